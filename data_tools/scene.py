@@ -1,0 +1,142 @@
+"""The canonical scene: the one in-memory contract every reader produces and the shard writer consumes.
+
+Conventions (stated once, used everywhere; see docs/data.md):
+
+* ``rgb``: uint8 (H, W, 3), RGB order.
+* ``depth``: float32 (H, W) in metres, 0 = unknown.
+* ``label``: uint16 (H, W) class ids of the scene's label space; :data:`IGNORE_ID` = unlabelled.
+* ``K``: float64 (3, 3) pinhole intrinsics for that image size. Pixel (u, v) is centred at (u, v)
+  in K's coordinates, so a centred principal point is ((W - 1) / 2, (H - 1) / 2).
+* ``c2w``: float64 (4, 4) camera-to-world in OpenCV axes (x right, y down, z forward).
+  Readers convert once; nothing downstream converts again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+IGNORE_ID = 255
+"""Label id of unlabelled pixels in every label space; never a prediction target."""
+
+SPLIT_NAMES = ("train", "source", "finetune", "test")
+"""Per-scene view splits. A training scene uses ``train`` (all views); an unseen test scene uses the
+paper's protocol: ``source`` (fixed source views), ``finetune`` (extra views for per-scene
+finetuning) and ``test`` (held-out views that are only ever evaluated)."""
+
+
+@dataclass
+class View:
+    """One posed, labelled frame of a scene."""
+
+    view_id: str
+    """Stable id, unique within the scene, without '.' (webdataset splits keys on dots)."""
+    rgb: np.ndarray
+    """uint8 (H, W, 3)."""
+    depth: np.ndarray
+    """float32 (H, W) metres, 0 = unknown."""
+    label: np.ndarray
+    """uint16 (H, W) class ids; IGNORE_ID = unlabelled."""
+    K: np.ndarray
+    """float64 (3, 3) intrinsics, pixel-centre convention above."""
+    c2w: np.ndarray
+    """float64 (4, 4) camera-to-world, OpenCV axes."""
+
+    @property
+    def hw(self) -> tuple[int, int]:
+        """Image height and width."""
+        return int(self.rgb.shape[0]), int(self.rgb.shape[1])
+
+
+@dataclass
+class SceneMeta:
+    """Everything about a scene except its pixels."""
+
+    name: str
+    """Scene name, unique in the dataset, without '.' or '/'."""
+    label_space: str
+    """Name of the label space, e.g. ``scannet20`` or ``nyu40``."""
+    class_names: list[str]
+    """Class names indexed by label id (ids 0 .. len-1)."""
+    view_ids: list[str]
+    """All view ids of the scene, in capture order."""
+    splits: dict[str, list[str]]
+    """View ids per split name (see :data:`SPLIT_NAMES`); views may be absent from every split."""
+    near: float = 0.0
+    """Near depth bound in metres (robust percentile with a margin); 0 = not yet measured."""
+    far: float = 0.0
+    """Far depth bound in metres; 0 = not yet measured."""
+    role: str = "train"
+    """``train`` (seen in pretraining) or ``test`` (unseen scene, evaluated with the protocol)."""
+    ignore_id: int = IGNORE_ID
+    """Label id of unlabelled pixels."""
+    extra: dict = field(default_factory=dict)
+    """Free-form provenance (source format, dropped frames, generator seed, ...)."""
+
+    def to_json(self) -> dict:
+        """JSON-serialisable form (used by scene.json and the shard metadata)."""
+        return {
+            "name": self.name,
+            "label_space": self.label_space,
+            "class_names": list(self.class_names),
+            "view_ids": list(self.view_ids),
+            "splits": {k: list(v) for k, v in self.splits.items()},
+            "near": float(self.near),
+            "far": float(self.far),
+            "role": self.role,
+            "ignore_id": int(self.ignore_id),
+            "extra": self.extra,
+        }
+
+    @classmethod
+    def from_json(cls, d: dict) -> SceneMeta:
+        """Inverse of :meth:`to_json`; raises KeyError naming a missing field."""
+        return cls(
+            name=d["name"],
+            label_space=d["label_space"],
+            class_names=list(d["class_names"]),
+            view_ids=list(d["view_ids"]),
+            splits={k: list(v) for k, v in d["splits"].items()},
+            near=float(d.get("near", 0.0)),
+            far=float(d.get("far", 0.0)),
+            role=d.get("role", "train"),
+            ignore_id=int(d.get("ignore_id", IGNORE_ID)),
+            extra=dict(d.get("extra", {})),
+        )
+
+
+@dataclass
+class Scene:
+    """A scene: its metadata plus lazy access to its views (large scans never sit in memory whole)."""
+
+    meta: SceneMeta
+    read_view: Callable[[str], View]
+    """Loads one view by id."""
+
+    def views(self) -> Iterator[View]:
+        """Yield every view in ``meta.view_ids`` order."""
+        for vid in self.meta.view_ids:
+            yield self.read_view(vid)
+
+    @classmethod
+    def in_memory(cls, meta: SceneMeta, views: list[View]) -> Scene:
+        """A scene backed by a list of already-loaded views."""
+        by_id = {v.view_id: v for v in views}
+        return cls(meta=meta, read_view=by_id.__getitem__)
+
+
+def depth_bounds(depths: list[np.ndarray], lo_pct: float = 1.0, hi_pct: float = 99.0,
+                 margin: float = 0.1) -> tuple[float, float]:
+    """Near/far from valid depth: the (lo, hi) percentiles widened by ``margin`` (relative).
+
+    near = max(p_lo * (1 - margin), 0.05 m); far = p_hi * (1 + margin). Raises ValueError when no
+    pixel has a valid (> 0, finite) depth.
+    """
+    valid = [d[(d > 0) & np.isfinite(d)] for d in depths]
+    values = np.concatenate([v.ravel() for v in valid]) if valid else np.zeros(0)
+    if values.size == 0:
+        raise ValueError("no valid depth (> 0, finite) in any view: near/far cannot be measured")
+    lo, hi = np.percentile(values, [lo_pct, hi_pct])
+    return max(float(lo) * (1.0 - margin), 0.05), float(hi) * (1.0 + margin)

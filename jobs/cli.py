@@ -1,0 +1,37 @@
+"""The ``sray`` console script: one parser, a few shallow subcommands.
+
+Each subcommand module exposes ``register(subparsers)``, which adds its parser and sets
+``func`` to a callable taking the parsed namespace and returning an exit code. Heavy imports
+(torch, ray, mlflow) happen inside those callables so that ``sray --help`` stays instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+SUBCOMMAND_MODULES = ("sray.jobs.data_cmd", "sray.jobs.bench_cmd", "sray.jobs.demo_cmd")
+"""Modules that register subcommands, in the order `sray --help` lists them."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full ``sray`` argument parser."""
+    parser = argparse.ArgumentParser(
+        prog="sray",
+        description="Generalizable semantic radiance fields (S-Ray): data, training, finetune fleets, benchmarks.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in SUBCOMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse ``argv`` and run the chosen subcommand; returns its exit code."""
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,195 @@
+"""Volume rendering along rays: sampling depths, hierarchical resampling and alpha compositing.
+
+Conventions shared by every model in ``sray.model``:
+
+- A ray is ``r(t) = o + t d`` and the sample values ``z`` are ray parameters ``t``. With the
+  non-unit directions of ``sray.model.rays.pixel_rays`` ``t`` is the camera z-depth, so the
+  scene's near/far z-depth bounds apply directly.
+- Sample ``k`` stands for the interval between the midpoints to its neighbours; the first interval
+  starts at ``near`` and the last ends at ``far``. So the interval lengths ``delta`` always sum to
+  ``far - near``, whatever the sampling (the paper's ``delta_k = z_{k+1} - z_k`` leaves the last
+  sample without a length; this is the same quadrature with both ends closed).
+- Compositing runs in float32 even inside an autocast region: transmittance is an exponential of
+  a cumulative sum and loses all precision in bfloat16.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+# Keys that ``composite`` writes itself; a rendered value may not use them.
+RESERVED_KEYS = ("weights", "opacity", "depth")
+
+# Share of the fine-sample mass spread uniformly over [near, far] (see ``sample_pdf``).
+PDF_EPS = 1e-5
+
+
+def _check_bounds(near: Tensor, far: Tensor, n_rays: int, where: str) -> None:
+    """Raise a clear error unless ``near`` and ``far`` are (R,) tensors with near <= far."""
+    for name, t in (("near", near), ("far", far)):
+        if not isinstance(t, Tensor) or t.shape != (n_rays,):
+            shape = tuple(t.shape) if isinstance(t, Tensor) else type(t).__name__
+            raise ValueError(
+                f"sray.model.rendering.{where}: `{name}` must be a tensor of shape ({n_rays},) "
+                f"(one bound per ray), got {shape}; expand a scalar with "
+                f"`torch.full((R,), value)`."
+            )
+    if bool((far < near).any()):
+        raise ValueError(
+            f"sray.model.rendering.{where}: some rays have far < near; check the scene's depth "
+            "bounds (near must not exceed far)."
+        )
+
+
+def sample_uniform(
+    near: Tensor, far: Tensor, n: int, stratified: bool, generator: torch.Generator | None = None
+) -> Tensor:
+    """Sorted sample depths in [near, far] from ``n`` equal bins per ray.
+
+    near, far: (R,). Returns z: (R, n). Deterministic mode takes the bin centres; stratified mode
+    draws one uniform sample inside each bin (NeRF's stratified sampling), from ``generator`` if
+    one is given.
+    """
+    if n < 1:
+        raise ValueError(f"sray.model.rendering.sample_uniform: `n` must be >= 1, got {n}.")
+    _check_bounds(near, far, near.shape[0] if near.ndim == 1 else -1, "sample_uniform")
+    n_rays = near.shape[0]
+    offset: Tensor | float
+    if stratified:
+        offset = torch.rand(n_rays, n, generator=generator, device=near.device, dtype=near.dtype)
+    else:
+        offset = 0.5
+    steps = torch.arange(n, device=near.device, dtype=near.dtype)  # (n,)
+    frac = (steps + offset) / n  # (R, n) or (n,), in [0, 1)
+    return near[:, None] + (far - near)[:, None] * frac  # (R, n)
+
+
+def bin_edges(z: Tensor, near: Tensor, far: Tensor) -> Tensor:
+    """Edges of the intervals the sorted samples stand for: (R, N) -> (R, N + 1).
+
+    Inner edges are midpoints between neighbouring samples; the outer edges are near and far.
+    """
+    mids = 0.5 * (z[:, 1:] + z[:, :-1])  # (R, N-1)
+    return torch.cat([near[:, None].to(z.dtype), mids, far[:, None].to(z.dtype)], dim=-1)
+
+
+def sample_pdf(
+    z: Tensor,
+    weights: Tensor,
+    near: Tensor,
+    far: Tensor,
+    n: int,
+    deterministic: bool,
+    generator: torch.Generator | None = None,
+) -> Tensor:
+    """Fine sample depths drawn by inverse CDF from coarse compositing weights.
+
+    z: (R, N) sorted coarse samples; weights: (R, N) their compositing weights (detached here);
+    near, far: (R,). Returns (R, n) sorted depths in [near, far], without gradient.
+
+    The piecewise-constant density puts mass ``w_k`` uniformly over the interval sample ``k``
+    stands for (see ``bin_edges``), plus ``PDF_EPS`` of mass spread uniformly over [near, far]
+    in proportion to interval length, so a ray whose weights are all zero samples uniformly.
+    The CDF is inverted at stratified quantiles ``(i + u_i) / n`` (``u_i = 0.5`` when
+    ``deterministic``): sorted by construction and of lower variance than i.i.d. quantiles.
+    """
+    if n < 1:
+        raise ValueError(f"sray.model.rendering.sample_pdf: `n` must be >= 1, got {n}.")
+    if weights.shape != z.shape or z.ndim != 2:
+        raise ValueError(
+            "sray.model.rendering.sample_pdf: `z` and `weights` must both be (R, N), got "
+            f"{tuple(z.shape)} and {tuple(weights.shape)}."
+        )
+    n_rays = z.shape[0]
+    _check_bounds(near, far, n_rays, "sample_pdf")
+    z = z.detach().float()
+    near, far = near.detach().float(), far.detach().float()
+    edges = bin_edges(z, near, far)  # (R, N+1)
+    widths = (edges[:, 1:] - edges[:, :-1]).clamp_min(0.0)  # (R, N)
+    span = widths.sum(-1, keepdim=True).clamp_min(1e-12)  # (R, 1)
+    mass = weights.detach().float().clamp_min(0.0)  # (R, N)
+    mass = mass + PDF_EPS * widths / span
+    cdf = torch.cumsum(mass, dim=-1) / mass.sum(-1, keepdim=True)  # (R, N)
+    cdf = torch.cat([torch.zeros_like(cdf[:, :1]), cdf], dim=-1).contiguous()  # (R, N+1)
+
+    steps = torch.arange(n, device=z.device, dtype=torch.float32)  # (n,)
+    if deterministic:
+        offset: Tensor | float = 0.5
+    else:
+        offset = torch.rand(n_rays, n, generator=generator, device=z.device)
+    u = ((steps + offset) / n).expand(n_rays, n).contiguous()  # (R, n) in [0, 1)
+
+    idx = torch.searchsorted(cdf, u, right=True)  # (R, n), in [1, N+1]
+    lo = (idx - 1).clamp(0, cdf.shape[-1] - 1)
+    hi = idx.clamp(0, cdf.shape[-1] - 1)
+    cdf_lo, cdf_hi = cdf.gather(-1, lo), cdf.gather(-1, hi)
+    edge_lo, edge_hi = edges.gather(-1, lo), edges.gather(-1, hi)
+    denom = cdf_hi - cdf_lo
+    frac = torch.where(denom > 0, (u - cdf_lo) / denom.clamp_min(1e-12), torch.zeros_like(u))
+    fine = edge_lo + frac.clamp(0.0, 1.0) * (edge_hi - edge_lo)  # (R, n)
+    fine = torch.minimum(torch.maximum(fine, near[:, None]), far[:, None])
+    return torch.sort(fine, dim=-1).values
+
+
+def merge_samples(z_coarse: Tensor, z_fine: Tensor) -> Tensor:
+    """Sorted union of two sample sets per ray: (R, N1), (R, N2) -> (R, N1 + N2)."""
+    if z_coarse.shape[0] != z_fine.shape[0]:
+        raise ValueError(
+            "sray.model.rendering.merge_samples: both sample sets need the same number of rays, "
+            f"got {z_coarse.shape[0]} and {z_fine.shape[0]}."
+        )
+    return torch.sort(torch.cat([z_coarse, z_fine.to(z_coarse.dtype)], dim=-1), dim=-1).values
+
+
+def composite(
+    sigma: Tensor, z: Tensor, near: Tensor, far: Tensor, values: dict[str, Tensor]
+) -> dict[str, Tensor]:
+    """Alpha-composite per-sample densities and values along each ray (float32 throughout).
+
+    sigma: (R, N) non-negative densities; z: (R, N) sorted sample depths; near, far: (R,);
+    values: name -> (R, N, D) per-sample quantities (semantic logits, colour, ...).
+
+    With ``delta_k`` the interval length of sample ``k`` (see the module docstring),
+    ``alpha_k = 1 - exp(-sigma_k delta_k)`` and ``T_k = exp(-sum_{j<k} sigma_j delta_j)``
+    (exclusive cumulative sum in log space), the weights are ``w_k = T_k alpha_k``.
+
+    Returns ``weights`` (R, N); ``opacity`` (R,) = sum w; ``depth`` (R,) = sum w z, the expected
+    depth with the empty remainder of the ray counting as 0 (NOT divided by opacity; divide by
+    ``opacity`` for the depth of the visible surface when opacity is well above 0); and for every
+    key of ``values`` the rendered (R, D) = sum_k w_k v_k.
+    """
+    if sigma.ndim != 2 or sigma.shape != z.shape:
+        raise ValueError(
+            "sray.model.rendering.composite: `sigma` and `z` must both be (R, N), got "
+            f"{tuple(sigma.shape)} and {tuple(z.shape)}."
+        )
+    n_rays, n_samples = sigma.shape
+    _check_bounds(near, far, n_rays, "composite")
+    for key, v in values.items():
+        if key in RESERVED_KEYS:
+            raise ValueError(
+                f"sray.model.rendering.composite: value name {key!r} is reserved for the "
+                f"compositor's own outputs {RESERVED_KEYS}; rename it."
+            )
+        if v.ndim != 3 or v.shape[:2] != (n_rays, n_samples):
+            raise ValueError(
+                f"sray.model.rendering.composite: value {key!r} must be (R, N, D) = "
+                f"({n_rays}, {n_samples}, D), got {tuple(v.shape)}."
+            )
+    with torch.autocast(device_type=sigma.device.type, enabled=False):
+        sigma32, z32 = sigma.float(), z.float()
+        edges = bin_edges(z32, near.float(), far.float())  # (R, N+1)
+        delta = (edges[:, 1:] - edges[:, :-1]).clamp_min(0.0)  # (R, N)
+        tau = sigma32 * delta  # (R, N) optical depth of each interval
+        alpha = -torch.expm1(-tau)  # 1 - exp(-tau), accurate for small tau
+        before = torch.cumsum(tau, dim=-1) - tau  # (R, N) exclusive sum: sum_{j<k} tau_j
+        weights = torch.exp(-before) * alpha  # (R, N)
+        out = {
+            "weights": weights,
+            "opacity": weights.sum(-1),
+            "depth": (weights * z32).sum(-1),
+        }
+        for key, v in values.items():
+            out[key] = torch.einsum("rn,rnd->rd", weights, v.float())
+    return out
