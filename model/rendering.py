@@ -53,8 +53,8 @@ def sample_uniform(
     """
     if n < 1:
         raise ValueError(f"sray.model.rendering.sample_uniform: `n` must be >= 1, got {n}.")
-    _check_bounds(near, far, near.shape[0] if near.ndim == 1 else -1, "sample_uniform")
-    n_rays = near.shape[0]
+    n_rays = near.shape[0] if isinstance(near, Tensor) and near.ndim == 1 else -1
+    _check_bounds(near, far, n_rays, "sample_uniform")
     offset: Tensor | float
     if stratified:
         offset = torch.rand(n_rays, n, generator=generator, device=near.device, dtype=near.dtype)
@@ -183,7 +183,8 @@ def composite(
         delta = (edges[:, 1:] - edges[:, :-1]).clamp_min(0.0)  # (R, N)
         tau = sigma32 * delta  # (R, N) optical depth of each interval
         alpha = -torch.expm1(-tau)  # 1 - exp(-tau), accurate for small tau
-        before = torch.cumsum(tau, dim=-1) - tau  # (R, N) exclusive sum: sum_{j<k} tau_j
+        # (R, N) exclusive sum sum_{j<k} tau_j; shifting (not subtracting tau) keeps it exact
+        before = torch.cat([torch.zeros_like(tau[:, :1]), torch.cumsum(tau[:, :-1], -1)], -1)
         weights = torch.exp(-before) * alpha  # (R, N)
         out = {
             "weights": weights,

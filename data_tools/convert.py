@@ -1,0 +1,201 @@
+"""``sray data convert``: a ScanNet export or a Replica rendering -> one scene in sray layout.
+
+Splits (see docs/data.md, "Readers and validation"):
+
+* role ``train``: every ``holdout_every``-th view (positions k//2, k//2 + k, ...; k = 20 by
+  default) is held out as ``test`` for validation during training; ``train`` holds all the others.
+  ``holdout_every`` 0 puts every view in ``train``. (The procedural generator uses the same rule.)
+* role ``test`` (the paper's protocol): a window of 20 consecutive views in capture order (after
+  frame skipping; centred in the capture unless ``window_start`` is given), read as four blocks of
+  five ``[finetune, source, test, source, finetune]``: 8 source, 8 finetune, 4 test, each test view
+  between two source views (the generator's blocks too). Only the window is written.
+
+Nothing partial is published: the scene is written into a hidden staging folder, near/far are
+measured from its depth (``scene.depth_bounds``), it must pass ``check_scene``, and only then is it
+renamed into place and added to ``dataset.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sray.data_tools.check import check_scene
+from sray.data_tools.layout import atomic_write_json, list_scenes, write_dataset_index, write_scene
+from sray.data_tools.read_replica import read_replica
+from sray.data_tools.read_scannet import read_scannet
+from sray.data_tools.scene import Scene, View, depth_bounds
+
+PROTOCOL_WINDOW = 20
+"""Views of a test scene: 8 source + 8 finetune + 4 test (the paper's protocol)."""
+PROTOCOL_BLOCK = ("finetune", "source", "test", "source", "finetune")
+"""Split of each position in a block of five consecutive window views."""
+DEFAULTS = {"scannet": {"size_hw": (240, 320), "frame_skip": 10}, "replica": {"size_hw": None, "frame_skip": 5}}
+"""Per-format defaults: ScanNet at 320x240 (the paper's size), every 10th frame of the 30 fps scan;
+Replica at its rendered size (640x480 in Semantic-NeRF's release, the paper's size), every 5th frame."""
+
+
+@dataclass
+class ConvertConfig:
+    """What ``sray data convert`` converts, and how."""
+
+    format: str
+    """Source layout: ``scannet`` (SensReader export + label-filt) or ``replica`` (Semantic-NeRF renders)."""
+    src: Path
+    """The source scan / sequence folder."""
+    out: Path
+    """Dataset folder (sray layout) that receives the scene."""
+    name: str | None = None
+    """Scene name; default: the source folder's name (``<parent>_<name>`` for Replica ``Sequence_<n>`` folders)."""
+    role: str = "train"
+    """``train`` (pretraining scene) or ``test`` (unseen scene, 20-view protocol)."""
+    label_space: str = "scannet20"
+    """Target label space: ``scannet20`` or ``nyu40``."""
+    size_hw: tuple[int, int] | None = None
+    """Output (H, W); None = the format's default (:data:`DEFAULTS`)."""
+    frame_skip: int | None = None
+    """Keep every n-th usable frame; None = the format's default (:data:`DEFAULTS`)."""
+    depth_scale: float = 1000.0
+    """Source depth PNG units per metre (1000 = millimetres, as both layouts store)."""
+    tsv: Path | None = None
+    """ScanNet: ``scannetv2-labels.combined.tsv``; None = search next to and above ``src``."""
+    classes: Path | None = None
+    """Replica: class table (``info_semantic.json``); None = ``src`` or its parent folder."""
+    holdout_every: int = 20
+    """Train scenes: hold out every n-th view as ``test`` (0 = none)."""
+    window_start: int | None = None
+    """Test scenes: first view of the 20-view window; None = centred in the capture."""
+    overwrite: bool = False
+    """Replace an existing scene of the same name."""
+
+
+@dataclass
+class ConvertReport:
+    """What a conversion produced."""
+
+    scene_dir: Path
+    """The published scene folder."""
+    n_views: int
+    """Views written."""
+    splits: dict[str, int]
+    """Views per split."""
+    near: float
+    """Measured near bound (m)."""
+    far: float
+    """Measured far bound (m)."""
+    dropped_frames: dict[str, str] = field(default_factory=dict)
+    """Source frames left out, with the reason (invalid pose, missing file)."""
+
+
+def default_name(src: Path) -> str:
+    """Scene name from the source folder: ``room_0/Sequence_1`` -> ``room_0_Sequence_1``; dots -> '_'."""
+    src = Path(src).resolve()
+    name = f"{src.parent.name}_{src.name}" if re.fullmatch(r"Sequence_\d+", src.name) else src.name
+    return name.replace(".", "_")
+
+
+def train_splits(view_ids: list[str], holdout_every: int) -> dict[str, list[str]]:
+    """``train`` + held-out ``test`` (every ``holdout_every``-th view, offset by half a period)."""
+    if holdout_every <= 0:
+        return {"train": list(view_ids)}
+    held = {i for i in range(len(view_ids)) if i % holdout_every == holdout_every // 2}
+    return {"train": [v for i, v in enumerate(view_ids) if i not in held],
+            "test": [v for i, v in enumerate(view_ids) if i in held]}
+
+
+def protocol_splits(view_ids: list[str], start: int | None) -> tuple[list[str], dict[str, list[str]]]:
+    """The 20-view window from ``start`` (None: centred) and its source/finetune/test splits."""
+    if len(view_ids) < PROTOCOL_WINDOW:
+        raise ValueError(f"a test scene needs {PROTOCOL_WINDOW} views, the source yields {len(view_ids)}; "
+                         "lower --frame-skip")
+    start = (len(view_ids) - PROTOCOL_WINDOW) // 2 if start is None else start
+    if not 0 <= start <= len(view_ids) - PROTOCOL_WINDOW:
+        raise ValueError(f"--window-start {start} out of range 0..{len(view_ids) - PROTOCOL_WINDOW}")
+    window = view_ids[start:start + PROTOCOL_WINDOW]
+    splits: dict[str, list[str]] = {"source": [], "finetune": [], "test": []}
+    for k, view in enumerate(window):
+        splits[PROTOCOL_BLOCK[k % len(PROTOCOL_BLOCK)]].append(view)
+    return window, splits
+
+
+def _open_source(cfg: ConvertConfig, name: str) -> Scene:
+    if cfg.format not in DEFAULTS:
+        raise ValueError(f"unknown format {cfg.format!r}; known: {sorted(DEFAULTS)}")
+    d = DEFAULTS[cfg.format]
+    common = dict(name=name, label_space=cfg.label_space, depth_scale=cfg.depth_scale,
+                  size_hw=cfg.size_hw or d["size_hw"], frame_skip=cfg.frame_skip or d["frame_skip"])
+    if cfg.format == "scannet":
+        return read_scannet(cfg.src, tsv=cfg.tsv, **common)
+    return read_replica(cfg.src, classes=cfg.classes, **common)
+
+
+def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = None) -> ConvertReport:
+    """Convert one source scene into ``cfg.out`` (see the module docstring); returns the report.
+
+    ``on_view`` is called after each converted view with the number of views to convert (progress bars).
+    """
+    name = cfg.name or default_name(cfg.src)
+    if not name or "." in name or "/" in name or name.startswith("-"):
+        raise ValueError(f"scene name {name!r} must be non-empty, without '.' or '/'; pass --name")
+    if cfg.role not in ("train", "test"):
+        raise ValueError(f"role must be 'train' or 'test', got {cfg.role!r}")
+    out, target = Path(cfg.out), Path(cfg.out) / name
+    if target.exists() and not cfg.overwrite:
+        raise FileExistsError(f"{target}: a scene of that name exists; pass --overwrite or another --name")
+    scene = _open_source(cfg, name)
+    meta = scene.meta
+    if cfg.role == "test":
+        meta.view_ids, meta.splits = protocol_splits(meta.view_ids, cfg.window_start)
+    else:
+        meta.splits = train_splits(meta.view_ids, cfg.holdout_every)
+    meta.role = cfg.role
+
+    depths: list[np.ndarray] = []
+
+    def recording_read(view_id: str) -> View:
+        view = scene.read_view(view_id)
+        depths.append(view.depth[::2, ::2].copy())  # a quarter of the pixels is plenty for percentiles
+        if on_view is not None:
+            on_view(len(meta.view_ids))
+        return view
+
+    staging = out / f".{name}.partial-{os.getpid()}"
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        write_scene(Scene(meta=meta, read_view=recording_read), staging)
+        try:
+            meta.near, meta.far = depth_bounds(depths)
+        except ValueError as e:
+            raise ValueError(f"{cfg.src}: {e}; check the depth images and --depth-scale") from None
+        meta_path = staging / name / "scene.json"
+        atomic_write_json(meta_path, {**json.loads(meta_path.read_text()), "near": meta.near, "far": meta.far})
+        problems = check_scene(staging / name)
+        if problems:
+            raise ValueError("the converted scene fails `sray data check`, so nothing was written:\n" +
+                             "\n".join(f"  {Path(p.file).name}: {p.what} (fix: {p.fix})" for p in problems))
+        _publish(staging / name, target, cfg.overwrite)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    others = {p.name for p in list_scenes(out) if not p.name.startswith(".")}
+    write_dataset_index(out, sorted(others | {name}))
+    return ConvertReport(scene_dir=target, n_views=len(meta.view_ids),
+                         splits={k: len(v) for k, v in meta.splits.items()}, near=meta.near, far=meta.far,
+                         dropped_frames=dict(meta.extra.get("dropped_frames", {})))
+
+
+def _publish(ready: Path, target: Path, overwrite: bool) -> None:
+    """Rename a complete scene folder into place (replacing ``target`` when ``overwrite``)."""
+    if target.exists() and overwrite:
+        old = target.with_name(f".{target.name}.old-{os.getpid()}")
+        os.replace(target, old)
+        os.replace(ready, target)
+        shutil.rmtree(old)
+    else:
+        os.replace(ready, target)

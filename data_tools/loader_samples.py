@@ -1,0 +1,66 @@
+"""Assembling loader samples (docs/CONTRACTS.md "Loader samples") from one scene's stored views."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from sray.data_tools.loader_views import StoredView
+
+
+def ranked_candidates(query: StoredView, allowed: set[str], limit: int) -> list[str]:
+    """The query's stored neighbours that are in ``allowed`` (never itself), best first, at most ``limit``."""
+    return [v for v in query.neighbours.ids if v in allowed and v != query.view_id][:limit]
+
+
+def _cameras(views: list[StoredView]) -> tuple[torch.Tensor, torch.Tensor]:
+    """K (m, 3, 3) and c2w (m, 4, 4) as float32 tensors."""
+    K = torch.from_numpy(np.stack([v.K for v in views])).float()
+    c2w = torch.from_numpy(np.stack([v.c2w for v in views])).float()
+    return K, c2w
+
+
+def _common(views: dict[str, StoredView], query_id: str, source_ids: list[str], scene: str,
+            near: float, far: float) -> dict:
+    """Keys shared by training and evaluation samples: sources, query camera, bounds, names."""
+    sources = [views[s] for s in source_ids]
+    rgb = torch.from_numpy(np.stack([v.rgb() for v in sources])).permute(0, 3, 1, 2)  # (m, 3, H, W) uint8 view
+    src_rgb = torch.empty(rgb.shape, dtype=torch.float32).copy_(rgb).div_(255.0)       # one strided pass
+    src_K, src_c2w = _cameras(sources)
+    q_K, q_c2w = _cameras([views[query_id]])
+    return {
+        "src_rgb": src_rgb,
+        "src_K": src_K, "src_c2w": src_c2w, "query_K": q_K[0], "query_c2w": q_c2w[0],
+        "near": torch.tensor(near, dtype=torch.float32), "far": torch.tensor(far, dtype=torch.float32),
+        "scene": scene, "query_id": query_id,
+    }
+
+
+def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
+                 rng: np.random.Generator, scene: str, near: float, far: float) -> dict:
+    """A training sample: sources, query camera and ``n_rays`` random pixels of the query with targets.
+
+    Pixels are drawn uniformly without replacement (with replacement only when ``n_rays`` exceeds
+    the pixel count); ``pixels`` (R, 2) holds integer (u, v) pixel centres as float32.
+    """
+    query = views[query_id]
+    rgb, label = query.rgb(), query.label()                                           # (H, W, 3), (H, W)
+    h, w = label.shape
+    flat = rng.choice(h * w, size=n_rays, replace=n_rays > h * w)                     # (R,)
+    v, u = np.divmod(flat, w)
+    sample = _common(views, query_id, source_ids, scene, near, far)
+    sample["pixels"] = torch.from_numpy(np.stack([u, v], axis=1).astype(np.float32))  # (R, 2)
+    sample["target_label"] = torch.from_numpy(label[v, u].astype(np.int64))          # (R,)
+    sample["target_rgb"] = torch.from_numpy(rgb[v, u].astype(np.float32) / 255.0)    # (R, 3)
+    return sample
+
+
+def eval_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], scene: str,
+                near: float, far: float) -> dict:
+    """An evaluation sample: sources, query camera and the whole query image, labels and depth."""
+    query = views[query_id]
+    sample = _common(views, query_id, source_ids, scene, near, far)
+    sample["query_rgb"] = torch.from_numpy(query.rgb().astype(np.float32) / 255.0)    # (H, W, 3)
+    sample["query_label"] = torch.from_numpy(query.label().astype(np.int64))          # (H, W)
+    sample["query_depth"] = torch.from_numpy(query.depth())                           # (H, W) metres
+    return sample

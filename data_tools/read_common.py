@@ -1,0 +1,121 @@
+"""Geometry and file helpers shared by the dataset readers (ScanNet export, Replica renders).
+
+Pixel-centre convention (see ``scene.py``): pixel (u, v) is centred at (u, v) in K's coordinates and
+covers [u - 0.5, u + 0.5). Resizing an image by ``s`` along an axis therefore maps a coordinate as
+``u' + 0.5 = s * (u + 0.5)``.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from sray.data_tools.label_spaces import NYU40, SCANNET20_NYU40_IDS
+from sray.data_tools.layout import decode_png
+
+
+def numbered_files(folder: Path, pattern: str, suffixes: tuple[str, ...]) -> dict[int, Path]:
+    """Files of ``folder`` whose stem matches ``pattern`` and whose suffix is in ``suffixes``, keyed by
+    the number they carry, in numeric order (natural sort: ``rgb_9`` before ``rgb_10``).
+
+    ``pattern`` is a regex with one group of digits (e.g. ``r"rgb_(\\d+)"``); other names are ignored.
+    Raises ValueError when two files carry the same number (e.g. ``3.jpg`` and ``3.png``).
+    """
+    found: dict[int, Path] = {}
+    regex = re.compile(rf"^{pattern}$")
+    for path in sorted(folder.iterdir()):
+        match = regex.match(path.stem)
+        if path.suffix.lower() not in suffixes or match is None:
+            continue
+        index = int(match.group(1))
+        if index in found:
+            raise ValueError(f"{path}: frame {index} also stored as {found[index].name}; keep one of them")
+        found[index] = path
+    return dict(sorted(found.items()))
+
+
+def read_image(path: Path) -> np.ndarray:
+    """Decode a PNG or JPEG without loss of bit depth (16-bit stays 16-bit; colour comes back RGB)."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: missing") from None
+    try:
+        return decode_png(data, str(path))
+    except ValueError:
+        raise ValueError(f"{path}: not a readable image (corrupt or truncated file?)") from None
+
+
+def scale_intrinsics(K: np.ndarray, src_hw: tuple[int, int], dst_hw: tuple[int, int]) -> np.ndarray:
+    """K (3, 3) of an image of size ``src_hw`` -> K of the same camera resampled to ``dst_hw``.
+
+    With s = dst / src per axis: f' = s f and c' = s (c + 0.5) - 0.5 (pixel-centre convention).
+    """
+    sy, sx = dst_hw[0] / src_hw[0], dst_hw[1] / src_hw[1]
+    out = np.array(K, dtype=np.float64)
+    out[0, :2] *= sx
+    out[0, 2] = sx * (K[0, 2] + 0.5) - 0.5
+    out[1, :2] *= sy
+    out[1, 2] = sy * (K[1, 2] + 0.5) - 0.5
+    return out
+
+
+def resample_nearest(image: np.ndarray, K_src: np.ndarray, K_dst: np.ndarray,
+                     dst_hw: tuple[int, int], fill: int | float) -> np.ndarray:
+    """Resample ``image`` (H, W) seen through K_src into a camera K_dst of size ``dst_hw``.
+
+    Both cameras share optical centre and orientation, so the warp is the 2D affine map
+    K_src K_dst^-1. Each output pixel takes the source pixel whose square contains its centre
+    (nearest, exact under the pixel-centre convention); pixels mapping outside get ``fill``.
+    Returns an array (dst_h, dst_w) of the input dtype.
+    """
+    h, w = dst_hw
+    warp = np.asarray(K_src, np.float64) @ np.linalg.inv(np.asarray(K_dst, np.float64))
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    x = warp[0, 0] * u + warp[0, 1] * v + warp[0, 2]  # (h, w) source column coordinate
+    y = warp[1, 0] * u + warp[1, 1] * v + warp[1, 2]  # (h, w) source row coordinate
+    # Ties (a centre exactly on a pixel border, e.g. every pixel of a 2x downscale) go to the
+    # right/lower pixel; the epsilon keeps float noise from deciding them.
+    col, row = np.floor(x + 0.5 + 1e-6).astype(np.int64), np.floor(y + 0.5 + 1e-6).astype(np.int64)
+    inside = (col >= 0) & (col < image.shape[1]) & (row >= 0) & (row < image.shape[0])
+    out = np.full((h, w), fill, dtype=image.dtype)
+    out[inside] = image[row[inside], col[inside]]
+    return out
+
+
+def resize_rgb(rgb: np.ndarray, dst_hw: tuple[int, int]) -> np.ndarray:
+    """Area-averaged resize of a uint8 (H, W, 3) image (unchanged when already at ``dst_hw``)."""
+    if rgb.shape[:2] == tuple(dst_hw):
+        return rgb
+    return cv2.resize(rgb, (dst_hw[1], dst_hw[0]), interpolation=cv2.INTER_AREA)
+
+
+def read_depth_m(path: Path, depth_scale: float) -> np.ndarray:
+    """16-bit depth PNG in ``depth_scale`` units per metre -> float32 (H, W) metres (0 = unknown)."""
+    raw = read_image(path)
+    if raw.dtype != np.uint16 or raw.ndim != 2:
+        raise ValueError(f"{path}: depth must be a single-channel 16-bit PNG, got {raw.dtype} {raw.shape}")
+    return raw.astype(np.float32) / np.float32(depth_scale)
+
+
+def check_principal_point(K: np.ndarray, hw: tuple[int, int], what: str) -> None:
+    """Raise ValueError when K's principal point lies outside an image of size ``hw``."""
+    cx, cy = float(K[0, 2]), float(K[1, 2])
+    if not (-0.5 <= cx <= hw[1] - 0.5 and -0.5 <= cy <= hw[0] - 0.5):
+        raise ValueError(f"{what}: principal point ({cx:.1f}, {cy:.1f}) lies outside the {hw[1]}x{hw[0]} "
+                         "images it is used with; are these intrinsics for another resolution?")
+
+
+def nyu40_to_label(space: str) -> dict[int, int]:
+    """NYU40 id (1..40) -> label id in ``space`` (``nyu40``: id - 1; ``scannet20``: benchmark index).
+
+    NYU40 ids without a class in ``space`` are absent (callers map them to IGNORE_ID).
+    """
+    if space == "nyu40":
+        return {nyu: nyu - 1 for nyu in range(1, len(NYU40) + 1)}
+    if space == "scannet20":
+        return {nyu: index for index, nyu in enumerate(SCANNET20_NYU40_IDS)}
+    raise ValueError(f"unknown label space {space!r}; the readers support 'scannet20' and 'nyu40'")

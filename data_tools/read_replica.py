@@ -1,0 +1,226 @@
+"""Reader: Replica sequences as rendered for Semantic-NeRF (Habitat-Sim renders of the Replica meshes).
+
+Expected layout (``SRC`` is one rendered sequence, e.g. ``Replica_Dataset/room_0/Sequence_1``)::
+
+    SRC/rgb/rgb_<i>.png                      8-bit colour
+    SRC/depth/depth_<i>.png                  16-bit depth, ``depth_scale`` units per metre (mm)
+    SRC/semantic_class/semantic_class_<i>.png  Replica class ids (0 = void)
+    SRC/traj_w_c.txt                         row i: camera-to-world of frame i, 16 numbers, row-major
+
+Axes: the rows of ``traj_w_c.txt`` are T_wc with an OpenCV camera (x right, y down, z forward) in
+Replica's z-up world. Semantic-NeRF's renderer converts each row to Habitat's OpenGL camera in its
+y-up frame only to place the simulator's agent, and its trainer casts rays from these rows with the
+"opencv" convention; so no axis change is needed here and none is applied.
+
+Intrinsics: a 90 degree horizontal field of view and square pixels, so fx = fy = W / (2 tan 45°) = W/2,
+cx = (W - 1) / 2, cy = (H - 1) / 2 (pixel-centre convention).
+
+Class ids: the renderer writes the class ids of the scene's Replica ``info_semantic.json``. That
+table is not part of the renders, so the user supplies it (``classes``; by default
+``SRC/info_semantic.json`` or ``SRC/../info_semantic.json``). Names map to NYU40 through
+:data:`REPLICA_TO_NYU40` (NYU40 names, hence all ScanNet-20 names, map to themselves) and on to the
+label space; names without a match become IGNORE_ID and are listed in ``meta.extra``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from sray.data_tools.label_spaces import NYU40, SCANNET20, class_names
+from sray.data_tools.read_common import (numbered_files, nyu40_to_label, read_depth_m, read_image,
+                                         resample_nearest, resize_rgb, scale_intrinsics)
+from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
+
+CLASS_FILE = "info_semantic.json"
+
+REPLICA_TO_NYU40: dict[str, str | None] = {
+    "backpack": "bag", "handbag": "bag", "base cabinet": "cabinet", "wall cabinet": "cabinet",
+    "wardrobe": "cabinet", "book": "books", "countertop": "counter", "cushion": "pillow",
+    "nightstand": "night stand", "shelf": "shelves", "rack": "shelves", "rug": "floor mat",
+    "mat": "floor mat", "cloth": "clothes", "clothing": "clothes", "set of clothing": "clothes",
+    "scarf": "clothes", "paper towel": "towel", "tissue paper": "paper", "tv screen": "television",
+    "monitor": "television", "stool": "chair", "beanbag": "otherfurniture", "bench": "otherfurniture",
+    "plant stand": "otherfurniture", "tv stand": "otherfurniture", "beam": "otherstructure",
+    "pillar": "otherstructure", "pipe": "otherstructure", "panel": "otherstructure",
+    "handrail": "otherstructure", "stair": "otherstructure", "vent": "otherstructure",
+    "shower stall": "otherstructure", "basket": "otherprop", "bike": "otherprop", "bin": "otherprop",
+    "blanket": "otherprop", "comforter": "otherprop", "bottle": "otherprop", "bowl": "otherprop",
+    "camera": "otherprop", "candle": "otherprop", "chopping board": "otherprop", "clock": "otherprop",
+    "coaster": "otherprop", "computer keyboard": "otherprop", "cooktop": "otherprop", "cup": "otherprop",
+    "desk organizer": "otherprop", "desktop computer": "otherprop", "exercise ball": "otherprop",
+    "faucet": "otherprop", "hair dryer": "otherprop", "indoor plant": "otherprop",
+    "kitchen utensil": "otherprop", "knife block": "otherprop", "laptop": "otherprop",
+    "major appliance": "otherprop", "small appliance": "otherprop", "microwave": "otherprop",
+    "mouse": "otherprop", "pan": "otherprop", "phone": "otherprop", "plate": "otherprop",
+    "pot": "otherprop", "remote control": "otherprop", "sculpture": "otherprop", "shoe": "otherprop",
+    "switch": "otherprop", "table runner": "otherprop", "tablet": "otherprop", "toothbrush": "otherprop",
+    "umbrella": "otherprop", "utensil holder": "otherprop", "vase": "otherprop", "wall plug": "otherprop",
+    "logo": "otherprop", "undefined": None, "void": None, "other leaf": None, "anonymize text": None,
+    "anonymize picture": None,
+}
+"""Replica class name (normalised: lower case, '-' and '_' as spaces) -> NYU40 class name or None
+(ignore). Our judgement by meaning; names that are already NYU40 names (wall, floor, chair, door,
+...) map to themselves and are not repeated here."""
+
+REPLICA_TO_SCANNET20: dict[str, str | None] = {
+    **{n: (n if n in SCANNET20 else None) for n in NYU40},
+    **{r: (n if n in SCANNET20 else None) for r, n in REPLICA_TO_NYU40.items()},
+}
+"""Replica class name -> ScanNet-20 class name, or None where the class is ignored in ScanNet-20."""
+
+
+def normalise_name(name: str) -> str:
+    """Lower case, '-' and '_' as spaces, single spaces: ``Base-Cabinet`` -> ``base cabinet``."""
+    return " ".join(name.lower().replace("-", " ").replace("_", " ").split())
+
+
+def replica_intrinsics(hw: tuple[int, int]) -> np.ndarray:
+    """K (3, 3) of Semantic-NeRF's Replica renders: 90° horizontal FoV, square pixels, centred."""
+    h, w = hw
+    f = w / 2.0  # w / (2 tan(45°))
+    return np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+def read_class_table(path: Path) -> dict[int, str]:
+    """Class id -> name from Replica's ``info_semantic.json`` ({"classes": [{"id", "name"}, ...]}),
+    a JSON object {"<id>": "<name>"}, or a TSV with header columns ``id`` and ``name``."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: class table missing; pass --classes with the scene's {CLASS_FILE}") from None
+    try:
+        if path.suffix.lower() == ".json":
+            data = json.loads(text)
+            if isinstance(data, dict) and isinstance(data.get("classes"), list):
+                table = {int(c["id"]): str(c["name"]) for c in data["classes"]}
+            else:
+                table = {int(k): str(v) for k, v in data.items()}
+        else:
+            table = {int(r["id"]): str(r["name"]) for r in csv.DictReader(text.splitlines(), delimiter="\t")}
+    except (ValueError, KeyError, TypeError, AttributeError) as e:
+        raise ValueError(f"{path}: not a class table ({type(e).__name__}: {e}); expected Replica's "
+                         f"{CLASS_FILE}, a JSON object {{id: name}} or a TSV with columns id and name") from None
+    bad = [i for i in table if not 0 <= i < 65536]
+    if bad:
+        raise ValueError(f"{path}: class ids {bad} out of range 0..65535")
+    return table
+
+
+def find_class_table(src: Path) -> Path:
+    """The default class table of a rendered sequence; error names the places and the fix."""
+    candidates = [src / CLASS_FILE, src.resolve().parent / CLASS_FILE]
+    for path in candidates:
+        if path.is_file():
+            return path
+    raise FileNotFoundError(
+        f"no class table for {src / 'semantic_class'} (looked for {', '.join(map(str, candidates))}); copy the "
+        f"scene's Replica/<scene>/habitat/{CLASS_FILE} there or pass --classes PATH (a JSON {{id: name}} or a "
+        "TSV with columns id and name also works)")
+
+
+def class_lut(table: dict[int, str], space: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(lut (65536,) uint16 id -> label, known (65536,) bool, names mapped to ignore) for ``space``."""
+    to_label = nyu40_to_label(space)
+    nyu_ids = {normalise_name(n): i + 1 for i, n in enumerate(NYU40)}
+    lut = np.full(65536, IGNORE_ID, dtype=np.uint16)
+    known = np.zeros(65536, dtype=bool)
+    known[0] = True  # 0 = void in the renders
+    ignored: list[str] = []
+    for class_id, name in table.items():
+        norm = normalise_name(name)
+        nyu_name = norm if norm in nyu_ids else REPLICA_TO_NYU40.get(norm)
+        label = to_label.get(nyu_ids[normalise_name(nyu_name)]) if nyu_name is not None else None
+        known[class_id] = True
+        if label is None:
+            ignored.append(name)
+        else:
+            lut[class_id] = label
+    return lut, known, sorted(set(ignored))
+
+
+def read_replica(src: Path, name: str, classes: Path | None = None, label_space: str = "scannet20",
+                 size_hw: tuple[int, int] | None = None, frame_skip: int = 5,
+                 depth_scale: float = 1000.0) -> Scene:
+    """Open a Semantic-NeRF Replica rendering as a canonical scene (views load lazily).
+
+    Frames without a depth or semantic image, or with a non-finite trajectory row, are dropped and
+    listed in ``meta.extra["dropped_frames"]``; then every ``frame_skip``-th remaining frame is kept.
+    ``size_hw`` None keeps the rendered resolution (640 x 480 in Semantic-NeRF's release).
+    """
+    src = Path(src)
+    for folder in ("rgb", "depth", "semantic_class"):
+        if not (src / folder).is_dir():
+            raise FileNotFoundError(f"{src / folder}: missing folder; is {src} a Semantic-NeRF Replica sequence?")
+    if frame_skip < 1:
+        raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+    traj_path = src / "traj_w_c.txt"
+    try:
+        traj = np.loadtxt(traj_path, dtype=np.float64, ndmin=2)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{traj_path}: missing; it ships with each rendered sequence") from None
+    except ValueError:
+        raise ValueError(f"{traj_path}: not a table of numbers") from None
+    if traj.shape[1] != 16:
+        raise ValueError(f"{traj_path}: each row must hold 16 numbers (a row-major 4x4), got {traj.shape[1]}")
+    classes = Path(classes) if classes is not None else find_class_table(src)
+    lut, known, ignored = class_lut(read_class_table(classes), label_space)
+
+    rgbs = numbered_files(src / "rgb", r"rgb_(\d+)", (".png",))
+    if not rgbs:
+        raise FileNotFoundError(f"{src / 'rgb'}: no rgb_<i>.png frames")
+    depths = numbered_files(src / "depth", r"depth_(\d+)", (".png",))
+    sems = numbered_files(src / "semantic_class", r"semantic_class_(\d+)", (".png",))
+    dropped: dict[str, str] = {}
+    poses: dict[int, np.ndarray] = {}
+    for frame in rgbs:
+        if frame >= len(traj):
+            raise ValueError(f"{traj_path}: {len(traj)} rows, but {rgbs[frame]} needs row {frame}; "
+                             "use the trajectory rendered with these images")
+        missing = [kind for kind, files in (("depth", depths), ("semantic_class", sems)) if frame not in files]
+        if missing:
+            dropped[str(frame)] = f"no {' or '.join(missing)} file"
+        elif not np.isfinite(traj[frame]).all():
+            dropped[str(frame)] = f"non-finite pose in row {frame} of traj_w_c.txt"
+        else:
+            poses[frame] = traj[frame].reshape(4, 4)
+    kept = list(poses)[::frame_skip]
+    if not kept:
+        raise ValueError(f"{src}: no usable frame (dropped: {dropped})")
+    ids = {f"{frame:06d}": frame for frame in kept}
+
+    def read_view(view_id: str) -> View:
+        """Load, map and (optionally) resize one rendered frame."""
+        frame = ids[view_id]
+        rgb = read_image(rgbs[frame])
+        if rgb.dtype != np.uint8 or rgb.ndim != 3:
+            raise ValueError(f"{rgbs[frame]}: colour must be 8-bit RGB, got {rgb.dtype} {rgb.shape}")
+        native_hw = rgb.shape[:2]
+        hw = tuple(size_hw) if size_hw is not None else native_hw
+        K_native = replica_intrinsics(native_hw)
+        K = scale_intrinsics(K_native, native_hw, hw)
+        depth, sem = read_depth_m(depths[frame], depth_scale), read_image(sems[frame])
+        for path, image in ((depths[frame], depth), (sems[frame], sem)):
+            if image.shape[:2] != native_hw:
+                raise ValueError(f"{path}: size {image.shape[1]}x{image.shape[0]} differs from "
+                                 f"{rgbs[frame].name} ({native_hw[1]}x{native_hw[0]})")
+        if sem.ndim != 2 or sem.dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"{sems[frame]}: class ids must be a single-channel 8/16-bit PNG")
+        unknown = np.unique(sem[~known[sem]])
+        if unknown.size:
+            raise ValueError(f"{sems[frame]}: class ids {unknown.tolist()} are not listed in {classes}; "
+                             "is that the class table of this scene?")
+        return View(view_id=view_id, rgb=resize_rgb(rgb, hw),
+                    depth=resample_nearest(depth, K_native, K, hw, 0.0),
+                    label=lut[resample_nearest(sem, K_native, K, hw, 0)],
+                    K=K, c2w=poses[frame])
+
+    meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space),
+                     view_ids=list(ids), splits={}, role="train",
+                     extra={"source_format": "replica", "source": str(src), "class_table": str(classes),
+                            "ignored_classes": ignored, "frame_skip": frame_skip, "dropped_frames": dropped})
+    return Scene(meta=meta, read_view=read_view)

@@ -1,0 +1,182 @@
+"""Reader: ScanNet frames as exported by ScanNet's SensReader plus the unzipped 2D label images.
+
+Expected layout (``SRC`` is one scan's export folder)::
+
+    SRC/color/<i>.jpg            colour (1296 x 968 in ScanNet); <i>.png is accepted too (lossless)
+    SRC/depth/<i>.png            16-bit depth in millimetres (640 x 480), depth camera
+    SRC/pose/<i>.txt             4 x 4 camera-to-world, OpenCV axes; invalid frames hold -inf rows
+    SRC/intrinsic/intrinsic_color.txt, intrinsic_depth.txt    4 x 4, K in the top-left 3 x 3
+    SRC/label-filt/<i>.png       16-bit raw ScanNet label ids, colour camera (from *_2d-label-filt.zip)
+
+Raw ids go through the user's ``scannetv2-labels.combined.tsv`` (columns ``id`` and ``nyu40id``,
+found by header name) to NYU40 and on to the requested label space; everything else becomes
+IGNORE_ID. Colour is area-resized to the target size, K scaled under the pixel-centre convention;
+depth and labels are resampled into that same target camera with exact nearest sampling (depth and
+colour cameras share optical centre and orientation in the export, so this is a 2D warp between the
+two intrinsics).
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from sray.data_tools.label_spaces import class_names
+from sray.data_tools.read_common import (check_principal_point, numbered_files, nyu40_to_label,
+                                         read_depth_m, read_image, resample_nearest, resize_rgb,
+                                         scale_intrinsics)
+from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
+
+TSV_NAME = "scannetv2-labels.combined.tsv"
+_FOLDER_FIX = {
+    "color": "export the .sens file with ScanNet's SensReader (--export_color_images)",
+    "depth": "export the .sens file with ScanNet's SensReader (--export_depth_images)",
+    "pose": "export the .sens file with ScanNet's SensReader (--export_poses)",
+    "intrinsic": "export the .sens file with ScanNet's SensReader (--export_intrinsics)",
+    "label-filt": "unzip <scan>_2d-label-filt.zip into SRC (it holds label-filt/<i>.png)",
+}
+
+
+def read_label_tsv(tsv: Path) -> dict[int, int]:
+    """Raw ScanNet label id -> NYU40 id (0 = none) from ``scannetv2-labels.combined.tsv``.
+
+    Columns are found by header name (``id``, ``nyu40id``); errors name the file and the column.
+    """
+    tsv = Path(tsv)
+    try:
+        text = tsv.read_text()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{tsv}: missing; pass --tsv with the path of ScanNet's {TSV_NAME}") from None
+    rows = list(csv.reader(text.splitlines(), delimiter="\t"))
+    if not rows:
+        raise ValueError(f"{tsv}: empty; expected ScanNet's {TSV_NAME}")
+    header = [h.strip() for h in rows[0]]
+    for column in ("id", "nyu40id"):
+        if column not in header:
+            raise ValueError(f"{tsv}: column {column!r} is missing (header has {header}); "
+                             f"use ScanNet's {TSV_NAME}, whose header names both 'id' and 'nyu40id'")
+    id_col, nyu_col = header.index("id"), header.index("nyu40id")
+    mapping: dict[int, int] = {}
+    for line_no, row in enumerate(rows[1:], start=2):
+        if not any(cell.strip() for cell in row):
+            continue
+        try:
+            raw = int(row[id_col])
+            cell = row[nyu_col].strip() if nyu_col < len(row) else ""
+            nyu = int(cell) if cell else 0
+        except (ValueError, IndexError):
+            raise ValueError(f"{tsv}, line {line_no}: 'id' and 'nyu40id' must be integers, got {row}") from None
+        if not (0 <= raw < 65536 and 0 <= nyu <= 40):
+            raise ValueError(f"{tsv}, line {line_no}: id {raw} or nyu40id {nyu} out of range (0..65535, 0..40)")
+        if mapping.get(raw, nyu) != nyu:
+            raise ValueError(f"{tsv}, line {line_no}: raw id {raw} listed twice with different nyu40ids")
+        mapping[raw] = nyu
+    return mapping
+
+
+def raw_label_lut(raw_to_nyu40: dict[int, int], space: str) -> np.ndarray:
+    """Lookup table (65536,) uint16: raw ScanNet id -> label id in ``space`` (IGNORE_ID if none, and for 0)."""
+    to_label = nyu40_to_label(space)
+    lut = np.full(65536, IGNORE_ID, dtype=np.uint16)
+    for raw, nyu in raw_to_nyu40.items():
+        if nyu in to_label:
+            lut[raw] = to_label[nyu]
+    lut[0] = IGNORE_ID  # raw id 0 marks unannotated pixels in ScanNet
+    return lut
+
+
+def find_tsv(src: Path) -> Path:
+    """The label tsv next to the scan or up to three folders above it; error lists where it looked."""
+    candidates = [folder / TSV_NAME for folder in [src, *list(src.resolve().parents)[:3]]]
+    for path in candidates:
+        if path.is_file():
+            return path
+    raise FileNotFoundError(f"{TSV_NAME} not found (looked in {', '.join(str(p.parent) for p in candidates)}); "
+                            "pass --tsv with its path (it ships with the ScanNet download)")
+
+
+def read_matrix4(path: Path) -> np.ndarray:
+    """A 4 x 4 matrix of numbers from a whitespace-separated text file, float64."""
+    try:
+        m = np.loadtxt(path, dtype=np.float64)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: missing") from None
+    except ValueError:
+        raise ValueError(f"{path}: not a 4x4 matrix of numbers") from None
+    if m.shape != (4, 4):
+        raise ValueError(f"{path}: expected a 4x4 matrix, got shape {m.shape}")
+    return m
+
+
+def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str = "scannet20",
+                 size_hw: tuple[int, int] | None = (240, 320), frame_skip: int = 10,
+                 depth_scale: float = 1000.0) -> Scene:
+    """Open a ScanNet export as a canonical scene (views load lazily).
+
+    Frames without a depth, pose or label file, or whose pose holds -inf/NaN, are dropped and listed
+    in ``meta.extra["dropped_frames"]`` ({frame number: reason}); then every ``frame_skip``-th of the
+    remaining frames (natural order) is kept. ``size_hw`` None keeps the colour resolution. View ids
+    are zero-padded frame numbers. Splits are left empty (the converter assigns them).
+    """
+    src = Path(src)
+    for folder, fix in _FOLDER_FIX.items():
+        if not (src / folder).is_dir():
+            raise FileNotFoundError(f"{src / folder}: missing folder; {fix}")
+    if frame_skip < 1:
+        raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+    tsv = Path(tsv) if tsv is not None else find_tsv(src)
+    lut = raw_label_lut(read_label_tsv(tsv), label_space)
+    k_color_path, k_depth_path = src / "intrinsic" / "intrinsic_color.txt", src / "intrinsic" / "intrinsic_depth.txt"
+    K_color, K_depth = read_matrix4(k_color_path)[:3, :3], read_matrix4(k_depth_path)[:3, :3]
+
+    colors = numbered_files(src / "color", r"(\d+)", (".jpg", ".jpeg", ".png"))
+    if not colors:
+        raise FileNotFoundError(f"{src / 'color'}: no <i>.jpg or <i>.png frames; {_FOLDER_FIX['color']}")
+    others = {kind: numbered_files(src / folder, r"(\d+)", (suffix,))
+              for kind, folder, suffix in (("depth", "depth", ".png"), ("pose", "pose", ".txt"),
+                                           ("label", "label-filt", ".png"))}
+    dropped: dict[str, str] = {}
+    poses: dict[int, np.ndarray] = {}
+    for frame in colors:
+        missing = [kind for kind, files in others.items() if frame not in files]
+        if missing:
+            dropped[str(frame)] = f"no {' or '.join(missing)} file"
+            continue
+        c2w = read_matrix4(others["pose"][frame])
+        if not np.isfinite(c2w).all():
+            dropped[str(frame)] = f"invalid pose in {others['pose'][frame].name} (-inf or NaN entries)"
+            continue
+        poses[frame] = c2w
+    kept = list(poses)[::frame_skip]
+    if not kept:
+        raise ValueError(f"{src}: no usable frame (dropped: {dropped})")
+    ids = {f"{frame:06d}": frame for frame in kept}
+
+    def read_view(view_id: str) -> View:
+        """Load, map and resample one frame into the target colour camera."""
+        frame = ids[view_id]
+        rgb = read_image(colors[frame])
+        if rgb.dtype != np.uint8 or rgb.ndim != 3:
+            raise ValueError(f"{colors[frame]}: colour must be 8-bit RGB, got {rgb.dtype} {rgb.shape}")
+        color_hw = rgb.shape[:2]
+        check_principal_point(K_color, color_hw, str(k_color_path))
+        hw = tuple(size_hw) if size_hw is not None else color_hw
+        K = scale_intrinsics(K_color, color_hw, hw)
+        depth = read_depth_m(others["depth"][frame], depth_scale)
+        check_principal_point(K_depth, depth.shape, str(k_depth_path))
+        raw = read_image(others["label"][frame])
+        if raw.ndim != 2 or raw.dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"{others['label'][frame]}: labels must be a single-channel 8/16-bit PNG")
+        K_label = scale_intrinsics(K_color, color_hw, raw.shape)
+        return View(view_id=view_id, rgb=resize_rgb(rgb, hw),
+                    depth=resample_nearest(depth, K_depth, K, hw, 0.0),
+                    label=lut[resample_nearest(raw, K_label, K, hw, 0)],
+                    K=K, c2w=poses[frame])
+
+    meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space),
+                     view_ids=list(ids), splits={}, role="train",
+                     extra={"source_format": "scannet", "source": str(src), "label_tsv": str(tsv),
+                            "frame_skip": frame_skip, "dropped_frames": dropped})
+    return Scene(meta=meta, read_view=read_view)

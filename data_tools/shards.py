@@ -1,0 +1,228 @@
+"""Canonical scenes -> webdataset tar shards grouped by scene, plus ``manifest.json``.
+
+Shard ``<scene>-NNNNNN.tar`` holds up to ``views_per_shard`` views of ONE scene, in capture order.
+Each view is one webdataset sample with key ``<scene>__<view_id>`` and the members
+
+* ``.rgb.png``        8-bit RGB
+* ``.depth.png``      16-bit depth in millimetres, 0 = unknown (lossless)
+* ``.label.png``      16-bit class ids, the scene's ignore id = unlabelled (lossless)
+* ``.camera.json``    ``{"K": 3x3, "c2w": 4x4, "image_size": [H, W]}`` (OpenCV axes, metres)
+* ``.neighbours.json`` ``{"ids": [...], "scores": [...]}`` ranked source views (``neighbours.py``)
+
+and the first sample of every shard also carries ``.scene.json`` (``SceneMeta.to_json()``), so a
+shard describes itself; the loader works from the manifest alone.
+
+Runs are reproducible and safe to interrupt: tar headers are fixed (mtime 0, uid/gid 0, no user
+names, mode 0644, fixed member order), every file goes through a temporary name and a rename, an
+existing shard whose bytes already match is left alone, the old manifest is removed before the
+first shard changes, and the new manifest is written last.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import re
+import tarfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from sray.data_tools.layout import atomic_write_bytes, depth_to_png16, encode_png, list_scenes, read_scene
+from sray.data_tools.manifest import MANIFEST_NAME, Manifest, SceneEntry, ShardEntry, manifest_bytes, sha256_file
+from sray.data_tools.neighbours import (GRID, MIN_POINTS, RULE, RULE_VERSION, Neighbours, fallback_depth,
+                                        grid_points, grid_samples, rank_neighbours, source_pool)
+from sray.data_tools.scene import Scene, View
+
+KEY_SEPARATOR = "__"
+"""Between scene name and view id in a sample key."""
+SHARD_NAME = re.compile(r"^.+-\d{6}\.tar$")
+TEMP_NAME = re.compile(r"^\..+\.tmp\d+$")
+
+
+class DatasetRejected(ValueError):
+    """The input scenes fail ``sray data check``; ``problems`` lists why (file, what, fix)."""
+
+    def __init__(self, problems: list) -> None:
+        self.problems = list(problems)
+        lines = "\n".join(f"  {p.file}: {p.what} (fix: {p.fix})" for p in self.problems)
+        super().__init__(f"{len(self.problems)} problem(s) found by `sray data check`; nothing was sharded:\n{lines}")
+
+
+@dataclass
+class ShardResult:
+    """What a :func:`write_shards` run did."""
+
+    manifest: Manifest
+    """The manifest now on disk."""
+    written: list[str] = field(default_factory=list)
+    """Shard files (re)written."""
+    unchanged: list[str] = field(default_factory=list)
+    """Shard files already byte-identical, left alone."""
+    removed: list[str] = field(default_factory=list)
+    """Stale shard files no longer listed in the manifest, deleted."""
+
+
+def sample_key(scene: str, view_id: str) -> str:
+    """The webdataset key of a view; refuses '.' and '/' (webdataset splits keys on dots)."""
+    for what, name in (("scene name", scene), ("view id", view_id)):
+        if "." in name or "/" in name or not name:
+            raise ValueError(f"scene {scene!r}: {what} {name!r} contains '.' or '/' or is empty; rename it "
+                             "in scene.json / cameras.json (webdataset splits sample keys on dots)")
+    return f"{scene}{KEY_SEPARATOR}{view_id}"
+
+
+def shard_name(scene: str, index: int) -> str:
+    """File name of a scene's ``index``-th shard."""
+    return f"{scene}-{index:06d}.tar"
+
+
+def json_bytes(obj: object) -> bytes:
+    """Compact JSON with sorted keys (deterministic bytes)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()
+
+
+def tar_bytes(members: list[tuple[str, bytes]]) -> bytes:
+    """An uncompressed tar of ``(name, data)`` members with fixed headers (same input -> same bytes)."""
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w", format=tarfile.GNU_FORMAT) as tar:
+        for name, data in members:
+            info = tarfile.TarInfo(name)
+            info.size, info.mtime, info.mode = len(data), 0, 0o644
+            info.uid = info.gid = 0
+            info.uname = info.gname = ""
+            tar.addfile(info, io.BytesIO(data))
+    return buf.getvalue()
+
+
+def view_members(scene: str, view: View, neighbours: Neighbours, scene_json: dict | None) -> list[tuple[str, bytes]]:
+    """Tar members of one view sample (``scene_json`` only on a shard's first sample)."""
+    key = sample_key(scene, view.view_id)
+    camera = {"K": np.asarray(view.K, np.float64).tolist(), "c2w": np.asarray(view.c2w, np.float64).tolist(),
+              "image_size": list(view.hw)}
+    members = [(f"{key}.rgb.png", encode_png(view.rgb)),
+               (f"{key}.depth.png", encode_png(depth_to_png16(view.depth))),
+               (f"{key}.label.png", encode_png(view.label.astype(np.uint16))),
+               (f"{key}.camera.json", json_bytes(camera)),
+               (f"{key}.neighbours.json", json_bytes(neighbours.to_json()))]
+    if scene_json is not None:
+        members.append((f"{key}.scene.json", json_bytes(scene_json)))
+    return members
+
+
+def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None) -> tuple[dict[str, Neighbours], tuple[int, int]]:
+    """Read every view once (cameras + a depth grid) and rank its neighbours; returns them and (H, W)."""
+    meta = scene.meta
+    Ks, c2ws, samples, hw = [], [], [], None
+    for view in scene.views():
+        if hw is not None and view.hw != hw:
+            raise ValueError(f"scene {meta.name!r}, view {view.view_id!r}: image size {view.hw} differs from "
+                             f"{hw}; resize every view of a scene to one size before sharding")
+        hw = view.hw
+        Ks.append(np.asarray(view.K, np.float64))
+        c2ws.append(np.asarray(view.c2w, np.float64))
+        samples.append(grid_samples(view.depth))
+        if bar is not None:
+            bar.update(1)
+    if hw is None:
+        raise ValueError(f"scene {meta.name!r}: field 'view_ids' is empty; a scene needs views")
+    fallback = fallback_depth(samples)
+    points = [grid_points(s, K, c2w, fallback) for s, K, c2w in zip(samples, Ks, c2ws)]
+    ranked = rank_neighbours(meta.view_ids, np.stack(Ks), np.stack(c2ws), hw, points, source_pool(meta), k)
+    return ranked, hw
+
+
+def is_current(path: Path, data: bytes) -> bool:
+    """True when ``path`` already holds exactly ``data`` (size, then sha256)."""
+    return path.is_file() and path.stat().st_size == len(data) and sha256_file(path) == hashlib.sha256(data).hexdigest()
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    """Atomic write that also removes its temporary file when interrupted by an exception."""
+    try:
+        atomic_write_bytes(path, data)
+    except BaseException:
+        for tmp in path.parent.glob(f".{path.name}.tmp*"):
+            tmp.unlink(missing_ok=True)
+        raise
+
+
+def _check_input(scenes_dir: Path) -> None:
+    """Refuse input that ``sray data check`` rejects."""
+    from sray.data_tools.check import check_dataset
+
+    problems = check_dataset(Path(scenes_dir))
+    if problems:
+        raise DatasetRejected(problems)
+
+
+def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256, neighbours: int = 32,
+                 progress: bool = True) -> ShardResult:
+    """Shard every scene of ``scenes_dir`` (sray layout) into ``out_dir`` and write its manifest.
+
+    Raises :class:`DatasetRejected` (listing file, problem and fix) when ``sray data check`` rejects
+    the input. ``neighbours`` = ranked source views kept per view (the loader's top-k must not exceed it).
+    """
+    if views_per_shard < 1 or neighbours < 1:
+        raise ValueError(f"views_per_shard ({views_per_shard}) and neighbours ({neighbours}) must be >= 1")
+    _check_input(scenes_dir)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in out.iterdir():
+        if TEMP_NAME.match(stale.name):
+            stale.unlink()
+    scenes = [read_scene(p) for p in list_scenes(Path(scenes_dir))]
+    label_spaces: dict[str, list[str]] = {}
+    for scene in scenes:
+        names = label_spaces.setdefault(scene.meta.label_space, list(scene.meta.class_names))
+        if names != list(scene.meta.class_names):
+            raise ValueError(f"scene {scene.meta.name!r}: field 'class_names' differs from another scene's list "
+                             f"for label space {scene.meta.label_space!r}; give the two spaces different names")
+    written, unchanged, entries, scene_entries = [], [], [], {}
+    total = 2 * sum(len(s.meta.view_ids) for s in scenes)
+    with tqdm(total=total, unit="view", desc="shard", disable=not progress) as bar:
+        for scene in scenes:
+            meta = scene.meta
+            bar.set_description(f"{meta.name}: neighbours")
+            ranked, hw = scene_neighbours(scene, neighbours, bar)
+            bar.set_description(f"{meta.name}: shards")
+            names = []
+            for index, start in enumerate(range(0, len(meta.view_ids), views_per_shard)):
+                ids = meta.view_ids[start:start + views_per_shard]
+                members = []
+                for j, vid in enumerate(ids):
+                    members += view_members(meta.name, scene.read_view(vid), ranked[vid],
+                                            meta.to_json() if j == 0 else None)
+                    bar.update(1)
+                data, name = tar_bytes(members), shard_name(meta.name, index)
+                if is_current(out / name, data):
+                    unchanged.append(name)
+                else:
+                    if not written:  # the folder stops looking complete before its first shard changes
+                        (out / MANIFEST_NAME).unlink(missing_ok=True)
+                    _atomic_write(out / name, data)
+                    written.append(name)
+                entries.append(ShardEntry(path=name, scene=meta.name, n_views=len(ids),
+                                          sha256=hashlib.sha256(data).hexdigest(), bytes=len(data)))
+                names.append(name)
+            scene_entries[meta.name] = SceneEntry(meta=meta.to_json(), shards=names, n_views=len(meta.view_ids),
+                                                  image_size=list(hw))
+    manifest = Manifest(
+        shards=sorted(entries, key=lambda e: e.path), scenes=dict(sorted(scene_entries.items())),
+        label_spaces=dict(sorted(label_spaces.items())),
+        neighbours={"rule": RULE, "version": RULE_VERSION, "k": neighbours, "grid": list(GRID),
+                    "min_points": MIN_POINTS, "pool": "train scenes: train split minus test split; "
+                    "test scenes: source plus finetune splits"},
+        extra={"views_per_shard": views_per_shard})
+    if not is_current(out / MANIFEST_NAME, manifest_bytes(manifest)):
+        _atomic_write(out / MANIFEST_NAME, manifest_bytes(manifest))
+    listed = {e.path for e in entries}
+    removed = []
+    for path in sorted(out.iterdir()):
+        if SHARD_NAME.match(path.name) and path.name not in listed:
+            path.unlink()
+            removed.append(path.name)
+    return ShardResult(manifest=manifest, written=written, unchanged=unchanged, removed=removed)

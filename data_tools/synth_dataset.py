@@ -1,0 +1,195 @@
+"""Procedural indoor scenes as canonical :class:`Scene` objects and as an sray-layout dataset.
+
+``generate_scene`` builds one room, walks a handheld-style camera path through it and renders every
+view (RGB, z-depth, ScanNet-20 labels). ``generate_dataset`` writes train and unseen test scenes
+with ``layout.write_scene`` and skips scenes already written with the same parameters.
+
+Splits (documented in docs/data.md, "Procedural scenes"):
+
+* train scenes: ``test`` holds every 20th view starting at view 10 (held out for validation) and
+  ``train`` holds all the other views;
+* test scenes (the paper's protocol): a window of 20 consecutive views starting at a seeded
+  offset, read as four blocks of five ``[finetune, source, test, source, finetune]``, so each test
+  view sits between two source views: 8 source, 8 finetune, 4 test; other views are in no split.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sray.data_tools.label_spaces import SCANNET20
+from sray.data_tools.layout import write_dataset_index, write_scene
+from sray.data_tools.scene import Scene, SceneMeta, View, depth_bounds
+from sray.data_tools.synth_render import RenderScene, render_view
+from sray.data_tools.synth_rooms import ROOM_TYPES, Room, build_room
+from sray.data_tools.synth_trajectory import scan_path
+
+GENERATOR = "sray-synth"
+"""Value of ``extra["generator"]`` in every procedural scene."""
+GENERATOR_VERSION = 1
+"""Bumped whenever the same parameters would render different pixels."""
+HFOV_DEG = 62.0
+"""Horizontal field of view (ScanNet's colour camera is about 58 degrees, its depth camera 58-60)."""
+WINDOW = 20
+"""Views in a test scene's evaluation window (the paper's 'select 20 nearby views')."""
+BLOCK = ("finetune", "source", "test", "source", "finetune")
+"""Split of each position in a block of five consecutive window views."""
+HOLDOUT_EVERY, HOLDOUT_OFFSET = 20, 10
+"""Train scenes hold out views HOLDOUT_OFFSET, HOLDOUT_OFFSET + HOLDOUT_EVERY, ... for validation."""
+
+
+def intrinsics(height: int, width: int, hfov_deg: float = HFOV_DEG) -> np.ndarray:
+    """float64 (3, 3) pinhole K with square pixels and the principal point at ((W-1)/2, (H-1)/2)."""
+    f = width / (2.0 * math.tan(math.radians(hfov_deg) / 2.0))
+    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass
+class ScenePlan:
+    """Everything about a procedural scene except its pixels."""
+
+    room: Room
+    """The generated room."""
+    render_scene: RenderScene
+    """The room prepared for rendering."""
+    poses: np.ndarray
+    """float64 (n_views, 4, 4) camera-to-world, OpenCV axes."""
+
+
+def plan_scene(seed: int, n_views: int, room_type: str | None = None) -> ScenePlan:
+    """Room and camera path of a scene (deterministic in ``seed``); retries cluttered rooms."""
+    rng = np.random.default_rng(seed)
+    kind = room_type if room_type is not None else ROOM_TYPES[int(rng.integers(len(ROOM_TYPES)))]
+    for _ in range(10):
+        room = build_room(rng, kind)
+        prepared = RenderScene.prepare(room, exposure=float(rng.uniform(0.9, 1.15)))
+        try:
+            return ScenePlan(room, prepared, scan_path(rng, room.size, prepared.boxes, n_views))
+        except RuntimeError:
+            continue
+    raise RuntimeError(f"seed {seed}: no {kind} room with a free camera path after 10 rooms")
+
+
+def split_views(view_ids: list[str], role: str, seed: int) -> dict[str, list[str]]:
+    """The scene's splits for its role (the rule is in this module's docstring)."""
+    n = len(view_ids)
+    if role == "train":
+        held = set(range(HOLDOUT_OFFSET, n, HOLDOUT_EVERY))
+        return {"train": [v for i, v in enumerate(view_ids) if i not in held],
+                "test": [v for i, v in enumerate(view_ids) if i in held]}
+    if role == "test":
+        if n < WINDOW:
+            raise ValueError(f"a test scene needs at least {WINDOW} views for the source/finetune/test "
+                             f"protocol, got n_views={n}; pass --views {WINDOW} or more")
+        start = int(np.random.default_rng([seed, 20]).integers(0, n - WINDOW + 1))
+        splits: dict[str, list[str]] = {"source": [], "finetune": [], "test": []}
+        for k in range(WINDOW):
+            splits[BLOCK[k % len(BLOCK)]].append(view_ids[start + k])
+        return splits
+    raise ValueError(f"role must be 'train' or 'test', got {role!r}")
+
+
+def scene_params(seed: int, n_views: int, height: int, width: int, role: str, room_type: str) -> dict:
+    """The parameters that fully determine a scene's files (stored in ``extra``, compared on rerun)."""
+    return {"generator": GENERATOR, "generator_version": GENERATOR_VERSION, "seed": int(seed),
+            "n_views": int(n_views), "height": int(height), "width": int(width), "role": role,
+            "room_type": room_type, "hfov_deg": HFOV_DEG}
+
+
+def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, role: str,
+                   room_type: str | None = None, on_view: Callable[[], None] | None = None) -> Scene:
+    """Render a procedural scene in memory (deterministic: same arguments, identical arrays).
+
+    ``room_type`` picks one of ``ROOM_TYPES`` (default: drawn from the seed); ``on_view`` is
+    called after each rendered view (progress bars).
+    """
+    if height < 8 or width < 8:
+        raise ValueError(f"image size {height}x{width} is too small; use at least 8x8")
+    split_views([f"{i:05d}" for i in range(n_views)], role, seed)  # validates role and view count early
+    plan = plan_scene(seed, n_views, room_type)
+    K = intrinsics(height, width)
+    views = []
+    for i, c2w in enumerate(plan.poses):
+        rgb, depth, label = render_view(plan.render_scene, K, c2w, (height, width))
+        views.append(View(view_id=f"{i:05d}", rgb=rgb, depth=depth, label=label, K=K.copy(), c2w=c2w))
+        if on_view is not None:
+            on_view()
+    view_ids = [v.view_id for v in views]
+    near, far = depth_bounds([v.depth for v in views])
+    extra = {**scene_params(seed, n_views, height, width, role, plan.room.room_type),
+             "room_size_m": [float(v) for v in plan.room.size], "n_boxes": len(plan.room.boxes),
+             "ceiling_label": "ignore (ScanNet-20 has no ceiling class)"}
+    meta = SceneMeta(name=name, label_space="scannet20", class_names=list(SCANNET20), view_ids=view_ids,
+                     splits=split_views(view_ids, role, seed), near=near, far=far, role=role, extra=extra)
+    return Scene.in_memory(meta, views)
+
+
+def _scene_seed(seed: int, role: str, index: int) -> int:
+    """Independent per-scene seed derived from the dataset seed."""
+    return int(np.random.SeedSequence([seed, 0 if role == "train" else 1, index]).generate_state(1)[0])
+
+
+def _is_current(scene_dir: Path, params: dict) -> bool:
+    """Whether ``scene_dir`` holds a complete scene written with exactly these parameters."""
+    meta_path = scene_dir / "scene.json"
+    if not meta_path.exists():
+        return False
+    try:
+        extra = json.loads(meta_path.read_text()).get("extra", {})
+    except json.JSONDecodeError:
+        return False
+    return all(extra.get(k) == v for k, v in params.items())
+
+
+def _prune_stale_views(scene_dir: Path, view_ids: list[str]) -> None:
+    """Remove view images of an earlier, larger run of the same scene name."""
+    keep = {f"{v}.png" for v in view_ids}
+    for sub in ("rgb", "depth", "label"):
+        for path in (scene_dir / sub).glob("*.png"):
+            if path.name not in keep:
+                path.unlink()
+
+
+def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height: int, width: int, seed: int,
+                     progress: bool = True) -> list[Path]:
+    """Write ``n_train`` train and ``n_test`` test scenes under ``out`` (sray layout); returns scene dirs.
+
+    Scene names are ``synth_train_000``, ``synth_test_000``, ...; room types cycle through
+    ``ROOM_TYPES`` from a seed-dependent offset so a small dataset covers every type. A scene whose
+    scene.json already records the same parameters is skipped (scene.json is written last, so its
+    presence means the scene is complete).
+    """
+    from tqdm import tqdm
+
+    if n_train < 0 or n_test < 0 or n_train + n_test == 0:
+        raise ValueError(f"need at least one scene, got n_train={n_train}, n_test={n_test}")
+    out = Path(out)
+    jobs = [("train", i) for i in range(n_train)] + [("test", i) for i in range(n_test)]
+    offset = seed % len(ROOM_TYPES)
+    bar = tqdm(total=len(jobs) * n_views, unit="view", desc="sray data synth", disable=not progress)
+    written: list[Path] = []
+    for k, (role, i) in enumerate(jobs):
+        name = f"synth_{role}_{i:03d}"
+        scene_seed, room_type = _scene_seed(seed, role, i), ROOM_TYPES[(offset + k) % len(ROOM_TYPES)]
+        params = scene_params(scene_seed, n_views, height, width, role, room_type)
+        scene_dir = out / name
+        if _is_current(scene_dir, params):
+            bar.update(n_views)
+        else:
+            bar.set_postfix_str(f"{name} ({room_type})")
+            scene = generate_scene(name, scene_seed, n_views, height, width, role, room_type,
+                                   on_view=lambda: bar.update(1))
+            if (scene_dir / "scene.json").exists():
+                (scene_dir / "scene.json").unlink()
+            write_scene(scene, out)
+            _prune_stale_views(scene_dir, scene.meta.view_ids)
+        written.append(scene_dir)
+    bar.close()
+    write_dataset_index(out, [p.name for p in written])
+    return written

@@ -1,0 +1,187 @@
+"""Surface materials of the procedural scenes: pattern kinds and class-conditioned, wide palettes.
+
+A material is a pattern kind plus two colours and a few parameters; the pattern is evaluated in the
+owning surface's local 3D frame (see ``synth_textures``), so a surface point has the same albedo
+from every view. Colours are linear RGB in [0, 1]. Palettes are wide on purpose (any hue for paint,
+fabric and curtains; light to dark for wood) so that colour alone does not identify a class.
+"""
+
+from __future__ import annotations
+
+import colorsys
+from dataclasses import dataclass
+
+import numpy as np
+
+PAINT, WOOD, PLANKS, TILES, FABRIC, STRIPES, PANELS, SKY, PAINTING, BOOKS, LAMP = range(11)
+"""Pattern kinds; SKY and LAMP are emissive (not shaded)."""
+
+UNLIT_KINDS = (SKY, LAMP)
+"""Kinds whose colour is emitted as is."""
+
+
+@dataclass(frozen=True)
+class Material:
+    """Appearance of one surface."""
+
+    kind: int
+    """Pattern kind (one of the constants above)."""
+    color_a: tuple[float, float, float]
+    """Main linear RGB colour."""
+    color_b: tuple[float, float, float]
+    """Second colour (grain, grout, stripes, seams, background), linear RGB."""
+    scale: float = 1.0
+    """Pattern frequency in cycles per metre (tile/plank/panel/spine counts per metre)."""
+    contrast: float = 0.2
+    """Strength of the noise or pattern modulation, 0..1."""
+    axis: int = 0
+    """Object-frame axis a directional pattern runs across (stripes, panels)."""
+    variant: int = 0
+    """Pattern-specific switch (checker tiles, plaid fabric)."""
+    seed: int = 0
+    """Per-surface noise seed (so two tables never share the same grain)."""
+
+
+def _linear(rgb: tuple[float, float, float]) -> tuple[float, float, float]:
+    """sRGB in [0, 1] -> linear RGB."""
+    return tuple(float(c) ** 2.2 for c in rgb)  # type: ignore[return-value]
+
+
+def hsv(rng: np.random.Generator, h: tuple[float, float], s: tuple[float, float],
+        v: tuple[float, float]) -> tuple[float, float, float]:
+    """A linear RGB colour drawn uniformly from an HSV box (hue wraps around)."""
+    hue = float(rng.uniform(*h)) % 1.0
+    return _linear(colorsys.hsv_to_rgb(hue, float(rng.uniform(*s)), float(rng.uniform(*v))))
+
+
+def _seed(rng: np.random.Generator) -> int:
+    return int(rng.integers(0, 2**31 - 1))
+
+
+def _shade(color: tuple[float, float, float], factor: float) -> tuple[float, float, float]:
+    return tuple(min(1.0, c * factor) for c in color)  # type: ignore[return-value]
+
+
+def wood(rng: np.random.Generator) -> Material:
+    """Light oak to dark walnut with grain stripes."""
+    a = hsv(rng, (0.04, 0.11), (0.35, 0.75), (0.3, 0.85))
+    return Material(WOOD, a, _shade(a, rng.uniform(0.55, 0.8)), scale=float(rng.uniform(6, 14)),
+                    contrast=float(rng.uniform(0.3, 0.8)), seed=_seed(rng))
+
+
+def painted(rng: np.random.Generator, panels: bool = False, panel_width: float = 0.45, axis: int = 0) -> Material:
+    """Any hue, muted to saturated, light to dark; optional door/drawer seams."""
+    a = hsv(rng, (0, 1), (0.0, 0.55), (0.25, 0.95))
+    kind = PANELS if panels else PAINT
+    return Material(kind, a, _shade(a, 0.45), scale=1.0 / panel_width, contrast=float(rng.uniform(0.03, 0.12)),
+                    axis=axis, seed=_seed(rng))
+
+
+def furniture_surface(rng: np.random.Generator, panels: bool = False, panel_width: float = 0.45) -> Material:
+    """Wood or paint, as cabinets, shelves and desks come."""
+    if rng.random() < 0.5:
+        return wood(rng)
+    return painted(rng, panels=panels, panel_width=panel_width)
+
+
+def fabric(rng: np.random.Generator) -> Material:
+    """Upholstery and bedding: any hue; plain weave, mottled or plaid."""
+    a = hsv(rng, (0, 1), (0.05, 0.7), (0.2, 0.9))
+    b = hsv(rng, (0, 1), (0.05, 0.7), (0.2, 0.9)) if rng.random() < 0.4 else _shade(a, 0.7)
+    return Material(FABRIC, a, b, scale=float(rng.uniform(15, 40)), contrast=float(rng.uniform(0.1, 0.5)),
+                    variant=int(rng.random() < 0.25), seed=_seed(rng))
+
+
+def ceramic(rng: np.random.Generator) -> Material:
+    """Sanitary ware: mostly white, sometimes cream, pastel or dark."""
+    if rng.random() < 0.7:
+        a = hsv(rng, (0, 1), (0.0, 0.08), (0.82, 0.97))
+    else:
+        a = hsv(rng, (0, 1), (0.1, 0.5), (0.3, 0.9))
+    return Material(PAINT, a, a, scale=3.0, contrast=0.04, seed=_seed(rng))
+
+
+def metal(rng: np.random.Generator) -> Material:
+    """Appliance or fitting finish: steel, white, black or a colour."""
+    pick = rng.random()
+    if pick < 0.4:
+        a = hsv(rng, (0.5, 0.7), (0.0, 0.08), (0.55, 0.8))
+    elif pick < 0.65:
+        a = hsv(rng, (0, 1), (0.0, 0.05), (0.85, 0.97))
+    elif pick < 0.85:
+        a = hsv(rng, (0, 1), (0.0, 0.1), (0.08, 0.25))
+    else:
+        a = hsv(rng, (0, 1), (0.3, 0.8), (0.4, 0.9))
+    return Material(PANELS, a, _shade(a, 0.5), scale=1.0 / 0.7, contrast=0.05, axis=2, seed=_seed(rng))
+
+
+def wall_paint(rng: np.random.Generator) -> Material:
+    """Walls: pale paint (any hue) with a soft mottle, or striped wallpaper."""
+    a = hsv(rng, (0, 1), (0.0, 0.3), (0.55, 0.95))
+    if rng.random() < 0.25:
+        b = hsv(rng, (0, 1), (0.0, 0.35), (0.45, 0.95))
+        return Material(STRIPES, a, b, scale=float(rng.uniform(2, 8)), contrast=float(rng.uniform(0.3, 1.0)),
+                        axis=0, seed=_seed(rng))
+    return Material(PAINT, a, a, scale=float(rng.uniform(1, 4)), contrast=float(rng.uniform(0.05, 0.2)),
+                    seed=_seed(rng))
+
+
+def floor_surface(rng: np.random.Generator, wet_room: bool = False) -> Material:
+    """Floors: planks, tiles (plain or checker) or carpet; wet rooms get tiles."""
+    pick = 1.0 if wet_room else rng.random()
+    if pick < 0.45:
+        a = hsv(rng, (0.03, 0.12), (0.25, 0.75), (0.25, 0.85))
+        return Material(PLANKS, a, _shade(a, rng.uniform(0.6, 0.85)), scale=float(rng.uniform(4, 9)),
+                        contrast=float(rng.uniform(0.2, 0.6)), seed=_seed(rng))
+    if pick < 0.7:
+        return Material(FABRIC, hsv(rng, (0, 1), (0.0, 0.5), (0.2, 0.8)), hsv(rng, (0, 1), (0.0, 0.5), (0.2, 0.8)),
+                        scale=float(rng.uniform(30, 60)), contrast=float(rng.uniform(0.1, 0.3)), seed=_seed(rng))
+    a = hsv(rng, (0, 1), (0.0, 0.35), (0.35, 0.95))
+    checker = int(rng.random() < 0.35)
+    b = hsv(rng, (0, 1), (0.0, 0.35), (0.1, 0.95)) if checker else _shade(a, 0.55)
+    return Material(TILES, a, b, scale=float(rng.uniform(1.6, 5.0)), contrast=float(rng.uniform(0.05, 0.2)),
+                    variant=checker, seed=_seed(rng))
+
+
+def ceiling_paint(rng: np.random.Generator) -> Material:
+    """Ceilings: near-white with a faint mottle."""
+    a = hsv(rng, (0, 1), (0.0, 0.06), (0.8, 0.95))
+    return Material(PAINT, a, a, scale=2.0, contrast=0.05, seed=_seed(rng))
+
+
+def curtain_fabric(rng: np.random.Generator) -> Material:
+    """Curtains: any colour, plain with folds or striped across the curtain's width (object x)."""
+    a = hsv(rng, (0, 1), (0.05, 0.8), (0.2, 0.92))
+    b = hsv(rng, (0, 1), (0.05, 0.8), (0.2, 0.92)) if rng.random() < 0.4 else _shade(a, 0.8)
+    return Material(STRIPES, a, b, scale=float(rng.uniform(3, 12)), contrast=float(rng.uniform(0.3, 1.0)),
+                    axis=0, variant=1, seed=_seed(rng))
+
+
+def canvas(rng: np.random.Generator) -> Material:
+    """A picture's image: blends of two random colours."""
+    return Material(PAINTING, hsv(rng, (0, 1), (0.2, 0.9), (0.2, 0.95)), hsv(rng, (0, 1), (0.2, 0.9), (0.2, 0.95)),
+                    scale=float(rng.uniform(2, 8)), contrast=float(rng.uniform(0.5, 1.0)), seed=_seed(rng))
+
+
+def book_row(rng: np.random.Generator) -> Material:
+    """A row of book spines (random colours per spine, uneven heights) in front of a dark back."""
+    return Material(BOOKS, (0.0, 0.0, 0.0), hsv(rng, (0, 1), (0.0, 0.3), (0.03, 0.12)),
+                    scale=float(rng.uniform(20, 45)), contrast=1.0, axis=0, seed=_seed(rng))
+
+
+def window_glass(rng: np.random.Generator) -> Material:
+    """Daylight through a window: a bright sky gradient (emissive)."""
+    top = hsv(rng, (0.52, 0.62), (0.15, 0.45), (0.85, 1.0))
+    low = hsv(rng, (0.0, 1.0), (0.0, 0.2), (0.75, 0.95))
+    return Material(SKY, top, low, scale=1.0, contrast=float(rng.uniform(0.1, 0.3)), seed=_seed(rng))
+
+
+def lamp_glow() -> Material:
+    """A ceiling light's diffuser (emissive, warm white)."""
+    return Material(LAMP, (1.0, 0.95, 0.85), (1.0, 0.95, 0.85))
+
+
+def dark_plastic(rng: np.random.Generator) -> Material:
+    """Screens, handles and small fittings."""
+    a = hsv(rng, (0, 1), (0.0, 0.1), (0.04, 0.3))
+    return Material(PAINT, a, a, scale=5.0, contrast=0.05, seed=_seed(rng))

@@ -1,0 +1,53 @@
+"""A procedural room: shell, finishes, lights and the furniture of its room type.
+
+``build_room(rng, room_type)`` returns a :class:`Room`; the furniture of each room type comes from
+``synth_room_types``. The room's interior is the box [0, Lx] x [0, Ly] x [0, H] (z up, floor at 0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sray.data_tools import synth_materials as mat
+from sray.data_tools.synth_geometry import Box
+from sray.data_tools.synth_layout import Light
+from sray.data_tools.synth_room_parts import add_lights
+from sray.data_tools.synth_room_types import RECIPES
+
+ROOM_TYPES: tuple[str, ...] = tuple(RECIPES)
+"""Room types the generator knows."""
+
+
+@dataclass
+class Room:
+    """A finished procedural room."""
+
+    room_type: str
+    """One of :data:`ROOM_TYPES`."""
+    size: tuple[float, float, float]
+    """Interior extents (Lx, Ly, H) in metres."""
+    boxes: list[Box]
+    """All boxes (world frame)."""
+    lights: list[Light]
+    """Point lights; the first one casts shadows."""
+    ambient: float
+    """Ambient light level."""
+    wall: mat.Material
+    """Wall finish."""
+    floor: mat.Material
+    """Floor finish."""
+    ceiling: mat.Material
+    """Ceiling finish."""
+
+
+def build_room(rng: np.random.Generator, room_type: str) -> Room:
+    """Generate a complete room of the given type from ``rng``."""
+    if room_type not in RECIPES:
+        raise ValueError(f"unknown room type {room_type!r}; known: {list(RECIPES)}")
+    layout, wall, floor = RECIPES[room_type](rng)
+    add_lights(rng, layout)
+    layout.add_baseboards(rng)
+    return Room(room_type=room_type, size=layout.size, boxes=layout.boxes, lights=layout.lights,
+                ambient=float(rng.uniform(0.25, 0.4)), wall=wall, floor=floor, ceiling=mat.ceiling_paint(rng))

@@ -1,0 +1,114 @@
+"""Handheld-scan-like camera paths through a procedural room.
+
+The camera walks a smooth arc of an ellipse (a third to a full turn) over free floor at 1.2-1.7 m,
+wobbling a little in position, height and roll, and looks outward across the room at a target near
+the far side that drifts left and right, slightly downward, as a person scanning a room does. Consecutive
+views are a few degrees apart, so neighbours overlap strongly. Every camera centre stays inside
+the room, away from the walls, and outside every box grown by a safety margin.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sray.data_tools.synth_geometry import PackedBoxes
+
+HEIGHT_RANGE = (1.2, 1.7)
+"""Camera height band in metres."""
+WALL_CLEARANCE = 0.35
+"""Minimum distance of a camera centre from any wall, floor or ceiling (metres)."""
+BOX_MARGIN = 0.25
+"""Minimum distance of a camera centre from every box (metres, per axis)."""
+BODY_RADIUS = 0.25
+"""How far the scanning person's standing point keeps from furniture footprints (metres)."""
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.ndarray:
+    """float64 (4, 4) camera-to-world in OpenCV axes (x right, y down, z forward); world z is up."""
+    forward = target - eye
+    forward = forward / np.linalg.norm(forward)
+    right = np.cross(forward, np.array([0.0, 0.0, 1.0]))
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    c, s = math.cos(roll), math.sin(roll)
+    right, down = c * right + s * down, -s * right + c * down
+    c2w = np.eye(4)
+    c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = right, down, forward, eye
+    return c2w
+
+
+def _wobble(rng: np.random.Generator, s: np.ndarray, amplitude: float, cycles: tuple[float, float]) -> np.ndarray:
+    """A smooth random signal over path parameter s in [0, 1]: three sines of random phase."""
+    out = np.zeros_like(s)
+    for k in range(3):
+        freq = float(rng.uniform(*cycles))
+        out += amplitude / (k + 1) * np.sin(2 * math.pi * freq * s + float(rng.uniform(0, 2 * math.pi)))
+    return out
+
+
+def camera_valid(centres: np.ndarray, size: tuple[float, float, float], boxes: PackedBoxes,
+                 standing: bool = False) -> np.ndarray:
+    """bool (N,): camera centres (N, 3) inside the room with clearance and outside every grown box.
+
+    With ``standing`` the centre must also be above free floor: outside the floor footprint of every
+    box taller than a rug, grown by the scanning person's reach (:data:`BODY_RADIUS`).
+    """
+    hi = np.asarray(size)
+    ok = np.all((centres >= WALL_CLEARANCE) & (centres <= hi - WALL_CLEARANCE), axis=1)
+    ok &= ~np.any(boxes.contains(centres, BOX_MARGIN), axis=1)
+    if standing:
+        tall = (boxes.center[:, 2] + boxes.half[:, 2]) > 0.05
+        floor_level = np.concatenate([centres[:, :2], np.zeros((len(centres), 1))], axis=1)
+        grown = boxes.contains(floor_level, 0.0) | _near_footprint(floor_level, boxes, BODY_RADIUS)
+        ok &= ~np.any(grown[:, tall], axis=1)
+    return ok
+
+
+def _near_footprint(points: np.ndarray, boxes: PackedBoxes, radius: float) -> np.ndarray:
+    """bool (N, P): a floor point within ``radius`` (per axis, in the box frame) of a box footprint."""
+    rel = points[:, None, :2] - boxes.center[None, :, :2]
+    c, s = np.cos(boxes.yaw)[None, :], np.sin(boxes.yaw)[None, :]
+    lx, ly = c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]
+    return (np.abs(lx) <= boxes.half[None, :, 0] + radius) & (np.abs(ly) <= boxes.half[None, :, 1] + radius)
+
+
+def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_views: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One random path: eyes (n, 3), look-at targets (n, 3) and roll angles (n,) in radians."""
+    lx, ly, _ = size
+    s = np.linspace(0.0, 1.0, n_views)
+    centre = np.array([rng.uniform(0.35 * lx, 0.65 * lx), rng.uniform(0.35 * ly, 0.65 * ly)])
+    a = float(rng.uniform(0.15, max(0.2, min(centre[0], lx - centre[0]) - WALL_CLEARANCE)))
+    b = float(rng.uniform(0.15, max(0.2, min(centre[1], ly - centre[1]) - WALL_CLEARANCE)))
+    sweep = float(rng.uniform(0.7, 2.0)) * math.pi * float(rng.choice([-1.0, 1.0]))
+    theta = float(rng.uniform(0, 2 * math.pi)) + sweep * s
+    x = centre[0] + a * np.cos(theta) + _wobble(rng, s, 0.06, (1.5, 5.0))
+    y = centre[1] + b * np.sin(theta) + _wobble(rng, s, 0.06, (1.5, 5.0))
+    z = np.clip(float(rng.uniform(1.3, 1.55)) + _wobble(rng, s, 0.1, (1.0, 4.0)), *HEIGHT_RANGE)
+    heading = theta + math.pi + _wobble(rng, s, 0.45, (0.3, 1.2))
+    dx, dy = np.cos(heading), np.sin(heading)
+    with np.errstate(divide="ignore"):
+        to_wall = np.minimum(np.where(dx > 0, (lx - x) / dx, -x / dx), np.where(dy > 0, (ly - y) / dy, -y / dy))
+    reach = np.maximum(0.6, (to_wall - 0.4) * float(rng.uniform(0.6, 1.0)))
+    tz = float(rng.uniform(0.45, 1.0)) + _wobble(rng, s, 0.25, (0.5, 3.0))
+    roll = np.radians(_wobble(rng, s, 2.5, (1.0, 4.0)))
+    return np.stack([x, y, z], axis=1), np.stack([x + reach * dx, y + reach * dy, tz], axis=1), roll
+
+
+def scan_path(rng: np.random.Generator, size: tuple[float, float, float], boxes: PackedBoxes,
+              n_views: int, attempts: int = 1500) -> np.ndarray:
+    """A valid handheld-style path of ``n_views`` cameras: float64 (n_views, 4, 4) c2w, OpenCV axes.
+
+    The first two thirds of the attempts require the person to stand on free floor; the rest only
+    keep the camera clear of every box (a scan reaching over a bed or table). Raises RuntimeError
+    when no valid path is found.
+    """
+    if n_views < 1:
+        raise ValueError(f"n_views must be >= 1, got {n_views}")
+    for attempt in range(attempts):
+        eyes, targets, roll = _candidate(rng, size, n_views)
+        if np.all(camera_valid(eyes, size, boxes, standing=attempt < 2 * attempts // 3)):
+            return np.stack([look_at(e, t, r) for e, t, r in zip(eyes, targets, roll)])
+    raise RuntimeError(f"no collision-free camera path found in a {size} room after {attempts} attempts")

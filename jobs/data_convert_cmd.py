@@ -1,0 +1,84 @@
+"""``sray data convert``: a ScanNet export or a Semantic-NeRF Replica rendering -> sray layout."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+
+def _size(text: str) -> tuple[int, int]:
+    """``WxH`` (e.g. ``320x240``) -> (H, W)."""
+    match = re.fullmatch(r"(\d+)x(\d+)", text.strip())
+    if not match or int(match.group(1)) < 1 or int(match.group(2)) < 1:
+        raise argparse.ArgumentTypeError(f"size must look like 320x240 (width x height), got {text!r}")
+    return int(match.group(2)), int(match.group(1))
+
+
+def register(verbs: argparse._SubParsersAction) -> None:
+    """Add ``sray data convert``."""
+    p = verbs.add_parser("convert", help="convert a ScanNet export or a Replica rendering into sray layout",
+                         description="Convert one scan (ScanNet SensReader export + label-filt) or one rendered "
+                                     "Replica sequence (Semantic-NeRF layout) into one scene of an sray dataset. "
+                                     "See docs/data.md, 'Readers and validation'.")
+    p.add_argument("src", type=Path, help="the scan / sequence folder")
+    p.add_argument("--format", required=True, choices=("scannet", "replica"), help="source layout")
+    p.add_argument("--out", required=True, type=Path, help="dataset folder that receives the scene")
+    p.add_argument("--name", default=None, help="scene name (default: the source folder's name)")
+    p.add_argument("--role", default="train", choices=("train", "test"),
+                   help="train: all views, every --holdout-every-th held out as 'test'; "
+                        "test: 20-view window, 8 source / 8 finetune / 4 test")
+    p.add_argument("--label-space", default="scannet20", choices=("scannet20", "nyu40"))
+    p.add_argument("--size", type=_size, default=None, metavar="WxH",
+                   help="output size (default: 320x240 for scannet, the rendered size for replica)")
+    p.add_argument("--frame-skip", type=int, default=None, metavar="N",
+                   help="keep every N-th usable frame (default: 10 for scannet's 30 fps, 5 for replica)")
+    p.add_argument("--depth-scale", type=float, default=1000.0,
+                   help="depth PNG units per metre in the source (default 1000: millimetres)")
+    p.add_argument("--tsv", type=Path, default=None,
+                   help="scannet: scannetv2-labels.combined.tsv (default: searched next to and above SRC)")
+    p.add_argument("--classes", type=Path, default=None,
+                   help="replica: class table, e.g. Replica/<scene>/habitat/info_semantic.json "
+                        "(default: SRC/info_semantic.json or SRC/../info_semantic.json)")
+    p.add_argument("--holdout-every", type=int, default=20, metavar="N",
+                   help="train scenes: hold out every N-th view as 'test' (0: none)")
+    p.add_argument("--window-start", type=int, default=None, metavar="I",
+                   help="test scenes: first view of the 20-view window (default: centred)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing scene of the same name")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Convert; print what was written and which frames were dropped. Exit 1 with the reason on bad input."""
+    from tqdm import tqdm
+
+    from sray.data_tools.convert import ConvertConfig, convert_scene
+
+    cfg = ConvertConfig(format=args.format, src=args.src, out=args.out, name=args.name, role=args.role,
+                        label_space=args.label_space, size_hw=args.size, frame_skip=args.frame_skip,
+                        depth_scale=args.depth_scale, tsv=args.tsv, classes=args.classes,
+                        holdout_every=args.holdout_every, window_start=args.window_start,
+                        overwrite=args.overwrite)
+    bar = tqdm(desc=f"sray data convert {args.src}", unit="view", file=sys.stderr)
+
+    def on_view(total: int) -> None:
+        bar.total = total
+        bar.update()
+
+    try:
+        report = convert_scene(cfg, on_view)
+    except (OSError, ValueError) as e:
+        bar.close()
+        print(f"sray data convert: {e}", file=sys.stderr)
+        return 1
+    bar.close()
+    splits = ", ".join(f"{k} {v}" for k, v in report.splits.items())
+    print(f"wrote {report.scene_dir}: {report.n_views} views ({splits}), near {report.near:.3f} m, "
+          f"far {report.far:.3f} m")
+    if report.dropped_frames:
+        n = len(report.dropped_frames)
+        print(f"dropped {n} source frame{'s' * (n != 1)}:")
+        for frame, reason in report.dropped_frames.items():
+            print(f"  frame {frame}: {reason}")
+    return 0

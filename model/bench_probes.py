@@ -1,0 +1,179 @@
+"""Measurement helpers for ``model.benchmark``: FLOP counts, peak allocations, timings, training steps.
+
+* FLOPs: ``torch.utils.flop_counter.FlopCounterMode`` with SDPA forced onto its MATH backend, which
+  decomposes attention into counted matmuls (the fused CPU flash kernel has no FLOP formula and
+  would count 0). Fused kernels do the same matmul work, so the count holds for every backend.
+* Peak memory: on CUDA, ``torch.cuda.max_memory_allocated`` above the level before the call; on
+  CPU, the profiler's allocator trace (``profile_memory=True``): the highest "Total Allocated"
+  reached during the call minus the level when it started. Both count PyTorch's allocator only
+  (tensors and kernel scratch), the quantity the paper's "memory increment" reports.
+* Training steps run in a fresh spawned process each, so the process peak RSS they report
+  (``ru_maxrss``) belongs to that configuration alone, as in the reference measurement of the
+  paper's public code.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import tempfile
+import time
+from collections.abc import Callable
+from contextlib import nullcontext
+
+import torch
+from torch.nn.attention import SDPBackend, sdpa_kernel
+from torch.utils.flop_counter import FlopCounterMode
+
+from .config import SRayConfig
+from .cra import CrossReprojectionAttention
+
+
+def resolve_device(device: str) -> torch.device:
+    """``auto`` -> cuda when available, else cpu; anything else as given."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    dev = torch.device(device)
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError("sray.model.benchmark: device 'cuda' asked for but no CUDA device is visible; "
+                         "use --device cpu or auto.")
+    return dev
+
+
+def attention_case(variant: str, rays: int, views: int, samples: int, channels: int,
+                   device: torch.device, seed: int = 0) -> tuple[CrossReprojectionAttention, torch.Tensor, torch.Tensor]:
+    """A CRA module of ``variant`` and its input: space (R, m, N, C) and a validity mask (90% valid)."""
+    gen = torch.Generator().manual_seed(seed)
+    cfg = SRayConfig(feat_dim=channels, attention=variant, n_coarse=samples)
+    torch.manual_seed(seed)
+    module = CrossReprojectionAttention(cfg, samples).to(device)
+    space = torch.randn(rays, views, samples, channels, generator=gen).to(device)
+    valid = (torch.rand(rays, views, samples, generator=gen) < 0.9).to(device)
+    return module, space, valid
+
+
+def attention_call(module: CrossReprojectionAttention, space: torch.Tensor, valid: torch.Tensor,
+                   backward: bool) -> Callable[[], None]:
+    """A closure running the attention stage forward (and backward of its output sum)."""
+
+    def run() -> None:
+        x = space.detach().requires_grad_(backward)
+        with torch.set_grad_enabled(backward):
+            out = module(x, valid)
+            if backward:
+                out.float().sum().backward()
+    return run
+
+
+def count_flops(fn: Callable[[], None]) -> int:
+    """Matmul FLOPs of ``fn`` (forward and whatever backward it runs), SDPA on the MATH backend."""
+    with sdpa_kernel(SDPBackend.MATH), FlopCounterMode(display=False) as counter:
+        fn()
+    return int(counter.get_total_flops())
+
+
+def _cpu_peak_from_trace(path: str) -> int:
+    """Peak allocator increment in a chrome trace written by a ``profile_memory=True`` profile."""
+    with open(path) as f:
+        events = [e["args"] for e in json.load(f)["traceEvents"]
+                  if e.get("name") == "[memory]" and e["args"].get("Device Type") == 0]
+    if not events:
+        return 0
+    start = events[0]["Total Allocated"] - events[0]["Bytes"]
+    return max(int(e["Total Allocated"]) for e in events) - int(start)
+
+
+def peak_bytes(fn: Callable[[], None], device: torch.device, backend: SDPBackend | None = None) -> int:
+    """Peak bytes PyTorch's allocator holds during ``fn`` above its level at the start."""
+    ctx = sdpa_kernel(backend) if backend is not None else nullcontext()
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+        before = torch.cuda.memory_allocated(device)
+        torch.cuda.reset_peak_memory_stats(device)
+        with ctx:
+            fn()
+        torch.cuda.synchronize(device)
+        return int(torch.cuda.max_memory_allocated(device) - before)
+    with tempfile.TemporaryDirectory() as tmp:
+        trace = os.path.join(tmp, "trace.json")
+        with ctx, torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU],
+                                         profile_memory=True) as prof:
+            fn()
+        prof.export_chrome_trace(trace)
+        return _cpu_peak_from_trace(trace)
+
+
+def time_call(fn: Callable[[], None], device: torch.device, repeats: int,
+              backend: SDPBackend | None = None) -> float:
+    """Median wall-clock seconds of ``fn`` over ``repeats`` runs after one warm-up run."""
+    ctx = sdpa_kernel(backend) if backend is not None else nullcontext()
+    times = []
+    with ctx:
+        for i in range(repeats + 1):
+            if device.type == "cuda":
+                torch.cuda.synchronize(device)
+            t0 = time.perf_counter()
+            fn()
+            if device.type == "cuda":
+                torch.cuda.synchronize(device)
+            if i:
+                times.append(time.perf_counter() - t0)
+    return sorted(times)[len(times) // 2]
+
+
+def _synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device) -> dict:
+    """Random source images and a camera rig whose sources all look at the query's frustum."""
+    from .rays import pixel_rays
+
+    h, w = hw
+    gen = torch.Generator().manual_seed(0)
+    K = torch.tensor([[w / 2, 0.0, (w - 1) / 2], [0.0, w / 2, (h - 1) / 2], [0.0, 0.0, 1.0]])
+    c2w = torch.eye(4).repeat(views, 1, 1)
+    c2w[:, 0, 3] = torch.linspace(-0.3, 0.3, views)
+    c2w[:, 1, 3] = 0.1 * torch.sin(torch.arange(views, dtype=torch.float32))
+    uv = torch.rand(rays, 2, generator=gen) * torch.tensor([w - 1.0, h - 1.0])
+    origins, dirs = pixel_rays(K, torch.eye(4), uv)
+    batch = {"src_rgb": torch.rand(views, 3, h, w, generator=gen), "src_K": K.expand(views, 3, 3).clone(),
+             "src_c2w": c2w, "origins": origins, "dirs": dirs,
+             "label": torch.randint(0, 20, (rays,), generator=gen), "rgb": torch.rand(rays, 3, generator=gen)}
+    return {k: v.to(device) for k, v in batch.items()}
+
+
+def train_step_worker(spec: dict) -> dict:
+    """Time full training steps (encode, render, loss, backward, Adam) for one configuration.
+
+    spec: rays, coarse, fine, views, hw, device, dtype ('fp32'|'bf16'|'fp16'), steps, threads.
+    Meant to run in a fresh process; returns the median step time and the process peak RSS.
+    """
+    from .losses import render_loss
+    from .sray import SRayModel
+
+    if spec.get("threads"):
+        torch.set_num_threads(int(spec["threads"]))
+    device = torch.device(spec["device"])
+    torch.manual_seed(0)
+    cfg = SRayConfig(n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"])
+    model = SRayModel(cfg).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    batch = _synthetic_batch(spec["rays"], spec["views"], tuple(spec["hw"]), device)
+    dtype = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}[spec["dtype"]]
+    scaler = torch.amp.GradScaler(device.type, enabled=dtype == torch.float16)
+
+    def step() -> None:
+        with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
+            src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"])
+            out = model.render_rays(src, batch["origins"], batch["dirs"], 1.0, 5.0, stratified=True)
+            loss, _ = render_loss(out, batch["label"], batch["rgb"], cfg)
+        opt.zero_grad(set_to_none=True)
+        scaler.scale(loss).backward()
+        scaler.step(opt)
+        scaler.update()
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"sray.model.benchmark: non-finite loss in {spec}.")
+
+    seconds = time_call(step, device, int(spec["steps"]))
+    peak_gpu = int(torch.cuda.max_memory_allocated(device)) if device.type == "cuda" else 0
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux reports KiB
+    n_params = sum(p.numel() for p in model.parameters())
+    return {"seconds": seconds, "rss_bytes": rss, "gpu_peak_bytes": peak_gpu, "params": n_params}

@@ -1,0 +1,100 @@
+"""Configuration of the S-Ray network (``SRayModel``): one typed dataclass, validated on creation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+ATTENTION_VARIANTS = ("full", "intra", "cross", "none", "dense")
+"""Cross-Reprojection Attention variants: ``full`` = intra-view radial then cross-view sparse
+attention (the paper's CRA); ``intra`` / ``cross`` = only one of the two; ``none`` = no attention;
+``dense`` = one joint attention over all (view, sample) tokens of a ray (the paper's baseline)."""
+
+DENSITY_ACTIVATIONS = ("softplus", "relu")
+"""Non-negative activations allowed for the density output."""
+
+
+@dataclass
+class SRayConfig:
+    """Every setting of the S-Ray network, its sampling and its loss weights.
+
+    Defaults are the paper's (Method section and appendix tables) where it states a value.
+    """
+
+    n_classes: int = 20
+    """Number of semantic classes L the classifier predicts (ScanNet benchmark: 20)."""
+    feat_dim: int = 32
+    """Channels C of the image features and of the contextual space M (paper: 32)."""
+    n_source: int = 8
+    """Number of source views m a training sample carries (paper: 8); the network itself accepts
+    any m >= 1 at run time."""
+    n_coarse: int = 64
+    """Coarse samples per ray, stratified in training and bin centres in evaluation (paper: 64)."""
+    n_fine: int = 64
+    """Fine samples per ray drawn from the coarse weights; the fine network sees the sorted union
+    of coarse and fine samples, n_coarse + n_fine in all (paper code: 64)."""
+    attention: str = "full"
+    """Cross-Reprojection Attention variant, one of ``ATTENTION_VARIANTS``."""
+    n_heads: int = 4
+    """Heads of every multi-head attention (CRA and the geometry net's ray attention; paper: 4)."""
+    ffn_mult: int = 0
+    """Hidden width of an optional pre-norm ReLU feed-forward after each CRA attention, as a
+    multiple of feat_dim; 0 (default) leaves it out, as the appendix's CRA table lists attention
+    layers only. It costs two full passes of the largest tensors per attention."""
+    dir_hidden: int = 16
+    """Hidden width of the view-direction MLP (4 -> 16 -> C, appendix L21)."""
+    weight_hidden: tuple[int, int] = (16, 8)
+    """Hidden widths of the semantic-aware weight net (37 -> 16 -> 8 -> 1, appendix)."""
+    geo_hidden: tuple[int, int] = (32, 16)
+    """Widths of the geometry net's MLP on [mean, variance] (64 -> 32 -> 16, appendix L8)."""
+    tau: float = 0.7
+    """Bound of the semantic-aware weights: tau/m < w_i < 1/(tau m); tau = 1 is the plain mean."""
+    weight_margin: float = 1e-3
+    """Fraction of the weight range kept unused so the bounds stay strict when the sigmoid
+    scores saturate to exactly 0 or 1 in floating point (see ``semantic_weights``)."""
+    density_activation: str = "softplus"
+    """``softplus`` (default: no dead units at start) or ``relu`` (the appendix's L11)."""
+    min_source_depth: float = 1e-3
+    """A projection is valid only if the point lies at least this far (camera z, scene units) in
+    front of the source camera."""
+    lambda_sem: float = 1.0
+    """Weight of the semantic cross-entropy in the training loss (paper: 1)."""
+    lambda_rgb: float = 1.0
+    """Weight of the photometric MSE in the training loss (paper: 1)."""
+    ignore_id: int = 255
+    """Label id of unlabelled pixels; never a prediction target."""
+    chunk: int = 4096
+    """Rays rendered per forward pass by ``render_image`` (bounds its memory)."""
+
+    def __post_init__(self) -> None:
+        """Reject settings the network cannot run with, naming the field and the fix."""
+
+        def bad(field: str, why: str) -> ValueError:
+            return ValueError(f"sray.model.config.SRayConfig: field `{field}` {why}.")
+
+        if self.attention not in ATTENTION_VARIANTS:
+            raise bad("attention", f"is {self.attention!r}; use one of {ATTENTION_VARIANTS}")
+        if self.density_activation not in DENSITY_ACTIVATIONS:
+            raise bad("density_activation",
+                      f"is {self.density_activation!r}; use one of {DENSITY_ACTIVATIONS}")
+        for name in ("n_classes", "feat_dim", "n_source", "n_coarse", "n_fine", "n_heads",
+                     "dir_hidden", "chunk"):
+            if int(getattr(self, name)) < 1:
+                raise bad(name, f"is {getattr(self, name)}; it must be a positive integer")
+        if self.feat_dim % self.n_heads or self.geo_hidden[-1] % self.n_heads:
+            raise bad("n_heads", f"is {self.n_heads}; it must divide feat_dim ({self.feat_dim}) "
+                      f"and geo_hidden[-1] ({self.geo_hidden[-1]})")
+        if self.ffn_mult < 0:
+            raise bad("ffn_mult", f"is {self.ffn_mult}; use 0 (no feed-forward) or more")
+        if not 0.0 < self.tau <= 1.0:
+            raise bad("tau", f"is {self.tau}; it must lie in (0, 1] (1 = mean aggregation)")
+        if not 0.0 < self.weight_margin < 1.0:
+            raise bad("weight_margin", f"is {self.weight_margin}; it must lie in (0, 1)")
+        if self.min_source_depth <= 0.0:
+            raise bad("min_source_depth", f"is {self.min_source_depth}; it must be > 0")
+        if len(self.weight_hidden) != 2 or len(self.geo_hidden) != 2:
+            raise bad("weight_hidden/geo_hidden", "must each hold exactly two widths")
+
+    @property
+    def n_fine_total(self) -> int:
+        """Samples per ray seen by the fine network: the sorted union of coarse and fine."""
+        return self.n_coarse + self.n_fine

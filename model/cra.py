@@ -1,0 +1,91 @@
+"""Cross-Reprojection Attention (CRA) over the contextual space M, and its ablation variants.
+
+M has shape (R, m, N, C): R rays, m source views, N samples per ray, C channels.
+
+* intra-view radial attention: for every (ray, view), attention over that view's N samples, after
+  adding a learned embedding of the sample index (appendix table: L1-L4);
+* cross-view sparse attention: for every (ray, sample), attention over its m views (L5-L6);
+* ``dense``: the paper's costly baseline, one joint attention over all m * N tokens of a ray.
+
+Each attention is an ``AttentionBlock``: pre-norm residual multi-head attention (LayerNorm, then
+``scaled_dot_product_attention``, then an output projection added to the input), followed by an
+optional pre-norm ReLU feed-forward (``ffn_mult``; the appendix lists ReLU as these layers'
+activation). Pre-norm keeps the residual path an identity, which trains stably from scratch.
+
+Masking: invalid projections are masked as KEYS. A sequence whose keys are all invalid (a view that
+sees no sample of the ray, a sample no view sees) attends over all its keys instead, which is
+finite. The outputs at invalid tokens are finite and ignored by everything downstream (they are
+masked as keys in the next attention, and the weight net gives invalid views weight exactly 0), so
+they are not zeroed, which saves a pass over the largest tensor.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from .config import SRayConfig
+
+
+class AttentionBlock(nn.Module):
+    """Pre-norm multi-head self-attention with key masking (+ optional ReLU feed-forward)."""
+
+    def __init__(self, dim: int, heads: int, ffn_mult: int) -> None:
+        super().__init__()
+        if dim % heads:
+            raise ValueError(f"sray.model.cra.AttentionBlock: heads ({heads}) must divide dim ({dim}).")
+        self.heads = heads
+        self.norm = nn.LayerNorm(dim)
+        self.qkv = nn.Linear(dim, 3 * dim)
+        self.proj = nn.Linear(dim, dim)
+        self.ffn: nn.Module | None = None
+        if ffn_mult > 0:
+            self.ffn = nn.Sequential(nn.LayerNorm(dim), nn.Linear(dim, ffn_mult * dim), nn.ReLU(),
+                                     nn.Linear(ffn_mult * dim, dim))
+
+    def forward(self, x: Tensor, valid: Tensor) -> Tensor:
+        """x: (B, L, D) tokens; valid: (B, L) bool. Returns (B, L, D); finite at invalid tokens."""
+        b, n, d = x.shape
+        qkv = self.qkv(self.norm(x)).view(b, n, 3, self.heads, d // self.heads)
+        q, k, v = qkv.permute(2, 0, 3, 1, 4).unbind(0)  # 3 x (B, heads, L, d / heads)
+        keys = valid | ~valid.any(-1, keepdim=True)  # (B, L): all keys where none is valid
+        att = F.scaled_dot_product_attention(q, k, v, attn_mask=keys[:, None, None, :])
+        x = x + self.proj(att.transpose(1, 2).reshape(b, n, d))  # (B, L, D)
+        if self.ffn is not None:
+            x = x + self.ffn(x)
+        return x
+
+
+class CrossReprojectionAttention(nn.Module):
+    """M (R, m, N, C) -> refined M'' (R, m, N, C) with the variant chosen by ``cfg.attention``."""
+
+    def __init__(self, cfg: SRayConfig, n_samples: int) -> None:
+        super().__init__()
+        self.variant = cfg.attention
+        self.n_samples = n_samples
+        c, h, f = cfg.feat_dim, cfg.n_heads, cfg.ffn_mult
+        self.pos: nn.Parameter | None = None
+        if self.variant in ("full", "intra", "dense"):
+            self.pos = nn.Parameter(torch.randn(n_samples, c) * 0.02)  # (N, C) sample-index embedding
+        self.intra = AttentionBlock(c, h, f) if self.variant in ("full", "intra") else None
+        self.cross = AttentionBlock(c, h, f) if self.variant in ("full", "cross") else None
+        self.dense = AttentionBlock(c, h, f) if self.variant == "dense" else None
+
+    def forward(self, space: Tensor, valid: Tensor) -> Tensor:
+        """space: (R, m, N, C); valid: (R, m, N) bool. Returns (R, m, N, C), meaningful where valid."""
+        r, m, n, c = space.shape
+        if n != self.n_samples:
+            raise ValueError(f"sray.model.cra: built for {self.n_samples} samples per ray, got {n}.")
+        x = space
+        if self.pos is not None:
+            x = x + self.pos.to(x.dtype)  # broadcast over rays and views (no view embedding)
+        if self.intra is not None:  # over the N samples of each (ray, view)
+            x = self.intra(x.reshape(r * m, n, c), valid.reshape(r * m, n)).view(r, m, n, c)
+        if self.cross is not None:  # over the m views of each (ray, sample)
+            xt = x.transpose(1, 2).reshape(r * n, m, c)  # (R*N, m, C)
+            vt = valid.transpose(1, 2).reshape(r * n, m)
+            x = self.cross(xt, vt).view(r, n, m, c).transpose(1, 2)
+        if self.dense is not None:  # over all m*N tokens of a ray
+            x = self.dense(x.reshape(r, m * n, c), valid.reshape(r, m * n)).view(r, m, n, c)
+        return x

@@ -1,0 +1,129 @@
+"""The ResUNet image encoder of the appendix table "Semantic feature extraction" (L1-L19).
+
+Layer shapes (H x W input; every stride-2 layer gives ceil(size / 2)):
+
+=====  =====================================  ===========  ===========
+layer  operation                              channels     resolution
+=====  =====================================  ===========  ===========
+L1     conv 7x7, stride 2, IN, ReLU           3 -> 16      1/2
+L2     ResBlock, stride 2                     16 -> 32     1/4  (skip)
+L3     ResBlock, stride 2                     32 -> 64     1/8
+L4     ResBlock                               64 -> 64     1/8  (skip)
+L5     ResBlock, stride 2                     64 -> 128    1/16
+L6-10  5 x ResBlock                           128 -> 128   1/16
+L11    conv 3x3, IN, ReLU                     128 -> 64    1/16
+L12    up-sample to the L4 grid               64           1/8
+L13    concat (L12, L4)                       128          1/8
+L14    conv 3x3, IN, ReLU                     128 -> 64    1/8
+L15    conv 3x3, IN, ReLU                     64 -> 32     1/8
+L16    up-sample to the L2 grid               32           1/4
+L17    concat (L16, L2)                       64           1/4
+L18    conv 3x3, IN, ReLU                     64 -> 32     1/4
+L19    conv 1x1, IN                           32 -> 32     1/4
+=====  =====================================  ===========  ===========
+
+The table's strides are consistent with its 1/4-resolution output: four stride-2 stages
+(L1, L2, L3, L5) reach 1/16 and the two up-sampling stages return to 1/4, where the skips (L4 at
+1/8, L2 at 1/4) have matching shapes. Two reconciliations, both documented here:
+
+* The table lists no activation for the decoder convs L11-L18; a purely linear decoder would fold
+  L14 and L15 into one convolution, so each decoder conv but the last (L19) is followed by ReLU.
+* Sizes not divisible by 16 (e.g. 120 rows) make the up-sampled grid one pixel larger than the
+  skip; the up-sampling therefore targets the skip's exact size (see ``upsample_to``).
+
+Pixel geometry (relied on by ``reprojection.feature_grid``): a stride-2 convolution with
+padding k // 2 centres output pixel j on input pixel 2j, so feature pixel j of the 1/4 map is
+centred on full-resolution pixel 4j. ``upsample_to`` keeps that alignment exactly: fine pixel j
+reads coarse coordinate j / 2.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+FEATURE_STRIDE = 4
+"""Feature pixel (j, i) is centred on full-resolution pixel (FEATURE_STRIDE * j, FEATURE_STRIDE * i)."""
+
+MIN_IMAGE_SIZE = 32
+"""Smallest image side the encoder accepts (instance norm needs > 1 pixel at 1/16 resolution)."""
+
+
+def _norm(channels: int) -> nn.InstanceNorm2d:
+    """Instance normalisation with a learned affine map (per-image statistics, no running stats)."""
+    return nn.InstanceNorm2d(channels, affine=True, track_running_stats=False)
+
+
+def upsample_to(x: Tensor, size: tuple[int, int]) -> Tensor:
+    """Bilinear 2x up-sampling that keeps pixel centres aligned: (B, C, h, w) -> (B, C, *size).
+
+    Output pixel j reads input coordinate j / 2 (input pixel k sits under output pixel 2k),
+    clamped at the last input pixel. ``size`` may be at most (2h, 2w).
+    """
+    h, w = x.shape[-2:]
+    if size[0] > 2 * h or size[1] > 2 * w:
+        raise ValueError(f"sray.model.encoder.upsample_to: target {size} exceeds twice {(h, w)}.")
+    # align_corners=True to (2h-1, 2w-1) puts output j exactly at input j/2
+    up = F.interpolate(x, size=(2 * h - 1, 2 * w - 1), mode="bilinear", align_corners=True)
+    up = F.pad(up, (0, 1, 0, 1), mode="replicate")  # (B, C, 2h, 2w), last row/col clamped
+    return up[..., : size[0], : size[1]]
+
+
+class ResBlock(nn.Module):
+    """Two 3x3 convs with instance norm and ReLU plus a (projected when needed) shortcut."""
+
+    def __init__(self, c_in: int, c_out: int, stride: int) -> None:
+        super().__init__()
+        self.conv1 = nn.Conv2d(c_in, c_out, 3, stride, 1, bias=False)
+        self.norm1 = _norm(c_out)
+        self.conv2 = nn.Conv2d(c_out, c_out, 3, 1, 1, bias=False)
+        self.norm2 = _norm(c_out)
+        self.shortcut: nn.Module = nn.Identity()
+        if stride != 1 or c_in != c_out:
+            self.shortcut = nn.Sequential(nn.Conv2d(c_in, c_out, 1, stride, bias=False), _norm(c_out))
+
+    def forward(self, x: Tensor) -> Tensor:
+        """(B, c_in, H, W) -> (B, c_out, ceil(H / stride), ceil(W / stride))."""
+        y = F.relu(self.norm1(self.conv1(x)))
+        y = self.norm2(self.conv2(y))
+        return F.relu(y + self.shortcut(x))
+
+
+def _conv_norm(c_in: int, c_out: int, k: int, relu: bool) -> nn.Sequential:
+    """Conv k x k (stride 1, same padding) + instance norm (+ ReLU)."""
+    layers: list[nn.Module] = [nn.Conv2d(c_in, c_out, k, 1, k // 2, bias=False), _norm(c_out)]
+    if relu:
+        layers.append(nn.ReLU())
+    return nn.Sequential(*layers)
+
+
+class ResUNetEncoder(nn.Module):
+    """Shared per-view encoder: RGB (B, 3, H, W) in [0, 1] -> features (B, C, ceil(H/4), ceil(W/4))."""
+
+    def __init__(self, out_dim: int = 32) -> None:
+        super().__init__()
+        self.stem = nn.Sequential(nn.Conv2d(3, 16, 7, 2, 3, bias=False), _norm(16), nn.ReLU())  # L1
+        self.down2 = ResBlock(16, 32, 2)  # L2
+        self.down3 = nn.Sequential(ResBlock(32, 64, 2), ResBlock(64, 64, 1))  # L3, L4
+        self.down4 = nn.Sequential(ResBlock(64, 128, 2), *[ResBlock(128, 128, 1) for _ in range(5)])
+        self.reduce4 = _conv_norm(128, 64, 3, relu=True)  # L11
+        self.merge3 = nn.Sequential(_conv_norm(128, 64, 3, relu=True),  # L14
+                                    _conv_norm(64, 32, 3, relu=True))  # L15
+        self.merge2 = _conv_norm(64, 32, 3, relu=True)  # L18
+        self.head = _conv_norm(32, out_dim, 1, relu=False)  # L19
+
+    def forward(self, rgb: Tensor) -> Tensor:
+        """rgb: (B, 3, H, W) in [0, 1]; returns (B, C, ceil(ceil(H/2)/2), ceil(ceil(W/2)/2))."""
+        if rgb.ndim != 4 or rgb.shape[1] != 3:
+            raise ValueError(f"sray.model.encoder: expected source images (m, 3, H, W), got {tuple(rgb.shape)}.")
+        if min(rgb.shape[-2:]) < MIN_IMAGE_SIZE:
+            raise ValueError(f"sray.model.encoder: source images are {tuple(rgb.shape[-2:])}; both sides "
+                             f"must be at least {MIN_IMAGE_SIZE} pixels (resize the scene up).")
+        x1 = self.stem(rgb * 2.0 - 1.0)  # (B, 16, H/2, W/2)
+        x2 = self.down2(x1)  # (B, 32, H/4, W/4)
+        x3 = self.down3(x2)  # (B, 64, H/8, W/8)
+        x4 = self.reduce4(self.down4(x3))  # (B, 64, H/16, W/16)
+        y3 = self.merge3(torch.cat([upsample_to(x4, x3.shape[-2:]), x3], 1))  # (B, 32, H/8, W/8)
+        y2 = self.merge2(torch.cat([upsample_to(y3, x2.shape[-2:]), x2], 1))  # (B, 32, H/4, W/4)
+        return self.head(y2)  # (B, C, H/4, W/4)

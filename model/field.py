@@ -1,0 +1,45 @@
+"""``SRayField``: the per-sample network of one render pass (coarse or fine).
+
+For samples z (R, N) along query rays it builds the contextual space M by reprojection, refines it
+with Cross-Reprojection Attention into M'', forms the semantic ray s = sum_i w_i F''_i with the
+bounded semantic-aware weights, classifies s into per-sample logits, and predicts density and
+colour with the geometry-aware net.
+"""
+
+from __future__ import annotations
+
+from torch import Tensor, nn
+
+from .config import SRayConfig
+from .cra import CrossReprojectionAttention
+from .geometry_net import GeometryNet
+from .reprojection import ContextualSpace
+from .semantic_weights import SemanticWeightNet
+from .source_set import SourceSet
+
+
+class SRayField(nn.Module):
+    """Per-sample semantics, density and colour for a fixed number of samples per ray."""
+
+    def __init__(self, cfg: SRayConfig, n_samples: int) -> None:
+        super().__init__()
+        c = cfg.feat_dim
+        self.context = ContextualSpace(c, cfg.dir_hidden, cfg.min_source_depth)
+        self.attention = CrossReprojectionAttention(cfg, n_samples)
+        self.view_weights = SemanticWeightNet(cfg)
+        self.classifier = nn.Sequential(nn.Linear(c, c), nn.ELU(), nn.Linear(c, cfg.n_classes))
+        self.geometry = GeometryNet(cfg)
+
+    def forward(self, src: SourceSet, origins: Tensor, dirs: Tensor, z: Tensor) -> dict[str, Tensor]:
+        """origins, dirs: (R, 3); z: (R, N) sample depths (ray parameters).
+
+        Returns ``sigma`` (R, N) float32 >= 0, ``logits`` (R, N, L), ``rgb`` (R, N, 3) float32 and
+        ``view_weights`` (R, m, N) float32 (the semantic-aware weights).
+        """
+        points = origins[:, None, :] + z[..., None] * dirs[:, None, :]  # (R, N, 3)
+        ctx = self.context(src, points, dirs)
+        refined = self.attention(ctx["M"], ctx["valid"])  # (R, m, N, C)
+        w = self.view_weights(refined, ctx["dir"], ctx["valid"])  # (R, m, N)
+        semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=1)  # (R, N, C)
+        sigma, rgb = self.geometry(ctx["M"], ctx["valid"], ctx["dir"], ctx["rgb"])
+        return {"sigma": sigma, "logits": self.classifier(semantic), "rgb": rgb, "view_weights": w}

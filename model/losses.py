@@ -1,0 +1,112 @@
+"""Training objective shared by S-Ray and the Semantic-NeRF baseline.
+
+``L_total = lambda_sem * L_sem + lambda_rgb * L_rgb`` (the paper's appendix, as Semantic-NeRF):
+
+- ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean cross-entropy over the LABELLED
+  rays of the batch (target != ignore id). A batch without a labelled ray gives ``L_sem = 0``
+  with a zero gradient, never NaN.
+- ``L_rgb = MSE(coarse rgb) + MSE(fine rgb)`` over all rays (photometric loss).
+Everything is computed in float32, whatever autocast region the caller is in.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+# Render passes in the order the loss sums them; see docs/CONTRACTS.md for the ``out`` structure.
+PASSES = ("coarse", "fine")
+
+
+class LossSettings(Protocol):
+    """What ``render_loss`` reads from a config (SRayConfig and SemanticNeRFConfig qualify)."""
+
+    lambda_sem: float
+    lambda_rgb: float
+    ignore_id: int
+
+
+@dataclass
+class LossConfig:
+    """Stand-alone loss settings, for callers without a model config."""
+
+    lambda_sem: float = 1.0
+    """Weight of the semantic cross-entropy (paper: 1)."""
+    lambda_rgb: float = 1.0
+    """Weight of the photometric MSE (paper: 1)."""
+    ignore_id: int = 255
+    """Label id of unlabelled pixels; such rays are left out of the cross-entropy."""
+
+
+def psnr_from_mse(mse: Tensor) -> Tensor:
+    """Peak signal-to-noise ratio in dB for signals in [0, 1]: -10 log10(mse); inf when mse = 0."""
+    return -10.0 * torch.log10(mse)
+
+
+def _labelled_cross_entropy(logits: Tensor, target: Tensor, mask: Tensor) -> Tensor:
+    """Mean CE over the rays where ``mask`` holds: logits (R, L), target (R,), mask (R,) bool.
+
+    Summing over the (possibly empty) selection and dividing by max(count, 1) keeps an
+    all-unlabelled batch at exactly 0 with a zero gradient.
+    """
+    n = mask.sum()
+    summed = F.cross_entropy(logits[mask].float(), target[mask], reduction="sum")
+    return summed / n.clamp_min(1).to(summed.dtype)
+
+
+def render_loss(
+    out: dict[str, dict[str, Tensor]],
+    target_label: Tensor,
+    target_rgb: Tensor,
+    cfg: LossSettings,
+) -> tuple[Tensor, dict[str, Tensor]]:
+    """Semantic + photometric loss of a model's ``render_rays`` output.
+
+    out: ``{"coarse": pass, "fine": pass}`` with ``logits`` (R, L) and ``rgb`` (R, 3) per pass
+    (a model without a fine pass may give ``coarse`` only); target_label: (R,) int64 with
+    ``cfg.ignore_id`` for unlabelled rays; target_rgb: (R, 3) in [0, 1].
+    Returns the scalar total and detached terms: ``sem_<pass>``, ``rgb_<pass>`` per pass,
+    ``n_labelled`` and ``psnr`` (of the last pass's colour, the fine one when present).
+    """
+    passes = [p for p in PASSES if p in out]
+    if not passes:
+        raise ValueError(
+            "sray.model.losses.render_loss: `out` holds neither a 'coarse' nor a 'fine' pass; "
+            "pass a model's render_rays output unchanged."
+        )
+    n_rays, n_classes = out[passes[0]]["logits"].shape
+    if target_label.shape != (n_rays,) or target_rgb.shape != (n_rays, 3):
+        raise ValueError(
+            f"sray.model.losses.render_loss: expected target_label ({n_rays},) and target_rgb "
+            f"({n_rays}, 3) for {n_rays} rendered rays, got {tuple(target_label.shape)} and "
+            f"{tuple(target_rgb.shape)}."
+        )
+    if target_label.dtype != torch.int64:
+        raise ValueError(
+            f"sray.model.losses.render_loss: target_label must be int64, got {target_label.dtype}."
+        )
+    mask = target_label != cfg.ignore_id  # (R,)
+    bad = mask & ((target_label < 0) | (target_label >= n_classes))
+    if bool(bad.any()):
+        raise ValueError(
+            f"sray.model.losses.render_loss: label ids must lie in [0, {n_classes}) or equal the "
+            f"ignore id {cfg.ignore_id}; found {sorted(set(target_label[bad].tolist()))[:5]}. "
+            "Check the scene's label space against the model's n_classes."
+        )
+    with torch.autocast(device_type=target_rgb.device.type, enabled=False):
+        rgb_target = target_rgb.float()
+        terms: dict[str, Tensor] = {}
+        sem_total = rgb_total = rgb_target.new_zeros(())
+        for name in passes:
+            sem = _labelled_cross_entropy(out[name]["logits"], target_label, mask)
+            rgb = F.mse_loss(out[name]["rgb"].float(), rgb_target)
+            sem_total, rgb_total = sem_total + sem, rgb_total + rgb
+            terms[f"sem_{name}"], terms[f"rgb_{name}"] = sem.detach(), rgb.detach()
+        total = cfg.lambda_sem * sem_total + cfg.lambda_rgb * rgb_total
+    terms["n_labelled"] = mask.sum().detach()
+    terms["psnr"] = psnr_from_mse(terms[f"rgb_{passes[-1]}"])
+    return total, terms

@@ -1,0 +1,254 @@
+"""Semantic-NeRF baseline (Zhi et al., ICCV 2021), written from the paper's description.
+
+A per-scene NeRF whose trunk also feeds a view-independent semantic head:
+
+- positions (normalised into the scene box, see ``SemanticNeRFConfig.scene_center``) and unit
+  viewing directions get NeRF's positional encoding (10 and 4 frequencies, raw input included);
+- an 8 x 256 ReLU trunk re-reads the encoded position after its fifth layer (skip connection);
+- density: one linear unit on the trunk output, made non-negative by ``density_activation``;
+- semantics: trunk output -> 128 -> L logits, BEFORE the viewing direction enters, so the
+  labels of a point do not depend on where it is seen from;
+- colour: a 256-wide linear feature concatenated with the encoded direction -> 128 -> rgb
+  (sigmoid).
+Like NeRF, a coarse and a fine network: the fine one is evaluated on the union of the coarse
+samples and samples drawn from the coarse weights. Rendering, losses and metrics are shared with
+S-Ray (``sray.model.rendering``, ``.losses``, ``.metrics``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from sray.model.positional_encoding import PositionalEncoding
+from sray.model.rays import image_pixels, pixel_rays
+from sray.model.rendering import composite, merge_samples, sample_pdf, sample_uniform
+
+
+@dataclass
+class SemanticNeRFConfig:
+    """Semantic-NeRF hyper-parameters (defaults: the paper's, except ``n_fine``)."""
+
+    n_classes: int
+    """Number of semantic classes L of the scene's label space (the ignore id is not a class)."""
+    pos_freqs: int = 10
+    """Positional-encoding frequencies of the position."""
+    dir_freqs: int = 4
+    """Positional-encoding frequencies of the viewing direction."""
+    depth: int = 8
+    """Number of trunk layers."""
+    width: int = 256
+    """Width of the trunk layers."""
+    skip_layer: int | None = 5
+    """The encoded position is concatenated to the activation of this many trunk layers and so
+    re-enters trunk layer ``skip_layer`` (0-based; 5 = after the fifth layer, as in NeRF). None
+    disables the skip connection."""
+    color_width: int = 128
+    """Hidden width of the colour head."""
+    semantic_width: int = 128
+    """Hidden width of the semantic head."""
+    density_activation: Literal["softplus", "relu"] = "softplus"
+    """Non-negativity of the density. NeRF uses ReLU; softplus (default) keeps a gradient where
+    the raw output is negative, so rays cannot die empty at initialisation."""
+    n_coarse: int = 64
+    """Coarse samples per ray (stratified in training, bin centres otherwise)."""
+    n_fine: int = 64
+    """Fine samples per ray drawn from the coarse weights (the paper uses 128)."""
+    lambda_sem: float = 1.0
+    """Weight of the semantic cross-entropy in ``sray.model.losses.render_loss``."""
+    lambda_rgb: float = 1.0
+    """Weight of the photometric MSE."""
+    ignore_id: int = 255
+    """Label id of unlabelled pixels."""
+    chunk: int = 4096
+    """Rays per forward pass in ``render_image``."""
+    scene_center: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """World point mapped to the origin before the positional encoding (see
+    ``scene_box_from_cameras``)."""
+    scene_scale: float = 1.0
+    """World length mapped to 1: positions enter the encoding as (x - center) / scale, which
+    should lie in about [-1, 1]. Densities are per normalised unit, so the initial opacity
+    does not depend on the scene's units."""
+
+    def __post_init__(self) -> None:
+        def fail(field: str, why: str) -> None:
+            raise ValueError(f"sray.model.semantic_nerf.SemanticNeRFConfig.{field}: {why}")
+
+        if self.n_classes < 1:
+            fail("n_classes", f"must be >= 1, got {self.n_classes}")
+        if self.depth < 1 or self.width < 1:
+            fail("depth", f"depth and width must be >= 1, got {self.depth} and {self.width}")
+        if self.skip_layer is not None and not 0 < self.skip_layer < self.depth:
+            fail("skip_layer", f"must be in [1, {self.depth - 1}] or None, got {self.skip_layer}")
+        if self.density_activation not in ("softplus", "relu"):
+            fail("density_activation", f"must be 'softplus' or 'relu', got "
+                 f"{self.density_activation!r}")
+        if self.n_coarse < 1 or self.n_fine < 1:
+            fail("n_coarse", f"n_coarse and n_fine must be >= 1, got {self.n_coarse}, "
+                 f"{self.n_fine}")
+        if self.scene_scale <= 0:
+            fail("scene_scale", f"must be > 0, got {self.scene_scale}")
+        if self.chunk < 1:
+            fail("chunk", f"must be >= 1, got {self.chunk}")
+
+
+class SemanticNeRFField(nn.Module):
+    """One Semantic-NeRF MLP: (normalised position, unit direction) -> density, rgb, logits."""
+
+    def __init__(self, cfg: SemanticNeRFConfig) -> None:
+        super().__init__()
+        self.skip_layer = cfg.skip_layer
+        self.pos_enc = PositionalEncoding(3, cfg.pos_freqs)
+        self.dir_enc = PositionalEncoding(3, cfg.dir_freqs)
+        pos_dim = self.pos_enc.out_dim
+        self.trunk = nn.ModuleList(
+            nn.Linear(
+                (pos_dim if i == 0 else cfg.width) + (pos_dim if i == cfg.skip_layer else 0),
+                cfg.width,
+            )
+            for i in range(cfg.depth)
+        )
+        self.density = nn.Linear(cfg.width, 1)
+        self.density_act = F.softplus if cfg.density_activation == "softplus" else F.relu
+        self.semantic = nn.Sequential(
+            nn.Linear(cfg.width, cfg.semantic_width), nn.ReLU(),
+            nn.Linear(cfg.semantic_width, cfg.n_classes),
+        )
+        self.feature = nn.Linear(cfg.width, cfg.width)
+        self.color = nn.Sequential(
+            nn.Linear(cfg.width + self.dir_enc.out_dim, cfg.color_width), nn.ReLU(),
+            nn.Linear(cfg.color_width, 3),
+        )
+
+    def forward(self, x: Tensor, d: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """x: (..., 3) normalised positions; d: (..., 3) unit directions.
+
+        Returns density (...,) per normalised unit length, rgb (..., 3) in (0, 1) and semantic
+        logits (..., L).
+        """
+        gamma_x = self.pos_enc(x)
+        h = gamma_x
+        for i, layer in enumerate(self.trunk):
+            if i == self.skip_layer:
+                h = torch.cat([h, gamma_x], dim=-1)
+            h = F.relu(layer(h))
+        sigma = self.density_act(self.density(h)).squeeze(-1)
+        logits = self.semantic(h)
+        rgb = torch.sigmoid(self.color(torch.cat([self.feature(h), self.dir_enc(d)], dim=-1)))
+        return sigma, rgb, logits
+
+
+class SemanticNeRF(nn.Module):
+    """Coarse + fine Semantic-NeRF of one scene; ``render_rays`` follows docs/CONTRACTS.md."""
+
+    scene_center: Tensor
+    scene_scale: Tensor
+
+    def __init__(self, cfg: SemanticNeRFConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.coarse = SemanticNeRFField(cfg)
+        self.fine = SemanticNeRFField(cfg)
+        self.register_buffer("scene_center", torch.tensor(cfg.scene_center, dtype=torch.float32))
+        self.register_buffer("scene_scale", torch.tensor(float(cfg.scene_scale)))
+
+    def _render_pass(
+        self, field: SemanticNeRFField, origins: Tensor, dirs: Tensor, z: Tensor,
+        near: Tensor, far: Tensor,
+    ) -> dict[str, Tensor]:
+        """Query ``field`` at depths z (R, N) along the rays and composite one pass."""
+        pts = origins[:, None, :] + z[..., None] * dirs[:, None, :]  # (R, N, 3)
+        x = (pts - self.scene_center) / self.scene_scale
+        dir_len = dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # (R, 1)
+        unit = (dirs / dir_len)[:, None, :].expand_as(pts)  # (R, N, 3)
+        sigma, rgb, logits = field(x, unit)  # (R, N), (R, N, 3), (R, N, L)
+        # density per unit of the ray parameter t: |d| world units per t, 1/scale per world unit
+        sigma_t = sigma * (dir_len / self.scene_scale)
+        out = composite(sigma_t, z, near, far, {"logits": logits, "rgb": rgb})
+        out["z"] = z
+        return out
+
+    def render_rays(
+        self, origins: Tensor, dirs: Tensor, near: Tensor | float, far: Tensor | float,
+        stratified: bool, generator: torch.Generator | None = None,
+    ) -> dict[str, dict[str, Tensor]]:
+        """Render rays r(t) = o + t d for t in [near, far]; dirs need not be unit length.
+
+        origins, dirs: (R, 3); near, far: (R,) or scalars. ``stratified`` jitters the coarse
+        samples and the fine quantiles (training); off, rendering is deterministic.
+        Returns ``{"coarse": pass, "fine": pass}`` with ``logits`` (R, L), ``rgb`` (R, 3),
+        ``depth`` (R,), ``opacity`` (R,), ``weights`` (R, N) and ``z`` (R, N) per pass.
+        """
+        if origins.ndim != 2 or origins.shape[-1] != 3 or dirs.shape != origins.shape:
+            raise ValueError(
+                "sray.model.semantic_nerf.SemanticNeRF.render_rays: origins and dirs must both "
+                f"be (R, 3), got {tuple(origins.shape)} and {tuple(dirs.shape)}."
+            )
+        n_rays = origins.shape[0]
+        near_t = torch.as_tensor(near, dtype=origins.dtype, device=origins.device)
+        far_t = torch.as_tensor(far, dtype=origins.dtype, device=origins.device)
+        near_t, far_t = near_t.expand(n_rays), far_t.expand(n_rays)
+        z_coarse = sample_uniform(near_t, far_t, self.cfg.n_coarse, stratified, generator)
+        coarse = self._render_pass(self.coarse, origins, dirs, z_coarse, near_t, far_t)
+        z_fine = sample_pdf(
+            z_coarse, coarse["weights"], near_t, far_t, self.cfg.n_fine,
+            deterministic=not stratified, generator=generator,
+        )
+        z_all = merge_samples(z_coarse, z_fine.to(z_coarse.dtype))
+        fine = self._render_pass(self.fine, origins, dirs, z_all, near_t, far_t)
+        return {"coarse": coarse, "fine": fine}
+
+    @torch.no_grad()
+    def render_image(
+        self, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
+        chunk: int | None = None,
+    ) -> dict[str, Tensor]:
+        """Render a whole (H, W) view, deterministic samples, ``chunk`` rays at a time.
+
+        K: (3, 3); c2w: (4, 4) OpenCV axes. Returns the fine pass as images: ``logits``
+        (H, W, L), ``rgb`` (H, W, 3), ``depth`` (H, W) (expected z-depth, see
+        ``sray.model.rendering.composite``) and ``opacity`` (H, W).
+        """
+        height, width = hw
+        chunk = chunk or self.cfg.chunk
+        device = self.scene_center.device
+        uv = image_pixels(height, width, device)  # (H*W, 2) pixel centres, row-major
+        origins, dirs = pixel_rays(K.to(device).float(), c2w.to(device).float(), uv)
+        keys = ("logits", "rgb", "depth", "opacity")
+        parts: dict[str, list[Tensor]] = {k: [] for k in keys}
+        for start in range(0, uv.shape[0], chunk):
+            sl = slice(start, start + chunk)
+            fine = self.render_rays(origins[sl], dirs[sl], near, far, stratified=False)["fine"]
+            for k in keys:
+                parts[k].append(fine[k])
+        return {k: torch.cat(v).reshape(height, width, *v[0].shape[1:]) for k, v in parts.items()}
+
+
+def scene_box_from_cameras(
+    K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float
+) -> tuple[tuple[float, float, float], float]:
+    """``scene_center`` and ``scene_scale`` that map all camera frusta into [-1, 1]^3.
+
+    K: (V, 3, 3) or (3, 3); c2w: (V, 4, 4) OpenCV axes; hw: image size; near/far: z-depth
+    bounds. The box is the axis-aligned hull of every frustum's corners between near and far;
+    the scale is half its longest side.
+    """
+    height, width = hw
+    c2w = c2w.double().reshape(-1, 4, 4)
+    K = K.double().expand(c2w.shape[0], 3, 3)
+    corners_px = torch.tensor(
+        [[-0.5, -0.5, 1.0], [width - 0.5, -0.5, 1.0], [-0.5, height - 0.5, 1.0],
+         [width - 0.5, height - 0.5, 1.0]], dtype=torch.float64,
+    )  # (4, 3) image corners in homogeneous pixels
+    cam = torch.einsum("vij,cj->vci", torch.linalg.inv(K), corners_px)  # (V, 4, 3), z = 1
+    cam = torch.cat([cam * near, cam * far], dim=1)  # (V, 8, 3) frustum corners
+    world = torch.einsum("vij,vcj->vci", c2w[:, :3, :3], cam) + c2w[:, None, :3, 3]
+    pts = world.reshape(-1, 3)
+    lo, hi = pts.min(0).values, pts.max(0).values
+    center = (lo + hi) / 2
+    scale = float((hi - lo).max() / 2)
+    return (float(center[0]), float(center[1]), float(center[2])), max(scale, 1e-6)

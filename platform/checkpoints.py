@@ -1,0 +1,244 @@
+"""Full-state training checkpoints: atomic, ``torch.load(weights_only=True)``-safe, latest + best.
+
+One checkpoint is a folder ``step_<step:09d>/`` holding
+
+* ``state.pt``: the caller's state dict (model, optimizer, scheduler, grad scaler, step, RNG from
+  :func:`capture_rng`, config as a plain dict, best metric ...) made only of tensors, dicts, lists,
+  tuples, strings, numbers, bools and None, so it loads with ``weights_only=True``;
+* ``meta.json``: ``{"format", "version", "step", "metric", "saved_at"}``.
+
+A folder is assembled under a hidden temporary name and renamed into place, so a crash during a
+save leaves the previous checkpoints untouched; :class:`CheckpointManager` derives ``latest`` (the
+highest step) and ``best`` (by the validation metric) from the complete folders alone. The same
+folder is what goes into a Ray Train checkpoint (:func:`to_ray_checkpoint`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import random
+import re
+import shutil
+import time
+import uuid
+from collections import OrderedDict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+log = logging.getLogger(__name__)
+
+FORMAT = "sray-checkpoint"
+VERSION = 1
+STATE_FILE = "state.pt"
+META_FILE = "meta.json"
+_STEP_DIR = re.compile(r"^step_(\d{9,})$")
+_EXACT_LEAVES = (str, int, float, bool, type(None))
+"""Plain scalar types (exact: a NumPy float64 is a float subclass that weights_only refuses)."""
+_TORCH_LEAVES = (torch.Tensor, torch.device, torch.dtype)
+
+
+# ---------------------------------------------------------------------------------------- RNG
+def capture_rng() -> dict[str, Any]:
+    """Python, NumPy (legacy global) and torch CPU/CUDA generator states, weights_only-safe."""
+    version, internal, gauss_next = random.getstate()
+    kind, keys, pos, has_gauss, cached = np.random.get_state()
+    state: dict[str, Any] = {
+        "python": {"version": version, "internal": list(internal), "gauss_next": gauss_next},
+        "numpy": {"kind": str(kind), "keys": torch.from_numpy(keys.astype(np.int64)), "pos": int(pos),
+                  "has_gauss": int(has_gauss), "cached_gaussian": float(cached)},
+        "torch": torch.get_rng_state(),
+    }
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def restore_rng(state: dict[str, Any]) -> None:
+    """Put back the generator states of :func:`capture_rng` (CUDA only if the device count matches)."""
+    py = state["python"]
+    random.setstate((py["version"], tuple(py["internal"]), py["gauss_next"]))
+    npy = state["numpy"]
+    np.random.set_state((npy["kind"], npy["keys"].numpy().astype(np.uint32), npy["pos"], npy["has_gauss"],
+                         npy["cached_gaussian"]))
+    torch.set_rng_state(state["torch"])
+    cuda = state.get("cuda")
+    if cuda is not None:
+        if torch.cuda.is_available() and torch.cuda.device_count() == len(cuda):
+            torch.cuda.set_rng_state_all(cuda)
+        else:
+            log.warning("checkpoint holds CUDA RNG states for %d devices; this process sees %d: not restored",
+                        len(cuda), torch.cuda.device_count() if torch.cuda.is_available() else 0)
+
+
+# ------------------------------------------------------------------------------ single folder
+def check_weights_only_safe(obj: Any, where: str = "state") -> None:
+    """TypeError naming the first entry ``torch.load(weights_only=True)`` would refuse."""
+    if type(obj) in (dict, OrderedDict):
+        for key, value in obj.items():
+            if type(key) not in (str, int):
+                raise TypeError(f"{where}: key {key!r} is a {type(key).__name__}; use str or int keys")
+            check_weights_only_safe(value, f"{where}[{key!r}]")
+    elif type(obj) in (list, tuple, torch.Size):
+        for i, value in enumerate(obj):
+            check_weights_only_safe(value, f"{where}[{i}]")
+    elif not (type(obj) in _EXACT_LEAVES or isinstance(obj, _TORCH_LEAVES)):
+        raise TypeError(f"{where} is a {type(obj).__module__}.{type(obj).__name__}, which "
+                        "torch.load(weights_only=True) refuses; convert it (str for paths, lists or tensors "
+                        "for arrays, dataclasses.asdict for configs)")
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_checkpoint(state: dict[str, Any], directory: Path, step: int, metric: float | None = None) -> Path:
+    """Write ``state`` as checkpoint folder ``directory`` atomically (replacing one already there)."""
+    check_weights_only_safe(state)
+    directory = Path(directory)
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    tag = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    tmp = directory.with_name(f".tmp-{directory.name}-{tag}")
+    tmp.mkdir()
+    try:
+        with open(tmp / STATE_FILE, "wb") as f:
+            torch.save(state, f)
+            f.flush()
+            os.fsync(f.fileno())
+        meta = {"format": FORMAT, "version": VERSION, "step": int(step),
+                "metric": None if metric is None or not math.isfinite(metric) else float(metric),
+                "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+        (tmp / META_FILE).write_text(json.dumps(meta, indent=1) + "\n")
+        _fsync_dir(tmp)
+        if directory.exists():  # the same step saved again (a restarted job repeats steps)
+            old = directory.with_name(f".old-{directory.name}-{tag}")
+            os.rename(directory, old)
+            os.rename(tmp, directory)
+            shutil.rmtree(old)
+        else:
+            os.rename(tmp, directory)
+        _fsync_dir(directory.parent)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return directory
+
+
+def read_meta(directory: Path) -> dict[str, Any]:
+    """The ``meta.json`` of a checkpoint folder; errors name the file and the fix."""
+    path = Path(directory) / META_FILE
+    try:
+        meta = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: missing; {directory} is not a complete sray checkpoint") from None
+    if meta.get("format") != FORMAT:
+        raise ValueError(f"{path}: field 'format' is {meta.get('format')!r}, expected {FORMAT!r}")
+    return meta
+
+
+def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """Load a checkpoint folder (or its ``state.pt``) with ``torch.load(weights_only=True)``."""
+    path = Path(path)
+    file = path / STATE_FILE if path.is_dir() else path
+    if not file.exists():
+        raise FileNotFoundError(f"{file}: missing; expected a checkpoint folder holding {STATE_FILE}")
+    return torch.load(file, map_location=map_location, weights_only=True)
+
+
+# ------------------------------------------------------------------------------------ manager
+class CheckpointManager:
+    """Numbered checkpoints under ``root``: save, ``latest``, ``best`` and pruning to the last k."""
+
+    def __init__(self, root: Path, keep_last: int = 3, mode: str = "max") -> None:
+        """``keep_last``: newest checkpoints kept besides the best; ``mode``: "max" (mIoU) or "min"."""
+        if keep_last < 1:
+            raise ValueError(f"keep_last must be >= 1, got {keep_last}")
+        if mode not in ("max", "min"):
+            raise ValueError(f"mode must be 'max' or 'min', got {mode!r}")
+        self.root = Path(root)
+        self.keep_last = keep_last
+        self.mode = mode
+        self.root.mkdir(parents=True, exist_ok=True)
+        self._recover()
+
+    def _recover(self) -> None:
+        """Undo an interrupted same-step replacement; remove leftovers of interrupted saves."""
+        for old in self.root.glob(".old-step_*"):
+            name = old.name[len(".old-"):].rsplit("-", 2)[0]
+            if not (self.root / name).exists():
+                os.rename(old, self.root / name)
+                log.warning("restored checkpoint %s left aside by an interrupted save", self.root / name)
+            else:
+                shutil.rmtree(old, ignore_errors=True)
+        for tmp in self.root.glob(".tmp-step_*"):
+            shutil.rmtree(tmp, ignore_errors=True)
+
+    def entries(self) -> list[tuple[int, float | None, Path]]:
+        """(step, metric, folder) of every complete checkpoint, by step."""
+        out = []
+        for child in self.root.iterdir():
+            match = _STEP_DIR.match(child.name)
+            if match and (child / META_FILE).exists() and (child / STATE_FILE).exists():
+                out.append((int(match.group(1)), read_meta(child)["metric"], child))
+        return sorted(out, key=lambda e: e[0])
+
+    def save(self, state: dict[str, Any], step: int, metric: float | None = None) -> Path:
+        """Write the checkpoint of ``step`` (with its validation metric, if any) and prune; its folder."""
+        path = write_checkpoint(state, self.root / f"step_{int(step):09d}", step, metric)
+        self._prune()
+        return path
+
+    def latest(self) -> Path | None:
+        """Folder of the highest-step complete checkpoint, or None."""
+        entries = self.entries()
+        return entries[-1][2] if entries else None
+
+    def best(self) -> Path | None:
+        """Folder of the checkpoint with the best metric (earliest on ties), or None if none has one."""
+        scored = [(m, s, p) for s, m, p in self.entries() if m is not None]
+        if not scored:
+            return None
+        sign = -1.0 if self.mode == "max" else 1.0
+        return min(scored, key=lambda e: (sign * e[0], e[1]))[2]
+
+    def load(self, path: Path | None = None, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+        """Load ``path`` (default: the latest checkpoint); FileNotFoundError when there is none."""
+        path = path if path is not None else self.latest()
+        if path is None:
+            raise FileNotFoundError(f"{self.root}: no complete checkpoint to load")
+        return load_checkpoint(path, map_location)
+
+    def _prune(self) -> None:
+        entries = self.entries()
+        keep = {p for _, _, p in entries[-self.keep_last:]}
+        best = self.best()
+        if best is not None:
+            keep.add(best)
+        for _, _, path in entries:
+            if path not in keep:
+                shutil.rmtree(path, ignore_errors=True)
+
+
+# ---------------------------------------------------------------------------------- Ray Train
+def to_ray_checkpoint(directory: Path):
+    """A ``ray.train.Checkpoint`` of one checkpoint folder (pass it to ``ray.train.report``)."""
+    from ray.train import Checkpoint
+
+    read_meta(directory)
+    return Checkpoint.from_directory(str(Path(directory).resolve()))
+
+
+def from_ray_checkpoint(checkpoint, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """The state dict inside a ``ray.train.Checkpoint`` (e.g. from ``ray.train.get_checkpoint()``)."""
+    with checkpoint.as_directory() as directory:
+        read_meta(Path(directory))
+        return load_checkpoint(Path(directory), map_location)

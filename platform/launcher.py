@@ -1,0 +1,161 @@
+"""The driver side of ``sray train``: Ray, resources, the MLflow run, the TorchTrainer, Ctrl-C.
+
+Order matters: the MLflow store, experiment and run exist before any worker starts (several
+processes creating one SQLite store at once corrupt it), and the resource request is checked
+against the cluster before ``fit()`` (an infeasible request would otherwise wait forever).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sray.platform.checkpoints import CheckpointManager
+from sray.platform.resources import check_feasible
+from sray.platform.tracking import RunHandle, default_tracking_uri, prepare_run, resume_run, terminate_run
+from sray.platform.train_config import TrainConfig
+from sray.platform.train_worker import STOP_FILE, train_worker
+
+CONFIG_FILE = "config.json"
+"""The job's full config, written into its folder (and logged as an artifact)."""
+
+
+@dataclass
+class TrainOutcome:
+    """Where a finished (or stopped) job left its results."""
+
+    job_dir: Path
+    run: RunHandle
+    best_checkpoint: Path | None
+    latest_checkpoint: Path | None
+    status: str
+
+
+def unique_name(cfg: TrainConfig) -> str:
+    """``cfg.run.name`` if free, else ``<recipe>-<UTC timestamp>``; an explicit name that is taken
+    is refused (a new job never resumes an old one by accident)."""
+    if cfg.run.name:
+        if (Path(cfg.run.output_dir) / cfg.run.name).exists():
+            raise FileExistsError(f"{Path(cfg.run.output_dir) / cfg.run.name}: a job called {cfg.run.name!r} "
+                                  f"exists; continue it with `sray train --resume {cfg.run.name}` or pick another --name")
+        return cfg.run.name
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    name, n = f"{cfg.recipe}-{stamp}", 1
+    while (Path(cfg.run.output_dir) / name).exists():
+        n += 1
+        name = f"{cfg.recipe}-{stamp}-{n}"
+    return name
+
+
+def load_job_config(output_dir: str, name: str) -> TrainConfig:
+    """The saved config of an existing job (for ``--resume``); errors name the file and the fix."""
+    path = Path(output_dir) / name / CONFIG_FILE
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no job called {name!r} under {output_dir}; "
+                                "check --name/--resume and the output folder (run.output_dir)")
+    return TrainConfig.from_dict(json.loads(path.read_text()))
+
+
+def init_ray(address: str | None, num_cpus: int | None = None) -> None:
+    """Join a cluster at ``address`` or start a local Ray in-process (the embedded default)."""
+    import ray
+
+    if ray.is_initialized():
+        return
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    if address:
+        ray.init(address=address)
+        return
+    ray.init(address="local", num_cpus=num_cpus or os.cpu_count(), include_dashboard=False,
+             _temp_dir=tempfile.mkdtemp(prefix="ray", dir="/tmp"), object_store_memory=200 * 2**20,
+             log_to_driver=True)
+
+
+def _install_stop_handler(job_dir: Path) -> Any:
+    """First Ctrl-C: ask the workers to checkpoint and stop. Second: abort now."""
+    def handler(signum: int, frame: Any) -> None:
+        stop = job_dir / STOP_FILE
+        if stop.exists():
+            raise KeyboardInterrupt
+        stop.touch()
+        print("\n[sray] stopping after the current step with a checkpoint (Ctrl-C again to abort) ...", flush=True)
+
+    return signal.signal(signal.SIGINT, handler)
+
+
+def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool = False) -> TrainOutcome:
+    """Run a training job to the end (or a clean stop); ``resume`` continues ``cfg.run.name``."""
+    import ray.train
+    from ray.train.torch import TorchTrainer
+
+    if cfg.run.precision == "fp16" and cfg.run.gpus_per_worker == 0:
+        raise ValueError("--precision fp16 needs CUDA (loss scaling on GPU); on CPU use --precision bf16 or no")
+    if not resume:
+        cfg.run.name = unique_name(cfg)
+    cfg.run.output_dir = str(Path(cfg.run.output_dir).resolve())
+    cfg.data.shards = str(Path(cfg.data.shards).resolve())
+    job_dir = cfg.job_dir()
+    job_dir.mkdir(parents=True, exist_ok=True)
+    (job_dir / STOP_FILE).unlink(missing_ok=True)
+    (job_dir / CONFIG_FILE).write_text(json.dumps(cfg.to_dict(), indent=1) + "\n")
+
+    init_ray(address)
+    check_feasible(cfg.run.workers, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker)
+    uri = cfg.run.tracking_uri or default_tracking_uri(Path.cwd())
+    cfg.run.tracking_uri = uri
+    tags = {"sray.recipe": cfg.recipe, "sray.job_dir": str(job_dir)}
+    run = (resume_run(uri, cfg.run.experiment, cfg.run.name) if resume
+           else prepare_run(uri, cfg.run.experiment, cfg.run.name, tags=tags))
+    if not resume:
+        _log_config_artifact(run, job_dir / CONFIG_FILE)
+    print(f"[sray] job {cfg.run.name}: checkpoints in {job_dir / 'checkpoints'}\n"
+          f"[sray] MLflow run: {run.ui_url}" + (f"  ({run.ui_hint})" if run.ui_hint else ""), flush=True)
+
+    latest = CheckpointManager(job_dir / "checkpoints").latest() if resume else None
+    trainer = TorchTrainer(
+        train_worker,
+        train_loop_config={"config": cfg.to_dict(), "run": run.__dict__,
+                           "resume_from": str(latest) if latest is not None else None},
+        scaling_config=ray.train.ScalingConfig(
+            num_workers=cfg.run.workers, use_gpu=cfg.run.gpus_per_worker > 0,
+            resources_per_worker={"CPU": cfg.run.cpus_per_worker, **({"GPU": cfg.run.gpus_per_worker}
+                                                                       if cfg.run.gpus_per_worker > 0 else {})}),
+        run_config=ray.train.RunConfig(name=cfg.run.name, storage_path=str(job_dir / "ray"),
+                                       failure_config=ray.train.FailureConfig(max_failures=cfg.run.max_failures)))
+    previous = _install_stop_handler(job_dir)
+    status = "FAILED"
+    try:
+        trainer.fit()
+        status = "KILLED" if (job_dir / STOP_FILE).exists() or _stopped_early(job_dir, cfg) else "FINISHED"
+    except KeyboardInterrupt:
+        status = "KILLED"
+        raise
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        terminate_run(run, status)
+    manager = CheckpointManager(job_dir / "checkpoints")
+    outcome = TrainOutcome(job_dir, run, manager.best(), manager.latest(), status)
+    print(f"[sray] {status.lower()}: best checkpoint {outcome.best_checkpoint}, latest {outcome.latest_checkpoint}\n"
+          f"[sray] MLflow run: {run.ui_url}", flush=True)
+    return outcome
+
+
+def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:
+    latest = CheckpointManager(job_dir / "checkpoints").latest()
+    from sray.platform.checkpoints import read_meta
+
+    return latest is None or read_meta(latest)["step"] < cfg.optim.steps
+
+
+def _log_config_artifact(run: RunHandle, path: Path) -> None:
+    from sray.platform.tracking_logger import RunLogger
+
+    logger = RunLogger(run)
+    logger.log_artifact(path)
+    logger.flush(force=True)

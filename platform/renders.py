@@ -1,0 +1,153 @@
+"""One PNG per evaluated view: semantics and colour, predicted next to ground truth, errors, legend.
+
+Layout (tiles are the view's pixels, enlarged by an integer factor, never resampled)::
+
+    title
+    predicted semantics | ground-truth semantics | error map
+    predicted colour    | ground-truth colour    | legend (classes present)
+
+Tiles are placed with ``Figure.figimage`` at exact pixel offsets (:func:`panel_layout` gives
+them), so a test can read class colours back from the file. Matplotlib's Agg canvas is used
+directly (no pyplot state), which is safe in Ray workers and threads.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sray.platform.palette import IGNORE_COLOR, colorize, palette
+
+MARGIN = 10
+"""Pixels around and between tiles."""
+TITLE_BAND = 22
+"""Pixels above each tile for its caption."""
+HEADER = 26
+"""Pixels at the top for the panel's title."""
+MIN_TILE_HEIGHT = 200
+"""Small views are enlarged by an integer factor until a tile is at least this tall."""
+LEGEND_ROW = 18
+"""Pixels per legend entry."""
+LEGEND_SWATCH = 14
+"""Side of a legend colour swatch."""
+LEGEND_COLUMN = 190
+"""Width of one legend column."""
+ERROR_COLOR = (255, 0, 0)
+"""Error map: labelled pixel predicted wrong."""
+CORRECT_COLOR = (225, 225, 225)
+"""Error map: labelled pixel predicted right (unlabelled pixels are black)."""
+_DPI = 100
+
+
+@dataclass(frozen=True)
+class PanelLayout:
+    """Pixel geometry of a panel PNG (x right, y down, origin top-left)."""
+
+    size: tuple[int, int]
+    """(height, width) of the PNG."""
+    scale: int
+    """Integer enlargement of the view's pixels."""
+    tiles: dict[str, tuple[int, int, int, int]]
+    """Tile name -> (x, y, width, height): pred_sem, gt_sem, error, pred_rgb, gt_rgb, legend."""
+    swatches: list[tuple[int, int]]
+    """Top-left (x, y) of each legend swatch: classes present by id, then the ignore label if present."""
+
+
+def panel_layout(hw: tuple[int, int], n_legend: int) -> PanelLayout:
+    """Geometry of a panel for views of size ``hw`` with ``n_legend`` legend entries."""
+    h, w = hw
+    scale = max(1, math.ceil(MIN_TILE_HEIGHT / h))
+    th, tw = h * scale, w * scale
+    rows_per_col = max(1, th // LEGEND_ROW)
+    legend_w = max(tw, LEGEND_COLUMN * max(1, math.ceil(n_legend / rows_per_col)))
+    xs = [MARGIN, 2 * MARGIN + tw, 3 * MARGIN + 2 * tw]
+    ys = [HEADER + TITLE_BAND, HEADER + 2 * TITLE_BAND + th + MARGIN]
+    tiles = {
+        "pred_sem": (xs[0], ys[0], tw, th), "gt_sem": (xs[1], ys[0], tw, th), "error": (xs[2], ys[0], tw, th),
+        "pred_rgb": (xs[0], ys[1], tw, th), "gt_rgb": (xs[1], ys[1], tw, th),
+        "legend": (xs[2], ys[1], legend_w, th),
+    }
+    swatches = [(xs[2] + (i // rows_per_col) * LEGEND_COLUMN, ys[1] + (i % rows_per_col) * LEGEND_ROW)
+                for i in range(n_legend)]
+    size = (ys[1] + th + MARGIN, xs[2] + max(tw, legend_w) + MARGIN)
+    return PanelLayout(size=size, scale=scale, tiles=tiles, swatches=swatches)
+
+
+def _as_uint8_rgb(image: np.ndarray, what: str, hw: tuple[int, int]) -> np.ndarray:
+    image = np.asarray(image)
+    if image.shape != (*hw, 3):
+        raise ValueError(f"{what} must be (H, W, 3) = {(*hw, 3)}, got {image.shape}")
+    if image.dtype == np.uint8:
+        return image
+    return (np.clip(np.nan_to_num(image.astype(np.float32)), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def error_map(pred: np.ndarray, gt: np.ndarray, ignore_id: int = 255) -> np.ndarray:
+    """uint8 (H, W, 3): :data:`ERROR_COLOR` where pred != gt on labelled pixels, else correct/black."""
+    out = np.zeros((*gt.shape, 3), np.uint8)
+    labelled = gt != ignore_id
+    out[labelled & (pred == gt)] = CORRECT_COLOR
+    out[labelled & (pred != gt)] = ERROR_COLOR
+    return out
+
+
+def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.ndarray, gt_rgb: np.ndarray,
+                 class_names: list[str], path: Path, ignore_id: int = 255, title: str = "") -> Path:
+    """Write the panel PNG for one view to ``path`` (atomically); returns ``path``.
+
+    ``pred_labels``, ``gt_labels``: int (H, W) class ids (``ignore_id`` = unlabelled in gt);
+    ``pred_rgb``, ``gt_rgb``: (H, W, 3) floats in [0, 1] or uint8; ``class_names``: the label space.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    pred, gt = np.asarray(pred_labels), np.asarray(gt_labels)
+    if pred.shape != gt.shape or pred.ndim != 2:
+        raise ValueError(f"pred_labels {pred.shape} and gt_labels {gt.shape} must be the same (H, W)")
+    n = len(class_names)
+    hw = (int(gt.shape[0]), int(gt.shape[1]))
+    present = sorted(int(c) for c in np.union1d(np.unique(pred), np.unique(gt)) if c != ignore_id)
+    colors = palette(n)
+    legend = [(f"{c} {class_names[c]}", colors[c]) for c in present]
+    if (gt == ignore_id).any():
+        legend.append((f"{ignore_id} unlabelled", np.asarray(IGNORE_COLOR, np.uint8)))
+    layout = panel_layout(hw, len(legend))
+    images = {"pred_sem": colorize(pred, n, ignore_id), "gt_sem": colorize(gt, n, ignore_id),
+              "error": error_map(pred, gt, ignore_id),
+              "pred_rgb": _as_uint8_rgb(pred_rgb, "pred_rgb", hw), "gt_rgb": _as_uint8_rgb(gt_rgb, "gt_rgb", hw)}
+    labelled = gt != ignore_id
+    wrong = float((pred[labelled] != gt[labelled]).mean() * 100) if labelled.any() else 0.0
+    captions = {"pred_sem": "predicted semantics", "gt_sem": "ground-truth semantics",
+                "error": f"errors (red): {wrong:.1f}% of {int(labelled.sum())} labelled px",
+                "pred_rgb": "predicted colour", "gt_rgb": "ground-truth colour", "legend": "classes present"}
+
+    height, width = layout.size
+    fig = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI, facecolor="white")
+    FigureCanvasAgg(fig)
+
+    def text(x: int, y: int, s: str, **kw) -> None:
+        fig.text(x / width, 1.0 - y / height, s, va="top", ha="left", **{"fontsize": 9, **kw})
+
+    def place(image: np.ndarray, x: int, y: int) -> None:
+        fig.figimage(image, xo=x, yo=height - y - image.shape[0], origin="upper")
+
+    text(MARGIN, 6, title, fontsize=11, fontweight="bold")
+    for name, (x, y, _, _) in layout.tiles.items():
+        text(x, y - TITLE_BAND + 4, captions[name])
+    for name, image in images.items():
+        x, y, _, _ = layout.tiles[name]
+        place(np.repeat(np.repeat(image, layout.scale, axis=0), layout.scale, axis=1), x, y)
+    for (label, color), (sx, sy) in zip(legend, layout.swatches):
+        place(np.broadcast_to(color, (LEGEND_SWATCH, LEGEND_SWATCH, 3)).copy(), sx, sy)
+        text(sx + LEGEND_SWATCH + 6, sy, label)
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
+    fig.savefig(tmp, dpi=_DPI, format="png")
+    os.replace(tmp, path)
+    return path

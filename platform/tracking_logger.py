@@ -1,0 +1,241 @@
+"""Rank-0 MLflow logging into a run prepared by the launcher, batched and never fatal.
+
+Every MLflow call goes through :meth:`RunLogger._attempt`. A transient failure (server down,
+network, a locked database) is reported ONCE as a warning; what was being sent stays in a bounded
+buffer and is retried on a later flush after an exponential back-off. A permanent refusal (e.g. a
+param whose value changed) drops that item with a warning. Training never stops because of tracking.
+
+Metrics are buffered and sent with ``MlflowClient.log_batch`` (explicit step and timestamp) every
+``flush_every_steps`` steps or ``flush_every_s`` seconds: a SQLite write costs 20-190 ms here.
+Not thread-safe: one logger, used from one thread (rank 0's training loop).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import tempfile
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from sray.platform.tracking import RunHandle
+from sray.platform.tracking_params import sanitize_key, to_params
+
+log = logging.getLogger(__name__)
+
+PARAMS_PER_BATCH = 100
+"""MLflow's limit on params per ``log_batch`` call."""
+METRICS_PER_BATCH = 1000
+"""MLflow's limit on metrics per ``log_batch`` call."""
+PERMANENT_ERROR_CODES = frozenset({"INVALID_PARAMETER_VALUE", "RESOURCE_DOES_NOT_EXIST",
+                                   "RESOURCE_ALREADY_EXISTS", "BAD_REQUEST", "INVALID_STATE"})
+"""MLflow error codes that retrying cannot fix: the item is dropped with a warning."""
+HTTP_DEFAULTS = {"MLFLOW_HTTP_REQUEST_MAX_RETRIES": "0", "MLFLOW_HTTP_REQUEST_TIMEOUT": "30"}
+"""Set (if unset) in the logging process: MLflow's own HTTP retries would stall training for
+minutes on a dead server; this logger retries later instead."""
+
+
+class RunLogger:
+    """Logs params, metrics, artifacts and a registered model into one fixed MLflow run."""
+
+    def __init__(self, handle: RunHandle, *, flush_every_steps: int = 20, flush_every_s: float = 30.0,
+                 max_buffered_metrics: int = 100_000, retry_initial_s: float = 2.0, retry_max_s: float = 300.0,
+                 client: Any = None) -> None:
+        """``client``: an ``MlflowClient`` for ``handle.tracking_uri`` (built here when None)."""
+        for key, value in HTTP_DEFAULTS.items():
+            os.environ.setdefault(key, value)
+        self.handle = handle
+        self.flush_every_steps = flush_every_steps
+        self.flush_every_s = flush_every_s
+        self.retry_initial_s = retry_initial_s
+        self.retry_max_s = retry_max_s
+        self.registered: dict[str, str] = {}
+        """Registered model name -> version, filled once a registration went through."""
+        self._client = client
+        self._params: dict[str, str] = {}
+        self._metrics: deque = deque(maxlen=max_buffered_metrics)
+        self._ops: deque[tuple[str, Callable[[Any], None]]] = deque(maxlen=1000)
+        self._staging = Path(tempfile.mkdtemp(prefix="sray-mlflow-"))
+        self._last_flush_step: int | None = None
+        self._last_flush_time = time.monotonic()
+        self._next_attempt = 0.0
+        self._delay = retry_initial_s
+        self._unreachable = False
+        self._dropped = 0
+        self._closed = False
+
+    # ----------------------------------------------------------------------------------- logging
+    def log_params(self, config: Any) -> None:
+        """Flatten a (nested) config dataclass or dict into dotted params and send them now."""
+        self._params.update(to_params(config))
+        self.flush()
+
+    def log_metrics(self, metrics: Mapping[str, Any], step: int) -> None:
+        """Buffer scalar metrics (floats, ints or 0-d tensors) at ``step``; flushes every N steps/s."""
+        from mlflow.entities import Metric
+
+        timestamp = int(time.time() * 1000)
+        for key, value in metrics.items():
+            number = float(value.item() if hasattr(value, "item") else value)
+            if len(self._metrics) == self._metrics.maxlen:
+                self._dropped += 1
+                if self._dropped == 1:
+                    log.warning("MLflow metric buffer is full (%d); dropping the oldest buffered metrics until "
+                                "%s is reachable", self._metrics.maxlen, self.handle.tracking_uri)
+            self._metrics.append(Metric(key=sanitize_key(key), value=number,
+                                        timestamp=timestamp, step=int(step)))
+        due_steps = self._last_flush_step is None or step - self._last_flush_step >= self.flush_every_steps
+        if due_steps or time.monotonic() - self._last_flush_time >= self.flush_every_s:
+            self._last_flush_step = step
+            self.flush()
+
+    def log_artifact(self, path: Path, artifact_path: str | None = None) -> None:
+        """Upload a file or a folder's contents (under ``artifact_path``); the file must stay until close()."""
+        path = Path(path)
+        if path.is_dir():
+            self._queue(f"artifacts {path}", lambda c: c.log_artifacts(self.handle.run_id, str(path), artifact_path))
+        else:
+            self._queue(f"artifact {path}", lambda c: c.log_artifact(self.handle.run_id, str(path), artifact_path))
+        self.flush()
+
+    def log_image(self, png: Path, artifact_path: str = "renders") -> None:
+        """Upload a PNG (a semantic render, a chart) under ``artifact_path``."""
+        self.log_artifact(png, artifact_path)
+
+    def log_dict(self, obj: Any, artifact_file: str) -> None:
+        """Write ``obj`` as JSON to ``artifact_file`` (e.g. ``config.json``) in the run's artifacts."""
+        target = self._staging / artifact_file
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(json.dumps(obj, indent=1, default=str) + "\n")
+        folder = str(Path(artifact_file).parent)
+        self.log_artifact(target, None if folder == "." else folder)
+
+    def register_model(self, checkpoint: Path, name: str, alias: str = "latest") -> str | None:
+        """Upload a checkpoint (file or folder) as ``checkpoint/`` and register it as ``name@alias``.
+
+        Returns the new version, or None when the store is unreachable now (retried on later
+        flushes and at close; :attr:`registered` holds the version once it went through).
+        """
+        self.log_artifact(checkpoint, "checkpoint")
+        source = f"runs:/{self.handle.run_id}/checkpoint"
+        created: list[str] = []  # the version, once made: a retry after a failed alias does not make another
+
+        def register(client: Any) -> None:
+            from mlflow.exceptions import MlflowException
+
+            if not created:
+                try:
+                    client.create_registered_model(name)
+                except MlflowException as e:
+                    if e.error_code != "RESOURCE_ALREADY_EXISTS":
+                        raise
+                created.append(str(client.create_model_version(name, source=source, run_id=self.handle.run_id).version))
+            client.set_registered_model_alias(name, alias, created[0])
+            self.registered[name] = created[0]
+
+        self._queue(f"model registration {name}@{alias}", register)
+        self.flush()
+        return self.registered.get(name)
+
+    # ------------------------------------------------------------------------------ delivery
+    def flush(self, force: bool = False) -> bool:
+        """Send what is buffered; True when nothing is left. Skipped while backing off unless ``force``."""
+        if not force and time.monotonic() < self._next_attempt:
+            return False
+        self._last_flush_time = time.monotonic()
+        client = self._get_client()
+        if client is None:
+            return False
+        from mlflow.entities import Param
+
+        while self._params:
+            chunk = dict(list(self._params.items())[:PARAMS_PER_BATCH])
+            params = [Param(k, v) for k, v in chunk.items()]
+            if not self._attempt("params", lambda: client.log_batch(self.handle.run_id, params=params)):
+                return False
+            for key in chunk:
+                self._params.pop(key, None)
+        while self._metrics:
+            batch = [self._metrics[i] for i in range(min(METRICS_PER_BATCH, len(self._metrics)))]
+            if not self._attempt("metrics", lambda: client.log_batch(self.handle.run_id, metrics=batch)):
+                return False
+            for _ in batch:
+                self._metrics.popleft()
+        while self._ops:
+            what, op = self._ops[0]
+            if not self._attempt(what, lambda: op(client)):
+                return False
+            self._ops.popleft()
+        return True
+
+    def pending(self) -> dict[str, int]:
+        """Counts of buffered params, metrics and other operations not delivered yet."""
+        return {"params": len(self._params), "metrics": len(self._metrics), "ops": len(self._ops)}
+
+    def close(self, status: str = "FINISHED") -> None:
+        """Flush everything (ignoring back-off) and mark the run FINISHED, FAILED or KILLED."""
+        if self._closed:
+            return
+        self._queue(f"run status {status}", lambda c: c.set_terminated(self.handle.run_id, status=status))
+        if not self.flush(force=True):
+            log.warning("MLflow run %s closed with undelivered items %s (tracking store %s unreachable)",
+                        self.handle.run_id, self.pending(), self.handle.tracking_uri)
+        self._closed = True
+        shutil.rmtree(self._staging, ignore_errors=True)
+
+    def __enter__(self) -> RunLogger:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close("FINISHED")
+        else:
+            self.close("KILLED" if issubclass(exc_type, KeyboardInterrupt) else "FAILED")
+
+    # ------------------------------------------------------------------------------- internals
+    def _queue(self, what: str, op: Callable[[Any], None]) -> None:
+        if len(self._ops) == self._ops.maxlen:
+            log.warning("MLflow operation queue is full; dropping %s", self._ops[0][0])
+        self._ops.append((what, op))
+
+    def _get_client(self) -> Any:
+        if self._client is None:
+            try:
+                from mlflow import MlflowClient
+
+                self._client = MlflowClient(tracking_uri=self.handle.tracking_uri,
+                                            registry_uri=self.handle.tracking_uri)
+            except Exception as e:  # noqa: BLE001 - tracking never crashes training
+                self._transient_failure("connect", e)
+        return self._client
+
+    def _attempt(self, what: str, call: Callable[[], Any]) -> bool:
+        """Run one MLflow call; True on success or on a permanent (dropped) failure."""
+        try:
+            call()
+        except Exception as e:  # noqa: BLE001 - tracking never crashes training
+            if getattr(e, "error_code", None) in PERMANENT_ERROR_CODES:
+                log.warning("MLflow refused %s for run %s, dropping it: %s", what, self.handle.run_id, e)
+                return True
+            self._transient_failure(what, e)
+            return False
+        if self._unreachable:
+            log.info("MLflow tracking store %s is reachable again; sending buffered items", self.handle.tracking_uri)
+            self._unreachable = False
+        self._delay = self.retry_initial_s
+        self._next_attempt = 0.0
+        return True
+
+    def _transient_failure(self, what: str, error: Exception) -> None:
+        if not self._unreachable:
+            log.warning("MLflow tracking store %s unreachable while sending %s (%s); training continues, "
+                        "tracking data is buffered and retried with back-off", self.handle.tracking_uri, what,
+                        str(error).splitlines()[0][:300] if str(error) else type(error).__name__)
+            self._unreachable = True
+        self._next_attempt = time.monotonic() + self._delay
+        self._delay = min(self._delay * 2.0, self.retry_max_s)

@@ -1,0 +1,170 @@
+"""The full, typed configuration of a training job (what a recipe returns, what MLflow records)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sray.model.config import SRayConfig
+
+PRECISIONS = ("no", "bf16", "fp16")
+"""Mixed-precision modes: fp32, bfloat16 autocast (CPU and CUDA), fp16 with loss scaling (CUDA)."""
+
+
+@dataclass
+class DataSettings:
+    """Where the shards are and how training samples are drawn from them."""
+
+    shards: str = "outputs/demo/shards"
+    """Folder holding ``manifest.json`` and the webdataset shards (``sray data shard``)."""
+    top_k: int = 12
+    """Source views (``model.n_source`` of them) are drawn from this many top-ranked neighbours
+    of the query view."""
+    rays_per_batch: int = 1024
+    """Rays per training step and rank (paper: 1024)."""
+    loader_workers: int = 1
+    """DataLoader worker processes per rank."""
+    val_views_per_scene: int = 2
+    """Held-out views rendered per scene at each validation (whole images, in chunks)."""
+    val_downscale: int = 2
+    """Validation renders at 1/val_downscale resolution to keep it cheap (1 = full)."""
+
+
+@dataclass
+class OptimSettings:
+    """Optimiser, schedule and stability guards."""
+
+    steps: int = 250_000
+    """Total optimiser steps (paper: 250k)."""
+    lr: float = 1e-3
+    """Initial Adam learning rate (paper: 1e-3)."""
+    lr_final: float = 5e-5
+    """Learning rate reached at the last step by exponential decay (paper: 5e-5)."""
+    warmup_steps: int = 0
+    """Linear warm-up steps before the decay starts."""
+    grad_clip: float = 1.0
+    """Global gradient-norm clipping threshold (0 disables clipping)."""
+    max_nonfinite_in_row: int = 20
+    """A non-finite loss or gradient skips the step; this many in a row stop the job."""
+
+
+@dataclass
+class RunSettings:
+    """Cadence, precision, placement and where results go."""
+
+    name: str = ""
+    """Job name; unique per job (a timestamp is appended when empty or clashing)."""
+    output_dir: str = "outputs/train"
+    """Root folder of checkpoints and Ray Train run state; a job writes under <output_dir>/<name>."""
+    experiment: str = "sray-train"
+    """MLflow experiment name."""
+    tracking_uri: str = ""
+    """MLflow tracking URI; empty = a SQLite store in the working directory."""
+    precision: str = "no"
+    """One of ``PRECISIONS``."""
+    workers: int = 2
+    """Ray Train workers (one Accelerate process each)."""
+    cpus_per_worker: float = 1.0
+    """CPUs reserved per worker."""
+    gpus_per_worker: float = 0.0
+    """GPUs per worker (0 = CPU training)."""
+    seed: int = 0
+    """Seed of parameters, sampling and data order."""
+    log_every: int = 10
+    """Training metrics are logged (batched) every this many steps."""
+    val_every: int = 500
+    """Validation (held-out views of train scenes + zero-shot on unseen test scenes) cadence."""
+    ckpt_every: int = 500
+    """Checkpoint cadence in steps (and always at the end)."""
+    keep_checkpoints: int = 2
+    """Recent checkpoints kept besides the best."""
+    max_failures: int = 2
+    """Worker-group restarts Ray Train attempts after a worker dies."""
+    register_model: str = "sray"
+    """Registered-model name the final checkpoint is registered under ('' = do not register)."""
+    fail_at_step: int = -1
+    """Testing aid: the first attempt's rank 0 exits abruptly at this step (-1 = never)."""
+    nan_at_step: int = -1
+    """Testing aid: the loss at this step is replaced by NaN (-1 = never)."""
+    stop_after_step: int = -1
+    """Stop cleanly (with a checkpoint) once this many steps are done, as if interrupted (-1 = never)."""
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training job needs; recipes return one, ``--set a.b=value`` overrides fields."""
+
+    recipe: str = "synth-small"
+    """Name of the recipe this config came from."""
+    model: SRayConfig = field(default_factory=SRayConfig)
+    """The network (paper defaults)."""
+    data: DataSettings = field(default_factory=DataSettings)
+    """Shards and sample assembly."""
+    optim: OptimSettings = field(default_factory=OptimSettings)
+    """Optimiser and schedule."""
+    run: RunSettings = field(default_factory=RunSettings)
+    """Cadence, precision, placement, outputs."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict (JSON/YAML-safe; tuples become lists)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        """Inverse of :meth:`to_dict`."""
+        model = dict(d.get("model", {}))
+        for key in ("weight_hidden", "geo_hidden"):
+            if key in model:
+                model[key] = tuple(model[key])
+        return cls(recipe=d.get("recipe", "custom"), model=SRayConfig(**model),
+                   data=DataSettings(**d.get("data", {})), optim=OptimSettings(**d.get("optim", {})),
+                   run=RunSettings(**d.get("run", {})))
+
+    def job_dir(self) -> Path:
+        """Folder of this job's checkpoints and run state."""
+        return Path(self.run.output_dir).resolve() / self.run.name
+
+
+def apply_override(cfg: TrainConfig, assignment: str) -> None:
+    """Apply one ``section.field=value`` override in place, parsing the value as the field's type.
+
+    Raises ValueError naming the unknown field and listing the valid ones.
+    """
+    if "=" not in assignment:
+        raise ValueError(f"--set {assignment!r}: expected section.field=value, e.g. optim.lr=5e-4")
+    path, raw = assignment.split("=", 1)
+    parts = path.strip().split(".")
+    target: Any = cfg
+    for part in parts[:-1]:
+        if not dataclasses.is_dataclass(target) or not hasattr(target, part):
+            raise ValueError(f"--set {assignment!r}: no section {part!r}; sections: model, data, optim, run")
+        target = getattr(target, part)
+    name = parts[-1]
+    fields = {f.name: f for f in dataclasses.fields(target)}
+    if name not in fields:
+        raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; "
+                         f"fields: {', '.join(sorted(fields))}")
+    current = getattr(target, name)
+    setattr(target, name, _parse_like(current, raw.strip(), assignment))
+    if hasattr(target, "__post_init__"):
+        target.__post_init__()
+
+
+def _parse_like(current: Any, raw: str, assignment: str) -> Any:
+    """Parse ``raw`` into the type of ``current``."""
+    try:
+        if isinstance(current, bool):
+            if raw.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                raise ValueError(raw)
+            return raw.lower() in ("true", "1", "yes")
+        if isinstance(current, int):
+            return int(raw)
+        if isinstance(current, float):
+            return float(raw)
+        if isinstance(current, tuple):
+            return tuple(type(current[0])(x) for x in raw.strip("()[] ").split(",") if x.strip())
+        return raw
+    except ValueError:
+        raise ValueError(f"--set {assignment!r}: {raw!r} is not a valid {type(current).__name__}") from None

@@ -1,0 +1,222 @@
+"""The function every Ray Train worker runs: an Accelerate training loop over the shard loader.
+
+Ray creates the process group (gloo on CPU, NCCL on GPU) and sets RANK/WORLD_SIZE; ``Accelerator()``
+picks it up. Rank 0 logs to MLflow into the run the launcher prepared, writes checkpoints and
+renders validation images; every rank reports to Ray at the same steps.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from sray.model.losses import render_loss
+from sray.model.rays import pixel_rays
+from sray.platform.checkpoints import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
+from sray.platform.train_config import TrainConfig
+from sray.platform.train_state import build_training, restore_training, step_seed, training_state
+from sray.platform.tracking import RunHandle
+
+STOP_FILE = "STOP"
+"""A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
+FAIL_MARKER = ".fail_injected"
+"""Written before an injected crash, so that only the first attempt crashes."""
+
+
+class NonFiniteTraining(RuntimeError):
+    """Too many consecutive steps had a non-finite loss or gradient."""
+
+
+def _to(batch: dict[str, Any], device: torch.device) -> dict[str, Any]:
+    return {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
+
+
+def _rays(batch: dict[str, Any]) -> tuple[torch.Tensor, ...]:
+    """origins, dirs (R,3) and per-ray near/far (R,) of a training batch."""
+    origins, dirs = pixel_rays(batch["query_K"], batch["query_c2w"], batch["pixels"])
+    n = origins.shape[0]
+    near = torch.full((n,), float(batch["near"]), device=origins.device)
+    far = torch.full((n,), float(batch["far"]), device=origins.device)
+    return origins, dirs, near, far
+
+
+def _memory_mb(device: torch.device) -> float:
+    if device.type == "cuda":
+        return torch.cuda.max_memory_allocated(device) / 2**20
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def parameter_divergence(model: torch.nn.Module, world: int) -> float:
+    """Largest difference between ranks of a per-tensor parameter fingerprint (0 = in sync).
+
+    Every rank must call it (an all-gather); DDP keeps replicas identical, so anything but 0
+    means the ranks diverged.
+    """
+    with torch.no_grad():
+        fingerprint = torch.stack([p.detach().float().sum() + p.detach().float().abs().sum()
+                                   for p in model.parameters()])  # on the params' device (NCCL needs CUDA tensors)
+    if world == 1:
+        return 0.0
+    gathered = [torch.empty_like(fingerprint) for _ in range(world)]
+    torch.distributed.all_gather(gathered, fingerprint)
+    return float(torch.stack(gathered).amax(0).sub(torch.stack(gathered).amin(0)).abs().max())
+
+
+def train_worker(payload: dict[str, Any]) -> None:
+    """Ray Train entry point. ``payload`` = {"config": TrainConfig.to_dict(), "run": RunHandle fields}."""
+    import ray.train
+    from accelerate import Accelerator
+
+    from sray.data_tools.loader import make_train_loader
+    from sray.platform.progress import make_progress
+    from sray.platform.tracking_logger import RunLogger
+    from sray.platform.validation import validate
+
+    cfg = TrainConfig.from_dict(payload["config"])
+    ctx = ray.train.get_context()
+    rank, world = ctx.get_world_rank(), ctx.get_world_size()
+    job_dir = cfg.job_dir()
+    stop_file = job_dir / STOP_FILE
+
+    use_cuda = cfg.run.gpus_per_worker > 0 and torch.cuda.is_available()
+    accelerator = Accelerator(mixed_precision=cfg.run.precision, cpu=not use_cuda)
+    device = accelerator.device
+    model, optimizer, scheduler = build_training(cfg)
+    start, best, counters = 0, None, {"skipped_steps": 0}
+    # A restarted worker group resumes from the last checkpoint Ray recorded; a resumed job
+    # (`--resume NAME`, a fresh Ray run) from the job's latest checkpoint folder.
+    resumed = ray.train.get_checkpoint()
+    state = (from_ray_checkpoint(resumed) if resumed is not None
+             else load_checkpoint(Path(payload["resume_from"])) if payload.get("resume_from") else None)
+    if state is not None:
+        start, best, counters = restore_training(state, model, optimizer, scheduler, None)
+    model, optimizer = accelerator.prepare(model, optimizer)
+    if state is not None and accelerator.scaler is not None and "scaler" in state:
+        accelerator.scaler.load_state_dict(state["scaler"])
+
+    manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
+    logger = RunLogger(RunHandle(**payload["run"])) if rank == 0 else None
+    if logger is not None and start == 0:
+        logger.log_params(cfg.to_dict())
+    # One loader epoch per checkpoint interval: epoch e's stream depends only on (seed, e, rank), so a
+    # job resumed at step s re-enters epoch s // E at offset s % E and sees exactly the batches an
+    # uninterrupted job would have seen.
+    epoch_len = cfg.run.ckpt_every
+    loader = make_train_loader(
+        Path(cfg.data.shards), n_source=cfg.model.n_source, top_k=cfg.data.top_k,
+        rays_per_batch=cfg.data.rays_per_batch, batches_per_epoch=epoch_len, rank=rank, world_size=world,
+        num_workers=cfg.data.loader_workers, seed=cfg.run.seed)
+
+    def batches_from(step_at: int) -> Any:
+        loader.set_epoch(step_at // epoch_len)
+        stream = iter(loader)
+        for _ in range(step_at % epoch_len):
+            next(stream)
+        return stream
+
+    batches = batches_from(start)
+    bar = make_progress(rank == 0, total=cfg.optim.steps, initial=start, desc=cfg.run.name)
+
+    def checkpoint_and_report(step_done: int, metrics: dict[str, float]) -> None:
+        """Every rank reports; rank 0 flushes metrics (so a restart never leaves a gap) and saves."""
+        divergence = parameter_divergence(model, world)
+        if rank == 0:
+            logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
+            logger.flush(force=True)
+            state = training_state(accelerator.unwrap_model(model), optimizer, scheduler, accelerator.scaler,
+                                   step_done, cfg, best, counters)
+            path = manager.save(state, step_done, metrics.get("val/miou"))
+            ray.train.report(metrics, checkpoint=to_ray_checkpoint(path))
+        else:
+            ray.train.report(metrics)
+
+    nonfinite_in_row, window_start, window_terms = 0, time.perf_counter(), []
+    step = start
+    try:
+        while step < cfg.optim.steps:
+            stop = torch.tensor([float(stop_file.exists() or step == cfg.run.stop_after_step)], device=device)
+            if world > 1:
+                torch.distributed.all_reduce(stop, op=torch.distributed.ReduceOp.MAX)
+            if stop.item() > 0:
+                checkpoint_and_report(step, {"step": step, "stopped": 1.0})
+                if rank == 0:
+                    print(f"[sray] stopped at step {step}; resume with: sray train --resume {cfg.run.name}", flush=True)
+                return
+            if rank == 0 and step == cfg.run.fail_at_step and not (job_dir / FAIL_MARKER).exists():
+                (job_dir / FAIL_MARKER).touch()
+                logger.flush(force=True)
+                os._exit(17)  # testing aid: an abrupt worker death
+
+            if step % epoch_len == 0 and step != start:
+                batches = batches_from(step)
+            batch = _to(next(batches), device)
+            torch.manual_seed(step_seed(cfg, rank, step))
+            origins, dirs, near, far = _rays(batch)
+            model.train()
+            with accelerator.autocast():
+                out = model(batch["src_rgb"], batch["src_K"], batch["src_c2w"], origins, dirs, near, far)
+            loss, terms = render_loss(out, batch["target_label"], batch["target_rgb"], cfg.model)
+            if step == cfg.run.nan_at_step:
+                loss = loss * float("nan")
+            accelerator.backward(loss)
+            params = [p for p in model.parameters() if p.grad is not None]
+            grad_norm = (accelerator.clip_grad_norm_(params, cfg.optim.grad_clip) if cfg.optim.grad_clip > 0
+                         else torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in params])))
+            finite = bool(torch.isfinite(grad_norm)) and bool(torch.isfinite(loss.detach()))
+            if accelerator.scaler is not None:  # fp16: the scaler skips overflowing steps itself
+                optimizer.step()
+                skipped = accelerator.optimizer_step_was_skipped
+            else:
+                skipped = not finite
+                if not skipped:
+                    optimizer.step()
+            optimizer.zero_grad(set_to_none=True)
+            scheduler.step()
+            if skipped:
+                counters["skipped_steps"] += 1
+                nonfinite_in_row += 1
+                if nonfinite_in_row >= cfg.optim.max_nonfinite_in_row:
+                    raise NonFiniteTraining(
+                        f"{nonfinite_in_row} steps in a row had a non-finite loss or gradient (last at step "
+                        f"{step}); lower optim.lr, raise optim.grad_clip strictness, or use --precision no/bf16")
+            else:
+                nonfinite_in_row = 0
+                window_terms.append({k: float(v) for k, v in terms.items()} | {"loss": float(loss.detach())})
+            step += 1
+            bar.update(1)
+
+            if rank == 0 and (step % cfg.run.log_every == 0 or step == cfg.optim.steps):
+                elapsed = time.perf_counter() - window_start
+                n_steps = max(len(window_terms), 1)
+                means = {f"train/{k}": sum(t[k] for t in window_terms) / n_steps for k in (window_terms[0] if window_terms else {})}
+                logger.log_metrics(means | {
+                    "train/lr": scheduler.get_last_lr()[0], "train/grad_norm": float(grad_norm),
+                    "train/rays_per_s": cfg.data.rays_per_batch * world * cfg.run.log_every / max(elapsed, 1e-9),
+                    "train/skipped_steps": counters["skipped_steps"], "train/memory_mb": _memory_mb(device)}, step)
+                bar.set_postfix(loss=f"{means.get('train/loss', float('nan')):.3f}")
+                window_start, window_terms = time.perf_counter(), []
+
+            metrics: dict[str, float] = {"step": step}
+            if step % cfg.run.val_every == 0 or step == cfg.optim.steps:
+                if rank == 0:
+                    metrics |= validate(accelerator.unwrap_model(model).net, cfg, step, logger, job_dir, device)
+                    miou = metrics.get("val/miou")
+                    if miou is not None and (best is None or miou > best):
+                        best = miou
+            if step % cfg.run.ckpt_every == 0 or step == cfg.optim.steps:
+                checkpoint_and_report(step, metrics)
+        if rank == 0:
+            final = manager.best() or manager.latest()
+            if cfg.run.register_model and final is not None:
+                logger.register_model(final, cfg.run.register_model, alias="best")
+            print(f"[sray] finished {step} steps; best checkpoint: {final}", flush=True)
+    finally:
+        bar.close()
+        if logger is not None:
+            logger.flush(force=True)

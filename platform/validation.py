@@ -1,0 +1,77 @@
+"""Validation during training (rank 0): held-out views of training scenes and zero-shot unseen scenes.
+
+``val/*`` scores come from the held-out ``test`` views of the training scenes (sources from their
+``train`` views); ``zeroshot/*`` from the unseen test scenes' ``test`` views with their fixed
+``source`` views (the paper's generalization protocol). Logged against the step, they give the
+paper's table of metrics against iterations.
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from sray.data_tools.loader import make_eval_samples
+from sray.data_tools.manifest import read_manifest
+from sray.platform.evaluation import ViewPrediction, render_view, score_views, sray_renderer
+from sray.platform.renders import render_panel
+from sray.platform.train_config import TrainConfig
+
+GROUPS = {"val": "train", "zeroshot": "test"}
+"""Metric prefix -> scene role it is computed on."""
+
+
+def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
+    keys = scores[0].keys()
+    return {k: sum(s[k] for s in scores) / len(scores) for k in keys}
+
+
+def evaluate_group(net: nn.Module, cfg: TrainConfig, role: str, device: torch.device) -> tuple[dict[str, float], list[tuple[str, ViewPrediction]]]:
+    """Scores averaged over the scenes of ``role`` (each scene scored from its own confusion matrix),
+    and the rendered views (scene, prediction). Empty when no scene of that role has test views."""
+    manifest = read_manifest(Path(cfg.data.shards))
+    per_scene, renders = [], []
+    for name, entry in sorted(manifest.scenes.items()):
+        meta = entry.meta
+        if meta.get("role") != role or not meta.get("splits", {}).get("test"):
+            continue
+        samples = itertools.islice(make_eval_samples(Path(cfg.data.shards), name, split="test",
+                                                     n_source=cfg.model.n_source), cfg.data.val_views_per_scene)
+        views = []
+        for sample in samples:
+            views.append(render_view(sray_renderer(net, sample, device), sample, cfg.data.val_downscale,
+                                     cfg.model.chunk, device))
+        per_scene.append(score_views(views, cfg.model.n_classes, cfg.model.ignore_id))
+        renders += [(name, v) for v in views]
+    return (_mean(per_scene) if per_scene else {}), renders
+
+
+def validate(net: nn.Module, cfg: TrainConfig, step: int, logger: Any, job_dir: Path,
+             device: torch.device) -> dict[str, float]:
+    """Run both validation groups, log their scores and one render panel each; returns the scores."""
+    was_training = net.training
+    net.eval()
+    metrics: dict[str, float] = {}
+    manifest = read_manifest(Path(cfg.data.shards))
+    class_names = next(iter(manifest.scenes.values())).meta["class_names"]
+    try:
+        for prefix, role in GROUPS.items():
+            scores, renders = evaluate_group(net, cfg, role, device)
+            metrics |= {f"{prefix}/{k}": v for k, v in scores.items()}
+            if renders:
+                scene, view = renders[0]
+                png = job_dir / "renders" / f"{prefix}_step{step:07d}_{scene}_{view.query_id}.png"
+                render_panel(view.pred_label.numpy(), view.gt_label.numpy(), view.pred_rgb.numpy(),
+                             view.gt_rgb.numpy(), class_names, png, cfg.model.ignore_id,
+                             title=f"{prefix} step {step}: {scene} view {view.query_id}")
+                if logger is not None:
+                    logger.log_image(png, artifact_path=f"renders/{prefix}")
+    finally:
+        net.train(was_training)
+    if logger is not None and metrics:
+        logger.log_metrics(metrics, step)
+    return metrics

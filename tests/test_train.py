@@ -1,0 +1,102 @@
+"""``sray train`` end to end on two gloo workers: learning, DDP sync, guards, checkpoints, resume, MLflow."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+import torch
+from mlflow.tracking import MlflowClient
+from train_fixtures import tiny_config, tiny_shards  # noqa: F401
+
+from sray.platform.checkpoints import CheckpointManager, load_checkpoint
+from sray.platform.launcher import launch_training
+from sray.platform.resources import InfeasibleRequest
+
+pytestmark = pytest.mark.slow
+
+
+def _history(cfg, key: str) -> list[tuple[int, float]]:
+    client = MlflowClient(cfg.run.tracking_uri)
+    exp = client.get_experiment_by_name(cfg.run.experiment)
+    runs = client.search_runs([exp.experiment_id], filter_string=f"attributes.run_name = '{cfg.run.name}'")
+    assert len(runs) == 1, f"expected one MLflow run for {cfg.run.name}, found {len(runs)}"
+    return [(m.step, m.value) for m in client.get_metric_history(runs[0].info.run_id, key)]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(ray_session, tiny_shards, tmp_path_factory):  # noqa: F811
+    """20 steps on 2 workers with a NaN injected at step 7."""
+    cfg = tiny_config(tiny_shards, tmp_path_factory.mktemp("u"), name="uninterrupted", nan_at_step=7)
+    outcome = launch_training(cfg)
+    return cfg, outcome
+
+
+def test_two_workers_learn_and_stay_in_sync(uninterrupted) -> None:
+    """The loss falls over 20 steps and the ranks' parameters are identical at every checkpoint."""
+    cfg, outcome = uninterrupted
+    assert outcome.status == "FINISHED"
+    losses = [v for _, v in sorted(_history(cfg, "train/loss"))]
+    assert len(losses) >= 15
+    assert sum(losses[-4:]) / 4 < sum(losses[:4]) / 4, losses
+    divergence = _history(cfg, "ddp/param_divergence")
+    assert divergence and all(v == 0.0 for _, v in divergence), divergence
+
+
+def test_nonfinite_loss_is_skipped_and_counted(uninterrupted) -> None:
+    """The NaN at step 7 skipped exactly one step; training went on to the end."""
+    cfg, outcome = uninterrupted
+    skipped = dict(_history(cfg, "train/skipped_steps"))
+    assert skipped[max(skipped)] == 1.0
+    assert load_checkpoint(outcome.latest_checkpoint)["step"] == cfg.optim.steps
+
+
+def test_mlflow_store_holds_everything(uninterrupted) -> None:
+    """Params, metrics, the config artifact, a PNG render and a registered model version."""
+    cfg, outcome = uninterrupted
+    client = MlflowClient(cfg.run.tracking_uri)
+    run = client.get_run(outcome.run.run_id)
+    assert run.data.params["optim.steps"] == "20" and run.info.status == "FINISHED"
+    assert {"train/loss", "train/lr", "val/miou", "zeroshot/miou"} <= set(run.data.metrics)
+    paths = [a.path for a in client.list_artifacts(run.info.run_id)]
+    assert "config.json" in paths
+    renders = [a.path for folder in ("renders/val", "renders/zeroshot") for a in client.list_artifacts(run.info.run_id, folder)]
+    assert any(p.endswith(".png") for p in renders), renders
+    versions = client.search_model_versions(f"name = '{cfg.run.register_model}'")
+    assert any(v.run_id == run.info.run_id for v in versions)
+
+
+def test_resume_equals_uninterrupted(uninterrupted, tiny_shards, tmp_path_factory) -> None:  # noqa: F811
+    """Stopped after its second checkpoint and resumed to step 20: same parameters as uninterrupted."""
+    ref_cfg, ref = uninterrupted
+    out = tmp_path_factory.mktemp("r")
+    cfg = tiny_config(tiny_shards, out, name="stopped", nan_at_step=7, stop_after_step=10)
+    first = launch_training(cfg)
+    assert first.status == "KILLED" and load_checkpoint(first.latest_checkpoint)["step"] == 10
+    cfg.run.stop_after_step = -1
+    second = launch_training(cfg, resume=True)
+    assert second.status == "FINISHED"
+    got = load_checkpoint(second.latest_checkpoint)["model"]
+    want = load_checkpoint(ref.latest_checkpoint)["model"]
+    for key in want:
+        torch.testing.assert_close(got[key], want[key], rtol=1e-5, atol=1e-6, msg=key)
+
+
+def test_killed_worker_resumes_without_metric_gaps(ray_session, tiny_shards, tmp_path) -> None:  # noqa: F811
+    """rank 0 dies abruptly at step 12 (first attempt): the job restarts from its checkpoint and ends."""
+    cfg = tiny_config(tiny_shards, tmp_path, name="killed", fail_at_step=12)
+    outcome = launch_training(cfg)
+    assert outcome.status == "FINISHED"
+    steps = sorted({s for s, _ in _history(cfg, "train/loss")})
+    assert steps == list(range(1, cfg.optim.steps + 1)), steps
+    assert (Path(cfg.run.output_dir) / "killed" / ".fail_injected").exists()
+
+
+def test_infeasible_request_fails_fast(ray_session, tiny_shards, tmp_path) -> None:  # noqa: F811
+    """More workers than the cluster's CPUs: refused in seconds, naming what is available."""
+    cfg = tiny_config(tiny_shards, tmp_path, name="too-big", workers=5)
+    start = time.perf_counter()
+    with pytest.raises(InfeasibleRequest, match="2 CPUs"):
+        launch_training(cfg)
+    assert time.perf_counter() - start < 30
