@@ -84,6 +84,7 @@ class TrainTuples(IterableDataset):
         return self.batches
 
     def __iter__(self) -> Iterator[dict]:
+        """This worker's share of the current epoch (the whole epoch when there are no workers)."""
         info = get_worker_info()
         worker, n_workers = (info.id, info.num_workers) if info else (0, 1)
         return self._generate(self.epoch, worker, n_workers)  # epoch read now, not when first consumed
@@ -117,6 +118,7 @@ class EpochLoader(DataLoader):
         self.dataset.epoch = epoch
 
     def __iter__(self) -> Iterator[dict]:
+        """Iterate one epoch, then advance the epoch counter."""
         iterator = super().__iter__()  # workers have copied the dataset (and its epoch) by now
         self.dataset.epoch += 1
         return iterator

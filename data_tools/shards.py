@@ -25,6 +25,7 @@ import io
 import json
 import re
 import tarfile
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -135,6 +136,31 @@ def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None) -> tuple[dic
     return ranked, hw
 
 
+def scene_shards(scene: Scene, ranked: dict[str, Neighbours], views_per_shard: int,
+                 bar: tqdm | None = None) -> Iterator[tuple[str, int, bytes]]:
+    """(file name, view count, tar bytes) of each shard of one scene, in view order."""
+    meta = scene.meta
+    for index, start in enumerate(range(0, len(meta.view_ids), views_per_shard)):
+        ids = meta.view_ids[start:start + views_per_shard]
+        members = []
+        for j, vid in enumerate(ids):
+            members += view_members(meta.name, scene.read_view(vid), ranked[vid], meta.to_json() if j == 0 else None)
+            if bar is not None:
+                bar.update(1)
+        yield shard_name(meta.name, index), len(ids), tar_bytes(members)
+
+
+def _label_spaces(scenes: list[Scene]) -> dict[str, list[str]]:
+    """Class names per label space; refuses two scenes giving one space different class lists."""
+    spaces: dict[str, list[str]] = {}
+    for scene in scenes:
+        names = spaces.setdefault(scene.meta.label_space, list(scene.meta.class_names))
+        if names != list(scene.meta.class_names):
+            raise ValueError(f"scene {scene.meta.name!r}: field 'class_names' differs from another scene's list "
+                             f"for label space {scene.meta.label_space!r}; give the two spaces different names")
+    return dict(sorted(spaces.items()))
+
+
 def is_current(path: Path, data: bytes) -> bool:
     """True when ``path`` already holds exactly ``data`` (size, then sha256)."""
     return path.is_file() and path.stat().st_size == len(data) and sha256_file(path) == hashlib.sha256(data).hexdigest()
@@ -175,29 +201,15 @@ def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256,
         if TEMP_NAME.match(stale.name):
             stale.unlink()
     scenes = [read_scene(p) for p in list_scenes(Path(scenes_dir))]
-    label_spaces: dict[str, list[str]] = {}
-    for scene in scenes:
-        names = label_spaces.setdefault(scene.meta.label_space, list(scene.meta.class_names))
-        if names != list(scene.meta.class_names):
-            raise ValueError(f"scene {scene.meta.name!r}: field 'class_names' differs from another scene's list "
-                             f"for label space {scene.meta.label_space!r}; give the two spaces different names")
+    label_spaces = _label_spaces(scenes)
     written, unchanged, entries, scene_entries = [], [], [], {}
-    total = 2 * sum(len(s.meta.view_ids) for s in scenes)
-    with tqdm(total=total, unit="view", desc="shard", disable=not progress) as bar:
+    with tqdm(total=2 * sum(len(s.meta.view_ids) for s in scenes), unit="view", disable=not progress) as bar:
         for scene in scenes:
-            meta = scene.meta
-            bar.set_description(f"{meta.name}: neighbours")
+            bar.set_description(f"{scene.meta.name}: neighbours")
             ranked, hw = scene_neighbours(scene, neighbours, bar)
-            bar.set_description(f"{meta.name}: shards")
+            bar.set_description(f"{scene.meta.name}: shards")
             names = []
-            for index, start in enumerate(range(0, len(meta.view_ids), views_per_shard)):
-                ids = meta.view_ids[start:start + views_per_shard]
-                members = []
-                for j, vid in enumerate(ids):
-                    members += view_members(meta.name, scene.read_view(vid), ranked[vid],
-                                            meta.to_json() if j == 0 else None)
-                    bar.update(1)
-                data, name = tar_bytes(members), shard_name(meta.name, index)
+            for name, n_views, data in scene_shards(scene, ranked, views_per_shard, bar):
                 if is_current(out / name, data):
                     unchanged.append(name)
                 else:
@@ -205,14 +217,14 @@ def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256,
                         (out / MANIFEST_NAME).unlink(missing_ok=True)
                     _atomic_write(out / name, data)
                     written.append(name)
-                entries.append(ShardEntry(path=name, scene=meta.name, n_views=len(ids),
+                entries.append(ShardEntry(path=name, scene=scene.meta.name, n_views=n_views,
                                           sha256=hashlib.sha256(data).hexdigest(), bytes=len(data)))
                 names.append(name)
-            scene_entries[meta.name] = SceneEntry(meta=meta.to_json(), shards=names, n_views=len(meta.view_ids),
-                                                  image_size=list(hw))
+            scene_entries[scene.meta.name] = SceneEntry(meta=scene.meta.to_json(), shards=names,
+                                                        n_views=len(scene.meta.view_ids), image_size=list(hw))
     manifest = Manifest(
         shards=sorted(entries, key=lambda e: e.path), scenes=dict(sorted(scene_entries.items())),
-        label_spaces=dict(sorted(label_spaces.items())),
+        label_spaces=label_spaces,
         neighbours={"rule": RULE, "version": RULE_VERSION, "k": neighbours, "grid": list(GRID),
                     "min_points": MIN_POINTS, "pool": "train scenes: train split minus test split; "
                     "test scenes: source plus finetune splits"},

@@ -99,6 +99,7 @@ class PackedBoxes:
                    materials=[b.material for b in boxes])
 
     def __len__(self) -> int:
+        """Number of boxes P."""
         return len(self.materials)
 
     def to_local(self, index: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -69,12 +69,12 @@ def wood(rng: np.random.Generator) -> Material:
                     contrast=float(rng.uniform(0.3, 0.8)), seed=_seed(rng))
 
 
-def painted(rng: np.random.Generator, panels: bool = False, panel_width: float = 0.45, axis: int = 0) -> Material:
+def painted(rng: np.random.Generator, panels: bool = False, panel_width: float = 0.45) -> Material:
     """Any hue, muted to saturated, light to dark; optional door/drawer seams."""
     a = hsv(rng, (0, 1), (0.0, 0.55), (0.25, 0.95))
     kind = PANELS if panels else PAINT
     return Material(kind, a, _shade(a, 0.45), scale=1.0 / panel_width, contrast=float(rng.uniform(0.03, 0.12)),
-                    axis=axis, seed=_seed(rng))
+                    seed=_seed(rng))
 
 
 def furniture_surface(rng: np.random.Generator, panels: bool = False, panel_width: float = 0.45) -> Material:

@@ -44,7 +44,8 @@ class RenderScene:
         boxes = PackedBoxes.from_boxes(room.boxes)
         shell_half = np.tile(np.array(room.size) / 2, (3, 1))
         table = MaterialTable.build(boxes.materials + [room.wall, room.floor, room.ceiling],
-                                    np.concatenate([boxes.half, shell_half]), np.concatenate([boxes.quarter, [0, 0, 0]]))
+                                    np.concatenate([boxes.half, shell_half]),
+                                    np.concatenate([boxes.quarter, [0, 0, 0]]))
         return cls(room=room, boxes=boxes, materials=table, exposure=exposure)
 
 

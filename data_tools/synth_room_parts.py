@@ -26,7 +26,7 @@ def add_door(rng: np.random.Generator, layout: RoomLayout, width: tuple[float, f
 
 
 def add_window(rng: np.random.Generator, layout: RoomLayout, sill: tuple[float, float] = (0.8, 1.0),
-               width: tuple[float, float] = (0.8, 1.6), curtain_prob: float = 0.7, walls: list[int] | None = None) -> bool:
+               width: tuple[float, float] = (0.8, 1.6), curtain_prob: float = 0.7) -> bool:
     """A window (and, often, a pair of curtains) on a free stretch of wall; returns success."""
     ceiling = layout.size[2]
     w, z_sill = float(rng.uniform(*width)), float(rng.uniform(*sill))
@@ -48,8 +48,7 @@ def add_window(rng: np.random.Generator, layout: RoomLayout, sill: tuple[float, 
             offsets.append(side * (win.width / 2 - overlap + pw / 2))
         z_lo = min(z_lo, z0)
     total = max([win.width] + [2 * abs(off) + p.width for p, off in zip(panels, offsets)])
-    order = walls if walls is not None else [int(w) for w in rng.permutation(4)]
-    for wall in order:
+    for wall in [int(w) for w in rng.permutation(4)]:
         length = layout.wall_length(wall)
         if length < total + 0.3:
             continue

@@ -75,6 +75,8 @@ class SemanticNeRFConfig:
     does not depend on the scene's units."""
 
     def __post_init__(self) -> None:
+        """Reject settings the network cannot run with, naming the field."""
+
         def fail(field: str, why: str) -> None:
             raise ValueError(f"sray.model.semantic_nerf.SemanticNeRFConfig.{field}: {why}")
 

@@ -11,6 +11,7 @@ import json
 import os
 import signal
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,9 +73,16 @@ def init_ray(address: str | None, num_cpus: int | None = None) -> None:
     if address:
         ray.init(address=address)
         return
-    ray.init(address="local", num_cpus=num_cpus or os.cpu_count(), include_dashboard=False,
-             _temp_dir=tempfile.mkdtemp(prefix="ray", dir="/tmp"), object_store_memory=200 * 2**20,
-             log_to_driver=True)
+    # Ray's own processes (gcs, raylet) share the terminal's process group: started with SIGINT
+    # ignored (inherited across exec), a Ctrl-C reaches only this driver, which then stops the
+    # workers cleanly with a checkpoint instead of losing the cluster under them.
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        ray.init(address="local", num_cpus=num_cpus or os.cpu_count(), include_dashboard=False,
+                 _temp_dir=tempfile.mkdtemp(prefix="ray", dir="/tmp"), object_store_memory=200 * 2**20,
+                 log_to_driver=True)
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _install_stop_handler(job_dir: Path) -> Any:
@@ -131,7 +139,7 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
     previous = _install_stop_handler(job_dir)
     status = "FAILED"
     try:
-        trainer.fit()
+        _fit_in_thread(trainer)
         status = "KILLED" if (job_dir / STOP_FILE).exists() or _stopped_early(job_dir, cfg) else "FINISHED"
     except KeyboardInterrupt:
         status = "KILLED"
@@ -141,9 +149,29 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
         terminate_run(run, status)
     manager = CheckpointManager(job_dir / "checkpoints")
     outcome = TrainOutcome(job_dir, run, manager.best(), manager.latest(), status)
-    print(f"[sray] {status.lower()}: best checkpoint {outcome.best_checkpoint}, latest {outcome.latest_checkpoint}\n"
+    word = {"KILLED": "stopped", "FINISHED": "finished"}.get(status, status.lower())
+    print(f"[sray] {word}: best checkpoint {outcome.best_checkpoint}, latest {outcome.latest_checkpoint}\n"
           f"[sray] MLflow run: {run.ui_url}", flush=True)
     return outcome
+
+
+def _fit_in_thread(trainer: Any) -> None:
+    """``trainer.fit()`` off the main thread, so that Ray Train installs no SIGINT handler of its
+    own (it aborts the run) and ours turns Ctrl-C into a checkpointed stop. Re-raises its error."""
+    failure: list[BaseException] = []
+
+    def target() -> None:
+        try:
+            trainer.fit()
+        except BaseException as e:  # noqa: BLE001 - handed to the main thread
+            failure.append(e)
+
+    thread = threading.Thread(target=target, name="sray-fit", daemon=True)
+    thread.start()
+    while thread.is_alive():
+        thread.join(timeout=0.5)
+    if failure:
+        raise failure[0]
 
 
 def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:

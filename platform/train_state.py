@@ -92,3 +92,16 @@ def restore_training(state: dict[str, Any], model: nn.Module, optimizer: torch.o
     if scaler is not None and "scaler" in state:
         scaler.load_state_dict(state["scaler"])
     return int(state["step"]), state.get("best_metric"), dict(state.get("counters", {}))
+
+
+def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayModel, TrainConfig]:
+    """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder."""
+    from pathlib import Path
+
+    from sray.platform.checkpoints import load_checkpoint
+
+    state = load_checkpoint(Path(path), map_location)
+    cfg = TrainConfig.from_dict(state["config"])
+    wrapper = RayBatchModel(cfg.model)
+    wrapper.load_state_dict(state["model"])
+    return wrapper.net.eval(), cfg

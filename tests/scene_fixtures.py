@@ -6,10 +6,7 @@ analytically, so depth, colour and labels agree across views exactly (a world po
 and one label whichever camera sees it). Labels use ScanNet-20 ids: walls 0, floor 1, the box
 "table" 6, a "picture" patch 10 on the +x wall; the ceiling is unlabelled (IGNORE_ID).
 
-Import from a test module with::
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import scene_fixtures
+Import from a test module with ``import scene_fixtures`` (tests/conftest.py puts tests/ on sys.path).
 """
 
 from __future__ import annotations
@@ -73,8 +70,8 @@ def render(K: np.ndarray, c2w: np.ndarray, height: int, width: int) -> tuple[np.
     label = np.full(t.shape, WALL, np.uint16)
     label[np.abs(points[:, 2] - ROOM_LO[2]) < 1e-6] = FLOOR
     label[np.abs(points[:, 2] - ROOM_HI[2]) < 1e-6] = IGNORE_ID
-    picture = (np.abs(points[:, 0] - ROOM_HI[0]) < 1e-6) & (np.abs(points[:, 1]) < 0.6) & (np.abs(points[:, 2] - 1.4) < 0.4)
-    label[picture] = PICTURE
+    on_wall = np.abs(points[:, 0] - ROOM_HI[0]) < 1e-6
+    label[on_wall & (np.abs(points[:, 1]) < 0.6) & (np.abs(points[:, 2] - 1.4) < 0.4)] = PICTURE
     label[hits_box] = TABLE
 
     checker = (np.floor(points[:, 0] * 4) + np.floor(points[:, 1] * 4) + np.floor(points[:, 2] * 4)) % 2

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,16 +10,15 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import scene_fixtures  # noqa: E402
+import scene_fixtures
 
-from sray.data_tools.layout import encode_png, read_scene  # noqa: E402
-from sray.data_tools.loader import (make_eval_samples, make_train_loader, slot_scenes,  # noqa: E402
+from sray.data_tools.layout import encode_png, read_scene
+from sray.data_tools.loader import (make_eval_samples, make_train_loader, slot_scenes,
                                     worker_batches)
-from sray.data_tools.loader_views import SceneCache, StoredView  # noqa: E402
-from sray.data_tools.manifest import read_manifest  # noqa: E402
-from sray.data_tools.neighbours import Neighbours, source_pool  # noqa: E402
-from sray.data_tools.shards import scene_neighbours, write_shards  # noqa: E402
+from sray.data_tools.loader_views import SceneCache, StoredView
+from sray.data_tools.manifest import read_manifest
+from sray.data_tools.neighbours import Neighbours, source_pool
+from sray.data_tools.shards import scene_neighbours, write_shards
 
 TRAIN = ["a", "b", "c", "d", "e"]
 TRAIN_KEYS = {"src_rgb", "src_K", "src_c2w", "query_K", "query_c2w", "pixels", "target_label", "target_rgb",
@@ -30,6 +28,7 @@ EVAL_KEYS = TRAIN_KEYS - {"pixels", "target_label", "target_rgb"} | {"query_rgb"
 
 @pytest.fixture(scope="module")
 def data(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(scenes, shards): five 6-view train scenes and one 10-view test scene, 4 views per shard."""
     root = tmp_path_factory.mktemp("loader")
     scenes = scene_fixtures.write_dataset(root / "scenes", [(s, 6, "train") for s in TRAIN] + [("unseen", 10, "test")])
     write_shards(scenes, root / "shards", views_per_shard=4, neighbours=8, progress=False)
@@ -37,6 +36,7 @@ def data(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 
 def _loader(shards: Path, **kw: object) -> torch.utils.data.DataLoader:
+    """A small training loader over the train scenes; keyword arguments override the defaults."""
     args = dict(n_source=2, top_k=3, rays_per_batch=16, batches_per_epoch=7, rank=0, world_size=1, num_workers=0,
                 seed=5, scenes=TRAIN)
     args.update(kw)
@@ -140,7 +140,7 @@ def test_eval_samples_are_fixed_and_lossless(data: tuple[Path, Path], scene: str
     canon = read_scene(scenes_dir / scene)
     views = {v.view_id: v for v in canon.views()}
     ranked, _ = scene_neighbours(canon, k=8)
-    first, again = list(make_eval_samples(shards, scene, split, n_source=2)), list(make_eval_samples(shards, scene, split, n_source=2))
+    first, again = (list(make_eval_samples(shards, scene, split, n_source=2)) for _ in range(2))
     assert [s["query_id"] for s in first] == canon.meta.splits[split]
     for s, t in zip(first, again):
         assert set(s) == EVAL_KEYS

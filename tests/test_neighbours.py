@@ -2,22 +2,18 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import cv2
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import scene_fixtures  # noqa: E402
+import scene_fixtures
 
-from sray.data_tools.neighbours import (grid_points, grid_samples, overlap_fractions,  # noqa: E402
+from sray.data_tools.neighbours import (grid_points, grid_samples, overlap_fractions,
                                         rank_neighbours, source_pool)
-from sray.data_tools.scene import SceneMeta  # noqa: E402
-from sray.data_tools.shards import scene_neighbours  # noqa: E402
+from sray.data_tools.scene import SceneMeta
+from sray.data_tools.shards import scene_neighbours
 
 
 def _opencv_fraction(points: np.ndarray, K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int]) -> float:
@@ -81,6 +77,7 @@ def test_overlap_beats_centre_distance() -> None:
 
 
 def _random_camera(rng: np.random.Generator) -> np.ndarray:
+    """A random rigid camera-to-world (4, 4)."""
     c2w = np.eye(4)
     c2w[:3, :3] = cv2.Rodrigues(rng.normal(size=3))[0]
     c2w[:3, 3] = rng.normal(size=3)

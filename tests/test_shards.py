@@ -7,7 +7,6 @@ import hashlib
 import json
 import os
 import shutil
-import sys
 import tarfile
 from pathlib import Path
 
@@ -16,29 +15,31 @@ import numpy as np
 import pytest
 import webdataset as wds
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import scene_fixtures  # noqa: E402
+import scene_fixtures
 
-from sray.data_tools import layout  # noqa: E402
-from sray.data_tools.layout import list_scenes, read_scene  # noqa: E402
-from sray.data_tools.manifest import MANIFEST_NAME, read_manifest, verify_shards  # noqa: E402
-from sray.data_tools.neighbours import source_pool  # noqa: E402
-from sray.data_tools.shards import DatasetRejected, write_shards  # noqa: E402
+from sray.data_tools import layout
+from sray.data_tools.layout import list_scenes, read_scene
+from sray.data_tools.manifest import MANIFEST_NAME, read_manifest, verify_shards
+from sray.data_tools.neighbours import source_pool
+from sray.data_tools.shards import DatasetRejected, write_shards
 
 SPECS = [("kitchen", 7, "train"), ("office", 5, "train"), ("unseen", 10, "test")]
 
 
 def _files(folder: Path) -> dict[str, bytes]:
+    """Every file of a folder by name, with its bytes."""
     return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
 
 
 @pytest.fixture(scope="module")
 def scenes_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Two train scenes and one test scene in sray layout (40x30)."""
     return scene_fixtures.write_dataset(tmp_path_factory.mktemp("scenes"), SPECS)
 
 
 @pytest.fixture(scope="module")
 def shards_dir(scenes_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Those scenes sharded 3 views per shard, 6 neighbours per view."""
     out = tmp_path_factory.mktemp("shards")
     write_shards(scenes_dir, out, views_per_shard=3, neighbours=6, progress=False)
     return out

@@ -77,4 +77,5 @@ def test_cli_writes_the_dataset_and_says_where(tmp_path: Path, capsys: pytest.Ca
     assert test_meta.role == "test" and len(test_meta.splits["source"]) == 8
     assert str(out.resolve()) in capsys.readouterr().out
     defaults = parser.parse_args(["synth", "--out", str(out)])
-    assert (defaults.train_scenes, defaults.test_scenes, defaults.views, defaults.height, defaults.width) == (4, 2, 60, 240, 320)
+    chosen = (defaults.train_scenes, defaults.test_scenes, defaults.views, defaults.height, defaults.width)
+    assert chosen == (4, 2, 60, 240, 320)

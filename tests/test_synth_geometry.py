@@ -71,8 +71,8 @@ def test_normals_point_out_of_the_hit_face() -> None:
     t, idx = cast_rays(origin, -origin[None, :], packed)
     hit = origin + float(t[0]) * -origin
     normals, axis = box_normals(packed, idx, packed.to_local(idx, hit[None, :]))
-    torch.testing.assert_close(torch.from_numpy(normals[0]).double(),
-                               torch.tensor([math.cos(0.3), math.sin(0.3), 0.0], dtype=torch.float64), rtol=0, atol=1e-6)
+    expected = torch.tensor([math.cos(0.3), math.sin(0.3), 0.0], dtype=torch.float64)
+    torch.testing.assert_close(torch.from_numpy(normals[0]).double(), expected, rtol=0, atol=1e-6)
     assert axis[0] == 0
     torch.testing.assert_close(torch.tensor(float(t[0]), dtype=torch.float64),
                                torch.tensor(0.8, dtype=torch.float64), rtol=0, atol=1e-6)
