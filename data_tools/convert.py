@@ -32,11 +32,8 @@ from sray.data_tools.layout import atomic_write_json, list_scenes, write_dataset
 from sray.data_tools.read_replica import read_replica
 from sray.data_tools.read_scannet import read_scannet
 from sray.data_tools.scene import Scene, View, depth_bounds
+from sray.data_tools.splits import protocol_splits, train_splits
 
-PROTOCOL_WINDOW = 20
-"""Views of a test scene: 8 source + 8 finetune + 4 test (the paper's protocol)."""
-PROTOCOL_BLOCK = ("finetune", "source", "test", "source", "finetune")
-"""Split of each position in a block of five consecutive window views."""
 DEFAULTS = {"scannet": {"size_hw": (240, 320), "frame_skip": 10}, "replica": {"size_hw": None, "frame_skip": 5}}
 """Per-format defaults: ScanNet at 320x240 (the paper's size), every 10th frame of the 30 fps scan;
 Replica at its rendered size (640x480 in Semantic-NeRF's release, the paper's size), every 5th frame."""
@@ -99,30 +96,6 @@ def default_name(src: Path) -> str:
     src = Path(src).resolve()
     name = f"{src.parent.name}_{src.name}" if re.fullmatch(r"Sequence_\d+", src.name) else src.name
     return name.replace(".", "_")
-
-
-def train_splits(view_ids: list[str], holdout_every: int) -> dict[str, list[str]]:
-    """``train`` + held-out ``test`` (every ``holdout_every``-th view, offset by half a period)."""
-    if holdout_every <= 0:
-        return {"train": list(view_ids)}
-    held = {i for i in range(len(view_ids)) if i % holdout_every == holdout_every // 2}
-    return {"train": [v for i, v in enumerate(view_ids) if i not in held],
-            "test": [v for i, v in enumerate(view_ids) if i in held]}
-
-
-def protocol_splits(view_ids: list[str], start: int | None) -> tuple[list[str], dict[str, list[str]]]:
-    """The 20-view window from ``start`` (None: centred) and its source/finetune/test splits."""
-    if len(view_ids) < PROTOCOL_WINDOW:
-        raise ValueError(f"a test scene needs {PROTOCOL_WINDOW} views, the source yields {len(view_ids)}; "
-                         "lower --frame-skip")
-    start = (len(view_ids) - PROTOCOL_WINDOW) // 2 if start is None else start
-    if not 0 <= start <= len(view_ids) - PROTOCOL_WINDOW:
-        raise ValueError(f"--window-start {start} out of range 0..{len(view_ids) - PROTOCOL_WINDOW}")
-    window = view_ids[start:start + PROTOCOL_WINDOW]
-    splits: dict[str, list[str]] = {"source": [], "finetune": [], "test": []}
-    for k, view in enumerate(window):
-        splits[PROTOCOL_BLOCK[k % len(PROTOCOL_BLOCK)]].append(view)
-    return window, splits
 
 
 def _open_source(cfg: ConvertConfig, name: str) -> Scene:

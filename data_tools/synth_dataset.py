@@ -26,6 +26,7 @@ import numpy as np
 from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.layout import write_dataset_index, write_scene
 from sray.data_tools.scene import Scene, SceneMeta, View, depth_bounds
+from sray.data_tools.splits import PROTOCOL_WINDOW, protocol_splits, train_splits
 from sray.data_tools.synth_render import RenderScene, render_view
 from sray.data_tools.synth_rooms import ROOM_TYPES, Room, build_room
 from sray.data_tools.synth_trajectory import scan_path
@@ -36,12 +37,6 @@ GENERATOR_VERSION = 1
 """Bumped whenever the same parameters would render different pixels."""
 HFOV_DEG = 62.0
 """Horizontal field of view (ScanNet's colour camera is about 58 degrees, its depth camera 58-60)."""
-WINDOW = 20
-"""Views in a test scene's evaluation window (the paper's 'select 20 nearby views')."""
-BLOCK = ("finetune", "source", "test", "source", "finetune")
-"""Split of each position in a block of five consecutive window views."""
-HOLDOUT_EVERY, HOLDOUT_OFFSET = 20, 10
-"""Train scenes hold out views HOLDOUT_OFFSET, HOLDOUT_OFFSET + HOLDOUT_EVERY, ... for validation."""
 
 
 def intrinsics(height: int, width: int, hfov_deg: float = HFOV_DEG) -> np.ndarray:
@@ -77,21 +72,16 @@ def plan_scene(seed: int, n_views: int, room_type: str | None = None) -> ScenePl
 
 
 def split_views(view_ids: list[str], role: str, seed: int) -> dict[str, list[str]]:
-    """The scene's splits for its role (the rule is in this module's docstring)."""
-    n = len(view_ids)
+    """The scene's splits for its role (rules in ``data_tools/splits.py``); a test scene's 20-view
+    window starts at a seed-derived offset."""
     if role == "train":
-        held = set(range(HOLDOUT_OFFSET, n, HOLDOUT_EVERY))
-        return {"train": [v for i, v in enumerate(view_ids) if i not in held],
-                "test": [v for i, v in enumerate(view_ids) if i in held]}
+        return train_splits(view_ids)
     if role == "test":
-        if n < WINDOW:
-            raise ValueError(f"a test scene needs at least {WINDOW} views for the source/finetune/test "
-                             f"protocol, got n_views={n}; pass --views {WINDOW} or more")
-        start = int(np.random.default_rng([seed, 20]).integers(0, n - WINDOW + 1))
-        splits: dict[str, list[str]] = {"source": [], "finetune": [], "test": []}
-        for k in range(WINDOW):
-            splits[BLOCK[k % len(BLOCK)]].append(view_ids[start + k])
-        return splits
+        if len(view_ids) < PROTOCOL_WINDOW:
+            raise ValueError(f"a test scene needs at least {PROTOCOL_WINDOW} views for the source/finetune/test "
+                             f"protocol, got n_views={len(view_ids)}; pass --views {PROTOCOL_WINDOW} or more")
+        start = int(np.random.default_rng([seed, 20]).integers(0, len(view_ids) - PROTOCOL_WINDOW + 1))
+        return protocol_splits(view_ids, start)[1]
     raise ValueError(f"role must be 'train' or 'test', got {role!r}")
 
 

@@ -11,6 +11,7 @@ from sray.model.config import SRayConfig
 from sray.model.cra import AttentionBlock, CrossReprojectionAttention
 
 
+@torch.no_grad()
 def _naive_layer_norm(x: torch.Tensor, norm: torch.nn.LayerNorm) -> torch.Tensor:
     """Row-by-row layer norm in float64: x (L, D)."""
     n, d = x.shape
@@ -22,6 +23,7 @@ def _naive_layer_norm(x: torch.Tensor, norm: torch.nn.LayerNorm) -> torch.Tensor
     return out
 
 
+@torch.no_grad()
 def _naive_block(block: AttentionBlock, x: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     """One sequence through ``block`` with explicit loops, float64: x (L, D), valid (L,) -> (L, D)."""
     x = x.double()

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from sray.data_tools.check import check_dataset
-from sray.data_tools.convert import ConvertConfig, convert_scene, protocol_splits, train_splits
+from sray.data_tools.convert import ConvertConfig, convert_scene
+from sray.data_tools.splits import protocol_splits, train_splits
 from sray.data_tools.label_spaces import NYU40, SCANNET20
 from sray.data_tools.layout import read_scene
 from sray.data_tools.read_replica import replica_intrinsics

@@ -1,0 +1,48 @@
+"""The ResUNet encoder follows the appendix table's shapes and keeps pixel centres aligned."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from sray.model.encoder import ResUNetEncoder, upsample_to
+
+
+@pytest.mark.parametrize("hw", [(48, 64), (120, 160), (33, 47)])
+def test_stage_shapes_follow_the_table(hw: tuple[int, int]) -> None:
+    torch.manual_seed(0)
+    enc = ResUNetEncoder(32)
+    seen = {}
+    for name in ("stem", "down2", "down3", "down4", "merge3"):
+        getattr(enc, name).register_forward_hook(lambda _m, _i, out, name=name: seen.__setitem__(name, out.shape))
+    out = enc(torch.rand(2, 3, *hw))
+
+    def down(size: int, times: int) -> int:
+        for _ in range(times):
+            size = -(-size // 2)
+        return size
+
+    h, w = hw
+    expected = {"stem": (2, 16, down(h, 1), down(w, 1)), "down2": (2, 32, down(h, 2), down(w, 2)),
+                "down3": (2, 64, down(h, 3), down(w, 3)), "down4": (2, 128, down(h, 4), down(w, 4)),
+                "merge3": (2, 32, down(h, 3), down(w, 3))}
+    assert {k: tuple(v) for k, v in seen.items()} == expected
+    assert out.shape == (2, 32, down(h, 2), down(w, 2))
+    assert torch.isfinite(out).all()
+
+
+def test_upsampling_reads_coarse_coordinate_half_j() -> None:
+    coarse = torch.arange(5.0).view(1, 1, 1, 5).expand(1, 1, 3, 5) * 2 + torch.arange(3.0).view(1, 1, 3, 1)
+    up = upsample_to(coarse, (6, 10))  # value at (i, j) should be coarse(i / 2, j / 2), clamped
+    j = torch.arange(10.0).clamp(max=8) / 2
+    i = torch.arange(6.0).clamp(max=4) / 2
+    torch.testing.assert_close(up[0, 0], j.view(1, 10) * 2 + i.view(6, 1), rtol=0, atol=1e-6)
+
+
+def test_encoder_is_per_image_and_rejects_tiny_images() -> None:
+    torch.manual_seed(1)
+    enc = ResUNetEncoder(32)
+    imgs = torch.rand(3, 3, 40, 48)
+    torch.testing.assert_close(enc(imgs)[1:2], enc(imgs[1:2]), rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="at least 32"):
+        enc(torch.rand(1, 3, 24, 64))
