@@ -1,0 +1,44 @@
+"""``sray eval``: zero-shot scores of a checkpoint on unseen scenes (the paper's generalization protocol)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``sray eval``."""
+    p = sub.add_parser("eval", help="score a checkpoint on unseen scenes: metrics.json, PNGs, an MLflow run")
+    p.add_argument("--checkpoint", type=Path, required=True,
+                   help="checkpoint folder (…/checkpoints/step_XXXXXXXXX) written by `sray train`")
+    p.add_argument("--data", type=Path, required=True, help="shard folder holding manifest.json")
+    p.add_argument("--scenes", nargs="+", metavar="SCENE",
+                   help="scenes to evaluate (default: every scene whose role is 'test')")
+    p.add_argument("--n-source", type=int, default=8, help="fixed source views per test view (paper: 8)")
+    p.add_argument("--stride", type=int, default=1, help="render every N-th pixel (1 = whole images)")
+    p.add_argument("--out", type=Path, default=Path("outputs/eval"), help="output folder")
+    p.add_argument("--tracking-uri", help="MLflow tracking URI (default: SQLite store in this folder)")
+    p.add_argument("--experiment", default="sray-eval", help="MLflow experiment name")
+    p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Evaluate, print the table and where everything went; exit 2 on bad input."""
+    from sray.platform.eval_job import evaluate_checkpoint, format_table
+
+    try:
+        report = evaluate_checkpoint(args.checkpoint, args.data, args.scenes, args.out, n_source=args.n_source,
+                                     stride=args.stride, tracking_uri=args.tracking_uri,
+                                     experiment=args.experiment, device=args.device)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"sray eval: {e}", file=sys.stderr)
+        return 2
+    print(format_table(report))
+    print(f"[sray] {report['protocol']}")
+    print(f"[sray] metrics: {report['metrics_path']}")
+    print(f"[sray] renders: {Path(report['out_dir']) / 'renders'}")
+    hint = report["run"]["ui_hint"]
+    print(f"[sray] MLflow run: {report['run']['ui_url']}" + (f"  (start the UI: {hint})" if hint else ""))
+    return 0

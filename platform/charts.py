@@ -1,0 +1,224 @@
+"""Charts of a finetune fleet (PNG): accuracy against time and steps, accuracy against artifact size.
+
+From the fleet result dicts (docs/CONTRACTS.md, "Fleet results"), :func:`write_fleet_charts` writes
+
+* ``miou_vs_wall_s.png``, ``miou_vs_step.png``, ``psnr_vs_wall_s.png``, ``psnr_vs_step.png``: held-out
+  score against training wall-clock time and against optimisation steps, one panel per scene plus
+  (with two scenes or more) a first panel averaging the scenes (curves resampled as step functions
+  on a common grid, :func:`sray.platform.charts_curves.average_curves`). S-Ray zero-shot is the
+  step-0 score of the S-Ray curve (a dashed horizontal line: it costs no per-scene step), S-Ray
+  finetune and Semantic-NeRF from scratch are step curves that hold their value between evaluations;
+* ``miou_vs_artifact_bytes.png``: held-out mIoU after per-scene optimisation against the bytes a
+  scene stores besides the shared model (log axis), one point per (scene, method); zero-shot S-Ray
+  stores nothing and sits on a separate "0 B" tick left of an axis break.
+
+Failed results are left out and named in a footnote. Matplotlib's Agg canvas is used directly (no
+pyplot state), so this is safe in Ray workers and threads.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sray.model.metrics import DATASET_PROTOCOL
+from sray.platform.charts_curves import (METHODS, average_curves, check_result, curve_xy, failure_note, is_chartable,
+                                         zero_shot_value)
+
+log = logging.getLogger(__name__)
+
+STYLES: dict[str, dict[str, Any]] = {
+    "sray": {"label": "S-Ray finetune", "color": "#1f6fb4", "marker": "o"},
+    "semantic-nerf": {"label": "Semantic-NeRF from scratch", "color": "#d1495b", "marker": "s"},
+    "zeroshot": {"label": "S-Ray zero-shot (step 0, no per-scene steps)", "color": "#6b9fd1", "marker": "*"},
+}
+"""Colour, marker and legend text of each curve kind."""
+METRICS = {"miou": ("held-out mIoU", f"held-out mIoU ({DATASET_PROTOCOL})"),
+           "psnr": ("held-out PSNR (dB)", "held-out PSNR (dB, mean over held-out views)")}
+"""Curve key -> (axis label, title text)."""
+X_AXES = {"wall_s": ("training wall-clock time (s, evaluation excluded)", "wall-clock time"),
+          "step": ("optimisation steps", "steps")}
+"""Curve key -> (axis label, title text)."""
+PANEL_SIZE = (4.8, 3.5)
+"""Inches per panel (width, height)."""
+DPI = 110
+
+
+def _human_bytes(n: float) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n:.0f} B"
+
+
+def _footnote(ok: list[dict[str, Any]], results: list[dict[str, Any]], extra: str, width_in: float) -> str:
+    protocols = sorted({str(r["protocol"]) for r in ok if isinstance(r.get("protocol"), str)})
+    parts = [extra] + [f"protocol: {p}" for p in protocols] + [failure_note(results)]
+    wrap = max(60, int(width_in * 15))
+    return "\n".join(textwrap.fill(p, wrap) for p in parts if p)
+
+
+def _new_figure(width: float, height: float) -> Any:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), dpi=DPI, layout="constrained", facecolor="white")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Any, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
+    fig.savefig(tmp, dpi=DPI, format="png")
+    os.replace(tmp, path)
+    return path
+
+
+def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str, x_key: str, mean: bool) -> None:
+    """One panel: zero-shot line, then each method's curve (the step-function mean of several)."""
+    zero = [v for r in by_method.get("sray", []) if (v := zero_shot_value(r, metric)) is not None]
+    if zero:
+        z = STYLES["zeroshot"]
+        ax.axhline(float(np.mean(zero)), color=z["color"], ls="--", lw=1.3, zorder=1)
+        ax.plot([0.0], [float(np.mean(zero))], ls="none", marker=z["marker"], ms=11, color=z["color"], zorder=4)
+    for method in METHODS:
+        results = by_method.get(method, [])
+        curves = [curve_xy(r["curve"], x_key, metric) for r in results]
+        x, y = average_curves(curves) if mean else curves[0] if curves else (np.zeros(0), np.zeros(0))
+        if not len(x):
+            continue
+        s = STYLES[method]
+        ax.step(x, y, where="post", color=s["color"], lw=1.8, zorder=3)
+        if not mean or len(x) == 1:
+            ax.plot(x, y, ls="none", marker=s["marker"], ms=4.5, color=s["color"], zorder=3)
+        if not mean and results[0].get("stopped_early"):
+            ax.annotate("early stop", (x[-1], y[-1]), xytext=(0, 7), textcoords="offset points", fontsize=7,
+                        ha="center", color=s["color"])
+    ax.grid(True, alpha=0.3)
+    ax.set_xlim(left=0.0)
+    ax.tick_params(labelsize=8)
+
+
+def _legend_handles(ok: list[dict[str, Any]]) -> list[Any]:
+    from matplotlib.lines import Line2D
+
+    handles = []
+    if any(zero_shot_value(r, "miou") is not None for r in ok):
+        z = STYLES["zeroshot"]
+        handles.append(Line2D([], [], color=z["color"], ls="--", marker=z["marker"], ms=9, label=z["label"]))
+    for method in METHODS:
+        if any(r["method"] == method for r in ok):
+            s = STYLES[method]
+            handles.append(Line2D([], [], color=s["color"], marker=s["marker"], ms=5, label=s["label"]))
+    return handles
+
+
+def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str) -> Any:
+    """The figure of one (score, x axis) pair: a mean panel (2+ scenes), then one panel per scene."""
+    ok = [r for r in results if is_chartable(r)]
+    scenes = sorted({r["scene"] for r in ok})
+    by_scene = {s: {m: [r for r in ok if r["scene"] == s and r["method"] == m] for m in METHODS} for s in scenes}
+    panels: list[tuple[str, dict[str, list[dict[str, Any]]], bool]] = []
+    if len(scenes) >= 2:
+        by_method = {m: [r for r in ok if r["method"] == m] for m in METHODS}
+        counts = {STYLES[m]["label"]: len(v) for m, v in by_method.items() if v}
+        same = len(set(counts.values())) == 1
+        title = (f"mean over {len(scenes)} scenes" if same else
+                 "mean over scenes (" + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ")")
+        panels.append((title, by_method, True))
+    panels += [(f"scene {s}", by_scene[s], False) for s in scenes]
+    ncols = min(3, len(panels))
+    nrows = math.ceil(len(panels) / ncols)
+    width = PANEL_SIZE[0] * ncols
+    fig = _new_figure(width, PANEL_SIZE[1] * nrows + 1.4)
+    y_label, y_title = METRICS[metric]
+    x_label, x_title = X_AXES[x_key]
+    fig.suptitle(f"{y_title} vs {x_title}", fontsize=11, fontweight="bold")
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    for ax, (title, by_method, mean) in zip(axes.flat, panels):
+        _draw_panel(ax, by_method, metric, x_key, mean)
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel(x_label, fontsize=8)
+        ax.set_ylabel(y_label, fontsize=8)
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_visible(False)
+    fig.legend(handles=_legend_handles(ok), loc="outside lower center", ncols=3, fontsize=8, frameon=False)
+    note = "Curves hold their value between evaluations and after a finetune stops" + (
+        "; the mean panel resamples each scene's curve on the union of evaluation points." if len(scenes) >= 2 else ".")
+    fig.supxlabel(_footnote(ok, results, note, width), fontsize=7, color="#444444", ha="center")
+    return fig
+
+
+def size_figure(results: list[dict[str, Any]]) -> Any:
+    """mIoU after per-scene optimisation against the per-scene artifact size (log x, '0 B' = zero-shot)."""
+    from matplotlib.ticker import NullFormatter, NullLocator
+
+    ok = [r for r in results if is_chartable(r)]
+    fig = _new_figure(8.0, 5.6)
+    ax = fig.add_subplot()
+    sized = [r for r in ok if r.get("artifact_bytes") and r.get("miou_after") is not None]
+    full = [float(r["full_checkpoint_bytes"]) for r in ok if r["method"] == "sray" and r.get("full_checkpoint_bytes")]
+    biggest = max([float(r["artifact_bytes"]) for r in sized] + full + [10.0])
+    smallest = min([float(r["artifact_bytes"]) for r in sized] + [biggest])
+    lo_decade, hi_decade = math.floor(math.log10(smallest)), math.ceil(math.log10(biggest * 1.5))
+    x_zero = 10.0 ** (lo_decade - 1)
+    for r in sized:
+        s = STYLES[r["method"]]
+        x, y = float(r["artifact_bytes"]), float(r["miou_after"])
+        ax.plot([x], [y], ls="none", marker=s["marker"], ms=7, color=s["color"], zorder=3)
+        ax.annotate(r["scene"], (x, y), xytext=(5, 4), textcoords="offset points", fontsize=7, color="#333333")
+        zero = zero_shot_value(r, "miou")
+        if zero is not None:
+            ax.plot([x_zero, x], [zero, y], ls=":", lw=1.0, color="#999999", zorder=2)
+            ax.plot([x_zero], [zero], ls="none", marker=STYLES["zeroshot"]["marker"], ms=11,
+                    color=STYLES["zeroshot"]["color"], zorder=3)
+            ax.annotate(r["scene"], (x_zero, zero), xytext=(7, -3), textcoords="offset points", fontsize=7,
+                        color="#333333")
+    if full:
+        ax.axvline(float(np.median(full)), color="#555555", ls="--", lw=1.0)
+        ax.annotate(f"full S-Ray checkpoint\n{_human_bytes(float(np.median(full)))}", (float(np.median(full)), 0.02),
+                    xycoords=("data", "axes fraction"), xytext=(-6, 0), textcoords="offset points", ha="right",
+                    fontsize=7, color="#555555")
+    ax.set_xscale("log")
+    ax.set_xlim(x_zero / 3.0, 10.0 ** hi_decade)
+    ax.axvspan(x_zero * 2.0, 10.0 ** lo_decade / 2.0, color="#eeeeee", zorder=0)  # the axis break
+    ticks = [x_zero] + [10.0 ** k for k in range(lo_decade, hi_decade + 1)]
+    ax.set_xticks(ticks, ["0 B\n(zero-shot)"] + [_human_bytes(t) for t in ticks[1:]], fontsize=8)
+    ax.xaxis.set_minor_locator(NullLocator())
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.grid(True, alpha=0.3)
+    ax.set_xlabel("per-scene artifact size (bytes stored besides the shared model; log scale)", fontsize=9)
+    ax.set_ylabel("held-out mIoU after per-scene optimisation", fontsize=9)
+    fig.suptitle(f"held-out mIoU ({DATASET_PROTOCOL}) vs per-scene artifact size", fontsize=11, fontweight="bold")
+    fig.legend(handles=_legend_handles(ok), loc="outside lower center", ncols=3, fontsize=8, frameon=False)
+    note = ("One point per (scene, method): the best evaluated state, as stored. Dotted: a scene's S-Ray "
+            "zero-shot -> finetune. Semantic-NeRF stores its whole per-scene model.")
+    fig.supxlabel(_footnote(ok, results, note, 8.0), fontsize=7, color="#444444")
+    return fig
+
+
+def write_fleet_charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
+    """Write the fleet's charts as PNG files in ``out_dir`` (atomically); returns their paths.
+
+    ``results``: fleet result dicts (docs/CONTRACTS.md). Failed results are skipped and named in
+    a footnote; with no finished result at all nothing is written (a warning says so).
+    """
+    for r in results:
+        check_result(r)
+    if not any(is_chartable(r) for r in results):
+        log.warning("no finished fleet result with an evaluated point: no charts written to %s", out_dir)
+        return []
+    out_dir = Path(out_dir)
+    paths = []
+    for metric in METRICS:
+        for x_key in X_AXES:
+            paths.append(_save(curve_figure(results, metric, x_key), out_dir / f"{metric}_vs_{x_key}.png"))
+    paths.append(_save(size_figure(results), out_dir / "miou_vs_artifact_bytes.png"))
+    return paths

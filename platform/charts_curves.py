@@ -1,0 +1,108 @@
+"""Fleet results as curves: reading ``result.json`` files, step-function resampling, averaging.
+
+A finetune is evaluated at a few points (``curve`` in the fleet result, docs/CONTRACTS.md); between
+two evaluations, and after the last one (early stop), the model is the one last evaluated. Its
+score is therefore a step function of time that holds its last value: averaging curves across
+scenes resamples every curve on the union of their evaluation points with that hold.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+METHODS = ("sray", "semantic-nerf")
+"""Method names a fleet result may carry."""
+RESULT_FIELDS = ("scene", "method", "status", "curve")
+"""Fields every result must have to be charted."""
+
+
+def read_fleet_results(fleet_dir: Path) -> list[dict[str, Any]]:
+    """Every ``<fleet_dir>/scenes/<scene>/<method>/result.json``, sorted by (scene, method).
+
+    ValueError names a file that is not valid JSON.
+    """
+    results = []
+    for path in sorted(Path(fleet_dir).glob("scenes/*/*/result.json")):
+        try:
+            results.append(json.loads(path.read_text()))
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{path}: not valid JSON ({e}); re-run the fleet for that scene") from None
+    return results
+
+
+def check_result(result: dict[str, Any]) -> None:
+    """ValueError naming the result and the missing or unknown field."""
+    missing = [f for f in RESULT_FIELDS if f not in result]
+    who = f"fleet result {result.get('scene', '?')}/{result.get('method', '?')}"
+    if missing:
+        raise ValueError(f"{who}: fields {missing} are missing (see docs/CONTRACTS.md, 'Fleet results')")
+    if result["method"] not in METHODS:
+        raise ValueError(f"{who}: field 'method' is {result['method']!r}; use one of {METHODS}")
+
+
+def is_chartable(result: dict[str, Any]) -> bool:
+    """A finished result with at least one evaluated point."""
+    return result.get("status") == "finished" and bool(result.get("curve"))
+
+
+def curve_xy(curve: list[dict[str, Any]], x_key: str, y_key: str) -> tuple[np.ndarray, np.ndarray]:
+    """(x (n,), y (n,)) of a result's curve, sorted by x (stable), points with a missing or
+    non-finite value dropped."""
+    pts = [(float(p[x_key]), float(p[y_key])) for p in curve
+           if p.get(x_key) is not None and p.get(y_key) is not None
+           and math.isfinite(float(p[x_key])) and math.isfinite(float(p[y_key]))]
+    pts.sort(key=lambda p: p[0])
+    if not pts:
+        return np.zeros(0), np.zeros(0)
+    x, y = zip(*pts)
+    return np.asarray(x, float), np.asarray(y, float)
+
+
+def step_hold(x: np.ndarray, y: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Values (len(grid),) of the step function through (x, y) (x sorted ascending) at ``grid``:
+    the y of the last point with x <= g; NaN before the first point; the last y after the end.
+    Of several points at the same x, the last one counts."""
+    idx = np.searchsorted(x, grid, side="right") - 1
+    return np.where(idx >= 0, y[np.clip(idx, 0, None)], np.nan) if len(x) else np.full(len(grid), np.nan)
+
+
+def average_curves(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of step-function curves on the union of their x values.
+
+    A grid point counts only where every curve has started (no curve is extrapolated backwards);
+    after its last point a curve holds its final value. Returns (grid (k,), mean (k,)); empty
+    arrays when no curve has a point.
+    """
+    curves = [(x, y) for x, y in curves if len(x)]
+    if not curves:
+        return np.zeros(0), np.zeros(0)
+    grid = np.unique(np.concatenate([x for x, _ in curves]))
+    grid = grid[grid >= max(float(x[0]) for x, _ in curves)]
+    values = np.stack([step_hold(x, y, grid) for x, y in curves])  # (n_curves, k)
+    return grid, values.mean(axis=0)
+
+
+def zero_shot_value(result: dict[str, Any], y_key: str) -> float | None:
+    """The step-0 score of an S-Ray result (the zero-shot model), or None when it has none."""
+    first = result["curve"][0] if result.get("curve") else None
+    if result.get("method") != "sray" or first is None or int(first.get("step", -1)) != 0:
+        return None
+    value = first.get(y_key)
+    return float(value) if value is not None and math.isfinite(float(value)) else None
+
+
+def failure_note(results: list[dict[str, Any]]) -> str:
+    """One line naming every result that is not charted (failed, or no evaluated point), or ''."""
+    skipped = []
+    for r in results:
+        if is_chartable(r):
+            continue
+        why = r.get("error") or ("no evaluated point" if r.get("status") == "finished" else r.get("status") or "?")
+        why = (str(why).splitlines() or ["?"])[0][:60]
+        skipped.append(f"{r.get('scene', '?')}/{r.get('method', '?')} ({why})")
+    return ("not plotted: " + "; ".join(skipped)) if skipped else ""

@@ -1,0 +1,249 @@
+"""``sray eval``: score a checkpoint on unseen scenes with the paper's generalization protocol.
+
+Every ``test`` view of a scene is rendered whole (in ray chunks, every ``stride``-th pixel; stride
+1 = every pixel) from its ``n_source`` FIXED source views (its top-ranked neighbours inside the
+scene's ``source`` split), by the pretrained model as it is: no per-scene optimisation.
+
+Outputs under ``out_dir``:
+
+* ``metrics.json`` (atomic): per scene and the mean over scenes, in blocks that each name their
+  protocol: ``dataset_level`` (mIoU, total and class-average accuracy from one confusion matrix per
+  scene), ``per_image`` (mIoU per view, then averaged), ``colour`` (PSNR, SSIM with its window);
+  per-view scores; the LPIPS note (not computable offline);
+* ``renders/<scene>/<view>_{pred,gt,error}.png`` at the render's own resolution (colours from
+  :mod:`sray.platform.palette`) and ``<view>_panel.png`` (:func:`sray.platform.renders.render_panel`).
+
+All of it goes into a new MLflow run (metrics at the checkpoint's training step, metrics.json and
+the PNGs as artifacts).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from sray.data_tools.loader import make_eval_samples
+from sray.data_tools.manifest import read_manifest
+from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
+from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
+from sray.platform.evaluation import ViewPrediction, render_view, score_views, sray_renderer
+from sray.platform.palette import colorize
+from sray.platform.renders import error_map, render_panel
+from sray.platform.train_state import model_from_checkpoint
+
+GENERALIZATION_PROTOCOL = ("zero-shot on unseen scenes: each 'test' view rendered whole from its {n} fixed "
+                           "'source' views (top-ranked neighbours), no per-scene optimisation")
+"""How the views are rendered (``{n}``: source views per query)."""
+METRICS_FILE = "metrics.json"
+
+
+def _finite_or_none(value: Any) -> Any:
+    """JSON has no NaN: NaN/inf become null, recursively."""
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_json_atomic(obj: Any, path: Path) -> Path:
+    """Write ``obj`` as indented JSON (NaN as null) through a temporary name; returns ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(json.dumps(_finite_or_none(obj), indent=1) + "\n")
+    os.replace(tmp, path)
+    return path
+
+
+def write_png_atomic(rgb: np.ndarray, path: Path) -> Path:
+    """Write a uint8 (H, W, 3) RGB image as PNG through a temporary name; returns ``path``."""
+    import cv2
+
+    ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]))
+    if not ok:
+        raise OSError(f"{path}: OpenCV could not encode a {rgb.shape} {rgb.dtype} image as PNG")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
+    tmp.write_bytes(data.tobytes())
+    os.replace(tmp, path)
+    return path
+
+
+def select_scenes(shards: Path, scenes: list[str] | None) -> tuple[list[str], dict[str, dict]]:
+    """The scenes to evaluate (default: every ``role == "test"`` scene) and their metadata.
+
+    ValueError names the manifest and the fix for unknown scenes or scenes without ``test`` views.
+    """
+    manifest = read_manifest(Path(shards))
+    where = Path(shards) / "manifest.json"
+    if scenes is None:
+        scenes = sorted(s for s, e in manifest.scenes.items() if e.meta.get("role") == "test")
+        if not scenes:
+            raise ValueError(f"{where}: no scene has role 'test'; pass --scenes NAME ... explicitly")
+    unknown = [s for s in scenes if s not in manifest.scenes]
+    if unknown:
+        raise ValueError(f"{where}: scenes {unknown} not found; known: {sorted(manifest.scenes)[:10]}")
+    metas = {s: manifest.scenes[s].meta for s in scenes}
+    empty = [s for s in scenes if not metas[s].get("splits", {}).get("test")]
+    if empty:
+        raise ValueError(f"{where}: scenes {empty} have no 'test' views to evaluate; pick scenes with a "
+                         "'test' split (unseen test scenes have one)")
+    return list(scenes), metas
+
+
+def save_view_pngs(view: ViewPrediction, scene: str, class_names: list[str], ignore_id: int,
+                   out_dir: Path) -> dict[str, str]:
+    """Predicted / ground-truth semantics, error map and the combined panel of one view, written
+    under ``out_dir/renders/<scene>/``. Returns {kind: path relative to ``out_dir``}."""
+    pred, gt = view.pred_label.numpy(), view.gt_label.numpy()
+    n = len(class_names)
+    stem = out_dir / "renders" / scene / str(view.query_id)
+    files = {
+        "pred": write_png_atomic(colorize(pred, n, ignore_id), stem.with_name(f"{stem.name}_pred.png")),
+        "gt": write_png_atomic(colorize(gt, n, ignore_id), stem.with_name(f"{stem.name}_gt.png")),
+        "error": write_png_atomic(error_map(pred, gt, ignore_id), stem.with_name(f"{stem.name}_error.png")),
+        "panel": render_panel(pred, gt, view.pred_rgb.numpy(), view.gt_rgb.numpy(), class_names,
+                              stem.with_name(f"{stem.name}_panel.png"), ignore_id,
+                              title=f"zero-shot: {scene} view {view.query_id}"),
+    }
+    return {k: str(p.relative_to(out_dir)) for k, p in files.items()}
+
+
+def scene_blocks(scores: dict[str, float], n_views: int) -> dict[str, Any]:
+    """Scores of one scene (or their mean) in protocol-named blocks."""
+    return {
+        "n_views": n_views,
+        "dataset_level": {"protocol": DATASET_PROTOCOL, "miou": scores["miou"], "total_acc": scores["total_acc"],
+                          "class_avg_acc": scores["class_avg_acc"]},
+        "per_image": {"protocol": PER_IMAGE_PROTOCOL, "miou": scores["miou_per_image"]},
+        "colour": {"psnr_db": scores["psnr"], "ssim": scores["ssim"], "ssim_protocol": SSIM_PROTOCOL,
+                   "ssim_window": SSIM_WINDOW},
+    }
+
+
+def view_scores(view: ViewPrediction, n_classes: int, ignore_id: int) -> dict[str, float]:
+    """Per-image mIoU and PSNR of one view."""
+    miou = per_image_miou([view.pred_label], [view.gt_label], n_classes, ignore_id)["miou"]
+    return {"miou_per_image": float(miou), "psnr_db": psnr(view.pred_rgb, view.gt_rgb)}
+
+
+def flat_metrics(report: dict[str, Any]) -> dict[str, float]:
+    """MLflow metric keys ``<scene or mean>/<metric>`` of a metrics.json report (finite values only)."""
+    out = {}
+    for name, block in [*report["scenes"].items(), ("mean", report["mean"])]:
+        values = {"miou": block["dataset_level"]["miou"], "total_acc": block["dataset_level"]["total_acc"],
+                  "class_avg_acc": block["dataset_level"]["class_avg_acc"],
+                  "miou_per_image": block["per_image"]["miou"], "psnr": block["colour"]["psnr_db"],
+                  "ssim": block["colour"]["ssim"]}
+        out |= {f"{name}/{k}": float(v) for k, v in values.items() if v is not None and math.isfinite(v)}
+    return out
+
+
+def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None, out_dir: Path,
+                        n_source: int = 8, stride: int = 1, tracking_uri: str | None = None,
+                        experiment: str = "sray-eval", *, device: str | None = None,
+                        progress: bool = True) -> dict:
+    """Evaluate ``checkpoint`` on ``scenes`` (default: the manifest's test scenes); see the module doc.
+
+    Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (MLflow run id,
+    experiment id, UI url and hint). ``tracking_uri`` None = the working directory's SQLite store.
+    """
+    from tqdm import tqdm
+
+    from sray.platform.checkpoints import read_meta
+    from sray.platform.tracking import default_tracking_uri, prepare_run
+    from sray.platform.tracking_logger import RunLogger
+
+    if stride < 1 or n_source < 1:
+        raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")
+    checkpoint, shards, out_dir = Path(checkpoint).resolve(), Path(shards).resolve(), Path(out_dir).resolve()
+    names, metas = select_scenes(shards, scenes)
+    net, cfg = model_from_checkpoint(checkpoint)
+    step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
+    n_classes, ignore_id = cfg.model.n_classes, cfg.model.ignore_id
+    for name in names:
+        if len(metas[name]["class_names"]) != n_classes:
+            raise ValueError(f"{shards / 'manifest.json'}: scene {name!r} has {len(metas[name]['class_names'])} "
+                             f"classes, the checkpoint's model predicts {n_classes}; evaluate on data of the "
+                             "label space the model was trained on")
+    torch_device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    net = net.to(torch_device).eval()
+    uri = tracking_uri or default_tracking_uri(Path.cwd())
+    job = f"{checkpoint.parent.parent.name}-" if checkpoint.parent.name == "checkpoints" else ""
+    run = prepare_run(uri, experiment, f"eval-{job}{checkpoint.name}-{time.strftime('%Y%m%d-%H%M%S')}",
+                      tags={"sray.kind": "eval", "sray.checkpoint": str(checkpoint)})
+    report: dict[str, Any] = {
+        "checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards), "n_source": n_source,
+        "stride": stride, "protocol": GENERALIZATION_PROTOCOL.format(n=n_source), "lpips": LPIPS_NOTE,
+        "scenes": {}}
+    t0 = time.perf_counter()
+    with RunLogger(run) as logger:
+        logger.log_params({"checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards),
+                           "scenes": names, "n_source": n_source, "stride": stride})
+        bar = tqdm(total=sum(len(metas[s]["splits"]["test"]) for s in names), desc="eval views", unit="view",
+                   disable=not progress)
+        for name in names:
+            views, per_view = [], []
+            for sample in make_eval_samples(shards, name, split="test", n_source=n_source):
+                view = render_view(sray_renderer(net, sample, torch_device), sample, stride, cfg.model.chunk,
+                                   torch_device)
+                pngs = save_view_pngs(view, name, metas[name]["class_names"], ignore_id, out_dir)
+                views.append(view)
+                per_view.append({"query_id": view.query_id, **view_scores(view, n_classes, ignore_id), "pngs": pngs})
+                bar.update(1)
+            block = scene_blocks(score_views(views, n_classes, ignore_id), len(views))
+            report["scenes"][name] = {**block, "views": per_view}
+        bar.close()
+        scene_scores = [report["scenes"][n] for n in names]
+        report["mean"] = mean_blocks(scene_scores)
+        report["wall_s"] = time.perf_counter() - t0
+        metrics_path = write_json_atomic(report, out_dir / METRICS_FILE)
+        logger.log_metrics(flat_metrics(_finite_or_none(report)), step)
+        logger.log_artifact(metrics_path)
+        logger.log_artifact(out_dir / "renders", "renders")
+    return {**_finite_or_none(report), "metrics_path": str(metrics_path), "out_dir": str(out_dir),
+            "run": {"run_id": run.run_id, "experiment_id": run.experiment_id, "ui_url": run.ui_url,
+                    "ui_hint": run.ui_hint}}
+
+
+def mean_blocks(blocks: list[dict[str, Any]]) -> dict[str, Any]:
+    """Unweighted mean over scenes of every score (each scene counts once, whatever its view count)."""
+
+    def avg(path: tuple[str, str]) -> float:
+        return float(np.mean([b[path[0]][path[1]] for b in blocks]))
+
+    scores = {"miou": avg(("dataset_level", "miou")), "total_acc": avg(("dataset_level", "total_acc")),
+              "class_avg_acc": avg(("dataset_level", "class_avg_acc")), "miou_per_image": avg(("per_image", "miou")),
+              "psnr": avg(("colour", "psnr_db")), "ssim": avg(("colour", "ssim"))}
+    return {**scene_blocks(scores, sum(b["n_views"] for b in blocks)), "n_scenes": len(blocks),
+            "averaging": "unweighted mean over scenes"}
+
+
+def format_table(report: dict[str, Any]) -> str:
+    """A plain-text table of a report: one row per scene, then the mean."""
+    head = ("scene", "views", "mIoU", "total acc", "class acc", "mIoU/img", "PSNR dB", "SSIM")
+    rows = [head]
+
+    def cell(v: Any, fmt: str) -> str:
+        return "n/a" if v is None else format(v, fmt)
+
+    for name, b in [*report["scenes"].items(), ("mean", report["mean"])]:
+        d, c = b["dataset_level"], b["colour"]
+        rows.append((name, str(b["n_views"]), cell(d["miou"], ".3f"), cell(d["total_acc"], ".3f"),
+                     cell(d["class_avg_acc"], ".3f"), cell(b["per_image"]["miou"], ".3f"),
+                     cell(c["psnr_db"], ".2f"), cell(c["ssim"], ".3f")))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
+    lines = ["  ".join(v.ljust(w) if i == 0 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths))) for r in rows]
+    lines.insert(1, "-" * len(lines[0]))
+    lines.insert(len(lines) - 1, "-" * len(lines[0]))
+    return "\n".join([*lines, f"mIoU, accuracies: {DATASET_PROTOCOL}; mIoU/img: {PER_IMAGE_PROTOCOL}"])

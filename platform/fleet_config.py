@@ -1,0 +1,207 @@
+"""Typed configuration of a finetune fleet (``sray finetune-fleet``): budgets, methods, scheduling.
+
+``--set section.field=value`` overrides any field (:func:`apply_fleet_override`), e.g.
+``--set finetune.patience=5`` or ``--set max_parallel=4``. Fields whose default is None inherit
+the shared checkpoint's training value (its rays per batch, source views, samples per ray).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from typing import Any
+
+METHODS = ("sray", "semantic-nerf")
+"""Per-scene methods a fleet runs: S-Ray finetuned from the shared model, Semantic-NeRF from scratch."""
+PRECISIONS = ("no", "bf16", "fp16")
+"""fp32, bfloat16 autocast (CPU and CUDA), float16 autocast with loss scaling (CUDA only)."""
+DEFAULT_ADAPT = ("coarse.classifier", "fine.classifier", "coarse.view_weights", "fine.view_weights")
+"""S-Ray modules a finetune trains and stores by default (see docs: the semantic heads and the
+semantic-aware view weighting of both per-sample networks; the image encoder, attention and
+geometry stay shared)."""
+
+
+@dataclass
+class FinetuneSettings:
+    """Budget, early stopping and optimisation of one scene's finetune (both methods)."""
+
+    max_steps: int = 300
+    """Most optimiser steps a scene may use."""
+    max_seconds: float = 0.0
+    """Training wall-clock budget per scene in seconds (evaluation time not counted); 0 = none.
+    Equal budgets let methods be compared at equal wall-clock time."""
+    eval_every: int = 25
+    """Held-out evaluation cadence in steps (also after step 0, the zero-shot model)."""
+    patience: int = 3
+    """Stop after this many evaluations in a row without an improvement of the held-out mIoU."""
+    min_delta: float = 0.002
+    """An evaluation improves only if its held-out mIoU beats the best so far by more than this."""
+    lr: float = 2e-4
+    """Adam learning rate of the adapted S-Ray parameters (constant)."""
+    grad_clip: float = 1.0
+    """Global gradient-norm clipping of the trained parameters (0 = off)."""
+    max_nonfinite_in_row: int = 20
+    """A non-finite loss or gradient skips the step; this many in a row fail the scene."""
+    rays_per_batch: int | None = None
+    """Rays per step; None = the checkpoint's ``data.rays_per_batch``."""
+    n_source: int | None = None
+    """Source views per training sample; None = the checkpoint's ``model.n_source``."""
+    top_k: int | None = None
+    """Training sources are drawn from this many ranked neighbours; None = the checkpoint's
+    ``data.top_k`` capped at the shards' stored neighbours."""
+    eval_n_source: int = 8
+    """Fixed source views per held-out view (the paper's protocol: 8)."""
+    eval_stride: int = 2
+    """Held-out views are scored on every ``eval_stride``-th pixel in each direction (speed)."""
+    eval_chunk: int = 2048
+    """Rays per forward pass when rendering held-out views."""
+    precision: str = "no"
+    """One of ``PRECISIONS``; fp16 needs ``gpus_per_task > 0``."""
+    adapt: tuple[str, ...] = DEFAULT_ADAPT
+    """S-Ray module paths (prefixes of ``SRayModel.state_dict()`` keys) trained and stored per scene."""
+    seed: int = 0
+    """Seed of ray sampling, data order and Semantic-NeRF's initial weights."""
+
+
+@dataclass
+class SemanticNeRFSettings:
+    """Semantic-NeRF from scratch, the per-scene baseline (``--method semantic-nerf``)."""
+
+    lr: float = 5e-4
+    """Adam learning rate (Semantic-NeRF: 5e-4)."""
+    depth: int = 8
+    """Trunk layers (paper: 8)."""
+    width: int = 256
+    """Trunk width (paper: 256)."""
+    skip_layer: int | None = 5
+    """Trunk layer the encoded position re-enters (NeRF: 5); must be below ``depth``; None = no skip."""
+    pos_freqs: int = 10
+    """Positional-encoding frequencies of positions."""
+    dir_freqs: int = 4
+    """Positional-encoding frequencies of directions."""
+    n_coarse: int | None = None
+    """Coarse samples per ray; None = the S-Ray checkpoint's (same sampling budget)."""
+    n_fine: int | None = None
+    """Fine samples per ray; None = the S-Ray checkpoint's."""
+
+
+@dataclass
+class FleetConfig:
+    """Everything a fleet needs besides the checkpoint, the shards, the scenes and the methods."""
+
+    finetune: FinetuneSettings = field(default_factory=FinetuneSettings)
+    """Per-scene budgets and optimisation."""
+    nerf: SemanticNeRFSettings = field(default_factory=SemanticNeRFSettings)
+    """The Semantic-NeRF baseline's network and learning rate."""
+    max_parallel: int = 2
+    """Most scene tasks in flight at once."""
+    cpus_per_task: float = 1.0
+    """CPUs Ray reserves per scene task (fractions allowed)."""
+    gpus_per_task: float = 0.0
+    """GPUs per scene task (fractions let several finetunes share a GPU; 0 = CPU)."""
+    retries: int = 2
+    """Re-runs of a scene task after a failure (worker crash or error) before it is reported."""
+    retry_backoff_s: float = 5.0
+    """Wait before the first re-run; doubled for each further one."""
+    experiment: str = "sray-fleet"
+    """MLflow experiment of the parent fleet run and its child runs."""
+    address: str = ""
+    """Ray cluster address; empty = start Ray locally in-process."""
+    fail_scenes: list[str] = field(default_factory=list)
+    """Testing aid: tasks of these scenes raise on every attempt (exercises retries and reporting)."""
+
+    def __post_init__(self) -> None:
+        """Reject settings a fleet cannot run with, naming the field and the fix."""
+        check_fleet_config(self)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict (JSON-safe; tuples become lists)."""
+        return dataclasses.asdict(self)
+
+
+def check_fleet_config(cfg: FleetConfig) -> None:
+    """ValueError naming the first field that is out of range."""
+    ft = cfg.finetune
+    positive = {"finetune.max_steps": ft.max_steps, "finetune.eval_every": ft.eval_every,
+                "finetune.patience": ft.patience, "finetune.eval_n_source": ft.eval_n_source,
+                "finetune.eval_stride": ft.eval_stride, "finetune.eval_chunk": ft.eval_chunk,
+                "finetune.max_nonfinite_in_row": ft.max_nonfinite_in_row, "max_parallel": cfg.max_parallel,
+                "nerf.depth": cfg.nerf.depth, "nerf.width": cfg.nerf.width}
+    for name in ("rays_per_batch", "n_source", "top_k"):
+        if getattr(ft, name) is not None:
+            positive[f"finetune.{name}"] = getattr(ft, name)
+    for name in ("n_coarse", "n_fine"):
+        if getattr(cfg.nerf, name) is not None:
+            positive[f"nerf.{name}"] = getattr(cfg.nerf, name)
+    for name, value in positive.items():
+        if int(value) < 1:
+            raise ValueError(f"fleet config: {name} is {value}; it must be a positive integer")
+    non_negative = {"finetune.max_seconds": ft.max_seconds, "finetune.min_delta": ft.min_delta,
+                    "finetune.lr": ft.lr, "finetune.grad_clip": ft.grad_clip, "nerf.lr": cfg.nerf.lr,
+                    "cpus_per_task": cfg.cpus_per_task, "gpus_per_task": cfg.gpus_per_task,
+                    "retries": cfg.retries, "retry_backoff_s": cfg.retry_backoff_s}
+    for name, value in non_negative.items():
+        if value < 0:
+            raise ValueError(f"fleet config: {name} is {value}; it must be >= 0")
+    if cfg.cpus_per_task == 0 and cfg.gpus_per_task == 0:
+        raise ValueError("fleet config: cpus_per_task and gpus_per_task are both 0; a task needs some CPU or GPU")
+    if ft.precision not in PRECISIONS:
+        raise ValueError(f"fleet config: finetune.precision is {ft.precision!r}; use one of {PRECISIONS}")
+    if ft.precision == "fp16" and cfg.gpus_per_task == 0:
+        raise ValueError("fleet config: finetune.precision fp16 needs CUDA (set --gpus-per-task > 0); "
+                         "on CPU use bf16 or no")
+    if cfg.nerf.skip_layer is not None and not 0 < cfg.nerf.skip_layer < cfg.nerf.depth:
+        raise ValueError(f"fleet config: nerf.skip_layer is {cfg.nerf.skip_layer}; it must lie in 1..nerf.depth - 1 "
+                         f"({cfg.nerf.depth - 1}) or be none")
+    if not ft.adapt:
+        raise ValueError("fleet config: finetune.adapt is empty; name at least one S-Ray module, e.g. "
+                         "fine.classifier")
+
+
+def _parse(kind: Any, raw: str, assignment: str) -> Any:
+    """Parse ``raw`` as the annotated type ``kind`` (int, float, str, bool, X | None, tuple/list of X)."""
+    args = typing.get_args(kind)
+    origin = typing.get_origin(kind)
+    if type(None) in args:  # X | None
+        if raw.lower() in ("none", "null", ""):
+            return None
+        return _parse(next(a for a in args if a is not type(None)), raw, assignment)
+    if origin in (tuple, list):
+        items = [_parse(args[0], x.strip(), assignment) for x in raw.strip("()[] ").split(",") if x.strip()]
+        return tuple(items) if origin is tuple else items
+    if kind is bool:
+        if raw.lower() not in ("true", "false", "1", "0", "yes", "no"):
+            raise ValueError(f"--set {assignment!r}: {raw!r} is not a bool (true/false)")
+        return raw.lower() in ("true", "1", "yes")
+    try:
+        return kind(raw)
+    except ValueError:
+        raise ValueError(f"--set {assignment!r}: {raw!r} is not a valid {kind.__name__}") from None
+
+
+def apply_fleet_override(cfg: FleetConfig, assignment: str) -> None:
+    """Apply one ``[section.]field=value`` override in place (value parsed as the field's type).
+
+    Raises ValueError naming an unknown section or field and listing the valid ones, or a value
+    out of range.
+    """
+    if "=" not in assignment:
+        raise ValueError(f"--set {assignment!r}: expected [section.]field=value, e.g. finetune.patience=5")
+    path, raw = assignment.split("=", 1)
+    parts = path.strip().split(".")
+    target: Any = cfg
+    for part in parts[:-1]:
+        child = getattr(target, part, None)
+        if not dataclasses.is_dataclass(child):
+            raise ValueError(f"--set {assignment!r}: no section {part!r}; sections: finetune, nerf "
+                             "(top-level fields take no section)")
+        target = child
+    name = parts[-1]
+    hints = typing.get_type_hints(type(target))
+    fields = {f.name for f in dataclasses.fields(target)}
+    if name not in fields:
+        raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; "
+                         f"fields: {', '.join(sorted(fields))}")
+    setattr(target, name, _parse(hints[name], raw.strip(), assignment))
+    check_fleet_config(cfg)

@@ -1,0 +1,177 @@
+"""A scene's finetune artifact: only what differs from the shared model (safetensors files).
+
+S-Ray (``sray_delta.safetensors``): the tensors of the adapted modules (``FinetuneSettings.adapt``,
+prefixes of ``SRayModel.state_dict()`` keys), the sha256 of the shared checkpoint's ``state.pt``
+they were trained from and the adapted module list. :func:`load_scene_model` = shared model +
+artifact, bit for bit the finetuned model; an artifact of another base checkpoint is refused.
+
+Semantic-NeRF (``semantic_nerf.safetensors``): the whole state dict (it shares nothing) and its
+config, rebuilt by :func:`load_semantic_nerf`.
+
+Sizes are compared with :func:`model_bytes` of the shared model: the bytes of its tensors alone
+(what a full per-scene copy of the model would cost), not the training checkpoint's ``state.pt``,
+which also holds the optimiser's moments.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import uuid
+from pathlib import Path
+
+import torch
+from safetensors import safe_open
+from safetensors.torch import save_file
+from torch import Tensor, nn
+
+from sray.data_tools.manifest import sha256_file
+from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
+from sray.model.sray import SRayModel
+from sray.platform.checkpoints import STATE_FILE
+
+SRAY_ARTIFACT = "sray_delta.safetensors"
+"""File name of an S-Ray scene artifact inside ``<fleet>/scenes/<scene>/sray/``."""
+NERF_ARTIFACT = "semantic_nerf.safetensors"
+"""File name of a Semantic-NeRF scene artifact inside ``<fleet>/scenes/<scene>/semantic-nerf/``."""
+FORMAT = "sray-scene-delta"
+"""``format`` metadata of every scene artifact."""
+VERSION = "1"
+
+
+def state_file(checkpoint: Path) -> Path:
+    """The ``state.pt`` of a checkpoint folder (or the file itself); FileNotFoundError if missing."""
+    path = Path(checkpoint)
+    file = path / STATE_FILE if path.is_dir() else path
+    if not file.is_file():
+        raise FileNotFoundError(f"{file}: missing; pass a checkpoint folder step_XXXXXXXXX holding {STATE_FILE}")
+    return file
+
+
+def checkpoint_sha256(checkpoint: Path) -> str:
+    """Hex sha256 of a checkpoint's ``state.pt``: the identity a scene artifact is bound to."""
+    return sha256_file(state_file(checkpoint))
+
+
+def model_bytes(model: nn.Module) -> int:
+    """Bytes of a model's state-dict tensors (parameters and buffers), without optimiser state."""
+    return sum(t.numel() * t.element_size() for t in model.state_dict().values())
+
+
+def adapted_keys(model: nn.Module, adapt: tuple[str, ...] | list[str]) -> list[str]:
+    """State-dict keys under the module paths ``adapt``; ValueError names a path matching nothing."""
+    keys = list(model.state_dict().keys())
+    chosen: list[str] = []
+    for prefix in adapt:
+        hits = [k for k in keys if k == prefix or k.startswith(prefix + ".")]
+        if not hits:
+            modules = sorted({k.rsplit(".", 2)[0] for k in keys if not k.startswith("encoder.")})
+            raise ValueError(f"finetune.adapt: {prefix!r} names no part of {type(model).__name__}; "
+                             f"e.g. {', '.join(modules[:12])}, encoder")
+        chosen += [k for k in hits if k not in chosen]
+    return chosen
+
+
+def adapted_state(model: nn.Module, adapt: tuple[str, ...] | list[str]) -> dict[str, Tensor]:
+    """Detached CPU copies of the tensors under ``adapt`` (what a scene artifact stores)."""
+    state = model.state_dict()
+    return {k: state[k].detach().to("cpu", copy=True).contiguous() for k in adapted_keys(model, adapt)}
+
+
+def _atomic_save(tensors: dict[str, Tensor], metadata: dict[str, str], path: Path) -> int:
+    """Write a safetensors file under a temporary name, then rename; returns its size in bytes."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".tmp-{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    try:
+        save_file({k: v.contiguous() for k, v in tensors.items()}, str(tmp), metadata=metadata)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path.stat().st_size
+
+
+def _read(path: Path) -> tuple[dict[str, Tensor], dict[str, str]]:
+    """Tensors and metadata of an artifact; errors name the file and what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no scene artifact here; run `sray finetune-fleet` first")
+    with safe_open(str(path), framework="pt") as f:
+        metadata = dict(f.metadata() or {})
+        tensors = {k: f.get_tensor(k) for k in f.keys()}
+    if metadata.get("format") != FORMAT:
+        raise ValueError(f"{path}: field 'format' is {metadata.get('format')!r}, expected {FORMAT!r}; "
+                         "not an sray scene artifact")
+    return tensors, metadata
+
+
+def save_sray_delta(path: Path, tensors: dict[str, Tensor], base_sha256: str, adapt: tuple[str, ...] | list[str],
+                    scene: str) -> int:
+    """Write an S-Ray scene artifact (the adapted tensors of :func:`adapted_state`); returns its bytes."""
+    metadata = {"format": FORMAT, "version": VERSION, "method": "sray", "scene": scene,
+                "base_sha256": base_sha256, "adapt": json.dumps(list(adapt))}
+    return _atomic_save(tensors, metadata, path)
+
+
+def read_sray_delta(path: Path) -> tuple[dict[str, Tensor], dict[str, str]]:
+    """The tensors and metadata (``base_sha256``, ``adapt`` as JSON, ``scene``) of an S-Ray artifact."""
+    tensors, metadata = _read(path)
+    if metadata.get("method") != "sray":
+        raise ValueError(f"{Path(path)}: field 'method' is {metadata.get('method')!r}; this is not an S-Ray "
+                         "scene artifact (a Semantic-NeRF one loads with load_semantic_nerf)")
+    return tensors, metadata
+
+
+def apply_delta(model: nn.Module, tensors: dict[str, Tensor], where: str) -> None:
+    """Copy artifact tensors into ``model`` in place; ValueError on an unknown key or a shape mismatch."""
+    state = model.state_dict()
+    for key, value in tensors.items():
+        if key not in state:
+            raise ValueError(f"{where}: tensor {key!r} is not part of {type(model).__name__}; the artifact "
+                             "belongs to a different network configuration")
+        if state[key].shape != value.shape:
+            raise ValueError(f"{where}: tensor {key!r} has shape {tuple(value.shape)}, the model's is "
+                             f"{tuple(state[key].shape)}; the artifact belongs to a different configuration")
+    with torch.no_grad():
+        for key, value in tensors.items():
+            state[key].copy_(value)
+
+
+def load_scene_model(base_checkpoint: Path, artifact: Path, map_location: str = "cpu") -> SRayModel:
+    """The finetuned S-Ray model of one scene (eval mode): the shared checkpoint plus its artifact.
+
+    Refuses (ValueError) an artifact whose recorded base checksum is not the checkpoint's.
+    """
+    from sray.platform.train_state import model_from_checkpoint
+
+    tensors, metadata = read_sray_delta(artifact)
+    actual = checkpoint_sha256(base_checkpoint)
+    if metadata.get("base_sha256") != actual:
+        raise ValueError(
+            f"{artifact}: base checksum mismatch: the artifact was finetuned from a checkpoint with sha256 "
+            f"{metadata.get('base_sha256')}, but {state_file(base_checkpoint)} has {actual}; load it onto the "
+            "checkpoint the fleet was run with")
+    model, _ = model_from_checkpoint(base_checkpoint, map_location)
+    apply_delta(model, tensors, str(artifact))
+    return model.eval()
+
+
+def save_semantic_nerf(path: Path, model: SemanticNeRF, scene: str) -> int:
+    """Write a Semantic-NeRF scene artifact (whole state dict + config); returns its bytes."""
+    tensors = {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
+    metadata = {"format": FORMAT, "version": VERSION, "method": "semantic-nerf", "scene": scene,
+                "config": json.dumps(dataclasses.asdict(model.cfg))}
+    return _atomic_save(tensors, metadata, path)
+
+
+def load_semantic_nerf(artifact: Path, map_location: str = "cpu") -> SemanticNeRF:
+    """The Semantic-NeRF of one scene (eval mode) rebuilt from its artifact."""
+    tensors, metadata = _read(artifact)
+    if metadata.get("method") != "semantic-nerf":
+        raise ValueError(f"{artifact}: field 'method' is {metadata.get('method')!r}, expected 'semantic-nerf'")
+    fields = json.loads(metadata["config"])
+    fields["scene_center"] = tuple(fields["scene_center"])
+    model = SemanticNeRF(SemanticNeRFConfig(**fields))
+    model.load_state_dict(tensors)
+    return model.to(map_location).eval()

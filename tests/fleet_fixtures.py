@@ -1,0 +1,52 @@
+"""A tiny shared S-Ray checkpoint (written without Ray Train) and a tiny fleet config for the fleet tests.
+
+Use from a test module (the tests folder is not a package)::
+
+    from fleet_fixtures import tiny_checkpoint, tiny_fleet_config  # noqa: F401
+    from train_fixtures import tiny_shards  # noqa: F401
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from train_fixtures import tiny_config
+
+from sray.platform.checkpoints import write_checkpoint
+from sray.platform.fleet_config import FleetConfig
+from sray.platform.train_state import RayBatchModel, lr_lambda, training_state
+
+
+def write_tiny_checkpoint(shards: Path, folder: Path, seed: int = 0) -> Path:
+    """A step-0 checkpoint of a seeded tiny ``RayBatchModel`` (the tiny training config's network)."""
+    cfg = tiny_config(shards, folder)
+    torch.manual_seed(seed)
+    model = RayBatchModel(cfg.model)
+    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)
+    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
+    state = training_state(model, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
+    return write_checkpoint(state, folder / "checkpoints" / "step_000000000", 0)
+
+
+@pytest.fixture(scope="session")
+def tiny_checkpoint(tiny_shards: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Folder of the tiny shared checkpoint (built once per session, at a fixed path)."""
+    folder = tmp_path_factory.getbasetemp() / "fleet-checkpoint"
+    path = folder / "checkpoints" / "step_000000000"
+    if not (path / "state.pt").exists():
+        write_tiny_checkpoint(tiny_shards, folder)
+    return path
+
+
+def tiny_fleet_config(**finetune: object) -> FleetConfig:
+    """Seconds per scene: 3 held-out sources, stride-2 renders, tiny Semantic-NeRF, quick retries."""
+    cfg = FleetConfig(max_parallel=2, cpus_per_task=1.0, retries=1, retry_backoff_s=0.1)
+    ft = cfg.finetune
+    ft.max_steps, ft.eval_every, ft.patience, ft.lr, ft.eval_n_source, ft.eval_stride = 6, 3, 2, 1e-2, 3, 2
+    cfg.nerf.depth, cfg.nerf.width, cfg.nerf.skip_layer, cfg.nerf.pos_freqs, cfg.nerf.dir_freqs = 2, 32, 1, 4, 2
+    for key, value in finetune.items():
+        setattr(ft, key, value)
+    return cfg
