@@ -73,6 +73,21 @@ def count_flops(fn: Callable[[], None]) -> int:
     return int(counter.get_total_flops())
 
 
+def attention_flops(variant: str, sizes: dict, count_rays: int, device: torch.device, backward: bool) -> int:
+    """FLOPs of the attention stage at ``sizes["rays"]`` rays, counted at ``count_rays`` and scaled.
+
+    The scaling is exact because every op is batched over rays; it is checked by also counting at
+    half as many rays. sizes: rays, views, samples, channels.
+    """
+    counts = []
+    for r in (count_rays // 2, count_rays):
+        module, space, valid = attention_case(variant, r, sizes["views"], sizes["samples"], sizes["channels"], device)
+        counts.append(count_flops(attention_call(module, space, valid, backward)))
+    if counts[1] != 2 * counts[0]:
+        raise RuntimeError(f"sray.model.bench_probes: FLOPs of {variant} are not linear in rays ({counts}).")
+    return counts[1] * sizes["rays"] // count_rays
+
+
 def _cpu_peak_from_trace(path: str) -> int:
     """Peak allocator increment in a chrome trace written by a ``profile_memory=True`` profile."""
     with open(path) as f:

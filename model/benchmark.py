@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import torch
 from torch.nn.attention import SDPBackend
 
-from .bench_probes import (attention_call, attention_case, count_flops, peak_bytes, resolve_device,
+from .bench_probes import (attention_call, attention_case, attention_flops, peak_bytes, resolve_device,
                            time_call, train_step_worker)
 
 VARIANTS = ("full", "intra", "cross", "dense")
@@ -54,17 +54,6 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     return _Sizes(PAPER_ATTENTION, 64, 256, steps)
 
 
-def _flops(variant: str, a: dict, rays: int, device: torch.device, backward: bool) -> int:
-    """FLOPs at ``a["rays"]`` rays, counted at ``rays`` and scaled (exact: all ops are per ray)."""
-    counts = []
-    for r in (rays // 2, rays):
-        module, space, valid = attention_case(variant, r, a["views"], a["samples"], a["channels"], device)
-        counts.append(count_flops(attention_call(module, space, valid, backward)))
-    if counts[1] != 2 * counts[0]:
-        raise RuntimeError(f"sray.model.benchmark: FLOPs of {variant} are not linear in rays ({counts}).")
-    return counts[1] * a["rays"] // rays
-
-
 def _attention_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
     """Table 1: FLOPs, peak memory and time of the attention stage alone, per variant."""
     a = sz.attention
@@ -74,8 +63,8 @@ def _attention_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         module, space, valid = attention_case(v, sz.mem_rays, a["views"], a["samples"], a["channels"], device)
         fwd, both = attention_call(module, space, valid, False), attention_call(module, space, valid, True)
         rows[v] = {
-            "gf": _flops(v, a, sz.flop_rays, device, False) / 1e9,
-            "gf_b": _flops(v, a, sz.flop_rays, device, True) / 1e9,
+            "gf": attention_flops(v, a, sz.flop_rays, device, False) / 1e9,
+            "gf_b": attention_flops(v, a, sz.flop_rays, device, True) / 1e9,
             "mem_math": peak_bytes(fwd, device, SDPBackend.MATH) * scale / 2**20,
             "mem_math_b": peak_bytes(both, device, SDPBackend.MATH) * scale / 2**20,
             "mem_def_b": peak_bytes(both, device) * scale / 2**20,
@@ -87,9 +76,9 @@ def _attention_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
              "memory / dense (default) | ms fwd+bwd (default) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for v, r in rows.items():
-        lines.append(f"| {v} | {r['gf']:.2f} | {r['gf_b']:.2f} | {r['gf'] / d['gf']:.3f} | "
-                     f"{r['mem_math']:.0f} | {r['mem_math_b']:.0f} | {r['mem_math_b'] / d['mem_math_b']:.3f} | "
-                     f"{r['mem_def_b']:.0f} | {r['mem_def_b'] / d['mem_def_b']:.3f} | {r['ms_b']:.0f} |")
+        lines.append(f"| {v} | {r['gf']:.4g} | {r['gf_b']:.4g} | {r['gf'] / d['gf']:.3f} | "
+                     f"{r['mem_math']:.4g} | {r['mem_math_b']:.4g} | {r['mem_math_b'] / d['mem_math_b']:.3f} | "
+                     f"{r['mem_def_b']:.4g} | {r['mem_def_b'] / d['mem_def_b']:.3f} | {r['ms_b']:.4g} |")
     f = rows["full"]
     verdict = (f"full CRA / dense: FLOPs {f['gf'] / d['gf']:.3f} (target <= 0.55), peak memory "
                f"(math backend, fwd+bwd) {f['mem_math_b'] / d['mem_math_b']:.3f} (target <= 0.25).")

@@ -58,13 +58,14 @@ def sample_maps(maps: Tensor, uv: Tensor, stride: int) -> Tensor:
     """Bilinear samples of per-view maps at full-res pixel coordinates.
 
     maps: (m, D, h, w) whose pixel (j, i) is centred on full-res pixel (stride j, stride i);
-    uv: (m, R, N, 2) full-res pixel coordinates. Returns (m, D, R, N).
+    uv: (m, R, N, 2) full-res pixel coordinates. Returns float32 (m, D, R, N): sampling runs in
+    float32 even under autocast, since bfloat16 grid coordinates would be off by up to ~0.5 pixel.
     """
     h, w = maps.shape[-2:]
     scale = uv.new_tensor([2.0 / (stride * max(w - 1, 1)), 2.0 / (stride * max(h - 1, 1))])
-    grid = (uv * scale - 1.0).clamp(-_GRID_LIMIT, _GRID_LIMIT)  # (m, R, N, 2), align_corners=True
-    return F.grid_sample(maps, grid.to(maps.dtype), mode="bilinear", padding_mode="border",
-                         align_corners=True)
+    grid = (uv.float() * scale.float() - 1.0).clamp(-_GRID_LIMIT, _GRID_LIMIT)  # (m, R, N, 2)
+    with torch.autocast(device_type=maps.device.type, enabled=False):
+        return F.grid_sample(maps.float(), grid, mode="bilinear", padding_mode="border", align_corners=True)
 
 
 def view_direction_difference(points: Tensor, query_dirs: Tensor, centres: Tensor) -> Tensor:

@@ -71,8 +71,9 @@ class SemanticNeRFConfig:
     ``scene_box_from_cameras``)."""
     scene_scale: float = 1.0
     """World length mapped to 1: positions enter the encoding as (x - center) / scale, which
-    should lie in about [-1, 1]. Densities are per normalised unit, so the initial opacity
-    does not depend on the scene's units."""
+    should lie in about [-1, 1]. Densities stay per world unit (NeRF's convention); per
+    normalised unit they would have to grow ``scale`` times larger to make the same surface,
+    which slowed convergence in our tests."""
 
     def __post_init__(self) -> None:
         """Reject settings the network cannot run with, naming the field."""
@@ -129,7 +130,7 @@ class SemanticNeRFField(nn.Module):
     def forward(self, x: Tensor, d: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """x: (..., 3) normalised positions; d: (..., 3) unit directions.
 
-        Returns density (...,) per normalised unit length, rgb (..., 3) in (0, 1) and semantic
+        Returns density (...,) per world unit length, rgb (..., 3) in (0, 1) and semantic
         logits (..., L).
         """
         gamma_x = self.pos_enc(x)
@@ -168,8 +169,7 @@ class SemanticNeRF(nn.Module):
         dir_len = dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # (R, 1)
         unit = (dirs / dir_len)[:, None, :].expand_as(pts)  # (R, N, 3)
         sigma, rgb, logits = field(x, unit)  # (R, N), (R, N, 3), (R, N, L)
-        # density per unit of the ray parameter t: |d| world units per t, 1/scale per world unit
-        sigma_t = sigma * (dir_len / self.scene_scale)
+        sigma_t = sigma * dir_len  # density per unit of the ray parameter t (|d| world units)
         out = composite(sigma_t, z, near, far, {"logits": logits, "rgb": rgb})
         out["z"] = z
         return out
@@ -193,7 +193,13 @@ class SemanticNeRF(nn.Module):
         n_rays = origins.shape[0]
         near_t = torch.as_tensor(near, dtype=origins.dtype, device=origins.device)
         far_t = torch.as_tensor(far, dtype=origins.dtype, device=origins.device)
-        near_t, far_t = near_t.expand(n_rays), far_t.expand(n_rays)
+        near_t = near_t.expand(n_rays) if near_t.ndim == 0 else near_t
+        far_t = far_t.expand(n_rays) if far_t.ndim == 0 else far_t
+        if near_t.shape != (n_rays,) or far_t.shape != (n_rays,):
+            raise ValueError(
+                "sray.model.semantic_nerf.SemanticNeRF.render_rays: near and far must be scalars "
+                f"or ({n_rays},), got {tuple(near_t.shape)} and {tuple(far_t.shape)}."
+            )
         z_coarse = sample_uniform(near_t, far_t, self.cfg.n_coarse, stratified, generator)
         coarse = self._render_pass(self.coarse, origins, dirs, z_coarse, near_t, far_t)
         z_fine = sample_pdf(
@@ -206,28 +212,39 @@ class SemanticNeRF(nn.Module):
 
     @torch.no_grad()
     def render_image(
-        self, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
-        chunk: int | None = None,
-    ) -> dict[str, Tensor]:
-        """Render a whole (H, W) view, deterministic samples, ``chunk`` rays at a time.
+        self, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: Tensor | float,
+        far: Tensor | float, chunk: int | None = None,
+    ) -> dict[str, dict[str, Tensor]]:
+        """Render a whole (H, W) view, deterministic samples, ``chunk`` rays at a time, no grad.
 
-        K: (3, 3); c2w: (4, 4) OpenCV axes. Returns the fine pass as images: ``logits``
-        (H, W, L), ``rgb`` (H, W, 3), ``depth`` (H, W) (expected z-depth, see
-        ``sray.model.rendering.composite``) and ``opacity`` (H, W).
+        K: (3, 3); c2w: (4, 4) OpenCV axes; near, far: scalars. Returns, like
+        ``SRayModel.render_image``, ``{"coarse": ..., "fine": ...}`` with ``logits`` (H, W, L),
+        ``rgb`` (H, W, 3), ``depth`` (H, W) (expected z-depth, not divided by opacity; see
+        ``sray.model.rendering.composite``) and ``opacity`` (H, W) per pass.
         """
         height, width = hw
-        chunk = chunk or self.cfg.chunk
+        step = int(chunk or self.cfg.chunk)
+        if step < 1:
+            raise ValueError(
+                "sray.model.semantic_nerf.SemanticNeRF.render_image: chunk must be >= 1, got "
+                f"{step}."
+            )
         device = self.scene_center.device
         uv = image_pixels(height, width, device)  # (H*W, 2) pixel centres, row-major
         origins, dirs = pixel_rays(K.to(device).float(), c2w.to(device).float(), uv)
         keys = ("logits", "rgb", "depth", "opacity")
-        parts: dict[str, list[Tensor]] = {k: [] for k in keys}
-        for start in range(0, uv.shape[0], chunk):
-            sl = slice(start, start + chunk)
-            fine = self.render_rays(origins[sl], dirs[sl], near, far, stratified=False)["fine"]
-            for k in keys:
-                parts[k].append(fine[k])
-        return {k: torch.cat(v).reshape(height, width, *v[0].shape[1:]) for k, v in parts.items()}
+        parts: dict[str, dict[str, list[Tensor]]] = {p: {k: [] for k in keys}
+                                                     for p in ("coarse", "fine")}
+        for start in range(0, uv.shape[0], step):
+            sl = slice(start, start + step)
+            out = self.render_rays(origins[sl], dirs[sl], near, far, stratified=False)
+            for p, per_key in parts.items():
+                for k, chunks in per_key.items():
+                    chunks.append(out[p][k])
+        return {
+            p: {k: torch.cat(v).reshape(height, width, *v[0].shape[1:]) for k, v in per_key.items()}
+            for p, per_key in parts.items()
+        }
 
 
 def scene_box_from_cameras(

@@ -47,6 +47,8 @@ X_AXES = {"wall_s": ("training wall-clock time (s, evaluation excluded)", "wall-
 """Curve key -> (axis label, title text)."""
 PANEL_SIZE = (4.8, 3.5)
 """Inches per panel (width, height)."""
+MIN_WIDTH = 7.0
+"""Narrowest figure (inches), so that a one-panel chart still has room for its legend and footnote."""
 DPI = 110
 
 
@@ -57,20 +59,31 @@ def _human_bytes(n: float) -> str:
     return f"{n:.0f} B"
 
 
-def _footnote(ok: list[dict[str, Any]], results: list[dict[str, Any]], extra: str, width_in: float) -> str:
+def _footnote_parts(ok: list[dict[str, Any]], results: list[dict[str, Any]], extra: str) -> list[str]:
     protocols = sorted({str(r["protocol"]) for r in ok if isinstance(r.get("protocol"), str)})
-    parts = [extra] + [f"protocol: {p}" for p in protocols] + [failure_note(results)]
-    wrap = max(60, int(width_in * 15))
-    return "\n".join(textwrap.fill(p, wrap) for p in parts if p)
+    return [p for p in [extra, *(f"fleet protocol: {p}" for p in protocols), failure_note(results)] if p]
 
 
-def _new_figure(width: float, height: float) -> Any:
+def _framed_figure(width: float, body_height: float, title: str, handles: list[Any],
+                   footnote: list[str]) -> tuple[Any, Any]:
+    """A figure with a header (title + legend), a body sub-figure for the axes, and a footnote.
+
+    Returns (figure, body sub-figure); sizes in inches.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width, height), dpi=DPI, layout="constrained", facecolor="white")
+    ncols = 4 if width >= 12 else 2
+    head_h = 0.45 + 0.22 * math.ceil(len(handles) / ncols)
+    lines = [line for part in footnote for line in textwrap.wrap(part, max(60, int(width * 17)))]
+    foot_h = 0.15 + 0.14 * len(lines)
+    fig = Figure(figsize=(width, head_h + body_height + foot_h), dpi=DPI, facecolor="white", layout="constrained")
     FigureCanvasAgg(fig)
-    return fig
+    head, body, foot = fig.subfigures(3, 1, height_ratios=[head_h, body_height, foot_h])
+    head.text(0.5, 1.0 - 0.08 / head_h, title, ha="center", va="top", fontsize=11, fontweight="bold")
+    head.legend(handles=handles, loc="lower center", ncols=ncols, fontsize=8, frameon=False)
+    foot.text(0.5, 0.5, "\n".join(lines), ha="center", va="center", fontsize=7, color="#444444")
+    return fig, body
 
 
 def _save(fig: Any, path: Path) -> Path:
@@ -87,7 +100,8 @@ def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str
     if zero:
         z = STYLES["zeroshot"]
         ax.axhline(float(np.mean(zero)), color=z["color"], ls="--", lw=1.3, zorder=1)
-        ax.plot([0.0], [float(np.mean(zero))], ls="none", marker=z["marker"], ms=11, color=z["color"], zorder=4)
+        ax.plot([0.0], [float(np.mean(zero))], ls="none", marker=z["marker"], ms=11, color=z["color"], zorder=4,
+                clip_on=False)
     for method in METHODS:
         results = by_method.get(method, [])
         curves = [curve_xy(r["curve"], x_key, metric) for r in results]
@@ -99,8 +113,7 @@ def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str
         if not mean or len(x) == 1:
             ax.plot(x, y, ls="none", marker=s["marker"], ms=4.5, color=s["color"], zorder=3)
         if not mean and results[0].get("stopped_early"):
-            ax.annotate("early stop", (x[-1], y[-1]), xytext=(0, 7), textcoords="offset points", fontsize=7,
-                        ha="center", color=s["color"])
+            ax.plot(x[-1:], y[-1:], ls="none", marker="|", ms=16, mew=2.0, color=s["color"], zorder=4, clip_on=False)
     ax.grid(True, alpha=0.3)
     ax.set_xlim(left=0.0)
     ax.tick_params(labelsize=8)
@@ -117,6 +130,9 @@ def _legend_handles(ok: list[dict[str, Any]]) -> list[Any]:
         if any(r["method"] == method for r in ok):
             s = STYLES[method]
             handles.append(Line2D([], [], color=s["color"], marker=s["marker"], ms=5, label=s["label"]))
+    if any(r.get("stopped_early") for r in ok):
+        handles.append(Line2D([], [], color="#555555", ls="none", marker="|", ms=12, mew=2.0,
+                              label="finetune stopped early (held-out score stopped improving)"))
     return handles
 
 
@@ -136,12 +152,13 @@ def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str) -> Any:
     panels += [(f"scene {s}", by_scene[s], False) for s in scenes]
     ncols = min(3, len(panels))
     nrows = math.ceil(len(panels) / ncols)
-    width = PANEL_SIZE[0] * ncols
-    fig = _new_figure(width, PANEL_SIZE[1] * nrows + 1.4)
     y_label, y_title = METRICS[metric]
     x_label, x_title = X_AXES[x_key]
-    fig.suptitle(f"{y_title} vs {x_title}", fontsize=11, fontweight="bold")
-    axes = fig.subplots(nrows, ncols, squeeze=False)
+    note = "Curves hold their value between evaluations and after a finetune stops" + (
+        "; the mean panel resamples each scene's curve on the union of evaluation points." if len(scenes) >= 2 else ".")
+    fig, body = _framed_figure(max(PANEL_SIZE[0] * ncols, MIN_WIDTH), PANEL_SIZE[1] * nrows,
+                               f"{y_title} vs {x_title}", _legend_handles(ok), _footnote_parts(ok, results, note))
+    axes = body.subplots(nrows, ncols, squeeze=False)
     for ax, (title, by_method, mean) in zip(axes.flat, panels):
         _draw_panel(ax, by_method, metric, x_key, mean)
         ax.set_title(title, fontsize=9)
@@ -149,10 +166,6 @@ def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str) -> Any:
         ax.set_ylabel(y_label, fontsize=8)
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
-    fig.legend(handles=_legend_handles(ok), loc="outside lower center", ncols=3, fontsize=8, frameon=False)
-    note = "Curves hold their value between evaluations and after a finetune stops" + (
-        "; the mean panel resamples each scene's curve on the union of evaluation points." if len(scenes) >= 2 else ".")
-    fig.supxlabel(_footnote(ok, results, note, width), fontsize=7, color="#444444", ha="center")
     return fig
 
 
@@ -161,14 +174,18 @@ def size_figure(results: list[dict[str, Any]]) -> Any:
     from matplotlib.ticker import NullFormatter, NullLocator
 
     ok = [r for r in results if is_chartable(r)]
-    fig = _new_figure(8.0, 5.6)
-    ax = fig.add_subplot()
+    note = ("One point per (scene, method): the best evaluated state, as stored. Dotted: a scene's S-Ray "
+            "zero-shot -> finetune. Semantic-NeRF stores its whole per-scene model.")
+    fig, body = _framed_figure(8.0, 4.6, f"held-out mIoU ({DATASET_PROTOCOL}) vs per-scene artifact size",
+                               _legend_handles(ok), _footnote_parts(ok, results, note))
+    ax = body.add_subplot()
     sized = [r for r in ok if r.get("artifact_bytes") and r.get("miou_after") is not None]
     full = [float(r["full_checkpoint_bytes"]) for r in ok if r["method"] == "sray" and r.get("full_checkpoint_bytes")]
     biggest = max([float(r["artifact_bytes"]) for r in sized] + full + [10.0])
     smallest = min([float(r["artifact_bytes"]) for r in sized] + [biggest])
     lo_decade, hi_decade = math.floor(math.log10(smallest)), math.ceil(math.log10(biggest * 1.5))
     x_zero = 10.0 ** (lo_decade - 1)
+    zero_labels: dict[float, list[str]] = {}
     for r in sized:
         s = STYLES[r["method"]]
         x, y = float(r["artifact_bytes"]), float(r["miou_after"])
@@ -179,8 +196,10 @@ def size_figure(results: list[dict[str, Any]]) -> Any:
             ax.plot([x_zero, x], [zero, y], ls=":", lw=1.0, color="#999999", zorder=2)
             ax.plot([x_zero], [zero], ls="none", marker=STYLES["zeroshot"]["marker"], ms=11,
                     color=STYLES["zeroshot"]["color"], zorder=3)
-            ax.annotate(r["scene"], (x_zero, zero), xytext=(7, -3), textcoords="offset points", fontsize=7,
-                        color="#333333")
+            zero_labels.setdefault(round(zero, 3), []).append(r["scene"])
+    for zero, names in zero_labels.items():  # scenes with the same zero-shot score share one label
+        ax.annotate(", ".join(names), (x_zero, zero), xytext=(7, -3), textcoords="offset points", fontsize=7,
+                    color="#333333")
     if full:
         ax.axvline(float(np.median(full)), color="#555555", ls="--", lw=1.0)
         ax.annotate(f"full S-Ray checkpoint\n{_human_bytes(float(np.median(full)))}", (float(np.median(full)), 0.02),
@@ -195,12 +214,7 @@ def size_figure(results: list[dict[str, Any]]) -> Any:
     ax.xaxis.set_minor_formatter(NullFormatter())
     ax.grid(True, alpha=0.3)
     ax.set_xlabel("per-scene artifact size (bytes stored besides the shared model; log scale)", fontsize=9)
-    ax.set_ylabel("held-out mIoU after per-scene optimisation", fontsize=9)
-    fig.suptitle(f"held-out mIoU ({DATASET_PROTOCOL}) vs per-scene artifact size", fontsize=11, fontweight="bold")
-    fig.legend(handles=_legend_handles(ok), loc="outside lower center", ncols=3, fontsize=8, frameon=False)
-    note = ("One point per (scene, method): the best evaluated state, as stored. Dotted: a scene's S-Ray "
-            "zero-shot -> finetune. Semantic-NeRF stores its whole per-scene model.")
-    fig.supxlabel(_footnote(ok, results, note, 8.0), fontsize=7, color="#444444")
+    ax.set_ylabel("held-out mIoU (best evaluated state)", fontsize=9)
     return fig
 
 

@@ -210,7 +210,8 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
         metrics_path = write_json_atomic(report, out_dir / METRICS_FILE)
         logger.log_metrics(flat_metrics(_finite_or_none(report)), step)
         logger.log_artifact(metrics_path)
-        logger.log_artifact(out_dir / "renders", "renders")
+        for name in names:  # only this evaluation's scenes, whatever else the folder holds
+            logger.log_artifact(out_dir / "renders" / name, f"renders/{name}")
     return {**_finite_or_none(report), "metrics_path": str(metrics_path), "out_dir": str(out_dir),
             "run": {"run_id": run.run_id, "experiment_id": run.experiment_id, "ui_url": run.ui_url,
                     "ui_hint": run.ui_hint}}

@@ -203,5 +203,10 @@ def apply_fleet_override(cfg: FleetConfig, assignment: str) -> None:
     if name not in fields:
         raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; "
                          f"fields: {', '.join(sorted(fields))}")
+    previous = getattr(target, name)
     setattr(target, name, _parse(hints[name], raw.strip(), assignment))
-    check_fleet_config(cfg)
+    try:
+        check_fleet_config(cfg)
+    except ValueError:
+        setattr(target, name, previous)  # leave the config valid
+        raise

@@ -84,8 +84,8 @@ def _ui_links(tracking_uri: str, experiment_id: str, run_id: str) -> tuple[str, 
     page = f"#/experiments/{experiment_id}/runs/{run_id}"
     if _is_server(tracking_uri):
         return f"{tracking_uri.rstrip('/')}/{page}", ""
-    hint = (f"MLFLOW_SERVER_ENABLE_JOB_EXECUTION=false mlflow server --backend-store-uri {tracking_uri} "
-            f"--workers 1 --port {DEFAULT_UI_PORT}")
+    hint = (f"sray ui --tracking-uri {tracking_uri}  (a lean MLflow server: --backend-store-uri {tracking_uri}, "
+            f"one worker, no job runner, port {DEFAULT_UI_PORT})")
     return f"http://127.0.0.1:{DEFAULT_UI_PORT}/{page}", hint
 
 

@@ -42,10 +42,10 @@ def tiny_checkpoint(tiny_shards: Path, tmp_path_factory: pytest.TempPathFactory)
 
 
 def tiny_fleet_config(**finetune: object) -> FleetConfig:
-    """Seconds per scene: 3 held-out sources, stride-2 renders, tiny Semantic-NeRF, quick retries."""
+    """Seconds per scene: 3 held-out sources, stride-4 renders, tiny Semantic-NeRF, quick retries."""
     cfg = FleetConfig(max_parallel=2, cpus_per_task=1.0, retries=1, retry_backoff_s=0.1)
     ft = cfg.finetune
-    ft.max_steps, ft.eval_every, ft.patience, ft.lr, ft.eval_n_source, ft.eval_stride = 6, 3, 2, 1e-2, 3, 2
+    ft.max_steps, ft.eval_every, ft.patience, ft.lr, ft.eval_n_source, ft.eval_stride = 6, 3, 2, 1e-2, 3, 4
     cfg.nerf.depth, cfg.nerf.width, cfg.nerf.skip_layer, cfg.nerf.pos_freqs, cfg.nerf.dir_freqs = 2, 32, 1, 4, 2
     for key, value in finetune.items():
         setattr(ft, key, value)

@@ -193,6 +193,23 @@ def test_bad_inputs_raise_clear_errors() -> None:
     with pytest.raises(ValueError, match="`near` must be a tensor of shape"):
         composite(torch.ones(3, 4), z, torch.zeros(()), torch.ones(3), {})
     with pytest.raises(ValueError, match="reserved"):
-        composite(torch.ones(3, 4), z, torch.zeros(3), torch.ones(3), {"depth": torch.ones(3, 4, 1)})
+        composite(torch.ones(3, 4), z, torch.zeros(3), torch.ones(3),
+                  {"depth": torch.ones(3, 4, 1)})
     with pytest.raises(ValueError, match="far < near"):
         sample_uniform(torch.ones(3), torch.zeros(3), 4, False)
+
+
+@pytest.mark.gpu
+def test_cuda_fp16_autocast_matches_cpu_float32() -> None:
+    near, far = _bounds(64)
+    g = torch.Generator().manual_seed(7)
+    z = sample_uniform(near, far, 32, True, g)
+    sigma = torch.rand(64, 32, generator=g) * 5
+    logits = torch.randn(64, 32, 6, generator=g)
+    reference = composite(sigma, z, near, far, {"logits": logits})
+    cuda = [t.cuda() for t in (sigma, z, near, far, logits)]
+    with torch.autocast("cuda", dtype=torch.float16):
+        out = composite(cuda[0].half(), cuda[1], cuda[2], cuda[3], {"logits": cuda[4].half()})
+    assert out["weights"].dtype == torch.float32
+    torch.testing.assert_close(out["opacity"].cpu(), reference["opacity"], atol=5e-3, rtol=5e-3)
+    torch.testing.assert_close(out["logits"].cpu(), reference["logits"], atol=2e-2, rtol=1e-2)

@@ -67,9 +67,12 @@ def test_permuting_source_views_leaves_the_output_unchanged() -> None:
     perm = torch.tensor([2, 0, 3, 1])
     permuted = dict(r, rgb=r["rgb"][perm], K=r["K"][perm], c2w=r["c2w"][perm])
     out_p = render(net, permuted)
+    src = net.encode(r["rgb"], r["K"], r["c2w"])
+    out_s = net.render_rays(src.select(perm), r["origins"], r["dirs"], NEAR, FAR, stratified=False)
     for name in ("coarse", "fine"):
         for key in ("logits", "rgb", "depth", "opacity", "z"):
             torch.testing.assert_close(out_p[name][key], out[name][key], rtol=1e-5, atol=1e-5)
+            torch.testing.assert_close(out_s[name][key], out[name][key], rtol=1e-5, atol=1e-5)
 
 
 @pytest.mark.parametrize("attention", ["full", "dense"])

@@ -1,0 +1,201 @@
+"""The MLflow dashboard on a store: a lean ``mlflow server`` bound to localhost (``sray ui``).
+
+Lean: no job runner (``MLFLOW_SERVER_ENABLE_JOB_EXECUTION=false``) and one worker, which makes it
+2 processes and ~0.5 GiB instead of 15-27 processes and 2-3 GiB; telemetry is off (offline
+machines). Artifacts: the experiments :mod:`sray.platform.tracking` creates carry an explicit
+``file://`` artifact location, which the server reads directly when the UI asks for a run's
+artifacts; experiments created from the UI itself store theirs through the server's artifact proxy
+into ``--artifacts-destination``, the same ``mlartifacts`` folder beside the SQLite database.
+
+The UI opens in its GenAI view; :func:`runs_view_url` is the address of the classic runs table.
+The server runs in its own process group so that :meth:`DashboardHandle.stop` ends it and its
+worker, and nothing else.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.error
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sray.platform.tracking import DEFAULT_UI_PORT, default_tracking_uri, sqlite_path
+
+SERVER_ENV = {"MLFLOW_SERVER_ENABLE_JOB_EXECUTION": "false", "MLFLOW_DISABLE_TELEMETRY": "true",
+              "DO_NOT_TRACK": "true"}
+"""Environment of the server process: no job runner, no telemetry."""
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+SORT_BY_RUN_NAME = "orderByKey=tags.%60mlflow.runName%60&orderByAsc=true"
+"""Runs-table query sorting by run name: the UI then lists child runs as rows of their own instead of
+folding them under their parent (it nests only when sorting by creation time without a filter)."""
+
+
+def runs_view_url(base_url: str, experiment_id: str, flat: bool = False) -> str:
+    """Address of an experiment's classic runs table (the UI otherwise opens its GenAI view);
+    ``flat``: sorted by run name, child runs listed beside their parents rather than folded."""
+    url = f"{base_url.rstrip('/')}/#/experiments/{experiment_id}/runs?workflowType=machine_learning"
+    return f"{url}&{SORT_BY_RUN_NAME}" if flat else url
+
+
+def run_artifacts_url(base_url: str, experiment_id: str, run_id: str, path: str = "") -> str:
+    """Address of a run's artifacts tab, with the artifact at ``path`` (relative) selected and previewed."""
+    url = f"{base_url.rstrip('/')}/#/experiments/{experiment_id}/runs/{run_id}/artifacts"
+    return (f"{url}/{path.strip('/')}" if path else url) + "?workflowType=machine_learning"
+
+
+def tunnel_hint(port: int) -> str:
+    """How to reach a dashboard on a remote machine: an SSH tunnel from the laptop."""
+    return (f"on a remote machine? on your laptop run  ssh -N -L {port}:127.0.0.1:{port} "
+            f"USER@{socket.gethostname()}  and open the same address there")
+
+
+def artifact_destination(tracking_uri: str) -> Path | None:
+    """``mlartifacts`` beside a SQLite database (where :mod:`sray.platform.tracking` puts artifacts)."""
+    db = sqlite_path(tracking_uri)
+    return None if db is None else db.parent / "mlartifacts"
+
+
+def experiment_links(tracking_uri: str, base_url: str) -> dict[str, str]:
+    """Experiment name -> runs-view address, for experiments that hold runs, newest activity first."""
+    from mlflow import MlflowClient
+
+    client = MlflowClient(tracking_uri=tracking_uri)
+    newest: list[tuple[int, str, str]] = []
+    for exp in client.search_experiments():
+        runs = client.search_runs([exp.experiment_id], order_by=["attributes.start_time DESC"], max_results=1)
+        if runs:
+            newest.append((int(runs[0].info.start_time or 0), exp.name, exp.experiment_id))
+    newest.sort(reverse=True)
+    return {name: runs_view_url(base_url, exp_id) for _, name, exp_id in newest}
+
+
+@dataclass
+class DashboardHandle:
+    """A running dashboard server (from :func:`start_dashboard`)."""
+
+    process: subprocess.Popen
+    """The ``mlflow server`` process (leader of its own process group)."""
+    base_url: str
+    """``http://host:port``."""
+    url: str
+    """Classic runs view of the experiment with the newest run (``base_url`` when there is none)."""
+    log_path: Path
+    """File receiving the server's stdout and stderr."""
+    experiment_urls: dict[str, str] = field(default_factory=dict)
+    """Experiment name -> runs-view address, newest activity first."""
+
+    def running(self) -> bool:
+        """True while the server process is alive."""
+        return self.process.poll() is None
+
+    def log_tail(self, n_chars: int = 2000) -> str:
+        """The end of the server's log."""
+        try:
+            return self.log_path.read_text(errors="replace")[-n_chars:]
+        except OSError:
+            return ""
+
+    def stop(self, timeout_s: float = 15.0) -> int | None:
+        """Stop the server and its worker (SIGTERM to its process group, SIGKILL after ``timeout_s``)."""
+        if self.running():
+            for sig in (signal.SIGTERM, signal.SIGKILL):
+                try:
+                    os.killpg(self.process.pid, sig)
+                except ProcessLookupError:
+                    break
+                try:
+                    self.process.wait(timeout_s)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
+        return self.process.poll()
+
+    def __enter__(self) -> DashboardHandle:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def _check_port_free(host: str, port: int) -> None:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError as e:
+            raise OSError(f"cannot listen on {host}:{port} ({e.strerror}); another dashboard may be running "
+                          f"there: open it, or pass --port with a free port") from None
+
+
+def _resolve_store(tracking_uri: str | None) -> str:
+    uri = tracking_uri or default_tracking_uri(Path.cwd())
+    if uri.startswith(("http://", "https://")):
+        raise ValueError(f"{uri} is a tracking server, which serves its own dashboard: open "
+                         f"{runs_view_url(uri, '<experiment id>')} instead of starting another")
+    db = sqlite_path(uri)
+    if db is not None and not db.is_file():
+        raise FileNotFoundError(f"{db}: no MLflow store there; run a job first (sray train / eval / "
+                                "finetune-fleet log into the working directory's store) or pass --tracking-uri")
+    return uri
+
+
+def _wait_ready(proc: subprocess.Popen, base_url: str, log_path: Path, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            tail = log_path.read_text(errors="replace")[-2000:]
+            raise RuntimeError(f"mlflow server exited with code {proc.returncode} before answering; its log "
+                               f"({log_path}) ends with:\n{tail}")
+        try:
+            with urllib.request.urlopen(f"{base_url}/health", timeout=2) as reply:
+                if reply.status == 200:
+                    return
+        except (urllib.error.URLError, ConnectionError, TimeoutError):
+            pass
+        time.sleep(0.3)
+    raise TimeoutError(f"mlflow server did not answer at {base_url}/health within {timeout_s:.0f} s; "
+                       f"see its log {log_path}")
+
+
+def start_dashboard(tracking_uri: str | None = None, port: int = DEFAULT_UI_PORT, host: str = "127.0.0.1",
+                    *, timeout_s: float = 120.0) -> DashboardHandle:
+    """Start the lean MLflow UI on ``tracking_uri`` (default: the working directory's SQLite store),
+    wait until it answers and return its handle (stop it with ``.stop()`` or a ``with`` block).
+
+    Errors: FileNotFoundError (no store), ValueError (a tracking server URI: it has its own UI),
+    OSError (port taken), RuntimeError/TimeoutError (the server failed; the message holds its log).
+    """
+    uri = _resolve_store(tracking_uri)
+    _check_port_free(host, port)
+    cmd = [sys.executable, "-m", "mlflow", "server", "--backend-store-uri", uri, "--host", host,
+           "--port", str(port), "--workers", "1"]
+    destination = artifact_destination(uri)
+    if destination is not None:
+        destination.mkdir(parents=True, exist_ok=True)
+        cmd += ["--artifacts-destination", str(destination)]
+    log_path = Path(tempfile.mkstemp(prefix=f"sray-ui-{port}-", suffix=".log")[1])
+    with open(log_path, "wb") as log_file:
+        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                env={**os.environ, **SERVER_ENV}, start_new_session=True)
+    url_host = f"[{host}]" if ":" in host else host
+    base_url = f"http://{url_host}:{port}"
+    handle = DashboardHandle(process=proc, base_url=base_url, url=base_url + "/", log_path=log_path)
+    try:
+        _wait_ready(proc, base_url, log_path, timeout_s)
+        handle.experiment_urls = experiment_links(uri, base_url)
+    except BaseException:
+        handle.stop()
+        raise
+    if handle.experiment_urls:
+        handle.url = next(iter(handle.experiment_urls.values()))
+    return handle

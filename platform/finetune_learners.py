@@ -1,0 +1,208 @@
+"""The two per-scene methods a fleet task trains, behind one small interface (``loss``, ``update``,
+``renderer``, ``snapshot``/``restore``, ``save``):
+
+* :class:`SRayLearner`: the shared S-Ray model with only the modules ``adapt`` trainable (the rest,
+  by default the image encoder, attention and geometry, frozen; sources are encoded without
+  gradient while the encoder is frozen); its artifact holds the adapted tensors only;
+* :class:`NeRFLearner`: a Semantic-NeRF trained from scratch on the same rays (the training sample's
+  source views are ignored); its artifact is the whole network.
+
+Precision: autocast bf16 (CPU and CUDA) or fp16 with a GradScaler (CUDA); the loss itself is computed
+in float32 by ``render_loss``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from sray.data_tools.loader_views import read_scene_views
+from sray.data_tools.manifest import read_manifest
+from sray.data_tools.scene import SceneMeta
+from sray.model.losses import render_loss
+from sray.model.rays import pixel_rays
+from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box_from_cameras
+from sray.model.sray import SourceSet, SRayModel
+from sray.platform.evaluation import sray_renderer
+from sray.platform.fleet_config import SemanticNeRFSettings
+from sray.platform.scene_delta import (NERF_ARTIFACT, SRAY_ARTIFACT, adapted_keys, adapted_state, apply_delta,
+                                       save_semantic_nerf, save_sray_delta)
+
+
+def autocast(device: torch.device, precision: str) -> contextlib.AbstractContextManager:
+    """The autocast region of ``precision`` ("no", "bf16", "fp16") on ``device``."""
+    dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}.get(precision)
+    return torch.autocast(device.type, dtype=dtype, enabled=dtype is not None)
+
+
+def _rays(batch: dict[str, Any], device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """origins, dirs (R, 3) and the scene's near/far (R,) of a training sample, on ``device``."""
+    origins, dirs = pixel_rays(batch["query_K"].to(device), batch["query_c2w"].to(device), batch["pixels"].to(device))
+    near = torch.full((origins.shape[0],), float(batch["near"]), device=device)
+    far = torch.full((origins.shape[0],), float(batch["far"]), device=device)
+    return origins, dirs, near, far
+
+
+class _Learner:
+    """Optimiser, precision and the update rule shared by both methods."""
+
+    def __init__(self, net: nn.Module, params: list[nn.Parameter], lr: float, grad_clip: float, precision: str,
+                 device: torch.device) -> None:
+        self.net, self.params, self.device, self.precision = net, params, device, precision
+        self.grad_clip = grad_clip
+        self.optimizer = torch.optim.Adam(params, lr=lr)
+        self.scaler = torch.amp.GradScaler("cuda") if precision == "fp16" else None
+
+    @contextlib.contextmanager
+    def inference(self) -> Iterator[None]:
+        """Evaluate with every parameter flagged as in a freshly loaded model (``requires_grad``).
+
+        CPU kernels (convolutions) choose their code path by these flags even under ``no_grad``, and
+        the paths differ in the last bit: with the flags of a loaded model, held-out scores are the
+        ones the stored artifact reproduces exactly.
+        """
+        flags = [(p, p.requires_grad) for p in self.net.parameters()]
+        self.net.requires_grad_(True)
+        try:
+            yield
+        finally:
+            for p, flag in flags:
+                p.requires_grad_(flag)
+
+    def update(self, loss: Tensor) -> bool:
+        """Backward, clip and step; False (step skipped) when the loss or a gradient is not finite."""
+        if self.scaler is not None:
+            self.scaler.scale(loss).backward()
+            self.scaler.unscale_(self.optimizer)
+        else:
+            loss.backward()
+        grads = [p for p in self.params if p.grad is not None]
+        norm = (torch.nn.utils.clip_grad_norm_(grads, self.grad_clip) if self.grad_clip > 0
+                else torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in grads])))
+        finite = bool(torch.isfinite(norm)) and bool(torch.isfinite(loss.detach()))
+        if self.scaler is not None:  # the scaler skips overflowing steps itself
+            self.scaler.step(self.optimizer)
+            self.scaler.update()
+        elif finite:
+            self.optimizer.step()
+        self.optimizer.zero_grad(set_to_none=True)
+        return finite
+
+
+class SRayLearner(_Learner):
+    """Trains only the modules ``adapt`` of the shared S-Ray model (the rest stays frozen)."""
+
+    method = "sray"
+
+    def __init__(self, net: SRayModel, base_sha256: str, adapt: tuple[str, ...], lr: float, grad_clip: float,
+                 precision: str, device: torch.device) -> None:
+        net = net.to(device).eval()
+        self.base_sha256, self.adapt = base_sha256, tuple(adapt)
+        keys = set(adapted_keys(net, adapt))
+        params = [p for name, p in net.named_parameters() if name in keys]
+        for name, p in net.named_parameters():
+            p.requires_grad_(name in keys)
+        self.encoder_frozen = not any(k.startswith("encoder.") for k in keys)
+        self._sources: dict[tuple[str, str], SourceSet] = {}
+        super().__init__(net, params, lr, grad_clip, precision, device)
+
+    def loss(self, batch: dict[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
+        """Loss of one training sample (sources encoded without gradient while the encoder is frozen)."""
+        origins, dirs, near, far = _rays(batch, self.device)
+        with autocast(self.device, self.precision):
+            with torch.no_grad() if self.encoder_frozen else contextlib.nullcontext():
+                src = self.net.encode(batch["src_rgb"].to(self.device), batch["src_K"].to(self.device),
+                                      batch["src_c2w"].to(self.device))
+            out = self.net.render_rays(src, origins, dirs, near, far, stratified=True)
+        return render_loss(out, batch["target_label"].to(self.device), batch["target_rgb"].to(self.device),
+                           self.net.cfg)
+
+    def renderer(self, sample: dict[str, Any]) -> Any:
+        """Ray renderer bound to the sample's fixed source views.
+
+        While the encoder is frozen the encoded sources of a held-out view never change: they are
+        computed at the first evaluation and reused by every later one.
+        """
+        if not self.encoder_frozen:
+            return sray_renderer(self.net, sample, self.device)
+        key = (str(sample["scene"]), str(sample["query_id"]))
+        if key not in self._sources:
+            self._sources[key] = self.net.encode(sample["src_rgb"].to(self.device), sample["src_K"].to(self.device),
+                                                 sample["src_c2w"].to(self.device))
+        src = self._sources[key]
+        return lambda o, d, near, far: self.net.render_rays(src, o, d, near, far, stratified=False)
+
+    def snapshot(self) -> dict[str, Tensor]:
+        """CPU copy of the adapted tensors."""
+        return adapted_state(self.net, self.adapt)
+
+    def restore(self, state: dict[str, Tensor]) -> None:
+        """Put back a :meth:`snapshot`."""
+        apply_delta(self.net, state, "snapshot")
+
+    def save(self, out_dir: Path, scene: str) -> Path:
+        """Write the scene artifact (the adapted tensors as they are now + the base checksum)."""
+        path = out_dir / SRAY_ARTIFACT
+        save_sray_delta(path, self.snapshot(), self.base_sha256, self.adapt, scene)
+        return path
+
+
+class NeRFLearner(_Learner):
+    """Trains a Semantic-NeRF of the scene from scratch (every parameter)."""
+
+    method = "semantic-nerf"
+
+    def __init__(self, net: SemanticNeRF, lr: float, grad_clip: float, precision: str, device: torch.device) -> None:
+        net = net.to(device).eval()
+        super().__init__(net, list(net.parameters()), lr, grad_clip, precision, device)
+
+    def loss(self, batch: dict[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
+        """Loss of one training sample's rays (its source views are not used)."""
+        origins, dirs, near, far = _rays(batch, self.device)
+        with autocast(self.device, self.precision):
+            out = self.net.render_rays(origins, dirs, near, far, stratified=True)
+        return render_loss(out, batch["target_label"].to(self.device), batch["target_rgb"].to(self.device),
+                           self.net.cfg)
+
+    def renderer(self, sample: dict[str, Any]) -> Any:
+        """Ray renderer (deterministic samples)."""
+        return lambda o, d, near, far: self.net.render_rays(o, d, near, far, stratified=False)
+
+    def snapshot(self) -> dict[str, Tensor]:
+        """CPU copy of the whole state dict."""
+        return {k: v.detach().to("cpu", copy=True) for k, v in self.net.state_dict().items()}
+
+    def restore(self, state: dict[str, Tensor]) -> None:
+        """Put back a :meth:`snapshot`."""
+        self.net.load_state_dict(state)
+
+    def save(self, out_dir: Path, scene: str) -> Path:
+        """Write the scene artifact (the whole model as it is now: Semantic-NeRF shares nothing)."""
+        path = out_dir / NERF_ARTIFACT
+        save_semantic_nerf(path, self.net, scene)
+        return path
+
+
+def build_semantic_nerf(shards: Path, scene: str, n_classes: int, ignore_id: int, n_coarse: int, n_fine: int,
+                        settings: SemanticNeRFSettings, seed: int, chunk: int) -> SemanticNeRF:
+    """A fresh Semantic-NeRF (seeded) whose scene box covers the frusta of all the scene's split views."""
+    manifest = read_manifest(shards)
+    entry = manifest.scenes[scene]
+    meta = SceneMeta.from_json(entry.meta)
+    views = read_scene_views(shards, entry)
+    ids = [v for v in meta.view_ids if any(v in s for s in meta.splits.values())]
+    K = torch.from_numpy(np.stack([views[v].K for v in ids]))  # (V, 3, 3)
+    c2w = torch.from_numpy(np.stack([views[v].c2w for v in ids]))  # (V, 4, 4)
+    center, scale = scene_box_from_cameras(K, c2w, tuple(entry.image_size), meta.near, meta.far)
+    nerf = settings
+    torch.manual_seed(seed)
+    return SemanticNeRF(SemanticNeRFConfig(
+        n_classes=n_classes, pos_freqs=nerf.pos_freqs, dir_freqs=nerf.dir_freqs, depth=nerf.depth, width=nerf.width,
+        skip_layer=nerf.skip_layer, n_coarse=n_coarse, n_fine=n_fine, ignore_id=ignore_id, chunk=chunk,
+        scene_center=center, scene_scale=scale))

@@ -1,0 +1,314 @@
+"""The finetune fleet driver (``sray finetune-fleet``): one Ray task per (scene, method), one parent MLflow run.
+
+Order of events:
+
+1. validate the request; pairs whose ``result.json`` already says ``finished`` are skipped (a
+   re-launched fleet with the same ``out_dir`` only runs what is missing or failed);
+2. in this process, before any task starts: the MLflow store, the parent run (reused on a
+   re-launch) and one child run per pair to run (concurrent SQLite schema creation corrupts stores);
+3. at most ``max_parallel`` tasks in flight (``ray.wait`` keeps the window), each with fractional
+   ``num_cpus`` / ``num_gpus``; a task that raises or whose worker dies is re-run after an
+   exponential back-off (the driver counts ``attempts``; Ray's own retries are off), and after
+   ``retries`` re-runs it is reported as failed, without stopping the others;
+4. the results table is printed and logged to the parent run (``fleet_results.md``,
+   ``fleet_results.json``, per-method summary metrics), with the charts of
+   ``sray.platform.charts.write_fleet_charts`` when that module is installed.
+
+Paths handed to tasks are absolute: on a multi-node cluster they must be on shared storage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import os
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+from sray.platform.checkpoints import CheckpointManager
+from sray.platform.finetune import RESULT_FILE, SceneJob, run_scene_job, write_result
+from sray.platform.fleet_config import METHODS, FleetConfig, check_fleet_config
+from sray.platform.fleet_report import results_table, summary_metrics
+from sray.platform.scene_delta import checkpoint_sha256, state_file
+from sray.platform.tracking import (RunHandle, _handle, default_tracking_uri, ensure_store, prepare_run,
+                                   terminate_run)
+
+log = logging.getLogger(__name__)
+
+FLEET_FILE = "fleet.json"
+"""``<out_dir>/fleet.json``: the base checkpoint's checksum and the parent run, for re-launches."""
+
+
+def _say(msg: str) -> None:
+    print(f"[fleet] {msg}", flush=True)
+
+
+def resolve_checkpoint(path: Path) -> Path:
+    """A checkpoint folder from a checkpoint folder, a job's ``checkpoints/`` folder or a job folder
+    (best checkpoint, else the latest); FileNotFoundError names the path and what was expected."""
+    path = Path(path).resolve()
+    for root in (path, path / "checkpoints"):
+        if (root / "state.pt").is_file():
+            return root
+        if root.is_dir() and any(root.glob("step_*")):
+            manager = CheckpointManager(root)
+            found = manager.best() or manager.latest()
+            if found is not None:
+                return found
+    raise FileNotFoundError(f"{path}: no sray checkpoint here; pass a step_XXXXXXXXX folder (holding state.pt), "
+                            "a job's checkpoints/ folder or the job folder")
+
+
+def test_scenes(shards: Path) -> list[str]:
+    """Names of the unseen test scenes (role ``test``) of a shard folder, sorted."""
+    from sray.data_tools.manifest import read_manifest
+
+    return sorted(name for name, e in read_manifest(Path(shards)).scenes.items() if e.meta.get("role") == "test")
+
+
+def result_dir(out_dir: Path, scene: str, method: str) -> Path:
+    """``<out_dir>/scenes/<scene>/<method>``: a pair's result.json and artifact."""
+    return Path(out_dir) / "scenes" / scene / method
+
+
+def read_result(out_dir: Path, scene: str, method: str) -> dict[str, Any] | None:
+    """A pair's result.json, or None when there is none (or it is unreadable: then it is re-run)."""
+    path = result_dir(out_dir, scene, method) / RESULT_FILE
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as e:
+        log.warning("%s is unreadable (%s); the pair runs again", path, e)
+        return None
+
+
+def failed_result(job: SceneJob, error: str, full_bytes: int | None) -> dict[str, Any]:
+    """The contract's result dict of a pair whose last attempt failed (nothing measured)."""
+    return {"scene": job.scene, "method": job.method, "status": "failed", "error": error, "attempts": job.attempt,
+            "steps_used": 0, "max_steps": job.config.finetune.max_steps, "stopped_early": False, "wall_s": 0.0,
+            "miou_before": None, "miou_after": None, "psnr_after": None, "artifact_bytes": None,
+            "full_checkpoint_bytes": full_bytes, "child_run_id": job.run["run_id"] if job.run else None,
+            "protocol": None, "curve": []}
+
+
+def _error_text(error: BaseException) -> str:
+    """``Type: message`` of a task's failure (the original exception inside a RayTaskError)."""
+    cause = getattr(error, "cause", None) or error
+    message = str(cause).strip().splitlines()
+    return f"{type(cause).__name__}: {message[-1] if message else ''}"[:2000]
+
+
+def _scene_task(job: SceneJob) -> dict[str, Any]:
+    """Ray task body (a module-level function, so workers import it by name)."""
+    return run_scene_job(job)
+
+
+def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
+    """ValueError naming what is wrong with the request, before anything starts."""
+    from sray.data_tools.manifest import read_manifest
+
+    bad = [m for m in methods if m not in METHODS]
+    if bad or not methods:
+        raise ValueError(f"methods {bad or methods}: use one or more of {', '.join(METHODS)}")
+    if not scenes:
+        raise ValueError(f"no scenes to finetune; name them or use every test scene of {shards}")
+    manifest = read_manifest(shards)
+    for scene in scenes:
+        entry = manifest.scenes.get(scene)
+        if entry is None:
+            raise ValueError(f"{shards}/manifest.json: no scene {scene!r}; known: {sorted(manifest.scenes)[:10]}")
+        if not entry.meta.get("splits", {}).get("test"):
+            raise ValueError(f"{shards}/manifest.json: scene {scene!r} has no held-out 'test' views to validate on")
+
+
+def _fleet_record(out_dir: Path, base_sha256: str, tracking_uri: str) -> dict[str, Any]:
+    """The fleet's record (new, or a re-launch's); ValueError if ``out_dir`` holds another checkpoint's fleet."""
+    path = out_dir / FLEET_FILE
+    if not path.exists():
+        return {"format": "sray-fleet", "base_sha256": base_sha256, "tracking_uri": tracking_uri,
+                "parent_run_id": None, "launches": 0}
+    record = json.loads(path.read_text())
+    if record.get("base_sha256") != base_sha256:
+        raise ValueError(f"{path}: field 'base_sha256' is {record.get('base_sha256')}, but this checkpoint's is "
+                         f"{base_sha256}; this folder holds a fleet of another checkpoint: pass another --out")
+    return record
+
+
+def _write_record(out_dir: Path, record: dict[str, Any]) -> None:
+    tmp = out_dir / f".tmp-{FLEET_FILE}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    tmp.write_text(json.dumps(record, indent=1) + "\n")
+    os.replace(tmp, out_dir / FLEET_FILE)
+
+
+def _parent_run(record: dict[str, Any], tracking_uri: str, experiment: str, out_dir: Path) -> tuple[RunHandle, bool]:
+    """The parent run: the recorded one (marked RUNNING again) if it still exists there, else a new one."""
+    from mlflow import MlflowClient
+
+    if record.get("parent_run_id") and record.get("tracking_uri") == tracking_uri:
+        client = MlflowClient(tracking_uri=tracking_uri)
+        try:
+            run = client.get_run(record["parent_run_id"])
+            client.update_run(run.info.run_id, status="RUNNING")
+            return _handle(tracking_uri, run.info.experiment_id, run.info.run_id), False
+        except Exception as e:  # noqa: BLE001 - deleted or unreachable: start a new parent
+            log.warning("parent run %s not usable (%s); starting a new one", record["parent_run_id"], e)
+    handle = prepare_run(tracking_uri, experiment, f"fleet:{out_dir.name}",
+                         tags={"sray.kind": "fleet", "sray.fleet_dir": str(out_dir)})
+    return handle, True
+
+
+def _tag(handle: RunHandle, tags: dict[str, str]) -> None:
+    """Set tags on a run from the driver; tracking problems only warn."""
+    from mlflow import MlflowClient
+
+    try:
+        client = MlflowClient(tracking_uri=handle.tracking_uri)
+        for key, value in tags.items():
+            client.set_tag(handle.run_id, key, value[:5000])
+    except Exception as e:  # noqa: BLE001 - tracking never stops the fleet
+        log.warning("could not tag MLflow run %s: %s", handle.run_id, e)
+
+
+def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
+    """PNGs of ``sray.platform.charts.write_fleet_charts`` ([] when the module is not installed)."""
+    try:
+        from sray.platform.charts import write_fleet_charts
+    except ModuleNotFoundError as e:
+        if e.name != "sray.platform.charts":
+            raise
+        _say("charts skipped: sray.platform.charts is not available")
+        return []
+    try:
+        return [Path(p) for p in write_fleet_charts(results, out_dir / "charts")]
+    except Exception as e:  # noqa: BLE001 - the results are saved already; a chart bug must not lose them
+        log.warning("fleet charts failed: %s", e, exc_info=True)
+        return []
+
+
+def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int) -> dict[tuple[str, str], dict[str, Any]]:
+    """Run the jobs on Ray with the in-flight window, re-runs with back-off and failure reports."""
+    import ray
+
+    task = ray.remote(_scene_task).options(num_cpus=cfg.cpus_per_task, num_gpus=cfg.gpus_per_task,
+                                           max_retries=0, retry_exceptions=False)
+    waiting: list[tuple[float, SceneJob]] = [(0.0, job) for job in jobs]
+    in_flight: dict[Any, SceneJob] = {}
+    results: dict[tuple[str, str], dict[str, Any]] = {}
+    try:
+        while waiting or in_flight:
+            now = time.monotonic()
+            for item in sorted((w for w in waiting if w[0] <= now), key=lambda w: w[0]):
+                if len(in_flight) >= cfg.max_parallel:
+                    break
+                waiting.remove(item)
+                in_flight[task.remote(item[1])] = item[1]
+                _say(f"started {item[1].scene}/{item[1].method} (attempt {item[1].attempt})")
+            next_ready = min((w[0] for w in waiting), default=None)
+            if not in_flight:
+                time.sleep(max(next_ready - time.monotonic(), 0.0))
+                continue
+            timeout = None if next_ready is None or len(in_flight) >= cfg.max_parallel else max(next_ready - now, 0.05)
+            done, _ = ray.wait(list(in_flight), num_returns=1, timeout=timeout)
+            for ref in done:
+                job = in_flight.pop(ref)
+                try:
+                    result = ray.get(ref)
+                except Exception as e:  # noqa: BLE001 - a task error or a dead worker: re-run or report
+                    error = _error_text(e)
+                    if job.attempt <= cfg.retries:
+                        delay = cfg.retry_backoff_s * 2 ** (job.attempt - 1)
+                        waiting.append((time.monotonic() + delay, dataclasses.replace(job, attempt=job.attempt + 1)))
+                        _say(f"{job.scene}/{job.method} attempt {job.attempt} failed ({error}); re-run in {delay:g} s")
+                        continue
+                    result = failed_result(job, error, full_bytes)
+                    write_result(Path(job.out_dir), result)
+                    if job.run:
+                        _tag(RunHandle(**job.run), {"sray.status": "failed", "sray.error": str(e)})
+                        terminate_run(RunHandle(**job.run), "FAILED")
+                    _say(f"{job.scene}/{job.method} FAILED after {job.attempt} attempts: {error}")
+                else:
+                    _say(f"{job.scene}/{job.method} finished: mIoU {result['miou_before']:.3f} -> "
+                         f"{result['miou_after']:.3f} in {result['steps_used']} steps ({result['wall_s']:.1f} s)")
+                results[(job.scene, job.method)] = result
+    except KeyboardInterrupt:
+        for ref, job in in_flight.items():
+            ray.cancel(ref, force=True)
+            if job.run:
+                terminate_run(RunHandle(**job.run), "KILLED")
+        raise
+    return results
+
+
+def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str], out_dir: Path,
+              tracking_uri: str, methods: list[str]) -> list[dict[str, Any]]:
+    """Finetune every (scene, method) pair; returns their result dicts (docs/CONTRACTS.md), scenes-major.
+
+    ``checkpoint``: a checkpoint folder, a job's ``checkpoints/`` or a job folder. ``tracking_uri``:
+    empty = the working directory's SQLite store. Ray is started locally unless ``cfg.address``
+    names a cluster (or Ray is already running in this process).
+    """
+    from sray.platform.launcher import init_ray
+    from sray.platform.resources import check_feasible
+    from sray.platform.scene_delta import model_bytes
+    from sray.platform.train_state import model_from_checkpoint
+    from sray.platform.tracking_logger import RunLogger
+
+    check_fleet_config(cfg)
+    checkpoint, shards, out_dir = resolve_checkpoint(checkpoint), Path(shards).resolve(), Path(out_dir).resolve()
+    scenes = list(dict.fromkeys(scenes))
+    _validate(shards, scenes, list(methods))
+    tracking_uri = tracking_uri or default_tracking_uri(Path.cwd())
+    base_sha = checkpoint_sha256(checkpoint)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    record = _fleet_record(out_dir, base_sha, tracking_uri)
+    full_bytes = model_bytes(model_from_checkpoint(checkpoint)[0])
+    pairs = [(s, m) for s in scenes for m in methods]
+    done = {p: r for p in pairs if (r := read_result(out_dir, *p)) is not None and r.get("status") == "finished"}
+    if done:
+        _say(f"skipping {len(done)} finished pair(s): " + ", ".join(f"{s}/{m}" for s, m in done))
+
+    ensure_store(tracking_uri)
+    parent, is_new = _parent_run(record, tracking_uri, cfg.experiment, out_dir)
+    record.update(parent_run_id=parent.run_id, tracking_uri=tracking_uri, launches=record["launches"] + 1,
+                  checkpoint=str(checkpoint), state_file=str(state_file(checkpoint)), shards=str(shards))
+    _write_record(out_dir, record)
+    _say(f"parent MLflow run: {parent.ui_url}" + (f"  ({parent.ui_hint})" if parent.ui_hint else ""))
+    jobs = []
+    for scene, method in (p for p in pairs if p not in done):
+        child = prepare_run(tracking_uri, cfg.experiment, f"{scene}/{method}", parent_run_id=parent.run_id,
+                            tags={"sray.kind": "fleet-scene", "sray.scene": scene, "sray.method": method})
+        jobs.append(SceneJob(scene=scene, method=method, checkpoint=str(checkpoint), base_sha256=base_sha,
+                             shards=str(shards), out_dir=str(result_dir(out_dir, scene, method)),
+                             run=dataclasses.asdict(child), attempt=1, config=cfg))
+
+    logger = RunLogger(parent)
+    status = "FAILED"
+    try:
+        if is_new:
+            logger.log_params(cfg.to_dict() | {"checkpoint": str(checkpoint), "shards": str(shards)})
+        if jobs:
+            init_ray(cfg.address or None)
+            check_feasible(1, cfg.cpus_per_task, cfg.gpus_per_task)
+            done |= _schedule(jobs, cfg, full_bytes)
+        results = [done[p] for p in pairs]
+        (out_dir / "fleet_results.json").write_text(json.dumps(results, indent=1) + "\n")
+        table = results_table(results)
+        (out_dir / "fleet_results.md").write_text(table + "\n")
+        print(table, flush=True)
+        logger.log_metrics(summary_metrics(results), record["launches"])
+        logger.log_artifact(out_dir / "fleet_results.md")
+        logger.log_artifact(out_dir / "fleet_results.json")
+        for png in _charts(results, out_dir):
+            logger.log_image(png, artifact_path="charts")
+        status = "FINISHED"
+    except KeyboardInterrupt:
+        status = "KILLED"
+        raise
+    finally:
+        logger.close(status)
+    _say(f"results: {out_dir / 'fleet_results.md'}; MLflow: {parent.ui_url}")
+    return results

@@ -1,0 +1,157 @@
+"""``sray eval`` on a tiny unseen scene: metrics.json (both protocols), PNGs, and the MLflow run.
+
+The scores in metrics.json are checked against an independent count: the predicted and ground-truth
+semantic PNGs are decoded back to class ids through the palette and scored with a naive loop.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
+from train_fixtures import tiny_config, tiny_shards  # noqa: E402,F401
+
+from sray.data_tools.loader import make_eval_samples  # noqa: E402
+from sray.data_tools.manifest import read_manifest  # noqa: E402
+from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL  # noqa: E402
+from sray.model.ssim import SSIM_WINDOW  # noqa: E402
+from sray.platform.palette import IGNORE_COLOR, palette  # noqa: E402
+from sray.platform.renders import CORRECT_COLOR, ERROR_COLOR  # noqa: E402
+
+N_SOURCE, STRIDE = 3, 2
+
+
+@pytest.fixture(scope="module")
+def tiny_checkpoint(tiny_shards, tmp_path_factory) -> Path:
+    """An untrained tiny S-Ray checkpoint in a ``sray train`` job layout."""
+    from sray.platform.checkpoints import write_checkpoint
+    from sray.platform.train_state import build_training, training_state
+
+    root = tmp_path_factory.mktemp("eval-ckpt")
+    cfg = tiny_config(tiny_shards, root)
+    model, optimizer, scheduler = build_training(cfg)
+    state = training_state(model, optimizer, scheduler, None, 12, cfg, None, {})
+    return write_checkpoint(state, root / "jobs" / "tiny" / "checkpoints" / "step_000000012", 12)
+
+
+def _decode(png: Path, n_classes: int, ignore_id: int) -> np.ndarray:
+    """Class ids (H, W) of a colourised semantic PNG (every pixel must be a palette colour)."""
+    rgb = cv2.cvtColor(cv2.imread(str(png)), cv2.COLOR_BGR2RGB)
+    table = {tuple(int(v) for v in c): i for i, c in enumerate(palette(n_classes))}
+    table[IGNORE_COLOR] = ignore_id
+    ids = np.vectorize(lambda r, g, b: table.get((r, g, b), -1))(rgb[..., 0], rgb[..., 1], rgb[..., 2])
+    assert (ids >= 0).all(), f"{png} holds colours outside the palette"
+    return ids
+
+
+def _naive_iou(pairs: list[tuple[np.ndarray, np.ndarray]], ignore_id: int) -> float:
+    """mIoU over the classes present in the ground truth of ``pairs``, counted pixel by pixel."""
+    tp, fp, fn, present = {}, {}, {}, set()
+    for pred, gt in pairs:
+        for p, g in zip(pred.ravel().tolist(), gt.ravel().tolist()):
+            if g == ignore_id:
+                continue
+            present.add(g)
+            if p == g:
+                tp[g] = tp.get(g, 0) + 1
+            else:
+                fn[g] = fn.get(g, 0) + 1
+                fp[p] = fp.get(p, 0) + 1
+    ious = [tp.get(c, 0) / (tp.get(c, 0) + fp.get(c, 0) + fn.get(c, 0)) for c in present]
+    return sum(ious) / len(ious)
+
+
+def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_path,
+                                                           capsys):
+    from mlflow import MlflowClient
+
+    from sray.jobs.cli import main
+
+    out = tmp_path / "eval"
+    code = main(["eval", "--checkpoint", str(tiny_checkpoint), "--data", str(tiny_shards), "--n-source",
+                 str(N_SOURCE), "--stride", str(STRIDE), "--out", str(out), "--tracking-uri", mlflow_uri])
+    printed = capsys.readouterr().out
+    assert code == 0
+    report = json.loads((out / "metrics.json").read_text())
+    manifest = read_manifest(tiny_shards)
+    test_scenes = sorted(s for s, e in manifest.scenes.items() if e.meta["role"] == "test")
+    assert list(report["scenes"]) == test_scenes and report["checkpoint_step"] == 12
+    assert report["lpips"] == LPIPS_NOTE and f"{N_SOURCE} fixed 'source' views" in report["protocol"]
+
+    for scene in test_scenes:
+        block, meta = report["scenes"][scene], manifest.scenes[scene].meta
+        n_classes, ignore_id = len(meta["class_names"]), meta["ignore_id"]
+        assert block["dataset_level"]["protocol"] == DATASET_PROTOCOL
+        assert block["per_image"]["protocol"] == PER_IMAGE_PROTOCOL
+        assert block["colour"]["ssim_window"] == SSIM_WINDOW and block["n_views"] == len(meta["splits"]["test"])
+        samples = list(make_eval_samples(tiny_shards, scene, split="test", n_source=N_SOURCE))
+        pairs = []
+        for view, sample in zip(block["views"], samples, strict=True):
+            pngs = {k: out / v for k, v in view["pngs"].items()}
+            assert all(p.is_file() for p in pngs.values()) and view["query_id"] == sample["query_id"]
+            gt_full = sample["query_label"].numpy()
+            gt = _decode(pngs["gt"], n_classes, ignore_id)
+            off = STRIDE // 2  # the strided grid samples pixel centres (off, off), (off + STRIDE, off) ...
+            np.testing.assert_array_equal(gt, gt_full[off::STRIDE, off::STRIDE])
+            pred = _decode(pngs["pred"], n_classes, ignore_id)
+            assert (pred != ignore_id).all()  # a prediction is always a class
+            error = cv2.cvtColor(cv2.imread(str(pngs["error"])), cv2.COLOR_BGR2RGB)
+            wrong = (gt != ignore_id) & (pred != gt)
+            np.testing.assert_array_equal(np.all(error == ERROR_COLOR, axis=-1), wrong)
+            np.testing.assert_array_equal(np.all(error == CORRECT_COLOR, axis=-1), (gt != ignore_id) & ~wrong)
+            panel = cv2.imread(str(pngs["panel"]))
+            assert panel is not None and panel.shape[0] > 3 * gt.shape[0]
+            assert view["miou_per_image"] == pytest.approx(_naive_iou([(pred, gt)], ignore_id), abs=1e-9)
+            pairs.append((pred, gt))
+        assert block["dataset_level"]["miou"] == pytest.approx(_naive_iou(pairs, ignore_id), abs=1e-9)
+        assert block["per_image"]["miou"] == pytest.approx(np.mean([v["miou_per_image"] for v in block["views"]]),
+                                                           abs=1e-9)
+        right = sum(int(((p == g) & (g != ignore_id)).sum()) for p, g in pairs)
+        assert block["dataset_level"]["total_acc"] == pytest.approx(
+            right / sum(int((g != ignore_id).sum()) for _, g in pairs), abs=1e-9)
+        assert 0.0 < block["colour"]["psnr_db"] < 60.0
+
+    mean = report["mean"]
+    for key in ("miou", "total_acc", "class_avg_acc"):
+        assert mean["dataset_level"][key] == pytest.approx(
+            np.mean([report["scenes"][s]["dataset_level"][key] for s in test_scenes]), abs=1e-12)
+    assert mean["n_scenes"] == len(test_scenes) and mean["per_image"]["protocol"] == PER_IMAGE_PROTOCOL
+
+    # the printed table and locations
+    assert "mIoU/img" in printed and f"metrics: {out.resolve() / 'metrics.json'}" in printed
+    assert all(scene in printed for scene in test_scenes) and "sray ui --tracking-uri" in printed
+
+    # the MLflow run holds the same numbers, metrics.json and the PNGs
+    client = MlflowClient(mlflow_uri)
+    experiment = client.get_experiment_by_name("sray-eval")
+    (run,) = client.search_runs([experiment.experiment_id])
+    assert run.info.status == "FINISHED" and run.data.tags["sray.kind"] == "eval"
+    scene = test_scenes[0]
+    assert run.data.metrics[f"{scene}/miou"] == pytest.approx(report["scenes"][scene]["dataset_level"]["miou"])
+    assert run.data.metrics["mean/miou_per_image"] == pytest.approx(mean["per_image"]["miou"])
+    assert client.get_metric_history(run.info.run_id, "mean/miou")[0].step == 12
+    assert "metrics.json" in [f.path for f in client.list_artifacts(run.info.run_id)]
+    logged = {Path(f.path).name for f in client.list_artifacts(run.info.run_id, f"renders/{scene}")}
+    view_id = report["scenes"][scene]["views"][0]["query_id"]
+    assert {f"{view_id}_{k}.png" for k in ("pred", "gt", "error", "panel")} <= logged
+
+
+def test_eval_refuses_bad_input(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_path, capsys):
+    from sray.jobs.cli import main
+
+    args = ["eval", "--checkpoint", str(tiny_checkpoint), "--data", str(tiny_shards), "--out", str(tmp_path),
+            "--tracking-uri", mlflow_uri]
+    assert main([*args, "--scenes", "no_such_scene"]) == 2
+    assert "scenes ['no_such_scene'] not found" in capsys.readouterr().err
+    train_scene = next(s for s, e in read_manifest(tiny_shards).scenes.items() if e.meta["role"] == "train")
+    assert main([*args, "--scenes", train_scene, "--stride", "0"]) == 2
+    assert "stride (0)" in capsys.readouterr().err
+    assert main([*args[:2], str(tmp_path / "nowhere"), *args[3:]]) == 2
+    assert "nowhere" in capsys.readouterr().err

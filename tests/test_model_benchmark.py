@@ -1,0 +1,49 @@
+"""``sray bench model`` machinery: analytic FLOP counts and the two tables in quick mode."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from sray.model.bench_probes import attention_flops
+from sray.model.benchmark import run_model_benchmark
+
+
+def _analytic_forward_flops(variant: str, r: int, m: int, n: int, c: int) -> int:
+    """Matmul FLOPs: 8 C^2 per token per block (q, k, v, output projections) + 4 L^2 C per sequence."""
+    tokens = r * m * n
+    intra = 8 * c * c * tokens + 4 * n * n * c * r * m
+    cross = 8 * c * c * tokens + 4 * m * m * c * r * n
+    dense = 8 * c * c * tokens + 4 * (m * n) ** 2 * c * r
+    return {"full": intra + cross, "intra": intra, "cross": cross, "dense": dense}[variant]
+
+
+@pytest.mark.parametrize("variant", ["full", "intra", "cross", "dense"])
+def test_counted_flops_match_the_analytic_count(variant: str) -> None:
+    sizes = {"rays": 64, "views": 3, "samples": 6, "channels": 16}
+    got = attention_flops(variant, sizes, 4, torch.device("cpu"), backward=False)
+    assert got == _analytic_forward_flops(variant, 64, 3, 6, 16)
+
+
+def test_paper_size_flop_ratio_meets_the_target() -> None:
+    paper = {"rays": 1024, "views": 8, "samples": 64, "channels": 32}
+    full, dense = (_analytic_forward_flops(v, 1024, 8, 64, 32) for v in ("full", "dense"))
+    assert attention_flops("full", paper, 2, torch.device("cpu"), backward=False) == full
+    assert full / dense <= 0.55
+
+
+def test_quick_benchmark_produces_both_tables() -> None:
+    sections = run_model_benchmark(device="cpu", quick=True)
+    assert len(sections) == 2
+    (t1, table1, notes1), (t2, table2, _) = sections
+    rows = {line.split("|")[1].strip(): line for line in table1.splitlines()[2:]}
+    assert set(rows) == {"full", "intra", "cross", "dense"}
+    dense_cells = [c.strip() for c in rows["dense"].split("|")[1:-1]]
+    assert dense_cells[3] == "1.000" and dense_cells[6] == "1.000"
+    for line in rows.values():
+        cells = [c.strip() for c in line.split("|")[1:-1]]
+        assert all(float(x) >= 0 for x in cells[1:])
+    assert "target <= 0.55" in notes1
+    assert "tiny" in table2 and "fp32" in table2
+    step_cells = [c.strip() for c in table2.splitlines()[2].split("|")[1:-1]]
+    assert float(step_cells[6]) > 0 and float(step_cells[8]) > 0
