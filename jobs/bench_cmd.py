@@ -1,4 +1,4 @@
-"""``sray bench loader|model``: measured tables, printed and appended to docs/benchmarks.md."""
+"""``sray bench loader|model|accuracy``: measured tables, printed and appended to docs/benchmarks.md."""
 
 from __future__ import annotations
 
@@ -23,6 +23,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     model.add_argument("--quick", action="store_true", help="smaller sizes (for tests)")
     model.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     model.set_defaults(func=_bench_model)
+
+    accuracy = kinds.add_parser("accuracy", help="ablation (zero-shot) and S-Ray finetune vs Semantic-NeRF")
+    accuracy.add_argument("--preset", choices=["cpu-small", "gpu"], default="cpu-small",
+                          help="cpu-small: within an hour on 2 CPU cores; gpu: for a GPU machine")
+    accuracy.add_argument("--out", type=Path, default=Path("outputs/bench-accuracy"), help="work folder")
+    accuracy.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
+    accuracy.set_defaults(func=_bench_accuracy)
+
+
+def _bench_accuracy(args: argparse.Namespace) -> int:
+    from sray.jobs.bench_accuracy import run_accuracy_benchmark
+
+    run_accuracy_benchmark(args.preset, args.out, args.doc)
+    return 0
 
 
 def _bench_loader(args: argparse.Namespace) -> int:

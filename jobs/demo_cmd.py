@@ -1,7 +1,9 @@
 """``sray demo``: the README's main job on the embedded defaults.
 
 procedural scenes -> ``sray data check`` -> shards (+ verification) -> a picture of a loader
-sample -> a short S-Ray training run on local Ray with two CPU workers, tracked in MLflow.
+sample -> a short S-Ray training run on local Ray with two CPU workers, tracked in MLflow ->
+zero-shot evaluation on the unseen scenes -> a finetune fleet (S-Ray and Semantic-NeRF) on them
+-> accuracy-against-time charts -> the results table and the ``sray ui`` command.
 Everything goes under ``--out`` (default ``outputs/demo``); the MLflow store is the working
 directory's default SQLite store.
 """
@@ -24,6 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=int, default=120)
     p.add_argument("--width", type=int, default=160)
     p.add_argument("--steps", type=int, default=300, help="training steps (0 = data only)")
+    p.add_argument("--finetune-seconds", type=float, default=90.0,
+                   help="wall-clock budget of each per-scene finetune (both methods)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
@@ -43,17 +47,17 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     scenes, shards = args.out / "scenes", args.out / "shards"
-    _say(f"1/5 generating {args.train_scenes} train + {args.test_scenes} unseen test scenes "
+    _say(f"1/8 generating {args.train_scenes} train + {args.test_scenes} unseen test scenes "
          f"({args.views} views, {args.width}x{args.height}) in {scenes}")
     generate_dataset(scenes, n_train=args.train_scenes, n_test=args.test_scenes, n_views=args.views,
                      height=args.height, width=args.width, seed=args.seed, progress=True)
-    _say("2/5 checking the scenes (sray data check)")
+    _say("2/8 checking the scenes (sray data check)")
     problems = check_dataset(scenes)
     if problems:
         for p in problems:
             print(f"  {p.file}: {p.what} -> {p.fix}", file=sys.stderr)
         return 1
-    _say(f"3/5 sharding into {shards}")
+    _say(f"3/8 sharding into {shards}")
     write_shards(scenes, shards)
     damaged = verify_shards(shards)
     if damaged:
@@ -66,19 +70,39 @@ def run(args: argparse.Namespace) -> int:
                                          batches_per_epoch=1, rank=0, world_size=1, num_workers=0, seed=args.seed)))
     class_names = next(iter(manifest.scenes.values())).meta["class_names"]
     picture = write_sample_picture(sample, class_names, args.out / "loader_sample.png")
-    _say(f"4/5 a training sample from the loader: {picture}")
-    if args.steps > 0:
-        from sray.jobs.recipes import get_recipe
-        from sray.platform.launcher import launch_training
+    _say(f"4/8 a training sample from the loader: {picture}")
+    if args.steps <= 0:
+        _say(f"done in {time.perf_counter() - t0:.0f} s (data only); results under {args.out.resolve()}")
+        return 0
+    from sray.jobs.recipes import get_recipe
+    from sray.platform.eval_job import evaluate_checkpoint, format_table
+    from sray.platform.fleet import run_fleet, test_scenes
+    from sray.platform.fleet_config import FleetConfig
+    from sray.platform.fleet_report import results_table
+    from sray.platform.launcher import launch_training
 
-        cfg = get_recipe("synth-small")
-        cfg.data.shards = str(shards)
-        cfg.optim.steps = args.steps
-        cfg.run.output_dir = str(args.out / "train")
-        cfg.run.seed = args.seed
-        _say(f"5/5 training S-Ray for {args.steps} steps on local Ray with {cfg.run.workers} CPU workers")
-        outcome = launch_training(cfg)
-        _say(f"    checkpoints: {outcome.job_dir / 'checkpoints'} (best: {outcome.best_checkpoint})")
-        _say(f"    MLflow run: {outcome.run.ui_url}")
-    _say(f"done in {time.perf_counter() - t0:.0f} s; results under {args.out.resolve()}")
+    cfg = get_recipe("synth-small")
+    cfg.data.shards = str(shards)
+    cfg.optim.steps = args.steps
+    cfg.run.output_dir = str(args.out / "train")
+    cfg.run.seed = args.seed
+    cfg.run.val_every = cfg.run.ckpt_every = max(args.steps // 2, 1)
+    _say(f"5/8 training S-Ray for {args.steps} steps on local Ray with {cfg.run.workers} CPU workers")
+    outcome = launch_training(cfg)
+    checkpoint = outcome.best_checkpoint or outcome.latest_checkpoint
+    scenes_test = test_scenes(shards)
+    _say(f"6/8 zero-shot evaluation of {checkpoint.name} on the unseen scenes {', '.join(scenes_test)}")
+    report = evaluate_checkpoint(checkpoint, shards, scenes_test, args.out / "eval", n_source=cfg.model.n_source,
+                                 stride=1, progress=True)
+    print(format_table(report), flush=True)
+    fleet_cfg = FleetConfig()
+    fleet_cfg.finetune.max_seconds = args.finetune_seconds
+    fleet_cfg.finetune.eval_n_source = cfg.model.n_source
+    _say(f"7/8 finetune fleet on {len(scenes_test)} unseen scenes: S-Ray (from the trained model) and "
+         f"Semantic-NeRF (from scratch), {args.finetune_seconds:.0f} s budget each, early stopping on held-out mIoU")
+    results = run_fleet(fleet_cfg, checkpoint, shards, scenes_test, args.out / "fleet", "", ["sray", "semantic-nerf"])
+    _say(f"8/8 results (charts in {args.out / 'fleet' / 'charts'}):")
+    print(results_table(results), flush=True)
+    _say(f"done in {(time.perf_counter() - t0) / 60:.1f} min; results under {args.out.resolve()}")
+    _say("browse everything in the MLflow dashboard:  sray ui   (then open the printed URL)")
     return 0

@@ -119,21 +119,23 @@ def peak_bytes(fn: Callable[[], None], device: torch.device, backend: SDPBackend
         return _cpu_peak_from_trace(trace)
 
 
-def time_call(fn: Callable[[], None], device: torch.device, repeats: int,
-              backend: SDPBackend | None = None) -> float:
-    """Median wall-clock seconds of ``fn`` over ``repeats`` runs after one warm-up run."""
-    ctx = sdpa_kernel(backend) if backend is not None else nullcontext()
+def _timed_runs(fn: Callable[[], None], device: torch.device, runs: int) -> list[float]:
+    """Wall-clock seconds of ``runs`` consecutive calls of ``fn``."""
     times = []
-    with ctx:
-        for i in range(repeats + 1):
-            if device.type == "cuda":
-                torch.cuda.synchronize(device)
-            t0 = time.perf_counter()
-            fn()
-            if device.type == "cuda":
-                torch.cuda.synchronize(device)
-            if i:
-                times.append(time.perf_counter() - t0)
+    for _ in range(runs):
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+        t0 = time.perf_counter()
+        fn()
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+        times.append(time.perf_counter() - t0)
+    return times
+
+
+def time_call(fn: Callable[[], None], device: torch.device, repeats: int) -> float:
+    """Median wall-clock seconds of ``fn`` over ``repeats`` runs after one warm-up run."""
+    times = _timed_runs(fn, device, repeats + 1)[1:]
     return sorted(times)[len(times) // 2]
 
 
@@ -158,18 +160,21 @@ def _synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.d
 def train_step_worker(spec: dict) -> dict:
     """Time full training steps (encode, render, loss, backward, Adam) for one configuration.
 
-    spec: rays, coarse, fine, views, hw, device, dtype ('fp32'|'bf16'|'fp16'), steps, threads.
-    Meant to run in a fresh process; returns the median step time and the process peak RSS.
+    spec: rays, coarse, fine, views, hw, device, dtype ('fp32'|'bf16'|'fp16'), steps, and
+    optionally compile (compile both per-sample fields with ``torch.compile`` in place).
+    Meant to run in a fresh process; returns the first step's time (warm-up, compilation
+    included), the median of the following ``steps`` steps and the process peak RSS.
     """
     from .losses import render_loss
     from .sray import SRayModel
 
-    if spec.get("threads"):
-        torch.set_num_threads(int(spec["threads"]))
     device = torch.device(spec["device"])
     torch.manual_seed(0)
     cfg = SRayConfig(n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"])
     model = SRayModel(cfg).to(device)
+    if spec.get("compile"):
+        model.coarse.compile()
+        model.fine.compile()
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
     batch = _synthetic_batch(spec["rays"], spec["views"], tuple(spec["hw"]), device)
     dtype = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}[spec["dtype"]]
@@ -187,8 +192,10 @@ def train_step_worker(spec: dict) -> dict:
         if not torch.isfinite(loss):
             raise FloatingPointError(f"sray.model.benchmark: non-finite loss in {spec}.")
 
-    seconds = time_call(step, device, int(spec["steps"]))
+    times = _timed_runs(step, device, int(spec["steps"]) + 1)
     peak_gpu = int(torch.cuda.max_memory_allocated(device)) if device.type == "cuda" else 0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux reports KiB
     n_params = sum(p.numel() for p in model.parameters())
-    return {"seconds": seconds, "rss_bytes": rss, "gpu_peak_bytes": peak_gpu, "params": n_params}
+    rest = sorted(times[1:])
+    return {"first": times[0], "seconds": rest[len(rest) // 2], "rss_bytes": rss,
+            "gpu_peak_bytes": peak_gpu, "params": n_params}

@@ -50,7 +50,8 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     if device.type == "cuda":
         steps = [dict(paper, dtype=d, steps=10) for d in ("fp32", "bf16", "fp16")]
         return _Sizes(PAPER_ATTENTION, 64, 1024, steps)
-    steps = [dict(paper, dtype="fp32"), dict(small, dtype="fp32"), dict(small, dtype="bf16")]
+    steps = [dict(paper, dtype="fp32"), dict(paper, dtype="fp32", compile=True),
+             dict(small, dtype="fp32"), dict(small, dtype="bf16")]
     return _Sizes(PAPER_ATTENTION, 64, 256, steps)
 
 
@@ -105,21 +106,23 @@ def _run_in_fresh_process(spec: dict) -> dict:
 
 def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
     """Table 2: seconds per training step, rays per second and peak memory per configuration."""
-    lines = ["| config | rays | samples | views | image | precision | s / step | rays / s | "
+    lines = ["| config | rays | samples | views | image | precision | first step s | s / step | rays / s | "
              "peak RSS GB | GPU peak GB | speed-up vs paper code |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for spec in sz.steps:
         res = _run_in_fresh_process(dict(spec, device=str(device)))
         s = res["seconds"]
         ref = (f"{REFERENCE_CODE_STEP[0] / s:.1f}-{REFERENCE_CODE_STEP[1] / s:.1f}x"
                if spec["name"] == "paper code config" and device.type == "cpu" else "-")
         h, w = spec["hw"]
+        precision = spec["dtype"] + (" + torch.compile" if spec.get("compile") else "")
         lines.append(f"| {spec['name']} | {spec['rays']} | {spec['coarse']}+{spec['fine']} | {spec['views']} | "
-                     f"{w}x{h} | {spec['dtype']} | {s:.2f} | {spec['rays'] / s:.0f} | "
+                     f"{w}x{h} | {precision} | {res['first']:.2f} | {s:.2f} | {spec['rays'] / s:.0f} | "
                      f"{res['rss_bytes'] / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {ref} |")
     notes = (
         "One step = encode the source views, render coarse + fine, semantic + photometric loss, "
-        "backward, Adam; synthetic scene, median of the timed steps after one warm-up, each "
+        "backward, Adam; synthetic scene; 'first step' is the warm-up (compilation included), "
+        "'s / step' the median of the following steps; each "
         "configuration in a fresh process (peak RSS is that process's ru_maxrss, torch runtime "
         f"included; {res['params'] / 1e6:.2f} M parameters). Reference: the paper's public code "
         "takes 31-34 s per step (about 33 rays/s) and 11.8 GB peak RSS at its configuration "

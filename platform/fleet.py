@@ -138,10 +138,11 @@ def _fleet_record(out_dir: Path, base_sha256: str, tracking_uri: str) -> dict[st
     return record
 
 
-def _write_record(out_dir: Path, record: dict[str, Any]) -> None:
-    tmp = out_dir / f".tmp-{FLEET_FILE}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    tmp.write_text(json.dumps(record, indent=1) + "\n")
-    os.replace(tmp, out_dir / FLEET_FILE)
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` under a temporary name beside ``path``, then rename it into place."""
+    tmp = path.with_name(f".tmp-{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
 
 
 def _parent_run(record: dict[str, Any], tracking_uri: str, experiment: str, out_dir: Path) -> tuple[RunHandle, bool]:
@@ -235,9 +236,10 @@ def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int) -> dict[t
                          f"{result['miou_after']:.3f} in {result['steps_used']} steps ({result['wall_s']:.1f} s)")
                 results[(job.scene, job.method)] = result
     except KeyboardInterrupt:
-        for ref, job in in_flight.items():
+        for ref in in_flight:
             ray.cancel(ref, force=True)
-            if job.run:
+        for job in jobs:
+            if job.run and (job.scene, job.method) not in results:
                 terminate_run(RunHandle(**job.run), "KILLED")
         raise
     return results
@@ -275,8 +277,11 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     parent, is_new = _parent_run(record, tracking_uri, cfg.experiment, out_dir)
     record.update(parent_run_id=parent.run_id, tracking_uri=tracking_uri, launches=record["launches"] + 1,
                   checkpoint=str(checkpoint), state_file=str(state_file(checkpoint)), shards=str(shards))
-    _write_record(out_dir, record)
+    _write_atomic(out_dir / FLEET_FILE, json.dumps(record, indent=1) + "\n")
     _say(f"parent MLflow run: {parent.ui_url}" + (f"  ({parent.ui_hint})" if parent.ui_hint else ""))
+    if len(done) < len(pairs):
+        init_ray(cfg.address or None)
+        check_feasible(1, cfg.cpus_per_task, cfg.gpus_per_task)
     jobs = []
     for scene, method in (p for p in pairs if p not in done):
         child = prepare_run(tracking_uri, cfg.experiment, f"{scene}/{method}", parent_run_id=parent.run_id,
@@ -291,13 +296,11 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
         if is_new:
             logger.log_params(cfg.to_dict() | {"checkpoint": str(checkpoint), "shards": str(shards)})
         if jobs:
-            init_ray(cfg.address or None)
-            check_feasible(1, cfg.cpus_per_task, cfg.gpus_per_task)
             done |= _schedule(jobs, cfg, full_bytes)
         results = [done[p] for p in pairs]
-        (out_dir / "fleet_results.json").write_text(json.dumps(results, indent=1) + "\n")
+        _write_atomic(out_dir / "fleet_results.json", json.dumps(results, indent=1) + "\n")
         table = results_table(results)
-        (out_dir / "fleet_results.md").write_text(table + "\n")
+        _write_atomic(out_dir / "fleet_results.md", table + "\n")
         print(table, flush=True)
         logger.log_metrics(summary_metrics(results), record["launches"])
         logger.log_artifact(out_dir / "fleet_results.md")

@@ -2,7 +2,7 @@
 
 Use from a test module (the tests folder is not a package)::
 
-    from fleet_fixtures import tiny_checkpoint, tiny_fleet_config  # noqa: F401
+    from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config  # noqa: F401
     from train_fixtures import tiny_shards  # noqa: F401
 """
 
@@ -39,6 +39,16 @@ def tiny_checkpoint(tiny_shards: Path, tmp_path_factory: pytest.TempPathFactory)
     if not (path / "state.pt").exists():
         write_tiny_checkpoint(tiny_shards, folder)
     return path
+
+
+@pytest.fixture(scope="module")
+def one_thread():
+    """Torch on one thread for the module (restored after): tiny models run fastest that way on a busy
+    2-core machine, as fleet tasks with one reserved CPU do."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
 
 
 def tiny_fleet_config(**finetune: object) -> FleetConfig:

@@ -5,8 +5,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import pytest
 import torch
-from fleet_fixtures import tiny_checkpoint, tiny_fleet_config  # noqa: F401
+from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config  # noqa: F401
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from train_fixtures import tiny_shards  # noqa: F401
@@ -14,6 +15,8 @@ from train_fixtures import tiny_shards  # noqa: F401
 from sray.platform.finetune import EarlyStopping, SceneJob, finetune_scene
 from sray.platform.scene_delta import adapted_keys, checkpoint_sha256
 from sray.platform.train_state import model_from_checkpoint
+
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def _job(checkpoint: Path, shards: Path, out: Path, method: str = "sray", **finetune: object) -> SceneJob:

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 import torch
-from fleet_fixtures import tiny_checkpoint, tiny_fleet_config, write_tiny_checkpoint  # noqa: F401
+from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config  # noqa: F401
+from fleet_fixtures import write_tiny_checkpoint
 from safetensors import safe_open
 from train_fixtures import tiny_shards  # noqa: F401
 
@@ -21,10 +22,11 @@ from sray.platform.scene_delta import (SRAY_ARTIFACT, adapted_keys, checkpoint_s
 from sray.platform.train_state import model_from_checkpoint
 
 SCENE = "synth_test_000"
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")
-def finetuned(tiny_shards: Path, tiny_checkpoint: Path,
+def finetuned(one_thread: None, tiny_shards: Path, tiny_checkpoint: Path,
               tmp_path_factory: pytest.TempPathFactory) -> tuple[SceneOutcome, Path]:
     """A 6-step S-Ray finetune of the tiny test scene (default adapted modules) and its artifact."""
     out = tmp_path_factory.mktemp("delta")
