@@ -84,7 +84,7 @@ class _Learner:
             loss.backward()
         grads = [p for p in self.params if p.grad is not None]
         norm = (torch.nn.utils.clip_grad_norm_(grads, self.grad_clip) if self.grad_clip > 0
-                else torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in grads])))
+                else torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in grads] or [loss.new_zeros(())])))
         finite = bool(torch.isfinite(norm)) and bool(torch.isfinite(loss.detach()))
         if self.scaler is not None:  # the scaler skips overflowing steps itself
             self.scaler.step(self.optimizer)

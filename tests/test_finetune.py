@@ -88,3 +88,17 @@ def test_only_adapted_modules_change(tiny_shards, tiny_checkpoint, tmp_path):
     changed = [k for k in adapted if not torch.equal(tuned[k].cpu(), before[k])]
     # the best state is kept: when step 3 beat step 0 the adapted weights moved, otherwise none did
     assert bool(changed) == (outcome.result["miou_after"] > outcome.result["miou_before"])
+
+
+def test_bf16_autocast_on_cpu_finetunes(tiny_shards, tiny_checkpoint, tmp_path):
+    r = finetune_scene(_job(tiny_checkpoint, tiny_shards, tmp_path, precision="bf16", max_steps=2, eval_every=2)).result
+    assert r["steps_used"] == 2 and all(math.isfinite(p["miou"]) and math.isfinite(p["psnr"]) for p in r["curve"])
+
+
+@pytest.mark.gpu
+def test_fp16_with_loss_scaling_on_cuda(tiny_shards, tiny_checkpoint, tmp_path):
+    job = _job(tiny_checkpoint, tiny_shards, tmp_path, precision="fp16", max_steps=4, eval_every=2)
+    job.config.gpus_per_task = 0.5
+    outcome = finetune_scene(job)
+    assert next(outcome.model.parameters()).is_cuda and outcome.result["steps_used"] == 4
+    assert all(math.isfinite(p["miou"]) for p in outcome.result["curve"])
