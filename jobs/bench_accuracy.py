@@ -98,7 +98,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     from sray.model.metrics import DATASET_PROTOCOL, PER_IMAGE_PROTOCOL
     from sray.platform.charts import write_fleet_charts
     from sray.platform.eval_job import evaluate_checkpoint
-    from sray.platform.fleet import run_fleet, test_scenes
+    from sray.platform.fleet import run_fleet, unseen_scenes
     from sray.platform.fleet_config import FleetConfig
 
     p = PRESETS[preset]
@@ -109,7 +109,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
                      height=p.height, width=p.width, seed=0, progress=True)
     shards = out / "shards"
     write_shards(out / "scenes", shards)
-    scenes = test_scenes(shards)
+    scenes = unseen_scenes(shards)
 
     rows, checkpoints = [], {}
     for variant in VARIANTS:

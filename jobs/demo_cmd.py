@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     from sray.jobs.recipes import get_recipe
     from sray.platform.eval_job import evaluate_checkpoint, format_table
-    from sray.platform.fleet import run_fleet, test_scenes
+    from sray.platform.fleet import run_fleet, unseen_scenes
     from sray.platform.fleet_config import FleetConfig
     from sray.platform.fleet_report import results_table
     from sray.platform.launcher import launch_training
@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     _say(f"5/8 training S-Ray for {args.steps} steps on local Ray with {cfg.run.workers} CPU workers")
     outcome = launch_training(cfg)
     checkpoint = outcome.best_checkpoint or outcome.latest_checkpoint
-    scenes_test = test_scenes(shards)
+    scenes_test = unseen_scenes(shards)
     _say(f"6/8 zero-shot evaluation of {checkpoint.name} on the unseen scenes {', '.join(scenes_test)}")
     report = evaluate_checkpoint(checkpoint, shards, scenes_test, args.out / "eval", n_source=cfg.model.n_source,
                                  stride=1, progress=True)

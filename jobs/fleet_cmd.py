@@ -53,12 +53,12 @@ def build_fleet_config(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     """Run the fleet; exit 0 when every pair finished, 1 when some failed, 2 for a bad request."""
-    from sray.platform.fleet import run_fleet, test_scenes
+    from sray.platform.fleet import run_fleet, unseen_scenes
     from sray.platform.resources import InfeasibleRequest
 
     try:
         cfg = build_fleet_config(args)
-        scenes = test_scenes(args.data) if args.all_test else args.scenes
+        scenes = unseen_scenes(args.data) if args.all_test else args.scenes
         results = run_fleet(cfg, args.checkpoint, args.data, scenes, args.out, args.tracking_uri,
                             METHOD_CHOICES[args.method])
     except (InfeasibleRequest, FileNotFoundError, ValueError) as e:

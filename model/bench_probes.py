@@ -8,8 +8,8 @@
   reached during the call minus the level when it started. Both count PyTorch's allocator only
   (tensors and kernel scratch), the quantity the paper's "memory increment" reports.
 * Training steps run in a fresh spawned process each, so the process peak RSS they report
-  (``ru_maxrss``) belongs to that configuration alone, as in the reference measurement of the
-  paper's public code.
+  (VmHWM) belongs to that configuration alone, as in the reference measurement of the paper's
+  public code.
 """
 
 from __future__ import annotations
@@ -41,8 +41,9 @@ def resolve_device(device: str) -> torch.device:
     return dev
 
 
-def attention_case(variant: str, rays: int, views: int, samples: int, channels: int,
-                   device: torch.device, seed: int = 0) -> tuple[CrossReprojectionAttention, torch.Tensor, torch.Tensor]:
+def attention_case(
+    variant: str, rays: int, views: int, samples: int, channels: int, device: torch.device, seed: int = 0
+) -> tuple[CrossReprojectionAttention, torch.Tensor, torch.Tensor]:
     """A CRA module of ``variant`` and its input: space (R, m, N, C) and a validity mask (90% valid)."""
     gen = torch.Generator().manual_seed(seed)
     cfg = SRayConfig(feat_dim=channels, attention=variant, n_coarse=samples)
@@ -139,6 +140,22 @@ def time_call(fn: Callable[[], None], device: torch.device, repeats: int) -> flo
     return sorted(times)[len(times) // 2]
 
 
+def peak_rss_bytes() -> int:
+    """Peak resident set size of this process: VmHWM from /proc (Linux), else ``ru_maxrss``.
+
+    ``ru_maxrss`` survives ``exec``: a spawned child would report at least its parent's RSS at the
+    fork, so VmHWM (the high-water mark of this process's own address space) is preferred.
+    """
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024  # kB
+    except OSError:
+        pass
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024  # KiB on Linux
+
+
 def _synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device) -> dict:
     """Random source images and a camera rig whose sources all look at the query's frustum."""
     from .rays import pixel_rays
@@ -194,7 +211,7 @@ def train_step_worker(spec: dict) -> dict:
 
     times = _timed_runs(step, device, int(spec["steps"]) + 1)
     peak_gpu = int(torch.cuda.max_memory_allocated(device)) if device.type == "cuda" else 0
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux reports KiB
+    rss = peak_rss_bytes()
     n_params = sum(p.numel() for p in model.parameters())
     rest = sorted(times[1:])
     return {"first": times[0], "seconds": rest[len(rest) // 2], "rss_bytes": rss,

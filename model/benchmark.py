@@ -55,6 +55,11 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     return _Sizes(PAPER_ATTENTION, 64, 256, steps)
 
 
+def _fmt(x: float) -> str:
+    """Compact number: no decimals from 100 up, two from 1, three significant digits below."""
+    return f"{x:.0f}" if x >= 100 else f"{x:.2f}" if x >= 1 else f"{x:.3g}"
+
+
 def _attention_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
     """Table 1: FLOPs, peak memory and time of the attention stage alone, per variant."""
     a = sz.attention
@@ -77,9 +82,10 @@ def _attention_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
              "memory / dense (default) | ms fwd+bwd (default) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for v, r in rows.items():
-        lines.append(f"| {v} | {r['gf']:.4g} | {r['gf_b']:.4g} | {r['gf'] / d['gf']:.3f} | "
-                     f"{r['mem_math']:.4g} | {r['mem_math_b']:.4g} | {r['mem_math_b'] / d['mem_math_b']:.3f} | "
-                     f"{r['mem_def_b']:.4g} | {r['mem_def_b'] / d['mem_def_b']:.3f} | {r['ms_b']:.4g} |")
+        lines.append(f"| {v} | {_fmt(r['gf'])} | {_fmt(r['gf_b'])} | {r['gf'] / d['gf']:.3f} | "
+                     f"{_fmt(r['mem_math'])} | {_fmt(r['mem_math_b'])} | "
+                     f"{r['mem_math_b'] / d['mem_math_b']:.3f} | "
+                     f"{_fmt(r['mem_def_b'])} | {r['mem_def_b'] / d['mem_def_b']:.3f} | {_fmt(r['ms_b'])} |")
     f = rows["full"]
     verdict = (f"full CRA / dense: FLOPs {f['gf'] / d['gf']:.3f} (target <= 0.55), peak memory "
                f"(math backend, fwd+bwd) {f['mem_math_b'] / d['mem_math_b']:.3f} (target <= 0.25).")
@@ -123,7 +129,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         "One step = encode the source views, render coarse + fine, semantic + photometric loss, "
         "backward, Adam; synthetic scene; 'first step' is the warm-up (compilation included), "
         "'s / step' the median of the following steps; each "
-        "configuration in a fresh process (peak RSS is that process's ru_maxrss, torch runtime "
+        "configuration in a fresh process (peak RSS is that process's VmHWM, torch runtime "
         f"included; {res['params'] / 1e6:.2f} M parameters). Reference: the paper's public code "
         "takes 31-34 s per step (about 33 rays/s) and 11.8 GB peak RSS at its configuration "
         "(1024 rays, 64+64 samples, 8 views, 320x240, fp32) on this 2-core CPU.")

@@ -27,16 +27,21 @@ from .cra import AttentionBlock
 
 
 def masked_mean_var(x: Tensor, valid: Tensor, dim: int) -> tuple[Tensor, Tensor]:
-    """Float32 mean and (biased) variance of ``x`` over ``dim``, counting only valid entries.
+    """Float32 mean and (biased) variance over ``dim`` of the valid entries of ``x``.
 
-    x: (..., K, ..., D); valid: same shape without D. Entries without any valid element give 0.
+    x: (..., K, ..., D), ZERO wherever ``valid`` (same shape without D) is False. With n valid
+    entries out of K, the (K - n) zeros add (K - n) mean^2 to the sum of squared deviations,
+    which is subtracted again (two-pass variance, no E[x^2] - E[x]^2 cancellation). Entries
+    without any valid element give 0.
     """
     with torch.autocast(device_type=x.device.type, enabled=False):
-        keep = valid.float()[..., None]
-        n = keep.sum(dim, keepdim=True).clamp_min(1.0)
-        xf = x.float() * keep
+        xf = x.float()
+        n_valid = valid.float().sum(dim, keepdim=True)[..., None]
+        n_zeros = x.shape[dim] - n_valid
+        n = n_valid.clamp_min(1.0)
         mean = xf.sum(dim, keepdim=True) / n
-        var = (((xf - mean) * keep) ** 2).sum(dim, keepdim=True) / n
+        sq = (xf - mean).square().sum(dim, keepdim=True) - n_zeros * mean.square()
+        var = sq.clamp_min(0.0) / n
     return mean.squeeze(dim), var.squeeze(dim)
 
 
@@ -67,7 +72,8 @@ class GeometryNet(nn.Module):
     def forward(self, space: Tensor, valid: Tensor, dirs: Tensor, src_rgb: Tensor) -> tuple[Tensor, Tensor]:
         """space: (R, m, N, C) (ignored where invalid); valid: (R, m, N); dirs: (R, m, N, 4);
         src_rgb: (R, m, N, 3) source colours at the projections. Returns sigma (R, N), rgb (R, N, 3)."""
-        gated = self.feature(space) * torch.sigmoid(self.gate(space))  # (R, m, N, C)
+        keep = valid[..., None].to(space.dtype)
+        gated = self.feature(space) * (torch.sigmoid(self.gate(space)) * keep)  # (R, m, N, C), 0 if invalid
         mean, var = masked_mean_var(gated, valid, dim=1)  # (R, N, C) each
         seen = valid.any(dim=1)  # (R, N)
         g = self.fuse(torch.cat([mean, var], dim=-1))  # (R, N, 16)

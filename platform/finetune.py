@@ -40,7 +40,7 @@ from sray.platform.train_worker import NonFiniteTraining
 
 RESULT_FILE = "result.json"
 """Per (scene, method) result, at ``<fleet>/scenes/<scene>/<method>/result.json`` (docs/CONTRACTS.md)."""
-PROTOCOL = (f"mIoU {DATASET_PROTOCOL}: one confusion matrix over the scene's held-out test views, each rendered "
+PROTOCOL = (f"mIoU ({DATASET_PROTOCOL}): one confusion matrix over the scene's held-out test views, each rendered "
             "from its fixed source views")
 """The protocol named in every result (``miou``; ``miou_per_image`` is the per-image protocol)."""
 
@@ -219,7 +219,7 @@ def finetune_scene(job: SceneJob, logger: Any = None) -> SceneOutcome:
                                         "train/psnr": float(terms["psnr"])}, step)
                 window = []
                 evaluate_now()
-                if stopper.should_stop:
+                if stopper.should_stop and step < ft.max_steps:
                     reason = "patience"
                     break
             if out_of_time:

@@ -33,7 +33,7 @@ from sray.platform.finetune import RESULT_FILE, SceneJob, run_scene_job, write_r
 from sray.platform.fleet_config import METHODS, FleetConfig, check_fleet_config
 from sray.platform.fleet_report import results_table, summary_metrics
 from sray.platform.scene_delta import checkpoint_sha256, state_file
-from sray.platform.tracking import (RunHandle, _handle, default_tracking_uri, ensure_store, prepare_run,
+from sray.platform.tracking import (RunHandle, run_handle, default_tracking_uri, ensure_store, prepare_run,
                                    terminate_run)
 
 log = logging.getLogger(__name__)
@@ -62,7 +62,7 @@ def resolve_checkpoint(path: Path) -> Path:
                             "a job's checkpoints/ folder or the job folder")
 
 
-def test_scenes(shards: Path) -> list[str]:
+def unseen_scenes(shards: Path) -> list[str]:
     """Names of the unseen test scenes (role ``test``) of a shard folder, sorted."""
     from sray.data_tools.manifest import read_manifest
 
@@ -154,7 +154,7 @@ def _parent_run(record: dict[str, Any], tracking_uri: str, experiment: str, out_
         try:
             run = client.get_run(record["parent_run_id"])
             client.update_run(run.info.run_id, status="RUNNING")
-            return _handle(tracking_uri, run.info.experiment_id, run.info.run_id), False
+            return run_handle(tracking_uri, run.info.experiment_id, run.info.run_id), False
         except Exception as e:  # noqa: BLE001 - deleted or unreachable: start a new parent
             log.warning("parent run %s not usable (%s); starting a new one", record["parent_run_id"], e)
     handle = prepare_run(tracking_uri, experiment, f"fleet:{out_dir.name}",

@@ -16,10 +16,15 @@ METHODS = ("sray", "semantic-nerf")
 """Per-scene methods a fleet runs: S-Ray finetuned from the shared model, Semantic-NeRF from scratch."""
 PRECISIONS = ("no", "bf16", "fp16")
 """fp32, bfloat16 autocast (CPU and CUDA), float16 autocast with loss scaling (CUDA only)."""
-DEFAULT_ADAPT = ("coarse.classifier", "fine.classifier", "coarse.view_weights", "fine.view_weights")
-"""S-Ray modules a finetune trains and stores by default (see docs: the semantic heads and the
-semantic-aware view weighting of both per-sample networks; the image encoder, attention and
-geometry stay shared)."""
+DEFAULT_ADAPT = ("encoder.merge2", "encoder.head", "coarse", "fine")
+"""S-Ray modules a finetune trains and stores by default: the image encoder's last two layers (L18,
+L19) and both per-sample networks (2.8% of the model's bytes; the rest of the encoder stays shared).
+Measured on 3 unseen procedural test scenes (72x96, a 400-step synth-small checkpoint, zero-shot
+mIoU 0.122), 80 steps at lr 1e-3, held-out mIoU after / artifact bytes:
+classifiers only 0.349 / 15 kB; + view weights 0.349 / 22 kB; whole per-sample networks 0.373 /
+158 kB; encoder L18-L19 + classifiers 0.567 / 94 kB; **encoder L18-L19 + per-sample networks 0.601 /
+237 kB**; whole encoder decoder (L11-L19) + per-sample networks 0.644 / 902 kB; everything 0.626 /
+8.3 MB. Adapting the image features is what transfers; the decoder-wide choice is one ``--set`` away."""
 
 
 @dataclass
@@ -37,8 +42,8 @@ class FinetuneSettings:
     """Stop after this many evaluations in a row without an improvement of the held-out mIoU."""
     min_delta: float = 0.002
     """An evaluation improves only if its held-out mIoU beats the best so far by more than this."""
-    lr: float = 2e-4
-    """Adam learning rate of the adapted S-Ray parameters (constant)."""
+    lr: float = 1e-3
+    """Adam learning rate of the adapted S-Ray parameters (constant; the paper's initial rate)."""
     grad_clip: float = 1.0
     """Global gradient-norm clipping of the trained parameters (0 = off)."""
     max_nonfinite_in_row: int = 20

@@ -48,7 +48,7 @@ def results_table(results: list[dict[str, Any]]) -> str:
             human_bytes(r.get("artifact_bytes")), share, _note(r)]))
     protocols = sorted({r["protocol"] for r in results if r.get("protocol")})
     lines = ["| " + row + " |" for row in rows]
-    lines += ["", "mIoU: " + "; ".join(protocols) if protocols else "",
+    lines += ["", "Protocol: " + "; ".join(protocols) if protocols else "",
               "Train time excludes held-out evaluation; \"of full model\" compares the scene artifact with the "
               "shared S-Ray model's tensor bytes."]
     return "\n".join(lines).strip()

@@ -145,10 +145,11 @@ def prepare_run(tracking_uri: str, experiment: str, run_name: str, tags: dict[st
     if parent_run_id:
         all_tags[PARENT_RUN_TAG] = parent_run_id
     run = client.create_run(experiment_id, run_name=run_name, tags=all_tags)
-    return _handle(tracking_uri, experiment_id, run.info.run_id)
+    return run_handle(tracking_uri, experiment_id, run.info.run_id)
 
 
-def _handle(tracking_uri: str, experiment_id: str, run_id: str) -> RunHandle:
+def run_handle(tracking_uri: str, experiment_id: str, run_id: str) -> RunHandle:
+    """The handle of an existing run (with its UI links)."""
     url, hint = _ui_links(tracking_uri, experiment_id, run_id)
     return RunHandle(run_id=run_id, experiment_id=experiment_id, tracking_uri=tracking_uri, ui_url=url, ui_hint=hint)
 
@@ -166,7 +167,7 @@ def find_run(tracking_uri: str, experiment: str, run_name: str) -> RunHandle | N
                               order_by=["attributes.start_time DESC"], max_results=1)
     if not runs:
         return None
-    return _handle(tracking_uri, found.experiment_id, runs[0].info.run_id)
+    return run_handle(tracking_uri, found.experiment_id, runs[0].info.run_id)
 
 
 def resume_run(tracking_uri: str, experiment: str, run_name: str) -> RunHandle:

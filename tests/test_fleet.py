@@ -13,7 +13,7 @@ from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
 from sray.platform.checkpoints import load_checkpoint
-from sray.platform.fleet import run_fleet
+from sray.platform.fleet import resolve_checkpoint, run_fleet, unseen_scenes
 
 CONTRACT_KEYS = {"scene", "method", "status", "error", "attempts", "steps_used", "max_steps", "stopped_early", "wall_s",
                  "miou_before", "miou_after", "psnr_after", "artifact_bytes", "full_checkpoint_bytes", "child_run_id",
@@ -133,3 +133,12 @@ def test_semantic_nerf_through_the_fleet(ray_session, tiny_shards, tiny_checkpoi
     assert net.cfg.depth == 2 and net.cfg.width == 32 and net.cfg.n_classes == 20
     assert _client(mlflow_uri).get_run(result["child_run_id"]).info.status == "FINISHED"
     assert torch.isfinite(torch.tensor([p["psnr"] for p in result["curve"]])).all()
+
+
+def test_checkpoint_and_scene_lookup(tiny_shards, tiny_checkpoint, tmp_path):
+    assert unseen_scenes(tiny_shards) == ["synth_test_000"]
+    job_dir = tiny_checkpoint.parent.parent
+    for given in (tiny_checkpoint, tiny_checkpoint.parent, job_dir):
+        assert resolve_checkpoint(given) == tiny_checkpoint
+    with pytest.raises(FileNotFoundError, match="no sray checkpoint here"):
+        resolve_checkpoint(tmp_path)

@@ -84,5 +84,5 @@ def test_results_table_has_a_row_per_result():
     table = results_table(rows)
     assert "| a | sray | finished | 1 | 4 | 2.0 | 0.100 | 0.300 | 20.00 | 2.0 KiB | 1.00% | early stop" in table
     assert "| b | sray | failed |" in table and "InjectedFailure: x / y" in table
-    assert "mIoU: P" in table
+    assert "Protocol: P" in table
     assert [human_bytes(n) for n in (None, 512, 1536, 3 * 2**20)] == ["-", "512 B", "1.5 KiB", "3.0 MiB"]

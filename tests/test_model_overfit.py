@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
+import pytest
 import torch
 
 from sray.model.config import SRayConfig
@@ -32,7 +35,8 @@ def look_at(pos: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 def ray_cast(c2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Render (H, W, 3) colours and (H, W) labels of the room seen from ``c2w`` (exact intersections)."""
-    o, d = (t.numpy().astype(np.float64) for t in pixel_rays(torch.tensor(K), torch.tensor(c2w), image_pixels(H, W).double()))
+    rays = pixel_rays(torch.tensor(K), torch.tensor(c2w), image_pixels(H, W).double())
+    o, d = (t.numpy() for t in rays)  # (H*W, 3) float64
     best_t = np.full(len(d), np.inf)
     label = np.zeros(len(d), dtype=np.int64)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -69,7 +73,17 @@ def test_miou_helper_on_a_known_case() -> None:
     assert abs(miou(pred, gt, 3) - (1 / 3 + 2 / 3 + 0) / 3) < 1e-12
 
 
-def test_overfits_a_training_view_of_a_small_scene() -> None:
+@pytest.fixture
+def one_thread() -> Iterator[None]:
+    """Run on one intra-op thread: hundreds of small steps stall badly on a shared 2-core machine
+    when two OpenMP threads wait on each other; restored afterwards."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def test_overfits_a_training_view_of_a_small_scene(one_thread: None) -> None:
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
     target = np.array([0.0, 0.2, 3.0])
@@ -90,8 +104,8 @@ def test_overfits_a_training_view_of_a_small_scene() -> None:
     for step in range(STEPS):
         q = train_ids[step % 2]
         pick = torch.tensor(rng.choice(H * W, 128, replace=False))
-        origins, dirs = pixel_rays(torch.tensor(K, dtype=torch.float32), torch.tensor(cams[q], dtype=torch.float32),
-                                   pixels[pick])
+        origins, dirs = pixel_rays(torch.tensor(K, dtype=torch.float32),
+                                   torch.tensor(cams[q], dtype=torch.float32), pixels[pick])
         src = net.encode(src_rgb, src_K, src_c2w)
         out = net.render_rays(src, origins, dirs, NEAR, FAR, stratified=True)
         label = torch.tensor(views[q][1].reshape(-1)[pick.numpy()])

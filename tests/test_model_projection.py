@@ -99,7 +99,8 @@ def test_gathered_features_equal_direct_bilinear_sampling() -> None:
             if not valid[i, r, n]:
                 continue
             expected = _bilinear_numpy(feats[i], u / FEATURE_STRIDE, v / FEATURE_STRIDE)
-            torch.testing.assert_close(got[i, :, r, n], torch.tensor(expected, dtype=torch.float32), rtol=0, atol=2e-4)
+            expected_t = torch.tensor(expected, dtype=torch.float32)
+            torch.testing.assert_close(got[i, :, r, n], expected_t, rtol=0, atol=2e-4)
 
 
 def test_feature_pixel_centres_sit_on_every_fourth_full_res_pixel() -> None:

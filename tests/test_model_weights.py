@@ -67,3 +67,4 @@ def test_net_weights_ignore_invalid_views_and_sum_to_one() -> None:
     torch.testing.assert_close(w.sum(1)[n > 0], torch.ones(int((n > 0).sum())), rtol=0, atol=2e-6)
     nv = n[..., None].expand(4, 9, 6).transpose(1, 2)[valid].float()
     assert (w[valid] > cfg.tau / nv).all() and (w[valid] < 1 / (cfg.tau * nv)).all()
+

@@ -58,9 +58,9 @@ def test_prepare_find_resume_and_nesting(mlflow_uri, tmp_path):
 
 
 def test_server_uri_links_to_the_server():
-    from sray.platform.tracking import _handle
+    from sray.platform.tracking import run_handle
 
-    handle = _handle("http://mlflow:5000/", "3", "abc")
+    handle = run_handle("http://mlflow:5000/", "3", "abc")
     assert handle.ui_url == "http://mlflow:5000/#/experiments/3/runs/abc" and handle.ui_hint == ""
 
 
