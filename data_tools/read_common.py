@@ -49,6 +49,22 @@ def read_image(path: Path) -> np.ndarray:
         raise ValueError(f"{path}: not a readable image (corrupt or truncated file?)") from None
 
 
+def read_rgb8(path: Path) -> np.ndarray:
+    """An 8-bit RGB image (H, W, 3); ValueError naming the file otherwise."""
+    rgb = read_image(path)
+    if rgb.dtype != np.uint8 or rgb.ndim != 3:
+        raise ValueError(f"{path}: colour must be 8-bit RGB, got {rgb.dtype} {rgb.shape}")
+    return rgb
+
+
+def kept_view_ids(poses: dict[int, np.ndarray], frame_skip: int, src: Path, dropped: dict[str, str]) -> dict[str, int]:
+    """View id -> frame number of every ``frame_skip``-th usable frame; ValueError when none is left."""
+    kept = list(poses)[::frame_skip]
+    if not kept:
+        raise ValueError(f"{src}: no usable frame (dropped: {dropped})")
+    return {f"{frame:06d}": frame for frame in kept}
+
+
 def scale_intrinsics(K: np.ndarray, src_hw: tuple[int, int], dst_hw: tuple[int, int]) -> np.ndarray:
     """K (3, 3) of an image of size ``src_hw`` -> K of the same camera resampled to ``dst_hw``.
 

@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import NYU40, SCANNET20, class_names
-from sray.data_tools.read_common import (numbered_files, nyu40_to_label, read_depth_m, read_image,
+from sray.data_tools.read_common import (kept_view_ids, numbered_files, nyu40_to_label, read_depth_m, read_image,
+                                         read_rgb8,
                                          resample_nearest, resize_rgb, scale_intrinsics)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
@@ -188,17 +189,12 @@ def read_replica(src: Path, name: str, classes: Path | None = None, label_space:
             dropped[str(frame)] = f"non-finite pose in row {frame} of traj_w_c.txt"
         else:
             poses[frame] = traj[frame].reshape(4, 4)
-    kept = list(poses)[::frame_skip]
-    if not kept:
-        raise ValueError(f"{src}: no usable frame (dropped: {dropped})")
-    ids = {f"{frame:06d}": frame for frame in kept}
+    ids = kept_view_ids(poses, frame_skip, src, dropped)
 
     def read_view(view_id: str) -> View:
         """Load, map and (optionally) resize one rendered frame."""
         frame = ids[view_id]
-        rgb = read_image(rgbs[frame])
-        if rgb.dtype != np.uint8 or rgb.ndim != 3:
-            raise ValueError(f"{rgbs[frame]}: colour must be 8-bit RGB, got {rgb.dtype} {rgb.shape}")
+        rgb = read_rgb8(rgbs[frame])
         native_hw = rgb.shape[:2]
         hw = tuple(size_hw) if size_hw is not None else native_hw
         K_native = replica_intrinsics(native_hw)

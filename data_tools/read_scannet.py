@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import class_names
-from sray.data_tools.read_common import (check_principal_point, numbered_files, nyu40_to_label,
+from sray.data_tools.read_common import (check_principal_point, kept_view_ids, numbered_files, nyu40_to_label,
+                                         read_rgb8,
                                          read_depth_m, read_image, resample_nearest, resize_rgb,
                                          scale_intrinsics)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
@@ -149,17 +150,12 @@ def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str
             dropped[str(frame)] = f"invalid pose in {others['pose'][frame].name} (-inf or NaN entries)"
             continue
         poses[frame] = c2w
-    kept = list(poses)[::frame_skip]
-    if not kept:
-        raise ValueError(f"{src}: no usable frame (dropped: {dropped})")
-    ids = {f"{frame:06d}": frame for frame in kept}
+    ids = kept_view_ids(poses, frame_skip, src, dropped)
 
     def read_view(view_id: str) -> View:
         """Load, map and resample one frame into the target colour camera."""
         frame = ids[view_id]
-        rgb = read_image(colors[frame])
-        if rgb.dtype != np.uint8 or rgb.ndim != 3:
-            raise ValueError(f"{colors[frame]}: colour must be 8-bit RGB, got {rgb.dtype} {rgb.shape}")
+        rgb = read_rgb8(colors[frame])
         color_hw = rgb.shape[:2]
         check_principal_point(K_color, color_hw, str(k_color_path))
         hw = tuple(size_hw) if size_hw is not None else color_hw
