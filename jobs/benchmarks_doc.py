@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import datetime as _dt
+import os
 import platform as _stdlib_platform
+import re
 import shlex
 import sys
 from pathlib import Path
@@ -13,28 +15,66 @@ import torch
 DEFAULT_DOC = Path("docs/benchmarks.md")
 
 
+def device_kind() -> str:
+    """The accelerator a number was measured on: the CUDA device's name, or 'CPU only'."""
+    return torch.cuda.get_device_name(0) if torch.cuda.is_available() else "CPU only"
+
+
 def machine_line() -> str:
     """One line naming the machine a number was measured on."""
-    if torch.cuda.is_available():
-        device = torch.cuda.get_device_name(0)
-    else:
-        device = f"CPU only, {torch.get_num_threads()} torch threads"
+    device = device_kind()
+    if not torch.cuda.is_available():
+        device += f", {torch.get_num_threads()} torch threads"
     return f"{_stdlib_platform.machine()}, {device}, torch {torch.__version__}, Python {_stdlib_platform.python_version()}"
 
 
+_HEADER = ("# Benchmarks\n\nEvery section below was written by the command it names; a rerun on the same "
+           "kind of device replaces its section, another device adds one. Ratios are measured side by side "
+           "in one run.\n")
+
+
+def _split_sections(text: str) -> tuple[str, list[str]]:
+    """The document's preamble and its ``## `` sections, each with its trailing text."""
+    parts = re.split(r"(?m)^(?=## )", text)
+    return parts[0], parts[1:]
+
+
+def _same_slot(section: str, title: str) -> bool:
+    """Whether ``section`` holds the benchmark ``title`` measured on this kind of device."""
+    lines = section.splitlines()
+    if not lines or lines[0].strip() != f"## {title}":
+        return False
+    command = next((ln for ln in lines if ln.startswith("Command: ")), "")
+    return f", {device_kind()}," in command or command.endswith(f", {device_kind()}")
+
+
 def record(title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "") -> str:
-    """Print a benchmark section and append it to ``doc``; returns the section text."""
+    """Print a benchmark section and write it into ``doc``; returns the section text.
+
+    A section with the same title measured on the same kind of device is replaced in place (so the
+    document holds the latest numbers once per device); otherwise the section is appended. The file
+    is rewritten through a temporary file and a rename, so an interrupted run leaves it intact.
+    """
     command = "sray " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    section = (f"\n## {title}\n\nCommand: `{command}` — {stamp} — {machine_line()}\n\n"
+    section = (f"## {title}\n\nCommand: `{command}` — {stamp} — {machine_line()}\n\n"
                f"{table_markdown.strip()}\n")
     if notes:
         section += f"\n{notes.strip()}\n"
-    print(section)
+    print("\n" + section)
+    preamble, sections = _split_sections(doc.read_text() if doc.exists() else _HEADER)
+    for i, old in enumerate(sections):
+        if _same_slot(old, title):
+            sections[i] = section + "\n" if i < len(sections) - 1 else section
+            break
+    else:
+        if sections and not sections[-1].endswith("\n\n"):
+            sections[-1] = sections[-1].rstrip("\n") + "\n\n"
+        elif not sections and not preamble.endswith("\n\n"):
+            preamble = preamble.rstrip("\n") + "\n\n"
+        sections.append(section)
     doc.parent.mkdir(parents=True, exist_ok=True)
-    if not doc.exists():
-        doc.write_text("# Benchmarks\n\nEvery section below was appended by the command it names; "
-                       "ratios are measured side by side in one run.\n")
-    with open(doc, "a") as f:
-        f.write(section)
+    tmp = doc.with_name(doc.name + ".tmp")
+    tmp.write_text(preamble + "".join(sections))
+    os.replace(tmp, doc)
     return section

@@ -7,6 +7,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# Property tests: CI replays a fixed example sequence so a run is reproducible; set
+# SRAY_HYPOTHESIS=explore to draw fresh random examples on every run when hunting bugs.
+settings.register_profile("ci", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("SRAY_HYPOTHESIS", "ci"))
 
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # shared fixture modules beside the tests

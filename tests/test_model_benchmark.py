@@ -46,4 +46,4 @@ def test_quick_benchmark_produces_both_tables() -> None:
     assert "target <= 0.55" in notes1
     assert "tiny" in table2 and "fp32" in table2
     step_cells = [c.strip() for c in table2.splitlines()[2].split("|")[1:-1]]
-    assert float(step_cells[6]) > 0 and float(step_cells[7]) > 0 and float(step_cells[9]) > 0
+    assert float(step_cells[7]) > 0 and float(step_cells[8]) > 0 and float(step_cells[10]) > 0
