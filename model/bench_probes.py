@@ -179,17 +179,14 @@ def train_step_worker(spec: dict) -> dict:
 
     spec: rays, coarse, fine, views, hw, device, dtype ('fp32'|'bf16'|'fp16'), steps, and
     optionally compile (compile both per-sample fields with ``torch.compile`` in place) and
-    alloc ('heap': call ``cpu_memory.keep_freed_memory`` first; 'thp' needs the environment
-    variable THP_MEM_ALLOC_ENABLE=1 set by the parent before this process starts).
+    alloc ('thp' needs the environment variable THP_MEM_ALLOC_ENABLE=1 set by the parent before
+    this process starts).
     Meant to run in a fresh process; returns the first step's time (warm-up, compilation
     included), the median of the following ``steps`` steps and the process peak RSS.
     """
-    from .cpu_memory import keep_freed_memory
     from .losses import render_loss
     from .sray import SRayModel
 
-    if spec.get("alloc") == "heap" and not keep_freed_memory():
-        raise RuntimeError("sray.model.benchmark: alloc='heap' needs glibc's mallopt (Linux).")
     device = torch.device(spec["device"])
     torch.manual_seed(0)
     cfg = SRayConfig(n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"])
