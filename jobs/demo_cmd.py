@@ -26,14 +26,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=int, default=120)
     p.add_argument("--width", type=int, default=160)
     p.add_argument("--steps", type=int, default=300, help="training steps (0 = data only)")
-    p.add_argument("--finetune-seconds", type=float, default=90.0,
+    p.add_argument("--finetune-seconds", type=float, default=60.0,
                    help="wall-clock budget of each per-scene finetune (both methods)")
+    p.add_argument("--eval-stride", type=int, default=2,
+                   help="score every n-th pixel in each direction in the zero-shot evaluation "
+                        "(the fleet's held-out curves use twice this); 1 = full images")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
 
 def _say(msg: str) -> None:
     print(f"[demo] {msg}", flush=True)
+
+
+def _sray_command() -> str:
+    """How to call ``sray`` again from here: the script this process was started as, else ``sray``."""
+    script = Path(sys.argv[0])
+    if script.name == "sray" and script.exists():
+        try:
+            return str(script.resolve().relative_to(Path.cwd()))
+        except ValueError:
+            return str(script)
+    return "sray"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -86,23 +100,26 @@ def run(args: argparse.Namespace) -> int:
     cfg.optim.steps = args.steps
     cfg.run.output_dir = str(args.out / "train")
     cfg.run.seed = args.seed
-    cfg.run.val_every = cfg.run.ckpt_every = max(args.steps // 2, 1)
+    cfg.run.ckpt_every = max(args.steps // 2, 1)
+    cfg.run.val_every = args.steps  # one validation, at the end: it costs about a minute on 2 cores
     _say(f"5/8 training S-Ray for {args.steps} steps on local Ray with {cfg.run.workers} CPU workers")
     outcome = launch_training(cfg)
     checkpoint = outcome.best_checkpoint or outcome.latest_checkpoint
     scenes_test = unseen_scenes(shards)
-    _say(f"6/8 zero-shot evaluation of {checkpoint.name} on the unseen scenes {', '.join(scenes_test)}")
+    _say(f"6/8 zero-shot evaluation of {checkpoint.name} on the unseen scenes {', '.join(scenes_test)} "
+         f"(scored on 1 pixel in every {args.eval_stride}x{args.eval_stride} block)")
     report = evaluate_checkpoint(checkpoint, shards, scenes_test, args.out / "eval", n_source=cfg.model.n_source,
-                                 stride=1, progress=True)
+                                 stride=args.eval_stride, progress=True)
     print(format_table(report), flush=True)
     fleet_cfg = FleetConfig()
     fleet_cfg.finetune.max_seconds = args.finetune_seconds
     fleet_cfg.finetune.eval_n_source = cfg.model.n_source
+    fleet_cfg.finetune.eval_stride = 2 * args.eval_stride
     _say(f"7/8 finetune fleet on {len(scenes_test)} unseen scenes: S-Ray (from the trained model) and "
          f"Semantic-NeRF (from scratch), {args.finetune_seconds:.0f} s budget each, early stopping on held-out mIoU")
     results = run_fleet(fleet_cfg, checkpoint, shards, scenes_test, args.out / "fleet", "", ["sray", "semantic-nerf"])
     _say(f"8/8 results (charts in {args.out / 'fleet' / 'charts'}):")
     print(results_table(results), flush=True)
     _say(f"done in {(time.perf_counter() - t0) / 60:.1f} min; results under {args.out.resolve()}")
-    _say("browse everything in the MLflow dashboard:  sray ui   (then open the printed URL)")
+    _say(f"browse everything in the MLflow dashboard:  {_sray_command()} ui   (then open the printed URL)")
     return 0

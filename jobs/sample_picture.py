@@ -44,9 +44,10 @@ def write_sample_picture(sample: dict, class_names: list[str], path: Path, ignor
         ax.set_ylim(h - 0.5, -0.5)
         ax.set_title(title, fontsize=9)
     present = sorted(int(c) for c in np.unique(labels) if c != ignore_id)
-    axes[0, 2 if cols > 2 else 1].legend(
-        handles=[plt.Line2D([], [], marker="s", ls="", color=pal[c], label=class_names[c]) for c in present],
-        loc="center", fontsize=7, frameon=False, ncol=2)
+    handles = [plt.Line2D([], [], marker="s", ls="", color=pal[c], label=class_names[c]) for c in present]
+    if (labels == ignore_id).any():
+        handles.append(plt.Line2D([], [], marker="s", ls="", color="black", label=f"ignore ({ignore_id})"))
+    axes[0, 2 if cols > 2 else 1].legend(handles=handles, loc="center", fontsize=7, frameon=False, ncol=2)
     for i in range(m):
         axes[1, i].imshow(src[i])
         axes[1, i].set_title(f"source {i + 1}", fontsize=9)
