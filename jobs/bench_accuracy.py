@@ -44,15 +44,21 @@ class Preset:
     """Wall-clock budget of each finetune (both methods)."""
     budgets: tuple[float, ...]
     """Equal-budget read-off points (seconds)."""
+    validations: int
+    """Held-out validations during each pretraining (the best one's checkpoint is used)."""
+    fleet_eval_stride: int
+    """Finetune curves score every n-th pixel in each direction of the held-out views."""
 
 
 PRESETS = {
     "cpu-small": Preset(train_scenes=4, test_scenes=2, views=40, height=120, width=160, steps=300, rays=256,
                         n_coarse=24, n_fine=24, n_source=4, workers=2, gpus_per_worker=0.0, precision="no",
-                        budget_s=150.0, budgets=(30.0, 60.0, 150.0)),
+                        budget_s=150.0, budgets=(30.0, 60.0, 150.0), validations=1,
+                        fleet_eval_stride=4),
     "gpu": Preset(train_scenes=12, test_scenes=4, views=100, height=240, width=320, steps=20_000, rays=1024,
                   n_coarse=64, n_fine=64, n_source=8, workers=1, gpus_per_worker=1.0, precision="bf16",
-                  budget_s=600.0, budgets=(60.0, 120.0, 300.0, 600.0)),
+                  budget_s=600.0, budgets=(60.0, 120.0, 300.0, 600.0), validations=4,
+                  fleet_eval_stride=2),
 }
 
 
@@ -69,7 +75,7 @@ def _pretrain(variant: str, p: Preset, shards: Path, out: Path, tracking_uri: st
     cfg.run.workers, cfg.run.gpus_per_worker, cfg.run.precision = p.workers, p.gpus_per_worker, p.precision
     cfg.run.output_dir, cfg.run.tracking_uri = str(out / "train"), tracking_uri
     cfg.run.experiment, cfg.run.register_model = "sray-bench-accuracy", ""
-    cfg.run.val_every = cfg.run.ckpt_every = max(p.steps // 3, 1)
+    cfg.run.val_every = cfg.run.ckpt_every = max(p.steps // p.validations, 1)
     cfg.run.name = f"bench-{variant}-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}"
     outcome = launch_training(cfg)
     return outcome.best_checkpoint or outcome.latest_checkpoint
@@ -133,6 +139,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     fleet_cfg.finetune.max_steps = 100_000
     fleet_cfg.finetune.patience = 10_000  # equal budgets: no early stop in the comparison
     fleet_cfg.finetune.eval_n_source = p.n_source
+    fleet_cfg.finetune.eval_stride = p.fleet_eval_stride
     fleet_cfg.gpus_per_task = 0.5 if p.gpus_per_worker else 0.0
     fleet_cfg.experiment = "sray-bench-accuracy"
     results = run_fleet(fleet_cfg, checkpoints["full"], shards, scenes, out / "fleet", tracking_uri,
@@ -160,7 +167,8 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
              f"{p.n_coarse}+{p.n_fine} samples, {p.workers} worker(s), on {p.train_scenes} procedural scenes "
              f"({p.width}x{p.height}, {p.views} views). Finetunes: {p.budget_s:.0f} s wall-clock budget each, "
              f"equal for both methods, read off at the last held-out evaluation before each budget (0 s = "
-             f"zero-shot for S-Ray, untrained for Semantic-NeRF). Total benchmark wall time "
+             f"zero-shot for S-Ray, untrained for Semantic-NeRF), held-out views scored on 1 pixel in every "
+             f"{p.fleet_eval_stride}x{p.fleet_eval_stride} block. Total benchmark wall time "
              f"{(time.perf_counter() - t0) / 60:.1f} min.\n\n" + "\n".join(links))
     record(f"Accuracy: attention ablation, zero-shot ({preset})", ablation, doc)
     record(f"Accuracy: S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets ({preset})",
