@@ -112,13 +112,13 @@ ALLOCATORS = {"default": "glibc malloc", "thp": "THP_MEM_ALLOC_ENABLE=1"}
 def _run_in_fresh_process(spec: dict) -> dict:
     """Run ``train_step_worker(spec)`` in a newly spawned interpreter (clean peak RSS).
 
-    For ``alloc='thp'`` the child inherits THP_MEM_ALLOC_ENABLE=1 (PyTorch reads it once, at its
-    first allocation); the parent's environment is restored afterwards.
+    The child inherits THP_MEM_ALLOC_ENABLE=1 for ``alloc='thp'`` and 0 otherwise, whatever the
+    caller's environment says (PyTorch reads it once, at its first allocation); the parent's
+    environment is restored afterwards.
     """
     ctx = multiprocessing.get_context("spawn")
     saved = os.environ.get("THP_MEM_ALLOC_ENABLE")
-    if spec.get("alloc") == "thp":
-        os.environ["THP_MEM_ALLOC_ENABLE"] = "1"
+    os.environ["THP_MEM_ALLOC_ENABLE"] = "1" if spec.get("alloc") == "thp" else "0"
     try:
         with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
             return pool.submit(train_step_worker, spec).result()
