@@ -63,18 +63,11 @@ def record(title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str 
         section += f"\n{notes.strip()}\n"
     print("\n" + section)
     preamble, sections = _split_sections(doc.read_text() if doc.exists() else _HEADER)
-    for i, old in enumerate(sections):
-        if _same_slot(old, title):
-            sections[i] = section + "\n" if i < len(sections) - 1 else section
-            break
-    else:
-        if sections and not sections[-1].endswith("\n\n"):
-            sections[-1] = sections[-1].rstrip("\n") + "\n\n"
-        elif not sections and not preamble.endswith("\n\n"):
-            preamble = preamble.rstrip("\n") + "\n\n"
-        sections.append(section)
+    slot = next((i for i, old in enumerate(sections) if _same_slot(old, title)), len(sections))
+    sections[slot:slot + 1] = [section]
+    text = "\n".join(part.strip("\n") + "\n" for part in [preamble, *sections])
     doc.parent.mkdir(parents=True, exist_ok=True)
     tmp = doc.with_name(doc.name + ".tmp")
-    tmp.write_text(preamble + "".join(sections))
+    tmp.write_text(text)
     os.replace(tmp, doc)
     return section

@@ -38,16 +38,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def build_fleet_config(args: argparse.Namespace):
     """The FleetConfig of the parsed flags: defaults, then the flags, then ``--set`` overrides."""
+    from sray.platform.config_override import apply_settings
     from sray.platform.fleet_config import FleetConfig, apply_fleet_override
 
     cfg = FleetConfig()
     flags = {"max_parallel": args.max_parallel, "cpus_per_task": args.cpus_per_task,
              "gpus_per_task": args.gpus_per_task, "finetune.precision": args.precision, "address": args.address}
-    for key, value in flags.items():
-        if value is not None:
-            apply_fleet_override(cfg, f"{key}={value}")
-    for assignment in args.overrides:
-        apply_fleet_override(cfg, assignment)
+    apply_settings(cfg, flags, args.overrides, apply_fleet_override)
     return cfg
 
 

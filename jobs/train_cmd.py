@@ -41,6 +41,7 @@ def build_config(args: argparse.Namespace):
     """The job's TrainConfig: the recipe (or a resumed job's saved config) plus flags and --set."""
     from sray.jobs.recipes import get_recipe
     from sray.platform.launcher import load_job_config
+    from sray.platform.config_override import apply_settings
     from sray.platform.train_config import apply_override
 
     cfg = get_recipe(args.recipe)
@@ -50,11 +51,7 @@ def build_config(args: argparse.Namespace):
     flags = {"data.shards": args.data, "run.workers": args.workers, "run.gpus_per_worker": args.gpus_per_worker,
              "run.precision": args.precision, "run.tracking_uri": args.tracking_uri,
              "run.name": None if args.resume else args.name}
-    for key, value in flags.items():
-        if value is not None:
-            apply_override(cfg, f"{key}={value}")
-    for assignment in args.overrides:
-        apply_override(cfg, assignment)
+    apply_settings(cfg, flags, args.overrides, apply_override)
     return cfg
 
 

@@ -8,9 +8,10 @@ the shared checkpoint's training value (its rays per batch, source views, sample
 from __future__ import annotations
 
 import dataclasses
-import typing
 from dataclasses import dataclass, field
 from typing import Any
+
+from sray.platform.config_override import set_field
 
 METHODS = ("sray", "semantic-nerf")
 """Per-scene methods a fleet runs: S-Ray finetuned from the shared model, Semantic-NeRF from scratch."""
@@ -164,54 +165,10 @@ def check_fleet_config(cfg: FleetConfig) -> None:
                          "fine.classifier")
 
 
-def _parse(kind: Any, raw: str, assignment: str) -> Any:
-    """Parse ``raw`` as the annotated type ``kind`` (int, float, str, bool, X | None, tuple/list of X)."""
-    args = typing.get_args(kind)
-    origin = typing.get_origin(kind)
-    if type(None) in args:  # X | None
-        if raw.lower() in ("none", "null", ""):
-            return None
-        return _parse(next(a for a in args if a is not type(None)), raw, assignment)
-    if origin in (tuple, list):
-        items = [_parse(args[0], x.strip(), assignment) for x in raw.strip("()[] ").split(",") if x.strip()]
-        return tuple(items) if origin is tuple else items
-    if kind is bool:
-        if raw.lower() not in ("true", "false", "1", "0", "yes", "no"):
-            raise ValueError(f"--set {assignment!r}: {raw!r} is not a bool (true/false)")
-        return raw.lower() in ("true", "1", "yes")
-    try:
-        return kind(raw)
-    except ValueError:
-        raise ValueError(f"--set {assignment!r}: {raw!r} is not a valid {kind.__name__}") from None
-
-
 def apply_fleet_override(cfg: FleetConfig, assignment: str) -> None:
     """Apply one ``[section.]field=value`` override in place (value parsed as the field's type).
 
     Raises ValueError naming an unknown section or field and listing the valid ones, or a value
-    out of range.
+    out of range (the config keeps its previous value then).
     """
-    if "=" not in assignment:
-        raise ValueError(f"--set {assignment!r}: expected [section.]field=value, e.g. finetune.patience=5")
-    path, raw = assignment.split("=", 1)
-    parts = path.strip().split(".")
-    target: Any = cfg
-    for part in parts[:-1]:
-        child = getattr(target, part, None)
-        if not dataclasses.is_dataclass(child):
-            raise ValueError(f"--set {assignment!r}: no section {part!r}; sections: finetune, nerf "
-                             "(top-level fields take no section)")
-        target = child
-    name = parts[-1]
-    hints = typing.get_type_hints(type(target))
-    fields = {f.name for f in dataclasses.fields(target)}
-    if name not in fields:
-        raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; "
-                         f"fields: {', '.join(sorted(fields))}")
-    previous = getattr(target, name)
-    setattr(target, name, _parse(hints[name], raw.strip(), assignment))
-    try:
-        check_fleet_config(cfg)
-    except ValueError:
-        setattr(target, name, previous)  # leave the config valid
-        raise
+    set_field(cfg, assignment, "finetune.patience=5", lambda: check_fleet_config(cfg))

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from sray.model.config import SRayConfig
+from sray.platform.config_override import set_field
 
 PRECISIONS = ("no", "bf16", "fp16")
 """Mixed-precision modes: fp32, bfloat16 autocast (CPU and CUDA), fp16 with loss scaling (CUDA)."""
@@ -130,41 +131,7 @@ class TrainConfig:
 def apply_override(cfg: TrainConfig, assignment: str) -> None:
     """Apply one ``section.field=value`` override in place, parsing the value as the field's type.
 
-    Raises ValueError naming the unknown field and listing the valid ones.
+    Raises ValueError naming the unknown section or field and listing the valid ones, or a value the
+    network cannot run with (the config keeps its previous value then).
     """
-    if "=" not in assignment:
-        raise ValueError(f"--set {assignment!r}: expected section.field=value, e.g. optim.lr=5e-4")
-    path, raw = assignment.split("=", 1)
-    parts = path.strip().split(".")
-    target: Any = cfg
-    for part in parts[:-1]:
-        if not dataclasses.is_dataclass(target) or not hasattr(target, part):
-            raise ValueError(f"--set {assignment!r}: no section {part!r}; sections: model, data, optim, run")
-        target = getattr(target, part)
-    name = parts[-1]
-    fields = {f.name: f for f in dataclasses.fields(target)}
-    if name not in fields:
-        raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; "
-                         f"fields: {', '.join(sorted(fields))}")
-    current = getattr(target, name)
-    setattr(target, name, _parse_like(current, raw.strip(), assignment))
-    if hasattr(target, "__post_init__"):
-        target.__post_init__()
-
-
-def _parse_like(current: Any, raw: str, assignment: str) -> Any:
-    """Parse ``raw`` into the type of ``current``."""
-    try:
-        if isinstance(current, bool):
-            if raw.lower() not in ("true", "false", "1", "0", "yes", "no"):
-                raise ValueError(raw)
-            return raw.lower() in ("true", "1", "yes")
-        if isinstance(current, int):
-            return int(raw)
-        if isinstance(current, float):
-            return float(raw)
-        if isinstance(current, tuple):
-            return tuple(type(current[0])(x) for x in raw.strip("()[] ").split(",") if x.strip())
-        return raw
-    except ValueError:
-        raise ValueError(f"--set {assignment!r}: {raw!r} is not a valid {type(current).__name__}") from None
+    set_field(cfg, assignment, "optim.lr=5e-4", cfg.model.__post_init__)

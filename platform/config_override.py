@@ -1,0 +1,79 @@
+"""``--set section.field=value`` on nested config dataclasses: the one override mechanism of every command.
+
+A value is parsed as the field's annotated type (int, float, str, bool, ``X | None``, tuple or list
+of X); an unknown section or field is refused with the valid names; a value the config's own checks
+reject is rolled back, so the config stays valid.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from collections.abc import Callable
+from typing import Any
+
+
+def parse_value(kind: Any, raw: str, assignment: str) -> Any:
+    """Parse ``raw`` as the annotated type ``kind``; ValueError names the assignment."""
+    args = typing.get_args(kind)
+    origin = typing.get_origin(kind)
+    if type(None) in args:  # X | None
+        if raw.lower() in ("none", "null", ""):
+            return None
+        return parse_value(next(a for a in args if a is not type(None)), raw, assignment)
+    if origin in (tuple, list):
+        items = [parse_value(args[0], x.strip(), assignment) for x in raw.strip("()[] ").split(",") if x.strip()]
+        return tuple(items) if origin is tuple else items
+    if kind is bool:
+        if raw.lower() not in ("true", "false", "1", "0", "yes", "no"):
+            raise ValueError(f"--set {assignment!r}: {raw!r} is not a bool (true/false)")
+        return raw.lower() in ("true", "1", "yes")
+    try:
+        return kind(raw)
+    except ValueError:
+        raise ValueError(f"--set {assignment!r}: {raw!r} is not a valid {kind.__name__}") from None
+
+
+def _sections(node: Any) -> list[str]:
+    """Names of the fields of ``node`` that are themselves config sections (dataclasses)."""
+    return [f.name for f in dataclasses.fields(node) if dataclasses.is_dataclass(getattr(node, f.name))]
+
+
+def set_field(cfg: Any, assignment: str, example: str, validate: Callable[[], None]) -> None:
+    """Apply one ``[section.]field=value`` to ``cfg`` in place, then ``validate()``.
+
+    ``example`` is shown when the assignment has no ``=``. If ``validate`` raises ValueError the
+    field gets its previous value back and the error propagates.
+    """
+    if "=" not in assignment:
+        raise ValueError(f"--set {assignment!r}: expected [section.]field=value, e.g. {example}")
+    path, raw = assignment.split("=", 1)
+    parts = path.strip().split(".")
+    target: Any = cfg
+    for part in parts[:-1]:
+        child = getattr(target, part, None)
+        if not dataclasses.is_dataclass(child):
+            raise ValueError(f"--set {assignment!r}: no section {part!r}; sections: {', '.join(_sections(target))}")
+        target = child
+    name = parts[-1]
+    fields = {f.name for f in dataclasses.fields(target)} - set(_sections(target))
+    if name not in fields:
+        raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; "
+                         f"fields: {', '.join(sorted(fields))}")
+    previous = getattr(target, name)
+    setattr(target, name, parse_value(typing.get_type_hints(type(target))[name], raw.strip(), assignment))
+    try:
+        validate()
+    except ValueError:
+        setattr(target, name, previous)
+        raise
+
+
+def apply_settings(cfg: Any, flags: dict[str, Any], assignments: list[str],
+                   apply: Callable[[Any, str], None]) -> None:
+    """Apply a command's flags (``path -> value``, None = not given), then its ``--set`` assignments."""
+    for path, value in flags.items():
+        if value is not None:
+            apply(cfg, f"{path}={value}")
+    for assignment in assignments:
+        apply(cfg, assignment)
