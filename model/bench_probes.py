@@ -48,20 +48,26 @@ def attention_case(
     gen = torch.Generator().manual_seed(seed)
     cfg = SRayConfig(feat_dim=channels, attention=variant, n_coarse=samples)
     torch.manual_seed(seed)
-    module = CrossReprojectionAttention(cfg, samples).to(device)
+    module = CrossReprojectionAttention(cfg).to(device)
     space = torch.randn(rays, views, samples, channels, generator=gen).to(device)
     valid = (torch.rand(rays, views, samples, generator=gen) < 0.9).to(device)
     return module, space, valid
 
 
+def sample_depths(rays: int, samples: int, device: torch.device) -> torch.Tensor:
+    """Evenly spread normalised sample depths (R, N) in (0, 1), the position input of CRA."""
+    return ((torch.arange(samples, dtype=torch.float32) + 0.5) / samples).expand(rays, samples).to(device)
+
+
 def attention_call(module: CrossReprojectionAttention, space: torch.Tensor, valid: torch.Tensor,
                    backward: bool) -> Callable[[], None]:
     """A closure running the attention stage forward (and backward of its output sum)."""
+    depth01 = sample_depths(space.shape[0], space.shape[2], space.device)
 
     def run() -> None:
         x = space.detach().requires_grad_(backward)
         with torch.set_grad_enabled(backward):
-            out = module(x, valid)
+            out = module(x, valid, depth01)
             if backward:
                 out.float().sum().backward()
     return run

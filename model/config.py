@@ -9,6 +9,11 @@ ATTENTION_VARIANTS = ("full", "intra", "cross", "none", "dense")
 attention (the paper's CRA); ``intra`` / ``cross`` = only one of the two; ``none`` = no attention;
 ``dense`` = one joint attention over all (view, sample) tokens of a ray (the paper's baseline)."""
 
+WEIGHT_MAPS = ("radial", "affine")
+"""How the semantic-aware weight net's per-view outputs become weights in C(tau) (``semantic_weights``):
+``radial`` (default) can approach both bounds tau/m and 1/(tau m); ``affine`` (the first version)
+reaches only (2 - tau)/m from above."""
+
 DENSITY_ACTIVATIONS = ("softplus", "relu")
 """Non-negative activations allowed for the density output."""
 
@@ -40,6 +45,9 @@ class SRayConfig:
     """Hidden width of an optional pre-norm ReLU feed-forward after each CRA attention, as a
     multiple of feat_dim; 0 (default) leaves it out, as the appendix's CRA table lists attention
     layers only. It costs two full passes of the largest tensors per attention."""
+    depth_freqs: int = 6
+    """Frequencies of the encoding of each sample's normalised depth (z - near) / (far - near)
+    whose learned projection is added to M before intra-view attention (0 = the raw depth only)."""
     dir_hidden: int = 16
     """Hidden width of the view-direction MLP (4 -> 16 -> C, appendix L21)."""
     weight_hidden: tuple[int, int] = (16, 8)
@@ -48,6 +56,8 @@ class SRayConfig:
     """Widths of the geometry net's MLP on [mean, variance] (64 -> 32 -> 16, appendix L8)."""
     tau: float = 0.7
     """Bound of the semantic-aware weights: tau/m < w_i < 1/(tau m); tau = 1 is the plain mean."""
+    weight_map: str = "radial"
+    """Parametrisation of the semantic-aware weights, one of ``WEIGHT_MAPS``."""
     weight_margin: float = 1e-3
     """Fraction of the weight range kept unused so the bounds stay strict when the sigmoid
     scores saturate to exactly 0 or 1 in floating point (see ``semantic_weights``)."""
@@ -73,6 +83,10 @@ class SRayConfig:
 
         if self.attention not in ATTENTION_VARIANTS:
             raise bad("attention", f"is {self.attention!r}; use one of {ATTENTION_VARIANTS}")
+        if self.weight_map not in WEIGHT_MAPS:
+            raise bad("weight_map", f"is {self.weight_map!r}; use one of {WEIGHT_MAPS}")
+        if self.depth_freqs < 0:
+            raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
         if self.density_activation not in DENSITY_ACTIVATIONS:
             raise bad("density_activation",
                       f"is {self.density_activation!r}; use one of {DENSITY_ACTIVATIONS}")

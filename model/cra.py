@@ -3,7 +3,9 @@
 M has shape (R, m, N, C): R rays, m source views, N samples per ray, C channels.
 
 * intra-view radial attention: for every (ray, view), attention over that view's N samples, after
-  adding a learned embedding of the sample index (appendix table: L1-L4);
+  adding a learned embedding of each sample's normalised depth (appendix table: L1-L4). Depth, not
+  the sample's rank: in the fine pass (the sorted union of coarse and resampled samples) rank k
+  means a different depth on every ray, and a rank table fixes the sample count;
 * cross-view sparse attention: for every (ray, sample), attention over its m views (L5-L6);
 * ``dense``: the paper's costly baseline, one joint attention over all m * N tokens of a ray.
 
@@ -26,6 +28,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from .config import SRayConfig
+from .positional_encoding import PositionalEncoding
 
 
 class AttentionBlock(nn.Module):
@@ -60,26 +63,33 @@ class AttentionBlock(nn.Module):
 class CrossReprojectionAttention(nn.Module):
     """M (R, m, N, C) -> refined M'' (R, m, N, C) with the variant chosen by ``cfg.attention``."""
 
-    def __init__(self, cfg: SRayConfig, n_samples: int) -> None:
+    def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         self.variant = cfg.attention
-        self.n_samples = n_samples
         c, h, f = cfg.feat_dim, cfg.n_heads, cfg.ffn_mult
-        self.pos: nn.Parameter | None = None
+        self.depth_embedding: nn.Module | None = None
         if self.variant in ("full", "intra", "dense"):
-            self.pos = nn.Parameter(torch.randn(n_samples, c) * 0.02)  # (N, C) sample-index embedding
+            encoding = PositionalEncoding(1, cfg.depth_freqs)
+            self.depth_embedding = nn.Sequential(encoding, nn.Linear(encoding.out_dim, c))
         self.intra = AttentionBlock(c, h, f) if self.variant in ("full", "intra") else None
         self.cross = AttentionBlock(c, h, f) if self.variant in ("full", "cross") else None
         self.dense = AttentionBlock(c, h, f) if self.variant == "dense" else None
 
-    def forward(self, space: Tensor, valid: Tensor) -> Tensor:
-        """space: (R, m, N, C); valid: (R, m, N) bool. Returns (R, m, N, C), meaningful where valid."""
+    def position_signal(self, depth01: Tensor) -> Tensor:
+        """The embedding added to every view's token of a sample: depth01 (R, N) in [0, 1] -> (R, N, C)."""
+        if self.depth_embedding is None:
+            raise ValueError(f"sray.model.cra: the {self.variant!r} variant adds no position signal.")
+        return self.depth_embedding(depth01.float()[..., None])
+
+    def forward(self, space: Tensor, valid: Tensor, depth01: Tensor) -> Tensor:
+        """space: (R, m, N, C); valid: (R, m, N) bool; depth01: (R, N) each sample's depth normalised
+        to [0, 1] between the ray's near and far. Returns (R, m, N, C), meaningful where valid."""
         r, m, n, c = space.shape
-        if n != self.n_samples:
-            raise ValueError(f"sray.model.cra: built for {self.n_samples} samples per ray, got {n}.")
+        if depth01.shape != (r, n):
+            raise ValueError(f"sray.model.cra: depth01 must be ({r}, {n}), got {tuple(depth01.shape)}.")
         x = space
-        if self.pos is not None:
-            x = x + self.pos.to(x.dtype)  # broadcast over rays and views (no view embedding)
+        if self.depth_embedding is not None:  # same signal for every view (no view embedding)
+            x = x + self.position_signal(depth01)[:, None].to(x.dtype)
         if self.intra is not None:  # over the N samples of each (ray, view)
             x = self.intra(x.reshape(r * m, n, c), valid.reshape(r * m, n)).view(r, m, n, c)
         if self.cross is not None:  # over the m views of each (ray, sample)

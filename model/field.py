@@ -18,27 +18,34 @@ from .semantic_weights import SemanticWeightNet
 from .source_set import SourceSet
 
 
+def normalised_depth(z: Tensor, near: Tensor, far: Tensor) -> Tensor:
+    """Each sample's depth as a fraction of its ray's [near, far]: z (R, N), near/far (R,) -> (R, N) in [0, 1]."""
+    return (z - near[:, None]) / (far - near).clamp_min(1e-6)[:, None]
+
+
 class SRayField(nn.Module):
     """Per-sample semantics, density and colour for a fixed number of samples per ray."""
 
-    def __init__(self, cfg: SRayConfig, n_samples: int) -> None:
+    def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         c = cfg.feat_dim
         self.context = ContextualSpace(c, cfg.dir_hidden, cfg.min_source_depth)
-        self.attention = CrossReprojectionAttention(cfg, n_samples)
+        self.attention = CrossReprojectionAttention(cfg)
         self.view_weights = SemanticWeightNet(cfg)
         self.classifier = nn.Sequential(nn.Linear(c, c), nn.ELU(), nn.Linear(c, cfg.n_classes))
         self.geometry = GeometryNet(cfg)
 
-    def forward(self, src: SourceSet, origins: Tensor, dirs: Tensor, z: Tensor) -> dict[str, Tensor]:
-        """origins, dirs: (R, 3); z: (R, N) sample depths (ray parameters).
+    def forward(self, src: SourceSet, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
+                far: Tensor) -> dict[str, Tensor]:
+        """origins, dirs: (R, 3); z: (R, N) sample depths (ray parameters); near, far: (R,).
 
-        Returns ``sigma`` (R, N) float32 >= 0, ``logits`` (R, N, L), ``rgb`` (R, N, 3) float32 and
-        ``view_weights`` (R, m, N) float32 (the semantic-aware weights).
+        Returns ``sigma`` (R, N) float32 >= 0 per world unit, ``logits`` (R, N, L), ``rgb`` (R, N, 3)
+        float32 and ``view_weights`` (R, m, N) float32 (the semantic-aware weights).
         """
         points = origins[:, None, :] + z[..., None] * dirs[:, None, :]  # (R, N, 3)
+        depth01 = normalised_depth(z, near, far)  # (R, N)
         ctx = self.context(src, points, dirs)
-        refined = self.attention(ctx["M"], ctx["valid"])  # (R, m, N, C)
+        refined = self.attention(ctx["M"], ctx["valid"], depth01)  # (R, m, N, C)
         w = self.view_weights(refined, ctx["dir"], ctx["valid"])  # (R, m, N)
         semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=1)  # (R, N, C)
         sigma, rgb = self.geometry(ctx["M"], ctx["valid"], ctx["dir"], ctx["rgb"])

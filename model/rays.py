@@ -11,7 +11,8 @@ def pixel_rays(K: Tensor, c2w: Tensor, uv: Tensor) -> tuple[Tensor, Tensor]:
 
     ``dirs = R_c2w K^-1 [u, v, 1]`` is NOT unit length: its camera-z component is 1, so the ray
     parameter t of ``o + t d`` is the camera z-depth and the scene's z-depth bounds apply as they
-    are. Computed in the dtype of ``c2w`` (float32 or float64).
+    are. Computed in the dtype of ``c2w`` (float32 or float64), with autocast off: in bfloat16 a
+    principal point of 159.5 rounds to 160 and rays move by pixels.
     """
     if K.shape != (3, 3) or c2w.shape != (4, 4) or uv.ndim != 2 or uv.shape[-1] != 2:
         raise ValueError(
@@ -19,10 +20,11 @@ def pixel_rays(K: Tensor, c2w: Tensor, uv: Tensor) -> tuple[Tensor, Tensor]:
             f"{tuple(K.shape)}, {tuple(c2w.shape)}, {tuple(uv.shape)}."
         )
     dtype = c2w.dtype
-    ones = torch.ones_like(uv[:, :1], dtype=dtype)
-    pix = torch.cat([uv.to(dtype), ones], dim=-1)  # (R, 3) homogeneous pixels
-    cam = torch.linalg.solve(K.to(dtype), pix.T).T  # (R, 3) = K^-1 [u, v, 1], z = 1
-    dirs = cam @ c2w[:3, :3].T  # (R, 3) rotated into the world
+    with torch.autocast(device_type=c2w.device.type, enabled=False):
+        ones = torch.ones_like(uv[:, :1], dtype=dtype)
+        pix = torch.cat([uv.to(dtype), ones], dim=-1)  # (R, 3) homogeneous pixels
+        cam = torch.linalg.solve(K.to(dtype), pix.T).T  # (R, 3) = K^-1 [u, v, 1], z = 1
+        dirs = cam @ c2w[:3, :3].T  # (R, 3) rotated into the world
     origins = c2w[:3, 3].expand_as(dirs)  # (R, 3)
     return origins, dirs
 

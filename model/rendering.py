@@ -9,6 +9,9 @@ Conventions shared by every model in ``sray.model``:
   starts at ``near`` and the last ends at ``far``. So the interval lengths ``delta`` always sum to
   ``far - near``, whatever the sampling (the paper's ``delta_k = z_{k+1} - z_k`` leaves the last
   sample without a length; this is the same quadrature with both ends closed).
+- Opacity uses metric distance: ``alpha_k = 1 - exp(-sigma_k delta_k |d|)`` with ``sigma`` a density
+  per world unit, so a corner ray (``|d|`` about 1.2 at ScanNet's field of view) crosses the same
+  optical depth per metre as the centre ray. ``t`` stays the z-depth so the scenes' bounds apply.
 - Compositing runs in float32 even inside an autocast region: transmittance is an exponential of
   a cumulative sum and loses all precision in bfloat16.
 """
@@ -18,6 +21,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from .debug_checks import value_checks_enabled
+
 # Keys that ``composite`` writes itself; a rendered value may not use them.
 RESERVED_KEYS = ("weights", "opacity", "depth")
 
@@ -26,7 +31,8 @@ PDF_EPS = 1e-5
 
 
 def _check_bounds(near: Tensor, far: Tensor, n_rays: int, where: str) -> None:
-    """Raise a clear error unless ``near`` and ``far`` are (R,) tensors with near <= far."""
+    """Raise a clear error unless ``near`` and ``far`` are (R,) tensors (and, with
+    ``SRAY_DEBUG_CHECKS=1``, near <= far on every ray: a value check that syncs the device)."""
     for name, t in (("near", near), ("far", far)):
         if not isinstance(t, Tensor) or t.shape != (n_rays,):
             shape = tuple(t.shape) if isinstance(t, Tensor) else type(t).__name__
@@ -35,7 +41,7 @@ def _check_bounds(near: Tensor, far: Tensor, n_rays: int, where: str) -> None:
                 f"(one bound per ray), got {shape}; expand a scalar with "
                 f"`torch.full((R,), value)`."
             )
-    if bool((far < near).any()):
+    if value_checks_enabled() and bool((far < near).any()):
         raise ValueError(
             f"sray.model.rendering.{where}: some rays have far < near; check the scene's depth "
             "bounds (near must not exceed far)."
@@ -143,16 +149,19 @@ def merge_samples(z_coarse: Tensor, z_fine: Tensor) -> Tensor:
 
 
 def composite(
-    sigma: Tensor, z: Tensor, near: Tensor, far: Tensor, values: dict[str, Tensor]
+    sigma: Tensor, z: Tensor, near: Tensor, far: Tensor, values: dict[str, Tensor],
+    ray_length: Tensor | None = None,
 ) -> dict[str, Tensor]:
     """Alpha-composite per-sample densities and values along each ray (float32 throughout).
 
-    sigma: (R, N) non-negative densities; z: (R, N) sorted sample depths; near, far: (R,);
-    values: name -> (R, N, D) per-sample quantities (semantic logits, colour, ...).
+    sigma: (R, N) non-negative densities per world unit; z: (R, N) sorted sample ray parameters;
+    near, far: (R,); values: name -> (R, N, D) per-sample quantities (semantic logits, colour, ...);
+    ray_length: (R,) the world length ``|d|`` of each ray's direction (None: unit directions).
 
-    With ``delta_k`` the interval length of sample ``k`` (see the module docstring),
-    ``alpha_k = 1 - exp(-sigma_k delta_k)`` and ``T_k = exp(-sum_{j<k} sigma_j delta_j)``
-    (exclusive cumulative sum in log space), the weights are ``w_k = T_k alpha_k``.
+    With ``delta_k`` the interval of sample ``k`` in ray parameter (see the module docstring) and
+    ``l = |d|``, ``alpha_k = 1 - exp(-sigma_k delta_k l)`` and
+    ``T_k = exp(-sum_{j<k} sigma_j delta_j l)`` (exclusive cumulative sum in log space), the
+    weights are ``w_k = T_k alpha_k``.
 
     Returns ``weights`` (R, N); ``opacity`` (R,) = sum w; ``depth`` (R,) = sum w z, the expected
     depth with the empty remainder of the ray counting as 0 (NOT divided by opacity; divide by
@@ -180,7 +189,12 @@ def composite(
     with torch.autocast(device_type=sigma.device.type, enabled=False):
         sigma32, z32 = sigma.float(), z.float()
         edges = bin_edges(z32, near.float(), far.float())  # (R, N+1)
-        delta = (edges[:, 1:] - edges[:, :-1]).clamp_min(0.0)  # (R, N)
+        delta = (edges[:, 1:] - edges[:, :-1]).clamp_min(0.0)  # (R, N) in ray parameter
+        if ray_length is not None:
+            if ray_length.shape != (n_rays,):
+                raise ValueError(f"sray.model.rendering.composite: `ray_length` must be ({n_rays},), got "
+                                 f"{tuple(ray_length.shape)}.")
+            delta = delta * ray_length.float()[:, None]  # (R, N) metric interval lengths
         tau = sigma32 * delta  # (R, N) optical depth of each interval
         alpha = -torch.expm1(-tau)  # 1 - exp(-tau), accurate for small tau
         # (R, N) exclusive sum sum_{j<k} tau_j; shifting (not subtracting tau) keeps it exact

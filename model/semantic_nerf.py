@@ -11,8 +11,8 @@ A per-scene NeRF whose trunk also feeds a view-independent semantic head:
 - colour: a 256-wide linear feature concatenated with the encoded direction -> 128 -> rgb
   (sigmoid).
 Like NeRF, a coarse and a fine network: the fine one is evaluated on the union of the coarse
-samples and samples drawn from the coarse weights. Rendering, losses and metrics are shared with
-S-Ray (``sray.model.rendering``, ``.losses``, ``.metrics``).
+samples and samples drawn from the coarse weights. The hierarchical renderer, losses and metrics
+are shared with S-Ray (``sray.model.hierarchical``, ``.losses``, ``.metrics``).
 """
 
 from __future__ import annotations
@@ -24,9 +24,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from sray.model.hierarchical import render_image, render_rays
 from sray.model.positional_encoding import PositionalEncoding
-from sray.model.rays import image_pixels, pixel_rays
-from sray.model.rendering import composite, merge_samples, sample_pdf, sample_uniform
 
 
 @dataclass
@@ -159,20 +158,14 @@ class SemanticNeRF(nn.Module):
         self.register_buffer("scene_center", torch.tensor(cfg.scene_center, dtype=torch.float32))
         self.register_buffer("scene_scale", torch.tensor(float(cfg.scene_scale)))
 
-    def _render_pass(
-        self, field: SemanticNeRFField, origins: Tensor, dirs: Tensor, z: Tensor,
-        near: Tensor, far: Tensor,
-    ) -> dict[str, Tensor]:
-        """Query ``field`` at depths z (R, N) along the rays and composite one pass."""
+    def _field(self, name: str, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
+               far: Tensor) -> dict[str, Tensor]:
+        """The ``hierarchical.PassField`` of pass ``name``: density per world unit, colour, logits at z (R, N)."""
         pts = origins[:, None, :] + z[..., None] * dirs[:, None, :]  # (R, N, 3)
         x = (pts - self.scene_center) / self.scene_scale
-        dir_len = dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # (R, 1)
-        unit = (dirs / dir_len)[:, None, :].expand_as(pts)  # (R, N, 3)
-        sigma, rgb, logits = field(x, unit)  # (R, N), (R, N, 3), (R, N, L)
-        sigma_t = sigma * dir_len  # density per unit of the ray parameter t (|d| world units)
-        out = composite(sigma_t, z, near, far, {"logits": logits, "rgb": rgb})
-        out["z"] = z
-        return out
+        unit = F.normalize(dirs, dim=-1)[:, None, :].expand_as(pts)  # (R, N, 3)
+        sigma, rgb, logits = (self.coarse if name == "coarse" else self.fine)(x, unit)
+        return {"sigma": sigma, "rgb": rgb, "logits": logits}
 
     def render_rays(
         self, origins: Tensor, dirs: Tensor, near: Tensor | float, far: Tensor | float,
@@ -182,33 +175,10 @@ class SemanticNeRF(nn.Module):
 
         origins, dirs: (R, 3); near, far: (R,) or scalars. ``stratified`` jitters the coarse
         samples and the fine quantiles (training); off, rendering is deterministic.
-        Returns ``{"coarse": pass, "fine": pass}`` with ``logits`` (R, L), ``rgb`` (R, 3),
-        ``depth`` (R,), ``opacity`` (R,), ``weights`` (R, N) and ``z`` (R, N) per pass.
+        Returns ``{"coarse": pass, "fine": pass}`` (see ``hierarchical.render_rays``).
         """
-        if origins.ndim != 2 or origins.shape[-1] != 3 or dirs.shape != origins.shape:
-            raise ValueError(
-                "sray.model.semantic_nerf.SemanticNeRF.render_rays: origins and dirs must both "
-                f"be (R, 3), got {tuple(origins.shape)} and {tuple(dirs.shape)}."
-            )
-        n_rays = origins.shape[0]
-        near_t = torch.as_tensor(near, dtype=origins.dtype, device=origins.device)
-        far_t = torch.as_tensor(far, dtype=origins.dtype, device=origins.device)
-        near_t = near_t.expand(n_rays) if near_t.ndim == 0 else near_t
-        far_t = far_t.expand(n_rays) if far_t.ndim == 0 else far_t
-        if near_t.shape != (n_rays,) or far_t.shape != (n_rays,):
-            raise ValueError(
-                "sray.model.semantic_nerf.SemanticNeRF.render_rays: near and far must be scalars "
-                f"or ({n_rays},), got {tuple(near_t.shape)} and {tuple(far_t.shape)}."
-            )
-        z_coarse = sample_uniform(near_t, far_t, self.cfg.n_coarse, stratified, generator)
-        coarse = self._render_pass(self.coarse, origins, dirs, z_coarse, near_t, far_t)
-        z_fine = sample_pdf(
-            z_coarse, coarse["weights"], near_t, far_t, self.cfg.n_fine,
-            deterministic=not stratified, generator=generator,
-        )
-        z_all = merge_samples(z_coarse, z_fine.to(z_coarse.dtype))
-        fine = self._render_pass(self.fine, origins, dirs, z_all, near_t, far_t)
-        return {"coarse": coarse, "fine": fine}
+        return render_rays(self._field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine,
+                           stratified, generator)
 
     @torch.no_grad()
     def render_image(
@@ -222,29 +192,8 @@ class SemanticNeRF(nn.Module):
         ``rgb`` (H, W, 3), ``depth`` (H, W) (expected z-depth, not divided by opacity; see
         ``sray.model.rendering.composite``) and ``opacity`` (H, W) per pass.
         """
-        height, width = hw
-        step = int(chunk or self.cfg.chunk)
-        if step < 1:
-            raise ValueError(
-                "sray.model.semantic_nerf.SemanticNeRF.render_image: chunk must be >= 1, got "
-                f"{step}."
-            )
-        device = self.scene_center.device
-        uv = image_pixels(height, width, device)  # (H*W, 2) pixel centres, row-major
-        origins, dirs = pixel_rays(K.to(device).float(), c2w.to(device).float(), uv)
-        keys = ("logits", "rgb", "depth", "opacity")
-        parts: dict[str, dict[str, list[Tensor]]] = {p: {k: [] for k in keys}
-                                                     for p in ("coarse", "fine")}
-        for start in range(0, uv.shape[0], step):
-            sl = slice(start, start + step)
-            out = self.render_rays(origins[sl], dirs[sl], near, far, stratified=False)
-            for p, per_key in parts.items():
-                for k, chunks in per_key.items():
-                    chunks.append(out[p][k])
-        return {
-            p: {k: torch.cat(v).reshape(height, width, *v[0].shape[1:]) for k, v in per_key.items()}
-            for p, per_key in parts.items()
-        }
+        return render_image(lambda o, d: self.render_rays(o, d, near, far, stratified=False),
+                            K, c2w, hw, int(chunk or self.cfg.chunk), self.scene_center.device)
 
 
 def scene_box_from_cameras(

@@ -4,22 +4,31 @@ The paper asks for w in C(tau) = {tau/m < w_i < 1/(tau m), sum_i w_i = 1}. Here 
 of views that VALIDLY see the sample (``n`` below): an invalid view gets weight exactly 0, which is
 the only way a view that sees nothing can have no influence while the others stay bounded below.
 
-Parametrisation (``bounded_weights``). The net gives a score s_i in [0, 1] per valid view (the
-appendix's sigmoid, L3). With the valid views' mean score s_bar, d_i = s_i - s_bar and
-kappa = (1 - margin)(1 - tau) n / (n - 1) (kappa = 0 when n <= 1):
+Two parametrisations (``SRayConfig.weight_map``); both give exactly 0 to invalid views, w = 1 for
+n = 1, all 0 for n = 0, and the plain mean 1/n for tau = 1.
+
+``radial`` (default, ``radial_weights``). The net's raw output a_i per valid view is centred,
+e_i = a_i - mean(a), and with p = 1/tau - 1 (room above 1/n, in units of 1/n) and q = 1 - tau (room
+below) its gauge g = max_i max(e_i / p, -e_i / q) >= 0 says how far e points towards the boundary:
+
+    w_i = (1 + (1 - margin) e_i / (1 + g)) / n.
+
+* sum: sum_i e_i = 0, so sum_i w_i = 1.
+* bounds: for e_i > 0, e_i <= g p, so n w_i - 1 <= (1 - margin) p g / (1 + g) < p, i.e.
+  w_i < (1 + p) / n = 1/(tau n); for e_i < 0 likewise n w_i - 1 > -q, i.e. w_i > tau / n.
+* range: near e = 0 the map is the identity to first order (w = (1 + e) / n); as one e_i grows (or falls) alone,
+  g -> infinity and w_i -> (1 + (1 - margin) p) / n (or (1 - (1 - margin) q) / n): both bounds are
+  approached to within a relative (margin p / (1 + p)) or (margin q / tau).
+
+``affine`` (the first version, ``bounded_weights``). Scores s_i = sigmoid(a_i) in [0, 1], centred,
+d_i = s_i - mean(s), and kappa = (1 - margin)(1 - tau) n / (n - 1):
 
     w_i = (1 + kappa d_i) / n.
 
-Proof of the constraints, for any scores (saturated 0 and 1 included):
-* sum: sum_i d_i = sum_i s_i - n s_bar = 0, so sum_i w_i = (n + kappa * 0) / n = 1.
-* bounds: |d_i| <= (n - 1) / n because d_i = ((n - 1) s_i - sum_{j != i} s_j) / n with all scores
-  in [0, 1]; hence |kappa d_i| <= (1 - margin)(1 - tau) < 1 - tau for tau < 1, and
-  w_i lies in [(1 - (1-margin)(1-tau)) / n, (1 + (1-margin)(1-tau)) / n], strictly inside
-  (tau / n, (2 - tau) / n). Finally (2 - tau) / n < 1 / (tau n) because
-  tau (2 - tau) = 1 - (1 - tau)^2 < 1. The margin keeps both inequalities strict in floating
-  point when a sigmoid saturates.
-* tau = 1: kappa = 0 and w_i = 1/n exactly, the mean over valid views.
-* n = 1: w = 1; n = 0 (no view sees the sample): all weights are 0 and the semantic ray is 0.
+|d_i| <= (n - 1) / n gives w_i in [(1 - (1-margin)(1-tau)) / n, (1 + (1-margin)(1-tau)) / n], strictly
+inside (tau / n, (2 - tau) / n), and (2 - tau) / n < 1 / (tau n) because tau (2 - tau) < 1. It
+reaches the lower bound but not the upper one (1.3 / n against 1.43 / n at tau = 0.7), which keeps
+trained weights near the mean.
 
 Input of the net (37 = 32 + 4 + 1 channels at the default C = 32): the refined feature F''_i of
 the token (C), the 4-d view-direction difference of ``reprojection.view_direction_difference``
@@ -52,13 +61,33 @@ def bounded_weights(score: Tensor, valid: Tensor, tau: float, margin: float) -> 
         return keep * (1.0 + kappa * d) / n_safe
 
 
+def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
+    """Raw per-view outputs (..., m) and validity (..., m) -> float32 weights (..., m).
+
+    Over the valid entries of each row the weights sum to 1 and obey tau/n < w_i < 1/(tau n), with
+    both bounds approachable (the ``radial`` map of the module docstring); invalid entries get 0, a
+    row without valid entries is all 0, and tau = 1 gives exactly 1/n.
+    """
+    with torch.autocast(device_type=logits.device.type, enabled=False):
+        keep = valid.float()
+        n = keep.sum(-1, keepdim=True)  # (..., 1)
+        n_safe = n.clamp_min(1.0)
+        if tau >= 1.0:
+            return keep / n_safe
+        a = logits.float() * keep
+        e = (a - a.sum(-1, keepdim=True) / n_safe) * keep  # (..., m), sums to 0 over valid views
+        above, below = 1.0 / tau - 1.0, 1.0 - tau
+        gauge = torch.maximum(e / above, -e / below).amax(-1, keepdim=True).clamp_min(0.0)  # (..., 1)
+        return keep * (1.0 + (1.0 - margin) * e / (1.0 + gauge)) / n_safe
+
+
 class SemanticWeightNet(nn.Module):
-    """MLP (C + 5 -> 16 -> 8 -> 1, ELU, sigmoid) scoring each view, mapped into C(tau)."""
+    """MLP (C + 5 -> 16 -> 8 -> 1, ELU) scoring each view, mapped into C(tau) by ``cfg.weight_map``."""
 
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         h1, h2 = cfg.weight_hidden
-        self.tau, self.margin = cfg.tau, cfg.weight_margin
+        self.tau, self.margin, self.weight_map = cfg.tau, cfg.weight_margin, cfg.weight_map
         self.mlp = nn.Sequential(nn.Linear(cfg.feat_dim + 5, h1), nn.ELU(), nn.Linear(h1, h2), nn.ELU(),
                                  nn.Linear(h2, 1))
 
@@ -69,6 +98,9 @@ class SemanticWeightNet(nn.Module):
         """
         seen = valid.to(feats.dtype).mean(dim=2, keepdim=True).expand_as(valid)  # (R, m, N)
         x = torch.cat([feats, dirs.to(feats.dtype), seen[..., None]], dim=-1)  # (R, m, N, C + 5)
-        score = torch.sigmoid(self.mlp(x).squeeze(-1).float())  # (R, m, N)
-        w = bounded_weights(score.transpose(1, 2), valid.transpose(1, 2), self.tau, self.margin)
+        raw = self.mlp(x).squeeze(-1).float().transpose(1, 2)  # (R, N, m)
+        if self.weight_map == "radial":
+            w = radial_weights(raw, valid.transpose(1, 2), self.tau, self.margin)
+        else:
+            w = bounded_weights(torch.sigmoid(raw), valid.transpose(1, 2), self.tau, self.margin)
         return w.transpose(1, 2)  # (R, m, N)

@@ -9,9 +9,13 @@ from torch import Tensor
 
 
 def rigid_inverse(c2w: Tensor) -> Tensor:
-    """Inverse of rigid camera-to-world transforms: (..., 4, 4) -> world-to-camera (..., 4, 4)."""
+    """Inverse of rigid camera-to-world transforms: (..., 4, 4) -> world-to-camera (..., 4, 4).
+
+    Computed in the input's dtype with autocast off (a bfloat16 translation is off by centimetres).
+    """
     rot_t = c2w[..., :3, :3].transpose(-1, -2)  # (..., 3, 3) R^T
-    trans = -(rot_t @ c2w[..., :3, 3:])  # (..., 3, 1) -R^T t
+    with torch.autocast(device_type=c2w.device.type, enabled=False):
+        trans = -(rot_t @ c2w[..., :3, 3:])  # (..., 3, 1) -R^T t
     top = torch.cat([rot_t, trans], dim=-1)  # (..., 3, 4)
     bottom = torch.zeros_like(c2w[..., 3:, :])
     bottom[..., 0, 3] = 1.0

@@ -14,6 +14,8 @@ Design choices where the paper is silent:
   (``rendering.sample_pdf``), with the same stratified / deterministic switch.
 * The semantic logits of every sample are composited with the density weights (the paper's
   semantic field rendering); colour comes from the geometry net's blending head.
+* Sampling, compositing and the whole-image loop are ``sray.model.hierarchical``'s, shared with
+  Semantic-NeRF; this class supplies the per-pass field.
 """
 
 from __future__ import annotations
@@ -24,24 +26,10 @@ from torch import Tensor, nn
 from .config import SRayConfig
 from .encoder import ResUNetEncoder
 from .field import SRayField
-from .rays import image_pixels, pixel_rays
-from .rendering import composite, merge_samples, sample_pdf, sample_uniform
+from .hierarchical import render_image, render_rays
 from .source_set import SourceSet, rigid_inverse
 
 __all__ = ["SRayModel", "SourceSet"]
-
-IMAGE_KEYS = ("logits", "rgb", "depth", "opacity")
-"""Per-pass outputs ``render_image`` assembles into images (weights and z are left out)."""
-
-
-def _per_ray(value: Tensor | float, n_rays: int, like: Tensor) -> Tensor:
-    """A scalar, 0-d or (R,) bound as an (R,) tensor on ``like``'s device, float32."""
-    t = torch.as_tensor(value, dtype=torch.float32, device=like.device)
-    if t.ndim == 0:
-        return t.expand(n_rays)
-    if t.shape != (n_rays,):
-        raise ValueError(f"sray.model.sray: near/far must be scalars or ({n_rays},), got {tuple(t.shape)}.")
-    return t
 
 
 class SRayModel(nn.Module):
@@ -51,8 +39,8 @@ class SRayModel(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.encoder = ResUNetEncoder(cfg.feat_dim)
-        self.coarse = SRayField(cfg, cfg.n_coarse)
-        self.fine = SRayField(cfg, cfg.n_fine_total)
+        self.coarse = SRayField(cfg)
+        self.fine = SRayField(cfg)
 
     def encode(self, src_rgb: Tensor, src_K: Tensor, src_c2w: Tensor) -> SourceSet:
         """Encode m source views once: src_rgb (m, 3, H, W) in [0, 1], src_K (m, 3, 3), src_c2w (m, 4, 4)."""
@@ -69,14 +57,6 @@ class SRayModel(nn.Module):
         c2w = src_c2w.float()
         return SourceSet(feats=feats, rgb=src_rgb, K=src_K.float(), c2w=c2w, w2c=rigid_inverse(c2w))
 
-    def _render_pass(self, field: SRayField, src: SourceSet, origins: Tensor, dirs: Tensor,
-                     z: Tensor, near: Tensor, far: Tensor) -> dict[str, Tensor]:
-        """One pass: per-sample field, then compositing. Returns the CONTRACTS.md pass dict."""
-        out = field(src, origins, dirs, z)
-        comp = composite(out["sigma"], z, near, far, {"logits": out["logits"], "rgb": out["rgb"]})
-        return {"logits": comp["logits"], "rgb": comp["rgb"], "depth": comp["depth"],
-                "opacity": comp["opacity"], "weights": comp["weights"], "z": z}
-
     def render_rays(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                     far: Tensor | float, stratified: bool,
                     generator: torch.Generator | None = None) -> dict[str, dict[str, Tensor]]:
@@ -84,22 +64,15 @@ class SRayModel(nn.Module):
 
         origins, dirs: (R, 3); near, far: scalars or (R,). ``stratified`` jitters coarse and fine
         samples (training); otherwise sampling is deterministic (evaluation).
-        Returns ``{"coarse": pass, "fine": pass}``, a pass holding ``logits`` (R, L), ``rgb``
-        (R, 3), ``depth`` (R,), ``opacity`` (R,), ``weights`` (R, N) and ``z`` (R, N).
+        Returns ``{"coarse": pass, "fine": pass}`` (see ``hierarchical.render_rays``).
         """
-        if origins.ndim != 2 or origins.shape[-1] != 3 or dirs.shape != origins.shape:
-            raise ValueError(f"sray.model.sray.render_rays: origins and dirs must both be (R, 3), got "
-                             f"{tuple(origins.shape)} and {tuple(dirs.shape)}.")
-        n_rays = origins.shape[0]
-        origins, dirs = origins.float(), dirs.float()
-        near_r, far_r = _per_ray(near, n_rays, origins), _per_ray(far, n_rays, origins)
-        z_coarse = sample_uniform(near_r, far_r, self.cfg.n_coarse, stratified, generator)  # (R, Nc)
-        coarse = self._render_pass(self.coarse, src, origins, dirs, z_coarse, near_r, far_r)
-        z_fine = sample_pdf(z_coarse, coarse["weights"].detach(), near_r, far_r, self.cfg.n_fine,
-                            deterministic=not stratified, generator=generator)  # (R, Nf)
-        z_all = merge_samples(z_coarse, z_fine)  # (R, Nc + Nf)
-        fine = self._render_pass(self.fine, src, origins, dirs, z_all, near_r, far_r)
-        return {"coarse": coarse, "fine": fine}
+        fields = {"coarse": self.coarse, "fine": self.fine}
+
+        def field(name: str, o: Tensor, d: Tensor, z: Tensor, lo: Tensor, hi: Tensor) -> dict[str, Tensor]:
+            return fields[name](src, o, d, z, lo, hi)
+
+        return render_rays(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, stratified,
+                           generator)
 
     @torch.no_grad()
     def render_image(self, src: SourceSet, K: Tensor, c2w: Tensor, hw: tuple[int, int],
@@ -111,17 +84,5 @@ class SRayModel(nn.Module):
         "fine": ...}`` with ``logits`` (H, W, L), ``rgb`` (H, W, 3), ``depth`` (H, W) and
         ``opacity`` (H, W) per pass. Memory is bounded by ``chunk`` rays (default ``cfg.chunk``).
         """
-        h, w = hw
-        step = int(chunk or self.cfg.chunk)
-        if step < 1:
-            raise ValueError(f"sray.model.sray.render_image: chunk must be >= 1, got {step}.")
-        origins, dirs = pixel_rays(K.float(), c2w.float(), image_pixels(h, w, device=src.feats.device))
-        parts: dict[str, dict[str, list[Tensor]]] = {p: {k: [] for k in IMAGE_KEYS} for p in ("coarse", "fine")}
-        for start in range(0, h * w, step):
-            out = self.render_rays(src, origins[start:start + step], dirs[start:start + step],
-                                   near, far, stratified=False)
-            for p, per_pass in parts.items():
-                for k, items in per_pass.items():
-                    items.append(out[p][k].float())
-        return {p: {k: torch.cat(v).reshape(h, w, *v[0].shape[1:]) for k, v in per_pass.items()}
-                for p, per_pass in parts.items()}
+        return render_image(lambda o, d: self.render_rays(src, o, d, near, far, stratified=False),
+                            K, c2w, hw, int(chunk or self.cfg.chunk), src.feats.device)

@@ -52,39 +52,55 @@ def _naive_block(block: AttentionBlock, x: torch.Tensor, valid: torch.Tensor) ->
     return y
 
 
-def _case(variant: str, seed: int = 0) -> tuple[CrossReprojectionAttention, torch.Tensor, torch.Tensor]:
+@torch.no_grad()
+def _naive_position(module: CrossReprojectionAttention, depth01: torch.Tensor) -> torch.Tensor:
+    """The depth embedding written out: [d, sin(pi 2^k d), cos(pi 2^k d) for k < L] @ W^T + b, float64.
+
+    depth01 (R, N) -> (R, N, C)."""
+    linear = module.depth_embedding[1]
+    n_freqs = (linear.in_features - 1) // 2
+    d = depth01.double()
+    feats = [d]
+    for k in range(n_freqs):
+        feats += [torch.sin(math.pi * 2.0**k * d), torch.cos(math.pi * 2.0**k * d)]
+    return torch.stack(feats, -1) @ linear.weight.double().T + linear.bias.double()
+
+
+def _case(variant: str, seed: int = 0) -> tuple[CrossReprojectionAttention, torch.Tensor, torch.Tensor,
+                                               torch.Tensor]:
     torch.manual_seed(seed)
     cfg = SRayConfig(feat_dim=8, n_heads=2, attention=variant, n_coarse=5, geo_hidden=(8, 4))
-    module = CrossReprojectionAttention(cfg, 5)
+    module = CrossReprojectionAttention(cfg)
     space = torch.randn(3, 4, 5, 8)  # (R, m, N, C)
     valid = torch.rand(3, 4, 5) < 0.7
     valid[1, 2] = False  # a view that sees no sample of ray 1
     valid[2, :, 3] = False  # a sample of ray 2 that no view sees
     valid[0, 0, 0] = True
-    return module, space, valid
+    depth01 = torch.sort(torch.rand(3, 5), dim=-1).values  # (R, N)
+    return module, space, valid, depth01
 
 
 def test_dense_equals_naive_loop_attention() -> None:
-    module, space, valid = _case("dense")
-    got = module(space, valid)
+    module, space, valid, depth01 = _case("dense")
+    got = module(space, valid, depth01)
     r, m, n, c = space.shape
-    x = space + module.pos.detach()
+    x = space.double() + _naive_position(module, depth01)[:, None]
     for ray in range(r):
         ref = _naive_block(module.dense, x[ray].reshape(m * n, c), valid[ray].reshape(m * n))
         torch.testing.assert_close(got[ray].double(), ref.view(m, n, c), rtol=1e-5, atol=1e-5)
     all_invalid = torch.zeros_like(valid)
-    assert torch.isfinite(module(space, all_invalid)).all()
+    assert torch.isfinite(module(space, all_invalid, depth01)).all()
 
 
 @pytest.mark.parametrize("ffn_mult", [0, 2])
 def test_full_cra_equals_naive_intra_then_cross(ffn_mult: int) -> None:
     torch.manual_seed(1)
     cfg = SRayConfig(feat_dim=8, n_heads=2, attention="full", n_coarse=5, ffn_mult=ffn_mult, geo_hidden=(8, 4))
-    module = CrossReprojectionAttention(cfg, 5)
-    _, space, valid = _case("full")
-    got = module(space, valid).double()
+    module = CrossReprojectionAttention(cfg)
+    _, space, valid, depth01 = _case("full")
+    got = module(space, valid, depth01).double()
     r, m, n, c = space.shape
-    x = (space + module.pos.detach()).double()
+    x = space.double() + _naive_position(module, depth01)[:, None]
     mid = torch.zeros_like(x)
     for ray in range(r):
         for view in range(m):
@@ -99,20 +115,46 @@ def test_full_cra_equals_naive_intra_then_cross(ffn_mult: int) -> None:
 
 def test_invalid_keys_do_not_influence_valid_tokens() -> None:
     for variant in ("full", "intra", "cross", "dense"):
-        module, space, valid = _case(variant)
+        module, space, valid, depth01 = _case(variant)
         changed = space.clone()
         changed[~valid] = torch.randn(int((~valid).sum()), 8) * 100
-        a, b = module(space, valid), module(changed, valid)
+        a, b = module(space, valid, depth01), module(changed, valid, depth01)
         torch.testing.assert_close(a[valid], b[valid], rtol=1e-5, atol=1e-5, msg=variant)
 
 
 def test_variants_hold_only_their_layers() -> None:
     present = {}
     for variant in ("full", "intra", "cross", "none", "dense"):
-        module, _, _ = _case(variant)
-        present[variant] = tuple(getattr(module, k) is not None for k in ("pos", "intra", "cross", "dense"))
+        module, _, _, _ = _case(variant)
+        present[variant] = tuple(getattr(module, k) is not None
+                                 for k in ("depth_embedding", "intra", "cross", "dense"))
     assert present == {"full": (True, True, True, False), "intra": (True, True, False, False),
                        "cross": (False, False, True, False), "none": (False, False, False, False),
                        "dense": (True, False, False, True)}
-    module, space, valid = _case("none")
-    assert module(space, valid) is space
+    module, space, valid, depth01 = _case("none")
+    assert module(space, valid, depth01) is space
+
+
+def test_position_signal_depends_on_depth_not_on_rank() -> None:
+    """Samples at the same depths of rays with the same bounds get the same signal, whatever drew them."""
+    from sray.model.field import normalised_depth
+    from sray.model.rendering import merge_samples, sample_pdf, sample_uniform
+
+    module, _, _, _ = _case("full")
+    near, far = torch.full((2,), 0.5), torch.full((2,), 4.5)
+    coarse = sample_uniform(near, far, 6, stratified=True, generator=torch.Generator().manual_seed(3))  # (2, 6)
+    fine = sample_pdf(coarse, torch.rand(2, 6), near, far, 5, deterministic=False,
+                      generator=torch.Generator().manual_seed(4))
+    merged = merge_samples(coarse, fine)  # the coarse depths now sit at other ranks
+    with torch.no_grad():
+        sig_coarse = module.position_signal(normalised_depth(coarse, near, far))  # (2, 6, C)
+        sig_merged = module.position_signal(normalised_depth(merged, near, far))  # (2, 11, C)
+    for ray in range(2):
+        ranks = [int((merged[ray] == z).nonzero()[0]) for z in coarse[ray]]
+        assert ranks != list(range(6)), "the test needs coarse samples that moved rank"
+        torch.testing.assert_close(sig_merged[ray, ranks], sig_coarse[ray], rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(sig_merged[ray, ranks].double(),
+                                   _naive_position(module, normalised_depth(coarse, near, far))[ray],
+                                   rtol=1e-5, atol=1e-5)
+    other_bounds = module.position_signal(normalised_depth(coarse, near * 0.5, far * 2.0))
+    assert not torch.allclose(other_bounds, sig_coarse), "the signal must follow the ray's bounds"

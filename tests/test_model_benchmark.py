@@ -9,13 +9,16 @@ from sray.model.bench_probes import attention_flops
 from sray.model.benchmark import run_model_benchmark
 
 
-def _analytic_forward_flops(variant: str, r: int, m: int, n: int, c: int) -> int:
-    """Matmul FLOPs: 8 C^2 per token per block (q, k, v, output projections) + 4 L^2 C per sequence."""
+def _analytic_forward_flops(variant: str, r: int, m: int, n: int, c: int, depth_freqs: int = 6) -> int:
+    """Matmul FLOPs: 8 C^2 per token per block (q, k, v, output projections) + 4 L^2 C per sequence,
+    plus the depth embedding (a (1 + 2F) -> C linear per sample) for the variants that add it."""
     tokens = r * m * n
+    position = 2 * (1 + 2 * depth_freqs) * c * r * n
     intra = 8 * c * c * tokens + 4 * n * n * c * r * m
     cross = 8 * c * c * tokens + 4 * m * m * c * r * n
     dense = 8 * c * c * tokens + 4 * (m * n) ** 2 * c * r
-    return {"full": intra + cross, "intra": intra, "cross": cross, "dense": dense}[variant]
+    return {"full": position + intra + cross, "intra": position + intra, "cross": cross,
+            "dense": position + dense}[variant]
 
 
 @pytest.mark.parametrize("variant", ["full", "intra", "cross", "dense"])

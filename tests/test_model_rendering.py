@@ -195,6 +195,14 @@ def test_bad_inputs_raise_clear_errors() -> None:
     with pytest.raises(ValueError, match="reserved"):
         composite(torch.ones(3, 4), z, torch.zeros(3), torch.ones(3),
                   {"depth": torch.ones(3, 4, 1)})
+    sample_uniform(torch.ones(3), torch.zeros(3), 4, False)  # a value check: off by default (no device sync)
+
+
+def test_bound_values_are_checked_in_debug_mode(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With SRAY_DEBUG_CHECKS=1 the value check (which syncs the device) names the problem."""
+    import sray.model.debug_checks as debug_checks
+
+    monkeypatch.setattr(debug_checks, "ENABLED", True)
     with pytest.raises(ValueError, match="far < near"):
         sample_uniform(torch.ones(3), torch.zeros(3), 4, False)
 
@@ -213,3 +221,14 @@ def test_cuda_fp16_autocast_matches_cpu_float32() -> None:
     assert out["weights"].dtype == torch.float32
     torch.testing.assert_close(out["opacity"].cpu(), reference["opacity"], atol=5e-3, rtol=5e-3)
     torch.testing.assert_close(out["logits"].cpu(), reference["logits"], atol=2e-2, rtol=1e-2)
+
+
+def test_opacity_of_a_slanted_ray_is_the_analytic_metric_integral() -> None:
+    """Constant sigma over z in [near, far] along a ray with |d| = l: opacity = 1 - exp(-sigma (far - near) l)."""
+    sigma, near_v, far_v = 0.7, 1.0, 3.0
+    lengths = torch.tensor([1.0, 1.22, 1.5])  # centre ray, a ScanNet corner ray, a wide-angle corner
+    z = sample_uniform(torch.full((3,), near_v), torch.full((3,), far_v), 32, stratified=False)
+    out = composite(torch.full_like(z, sigma), z, torch.full((3,), near_v), torch.full((3,), far_v), {},
+                    ray_length=lengths)
+    expected = 1.0 - torch.exp(-sigma * (far_v - near_v) * lengths)
+    torch.testing.assert_close(out["opacity"], expected, rtol=1e-5, atol=1e-6)

@@ -107,7 +107,7 @@ def test_bad_config_names_the_field() -> None:
     with pytest.raises(ValueError, match="scene_scale"):
         SemanticNeRFConfig(n_classes=3, scene_scale=0.0)
     model = SemanticNeRF(SemanticNeRFConfig(n_classes=3, n_coarse=4, n_fine=4, **SMALL))
-    with pytest.raises(ValueError, match=r"near and far must be scalars or \(6,\)"):
+    with pytest.raises(ValueError, match=r"`near` must be a scalar or \(6,\)"):
         model.render_rays(torch.zeros(6, 3), torch.ones(6, 3), torch.zeros(5), 2.0, False)
 
 

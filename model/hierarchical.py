@@ -1,0 +1,114 @@
+"""The one hierarchical renderer of ``sray.model``: coarse pass -> inverse-CDF resampling -> fine pass.
+
+Every method (S-Ray, Semantic-NeRF, the next one) supplies a *pass field*, a callable that gives
+per-sample density, semantic logits and colour along a batch of rays for one named pass; this module
+owns the sampling, the compositing and the chunked whole-image loop. The rules it applies:
+
+* coarse samples: ``n_coarse`` equal bins of [near, far], stratified in training, bin centres in
+  evaluation; fine samples: ``n_fine`` draws from the detached coarse weights; the fine pass sees
+  the sorted union of both (NeRF's hierarchical sampling);
+* density is per world unit and ``composite`` multiplies the z-depth spacing by ``|d|`` (metric
+  distance), so non-unit ``pixel_rays`` directions render the same surface at every pixel.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Protocol
+
+import torch
+from torch import Tensor
+
+from .rays import image_pixels, pixel_rays
+from .rendering import composite, merge_samples, sample_pdf, sample_uniform
+
+PASSES = ("coarse", "fine")
+"""Render passes in order."""
+IMAGE_KEYS = ("logits", "rgb", "depth", "opacity")
+"""Per-pass outputs ``render_image`` assembles into images (weights and z are left out)."""
+
+
+class PassField(Protocol):
+    """A method's per-sample network for one pass.
+
+    ``field(pass_name, origins (R, 3), dirs (R, 3), z (R, N), near (R,), far (R,))`` returns
+    ``{"sigma": (R, N) >= 0 per world unit, "logits": (R, N, L), "rgb": (R, N, 3)}``.
+    """
+
+    def __call__(self, pass_name: str, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
+                 far: Tensor) -> dict[str, Tensor]:
+        """Per-sample outputs of pass ``pass_name`` (see the class docstring)."""
+        ...
+
+
+RayRenderer = Callable[[Tensor, Tensor], dict[str, dict[str, Tensor]]]
+"""``render(origins (R, 3), dirs (R, 3)) -> {"coarse": pass, "fine": pass}`` for fixed bounds."""
+
+
+def per_ray_bounds(value: Tensor | float, n_rays: int, like: Tensor, name: str) -> Tensor:
+    """A bound given as a Python scalar, a 0-d or an (R,) tensor, as a float32 (R,) tensor on ``like``'s device."""
+    t = torch.as_tensor(value, dtype=torch.float32, device=like.device)
+    if t.ndim == 0:
+        return t.expand(n_rays)
+    if t.shape != (n_rays,):
+        raise ValueError(f"sray.model.hierarchical: `{name}` must be a scalar or ({n_rays},), got {tuple(t.shape)}.")
+    return t
+
+
+def _render_pass(field: PassField, name: str, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
+                 far: Tensor, ray_length: Tensor) -> dict[str, Tensor]:
+    """One pass: the field at depths z (R, N), composited. Returns the CONTRACTS.md pass dict."""
+    out = field(name, origins, dirs, z, near, far)
+    comp = composite(out["sigma"], z, near, far, {"logits": out["logits"], "rgb": out["rgb"]}, ray_length)
+    return {"logits": comp["logits"], "rgb": comp["rgb"], "depth": comp["depth"], "opacity": comp["opacity"],
+            "weights": comp["weights"], "z": z}
+
+
+def render_rays(field: PassField, origins: Tensor, dirs: Tensor, near: Tensor | float, far: Tensor | float,
+                n_coarse: int, n_fine: int, stratified: bool,
+                generator: torch.Generator | None = None) -> dict[str, dict[str, Tensor]]:
+    """Render rays o + t d, t in [near, far] (z-depth for ``pixel_rays`` directions), coarse then fine.
+
+    origins, dirs: (R, 3), any direction length; near, far: scalars or (R,). ``stratified``
+    jitters coarse and fine samples (training); otherwise sampling is deterministic.
+    Returns ``{"coarse": pass, "fine": pass}``, a pass holding ``logits`` (R, L), ``rgb`` (R, 3),
+    ``depth`` (R,) (expected ray parameter), ``opacity`` (R,), ``weights`` (R, N) and ``z`` (R, N).
+    """
+    if origins.ndim != 2 or origins.shape[-1] != 3 or dirs.shape != origins.shape:
+        raise ValueError(f"sray.model.hierarchical.render_rays: origins and dirs must both be (R, 3), got "
+                         f"{tuple(origins.shape)} and {tuple(dirs.shape)}.")
+    n_rays = origins.shape[0]
+    origins, dirs = origins.float(), dirs.float()
+    near_r = per_ray_bounds(near, n_rays, origins, "near")
+    far_r = per_ray_bounds(far, n_rays, origins, "far")
+    ray_length = dirs.norm(dim=-1)  # (R,) world length of one unit of t
+    z_coarse = sample_uniform(near_r, far_r, n_coarse, stratified, generator)  # (R, Nc)
+    coarse = _render_pass(field, "coarse", origins, dirs, z_coarse, near_r, far_r, ray_length)
+    z_fine = sample_pdf(z_coarse, coarse["weights"].detach(), near_r, far_r, n_fine,
+                        deterministic=not stratified, generator=generator)  # (R, Nf)
+    z_all = merge_samples(z_coarse, z_fine)  # (R, Nc + Nf)
+    fine = _render_pass(field, "fine", origins, dirs, z_all, near_r, far_r, ray_length)
+    return {"coarse": coarse, "fine": fine}
+
+
+@torch.no_grad()
+def render_image(render: RayRenderer, K: Tensor, c2w: Tensor, hw: tuple[int, int], chunk: int,
+                 device: torch.device) -> dict[str, dict[str, Tensor]]:
+    """Render a whole (H, W) query image ``chunk`` rays at a time, no grad.
+
+    render: rays -> passes (deterministic sampling, bounds bound in); K (3, 3), c2w (4, 4) of the
+    query camera. Returns ``{"coarse": ..., "fine": ...}`` with ``logits`` (H, W, L), ``rgb``
+    (H, W, 3), ``depth`` (H, W) and ``opacity`` (H, W) per pass, float32.
+    """
+    h, w = hw
+    if chunk < 1:
+        raise ValueError(f"sray.model.hierarchical.render_image: chunk must be >= 1, got {chunk}.")
+    origins, dirs = pixel_rays(K.to(device).float(), c2w.to(device).float(), image_pixels(h, w, device=device))
+    parts: dict[str, dict[str, list[Tensor]]] = {p: {k: [] for k in IMAGE_KEYS} for p in PASSES}
+    for start in range(0, h * w, chunk):
+        out = render(origins[start:start + chunk], dirs[start:start + chunk])
+        for p, per_pass in parts.items():
+            for k, items in per_pass.items():
+                items.append(out[p][k].float())
+    return {p: {k: torch.cat(v).reshape(h, w, *v[0].shape[1:]) for k, v in per_pass.items()}
+            for p, per_pass in parts.items()}
