@@ -164,7 +164,7 @@ def meta_problems(meta: dict, file: str, dir_name: str, limits: CheckLimits) -> 
     near, far = meta.get("near"), meta.get("far")
     if "near" in meta and "far" in meta and not (_is_number(near) and _is_number(far) and 0 < near < far):
         bad(f"near/far must be finite with 0 < near < far, got near={near!r}, far={far!r}",
-            "measure them from the depth with scene.depth_bounds; " + RECONVERT)
+            "measure them from the depth with scene.scene_depth_bounds; " + RECONVERT)
     role = meta.get("role")
     if "role" in meta and role not in ("train", "test"):
         bad(f"field 'role' must be 'train' or 'test', got {role!r}")

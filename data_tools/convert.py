@@ -11,8 +11,9 @@ Splits (see docs/data.md, "Readers and validation"):
   between two source views (the generator's blocks too). Only the window is written.
 
 Nothing partial is published: the scene is written into a hidden staging folder, near/far are
-measured from its depth (``scene.depth_bounds``), it must pass ``check_scene``, and only then is it
-renamed into place and added to ``dataset.json``.
+measured from its depth (``scene.scene_depth_bounds``: a test scene's source and finetune views
+only, a train scene's every view), it must pass ``check_scene``, and only then is it renamed into
+place and added to ``dataset.json``.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from sray.data_tools.check import check_scene
 from sray.data_tools.layout import atomic_write_json, list_scenes, write_dataset_index, write_scene
 from sray.data_tools.read_replica import read_replica
 from sray.data_tools.read_scannet import read_scannet
-from sray.data_tools.scene import Scene, View, depth_bounds
+from sray.data_tools.scene import Scene, View, scene_depth_bounds
 from sray.data_tools.splits import protocol_splits, train_splits
 
 DEFAULTS = {"scannet": {"size_hw": (240, 320), "frame_skip": 10}, "replica": {"size_hw": None, "frame_skip": 5}}
@@ -130,11 +131,11 @@ def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = No
         meta.splits = train_splits(meta.view_ids, cfg.holdout_every)
     meta.role = cfg.role
 
-    depths: list[np.ndarray] = []
+    depths: dict[str, np.ndarray] = {}
 
     def recording_read(view_id: str) -> View:
         view = scene.read_view(view_id)
-        depths.append(view.depth[::2, ::2].copy())  # a quarter of the pixels is plenty for percentiles
+        depths[view_id] = view.depth[::2, ::2].copy()  # a quarter of the pixels is plenty for percentiles
         if on_view is not None:
             on_view(len(meta.view_ids))
         return view
@@ -144,7 +145,7 @@ def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = No
     try:
         write_scene(Scene(meta=meta, read_view=recording_read), staging)
         try:
-            meta.near, meta.far = depth_bounds(depths)
+            meta.near, meta.far = scene_depth_bounds(meta, depths.__getitem__)
         except ValueError as e:
             raise ValueError(f"{cfg.src}: {e}; check the depth images and --depth-scale") from None
         meta_path = staging / name / "scene.json"

@@ -1,15 +1,22 @@
 """Ranked source-view neighbours: which views see the most of what a view sees.
 
-Rule ``frustum-overlap`` (version 1), computed once at shard time when depth is at hand:
+Rule ``frustum-overlap`` (version 2), computed once at shard time when depth is at hand:
 
-1. For a query view, take a sparse grid of pixels (``GRID`` = 12 rows x 16 columns, at pixel
-   centres) and back-project those with known depth to world points with the view's K and c2w.
-   If fewer than ``MIN_POINTS`` grid pixels have depth, the whole grid is back-projected at the
-   scene's median valid depth instead (so a view without depth still gets a sensible ranking).
-2. For every candidate view, the score is the fraction of those points that land in front of the
-   candidate camera (z > 0) and inside its image (-0.5 <= u < W - 0.5, -0.5 <= v < H - 0.5, the
-   pixel-centre convention). It is scale-free and directed: "how much of what the query sees does
-   this candidate see". Occlusion is not modelled (it is a frustum overlap, not a visibility test).
+1. For a view, take a sparse grid of pixels (``GRID`` = 12 rows x 16 columns, at pixel centres)
+   and back-project those with known depth to world points with the view's K and c2w. If fewer
+   than ``MIN_POINTS`` grid pixels have depth, the whole grid is back-projected at the scene's
+   median valid depth instead (so a view without depth still gets a sensible ranking); that
+   median comes from ``scene.depth_views`` (a test scene's source pool, a train scene's views).
+2. Query views whose depth may be used: a candidate's score is the fraction of the QUERY's points
+   that land in front of the candidate camera (z > 0) and inside its image (-0.5 <= u < W - 0.5,
+   -0.5 <= v < H - 0.5, the pixel-centre convention): "how much of what the query sees does this
+   candidate see".
+   Blind queries (:func:`blind_views`: the ``test`` split of a test scene, whose depth and labels
+   are ground truth a user does not have): a candidate's score is the fraction of the CANDIDATE's
+   own points that land in front of and inside the query camera: "how much of what this candidate
+   saw lies in the query's frustum". It needs only the query's pose and intrinsics; the query's
+   depth is never read. Both scores are scale-free and directed; occlusion is not modelled (a
+   frustum overlap, not a visibility test).
 3. Candidates are sorted by score (descending), ties broken by the smaller angle between optical
    axes, then the smaller camera-centre distance, then capture order. The top ``k`` are kept.
 
@@ -18,9 +25,9 @@ near-duplicate frames and, worse, cameras next to the query that look the other 
 score never prefers a camera facing away, and the loader samples m sources at random from the top
 k so near duplicates are not always chosen.
 
-Candidates come from :func:`source_pool`: the views a training or evaluation tuple may use as
-sources (for training scenes, the ``train`` split minus held-out ``test`` views; for test scenes,
-``source`` plus ``finetune``).
+Candidates come from :func:`source_pool` (defined in ``scene.py``, which also measures bounds with
+it): the views a training or evaluation tuple may use as sources (for training scenes, the
+``train`` split minus held-out ``test`` views; for test scenes, ``source`` plus ``finetune``).
 """
 
 from __future__ import annotations
@@ -29,12 +36,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools.scene import SceneMeta
+from sray.data_tools.scene import SceneMeta, source_pool  # noqa: F401  (re-exported; bounds use it too)
 
 RULE = "frustum-overlap"
-RULE_VERSION = 1
+RULE_VERSION = 2
 GRID = (12, 16)
-"""Rows and columns of the sparse pixel grid back-projected per query view."""
+"""Rows and columns of the sparse pixel grid back-projected per view."""
 MIN_POINTS = 8
 """Fewer grid pixels with known depth than this: back-project the grid at the scene's median depth."""
 
@@ -58,22 +65,13 @@ class Neighbours:
         return cls(ids=list(d["ids"]), scores=[float(s) for s in d["scores"]])
 
 
-def source_pool(meta: SceneMeta) -> list[str]:
-    """View ids that may serve as source views (and as training queries), in capture order.
+def blind_views(meta: SceneMeta) -> set[str]:
+    """Views ranked without their own depth or labels: the ``test`` split of a ``test`` scene.
 
-    ``train`` scenes: the ``train`` split minus the ``test`` split (held-out validation views).
-    ``test`` scenes: ``source`` plus ``finetune`` (the paper's protocol never shows ``test`` views).
+    At test time a user has only such a view's pose and intrinsics; its depth and labels are the
+    ground truth it is scored against, so they must not choose its source views.
     """
-    if meta.role == "test":
-        allowed = set(meta.splits.get("source", [])) | set(meta.splits.get("finetune", []))
-        fix = "a test scene needs a non-empty 'source' split"
-    else:
-        allowed = set(meta.splits.get("train", [])) - set(meta.splits.get("test", []))
-        fix = "a train scene needs a 'train' split with views outside its 'test' split"
-    pool = [v for v in meta.view_ids if v in allowed]
-    if not pool:
-        raise ValueError(f"scene {meta.name!r}: field 'splits' gives no source views; {fix}")
-    return pool
+    return set(meta.splits.get("test", [])) if meta.role == "test" else set()
 
 
 def grid_samples(depth: np.ndarray, grid: tuple[int, int] = GRID) -> np.ndarray:
@@ -86,7 +84,8 @@ def grid_samples(depth: np.ndarray, grid: tuple[int, int] = GRID) -> np.ndarray:
 
 
 def fallback_depth(samples: list[np.ndarray]) -> float:
-    """The scene's median valid depth over the grid samples of all views (used where depth is missing)."""
+    """Median valid depth over grid samples (each (P, 3), from :func:`grid_samples`; pass those of
+    ``scene.depth_views``), used where a view lacks depth."""
     z = np.concatenate([s[:, 2] for s in samples]) if samples else np.zeros(0)
     z = z[np.isfinite(z) & (z > 0)]
     if z.size == 0:
@@ -135,21 +134,37 @@ def overlap_fractions(points: np.ndarray, Ks: np.ndarray, c2ws: np.ndarray, hw: 
     return _fractions(points, projection_matrices(Ks, c2ws), hw)
 
 
+def _seen_by_query(points: list[np.ndarray], proj_query: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
+    """Fraction (C,) of each candidate's own world points (C arrays (P_c, 3)) in front of and inside
+    the query camera ``proj_query`` (3, 4)."""
+    return np.array([_fractions(p, proj_query[None], hw)[0] for p in points])
+
+
 def rank_neighbours(view_ids: list[str], Ks: np.ndarray, c2ws: np.ndarray, hw: tuple[int, int],
-                    points: list[np.ndarray], pool: list[str], k: int) -> dict[str, Neighbours]:
+                    points: dict[str, np.ndarray], pool: list[str], k: int) -> dict[str, Neighbours]:
     """Top-``k`` neighbours from ``pool`` for every view (see the module rule).
 
-    view_ids: V ids; Ks (V, 3, 3); c2ws (V, 4, 4); points: V arrays (P_i, 3) from :func:`grid_points`.
+    view_ids: V ids; Ks (V, 3, 3); c2ws (V, 4, 4); points: world points (P_i, 3) from
+    :func:`grid_points` of every view whose own depth may be used, by id. A view absent from
+    ``points`` (a :func:`blind_views` view) is scored by how much of each candidate's points lies in
+    its camera; every pool view needs points (ValueError otherwise).
     """
     index = {vid: i for i, vid in enumerate(view_ids)}
     cand = np.array([index[v] for v in pool])
+    missing = [v for v in pool if v not in points]
+    if missing:
+        raise ValueError(f"pool views {missing} have no grid points; every candidate needs them (a view ranked "
+                         "without its own depth is scored with its candidates' points)")
     proj = projection_matrices(Ks, c2ws)                                              # (V, 3, 4)
     axes = c2ws[:, :3, 2]                                                             # (V, 3) optical axes
     centres = c2ws[:, :3, 3]                                                          # (V, 3)
     out: dict[str, Neighbours] = {}
     for i, vid in enumerate(view_ids):
         others = cand[cand != i]
-        score = _fractions(points[i], proj[others], hw)
+        if vid in points:
+            score = _fractions(points[vid], proj[others], hw)
+        else:
+            score = _seen_by_query([points[view_ids[j]] for j in others], proj[i], hw)
         cos = axes[others] @ axes[i]
         dist = np.linalg.norm(centres[others] - centres[i], axis=1)
         order = np.lexsort((others, dist, -cos, -np.round(score, 6)))[:k]            # last key sorts first

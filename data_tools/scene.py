@@ -127,6 +127,47 @@ class Scene:
         return cls(meta=meta, read_view=by_id.__getitem__)
 
 
+def source_pool(meta: SceneMeta) -> list[str]:
+    """View ids that may serve as source views (and as training queries), in capture order.
+
+    ``train`` scenes: the ``train`` split minus the ``test`` split (held-out validation views).
+    ``test`` scenes: ``source`` plus ``finetune`` (the paper's protocol never shows ``test`` views).
+    """
+    if meta.role == "test":
+        allowed = set(meta.splits.get("source", [])) | set(meta.splits.get("finetune", []))
+        fix = "a test scene needs a non-empty 'source' split"
+    else:
+        allowed = set(meta.splits.get("train", [])) - set(meta.splits.get("test", []))
+        fix = "a train scene needs a 'train' split with views outside its 'test' split"
+    pool = [v for v in meta.view_ids if v in allowed]
+    if not pool:
+        raise ValueError(f"scene {meta.name!r}: field 'splits' gives no source views; {fix}")
+    return pool
+
+
+def depth_views(meta: SceneMeta) -> list[str]:
+    """View ids whose depth may shape scene-wide quantities (near/far, the neighbours' fallback depth).
+
+    ``test`` scenes: the :func:`source_pool` only, so nothing measured depends on the depth of the
+    ``test`` views (ground truth a user does not have at test time). ``train`` scenes: every view.
+    """
+    return source_pool(meta) if meta.role == "test" else list(meta.view_ids)
+
+
+def scene_depth_bounds(meta: SceneMeta, depth_of_view: Callable[[str], np.ndarray]) -> tuple[float, float]:
+    """The scene's (near, far): :func:`depth_bounds` over the depth maps of :func:`depth_views`.
+
+    ``depth_of_view(view_id)`` returns that view's float32 (H, W) depth in metres (any subsampling
+    of it will do). The one place that decides which views measure a scene's bounds.
+    """
+    views = depth_views(meta)
+    try:
+        return depth_bounds([depth_of_view(v) for v in views])
+    except ValueError as e:
+        where = "source and finetune views" if meta.role == "test" else "views"
+        raise ValueError(f"scene {meta.name!r}: {e} (looked at its {len(views)} {where})") from None
+
+
 def depth_bounds(depths: list[np.ndarray], lo_pct: float = 1.0, hi_pct: float = 99.0,
                  margin: float = 0.1) -> tuple[float, float]:
     """Near/far from valid depth: the (lo, hi) percentiles widened by ``margin`` (relative).

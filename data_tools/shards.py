@@ -34,9 +34,9 @@ from tqdm import tqdm
 
 from sray.data_tools.layout import atomic_write_bytes, depth_to_png16, encode_png, list_scenes, read_scene
 from sray.data_tools.manifest import MANIFEST_NAME, Manifest, SceneEntry, ShardEntry, manifest_bytes, sha256_file
-from sray.data_tools.neighbours import (GRID, MIN_POINTS, RULE, RULE_VERSION, Neighbours, fallback_depth,
-                                        grid_points, grid_samples, rank_neighbours, source_pool)
-from sray.data_tools.scene import Scene, View
+from sray.data_tools.neighbours import (GRID, MIN_POINTS, RULE, RULE_VERSION, Neighbours, blind_views,
+                                        fallback_depth, grid_points, grid_samples, rank_neighbours)
+from sray.data_tools.scene import Scene, View, depth_views, source_pool
 
 KEY_SEPARATOR = "__"
 """Between scene name and view id in a sample key."""
@@ -115,9 +115,14 @@ def view_members(scene: str, view: View, neighbours: Neighbours, scene_json: dic
 
 
 def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None) -> tuple[dict[str, Neighbours], tuple[int, int]]:
-    """Read every view once (cameras + a depth grid) and rank its neighbours; returns them and (H, W)."""
+    """Read every view once (cameras + a depth grid) and rank its neighbours; returns them and (H, W).
+
+    The depth of a blind view (``neighbours.blind_views``: a test scene's ``test`` split) is never
+    sampled, and the fallback depth comes from ``scene.depth_views`` only.
+    """
     meta = scene.meta
-    Ks, c2ws, samples, hw = [], [], [], None
+    blind = blind_views(meta)
+    Ks, c2ws, samples, hw = [], [], {}, None
     for view in scene.views():
         if hw is not None and view.hw != hw:
             raise ValueError(f"scene {meta.name!r}, view {view.view_id!r}: image size {view.hw} differs from "
@@ -125,13 +130,15 @@ def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None) -> tuple[dic
         hw = view.hw
         Ks.append(np.asarray(view.K, np.float64))
         c2ws.append(np.asarray(view.c2w, np.float64))
-        samples.append(grid_samples(view.depth))
+        if view.view_id not in blind:
+            samples[view.view_id] = grid_samples(view.depth)
         if bar is not None:
             bar.update(1)
     if hw is None:
         raise ValueError(f"scene {meta.name!r}: field 'view_ids' is empty; a scene needs views")
-    fallback = fallback_depth(samples)
-    points = [grid_points(s, K, c2w, fallback) for s, K, c2w in zip(samples, Ks, c2ws)]
+    fallback = fallback_depth([samples[v] for v in depth_views(meta)])
+    index = {v: i for i, v in enumerate(meta.view_ids)}
+    points = {v: grid_points(s, Ks[index[v]], c2ws[index[v]], fallback) for v, s in samples.items()}
     ranked = rank_neighbours(meta.view_ids, np.stack(Ks), np.stack(c2ws), hw, points, source_pool(meta), k)
     return ranked, hw
 
@@ -227,7 +234,10 @@ def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256,
         label_spaces=label_spaces,
         neighbours={"rule": RULE, "version": RULE_VERSION, "k": neighbours, "grid": list(GRID),
                     "min_points": MIN_POINTS, "pool": "train scenes: train split minus test split; "
-                    "test scenes: source plus finetune splits"},
+                    "test scenes: source plus finetune splits",
+                    "test_views": "test split of test scenes: score = fraction of each candidate's own depth-grid "
+                    "points in front of and inside the query camera (the query's depth and labels are never read)",
+                    "fallback_depth": "median grid depth of train scenes' views, of test scenes' source pool"},
         extra={"views_per_shard": views_per_shard})
     if not is_current(out / MANIFEST_NAME, manifest_bytes(manifest)):
         _atomic_write(out / MANIFEST_NAME, manifest_bytes(manifest))

@@ -25,7 +25,7 @@ import numpy as np
 
 from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.layout import write_dataset_index, write_scene
-from sray.data_tools.scene import Scene, SceneMeta, View, depth_bounds
+from sray.data_tools.scene import Scene, SceneMeta, View, scene_depth_bounds
 from sray.data_tools.splits import PROTOCOL_WINDOW, protocol_splits, train_splits
 from sray.data_tools.synth_render import RenderScene, render_view
 from sray.data_tools.synth_rooms import ROOM_TYPES, Room, build_room
@@ -33,8 +33,9 @@ from sray.data_tools.synth_trajectory import scan_path
 
 GENERATOR = "sray-synth"
 """Value of ``extra["generator"]`` in every procedural scene."""
-GENERATOR_VERSION = 1
-"""Bumped whenever the same parameters would render different pixels."""
+GENERATOR_VERSION = 2
+"""Bumped whenever the same parameters would write different files (pixels, or metadata such as near/far:
+version 2 measures a test scene's bounds from its source and finetune views only)."""
 HFOV_DEG = 62.0
 """Horizontal field of view (ScanNet's colour camera is about 58 degrees, its depth camera 58-60)."""
 
@@ -111,13 +112,14 @@ def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, 
         if on_view is not None:
             on_view()
     view_ids = [v.view_id for v in views]
-    near, far = depth_bounds([v.depth for v in views])
     extra = {**scene_params(seed, n_views, height, width, role, plan.room.room_type),
              "room_size_m": [float(v) for v in plan.room.size], "n_boxes": len(plan.room.boxes),
              "ceiling_label": "ignore (ScanNet-20 has no ceiling class)"}
     meta = SceneMeta(name=name, label_space="scannet20", class_names=list(SCANNET20), view_ids=view_ids,
-                     splits=split_views(view_ids, role, seed), near=near, far=far, role=role, extra=extra)
-    return Scene.in_memory(meta, views)
+                     splits=split_views(view_ids, role, seed), role=role, extra=extra)
+    scene = Scene.in_memory(meta, views)
+    meta.near, meta.far = scene_depth_bounds(meta, lambda v: scene.read_view(v).depth)
+    return scene
 
 
 def _scene_seed(seed: int, role: str, index: int) -> int:

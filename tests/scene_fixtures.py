@@ -17,7 +17,7 @@ import numpy as np
 
 from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.layout import png16_to_depth, depth_to_png16, write_dataset_index, write_scene
-from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View, depth_bounds
+from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View, scene_depth_bounds
 
 ROOM_LO = np.array([-2.0, -2.0, 0.0])
 ROOM_HI = np.array([2.0, 2.0, 2.5])
@@ -118,11 +118,12 @@ def make_scene(name: str, n_views: int = 8, height: int = 30, width: int = 40, s
         depth = png16_to_depth(depth_to_png16(depth))
         views.append(View(view_id=f"{i:05d}", rgb=rgb, depth=depth, label=label, K=K.copy(), c2w=c2w))
     ids = [v.view_id for v in views]
-    near, far = depth_bounds([v.depth for v in views])
     meta = SceneMeta(name=name, label_space="scannet20", class_names=list(SCANNET20), view_ids=ids,
-                     splits=default_splits(ids, role), near=near, far=far, role=role,
+                     splits=default_splits(ids, role), role=role,
                      extra={"source": "tests/scene_fixtures.py", "seed": seed})
-    return Scene.in_memory(meta, views)
+    scene = Scene.in_memory(meta, views)
+    meta.near, meta.far = scene_depth_bounds(meta, lambda v: scene.read_view(v).depth)
+    return scene
 
 
 def write_dataset(root: Path, specs: list[tuple[str, int, str]], height: int = 30, width: int = 40,

@@ -53,9 +53,29 @@ def test_top_neighbour_sees_most_of_what_the_query_sees(seed: int) -> None:
         assert np.all(np.diff(scores) <= 0)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_test_view_neighbours_are_the_candidates_that_saw_its_frustum(seed: int) -> None:
+    """A test scene's test view is ranked by the fraction of each candidate's OWN visible pixels inside the
+    test camera (all pixels, OpenCV); its own depth plays no part (zeroing it changes nothing)."""
+    scene = scene_fixtures.make_scene("room", n_views=15, height=48, width=64, seed=seed, role="test")
+    ranked, hw = scene_neighbours(scene, k=20)
+    views = {v.view_id: v for v in scene.views()}
+    pool = source_pool(scene.meta)
+    for query_id in scene.meta.splits["test"]:
+        query = views[query_id]
+        truth = {c: _opencv_fraction(_all_depth_points(views[c].depth, views[c].K, views[c].c2w), query.K, query.c2w,
+                                     hw) for c in pool}
+        ids = ranked[query_id].ids
+        assert sorted(ids) == sorted(truth) and truth[ids[0]] >= max(truth.values()) - 0.05, (query_id, ids, truth)
+        np.testing.assert_allclose(ranked[query_id].scores, [truth[c] for c in ids], atol=0.06)
+        views[query_id].depth = np.zeros_like(query.depth)
+    assert scene_neighbours(scene, k=20)[0] == ranked
+
+
 def test_overlap_beats_centre_distance() -> None:
     """The nearest camera facing away ranks last; a camera behind the query looking the same way ranks first;
-    a query without depth falls back to the scene's median depth."""
+    a query without depth falls back to the scene's median depth; a query without points (a test view)
+    ranks the same from its candidates' points."""
     K = scene_fixtures.intrinsics(30, 40)
     origin, wall = np.array([0.0, 0.0, 1.5]), np.array([3.0, 0.0, 1.5])
     c2ws = np.stack([
@@ -67,11 +87,17 @@ def test_overlap_beats_centre_distance() -> None:
     ids = ["q", "away", "behind", "turned"]
     depth = np.full((30, 40), 3.0, np.float32)
     for query_depth, fallback in ((depth, 3.0), (np.zeros_like(depth), 3.0)):
-        points = [grid_points(grid_samples(query_depth), K, c2ws[0], fallback)]
-        points += [grid_points(grid_samples(depth), K, c, fallback) for c in c2ws[1:]]
+        points = {"q": grid_points(grid_samples(query_depth), K, c2ws[0], fallback)}
+        points |= {v: grid_points(grid_samples(depth), K, c, fallback) for v, c in zip(ids[1:], c2ws[1:])}
         ranked = rank_neighbours(ids, np.stack([K] * 4), c2ws, (30, 40), points, ids, k=3)
         assert ranked["q"].ids == ["behind", "turned", "away"]
         assert ranked["q"].scores[0] == 1.0 and ranked["q"].scores[-1] == 0.0
+    del points["q"]  # a test view of a test scene: scored by how much of each candidate's points it frames
+    ranked = rank_neighbours(ids, np.stack([K] * 4), c2ws, (30, 40), points, ids[1:], k=3)
+    assert ranked["q"].ids == ["behind", "turned", "away"]
+    assert 0.0 < ranked["q"].scores[0] < 1.0 and ranked["q"].scores[1:] == [0.0, 0.0]
+    with pytest.raises(ValueError, match="pool views \\['q'\\]"):
+        rank_neighbours(ids, np.stack([K] * 4), c2ws, (30, 40), points, ids, k=3)
     by_distance = sorted(ids[1:], key=lambda i: np.linalg.norm(c2ws[ids.index(i), :3, 3] - origin))
     assert by_distance[0] == "away"  # what the centre-distance rule would have picked
 

@@ -89,6 +89,7 @@ def test_manifest_lists_checksums_sizes_and_rules(scenes_dir: Path, shards_dir: 
     raw = json.loads((shards_dir / MANIFEST_NAME).read_text())
     assert raw["format"] == "sray-shards" and raw["version"] == 1
     assert raw["neighbours"]["rule"] == "frustum-overlap" and raw["neighbours"]["k"] == 6
+    assert raw["neighbours"]["version"] == 2 and "never read" in raw["neighbours"]["test_views"]
     assert raw["label_spaces"] == {"scannet20": scene_fixtures.SCANNET20}
     tars = sorted(p.name for p in shards_dir.glob("*.tar"))
     assert [s["path"] for s in raw["shards"]] == tars
