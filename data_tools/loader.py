@@ -106,7 +106,8 @@ class TrainTuples(IterableDataset):
                     raise ValueError(f"scene {scene!r}, view {query_id!r}: {len(candidates)} ranked neighbours, "
                                      f"n_source={self.n_source} needed; re-shard with a larger --neighbours")
                 sources = [candidates[i] for i in rng.choice(len(candidates), self.n_source, replace=False)]
-                yield train_sample(views, query_id, sources, self.rays, rng, scene, meta.near, meta.far)
+                yield train_sample(views, query_id, sources, self.rays, rng, scene, meta.near, meta.far,
+                                   len(meta.class_names))
                 remaining -= 1
 
 

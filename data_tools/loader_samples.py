@@ -6,6 +6,7 @@ import numpy as np
 import torch
 
 from sray.data_tools.loader_views import StoredView
+from sray.data_tools.scene import IGNORE_ID
 
 
 def ranked_candidates(query: StoredView, allowed: set[str], limit: int) -> list[str]:
@@ -36,12 +37,23 @@ def _common(views: dict[str, StoredView], query_id: str, source_ids: list[str], 
     }
 
 
+def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str) -> None:
+    """Refuse label ids outside [0, n_classes) other than ``IGNORE_ID`` (checked here, on the host,
+    once per batch, so the training step never reads tensor values to check them)."""
+    bad = (labels != IGNORE_ID) & (labels >= n_classes)
+    if bad.any():
+        raise ValueError(f"scene {scene!r}, view {view_id!r}: label ids {sorted(set(labels[bad].tolist()))[:5]} lie "
+                         f"outside the scene's {n_classes} classes (ignore id {IGNORE_ID}); fix the label space in "
+                         "scene.json or re-convert the scene")
+
+
 def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
-                 rng: np.random.Generator, scene: str, near: float, far: float) -> dict:
+                 rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int) -> dict:
     """A training sample: sources, query camera and ``n_rays`` random pixels of the query with targets.
 
     Pixels are drawn uniformly without replacement (with replacement only when ``n_rays`` exceeds
-    the pixel count); ``pixels`` (R, 2) holds integer (u, v) pixel centres as float32.
+    the pixel count); ``pixels`` (R, 2) holds integer (u, v) pixel centres as float32. Target label
+    ids are checked against the scene's ``n_classes`` (:func:`check_label_ids`).
     """
     query = views[query_id]
     rgb, label = query.rgb(), query.label()                                           # (H, W, 3), (H, W)
@@ -50,7 +62,9 @@ def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[s
     v, u = np.divmod(flat, w)
     sample = _common(views, query_id, source_ids, scene, near, far)
     sample["pixels"] = torch.from_numpy(np.stack([u, v], axis=1).astype(np.float32))  # (R, 2)
-    sample["target_label"] = torch.from_numpy(label[v, u].astype(np.int64))          # (R,)
+    targets = label[v, u].astype(np.int64)                                            # (R,)
+    check_label_ids(targets, n_classes, scene, query_id)
+    sample["target_label"] = torch.from_numpy(targets)
     sample["target_rgb"] = torch.from_numpy(rgb[v, u].astype(np.float32) / 255.0)    # (R, 3)
     return sample
 

@@ -5,6 +5,8 @@
 - ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean cross-entropy over the LABELLED
   rays of the batch (target != ignore id). A batch without a labelled ray gives ``L_sem = 0``
   with a zero gradient, never NaN.
+- Label ids outside [0, L) are refused by the loader (once per batch, on the host); here only
+  with ``SRAY_DEBUG_CHECKS=1`` (the check reads tensor values: a device sync per step).
 - ``L_rgb = MSE(coarse rgb) + MSE(fine rgb)`` over all rays (photometric loss).
 Everything is computed in float32, whatever autocast region the caller is in.
 """
@@ -17,6 +19,8 @@ from typing import Protocol
 import torch
 import torch.nn.functional as F
 from torch import Tensor
+
+from .debug_checks import value_checks_enabled
 
 # Render passes in the order the loss sums them; see docs/CONTRACTS.md for the ``out`` structure.
 PASSES = ("coarse", "fine")
@@ -47,15 +51,14 @@ def psnr_from_mse(mse: Tensor) -> Tensor:
     return -10.0 * torch.log10(mse)
 
 
-def _labelled_cross_entropy(logits: Tensor, target: Tensor, mask: Tensor) -> Tensor:
-    """Mean CE over the rays where ``mask`` holds: logits (R, L), target (R,), mask (R,) bool.
+def _labelled_cross_entropy(logits: Tensor, target: Tensor, n_labelled: Tensor, ignore_id: int) -> Tensor:
+    """Mean CE over the labelled rays: logits (R, L), target (R,) with ``ignore_id`` for unlabelled.
 
-    Summing over the (possibly empty) selection and dividing by max(count, 1) keeps an
-    all-unlabelled batch at exactly 0 with a zero gradient.
+    The ignored rays add 0 to the sum, which is divided by max(n_labelled, 1): an all-unlabelled
+    batch gives exactly 0 with a zero gradient. No boolean indexing, so no device -> host sync.
     """
-    n = mask.sum()
-    summed = F.cross_entropy(logits[mask].float(), target[mask], reduction="sum")
-    return summed / n.clamp_min(1).to(summed.dtype)
+    summed = F.cross_entropy(logits.float(), target, ignore_index=ignore_id, reduction="sum")
+    return summed / n_labelled.clamp_min(1).to(summed.dtype)
 
 
 def render_loss(
@@ -90,8 +93,9 @@ def render_loss(
             f"sray.model.losses.render_loss: target_label must be int64, got {target_label.dtype}."
         )
     mask = target_label != cfg.ignore_id  # (R,)
-    bad = mask & ((target_label < 0) | (target_label >= n_classes))
-    if bool(bad.any()):
+    n_labelled = mask.sum()
+    bad = mask & ((target_label < 0) | (target_label >= n_classes)) if value_checks_enabled() else None
+    if bad is not None and bool(bad.any()):
         raise ValueError(
             f"sray.model.losses.render_loss: label ids must lie in [0, {n_classes}) or equal the "
             f"ignore id {cfg.ignore_id}; found {sorted(set(target_label[bad].tolist()))[:5]}. "
@@ -102,11 +106,11 @@ def render_loss(
         terms: dict[str, Tensor] = {}
         sem_total = rgb_total = rgb_target.new_zeros(())
         for name in passes:
-            sem = _labelled_cross_entropy(out[name]["logits"], target_label, mask)
+            sem = _labelled_cross_entropy(out[name]["logits"], target_label, n_labelled, cfg.ignore_id)
             rgb = F.mse_loss(out[name]["rgb"].float(), rgb_target)
             sem_total, rgb_total = sem_total + sem, rgb_total + rgb
             terms[f"sem_{name}"], terms[f"rgb_{name}"] = sem.detach(), rgb.detach()
         total = cfg.lambda_sem * sem_total + cfg.lambda_rgb * rgb_total
-    terms["n_labelled"] = mask.sum().detach()
+    terms["n_labelled"] = n_labelled.detach()
     terms["psnr"] = psnr_from_mse(terms[f"rgb_{passes[-1]}"])
     return total, terms

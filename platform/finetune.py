@@ -32,11 +32,11 @@ from sray.data_tools.loader import make_eval_samples, make_train_loader
 from sray.data_tools.manifest import read_manifest
 from sray.model.metrics import DATASET_PROTOCOL
 from sray.platform.evaluation import render_view, score_views
-from sray.platform.finetune_learners import NeRFLearner, SRayLearner, autocast, build_semantic_nerf
+from sray.platform.finetune_learners import NeRFLearner, SRayLearner, build_semantic_nerf
 from sray.platform.fleet_config import FleetConfig
 from sray.platform.scene_delta import model_bytes
 from sray.platform.train_state import model_from_checkpoint
-from sray.platform.train_worker import NonFiniteTraining
+from sray.platform.train_step import NonFiniteTraining, step_seed
 
 RESULT_FILE = "result.json"
 """Per (scene, method) result, at ``<fleet>/scenes/<scene>/<method>/result.json`` (docs/CONTRACTS.md)."""
@@ -112,7 +112,7 @@ def evaluate(learner: Any, samples: list[dict[str, Any]], cfg: FleetConfig, n_cl
              ignore_id: int) -> dict[str, float]:
     """Held-out scores (``score_views`` keys) of the learner's current state."""
     ft = cfg.finetune
-    with learner.inference(), autocast(learner.device, ft.precision):
+    with learner.inference(), learner.step.autocast():
         views = [render_view(learner.renderer(s), s, ft.eval_stride, ft.eval_chunk, learner.device) for s in samples]
     return score_views(views, n_classes, ignore_id)
 
@@ -142,14 +142,15 @@ def _prepare(job: SceneJob, device: torch.device) -> tuple[Any, Any, list[dict[s
                          f"{job.checkpoint} predicts {n_classes}; use shards of the checkpoint's label space")
     full_bytes = model_bytes(base)
     if job.method == "sray":
-        learner: Any = SRayLearner(base, job.base_sha256, ft.adapt, ft.lr, ft.grad_clip, ft.precision, device)
+        learner: Any = SRayLearner(base, job.base_sha256, ft.adapt, ft.lr, ft.grad_clip, ft.precision, device,
+                                   ft.max_nonfinite_in_row)
         n_source = ft.n_source or train_cfg.model.n_source
         top_k = ft.top_k or min(train_cfg.data.top_k, int(manifest.neighbours["k"]))
     elif job.method == "semantic-nerf":
         samples_per_ray = (cfg.nerf.n_coarse or train_cfg.model.n_coarse, cfg.nerf.n_fine or train_cfg.model.n_fine)
         net = build_semantic_nerf(shards, job.scene, n_classes, ignore_id, *samples_per_ray, cfg.nerf, ft.seed,
                                   ft.eval_chunk)
-        learner = NeRFLearner(net, cfg.nerf.lr, ft.grad_clip, ft.precision, device)
+        learner = NeRFLearner(net, cfg.nerf.lr, ft.grad_clip, ft.precision, device, ft.max_nonfinite_in_row)
         n_source, top_k = 1, 1  # only the query's rays are used
     else:
         raise ValueError(f"method {job.method!r}: use one of 'sray', 'semantic-nerf'")
@@ -194,28 +195,27 @@ def finetune_scene(job: SceneJob, logger: Any = None) -> SceneOutcome:
 
     bar = make_progress(True, total=ft.max_steps, desc=f"{job.scene}/{job.method}")
     evaluate_now()
-    nonfinite, window = 0, []
+    window: list[torch.Tensor] = []
     try:
         while step < ft.max_steps:
             start = time.perf_counter()
             if step % ft.eval_every == 0:
                 batches = iter(loader)  # one loader epoch = eval_every samples
-            torch.manual_seed((ft.seed * 1_000_003 + step) % (2**63 - 1))
+            torch.manual_seed(step_seed(ft.seed, 0, step))
             loss, terms = learner.loss(next(batches))
-            finite = learner.update(loss)
+            try:
+                outcome = learner.step(loss)
+            except NonFiniteTraining as err:
+                raise NonFiniteTraining(f"{job.scene}/{job.method} at step {step}: {err}") from None
             train_s += time.perf_counter() - start
             step += 1
             bar.update(1)
-            nonfinite = 0 if finite else nonfinite + 1
-            if nonfinite >= ft.max_nonfinite_in_row:
-                raise NonFiniteTraining(f"{job.scene}/{job.method}: {nonfinite} steps in a row had a non-finite loss "
-                                        f"or gradient (last at step {step}); lower finetune.lr or use precision no")
-            if finite:
-                window.append(float(loss.detach()))
+            if outcome.applied:
+                window.append(loss.detach())
             out_of_time = 0 < ft.max_seconds <= train_s
             if step % ft.eval_every == 0 or step == ft.max_steps or out_of_time:
                 if logger is not None and window:
-                    logger.log_metrics({"train/loss": sum(window) / len(window),
+                    logger.log_metrics({"train/loss": float(torch.stack(window).mean()),
                                         "train/psnr": float(terms["psnr"])}, step)
                 window = []
                 evaluate_now()

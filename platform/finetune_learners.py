@@ -7,8 +7,9 @@
 * :class:`NeRFLearner`: a Semantic-NeRF trained from scratch on the same rays (the training sample's
   source views are ignored); its artifact is the whole network.
 
-Precision: autocast bf16 (CPU and CUDA) or fp16 with a GradScaler (CUDA); the loss itself is computed
-in float32 by ``render_loss``.
+Both update through the shared :class:`sray.platform.train_step.TrainStep` (autocast bf16 on CPU and
+CUDA or fp16 with a GradScaler on CUDA, clipping, the non-finite guard); the loss itself is computed in
+float32 by ``render_loss``.
 """
 
 from __future__ import annotations
@@ -26,38 +27,22 @@ from sray.data_tools.loader_views import read_scene_views
 from sray.data_tools.manifest import read_manifest
 from sray.data_tools.scene import SceneMeta
 from sray.model.losses import render_loss
-from sray.model.rays import pixel_rays
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box_from_cameras
 from sray.model.sray import SourceSet, SRayModel
 from sray.platform.evaluation import sray_renderer
 from sray.platform.fleet_config import SemanticNeRFSettings
 from sray.platform.scene_delta import (NERF_ARTIFACT, SRAY_ARTIFACT, adapted_keys, adapted_state, apply_delta,
                                        save_semantic_nerf, save_sray_delta)
-
-
-def autocast(device: torch.device, precision: str) -> contextlib.AbstractContextManager:
-    """The autocast region of ``precision`` ("no", "bf16", "fp16") on ``device``."""
-    dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}.get(precision)
-    return torch.autocast(device.type, dtype=dtype, enabled=dtype is not None)
-
-
-def _rays(batch: dict[str, Any], device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """origins, dirs (R, 3) and the scene's near/far (R,) of a training sample, on ``device``."""
-    origins, dirs = pixel_rays(batch["query_K"].to(device), batch["query_c2w"].to(device), batch["pixels"].to(device))
-    near = torch.full((origins.shape[0],), float(batch["near"]), device=device)
-    far = torch.full((origins.shape[0],), float(batch["far"]), device=device)
-    return origins, dirs, near, far
+from sray.platform.train_step import TrainStep, batch_rays, fused_adam
 
 
 class _Learner:
-    """Optimiser, precision and the update rule shared by both methods."""
+    """Optimiser, precision and the shared training step of both methods."""
 
     def __init__(self, net: nn.Module, params: list[nn.Parameter], lr: float, grad_clip: float, precision: str,
-                 device: torch.device) -> None:
+                 device: torch.device, max_nonfinite_in_row: int) -> None:
         self.net, self.params, self.device, self.precision = net, params, device, precision
-        self.grad_clip = grad_clip
-        self.optimizer = torch.optim.Adam(params, lr=lr)
-        self.scaler = torch.amp.GradScaler("cuda") if precision == "fp16" else None
+        self.step = TrainStep(params, fused_adam(params, lr), grad_clip, precision, device, max_nonfinite_in_row)
 
     @contextlib.contextmanager
     def inference(self) -> Iterator[None]:
@@ -75,33 +60,13 @@ class _Learner:
             for p, flag in flags:
                 p.requires_grad_(flag)
 
-    def update(self, loss: Tensor) -> bool:
-        """Backward, clip and step; False (step skipped) when the loss or a gradient is not finite."""
-        if self.scaler is not None:
-            self.scaler.scale(loss).backward()
-            self.scaler.unscale_(self.optimizer)
-        else:
-            loss.backward()
-        grads = [p for p in self.params if p.grad is not None]
-        norm = (torch.nn.utils.clip_grad_norm_(grads, self.grad_clip) if self.grad_clip > 0
-                else torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in grads] or [loss.new_zeros(())])))
-        finite = bool(torch.isfinite(norm)) and bool(torch.isfinite(loss.detach()))
-        if self.scaler is not None:  # the scaler skips overflowing steps itself
-            self.scaler.step(self.optimizer)
-            self.scaler.update()
-        elif finite:
-            self.optimizer.step()
-        self.optimizer.zero_grad(set_to_none=True)
-        return finite
-
-
 class SRayLearner(_Learner):
     """Trains only the modules ``adapt`` of the shared S-Ray model (the rest stays frozen)."""
 
     method = "sray"
 
     def __init__(self, net: SRayModel, base_sha256: str, adapt: tuple[str, ...], lr: float, grad_clip: float,
-                 precision: str, device: torch.device) -> None:
+                 precision: str, device: torch.device, max_nonfinite_in_row: int) -> None:
         net = net.to(device).eval()
         self.base_sha256, self.adapt = base_sha256, tuple(adapt)
         keys = set(adapted_keys(net, adapt))
@@ -110,12 +75,12 @@ class SRayLearner(_Learner):
             p.requires_grad_(name in keys)
         self.encoder_frozen = not any(k.startswith("encoder.") for k in keys)
         self._sources: dict[tuple[str, str], SourceSet] = {}
-        super().__init__(net, params, lr, grad_clip, precision, device)
+        super().__init__(net, params, lr, grad_clip, precision, device, max_nonfinite_in_row)
 
     def loss(self, batch: dict[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
         """Loss of one training sample (sources encoded without gradient while the encoder is frozen)."""
-        origins, dirs, near, far = _rays(batch, self.device)
-        with autocast(self.device, self.precision):
+        origins, dirs, near, far = batch_rays(batch, self.device)
+        with self.step.autocast():
             with torch.no_grad() if self.encoder_frozen else contextlib.nullcontext():
                 src = self.net.encode(batch["src_rgb"].to(self.device), batch["src_K"].to(self.device),
                                       batch["src_c2w"].to(self.device))
@@ -158,14 +123,15 @@ class NeRFLearner(_Learner):
 
     method = "semantic-nerf"
 
-    def __init__(self, net: SemanticNeRF, lr: float, grad_clip: float, precision: str, device: torch.device) -> None:
+    def __init__(self, net: SemanticNeRF, lr: float, grad_clip: float, precision: str, device: torch.device,
+                 max_nonfinite_in_row: int) -> None:
         net = net.to(device).eval()
-        super().__init__(net, list(net.parameters()), lr, grad_clip, precision, device)
+        super().__init__(net, list(net.parameters()), lr, grad_clip, precision, device, max_nonfinite_in_row)
 
     def loss(self, batch: dict[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
         """Loss of one training sample's rays (its source views are not used)."""
-        origins, dirs, near, far = _rays(batch, self.device)
-        with autocast(self.device, self.precision):
+        origins, dirs, near, far = batch_rays(batch, self.device)
+        with self.step.autocast():
             out = self.net.render_rays(origins, dirs, near, far, stratified=True)
         return render_loss(out, batch["target_label"].to(self.device), batch["target_rgb"].to(self.device),
                            self.net.cfg)

@@ -11,6 +11,7 @@ from torch import Tensor, nn
 from sray.model.config import SRayConfig
 from sray.model.sray import SRayModel
 from sray.platform.train_config import OptimSettings, TrainConfig
+from sray.platform.train_step import fused_adam
 
 
 class RayBatchModel(nn.Module):
@@ -52,18 +53,9 @@ def build_training(cfg: TrainConfig) -> tuple[RayBatchModel, torch.optim.Optimiz
     """Model (seeded from ``cfg.run.seed``, identical on every rank), Adam and its schedule."""
     torch.manual_seed(cfg.run.seed)
     model = RayBatchModel(cfg.model)
-    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)
+    optimizer = fused_adam(list(model.parameters()), cfg.optim.lr)
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
     return model, optimizer, scheduler
-
-
-def step_seed(cfg: TrainConfig, rank: int, step: int) -> int:
-    """Seed of everything random in one step (ray sampling, stratified depths) on one rank.
-
-    A pure function of (seed, rank, step): a resumed job draws exactly what an uninterrupted one
-    would, with no RNG state to carry between processes.
-    """
-    return (cfg.run.seed * 1_000_003 + rank * 7_919 + step) % (2**63 - 1)
 
 
 def training_state(model: nn.Module, optimizer: torch.optim.Optimizer, scheduler: Any, scaler: Any,
@@ -101,6 +93,9 @@ def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayMod
     from sray.platform.checkpoints import load_checkpoint
 
     state = load_checkpoint(Path(path), map_location)
+    if any(k.endswith("attention.pos") for k in state["model"]):
+        raise ValueError(f"{path}: this checkpoint embeds sample ranks (sray before the depth position signal "
+                         "of issue 8); it cannot be loaded into the current model. Retrain it with `sray train`.")
     cfg = TrainConfig.from_dict(state["config"])
     wrapper = RayBatchModel(cfg.model)
     wrapper.load_state_dict(state["model"])

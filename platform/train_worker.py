@@ -15,10 +15,10 @@ from typing import Any
 import torch
 
 from sray.model.losses import render_loss
-from sray.model.rays import pixel_rays
 from sray.platform.checkpoints import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
 from sray.platform.train_config import TrainConfig
-from sray.platform.train_state import build_training, restore_training, step_seed, training_state
+from sray.platform.train_state import build_training, restore_training, training_state
+from sray.platform.train_step import TrainStep, batch_rays, step_seed
 from sray.platform.tracking import RunHandle
 
 STOP_FILE = "STOP"
@@ -27,21 +27,8 @@ FAIL_MARKER = ".fail_injected"
 """Written before an injected crash, so that only the first attempt crashes."""
 
 
-class NonFiniteTraining(RuntimeError):
-    """Too many consecutive steps had a non-finite loss or gradient."""
-
-
 def _to(batch: dict[str, Any], device: torch.device) -> dict[str, Any]:
     return {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
-
-
-def _rays(batch: dict[str, Any]) -> tuple[torch.Tensor, ...]:
-    """origins, dirs (R,3) and per-ray near/far (R,) of a training batch."""
-    origins, dirs = pixel_rays(batch["query_K"], batch["query_c2w"], batch["pixels"])
-    n = origins.shape[0]
-    near = torch.full((n,), float(batch["near"]), device=origins.device)
-    far = torch.full((n,), float(batch["far"]), device=origins.device)
-    return origins, dirs, near, far
 
 
 def _memory_mb(device: torch.device) -> float:
@@ -85,7 +72,9 @@ def train_worker(payload: dict[str, Any]) -> None:
     stop_file = job_dir / STOP_FILE
 
     use_cuda = cfg.run.gpus_per_worker > 0 and torch.cuda.is_available()
-    accelerator = Accelerator(mixed_precision=cfg.run.precision, cpu=not use_cuda)
+    # Accelerate places the model and wraps it for DDP; autocast and loss scaling are the shared
+    # TrainStep's, so pretraining and finetuning run the same step.
+    accelerator = Accelerator(mixed_precision="no", cpu=not use_cuda)
     device = accelerator.device
     model, optimizer, scheduler = build_training(cfg)
     start, best, counters = 0, None, {"skipped_steps": 0}
@@ -97,8 +86,11 @@ def train_worker(payload: dict[str, Any]) -> None:
     if state is not None:
         start, best, counters = restore_training(state, model, optimizer, scheduler, None)
     model, optimizer = accelerator.prepare(model, optimizer)
-    if state is not None and accelerator.scaler is not None and "scaler" in state:
-        accelerator.scaler.load_state_dict(state["scaler"])
+    train_step = TrainStep(list(model.parameters()), optimizer, cfg.optim.grad_clip, cfg.run.precision, device,
+                           cfg.optim.max_nonfinite_in_row, world)
+    train_step.skipped_total = counters.get("skipped_steps", 0)
+    if state is not None and train_step.scaler is not None and "scaler" in state:
+        train_step.scaler.load_state_dict(state["scaler"])
 
     manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
     logger = RunLogger(RunHandle(**payload["run"])) if rank == 0 else None
@@ -129,25 +121,18 @@ def train_worker(payload: dict[str, Any]) -> None:
         if rank == 0:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
             logger.flush(force=True)
-            state = training_state(accelerator.unwrap_model(model), optimizer, scheduler, accelerator.scaler,
+            counters["skipped_steps"] = train_step.skipped_total
+            state = training_state(accelerator.unwrap_model(model), optimizer, scheduler, train_step.scaler,
                                    step_done, cfg, best, counters)
             path = manager.save(state, step_done, metrics.get("val/miou"))
             ray.train.report(metrics, checkpoint=to_ray_checkpoint(path))
         else:
             ray.train.report(metrics)
 
-    nonfinite_in_row, window_start, window_terms = 0, time.perf_counter(), []
+    window_start, window_terms, term_names = time.perf_counter(), [], None
     step = start
     try:
         while step < cfg.optim.steps:
-            stop = torch.tensor([float(stop_file.exists() or step == cfg.run.stop_after_step)], device=device)
-            if world > 1:
-                torch.distributed.all_reduce(stop, op=torch.distributed.ReduceOp.MAX)
-            if stop.item() > 0:
-                checkpoint_and_report(step, {"step": step, "stopped": 1.0})
-                if rank == 0:
-                    print(f"[sray] stopped at step {step}; resume with: sray train --resume {cfg.run.name}", flush=True)
-                return
             if rank == 0 and step == cfg.run.fail_at_step and not (job_dir / FAIL_MARKER).exists():
                 (job_dir / FAIL_MARKER).touch()
                 logger.flush(force=True)
@@ -156,52 +141,33 @@ def train_worker(payload: dict[str, Any]) -> None:
             if step % epoch_len == 0 and step != start:
                 batches = batches_from(step)
             batch = _to(next(batches), device)
-            torch.manual_seed(step_seed(cfg, rank, step))
-            origins, dirs, near, far = _rays(batch)
+            torch.manual_seed(step_seed(cfg.run.seed, rank, step))
+            origins, dirs, near, far = batch_rays(batch, device)
             model.train()
-            with accelerator.autocast():
+            with train_step.autocast():
                 out = model(batch["src_rgb"], batch["src_K"], batch["src_c2w"], origins, dirs, near, far)
             loss, terms = render_loss(out, batch["target_label"], batch["target_rgb"], cfg.model)
             if step == cfg.run.nan_at_step:
                 loss = loss * float("nan")
-            accelerator.backward(loss)
-            params = [p for p in model.parameters() if p.grad is not None]
-            grad_norm = (accelerator.clip_grad_norm_(params, cfg.optim.grad_clip) if cfg.optim.grad_clip > 0
-                         else torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in params])))
-            finite = bool(torch.isfinite(grad_norm)) and bool(torch.isfinite(loss.detach()))
-            if accelerator.scaler is not None:  # fp16: the scaler skips overflowing steps itself
-                optimizer.step()
-                skipped = accelerator.optimizer_step_was_skipped
-            else:
-                skipped = not finite
-                if not skipped:
-                    optimizer.step()
-            optimizer.zero_grad(set_to_none=True)
+            stop_asked = stop_file.exists() or step + 1 == cfg.run.stop_after_step
+            outcome = train_step(loss, stop_requested=stop_asked)
             scheduler.step()
-            if skipped:
-                counters["skipped_steps"] += 1
-                nonfinite_in_row += 1
-                if nonfinite_in_row >= cfg.optim.max_nonfinite_in_row:
-                    raise NonFiniteTraining(
-                        f"{nonfinite_in_row} steps in a row had a non-finite loss or gradient (last at step "
-                        f"{step}); lower optim.lr, raise optim.grad_clip strictness, or use --precision no/bf16")
-            else:
-                nonfinite_in_row = 0
-                window_terms.append({k: float(v) for k, v in terms.items()} | {"loss": float(loss.detach())})
+            if outcome.applied:
+                term_names = term_names or [*terms, "loss"]
+                window_terms.append(torch.stack([*(terms[k].float() for k in term_names[:-1]), loss.detach().float()]))
             step += 1
             bar.update(1)
 
             if rank == 0 and (step % cfg.run.log_every == 0 or step == cfg.optim.steps):
                 elapsed = time.perf_counter() - window_start
-                n_steps = max(len(window_terms), 1)
-                means = {f"train/{k}": sum(t[k] for t in window_terms) / n_steps for k in (window_terms[0] if window_terms else {})}
-                logger.log_metrics(means | {
-                    "train/lr": scheduler.get_last_lr()[0], "train/grad_norm": float(grad_norm),
+                means = (dict(zip(term_names, torch.stack(window_terms).mean(0).tolist()))
+                         if window_terms else {})  # one read of the whole window's terms
+                logger.log_metrics({f"train/{k}": v for k, v in means.items()} | {
+                    "train/lr": scheduler.get_last_lr()[0], "train/grad_norm": float(outcome.grad_norm),
                     "train/rays_per_s": cfg.data.rays_per_batch * world * cfg.run.log_every / max(elapsed, 1e-9),
-                    "train/skipped_steps": counters["skipped_steps"], "train/memory_mb": _memory_mb(device)}, step)
-                bar.set_postfix(loss=f"{means.get('train/loss', float('nan')):.3f}")
+                    "train/skipped_steps": train_step.skipped_total, "train/memory_mb": _memory_mb(device)}, step)
+                bar.set_postfix(loss=f"{means.get('loss', float('nan')):.3f}")
                 window_start, window_terms = time.perf_counter(), []
-
             metrics: dict[str, float] = {"step": step}
             if step % cfg.run.val_every == 0 or step == cfg.optim.steps:
                 if rank == 0:
@@ -209,6 +175,11 @@ def train_worker(payload: dict[str, Any]) -> None:
                     miou = metrics.get("val/miou")
                     if miou is not None and (best is None or miou > best):
                         best = miou
+            if outcome.stop:  # asked by a STOP file on any rank (all ranks read the same flag)
+                checkpoint_and_report(step, metrics | {"stopped": 1.0})
+                if rank == 0:
+                    print(f"[sray] stopped at step {step}; resume with: sray train --resume {cfg.run.name}", flush=True)
+                return
             if step % cfg.run.ckpt_every == 0 or step == cfg.optim.steps:
                 checkpoint_and_report(step, metrics)
         if rank == 0:

@@ -183,3 +183,12 @@ def test_bad_arguments_are_refused(data: tuple[Path, Path]) -> None:
                       (dict(scenes=["nope"]), "nope")]:
         with pytest.raises(ValueError, match=match):
             _loader(data[1], **kw)
+
+
+def test_label_ids_outside_the_label_space_are_refused_on_the_host() -> None:
+    """The loader checks target ids once per batch (the training step no longer reads them back)."""
+    from sray.data_tools.loader_samples import check_label_ids
+
+    check_label_ids(np.array([0, 19, 255, 3]), 20, "room", "v1")  # in range, ignore id allowed
+    with pytest.raises(ValueError, match=r"scene 'room', view 'v7': label ids \[20, 40\]"):
+        check_label_ids(np.array([0, 40, 20, 255]), 20, "room", "v7")

@@ -104,7 +104,11 @@ def test_constant_colour_error_gives_20_db() -> None:
     torch.testing.assert_close(terms["psnr"], torch.tensor(20.0), atol=1e-4, rtol=0.0)
 
 
-def test_labels_outside_the_label_space_raise() -> None:
+def test_labels_outside_the_label_space_raise_in_debug_mode(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The value check syncs the device, so it runs with SRAY_DEBUG_CHECKS=1 (the loader checks labels)."""
+    import sray.model.debug_checks as debug_checks
+
+    monkeypatch.setattr(debug_checks, "ENABLED", True)
     with pytest.raises(ValueError, match=r"label ids must lie in \[0, 3\)"):
         render_loss(_out(3, 3), torch.tensor([0, 7, IGNORE]), torch.rand(3, 3), LossConfig())
     with pytest.raises(ValueError, match="int64"):

@@ -1,0 +1,126 @@
+"""The one optimisation step of sray, shared by pretraining (``train_worker``) and per-scene finetuning.
+
+A step reads top to bottom: seed -> (caller: forward under :meth:`TrainStep.autocast`, loss) ->
+backward (scaled under fp16) -> unscale -> clip -> non-finite guard -> optimiser step -> scaler
+update -> zero grads. It waits for the device exactly once: the guard's flags (non-finite loss or
+gradient, and a stop request from any rank) are brought to the host in one transfer. Loss terms stay
+on the device; callers stack them and read them at their logging interval.
+
+Non-finite steps are skipped (no parameter or optimiser-state change), counted, and after
+``max_nonfinite_in_row`` in a row the step raises :class:`NonFiniteTraining`. Under fp16 the
+gradient scaler still lowers its scale after a skipped step.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from sray.model.rays import pixel_rays
+
+PRECISIONS = {"no": None, "bf16": torch.bfloat16, "fp16": torch.float16}
+"""Autocast dtype of each precision setting (``no`` = float32 throughout)."""
+
+
+class NonFiniteTraining(RuntimeError):
+    """Too many consecutive steps had a non-finite loss or gradient."""
+
+
+def step_seed(seed: int, rank: int, step: int) -> int:
+    """Seed of everything random in one step (ray sampling, stratified depths) on one rank.
+
+    A pure function of (seed, rank, step): a resumed job draws exactly what an uninterrupted one
+    would, with no RNG state to carry between processes.
+    """
+    return (seed * 1_000_003 + rank * 7_919 + step) % (2**63 - 1)
+
+
+def batch_rays(batch: dict[str, Any], device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Rays of a training sample on ``device``: origins, dirs (R, 3) and the scene's near, far (R,).
+
+    The bounds are expanded on the device (no host round trip).
+    """
+    origins, dirs = pixel_rays(batch["query_K"].to(device), batch["query_c2w"].to(device),
+                               batch["pixels"].to(device))
+    n = origins.shape[0]
+    near = batch["near"].to(device, torch.float32).reshape(()).expand(n)
+    far = batch["far"].to(device, torch.float32).reshape(()).expand(n)
+    return origins, dirs, near, far
+
+
+@dataclass
+class StepOutcome:
+    """What one :class:`TrainStep` call did."""
+
+    applied: bool
+    """False when the step was skipped (non-finite loss or gradient)."""
+    stop: bool
+    """True when any rank asked to stop (read in the same transfer as the guard)."""
+    grad_norm: Tensor
+    """Total gradient norm before clipping, a device scalar (read it only when logging)."""
+
+
+class TrainStep:
+    """Backward, clipping, non-finite guard, loss scaling and the update for one set of parameters."""
+
+    def __init__(self, params: list[nn.Parameter], optimizer: torch.optim.Optimizer, grad_clip: float,
+                 precision: str, device: torch.device, max_nonfinite_in_row: int, world_size: int = 1) -> None:
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision {precision!r}: use one of {sorted(PRECISIONS)}")
+        self.params, self.optimizer, self.grad_clip = params, optimizer, grad_clip
+        self.precision, self.device, self.world_size = precision, device, world_size
+        self.max_nonfinite_in_row = max_nonfinite_in_row
+        self.scaler = torch.amp.GradScaler(device.type) if precision == "fp16" else None
+        self.skipped_total = 0
+        """Steps skipped so far (restored from checkpoints by the caller)."""
+        self.skipped_in_row = 0
+
+    def autocast(self) -> contextlib.AbstractContextManager:
+        """The autocast region of this step's precision (forward and loss go inside it)."""
+        dtype = PRECISIONS[self.precision]
+        return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None)
+
+    def _gradient_norm(self, loss: Tensor) -> Tensor:
+        """Total norm of the gradients before clipping (clips in place when ``grad_clip`` > 0)."""
+        grads = [p for p in self.params if p.grad is not None]
+        if not grads:
+            return loss.detach().new_zeros(())
+        if self.grad_clip > 0:
+            return torch.nn.utils.clip_grad_norm_(grads, self.grad_clip)
+        return torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in grads]))
+
+    def __call__(self, loss: Tensor, stop_requested: bool = False) -> StepOutcome:
+        """Apply one update from ``loss`` (a scalar with a graph); see the module docstring."""
+        (self.scaler.scale(loss) if self.scaler is not None else loss).backward()
+        if self.scaler is not None:
+            self.scaler.unscale_(self.optimizer)
+        norm = self._gradient_norm(loss)
+        bad = ~(torch.isfinite(norm) & torch.isfinite(loss.detach()))
+        flags = torch.stack([bad.float(), torch.tensor(float(stop_requested), device=norm.device)])
+        if self.world_size > 1:
+            torch.distributed.all_reduce(flags, op=torch.distributed.ReduceOp.MAX)
+        nonfinite, stop = flags.tolist()  # the step's one device -> host transfer
+        if not nonfinite:
+            self.optimizer.step()
+        if self.scaler is not None:
+            self.scaler.update()
+        self.optimizer.zero_grad(set_to_none=True)
+        if nonfinite:
+            self.skipped_total += 1
+            self.skipped_in_row += 1
+            if self.skipped_in_row >= self.max_nonfinite_in_row:
+                raise NonFiniteTraining(
+                    f"{self.skipped_in_row} steps in a row had a non-finite loss or gradient; lower the learning "
+                    "rate, clip gradients harder, or train in precision 'no' or 'bf16'")
+        else:
+            self.skipped_in_row = 0
+        return StepOutcome(applied=not nonfinite, stop=bool(stop), grad_norm=norm.detach())
+
+
+def fused_adam(params: list[nn.Parameter], lr: float) -> torch.optim.Adam:
+    """Adam with the fused kernel (CPU and CUDA): one kernel per step and no host reads of its step counters."""
+    return torch.optim.Adam(params, lr=lr, fused=True)
