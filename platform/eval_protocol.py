@@ -40,9 +40,9 @@ class EvalProtocol:
     """How a set of evaluation scores was made (JSON: :meth:`to_json`, one line: :meth:`describe`)."""
 
     source_rule: str
-    """How each query's source views were chosen: the shard manifest's neighbour rule and version
-    (e.g. ``frustum-overlap v1``; the top-ranked ``n_source`` inside the scene's source split, fixed),
-    or :data:`NO_SOURCES`."""
+    """How each query's source views were chosen: the shard manifest's neighbour rule and version,
+    ``"<rule> v<version>"`` (the top-ranked ``n_source`` inside the scene's source split, fixed), or
+    :data:`NO_SOURCES`."""
     n_source: int
     """Source views per query view (0 with :data:`NO_SOURCES`)."""
     stride: int
