@@ -6,7 +6,10 @@
 3. a finetune fleet on the unseen scenes from the full model, S-Ray finetune against Semantic-NeRF
    from scratch under the same wall-clock budget, read off at equal budgets (the paper's
    per-scene optimisation table);
-4. tables and charts appended to docs/benchmarks.md with the exact command.
+4. tables and charts appended to docs/benchmarks.md with the exact command, each table with the
+   protocol line(s) of the numbers in it (:func:`sray.platform.eval_protocol.caption_lines`); the
+   stored results (``<out>/eval/<variant>/metrics.json``, the fleet's ``result.json`` files) carry
+   the protocol descriptor.
 """
 
 from __future__ import annotations
@@ -91,9 +94,10 @@ def _at_budget(result: dict[str, Any], budget: float, key: str) -> float:
     return float(step_hold(x, y, np.array([budget]))[0])
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
+def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str:
+    """A Markdown table with its protocol caption lines under it."""
     lines = [" | ".join(header), " | ".join("---" for _ in header)]
-    return "\n".join(lines + [" | ".join(r) for r in rows])
+    return "\n".join(lines + [" | ".join(r) for r in rows] + ["", *captions])
 
 
 def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
@@ -101,9 +105,9 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     from sray.data_tools.shards import write_shards
     from sray.data_tools.synth_dataset import generate_dataset
     from sray.jobs.benchmarks_doc import record
-    from sray.model.metrics import DATASET_PROTOCOL, PER_IMAGE_PROTOCOL
     from sray.platform.charts import write_fleet_charts
     from sray.platform.eval_job import evaluate_checkpoint
+    from sray.platform.eval_protocol import caption_lines
     from sray.platform.fleet import run_fleet, unseen_scenes
     from sray.platform.fleet_config import FleetConfig
 
@@ -117,7 +121,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     write_shards(out / "scenes", shards)
     scenes = unseen_scenes(shards)
 
-    rows, checkpoints = [], {}
+    rows, checkpoints, protocols = [], {}, []
     for variant in VARIANTS:
         start = time.perf_counter()
         checkpoints[variant] = _pretrain(variant, p, shards, out, tracking_uri)
@@ -125,14 +129,15 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
         report = evaluate_checkpoint(checkpoints[variant], shards, scenes, out / "eval" / variant,
                                      n_source=p.n_source, stride=1, tracking_uri=tracking_uri,
                                      experiment="sray-bench-accuracy", progress=False)
-        mean = report["mean"]
+        mean, ssim = report["mean"], report["mean"]["colour"]["ssim"]
+        protocols.append((variant, report["protocol"]))
         rows.append([variant, f"{100 * mean['dataset_level']['miou']:.2f}",
                      f"{100 * mean['dataset_level']['total_acc']:.2f}",
                      f"{100 * mean['dataset_level']['class_avg_acc']:.2f}",
                      f"{100 * mean['per_image']['miou']:.2f}", f"{mean['colour']['psnr_db']:.2f}",
-                     f"{train_s / 60:.1f}"])
+                     "—" if ssim is None else f"{ssim:.3f}", f"{train_s / 60:.1f}"])
     ablation = _table(["attention", "mIoU %", "total acc %", "class-avg acc %", "per-image mIoU %", "PSNR dB",
-                       "pretrain min"], rows)
+                       "SSIM", "pretrain min"], rows, caption_lines(protocols))
 
     fleet_cfg = FleetConfig()
     fleet_cfg.finetune.max_seconds = p.budget_s
@@ -153,7 +158,8 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
             values = [v for v in values if np.isfinite(v)]
             cells.append(f"{100 * np.mean(values):.2f}" if values else "-")
         budget_rows.append(cells)
-    equal_budget = _table(["budget s", "S-Ray finetune mIoU %", "Semantic-NeRF mIoU %"], budget_rows)
+    equal_budget = _table(["budget s", "S-Ray finetune mIoU %", "Semantic-NeRF mIoU %"], budget_rows,
+                          caption_lines((r["method"], r.get("protocol")) for r in results))
 
     figures = doc.parent / "benchmarks" / f"accuracy-{preset}"
     figures.mkdir(parents=True, exist_ok=True)
@@ -161,14 +167,12 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     for chart in charts:
         shutil.copy(chart, figures / chart.name)
         links.append(f"![{chart.stem}](benchmarks/accuracy-{preset}/{chart.name})")
-    notes = (f"Protocols: mIoU and accuracies {DATASET_PROTOCOL}, per scene then averaged over the "
-             f"{len(scenes)} unseen scenes; per-image mIoU: {PER_IMAGE_PROTOCOL}. Zero-shot: each test view "
-             f"rendered from its {p.n_source} fixed source views. Pretraining: {p.steps} steps, {p.rays} rays, "
+    notes = (f"Scores per scene, then averaged over the {len(scenes)} unseen scenes. "
+             f"Pretraining: {p.steps} steps, {p.rays} rays, "
              f"{p.n_coarse}+{p.n_fine} samples, {p.workers} worker(s), on {p.train_scenes} procedural scenes "
              f"({p.width}x{p.height}, {p.views} views). Finetunes: {p.budget_s:.0f} s wall-clock budget each, "
              f"equal for both methods, read off at the last held-out evaluation before each budget (0 s = "
-             f"zero-shot for S-Ray, untrained for Semantic-NeRF), held-out views scored on 1 pixel in every "
-             f"{p.fleet_eval_stride}x{p.fleet_eval_stride} block. Total benchmark wall time "
+             f"zero-shot for S-Ray, untrained for Semantic-NeRF). Total benchmark wall time "
              f"{(time.perf_counter() - t0) / 60:.1f} min.\n\n" + "\n".join(links))
     record(f"Accuracy: attention ablation, zero-shot ({preset})", ablation, doc)
     record(f"Accuracy: S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets ({preset})",

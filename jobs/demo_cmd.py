@@ -3,7 +3,8 @@
 procedural scenes -> ``sray data check`` -> shards (+ verification) -> a picture of a loader
 sample -> a short S-Ray training run on local Ray with two CPU workers, tracked in MLflow ->
 zero-shot evaluation on the unseen scenes -> a finetune fleet (S-Ray and Semantic-NeRF) on them
--> accuracy-against-time charts -> the results table and the ``sray ui`` command.
+-> accuracy-against-time charts -> the results table and the ``sray ui`` command. Each printed
+table ends with its protocol line (sources, stride, render mode, inputs).
 Everything goes under ``--out`` (default ``outputs/demo``); the MLflow store is the working
 directory's default SQLite store.
 """
@@ -30,7 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="wall-clock budget of each per-scene finetune (both methods)")
     p.add_argument("--eval-stride", type=int, default=2,
                    help="score every n-th pixel in each direction in the zero-shot evaluation "
-                        "(the fleet's held-out curves use twice this); 1 = full images")
+                        "(the fleet's held-out curves use twice this); 1 = full images, the only stride "
+                        "with SSIM")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 

@@ -16,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenes", nargs="+", metavar="SCENE",
                    help="scenes to evaluate (default: every scene whose role is 'test')")
     p.add_argument("--n-source", type=int, default=8, help="fixed source views per test view (paper: 8)")
-    p.add_argument("--stride", type=int, default=1, help="render every N-th pixel (1 = whole images)")
+    p.add_argument("--stride", type=int, default=1,
+                   help="render every N-th pixel in each direction (1 = whole images; SSIM only then)")
     p.add_argument("--out", type=Path, default=Path("outputs/eval"), help="output folder")
     p.add_argument("--tracking-uri", help="MLflow tracking URI (default: SQLite store in this folder)")
     p.add_argument("--experiment", default="sray-eval", help="MLflow experiment name")
@@ -36,7 +37,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"sray eval: {e}", file=sys.stderr)
         return 2
     print(format_table(report))
-    print(f"[sray] {report['protocol']}")
     print(f"[sray] metrics: {report['metrics_path']}")
     print(f"[sray] renders: {Path(report['out_dir']) / 'renders'}")
     hint = report["run"]["ui_hint"]

@@ -12,6 +12,7 @@ From the fleet result dicts (docs/CONTRACTS.md, "Fleet results"), :func:`write_f
   scene stores besides the shared model (log axis), one point per (scene, method); zero-shot S-Ray
   stores nothing and sits on a separate "0 B" tick left of an axis break.
 
+Every chart's footnote carries the results' protocol line(s) (:func:`sray.platform.eval_protocol.caption_lines`).
 Failed results are left out and named in a footnote. Matplotlib's Agg canvas is used directly (no
 pyplot state), so this is safe in Ray workers and threads.
 """
@@ -30,6 +31,7 @@ import numpy as np
 from sray.model.metrics import DATASET_PROTOCOL
 from sray.platform.charts_curves import (METHODS, average_curves, check_result, curve_xy, failure_note, is_chartable,
                                          zero_shot_value)
+from sray.platform.eval_protocol import caption_lines
 
 log = logging.getLogger(__name__)
 
@@ -60,8 +62,8 @@ def _human_bytes(n: float) -> str:
 
 
 def _footnote_parts(ok: list[dict[str, Any]], results: list[dict[str, Any]], extra: str) -> list[str]:
-    protocols = sorted({str(r["protocol"]) for r in ok if isinstance(r.get("protocol"), str)})
-    return [p for p in [extra, *(f"fleet protocol: {p}" for p in protocols), failure_note(results)] if p]
+    protocols = caption_lines((r["method"], r.get("protocol")) for r in ok)
+    return [p for p in [extra, *protocols, failure_note(results)] if p]
 
 
 def _framed_figure(width: float, body_height: float, title: str, handles: list[Any],

@@ -1,15 +1,18 @@
 """``sray eval``: score a checkpoint on unseen scenes with the paper's generalization protocol.
 
-Every ``test`` view of a scene is rendered whole (in ray chunks, every ``stride``-th pixel; stride
-1 = every pixel) from its ``n_source`` FIXED source views (its top-ranked neighbours inside the
-scene's ``source`` split), by the pretrained model as it is: no per-scene optimisation.
+Every ``test`` view of a scene is rendered (in ray chunks, every ``stride``-th pixel in each
+direction; stride 1 = the whole image) from its ``n_source`` FIXED source views (its top-ranked
+neighbours inside the scene's ``source`` split), by the pretrained model as it is: no per-scene
+optimisation.
 
 Outputs under ``out_dir``:
 
-* ``metrics.json`` (atomic): per scene and the mean over scenes, in blocks that each name their
-  protocol: ``dataset_level`` (mIoU, total and class-average accuracy from one confusion matrix per
-  scene), ``per_image`` (mIoU per view, then averaged), ``colour`` (PSNR, SSIM with its window);
-  per-view scores; the LPIPS note (not computable offline);
+* ``metrics.json`` (atomic): ``protocol`` (:class:`sray.platform.eval_protocol.EvalProtocol`: source
+  rule from the shard manifest, source views, stride, render mode, inputs), then per scene and the
+  mean over scenes, in blocks that each name their metric protocol: ``dataset_level`` (mIoU, total
+  and class-average accuracy from one confusion matrix per scene), ``per_image`` (mIoU per view,
+  then averaged), ``colour`` (PSNR; SSIM with its window, null unless stride is 1); per-view scores;
+  the LPIPS note (not computable offline);
 * ``renders/<scene>/<view>_{pred,gt,error}.png`` at the render's own resolution (colours from
   :mod:`sray.platform.palette`) and ``<view>_panel.png`` (:func:`sray.platform.renders.render_panel`).
 
@@ -33,14 +36,12 @@ from sray.data_tools.loader import make_eval_samples
 from sray.data_tools.manifest import read_manifest
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
+from sray.platform.eval_protocol import EvalProtocol
 from sray.platform.evaluation import ViewPrediction, render_view, score_views, sray_renderer
 from sray.platform.palette import colorize
 from sray.platform.renders import error_map, render_panel
 from sray.platform.train_state import model_from_checkpoint
 
-GENERALIZATION_PROTOCOL = ("zero-shot on unseen scenes: each 'test' view rendered whole from its {n} fixed "
-                           "'source' views (top-ranked neighbours), no per-scene optimisation")
-"""How the views are rendered (``{n}``: source views per query)."""
 METRICS_FILE = "metrics.json"
 
 
@@ -119,14 +120,14 @@ def save_view_pngs(view: ViewPrediction, scene: str, class_names: list[str], ign
     return {k: str(p.relative_to(out_dir)) for k, p in files.items()}
 
 
-def scene_blocks(scores: dict[str, float], n_views: int) -> dict[str, Any]:
-    """Scores of one scene (or their mean) in protocol-named blocks."""
+def scene_blocks(scores: dict[str, float | None], n_views: int) -> dict[str, Any]:
+    """Scores of one scene (or their mean) in protocol-named blocks; ``ssim`` None when not scored."""
     return {
         "n_views": n_views,
         "dataset_level": {"protocol": DATASET_PROTOCOL, "miou": scores["miou"], "total_acc": scores["total_acc"],
                           "class_avg_acc": scores["class_avg_acc"]},
         "per_image": {"protocol": PER_IMAGE_PROTOCOL, "miou": scores["miou_per_image"]},
-        "colour": {"psnr_db": scores["psnr"], "ssim": scores["ssim"], "ssim_protocol": SSIM_PROTOCOL,
+        "colour": {"psnr_db": scores["psnr"], "ssim": scores.get("ssim"), "ssim_protocol": SSIM_PROTOCOL,
                    "ssim_window": SSIM_WINDOW},
     }
 
@@ -168,6 +169,7 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")
     checkpoint, shards, out_dir = Path(checkpoint).resolve(), Path(shards).resolve(), Path(out_dir).resolve()
     names, metas = select_scenes(shards, scenes)
+    protocol = EvalProtocol.from_shards(shards, n_source, stride)
     net, cfg = model_from_checkpoint(checkpoint)
     step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
     n_classes, ignore_id = cfg.model.n_classes, cfg.model.ignore_id
@@ -181,15 +183,15 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
     uri = tracking_uri or default_tracking_uri(Path.cwd())
     job = f"{checkpoint.parent.parent.name}-" if checkpoint.parent.name == "checkpoints" else ""
     run = prepare_run(uri, experiment, f"eval-{job}{checkpoint.name}-{time.strftime('%Y%m%d-%H%M%S')}",
-                      tags={"sray.kind": "eval", "sray.checkpoint": str(checkpoint)})
+                      tags={"sray.kind": "eval", "sray.checkpoint": str(checkpoint),
+                            "sray.protocol": protocol.describe()})
     report: dict[str, Any] = {
-        "checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards), "n_source": n_source,
-        "stride": stride, "protocol": GENERALIZATION_PROTOCOL.format(n=n_source), "lpips": LPIPS_NOTE,
-        "scenes": {}}
+        "checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards),
+        "protocol": protocol.to_json(), "lpips": LPIPS_NOTE, "scenes": {}}
     t0 = time.perf_counter()
     with RunLogger(run) as logger:
         logger.log_params({"checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards),
-                           "scenes": names, "n_source": n_source, "stride": stride})
+                           "scenes": names, "protocol": protocol.to_json()})
         bar = tqdm(total=sum(len(metas[s]["splits"]["test"]) for s in names), desc="eval views", unit="view",
                    disable=not progress)
         for name in names:
@@ -218,10 +220,14 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
 
 
 def mean_blocks(blocks: list[dict[str, Any]]) -> dict[str, Any]:
-    """Unweighted mean over scenes of every score (each scene counts once, whatever its view count)."""
+    """Unweighted mean over scenes of every score (each scene counts once, whatever its view count).
 
-    def avg(path: tuple[str, str]) -> float:
-        return float(np.mean([b[path[0]][path[1]] for b in blocks]))
+    A score some scene lacks (SSIM of strided renders) has no mean: None.
+    """
+
+    def avg(path: tuple[str, str]) -> float | None:
+        values = [b[path[0]][path[1]] for b in blocks]
+        return None if any(v is None for v in values) else float(np.mean(values))
 
     scores = {"miou": avg(("dataset_level", "miou")), "total_acc": avg(("dataset_level", "total_acc")),
               "class_avg_acc": avg(("dataset_level", "class_avg_acc")), "miou_per_image": avg(("per_image", "miou")),
@@ -231,20 +237,25 @@ def mean_blocks(blocks: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def format_table(report: dict[str, Any]) -> str:
-    """A plain-text table of a report: one row per scene, then the mean."""
+    """A plain-text table of a report: one row per scene, then the mean, the protocol line below.
+
+    The SSIM column is there only for whole-image evaluations (stride 1).
+    """
+    protocol = EvalProtocol.from_json(report["protocol"])
     head = ("scene", "views", "mIoU", "total acc", "class acc", "mIoU/img", "PSNR dB", "SSIM")
-    rows = [head]
+    columns = len(head) if protocol.scores_ssim else len(head) - 1
+    rows = [head[:columns]]
 
     def cell(v: Any, fmt: str) -> str:
-        return "n/a" if v is None else format(v, fmt)
+        return "—" if v is None else format(v, fmt)
 
     for name, b in [*report["scenes"].items(), ("mean", report["mean"])]:
         d, c = b["dataset_level"], b["colour"]
         rows.append((name, str(b["n_views"]), cell(d["miou"], ".3f"), cell(d["total_acc"], ".3f"),
                      cell(d["class_avg_acc"], ".3f"), cell(b["per_image"]["miou"], ".3f"),
-                     cell(c["psnr_db"], ".2f"), cell(c["ssim"], ".3f")))
-    widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
+                     cell(c["psnr_db"], ".2f"), cell(c["ssim"], ".3f"))[:columns])
+    widths = [max(len(r[i]) for r in rows) for i in range(columns)]
     lines = ["  ".join(v.ljust(w) if i == 0 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths))) for r in rows]
     lines.insert(1, "-" * len(lines[0]))
     lines.insert(len(lines) - 1, "-" * len(lines[0]))
-    return "\n".join([*lines, f"mIoU, accuracies: {DATASET_PROTOCOL}; mIoU/img: {PER_IMAGE_PROTOCOL}"])
+    return "\n".join([*lines, f"Protocol: {protocol.describe()}"])

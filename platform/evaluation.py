@@ -1,7 +1,8 @@
 """Render held-out query views of one scene and score them (validation, ``sray eval``, the fleet).
 
 Every score names its protocol (``sray.model.metrics``): semantic scores both from one confusion
-matrix per scene ("dataset-level") and per image ("per-image mean"); colour by PSNR and SSIM.
+matrix per scene ("dataset-level") and per image ("per-image mean"); colour by PSNR, and by SSIM
+on whole images only (a strided render has no SSIM: its pixels are not neighbours in the image).
 LPIPS is not reported: its backbones are downloaded at run time, which this platform cannot do.
 """
 
@@ -31,6 +32,8 @@ class ViewPrediction:
     """int64 (h, w) ground truth (ignore id = unlabelled)."""
     gt_rgb: Tensor
     """float32 (h, w, 3) ground-truth colour."""
+    stride: int
+    """Every ``stride``-th pixel of the query image in each direction; 1 = the whole image."""
 
 
 def strided_pixels(h: int, w: int, stride: int) -> tuple[Tensor, int, int]:
@@ -67,7 +70,8 @@ def render_view(render: Any, sample: dict[str, Any], stride: int, chunk: int,
     return ViewPrediction(
         query_id=str(sample["query_id"]),
         pred_label=torch.cat(labels).reshape(hh, ww), pred_rgb=torch.cat(colours).reshape(hh, ww, 3),
-        gt_label=gt_label[iv, iu].reshape(hh, ww).long(), gt_rgb=gt_rgb[iv, iu].reshape(hh, ww, 3).float())
+        gt_label=gt_label[iv, iu].reshape(hh, ww).long(), gt_rgb=gt_rgb[iv, iu].reshape(hh, ww, 3).float(),
+        stride=stride)
 
 
 def sray_renderer(net: nn.Module, sample: dict[str, Any], device: torch.device) -> Any:
@@ -80,14 +84,18 @@ def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> 
     """Scene scores: dataset-level and per-image semantic metrics, PSNR and SSIM (mean over views).
 
     Keys: ``miou``, ``total_acc``, ``class_avg_acc`` (dataset-level protocol), ``miou_per_image``
-    (per-image protocol), ``psnr``, ``ssim`` (NaN when the renders are smaller than the SSIM window).
+    (per-image protocol), ``psnr``, and ``ssim`` only when every view is a whole image (stride 1):
+    a strided render never gets an SSIM. Whole images smaller than the SSIM window score NaN.
     """
     conf = sum(confusion_matrix(v.pred_label, v.gt_label, n_classes, ignore_id) for v in views)
     dataset = scene_metrics(conf)
     per_image = per_image_miou([v.pred_label for v in views], [v.gt_label for v in views], n_classes, ignore_id)
     psnrs = [psnr(v.pred_rgb, v.gt_rgb) for v in views]
-    big = all(min(v.gt_label.shape) >= SSIM_WINDOW for v in views)
-    ssims = [ssim(v.pred_rgb, v.gt_rgb) for v in views] if big else [float("nan")]
-    return {"miou": float(dataset["miou"]), "total_acc": float(dataset["total_acc"]),
-            "class_avg_acc": float(dataset["class_avg_acc"]), "miou_per_image": float(per_image["miou"]),
-            "psnr": sum(psnrs) / len(psnrs), "ssim": sum(ssims) / len(ssims)}
+    scores = {"miou": float(dataset["miou"]), "total_acc": float(dataset["total_acc"]),
+              "class_avg_acc": float(dataset["class_avg_acc"]), "miou_per_image": float(per_image["miou"]),
+              "psnr": sum(psnrs) / len(psnrs)}
+    if all(v.stride == 1 for v in views):
+        big = all(min(v.gt_label.shape) >= SSIM_WINDOW for v in views)
+        ssims = [ssim(v.pred_rgb, v.gt_rgb) for v in views] if big else [float("nan")]
+        scores["ssim"] = sum(ssims) / len(ssims)
+    return scores

@@ -4,10 +4,12 @@ Both methods train on the scene's loader pool (test scenes: ``source`` + ``finet
 scenes: ``train`` minus held-out views) with the shared loss, and are scored on the held-out ``test``
 views rendered from their fixed source views (``make_eval_samples``), every ``eval_every`` steps and
 at step 0 (zero-shot S-Ray, untrained Semantic-NeRF). The score is the dataset-level mIoU (one
-confusion matrix over the scene's held-out views). A finetune stops at the first of: ``patience``
-evaluations without an improvement > ``min_delta`` (early stop), ``max_steps``, ``max_seconds`` of
-training time. The best evaluated state is kept and stored as the scene artifact
-(:mod:`sray.platform.scene_delta`). Sampling uses the scene's own near/far from the shard metadata.
+confusion matrix over the scene's held-out views); how it was made (sources, stride, render mode,
+inputs) is the result's ``protocol`` (:class:`sray.platform.eval_protocol.EvalProtocol`). A
+finetune stops at the first of: ``patience`` evaluations without an improvement > ``min_delta``
+(early stop), ``max_steps``, ``max_seconds`` of training time. The best evaluated state is kept
+and stored as the scene artifact (:mod:`sray.platform.scene_delta`). Sampling uses the scene's own
+near/far from the shard metadata.
 
 Time: ``wall_s`` (curve and result) counts training time only (data, forward, backward, update);
 evaluation is protocol overhead and is left out, so methods compare at equal training time.
@@ -30,7 +32,7 @@ from torch import nn
 
 from sray.data_tools.loader import make_eval_samples, make_train_loader
 from sray.data_tools.manifest import read_manifest
-from sray.model.metrics import DATASET_PROTOCOL
+from sray.platform.eval_protocol import EvalProtocol
 from sray.platform.evaluation import render_view, score_views
 from sray.platform.finetune_learners import NeRFLearner, SRayLearner, build_semantic_nerf
 from sray.platform.fleet_config import FleetConfig
@@ -40,9 +42,6 @@ from sray.platform.train_step import NonFiniteTraining, step_seed
 
 RESULT_FILE = "result.json"
 """Per (scene, method) result, at ``<fleet>/scenes/<scene>/<method>/result.json`` (docs/CONTRACTS.md)."""
-PROTOCOL = (f"mIoU ({DATASET_PROTOCOL}): one confusion matrix over the scene's held-out test views, each rendered "
-            "from its fixed source views")
-"""The protocol named in every result (``miou``; ``miou_per_image`` is the per-image protocol)."""
 
 
 class InjectedFailure(RuntimeError):
@@ -127,6 +126,15 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
     return path
 
 
+def scene_protocol(job: SceneJob) -> EvalProtocol:
+    """How the job's held-out scores are made: S-Ray from ``finetune.eval_n_source`` fixed sources
+    ranked by the shards' neighbour rule; Semantic-NeRF from no sources; both at ``finetune.eval_stride``."""
+    ft = job.config.finetune
+    if job.method == "semantic-nerf":
+        return EvalProtocol.without_sources(ft.eval_stride)
+    return EvalProtocol.from_shards(Path(job.shards), ft.eval_n_source, ft.eval_stride)
+
+
 def _prepare(job: SceneJob, device: torch.device) -> tuple[Any, Any, list[dict[str, Any]], tuple[int, int, int]]:
     """The learner, the training loader (one epoch = ``eval_every`` samples), the held-out samples and
     (classes, ignore id, shared model bytes); ValueError when the scene does not fit the checkpoint."""
@@ -173,8 +181,10 @@ def finetune_scene(job: SceneJob, logger: Any = None) -> SceneOutcome:
     device = torch.device("cuda" if use_cuda else "cpu")
     out_dir = Path(job.out_dir)
     learner, loader, samples, (n_classes, ignore_id, full_bytes) = _prepare(job, device)
+    protocol = scene_protocol(job)
     if logger is not None:
-        logger.log_params(cfg.to_dict() | {"scene": job.scene, "method": job.method, "checkpoint": job.checkpoint})
+        logger.log_params(cfg.to_dict() | {"scene": job.scene, "method": job.method, "checkpoint": job.checkpoint,
+                                           "protocol": protocol.to_json()})
         logger.log_metrics({"attempt": job.attempt}, 0)
 
     curve: list[dict[str, float]] = []
@@ -236,7 +246,7 @@ def finetune_scene(job: SceneJob, logger: Any = None) -> SceneOutcome:
         "steps_used": step, "max_steps": ft.max_steps, "stopped_early": reason == "patience", "wall_s": train_s,
         "miou_before": curve[0]["miou"], "miou_after": best_point["miou"], "psnr_after": best_point["psnr"],
         "artifact_bytes": artifact.stat().st_size, "full_checkpoint_bytes": full_bytes,
-        "child_run_id": job.run["run_id"] if job.run else None, "protocol": PROTOCOL, "curve": curve,
+        "child_run_id": job.run["run_id"] if job.run else None, "protocol": protocol.to_json(), "curve": curve,
     }
     write_result(out_dir, result)
     if logger is not None:

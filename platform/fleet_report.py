@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from sray.platform.eval_protocol import caption_lines
+
 COLUMNS = ("scene", "method", "status", "attempts", "steps used", "train time (s)", "mIoU before", "mIoU after",
            "PSNR after (dB)", "artifact", "of full model", "note")
 """Table columns, in order."""
@@ -37,7 +39,8 @@ def _note(r: dict[str, Any]) -> str:
 
 
 def results_table(results: list[dict[str, Any]]) -> str:
-    """Markdown table of fleet results (one row per scene and method), the protocol below it."""
+    """Markdown table of fleet results (one row per scene and method), the protocol line(s) below it
+    (one per distinct ``protocol`` of the results, naming its methods when they differ)."""
     rows = [" | ".join(COLUMNS), " | ".join("---" for _ in COLUMNS)]
     for r in results:
         share = (f"{100 * r['artifact_bytes'] / r['full_checkpoint_bytes']:.2f}%"
@@ -46,9 +49,8 @@ def results_table(results: list[dict[str, Any]]) -> str:
             r["scene"], r["method"], r["status"], str(r["attempts"]), str(r["steps_used"]), _num(r["wall_s"], 1),
             _num(r["miou_before"], 3), _num(r["miou_after"], 3), _num(r["psnr_after"], 2),
             human_bytes(r.get("artifact_bytes")), share, _note(r)]))
-    protocols = sorted({r["protocol"] for r in results if r.get("protocol")})
     lines = ["| " + row + " |" for row in rows]
-    lines += ["", "Protocol: " + "; ".join(protocols) if protocols else "",
+    lines += ["", *caption_lines((r["method"], r.get("protocol")) for r in results),
               "Train time excludes held-out evaluation; \"of full model\" compares the scene artifact with the "
               "shared S-Ray model's tensor bytes."]
     return "\n".join(lines).strip()

@@ -22,6 +22,7 @@ from sray.platform.resources import check_feasible
 from sray.platform.tracking import RunHandle, default_tracking_uri, prepare_run, resume_run, terminate_run
 from sray.platform.train_config import TrainConfig
 from sray.platform.train_worker import STOP_FILE, train_worker
+from sray.platform.validation import validation_protocol
 
 CONFIG_FILE = "config.json"
 """The job's full config, written into its folder (and logged as an artifact)."""
@@ -131,11 +132,12 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
     check_feasible(cfg.run.workers, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker)
     uri = cfg.run.tracking_uri or default_tracking_uri(Path.cwd())
     cfg.run.tracking_uri = uri
-    tags = {"sray.recipe": cfg.recipe, "sray.job_dir": str(job_dir)}
+    protocol = validation_protocol(cfg)
+    tags = {"sray.recipe": cfg.recipe, "sray.job_dir": str(job_dir), "sray.protocol": protocol.describe()}
     run = (resume_run(uri, cfg.run.experiment, cfg.run.name) if resume
            else prepare_run(uri, cfg.run.experiment, cfg.run.name, tags=tags))
     if not resume:
-        _log_config_artifact(run, job_dir / CONFIG_FILE)
+        _log_run_start(run, job_dir / CONFIG_FILE, protocol.to_json())
     print(f"[sray] job {cfg.run.name}: checkpoints in {job_dir / 'checkpoints'}\n"
           f"[sray] MLflow run: {run.ui_url}" + (f"  ({run.ui_hint})" if run.ui_hint else ""), flush=True)
 
@@ -195,9 +197,11 @@ def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:
     return latest is None or read_meta(latest)["step"] < cfg.optim.steps
 
 
-def _log_config_artifact(run: RunHandle, path: Path) -> None:
+def _log_run_start(run: RunHandle, config_path: Path, protocol: dict[str, Any]) -> None:
+    """Log the config file and, once, the validation protocol (params ``protocol.*``) to a new run."""
     from sray.platform.tracking_logger import RunLogger
 
     logger = RunLogger(run)
-    logger.log_artifact(path)
+    logger.log_artifact(config_path)
+    logger.log_params({"protocol": protocol})
     logger.flush(force=True)

@@ -3,7 +3,10 @@
 ``val/*`` scores come from the held-out ``test`` views of the training scenes (sources from their
 ``train`` views); ``zeroshot/*`` from the unseen test scenes' ``test`` views with their fixed
 ``source`` views (the paper's generalization protocol). Logged against the step, they give the
-paper's table of metrics against iterations.
+paper's table of metrics against iterations. Both groups are made the same way,
+:func:`validation_protocol` (logged once per run by the launcher: tag ``sray.protocol``, params
+``protocol.*``); validation renders are strided (``data.val_downscale``), so they carry no SSIM
+unless that is 1.
 """
 
 from __future__ import annotations
@@ -17,12 +20,19 @@ from torch import nn
 
 from sray.data_tools.loader import make_eval_samples
 from sray.data_tools.manifest import read_manifest
+from sray.platform.eval_protocol import EvalProtocol
 from sray.platform.evaluation import ViewPrediction, render_view, score_views, sray_renderer
 from sray.platform.renders import render_panel
 from sray.platform.train_config import TrainConfig
 
 GROUPS = {"val": "train", "zeroshot": "test"}
 """Metric prefix -> scene role it is computed on."""
+
+
+def validation_protocol(cfg: TrainConfig) -> EvalProtocol:
+    """How ``val/*`` and ``zeroshot/*`` are made: ``model.n_source`` fixed sources ranked by the shards'
+    neighbour rule, every ``data.val_downscale``-th pixel."""
+    return EvalProtocol.from_shards(Path(cfg.data.shards), cfg.model.n_source, cfg.data.val_downscale)
 
 
 def _mean(scores: list[dict[str, float]]) -> dict[str, float]:

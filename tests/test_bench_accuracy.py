@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -23,12 +24,26 @@ def test_toy_preset_writes_both_tables_and_the_charts(ray_session, tmp_path: Pat
     ablation = text.split("## Accuracy: attention ablation, zero-shot (toy)")[1].split("## ")[0]
     rows = [ln for ln in ablation.splitlines() if ln.split(" | ")[0] in VARIANTS]
     assert [r.split(" | ")[0] for r in rows] == list(VARIANTS)
+    header = next(ln for ln in ablation.splitlines() if ln.startswith("attention | ")).split(" | ")
     for row in rows:
-        miou = float(row.split(" | ")[1])
-        assert 0.0 <= miou <= 100.0
+        cells = dict(zip(header, row.split(" | "), strict=True))
+        assert 0.0 <= float(cells["mIoU %"]) <= 100.0
+        assert -1.0 <= float(cells["SSIM"]) <= 1.0  # zero-shot evaluations render whole images
+    # the protocol line under each table: read from the shards' manifest and the preset
+    rule = json.loads((tmp_path / "run" / "shards" / "manifest.json").read_text())["neighbours"]
+    source_rule = f"{rule['rule']} v{rule['version']}"
+    [caption] = [ln for ln in ablation.splitlines() if ln.startswith("Protocol")]
+    assert caption.startswith(f"Protocol: sources: {TOY.n_source} per query, fixed, top-ranked by {source_rule}; "
+                              "pixels: whole images (stride 1)")
     budget = text.split("equal wall-clock budgets (toy)")[1]
     budget_rows = [ln.split(" | ") for ln in budget.splitlines() if ln[:1].isdigit()]
     assert [r[0] for r in budget_rows] == ["0", "1", "3"]
     assert all(cell != "-" for r in budget_rows for cell in r[1:])
+    captions = {ln.split(": ", 1)[0]: ln for ln in budget.splitlines() if ln.startswith("Protocol")}
+    assert set(captions) == {"Protocol (sray)", "Protocol (semantic-nerf)"}
+    stride = f"every 4th in each direction (stride {TOY.fleet_eval_stride}), so no SSIM"
+    assert f"{TOY.n_source} per query, fixed, top-ranked by {source_rule}" in captions["Protocol (sray)"]
+    assert "sources: none (per-scene model)" in captions["Protocol (semantic-nerf)"]
+    assert all(stride in c for c in captions.values())
     charts = list((tmp_path / "docs/benchmarks/accuracy-toy").glob("*.png"))
     assert charts and all(f"benchmarks/accuracy-toy/{c.name}" in text for c in charts)

@@ -34,7 +34,11 @@ def synthetic_result(scene: str, method: str, n_points: int = 5, status: str = "
             "miou_after": max(p["miou"] for p in curve) if curve else None,
             "psnr_after": curve[-1]["psnr"] if curve else None,
             "artifact_bytes": 40_000 if method == "sray" else 2_500_000, "full_checkpoint_bytes": 2_000_000,
-            "child_run_id": None, "protocol": "dataset-level mIoU over held-out views", "curve": curve}
+            "child_run_id": None, "curve": curve,
+            "protocol": None if status != "finished" else {
+                "source_rule": "frustum-overlap v1" if method == "sray" else "none (per-scene model)",
+                "n_source": 8 if method == "sray" else 0, "stride": 2, "render": "full", "inputs": "rgb",
+                "miou": "dataset-level, classes present in ground truth", "miou_per_image": "per-image mean"}}
 
 
 def mixed_fleet() -> list[dict]:
@@ -122,6 +126,9 @@ def test_mixed_fleet_charts_are_written_and_skip_failures(tmp_path):
     texts = " ".join(t.get_text() for sub in fig.subfigs for t in sub.texts)
     assert "scene_b/semantic-nerf (RuntimeError: injected failure)" in texts and "scene_d/sray" in texts
     assert "vs wall-clock time" in texts and "dataset-level" in texts
+    # the footnote carries the protocol of each method's numbers
+    assert "Protocol (sray): sources: 8 per query" in texts and "Protocol (semantic-nerf): sources: none" in texts
+    assert "(stride 2), so no SSIM" in " ".join(texts.split())
 
 
 def test_single_method_fleet_and_degenerate_inputs(tmp_path):

@@ -35,10 +35,14 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
     assert "ui   (then open the printed URL)" in out
     eval_metrics = json.loads((tmp_path / "demo/eval/metrics.json").read_text())
     assert "synth_test_000" in json.dumps(eval_metrics)
+    # --eval-stride 4: the evaluation is strided, so it has no SSIM; the fleet scores every 8th pixel
+    assert eval_metrics["protocol"]["stride"] == 4 and eval_metrics["mean"]["colour"]["ssim"] is None
     fleet = tmp_path / "demo/fleet"
     for method in ("sray", "semantic-nerf"):
         result = json.loads((fleet / f"scenes/synth_test_000/{method}/result.json").read_text())
         assert result["status"] == "finished" and result["steps_used"] > 0
+        assert result["protocol"]["stride"] == 8
+    assert "(stride 4), so no SSIM" in out and "Protocol (semantic-nerf): sources: none (per-scene model)" in out
     charts = sorted(p.name for p in (fleet / "charts").glob("*.png"))
     assert charts, "the fleet wrote no chart"
     client = MlflowClient(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")

@@ -1,7 +1,9 @@
 """``sray eval`` on a tiny unseen scene: metrics.json (both protocols), PNGs, and the MLflow run.
 
 The scores in metrics.json are checked against an independent count: the predicted and ground-truth
-semantic PNGs are decoded back to class ids through the palette and scored with a naive loop.
+semantic PNGs are decoded back to class ids through the palette and scored with a naive loop. The
+protocol descriptor is checked against the raw manifest.json and the command line: a strided
+evaluation has no SSIM, a whole-image one has.
 """
 
 from __future__ import annotations
@@ -68,6 +70,13 @@ def _naive_iou(pairs: list[tuple[np.ndarray, np.ndarray]], ignore_id: int) -> fl
     return sum(ious) / len(ious)
 
 
+def _expected_protocol(shards: Path, n_source: int, stride: int) -> dict:
+    """The descriptor an evaluation of ``shards`` must carry, from the raw manifest and the arguments."""
+    rule = json.loads((shards / "manifest.json").read_text())["neighbours"]
+    return {"source_rule": f"{rule['rule']} v{rule['version']}", "n_source": n_source, "stride": stride,
+            "render": "full", "inputs": "rgb", "miou": DATASET_PROTOCOL, "miou_per_image": PER_IMAGE_PROTOCOL}
+
+
 def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_path,
                                                            capsys):
     from mlflow import MlflowClient
@@ -83,7 +92,9 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
     manifest = read_manifest(tiny_shards)
     test_scenes = sorted(s for s, e in manifest.scenes.items() if e.meta["role"] == "test")
     assert list(report["scenes"]) == test_scenes and report["checkpoint_step"] == 12
-    assert report["lpips"] == LPIPS_NOTE and f"{N_SOURCE} fixed 'source' views" in report["protocol"]
+    assert report["lpips"] == LPIPS_NOTE
+    assert report["protocol"] == _expected_protocol(tiny_shards, N_SOURCE, STRIDE)
+    assert not {"stride", "n_source"} & set(report)  # the descriptor holds them, once
 
     for scene in test_scenes:
         block, meta = report["scenes"][scene], manifest.scenes[scene].meta
@@ -91,6 +102,7 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
         assert block["dataset_level"]["protocol"] == DATASET_PROTOCOL
         assert block["per_image"]["protocol"] == PER_IMAGE_PROTOCOL
         assert block["colour"]["ssim_window"] == SSIM_WINDOW and block["n_views"] == len(meta["splits"]["test"])
+        assert block["colour"]["ssim"] is None  # strided renders never get an SSIM
         samples = list(make_eval_samples(tiny_shards, scene, split="test", n_source=N_SOURCE))
         pairs = []
         for view, sample in zip(block["views"], samples, strict=True):
@@ -123,9 +135,15 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
         assert mean["dataset_level"][key] == pytest.approx(
             np.mean([report["scenes"][s]["dataset_level"][key] for s in test_scenes]), abs=1e-12)
     assert mean["n_scenes"] == len(test_scenes) and mean["per_image"]["protocol"] == PER_IMAGE_PROTOCOL
+    assert mean["colour"]["ssim"] is None
+
+    # the printed table: no SSIM column for a strided evaluation, the protocol line under it
+    header = next(line for line in printed.splitlines() if line.startswith("scene "))
+    assert "mIoU/img" in header and "SSIM" not in header
+    assert f"stride {STRIDE}), so no SSIM" in printed and f"sources: {N_SOURCE} per query" in printed
 
     # the printed table and locations
-    assert "mIoU/img" in printed and f"metrics: {out.resolve() / 'metrics.json'}" in printed
+    assert f"metrics: {out.resolve() / 'metrics.json'}" in printed
     assert all(scene in printed for scene in test_scenes) and "sray ui --tracking-uri" in printed
 
     # the MLflow run holds the same numbers, metrics.json and the PNGs
@@ -133,6 +151,9 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
     experiment = client.get_experiment_by_name("sray-eval")
     (run,) = client.search_runs([experiment.experiment_id])
     assert run.info.status == "FINISHED" and run.data.tags["sray.kind"] == "eval"
+    assert f"stride {STRIDE}" in run.data.tags["sray.protocol"]
+    assert run.data.params["protocol.stride"] == str(STRIDE) and run.data.params["protocol.n_source"] == str(N_SOURCE)
+    assert "mean/ssim" not in run.data.metrics
     scene = test_scenes[0]
     assert run.data.metrics[f"{scene}/miou"] == pytest.approx(report["scenes"][scene]["dataset_level"]["miou"])
     assert run.data.metrics["mean/miou_per_image"] == pytest.approx(mean["per_image"]["miou"])
@@ -141,6 +162,26 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
     logged = {Path(f.path).name for f in client.list_artifacts(run.info.run_id, f"renders/{scene}")}
     view_id = report["scenes"][scene]["views"][0]["query_id"]
     assert {f"{view_id}_{k}.png" for k in ("pred", "gt", "error", "panel")} <= logged
+
+
+def test_whole_image_eval_scores_ssim(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_path, capsys):
+    from sray.jobs.cli import main
+
+    out = tmp_path / "eval"
+    code = main(["eval", "--checkpoint", str(tiny_checkpoint), "--data", str(tiny_shards), "--n-source",
+                 str(N_SOURCE), "--out", str(out), "--tracking-uri", mlflow_uri])
+    printed = capsys.readouterr().out
+    assert code == 0
+    report = json.loads((out / "metrics.json").read_text())
+    assert report["protocol"] == _expected_protocol(tiny_shards, N_SOURCE, 1)
+    for block in [*report["scenes"].values(), report["mean"]]:
+        assert isinstance(block["colour"]["ssim"], float) and -1.0 <= block["colour"]["ssim"] <= 1.0
+    manifest = read_manifest(tiny_shards)
+    for scene, block in report["scenes"].items():  # whole renders: the full image size
+        gt = cv2.imread(str(out / block["views"][0]["pngs"]["gt"]))
+        assert list(gt.shape[:2]) == manifest.scenes[scene].image_size
+    header = next(line for line in printed.splitlines() if line.startswith("scene "))
+    assert header.rstrip().endswith("SSIM") and "pixels: whole images (stride 1)" in printed
 
 
 def test_eval_refuses_bad_input(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_path, capsys):

@@ -40,6 +40,12 @@ def _on_disk(out: Path, scene: str, method: str) -> dict:
     return json.loads((out / "scenes" / scene / method / "result.json").read_text())
 
 
+def _protocol(source_rule: str, n_source: int, stride: int) -> dict:
+    """The descriptor a result must carry (docs/CONTRACTS.md, "Protocol descriptor")."""
+    return {"source_rule": source_rule, "n_source": n_source, "stride": stride, "render": "full", "inputs": "rgb",
+            "miou": "dataset-level, classes present in ground truth", "miou_per_image": "per-image mean"}
+
+
 def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, tiny_shards, tiny_checkpoint,
                                                                    mlflow_uri, tmp_path):
     out = tmp_path / "fleet"
@@ -55,10 +61,14 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
     by_scene = {r["scene"]: r for r in results}
     failed = by_scene[FAILING]
     assert failed["status"] == "failed" and failed["attempts"] == 2  # first try + retries=1
+    assert failed["protocol"] is None  # nothing was measured
+    rule = json.loads((tiny_shards / "manifest.json").read_text())["neighbours"]
+    source_rule = f"{rule['rule']} v{rule['version']}"
     assert "InjectedFailure" in failed["error"]
     for scene in ("synth_train_000", "synth_test_000"):
         r = by_scene[scene]
         assert r["status"] == "finished" and r["attempts"] == 1 and r["error"] is None
+        assert r["protocol"] == _protocol(source_rule, cfg.finetune.eval_n_source, cfg.finetune.eval_stride)
         assert r["steps_used"] == 6 and [p["step"] for p in r["curve"]] == [0, 3, 6]
         assert all(set(p) == CURVE_KEYS for p in r["curve"])
         assert r["miou_before"] == r["curve"][0]["miou"]
@@ -73,6 +83,9 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
     assert set(children) == {r["child_run_id"] for r in results}
     status = {c.data.tags["sray.scene"]: c.info.status for c in children.values()}
     assert status == {"synth_train_000": "FINISHED", "synth_train_001": "FAILED", "synth_test_000": "FINISHED"}
+    finished = children[by_scene["synth_test_000"]["child_run_id"]]
+    params = finished.data.params
+    assert params["protocol.stride"] == "4" and params["protocol.source_rule"] == source_rule
     client = _client(mlflow_uri)
     parent = client.get_run(parent_id)
     assert parent.info.status == "FINISHED"
@@ -85,6 +98,9 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
     for scene in SCENES:
         assert f"| {scene} | sray |" in table
     assert "| failed |" in table and "InjectedFailure" in table
+    [caption] = [line for line in table.splitlines() if line.startswith("Protocol")]
+    assert caption.startswith(f"Protocol: sources: {cfg.finetune.eval_n_source} per query, fixed, top-ranked by "
+                              f"{source_rule}; pixels: every 4th in each direction (stride 4), so no SSIM")
     if importlib.util.find_spec("sray.platform.charts") is not None:
         charts = [a.path for a in client.list_artifacts(parent_id, "charts")]
         assert any(p.endswith(".png") for p in charts)
@@ -123,6 +139,7 @@ def test_semantic_nerf_through_the_fleet(ray_session, tiny_shards, tiny_checkpoi
     [result] = run_fleet(tiny_fleet_config(), tiny_checkpoint, tiny_shards, ["synth_test_000"], out, mlflow_uri,
                          ["semantic-nerf"])
     assert set(result) == CONTRACT_KEYS and _on_disk(out, "synth_test_000", "semantic-nerf") == result
+    assert result["protocol"] == _protocol("none (per-scene model)", 0, 4)  # renders from no source views
     assert result["status"] == "finished" and result["method"] == "semantic-nerf"
     assert result["curve"][0]["step"] == 0 and result["steps_used"] == 6
     artifact = out / "scenes" / "synth_test_000" / "semantic-nerf" / "semantic_nerf.safetensors"

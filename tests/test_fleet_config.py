@@ -58,11 +58,16 @@ def test_cli_flags_map_onto_the_config():
         _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test", "--scenes", "a"])
 
 
+PROTOCOL = {"source_rule": "frustum-overlap v1", "n_source": 8, "stride": 2, "render": "full", "inputs": "rgb",
+            "miou": "dataset-level, classes present in ground truth", "miou_per_image": "per-image mean"}
+"""A fleet result's protocol descriptor (docs/CONTRACTS.md)."""
+
+
 def _result(scene: str, method: str, status: str = "finished", **values: object) -> dict:
     base = {"scene": scene, "method": method, "status": status, "error": None, "attempts": 1, "steps_used": 10,
             "max_steps": 10, "stopped_early": False, "wall_s": 2.0, "miou_before": 0.1, "miou_after": 0.3,
             "psnr_after": 20.0, "artifact_bytes": 2048, "full_checkpoint_bytes": 204800, "child_run_id": "r",
-            "protocol": "P", "curve": []}
+            "protocol": PROTOCOL, "curve": []}
     return base | values
 
 
@@ -80,9 +85,20 @@ def test_summary_metrics_average_finished_scenes_only():
 
 def test_results_table_has_a_row_per_result():
     rows = [_result("a", "sray", stopped_early=True, steps_used=4),
-            _result("b", "sray", "failed", error="InjectedFailure: x | y", artifact_bytes=None)]
+            _result("b", "sray", "failed", error="InjectedFailure: x | y", artifact_bytes=None, protocol=None)]
     table = results_table(rows)
     assert "| a | sray | finished | 1 | 4 | 2.0 | 0.100 | 0.300 | 20.00 | 2.0 KiB | 1.00% | early stop" in table
     assert "| b | sray | failed |" in table and "InjectedFailure: x / y" in table
-    assert "Protocol: P" in table
+    lines = table.splitlines()
+    last_row = max(i for i, line in enumerate(lines) if line.startswith("|"))
+    assert lines[last_row + 1] == ""  # a blank line ends the Markdown table, then its caption
+    assert lines[last_row + 2] == ("Protocol: sources: 8 per query, fixed, top-ranked by frustum-overlap v1; "
+                                   "pixels: every 2nd in each direction (stride 2), so no SSIM; render: full; "
+                                   "inputs: rgb; mIoU: dataset-level, classes present in ground truth; "
+                                   "mIoU/img: per-image mean")
+    nerf = PROTOCOL | {"source_rule": "none (per-scene model)", "n_source": 0}
+    mixed = results_table([_result("a", "sray"), _result("a", "semantic-nerf", protocol=nerf)])
+    captions = [line for line in mixed.splitlines() if line.startswith("Protocol")]
+    assert [c.split(": sources: ")[0] for c in captions] == ["Protocol (sray)", "Protocol (semantic-nerf)"]
+    assert "sources: none (per-scene model)" in captions[1]
     assert [human_bytes(n) for n in (None, 512, 1536, 3 * 2**20)] == ["-", "512 B", "1.5 KiB", "3.0 MiB"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -59,6 +60,12 @@ def test_mlflow_store_holds_everything(uninterrupted) -> None:
     run = client.get_run(outcome.run.run_id)
     assert run.data.params["optim.steps"] == "20" and run.info.status == "FINISHED"
     assert {"train/loss", "train/lr", "val/miou", "zeroshot/miou"} <= set(run.data.metrics)
+    # the validation protocol, logged once: strided renders (val_downscale 2), so no SSIM was logged
+    rule = json.loads((Path(cfg.data.shards) / "manifest.json").read_text())["neighbours"]
+    assert run.data.params["protocol.source_rule"] == f"{rule['rule']} v{rule['version']}"
+    assert run.data.params["protocol.stride"] == "2" and run.data.params["protocol.n_source"] == "3"
+    assert "(stride 2), so no SSIM" in run.data.tags["sray.protocol"]
+    assert not {"val/ssim", "zeroshot/ssim"} & set(run.data.metrics)
     paths = [a.path for a in client.list_artifacts(run.info.run_id)]
     assert "config.json" in paths
     renders = [a.path for folder in ("renders/val", "renders/zeroshot") for a in client.list_artifacts(run.info.run_id, folder)]

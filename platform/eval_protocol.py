@@ -1,0 +1,142 @@
+"""One descriptor of how an evaluation number was made: :class:`EvalProtocol`.
+
+Every metrics JSON sray writes (``sray eval``'s metrics.json, a fleet's result.json) carries it as
+``"protocol": {...}`` (:meth:`EvalProtocol.to_json`); training logs it once per run (tag
+``sray.protocol`` and params ``protocol.*``, for ``val/*`` and ``zeroshot/*``); every table prints
+:meth:`EvalProtocol.describe` under it (:func:`caption_lines`).
+
+Fields: how the source views were chosen (the shard manifest's neighbour rule and its version, read
+from ``manifest.json``, never assumed), how many, whole or strided images, render mode and inputs,
+and the names of the two mIoU protocols (:mod:`sray.model.metrics`). SSIM is a whole-image score:
+it is computed only when ``stride == 1`` (:attr:`EvalProtocol.scores_ssim`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from sray.data_tools.manifest import Manifest, read_manifest
+from sray.model.metrics import DATASET_PROTOCOL, PER_IMAGE_PROTOCOL
+
+RENDER_MODES = ("full",)
+"""Render modes an evaluation may use (``full``: the whole coarse + fine hierarchical renderer)."""
+INPUTS = ("rgb",)
+"""What the model is given of its source views (``rgb``: posed colour images only)."""
+NO_SOURCES = "none (per-scene model)"
+"""``source_rule`` of a method that renders without source views (Semantic-NeRF)."""
+
+
+def _ordinal(n: int) -> str:
+    """2 -> '2nd', 3 -> '3rd', 4 -> '4th', 11 -> '11th'."""
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
+@dataclass(frozen=True)
+class EvalProtocol:
+    """How a set of evaluation scores was made (JSON: :meth:`to_json`, one line: :meth:`describe`)."""
+
+    source_rule: str
+    """How each query's source views were chosen: the shard manifest's neighbour rule and version,
+    ``"<rule> v<version>"`` (the top-ranked ``n_source`` inside the scene's source split, fixed), or
+    :data:`NO_SOURCES`."""
+    n_source: int
+    """Source views per query view (0 with :data:`NO_SOURCES`)."""
+    stride: int
+    """Every ``stride``-th pixel in each direction is rendered and scored; 1 = whole images."""
+    render: str = "full"
+    """Render mode, one of :data:`RENDER_MODES`."""
+    inputs: str = "rgb"
+    """Source-view inputs, one of :data:`INPUTS`."""
+    miou: str = DATASET_PROTOCOL
+    """Protocol of ``miou`` and the accuracies (one confusion matrix per scene)."""
+    miou_per_image: str = PER_IMAGE_PROTOCOL
+    """Protocol of ``miou_per_image``."""
+
+    def __post_init__(self) -> None:
+        """ValueError naming the field that is out of range."""
+        if self.stride < 1:
+            raise ValueError(f"eval protocol: stride is {self.stride}; it must be >= 1 (1 = whole images)")
+        if self.n_source < 0 or (self.n_source == 0) != (self.source_rule == NO_SOURCES):
+            raise ValueError(f"eval protocol: n_source {self.n_source} with source_rule {self.source_rule!r}; "
+                             f"n_source is 0 exactly when the rule is {NO_SOURCES!r}")
+        if self.render not in RENDER_MODES:
+            raise ValueError(f"eval protocol: render is {self.render!r}; use one of {RENDER_MODES}")
+        if self.inputs not in INPUTS:
+            raise ValueError(f"eval protocol: inputs is {self.inputs!r}; use one of {INPUTS}")
+
+    @classmethod
+    def from_manifest(cls, manifest: Manifest, n_source: int, stride: int,
+                      where: str = "manifest.json") -> EvalProtocol:
+        """The protocol of fixed sources ranked by ``manifest``'s neighbour rule (``where`` names it in errors)."""
+        rule, version = manifest.neighbours.get("rule"), manifest.neighbours.get("version")
+        if not rule or version is None:
+            raise ValueError(f"{where}: field 'neighbours' has no 'rule' and 'version' ({manifest.neighbours}); "
+                             "re-run `sray data shard` with this sray")
+        return cls(source_rule=f"{rule} v{version}", n_source=n_source, stride=stride)
+
+    @classmethod
+    def from_shards(cls, shards: Path, n_source: int, stride: int) -> EvalProtocol:
+        """:meth:`from_manifest` of ``shards/manifest.json``."""
+        return cls.from_manifest(read_manifest(Path(shards)), n_source, stride, str(Path(shards) / "manifest.json"))
+
+    @classmethod
+    def without_sources(cls, stride: int) -> EvalProtocol:
+        """The protocol of a per-scene model that renders from no source views (Semantic-NeRF)."""
+        return cls(source_rule=NO_SOURCES, n_source=0, stride=stride)
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> EvalProtocol:
+        """Inverse of :meth:`to_json`; ValueError names missing or unknown fields."""
+        if not isinstance(d, dict):
+            raise ValueError(f"eval protocol {d!r}: expected a JSON object (docs/CONTRACTS.md); a file written "
+                             "before sray recorded protocol descriptors: evaluate again to replace it")
+        names = {f.name for f in fields(cls)}
+        missing, unknown = sorted(names - set(d)), sorted(set(d) - names)
+        if missing or unknown:
+            raise ValueError(f"eval protocol {d}: fields {missing} missing, {unknown} unknown "
+                             f"(expected {sorted(names)}; see docs/CONTRACTS.md)")
+        return cls(**d)
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"source_rule", "n_source", "stride", "render", "inputs", "miou", "miou_per_image"}``."""
+        return asdict(self)
+
+    @property
+    def whole_images(self) -> bool:
+        """True when every pixel was rendered and scored (``stride == 1``)."""
+        return self.stride == 1
+
+    @property
+    def scores_ssim(self) -> bool:
+        """SSIM is computed on whole images only; a strided render never gets one."""
+        return self.whole_images
+
+    def describe(self) -> str:
+        """One line for table captions and chart footnotes."""
+        sources = (NO_SOURCES if self.n_source == 0 else
+                   f"{self.n_source} per query, fixed, top-ranked by {self.source_rule}")
+        pixels = ("whole images (stride 1)" if self.whole_images else
+                  f"every {_ordinal(self.stride)} in each direction (stride {self.stride}), so no SSIM")
+        return (f"sources: {sources}; pixels: {pixels}; render: {self.render}; inputs: {self.inputs}; "
+                f"mIoU: {self.miou}; mIoU/img: {self.miou_per_image}")
+
+
+def caption_lines(labelled: Iterable[tuple[str, dict[str, Any] | None]]) -> list[str]:
+    """``Protocol: ...`` lines for a table whose rows carry ``protocol`` JSON objects.
+
+    ``labelled``: (row label, the row's protocol JSON or None) pairs; rows without one are skipped.
+    One line when every row shares a protocol, else one line per protocol naming its rows.
+    """
+    labels: dict[str, list[str]] = {}
+    for label, protocol in labelled:
+        if protocol is not None:
+            rows = labels.setdefault(EvalProtocol.from_json(protocol).describe(), [])
+            if label not in rows:
+                rows.append(label)
+    if len(labels) == 1:
+        return [f"Protocol: {next(iter(labels))}"]
+    return [f"Protocol ({', '.join(rows)}): {text}" for text, rows in labels.items()]
