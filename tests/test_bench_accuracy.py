@@ -24,7 +24,7 @@ def test_toy_preset_writes_both_tables_and_the_charts(ray_session, tmp_path: Pat
     ablation = text.split("## Accuracy: attention ablation, zero-shot (toy)")[1].split("## ")[0]
     rows = [ln for ln in ablation.splitlines() if ln.split(" | ")[0] in VARIANTS]
     assert [r.split(" | ")[0] for r in rows] == list(VARIANTS)
-    header = next(ln for ln in ablation.splitlines() if ln.startswith("attention | ")).split(" | ")
+    header = next(ln for ln in ablation.splitlines() if ln.startswith("variant | ")).split(" | ")
     for row in rows:
         cells = dict(zip(header, row.split(" | "), strict=True))
         assert 0.0 <= float(cells["mIoU %"]) <= 100.0
