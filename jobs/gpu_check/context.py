@@ -1,0 +1,52 @@
+"""What every ``sray gpu-check`` stage receives: the device, the sizes (real or dry run) and the folders."""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+
+@dataclass(frozen=True)
+class CheckContext:
+    """The run's settings, shared by all stages."""
+
+    device: torch.device
+    """``cuda`` on a GPU machine; ``cpu`` in a dry run."""
+    dry_run: bool
+    """Toy sizes on the CPU (the suite runs this so the command cannot rot)."""
+    out: Path
+    """Work folder: the report, scratch data and logs."""
+    repo: Path
+    """Checkout root (its ``tests/`` feed the tests stage)."""
+
+    @property
+    def image_hw(self) -> tuple[int, int]:
+        """Image size of the model checks: 240 x 320 on a GPU, 32 x 40 in a dry run."""
+        return (32, 40) if self.dry_run else (240, 320)
+
+    @property
+    def samples(self) -> tuple[int, int]:
+        """(coarse, fine) samples per ray: the paper's 64 + 64 on a GPU, 4 + 4 in a dry run."""
+        return (4, 4) if self.dry_run else (64, 64)
+
+    @property
+    def views(self) -> int:
+        """Source views: the paper's 8 on a GPU, 2 in a dry run."""
+        return 2 if self.dry_run else 8
+
+    @property
+    def rays(self) -> int:
+        """Rays per training step: 1024 on a GPU (the paper's), 32 in a dry run."""
+        return 32 if self.dry_run else 1024
+
+    def low_precisions(self) -> list[str]:
+        """The autocast precisions to compare with fp32 here: bf16 and fp16 on CUDA, bf16 on the CPU."""
+        return ["bf16", "fp16"] if self.device.type == "cuda" else ["bf16"]
+
+
+def has_module(name: str) -> bool:
+    """Whether ``name`` can be imported here (the GPU image may lack ray, mlflow or webdataset)."""
+    return importlib.util.find_spec(name) is not None

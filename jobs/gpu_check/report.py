@@ -1,0 +1,75 @@
+"""The ``sray gpu-check`` report: one result per stage, kept in a JSON file so a re-run resumes.
+
+``<out>/gpu_check.json`` holds ``{"device": ..., "stages": {name: StageResult}}``; a stage already in
+it is skipped by the next run (``--fresh`` starts over). :func:`markdown` renders the whole report: a
+summary table (stage, status, seconds, one line) and each stage's own table.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+REPORT_FILE = "gpu_check.json"
+STATUSES = ("passed", "failed", "skipped")
+
+
+@dataclass
+class StageResult:
+    """What one stage found."""
+
+    status: str
+    """``passed`` (every check within its tolerance), ``failed`` (a check outside it, or an error) or
+    ``skipped`` (the machine lacks what the stage needs; ``summary`` says what)."""
+    summary: str
+    """One line: the headline figures, or why the stage failed or was skipped."""
+    seconds: float = 0.0
+    """Wall time of the stage."""
+    header: list[str] = field(default_factory=list)
+    """Column names of the stage's table (empty: no table)."""
+    rows: list[list[str]] = field(default_factory=list)
+    """The stage's table rows, as printed."""
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"stage status {self.status!r}: use one of {STATUSES}")
+
+
+def load_report(out: Path) -> dict:
+    """The report in ``out`` (an empty one if there is none yet)."""
+    path = out / REPORT_FILE
+    if not path.exists():
+        return {"device": None, "stages": {}}
+    data = json.loads(path.read_text())
+    return {"device": data.get("device"), "stages": {k: StageResult(**v) for k, v in data["stages"].items()}}
+
+
+def save_report(out: Path, report: dict) -> Path:
+    """Write the report atomically (temporary file, then rename); returns its path."""
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / REPORT_FILE
+    tmp = path.with_name(path.name + ".tmp")
+    data = {"device": report["device"], "stages": {k: asdict(v) for k, v in report["stages"].items()}}
+    tmp.write_text(json.dumps(data, indent=1) + "\n")
+    os.replace(tmp, path)
+    return path
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    lines = [" | ".join(header), " | ".join("---" for _ in header)]
+    return "\n".join(lines + [" | ".join(str(c) for c in r) for r in rows])
+
+
+def markdown(report: dict, order: list[str]) -> str:
+    """The report as Markdown: a summary table in stage order, then each stage's table."""
+    stages = report["stages"]
+    names = [n for n in order if n in stages]
+    parts = [_table(["stage", "status", "seconds", "summary"],
+                    [[n, stages[n].status, f"{stages[n].seconds:.1f}", stages[n].summary] for n in names])]
+    for name in names:
+        result = stages[name]
+        if result.header:
+            parts.append(f"**{name}**\n\n" + _table(result.header, result.rows))
+    return "\n\n".join(parts)

@@ -1,0 +1,49 @@
+"""Stage ``bench``: ``sray bench model`` on this device (attention cost with the fused kernels, the
+paper-config step in each precision) and the time to render one whole view."""
+
+from __future__ import annotations
+
+import time
+
+import torch
+
+from .context import CheckContext
+from .report import StageResult
+from .synthetic import model, rig
+
+
+def render_seconds(ctx: CheckContext, repeats: int) -> float:
+    """Median seconds to render one (H, W) view from ``ctx.views`` sources with fp32 weights, no grad."""
+    net = model(ctx.samples, ctx.views, ctx.device).eval()
+    data = rig(ctx.views, ctx.image_hw, ctx.device)
+    times = []
+    for _ in range(repeats + 1):
+        if ctx.device.type == "cuda":
+            torch.cuda.synchronize(ctx.device)
+        start = time.perf_counter()
+        with torch.no_grad():
+            src = net.encode(data["src_rgb"], data["src_K"], data["src_c2w"])
+            net.render_image(src, data["query_K"], data["query_c2w"], ctx.image_hw, 1.0, 5.0)
+        if ctx.device.type == "cuda":
+            torch.cuda.synchronize(ctx.device)
+        times.append(time.perf_counter() - start)
+    rest = sorted(times[1:])
+    return rest[len(rest) // 2]
+
+
+def run(ctx: CheckContext) -> StageResult:
+    """The model benchmark's two tables, flattened into one, plus the whole-view render time."""
+    from sray.model.benchmark import run_model_benchmark
+
+    rows = []
+    for title, table, _notes in run_model_benchmark(device=str(ctx.device), quick=ctx.dry_run):
+        body = [line for line in table.splitlines()[2:] if line.strip()]
+        header = [c.strip() for c in table.splitlines()[0].split("|") if c.strip()]
+        for line in body:
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            rows.append([title, "; ".join(f"{h} {v}" for h, v in zip(header, cells))])
+    seconds = render_seconds(ctx, 1 if ctx.dry_run else 5)
+    h, w = ctx.image_hw
+    rows.append(["whole-view render", f"{w}x{h}, {ctx.views} views, {ctx.samples[0]}+{ctx.samples[1]} samples, "
+                 f"fp32: {seconds:.3f} s/view ({1 / seconds:.2f} views/s)"])
+    return StageResult("passed", f"render {w}x{h}: {seconds:.3f} s/view", header=["benchmark", "row"], rows=rows)

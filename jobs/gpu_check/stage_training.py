@@ -1,0 +1,81 @@
+"""Stage ``training``: Accelerate training steps on one device in each low precision (fp16 with loss
+scaling on CUDA) through the shared ``TrainStep``: steps/s, rays/s, peak memory, no non-finite step."""
+
+from __future__ import annotations
+
+import resource
+import time
+
+import torch
+
+from sray.model.config import SRayConfig
+from sray.model.losses import render_loss
+from sray.platform.train_state import RayBatchModel
+from sray.platform.train_step import TrainStep, batch_rays, fused_adam
+
+from .context import CheckContext, has_module
+from .report import StageResult
+from .synthetic import training_sample
+
+
+def _peak_mb(device: torch.device) -> float:
+    if device.type == "cuda":
+        return torch.cuda.max_memory_allocated(device) / 2**20
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def timed_steps(ctx: CheckContext, precision: str, steps: int) -> dict[str, float]:
+    """Run ``steps`` training steps after one warm-up; returns steps/s, rays/s, peak MiB and skipped steps."""
+    from accelerate import Accelerator
+
+    accelerator = Accelerator(mixed_precision="no", cpu=ctx.device.type != "cuda")
+    torch.manual_seed(0)
+    model = RayBatchModel(SRayConfig(n_coarse=ctx.samples[0], n_fine=ctx.samples[1], n_source=ctx.views))
+    params = list(model.parameters())
+    model, optimizer = accelerator.prepare(model, fused_adam(params, 1e-4))
+    step = TrainStep(list(model.parameters()), optimizer, 1.0, precision, accelerator.device, steps + 1)
+    batch = training_sample(ctx.views, ctx.image_hw, ctx.rays, 20, accelerator.device)
+    origins, dirs, near, far = batch_rays(batch, accelerator.device)
+    cfg = accelerator.unwrap_model(model).net.cfg
+    if ctx.device.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(ctx.device)
+
+    def one() -> None:
+        with step.autocast():
+            out = model(batch["src_rgb"], batch["src_K"], batch["src_c2w"], origins, dirs, near, far)
+        loss, _ = render_loss(out, batch["target_label"], batch["target_rgb"], cfg)
+        step(loss)
+
+    one()  # warm-up
+    if ctx.device.type == "cuda":
+        torch.cuda.synchronize(ctx.device)
+    start = time.perf_counter()
+    for _ in range(steps):
+        one()
+    if ctx.device.type == "cuda":
+        torch.cuda.synchronize(ctx.device)
+    seconds = time.perf_counter() - start
+    return {"steps_per_s": steps / seconds, "rays_per_s": steps * ctx.rays / seconds,
+            "peak_mb": _peak_mb(ctx.device), "skipped": float(step.skipped_total)}
+
+
+def run(ctx: CheckContext) -> StageResult:
+    """fp32 and each low precision; fails on a skipped (non-finite) step."""
+    if not has_module("accelerate"):
+        return StageResult("skipped", "accelerate is not installed here")
+    steps = 2 if ctx.dry_run else 20
+    rows, bad = [], []
+    for precision in ["no", *ctx.low_precisions()]:
+        m = timed_steps(ctx, precision, steps)
+        label = "fp32" if precision == "no" else precision
+        rows.append([label, f"{m['steps_per_s']:.2f}", f"{m['rays_per_s']:.0f}", f"{m['peak_mb']:.0f}",
+                     f"{m['skipped']:.0f}"])
+        if m["skipped"]:
+            bad.append(label)
+    hw = f"{ctx.image_hw[1]}x{ctx.image_hw[0]}"
+    summary = (f"{ctx.rays} rays, {ctx.samples[0]}+{ctx.samples[1]} samples, {ctx.views} views, {hw}: "
+               + ", ".join(f"{r[0]} {r[2]} rays/s" for r in rows))
+    if bad:
+        summary = f"non-finite steps in {', '.join(bad)}; " + summary
+    return StageResult("failed" if bad else "passed", summary,
+                       header=["precision", "steps/s", "rays/s", "peak MiB", "skipped steps"], rows=rows)

@@ -1,0 +1,37 @@
+"""``sray gpu-check [--stages ...] [--out DIR] [--dry-run] [--fresh]``: check sray's CUDA path stage by stage.
+
+Needs torch and accelerate only (the stages that need Ray, MLflow or webdataset say so and skip).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``sray gpu-check``."""
+    from sray.jobs.gpu_check.stage_names import STAGE_NAMES
+
+    p = sub.add_parser("gpu-check", help="check the CUDA path stage by stage; report into docs/benchmarks.md")
+    p.add_argument("--stages", nargs="+", default=list(STAGE_NAMES), choices=list(STAGE_NAMES),
+                   metavar="STAGE", help=f"stages to run, in order (default: all of {', '.join(STAGE_NAMES)})")
+    p.add_argument("--out", type=Path, default=Path("outputs/gpu-check"), help="report and scratch folder")
+    p.add_argument("--dry-run", action="store_true", help="every stage on the CPU at toy size (tests the command)")
+    p.add_argument("--fresh", action="store_true", help="ignore stages already in the report and run them again")
+    p.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"),
+                   help="where a GPU run writes its section (dry runs write only under --out)")
+    p.set_defaults(func=_gpu_check)
+
+
+def _gpu_check(args: argparse.Namespace) -> int:
+    from sray.jobs.gpu_check.runner import NoCudaDevice, run_gpu_check
+
+    try:
+        report = run_gpu_check(args.stages, args.out, args.dry_run, args.fresh, Path.cwd(), args.doc)
+    except NoCudaDevice as err:
+        print(f"sray gpu-check: {err}")
+        return 2
+    failed = [n for n, r in report["stages"].items() if r.status == "failed"]
+    print(f"sray gpu-check: report in {args.out / 'gpu_check.md'}" + (f"; failed: {', '.join(failed)}" if failed else ""))
+    return 1 if failed else 0

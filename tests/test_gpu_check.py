@@ -1,0 +1,65 @@
+"""``sray gpu-check``: the dry run exercises every stage on the CPU, a re-run resumes, a failing stage is a
+result, and a machine without CUDA is told so in one line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from sray.jobs.cli import main
+from sray.jobs.gpu_check import runner
+from sray.jobs.gpu_check.report import REPORT_FILE, StageResult, load_report
+from sray.jobs.gpu_check.stage_names import STAGE_NAMES
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.slow
+def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Path, monkeypatch, capsys) -> None:
+    monkeypatch.chdir(REPO)
+    assert main(["gpu-check", "--dry-run", "--out", str(tmp_path)]) == 0
+    report = load_report(tmp_path)
+    assert list(report["stages"]) == list(STAGE_NAMES)
+    for name, result in report["stages"].items():
+        assert result.status == "passed", (name, result.summary)
+    precision = {(r[0], r[1]): r for r in report["stages"]["precision"].rows}
+    assert set(precision) == {("bf16", c) for c in ("projection", "render argmax", "step loss", "step gradient")}
+    assert all(r[-1] == "ok" for r in precision.values())
+    assert {r[0] for r in report["stages"]["training"].rows} == {"fp32", "bf16"}
+    assert report["stages"]["ray"].rows[0][2] == "2"  # steps of the training job
+    text = (tmp_path / "gpu_check.md").read_text()
+    for name in STAGE_NAMES:
+        assert f"\n{name} | passed |" in text
+    capsys.readouterr()
+    # a re-run skips every stage already in the report (and changes none of them)
+    before = (tmp_path / REPORT_FILE).read_text()
+    assert main(["gpu-check", "--dry-run", "--out", str(tmp_path), "--stages", "environment", "precision"]) == 0
+    printed = capsys.readouterr().out
+    assert printed.count("already in the report") == 2
+    assert (tmp_path / REPORT_FILE).read_text() == before
+
+
+def test_a_failing_stage_is_recorded_and_the_next_stage_runs(tmp_path: Path, monkeypatch) -> None:
+    def broken(ctx: object) -> StageResult:
+        raise FloatingPointError("NaN in the bf16 render")
+
+    monkeypatch.setitem(runner.STAGES, "precision", broken)
+    report = runner.run_gpu_check(["precision", "environment"], tmp_path, dry_run=True, fresh=False, repo=REPO,
+                                  doc=None)
+    assert report["stages"]["precision"].status == "failed"
+    assert "FloatingPointError: NaN in the bf16 render" in report["stages"]["precision"].summary
+    assert (tmp_path / "precision.error.log").exists()
+    assert report["stages"]["environment"].status == "passed"
+    assert main(["gpu-check", "--dry-run", "--out", str(tmp_path), "--stages", "precision"]) == 1
+
+
+def test_without_cuda_it_says_so_in_one_line_and_fails(tmp_path: Path, capsys) -> None:
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has CUDA")
+    assert main(["gpu-check", "--out", str(tmp_path)]) == 2
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1 and "no CUDA device" in out[0] and "--dry-run" in out[0]
+    assert not (tmp_path / REPORT_FILE).exists()
