@@ -41,7 +41,7 @@ class _Learner:
 
     def __init__(self, net: nn.Module, params: list[nn.Parameter], lr: float, grad_clip: float, precision: str,
                  device: torch.device, max_nonfinite_in_row: int) -> None:
-        self.net, self.params, self.device, self.precision = net, params, device, precision
+        self.net, self.device = net, device
         self.step = TrainStep(params, fused_adam(params, lr), grad_clip, precision, device, max_nonfinite_in_row)
 
     @contextlib.contextmanager
