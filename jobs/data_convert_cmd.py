@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     """Convert; print what was written and which frames were dropped. Exit 1 with the reason on bad input."""
     from tqdm import tqdm
 
-    from sray.data_tools.convert import ConvertConfig, convert_scene
+    from sray.data_tools.readers.convert import ConvertConfig, convert_scene
 
     cfg = ConvertConfig(format=args.format, src=args.src, out=args.out, name=args.name, role=args.role,
                         label_space=args.label_space, size_hw=args.size, frame_skip=args.frame_skip,

@@ -10,14 +10,15 @@ import cv2
 import numpy as np
 import pytest
 
-from sray.data_tools.check import check_dataset
-from sray.data_tools.convert import ConvertConfig, convert_scene
-from sray.data_tools.splits import protocol_splits, train_splits
+from source_writers import write_replica, write_scannet_export
+
+from sray.data_tools.check.scenes import check_dataset
 from sray.data_tools.label_spaces import NYU40, SCANNET20
-from sray.data_tools.layout import read_scene
-from sray.data_tools.read_replica import replica_intrinsics
+from sray.data_tools.readers.convert import ConvertConfig, convert_scene
+from sray.data_tools.readers.replica import replica_intrinsics
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
-from sray.data_tools.write_layouts import write_replica, write_scannet_export
+from sray.data_tools.scene_folder import read_scene
+from sray.data_tools.splits import protocol_splits, train_splits
 from sray.jobs import data_convert_cmd
 
 H, W = 24, 32

@@ -37,11 +37,11 @@ from pathlib import Path
 import numpy as np
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
-from sray.data_tools.loader_samples import eval_sample, ranked_candidates, train_sample
-from sray.data_tools.loader_views import SceneCache, read_scene_views
-from sray.data_tools.manifest import Manifest, read_manifest, verify_shards
-from sray.data_tools.neighbours import source_pool
+from sray.data_tools.loader.samples import eval_sample, ranked_candidates, train_sample
+from sray.data_tools.loader.views import SceneCache, read_scene_views
 from sray.data_tools.scene import SceneMeta
+from sray.data_tools.shards.manifest import Manifest, read_manifest, verify_shards
+from sray.data_tools.shards.neighbours import source_pool
 
 
 def slot_scenes(scenes: list[str], pools: dict[str, list[str]], slot: int, n_slots: int,

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from sray.data_tools import synth_fixtures as fx
-from sray.data_tools import synth_materials as mat
-from sray.data_tools.synth_furniture import Piece
-from sray.data_tools.synth_layout import Light, RoomLayout
+from sray.data_tools.synth import fittings as fx
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.floor_plan import Light, RoomLayout
+from sray.data_tools.synth.furniture import Piece
 
 
 def add_door(rng: np.random.Generator, layout: RoomLayout, width: tuple[float, float] = (0.8, 0.95)) -> bool:

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.data_tools.layout import atomic_write_bytes, depth_to_png16, encode_png
-from sray.data_tools.read_common import nyu40_to_label
-from sray.data_tools.read_replica import CLASS_FILE, replica_intrinsics
-from sray.data_tools.read_scannet import read_label_tsv
+from sray.data_tools.readers.common import nyu40_to_label
+from sray.data_tools.readers.replica import CLASS_FILE, replica_intrinsics
+from sray.data_tools.readers.scannet import read_label_tsv
 from sray.data_tools.scene import Scene
+from sray.data_tools.scene_folder import atomic_write_bytes, depth_to_png16, encode_png
 
 
 def _matrix_text(m: np.ndarray) -> bytes:

@@ -10,11 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools import synth_materials as mat
-from sray.data_tools.synth_geometry import Box
-from sray.data_tools.synth_layout import Light
-from sray.data_tools.synth_room_parts import add_lights
-from sray.data_tools.synth_room_types import RECIPES
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.floor_plan import Light
+from sray.data_tools.synth.geometry import Box
+from sray.data_tools.synth.room_parts import add_lights
+from sray.data_tools.synth.room_types import RECIPES
 
 ROOM_TYPES: tuple[str, ...] = tuple(RECIPES)
 """Room types the generator knows."""

@@ -11,12 +11,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from sray.data_tools import synth_fixtures as fx
-from sray.data_tools import synth_furniture as fu
-from sray.data_tools import synth_materials as mat
 from sray.data_tools.scene import IGNORE_ID
-from sray.data_tools.synth_layout import RoomLayout
-from sray.data_tools.synth_room_parts import add_door, add_pictures, add_window
+from sray.data_tools.synth import fittings as fx
+from sray.data_tools.synth import furniture as fu
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.floor_plan import RoomLayout
+from sray.data_tools.synth.room_parts import add_door, add_pictures, add_window
 
 Recipe = Callable[[np.random.Generator], tuple[RoomLayout, mat.Material, mat.Material]]
 

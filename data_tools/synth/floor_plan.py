@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sray.data_tools.synth_furniture import CLS, Piece, span
-from sray.data_tools.synth_geometry import Box, place
-from sray.data_tools import synth_materials as mat
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.furniture import CLS, Piece, span
+from sray.data_tools.synth.geometry import Box, place
 
 Rect = tuple[float, float, float, float]
 """Axis-aligned floor rectangle (x0, x1, y0, y1) in metres."""

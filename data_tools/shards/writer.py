@@ -32,11 +32,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from sray.data_tools.layout import atomic_write_bytes, depth_to_png16, encode_png, list_scenes, read_scene
-from sray.data_tools.manifest import MANIFEST_NAME, Manifest, SceneEntry, ShardEntry, manifest_bytes, sha256_file
-from sray.data_tools.neighbours import (GRID, MIN_POINTS, RULE, RULE_VERSION, Neighbours, blind_views,
-                                        fallback_depth, grid_points, grid_samples, rank_neighbours)
 from sray.data_tools.scene import Scene, View, depth_views, source_pool
+from sray.data_tools.scene_folder import atomic_write_bytes, depth_to_png16, encode_png, list_scenes, read_scene
+from sray.data_tools.shards.manifest import MANIFEST_NAME, Manifest, SceneEntry, ShardEntry, manifest_bytes, sha256_file
+from sray.data_tools.shards.neighbours import (GRID, MIN_POINTS, RULE, RULE_VERSION, Neighbours, blind_views,
+                                               fallback_depth, grid_points, grid_samples, rank_neighbours)
 
 KEY_SEPARATOR = "__"
 """Between scene name and view id in a sample key."""
@@ -185,7 +185,7 @@ def _atomic_write(path: Path, data: bytes) -> None:
 
 def _check_input(scenes_dir: Path) -> None:
     """Refuse input that ``sray data check`` rejects."""
-    from sray.data_tools.check import check_dataset
+    from sray.data_tools.check.scenes import check_dataset
 
     problems = check_dataset(Path(scenes_dir))
     if problems:
