@@ -9,16 +9,16 @@ Frames are numbered 0..n-1 in view order. Every file is written atomically.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
+from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
+from sray.data_tools.png import depth_to_png16, encode_png
 from sray.data_tools.readers.common import nyu40_to_label
 from sray.data_tools.readers.replica import CLASS_FILE, replica_intrinsics
 from sray.data_tools.readers.scannet import read_label_tsv
 from sray.data_tools.scene import Scene
-from sray.data_tools.scene_folder import atomic_write_bytes, depth_to_png16, encode_png
 
 
 def _matrix_text(m: np.ndarray) -> bytes:
@@ -97,5 +97,5 @@ def write_replica(scene: Scene, dst: Path) -> Path:
         raise ValueError(f"scene {meta.name!r} has no views to write")
     atomic_write_bytes(dst / "traj_w_c.txt", _matrix_text(np.stack(rows)))
     table = {"classes": [{"id": i + 1, "name": name} for i, name in enumerate(meta.class_names)]}
-    atomic_write_bytes(dst / CLASS_FILE, (json.dumps(table, indent=1) + "\n").encode())
+    atomic_write_json(dst / CLASS_FILE, table)
     return dst

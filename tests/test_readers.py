@@ -15,12 +15,13 @@ from torch.testing import assert_close
 
 from source_writers import write_replica, write_scannet_export
 
+from sray.data_tools.atomic import atomic_write_bytes
 from sray.data_tools.label_spaces import NYU40, SCANNET20, SCANNET20_NYU40_IDS
+from sray.data_tools.png import encode_png
 from sray.data_tools.readers.common import numbered_files, resample_nearest, scale_intrinsics
 from sray.data_tools.readers.replica import REPLICA_TO_SCANNET20, read_replica, replica_intrinsics
 from sray.data_tools.readers.scannet import read_label_tsv, read_scannet
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
-from sray.data_tools.scene_folder import atomic_write_bytes, encode_png
 
 H, W = 24, 32
 

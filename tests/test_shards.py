@@ -17,7 +17,7 @@ import webdataset as wds
 
 import scene_fixtures
 
-from sray.data_tools import scene_folder
+from sray.data_tools import atomic
 from sray.data_tools.scene_folder import list_scenes, read_scene
 from sray.data_tools.shards.manifest import MANIFEST_NAME, read_manifest, verify_shards
 from sray.data_tools.shards.neighbours import source_pool
@@ -146,7 +146,7 @@ def _interrupt_on_nth_replace(monkeypatch: pytest.MonkeyPatch, n: int) -> None:
             raise KeyboardInterrupt("simulated interruption")
         real_replace(src, dst)
 
-    monkeypatch.setattr(scene_folder.os, "replace", replace)
+    monkeypatch.setattr(atomic.os, "replace", replace)
 
 
 def test_interrupted_run_leaves_nothing_that_looks_complete(scenes_dir: Path, shards_dir: Path, tmp_path: Path,

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import webdataset as wds
 
-from sray.data_tools.scene_folder import decode_png, png16_to_depth
+from sray.data_tools.png import decode_png, png16_to_depth
 from sray.data_tools.shards.manifest import SceneEntry
 from sray.data_tools.shards.neighbours import Neighbours
 from sray.data_tools.shards.writer import KEY_SEPARATOR

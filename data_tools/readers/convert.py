@@ -28,11 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.check.scenes import check_scene
 from sray.data_tools.readers.replica import read_replica
 from sray.data_tools.readers.scannet import read_scannet
 from sray.data_tools.scene import Scene, View, scene_depth_bounds
-from sray.data_tools.scene_folder import atomic_write_json, list_scenes, write_dataset_index, write_scene
+from sray.data_tools.scene_folder import list_scenes, write_dataset_index, write_scene
 from sray.data_tools.splits import protocol_splits, train_splits
 
 DEFAULTS = {"scannet": {"size_hw": (240, 320), "frame_skip": 10}, "replica": {"size_hw": None, "frame_skip": 5}}
