@@ -16,9 +16,10 @@ from sray.data_tools.loader.shard_loader import (make_eval_samples, make_train_l
                                                  worker_batches)
 from sray.data_tools.loader.views import SceneCache, StoredView
 from sray.data_tools.png import encode_png
+from sray.data_tools.scene import source_pool
 from sray.data_tools.scene_folder import read_scene
 from sray.data_tools.shards.manifest import read_manifest
-from sray.data_tools.shards.neighbours import Neighbours, source_pool
+from sray.data_tools.shards.neighbours import Neighbours
 from sray.data_tools.shards.writer import scene_neighbours, write_shards
 
 TRAIN = ["a", "b", "c", "d", "e"]

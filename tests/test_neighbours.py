@@ -10,9 +10,8 @@ from hypothesis import strategies as st
 
 import scene_fixtures
 
-from sray.data_tools.scene import SceneMeta
-from sray.data_tools.shards.neighbours import (grid_points, grid_samples, overlap_fractions,
-                                               rank_neighbours, source_pool)
+from sray.data_tools.scene import SceneMeta, source_pool
+from sray.data_tools.shards.neighbours import grid_points, grid_samples, overlap_fractions, rank_neighbours
 from sray.data_tools.shards.writer import scene_neighbours
 
 

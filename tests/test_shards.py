@@ -18,9 +18,9 @@ import webdataset as wds
 import scene_fixtures
 
 from sray.data_tools import atomic
+from sray.data_tools.scene import source_pool
 from sray.data_tools.scene_folder import list_scenes, read_scene
 from sray.data_tools.shards.manifest import MANIFEST_NAME, read_manifest, verify_shards
-from sray.data_tools.shards.neighbours import source_pool
 from sray.data_tools.shards.writer import DatasetRejected, write_shards
 
 SPECS = [("kitchen", 7, "train"), ("office", 5, "train"), ("unseen", 10, "test")]

@@ -9,9 +9,8 @@ from collections import Counter
 from pathlib import Path
 
 from sray.data_tools.loader.shard_loader import make_train_loader
-from sray.data_tools.scene import SceneMeta
+from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
-from sray.data_tools.shards.neighbours import source_pool
 
 BENCH_SCENES, BENCH_VIEWS, BENCH_HW = 2, 20, (240, 320)
 """Procedural data used when no shard folder is given: 2 train scenes x 20 views at 320x240 (ScanNet size)."""
