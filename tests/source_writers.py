@@ -1,10 +1,10 @@
-"""Writers of a canonical scene INTO the ScanNet-export and Semantic-NeRF Replica layouts.
+"""Test helpers: write a canonical scene as a reader's source (a ScanNet export, a Replica sequence).
 
-They exist for round-trip tests and fixtures, and to hand sray scenes to tools that read those
-layouts. They write at the scene's own resolution and store colour losslessly (``color/<i>.png``,
-which the ScanNet reader accepts beside ``<i>.jpg``), so reading the result back reproduces the
-scene: labels exactly, cameras to float precision, depth to the 1 mm of the 16-bit PNGs.
-Frames are numbered 0..n-1 in view order. Every file is written atomically.
+For the readers' round-trip tests and fixtures (``from source_writers import ...``; tests/conftest.py
+puts tests/ on sys.path). They write at the scene's own resolution and store colour losslessly
+(``color/<i>.png``, which the ScanNet reader accepts beside ``<i>.jpg``), so reading the result back
+reproduces the scene: labels exactly, cameras to float precision, depth to the 1 mm of the 16-bit
+PNGs. Frames are numbered 0..n-1 in view order. Every file is written atomically.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
-"""Wall fixtures, kitchen and bathroom pieces, assembled from boxes in an object frame.
+"""Fittings, the built-in pieces of a room: wall fixtures, kitchen and bathroom pieces, made of boxes.
 
-Same frame as ``furniture.py``: footprint centred on the origin, back (the wall side) at -y,
-front at +y, floor at z = 0. Wall fixtures (doors, windows, pictures, curtains) are thin pieces
-whose back lies on the wall.
+Same object frame as ``furniture.py`` (the free-standing pieces): footprint centred on the origin,
+back (the wall side) at -y, front at +y, floor at z = 0. Wall fixtures (doors, windows, pictures,
+curtains) are thin pieces whose back lies on the wall.
 """
 
 from __future__ import annotations
