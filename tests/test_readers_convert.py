@@ -134,7 +134,7 @@ def test_jpg_colour_is_read_like_opencv_reads_it(tmp_path: Path) -> None:
     write_scannet_export(plane_scene(4), scan, tsv)
     (scan / "color" / "1.png").unlink()
     cv2.imwrite(str(scan / "color" / "1.jpg"), cv2.cvtColor(plane_scene(4).read_view("v1").rgb, cv2.COLOR_RGB2BGR))
-    report = convert_scene(ConvertConfig(format="scannet", src=scan, out=tmp_path / "ds", tsv=tsv,
+    report = convert_scene(ConvertConfig(format="scannet", src=scan, out=tmp_path / "ds", options={"tsv": tsv},
                                          size_hw=(H, W), frame_skip=1, holdout_every=0))
     view = read_scene(report.scene_dir).read_view("000001")
     np.testing.assert_array_equal(view.rgb, cv2.imread(str(scan / "color" / "1.jpg"))[..., ::-1])
