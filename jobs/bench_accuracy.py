@@ -108,8 +108,8 @@ def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str
 
 def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     """Run every stage and append the tables (and chart links) to ``doc``."""
-    from sray.data_tools.shards import write_shards
-    from sray.data_tools.synth_dataset import generate_dataset
+    from sray.data_tools.shards.writer import write_shards
+    from sray.data_tools.synth.dataset import generate_dataset
     from sray.jobs.benchmarks_doc import record
     from sray.platform.charts import write_fleet_charts
     from sray.platform.eval_job import evaluate_checkpoint

@@ -40,7 +40,7 @@ def _bench_accuracy(args: argparse.Namespace) -> int:
 
 
 def _bench_loader(args: argparse.Namespace) -> int:
-    from sray.data_tools.loader_bench import run_loader_benchmark
+    from sray.data_tools.loader.bench import run_loader_benchmark
     from sray.jobs.benchmarks_doc import record
 
     title, table, notes = run_loader_benchmark(args.data, batches=args.batches)

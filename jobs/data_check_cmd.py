@@ -22,7 +22,7 @@ def register(verbs: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print problems grouped by file and a count (exit 1), or a one-line OK summary (exit 0)."""
-    from sray.data_tools.check import CheckLimits, check_dataset
+    from sray.data_tools.check.scenes import CheckLimits, check_dataset
 
     limits = CheckLimits(min_train_views=args.min_train_views, min_source_views=args.min_source_views,
                          min_test_views=args.min_test_views)
@@ -47,6 +47,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _scene_names(root: Path) -> list[str]:
     """Scene names of a dataset that passed the check (dataset.json if present, else scene folders)."""
-    from sray.data_tools.layout import list_scenes
+    from sray.data_tools.scene_folder import list_scenes
 
     return [p.name for p in list_scenes(root) if not p.name.startswith(".")]

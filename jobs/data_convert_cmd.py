@@ -1,4 +1,4 @@
-"""``sray data convert``: a ScanNet export or a Semantic-NeRF Replica rendering -> sray layout."""
+"""``sray data convert``: one scan or rendered sequence -> sray layout; the formats come from the reader registry."""
 
 from __future__ import annotations
 
@@ -6,6 +6,9 @@ import argparse
 import re
 import sys
 from pathlib import Path
+
+from sray.data_tools.label_spaces import LABEL_SPACES
+from sray.data_tools.readers.registry import READERS
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -16,31 +19,37 @@ def _size(text: str) -> tuple[int, int]:
     return int(match.group(2)), int(match.group(1))
 
 
+def _default_size(size_hw: tuple[int, int] | None) -> str:
+    """A reader's default output size as the CLI writes it (``320x240``)."""
+    return "the source's size" if size_hw is None else f"{size_hw[1]}x{size_hw[0]}"
+
+
 def register(verbs: argparse._SubParsersAction) -> None:
-    """Add ``sray data convert``."""
-    p = verbs.add_parser("convert", help="convert a ScanNet export or a Replica rendering into sray layout",
-                         description="Convert one scan (ScanNet SensReader export + label-filt) or one rendered "
-                                     "Replica sequence (Semantic-NeRF layout) into one scene of an sray dataset. "
-                                     "See docs/data.md, 'Readers and validation'.")
+    """Add ``sray data convert``, with the formats, defaults and reader options of the reader registry."""
+    formats = "; ".join(f"{r.name}: {r.summary}" for r in READERS.values())
+    p = verbs.add_parser("convert", help=f"convert one source scene ({', '.join(READERS)}) into sray layout",
+                         description=f"Convert one scan or rendered sequence into one scene of an sray dataset "
+                                     f"({formats}). See docs/data.md, 'Readers and validation'.")
     p.add_argument("src", type=Path, help="the scan / sequence folder")
-    p.add_argument("--format", required=True, choices=("scannet", "replica"), help="source layout")
+    p.add_argument("--format", required=True, choices=tuple(READERS), help=f"source format ({formats})")
     p.add_argument("--out", required=True, type=Path, help="dataset folder that receives the scene")
     p.add_argument("--name", default=None, help="scene name (default: the source folder's name)")
     p.add_argument("--role", default="train", choices=("train", "test"),
                    help="train: all views, every --holdout-every-th held out as 'test'; "
                         "test: 20-view window, 8 source / 8 finetune / 4 test")
-    p.add_argument("--label-space", default="scannet20", choices=("scannet20", "nyu40"))
+    p.add_argument("--label-space", default="scannet20", choices=tuple(LABEL_SPACES))
     p.add_argument("--size", type=_size, default=None, metavar="WxH",
-                   help="output size (default: 320x240 for scannet, the rendered size for replica)")
+                   help="output size (default: " +
+                        ", ".join(f"{_default_size(r.size_hw)} for {r.name}" for r in READERS.values()) + ")")
     p.add_argument("--frame-skip", type=int, default=None, metavar="N",
-                   help="keep every N-th usable frame (default: 10 for scannet's 30 fps, 5 for replica)")
+                   help="keep every N-th usable frame (default: " +
+                        ", ".join(f"{r.frame_skip} for {r.name}" for r in READERS.values()) + ")")
     p.add_argument("--depth-scale", type=float, default=1000.0,
                    help="depth PNG units per metre in the source (default 1000: millimetres)")
-    p.add_argument("--tsv", type=Path, default=None,
-                   help="scannet: scannetv2-labels.combined.tsv (default: searched next to and above SRC)")
-    p.add_argument("--classes", type=Path, default=None,
-                   help="replica: class table, e.g. Replica/<scene>/habitat/info_semantic.json "
-                        "(default: SRC/info_semantic.json or SRC/../info_semantic.json)")
+    for reader in READERS.values():
+        for option in reader.options:
+            p.add_argument(f"--{option.name.replace('_', '-')}", dest=option.name, type=Path, default=None,
+                           help=f"{reader.name}: {option.help}")
     p.add_argument("--holdout-every", type=int, default=20, metavar="N",
                    help="train scenes: hold out every N-th view as 'test' (0: none)")
     p.add_argument("--window-start", type=int, default=None, metavar="I",
@@ -53,11 +62,12 @@ def run(args: argparse.Namespace) -> int:
     """Convert; print what was written and which frames were dropped. Exit 1 with the reason on bad input."""
     from tqdm import tqdm
 
-    from sray.data_tools.convert import ConvertConfig, convert_scene
+    from sray.data_tools.readers.convert import ConvertConfig, convert_scene
 
+    options = {o.name: getattr(args, o.name) for o in READERS[args.format].options if getattr(args, o.name) is not None}
     cfg = ConvertConfig(format=args.format, src=args.src, out=args.out, name=args.name, role=args.role,
                         label_space=args.label_space, size_hw=args.size, frame_skip=args.frame_skip,
-                        depth_scale=args.depth_scale, tsv=args.tsv, classes=args.classes,
+                        depth_scale=args.depth_scale, options=options,
                         holdout_every=args.holdout_every, window_start=args.window_start,
                         overwrite=args.overwrite)
     bar = tqdm(desc=f"sray data convert {args.src}", unit="view", file=sys.stderr)

@@ -26,8 +26,8 @@ def register(verbs: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Shard and/or verify; exit 1 on rejected input or damaged shards, 2 on a usage error."""
-    from sray.data_tools.manifest import verify_shards
-    from sray.data_tools.shards import DatasetRejected, write_shards
+    from sray.data_tools.shards.manifest import verify_shards
+    from sray.data_tools.shards.writer import DatasetRejected, write_shards
 
     if args.scenes_dir is None and not args.verify:
         print("sray data shard: give SCENES_DIR to shard, or --verify to check --out", file=sys.stderr)

@@ -23,7 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from sray.data_tools.synth_dataset import generate_dataset
+    from sray.data_tools.synth.dataset import generate_dataset
 
     scenes = generate_dataset(args.out, n_train=args.train_scenes, n_test=args.test_scenes, n_views=args.views,
                               height=args.height, width=args.width, seed=args.seed, progress=True)

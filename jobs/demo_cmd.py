@@ -54,11 +54,11 @@ def _sray_command() -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Run every stage, printing where each result went; exit 1 if the data fails its checks."""
-    from sray.data_tools.check import check_dataset
-    from sray.data_tools.loader import make_train_loader
-    from sray.data_tools.manifest import read_manifest, verify_shards
-    from sray.data_tools.shards import write_shards
-    from sray.data_tools.synth_dataset import generate_dataset
+    from sray.data_tools.check.scenes import check_dataset
+    from sray.data_tools.loader.shard_loader import make_train_loader
+    from sray.data_tools.shards.manifest import read_manifest, verify_shards
+    from sray.data_tools.shards.writer import write_shards
+    from sray.data_tools.synth.dataset import generate_dataset
     from sray.jobs.sample_picture import write_sample_picture
 
     t0 = time.perf_counter()

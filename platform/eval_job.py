@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from sray.data_tools.loader import make_eval_samples
-from sray.data_tools.manifest import read_manifest
+from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.data_tools.shards.manifest import read_manifest
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
 from sray.platform.eval_protocol import EvalProtocol

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from sray.data_tools.manifest import Manifest, read_manifest
+from sray.data_tools.shards.manifest import Manifest, read_manifest
 from sray.model.metrics import DATASET_PROTOCOL, PER_IMAGE_PROTOCOL
 
 RENDER_MODES = ("full",)

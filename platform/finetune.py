@@ -30,8 +30,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from sray.data_tools.loader import make_eval_samples, make_train_loader
-from sray.data_tools.manifest import read_manifest
+from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader
+from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.eval_protocol import EvalProtocol
 from sray.platform.evaluation import render_view, score_views
 from sray.platform.finetune_learners import NeRFLearner, SRayLearner, build_semantic_nerf

@@ -23,9 +23,9 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from sray.data_tools.loader_views import read_scene_views
-from sray.data_tools.manifest import read_manifest
+from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.scene import SceneMeta
+from sray.data_tools.shards.manifest import read_manifest
 from sray.model.losses import render_loss
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box_from_cameras
 from sray.model.sray import SourceSet, SRayModel

@@ -64,7 +64,7 @@ def resolve_checkpoint(path: Path) -> Path:
 
 def unseen_scenes(shards: Path) -> list[str]:
     """Names of the unseen test scenes (role ``test``) of a shard folder, sorted."""
-    from sray.data_tools.manifest import read_manifest
+    from sray.data_tools.shards.manifest import read_manifest
 
     return sorted(name for name, e in read_manifest(Path(shards)).scenes.items() if e.meta.get("role") == "test")
 
@@ -109,7 +109,7 @@ def _scene_task(job: SceneJob) -> dict[str, Any]:
 
 def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
     """ValueError naming what is wrong with the request, before anything starts."""
-    from sray.data_tools.manifest import read_manifest
+    from sray.data_tools.shards.manifest import read_manifest
 
     bad = [m for m in methods if m not in METHODS]
     if bad or not methods:

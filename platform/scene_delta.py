@@ -26,7 +26,7 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 from torch import Tensor, nn
 
-from sray.data_tools.manifest import sha256_file
+from sray.data_tools.shards.manifest import sha256_file
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.model.sray import SRayModel
 from sray.platform.checkpoints import STATE_FILE

@@ -60,7 +60,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     import ray.train
     from accelerate import Accelerator
 
-    from sray.data_tools.loader import make_train_loader
+    from sray.data_tools.loader.shard_loader import make_train_loader
     from sray.platform.progress import make_progress
     from sray.platform.tracking_logger import RunLogger
     from sray.platform.validation import validate

@@ -18,8 +18,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from sray.data_tools.loader import make_eval_samples
-from sray.data_tools.manifest import read_manifest
+from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.eval_protocol import EvalProtocol
 from sray.platform.evaluation import ViewPrediction, render_view, score_views, sray_renderer
 from sray.platform.renders import render_panel

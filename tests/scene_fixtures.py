@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import SCANNET20
-from sray.data_tools.layout import png16_to_depth, depth_to_png16, write_dataset_index, write_scene
+from sray.data_tools.png import depth_to_png16, png16_to_depth
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View, scene_depth_bounds
+from sray.data_tools.scene_folder import write_dataset_index, write_scene
 
 ROOM_LO = np.array([-2.0, -2.0, 0.0])
 ROOM_HI = np.array([2.0, 2.0, 2.5])

@@ -14,11 +14,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sray.data_tools.check import CheckLimits, check_dataset, check_scene_object
-from sray.data_tools.check_rules import REQUIRED_FIELDS
+from sray.data_tools.check.rules import REQUIRED_FIELDS
+from sray.data_tools.check.scenes import CheckLimits, check_dataset, check_scene_object
 from sray.data_tools.label_spaces import SCANNET20
-from sray.data_tools.layout import encode_png, write_dataset_index, write_scene
+from sray.data_tools.png import encode_png
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
+from sray.data_tools.scene_folder import write_dataset_index, write_scene
 from sray.jobs import data_check_cmd
 
 H, W = 16, 20

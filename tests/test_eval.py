@@ -20,8 +20,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
 from train_fixtures import tiny_config, tiny_shards  # noqa: E402,F401
 
-from sray.data_tools.loader import make_eval_samples  # noqa: E402
-from sray.data_tools.manifest import read_manifest  # noqa: E402
+from sray.data_tools.loader.shard_loader import make_eval_samples  # noqa: E402
+from sray.data_tools.shards.manifest import read_manifest  # noqa: E402
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL  # noqa: E402
 from sray.model.ssim import SSIM_WINDOW  # noqa: E402
 from sray.platform.palette import IGNORE_COLOR, palette  # noqa: E402

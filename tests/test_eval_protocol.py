@@ -27,7 +27,7 @@ def test_source_rule_is_the_manifests_neighbour_rule(tiny_shards: Path) -> None:
 
 
 def test_a_manifest_without_a_rule_is_refused(tiny_shards: Path) -> None:
-    from sray.data_tools.manifest import read_manifest
+    from sray.data_tools.shards.manifest import read_manifest
 
     manifest = read_manifest(tiny_shards)
     manifest.neighbours = {"k": 8}

@@ -12,13 +12,15 @@ from hypothesis import strategies as st
 
 import scene_fixtures
 
-from sray.data_tools.layout import encode_png, read_scene
-from sray.data_tools.loader import (make_eval_samples, make_train_loader, slot_scenes,
-                                    worker_batches)
-from sray.data_tools.loader_views import SceneCache, StoredView
-from sray.data_tools.manifest import read_manifest
-from sray.data_tools.neighbours import Neighbours, source_pool
-from sray.data_tools.shards import scene_neighbours, write_shards
+from sray.data_tools.loader.shard_loader import (make_eval_samples, make_train_loader, slot_scenes,
+                                                 worker_batches)
+from sray.data_tools.loader.views import SceneCache, StoredView
+from sray.data_tools.png import encode_png
+from sray.data_tools.scene import source_pool
+from sray.data_tools.scene_folder import read_scene
+from sray.data_tools.shards.manifest import read_manifest
+from sray.data_tools.shards.neighbours import Neighbours
+from sray.data_tools.shards.writer import scene_neighbours, write_shards
 
 TRAIN = ["a", "b", "c", "d", "e"]
 TRAIN_KEYS = {"src_rgb", "src_K", "src_c2w", "query_K", "query_c2w", "pixels", "target_label", "target_rgb",
@@ -187,7 +189,7 @@ def test_bad_arguments_are_refused(data: tuple[Path, Path]) -> None:
 
 def test_label_ids_outside_the_label_space_are_refused_on_the_host() -> None:
     """The loader checks target ids once per batch (the training step no longer reads them back)."""
-    from sray.data_tools.loader_samples import check_label_ids
+    from sray.data_tools.loader.samples import check_label_ids
 
     check_label_ids(np.array([0, 19, 255, 3]), 20, "room", "v1")  # in range, ignore id allowed
     with pytest.raises(ValueError, match=r"scene 'room', view 'v7': label ids \[20, 40\]"):

@@ -9,9 +9,9 @@ import pytest
 
 import scene_fixtures
 
-from sray.data_tools import loader_bench
-from sray.data_tools.manifest import read_manifest
-from sray.data_tools.shards import write_shards
+from sray.data_tools.loader import bench as loader_bench
+from sray.data_tools.shards.manifest import read_manifest
+from sray.data_tools.shards.writer import write_shards
 
 
 def _check_report(title: str, table: str, notes: str, shards: Path | None) -> None:

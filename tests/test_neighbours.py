@@ -10,10 +10,9 @@ from hypothesis import strategies as st
 
 import scene_fixtures
 
-from sray.data_tools.neighbours import (grid_points, grid_samples, overlap_fractions,
-                                        rank_neighbours, source_pool)
-from sray.data_tools.scene import SceneMeta
-from sray.data_tools.shards import scene_neighbours
+from sray.data_tools.scene import SceneMeta, source_pool
+from sray.data_tools.shards.neighbours import grid_points, grid_samples, overlap_fractions, rank_neighbours
+from sray.data_tools.shards.writer import scene_neighbours
 
 
 def _opencv_fraction(points: np.ndarray, K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int]) -> float:

@@ -13,13 +13,15 @@ import pytest
 import torch
 from torch.testing import assert_close
 
+from source_writers import write_replica, write_scannet_export
+
+from sray.data_tools.atomic import atomic_write_bytes
 from sray.data_tools.label_spaces import NYU40, SCANNET20, SCANNET20_NYU40_IDS
-from sray.data_tools.layout import atomic_write_bytes, encode_png
-from sray.data_tools.read_common import numbered_files, resample_nearest, scale_intrinsics
-from sray.data_tools.read_replica import REPLICA_TO_SCANNET20, read_replica, replica_intrinsics
-from sray.data_tools.read_scannet import read_label_tsv, read_scannet
+from sray.data_tools.png import encode_png
+from sray.data_tools.readers.common import numbered_files, resample_nearest, scale_intrinsics
+from sray.data_tools.readers.replica import REPLICA_TO_SCANNET20, read_replica, replica_intrinsics
+from sray.data_tools.readers.scannet import read_label_tsv, read_scannet
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
-from sray.data_tools.write_layouts import write_replica, write_scannet_export
 
 H, W = 24, 32
 
@@ -62,7 +64,7 @@ def random_scene(seed: int, n_views: int = 5, space: str = "scannet20") -> Scene
 
 def procedural_scene() -> Scene:
     """The procedural generator's scene, with the Replica camera (the only one that layout holds)."""
-    synth = pytest.importorskip("sray.data_tools.synth_dataset")
+    synth = pytest.importorskip("sray.data_tools.synth.dataset")
     scene = synth.generate_scene("proc", seed=3, n_views=4, height=H, width=W, role="train")
     views = [View(v.view_id, v.rgb, v.depth, v.label, replica_intrinsics(v.hw), v.c2w) for v in scene.views()]
     return Scene.in_memory(scene.meta, views)

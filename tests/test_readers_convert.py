@@ -10,14 +10,15 @@ import cv2
 import numpy as np
 import pytest
 
-from sray.data_tools.check import check_dataset
-from sray.data_tools.convert import ConvertConfig, convert_scene
-from sray.data_tools.splits import protocol_splits, train_splits
+from source_writers import write_replica, write_scannet_export
+
+from sray.data_tools.check.scenes import check_dataset
 from sray.data_tools.label_spaces import NYU40, SCANNET20
-from sray.data_tools.layout import read_scene
-from sray.data_tools.read_replica import replica_intrinsics
+from sray.data_tools.readers.convert import ConvertConfig, convert_scene
+from sray.data_tools.readers.replica import replica_intrinsics
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
-from sray.data_tools.write_layouts import write_replica, write_scannet_export
+from sray.data_tools.scene_folder import read_scene
+from sray.data_tools.splits import protocol_splits, train_splits
 from sray.jobs import data_convert_cmd
 
 H, W = 24, 32
@@ -133,7 +134,7 @@ def test_jpg_colour_is_read_like_opencv_reads_it(tmp_path: Path) -> None:
     write_scannet_export(plane_scene(4), scan, tsv)
     (scan / "color" / "1.png").unlink()
     cv2.imwrite(str(scan / "color" / "1.jpg"), cv2.cvtColor(plane_scene(4).read_view("v1").rgb, cv2.COLOR_RGB2BGR))
-    report = convert_scene(ConvertConfig(format="scannet", src=scan, out=tmp_path / "ds", tsv=tsv,
+    report = convert_scene(ConvertConfig(format="scannet", src=scan, out=tmp_path / "ds", options={"tsv": tsv},
                                          size_hw=(H, W), frame_skip=1, holdout_every=0))
     view = read_scene(report.scene_dir).read_view("000001")
     np.testing.assert_array_equal(view.rgb, cv2.imread(str(scan / "color" / "1.jpg"))[..., ::-1])

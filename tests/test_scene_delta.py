@@ -11,7 +11,7 @@ from fleet_fixtures import write_tiny_checkpoint
 from safetensors import safe_open
 from train_fixtures import tiny_shards  # noqa: F401
 
-from sray.data_tools.loader import make_eval_samples
+from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.platform.checkpoints import load_checkpoint
 from sray.platform.finetune import SceneJob, SceneOutcome, evaluate, finetune_scene

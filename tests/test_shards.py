@@ -17,11 +17,11 @@ import webdataset as wds
 
 import scene_fixtures
 
-from sray.data_tools import layout
-from sray.data_tools.layout import list_scenes, read_scene
-from sray.data_tools.manifest import MANIFEST_NAME, read_manifest, verify_shards
-from sray.data_tools.neighbours import source_pool
-from sray.data_tools.shards import DatasetRejected, write_shards
+from sray.data_tools import atomic
+from sray.data_tools.scene import source_pool
+from sray.data_tools.scene_folder import list_scenes, read_scene
+from sray.data_tools.shards.manifest import MANIFEST_NAME, read_manifest, verify_shards
+from sray.data_tools.shards.writer import DatasetRejected, write_shards
 
 SPECS = [("kitchen", 7, "train"), ("office", 5, "train"), ("unseen", 10, "test")]
 
@@ -114,7 +114,7 @@ def test_rerun_is_idempotent_and_deterministic(scenes_dir: Path, shards_dir: Pat
 
 def test_damage_is_detected(shards_dir: Path, tmp_path: Path) -> None:
     """Truncation fails the size check; a same-size byte flip fails only the checksum; the loader refuses both."""
-    from sray.data_tools.loader import make_train_loader
+    from sray.data_tools.loader.shard_loader import make_train_loader
 
     copy = tmp_path / "copy"
     shutil.copytree(shards_dir, copy)
@@ -146,7 +146,7 @@ def _interrupt_on_nth_replace(monkeypatch: pytest.MonkeyPatch, n: int) -> None:
             raise KeyboardInterrupt("simulated interruption")
         real_replace(src, dst)
 
-    monkeypatch.setattr(layout.os, "replace", replace)
+    monkeypatch.setattr(atomic.os, "replace", replace)
 
 
 def test_interrupted_run_leaves_nothing_that_looks_complete(scenes_dir: Path, shards_dir: Path, tmp_path: Path,

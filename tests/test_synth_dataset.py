@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from sray.data_tools.layout import list_scenes, read_scene, write_scene
-from sray.data_tools.synth_dataset import generate_dataset, generate_scene
+from sray.data_tools.scene_folder import list_scenes, read_scene, write_scene
+from sray.data_tools.synth.dataset import generate_dataset, generate_scene
 from sray.jobs import data_synth_cmd
 
 

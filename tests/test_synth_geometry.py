@@ -9,8 +9,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sray.data_tools.synth_geometry import Box, PackedBoxes, box_normals, cast_rays, cast_shell
-from sray.data_tools.synth_materials import Material
+from sray.data_tools.synth.geometry import Box, PackedBoxes, box_normals, cast_rays, cast_shell
+from sray.data_tools.synth.materials import Material
 
 PLAIN = Material(0, (0.5, 0.5, 0.5), (0.5, 0.5, 0.5))
 

@@ -11,8 +11,8 @@ import torch
 from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.scene import IGNORE_ID, Scene, View
 from sray.data_tools.splits import PROTOCOL_WINDOW as WINDOW
-from sray.data_tools.synth_dataset import generate_scene, plan_scene
-from sray.data_tools.synth_rooms import ROOM_TYPES
+from sray.data_tools.synth.dataset import generate_scene, plan_scene
+from sray.data_tools.synth.rooms import ROOM_TYPES
 
 H, W, N_VIEWS = 60, 80, 30
 

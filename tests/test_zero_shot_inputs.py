@@ -19,18 +19,18 @@ import pytest
 import torch
 
 import scene_fixtures
+from source_writers import write_replica
 
-from sray.data_tools.convert import ConvertConfig, convert_scene
 from sray.data_tools.label_spaces import SCANNET20
-from sray.data_tools.layout import read_scene
-from sray.data_tools.loader import make_eval_samples
-from sray.data_tools.loader_views import read_scene_views
-from sray.data_tools.manifest import read_manifest
-from sray.data_tools.read_replica import replica_intrinsics
+from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.data_tools.loader.views import read_scene_views
+from sray.data_tools.readers.convert import ConvertConfig, convert_scene
+from sray.data_tools.readers.replica import replica_intrinsics
 from sray.data_tools.scene import Scene, SceneMeta, View, depth_bounds
-from sray.data_tools.shards import write_shards
-from sray.data_tools.synth_dataset import generate_scene
-from sray.data_tools.write_layouts import write_replica
+from sray.data_tools.scene_folder import read_scene
+from sray.data_tools.shards.manifest import read_manifest
+from sray.data_tools.shards.writer import write_shards
+from sray.data_tools.synth.dataset import generate_scene
 from sray.model.config import SRayConfig
 from sray.model.rays import pixel_rays
 from sray.model.sray import SRayModel

@@ -13,8 +13,8 @@ from sray.platform.train_config import TrainConfig
 @pytest.fixture(scope="session")
 def tiny_shards(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """2 train scenes + 1 unseen test scene, 20 views of 32x40 each, sharded."""
-    from sray.data_tools.shards import write_shards
-    from sray.data_tools.synth_dataset import generate_dataset
+    from sray.data_tools.shards.writer import write_shards
+    from sray.data_tools.synth.dataset import generate_dataset
 
     root = tmp_path_factory.mktemp("tiny")
     generate_dataset(root / "scenes", n_train=2, n_test=1, n_views=20, height=32, width=40, seed=3, progress=False)

@@ -16,8 +16,8 @@ def run(ctx: CheckContext) -> StageResult:
     missing = [m for m in NEEDS if not has_module(m)]
     if missing:
         return StageResult("skipped", f"{', '.join(missing)} not installed here: the Ray stage needs the full stack")
-    from sray.data_tools.shards import write_shards
-    from sray.data_tools.synth_dataset import generate_dataset
+    from sray.data_tools.shards.writer import write_shards
+    from sray.data_tools.synth.dataset import generate_dataset
     from sray.jobs.recipes import get_recipe
     from sray.platform.launcher import launch_training
 

@@ -10,11 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools import synth_materials as mat
-from sray.data_tools.synth_geometry import Box
-from sray.data_tools.synth_layout import Light
-from sray.data_tools.synth_room_parts import add_lights
-from sray.data_tools.synth_room_types import RECIPES
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.floor_plan import Light
+from sray.data_tools.synth.geometry import Box
+from sray.data_tools.synth.room_parts import add_lights
+from sray.data_tools.synth.room_types import RECIPES
 
 ROOM_TYPES: tuple[str, ...] = tuple(RECIPES)
 """Room types the generator knows."""
@@ -46,8 +46,8 @@ def build_room(rng: np.random.Generator, room_type: str) -> Room:
     """Generate a complete room of the given type from ``rng``."""
     if room_type not in RECIPES:
         raise ValueError(f"unknown room type {room_type!r}; known: {list(RECIPES)}")
-    layout, wall, floor = RECIPES[room_type](rng)
-    add_lights(rng, layout)
-    layout.add_baseboards(rng)
-    return Room(room_type=room_type, size=layout.size, boxes=layout.boxes, lights=layout.lights,
+    plan, wall, floor = RECIPES[room_type](rng)
+    add_lights(rng, plan)
+    plan.add_baseboards(rng)
+    return Room(room_type=room_type, size=plan.size, boxes=plan.boxes, lights=plan.lights,
                 ambient=float(rng.uniform(0.25, 0.4)), wall=wall, floor=floor, ceiling=mat.ceiling_paint(rng))

@@ -19,7 +19,7 @@ is a scene (all of its shards):
   waits on a rank that ran dry. Each new ``iter(loader)`` starts a new epoch (new random stream);
   ``loader.set_epoch(e)`` sets it explicitly (for resuming).
 
-Which views are queries and sources (``neighbours.source_pool``): train scenes use their ``train``
+Which views are queries and sources (``scene.source_pool``): train scenes use their ``train``
 split minus held-out ``test`` views; test scenes (finetuning) use ``source`` plus ``finetune``.
 
 Evaluation (:func:`make_eval_samples`) yields whole query images with FIXED source views (the
@@ -37,11 +37,10 @@ from pathlib import Path
 import numpy as np
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
-from sray.data_tools.loader_samples import eval_sample, ranked_candidates, train_sample
-from sray.data_tools.loader_views import SceneCache, read_scene_views
-from sray.data_tools.manifest import Manifest, read_manifest, verify_shards
-from sray.data_tools.neighbours import source_pool
-from sray.data_tools.scene import SceneMeta
+from sray.data_tools.loader.samples import eval_sample, ranked_candidates, train_sample
+from sray.data_tools.loader.views import SceneCache, read_scene_views
+from sray.data_tools.scene import SceneMeta, source_pool
+from sray.data_tools.shards.manifest import Manifest, read_manifest, verify_shards
 
 
 def slot_scenes(scenes: list[str], pools: dict[str, list[str]], slot: int, n_slots: int,

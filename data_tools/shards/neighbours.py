@@ -25,9 +25,9 @@ near-duplicate frames and, worse, cameras next to the query that look the other 
 score never prefers a camera facing away, and the loader samples m sources at random from the top
 k so near duplicates are not always chosen.
 
-Candidates come from :func:`source_pool` (defined in ``scene.py``, which also measures bounds with
-it): the views a training or evaluation tuple may use as sources (for training scenes, the
-``train`` split minus held-out ``test`` views; for test scenes, ``source`` plus ``finetune``).
+Candidates come from ``scene.source_pool`` (which also measures bounds): the views a training or
+evaluation tuple may use as sources (for training scenes, the ``train`` split minus held-out
+``test`` views; for test scenes, ``source`` plus ``finetune``).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools.scene import SceneMeta, source_pool  # noqa: F401  (re-exported; bounds use it too)
+from sray.data_tools.scene import SceneMeta
 
 RULE = "frustum-overlap"
 RULE_VERSION = 2

@@ -8,10 +8,9 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from sray.data_tools.loader import make_train_loader
-from sray.data_tools.manifest import read_manifest
-from sray.data_tools.neighbours import source_pool
-from sray.data_tools.scene import SceneMeta
+from sray.data_tools.loader.shard_loader import make_train_loader
+from sray.data_tools.scene import SceneMeta, source_pool
+from sray.data_tools.shards.manifest import read_manifest
 
 BENCH_SCENES, BENCH_VIEWS, BENCH_HW = 2, 20, (240, 320)
 """Procedural data used when no shard folder is given: 2 train scenes x 20 views at 320x240 (ScanNet size)."""
@@ -19,8 +18,8 @@ BENCH_SCENES, BENCH_VIEWS, BENCH_HW = 2, 20, (240, 320)
 
 def procedural_shards(root: Path, seed: int = 0) -> Path:
     """Generate small procedural scenes under ``root`` and shard them; returns the shard folder."""
-    from sray.data_tools.shards import write_shards
-    from sray.data_tools.synth_dataset import generate_dataset
+    from sray.data_tools.shards.writer import write_shards
+    from sray.data_tools.synth.dataset import generate_dataset
 
     generate_dataset(root / "scenes", n_train=BENCH_SCENES, n_test=0, n_views=BENCH_VIEWS, height=BENCH_HW[0],
                      width=BENCH_HW[1], seed=seed, progress=True)

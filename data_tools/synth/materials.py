@@ -1,7 +1,7 @@
 """Surface materials of the procedural scenes: pattern kinds and class-conditioned, wide palettes.
 
 A material is a pattern kind plus two colours and a few parameters; the pattern is evaluated in the
-owning surface's local 3D frame (see ``synth_textures``), so a surface point has the same albedo
+owning surface's local 3D frame (see ``textures.py``), so a surface point has the same albedo
 from every view. Colours are linear RGB in [0, 1]. Palettes are wide on purpose (any hue for paint,
 fabric and curtains; light to dark for wood) so that colour alone does not identify a class.
 """

@@ -2,7 +2,7 @@
 
 Each function inspects one thing (a pose, an intrinsic matrix, a label map, scene.json's fields) and
 returns :class:`Problem` records naming the file, what is wrong and how to fix it. They read and
-write nothing, so the on-disk check (``check.py``) and the in-memory check share them.
+write nothing, so the on-disk check (``scenes.py``) and the in-memory check share them.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from sray.data_tools.loader_views import StoredView
+from sray.data_tools.loader.views import StoredView
 from sray.data_tools.scene import IGNORE_ID
 
 

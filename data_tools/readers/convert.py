@@ -1,4 +1,4 @@
-"""``sray data convert``: a ScanNet export or a Replica rendering -> one scene in sray layout.
+"""``sray data convert``: one source scene (any format of ``readers/registry.py``) -> one scene in sray layout.
 
 Splits (see docs/data.md, "Readers and validation"):
 
@@ -28,16 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.data_tools.check import check_scene
-from sray.data_tools.layout import atomic_write_json, list_scenes, write_dataset_index, write_scene
-from sray.data_tools.read_replica import read_replica
-from sray.data_tools.read_scannet import read_scannet
+from sray.data_tools.atomic import atomic_write_json
+from sray.data_tools.check.scenes import check_scene
+from sray.data_tools.readers.registry import get_reader
 from sray.data_tools.scene import Scene, View, scene_depth_bounds
+from sray.data_tools.scene_folder import list_scenes, write_dataset_index, write_scene
 from sray.data_tools.splits import protocol_splits, train_splits
-
-DEFAULTS = {"scannet": {"size_hw": (240, 320), "frame_skip": 10}, "replica": {"size_hw": None, "frame_skip": 5}}
-"""Per-format defaults: ScanNet at 320x240 (the paper's size), every 10th frame of the 30 fps scan;
-Replica at its rendered size (640x480 in Semantic-NeRF's release, the paper's size), every 5th frame."""
 
 
 @dataclass
@@ -45,7 +41,7 @@ class ConvertConfig:
     """What ``sray data convert`` converts, and how."""
 
     format: str
-    """Source layout: ``scannet`` (SensReader export + label-filt) or ``replica`` (Semantic-NeRF renders)."""
+    """Source format: a name in the reader registry (``readers/registry.py``: ``scannet``, ``replica``)."""
     src: Path
     """The source scan / sequence folder."""
     out: Path
@@ -55,17 +51,17 @@ class ConvertConfig:
     role: str = "train"
     """``train`` (pretraining scene) or ``test`` (unseen scene, 20-view protocol)."""
     label_space: str = "scannet20"
-    """Target label space: ``scannet20`` or ``nyu40``."""
+    """Target label space: a name in ``label_spaces.LABEL_SPACES`` (``scannet20``, ``nyu40``)."""
     size_hw: tuple[int, int] | None = None
-    """Output (H, W); None = the format's default (:data:`DEFAULTS`)."""
+    """Output (H, W); None = the reader's default (its registry entry)."""
     frame_skip: int | None = None
-    """Keep every n-th usable frame; None = the format's default (:data:`DEFAULTS`)."""
+    """Keep every n-th usable frame; None = the reader's default (its registry entry)."""
     depth_scale: float = 1000.0
     """Source depth PNG units per metre (1000 = millimetres, as both layouts store)."""
-    tsv: Path | None = None
-    """ScanNet: ``scannetv2-labels.combined.tsv``; None = search next to and above ``src``."""
-    classes: Path | None = None
-    """Replica: class table (``info_semantic.json``); None = ``src`` or its parent folder."""
+    options: dict[str, Path] = field(default_factory=dict)
+    """Reader-specific side inputs by the reader's option names: ``{"tsv": ...}`` (ScanNet's
+    ``scannetv2-labels.combined.tsv``), ``{"classes": ...}`` (Replica's ``info_semantic.json``); one
+    left out is searched for next to the source."""
     holdout_every: int = 20
     """Train scenes: hold out every n-th view as ``test`` (0 = none)."""
     window_start: int | None = None
@@ -100,14 +96,15 @@ def default_name(src: Path) -> str:
 
 
 def _open_source(cfg: ConvertConfig, name: str) -> Scene:
-    if cfg.format not in DEFAULTS:
-        raise ValueError(f"unknown format {cfg.format!r}; known: {sorted(DEFAULTS)}")
-    d = DEFAULTS[cfg.format]
-    common = dict(name=name, label_space=cfg.label_space, depth_scale=cfg.depth_scale,
-                  size_hw=cfg.size_hw or d["size_hw"], frame_skip=cfg.frame_skip or d["frame_skip"])
-    if cfg.format == "scannet":
-        return read_scannet(cfg.src, tsv=cfg.tsv, **common)
-    return read_replica(cfg.src, classes=cfg.classes, **common)
+    """Open ``cfg.src`` with the registered reader of ``cfg.format``, filling in that reader's defaults."""
+    reader = get_reader(cfg.format)
+    unknown = sorted(set(cfg.options) - {o.name for o in reader.options})
+    if unknown:
+        raise ValueError(f"options {unknown} are not inputs of the {reader.name} reader; "
+                         f"it takes {[o.name for o in reader.options]}")
+    return reader.load()(cfg.src, name=name, label_space=cfg.label_space, depth_scale=cfg.depth_scale,
+                         size_hw=cfg.size_hw or reader.size_hw, frame_skip=cfg.frame_skip or reader.frame_skip,
+                         **cfg.options)
 
 
 def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = None) -> ConvertReport:

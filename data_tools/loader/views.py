@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import webdataset as wds
 
-from sray.data_tools.layout import decode_png, png16_to_depth
-from sray.data_tools.manifest import SceneEntry
-from sray.data_tools.neighbours import Neighbours
-from sray.data_tools.shards import KEY_SEPARATOR
+from sray.data_tools.png import decode_png, png16_to_depth
+from sray.data_tools.shards.manifest import SceneEntry
+from sray.data_tools.shards.neighbours import Neighbours
+from sray.data_tools.shards.writer import KEY_SEPARATOR
 
 REQUIRED = ("rgb.png", "depth.png", "label.png", "camera.json", "neighbours.json")
 

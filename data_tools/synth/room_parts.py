@@ -4,31 +4,31 @@ from __future__ import annotations
 
 import numpy as np
 
-from sray.data_tools import synth_fixtures as fx
-from sray.data_tools import synth_materials as mat
-from sray.data_tools.synth_furniture import Piece
-from sray.data_tools.synth_layout import Light, RoomLayout
+from sray.data_tools.synth import fittings as fx
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.floor_plan import FloorPlan, Light
+from sray.data_tools.synth.furniture import Piece
 
 
-def add_door(rng: np.random.Generator, layout: RoomLayout, width: tuple[float, float] = (0.8, 0.95)) -> bool:
+def add_door(rng: np.random.Generator, plan: FloorPlan, width: tuple[float, float] = (0.8, 0.95)) -> bool:
     """A closed door on a random wall, with a clear floor area in front; returns success."""
     w = float(rng.uniform(*width))
-    h = min(float(rng.uniform(2.0, 2.1)), layout.size[2] - 0.2)
+    h = min(float(rng.uniform(2.0, 2.1)), plan.size[2] - 0.2)
     piece = fx.door(rng, w, h)
     for wall in rng.permutation(4):
-        s = layout.try_wall(rng, piece, int(wall), z_range=(0.0, layout.size[2]), gap=0.0, occupies_floor=False,
-                            margin=0.12)
+        s = plan.try_wall(rng, piece, int(wall), z_range=(0.0, plan.size[2]), gap=0.0, occupies_floor=False,
+                          margin=0.12)
         if s is not None:
-            layout.doors.append((int(wall), s - piece.width / 2, s + piece.width / 2))
-            layout.reserve_clearance(int(wall), s, piece.width + 0.2, 0.85)
+            plan.doors.append((int(wall), s - piece.width / 2, s + piece.width / 2))
+            plan.reserve_clearance(int(wall), s, piece.width + 0.2, 0.85)
             return True
     return False
 
 
-def add_window(rng: np.random.Generator, layout: RoomLayout, sill: tuple[float, float] = (0.8, 1.0),
+def add_window(rng: np.random.Generator, plan: FloorPlan, sill: tuple[float, float] = (0.8, 1.0),
                width: tuple[float, float] = (0.8, 1.6), curtain_prob: float = 0.7) -> bool:
     """A window (and, often, a pair of curtains) on a free stretch of wall; returns success."""
-    ceiling = layout.size[2]
+    ceiling = plan.size[2]
     w, z_sill = float(rng.uniform(*width)), float(rng.uniform(*sill))
     h = min(float(rng.uniform(1.1, 1.6)), ceiling - z_sill - 0.3)
     if h < 0.4:
@@ -49,42 +49,42 @@ def add_window(rng: np.random.Generator, layout: RoomLayout, sill: tuple[float, 
         z_lo = min(z_lo, z0)
     total = max([win.width] + [2 * abs(off) + p.width for p, off in zip(panels, offsets)])
     for wall in [int(w) for w in rng.permutation(4)]:
-        length = layout.wall_length(wall)
+        length = plan.wall_length(wall)
         if length < total + 0.3:
             continue
         for _ in range(15):
             s = float(rng.uniform(total / 2 + 0.1, length - total / 2 - 0.1))
-            if not layout.span_free(wall, s - total / 2, s + total / 2, z_lo, z_sill + h + 0.1):
+            if not plan.span_free(wall, s - total / 2, s + total / 2, z_lo, z_sill + h + 0.1):
                 continue
-            placed = [(p, layout.wall_pose(wall, s + off, p.depth)) for p, off in zip(panels, offsets)]
-            if z_lo < 0.5 and not all(layout.is_free(layout.footprint(p, *pose)) for p, pose in placed):
+            placed = [(p, plan.wall_pose(wall, s + off, p.depth)) for p, off in zip(panels, offsets)]
+            if z_lo < 0.5 and not all(plan.is_free(plan.footprint(p, *pose)) for p, pose in placed):
                 continue
-            layout.add(win, *layout.wall_pose(wall, s, win.depth), occupies_floor=False)
+            plan.add(win, *plan.wall_pose(wall, s, win.depth), occupies_floor=False)
             for p, pose in placed:
-                layout.add(p, *pose, occupies_floor=z_lo < 0.5)
-            layout.spans[wall].append((s - total / 2, s + total / 2, z_lo, z_sill + h + 0.1))
+                plan.add(p, *pose, occupies_floor=z_lo < 0.5)
+            plan.spans[wall].append((s - total / 2, s + total / 2, z_lo, z_sill + h + 0.1))
             return True
     return False
 
 
-def add_pictures(rng: np.random.Generator, layout: RoomLayout, count: int) -> int:
+def add_pictures(rng: np.random.Generator, plan: FloorPlan, count: int) -> int:
     """Framed pictures hung at eye height on free wall stretches; returns how many fitted."""
     placed = 0
     for _ in range(count):
         w, h = float(rng.uniform(0.3, 1.0)), float(rng.uniform(0.25, 0.75))
-        zc = min(float(rng.uniform(1.35, 1.75)), layout.size[2] - h / 2 - 0.15)
+        zc = min(float(rng.uniform(1.35, 1.75)), plan.size[2] - h / 2 - 0.15)
         pic = fx.picture(rng, w, h, zc)
         for wall in rng.permutation(4):
-            if layout.try_wall(rng, pic, int(wall), z_range=(zc - h / 2, zc + h / 2), gap=0.0,
-                               occupies_floor=False, tries=8) is not None:
+            if plan.try_wall(rng, pic, int(wall), z_range=(zc - h / 2, zc + h / 2), gap=0.0,
+                             occupies_floor=False, tries=8) is not None:
                 placed += 1
                 break
     return placed
 
 
-def add_lights(rng: np.random.Generator, layout: RoomLayout) -> None:
+def add_lights(rng: np.random.Generator, plan: FloorPlan) -> None:
     """Ceiling lamps (one, or two in large rooms), each with a point light just below it."""
-    lx, ly, h = layout.size
+    lx, ly, h = plan.size
     n = 2 if lx * ly > 16 else 1
     warm = (1.0, float(rng.uniform(0.85, 0.97)), float(rng.uniform(0.65, 0.9)))
     for i in range(n):
@@ -92,7 +92,7 @@ def add_lights(rng: np.random.Generator, layout: RoomLayout) -> None:
         x = lx * frac if lx >= ly else lx / 2 + float(rng.uniform(-0.3, 0.3))
         y = ly / 2 + float(rng.uniform(-0.3, 0.3)) if lx >= ly else ly * frac
         lamp = fx.ceiling_lamp(rng, h)
-        layout.add(lamp, x, y, 0.0, occupies_floor=False)
-        layout.lights.append(Light((x, y, h - 0.35), float(rng.uniform(2.0, 3.2)) / n ** 0.5, warm))
+        plan.add(lamp, x, y, 0.0, occupies_floor=False)
+        plan.lights.append(Light((x, y, h - 0.35), float(rng.uniform(2.0, 3.2)) / n ** 0.5, warm))
     fill = (float(rng.uniform(0.2, lx - 0.2)), float(rng.uniform(0.2, ly - 0.2)), h * float(rng.uniform(0.5, 0.8)))
-    layout.lights.append(Light(fill, float(rng.uniform(0.4, 0.9)), (0.85, 0.92, 1.0)))
+    plan.lights.append(Light(fill, float(rng.uniform(0.4, 0.9)), (0.85, 0.92, 1.0)))

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from sray.data_tools.label_spaces import NYU40, SCANNET20_NYU40_IDS
-from sray.data_tools.layout import decode_png
+from sray.data_tools.png import decode_png
 
 
 def numbered_files(folder: Path, pattern: str, suffixes: tuple[str, ...]) -> dict[int, Path]:

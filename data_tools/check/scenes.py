@@ -13,10 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.data_tools.check_rules import (RECONVERT, CheckLimits, Problem, intrinsics_problems,
+from sray.data_tools.check.rules import (RECONVERT, CheckLimits, Problem, intrinsics_problems,
                                          label_problems, meta_problems, pose_problems)
-from sray.data_tools.layout import FORMAT, VERSION, decode_png
+from sray.data_tools.png import decode_png
 from sray.data_tools.scene import Scene
+from sray.data_tools.scene_folder import FORMAT, VERSION
 
 __all__ = ["CheckLimits", "Problem", "check_dataset", "check_scene", "check_scene_object"]
 
@@ -125,7 +126,7 @@ def check_dataset(path: Path, limits: CheckLimits | None = None) -> list[Problem
     names = sorted(on_disk)
     if index_path.exists():
         index = _read_json(index_path, out)
-        fix = "rewrite it with layout.write_dataset_index (any `sray data convert` into this folder does)"
+        fix = "rewrite it with scene_folder.write_dataset_index (any `sray data convert` into this folder does)"
         if isinstance(index, dict) and isinstance(index.get("scenes"), list):
             if index.get("format") != FORMAT or index.get("version") != VERSION:
                 out.append(Problem(str(index_path), f"format/version is {index.get('format')!r}/"

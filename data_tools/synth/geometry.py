@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools.synth_materials import Material
+from sray.data_tools.synth.materials import Material
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from sray.data_tools.synth_geometry import PackedBoxes
+from sray.data_tools.synth.geometry import PackedBoxes
 
 HEIGHT_RANGE = (1.2, 1.7)
 """Camera height band in metres."""

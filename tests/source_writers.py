@@ -1,23 +1,23 @@
-"""Writers of a canonical scene INTO the ScanNet-export and Semantic-NeRF Replica layouts.
+"""Test helpers: write a canonical scene as a reader's source (a ScanNet export, a Replica sequence).
 
-They exist for round-trip tests and fixtures, and to hand sray scenes to tools that read those
-layouts. They write at the scene's own resolution and store colour losslessly (``color/<i>.png``,
-which the ScanNet reader accepts beside ``<i>.jpg``), so reading the result back reproduces the
-scene: labels exactly, cameras to float precision, depth to the 1 mm of the 16-bit PNGs.
-Frames are numbered 0..n-1 in view order. Every file is written atomically.
+For the readers' round-trip tests and fixtures (``from source_writers import ...``; tests/conftest.py
+puts tests/ on sys.path). They write at the scene's own resolution and store colour losslessly
+(``color/<i>.png``, which the ScanNet reader accepts beside ``<i>.jpg``), so reading the result back
+reproduces the scene: labels exactly, cameras to float precision, depth to the 1 mm of the 16-bit
+PNGs. Frames are numbered 0..n-1 in view order. Every file is written atomically.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from sray.data_tools.layout import atomic_write_bytes, depth_to_png16, encode_png
-from sray.data_tools.read_common import nyu40_to_label
-from sray.data_tools.read_replica import CLASS_FILE, replica_intrinsics
-from sray.data_tools.read_scannet import read_label_tsv
+from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
+from sray.data_tools.png import depth_to_png16, encode_png
+from sray.data_tools.readers.common import nyu40_to_label
+from sray.data_tools.readers.replica import CLASS_FILE, replica_intrinsics
+from sray.data_tools.readers.scannet import read_label_tsv
 from sray.data_tools.scene import Scene
 
 
@@ -97,5 +97,5 @@ def write_replica(scene: Scene, dst: Path) -> Path:
         raise ValueError(f"scene {meta.name!r} has no views to write")
     atomic_write_bytes(dst / "traj_w_c.txt", _matrix_text(np.stack(rows)))
     table = {"classes": [{"id": i + 1, "name": name} for i, name in enumerate(meta.class_names)]}
-    atomic_write_bytes(dst / CLASS_FILE, (json.dumps(table, indent=1) + "\n").encode())
+    atomic_write_json(dst / CLASS_FILE, table)
     return dst

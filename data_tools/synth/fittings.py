@@ -1,8 +1,8 @@
-"""Wall fixtures, kitchen and bathroom pieces, assembled from boxes in an object frame.
+"""Fittings, the built-in pieces of a room: wall fixtures, kitchen and bathroom pieces, made of boxes.
 
-Same frame as ``synth_furniture``: footprint centred on the origin, back (the wall side) at -y,
-front at +y, floor at z = 0. Wall fixtures (doors, windows, pictures, curtains) are thin pieces
-whose back lies on the wall.
+Same object frame as ``furniture.py`` (the free-standing pieces): footprint centred on the origin,
+back (the wall side) at -y, front at +y, floor at z = 0. Wall fixtures (doors, windows, pictures,
+curtains) are thin pieces whose back lies on the wall.
 """
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
-from sray.data_tools.synth_furniture import CLS, Piece, span
-from sray.data_tools.synth_geometry import Box
-from sray.data_tools import synth_materials as mat
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.furniture import CLS, Piece, span
+from sray.data_tools.synth.geometry import Box
 
 
 def _against_wall(boxes: list[Box], width: float, depth: float, height: float) -> Piece:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools.synth_materials import (BOOKS, FABRIC, LAMP, PAINT, PAINTING, PANELS, PLANKS, SKY,
+from sray.data_tools.synth.materials import (BOOKS, FABRIC, LAMP, PAINT, PAINTING, PANELS, PLANKS, SKY,
                                              STRIPES, TILES, WOOD, Material)
 
 

@@ -1,4 +1,4 @@
-"""Placing pieces in a rectangular room without collisions: floor footprints and wall spans.
+"""The floor plan of a procedural room: placing pieces without collisions (floor footprints, wall spans).
 
 Walls are numbered counter-clockwise seen from above: wall 0 runs along y = 0 from x = 0 to Lx,
 wall 1 along x = Lx, wall 2 along y = Ly (from x = Lx back to 0), wall 3 along x = 0. A position
@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sray.data_tools.synth_furniture import CLS, Piece, span
-from sray.data_tools.synth_geometry import Box, place
-from sray.data_tools import synth_materials as mat
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.furniture import CLS, Piece, span
+from sray.data_tools.synth.geometry import Box, place
 
 Rect = tuple[float, float, float, float]
 """Axis-aligned floor rectangle (x0, x1, y0, y1) in metres."""
@@ -34,7 +34,7 @@ class Light:
 
 
 @dataclass
-class RoomLayout:
+class FloorPlan:
     """A room under construction: its boxes, occupied floor and wall regions, lights and finishes."""
 
     size: tuple[float, float, float]

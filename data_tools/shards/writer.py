@@ -32,16 +32,17 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from sray.data_tools.layout import atomic_write_bytes, depth_to_png16, encode_png, list_scenes, read_scene
-from sray.data_tools.manifest import MANIFEST_NAME, Manifest, SceneEntry, ShardEntry, manifest_bytes, sha256_file
-from sray.data_tools.neighbours import (GRID, MIN_POINTS, RULE, RULE_VERSION, Neighbours, blind_views,
-                                        fallback_depth, grid_points, grid_samples, rank_neighbours)
+from sray.data_tools.atomic import TEMP_NAME, atomic_write_bytes
+from sray.data_tools.png import depth_to_png16, encode_png
 from sray.data_tools.scene import Scene, View, depth_views, source_pool
+from sray.data_tools.scene_folder import list_scenes, read_scene
+from sray.data_tools.shards.manifest import MANIFEST_NAME, Manifest, SceneEntry, ShardEntry, manifest_bytes, sha256_file
+from sray.data_tools.shards.neighbours import (GRID, MIN_POINTS, RULE, RULE_VERSION, Neighbours, blind_views,
+                                               fallback_depth, grid_points, grid_samples, rank_neighbours)
 
 KEY_SEPARATOR = "__"
 """Between scene name and view id in a sample key."""
 SHARD_NAME = re.compile(r"^.+-\d{6}\.tar$")
-TEMP_NAME = re.compile(r"^\..+\.tmp\d+$")
 
 
 class DatasetRejected(ValueError):
@@ -173,19 +174,9 @@ def is_current(path: Path, data: bytes) -> bool:
     return path.is_file() and path.stat().st_size == len(data) and sha256_file(path) == hashlib.sha256(data).hexdigest()
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    """Atomic write that also removes its temporary file when interrupted by an exception."""
-    try:
-        atomic_write_bytes(path, data)
-    except BaseException:
-        for tmp in path.parent.glob(f".{path.name}.tmp*"):
-            tmp.unlink(missing_ok=True)
-        raise
-
-
 def _check_input(scenes_dir: Path) -> None:
     """Refuse input that ``sray data check`` rejects."""
-    from sray.data_tools.check import check_dataset
+    from sray.data_tools.check.scenes import check_dataset
 
     problems = check_dataset(Path(scenes_dir))
     if problems:
@@ -222,7 +213,7 @@ def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256,
                 else:
                     if not written:  # the folder stops looking complete before its first shard changes
                         (out / MANIFEST_NAME).unlink(missing_ok=True)
-                    _atomic_write(out / name, data)
+                    atomic_write_bytes(out / name, data)
                     written.append(name)
                 entries.append(ShardEntry(path=name, scene=scene.meta.name, n_views=n_views,
                                           sha256=hashlib.sha256(data).hexdigest(), bytes=len(data)))
@@ -240,7 +231,7 @@ def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256,
                     "fallback_depth": "median grid depth of train scenes' views, of test scenes' source pool"},
         extra={"views_per_shard": views_per_shard})
     if not is_current(out / MANIFEST_NAME, manifest_bytes(manifest)):
-        _atomic_write(out / MANIFEST_NAME, manifest_bytes(manifest))
+        atomic_write_bytes(out / MANIFEST_NAME, manifest_bytes(manifest))
     listed = {e.path for e in entries}
     removed = []
     for path in sorted(out.iterdir()):

@@ -1,7 +1,7 @@
 """Free-standing furniture assembled from boxes, each in its own object frame.
 
 Object frame: the footprint is centred on the origin, z = 0 is the floor, the back faces -y and
-the front (where one sits or opens doors) faces +y. ``synth_geometry.place`` puts a piece in a room.
+the front (where one sits or opens doors) faces +y. ``geometry.place`` puts a piece in a room.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 
 from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.scene import IGNORE_ID
-from sray.data_tools.synth_geometry import Box
-from sray.data_tools import synth_materials as mat
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.geometry import Box
 
 CLS: dict[str, int] = {name: i for i, name in enumerate(SCANNET20)}
 """ScanNet-20 class id by name."""

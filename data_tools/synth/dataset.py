@@ -2,7 +2,7 @@
 
 ``generate_scene`` builds one room, walks a handheld-style camera path through it and renders every
 view (RGB, z-depth, ScanNet-20 labels). ``generate_dataset`` writes train and unseen test scenes
-with ``layout.write_scene`` and skips scenes already written with the same parameters.
+with ``scene_folder.write_scene`` and skips scenes already written with the same parameters.
 
 Splits (documented in docs/data.md, "Procedural scenes"):
 
@@ -24,12 +24,12 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import SCANNET20
-from sray.data_tools.layout import write_dataset_index, write_scene
 from sray.data_tools.scene import Scene, SceneMeta, View, scene_depth_bounds
+from sray.data_tools.scene_folder import write_dataset_index, write_scene
 from sray.data_tools.splits import PROTOCOL_WINDOW, protocol_splits, train_splits
-from sray.data_tools.synth_render import RenderScene, render_view
-from sray.data_tools.synth_rooms import ROOM_TYPES, Room, build_room
-from sray.data_tools.synth_trajectory import scan_path
+from sray.data_tools.synth.render import RenderScene, render_view
+from sray.data_tools.synth.rooms import ROOM_TYPES, Room, build_room
+from sray.data_tools.synth.trajectory import scan_path
 
 GENERATOR = "sray-synth"
 """Value of ``extra["generator"]`` in every procedural scene."""

@@ -15,11 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
-from sray.data_tools.synth_furniture import CLS
-from sray.data_tools.synth_geometry import PackedBoxes, box_normals, cast_rays, cast_shell
-from sray.data_tools.synth_materials import UNLIT_KINDS
-from sray.data_tools.synth_rooms import Room
-from sray.data_tools.synth_textures import MaterialTable, albedo
+from sray.data_tools.synth.furniture import CLS
+from sray.data_tools.synth.geometry import PackedBoxes, box_normals, cast_rays, cast_shell
+from sray.data_tools.synth.materials import UNLIT_KINDS
+from sray.data_tools.synth.rooms import Room
+from sray.data_tools.synth.textures import MaterialTable, albedo
 
 SHELL_LABELS = (CLS["wall"], CLS["floor"], IGNORE_ID)
 """Labels of the shell surfaces: walls, floor, ceiling."""

@@ -1,4 +1,4 @@
-"""sray's own on-disk scene layout (what ``sray data synth`` and ``sray data convert`` write).
+"""The scene folder: sray's on-disk scene layout (what ``sray data synth`` and ``sray data convert`` write).
 
 ::
 
@@ -12,71 +12,22 @@
         label/<view_id>.png        16-bit class ids, IGNORE_ID = unlabelled
 
 Every file is written to a temporary name and renamed, so an interrupted write never leaves a
-file that looks complete.
+file that looks complete (``atomic.py``); images go through the lossless codecs of ``png.py``.
 """
 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
-import cv2
 import numpy as np
 
+from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
+from sray.data_tools.png import decode_png, depth_to_png16, encode_png, png16_to_depth
 from sray.data_tools.scene import Scene, SceneMeta, View
 
 FORMAT = "sray-scenes"
 VERSION = 1
-DEPTH_SCALE = 1000.0
-"""Depth PNG units per metre (millimetres)."""
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary sibling and an atomic rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
-def atomic_write_json(path: Path, obj: object) -> None:
-    """Write ``obj`` as indented JSON atomically."""
-    atomic_write_bytes(path, (json.dumps(obj, indent=1) + "\n").encode())
-
-
-def encode_png(image: np.ndarray) -> bytes:
-    """Lossless PNG bytes of a uint8 (H, W[, 3] RGB) or uint16 (H, W) array."""
-    if image.ndim == 3:
-        image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-    ok, buf = cv2.imencode(".png", image)
-    if not ok:
-        raise ValueError(f"PNG encoding failed for an array of shape {image.shape} and dtype {image.dtype}")
-    return buf.tobytes()
-
-
-def decode_png(data: bytes, what: str) -> np.ndarray:
-    """Decode PNG bytes without loss (16-bit stays 16-bit; colour comes back RGB)."""
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise ValueError(f"{what}: not a readable PNG")
-    if image.ndim == 3:
-        image = cv2.cvtColor(image[..., :3], cv2.COLOR_BGR2RGB)
-    return image
-
-
-def depth_to_png16(depth_m: np.ndarray) -> np.ndarray:
-    """float32 metres -> uint16 millimetres (rounded; 0 and non-finite stay 0; clipped at 65.535 m)."""
-    d = np.where(np.isfinite(depth_m) & (depth_m > 0), depth_m, 0.0)
-    return np.clip(np.rint(d * DEPTH_SCALE), 0, 65535).astype(np.uint16)
-
-
-def png16_to_depth(depth_mm: np.ndarray) -> np.ndarray:
-    """uint16 millimetres -> float32 metres."""
-    return depth_mm.astype(np.float32) / DEPTH_SCALE
 
 
 def write_scene(scene: Scene, dataset_dir: Path) -> Path:

@@ -1,0 +1,43 @@
+"""Atomic file writes: a temporary sibling, fsync, then one rename.
+
+A reader sees either the old file or the whole new one, never a partial file. The temporary file is
+``.<name>.tmp<pid>`` in the target's folder (same file system, so the rename is atomic); it is
+removed when the write fails or is interrupted, and :data:`TEMP_NAME` matches the ones a killed
+process may leave behind. Importable from every part of sray (``sray.data_tools.atomic``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+
+TEMP_NAME = re.compile(r"^\..+\.tmp\d+$")
+"""File names of this module's temporary files (left over only when a process was killed)."""
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (parent folders are created); no temporary file survives an error."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_write_json(path: Path, obj: object) -> None:
+    """Write ``obj`` as indented JSON (one space, trailing newline) to ``path`` atomically."""
+    atomic_write_text(path, json.dumps(obj, indent=1) + "\n")

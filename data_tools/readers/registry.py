@@ -1,0 +1,90 @@
+"""The reader registry: every source format ``sray data convert`` reads, with its defaults and options.
+
+``readers/convert.py`` opens sources through :data:`READERS`, and ``sray data convert``
+(``jobs/data_convert_cmd.py``) takes its ``--format`` choices, its reader-specific flags and the
+defaults in its help from here, so nothing else lists the formats. This module imports neither
+numpy nor OpenCV: the CLI builds its parser from it, and a reader's module is imported only when
+that reader is used.
+
+Adding a format: a module in this folder whose reader is called as ``read(src, name=..., label_space=...,
+size_hw=..., frame_skip=..., depth_scale=..., **options)`` and returns a canonical
+:class:`~sray.data_tools.scene.Scene`, plus one :class:`Reader` entry below (and its section in
+docs/data.md, "Readers and validation").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from sray.data_tools.scene import Scene
+
+ReadFunction = Callable[..., "Scene"]
+"""``read(src, *, name, label_space, size_hw, frame_skip, depth_scale, **options) -> Scene``."""
+
+
+@dataclass(frozen=True)
+class ReaderOption:
+    """A side input only one reader takes (a file path), offered as ``--<name>`` by ``sray data convert``."""
+
+    name: str
+    """Keyword of the reader function and key of ``ConvertConfig.options`` (``tsv``, ``classes``); unique
+    across readers, since every option is a flag of the one ``sray data convert`` command."""
+    help: str
+    """What the file is and where the reader looks when it is not given (CLI help)."""
+
+
+@dataclass(frozen=True)
+class Reader:
+    """One source format: its name, what it reads, how to load it and its defaults."""
+
+    name: str
+    """Format name (``--format``)."""
+    summary: str
+    """The source, in a few words (CLI help and error messages)."""
+    load: Callable[[], ReadFunction]
+    """Returns the read function (importing the reader module on first use)."""
+    size_hw: tuple[int, int] | None
+    """Default output (H, W); None = the source's own image size."""
+    frame_skip: int
+    """Default: keep every n-th usable frame."""
+    options: tuple[ReaderOption, ...] = ()
+    """Reader-specific side inputs."""
+
+
+def _load_scannet() -> ReadFunction:
+    """The ScanNet reader, imported on use."""
+    from sray.data_tools.readers.scannet import read_scannet
+
+    return read_scannet
+
+
+def _load_replica() -> ReadFunction:
+    """The Replica reader, imported on use."""
+    from sray.data_tools.readers.replica import read_replica
+
+    return read_replica
+
+
+READERS: dict[str, Reader] = {r.name: r for r in (
+    # 320x240 is the paper's size; every 10th frame of the 30 fps scan.
+    Reader(name="scannet", summary="ScanNet SensReader export + label-filt", load=_load_scannet,
+           size_hw=(240, 320), frame_skip=10,
+           options=(ReaderOption("tsv", "scannetv2-labels.combined.tsv (default: searched next to and above SRC)"),)),
+    # The rendered size (640x480 in Semantic-NeRF's release, the paper's size); every 5th frame.
+    Reader(name="replica", summary="Replica as rendered for Semantic-NeRF", load=_load_replica,
+           size_hw=None, frame_skip=5,
+           options=(ReaderOption("classes", "class table, e.g. Replica/<scene>/habitat/info_semantic.json "
+                                            "(default: SRC/info_semantic.json or SRC/../info_semantic.json)"),)),
+)}
+"""Every known source format by name."""
+
+
+def get_reader(name: str) -> Reader:
+    """The registered reader of format ``name``; ValueError names the known formats otherwise."""
+    try:
+        return READERS[name]
+    except KeyError:
+        raise ValueError(f"unknown format {name!r}; known: {sorted(READERS)}") from None
