@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import datetime as _dt
-import os
 import platform as _stdlib_platform
 import re
 import shlex
@@ -11,6 +10,8 @@ import sys
 from pathlib import Path
 
 import torch
+
+from sray.data_tools.atomic import atomic_write_text
 
 DEFAULT_DOC = Path("docs/benchmarks.md")
 
@@ -66,8 +67,5 @@ def record(title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str 
     slot = next((i for i, old in enumerate(sections) if _same_slot(old, title)), len(sections))
     sections[slot:slot + 1] = [section]
     text = "\n".join(part.strip("\n") + "\n" for part in [preamble, *sections])
-    doc.parent.mkdir(parents=True, exist_ok=True)
-    tmp = doc.with_name(doc.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, doc)
+    atomic_write_text(doc, text)
     return section

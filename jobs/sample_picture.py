@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sray.platform.figure_io import save_png
+
 
 def write_sample_picture(sample: dict, class_names: list[str], path: Path, ignore_id: int = 255) -> Path:
     """Query view with its sampled ray pixels, the ray targets' labels, and the m source views.
@@ -54,9 +56,6 @@ def write_sample_picture(sample: dict, class_names: list[str], path: Path, ignor
     fig.suptitle(f"scene {sample['scene']}, query view {sample['query_id']}: {len(uv)} rays, "
                  f"{m} source views, depth range {float(sample['near']):.2f}-{float(sample['far']):.2f} m", fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=100)
+    save_png(fig, path, 100)
     plt.close(fig)
-    tmp.replace(path)
     return path

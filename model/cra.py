@@ -23,7 +23,6 @@ they are not zeroed, which saves a pass over the largest tensor.
 
 from __future__ import annotations
 
-import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 

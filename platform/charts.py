@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import textwrap
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from sray.platform.figure_io import save_png
 from sray.model.metrics import DATASET_PROTOCOL
 from sray.platform.charts_curves import (METHODS, average_curves, check_result, curve_xy, failure_note, is_chartable,
                                          zero_shot_value)
@@ -89,11 +89,7 @@ def _framed_figure(width: float, body_height: float, title: str, handles: list[A
 
 
 def _save(fig: Any, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
-    fig.savefig(tmp, dpi=DPI, format="png")
-    os.replace(tmp, path)
-    return path
+    return save_png(fig, path, DPI)
 
 
 def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str, x_key: str, mean: bool) -> None:

@@ -22,9 +22,7 @@ the PNGs as artifacts).
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import time
 from pathlib import Path
 from typing import Any
@@ -32,6 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
@@ -58,12 +57,8 @@ def _finite_or_none(value: Any) -> Any:
 
 def write_json_atomic(obj: Any, path: Path) -> Path:
     """Write ``obj`` as indented JSON (NaN as null) through a temporary name; returns ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(_finite_or_none(obj), indent=1) + "\n")
-    os.replace(tmp, path)
-    return path
+    atomic_write_json(Path(path), _finite_or_none(obj))
+    return Path(path)
 
 
 def write_png_atomic(rgb: np.ndarray, path: Path) -> Path:
@@ -73,11 +68,8 @@ def write_png_atomic(rgb: np.ndarray, path: Path) -> Path:
     ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]))
     if not ok:
         raise OSError(f"{path}: OpenCV could not encode a {rgb.shape} {rgb.dtype} image as PNG")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
-    tmp.write_bytes(data.tobytes())
-    os.replace(tmp, path)
-    return path
+    atomic_write_bytes(Path(path), data.tobytes())
+    return Path(path)
 
 
 def select_scenes(shards: Path, scenes: list[str] | None) -> tuple[list[str], dict[str, dict]]:

@@ -18,11 +18,8 @@ Plain PyTorch, one process: autocast bf16 (CPU/CUDA) or fp16 with a GradScaler (
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import time
-import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,6 +27,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader
 from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.eval_protocol import EvalProtocol
@@ -118,11 +116,8 @@ def evaluate(learner: Any, samples: list[dict[str, Any]], cfg: FleetConfig, n_cl
 
 def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
     """Write ``result.json`` atomically (temp name, then rename)."""
-    out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / RESULT_FILE
-    tmp = out_dir / f".tmp-{RESULT_FILE}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    tmp.write_text(json.dumps(result, indent=1) + "\n")
-    os.replace(tmp, path)
+    atomic_write_json(path, result)
     return path
 
 

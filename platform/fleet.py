@@ -22,12 +22,11 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import os
 import time
-import uuid
 from pathlib import Path
 from typing import Any
 
+from sray.data_tools.atomic import atomic_write_json, atomic_write_text
 from sray.platform.checkpoints import CheckpointManager
 from sray.platform.finetune import RESULT_FILE, SceneJob, run_scene_job, write_result
 from sray.platform.fleet_config import METHODS, FleetConfig, check_fleet_config
@@ -136,13 +135,6 @@ def _fleet_record(out_dir: Path, base_sha256: str, tracking_uri: str) -> dict[st
         raise ValueError(f"{path}: field 'base_sha256' is {record.get('base_sha256')}, but this checkpoint's is "
                          f"{base_sha256}; this folder holds a fleet of another checkpoint: pass another --out")
     return record
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` under a temporary name beside ``path``, then rename it into place."""
-    tmp = path.with_name(f".tmp-{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def _parent_run(record: dict[str, Any], tracking_uri: str, experiment: str, out_dir: Path) -> tuple[RunHandle, bool]:
@@ -277,7 +269,7 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     parent, is_new = _parent_run(record, tracking_uri, cfg.experiment, out_dir)
     record.update(parent_run_id=parent.run_id, tracking_uri=tracking_uri, launches=record["launches"] + 1,
                   checkpoint=str(checkpoint), state_file=str(state_file(checkpoint)), shards=str(shards))
-    _write_atomic(out_dir / FLEET_FILE, json.dumps(record, indent=1) + "\n")
+    atomic_write_json(out_dir / FLEET_FILE, record)
     _say(f"parent MLflow run: {parent.ui_url}" + (f"  ({parent.ui_hint})" if parent.ui_hint else ""))
     if len(done) < len(pairs):
         init_ray(cfg.address or None)
@@ -298,9 +290,9 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
         if jobs:
             done |= _schedule(jobs, cfg, full_bytes)
         results = [done[p] for p in pairs]
-        _write_atomic(out_dir / "fleet_results.json", json.dumps(results, indent=1) + "\n")
+        atomic_write_json(out_dir / "fleet_results.json", results)
         table = results_table(results)
-        _write_atomic(out_dir / "fleet_results.md", table + "\n")
+        atomic_write_text(out_dir / "fleet_results.md", table + "\n")
         print(table, flush=True)
         logger.log_metrics(summary_metrics(results), record["launches"])
         logger.log_artifact(out_dir / "fleet_results.md")

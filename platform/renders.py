@@ -14,12 +14,12 @@ directly (no pyplot state), which is safe in Ray workers and threads.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from sray.platform.figure_io import save_png
 from sray.platform.palette import IGNORE_COLOR, colorize, palette
 
 MARGIN = 10
@@ -145,9 +145,4 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
         place(np.broadcast_to(color, (LEGEND_SWATCH, LEGEND_SWATCH, 3)).copy(), sx, sy)
         text(sx + LEGEND_SWATCH + 6, sy, label)
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
-    fig.savefig(tmp, dpi=_DPI, format="png")
-    os.replace(tmp, path)
-    return path
+    return save_png(fig, Path(path), _DPI)

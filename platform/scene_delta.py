@@ -17,15 +17,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import uuid
 from pathlib import Path
 
 import torch
 from safetensors import safe_open
-from safetensors.torch import save_file
+from safetensors.torch import save
 from torch import Tensor, nn
 
+from sray.data_tools.atomic import atomic_write_bytes
 from sray.data_tools.shards.manifest import sha256_file
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.model.sray import SRayModel
@@ -82,13 +81,7 @@ def adapted_state(model: nn.Module, adapt: tuple[str, ...] | list[str]) -> dict[
 def _atomic_save(tensors: dict[str, Tensor], metadata: dict[str, str], path: Path) -> int:
     """Write a safetensors file under a temporary name, then rename; returns its size in bytes."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".tmp-{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    try:
-        save_file({k: v.contiguous() for k, v in tensors.items()}, str(tmp), metadata=metadata)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    atomic_write_bytes(path, save({k: v.contiguous() for k, v in tensors.items()}, metadata=metadata))
     return path.stat().st_size
 
 

@@ -8,9 +8,10 @@ summary table (stage, status, seconds, one line) and each stage's own table.
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+from sray.data_tools.atomic import atomic_write_json
 
 REPORT_FILE = "gpu_check.json"
 STATUSES = ("passed", "failed", "skipped")
@@ -48,12 +49,8 @@ def load_report(out: Path) -> dict:
 
 def save_report(out: Path, report: dict) -> Path:
     """Write the report atomically (temporary file, then rename); returns its path."""
-    out.mkdir(parents=True, exist_ok=True)
     path = out / REPORT_FILE
-    tmp = path.with_name(path.name + ".tmp")
-    data = {"device": report["device"], "stages": {k: asdict(v) for k, v in report["stages"].items()}}
-    tmp.write_text(json.dumps(data, indent=1) + "\n")
-    os.replace(tmp, path)
+    atomic_write_json(path, {"device": report["device"], "stages": {k: asdict(v) for k, v in report["stages"].items()}})
     return path
 
 
