@@ -58,9 +58,20 @@ def build_training(cfg: TrainConfig) -> tuple[RayBatchModel, torch.optim.Optimiz
     return model, optimizer, scheduler
 
 
-def training_state(model: nn.Module, optimizer: torch.optim.Optimizer, scheduler: Any, scaler: Any,
+LEGACY_PREFIX = "net."
+"""Checkpoints written before 2026-11-23 stored the training wrapper's keys (``net.`` + the model's)."""
+
+
+def bare_model_keys(weights: dict[str, Tensor]) -> dict[str, Tensor]:
+    """A checkpoint's model weights under the bare ``SRayModel`` keys (legacy ``net.`` keys stripped)."""
+    if weights and all(k.startswith(LEGACY_PREFIX) for k in weights):
+        return {k[len(LEGACY_PREFIX):]: v for k, v in weights.items()}
+    return dict(weights)
+
+
+def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler: Any, scaler: Any,
                    step: int, cfg: TrainConfig, best_metric: float | None, counters: dict[str, int]) -> dict[str, Any]:
-    """Full checkpoint state (weights_only-safe): the step is the NEXT step to run."""
+    """Full checkpoint state (weights_only-safe) of the bare model: the step is the NEXT step to run."""
     state: dict[str, Any] = {
         "model": model.state_dict(),
         "optimizer": optimizer.state_dict(),
@@ -75,10 +86,11 @@ def training_state(model: nn.Module, optimizer: torch.optim.Optimizer, scheduler
     return state
 
 
-def restore_training(state: dict[str, Any], model: nn.Module, optimizer: torch.optim.Optimizer,
+def restore_training(state: dict[str, Any], model: SRayModel, optimizer: torch.optim.Optimizer,
                      scheduler: Any, scaler: Any) -> tuple[int, float | None, dict[str, int]]:
-    """Load a :func:`training_state` dict into live objects; returns (next step, best metric, counters)."""
-    model.load_state_dict(state["model"])
+    """Load a :func:`training_state` dict (legacy keys too) into live objects; returns (next step, best
+    metric, counters). ``model`` is the bare network whose parameters the optimizer holds, in order."""
+    model.load_state_dict(bare_model_keys(state["model"]))
     optimizer.load_state_dict(state["optimizer"])
     scheduler.load_state_dict(state["scheduler"])
     if scaler is not None and "scaler" in state:
@@ -97,6 +109,6 @@ def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayMod
         raise ValueError(f"{path}: this checkpoint embeds sample ranks (sray before the depth position signal "
                          "of issue 8); it cannot be loaded into the current model. Retrain it with `sray train`.")
     cfg = TrainConfig.from_dict(state["config"])
-    wrapper = RayBatchModel(cfg.model)
-    wrapper.load_state_dict(state["model"])
-    return wrapper.net.eval(), cfg
+    net = SRayModel(cfg.model)
+    net.load_state_dict(bare_model_keys(state["model"]))
+    return net.eval(), cfg

@@ -84,7 +84,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     state = (from_ray_checkpoint(resumed) if resumed is not None
              else load_checkpoint(Path(payload["resume_from"])) if payload.get("resume_from") else None)
     if state is not None:
-        start, best, counters = restore_training(state, model, optimizer, scheduler, None)
+        start, best, counters = restore_training(state, model.net, optimizer, scheduler, None)
     model, optimizer = accelerator.prepare(model, optimizer)
     train_step = TrainStep(list(model.parameters()), optimizer, cfg.optim.grad_clip, cfg.run.precision, device,
                            cfg.optim.max_nonfinite_in_row, world)
@@ -122,7 +122,7 @@ def train_worker(payload: dict[str, Any]) -> None:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
             logger.flush(force=True)
             counters["skipped_steps"] = train_step.skipped_total
-            state = training_state(accelerator.unwrap_model(model), optimizer, scheduler, train_step.scaler,
+            state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
                                    step_done, cfg, best, counters)
             path = manager.save(state, step_done, metrics.get("val/miou"))
             ray.train.report(metrics, checkpoint=to_ray_checkpoint(path))

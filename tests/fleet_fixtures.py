@@ -27,7 +27,7 @@ def write_tiny_checkpoint(shards: Path, folder: Path, seed: int = 0) -> Path:
     model = RayBatchModel(cfg.model)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
-    state = training_state(model, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
+    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
     return write_checkpoint(state, folder / "checkpoints" / "step_000000000", 0)
 
 

@@ -39,7 +39,7 @@ def tiny_checkpoint(tiny_shards, tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("eval-ckpt")
     cfg = tiny_config(tiny_shards, root)
     model, optimizer, scheduler = build_training(cfg)
-    state = training_state(model, optimizer, scheduler, None, 12, cfg, None, {})
+    state = training_state(model.net, optimizer, scheduler, None, 12, cfg, None, {})
     return write_checkpoint(state, root / "jobs" / "tiny" / "checkpoints" / "step_000000012", 12)
 
 

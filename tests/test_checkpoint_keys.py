@@ -1,0 +1,36 @@
+"""Training checkpoints hold the bare model's keys; checkpoints of the old ``net.``-prefixed form still load."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from train_fixtures import tiny_config, tiny_shards  # noqa: F401
+
+from sray.platform.checkpoints import load_checkpoint, write_checkpoint
+from sray.platform.train_state import build_training, model_from_checkpoint, restore_training, training_state
+
+
+def test_new_checkpoints_hold_bare_keys_and_legacy_ones_still_load(tiny_shards: Path, tmp_path: Path) -> None:
+    cfg = tiny_config(tiny_shards, tmp_path)
+    wrapper, optimizer, scheduler = build_training(cfg)
+    with torch.no_grad():  # weights no fresh build can have, so a load that did nothing would show
+        for p in wrapper.parameters():
+            p.add_(torch.randn_like(p))
+    state = training_state(wrapper.net, optimizer, scheduler, None, 3, cfg, None, {})
+    assert set(state["model"]) == set(wrapper.net.state_dict())  # no "net." prefix
+    new = write_checkpoint(state, tmp_path / "new" / "step_000000003", 3)
+
+    legacy_state = dict(state, model=wrapper.state_dict())  # the old form: the wrapper's keys
+    assert all(k.startswith("net.") for k in legacy_state["model"])
+    legacy = write_checkpoint(legacy_state, tmp_path / "legacy" / "step_000000003", 3)
+
+    for path in (new, legacy):
+        net, _ = model_from_checkpoint(path)
+        for key, value in wrapper.net.state_dict().items():
+            torch.testing.assert_close(net.state_dict()[key], value, rtol=0, atol=0)
+        other, opt2, sched2 = build_training(cfg)
+        step, _, _ = restore_training(load_checkpoint(path), other.net, opt2, sched2, None)
+        assert step == 3
+        for key, value in wrapper.net.state_dict().items():
+            torch.testing.assert_close(other.net.state_dict()[key], value, rtol=0, atol=0)
