@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 from pathlib import Path
 
 TEMP_NAME = re.compile(r"^\..+\.tmp\d+$")
@@ -41,3 +42,14 @@ def atomic_write_text(path: Path, text: str) -> None:
 def atomic_write_json(path: Path, obj: object) -> None:
     """Write ``obj`` as indented JSON (one space, trailing newline) to ``path`` atomically."""
     atomic_write_text(path, json.dumps(obj, indent=1) + "\n")
+
+
+def replace_dir(ready: Path, target: Path, aside: Path) -> None:
+    """Rename the complete folder ``ready`` to ``target``; an existing ``target`` is first renamed to
+    ``aside`` and deleted only once the new one is in place (a crash leaves one whole folder there)."""
+    if target.exists():
+        os.replace(target, aside)
+        os.replace(ready, target)
+        shutil.rmtree(aside)
+    else:
+        os.replace(ready, target)

@@ -31,6 +31,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from sray.data_tools.atomic import replace_dir
+
 log = logging.getLogger(__name__)
 
 FORMAT = "sray-checkpoint"
@@ -119,13 +121,8 @@ def write_checkpoint(state: dict[str, Any], directory: Path, step: int, metric: 
                 "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         (tmp / META_FILE).write_text(json.dumps(meta, indent=1) + "\n")
         _fsync_dir(tmp)
-        if directory.exists():  # the same step saved again (a restarted job repeats steps)
-            old = directory.with_name(f".old-{directory.name}-{tag}")
-            os.rename(directory, old)
-            os.rename(tmp, directory)
-            shutil.rmtree(old)
-        else:
-            os.rename(tmp, directory)
+        # the same step may be saved again (a restarted job repeats steps): swap the folders
+        replace_dir(tmp, directory, directory.with_name(f".old-{directory.name}-{tag}"))
         _fsync_dir(directory.parent)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -30,9 +30,10 @@ from sray.data_tools.atomic import atomic_write_json, atomic_write_text
 from sray.platform.checkpoints import CheckpointManager
 from sray.platform.finetune import RESULT_FILE, SceneJob, run_scene_job, write_result
 from sray.platform.fleet_config import METHODS, FleetConfig, check_fleet_config
+from sray.platform.fleet_parent_run import parent_run, tag_run
 from sray.platform.fleet_report import results_table, summary_metrics
 from sray.platform.scene_delta import checkpoint_sha256, state_file
-from sray.platform.tracking import (RunHandle, run_handle, default_tracking_uri, ensure_store, prepare_run,
+from sray.platform.tracking import (RunHandle, default_tracking_uri, ensure_store, prepare_run,
                                    terminate_run)
 
 log = logging.getLogger(__name__)
@@ -137,35 +138,6 @@ def _fleet_record(out_dir: Path, base_sha256: str, tracking_uri: str) -> dict[st
     return record
 
 
-def _parent_run(record: dict[str, Any], tracking_uri: str, experiment: str, out_dir: Path) -> tuple[RunHandle, bool]:
-    """The parent run: the recorded one (marked RUNNING again) if it still exists there, else a new one."""
-    from mlflow import MlflowClient
-
-    if record.get("parent_run_id") and record.get("tracking_uri") == tracking_uri:
-        client = MlflowClient(tracking_uri=tracking_uri)
-        try:
-            run = client.get_run(record["parent_run_id"])
-            client.update_run(run.info.run_id, status="RUNNING")
-            return run_handle(tracking_uri, run.info.experiment_id, run.info.run_id), False
-        except Exception as e:  # noqa: BLE001 - deleted or unreachable: start a new parent
-            log.warning("parent run %s not usable (%s); starting a new one", record["parent_run_id"], e)
-    handle = prepare_run(tracking_uri, experiment, f"fleet:{out_dir.name}",
-                         tags={"sray.kind": "fleet", "sray.fleet_dir": str(out_dir)})
-    return handle, True
-
-
-def _tag(handle: RunHandle, tags: dict[str, str]) -> None:
-    """Set tags on a run from the driver; tracking problems only warn."""
-    from mlflow import MlflowClient
-
-    try:
-        client = MlflowClient(tracking_uri=handle.tracking_uri)
-        for key, value in tags.items():
-            client.set_tag(handle.run_id, key, value[:5000])
-    except Exception as e:  # noqa: BLE001 - tracking never stops the fleet
-        log.warning("could not tag MLflow run %s: %s", handle.run_id, e)
-
-
 def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
     """PNGs of ``sray.platform.charts.write_fleet_charts`` ([] when the module is not installed)."""
     try:
@@ -220,7 +192,7 @@ def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int) -> dict[t
                     result = failed_result(job, error, full_bytes)
                     write_result(Path(job.out_dir), result)
                     if job.run:
-                        _tag(RunHandle(**job.run), {"sray.status": "failed", "sray.error": str(e)})
+                        tag_run(RunHandle(**job.run), {"sray.status": "failed", "sray.error": str(e)})
                         terminate_run(RunHandle(**job.run), "FAILED")
                     _say(f"{job.scene}/{job.method} FAILED after {job.attempt} attempts: {error}")
                 else:
@@ -266,7 +238,7 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
         _say(f"skipping {len(done)} finished pair(s): " + ", ".join(f"{s}/{m}" for s, m in done))
 
     ensure_store(tracking_uri)
-    parent, is_new = _parent_run(record, tracking_uri, cfg.experiment, out_dir)
+    parent, is_new = parent_run(record, tracking_uri, cfg.experiment, out_dir)
     record.update(parent_run_id=parent.run_id, tracking_uri=tracking_uri, launches=record["launches"] + 1,
                   checkpoint=str(checkpoint), state_file=str(state_file(checkpoint)), shards=str(shards))
     atomic_write_json(out_dir / FLEET_FILE, record)

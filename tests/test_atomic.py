@@ -42,3 +42,15 @@ def test_failure_keeps_the_old_file_and_removes_the_temporary(tmp_path: Path, mo
     assert seen == [f".x.json.tmp{atomic.os.getpid()}"]  # the temporary existed, under the name TEMP_NAME matches
     assert [p.name for p in tmp_path.iterdir()] == ["x.json"]
     assert json.loads(target.read_text()) == {"old": True}
+
+
+def test_replace_dir_swaps_a_whole_folder_in_and_removes_the_old_one(tmp_path: Path) -> None:
+    from sray.data_tools.atomic import replace_dir
+
+    target, aside = tmp_path / "scene", tmp_path / ".scene.old"
+    for version in ("v1", "v2"):
+        ready = tmp_path / f".ready-{version}"
+        ready.mkdir()
+        (ready / "a.txt").write_text(version)
+        replace_dir(ready, target, aside)
+        assert (target / "a.txt").read_text() == version and not ready.exists() and not aside.exists()

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.data_tools.atomic import atomic_write_json
+from sray.data_tools.atomic import atomic_write_json, replace_dir
 from sray.data_tools.check.scenes import check_scene
 from sray.data_tools.readers.registry import get_reader
 from sray.data_tools.scene import Scene, View, scene_depth_bounds
@@ -151,7 +151,7 @@ def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = No
         if problems:
             raise ValueError("the converted scene fails `sray data check`, so nothing was written:\n" +
                              "\n".join(f"  {Path(p.file).name}: {p.what} (fix: {p.fix})" for p in problems))
-        _publish(staging / name, target, cfg.overwrite)
+        replace_dir(staging / name, target, target.with_name(f".{target.name}.old-{os.getpid()}"))
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     others = {p.name for p in list_scenes(out) if not p.name.startswith(".")}
@@ -159,14 +159,3 @@ def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = No
     return ConvertReport(scene_dir=target, n_views=len(meta.view_ids),
                          splits={k: len(v) for k, v in meta.splits.items()}, near=meta.near, far=meta.far,
                          dropped_frames=dict(meta.extra.get("dropped_frames", {})))
-
-
-def _publish(ready: Path, target: Path, overwrite: bool) -> None:
-    """Rename a complete scene folder into place (replacing ``target`` when ``overwrite``)."""
-    if target.exists() and overwrite:
-        old = target.with_name(f".{target.name}.old-{os.getpid()}")
-        os.replace(target, old)
-        os.replace(ready, target)
-        shutil.rmtree(old)
-    else:
-        os.replace(ready, target)
