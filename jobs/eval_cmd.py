@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table and where everything went; exit 2 on bad input."""
-    from sray.platform.eval_job import evaluate_checkpoint, format_table
+    from sray.platform.eval.zero_shot import evaluate_checkpoint, format_table
 
     try:
         report = evaluate_checkpoint(args.checkpoint, args.data, args.scenes, args.out, n_source=args.n_source,

@@ -38,8 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def build_fleet_config(args: argparse.Namespace):
     """The FleetConfig of the parsed flags: defaults, then the flags, then ``--set`` overrides."""
-    from sray.platform.config_override import apply_settings
-    from sray.platform.fleet_config import FleetConfig, apply_fleet_override
+    from sray.platform.config.overrides import apply_settings
+    from sray.platform.config.fleet_config import FleetConfig, apply_fleet_override
 
     cfg = FleetConfig()
     flags = {"max_parallel": args.max_parallel, "cpus_per_task": args.cpus_per_task,
@@ -50,8 +50,8 @@ def build_fleet_config(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     """Run the fleet; exit 0 when every pair finished, 1 when some failed, 2 for a bad request."""
-    from sray.platform.fleet import run_fleet, unseen_scenes
-    from sray.platform.resources import InfeasibleRequest
+    from sray.platform.finetune.fleet import run_fleet, unseen_scenes
+    from sray.platform.train.resources import InfeasibleRequest
 
     try:
         cfg = build_fleet_config(args)

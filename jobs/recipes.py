@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from sray.model.config import SRayConfig
-from sray.platform.train_config import DataSettings, OptimSettings, RunSettings, TrainConfig
+from sray.platform.config.train_config import DataSettings, OptimSettings, RunSettings, TrainConfig
 
 
 def synth_small() -> TrainConfig:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.platform.figure_io import save_png
+from sray.platform.viz.figure_io import save_png
 
 
 def write_sample_picture(sample: dict, class_names: list[str], path: Path, ignore_id: int = 255) -> Path:
@@ -21,7 +21,7 @@ def write_sample_picture(sample: dict, class_names: list[str], path: Path, ignor
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sray.platform.palette import palette
+    from sray.platform.viz.palette import palette
 
     src = sample["src_rgb"].permute(0, 2, 3, 1).numpy()  # (m, H, W, 3)
     m, h, w = src.shape[:3]

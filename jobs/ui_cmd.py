@@ -8,7 +8,7 @@ import sys
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray ui``."""
-    from sray.platform.tracking import DEFAULT_UI_PORT
+    from sray.platform.tracking.runs import DEFAULT_UI_PORT
 
     p = sub.add_parser("ui", help="open the MLflow dashboard (runs, fleets, charts, renders) on 127.0.0.1")
     p.add_argument("--tracking-uri", help="store to show (default: the SQLite store in this folder, mlflow.db)")
@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Start the dashboard, print where to open it, serve until Ctrl-C; exit 1 if the server dies."""
-    from sray.platform.dashboard import start_dashboard, tunnel_hint
+    from sray.platform.tracking.dashboard import start_dashboard, tunnel_hint
 
     print(f"[sray] starting the MLflow dashboard on {args.host}:{args.port} ...", flush=True)
     try:

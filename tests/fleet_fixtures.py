@@ -15,9 +15,9 @@ import torch
 
 from train_fixtures import tiny_config
 
-from sray.platform.checkpoints import write_checkpoint
-from sray.platform.fleet_config import FleetConfig
-from sray.platform.train_state import RayBatchModel, lr_lambda, training_state
+from sray.platform.train.checkpoints import write_checkpoint
+from sray.platform.config.fleet_config import FleetConfig
+from sray.platform.train.state import RayBatchModel, lr_lambda, training_state
 
 
 def write_tiny_checkpoint(shards: Path, folder: Path, seed: int = 0) -> Path:

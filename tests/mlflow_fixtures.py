@@ -19,7 +19,7 @@ import pytest
 @pytest.fixture(scope="session")
 def mlflow_template(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Path of an empty SQLite store that already holds MLflow's schema (built once per session)."""
-    from sray.platform.tracking import ensure_store
+    from sray.platform.tracking.runs import ensure_store
 
     # A fixed path, not mktemp: every module importing this fixture gets its own session-scoped copy
     # of it, and they must all find the one template.

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from sray.jobs import bench_accuracy
-from sray.jobs.bench_accuracy import VARIANTS, Preset, run_accuracy_benchmark
+from sray.jobs.bench import accuracy as bench_accuracy
+from sray.jobs.bench.accuracy import VARIANTS, Preset, run_accuracy_benchmark
 
 TOY = Preset(train_scenes=1, test_scenes=1, views=20, height=36, width=48, steps=2, rays=32, n_coarse=4, n_fine=4,
              n_source=2, workers=1, gpus_per_worker=0.0, precision="no", budget_s=3.0, budgets=(1.0, 3.0),

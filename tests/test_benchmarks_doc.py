@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sray.jobs.benchmarks_doc import device_kind, record
+from sray.jobs.bench.doc import device_kind, record
 
 
 def _titles(doc: Path) -> list[str]:

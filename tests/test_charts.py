@@ -11,8 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sray.platform.charts import STYLES, curve_figure, write_fleet_charts
-from sray.platform.charts_curves import average_curves, curve_xy, read_fleet_results, step_hold, zero_shot_value
+from sray.platform.viz.charts import STYLES, curve_figure, write_fleet_charts
+from sray.platform.viz.curves import average_curves, curve_xy, read_fleet_results, step_hold, zero_shot_value
 
 CHART_FILES = ["miou_vs_wall_s.png", "miou_vs_step.png", "psnr_vs_wall_s.png", "psnr_vs_step.png",
                "miou_vs_artifact_bytes.png"]

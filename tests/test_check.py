@@ -20,7 +20,7 @@ from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.png import encode_png
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 from sray.data_tools.scene_folder import write_dataset_index, write_scene
-from sray.jobs import data_check_cmd
+from sray.jobs.data import check as data_check_cmd
 
 H, W = 16, 20
 

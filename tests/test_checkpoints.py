@@ -10,8 +10,8 @@ import pytest
 import torch
 from torch import nn
 
-from sray.platform import checkpoints
-from sray.platform.checkpoints import (CheckpointManager, capture_rng, check_weights_only_safe,
+from sray.platform.train import checkpoints
+from sray.platform.train.checkpoints import (CheckpointManager, capture_rng, check_weights_only_safe,
                                        from_ray_checkpoint, load_checkpoint, restore_rng, to_ray_checkpoint)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from sray.jobs.recipes import get_recipe
-from sray.platform.train_config import apply_override
+from sray.platform.config.train_config import apply_override
 
 
 def test_each_field_type_is_parsed_from_its_annotation() -> None:

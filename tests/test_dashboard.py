@@ -1,7 +1,7 @@
 """``sray ui``: the lean MLflow dashboard on a store holding a finished fleet, loaded in headless Chromium.
 
 The store is built here: a parent fleet run, two child runs (``mlflow.parentRunId``) with metrics,
-and the fleet's charts (from :mod:`sray.platform.charts`) as artifacts of the parent. Chromium is
+and the fleet's charts (from :mod:`sray.platform.viz.charts`) as artifacts of the parent. Chromium is
 Debian's package, installed by the fixture when missing and we are root; otherwise the browser test
 skips and says why.
 """
@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
 from test_charts import synthetic_result  # noqa: E402
 
-from sray.platform.dashboard import run_artifacts_url, runs_view_url, start_dashboard  # noqa: E402
+from sray.platform.tracking.dashboard import run_artifacts_url, runs_view_url, start_dashboard  # noqa: E402
 
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic",
@@ -79,9 +79,9 @@ def _browser(chromium: str, url: str, profile: Path, screenshot: Path | None = N
 
 def _finished_fleet(uri: str, tmp_path: Path) -> dict:
     """A parent fleet run with two finished child runs and the fleet's charts as parent artifacts."""
-    from sray.platform.charts import write_fleet_charts
-    from sray.platform.tracking import prepare_run
-    from sray.platform.tracking_logger import RunLogger
+    from sray.platform.viz.charts import write_fleet_charts
+    from sray.platform.tracking.runs import prepare_run
+    from sray.platform.tracking.logger import RunLogger
 
     parent = prepare_run(uri, "sray-fleet", "fleet-ui-test", tags={"sray.kind": "fleet"})
     children, results = [], []

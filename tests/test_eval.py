@@ -24,8 +24,8 @@ from sray.data_tools.loader.shard_loader import make_eval_samples  # noqa: E402
 from sray.data_tools.shards.manifest import read_manifest  # noqa: E402
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL  # noqa: E402
 from sray.model.ssim import SSIM_WINDOW  # noqa: E402
-from sray.platform.palette import IGNORE_COLOR, palette  # noqa: E402
-from sray.platform.renders import CORRECT_COLOR, ERROR_COLOR  # noqa: E402
+from sray.platform.viz.palette import IGNORE_COLOR, palette  # noqa: E402
+from sray.platform.viz.renders import CORRECT_COLOR, ERROR_COLOR  # noqa: E402
 
 N_SOURCE, STRIDE = 3, 2
 
@@ -33,8 +33,8 @@ N_SOURCE, STRIDE = 3, 2
 @pytest.fixture(scope="module")
 def tiny_checkpoint(tiny_shards, tmp_path_factory) -> Path:
     """An untrained tiny S-Ray checkpoint in a ``sray train`` job layout."""
-    from sray.platform.checkpoints import write_checkpoint
-    from sray.platform.train_state import build_training, training_state
+    from sray.platform.train.checkpoints import write_checkpoint
+    from sray.platform.train.state import build_training, training_state
 
     root = tmp_path_factory.mktemp("eval-ckpt")
     cfg = tiny_config(tiny_shards, root)

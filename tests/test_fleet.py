@@ -12,8 +12,8 @@ from fleet_fixtures import tiny_checkpoint, tiny_fleet_config, write_tiny_checkp
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
-from sray.platform.checkpoints import load_checkpoint
-from sray.platform.fleet import resolve_checkpoint, run_fleet, unseen_scenes
+from sray.platform.train.checkpoints import load_checkpoint
+from sray.platform.finetune.fleet import resolve_checkpoint, run_fleet, unseen_scenes
 
 CONTRACT_KEYS = {"scene", "method", "status", "error", "attempts", "steps_used", "max_steps", "stopped_early", "wall_s",
                  "miou_before", "miou_after", "psnr_after", "artifact_bytes", "full_checkpoint_bytes", "child_run_id",
@@ -101,7 +101,7 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
     [caption] = [line for line in table.splitlines() if line.startswith("Protocol")]
     assert caption.startswith(f"Protocol: sources: {cfg.finetune.eval_n_source} per query, fixed, top-ranked by "
                               f"{source_rule}; pixels: every 4th in each direction (stride 4), so no SSIM")
-    if importlib.util.find_spec("sray.platform.charts") is not None:
+    if importlib.util.find_spec("sray.platform.viz.charts") is not None:
         charts = [a.path for a in client.list_artifacts(parent_id, "charts")]
         assert any(p.endswith(".png") for p in charts)
 
@@ -133,7 +133,7 @@ def test_fleet_rejects_unknown_scene_and_method(tiny_shards, tiny_checkpoint, ml
 
 
 def test_semantic_nerf_through_the_fleet(ray_session, tiny_shards, tiny_checkpoint, mlflow_uri, tmp_path):
-    from sray.platform.scene_delta import load_semantic_nerf
+    from sray.platform.finetune.scene_artifacts import load_semantic_nerf
 
     out = tmp_path / "fleet"
     [result] = run_fleet(tiny_fleet_config(), tiny_checkpoint, tiny_shards, ["synth_test_000"], out, mlflow_uri,

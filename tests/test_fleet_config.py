@@ -8,8 +8,8 @@ import math
 import pytest
 
 from sray.jobs.fleet_cmd import build_fleet_config, register
-from sray.platform.fleet_config import FleetConfig, apply_fleet_override
-from sray.platform.fleet_report import human_bytes, results_table, summary_metrics
+from sray.platform.config.fleet_config import FleetConfig, apply_fleet_override
+from sray.platform.finetune.fleet_report import human_bytes, results_table, summary_metrics
 
 
 def test_overrides_parse_each_field_type():

@@ -8,7 +8,7 @@ import sys
 
 _PROBE = """
 import ray
-from sray.platform.launcher import init_ray
+from sray.platform.train.launcher import init_ray
 
 @ray.remote(num_cpus=1)
 def probe():

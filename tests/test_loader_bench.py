@@ -9,7 +9,7 @@ import pytest
 
 import scene_fixtures
 
-from sray.data_tools.loader import bench as loader_bench
+from sray.jobs.bench import loader_throughput as loader_bench
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
 

@@ -7,7 +7,7 @@ import torch
 
 from sray.model.config import SRayConfig
 from sray.model.rays import pixel_rays
-from sray.model.sray import SRayModel
+from sray.model.semantic_ray import SRayModel
 
 pytestmark = pytest.mark.gpu
 H, W = 48, 64

@@ -24,7 +24,7 @@ from sray.model.rays import pixel_rays
 from sray.model.rendering import PDF_EPS, sample_pdf
 from sray.model.reprojection import project
 from sray.model.source_set import SourceSet, rigid_inverse
-from sray.model.sray import SRayModel
+from sray.model.semantic_ray import SRayModel
 from toy_room import FAR, N_CLASSES, NEAR, TRAIN_IDS, ToyRoom, make_room, miou, one_thread, overfit
 
 AUTOCAST_DTYPES = [pytest.param(torch.bfloat16, id="bf16"), pytest.param(torch.float16, id="fp16")]

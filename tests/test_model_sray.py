@@ -8,7 +8,7 @@ import torch
 from sray.model.config import SRayConfig
 from sray.model.rays import image_pixels, pixel_rays
 from sray.model.reprojection import project, valid_projection
-from sray.model.sray import SRayModel
+from sray.model.semantic_ray import SRayModel
 
 H, W, NEAR, FAR = 32, 40, 1.5, 4.5
 K = torch.tensor([[30.0, 0.0, (W - 1) / 2], [0.0, 30.0, (H - 1) / 2], [0.0, 0.0, 1.0]])

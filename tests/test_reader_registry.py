@@ -12,7 +12,7 @@ import pytest
 
 from sray.data_tools.readers.convert import ConvertConfig, convert_scene
 from sray.data_tools.readers.registry import READERS, get_reader
-from sray.jobs import data_convert_cmd
+from sray.jobs.data import convert as data_convert_cmd
 
 
 @pytest.mark.parametrize("name", sorted(READERS))
@@ -49,7 +49,7 @@ def test_cli_takes_formats_and_reader_options_from_the_registry() -> None:
 def test_registry_and_convert_command_import_no_reader() -> None:
     """The convert command's parser reads the registry without importing a reader (no numpy, OpenCV, torch)."""
     heavy = ("numpy", "cv2", "torch", "sray.data_tools.readers.scannet", "sray.data_tools.readers.replica")
-    code = f"import sys; import sray.jobs.data_convert_cmd; print(sorted(m for m in {heavy} if m in sys.modules))"
+    code = f"import sys; import sray.jobs.data.convert; print(sorted(m for m in {heavy} if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"

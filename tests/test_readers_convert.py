@@ -19,7 +19,7 @@ from sray.data_tools.readers.replica import replica_intrinsics
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 from sray.data_tools.scene_folder import read_scene
 from sray.data_tools.splits import protocol_splits, train_splits
-from sray.jobs import data_convert_cmd
+from sray.jobs.data import convert as data_convert_cmd
 
 H, W = 24, 32
 

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sray.platform import resources
-from sray.platform.resources import InfeasibleRequest, NodeResources, check_feasible
+from sray.platform.train import resources
+from sray.platform.train.resources import InfeasibleRequest, NodeResources, check_feasible
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ray_fixtures import ray_session  # noqa: E402,F401  (pytest fixture, used by name)

@@ -12,7 +12,7 @@ import torch
 
 from sray.data_tools.scene_folder import list_scenes, read_scene, write_scene
 from sray.data_tools.synth.dataset import generate_dataset, generate_scene
-from sray.jobs import data_synth_cmd
+from sray.jobs.data import synth as data_synth_cmd
 
 
 def _files(root: Path) -> dict[str, bytes]:

@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 from mlflow import MlflowClient
 
-from sray.platform.tracking import (PARENT_RUN_TAG, default_artifact_root, default_tracking_uri, find_run,
+from sray.platform.tracking.runs import (PARENT_RUN_TAG, default_artifact_root, default_tracking_uri, find_run,
                                     prepare_run, resume_run, sqlite_path, terminate_run)
-from sray.platform.tracking_params import MAX_PARAM_VALUE, TRUNCATION_MARKER, flatten_config, to_params
+from sray.platform.tracking.params import MAX_PARAM_VALUE, TRUNCATION_MARKER, flatten_config, to_params
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
@@ -58,7 +58,7 @@ def test_prepare_find_resume_and_nesting(mlflow_uri, tmp_path):
 
 
 def test_server_uri_links_to_the_server():
-    from sray.platform.tracking import run_handle
+    from sray.platform.tracking.runs import run_handle
 
     handle = run_handle("http://mlflow:5000/", "3", "abc")
     assert handle.ui_url == "http://mlflow:5000/#/experiments/3/runs/abc" and handle.ui_hint == ""

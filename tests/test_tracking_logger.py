@@ -14,8 +14,8 @@ import pytest
 import torch
 from mlflow import MlflowClient
 
-from sray.platform.tracking import RunHandle, prepare_run
-from sray.platform.tracking_logger import RunLogger
+from sray.platform.tracking.runs import RunHandle, prepare_run
+from sray.platform.tracking.logger import RunLogger
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
@@ -116,7 +116,7 @@ def test_unreachable_server_warns_once_and_never_raises(tmp_path, caplog):
     png = tmp_path / "x.png"
     png.write_bytes(b"png")
     start = time.perf_counter()
-    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking_logger"):
+    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
         logger = RunLogger(handle, flush_every_steps=1, retry_initial_s=0.0)
         logger.log_params({"a": 1})
         for step in range(20):
@@ -133,7 +133,7 @@ def test_unreachable_server_warns_once_and_never_raises(tmp_path, caplog):
 def test_buffered_items_are_delivered_after_an_outage(mlflow_uri, caplog):
     handle = prepare_run(mlflow_uri, "sray train", "job-c")
     client = CountingClient(mlflow_uri, fail_first=4)
-    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking_logger"):
+    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
         logger = RunLogger(handle, flush_every_steps=1, retry_initial_s=0.0, client=client)
         for step in range(10):
             logger.log_metrics({"loss": float(step)}, step=step)
@@ -158,7 +158,7 @@ def test_backoff_skips_attempts_until_it_expires(mlflow_uri):
 def test_bounded_buffer_drops_oldest_with_a_warning(caplog):
     uri = f"http://127.0.0.1:{_closed_port()}"
     handle = RunHandle(run_id="0" * 32, experiment_id="1", tracking_uri=uri, ui_url=uri)
-    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking_logger"):
+    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
         logger = RunLogger(handle, flush_every_steps=1000, max_buffered_metrics=5)
         for step in range(12):
             logger.log_metrics({"loss": float(step)}, step=step)
@@ -170,7 +170,7 @@ def test_bounded_buffer_drops_oldest_with_a_warning(caplog):
 def test_refused_param_is_dropped_and_metrics_still_arrive(mlflow_uri, caplog):
     handle = prepare_run(mlflow_uri, "sray train", "job-e")
     MlflowClient(mlflow_uri).log_param(handle.run_id, "optim.lr", "0.5")  # an earlier job used another lr
-    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking_logger"):
+    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
         with RunLogger(handle) as logger:
             logger.log_params({"optim": {"lr": 1e-3}})
             logger.log_metrics({"miou": np.float32(0.25)}, step=0)

@@ -13,8 +13,8 @@ from hypothesis.extra import numpy as hnp
 
 from sray.data_tools.label_spaces import NYU40, SCANNET20
 from sray.data_tools.scene import IGNORE_ID
-from sray.platform.palette import IGNORE_COLOR, SCANNET20_COLORS, colorize, palette
-from sray.platform.renders import CORRECT_COLOR, ERROR_COLOR, error_map, panel_layout, render_panel
+from sray.platform.viz.palette import IGNORE_COLOR, SCANNET20_COLORS, colorize, palette
+from sray.platform.viz.renders import CORRECT_COLOR, ERROR_COLOR, error_map, panel_layout, render_panel
 
 
 def _lab(colors: np.ndarray) -> np.ndarray:

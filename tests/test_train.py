@@ -11,9 +11,9 @@ import torch
 from mlflow.tracking import MlflowClient
 from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
-from sray.platform.checkpoints import CheckpointManager, load_checkpoint
-from sray.platform.launcher import launch_training
-from sray.platform.resources import InfeasibleRequest
+from sray.platform.train.checkpoints import CheckpointManager, load_checkpoint
+from sray.platform.train.launcher import launch_training
+from sray.platform.train.resources import InfeasibleRequest
 
 pytestmark = pytest.mark.slow
 

@@ -9,8 +9,8 @@ from torch.overrides import TorchFunctionMode
 
 from sray.model.config import SRayConfig
 from sray.model.losses import render_loss
-from sray.platform.train_state import RayBatchModel
-from sray.platform.train_step import NonFiniteTraining, TrainStep, batch_rays, fused_adam
+from sray.platform.train.state import RayBatchModel
+from sray.platform.train.step import NonFiniteTraining, TrainStep, batch_rays, fused_adam
 
 H, W = 32, 40
 HOST_READS = {"item", "tolist", "numpy", "cpu", "__bool__", "__float__", "__int__", "__index__", "nonzero",

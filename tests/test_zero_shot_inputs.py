@@ -33,7 +33,7 @@ from sray.data_tools.shards.writer import write_shards
 from sray.data_tools.synth.dataset import generate_scene
 from sray.model.config import SRayConfig
 from sray.model.rays import pixel_rays
-from sray.model.sray import SRayModel
+from sray.model.semantic_ray import SRayModel
 
 H, W, N_VIEWS, SCENE = 36, 48, 20, "unseen"
 MODEL_INPUTS = ("src_rgb", "src_K", "src_c2w", "query_K", "query_c2w", "near", "far")

@@ -19,7 +19,7 @@ import torch
 from sray.model.config import SRayConfig
 from sray.model.losses import render_loss
 from sray.model.rays import image_pixels, pixel_rays
-from sray.model.sray import SRayModel
+from sray.model.semantic_ray import SRayModel
 
 N_CLASSES = 5
 NEAR, FAR = 0.5, 6.0

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from sray.jobs.recipes import get_recipe
-from sray.platform.train_config import TrainConfig
+from sray.platform.config.train_config import TrainConfig
 
 
 @pytest.fixture(scope="session")

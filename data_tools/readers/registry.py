@@ -1,7 +1,7 @@
 """The reader registry: every source format ``sray data convert`` reads, with its defaults and options.
 
 ``readers/convert.py`` opens sources through :data:`READERS`, and ``sray data convert``
-(``jobs/data_convert_cmd.py``) takes its ``--format`` choices, its reader-specific flags and the
+(``jobs/data/convert.py``) takes its ``--format`` choices, its reader-specific flags and the
 defaults in its help from here, so nothing else lists the formats. This module imports neither
 numpy nor OpenCV: the CLI builds its parser from it, and a reader's module is imported only when
 that reader is used.

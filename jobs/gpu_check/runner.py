@@ -73,7 +73,7 @@ def run_gpu_check(stages: list[str], out: Path, dry_run: bool, fresh: bool, repo
     text = markdown(report, list(STAGES))
     (ctx.out / "gpu_check.md").write_text(text + "\n")
     if doc is not None and not dry_run:
-        from sray.jobs.benchmarks_doc import record
+        from sray.jobs.bench.doc import record
 
         record(REPORT_TITLE, text, doc)
     return report

@@ -33,7 +33,7 @@ def render_seconds(ctx: CheckContext, repeats: int) -> float:
 
 def run(ctx: CheckContext) -> StageResult:
     """The model benchmark's two tables, flattened into one, plus the whole-view render time."""
-    from sray.model.benchmark import run_model_benchmark
+    from sray.jobs.bench.model_cost import run_model_benchmark
 
     rows = []
     for title, table, _notes in run_model_benchmark(device=str(ctx.device), quick=ctx.dry_run):

@@ -8,7 +8,7 @@ import torch
 from sray.model.losses import render_loss
 from sray.model.reprojection import project
 from sray.model.source_set import rigid_inverse
-from sray.platform.train_step import PRECISIONS, batch_rays
+from sray.platform.train.step import PRECISIONS, batch_rays
 
 from .context import CheckContext
 from .report import StageResult

@@ -19,7 +19,7 @@ def run(ctx: CheckContext) -> StageResult:
     from sray.data_tools.shards.writer import write_shards
     from sray.data_tools.synth.dataset import generate_dataset
     from sray.jobs.recipes import get_recipe
-    from sray.platform.launcher import launch_training
+    from sray.platform.train.launcher import launch_training
 
     root = ctx.out / "ray"
     hw = (32, 40) if ctx.dry_run else (120, 160)

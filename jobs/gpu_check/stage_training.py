@@ -10,8 +10,8 @@ import torch
 
 from sray.model.config import SRayConfig
 from sray.model.losses import render_loss
-from sray.platform.train_state import RayBatchModel
-from sray.platform.train_step import TrainStep, batch_rays, fused_adam
+from sray.platform.train.state import RayBatchModel
+from sray.platform.train.step import TrainStep, batch_rays, fused_adam
 
 from .context import CheckContext, has_module
 from .report import StageResult

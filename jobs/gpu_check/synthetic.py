@@ -11,7 +11,7 @@ import math
 import torch
 
 from sray.model.config import SRayConfig
-from sray.model.sray import SRayModel
+from sray.model.semantic_ray import SRayModel
 
 
 def pinhole(hw: tuple[int, int], fov_deg: float) -> torch.Tensor:

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.platform.figure_io import save_png
-from sray.platform.palette import IGNORE_COLOR, colorize, palette
+from sray.platform.viz.figure_io import save_png
+from sray.platform.viz.palette import IGNORE_COLOR, colorize, palette
 
 MARGIN = 10
 """Pixels around and between tiles."""

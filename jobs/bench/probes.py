@@ -1,4 +1,4 @@
-"""Measurement helpers for ``model.benchmark``: FLOP counts, peak allocations, timings, training steps.
+"""Measurement helpers for ``sray.jobs.bench.model_cost``: FLOP counts, peak allocations, timings, training steps.
 
 * FLOPs: ``torch.utils.flop_counter.FlopCounterMode`` with SDPA forced onto its MATH backend, which
   decomposes attention into counted matmuls (the fused CPU flash kernel has no FLOP formula and
@@ -26,8 +26,8 @@ import torch
 from torch.nn.attention import SDPBackend, sdpa_kernel
 from torch.utils.flop_counter import FlopCounterMode
 
-from .config import SRayConfig
-from .cra import CrossReprojectionAttention
+from sray.model.config import SRayConfig
+from sray.model.cra import CrossReprojectionAttention
 
 
 def resolve_device(device: str) -> torch.device:
@@ -36,7 +36,7 @@ def resolve_device(device: str) -> torch.device:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     dev = torch.device(device)
     if dev.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError("sray.model.benchmark: device 'cuda' asked for but no CUDA device is visible; "
+        raise ValueError("sray.jobs.bench.model_cost: device 'cuda' asked for but no CUDA device is visible; "
                          "use --device cpu or auto.")
     return dev
 
@@ -91,7 +91,7 @@ def attention_flops(variant: str, sizes: dict, count_rays: int, device: torch.de
         module, space, valid = attention_case(variant, r, sizes["views"], sizes["samples"], sizes["channels"], device)
         counts.append(count_flops(attention_call(module, space, valid, backward)))
     if counts[1] != 2 * counts[0]:
-        raise RuntimeError(f"sray.model.bench_probes: FLOPs of {variant} are not linear in rays ({counts}).")
+        raise RuntimeError(f"sray.jobs.bench.probes: FLOPs of {variant} are not linear in rays ({counts}).")
     return counts[1] * sizes["rays"] // count_rays
 
 
@@ -164,7 +164,7 @@ def peak_rss_bytes() -> int:
 
 def _synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device) -> dict:
     """Random source images and a camera rig whose sources all look at the query's frustum."""
-    from .rays import pixel_rays
+    from sray.model.rays import pixel_rays
 
     h, w = hw
     gen = torch.Generator().manual_seed(0)
@@ -190,8 +190,8 @@ def train_step_worker(spec: dict) -> dict:
     Meant to run in a fresh process; returns the first step's time (warm-up, compilation
     included), the median of the following ``steps`` steps and the process peak RSS.
     """
-    from .losses import render_loss
-    from .sray import SRayModel
+    from sray.model.losses import render_loss
+    from sray.model.semantic_ray import SRayModel
 
     device = torch.device(spec["device"])
     torch.manual_seed(0)
@@ -215,7 +215,7 @@ def train_step_worker(spec: dict) -> dict:
         scaler.step(opt)
         scaler.update()
         if not torch.isfinite(loss):
-            raise FloatingPointError(f"sray.model.benchmark: non-finite loss in {spec}.")
+            raise FloatingPointError(f"sray.jobs.bench.model_cost: non-finite loss in {spec}.")
 
     times = _timed_runs(step, device, int(spec["steps"]) + 1)
     peak_gpu = int(torch.cuda.max_memory_allocated(device)) if device.type == "cuda" else 0

@@ -9,9 +9,9 @@ import torch
 from torch import Tensor, nn
 
 from sray.model.config import SRayConfig
-from sray.model.sray import SRayModel
-from sray.platform.train_config import OptimSettings, TrainConfig
-from sray.platform.train_step import fused_adam
+from sray.model.semantic_ray import SRayModel
+from sray.platform.config.train_config import OptimSettings, TrainConfig
+from sray.platform.train.step import fused_adam
 
 
 class RayBatchModel(nn.Module):
@@ -102,7 +102,7 @@ def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayMod
     """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder."""
     from pathlib import Path
 
-    from sray.platform.checkpoints import load_checkpoint
+    from sray.platform.train.checkpoints import load_checkpoint
 
     state = load_checkpoint(Path(path), map_location)
     if any(k.endswith("attention.pos") for k in state["model"]):

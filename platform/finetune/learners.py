@@ -7,7 +7,7 @@
 * :class:`NeRFLearner`: a Semantic-NeRF trained from scratch on the same rays (the training sample's
   source views are ignored); its artifact is the whole network.
 
-Both update through the shared :class:`sray.platform.train_step.TrainStep` (autocast bf16 on CPU and
+Both update through the shared :class:`sray.platform.train.step.TrainStep` (autocast bf16 on CPU and
 CUDA or fp16 with a GradScaler on CUDA, clipping, the non-finite guard); the loss itself is computed in
 float32 by ``render_loss``.
 """
@@ -28,12 +28,12 @@ from sray.data_tools.scene import SceneMeta
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.losses import render_loss
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box_from_cameras
-from sray.model.sray import SourceSet, SRayModel
-from sray.platform.evaluation import sray_renderer
-from sray.platform.fleet_config import SemanticNeRFSettings
-from sray.platform.scene_delta import (NERF_ARTIFACT, SRAY_ARTIFACT, adapted_keys, adapted_state, apply_delta,
+from sray.model.semantic_ray import SourceSet, SRayModel
+from sray.platform.eval.view_scoring import sray_renderer
+from sray.platform.config.fleet_config import SemanticNeRFSettings
+from sray.platform.finetune.scene_artifacts import (NERF_ARTIFACT, SRAY_ARTIFACT, adapted_keys, adapted_state, apply_delta,
                                        save_semantic_nerf, save_sray_delta)
-from sray.platform.train_step import TrainStep, batch_rays, fused_adam
+from sray.platform.train.step import TrainStep, batch_rays, fused_adam
 
 
 class _Learner:

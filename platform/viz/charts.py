@@ -5,14 +5,14 @@ From the fleet result dicts (docs/CONTRACTS.md, "Fleet results"), :func:`write_f
 * ``miou_vs_wall_s.png``, ``miou_vs_step.png``, ``psnr_vs_wall_s.png``, ``psnr_vs_step.png``: held-out
   score against training wall-clock time and against optimisation steps, one panel per scene plus
   (with two scenes or more) a first panel averaging the scenes (curves resampled as step functions
-  on a common grid, :func:`sray.platform.charts_curves.average_curves`). S-Ray zero-shot is the
+  on a common grid, :func:`sray.platform.viz.curves.average_curves`). S-Ray zero-shot is the
   step-0 score of the S-Ray curve (a dashed horizontal line: it costs no per-scene step), S-Ray
   finetune and Semantic-NeRF from scratch are step curves that hold their value between evaluations;
 * ``miou_vs_artifact_bytes.png``: held-out mIoU after per-scene optimisation against the bytes a
   scene stores besides the shared model (log axis), one point per (scene, method); zero-shot S-Ray
   stores nothing and sits on a separate "0 B" tick left of an axis break.
 
-Every chart's footnote carries the results' protocol line(s) (:func:`sray.platform.eval_protocol.caption_lines`).
+Every chart's footnote carries the results' protocol line(s) (:func:`sray.platform.eval.protocol.caption_lines`).
 Failed results are left out and named in a footnote. Matplotlib's Agg canvas is used directly (no
 pyplot state), so this is safe in Ray workers and threads.
 """
@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from sray.platform.figure_io import save_png
+from sray.platform.viz.figure_io import save_png
 from sray.model.metrics import DATASET_PROTOCOL
-from sray.platform.charts_curves import (METHODS, average_curves, check_result, curve_xy, failure_note, is_chartable,
+from sray.platform.viz.curves import (METHODS, average_curves, check_result, curve_xy, failure_note, is_chartable,
                                          zero_shot_value)
-from sray.platform.eval_protocol import caption_lines
+from sray.platform.eval.protocol import caption_lines
 
 log = logging.getLogger(__name__)
 

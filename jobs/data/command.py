@@ -6,10 +6,10 @@ import argparse
 import importlib
 
 DATA_SUBCOMMAND_MODULES = (
-    "sray.jobs.data_synth_cmd",
-    "sray.jobs.data_convert_cmd",
-    "sray.jobs.data_check_cmd",
-    "sray.jobs.data_shard_cmd",
+    "sray.jobs.data.synth",
+    "sray.jobs.data.convert",
+    "sray.jobs.data.check",
+    "sray.jobs.data.shard",
 )
 """Each module exposes ``register(subparsers)`` for one ``sray data`` verb."""
 

@@ -5,10 +5,10 @@ scenes: ``train`` minus held-out views) with the shared loss, and are scored on 
 views rendered from their fixed source views (``make_eval_samples``), every ``eval_every`` steps and
 at step 0 (zero-shot S-Ray, untrained Semantic-NeRF). The score is the dataset-level mIoU (one
 confusion matrix over the scene's held-out views); how it was made (sources, stride, render mode,
-inputs) is the result's ``protocol`` (:class:`sray.platform.eval_protocol.EvalProtocol`). A
+inputs) is the result's ``protocol`` (:class:`sray.platform.eval.protocol.EvalProtocol`). A
 finetune stops at the first of: ``patience`` evaluations without an improvement > ``min_delta``
 (early stop), ``max_steps``, ``max_seconds`` of training time. The best evaluated state is kept
-and stored as the scene artifact (:mod:`sray.platform.scene_delta`). Sampling uses the scene's own
+and stored as the scene artifact (:mod:`sray.platform.finetune.scene_artifacts`). Sampling uses the scene's own
 near/far from the shard metadata.
 
 Time: ``wall_s`` (curve and result) counts training time only (data, forward, backward, update);
@@ -30,13 +30,13 @@ from torch import nn
 from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader
 from sray.data_tools.shards.manifest import read_manifest
-from sray.platform.eval_protocol import EvalProtocol
-from sray.platform.evaluation import render_view, score_views
-from sray.platform.finetune_learners import NeRFLearner, SRayLearner, build_semantic_nerf
-from sray.platform.fleet_config import FleetConfig
-from sray.platform.scene_delta import model_bytes
-from sray.platform.train_state import model_from_checkpoint
-from sray.platform.train_step import NonFiniteTraining, step_seed
+from sray.platform.eval.protocol import EvalProtocol
+from sray.platform.eval.view_scoring import render_view, score_views
+from sray.platform.finetune.learners import NeRFLearner, SRayLearner, build_semantic_nerf
+from sray.platform.config.fleet_config import FleetConfig
+from sray.platform.finetune.scene_artifacts import model_bytes
+from sray.platform.train.state import model_from_checkpoint
+from sray.platform.train.step import NonFiniteTraining, step_seed
 
 RESULT_FILE = "result.json"
 """Per (scene, method) result, at ``<fleet>/scenes/<scene>/<method>/result.json`` (docs/CONTRACTS.md)."""
@@ -167,7 +167,7 @@ def _prepare(job: SceneJob, device: torch.device) -> tuple[Any, Any, list[dict[s
 
 def finetune_scene(job: SceneJob, logger: Any = None) -> SceneOutcome:
     """Finetune one (scene, method), write its artifact and ``result.json``; ``logger``: a RunLogger or None."""
-    from sray.platform.progress import make_progress
+    from sray.platform.common.progress import make_progress
 
     cfg, ft = job.config, job.config.finetune
     if job.scene in cfg.fail_scenes:
@@ -261,8 +261,8 @@ def run_scene_job(job: SceneJob) -> dict[str, Any]:
     CPUs: more threads than reserved cores oversubscribe a shared machine (measured 10x slower
     steps with 2 threads on a busy 2-core host).
     """
-    from sray.platform.tracking import RunHandle
-    from sray.platform.tracking_logger import RunLogger
+    from sray.platform.tracking.runs import RunHandle
+    from sray.platform.tracking.logger import RunLogger
 
     torch.set_num_threads(max(1, int(job.config.cpus_per_task)))
 

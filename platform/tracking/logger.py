@@ -23,8 +23,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from sray.platform.tracking import RunHandle
-from sray.platform.tracking_params import sanitize_key, to_params
+from sray.platform.tracking.runs import RunHandle
+from sray.platform.tracking.params import sanitize_key, to_params
 
 log = logging.getLogger(__name__)
 

@@ -47,11 +47,11 @@ class SRayModel(nn.Module):
         m = src_rgb.shape[0]
         if src_rgb.ndim != 4 or src_K.shape != (m, 3, 3) or src_c2w.shape != (m, 4, 4):
             raise ValueError(
-                "sray.model.sray.encode: expected src_rgb (m, 3, H, W), src_K (m, 3, 3), src_c2w "
+                "sray.model.semantic_ray.encode: expected src_rgb (m, 3, H, W), src_K (m, 3, 3), src_c2w "
                 f"(m, 4, 4); got {tuple(src_rgb.shape)}, {tuple(src_K.shape)}, {tuple(src_c2w.shape)}."
             )
         if not src_rgb.is_floating_point():
-            raise ValueError(f"sray.model.sray.encode: src_rgb must be float in [0, 1], got {src_rgb.dtype}; "
+            raise ValueError(f"sray.model.semantic_ray.encode: src_rgb must be float in [0, 1], got {src_rgb.dtype}; "
                              "divide uint8 images by 255.")
         feats = self.encoder(src_rgb)  # (m, C, H/4, W/4)
         c2w = src_c2w.float()

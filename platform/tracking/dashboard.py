@@ -2,7 +2,7 @@
 
 Lean: no job runner (``MLFLOW_SERVER_ENABLE_JOB_EXECUTION=false``) and one worker, which makes it
 2 processes and ~0.5 GiB instead of 15-27 processes and 2-3 GiB; telemetry is off (offline
-machines). Artifacts: the experiments :mod:`sray.platform.tracking` creates carry an explicit
+machines). Artifacts: the experiments :mod:`sray.platform.tracking.runs` creates carry an explicit
 ``file://`` artifact location, which the server reads directly when the UI asks for a run's
 artifacts; experiments created from the UI itself store theirs through the server's artifact proxy
 into ``--artifacts-destination``, the same ``mlartifacts`` folder beside the SQLite database.
@@ -26,7 +26,7 @@ import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sray.platform.tracking import DEFAULT_UI_PORT, default_tracking_uri, sqlite_path
+from sray.platform.tracking.runs import DEFAULT_UI_PORT, default_tracking_uri, sqlite_path
 
 SERVER_ENV = {"MLFLOW_SERVER_ENABLE_JOB_EXECUTION": "false", "MLFLOW_DISABLE_TELEMETRY": "true",
               "DO_NOT_TRACK": "true"}
@@ -59,7 +59,7 @@ def tunnel_hint(port: int) -> str:
 
 
 def artifact_destination(tracking_uri: str) -> Path | None:
-    """``mlartifacts`` beside a SQLite database (where :mod:`sray.platform.tracking` puts artifacts)."""
+    """``mlartifacts`` beside a SQLite database (where :mod:`sray.platform.tracking.runs` puts artifacts)."""
     db = sqlite_path(tracking_uri)
     return None if db is None else db.parent / "mlartifacts"
 

@@ -8,7 +8,7 @@
    from scratch under the same wall-clock budget, read off at equal budgets (the paper's
    per-scene optimisation table);
 4. tables and charts appended to docs/benchmarks.md with the exact command, each table with the
-   protocol line(s) of the numbers in it (:func:`sray.platform.eval_protocol.caption_lines`); the
+   protocol line(s) of the numbers in it (:func:`sray.platform.eval.protocol.caption_lines`); the
    stored results (``<out>/eval/<variant>/metrics.json``, the fleet's ``result.json`` files) carry
    the protocol descriptor.
 """
@@ -74,7 +74,7 @@ PRESETS = {
 def _pretrain(variant: str, p: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:
     """Train one ablation row (``VARIANT_SETTINGS``); returns its best checkpoint (by held-out validation mIoU)."""
     from sray.jobs.recipes import get_recipe
-    from sray.platform.launcher import launch_training
+    from sray.platform.train.launcher import launch_training
 
     cfg = get_recipe("synth-small" if p.gpus_per_worker == 0 else "synth-paper")
     (cfg.model.attention, cfg.model.weight_map), cfg.model.n_source = VARIANT_SETTINGS[variant], p.n_source
@@ -92,7 +92,7 @@ def _pretrain(variant: str, p: Preset, shards: Path, out: Path, tracking_uri: st
 
 def _at_budget(result: dict[str, Any], budget: float, key: str) -> float:
     """The held-out score a finetune had reached after ``budget`` seconds (last evaluation before it)."""
-    from sray.platform.charts_curves import step_hold
+    from sray.platform.viz.curves import step_hold
 
     curve = [c for c in result.get("curve", []) if c.get(key) is not None]
     x = np.array([c["wall_s"] for c in curve], dtype=float)
@@ -110,12 +110,12 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     """Run every stage and append the tables (and chart links) to ``doc``."""
     from sray.data_tools.shards.writer import write_shards
     from sray.data_tools.synth.dataset import generate_dataset
-    from sray.jobs.benchmarks_doc import record
-    from sray.platform.charts import write_fleet_charts
-    from sray.platform.eval_job import evaluate_checkpoint
-    from sray.platform.eval_protocol import caption_lines
-    from sray.platform.fleet import run_fleet, unseen_scenes
-    from sray.platform.fleet_config import FleetConfig
+    from sray.jobs.bench.doc import record
+    from sray.platform.viz.charts import write_fleet_charts
+    from sray.platform.eval.zero_shot import evaluate_checkpoint
+    from sray.platform.eval.protocol import caption_lines
+    from sray.platform.finetune.fleet import run_fleet, unseen_scenes
+    from sray.platform.config.fleet_config import FleetConfig
 
     p = PRESETS[preset]
     out = out.resolve()

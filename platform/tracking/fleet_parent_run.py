@@ -9,7 +9,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from sray.platform.tracking import RunHandle, prepare_run, run_handle
+from sray.platform.tracking.runs import RunHandle, prepare_run, run_handle
 
 log = logging.getLogger(__name__)
 

@@ -33,15 +33,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _bench_accuracy(args: argparse.Namespace) -> int:
-    from sray.jobs.bench_accuracy import run_accuracy_benchmark
+    from sray.jobs.bench.accuracy import run_accuracy_benchmark
 
     run_accuracy_benchmark(args.preset, args.out, args.doc)
     return 0
 
 
 def _bench_loader(args: argparse.Namespace) -> int:
-    from sray.data_tools.loader.bench import run_loader_benchmark
-    from sray.jobs.benchmarks_doc import record
+    from sray.jobs.bench.loader_throughput import run_loader_benchmark
+    from sray.jobs.bench.doc import record
 
     title, table, notes = run_loader_benchmark(args.data, batches=args.batches)
     record(title, table, args.doc, notes)
@@ -49,8 +49,8 @@ def _bench_loader(args: argparse.Namespace) -> int:
 
 
 def _bench_model(args: argparse.Namespace) -> int:
-    from sray.jobs.benchmarks_doc import record
-    from sray.model.benchmark import run_model_benchmark
+    from sray.jobs.bench.doc import record
+    from sray.jobs.bench.model_cost import run_model_benchmark
 
     for title, table, notes in run_model_benchmark(device=args.device, quick=args.quick):
         record(title, table, args.doc, notes)

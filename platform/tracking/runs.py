@@ -2,7 +2,7 @@
 
 The launcher (driver) creates the store schema, the experiment and the run once, then hands the
 resulting :class:`RunHandle` (plain strings, picklable) to the workers. Rank 0 logs into that fixed
-run id through :class:`sray.platform.tracking_logger.RunLogger`, so a worker group restarted by Ray
+run id through :class:`sray.platform.tracking.logger.RunLogger`, so a worker group restarted by Ray
 Train's ``FailureConfig`` keeps writing into the same run instead of opening a new one.
 
 Default store (no ``--tracking-uri``): a SQLite file ``<workdir>/mlflow.db`` with artifacts under

@@ -11,7 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from sray.platform.config_override import set_field
+from sray.platform.config.overrides import set_field
 
 METHODS = ("sray", "semantic-nerf")
 """Per-scene methods a fleet runs: S-Ray finetuned from the shared model, Semantic-NeRF from scratch."""

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from sray.model.config import SRayConfig
-from sray.platform.config_override import set_field
+from sray.platform.config.overrides import set_field
 
 PRECISIONS = ("no", "bf16", "fp16")
 """Mixed-precision modes: fp32, bfloat16 autocast (CPU and CUDA), fp16 with loss scaling (CUDA)."""

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sray.platform.checkpoints import CheckpointManager
-from sray.platform.resources import check_feasible
-from sray.platform.tracking import RunHandle, default_tracking_uri, prepare_run, resume_run, terminate_run
-from sray.platform.train_config import TrainConfig
-from sray.platform.train_worker import STOP_FILE, train_worker
-from sray.platform.validation import validation_protocol
+from sray.platform.train.checkpoints import CheckpointManager
+from sray.platform.train.resources import check_feasible
+from sray.platform.tracking.runs import RunHandle, default_tracking_uri, prepare_run, resume_run, terminate_run
+from sray.platform.config.train_config import TrainConfig
+from sray.platform.train.worker import STOP_FILE, train_worker
+from sray.platform.train.validation import validation_protocol
 
 CONFIG_FILE = "config.json"
 """The job's full config, written into its folder (and logged as an artifact)."""
@@ -192,14 +192,14 @@ def _fit_in_thread(trainer: Any) -> None:
 
 def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:
     latest = CheckpointManager(job_dir / "checkpoints").latest()
-    from sray.platform.checkpoints import read_meta
+    from sray.platform.train.checkpoints import read_meta
 
     return latest is None or read_meta(latest)["step"] < cfg.optim.steps
 
 
 def _log_run_start(run: RunHandle, config_path: Path, protocol: dict[str, Any]) -> None:
     """Log the config file and, once, the validation protocol (params ``protocol.*``) to a new run."""
-    from sray.platform.tracking_logger import RunLogger
+    from sray.platform.tracking.logger import RunLogger
 
     logger = RunLogger(run)
     logger.log_artifact(config_path)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import torch
 from torch.nn.attention import SDPBackend
 
-from .bench_probes import (attention_call, attention_case, attention_flops, peak_bytes, resolve_device,
+from sray.jobs.bench.probes import (attention_call, attention_case, attention_flops, peak_bytes, resolve_device,
                            time_call, train_step_worker)
 
 VARIANTS = ("full", "intra", "cross", "dense")

@@ -15,11 +15,11 @@ from typing import Any
 import torch
 
 from sray.model.losses import render_loss
-from sray.platform.checkpoints import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
-from sray.platform.train_config import TrainConfig
-from sray.platform.train_state import build_training, restore_training, training_state
-from sray.platform.train_step import TrainStep, batch_rays, step_seed
-from sray.platform.tracking import RunHandle
+from sray.platform.train.checkpoints import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
+from sray.platform.config.train_config import TrainConfig
+from sray.platform.train.state import build_training, restore_training, training_state
+from sray.platform.train.step import TrainStep, batch_rays, step_seed
+from sray.platform.tracking.runs import RunHandle
 
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
@@ -61,9 +61,9 @@ def train_worker(payload: dict[str, Any]) -> None:
     from accelerate import Accelerator
 
     from sray.data_tools.loader.shard_loader import make_train_loader
-    from sray.platform.progress import make_progress
-    from sray.platform.tracking_logger import RunLogger
-    from sray.platform.validation import validate
+    from sray.platform.common.progress import make_progress
+    from sray.platform.tracking.logger import RunLogger
+    from sray.platform.train.validation import validate
 
     cfg = TrainConfig.from_dict(payload["config"])
     ctx = ray.train.get_context()

@@ -12,7 +12,7 @@ Order of events:
    ``retries`` re-runs it is reported as failed, without stopping the others;
 4. the results table is printed and logged to the parent run (``fleet_results.md``,
    ``fleet_results.json``, per-method summary metrics), with the charts of
-   ``sray.platform.charts.write_fleet_charts`` when that module is installed.
+   ``sray.platform.viz.charts.write_fleet_charts`` when that module is installed.
 
 Paths handed to tasks are absolute: on a multi-node cluster they must be on shared storage.
 """
@@ -27,13 +27,13 @@ from pathlib import Path
 from typing import Any
 
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
-from sray.platform.checkpoints import CheckpointManager
-from sray.platform.finetune import RESULT_FILE, SceneJob, run_scene_job, write_result
-from sray.platform.fleet_config import METHODS, FleetConfig, check_fleet_config
-from sray.platform.fleet_parent_run import parent_run, tag_run
-from sray.platform.fleet_report import results_table, summary_metrics
-from sray.platform.scene_delta import checkpoint_sha256, state_file
-from sray.platform.tracking import (RunHandle, default_tracking_uri, ensure_store, prepare_run,
+from sray.platform.train.checkpoints import CheckpointManager
+from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneJob, run_scene_job, write_result
+from sray.platform.config.fleet_config import METHODS, FleetConfig, check_fleet_config
+from sray.platform.tracking.fleet_parent_run import parent_run, tag_run
+from sray.platform.finetune.fleet_report import results_table, summary_metrics
+from sray.platform.finetune.scene_artifacts import checkpoint_sha256, state_file
+from sray.platform.tracking.runs import (RunHandle, default_tracking_uri, ensure_store, prepare_run,
                                    terminate_run)
 
 log = logging.getLogger(__name__)
@@ -139,13 +139,13 @@ def _fleet_record(out_dir: Path, base_sha256: str, tracking_uri: str) -> dict[st
 
 
 def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
-    """PNGs of ``sray.platform.charts.write_fleet_charts`` ([] when the module is not installed)."""
+    """PNGs of ``sray.platform.viz.charts.write_fleet_charts`` ([] when the module is not installed)."""
     try:
-        from sray.platform.charts import write_fleet_charts
+        from sray.platform.viz.charts import write_fleet_charts
     except ModuleNotFoundError as e:
-        if e.name != "sray.platform.charts":
+        if e.name != "sray.platform.viz.charts":
             raise
-        _say("charts skipped: sray.platform.charts is not available")
+        _say("charts skipped: sray.platform.viz.charts is not available")
         return []
     try:
         return [Path(p) for p in write_fleet_charts(results, out_dir / "charts")]
@@ -217,11 +217,11 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     empty = the working directory's SQLite store. Ray is started locally unless ``cfg.address``
     names a cluster (or Ray is already running in this process).
     """
-    from sray.platform.launcher import init_ray
-    from sray.platform.resources import check_feasible
-    from sray.platform.scene_delta import model_bytes
-    from sray.platform.train_state import model_from_checkpoint
-    from sray.platform.tracking_logger import RunLogger
+    from sray.platform.train.launcher import init_ray
+    from sray.platform.train.resources import check_feasible
+    from sray.platform.finetune.scene_artifacts import model_bytes
+    from sray.platform.train.state import model_from_checkpoint
+    from sray.platform.tracking.logger import RunLogger
 
     check_fleet_config(cfg)
     checkpoint, shards, out_dir = resolve_checkpoint(checkpoint), Path(shards).resolve(), Path(out_dir).resolve()
