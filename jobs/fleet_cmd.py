@@ -38,8 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def build_fleet_config(args: argparse.Namespace):
     """The FleetConfig of the parsed flags: defaults, then the flags, then ``--set`` overrides."""
-    from sray.platform.config.overrides import apply_settings
     from sray.platform.config.fleet_config import FleetConfig, apply_fleet_override
+    from sray.platform.config.overrides import apply_settings
 
     cfg = FleetConfig()
     flags = {"max_parallel": args.max_parallel, "cpus_per_task": args.cpus_per_task,

@@ -40,9 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def build_config(args: argparse.Namespace):
     """The job's TrainConfig: the recipe (or a resumed job's saved config) plus flags and --set."""
     from sray.jobs.recipes import get_recipe
-    from sray.platform.train.launcher import load_job_config
     from sray.platform.config.overrides import apply_settings
     from sray.platform.config.train_config import apply_override
+    from sray.platform.train.launcher import load_job_config
 
     cfg = get_recipe(args.recipe)
     if args.resume:

@@ -12,11 +12,10 @@ from pathlib import Path
 
 import pytest
 import torch
-
 from train_fixtures import tiny_config
 
-from sray.platform.train.checkpoints import write_checkpoint
 from sray.platform.config.fleet_config import FleetConfig
+from sray.platform.train.checkpoints import write_checkpoint
 from sray.platform.train.state import RayBatchModel, lr_lambda, training_state
 
 

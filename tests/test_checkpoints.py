@@ -8,11 +8,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from rng_state import capture_rng, restore_rng
 from torch import nn
 
 from sray.platform.train import checkpoints
-from sray.platform.train.checkpoints import (CheckpointManager, capture_rng, check_weights_only_safe,
-                                       from_ray_checkpoint, load_checkpoint, restore_rng, to_ray_checkpoint)
+from sray.platform.train.checkpoints import (
+    CheckpointManager,
+    check_weights_only_safe,
+    from_ray_checkpoint,
+    load_checkpoint,
+    to_ray_checkpoint,
+)
 
 
 def _build(seed: int):

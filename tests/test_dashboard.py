@@ -79,9 +79,9 @@ def _browser(chromium: str, url: str, profile: Path, screenshot: Path | None = N
 
 def _finished_fleet(uri: str, tmp_path: Path) -> dict:
     """A parent fleet run with two finished child runs and the fleet's charts as parent artifacts."""
-    from sray.platform.viz.charts import write_fleet_charts
-    from sray.platform.tracking.runs import prepare_run
     from sray.platform.tracking.logger import RunLogger
+    from sray.platform.tracking.runs import prepare_run
+    from sray.platform.viz.charts import write_fleet_charts
 
     parent = prepare_run(uri, "sray-fleet", "fleet-ui-test", tags={"sray.kind": "fleet"})
     children, results = [], []

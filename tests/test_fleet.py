@@ -9,11 +9,12 @@ from pathlib import Path
 import pytest
 import torch
 from fleet_fixtures import tiny_checkpoint, tiny_fleet_config, write_tiny_checkpoint  # noqa: F401
+from injected_faults import injected_faults
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
-from sray.platform.train.checkpoints import load_checkpoint
 from sray.platform.finetune.fleet import resolve_checkpoint, run_fleet, unseen_scenes
+from sray.platform.train.checkpoints import load_checkpoint
 
 CONTRACT_KEYS = {"scene", "method", "status", "error", "attempts", "steps_used", "max_steps", "stopped_early", "wall_s",
                  "miou_before", "miou_after", "psnr_after", "artifact_bytes", "full_checkpoint_bytes", "child_run_id",
@@ -50,8 +51,8 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
                                                                    mlflow_uri, tmp_path):
     out = tmp_path / "fleet"
     cfg = tiny_fleet_config()
-    cfg.fail_scenes = [FAILING]
-    results = run_fleet(cfg, tiny_checkpoint, tiny_shards, SCENES, out, mlflow_uri, ["sray"])
+    with injected_faults(f"fleet.fail_scenes={FAILING}"):
+        results = run_fleet(cfg, tiny_checkpoint, tiny_shards, SCENES, out, mlflow_uri, ["sray"])
 
     assert [r["scene"] for r in results] == SCENES
     model_bytes = sum(t.numel() * t.element_size() for t in load_checkpoint(tiny_checkpoint)["model"].values())

@@ -15,11 +15,11 @@ from sray.platform.finetune.fleet_report import human_bytes, results_table, summ
 def test_overrides_parse_each_field_type():
     cfg = FleetConfig()
     for assignment in ("finetune.patience=7", "finetune.min_delta=0.05", "finetune.rays_per_batch=128",
-                       "finetune.adapt=fine.classifier, coarse.geometry", "fail_scenes=a,b", "max_parallel=4",
+                       "finetune.adapt=fine.classifier, coarse.geometry", "max_parallel=4",
                        "gpus_per_task=0.25", "nerf.skip_layer=none", "experiment=x"):
         apply_fleet_override(cfg, assignment)
     assert cfg.finetune.patience == 7 and cfg.finetune.min_delta == 0.05 and cfg.finetune.rays_per_batch == 128
-    assert cfg.finetune.adapt == ("fine.classifier", "coarse.geometry") and cfg.fail_scenes == ["a", "b"]
+    assert cfg.finetune.adapt == ("fine.classifier", "coarse.geometry")
     assert cfg.max_parallel == 4 and cfg.gpus_per_task == 0.25 and cfg.nerf.skip_layer is None
     assert cfg.experiment == "x"
     apply_fleet_override(cfg, "finetune.rays_per_batch=None")

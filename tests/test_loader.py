@@ -6,14 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scene_fixtures
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import scene_fixtures
-
-from sray.data_tools.loader.shard_loader import (make_eval_samples, make_train_loader, slot_scenes,
-                                                 worker_batches)
+from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader, slot_scenes, worker_batches
 from sray.data_tools.loader.views import SceneCache, StoredView
 from sray.data_tools.png import encode_png
 from sray.data_tools.scene import source_pool

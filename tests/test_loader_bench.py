@@ -6,12 +6,11 @@ import re
 from pathlib import Path
 
 import pytest
-
 import scene_fixtures
 
-from sray.jobs.bench import loader_throughput as loader_bench
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
+from sray.jobs.bench import loader_throughput as loader_bench
 
 
 def _check_report(title: str, table: str, notes: str, shards: Path | None) -> None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from sray.jobs.bench.probes import attention_flops
 from sray.jobs.bench.model_cost import run_model_benchmark
+from sray.jobs.bench.probes import attention_flops
 
 
 def _analytic_forward_flops(variant: str, r: int, m: int, n: int, c: int, depth_freqs: int = 6) -> int:

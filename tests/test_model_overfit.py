@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from toy_room import FAR, N_CLASSES, NEAR, make_room, miou, one_thread, overfit
 
 from sray.model.config import SRayConfig
-from toy_room import FAR, N_CLASSES, NEAR, make_room, miou, one_thread, overfit
 
 STEPS = 120  # 128 rays, 8 + 8 samples, 4 source views per step
 

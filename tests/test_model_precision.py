@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from toy_room import FAR, N_CLASSES, NEAR, TRAIN_IDS, ToyRoom, make_room, miou, one_thread, overfit
 
 from sray.model.config import SRayConfig
 from sray.model.encoder import FEATURE_STRIDE
@@ -23,9 +24,8 @@ from sray.model.field import SRayField
 from sray.model.rays import pixel_rays
 from sray.model.rendering import PDF_EPS, sample_pdf
 from sray.model.reprojection import project
-from sray.model.source_set import SourceSet, rigid_inverse
 from sray.model.semantic_ray import SRayModel
-from toy_room import FAR, N_CLASSES, NEAR, TRAIN_IDS, ToyRoom, make_room, miou, one_thread, overfit
+from sray.model.source_set import SourceSet, rigid_inverse
 
 AUTOCAST_DTYPES = [pytest.param(torch.bfloat16, id="bf16"), pytest.param(torch.float16, id="fp16")]
 """Both CPU autocast dtypes; fp16 autocast runs on CPU in torch 2.13 (linear, conv and attention)."""

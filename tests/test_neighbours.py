@@ -5,10 +5,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+import scene_fixtures
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-import scene_fixtures
 
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.neighbours import grid_points, grid_samples, overlap_fractions, rank_neighbours

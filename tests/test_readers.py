@@ -11,9 +11,8 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from torch.testing import assert_close
-
 from source_writers import write_replica, write_scannet_export
+from torch.testing import assert_close
 
 from sray.data_tools.atomic import atomic_write_bytes
 from sray.data_tools.label_spaces import NYU40, SCANNET20, SCANNET20_NYU40_IDS

@@ -9,7 +9,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-
 from source_writers import write_replica, write_scannet_export
 
 from sray.data_tools.check.scenes import check_dataset

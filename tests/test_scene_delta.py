@@ -6,19 +6,25 @@ from pathlib import Path
 
 import pytest
 import torch
-from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config  # noqa: F401
-from fleet_fixtures import write_tiny_checkpoint
+from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config, write_tiny_checkpoint  # noqa: F401
 from safetensors import safe_open
 from train_fixtures import tiny_shards  # noqa: F401
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
-from sray.platform.train.checkpoints import load_checkpoint
-from sray.platform.finetune.scene_finetune import SceneJob, SceneOutcome, evaluate, finetune_scene
-from sray.platform.finetune.learners import SRayLearner
 from sray.platform.config.fleet_config import DEFAULT_ADAPT
-from sray.platform.finetune.scene_artifacts import (SRAY_ARTIFACT, adapted_keys, checkpoint_sha256, load_scene_model,
-                                       load_semantic_nerf, save_semantic_nerf, save_sray_delta)
+from sray.platform.finetune.learners import SRayLearner
+from sray.platform.finetune.scene_artifacts import (
+    SRAY_ARTIFACT,
+    adapted_keys,
+    checkpoint_sha256,
+    load_scene_model,
+    load_semantic_nerf,
+    save_semantic_nerf,
+    save_sray_delta,
+)
+from sray.platform.finetune.scene_finetune import SceneJob, SceneOutcome, evaluate, finetune_scene
+from sray.platform.train.checkpoints import load_checkpoint
 from sray.platform.train.state import model_from_checkpoint
 
 SCENE = "synth_test_000"

@@ -13,9 +13,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-import webdataset as wds
-
 import scene_fixtures
+import webdataset as wds
 
 from sray.data_tools import atomic
 from sray.data_tools.scene import source_pool

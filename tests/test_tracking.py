@@ -11,9 +11,17 @@ from pathlib import Path
 import pytest
 from mlflow import MlflowClient
 
-from sray.platform.tracking.runs import (PARENT_RUN_TAG, default_artifact_root, default_tracking_uri, find_run,
-                                    prepare_run, resume_run, sqlite_path, terminate_run)
 from sray.platform.tracking.params import MAX_PARAM_VALUE, TRUNCATION_MARKER, flatten_config, to_params
+from sray.platform.tracking.runs import (
+    PARENT_RUN_TAG,
+    default_artifact_root,
+    default_tracking_uri,
+    find_run,
+    prepare_run,
+    resume_run,
+    sqlite_path,
+    terminate_run,
+)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)

@@ -14,8 +14,8 @@ import pytest
 import torch
 from mlflow import MlflowClient
 
-from sray.platform.tracking.runs import RunHandle, prepare_run
 from sray.platform.tracking.logger import RunLogger
+from sray.platform.tracking.runs import RunHandle, prepare_run
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)

@@ -8,10 +8,12 @@ from pathlib import Path
 
 import pytest
 import torch
+from injected_faults import injected_faults
 from mlflow.tracking import MlflowClient
 from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
-from sray.platform.train.checkpoints import CheckpointManager, load_checkpoint
+from sray.platform.common.fault_hook import KILL_MARKER
+from sray.platform.train.checkpoints import load_checkpoint
 from sray.platform.train.launcher import launch_training
 from sray.platform.train.resources import InfeasibleRequest
 
@@ -29,8 +31,9 @@ def _history(cfg, key: str) -> list[tuple[int, float]]:
 @pytest.fixture(scope="module")
 def uninterrupted(ray_session, tiny_shards, tmp_path_factory):  # noqa: F811
     """20 steps on 2 workers with a NaN injected at step 7."""
-    cfg = tiny_config(tiny_shards, tmp_path_factory.mktemp("u"), name="uninterrupted", nan_at_step=7)
-    outcome = launch_training(cfg)
+    cfg = tiny_config(tiny_shards, tmp_path_factory.mktemp("u"), name="uninterrupted")
+    with injected_faults("train.nan_at_step=7"):
+        outcome = launch_training(cfg)
     return cfg, outcome
 
 
@@ -78,11 +81,12 @@ def test_resume_equals_uninterrupted(uninterrupted, tiny_shards, tmp_path_factor
     """Stopped after its second checkpoint and resumed to step 20: same parameters as uninterrupted."""
     ref_cfg, ref = uninterrupted
     out = tmp_path_factory.mktemp("r")
-    cfg = tiny_config(tiny_shards, out, name="stopped", nan_at_step=7, stop_after_step=10)
-    first = launch_training(cfg)
+    cfg = tiny_config(tiny_shards, out, name="stopped")
+    with injected_faults("train.nan_at_step=7;train.stop_after_step=10"):
+        first = launch_training(cfg)
     assert first.status == "KILLED" and load_checkpoint(first.latest_checkpoint)["step"] == 10
-    cfg.run.stop_after_step = -1
-    second = launch_training(cfg, resume=True)
+    with injected_faults("train.nan_at_step=7"):
+        second = launch_training(cfg, resume=True)
     assert second.status == "FINISHED"
     got = load_checkpoint(second.latest_checkpoint)["model"]
     want = load_checkpoint(ref.latest_checkpoint)["model"]
@@ -92,12 +96,13 @@ def test_resume_equals_uninterrupted(uninterrupted, tiny_shards, tmp_path_factor
 
 def test_killed_worker_resumes_without_metric_gaps(ray_session, tiny_shards, tmp_path) -> None:  # noqa: F811
     """rank 0 dies abruptly at step 12 (first attempt): the job restarts from its checkpoint and ends."""
-    cfg = tiny_config(tiny_shards, tmp_path, name="killed", fail_at_step=12)
-    outcome = launch_training(cfg)
+    cfg = tiny_config(tiny_shards, tmp_path, name="killed")
+    with injected_faults("train.kill_at_step=12"):
+        outcome = launch_training(cfg)
     assert outcome.status == "FINISHED"
     steps = sorted({s for s, _ in _history(cfg, "train/loss")})
     assert steps == list(range(1, cfg.optim.steps + 1)), steps
-    assert (Path(cfg.run.output_dir) / "killed" / ".fail_injected").exists()
+    assert (Path(cfg.run.output_dir) / "killed" / KILL_MARKER).exists()
 
 
 def test_infeasible_request_fails_fast(ray_session, tiny_shards, tmp_path) -> None:  # noqa: F811

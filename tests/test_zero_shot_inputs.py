@@ -16,9 +16,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-import torch
-
 import scene_fixtures
+import torch
 from source_writers import write_replica
 
 from sray.data_tools.label_spaces import SCANNET20

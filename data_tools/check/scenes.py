@@ -13,8 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.data_tools.check.rules import (RECONVERT, CheckLimits, Problem, intrinsics_problems,
-                                         label_problems, meta_problems, pose_problems)
+from sray.data_tools.check.rules import (
+    RECONVERT,
+    CheckLimits,
+    Problem,
+    intrinsics_problems,
+    label_problems,
+    meta_problems,
+    pose_problems,
+)
 from sray.data_tools.png import decode_png
 from sray.data_tools.scene import Scene
 from sray.data_tools.scene_folder import FORMAT, VERSION

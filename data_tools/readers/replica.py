@@ -31,8 +31,17 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import NYU40, SCANNET20, class_names
-from sray.data_tools.readers.common import (kept_view_ids, numbered_files, nyu40_to_label, read_depth_m, read_image,
-                                            read_rgb8, resample_nearest, resize_rgb, scale_intrinsics)
+from sray.data_tools.readers.common import (
+    kept_view_ids,
+    numbered_files,
+    nyu40_to_label,
+    read_depth_m,
+    read_image,
+    read_rgb8,
+    resample_nearest,
+    resize_rgb,
+    scale_intrinsics,
+)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
 CLASS_FILE = "info_semantic.json"

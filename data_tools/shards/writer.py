@@ -37,8 +37,18 @@ from sray.data_tools.png import depth_to_png16, encode_png
 from sray.data_tools.scene import Scene, View, depth_views, source_pool
 from sray.data_tools.scene_folder import list_scenes, read_scene
 from sray.data_tools.shards.manifest import MANIFEST_NAME, Manifest, SceneEntry, ShardEntry, manifest_bytes, sha256_file
-from sray.data_tools.shards.neighbours import (GRID, MIN_POINTS, RULE, RULE_VERSION, Neighbours, blind_views,
-                                               fallback_depth, grid_points, grid_samples, rank_neighbours)
+from sray.data_tools.shards.neighbours import (
+    GRID,
+    MIN_POINTS,
+    RULE,
+    RULE_VERSION,
+    Neighbours,
+    blind_views,
+    fallback_depth,
+    grid_points,
+    grid_samples,
+    rank_neighbours,
+)
 
 KEY_SEPARATOR = "__"
 """Between scene name and view id in a sample key."""

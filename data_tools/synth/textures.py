@@ -11,8 +11,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools.synth.materials import (BOOKS, FABRIC, LAMP, PAINT, PAINTING, PANELS, PLANKS, SKY,
-                                             STRIPES, TILES, WOOD, Material)
+from sray.data_tools.synth.materials import (
+    BOOKS,
+    FABRIC,
+    LAMP,
+    PAINT,
+    PAINTING,
+    PANELS,
+    PLANKS,
+    SKY,
+    STRIPES,
+    TILES,
+    WOOD,
+    Material,
+)
 
 
 def _hash(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, seed: np.ndarray) -> np.ndarray:

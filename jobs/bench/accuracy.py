@@ -111,11 +111,11 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     from sray.data_tools.shards.writer import write_shards
     from sray.data_tools.synth.dataset import generate_dataset
     from sray.jobs.bench.doc import record
-    from sray.platform.viz.charts import write_fleet_charts
-    from sray.platform.eval.zero_shot import evaluate_checkpoint
-    from sray.platform.eval.protocol import caption_lines
-    from sray.platform.finetune.fleet import run_fleet, unseen_scenes
     from sray.platform.config.fleet_config import FleetConfig
+    from sray.platform.eval.protocol import caption_lines
+    from sray.platform.eval.zero_shot import evaluate_checkpoint
+    from sray.platform.finetune.fleet import run_fleet, unseen_scenes
+    from sray.platform.viz.charts import write_fleet_charts
 
     p = PRESETS[preset]
     out = out.resolve()

@@ -40,8 +40,8 @@ def _bench_accuracy(args: argparse.Namespace) -> int:
 
 
 def _bench_loader(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.loader_throughput import run_loader_benchmark
     from sray.jobs.bench.doc import record
+    from sray.jobs.bench.loader_throughput import run_loader_benchmark
 
     title, table, notes = run_loader_benchmark(args.data, batches=args.batches)
     record(title, table, args.doc, notes)

@@ -14,8 +14,15 @@ from dataclasses import dataclass
 import torch
 from torch.nn.attention import SDPBackend
 
-from sray.jobs.bench.probes import (attention_call, attention_case, attention_flops, peak_bytes, resolve_device,
-                           time_call, train_step_worker)
+from sray.jobs.bench.probes import (
+    attention_call,
+    attention_case,
+    attention_flops,
+    peak_bytes,
+    resolve_device,
+    time_call,
+    train_step_worker,
+)
 
 VARIANTS = ("full", "intra", "cross", "dense")
 """Attention variants compared in table 1 (``none`` has no attention cost)."""

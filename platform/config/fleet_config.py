@@ -114,8 +114,6 @@ class FleetConfig:
     """MLflow experiment of the parent fleet run and its child runs."""
     address: str = ""
     """Ray cluster address; empty = start Ray locally in-process."""
-    fail_scenes: list[str] = field(default_factory=list)
-    """Testing aid: tasks of these scenes raise on every attempt (exercises retries and reporting)."""
 
     def __post_init__(self) -> None:
         """Reject settings a fleet cannot run with, naming the field and the fix."""

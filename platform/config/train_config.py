@@ -85,12 +85,10 @@ class RunSettings:
     """Worker-group restarts Ray Train attempts after a worker dies."""
     register_model: str = "sray"
     """Registered-model name the final checkpoint is registered under ('' = do not register)."""
-    fail_at_step: int = -1
-    """Testing aid: the first attempt's rank 0 exits abruptly at this step (-1 = never)."""
-    nan_at_step: int = -1
-    """Testing aid: the loss at this step is replaced by NaN (-1 = never)."""
-    stop_after_step: int = -1
-    """Stop cleanly (with a checkpoint) once this many steps are done, as if interrupted (-1 = never)."""
+
+
+RETIRED_RUN_KEYS = frozenset({"fail_at_step", "nan_at_step", "stop_after_step"})
+"""Run settings that configs written before the fault hook (``SRAY_FAULTS``) may still hold; ignored on load."""
 
 
 @dataclass
@@ -121,7 +119,7 @@ class TrainConfig:
                 model[key] = tuple(model[key])
         return cls(recipe=d.get("recipe", "custom"), model=SRayConfig(**model),
                    data=DataSettings(**d.get("data", {})), optim=OptimSettings(**d.get("optim", {})),
-                   run=RunSettings(**d.get("run", {})))
+                   run=RunSettings(**{k: v for k, v in d.get("run", {}).items() if k not in RETIRED_RUN_KEYS}))
 
     def job_dir(self) -> Path:
         """Folder of this job's checkpoints and run state."""

@@ -37,9 +37,9 @@ from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL,
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
 from sray.platform.eval.protocol import EvalProtocol
 from sray.platform.eval.view_scoring import ViewPrediction, render_view, score_views, sray_renderer
+from sray.platform.train.state import model_from_checkpoint
 from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
-from sray.platform.train.state import model_from_checkpoint
 
 METRICS_FILE = "metrics.json"
 
@@ -153,9 +153,9 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
     """
     from tqdm import tqdm
 
-    from sray.platform.train.checkpoints import read_meta
-    from sray.platform.tracking.runs import default_tracking_uri, prepare_run
     from sray.platform.tracking.logger import RunLogger
+    from sray.platform.tracking.runs import default_tracking_uri, prepare_run
+    from sray.platform.train.checkpoints import read_meta
 
     if stride < 1 or n_source < 1:
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")

@@ -29,10 +29,17 @@ from sray.data_tools.shards.manifest import read_manifest
 from sray.model.losses import render_loss
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box_from_cameras
 from sray.model.semantic_ray import SourceSet, SRayModel
-from sray.platform.eval.view_scoring import sray_renderer
 from sray.platform.config.fleet_config import SemanticNeRFSettings
-from sray.platform.finetune.scene_artifacts import (NERF_ARTIFACT, SRAY_ARTIFACT, adapted_keys, adapted_state, apply_delta,
-                                       save_semantic_nerf, save_sray_delta)
+from sray.platform.eval.view_scoring import sray_renderer
+from sray.platform.finetune.scene_artifacts import (
+    NERF_ARTIFACT,
+    SRAY_ARTIFACT,
+    adapted_keys,
+    adapted_state,
+    apply_delta,
+    save_semantic_nerf,
+    save_sray_delta,
+)
 from sray.platform.train.step import TrainStep, batch_rays, fused_adam
 
 

@@ -30,20 +30,17 @@ from torch import nn
 from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader
 from sray.data_tools.shards.manifest import read_manifest
+from sray.platform.common.fault_hook import fail_if_listed
+from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.eval.protocol import EvalProtocol
 from sray.platform.eval.view_scoring import render_view, score_views
 from sray.platform.finetune.learners import NeRFLearner, SRayLearner, build_semantic_nerf
-from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.finetune.scene_artifacts import model_bytes
 from sray.platform.train.state import model_from_checkpoint
 from sray.platform.train.step import NonFiniteTraining, step_seed
 
 RESULT_FILE = "result.json"
 """Per (scene, method) result, at ``<fleet>/scenes/<scene>/<method>/result.json`` (docs/CONTRACTS.md)."""
-
-
-class InjectedFailure(RuntimeError):
-    """Raised on purpose for scenes listed in ``FleetConfig.fail_scenes`` (a testing aid)."""
 
 
 @dataclass(frozen=True)
@@ -170,8 +167,7 @@ def finetune_scene(job: SceneJob, logger: Any = None) -> SceneOutcome:
     from sray.platform.common.progress import make_progress
 
     cfg, ft = job.config, job.config.finetune
-    if job.scene in cfg.fail_scenes:
-        raise InjectedFailure(f"scene {job.scene!r} is listed in fail_scenes (testing aid); attempt {job.attempt}")
+    fail_if_listed(job.scene, job.attempt)
     use_cuda = cfg.gpus_per_task > 0 and torch.cuda.is_available()
     device = torch.device("cuda" if use_cuda else "cpu")
     out_dir = Path(job.out_dir)
@@ -261,8 +257,8 @@ def run_scene_job(job: SceneJob) -> dict[str, Any]:
     CPUs: more threads than reserved cores oversubscribe a shared machine (measured 10x slower
     steps with 2 threads on a busy 2-core host).
     """
-    from sray.platform.tracking.runs import RunHandle
     from sray.platform.tracking.logger import RunLogger
+    from sray.platform.tracking.runs import RunHandle
 
     torch.set_num_threads(max(1, int(job.config.cpus_per_task)))
 

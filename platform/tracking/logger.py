@@ -23,8 +23,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from sray.platform.tracking.runs import RunHandle
 from sray.platform.tracking.params import sanitize_key, to_params
+from sray.platform.tracking.runs import RunHandle
 
 log = logging.getLogger(__name__)
 

@@ -14,9 +14,9 @@ created here, in one process, before any fan-out.
 from __future__ import annotations
 
 import logging
+import re
 from dataclasses import dataclass
 from pathlib import Path
-import re
 
 log = logging.getLogger(__name__)
 

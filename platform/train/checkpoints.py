@@ -2,8 +2,8 @@
 
 One checkpoint is a folder ``step_<step:09d>/`` holding
 
-* ``state.pt``: the caller's state dict (model, optimizer, scheduler, grad scaler, step, RNG from
-  :func:`capture_rng`, config as a plain dict, best metric ...) made only of tensors, dicts, lists,
+* ``state.pt``: the caller's state dict (model, optimizer, scheduler, grad scaler, step, config as a
+  plain dict, best metric ...) made only of tensors, dicts, lists,
   tuples, strings, numbers, bools and None, so it loads with ``weights_only=True``;
 * ``meta.json``: ``{"format", "version", "step", "metric", "saved_at"}``.
 
@@ -19,7 +19,6 @@ import json
 import logging
 import math
 import os
-import random
 import re
 import shutil
 import time
@@ -28,7 +27,6 @@ from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from sray.data_tools.atomic import replace_dir
@@ -43,39 +41,6 @@ _STEP_DIR = re.compile(r"^step_(\d{9,})$")
 _EXACT_LEAVES = (str, int, float, bool, type(None))
 """Plain scalar types (exact: a NumPy float64 is a float subclass that weights_only refuses)."""
 _TORCH_LEAVES = (torch.Tensor, torch.device, torch.dtype)
-
-
-# ---------------------------------------------------------------------------------------- RNG
-def capture_rng() -> dict[str, Any]:
-    """Python, NumPy (legacy global) and torch CPU/CUDA generator states, weights_only-safe."""
-    version, internal, gauss_next = random.getstate()
-    kind, keys, pos, has_gauss, cached = np.random.get_state()
-    state: dict[str, Any] = {
-        "python": {"version": version, "internal": list(internal), "gauss_next": gauss_next},
-        "numpy": {"kind": str(kind), "keys": torch.from_numpy(keys.astype(np.int64)), "pos": int(pos),
-                  "has_gauss": int(has_gauss), "cached_gaussian": float(cached)},
-        "torch": torch.get_rng_state(),
-    }
-    if torch.cuda.is_available():
-        state["cuda"] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def restore_rng(state: dict[str, Any]) -> None:
-    """Put back the generator states of :func:`capture_rng` (CUDA only if the device count matches)."""
-    py = state["python"]
-    random.setstate((py["version"], tuple(py["internal"]), py["gauss_next"]))
-    npy = state["numpy"]
-    np.random.set_state((npy["kind"], npy["keys"].numpy().astype(np.uint32), npy["pos"], npy["has_gauss"],
-                         npy["cached_gaussian"]))
-    torch.set_rng_state(state["torch"])
-    cuda = state.get("cuda")
-    if cuda is not None:
-        if torch.cuda.is_available() and torch.cuda.device_count() == len(cuda):
-            torch.cuda.set_rng_state_all(cuda)
-        else:
-            log.warning("checkpoint holds CUDA RNG states for %d devices; this process sees %d: not restored",
-                        len(cuda), torch.cuda.device_count() if torch.cuda.is_available() else 0)
 
 
 # ------------------------------------------------------------------------------ single folder

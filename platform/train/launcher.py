@@ -17,12 +17,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sray.platform.common.fault_hook import propagated_env
+from sray.platform.config.train_config import TrainConfig
+from sray.platform.tracking.runs import RunHandle, default_tracking_uri, prepare_run, resume_run, terminate_run
 from sray.platform.train.checkpoints import CheckpointManager
 from sray.platform.train.resources import check_feasible
-from sray.platform.tracking.runs import RunHandle, default_tracking_uri, prepare_run, resume_run, terminate_run
-from sray.platform.config.train_config import TrainConfig
-from sray.platform.train.worker import STOP_FILE, train_worker
 from sray.platform.train.validation import validation_protocol
+from sray.platform.train.worker import STOP_FILE, train_worker
 
 CONFIG_FILE = "config.json"
 """The job's full config, written into its folder (and logged as an artifact)."""
@@ -151,7 +152,8 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
             resources_per_worker={"CPU": cfg.run.cpus_per_worker, **({"GPU": cfg.run.gpus_per_worker}
                                                                        if cfg.run.gpus_per_worker > 0 else {})}),
         run_config=ray.train.RunConfig(name=cfg.run.name, storage_path=str(job_dir / "ray"),
-                                       failure_config=ray.train.FailureConfig(max_failures=cfg.run.max_failures)))
+                                       failure_config=ray.train.FailureConfig(max_failures=cfg.run.max_failures),
+                                       worker_runtime_env={"env_vars": propagated_env()}))
     previous = _install_stop_handler(job_dir)
     status = "FAILED"
     try:

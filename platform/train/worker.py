@@ -7,7 +7,6 @@ renders validation images; every rank reports to Ray at the same steps.
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 from typing import Any
@@ -15,16 +14,15 @@ from typing import Any
 import torch
 
 from sray.model.losses import render_loss
-from sray.platform.train.checkpoints import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
+from sray.platform.common.fault_hook import active_faults, kill_if_due
 from sray.platform.config.train_config import TrainConfig
+from sray.platform.tracking.runs import RunHandle
+from sray.platform.train.checkpoints import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
 from sray.platform.train.state import build_training, restore_training, training_state
 from sray.platform.train.step import TrainStep, batch_rays, step_seed
-from sray.platform.tracking.runs import RunHandle
 
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
-FAIL_MARKER = ".fail_injected"
-"""Written before an injected crash, so that only the first attempt crashes."""
 
 
 def _to(batch: dict[str, Any], device: torch.device) -> dict[str, Any]:
@@ -70,6 +68,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     rank, world = ctx.get_world_rank(), ctx.get_world_size()
     job_dir = cfg.job_dir()
     stop_file = job_dir / STOP_FILE
+    faults = active_faults()
 
     use_cuda = cfg.run.gpus_per_worker > 0 and torch.cuda.is_available()
     # Accelerate places the model and wraps it for DDP; autocast and loss scaling are the shared
@@ -133,10 +132,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     step = start
     try:
         while step < cfg.optim.steps:
-            if rank == 0 and step == cfg.run.fail_at_step and not (job_dir / FAIL_MARKER).exists():
-                (job_dir / FAIL_MARKER).touch()
-                logger.flush(force=True)
-                os._exit(17)  # testing aid: an abrupt worker death
+            kill_if_due(faults, step, rank, job_dir, before_exit=lambda: logger.flush(force=True))
 
             if step % epoch_len == 0 and step != start:
                 batches = batches_from(step)
@@ -147,9 +143,9 @@ def train_worker(payload: dict[str, Any]) -> None:
             with train_step.autocast():
                 out = model(batch["src_rgb"], batch["src_K"], batch["src_c2w"], origins, dirs, near, far)
             loss, terms = render_loss(out, batch["target_label"], batch["target_rgb"], cfg.model)
-            if step == cfg.run.nan_at_step:
+            if step == faults.nan_at_step:
                 loss = loss * float("nan")
-            stop_asked = stop_file.exists() or step + 1 == cfg.run.stop_after_step
+            stop_asked = stop_file.exists() or step + 1 == faults.stop_after_step
             outcome = train_step(loss, stop_requested=stop_asked)
             scheduler.step()
             if outcome.applied:

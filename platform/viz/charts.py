@@ -27,11 +27,18 @@ from typing import Any
 
 import numpy as np
 
-from sray.platform.viz.figure_io import save_png
 from sray.model.metrics import DATASET_PROTOCOL
-from sray.platform.viz.curves import (METHODS, average_curves, check_result, curve_xy, failure_note, is_chartable,
-                                         zero_shot_value)
 from sray.platform.eval.protocol import caption_lines
+from sray.platform.viz.curves import (
+    METHODS,
+    average_curves,
+    check_result,
+    curve_xy,
+    failure_note,
+    is_chartable,
+    zero_shot_value,
+)
+from sray.platform.viz.figure_io import save_png
 
 log = logging.getLogger(__name__)
 

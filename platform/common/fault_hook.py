@@ -1,0 +1,107 @@
+"""The one fault-injection hook of sray: the ``SRAY_FAULTS`` environment variable, read only here.
+
+Tests (and cluster drills) break a run on purpose without touching user-facing configs::
+
+    SRAY_FAULTS="train.kill_at_step=12;train.nan_at_step=7;fleet.fail_scenes=scene_a,scene_b"
+
+Entries are ``key=value`` separated by ``;``; lists are comma-separated. Keys:
+
+* ``train.kill_at_step``: rank 0 of a training job exits abruptly (``os._exit``) at that step, on the
+  first attempt only (a marker file in the job folder remembers it), so Ray Train restarts the workers;
+* ``train.nan_at_step``: the training loss at that step becomes NaN (the non-finite guard must skip it);
+* ``train.stop_after_step``: the job stops cleanly with a checkpoint once that many steps are done, as
+  after Ctrl-C;
+* ``fleet.fail_scenes``: every attempt of a fleet task for these scenes raises :class:`InjectedFailure`.
+
+The driver forwards the variable to Ray Train workers and fleet tasks (:func:`propagated_env`), so
+the hook reaches every process of a run, on one machine or a cluster.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+ENV_VAR = "SRAY_FAULTS"
+"""Name of the environment variable that carries the faults."""
+
+KILL_MARKER = ".fault_kill_done"
+"""File in a training job folder that records that the injected kill already happened."""
+
+KILL_EXIT_CODE = 17
+"""Exit status of a worker killed by ``train.kill_at_step``."""
+
+
+class InjectedFailure(RuntimeError):
+    """Raised on purpose by ``fleet.fail_scenes`` (the failure a retry and a report must survive)."""
+
+
+@dataclass(frozen=True)
+class Faults:
+    """The faults of this process's run (all off by default)."""
+
+    kill_at_step: int = -1
+    """Training step at which rank 0 dies abruptly on the first attempt (-1 = never)."""
+    nan_at_step: int = -1
+    """Training step whose loss becomes NaN (-1 = never)."""
+    stop_after_step: int = -1
+    """Steps after which training stops cleanly with a checkpoint (-1 = never)."""
+    fail_scenes: tuple[str, ...] = ()
+    """Scenes whose fleet tasks raise on every attempt."""
+
+
+_KEYS = {"train.kill_at_step": "kill_at_step", "train.nan_at_step": "nan_at_step",
+         "train.stop_after_step": "stop_after_step", "fleet.fail_scenes": "fail_scenes"}
+
+
+def parse_faults(text: str) -> Faults:
+    """Parse a ``SRAY_FAULTS`` value; an unknown key or a bad number is a ``ValueError`` naming it."""
+    values: dict[str, object] = {}
+    for entry in filter(None, (part.strip() for part in text.split(";"))):
+        key, sep, raw = entry.partition("=")
+        key = key.strip()
+        if not sep or key not in _KEYS:
+            raise ValueError(f"{ENV_VAR}: cannot read {entry!r}; write key=value entries separated by ';' "
+                             f"with keys {sorted(_KEYS)}")
+        field = _KEYS[key]
+        if field == "fail_scenes":
+            values[field] = tuple(s.strip() for s in raw.split(",") if s.strip())
+            continue
+        try:
+            values[field] = int(raw)
+        except ValueError:
+            raise ValueError(f"{ENV_VAR}: {key} must be an integer step, got {raw!r}") from None
+    return Faults(**values)  # type: ignore[arg-type]
+
+
+def active_faults() -> Faults:
+    """The faults set in this process's environment (none when ``SRAY_FAULTS`` is unset)."""
+    return parse_faults(os.environ.get(ENV_VAR, ""))
+
+
+def propagated_env() -> dict[str, str]:
+    """``{"SRAY_FAULTS": value}`` when set here, else ``{}``: the ``env_vars`` of a Ray runtime env."""
+    value = os.environ.get(ENV_VAR, "")
+    return {ENV_VAR: value} if value else {}
+
+
+def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path, before_exit: Callable[[], None] | None = None) -> None:
+    """Exit this process abruptly at ``faults.kill_at_step`` (rank 0, first attempt only).
+
+    ``before_exit``: run just before the exit (e.g. flushing the tracker).
+    """
+    marker = job_dir / KILL_MARKER
+    if rank != 0 or step != faults.kill_at_step or marker.exists():
+        return
+    marker.touch()
+    if before_exit is not None:
+        before_exit()
+    os._exit(KILL_EXIT_CODE)
+
+
+def fail_if_listed(scene: str, attempt: int) -> None:
+    """Raise :class:`InjectedFailure` when ``scene`` is listed in ``fleet.fail_scenes``."""
+    if scene in active_faults().fail_scenes:
+        raise InjectedFailure(f"scene {scene!r} is listed in {ENV_VAR} fleet.fail_scenes; attempt {attempt}")

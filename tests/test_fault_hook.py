@@ -1,0 +1,88 @@
+"""The fault hook: ``SRAY_FAULTS`` parsing, its errors, and each fault's effect in a real process."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from injected_faults import injected_faults
+
+from sray.platform.common.fault_hook import (
+    ENV_VAR,
+    KILL_EXIT_CODE,
+    KILL_MARKER,
+    Faults,
+    InjectedFailure,
+    active_faults,
+    fail_if_listed,
+    parse_faults,
+    propagated_env,
+)
+from sray.platform.config.train_config import TrainConfig
+
+
+def test_parse_reads_every_key_and_defaults_to_off() -> None:
+    assert parse_faults("") == Faults()
+    got = parse_faults(" train.kill_at_step=12 ; train.nan_at_step=7;train.stop_after_step=10;fleet.fail_scenes=a, b ;")
+    assert got == Faults(kill_at_step=12, nan_at_step=7, stop_after_step=10, fail_scenes=("a", "b"))
+
+
+@pytest.mark.parametrize("text, named", [("train.kill_at=3", "train.kill_at"), ("train.nan_at_step=x", "integer"),
+                                         ("fleet.fail_scenes", "key=value")])
+def test_parse_errors_name_the_entry_and_the_fix(text: str, named: str) -> None:
+    with pytest.raises(ValueError, match=ENV_VAR) as err:
+        parse_faults(text)
+    assert named in str(err.value)
+
+
+def test_env_is_read_and_forwarded_only_while_set(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(ENV_VAR, raising=False)
+    assert active_faults() == Faults() and propagated_env() == {}
+    with injected_faults("fleet.fail_scenes=s1"):
+        assert active_faults().fail_scenes == ("s1",)
+        assert propagated_env() == {ENV_VAR: "fleet.fail_scenes=s1"}
+        with pytest.raises(InjectedFailure, match="'s1'"):
+            fail_if_listed("s1", attempt=1)
+        fail_if_listed("s2", attempt=1)
+    assert active_faults() == Faults()
+
+
+KILL_SCRIPT = """
+import sys
+from pathlib import Path
+from sray.platform.common.fault_hook import active_faults, kill_if_due
+job = Path(sys.argv[1])
+for step in range(5):
+    kill_if_due(active_faults(), step, int(sys.argv[2]), job, before_exit=lambda: print("flushed", flush=True))
+    print("step", step, flush=True)
+"""
+
+
+def _run_kill_script(job: Path, rank: int, env_faults: str) -> subprocess.CompletedProcess:
+    import os
+
+    env = dict(os.environ, **{ENV_VAR: env_faults})
+    return subprocess.run([sys.executable, "-c", KILL_SCRIPT, str(job), str(rank)], env=env, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_kill_happens_once_on_rank_zero_only(tmp_path: Path) -> None:
+    """A real process dies at the step (after the flush), leaves the marker; a restart runs through."""
+    first = _run_kill_script(tmp_path, 0, "train.kill_at_step=3")
+    assert first.returncode == KILL_EXIT_CODE and first.stdout.split("\n")[-2] == "flushed"
+    assert "step 2" in first.stdout and "step 3" not in first.stdout
+    assert (tmp_path / KILL_MARKER).exists()
+    again = _run_kill_script(tmp_path, 0, "train.kill_at_step=3")
+    assert again.returncode == 0 and "step 4" in again.stdout
+    other = tmp_path / "rank1"
+    other.mkdir()
+    assert _run_kill_script(other, 1, "train.kill_at_step=3").returncode == 0
+
+
+def test_configs_written_before_the_hook_still_load() -> None:
+    """A job config that still holds the retired testing fields loads (they are ignored)."""
+    d = TrainConfig().to_dict()
+    d["run"].update(fail_at_step=3, nan_at_step=4, stop_after_step=5)
+    assert TrainConfig.from_dict(d).to_dict() == TrainConfig().to_dict()
