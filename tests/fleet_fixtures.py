@@ -14,8 +14,8 @@ import pytest
 import torch
 from train_fixtures import tiny_config
 
+from sray.platform.checkpoints.folders import write_checkpoint
 from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.train.checkpoints import write_checkpoint
 from sray.platform.train.state import RayBatchModel, lr_lambda, training_state
 
 

@@ -7,8 +7,9 @@ from pathlib import Path
 import torch
 from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
-from sray.platform.train.checkpoints import load_checkpoint, write_checkpoint
-from sray.platform.train.state import build_training, model_from_checkpoint, restore_training, training_state
+from sray.platform.checkpoints.folders import load_checkpoint, write_checkpoint
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.train.state import build_training, restore_training, training_state
 
 
 def test_new_checkpoints_hold_bare_keys_and_legacy_ones_still_load(tiny_shards: Path, tmp_path: Path) -> None:

@@ -11,8 +11,8 @@ import torch
 from rng_state import capture_rng, restore_rng
 from torch import nn
 
-from sray.platform.train import checkpoints
-from sray.platform.train.checkpoints import (
+from sray.platform.checkpoints import folders as checkpoints
+from sray.platform.checkpoints.folders import (
     CheckpointManager,
     check_weights_only_safe,
     from_ray_checkpoint,

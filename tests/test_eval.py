@@ -33,7 +33,7 @@ N_SOURCE, STRIDE = 3, 2
 @pytest.fixture(scope="module")
 def tiny_checkpoint(tiny_shards, tmp_path_factory) -> Path:
     """An untrained tiny S-Ray checkpoint in a ``sray train`` job layout."""
-    from sray.platform.train.checkpoints import write_checkpoint
+    from sray.platform.checkpoints.folders import write_checkpoint
     from sray.platform.train.state import build_training, training_state
 
     root = tmp_path_factory.mktemp("eval-ckpt")

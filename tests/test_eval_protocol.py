@@ -9,7 +9,7 @@ import pytest
 import torch
 from train_fixtures import tiny_shards  # noqa: F401  (pytest fixture, used by name)
 
-from sray.platform.eval.protocol import EvalProtocol, caption_lines
+from sray.platform.common.eval_protocol import EvalProtocol, caption_lines
 from sray.platform.eval.view_scoring import ViewPrediction, score_views
 
 JSON_KEYS = {"source_rule", "n_source", "stride", "render", "inputs", "miou", "miou_per_image"}

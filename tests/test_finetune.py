@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from train_fixtures import tiny_shards  # noqa: F401
 
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.finetune.scene_artifacts import adapted_keys, checkpoint_sha256
 from sray.platform.finetune.scene_finetune import EarlyStopping, SceneJob, finetune_scene
-from sray.platform.train.state import model_from_checkpoint
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 

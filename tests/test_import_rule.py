@@ -34,3 +34,76 @@ def test_folder_keeps_the_import_rule(folder: str) -> None:
     broken = [f"{path.relative_to(REPO)} imports {name}" for path in files for name in imported_modules(path)
               if any(name == bad or name.startswith(bad + ".") for bad in FORBIDDEN[folder])]
     assert not broken, "\n".join(broken)
+
+
+PRODUCT = ("model", "data_tools", "platform", "jobs")
+"""The four top-level folders installed as ``sray.<folder>``."""
+
+PLATFORM_LEVELS = {"common": 0, "config": 0, "checkpoints": 1, "tracking": 1, "viz": 1, "eval": 2, "train": 3,
+                   "finetune": 4}
+"""docs/architecture.md: a ``platform`` sub-package imports only itself and sub-packages of a lower level."""
+
+MAX_LINES = 300
+"""No product file is longer than this (one job per file)."""
+
+
+def _module_name(path: Path) -> str:
+    return "sray." + ".".join(path.relative_to(REPO).with_suffix("").parts)
+
+
+def _product_files() -> list[Path]:
+    return sorted(p for folder in PRODUCT for p in (REPO / folder).rglob("*.py"))
+
+
+def test_platform_subpackages_import_only_downwards() -> None:
+    """Every platform sub-package has a level; imports between them point strictly downwards."""
+    files = sorted((REPO / "platform").rglob("*.py"))
+    packages = {p.relative_to(REPO / "platform").parts[0] for p in files}
+    assert packages == set(PLATFORM_LEVELS), "give each new platform sub-package a level here and in docs"
+    broken = []
+    for path in files:
+        own = path.relative_to(REPO / "platform").parts[0]
+        for name in imported_modules(path):
+            parts = name.split(".")
+            if parts[:2] == ["sray", "platform"] and len(parts) > 2 and parts[2] != own:
+                if PLATFORM_LEVELS[parts[2]] >= PLATFORM_LEVELS[own]:
+                    broken.append(f"{path.relative_to(REPO)} ({own}) imports {name}")
+    assert not broken, "\n".join(broken)
+
+
+def test_no_import_cycles_between_product_modules() -> None:
+    """The module import graph of the product (imports anywhere in a file) has no cycle."""
+    files = _product_files()
+    known = {_module_name(p) for p in files}
+    graph = {_module_name(p): {n for n in imported_modules(p) if n in known} for p in files}
+    state: dict[str, int] = {}
+    cycles: list[str] = []
+
+    def visit(node: str, trail: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                cycles.append(" -> ".join(trail[trail.index(nxt):] + [node, nxt]) if nxt in trail else f"{node} -> {nxt}")
+            elif nxt not in state:
+                visit(nxt, trail + [node])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [])
+    assert not cycles, "\n".join(cycles)
+
+
+def test_model_imports_no_platform_library() -> None:
+    """``model`` can be lifted into any project: no ray, mlflow, accelerate or webdataset."""
+    banned = ("ray", "mlflow", "accelerate", "webdataset")
+    broken = [f"{p.relative_to(REPO)} imports {n}" for p in sorted((REPO / "model").rglob("*.py"))
+              for n in imported_modules(p) if n.split(".")[0] in banned]
+    assert not broken, "\n".join(broken)
+
+
+def test_product_files_stay_short() -> None:
+    """One job per file: no product file over ``MAX_LINES`` lines."""
+    long = [f"{p.relative_to(REPO)}: {n}" for p in _product_files()
+            if (n := len(p.read_text().splitlines())) > MAX_LINES]
+    assert not long, "\n".join(long)

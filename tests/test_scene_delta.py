@@ -12,6 +12,8 @@ from train_fixtures import tiny_shards  # noqa: F401
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
+from sray.platform.checkpoints.folders import load_checkpoint
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.config.fleet_config import DEFAULT_ADAPT
 from sray.platform.finetune.learners import SRayLearner
 from sray.platform.finetune.scene_artifacts import (
@@ -24,8 +26,6 @@ from sray.platform.finetune.scene_artifacts import (
     save_sray_delta,
 )
 from sray.platform.finetune.scene_finetune import SceneJob, SceneOutcome, evaluate, finetune_scene
-from sray.platform.train.checkpoints import load_checkpoint
-from sray.platform.train.state import model_from_checkpoint
 
 SCENE = "synth_test_000"
 pytestmark = pytest.mark.usefixtures("one_thread")

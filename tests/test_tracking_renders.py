@@ -14,7 +14,7 @@ from hypothesis.extra import numpy as hnp
 from sray.data_tools.label_spaces import NYU40, SCANNET20
 from sray.data_tools.scene import IGNORE_ID
 from sray.platform.viz.palette import IGNORE_COLOR, SCANNET20_COLORS, colorize, palette
-from sray.platform.viz.renders import CORRECT_COLOR, ERROR_COLOR, error_map, panel_layout, render_panel
+from sray.platform.viz.renders import CORRECT_COLOR, ERROR_COLOR, error_map, panel_grid, render_panel
 
 
 def _lab(colors: np.ndarray) -> np.ndarray:
@@ -85,13 +85,13 @@ def test_panel_png_reads_back_with_the_right_colours(tmp_path):
     assert sorted(p.name for p in path.parent.iterdir()) == ["view.png"]  # no temp file left
 
     legend_ids = [0, 1, 3, 4, 6]
-    layout = panel_layout((30, 40), len(legend_ids) + 1)  # + the unlabelled entry
-    assert image.shape[:2] == layout.size
-    s = layout.scale
+    grid = panel_grid((30, 40), len(legend_ids) + 1)  # + the unlabelled entry
+    assert image.shape[:2] == grid.size
+    s = grid.scale
 
     def tile(name: str) -> np.ndarray:
         """The tile's pixels, sampled back to the view's resolution (one pixel per enlarged block)."""
-        x, y, w, h = layout.tiles[name]
+        x, y, w, h = grid.tiles[name]
         return image[y + s // 2:y + h:s, x + s // 2:x + w:s]
 
     np.testing.assert_array_equal(tile("pred_sem"), colorize(pred, 20))
@@ -104,7 +104,7 @@ def test_panel_png_reads_back_with_the_right_colours(tmp_path):
     assert tuple(errors[5, 2]) == (0, 0, 0)  # unlabelled: never an error, whatever was predicted
     assert (errors == ERROR_COLOR).all(axis=-1).sum() == 4 * 6
 
-    swatch_colors = [tuple(image[y + 5, x + 5]) for x, y in layout.swatches]
+    swatch_colors = [tuple(image[y + 5, x + 5]) for x, y in grid.swatches]
     assert swatch_colors == [SCANNET20_COLORS[c] for c in legend_ids] + [IGNORE_COLOR]
 
 

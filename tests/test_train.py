@@ -12,8 +12,8 @@ from injected_faults import injected_faults
 from mlflow.tracking import MlflowClient
 from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
+from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.common.fault_hook import KILL_MARKER
-from sray.platform.train.checkpoints import load_checkpoint
 from sray.platform.train.launcher import launch_training
 from sray.platform.train.resources import InfeasibleRequest
 

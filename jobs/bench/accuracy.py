@@ -8,7 +8,7 @@
    from scratch under the same wall-clock budget, read off at equal budgets (the paper's
    per-scene optimisation table);
 4. tables and charts appended to docs/benchmarks.md with the exact command, each table with the
-   protocol line(s) of the numbers in it (:func:`sray.platform.eval.protocol.caption_lines`); the
+   protocol line(s) of the numbers in it (:func:`sray.platform.common.eval_protocol.caption_lines`); the
    stored results (``<out>/eval/<variant>/metrics.json``, the fleet's ``result.json`` files) carry
    the protocol descriptor.
 """
@@ -111,8 +111,8 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     from sray.data_tools.shards.writer import write_shards
     from sray.data_tools.synth.dataset import generate_dataset
     from sray.jobs.bench.doc import record
+    from sray.platform.common.eval_protocol import caption_lines
     from sray.platform.config.fleet_config import FleetConfig
-    from sray.platform.eval.protocol import caption_lines
     from sray.platform.eval.zero_shot import evaluate_checkpoint
     from sray.platform.finetune.fleet import run_fleet, unseen_scenes
     from sray.platform.viz.charts import write_fleet_charts

@@ -7,7 +7,7 @@ optimisation.
 
 Outputs under ``out_dir``:
 
-* ``metrics.json`` (atomic): ``protocol`` (:class:`sray.platform.eval.protocol.EvalProtocol`: source
+* ``metrics.json`` (atomic): ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`: source
   rule from the shard manifest, source views, stride, render mode, inputs), then per scene and the
   mean over scenes, in blocks that each name their metric protocol: ``dataset_level`` (mIoU, total
   and class-average accuracy from one confusion matrix per scene), ``per_image`` (mIoU per view,
@@ -35,9 +35,9 @@ from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
-from sray.platform.eval.protocol import EvalProtocol
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.view_scoring import ViewPrediction, render_view, score_views, sray_renderer
-from sray.platform.train.state import model_from_checkpoint
 from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
 
@@ -153,9 +153,9 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
     """
     from tqdm import tqdm
 
+    from sray.platform.checkpoints.folders import read_meta
     from sray.platform.tracking.logger import RunLogger
     from sray.platform.tracking.runs import default_tracking_uri, prepare_run
-    from sray.platform.train.checkpoints import read_meta
 
     if stride < 1 or n_source < 1:
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")

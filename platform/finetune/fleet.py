@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
+from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.config.fleet_config import METHODS, FleetConfig, check_fleet_config
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
@@ -34,7 +35,6 @@ from sray.platform.finetune.scene_artifacts import checkpoint_sha256, state_file
 from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneJob, run_scene_job, write_result
 from sray.platform.tracking.fleet_parent_run import parent_run, tag_run
 from sray.platform.tracking.runs import RunHandle, default_tracking_uri, ensure_store, prepare_run, terminate_run
-from sray.platform.train.checkpoints import CheckpointManager
 
 log = logging.getLogger(__name__)
 
@@ -218,11 +218,11 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     empty = the working directory's SQLite store. Ray is started locally unless ``cfg.address``
     names a cluster (or Ray is already running in this process).
     """
+    from sray.platform.checkpoints.model_loading import model_from_checkpoint
     from sray.platform.finetune.scene_artifacts import model_bytes
     from sray.platform.tracking.logger import RunLogger
     from sray.platform.train.launcher import init_ray
     from sray.platform.train.resources import check_feasible
-    from sray.platform.train.state import model_from_checkpoint
 
     check_fleet_config(cfg)
     checkpoint, shards, out_dir = resolve_checkpoint(checkpoint), Path(shards).resolve(), Path(out_dir).resolve()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from sray.platform.eval.protocol import caption_lines
+from sray.platform.common.eval_protocol import caption_lines
 
 COLUMNS = ("scene", "method", "status", "attempts", "steps used", "train time (s)", "mIoU before", "mIoU after",
            "PSNR after (dB)", "artifact", "of full model", "note")

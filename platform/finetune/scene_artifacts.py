@@ -28,7 +28,7 @@ from sray.data_tools.atomic import atomic_write_bytes
 from sray.data_tools.shards.manifest import sha256_file
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.model.semantic_ray import SRayModel
-from sray.platform.train.checkpoints import STATE_FILE
+from sray.platform.checkpoints.folders import STATE_FILE
 
 SRAY_ARTIFACT = "sray_delta.safetensors"
 """File name of an S-Ray scene artifact inside ``<fleet>/scenes/<scene>/sray/``."""
@@ -136,7 +136,7 @@ def load_scene_model(base_checkpoint: Path, artifact: Path, map_location: str = 
 
     Refuses (ValueError) an artifact whose recorded base checksum is not the checkpoint's.
     """
-    from sray.platform.train.state import model_from_checkpoint
+    from sray.platform.checkpoints.model_loading import model_from_checkpoint
 
     tensors, metadata = read_sray_delta(artifact)
     actual = checkpoint_sha256(base_checkpoint)

@@ -5,7 +5,7 @@ scenes: ``train`` minus held-out views) with the shared loss, and are scored on 
 views rendered from their fixed source views (``make_eval_samples``), every ``eval_every`` steps and
 at step 0 (zero-shot S-Ray, untrained Semantic-NeRF). The score is the dataset-level mIoU (one
 confusion matrix over the scene's held-out views); how it was made (sources, stride, render mode,
-inputs) is the result's ``protocol`` (:class:`sray.platform.eval.protocol.EvalProtocol`). A
+inputs) is the result's ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`). A
 finetune stops at the first of: ``patience`` evaluations without an improvement > ``min_delta``
 (early stop), ``max_steps``, ``max_seconds`` of training time. The best evaluated state is kept
 and stored as the scene artifact (:mod:`sray.platform.finetune.scene_artifacts`). Sampling uses the scene's own
@@ -30,13 +30,13 @@ from torch import nn
 from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader
 from sray.data_tools.shards.manifest import read_manifest
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
 from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.eval.protocol import EvalProtocol
 from sray.platform.eval.view_scoring import render_view, score_views
 from sray.platform.finetune.learners import NeRFLearner, SRayLearner, build_semantic_nerf
 from sray.platform.finetune.scene_artifacts import model_bytes
-from sray.platform.train.state import model_from_checkpoint
 from sray.platform.train.step import NonFiniteTraining, step_seed
 
 RESULT_FILE = "result.json"

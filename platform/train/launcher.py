@@ -17,10 +17,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.runs import RunHandle, default_tracking_uri, prepare_run, resume_run, terminate_run
-from sray.platform.train.checkpoints import CheckpointManager
 from sray.platform.train.resources import check_feasible
 from sray.platform.train.validation import validation_protocol
 from sray.platform.train.worker import STOP_FILE, train_worker
@@ -194,7 +194,7 @@ def _fit_in_thread(trainer: Any) -> None:
 
 def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:
     latest = CheckpointManager(job_dir / "checkpoints").latest()
-    from sray.platform.train.checkpoints import read_meta
+    from sray.platform.checkpoints.folders import read_meta
 
     return latest is None or read_meta(latest)["step"] < cfg.optim.steps
 

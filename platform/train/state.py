@@ -10,6 +10,7 @@ from torch import Tensor, nn
 
 from sray.model.config import SRayConfig
 from sray.model.semantic_ray import SRayModel
+from sray.platform.checkpoints.model_loading import bare_model_keys
 from sray.platform.config.train_config import OptimSettings, TrainConfig
 from sray.platform.train.step import fused_adam
 
@@ -58,17 +59,6 @@ def build_training(cfg: TrainConfig) -> tuple[RayBatchModel, torch.optim.Optimiz
     return model, optimizer, scheduler
 
 
-LEGACY_PREFIX = "net."
-"""Checkpoints written before 2026-11-23 stored the training wrapper's keys (``net.`` + the model's)."""
-
-
-def bare_model_keys(weights: dict[str, Tensor]) -> dict[str, Tensor]:
-    """A checkpoint's model weights under the bare ``SRayModel`` keys (legacy ``net.`` keys stripped)."""
-    if weights and all(k.startswith(LEGACY_PREFIX) for k in weights):
-        return {k[len(LEGACY_PREFIX):]: v for k, v in weights.items()}
-    return dict(weights)
-
-
 def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler: Any, scaler: Any,
                    step: int, cfg: TrainConfig, best_metric: float | None, counters: dict[str, int]) -> dict[str, Any]:
     """Full checkpoint state (weights_only-safe) of the bare model: the step is the NEXT step to run."""
@@ -96,19 +86,3 @@ def restore_training(state: dict[str, Any], model: SRayModel, optimizer: torch.o
     if scaler is not None and "scaler" in state:
         scaler.load_state_dict(state["scaler"])
     return int(state["step"]), state.get("best_metric"), dict(state.get("counters", {}))
-
-
-def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayModel, TrainConfig]:
-    """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder."""
-    from pathlib import Path
-
-    from sray.platform.train.checkpoints import load_checkpoint
-
-    state = load_checkpoint(Path(path), map_location)
-    if any(k.endswith("attention.pos") for k in state["model"]):
-        raise ValueError(f"{path}: this checkpoint embeds sample ranks (sray before the depth position signal "
-                         "of issue 8); it cannot be loaded into the current model. Retrain it with `sray train`.")
-    cfg = TrainConfig.from_dict(state["config"])
-    net = SRayModel(cfg.model)
-    net.load_state_dict(bare_model_keys(state["model"]))
-    return net.eval(), cfg

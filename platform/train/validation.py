@@ -20,8 +20,8 @@ from torch import nn
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
+from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.config.train_config import TrainConfig
-from sray.platform.eval.protocol import EvalProtocol
 from sray.platform.eval.view_scoring import ViewPrediction, render_view, score_views, sray_renderer
 from sray.platform.viz.renders import render_panel
 

@@ -14,10 +14,10 @@ from typing import Any
 import torch
 
 from sray.model.losses import render_loss
+from sray.platform.checkpoints.folders import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
 from sray.platform.common.fault_hook import active_faults, kill_if_due
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.runs import RunHandle
-from sray.platform.train.checkpoints import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
 from sray.platform.train.state import build_training, restore_training, training_state
 from sray.platform.train.step import TrainStep, batch_rays, step_seed
 

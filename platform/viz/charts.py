@@ -12,7 +12,7 @@ From the fleet result dicts (docs/CONTRACTS.md, "Fleet results"), :func:`write_f
   scene stores besides the shared model (log axis), one point per (scene, method); zero-shot S-Ray
   stores nothing and sits on a separate "0 B" tick left of an axis break.
 
-Every chart's footnote carries the results' protocol line(s) (:func:`sray.platform.eval.protocol.caption_lines`).
+Every chart's footnote carries the results' protocol line(s) (:func:`sray.platform.common.eval_protocol.caption_lines`).
 Failed results are left out and named in a footnote. Matplotlib's Agg canvas is used directly (no
 pyplot state), so this is safe in Ray workers and threads.
 """
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from sray.model.metrics import DATASET_PROTOCOL
-from sray.platform.eval.protocol import caption_lines
+from sray.platform.common.eval_protocol import caption_lines
 from sray.platform.viz.curves import (
     METHODS,
     average_curves,

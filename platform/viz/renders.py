@@ -1,12 +1,12 @@
 """One PNG per evaluated view: semantics and colour, predicted next to ground truth, errors, legend.
 
-Layout (tiles are the view's pixels, enlarged by an integer factor, never resampled)::
+Grid (tiles are the view's pixels, enlarged by an integer factor, never resampled)::
 
     title
     predicted semantics | ground-truth semantics | error map
     predicted colour    | ground-truth colour    | legend (classes present)
 
-Tiles are placed with ``Figure.figimage`` at exact pixel offsets (:func:`panel_layout` gives
+Tiles are placed with ``Figure.figimage`` at exact pixel offsets (:func:`panel_grid` gives
 them), so a test can read class colours back from the file. Matplotlib's Agg canvas is used
 directly (no pyplot state), which is safe in Ray workers and threads.
 """
@@ -44,7 +44,7 @@ _DPI = 100
 
 
 @dataclass(frozen=True)
-class PanelLayout:
+class PanelGrid:
     """Pixel geometry of a panel PNG (x right, y down, origin top-left)."""
 
     size: tuple[int, int]
@@ -57,7 +57,7 @@ class PanelLayout:
     """Top-left (x, y) of each legend swatch: classes present by id, then the ignore label if present."""
 
 
-def panel_layout(hw: tuple[int, int], n_legend: int) -> PanelLayout:
+def panel_grid(hw: tuple[int, int], n_legend: int) -> PanelGrid:
     """Geometry of a panel for views of size ``hw`` with ``n_legend`` legend entries."""
     h, w = hw
     scale = max(1, math.ceil(MIN_TILE_HEIGHT / h))
@@ -74,7 +74,7 @@ def panel_layout(hw: tuple[int, int], n_legend: int) -> PanelLayout:
     swatches = [(xs[2] + (i // rows_per_col) * LEGEND_COLUMN, ys[1] + (i % rows_per_col) * LEGEND_ROW)
                 for i in range(n_legend)]
     size = (ys[1] + th + MARGIN, xs[2] + max(tw, legend_w) + MARGIN)
-    return PanelLayout(size=size, scale=scale, tiles=tiles, swatches=swatches)
+    return PanelGrid(size=size, scale=scale, tiles=tiles, swatches=swatches)
 
 
 def _as_uint8_rgb(image: np.ndarray, what: str, hw: tuple[int, int]) -> np.ndarray:
@@ -115,7 +115,7 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
     legend = [(f"{c} {class_names[c]}", colors[c]) for c in present]
     if (gt == ignore_id).any():
         legend.append((f"{ignore_id} unlabelled", np.asarray(IGNORE_COLOR, np.uint8)))
-    layout = panel_layout(hw, len(legend))
+    grid = panel_grid(hw, len(legend))
     images = {"pred_sem": colorize(pred, n, ignore_id), "gt_sem": colorize(gt, n, ignore_id),
               "error": error_map(pred, gt, ignore_id),
               "pred_rgb": _as_uint8_rgb(pred_rgb, "pred_rgb", hw), "gt_rgb": _as_uint8_rgb(gt_rgb, "gt_rgb", hw)}
@@ -125,7 +125,7 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
                 "error": f"errors (red): {wrong:.1f}% of {int(labelled.sum())} labelled px",
                 "pred_rgb": "predicted colour", "gt_rgb": "ground-truth colour", "legend": "classes present"}
 
-    height, width = layout.size
+    height, width = grid.size
     fig = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI, facecolor="white")
     FigureCanvasAgg(fig)
 
@@ -136,12 +136,12 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
         fig.figimage(image, xo=x, yo=height - y - image.shape[0], origin="upper")
 
     text(MARGIN, 6, title, fontsize=11, fontweight="bold")
-    for name, (x, y, _, _) in layout.tiles.items():
+    for name, (x, y, _, _) in grid.tiles.items():
         text(x, y - TITLE_BAND + 4, captions[name])
     for name, image in images.items():
-        x, y, _, _ = layout.tiles[name]
-        place(np.repeat(np.repeat(image, layout.scale, axis=0), layout.scale, axis=1), x, y)
-    for (label, color), (sx, sy) in zip(legend, layout.swatches):
+        x, y, _, _ = grid.tiles[name]
+        place(np.repeat(np.repeat(image, grid.scale, axis=0), grid.scale, axis=1), x, y)
+    for (label, color), (sx, sy) in zip(legend, grid.swatches):
         place(np.broadcast_to(color, (LEGEND_SWATCH, LEGEND_SWATCH, 3)).copy(), sx, sy)
         text(sx + LEGEND_SWATCH + 6, sy, label)
 
