@@ -1,0 +1,136 @@
+"""Seeded perturbations of posed views, with their units: what ``sray stability`` sweeps and what
+training may use as augmentation.
+
+Every function is pure (inputs are never modified) and draws only from the ``numpy`` generator it is
+given, so a (seed, level) pair always produces the same perturbation.
+
+Units:
+
+* pose noise: rotation in **degrees** (the angle of the relative rotation R_noisy R_cleanᵀ) and
+  translation in **centimetres** (the distance between the clean and noisy camera centres), with
+  uniformly random axes and directions; poses are camera-to-world matrices in metres;
+* Gaussian noise: σ in **8-bit intensity levels** (0-255), added to every channel, then clipped;
+* motion blur: a straight kernel of **length in pixels** (odd, ≥ 1) at a random angle, normalised to
+  sum 1, with reflected borders (so the image mean is kept, exactly for a constant image);
+* exposure: a change of **EV stops**: intensities multiplied by 2^ev, then clipped;
+* JPEG: encoder **quality** 1-100 (OpenCV's encoder, 4:2:0 chroma subsampling);
+* occlusion: the **fraction of pixels** (0-1) hidden by random axis-aligned rectangles of a flat
+  random colour; exactly ``round(fraction · H · W)`` pixels are hidden.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def random_unit_vector(rng: np.random.Generator) -> np.ndarray:
+    """A direction drawn uniformly on the unit sphere, (3,) float64."""
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
+def axis_angle_matrix(axis: np.ndarray, angle_rad: float) -> np.ndarray:
+    """Rotation matrix (3, 3) of ``angle_rad`` about the unit ``axis`` (Rodrigues' formula)."""
+    rot, _ = cv2.Rodrigues(np.asarray(axis, np.float64).reshape(3, 1) * angle_rad)
+    return rot
+
+
+def noisy_pose(c2w: np.ndarray, rotation_deg: float, translation_cm: float, rng: np.random.Generator) -> np.ndarray:
+    """``c2w`` (4, 4) turned by exactly ``rotation_deg`` about a random axis through the camera centre and
+    moved by exactly ``translation_cm`` in a random direction; returns a new (4, 4) float64 matrix."""
+    if rotation_deg < 0 or translation_cm < 0:
+        raise ValueError(f"pose noise magnitudes must be >= 0, got {rotation_deg} deg and {translation_cm} cm")
+    out = np.array(c2w, dtype=np.float64, copy=True)
+    turn = axis_angle_matrix(random_unit_vector(rng), np.deg2rad(rotation_deg))
+    out[:3, :3] = turn @ out[:3, :3]
+    out[:3, 3] = out[:3, 3] + random_unit_vector(rng) * translation_cm / 100.0
+    return out
+
+
+def _to_uint8(image: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+
+def gaussian_noise(rgb: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
+    """uint8 (H, W, 3) plus N(0, sigma²) per channel (sigma in 8-bit levels), clipped; uint8 out."""
+    if sigma < 0:
+        raise ValueError(f"noise sigma must be >= 0 (8-bit levels), got {sigma}")
+    return _to_uint8(rgb.astype(np.float64) + rng.normal(0.0, sigma, rgb.shape)) if sigma > 0 else rgb.copy()
+
+
+def motion_blur_kernel(length_px: int, angle_rad: float) -> np.ndarray:
+    """A straight blur kernel (length_px, length_px) float64 along ``angle_rad``, summing to 1."""
+    if length_px < 1 or length_px % 2 == 0:
+        raise ValueError(f"motion blur length must be an odd number of pixels >= 1, got {length_px}")
+    kernel = np.zeros((length_px, length_px), np.float64)
+    c = (length_px - 1) / 2
+    for t in np.linspace(-c, c, 4 * length_px):
+        kernel[int(round(c + t * np.sin(angle_rad))), int(round(c + t * np.cos(angle_rad)))] = 1.0
+    return kernel / kernel.sum()
+
+
+def motion_blur(rgb: np.ndarray, length_px: int, rng: np.random.Generator) -> np.ndarray:
+    """uint8 (H, W, 3) blurred along a random direction by a ``length_px`` kernel (reflected borders)."""
+    if length_px == 1:
+        return rgb.copy()
+    kernel = motion_blur_kernel(length_px, float(rng.uniform(0.0, np.pi)))
+    blurred = cv2.filter2D(rgb.astype(np.float64), -1, kernel, borderType=cv2.BORDER_REFLECT)
+    return _to_uint8(blurred)
+
+
+def exposure(rgb: np.ndarray, ev: float) -> np.ndarray:
+    """uint8 (H, W, 3) with intensities multiplied by 2**ev (clipped): ev > 0 brighter, < 0 darker."""
+    return _to_uint8(rgb.astype(np.float64) * 2.0 ** ev)
+
+
+def jpeg(rgb: np.ndarray, quality: int) -> np.ndarray:
+    """uint8 (H, W, 3) RGB after a JPEG round trip at ``quality`` (1-100)."""
+    if not 1 <= quality <= 100:
+        raise ValueError(f"JPEG quality must be in 1..100, got {quality}")
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise RuntimeError("OpenCV could not encode the image as JPEG")
+    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+
+
+def occlusion_mask(hw: tuple[int, int], fraction: float, rng: np.random.Generator) -> np.ndarray:
+    """bool (H, W) with exactly ``round(fraction · H · W)`` True pixels, made of random rectangles.
+
+    Rectangles (sides 5-35 % of the image's) are added until the target is reached; pixels the last
+    one adds beyond the target are left out in raster order, so that rectangle ends in a partial row.
+    """
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"occlusion fraction must be in [0, 1], got {fraction}")
+    h, w = hw
+    target = int(round(fraction * h * w))
+    mask = np.zeros((h, w), bool)
+    while int(mask.sum()) < target:
+        rh = int(rng.integers(max(1, h // 20), max(2, h * 7 // 20) + 1))
+        rw = int(rng.integers(max(1, w // 20), max(2, w * 7 // 20) + 1))
+        y, x = int(rng.integers(0, h - rh + 1)), int(rng.integers(0, w - rw + 1))
+        new = np.zeros_like(mask)
+        new[y:y + rh, x:x + rw] = True
+        new &= ~mask
+        excess = int(mask.sum() + new.sum()) - target
+        if excess > 0:
+            ys, xs = np.nonzero(new)
+            new[ys[len(ys) - excess:], xs[len(xs) - excess:]] = False
+        mask |= new
+    return mask
+
+
+def occlude(rgb: np.ndarray, fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """uint8 (H, W, 3) with ``fraction`` of its pixels covered by flat random colours; returns (image, mask)."""
+    mask = occlusion_mask(rgb.shape[:2], fraction, rng)
+    out = rgb.copy()
+    labels, n = _components(mask)
+    for k in range(1, n + 1):
+        out[labels == k] = rng.integers(0, 256, 3, dtype=np.uint8)
+    return out, mask
+
+
+def _components(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """Connected components of a mask (8-connected): labels (H, W) int32 and their count."""
+    n, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    return labels, n - 1
