@@ -17,7 +17,8 @@ from train_fixtures import tiny_config
 
 from sray.platform.train.checkpoints import write_checkpoint
 from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.train.state import RayBatchModel, lr_lambda, training_state
+from sray.model.ray_batch import RayBatchModel
+from sray.platform.train.state import lr_lambda, training_state
 
 
 def write_tiny_checkpoint(shards: Path, folder: Path, seed: int = 0) -> Path:
