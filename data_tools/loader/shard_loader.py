@@ -127,12 +127,15 @@ class EpochLoader(DataLoader):
         return iterator
 
 
-def _open(shards_dir: Path, scenes: list[str] | None) -> tuple[Manifest, list[str]]:
-    """Read the manifest, refuse a damaged folder (size check), resolve the scene list (None = train scenes)."""
-    problems = verify_shards(shards_dir, checksums=False)
-    if problems:
-        raise ValueError("the shard folder is damaged:\n  " + "\n  ".join(problems))
-    manifest = read_manifest(shards_dir)
+def _open(shards_dir: Path, scenes: list[str] | None,
+          manifest: Manifest | None = None) -> tuple[Manifest, list[str]]:
+    """Read the manifest and refuse a damaged folder (size check) unless the caller passes the manifest
+    it has read already; resolve the scene list (None = train scenes)."""
+    if manifest is None:
+        problems = verify_shards(shards_dir, checksums=False)
+        if problems:
+            raise ValueError("the shard folder is damaged:\n  " + "\n  ".join(problems))
+        manifest = read_manifest(shards_dir)
     if scenes is None:
         names = sorted(s for s, e in manifest.scenes.items() if e.meta.get("role", "train") == "train")
         if not names:
@@ -178,14 +181,16 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
 
 
 def make_eval_samples(shards_dir: Path, scene: str, split: str = "test", source_split: str | None = None,
-                      n_source: int = 8) -> Iterator[EvalSample]:
+                      n_source: int = 8, *, manifest: Manifest | None = None) -> Iterator[EvalSample]:
     """Evaluation samples of ``scene``'s ``split`` views, in split order, with fixed sources.
 
     Sources are the query's top ``n_source`` ranked neighbours inside ``source_split`` (default:
     ``source`` for test scenes, ``train`` for train scenes; held-out views are never sources).
     Deterministic: every call yields the same samples. Validates before returning a generator.
+    ``manifest``: the folder's manifest when the caller has read it already (it is then neither read
+    nor size-checked again); None = read and check it here.
     """
-    manifest, _ = _open(shards_dir, [scene])
+    manifest, _ = _open(shards_dir, [scene], manifest)
     meta = SceneMeta.from_json(manifest.scenes[scene].meta)
     source_split = source_split or ("source" if meta.role == "test" else "train")
     for name in (split, source_split):
