@@ -6,15 +6,15 @@ from pathlib import Path
 
 import numpy as np
 
+from sray.data_tools.loader.sample_types import TrainSample
 from sray.platform.viz.figure_io import save_png
 
 
-def write_sample_picture(sample: dict, class_names: list[str], path: Path, ignore_id: int = 255) -> Path:
+def write_sample_picture(sample: TrainSample, class_names: list[str], path: Path, ignore_id: int = 255) -> Path:
     """Query view with its sampled ray pixels, the ray targets' labels, and the m source views.
 
-    ``sample`` is a training sample (docs/CONTRACTS.md); the query image itself is not in a
-    training sample, so the panel shows the sampled pixels' colours and labels scattered at their
-    positions over the query frame, next to the source views.
+    The query image itself is not in a training sample, so the panel shows the sampled pixels'
+    colours and labels scattered at their positions over the query frame, next to the source views.
     """
     import matplotlib
 
@@ -23,11 +23,11 @@ def write_sample_picture(sample: dict, class_names: list[str], path: Path, ignor
 
     from sray.platform.viz.palette import palette
 
-    src = sample["src_rgb"].permute(0, 2, 3, 1).numpy()  # (m, H, W, 3)
+    src = sample.sources.rgb.permute(0, 2, 3, 1).numpy()  # (m, H, W, 3)
     m, h, w = src.shape[:3]
-    uv = sample["pixels"].numpy()
-    labels = sample["target_label"].numpy()
-    colours = sample["target_rgb"].numpy()
+    uv = sample.pixels.numpy()  # (R, 2)
+    labels = sample.target_label.numpy()  # (R,)
+    colours = sample.target_rgb.numpy()  # (R, 3)
     pal = palette(len(class_names)) / 255.0
     label_colours = np.where((labels == ignore_id)[:, None], 0.0, pal[np.minimum(labels, len(class_names) - 1)])
 
@@ -53,8 +53,8 @@ def write_sample_picture(sample: dict, class_names: list[str], path: Path, ignor
     for i in range(m):
         axes[1, i].imshow(src[i])
         axes[1, i].set_title(f"source {i + 1}", fontsize=9)
-    fig.suptitle(f"scene {sample['scene']}, query view {sample['query_id']}: {len(uv)} rays, "
-                 f"{m} source views, depth range {float(sample['near']):.2f}-{float(sample['far']):.2f} m", fontsize=10)
+    fig.suptitle(f"scene {sample.scene}, query view {sample.query_id}: {len(uv)} rays, "
+                 f"{m} source views, depth range {sample.near:.2f}-{sample.far:.2f} m", fontsize=10)
     fig.tight_layout()
     save_png(fig, path, 100)
     plt.close(fig)

@@ -14,9 +14,10 @@ import pytest
 import torch
 from train_fixtures import tiny_config
 
+from sray.model.ray_batch import RayBatchModel
 from sray.platform.checkpoints.folders import write_checkpoint
 from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.train.state import RayBatchModel, lr_lambda, training_state
+from sray.platform.train.state import lr_lambda, training_state
 
 
 def write_tiny_checkpoint(shards: Path, folder: Path, seed: int = 0) -> Path:

@@ -107,8 +107,8 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
         pairs = []
         for view, sample in zip(block["views"], samples, strict=True):
             pngs = {k: out / v for k, v in view["pngs"].items()}
-            assert all(p.is_file() for p in pngs.values()) and view["query_id"] == sample["query_id"]
-            gt_full = sample["query_label"].numpy()
+            assert all(p.is_file() for p in pngs.values()) and view["query_id"] == sample.query_id
+            gt_full = sample.query_label.numpy()
             gt = _decode(pngs["gt"], n_classes, ignore_id)
             off = STRIDE // 2  # the strided grid samples pixel centres (off, off), (off + STRIDE, off) ...
             np.testing.assert_array_equal(gt, gt_full[off::STRIDE, off::STRIDE])

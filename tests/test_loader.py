@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sray.data_tools.loader.sample_types import EvalSample, TrainSample
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader, slot_scenes, worker_batches
 from sray.data_tools.loader.views import SceneCache, StoredView
 from sray.data_tools.png import encode_png
@@ -21,9 +23,6 @@ from sray.data_tools.shards.neighbours import Neighbours
 from sray.data_tools.shards.writer import scene_neighbours, write_shards
 
 TRAIN = ["a", "b", "c", "d", "e"]
-TRAIN_KEYS = {"src_rgb", "src_K", "src_c2w", "query_K", "query_c2w", "pixels", "target_label", "target_rgb",
-              "near", "far", "scene", "query_id"}
-EVAL_KEYS = TRAIN_KEYS - {"pixels", "target_label", "target_rgb"} | {"query_rgb", "query_label", "query_depth"}
 
 
 @pytest.fixture(scope="module")
@@ -33,6 +32,11 @@ def data(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     scenes = scene_fixtures.write_dataset(root / "scenes", [(s, 6, "train") for s in TRAIN] + [("unseen", 10, "test")])
     write_shards(scenes, root / "shards", views_per_shard=4, neighbours=8, progress=False)
     return scenes, root / "shards"
+
+
+def _tensors(sample: EvalSample) -> dict:
+    """Every tensor of a sample by field (nested fields as nested dicts)."""
+    return {k: v for k, v in asdict(sample).items() if k not in ("scene", "query_id", "near", "far")}
 
 
 def _loader(shards: Path, **kw: object) -> torch.utils.data.DataLoader:
@@ -48,7 +52,7 @@ def test_two_ranks_two_workers_disjoint_shards_same_batches(data: tuple[Path, Pa
     manifest = read_manifest(data[1])
     loaders = [_loader(data[1], rank=r, world_size=2, num_workers=2) for r in (0, 1)]
     for _ in range(2):  # two epochs
-        drawn = [[s["scene"] for s in loader] for loader in loaders]
+        drawn = [[s.scene for s in loader] for loader in loaders]
         assert [len(d) for d in drawn] == [7, 7] and [len(loader) for loader in loaders] == [7, 7]
         assert all(len(set(d)) >= 2 for d in drawn)  # the two workers of a rank read different scenes
         shards = [{sh for s in set(d) for sh in manifest.scenes[s].shards} for d in drawn]
@@ -57,7 +61,7 @@ def test_two_ranks_two_workers_disjoint_shards_same_batches(data: tuple[Path, Pa
 
 def test_one_scene_two_ranks_get_disjoint_queries(data: tuple[Path, Path]) -> None:
     """With fewer scenes than slots, ranks share the scene but never a query view."""
-    queries = [{s["query_id"] for s in _loader(data[1], scenes=["a"], rank=r, world_size=2, batches_per_epoch=12)}
+    queries = [{s.query_id for s in _loader(data[1], scenes=["a"], rank=r, world_size=2, batches_per_epoch=12)}
                for r in (0, 1)]
     assert queries[0] and queries[1] and not queries[0] & queries[1]
 
@@ -95,26 +99,26 @@ def test_training_samples_match_the_scenes(data: tuple[Path, Path]) -> None:
                      visit_samples=2)
     seen = set()
     for s in loader:
-        assert set(s) == TRAIN_KEYS
-        scene = read_scene(scenes_dir / s["scene"])
+        assert isinstance(s, TrainSample)
+        scene = read_scene(scenes_dir / s.scene)
         views = {v.view_id: v for v in scene.views()}
         ranked, _ = scene_neighbours(scene, k=4)
-        query = views[s["query_id"]]
-        assert s["query_id"] in source_pool(scene.meta)
-        u, v = s["pixels"].long().unbind(1)
-        assert s["pixels"].dtype == torch.float32 and s["pixels"].shape == (50, 2)
-        torch.testing.assert_close(s["target_label"], torch.from_numpy(query.label[v, u].astype(np.int64)))
-        torch.testing.assert_close(s["target_rgb"], torch.from_numpy(query.rgb[v, u] / 255.0).float(),
+        query = views[s.query_id]
+        assert s.query_id in source_pool(scene.meta)
+        u, v = s.pixels.long().unbind(1)
+        assert s.pixels.dtype == torch.float32 and s.pixels.shape == (50, 2)
+        torch.testing.assert_close(s.target_label, torch.from_numpy(query.label[v, u].astype(np.int64)))
+        torch.testing.assert_close(s.target_rgb, torch.from_numpy(query.rgb[v, u] / 255.0).float(),
                                    atol=1e-7, rtol=0)
-        torch.testing.assert_close(s["query_c2w"], torch.from_numpy(query.c2w).float())
+        torch.testing.assert_close(s.query.c2w, torch.from_numpy(query.c2w).float())
         for i in range(3):
             match = [vid for vid, view in views.items()
-                     if torch.equal(torch.from_numpy(view.c2w).float(), s["src_c2w"][i])]
-            assert len(match) == 1 and match[0] in ranked[s["query_id"]].ids
+                     if torch.equal(torch.from_numpy(view.c2w).float(), s.sources.c2w[i])]
+            assert len(match) == 1 and match[0] in ranked[s.query_id].ids
             rgb = torch.from_numpy(views[match[0]].rgb).permute(2, 0, 1).float() / 255.0
-            torch.testing.assert_close(s["src_rgb"][i], rgb, atol=1e-7, rtol=0)
-        assert float(s["near"]) == pytest.approx(scene.meta.near) and float(s["far"]) == pytest.approx(scene.meta.far)
-        seen.add(s["scene"])
+            torch.testing.assert_close(s.sources.rgb[i], rgb, atol=1e-7, rtol=0)
+        assert s.near == pytest.approx(scene.meta.near) and s.far == pytest.approx(scene.meta.far)
+        seen.add(s.scene)
     assert seen == {"a", "unseen"}
 
 
@@ -124,7 +128,7 @@ def test_epochs_advance_and_set_epoch_replays(data: tuple[Path, Path]) -> None:
     loader = _loader(data[1], scenes=None, visit_samples=1, batches_per_epoch=12)
 
     def stream() -> list[tuple]:
-        return [(s["scene"], s["query_id"], s["pixels"].sum().item()) for s in loader]
+        return [(s.scene, s.query_id, s.pixels.sum().item()) for s in loader]
 
     first, second = stream(), stream()
     assert first != second and {s for s, _, _ in first + second} <= set(TRAIN)
@@ -141,17 +145,17 @@ def test_eval_samples_are_fixed_and_lossless(data: tuple[Path, Path], scene: str
     views = {v.view_id: v for v in canon.views()}
     ranked, _ = scene_neighbours(canon, k=8)
     first, again = (list(make_eval_samples(shards, scene, split, n_source=2)) for _ in range(2))
-    assert [s["query_id"] for s in first] == canon.meta.splits[split]
+    assert [s.query_id for s in first] == canon.meta.splits[split]
     for s, t in zip(first, again):
-        assert set(s) == EVAL_KEYS
-        for key in EVAL_KEYS - {"scene", "query_id"}:
-            torch.testing.assert_close(s[key], t[key], atol=0, rtol=0)
-        q = views[s["query_id"]]
-        torch.testing.assert_close(s["query_depth"], torch.from_numpy(q.depth), atol=0, rtol=0)
-        torch.testing.assert_close(s["query_label"], torch.from_numpy(q.label.astype(np.int64)), atol=0, rtol=0)
+        assert isinstance(s, EvalSample)
+        torch.testing.assert_close(_tensors(s), _tensors(t), atol=0, rtol=0)
+        assert (s.scene, s.query_id, s.near, s.far) == (t.scene, t.query_id, t.near, t.far)
+        q = views[s.query_id]
+        torch.testing.assert_close(s.query_depth, torch.from_numpy(q.depth), atol=0, rtol=0)
+        torch.testing.assert_close(s.query_label, torch.from_numpy(q.label.astype(np.int64)), atol=0, rtol=0)
         held_out = set(canon.meta.splits["test"])
-        expected = [v for v in ranked[s["query_id"]].ids if v in canon.meta.splits[allowed] and v not in held_out][:2]
-        torch.testing.assert_close(s["src_c2w"], torch.from_numpy(np.stack([views[v].c2w for v in expected])).float())
+        expected = [v for v in ranked[s.query_id].ids if v in canon.meta.splits[allowed] and v not in held_out][:2]
+        torch.testing.assert_close(s.sources.c2w, torch.from_numpy(np.stack([views[v].c2w for v in expected])).float())
     with pytest.raises(ValueError, match="n_source"):
         make_eval_samples(shards, scene, split, n_source=9)
 

@@ -7,8 +7,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sray.data_tools.perturbations import (exposure, gaussian_noise, jpeg, motion_blur, motion_blur_kernel,
-                                           noisy_pose, occlude, occlusion_mask)
+from sray.data_tools.perturbations import (
+    exposure,
+    gaussian_noise,
+    jpeg,
+    motion_blur,
+    motion_blur_kernel,
+    noisy_pose,
+    occlude,
+    occlusion_mask,
+)
 
 
 def _random_pose(rng: np.random.Generator) -> np.ndarray:

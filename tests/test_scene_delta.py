@@ -10,6 +10,7 @@ from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config, write
 from safetensors import safe_open
 from train_fixtures import tiny_shards  # noqa: F401
 
+from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.platform.checkpoints.folders import load_checkpoint
@@ -42,11 +43,11 @@ def finetuned(one_thread: None, tiny_shards: Path, tiny_checkpoint: Path,
     return finetune_scene(job), out / SRAY_ARTIFACT
 
 
-def _render(net: torch.nn.Module, sample: dict) -> dict:
+def _render(net: torch.nn.Module, sample: EvalSample) -> dict:
     with torch.no_grad():
-        src = net.encode(sample["src_rgb"], sample["src_K"], sample["src_c2w"])
-        h, w = sample["query_label"].shape
-        return net.render_image(src, sample["query_K"], sample["query_c2w"], (h, w), sample["near"], sample["far"])
+        src = net.encode(sample.sources.rgb, sample.sources.K, sample.sources.c2w)
+        h, w = sample.query_label.shape
+        return net.render_image(src, sample.query.K, sample.query.c2w, (h, w), sample.near, sample.far)
 
 
 def test_artifact_reproduces_the_finetuned_model_exactly(finetuned, tiny_shards, tiny_checkpoint):

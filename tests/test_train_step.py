@@ -7,10 +7,12 @@ import pytest
 import torch
 from torch.overrides import TorchFunctionMode
 
+from sray.data_tools.loader.sample_types import QueryCamera, SourceViews, TrainSample
 from sray.model.config import SRayConfig
 from sray.model.losses import render_loss
-from sray.platform.train.state import RayBatchModel
-from sray.platform.train.step import NonFiniteTraining, TrainStep, batch_rays, fused_adam
+from sray.model.ray_batch import RayBatchModel
+from sray.platform.common.model_input import ray_batch
+from sray.platform.train.step import NonFiniteTraining, TrainStep, fused_adam
 
 H, W = 32, 40
 HOST_READS = {"item", "tolist", "numpy", "cpu", "__bool__", "__float__", "__int__", "__index__", "nonzero",
@@ -45,18 +47,18 @@ def _has_bool_tensor(index: object) -> bool:
     return any(torch.is_tensor(i) and i.dtype == torch.bool for i in items)
 
 
-def _batch(seed: int = 0) -> dict:
-    """A training sample in the loader's format (docs/CONTRACTS.md): 3 sources, 64 rays, some unlabelled."""
+def _batch(seed: int = 0) -> TrainSample:
+    """A training sample as the loader makes it: 3 sources, 64 rays, some unlabelled."""
     g = torch.Generator().manual_seed(seed)
     K = torch.tensor([[28.0, 0.0, (W - 1) / 2], [0.0, 28.0, (H - 1) / 2], [0.0, 0.0, 1.0]])
     c2w = torch.eye(4).expand(3, 4, 4).clone()
     c2w[:, 0, 3] = torch.tensor([-0.2, 0.0, 0.2])
     labels = torch.randint(0, 5, (64,), generator=g)
     labels[::7] = 255
-    return {"src_rgb": torch.rand(3, 3, H, W, generator=g), "src_K": K.expand(3, 3, 3).clone(), "src_c2w": c2w,
-            "query_K": K, "query_c2w": torch.eye(4), "near": torch.tensor(1.0), "far": torch.tensor(4.0),
-            "pixels": torch.rand(64, 2, generator=g) * torch.tensor([W - 1.0, H - 1.0]),
-            "target_label": labels, "target_rgb": torch.rand(64, 3, generator=g)}
+    sources = SourceViews(rgb=torch.rand(3, 3, H, W, generator=g), K=K.expand(3, 3, 3).clone(), c2w=c2w)
+    return TrainSample(scene="s", query_id="q", sources=sources, query=QueryCamera(K=K, c2w=torch.eye(4)),
+                       near=1.0, far=4.0, pixels=torch.rand(64, 2, generator=g) * torch.tensor([W - 1.0, H - 1.0]),
+                       target_label=labels, target_rgb=torch.rand(64, 3, generator=g))
 
 
 def _setup(precision: str = "no", lr: float = 1e-3) -> tuple[RayBatchModel, TrainStep]:
@@ -66,11 +68,10 @@ def _setup(precision: str = "no", lr: float = 1e-3) -> tuple[RayBatchModel, Trai
     return model, TrainStep(params, fused_adam(params, lr), 1.0, precision, torch.device("cpu"), 3)
 
 
-def _loss(model: RayBatchModel, step: TrainStep, batch: dict) -> torch.Tensor:
-    origins, dirs, near, far = batch_rays(batch, torch.device("cpu"))
+def _loss(model: RayBatchModel, step: TrainStep, sample: TrainSample) -> torch.Tensor:
     with step.autocast():
-        out = model(batch["src_rgb"], batch["src_K"], batch["src_c2w"], origins, dirs, near, far)
-    loss, _ = render_loss(out, batch["target_label"], batch["target_rgb"], model.net.cfg)
+        out = model(ray_batch(sample))
+    loss, _ = render_loss(out, sample.target_label, sample.target_rgb, model.net.cfg)
     return loss
 
 

@@ -10,7 +10,7 @@ bounds and the ranking, so these tests can fail.
 from __future__ import annotations
 
 import shutil
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import cv2
@@ -21,6 +21,7 @@ import torch
 from source_writers import write_replica
 
 from sray.data_tools.label_spaces import SCANNET20
+from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.readers.convert import ConvertConfig, convert_scene
@@ -35,8 +36,6 @@ from sray.model.rays import pixel_rays
 from sray.model.semantic_ray import SRayModel
 
 H, W, N_VIEWS, SCENE = 36, 48, 20, "unseen"
-MODEL_INPUTS = ("src_rgb", "src_K", "src_c2w", "query_K", "query_c2w", "near", "far")
-"""Everything of an evaluation sample the model sees."""
 
 
 @dataclass
@@ -49,7 +48,7 @@ class Run:
     """near/far of the scene in the shards' manifest."""
     ranked: dict[str, tuple[list[str], list[float]]]
     """Stored neighbour ids and scores of each test view, from the shards."""
-    samples: list[dict]
+    samples: list[EvalSample]
     """The eval loader's samples of the test split (4 sources each)."""
 
 
@@ -127,24 +126,28 @@ def test_model_inputs_and_prediction_are_unchanged(runs: dict[str, Run]) -> None
     """Every tensor the model sees is bit-identical, while the targets did change; a tiny random S-Ray
     model renders the same logits for each test view."""
     before, after = runs["original"].samples, runs["test_rewritten"].samples
-    assert [s["query_id"] for s in before] == [s["query_id"] for s in after] == runs["original"].meta.splits["test"]
+    assert [s.query_id for s in before] == [s.query_id for s in after] == runs["original"].meta.splits["test"]
     torch.manual_seed(0)
     model = SRayModel(SRayConfig(n_classes=len(SCANNET20), feat_dim=8, n_coarse=8, n_fine=8, n_source=4)).eval()
     for b, a in zip(before, after):
-        for key in MODEL_INPUTS:
-            torch.testing.assert_close(a[key], b[key], atol=0, rtol=0, msg=f"{b['query_id']}: {key}")
-        assert not torch.equal(a["query_label"], b["query_label"]) and not torch.equal(a["query_depth"], b["query_depth"])
+        torch.testing.assert_close(_model_inputs(a), _model_inputs(b), atol=0, rtol=0, msg=b.query_id)
+        assert not torch.equal(a.query_label, b.query_label) and not torch.equal(a.query_depth, b.query_depth)
         logits = [_render_logits(model, s) for s in (b, a)]
         torch.testing.assert_close(logits[1], logits[0], atol=0, rtol=0)
 
 
-def _render_logits(model: SRayModel, sample: dict) -> torch.Tensor:
+def _model_inputs(sample: EvalSample) -> dict:
+    """Everything of an evaluation sample the model sees: source views, query camera, bounds."""
+    return {"sources": asdict(sample.sources), "query": asdict(sample.query), "near": sample.near, "far": sample.far}
+
+
+def _render_logits(model: SRayModel, sample: EvalSample) -> torch.Tensor:
     """Fine-pass semantic logits (R, L) of a 5 x 5 grid of the query's pixels, deterministic sampling."""
     v, u = torch.meshgrid(torch.linspace(0, H - 1, 5), torch.linspace(0, W - 1, 5), indexing="ij")
-    origins, dirs = pixel_rays(sample["query_K"], sample["query_c2w"], torch.stack([u, v], -1).reshape(-1, 2))
+    origins, dirs = pixel_rays(sample.query.K, sample.query.c2w, torch.stack([u, v], -1).reshape(-1, 2))
     with torch.no_grad():
-        src = model.encode(sample["src_rgb"], sample["src_K"], sample["src_c2w"])
-        out = model.render_rays(src, origins, dirs, sample["near"], sample["far"], stratified=False)
+        src = model.encode(sample.sources.rgb, sample.sources.K, sample.sources.c2w)
+        out = model.render_rays(src, origins, dirs, sample.near, sample.far, stratified=False)
     return out["fine"]["logits"]
 
 

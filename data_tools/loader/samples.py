@@ -1,10 +1,11 @@
-"""Assembling loader samples (docs/CONTRACTS.md "Loader samples") from one scene's stored views."""
+"""Assembling loader samples (:mod:`sray.data_tools.loader.sample_types`) from one scene's stored views."""
 
 from __future__ import annotations
 
 import numpy as np
 import torch
 
+from sray.data_tools.loader.sample_types import EvalSample, QueryCamera, SourceViews, TrainSample
 from sray.data_tools.loader.views import StoredView
 from sray.data_tools.scene import IGNORE_ID
 
@@ -21,20 +22,19 @@ def _cameras(views: list[StoredView]) -> tuple[torch.Tensor, torch.Tensor]:
     return K, c2w
 
 
-def _common(views: dict[str, StoredView], query_id: str, source_ids: list[str], scene: str,
-            near: float, far: float) -> dict:
-    """Keys shared by training and evaluation samples: sources, query camera, bounds, names."""
+def _sources(views: dict[str, StoredView], source_ids: list[str]) -> SourceViews:
+    """The source views' colours (m, 3, H, W) in [0, 1] and cameras."""
     sources = [views[s] for s in source_ids]
     rgb = torch.from_numpy(np.stack([v.rgb() for v in sources])).permute(0, 3, 1, 2)  # (m, 3, H, W) uint8 view
     src_rgb = torch.empty(rgb.shape, dtype=torch.float32).copy_(rgb).div_(255.0)       # one strided pass
-    src_K, src_c2w = _cameras(sources)
-    q_K, q_c2w = _cameras([views[query_id]])
-    return {
-        "src_rgb": src_rgb,
-        "src_K": src_K, "src_c2w": src_c2w, "query_K": q_K[0], "query_c2w": q_c2w[0],
-        "near": torch.tensor(near, dtype=torch.float32), "far": torch.tensor(far, dtype=torch.float32),
-        "scene": scene, "query_id": query_id,
-    }
+    K, c2w = _cameras(sources)
+    return SourceViews(rgb=src_rgb, K=K, c2w=c2w)
+
+
+def _query(view: StoredView) -> QueryCamera:
+    """The query view's camera: K (3, 3), c2w (4, 4)."""
+    K, c2w = _cameras([view])
+    return QueryCamera(K=K[0], c2w=c2w[0])
 
 
 def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str) -> None:
@@ -48,7 +48,7 @@ def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str
 
 
 def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
-                 rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int) -> dict:
+                 rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int) -> TrainSample:
     """A training sample: sources, query camera and ``n_rays`` random pixels of the query with targets.
 
     Pixels are drawn uniformly without replacement (with replacement only when ``n_rays`` exceeds
@@ -60,21 +60,23 @@ def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[s
     h, w = label.shape
     flat = rng.choice(h * w, size=n_rays, replace=n_rays > h * w)                     # (R,)
     v, u = np.divmod(flat, w)
-    sample = _common(views, query_id, source_ids, scene, near, far)
-    sample["pixels"] = torch.from_numpy(np.stack([u, v], axis=1).astype(np.float32))  # (R, 2)
     targets = label[v, u].astype(np.int64)                                            # (R,)
     check_label_ids(targets, n_classes, scene, query_id)
-    sample["target_label"] = torch.from_numpy(targets)
-    sample["target_rgb"] = torch.from_numpy(rgb[v, u].astype(np.float32) / 255.0)    # (R, 3)
-    return sample
+    return TrainSample(
+        scene=scene, query_id=query_id, sources=_sources(views, source_ids), query=_query(query),
+        near=float(near), far=float(far),
+        pixels=torch.from_numpy(np.stack([u, v], axis=1).astype(np.float32)),          # (R, 2)
+        target_label=torch.from_numpy(targets),
+        target_rgb=torch.from_numpy(rgb[v, u].astype(np.float32) / 255.0))            # (R, 3)
 
 
 def eval_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], scene: str,
-                near: float, far: float) -> dict:
+                near: float, far: float) -> EvalSample:
     """An evaluation sample: sources, query camera and the whole query image, labels and depth."""
     query = views[query_id]
-    sample = _common(views, query_id, source_ids, scene, near, far)
-    sample["query_rgb"] = torch.from_numpy(query.rgb().astype(np.float32) / 255.0)    # (H, W, 3)
-    sample["query_label"] = torch.from_numpy(query.label().astype(np.int64))          # (H, W)
-    sample["query_depth"] = torch.from_numpy(query.depth())                           # (H, W) metres
-    return sample
+    return EvalSample(
+        scene=scene, query_id=query_id, sources=_sources(views, source_ids), query=_query(query),
+        near=float(near), far=float(far),
+        query_rgb=torch.from_numpy(query.rgb().astype(np.float32) / 255.0),             # (H, W, 3)
+        query_label=torch.from_numpy(query.label().astype(np.int64)),                   # (H, W)
+        query_depth=torch.from_numpy(query.depth()))                                    # (H, W) metres

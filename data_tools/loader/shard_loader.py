@@ -2,7 +2,7 @@
 
 Training (:func:`make_train_loader`). One sample = one ray batch of one scene: a query view, m
 source views drawn at random from its top-k ranked neighbours, R random pixels of the query with
-their labels and colours, and the scene's near/far (sample keys: docs/CONTRACTS.md). Because a
+their labels and colours, and the scene's near/far (a :class:`TrainSample`, docs/CONTRACTS.md). Because a
 tuple needs several views of ONE scene, the unit that is split across ranks and DataLoader workers
 is a scene (all of its shards):
 
@@ -25,8 +25,10 @@ split minus held-out ``test`` views; test scenes (finetuning) use ``source`` plu
 Evaluation (:func:`make_eval_samples`) yields whole query images with FIXED source views (the
 top-n ranked neighbours within the source split), in split order, identical on every call.
 
-Never pass these loaders through ``accelerator.prepare``: Accelerate re-shards iterable datasets
-and drops samples. Rank and world size are explicit arguments (pass Ray Train's values).
+Samples are dataclasses (:mod:`sray.data_tools.loader.sample_types`, which says how they cross
+worker processes, pinning and device moves). Never pass these loaders through ``accelerator.prepare``:
+Accelerate re-shards iterable datasets and drops samples. Rank and world size are explicit arguments
+(pass Ray Train's values).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from pathlib import Path
 import numpy as np
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
+from sray.data_tools.loader.sample_types import EvalSample, TrainSample
 from sray.data_tools.loader.samples import eval_sample, ranked_candidates, train_sample
 from sray.data_tools.loader.views import SceneCache, read_scene_views
 from sray.data_tools.scene import SceneMeta, source_pool
@@ -82,13 +85,13 @@ class TrainTuples(IterableDataset):
         """Samples per epoch of this rank (all its workers together)."""
         return self.batches
 
-    def __iter__(self) -> Iterator[dict]:
+    def __iter__(self) -> Iterator[TrainSample]:
         """This worker's share of the current epoch (the whole epoch when there are no workers)."""
         info = get_worker_info()
         worker, n_workers = (info.id, info.num_workers) if info else (0, 1)
         return self._generate(self.epoch, worker, n_workers)  # epoch read now, not when first consumed
 
-    def _generate(self, epoch: int, worker: int, n_workers: int) -> Iterator[dict]:
+    def _generate(self, epoch: int, worker: int, n_workers: int) -> Iterator[TrainSample]:
         slot, n_slots = self.rank * n_workers + worker, self.world_size * n_workers
         assigned = slot_scenes(self.scenes, self.pools, slot, n_slots, np.random.default_rng([self.seed, epoch]))
         rng = np.random.default_rng([self.seed, epoch, self.rank, worker, 1])
@@ -117,19 +120,22 @@ class EpochLoader(DataLoader):
         """Make the next ``iter(loader)`` produce epoch ``epoch``'s random stream (e.g. after a resume)."""
         self.dataset.epoch = epoch
 
-    def __iter__(self) -> Iterator[dict]:
+    def __iter__(self) -> Iterator[TrainSample]:
         """Iterate one epoch, then advance the epoch counter."""
         iterator = super().__iter__()  # workers have copied the dataset (and its epoch) by now
         self.dataset.epoch += 1
         return iterator
 
 
-def _open(shards_dir: Path, scenes: list[str] | None) -> tuple[Manifest, list[str]]:
-    """Read the manifest, refuse a damaged folder (size check), resolve the scene list (None = train scenes)."""
-    problems = verify_shards(shards_dir, checksums=False)
-    if problems:
-        raise ValueError("the shard folder is damaged:\n  " + "\n  ".join(problems))
-    manifest = read_manifest(shards_dir)
+def _open(shards_dir: Path, scenes: list[str] | None,
+          manifest: Manifest | None = None) -> tuple[Manifest, list[str]]:
+    """Read the manifest and refuse a damaged folder (size check) unless the caller passes the manifest
+    it has read already; resolve the scene list (None = train scenes)."""
+    if manifest is None:
+        problems = verify_shards(shards_dir, checksums=False)
+        if problems:
+            raise ValueError("the shard folder is damaged:\n  " + "\n  ".join(problems))
+        manifest = read_manifest(shards_dir)
     if scenes is None:
         names = sorted(s for s, e in manifest.scenes.items() if e.meta.get("role", "train") == "train")
         if not names:
@@ -147,7 +153,7 @@ def _open(shards_dir: Path, scenes: list[str] | None) -> tuple[Manifest, list[st
 def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_batch: int, batches_per_epoch: int,
                       rank: int, world_size: int, num_workers: int, seed: int, scenes: list[str] | None = None,
                       cache_scenes: int = 2, visit_samples: int = 16, pin_memory: bool = False) -> EpochLoader:
-    """The training DataLoader of one rank (already-collated samples, ``batch_size=None``).
+    """The training DataLoader of one rank: one :class:`TrainSample` per step (``batch_size=None``).
 
     ``scenes``: scene names to train on; None = every scene whose role is ``train`` (unseen test
     scenes never leak into pretraining; name a test scene explicitly to finetune on it).
@@ -175,14 +181,16 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
 
 
 def make_eval_samples(shards_dir: Path, scene: str, split: str = "test", source_split: str | None = None,
-                      n_source: int = 8) -> Iterator[dict]:
+                      n_source: int = 8, *, manifest: Manifest | None = None) -> Iterator[EvalSample]:
     """Evaluation samples of ``scene``'s ``split`` views, in split order, with fixed sources.
 
     Sources are the query's top ``n_source`` ranked neighbours inside ``source_split`` (default:
     ``source`` for test scenes, ``train`` for train scenes; held-out views are never sources).
     Deterministic: every call yields the same samples. Validates before returning a generator.
+    ``manifest``: the folder's manifest when the caller has read it already (it is then neither read
+    nor size-checked again); None = read and check it here.
     """
-    manifest, _ = _open(shards_dir, [scene])
+    manifest, _ = _open(shards_dir, [scene], manifest)
     meta = SceneMeta.from_json(manifest.scenes[scene].meta)
     source_split = source_split or ("source" if meta.role == "test" else "train")
     for name in (split, source_split):
@@ -197,7 +205,7 @@ def make_eval_samples(shards_dir: Path, scene: str, split: str = "test", source_
             raise ValueError(f"scene {scene!r}, view {q!r}: {len(sources)} ranked {source_split!r} neighbours, "
                              f"n_source={n_source} needed; lower n_source or re-shard with a larger --neighbours")
 
-    def generate() -> Iterator[dict]:
+    def generate() -> Iterator[EvalSample]:
         for q, sources in plan:
             yield eval_sample(views, q, sources, scene, meta.near, meta.far)
 

@@ -51,7 +51,7 @@ def time_loader(shards_dir: Path, workers: int, batches: int, *, rays: int, n_so
     count = sum(1 for _ in stream)
     elapsed = time.perf_counter() - ready
     return {"workers": workers, "first_s": ready - start, "samples_s": count / elapsed,
-            "rays_s": count * rays / elapsed, "src_shape": tuple(first["src_rgb"].shape)}
+            "rays_s": count * rays / elapsed, "src_shape": tuple(first.sources.rgb.shape)}
 
 
 def run_loader_benchmark(data: Path | None, batches: int, *, rays: int = 1024, n_source: int = 8,

@@ -15,15 +15,15 @@ from .synthetic import model, rig
 def render_seconds(ctx: CheckContext, repeats: int) -> float:
     """Median seconds to render one (H, W) view from ``ctx.views`` sources with fp32 weights, no grad."""
     net = model(ctx.samples, ctx.views, ctx.device).eval()
-    data = rig(ctx.views, ctx.image_hw, ctx.device)
+    sources, query = rig(ctx.views, ctx.image_hw, ctx.device)
     times = []
     for _ in range(repeats + 1):
         if ctx.device.type == "cuda":
             torch.cuda.synchronize(ctx.device)
         start = time.perf_counter()
         with torch.no_grad():
-            src = net.encode(data["src_rgb"], data["src_K"], data["src_c2w"])
-            net.render_image(src, data["query_K"], data["query_c2w"], ctx.image_hw, 1.0, 5.0)
+            src = net.encode(sources.rgb, sources.K, sources.c2w)
+            net.render_image(src, query.K, query.c2w, ctx.image_hw, 1.0, 5.0)
         if ctx.device.type == "cuda":
             torch.cuda.synchronize(ctx.device)
         times.append(time.perf_counter() - start)

@@ -8,7 +8,8 @@ import torch
 from sray.model.losses import render_loss
 from sray.model.reprojection import project
 from sray.model.source_set import rigid_inverse
-from sray.platform.train.step import PRECISIONS, batch_rays
+from sray.platform.common.model_input import ray_batch
+from sray.platform.train.step import PRECISIONS
 
 from .context import CheckContext
 from .report import StageResult
@@ -51,12 +52,12 @@ def projection_error(ctx: CheckContext, precision: str) -> float:
 def argmax_agreement(ctx: CheckContext, precision: str) -> tuple[float, int]:
     """Share of confident pixels with the same label under ``precision`` as under fp32, and their count."""
     net = model(ctx.samples, ctx.views, ctx.device).eval()
-    data = rig(ctx.views, ctx.image_hw, ctx.device)
+    sources, query = rig(ctx.views, ctx.image_hw, ctx.device)
     images = []
     for p in ("no", precision):
         with torch.no_grad(), _autocast(ctx, p):
-            src = net.encode(data["src_rgb"], data["src_K"], data["src_c2w"])
-            images.append(net.render_image(src, data["query_K"], data["query_c2w"], ctx.image_hw, 1.0, 5.0)
+            src = net.encode(sources.rgb, sources.K, sources.c2w)
+            images.append(net.render_image(src, query.K, query.c2w, ctx.image_hw, 1.0, 5.0)
                           ["fine"]["logits"].float())
     top2 = images[0].topk(2, dim=-1).values
     confident = (top2[..., 0] - top2[..., 1]) > MARGIN
@@ -70,13 +71,14 @@ def step_agreement(ctx: CheckContext, precision: str) -> tuple[float, float]:
     results = []
     for p in ("no", precision):
         net = model(ctx.samples, ctx.views, ctx.device).train()
-        batch = training_sample(ctx.views, ctx.image_hw, ctx.rays, net.cfg.n_classes, ctx.device)
+        sample = training_sample(ctx.views, ctx.image_hw, ctx.rays, net.cfg.n_classes, ctx.device)
+        batch = ray_batch(sample)
         torch.manual_seed(1)
-        origins, dirs, near, far = batch_rays(batch, ctx.device)
+        origins, dirs, near, far = batch.query.rays()
         with _autocast(ctx, p):
-            src = net.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"])
+            src = net.encode(batch.src_rgb, batch.src_K, batch.src_c2w)
             out = net.render_rays(src, origins, dirs, near, far, stratified=True)
-        loss, _ = render_loss(out, batch["target_label"], batch["target_rgb"], net.cfg)
+        loss, _ = render_loss(out, sample.target_label, sample.target_rgb, net.cfg)
         loss.backward()
         grads = torch.cat([q.grad.flatten().float() for q in net.parameters() if q.grad is not None])
         results.append((float(loss.detach()), grads))

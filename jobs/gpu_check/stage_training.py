@@ -10,8 +10,9 @@ import torch
 
 from sray.model.config import SRayConfig
 from sray.model.losses import render_loss
-from sray.platform.train.state import RayBatchModel
-from sray.platform.train.step import TrainStep, batch_rays, fused_adam
+from sray.model.ray_batch import RayBatchModel
+from sray.platform.common.model_input import ray_batch
+from sray.platform.train.step import TrainStep, fused_adam
 
 from .context import CheckContext, has_module
 from .report import StageResult
@@ -34,16 +35,16 @@ def timed_steps(ctx: CheckContext, precision: str, steps: int) -> dict[str, floa
     params = list(model.parameters())
     model, optimizer = accelerator.prepare(model, fused_adam(params, 1e-4))
     step = TrainStep(list(model.parameters()), optimizer, 1.0, precision, accelerator.device, steps + 1)
-    batch = training_sample(ctx.views, ctx.image_hw, ctx.rays, 20, accelerator.device)
-    origins, dirs, near, far = batch_rays(batch, accelerator.device)
+    sample = training_sample(ctx.views, ctx.image_hw, ctx.rays, 20, accelerator.device)
+    batch = ray_batch(sample)
     cfg = accelerator.unwrap_model(model).net.cfg
     if ctx.device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(ctx.device)
 
     def one() -> None:
         with step.autocast():
-            out = model(batch["src_rgb"], batch["src_K"], batch["src_c2w"], origins, dirs, near, far)
-        loss, _ = render_loss(out, batch["target_label"], batch["target_rgb"], cfg)
+            out = model(batch)
+        loss, _ = render_loss(out, sample.target_label, sample.target_rgb, cfg)
         step(loss)
 
     one()  # warm-up

@@ -10,6 +10,7 @@ import math
 
 import torch
 
+from sray.data_tools.loader.sample_types import QueryCamera, SourceViews, TrainSample
 from sray.model.config import SRayConfig
 from sray.model.semantic_ray import SRayModel
 
@@ -21,28 +22,27 @@ def pinhole(hw: tuple[int, int], fov_deg: float) -> torch.Tensor:
     return torch.tensor([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
 
 
-def rig(views: int, hw: tuple[int, int], device: torch.device, seed: int = 0) -> dict[str, torch.Tensor]:
-    """Source views (m, 3, H, W) with K (m, 3, 3) and c2w (m, 4, 4) spread around a query at the origin."""
+def rig(views: int, hw: tuple[int, int], device: torch.device, seed: int = 0) -> tuple[SourceViews, QueryCamera]:
+    """Source views (m, 3, H, W) with K (m, 3, 3) and c2w (m, 4, 4) spread around a query camera at the origin."""
     gen = torch.Generator().manual_seed(seed)
     K = pinhole(hw, 60.0)
     c2w = torch.eye(4).repeat(views, 1, 1)
     c2w[:, 0, 3] = torch.linspace(-0.3, 0.3, views)
     c2w[:, 1, 3] = 0.1 * torch.sin(torch.arange(views, dtype=torch.float32))
-    data = {"src_rgb": torch.rand(views, 3, *hw, generator=gen), "src_K": K.expand(views, 3, 3).clone(),
-            "src_c2w": c2w, "query_K": K, "query_c2w": torch.eye(4)}
-    return {k: v.to(device) for k, v in data.items()}
+    sources = SourceViews(rgb=torch.rand(views, 3, *hw, generator=gen), K=K.expand(views, 3, 3).clone(), c2w=c2w)
+    return sources.to(device), QueryCamera(K=K, c2w=torch.eye(4)).to(device)
 
 
 def training_sample(views: int, hw: tuple[int, int], rays: int, n_classes: int, device: torch.device,
-                    seed: int = 0) -> dict[str, torch.Tensor]:
-    """A training sample in the loader's format (docs/CONTRACTS.md), on ``device``."""
+                    seed: int = 0) -> TrainSample:
+    """A training sample as the loader makes it (bounds 1-5 m), on ``device``."""
     gen = torch.Generator().manual_seed(seed + 1)
     h, w = hw
-    sample = rig(views, hw, device, seed)
-    extra = {"pixels": torch.rand(rays, 2, generator=gen) * torch.tensor([w - 1.0, h - 1.0]),
-             "target_label": torch.randint(0, n_classes, (rays,), generator=gen),
-             "target_rgb": torch.rand(rays, 3, generator=gen), "near": torch.tensor(1.0), "far": torch.tensor(5.0)}
-    return sample | {k: v.to(device) for k, v in extra.items()}
+    sources, query = rig(views, hw, device, seed)
+    return TrainSample(scene="synthetic", query_id="query", sources=sources, query=query, near=1.0, far=5.0,
+                       pixels=(torch.rand(rays, 2, generator=gen) * torch.tensor([w - 1.0, h - 1.0])).to(device),
+                       target_label=torch.randint(0, n_classes, (rays,), generator=gen).to(device),
+                       target_rgb=torch.rand(rays, 3, generator=gen).to(device))
 
 
 def model(samples: tuple[int, int], views: int, device: torch.device, seed: int = 0) -> SRayModel:

@@ -12,7 +12,8 @@ from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.config.train_config import TrainConfig
 
 LEGACY_PREFIX = "net."
-"""Checkpoints written before 2026-11-23 stored the training wrapper's keys (``net.`` + the model's)."""
+"""Checkpoints written before 2026-11-23 stored the training module's keys (``net.`` + the model's:
+``sray.model.ray_batch.RayBatchModel`` holds the network as ``net``)."""
 
 
 def bare_model_keys(weights: dict[str, Tensor]) -> dict[str, Tensor]:

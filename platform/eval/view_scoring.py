@@ -8,15 +8,21 @@ LPIPS is not reported: its backbones are downloaded at run time, which this plat
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import torch
 from torch import Tensor, nn
 
+from sray.data_tools.loader.sample_types import EvalSample
 from sray.model.metrics import confusion_matrix, per_image_miou, psnr, scene_metrics
-from sray.model.rays import pixel_rays
+from sray.model.semantic_ray import SourceSet
 from sray.model.ssim import SSIM_WINDOW, ssim
+from sray.platform.common.model_input import ray_batch
+
+Renderer = Callable[[Tensor, Tensor, Tensor, Tensor], dict[str, dict[str, Tensor]]]
+"""``render(origins (R, 3), dirs (R, 3), near (R,), far (R,)) -> {"coarse": pass, "fine": pass}``,
+deterministic sampling."""
 
 
 @dataclass
@@ -46,37 +52,37 @@ def strided_pixels(h: int, w: int, stride: int) -> tuple[Tensor, int, int]:
 
 
 @torch.no_grad()
-def render_view(render: Any, sample: dict[str, Any], stride: int, chunk: int,
+def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
                 device: torch.device) -> ViewPrediction:
-    """Render one evaluation sample with ``render(origins, dirs, near, far) -> out`` in ray chunks.
-
-    ``sample`` follows the evaluation-sample contract (docs/CONTRACTS.md): whole query image,
-    fixed source views.
-    """
-    gt_rgb, gt_label = sample["query_rgb"], sample["query_label"]
+    """Render one evaluation sample (whole query image, fixed source views) with ``render`` in ray
+    chunks of at most ``chunk`` rays, every ``stride``-th pixel in each direction."""
+    gt_rgb, gt_label = sample.query_rgb, sample.query_label
     h, w = gt_label.shape
     uv, hh, ww = strided_pixels(h, w, stride)
-    origins, dirs = pixel_rays(sample["query_K"].to(device), sample["query_c2w"].to(device), uv.to(device))
+    origins, dirs, near, far = ray_batch(sample, uv).query.to(device).rays()  # (R, 3), (R, 3), (R,), (R,)
     labels, colours = [], []
     for start in range(0, uv.shape[0], chunk):
         sl = slice(start, start + chunk)
-        n = origins[sl].shape[0]
-        near = torch.full((n,), float(sample["near"]), device=device)
-        far = torch.full((n,), float(sample["far"]), device=device)
-        fine = render(origins[sl], dirs[sl], near, far)["fine"]
+        fine = render(origins[sl], dirs[sl], near[sl], far[sl])["fine"]
         labels.append(fine["logits"].float().argmax(-1).cpu())
         colours.append(fine["rgb"].float().clamp(0, 1).cpu())
     iu, iv = uv[:, 0].long(), uv[:, 1].long()
     return ViewPrediction(
-        query_id=str(sample["query_id"]),
+        query_id=sample.query_id,
         pred_label=torch.cat(labels).reshape(hh, ww), pred_rgb=torch.cat(colours).reshape(hh, ww, 3),
         gt_label=gt_label[iv, iu].reshape(hh, ww).long(), gt_rgb=gt_rgb[iv, iu].reshape(hh, ww, 3).float(),
         stride=stride)
 
 
-def sray_renderer(net: nn.Module, sample: dict[str, Any], device: torch.device) -> Any:
+def encode_sources(net: nn.Module, sample: EvalSample, device: torch.device) -> SourceSet:
+    """The sample's fixed source views, moved to ``device`` and encoded by the S-Ray ``net``."""
+    sources = sample.sources.to(device)
+    return net.encode(sources.rgb, sources.K, sources.c2w)
+
+
+def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device) -> Renderer:
     """Encode the sample's fixed source views once; return a ray renderer bound to them."""
-    src = net.encode(sample["src_rgb"].to(device), sample["src_K"].to(device), sample["src_c2w"].to(device))
+    src = encode_sources(net, sample, device)
     return lambda o, d, near, far: net.render_rays(src, o, d, near, far, stratified=False)
 
 

@@ -17,20 +17,21 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor, nn
 
+from sray.data_tools.loader.sample_types import EvalSample, TrainSample
 from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.scene import SceneMeta
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.losses import render_loss
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box_from_cameras
 from sray.model.semantic_ray import SourceSet, SRayModel
+from sray.platform.common.model_input import ray_batch
 from sray.platform.config.fleet_config import SemanticNeRFSettings
-from sray.platform.eval.view_scoring import sray_renderer
+from sray.platform.eval.view_scoring import Renderer, encode_sources, sray_renderer
 from sray.platform.finetune.scene_artifacts import (
     NERF_ARTIFACT,
     SRAY_ARTIFACT,
@@ -40,7 +41,7 @@ from sray.platform.finetune.scene_artifacts import (
     save_semantic_nerf,
     save_sray_delta,
 )
-from sray.platform.train.step import TrainStep, batch_rays, fused_adam
+from sray.platform.train.step import TrainStep, fused_adam
 
 
 class _Learner:
@@ -84,18 +85,18 @@ class SRayLearner(_Learner):
         self._sources: dict[tuple[str, str], SourceSet] = {}
         super().__init__(net, params, lr, grad_clip, precision, device, max_nonfinite_in_row)
 
-    def loss(self, batch: dict[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
+    def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
         """Loss of one training sample (sources encoded without gradient while the encoder is frozen)."""
-        origins, dirs, near, far = batch_rays(batch, self.device)
+        sample = sample.to(self.device)
+        batch = ray_batch(sample)
+        origins, dirs, near, far = batch.query.rays()
         with self.step.autocast():
             with torch.no_grad() if self.encoder_frozen else contextlib.nullcontext():
-                src = self.net.encode(batch["src_rgb"].to(self.device), batch["src_K"].to(self.device),
-                                      batch["src_c2w"].to(self.device))
+                src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w)
             out = self.net.render_rays(src, origins, dirs, near, far, stratified=True)
-        return render_loss(out, batch["target_label"].to(self.device), batch["target_rgb"].to(self.device),
-                           self.net.cfg)
+        return render_loss(out, sample.target_label, sample.target_rgb, self.net.cfg)
 
-    def renderer(self, sample: dict[str, Any]) -> Any:
+    def renderer(self, sample: EvalSample) -> Renderer:
         """Ray renderer bound to the sample's fixed source views.
 
         While the encoder is frozen the encoded sources of a held-out view never change: they are
@@ -103,10 +104,9 @@ class SRayLearner(_Learner):
         """
         if not self.encoder_frozen:
             return sray_renderer(self.net, sample, self.device)
-        key = (str(sample["scene"]), str(sample["query_id"]))
+        key = (sample.scene, sample.query_id)
         if key not in self._sources:
-            self._sources[key] = self.net.encode(sample["src_rgb"].to(self.device), sample["src_K"].to(self.device),
-                                                 sample["src_c2w"].to(self.device))
+            self._sources[key] = encode_sources(self.net, sample, self.device)
         src = self._sources[key]
         return lambda o, d, near, far: self.net.render_rays(src, o, d, near, far, stratified=False)
 
@@ -135,15 +135,15 @@ class NeRFLearner(_Learner):
         net = net.to(device).eval()
         super().__init__(net, list(net.parameters()), lr, grad_clip, precision, device, max_nonfinite_in_row)
 
-    def loss(self, batch: dict[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
+    def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
         """Loss of one training sample's rays (its source views are not used)."""
-        origins, dirs, near, far = batch_rays(batch, self.device)
+        origins, dirs, near, far = ray_batch(sample).query.to(self.device).rays()
         with self.step.autocast():
             out = self.net.render_rays(origins, dirs, near, far, stratified=True)
-        return render_loss(out, batch["target_label"].to(self.device), batch["target_rgb"].to(self.device),
+        return render_loss(out, sample.target_label.to(self.device), sample.target_rgb.to(self.device),
                            self.net.cfg)
 
-    def renderer(self, sample: dict[str, Any]) -> Any:
+    def renderer(self, sample: EvalSample) -> Renderer:
         """Ray renderer (deterministic samples)."""
         return lambda o, d, near, far: self.net.render_rays(o, d, near, far, stratified=False)
 

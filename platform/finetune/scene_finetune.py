@@ -28,6 +28,7 @@ import torch
 from torch import nn
 
 from sray.data_tools.atomic import atomic_write_json
+from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader
 from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
@@ -102,7 +103,7 @@ class EarlyStopping:
 
 
 @torch.no_grad()
-def evaluate(learner: Any, samples: list[dict[str, Any]], cfg: FleetConfig, n_classes: int,
+def evaluate(learner: Any, samples: list[EvalSample], cfg: FleetConfig, n_classes: int,
              ignore_id: int) -> dict[str, float]:
     """Held-out scores (``score_views`` keys) of the learner's current state."""
     ft = cfg.finetune
@@ -127,7 +128,7 @@ def scene_protocol(job: SceneJob) -> EvalProtocol:
     return EvalProtocol.from_shards(Path(job.shards), ft.eval_n_source, ft.eval_stride)
 
 
-def _prepare(job: SceneJob, device: torch.device) -> tuple[Any, Any, list[dict[str, Any]], tuple[int, int, int]]:
+def _prepare(job: SceneJob, device: torch.device) -> tuple[Any, Any, list[EvalSample], tuple[int, int, int]]:
     """The learner, the training loader (one epoch = ``eval_every`` samples), the held-out samples and
     (classes, ignore id, shared model bytes); ValueError when the scene does not fit the checkpoint."""
     cfg, ft, shards = job.config, job.config.finetune, Path(job.shards)

@@ -6,35 +6,12 @@ import math
 from typing import Any
 
 import torch
-from torch import Tensor, nn
 
-from sray.model.config import SRayConfig
+from sray.model.ray_batch import RayBatchModel
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.model_loading import bare_model_keys
 from sray.platform.config.train_config import OptimSettings, TrainConfig
 from sray.platform.train.step import fused_adam
-
-
-class RayBatchModel(nn.Module):
-    """One ``forward`` = encode the source views + render a ray batch.
-
-    DDP synchronises gradients only for work done inside ``forward``, so the training step goes
-    through this wrapper instead of calling ``encode`` / ``render_rays`` on the bare model.
-    """
-
-    def __init__(self, cfg: SRayConfig) -> None:
-        """Build the wrapped S-Ray network (no device work here)."""
-        super().__init__()
-        self.net = SRayModel(cfg)
-
-    def forward(self, src_rgb: Tensor, src_K: Tensor, src_c2w: Tensor, origins: Tensor, dirs: Tensor,
-                near: Tensor, far: Tensor) -> dict[str, dict[str, Tensor]]:
-        """src_rgb (m,3,H,W), src_K (m,3,3), src_c2w (m,4,4), origins/dirs (R,3), near/far (R,).
-
-        Samples are stratified in training mode and deterministic in eval mode.
-        """
-        src = self.net.encode(src_rgb, src_K, src_c2w)
-        return self.net.render_rays(src, origins, dirs, near, far, stratified=self.training)
 
 
 def lr_lambda(opt: OptimSettings) -> Any:

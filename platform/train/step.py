@@ -15,12 +15,9 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass
-from typing import Any
 
 import torch
 from torch import Tensor, nn
-
-from sray.model.rays import pixel_rays
 
 PRECISIONS = {"no": None, "bf16": torch.bfloat16, "fp16": torch.float16}
 """Autocast dtype of each precision setting (``no`` = float32 throughout)."""
@@ -37,19 +34,6 @@ def step_seed(seed: int, rank: int, step: int) -> int:
     would, with no RNG state to carry between processes.
     """
     return (seed * 1_000_003 + rank * 7_919 + step) % (2**63 - 1)
-
-
-def batch_rays(batch: dict[str, Any], device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """Rays of a training sample on ``device``: origins, dirs (R, 3) and the scene's near, far (R,).
-
-    The bounds are expanded on the device (no host round trip).
-    """
-    origins, dirs = pixel_rays(batch["query_K"].to(device), batch["query_c2w"].to(device),
-                               batch["pixels"].to(device))
-    n = origins.shape[0]
-    near = batch["near"].to(device, torch.float32).reshape(()).expand(n)
-    far = batch["far"].to(device, torch.float32).reshape(()).expand(n)
-    return origins, dirs, near, far
 
 
 @dataclass

@@ -6,7 +6,7 @@
 paper's table of metrics against iterations. Both groups are made the same way,
 :func:`validation_protocol` (logged once per run by the launcher: tag ``sray.protocol``, params
 ``protocol.*``); validation renders are strided (``data.val_downscale``), so they carry no SSIM
-unless that is 1.
+unless that is 1. One validation reads the shard manifest once and hands it down.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
-from sray.data_tools.shards.manifest import read_manifest
+from sray.data_tools.shards.manifest import Manifest, read_manifest
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.eval.view_scoring import ViewPrediction, render_view, score_views, sray_renderer
@@ -40,17 +40,19 @@ def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
     return {k: sum(s[k] for s in scores) / len(scores) for k in keys}
 
 
-def evaluate_group(net: nn.Module, cfg: TrainConfig, role: str, device: torch.device) -> tuple[dict[str, float], list[tuple[str, ViewPrediction]]]:
+def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: str,
+                   device: torch.device) -> tuple[dict[str, float], list[tuple[str, ViewPrediction]]]:
     """Scores averaged over the scenes of ``role`` (each scene scored from its own confusion matrix),
-    and the rendered views (scene, prediction). Empty when no scene of that role has test views."""
-    manifest = read_manifest(Path(cfg.data.shards))
+    and the rendered views (scene, prediction). Empty when no scene of that role has test views.
+    ``manifest``: the parsed ``cfg.data.shards`` manifest (not read again here)."""
     per_scene, renders = [], []
     for name, entry in sorted(manifest.scenes.items()):
         meta = entry.meta
         if meta.get("role") != role or not meta.get("splits", {}).get("test"):
             continue
         samples = itertools.islice(make_eval_samples(Path(cfg.data.shards), name, split="test",
-                                                     n_source=cfg.model.n_source), cfg.data.val_views_per_scene)
+                                                     n_source=cfg.model.n_source, manifest=manifest),
+                                   cfg.data.val_views_per_scene)
         views = []
         for sample in samples:
             views.append(render_view(sray_renderer(net, sample, device), sample, cfg.data.val_downscale,
@@ -66,11 +68,11 @@ def validate(net: nn.Module, cfg: TrainConfig, step: int, logger: Any, job_dir: 
     was_training = net.training
     net.eval()
     metrics: dict[str, float] = {}
-    manifest = read_manifest(Path(cfg.data.shards))
+    manifest = read_manifest(Path(cfg.data.shards))  # the one read of this validation
     class_names = next(iter(manifest.scenes.values())).meta["class_names"]
     try:
         for prefix, role in GROUPS.items():
-            scores, renders = evaluate_group(net, cfg, role, device)
+            scores, renders = evaluate_group(net, cfg, manifest, role, device)
             metrics |= {f"{prefix}/{k}": v for k, v in scores.items()}
             if renders:
                 scene, view = renders[0]

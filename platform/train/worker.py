@@ -16,17 +16,14 @@ import torch
 from sray.model.losses import render_loss
 from sray.platform.checkpoints.folders import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
 from sray.platform.common.fault_hook import active_faults, kill_if_due
+from sray.platform.common.model_input import ray_batch
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.runs import RunHandle
 from sray.platform.train.state import build_training, restore_training, training_state
-from sray.platform.train.step import TrainStep, batch_rays, step_seed
+from sray.platform.train.step import TrainStep, step_seed
 
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
-
-
-def _to(batch: dict[str, Any], device: torch.device) -> dict[str, Any]:
-    return {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
 
 
 def _memory_mb(device: torch.device) -> float:
@@ -136,13 +133,12 @@ def train_worker(payload: dict[str, Any]) -> None:
 
             if step % epoch_len == 0 and step != start:
                 batches = batches_from(step)
-            batch = _to(next(batches), device)
+            sample = next(batches).to(device, non_blocking=True)
             torch.manual_seed(step_seed(cfg.run.seed, rank, step))
-            origins, dirs, near, far = batch_rays(batch, device)
             model.train()
             with train_step.autocast():
-                out = model(batch["src_rgb"], batch["src_K"], batch["src_c2w"], origins, dirs, near, far)
-            loss, terms = render_loss(out, batch["target_label"], batch["target_rgb"], cfg.model)
+                out = model(ray_batch(sample))
+            loss, terms = render_loss(out, sample.target_label, sample.target_rgb, cfg.model)
             if step == faults.nan_at_step:
                 loss = loss * float("nan")
             stop_asked = stop_file.exists() or step + 1 == faults.stop_after_step

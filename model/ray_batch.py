@@ -1,0 +1,84 @@
+"""The model surface: one typed input (a batch of query rays of one scene) and the module that renders it.
+
+``RayBatch`` is what a caller hands the model: m source views, and a :class:`QueryRays` (query
+camera, the pixels to render, the scene's z-depth bounds as Python floats). :meth:`QueryRays.rays`
+is the one place pixels become rays and the bounds become per-ray (R,) tensors, made by ``torch.full``
+on the pixels' device (a fill: no host-to-device copy, so the host never waits for the device).
+
+``RayBatchModel.forward`` = encode the sources + render the rays. DDP synchronises gradients only for
+work done inside ``forward``, so training goes through this module; it holds the network as ``net``
+(checkpoints store ``net``'s own keys, see ``sray.platform.train.state``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+
+from .config import SRayConfig
+from .rays import pixel_rays
+from .semantic_ray import SRayModel
+
+
+@dataclass(frozen=True)
+class QueryRays:
+    """Rays through pixels of one query camera, with the scene's depth bounds."""
+
+    K: Tensor
+    """float32 (3, 3) query intrinsics (pixel (u, v) centred at (u, v))."""
+    c2w: Tensor
+    """float32 (4, 4) query camera-to-world, OpenCV axes."""
+    pixels: Tensor
+    """float32 (R, 2) (u, v) pixel coordinates of the rays."""
+    near: float
+    """Near z-depth bound (metres) of every ray."""
+    far: float
+    """Far z-depth bound (metres) of every ray."""
+
+    def to(self, device: torch.device | str, non_blocking: bool = False) -> QueryRays:
+        """A copy with the camera and pixels on ``device``."""
+        return QueryRays(self.K.to(device, non_blocking=non_blocking), self.c2w.to(device, non_blocking=non_blocking),
+                         self.pixels.to(device, non_blocking=non_blocking), self.near, self.far)
+
+    def rays(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """origins, dirs (R, 3) (``pixel_rays``: dirs have camera-z 1, so t is the z-depth) and near,
+        far (R,) float32, all on the pixels' device."""
+        origins, dirs = pixel_rays(self.K, self.c2w, self.pixels)
+        n, device = self.pixels.shape[0], self.pixels.device
+        near = torch.full((n,), self.near, dtype=torch.float32, device=device)  # (R,)
+        far = torch.full((n,), self.far, dtype=torch.float32, device=device)  # (R,)
+        return origins, dirs, near, far
+
+
+@dataclass(frozen=True)
+class RayBatch:
+    """The model's input: the source views of one scene and query rays to render against them."""
+
+    src_rgb: Tensor
+    """float32 (m, 3, H, W) source colours in [0, 1]."""
+    src_K: Tensor
+    """float32 (m, 3, 3) source intrinsics."""
+    src_c2w: Tensor
+    """float32 (m, 4, 4) source camera-to-world, OpenCV axes."""
+    query: QueryRays
+    """The rays to render."""
+
+
+class RayBatchModel(nn.Module):
+    """One ``forward`` = encode a :class:`RayBatch`'s sources + render its rays (see the module docstring)."""
+
+    def __init__(self, cfg: SRayConfig) -> None:
+        """Build the S-Ray network it renders with (no device work here)."""
+        super().__init__()
+        self.net = SRayModel(cfg)
+
+    def forward(self, batch: RayBatch) -> dict[str, dict[str, Tensor]]:
+        """``{"coarse": pass, "fine": pass}`` of the batch's R rays (``SRayModel.render_rays``).
+
+        Samples along the rays are stratified in training mode and deterministic in eval mode.
+        """
+        origins, dirs, near, far = batch.query.rays()
+        src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w)
+        return self.net.render_rays(src, origins, dirs, near, far, stratified=self.training)
