@@ -11,7 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sray.platform.viz.charts import STYLES, curve_figure, write_fleet_charts
+from sray.platform.methods.registry import get_method
+from sray.platform.viz.charts import curve_figure, write_fleet_charts
 from sray.platform.viz.curves import average_curves, curve_xy, read_fleet_results, step_hold, zero_shot_value
 
 CHART_FILES = ["miou_vs_wall_s.png", "miou_vs_step.png", "psnr_vs_wall_s.png", "psnr_vs_step.png",
@@ -115,8 +116,8 @@ def test_mixed_fleet_charts_are_written_and_skip_failures(tmp_path):
         h, w = image.shape[:2]
         assert 450 <= w <= 2600 and 400 <= h <= 2200, f"{p.name}: {w}x{h} px"
         assert image.std() > 10, f"{p.name} looks blank"
-        assert _colour_pixels(p, STYLES["sray"]["color"]) > 50
-        assert _colour_pixels(p, STYLES["semantic-nerf"]["color"]) > 20
+        assert _colour_pixels(p, get_method("sray").style.color) > 50
+        assert _colour_pixels(p, get_method("semantic-nerf").style.color) > 20
     assert not list((tmp_path / "charts").glob(".*"))  # no temporary files left
     # panels: the mean, then scenes a, b, c; scene_d (all failed) has none; the footnote names failures
     fig = curve_figure(results, "miou", "wall_s")
@@ -137,7 +138,7 @@ def test_single_method_fleet_and_degenerate_inputs(tmp_path):
     assert [p.name for p in paths] == CHART_FILES
     for p in paths:
         assert cv2.imread(str(p)) is not None
-        assert _colour_pixels(p, STYLES["semantic-nerf"]["color"], tol=6) == 0  # no Semantic-NeRF anywhere
+        assert _colour_pixels(p, get_method("semantic-nerf").style.color, tol=6) == 0  # no Semantic-NeRF anywhere
     assert [ax.get_title() for ax in curve_figure(results, "psnr", "step").axes if ax.get_visible()] == \
         ["scene only_scene"]
     # every result failed: nothing to draw, nothing written

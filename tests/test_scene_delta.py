@@ -17,8 +17,9 @@ from sray.platform.train.checkpoints import load_checkpoint
 from sray.platform.finetune.scene_finetune import SceneJob, SceneOutcome, evaluate, finetune_scene
 from sray.platform.finetune.learners import SRayLearner
 from sray.platform.config.fleet_config import DEFAULT_ADAPT
-from sray.platform.finetune.scene_artifacts import (SRAY_ARTIFACT, adapted_keys, checkpoint_sha256, load_scene_model,
+from sray.platform.finetune.scene_artifacts import (adapted_keys, checkpoint_sha256, load_scene_model,
                                        load_semantic_nerf, save_semantic_nerf, save_sray_delta)
+from sray.platform.methods.registry import get_method
 from sray.platform.train.state import model_from_checkpoint
 
 SCENE = "synth_test_000"
@@ -33,7 +34,7 @@ def finetuned(one_thread: None, tiny_shards: Path, tiny_checkpoint: Path,
     job = SceneJob(scene=SCENE, method="sray", checkpoint=str(tiny_checkpoint),
                    base_sha256=checkpoint_sha256(tiny_checkpoint), shards=str(tiny_shards), out_dir=str(out), run=None,
                    attempt=1, config=tiny_fleet_config(patience=5))
-    return finetune_scene(job), out / SRAY_ARTIFACT
+    return finetune_scene(job), out / get_method("sray").artifact_file
 
 
 def _render(net: torch.nn.Module, sample: dict) -> dict:
