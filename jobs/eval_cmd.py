@@ -9,7 +9,7 @@ from pathlib import Path
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray eval``."""
-    p = sub.add_parser("eval", help="score a checkpoint on unseen scenes: metrics.json, PNGs, an MLflow run")
+    p = sub.add_parser("eval", help="score a checkpoint on unseen scenes: metrics.json, PNGs, a tracked run")
     p.add_argument("--checkpoint", type=Path, required=True,
                    help="checkpoint folder (…/checkpoints/step_XXXXXXXXX) written by `sray train`")
     p.add_argument("--data", type=Path, required=True, help="shard folder holding manifest.json")
@@ -19,8 +19,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--stride", type=int, default=1,
                    help="render every N-th pixel in each direction (1 = whole images; SSIM only then)")
     p.add_argument("--out", type=Path, default=Path("outputs/eval"), help="output folder")
-    p.add_argument("--tracking-uri", help="MLflow tracking URI (default: SQLite store in this folder)")
-    p.add_argument("--experiment", default="sray-eval", help="MLflow experiment name")
+    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
+    p.add_argument("--tracking-uri", help="the tracker's store, for MLflow its tracking URI (default: SQLite store "
+                                          "in this folder)")
+    p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
     p.set_defaults(func=run)
 
@@ -32,13 +34,14 @@ def run(args: argparse.Namespace) -> int:
     try:
         report = evaluate_checkpoint(args.checkpoint, args.data, args.scenes, args.out, n_source=args.n_source,
                                      stride=args.stride, tracking_uri=args.tracking_uri,
-                                     experiment=args.experiment, device=args.device)
+                                     experiment=args.experiment, tracker=args.tracker, device=args.device)
     except (FileNotFoundError, ValueError) as e:
         print(f"sray eval: {e}", file=sys.stderr)
         return 2
     print(format_table(report))
     print(f"[sray] metrics: {report['metrics_path']}")
     print(f"[sray] renders: {Path(report['out_dir']) / 'renders'}")
-    hint = report["run"]["ui_hint"]
-    print(f"[sray] MLflow run: {report['run']['ui_url']}" + (f"  (start the UI: {hint})" if hint else ""))
+    run = report["run"]
+    hint = run["ui_hint"]
+    print(f"[sray] {run['tracker']} run: {run['ui_url']}" + (f"  (start the UI: {hint})" if hint else ""))
     return 0

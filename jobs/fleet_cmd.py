@@ -1,4 +1,7 @@
-"""``sray finetune-fleet``: finetune S-Ray (and/or train Semantic-NeRF) per scene as a fleet of Ray tasks."""
+"""``sray finetune-fleet``: per-scene methods (S-Ray finetune, Semantic-NeRF, ...) as a fleet of Ray tasks.
+
+The ``--methods`` choices come from the method registry (:mod:`sray.platform.finetune.methods.registry`).
+"""
 
 from __future__ import annotations
 
@@ -6,30 +9,36 @@ import argparse
 import sys
 from pathlib import Path
 
-METHOD_CHOICES = {"sray": ["sray"], "semantic-nerf": ["semantic-nerf"], "both": ["sray", "semantic-nerf"]}
-"""``--method`` value -> methods run per scene."""
+from sray.platform.finetune.methods.registry import METHODS, method_names
+
+ALL_METHODS = "all"
+"""``--methods`` value that runs every registered method."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray finetune-fleet``."""
-    p = sub.add_parser("finetune-fleet", help="per-scene finetunes as Ray tasks, one parent MLflow run",
-                       description="Finetune the shared S-Ray model on each scene's finetune views (and/or train "
-                                   "Semantic-NeRF from scratch), with early stopping on the held-out views. A "
-                                   "re-launch with the same --out skips finished scenes.")
+    p = sub.add_parser("finetune-fleet", help="per-scene finetunes as Ray tasks, one parent tracked run",
+                       description="Run per-scene methods on each scene's finetune views (finetune the shared S-Ray "
+                                   "model, train Semantic-NeRF from scratch, ...), with early stopping on the "
+                                   "held-out views. A re-launch with the same --out skips finished scenes.")
     p.add_argument("--checkpoint", required=True, type=Path,
                    help="shared S-Ray checkpoint: a step_XXXXXXXXX folder, a job's checkpoints/ or a job folder")
     p.add_argument("--data", required=True, type=Path, help="shard folder (manifest.json)")
     which = p.add_mutually_exclusive_group(required=True)
     which.add_argument("--scenes", nargs="+", metavar="SCENE", help="scenes to finetune (any with 'test' views)")
     which.add_argument("--all-test", action="store_true", help="every unseen test scene of --data")
-    p.add_argument("--method", choices=sorted(METHOD_CHOICES), default="sray",
-                   help="sray (finetune the shared model), semantic-nerf (from scratch) or both")
+    summaries = "; ".join(f"{m.name}: {m.summary}" for m in METHODS.values())
+    p.add_argument("--methods", "--method", dest="methods", nargs="+", choices=[*METHODS, ALL_METHODS],
+                   default=["sray"], metavar="METHOD",
+                   help=f"methods run per scene, default sray ({summaries}; {ALL_METHODS}: every one)")
     p.add_argument("--max-parallel", type=int, help="most scene tasks at once (max_parallel)")
     p.add_argument("--cpus-per-task", type=float, help="CPUs per scene task, fractions allowed")
     p.add_argument("--gpus-per-task", type=float, help="GPUs per scene task, fractions share a GPU")
     p.add_argument("--precision", choices=["no", "bf16", "fp16"], help="autocast (fp16: CUDA only)")
     p.add_argument("--out", type=Path, default=Path("outputs/fleet"), help="fleet folder (default outputs/fleet)")
-    p.add_argument("--tracking-uri", default="", help="MLflow tracking URI (default: SQLite store in this folder)")
+    p.add_argument("--tracker", help="tracker to log to, by registry name (tracker; default: mlflow)")
+    p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
+                                                      "SQLite store in this folder)")
     p.add_argument("--address", help="join this Ray cluster (default: start Ray locally in-process)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="[SECTION.]FIELD=VALUE",
                    help="override a fleet config field, e.g. --set finetune.patience=5 (repeatable)")
@@ -43,9 +52,15 @@ def build_fleet_config(args: argparse.Namespace):
 
     cfg = FleetConfig()
     flags = {"max_parallel": args.max_parallel, "cpus_per_task": args.cpus_per_task,
-             "gpus_per_task": args.gpus_per_task, "finetune.precision": args.precision, "address": args.address}
+             "gpus_per_task": args.gpus_per_task, "finetune.precision": args.precision, "address": args.address,
+             "tracker": args.tracker}
     apply_settings(cfg, flags, args.overrides, apply_fleet_override)
     return cfg
+
+
+def chosen_methods(values: list[str]) -> list[str]:
+    """The methods ``--methods`` asks for: every registered one for ``all``, else the names once each, in order."""
+    return method_names() if ALL_METHODS in values else list(dict.fromkeys(values))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = build_fleet_config(args)
         scenes = unseen_scenes(args.data) if args.all_test else args.scenes
         results = run_fleet(cfg, args.checkpoint, args.data, scenes, args.out, args.tracking_uri,
-                            METHOD_CHOICES[args.method])
+                            chosen_methods(args.methods))
     except (InfeasibleRequest, FileNotFoundError, ValueError) as e:
         print(f"sray finetune-fleet: {e}", file=sys.stderr)
         return 2

@@ -18,7 +18,9 @@ def add_train_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, help="Ray Train workers (run.workers)")
     p.add_argument("--gpus-per-worker", type=float, help="GPUs per worker, fractions allowed")
     p.add_argument("--precision", choices=["no", "bf16", "fp16"], help="mixed precision (fp16: CUDA only)")
-    p.add_argument("--tracking-uri", help="MLflow tracking URI (default: SQLite store in this folder)")
+    p.add_argument("--tracker", help="tracker to log to, by registry name (run.tracker; default: mlflow)")
+    p.add_argument("--tracking-uri", help="the tracker's store, for MLflow its tracking URI (default: SQLite store "
+                                          "in this folder)")
     p.add_argument("--name", help="job name (unique; default <recipe>-<timestamp>)")
     p.add_argument("--resume", metavar="NAME", help="continue the stopped or crashed job NAME")
 
@@ -49,7 +51,7 @@ def build_config(args: argparse.Namespace):
         cfg = load_job_config(cfg.run.output_dir, args.resume)
         cfg.run.name = args.resume
     flags = {"data.shards": args.data, "run.workers": args.workers, "run.gpus_per_worker": args.gpus_per_worker,
-             "run.precision": args.precision, "run.tracking_uri": args.tracking_uri,
+             "run.precision": args.precision, "run.tracker": args.tracker, "run.tracking_uri": args.tracking_uri,
              "run.name": None if args.resume else args.name}
     apply_settings(cfg, flags, args.overrides, apply_override)
     return cfg

@@ -8,7 +8,7 @@ import sys
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray ui``."""
-    from sray.platform.tracking.runs import DEFAULT_UI_PORT
+    from sray.platform.tracking.dashboard import DEFAULT_UI_PORT
 
     p = sub.add_parser("ui", help="open the MLflow dashboard (runs, fleets, charts, renders) on 127.0.0.1")
     p.add_argument("--tracking-uri", help="store to show (default: the SQLite store in this folder, mlflow.db)")

@@ -11,7 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sray.platform.viz.charts import STYLES, curve_figure, write_fleet_charts
+from sray.platform.finetune.methods.registry import METHODS, get_method
+from sray.platform.viz.charts import curve_figure, write_fleet_charts
 from sray.platform.viz.curves import average_curves, curve_xy, read_fleet_results, step_hold, zero_shot_value
 
 CHART_FILES = ["miou_vs_wall_s.png", "miou_vs_step.png", "psnr_vs_wall_s.png", "psnr_vs_step.png",
@@ -94,9 +95,9 @@ def test_curve_points_are_sorted_and_missing_values_dropped():
     x, y = curve_xy(curve, "wall_s", "psnr")
     np.testing.assert_allclose(x, [0.0, 4.0])
     np.testing.assert_allclose(y, [12.0, 13.0])
-    assert zero_shot_value({"method": "sray", "curve": curve}, "miou") is None  # first point is not step 0
-    assert zero_shot_value({"method": "sray", "curve": curve[1:2]}, "miou") == 0.4
-    assert zero_shot_value({"method": "semantic-nerf", "curve": curve[1:2]}, "miou") is None
+    assert zero_shot_value({"method": "sray", "curve": curve}, "miou", METHODS) is None  # first point is not step 0
+    assert zero_shot_value({"method": "sray", "curve": curve[1:2]}, "miou", METHODS) == 0.4
+    assert zero_shot_value({"method": "semantic-nerf", "curve": curve[1:2]}, "miou", METHODS) is None
 
 
 def _colour_pixels(png, hex_colour: str, tol: int = 12) -> int:
@@ -107,7 +108,7 @@ def _colour_pixels(png, hex_colour: str, tol: int = 12) -> int:
 
 def test_mixed_fleet_charts_are_written_and_skip_failures(tmp_path):
     results = mixed_fleet()
-    paths = write_fleet_charts(results, tmp_path / "charts")
+    paths = write_fleet_charts(results, tmp_path / "charts", METHODS)
     assert [p.name for p in paths] == CHART_FILES
     for p in paths:
         image = cv2.imread(str(p))
@@ -115,11 +116,11 @@ def test_mixed_fleet_charts_are_written_and_skip_failures(tmp_path):
         h, w = image.shape[:2]
         assert 450 <= w <= 2600 and 400 <= h <= 2200, f"{p.name}: {w}x{h} px"
         assert image.std() > 10, f"{p.name} looks blank"
-        assert _colour_pixels(p, STYLES["sray"]["color"]) > 50
-        assert _colour_pixels(p, STYLES["semantic-nerf"]["color"]) > 20
+        assert _colour_pixels(p, get_method("sray").style.color) > 50
+        assert _colour_pixels(p, get_method("semantic-nerf").style.color) > 20
     assert not list((tmp_path / "charts").glob(".*"))  # no temporary files left
     # panels: the mean, then scenes a, b, c; scene_d (all failed) has none; the footnote names failures
-    fig = curve_figure(results, "miou", "wall_s")
+    fig = curve_figure(results, "miou", "wall_s", METHODS)
     titles = [ax.get_title() for ax in fig.axes if ax.get_visible()]
     assert titles == ["mean over scenes (S-Ray finetune: 3, Semantic-NeRF from scratch: 2)",
                       "scene scene_a", "scene scene_b", "scene scene_c"]
@@ -133,20 +134,20 @@ def test_mixed_fleet_charts_are_written_and_skip_failures(tmp_path):
 
 def test_single_method_fleet_and_degenerate_inputs(tmp_path):
     results = [synthetic_result("only_scene", "sray", 4)]
-    paths = write_fleet_charts(results, tmp_path)
+    paths = write_fleet_charts(results, tmp_path, METHODS)
     assert [p.name for p in paths] == CHART_FILES
     for p in paths:
         assert cv2.imread(str(p)) is not None
-        assert _colour_pixels(p, STYLES["semantic-nerf"]["color"], tol=6) == 0  # no Semantic-NeRF anywhere
-    assert [ax.get_title() for ax in curve_figure(results, "psnr", "step").axes if ax.get_visible()] == \
+        assert _colour_pixels(p, get_method("semantic-nerf").style.color, tol=6) == 0  # no Semantic-NeRF anywhere
+    assert [ax.get_title() for ax in curve_figure(results, "psnr", "step", METHODS).axes if ax.get_visible()] == \
         ["scene only_scene"]
     # every result failed: nothing to draw, nothing written
-    assert write_fleet_charts([synthetic_result("x", "sray", status="failed")], tmp_path / "none") == []
+    assert write_fleet_charts([synthetic_result("x", "sray", status="failed")], tmp_path / "none", METHODS) == []
     assert not (tmp_path / "none").exists()
     with pytest.raises(ValueError, match=r"fleet result x/sray: fields \['curve'\] are missing"):
-        write_fleet_charts([{k: v for k, v in synthetic_result("x", "sray").items() if k != "curve"}], tmp_path)
+        write_fleet_charts([{k: v for k, v in synthetic_result("x", "sray").items() if k != "curve"}], tmp_path, METHODS)
     with pytest.raises(ValueError, match="field 'method' is 'nerf'"):
-        write_fleet_charts([synthetic_result("x", "sray") | {"method": "nerf"}], tmp_path)
+        write_fleet_charts([synthetic_result("x", "sray") | {"method": "nerf"}], tmp_path, METHODS)
 
 
 def test_read_fleet_results_from_the_contract_layout(tmp_path):

@@ -79,20 +79,21 @@ def _browser(chromium: str, url: str, profile: Path, screenshot: Path | None = N
 
 def _finished_fleet(uri: str, tmp_path: Path) -> dict:
     """A parent fleet run with two finished child runs and the fleet's charts as parent artifacts."""
-    from sray.platform.tracking.logger import RunLogger
-    from sray.platform.tracking.runs import prepare_run
+    from sray.platform.finetune.methods.registry import METHODS
+    from sray.platform.tracking.mlflow_tracker import MlflowTracker
     from sray.platform.viz.charts import write_fleet_charts
 
-    parent = prepare_run(uri, "sray-fleet", "fleet-ui-test", tags={"sray.kind": "fleet"})
+    tracker = MlflowTracker(uri)
+    parent = tracker.start_run("sray-fleet", "fleet-ui-test", tags={"sray.kind": "fleet"})
     children, results = [], []
     for scene in ("scene_alpha", "scene_beta"):
-        child = prepare_run(uri, "sray-fleet", f"{scene}-sray", parent_run_id=parent.run_id)
-        with RunLogger(child) as logger:
+        child = tracker.start_run("sray-fleet", f"{scene}-sray", parent=parent)
+        with tracker.logger(child) as logger:
             logger.log_metrics({"heldout/miou": 0.45, "result/miou_after": 0.61}, 40)
         children.append(child)
         results.append(synthetic_result(scene, "sray", 4))
-    charts = write_fleet_charts(results, tmp_path / "charts")
-    with RunLogger(parent) as logger:
+    charts = write_fleet_charts(results, tmp_path / "charts", METHODS)
+    with tracker.logger(parent) as logger:
         logger.log_metrics({"fleet/miou_after_mean": 0.61}, 0)
         for chart in charts:
             logger.log_artifact(chart, "charts")

@@ -1,4 +1,5 @@
-"""The import rule (ARCHITECTURE §1): ``model`` imports nothing of ours, ``data_tools`` no model/platform/jobs."""
+"""The import rules (ARCHITECTURE §1): ``model`` imports nothing of ours, ``data_tools`` no model/platform/jobs,
+and only ``platform/tracking/`` imports mlflow."""
 
 from __future__ import annotations
 
@@ -107,3 +108,58 @@ def test_product_files_stay_short() -> None:
     long = [f"{p.relative_to(REPO)}: {n}" for p in _product_files()
             if (n := len(p.read_text().splitlines())) > MAX_LINES]
     assert not long, "\n".join(long)
+TRACKING = "platform/tracking"
+"""The one folder whose modules may import mlflow (the MLflow tracker and its helpers)."""
+TRACKER_INTERFACE = ("sray.platform.tracking.tracker", "sray.platform.tracking.registry",
+                     "sray.platform.tracking.fleet_parent_run", "sray.platform.tracking.dashboard")
+"""What code outside ``platform/tracking/`` may import from it: the interface, the registry, the fleet's
+parent-run helper (written against the interface), and the dashboard behind ``sray ui``."""
+
+
+def imported_names(path: Path) -> list[str]:
+    """Every module a file imports, plus ``module.name`` for each ``from module import name``."""
+    names = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names += [node.module, *(f"{node.module}.{alias.name}" for alias in node.names)]
+    return names
+
+
+def tracking_violations(root: Path) -> list[str]:
+    """Files of the product folders under ``root`` that import mlflow, or a tracking module other than
+    the interface, from outside ``platform/tracking/``."""
+    broken = []
+    for folder in ("model", "data_tools", "platform", "jobs"):
+        for path in sorted((root / folder).rglob("*.py")):
+            if (root / TRACKING) in path.parents:
+                continue
+            for name in imported_names(path):
+                if name == "mlflow" or name.startswith("mlflow."):
+                    broken.append(f"{path.relative_to(root)} imports {name}")
+                elif name.startswith("sray.platform.tracking.") and not name.startswith(TRACKER_INTERFACE):
+                    broken.append(f"{path.relative_to(root)} imports {name} (use the tracker interface)")
+    return broken
+
+
+def test_only_the_tracking_folder_imports_mlflow() -> None:
+    """mlflow is imported only inside platform/tracking/; everything else talks to the tracker interface."""
+    assert (REPO / TRACKING / "mlflow_tracker.py").is_file()
+    assert not tracking_violations(REPO), "\n".join(tracking_violations(REPO))
+
+
+def test_the_tracking_scan_finds_violations(tmp_path: Path) -> None:
+    """The scan above is not vacuous: imports planted in a copy of the layout are reported, allowed ones not."""
+    planted = {"jobs/a.py": "import mlflow.pytorch\n",
+               "platform/eval/b.py": "def f():\n    from mlflow import MlflowClient\n",
+               "model/c.py": "from sray.platform.tracking import logger\n",
+               "platform/train/d.py": "from sray.platform.tracking.registry import get_tracker\n",
+               "platform/tracking/e.py": "import mlflow\n", "data_tools/f.py": "import mlflowish\n"}
+    for name, text in planted.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    assert sorted(tracking_violations(tmp_path)) == [
+        "jobs/a.py imports mlflow.pytorch",
+        "model/c.py imports sray.platform.tracking.logger (use the tracker interface)",
+        "platform/eval/b.py imports mlflow", "platform/eval/b.py imports mlflow.MlflowClient"]

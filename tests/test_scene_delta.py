@@ -17,8 +17,8 @@ from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.config.fleet_config import DEFAULT_ADAPT
 from sray.platform.finetune.learners import SRayLearner
+from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import (
-    SRAY_ARTIFACT,
     adapted_keys,
     checkpoint_sha256,
     load_scene_model,
@@ -40,7 +40,7 @@ def finetuned(one_thread: None, tiny_shards: Path, tiny_checkpoint: Path,
     job = SceneJob(scene=SCENE, method="sray", checkpoint=str(tiny_checkpoint),
                    base_sha256=checkpoint_sha256(tiny_checkpoint), shards=str(tiny_shards), out_dir=str(out), run=None,
                    attempt=1, config=tiny_fleet_config(patience=5))
-    return finetune_scene(job), out / SRAY_ARTIFACT
+    return finetune_scene(job), out / get_method("sray").artifact_file
 
 
 def _render(net: torch.nn.Module, sample: EvalSample) -> dict:

@@ -1,4 +1,5 @@
-"""Run preparation on the embedded SQLite store, and config flattening into MLflow params."""
+"""MLflow run preparation on the embedded SQLite store (through ``runs`` and the ``MlflowTracker``), and
+config flattening into MLflow params."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 import pytest
 from mlflow import MlflowClient
 
+from sray.platform.tracking.mlflow_tracker import MlflowTracker
 from sray.platform.tracking.params import MAX_PARAM_VALUE, TRUNCATION_MARKER, flatten_config, to_params
 from sray.platform.tracking.runs import (
     PARENT_RUN_TAG,
@@ -18,10 +20,9 @@ from sray.platform.tracking.runs import (
     default_tracking_uri,
     find_run,
     prepare_run,
-    resume_run,
     sqlite_path,
-    terminate_run,
 )
+from sray.platform.tracking.tracker import RunHandle
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
@@ -55,14 +56,30 @@ def test_prepare_find_resume_and_nesting(mlflow_uri, tmp_path):
     assert child.ui_url == f"http://127.0.0.1:5000/#/experiments/{child.experiment_id}/runs/{child.run_id}"
     assert f"--backend-store-uri {uri}" in child.ui_hint
 
-    assert find_run(uri, "sray train", "scene0000") == child
+    assert child.tracker == "mlflow" and child.store == uri
+
+    tracker = MlflowTracker(uri)
+    assert find_run(uri, "sray train", "scene0000") == child == tracker.find_run("sray train", "scene0000")
     assert find_run(uri, "sray train", "nope") is None and find_run(uri, "other", "scene0000") is None
-    assert terminate_run(child, "FAILED")
+    assert tracker.get_run(child.run_id) == child
+    assert tracker.end_run(child, "FAILED")
     assert client.get_run(child.run_id).info.status == "FAILED"
-    assert resume_run(uri, "sray train", "scene0000").run_id == child.run_id
+    assert tracker.resume_run("sray train", "scene0000").run_id == child.run_id
     assert client.get_run(child.run_id).info.status == "RUNNING"
     with pytest.raises(LookupError, match="no MLflow run named 'ghost'"):
-        resume_run(uri, "sray train", "ghost")
+        tracker.resume_run("sray train", "ghost")
+    assert tracker.tag_run(child, {"sray.error": "x" * 6000})
+    assert client.get_run(child.run_id).data.tags["sray.error"] == "x" * 5000  # cut to MLflow's limit
+
+
+def test_tracker_problems_only_warn(tmp_path, caplog):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    tracker = MlflowTracker(f"sqlite:///{blocker}/sub/mlflow.db")
+    handle = RunHandle(tracker="mlflow", store=tracker.store, run_id="0" * 32)
+    with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.tracker"):
+        assert not tracker.end_run(handle, "FINISHED") and not tracker.tag_run(handle, {"a": "b"})
+    assert "could not mark MLflow run" in caplog.text and "could not tag MLflow run" in caplog.text
 
 
 def test_server_uri_links_to_the_server():

@@ -1,4 +1,4 @@
-"""RunLogger: batched delivery into the fixed run, registration, and no crash when the store is down."""
+"""MlflowRunLogger: batched delivery into the fixed run, registration, and no crash when the store is down."""
 
 from __future__ import annotations
 
@@ -14,8 +14,10 @@ import pytest
 import torch
 from mlflow import MlflowClient
 
-from sray.platform.tracking.logger import RunLogger
-from sray.platform.tracking.runs import RunHandle, prepare_run
+from sray.platform.tracking.logger import MlflowRunLogger
+from sray.platform.tracking.registry import open_logger
+from sray.platform.tracking.runs import prepare_run
+from sray.platform.tracking.tracker import RunHandle
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
@@ -67,7 +69,7 @@ def test_everything_lands_in_the_fixed_run_in_batches(mlflow_uri, tmp_path):
     ckpt = tmp_path / "step_000000050"
     ckpt.mkdir()
     (ckpt / "state.pt").write_bytes(b"weights")
-    with RunLogger(handle, flush_every_steps=10, flush_every_s=3600, client=client) as logger:
+    with MlflowRunLogger(handle, flush_every_steps=10, flush_every_s=3600, client=client) as logger:
         logger.log_params(TrainCfg())
         for step in range(50):
             logger.log_metrics({"loss": 1.0 / (step + 1), "lr": torch.tensor(0.5)}, step=step)
@@ -91,11 +93,13 @@ def test_everything_lands_in_the_fixed_run_in_batches(mlflow_uri, tmp_path):
 
 def test_restarted_logger_continues_the_same_run(mlflow_uri):
     handle = prepare_run(mlflow_uri, "sray train", "job-b")
-    first = RunLogger(handle, flush_every_steps=1)
+    first = MlflowRunLogger(handle, flush_every_steps=1)
     for step in range(4):
         first.log_metrics({"loss": float(step)}, step=step)
-    # the worker dies here (no close); Ray restarts the group, rank 0 resumes from step 2
-    second = RunLogger(RunHandle(**dataclasses.asdict(handle)), flush_every_steps=1)
+    # the worker dies here (no close); Ray restarts the group, rank 0 resumes from step 2 and opens a
+    # logger on the handle's fields through the tracker registry, as train_worker does
+    second = open_logger(RunHandle(**dataclasses.asdict(handle)), flush_every_steps=1)
+    assert isinstance(second, MlflowRunLogger) and second.handle == handle
     for step in range(2, 6):
         second.log_metrics({"loss": float(step)}, step=step)
     second.close()
@@ -112,12 +116,12 @@ def _closed_port() -> int:
 
 def test_unreachable_server_warns_once_and_never_raises(tmp_path, caplog):
     uri = f"http://127.0.0.1:{_closed_port()}"
-    handle = RunHandle(run_id="0" * 32, experiment_id="1", tracking_uri=uri, ui_url=uri)
+    handle = RunHandle(tracker="mlflow", store=uri, run_id="0" * 32, experiment_id="1", ui_url=uri)
     png = tmp_path / "x.png"
     png.write_bytes(b"png")
     start = time.perf_counter()
     with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
-        logger = RunLogger(handle, flush_every_steps=1, retry_initial_s=0.0)
+        logger = MlflowRunLogger(handle, flush_every_steps=1, retry_initial_s=0.0)
         logger.log_params({"a": 1})
         for step in range(20):
             logger.log_metrics({"loss": 0.5}, step=step)
@@ -134,7 +138,7 @@ def test_buffered_items_are_delivered_after_an_outage(mlflow_uri, caplog):
     handle = prepare_run(mlflow_uri, "sray train", "job-c")
     client = CountingClient(mlflow_uri, fail_first=4)
     with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
-        logger = RunLogger(handle, flush_every_steps=1, retry_initial_s=0.0, client=client)
+        logger = MlflowRunLogger(handle, flush_every_steps=1, retry_initial_s=0.0, client=client)
         for step in range(10):
             logger.log_metrics({"loss": float(step)}, step=step)
         logger.close()
@@ -146,7 +150,7 @@ def test_buffered_items_are_delivered_after_an_outage(mlflow_uri, caplog):
 def test_backoff_skips_attempts_until_it_expires(mlflow_uri):
     handle = prepare_run(mlflow_uri, "sray train", "job-d")
     client = CountingClient(mlflow_uri, fail_first=1)
-    logger = RunLogger(handle, flush_every_steps=1, retry_initial_s=0.3, client=client)
+    logger = MlflowRunLogger(handle, flush_every_steps=1, retry_initial_s=0.3, client=client)
     logger.log_metrics({"loss": 1.0}, step=0)  # fails: next attempt in 0.3 s
     logger.log_metrics({"loss": 2.0}, step=1)  # inside the back-off window: not even tried
     assert client.fail_left == 0 and client.batches == 0 and logger.pending()["metrics"] == 2
@@ -157,9 +161,9 @@ def test_backoff_skips_attempts_until_it_expires(mlflow_uri):
 
 def test_bounded_buffer_drops_oldest_with_a_warning(caplog):
     uri = f"http://127.0.0.1:{_closed_port()}"
-    handle = RunHandle(run_id="0" * 32, experiment_id="1", tracking_uri=uri, ui_url=uri)
+    handle = RunHandle(tracker="mlflow", store=uri, run_id="0" * 32, experiment_id="1", ui_url=uri)
     with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
-        logger = RunLogger(handle, flush_every_steps=1000, max_buffered_metrics=5)
+        logger = MlflowRunLogger(handle, flush_every_steps=1000, max_buffered_metrics=5)
         for step in range(12):
             logger.log_metrics({"loss": float(step)}, step=step)
     assert logger.pending()["metrics"] == 5
@@ -171,7 +175,7 @@ def test_refused_param_is_dropped_and_metrics_still_arrive(mlflow_uri, caplog):
     handle = prepare_run(mlflow_uri, "sray train", "job-e")
     MlflowClient(mlflow_uri).log_param(handle.run_id, "optim.lr", "0.5")  # an earlier job used another lr
     with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
-        with RunLogger(handle) as logger:
+        with MlflowRunLogger(handle) as logger:
             logger.log_params({"optim": {"lr": 1e-3}})
             logger.log_metrics({"miou": np.float32(0.25)}, step=0)
     assert "refused params" in caplog.text
@@ -181,6 +185,6 @@ def test_refused_param_is_dropped_and_metrics_still_arrive(mlflow_uri, caplog):
 def test_exception_inside_the_block_marks_the_run_failed(mlflow_uri):
     handle = prepare_run(mlflow_uri, "sray train", "job-f")
     with pytest.raises(RuntimeError):
-        with RunLogger(handle):
+        with MlflowRunLogger(handle):
             raise RuntimeError("training diverged")
     assert MlflowClient(mlflow_uri).get_run(handle.run_id).info.status == "FAILED"

@@ -27,6 +27,10 @@ VARIANTS = ("full", "cross", "intra", "none", "full-affine")
 """Rows of the ablation: the attention variants in the paper's expected order (best first), then the
 full model with the first (``affine``) semantic-aware weight map, against the default ``radial`` one."""
 
+COMPARED = ("sray", "semantic-nerf")
+"""Per-scene methods of the equal-budget table (the paper's per-scene optimisation comparison), by
+registry name; columns are headed with their chart labels."""
+
 VARIANT_SETTINGS = {"full": ("full", "radial"), "cross": ("cross", "radial"), "intra": ("intra", "radial"),
                     "none": ("none", "radial"), "full-affine": ("full", "affine")}
 """Row name -> (``model.attention``, ``model.weight_map``)."""
@@ -115,6 +119,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     from sray.platform.config.fleet_config import FleetConfig
     from sray.platform.eval.zero_shot import evaluate_checkpoint
     from sray.platform.finetune.fleet import run_fleet, unseen_scenes
+    from sray.platform.finetune.methods.registry import METHODS, get_method
     from sray.platform.viz.charts import write_fleet_charts
 
     p = PRESETS[preset]
@@ -153,18 +158,17 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
     fleet_cfg.finetune.eval_stride = p.fleet_eval_stride
     fleet_cfg.gpus_per_task = 0.5 if p.gpus_per_worker else 0.0
     fleet_cfg.experiment = "sray-bench-accuracy"
-    results = run_fleet(fleet_cfg, checkpoints["full"], shards, scenes, out / "fleet", tracking_uri,
-                        ["sray", "semantic-nerf"])
-    charts = write_fleet_charts(results, out / "fleet" / "charts")
+    results = run_fleet(fleet_cfg, checkpoints["full"], shards, scenes, out / "fleet", tracking_uri, list(COMPARED))
+    charts = write_fleet_charts(results, out / "fleet" / "charts", METHODS)
     budget_rows = []
     for budget in (0.0, *p.budgets):
         cells = [f"{budget:.0f}"]
-        for method in ("sray", "semantic-nerf"):
+        for method in COMPARED:
             values = [_at_budget(r, budget, "miou") for r in results if r["method"] == method and r["status"] == "finished"]
             values = [v for v in values if np.isfinite(v)]
             cells.append(f"{100 * np.mean(values):.2f}" if values else "-")
         budget_rows.append(cells)
-    equal_budget = _table(["budget s", "S-Ray finetune mIoU %", "Semantic-NeRF mIoU %"], budget_rows,
+    equal_budget = _table(["budget s", *(f"{get_method(m).style.label} mIoU %" for m in COMPARED)], budget_rows,
                           caption_lines((r["method"], r.get("protocol")) for r in results))
 
     figures = doc.parent / "benchmarks" / f"accuracy-{preset}"

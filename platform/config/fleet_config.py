@@ -1,4 +1,6 @@
-"""Typed configuration of a finetune fleet (``sray finetune-fleet``): budgets, methods, scheduling.
+"""Typed configuration of a finetune fleet (``sray finetune-fleet``): budgets, method settings, scheduling.
+
+The methods themselves are registered in :mod:`sray.platform.finetune.methods.registry`.
 
 ``--set section.field=value`` overrides any field (:func:`apply_fleet_override`), e.g.
 ``--set finetune.patience=5`` or ``--set max_parallel=4``. Fields whose default is None inherit
@@ -13,8 +15,6 @@ from typing import Any
 
 from sray.platform.config.overrides import set_field
 
-METHODS = ("sray", "semantic-nerf")
-"""Per-scene methods a fleet runs: S-Ray finetuned from the shared model, Semantic-NeRF from scratch."""
 PRECISIONS = ("no", "bf16", "fp16")
 """fp32, bfloat16 autocast (CPU and CUDA), float16 autocast with loss scaling (CUDA only)."""
 DEFAULT_ADAPT = ("encoder.merge2", "encoder.head", "coarse", "fine")
@@ -72,7 +72,7 @@ class FinetuneSettings:
 
 @dataclass
 class SemanticNeRFSettings:
-    """Semantic-NeRF from scratch, the per-scene baseline (``--method semantic-nerf``)."""
+    """Semantic-NeRF from scratch, the per-scene baseline (method ``semantic-nerf``)."""
 
     lr: float = 5e-4
     """Adam learning rate (Semantic-NeRF: 5e-4)."""
@@ -111,7 +111,9 @@ class FleetConfig:
     retry_backoff_s: float = 5.0
     """Wait before the first re-run; doubled for each further one."""
     experiment: str = "sray-fleet"
-    """MLflow experiment of the parent fleet run and its child runs."""
+    """Experiment of the parent fleet run and its child runs."""
+    tracker: str = "mlflow"
+    """Tracker of those runs, by registry name (``sray.platform.tracking.registry``)."""
     address: str = ""
     """Ray cluster address; empty = start Ray locally in-process."""
 

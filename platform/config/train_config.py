@@ -1,4 +1,4 @@
-"""The full, typed configuration of a training job (what a recipe returns, what MLflow records)."""
+"""The full, typed configuration of a training job (what a recipe returns, what the tracker records)."""
 
 from __future__ import annotations
 
@@ -60,9 +60,12 @@ class RunSettings:
     output_dir: str = "outputs/train"
     """Root folder of checkpoints and Ray Train run state; a job writes under <output_dir>/<name>."""
     experiment: str = "sray-train"
-    """MLflow experiment name."""
+    """Experiment (group of runs) the job's run belongs to."""
+    tracker: str = "mlflow"
+    """Tracker the job logs to, by registry name (``sray.platform.tracking.registry``)."""
     tracking_uri: str = ""
-    """MLflow tracking URI; empty = a SQLite store in the working directory."""
+    """The tracker's store (MLflow: the tracking URI); empty = its default store in the working directory
+    (MLflow: a SQLite file)."""
     precision: str = "no"
     """One of ``PRECISIONS``."""
     workers: int = 2
@@ -84,7 +87,7 @@ class RunSettings:
     max_failures: int = 2
     """Worker-group restarts Ray Train attempts after a worker dies."""
     register_model: str = "sray"
-    """Registered-model name the final checkpoint is registered under ('' = do not register)."""
+    """Name the final checkpoint is registered under in the tracker's model registry ('' = do not register)."""
 
 
 RETIRED_RUN_KEYS = frozenset({"fail_at_step", "nan_at_step", "stop_after_step"})

@@ -16,12 +16,13 @@ Outputs under ``out_dir``:
 * ``renders/<scene>/<view>_{pred,gt,error}.png`` at the render's own resolution (colours from
   :mod:`sray.platform.viz.palette`) and ``<view>_panel.png`` (:func:`sray.platform.viz.renders.render_panel`).
 
-All of it goes into a new MLflow run (metrics at the checkpoint's training step, metrics.json and
-the PNGs as artifacts).
+All of it goes into a new run of the chosen tracker (metrics at the checkpoint's training step,
+metrics.json and the PNGs as artifacts).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -38,6 +39,7 @@ from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.view_scoring import ViewPrediction, render_view, score_views, sray_renderer
+from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
 
@@ -131,7 +133,7 @@ def view_scores(view: ViewPrediction, n_classes: int, ignore_id: int) -> dict[st
 
 
 def flat_metrics(report: dict[str, Any]) -> dict[str, float]:
-    """MLflow metric keys ``<scene or mean>/<metric>`` of a metrics.json report (finite values only)."""
+    """Tracked metric keys ``<scene or mean>/<metric>`` of a metrics.json report (finite values only)."""
     out = {}
     for name, block in [*report["scenes"].items(), ("mean", report["mean"])]:
         values = {"miou": block["dataset_level"]["miou"], "total_acc": block["dataset_level"]["total_acc"],
@@ -144,21 +146,22 @@ def flat_metrics(report: dict[str, Any]) -> dict[str, float]:
 
 def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None, out_dir: Path,
                         n_source: int = 8, stride: int = 1, tracking_uri: str | None = None,
-                        experiment: str = "sray-eval", *, device: str | None = None,
+                        experiment: str = "sray-eval", *, tracker: str = DEFAULT_TRACKER, device: str | None = None,
                         progress: bool = True) -> dict:
     """Evaluate ``checkpoint`` on ``scenes`` (default: the manifest's test scenes); see the module doc.
 
-    Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (MLflow run id,
-    experiment id, UI url and hint). ``tracking_uri`` None = the working directory's SQLite store.
+    Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (the fields of the
+    run's :class:`~sray.platform.tracking.tracker.RunHandle`: tracker, store, run id, experiment id,
+    UI url and hint). ``tracker``: a registry name; ``tracking_uri``: its store (None = the tracker's
+    default store in the working directory).
     """
     from tqdm import tqdm
 
     from sray.platform.checkpoints.folders import read_meta
-    from sray.platform.tracking.logger import RunLogger
-    from sray.platform.tracking.runs import default_tracking_uri, prepare_run
 
     if stride < 1 or n_source < 1:
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")
+    tracking = get_tracker(tracker, tracking_uri or "")
     checkpoint, shards, out_dir = Path(checkpoint).resolve(), Path(shards).resolve(), Path(out_dir).resolve()
     names, metas = select_scenes(shards, scenes)
     protocol = EvalProtocol.from_shards(shards, n_source, stride)
@@ -172,16 +175,15 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
                              "label space the model was trained on")
     torch_device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
     net = net.to(torch_device).eval()
-    uri = tracking_uri or default_tracking_uri(Path.cwd())
     job = f"{checkpoint.parent.parent.name}-" if checkpoint.parent.name == "checkpoints" else ""
-    run = prepare_run(uri, experiment, f"eval-{job}{checkpoint.name}-{time.strftime('%Y%m%d-%H%M%S')}",
-                      tags={"sray.kind": "eval", "sray.checkpoint": str(checkpoint),
-                            "sray.protocol": protocol.describe()})
+    run = tracking.start_run(experiment, f"eval-{job}{checkpoint.name}-{time.strftime('%Y%m%d-%H%M%S')}",
+                              tags={"sray.kind": "eval", "sray.checkpoint": str(checkpoint),
+                                    "sray.protocol": protocol.describe()})
     report: dict[str, Any] = {
         "checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards),
         "protocol": protocol.to_json(), "lpips": LPIPS_NOTE, "scenes": {}}
     t0 = time.perf_counter()
-    with RunLogger(run) as logger:
+    with tracking.logger(run) as logger:
         logger.log_params({"checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards),
                            "scenes": names, "protocol": protocol.to_json()})
         bar = tqdm(total=sum(len(metas[s]["splits"]["test"]) for s in names), desc="eval views", unit="view",
@@ -207,8 +209,7 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
         for name in names:  # only this evaluation's scenes, whatever else the folder holds
             logger.log_artifact(out_dir / "renders" / name, f"renders/{name}")
     return {**_finite_or_none(report), "metrics_path": str(metrics_path), "out_dir": str(out_dir),
-            "run": {"run_id": run.run_id, "experiment_id": run.experiment_id, "ui_url": run.ui_url,
-                    "ui_hint": run.ui_hint}}
+            "run": dataclasses.asdict(run)}
 
 
 def mean_blocks(blocks: list[dict[str, Any]]) -> dict[str, Any]:

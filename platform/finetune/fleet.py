@@ -1,11 +1,12 @@
-"""The finetune fleet driver (``sray finetune-fleet``): one Ray task per (scene, method), one parent MLflow run.
+"""The finetune fleet driver (``sray finetune-fleet``): one Ray task per (scene, method), one parent tracked run.
 
 Order of events:
 
 1. validate the request; pairs whose ``result.json`` already says ``finished`` are skipped (a
    re-launched fleet with the same ``out_dir`` only runs what is missing or failed);
-2. in this process, before any task starts: the MLflow store, the parent run (reused on a
-   re-launch) and one child run per pair to run (concurrent SQLite schema creation corrupts stores);
+2. in this process, before any task starts: the tracker's store (``FleetConfig.tracker``), the
+   parent run (reused on a re-launch) and one child run per pair to run (concurrent SQLite schema
+   creation corrupts stores);
 3. at most ``max_parallel`` tasks in flight (``ray.wait`` keeps the window), each with fractional
    ``num_cpus`` / ``num_gpus``; a task that raises or whose worker dies is re-run after an
    exponential back-off (the driver counts ``attempts``; Ray's own retries are off), and after
@@ -29,12 +30,14 @@ from typing import Any
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
-from sray.platform.config.fleet_config import METHODS, FleetConfig, check_fleet_config
+from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
+from sray.platform.finetune.methods.registry import method_names
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256, state_file
 from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneJob, run_scene_job, write_result
-from sray.platform.tracking.fleet_parent_run import parent_run, tag_run
-from sray.platform.tracking.runs import RunHandle, default_tracking_uri, ensure_store, prepare_run, terminate_run
+from sray.platform.tracking.fleet_parent_run import parent_run
+from sray.platform.tracking.registry import get_tracker
+from sray.platform.tracking.tracker import Tracker
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +94,7 @@ def failed_result(job: SceneJob, error: str, full_bytes: int | None) -> dict[str
     return {"scene": job.scene, "method": job.method, "status": "failed", "error": error, "attempts": job.attempt,
             "steps_used": 0, "max_steps": job.config.finetune.max_steps, "stopped_early": False, "wall_s": 0.0,
             "miou_before": None, "miou_after": None, "psnr_after": None, "artifact_bytes": None,
-            "full_checkpoint_bytes": full_bytes, "child_run_id": job.run["run_id"] if job.run else None,
+            "full_checkpoint_bytes": full_bytes, "child_run_id": job.run.run_id if job.run else None,
             "protocol": None, "curve": []}
 
 
@@ -111,9 +114,10 @@ def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
     """ValueError naming what is wrong with the request, before anything starts."""
     from sray.data_tools.shards.manifest import read_manifest
 
-    bad = [m for m in methods if m not in METHODS]
+    known = method_names()
+    bad = [m for m in methods if m not in known]
     if bad or not methods:
-        raise ValueError(f"methods {bad or methods}: use one or more of {', '.join(METHODS)}")
+        raise ValueError(f"methods {bad or methods}: use one or more of {', '.join(known)}")
     if not scenes:
         raise ValueError(f"no scenes to finetune; name them or use every test scene of {shards}")
     manifest = read_manifest(shards)
@@ -125,12 +129,12 @@ def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
             raise ValueError(f"{shards}/manifest.json: scene {scene!r} has no held-out 'test' views to validate on")
 
 
-def _fleet_record(out_dir: Path, base_sha256: str, tracking_uri: str) -> dict[str, Any]:
+def _fleet_record(out_dir: Path, base_sha256: str, tracker: Tracker) -> dict[str, Any]:
     """The fleet's record (new, or a re-launch's); ValueError if ``out_dir`` holds another checkpoint's fleet."""
     path = out_dir / FLEET_FILE
     if not path.exists():
-        return {"format": "sray-fleet", "base_sha256": base_sha256, "tracking_uri": tracking_uri,
-                "parent_run_id": None, "launches": 0}
+        return {"format": "sray-fleet", "base_sha256": base_sha256, "tracker": tracker.name,
+                "tracking_uri": tracker.store, "parent_run_id": None, "launches": 0}
     record = json.loads(path.read_text())
     if record.get("base_sha256") != base_sha256:
         raise ValueError(f"{path}: field 'base_sha256' is {record.get('base_sha256')}, but this checkpoint's is "
@@ -141,6 +145,7 @@ def _fleet_record(out_dir: Path, base_sha256: str, tracking_uri: str) -> dict[st
 def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
     """PNGs of ``sray.platform.viz.charts.write_fleet_charts`` ([] when the module is not installed)."""
     try:
+        from sray.platform.finetune.methods.registry import METHODS
         from sray.platform.viz.charts import write_fleet_charts
     except ModuleNotFoundError as e:
         if e.name != "sray.platform.viz.charts":
@@ -148,13 +153,14 @@ def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
         _say("charts skipped: sray.platform.viz.charts is not available")
         return []
     try:
-        return [Path(p) for p in write_fleet_charts(results, out_dir / "charts")]
+        return [Path(p) for p in write_fleet_charts(results, out_dir / "charts", METHODS)]
     except Exception as e:  # noqa: BLE001 - the results are saved already; a chart bug must not lose them
         log.warning("fleet charts failed: %s", e, exc_info=True)
         return []
 
 
-def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int) -> dict[tuple[str, str], dict[str, Any]]:
+def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int,
+              tracker: Tracker) -> dict[tuple[str, str], dict[str, Any]]:
     """Run the jobs on Ray with the in-flight window, re-runs with back-off and failure reports."""
     import ray
 
@@ -193,8 +199,8 @@ def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int) -> dict[t
                     result = failed_result(job, error, full_bytes)
                     write_result(Path(job.out_dir), result)
                     if job.run:
-                        tag_run(RunHandle(**job.run), {"sray.status": "failed", "sray.error": str(e)})
-                        terminate_run(RunHandle(**job.run), "FAILED")
+                        tracker.tag_run(job.run, {"sray.status": "failed", "sray.error": str(e)})
+                        tracker.end_run(job.run, "FAILED")
                     _say(f"{job.scene}/{job.method} FAILED after {job.attempt} attempts: {error}")
                 else:
                     _say(f"{job.scene}/{job.method} finished: mIoU {result['miou_before']:.3f} -> "
@@ -205,7 +211,7 @@ def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int) -> dict[t
             ray.cancel(ref, force=True)
         for job in jobs:
             if job.run and (job.scene, job.method) not in results:
-                terminate_run(RunHandle(**job.run), "KILLED")
+                tracker.end_run(job.run, "KILLED")
         raise
     return results
 
@@ -215,53 +221,54 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     """Finetune every (scene, method) pair; returns their result dicts (docs/CONTRACTS.md), scenes-major.
 
     ``checkpoint``: a checkpoint folder, a job's ``checkpoints/`` or a job folder. ``tracking_uri``:
-    empty = the working directory's SQLite store. Ray is started locally unless ``cfg.address``
-    names a cluster (or Ray is already running in this process).
+    the store of the tracker ``cfg.tracker``; empty = its default store in the working directory.
+    Ray is started locally unless ``cfg.address`` names a cluster (or Ray is already running in this
+    process).
     """
     from sray.platform.checkpoints.model_loading import model_from_checkpoint
     from sray.platform.finetune.scene_artifacts import model_bytes
-    from sray.platform.tracking.logger import RunLogger
     from sray.platform.train.launcher import init_ray
     from sray.platform.train.resources import check_feasible
 
     check_fleet_config(cfg)
+    tracker = get_tracker(cfg.tracker, tracking_uri)
     checkpoint, shards, out_dir = resolve_checkpoint(checkpoint), Path(shards).resolve(), Path(out_dir).resolve()
     scenes = list(dict.fromkeys(scenes))
     _validate(shards, scenes, list(methods))
-    tracking_uri = tracking_uri or default_tracking_uri(Path.cwd())
     base_sha = checkpoint_sha256(checkpoint)
     out_dir.mkdir(parents=True, exist_ok=True)
-    record = _fleet_record(out_dir, base_sha, tracking_uri)
+    record = _fleet_record(out_dir, base_sha, tracker)
     full_bytes = model_bytes(model_from_checkpoint(checkpoint)[0])
     pairs = [(s, m) for s in scenes for m in methods]
     done = {p: r for p in pairs if (r := read_result(out_dir, *p)) is not None and r.get("status") == "finished"}
     if done:
         _say(f"skipping {len(done)} finished pair(s): " + ", ".join(f"{s}/{m}" for s, m in done))
 
-    ensure_store(tracking_uri)
-    parent, is_new = parent_run(record, tracking_uri, cfg.experiment, out_dir)
-    record.update(parent_run_id=parent.run_id, tracking_uri=tracking_uri, launches=record["launches"] + 1,
-                  checkpoint=str(checkpoint), state_file=str(state_file(checkpoint)), shards=str(shards))
+    tracker.ensure_store()
+    parent, is_new = parent_run(tracker, record, cfg.experiment, out_dir)
+    record.update(parent_run_id=parent.run_id, tracker=tracker.name, tracking_uri=tracker.store,
+                  launches=record["launches"] + 1, checkpoint=str(checkpoint), state_file=str(state_file(checkpoint)),
+                  shards=str(shards))
     atomic_write_json(out_dir / FLEET_FILE, record)
-    _say(f"parent MLflow run: {parent.ui_url}" + (f"  ({parent.ui_hint})" if parent.ui_hint else ""))
+    _say(f"parent {tracker.label} run: {parent.ui_url}" + (f"  ({parent.ui_hint})" if parent.ui_hint else ""))
     if len(done) < len(pairs):
         init_ray(cfg.address or None)
         check_feasible(1, cfg.cpus_per_task, cfg.gpus_per_task)
     jobs = []
     for scene, method in (p for p in pairs if p not in done):
-        child = prepare_run(tracking_uri, cfg.experiment, f"{scene}/{method}", parent_run_id=parent.run_id,
-                            tags={"sray.kind": "fleet-scene", "sray.scene": scene, "sray.method": method})
+        child = tracker.start_run(cfg.experiment, f"{scene}/{method}", parent=parent,
+                                  tags={"sray.kind": "fleet-scene", "sray.scene": scene, "sray.method": method})
         jobs.append(SceneJob(scene=scene, method=method, checkpoint=str(checkpoint), base_sha256=base_sha,
                              shards=str(shards), out_dir=str(result_dir(out_dir, scene, method)),
-                             run=dataclasses.asdict(child), attempt=1, config=cfg))
+                             run=child, attempt=1, config=cfg))
 
-    logger = RunLogger(parent)
+    logger = tracker.logger(parent)
     status = "FAILED"
     try:
         if is_new:
             logger.log_params(cfg.to_dict() | {"checkpoint": str(checkpoint), "shards": str(shards)})
         if jobs:
-            done |= _schedule(jobs, cfg, full_bytes)
+            done |= _schedule(jobs, cfg, full_bytes, tracker)
         results = [done[p] for p in pairs]
         atomic_write_json(out_dir / "fleet_results.json", results)
         table = results_table(results)
@@ -278,5 +285,5 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
         raise
     finally:
         logger.close(status)
-    _say(f"results: {out_dir / 'fleet_results.md'}; MLflow: {parent.ui_url}")
+    _say(f"results: {out_dir / 'fleet_results.md'}; {tracker.label}: {parent.ui_url}")
     return results

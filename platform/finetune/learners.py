@@ -1,5 +1,6 @@
-"""The two per-scene methods a fleet task trains, behind one small interface (``loss``, ``update``,
-``renderer``, ``snapshot``/``restore``, ``save``):
+"""The per-scene learners a fleet task trains, behind one small interface, :class:`Learner`
+(``loss``, ``step``, ``renderer``, ``snapshot``/``restore``, ``save``); the methods of
+:mod:`sray.platform.finetune.methods` build them:
 
 * :class:`SRayLearner`: the shared S-Ray model with only the modules ``adapt`` trainable (the rest,
   by default the image encoder, attention and geometry, frozen; sources are encoded without
@@ -15,6 +16,7 @@ float32 by ``render_loss``.
 from __future__ import annotations
 
 import contextlib
+from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -33,8 +35,6 @@ from sray.platform.common.model_input import ray_batch
 from sray.platform.config.fleet_config import SemanticNeRFSettings
 from sray.platform.eval.view_scoring import Renderer, encode_sources, sray_renderer
 from sray.platform.finetune.scene_artifacts import (
-    NERF_ARTIFACT,
-    SRAY_ARTIFACT,
     adapted_keys,
     adapted_state,
     apply_delta,
@@ -44,11 +44,16 @@ from sray.platform.finetune.scene_artifacts import (
 from sray.platform.train.step import TrainStep, fused_adam
 
 
-class _Learner:
-    """Optimiser, precision and the shared training step of both methods."""
+class Learner(ABC):
+    """One method's network on one scene, with its optimiser, precision and the shared training step.
+
+    A method subclasses it and implements the five abstract methods; ``step`` (a
+    :class:`~sray.platform.train.step.TrainStep` over ``params``) applies an update.
+    """
 
     def __init__(self, net: nn.Module, params: list[nn.Parameter], lr: float, grad_clip: float, precision: str,
                  device: torch.device, max_nonfinite_in_row: int) -> None:
+        """``net`` (already on ``device``) is what the method evaluates and stores; ``params``, what it trains."""
         self.net, self.device = net, device
         self.step = TrainStep(params, fused_adam(params, lr), grad_clip, precision, device, max_nonfinite_in_row)
 
@@ -68,10 +73,30 @@ class _Learner:
             for p, flag in flags:
                 p.requires_grad_(flag)
 
-class SRayLearner(_Learner):
-    """Trains only the modules ``adapt`` of the shared S-Ray model (the rest stays frozen)."""
+    @abstractmethod
+    def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
+        """(loss, terms) of one training sample, the forward pass under ``self.step.autocast()``;
+        ``terms`` holds at least ``psnr``."""
 
-    method = "sray"
+    @abstractmethod
+    def renderer(self, sample: EvalSample) -> Renderer:
+        """The ray renderer of one held-out evaluation sample (deterministic)."""
+
+    @abstractmethod
+    def snapshot(self) -> dict[str, Tensor]:
+        """CPU copy of the state the method trains (what :meth:`restore` puts back)."""
+
+    @abstractmethod
+    def restore(self, state: dict[str, Tensor]) -> None:
+        """Put back a :meth:`snapshot`."""
+
+    @abstractmethod
+    def save(self, path: Path, scene: str) -> None:
+        """Write the scene artifact (the state as it is now) to ``path``."""
+
+
+class SRayLearner(Learner):
+    """Trains only the modules ``adapt`` of the shared S-Ray model (the rest stays frozen)."""
 
     def __init__(self, net: SRayModel, base_sha256: str, adapt: tuple[str, ...], lr: float, grad_clip: float,
                  precision: str, device: torch.device, max_nonfinite_in_row: int) -> None:
@@ -118,17 +143,13 @@ class SRayLearner(_Learner):
         """Put back a :meth:`snapshot`."""
         apply_delta(self.net, state, "snapshot")
 
-    def save(self, out_dir: Path, scene: str) -> Path:
+    def save(self, path: Path, scene: str) -> None:
         """Write the scene artifact (the adapted tensors as they are now + the base checksum)."""
-        path = out_dir / SRAY_ARTIFACT
         save_sray_delta(path, self.snapshot(), self.base_sha256, self.adapt, scene)
-        return path
 
 
-class NeRFLearner(_Learner):
+class NeRFLearner(Learner):
     """Trains a Semantic-NeRF of the scene from scratch (every parameter)."""
-
-    method = "semantic-nerf"
 
     def __init__(self, net: SemanticNeRF, lr: float, grad_clip: float, precision: str, device: torch.device,
                  max_nonfinite_in_row: int) -> None:
@@ -155,11 +176,9 @@ class NeRFLearner(_Learner):
         """Put back a :meth:`snapshot`."""
         self.net.load_state_dict(state)
 
-    def save(self, out_dir: Path, scene: str) -> Path:
+    def save(self, path: Path, scene: str) -> None:
         """Write the scene artifact (the whole model as it is now: Semantic-NeRF shares nothing)."""
-        path = out_dir / NERF_ARTIFACT
         save_semantic_nerf(path, self.net, scene)
-        return path
 
 
 def build_semantic_nerf(shards: Path, scene: str, n_classes: int, ignore_id: int, n_coarse: int, n_fine: int,

@@ -8,6 +8,8 @@ artifact, bit for bit the finetuned model; an artifact of another base checkpoin
 Semantic-NeRF (``semantic_nerf.safetensors``): the whole state dict (it shares nothing) and its
 config, rebuilt by :func:`load_semantic_nerf`.
 
+The file names are the methods' (``artifact_file`` in :mod:`sray.platform.finetune.methods`).
+
 Sizes are compared with :func:`model_bytes` of the shared model: the bytes of its tensors alone
 (what a full per-scene copy of the model would cost), not the training checkpoint's ``state.pt``,
 which also holds the optimiser's moments.
@@ -30,10 +32,6 @@ from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import STATE_FILE
 
-SRAY_ARTIFACT = "sray_delta.safetensors"
-"""File name of an S-Ray scene artifact inside ``<fleet>/scenes/<scene>/sray/``."""
-NERF_ARTIFACT = "semantic_nerf.safetensors"
-"""File name of a Semantic-NeRF scene artifact inside ``<fleet>/scenes/<scene>/semantic-nerf/``."""
 FORMAT = "sray-scene-delta"
 """``format`` metadata of every scene artifact."""
 VERSION = "1"

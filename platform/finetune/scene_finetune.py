@@ -1,6 +1,7 @@
-"""One scene's finetune (the body of a fleet task): S-Ray from the shared model, or Semantic-NeRF from scratch.
+"""One scene's finetune (the body of a fleet task) with any registered method (:mod:`sray.platform.finetune.methods`):
+S-Ray from the shared model, Semantic-NeRF from scratch, ...
 
-Both methods train on the scene's loader pool (test scenes: ``source`` + ``finetune`` views; train
+Every method trains on the scene's loader pool (test scenes: ``source`` + ``finetune`` views; train
 scenes: ``train`` minus held-out views) with the shared loss, and are scored on the held-out ``test``
 views rendered from their fixed source views (``make_eval_samples``), every ``eval_every`` steps and
 at step 0 (zero-shot S-Ray, untrained Semantic-NeRF). The score is the dataset-level mIoU (one
@@ -36,8 +37,11 @@ from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
 from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.eval.view_scoring import render_view, score_views
-from sray.platform.finetune.learners import NeRFLearner, SRayLearner, build_semantic_nerf
+from sray.platform.finetune.learners import Learner
+from sray.platform.finetune.methods.method import SceneContext
+from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import model_bytes
+from sray.platform.tracking.tracker import RunHandle, RunLogger
 from sray.platform.train.step import NonFiniteTraining, step_seed
 
 RESULT_FILE = "result.json"
@@ -51,7 +55,7 @@ class SceneJob:
     scene: str
     """Scene name in the shard manifest."""
     method: str
-    """``sray`` or ``semantic-nerf``."""
+    """A registered method's name (``sray``, ``semantic-nerf``, ...)."""
     checkpoint: str
     """Shared S-Ray checkpoint folder (its config also sets the defaults both methods inherit)."""
     base_sha256: str
@@ -60,8 +64,8 @@ class SceneJob:
     """Shard folder (``manifest.json``)."""
     out_dir: str
     """``<fleet>/scenes/<scene>/<method>``: result.json and the scene artifact go here."""
-    run: dict[str, str] | None
-    """The child MLflow run's ``RunHandle`` fields (None: no tracking)."""
+    run: RunHandle | None
+    """The pair's child run (None: no tracking)."""
     attempt: int
     """1 for the first try, 2 for the first re-run, ..."""
     config: FleetConfig
@@ -103,7 +107,7 @@ class EarlyStopping:
 
 
 @torch.no_grad()
-def evaluate(learner: Any, samples: list[EvalSample], cfg: FleetConfig, n_classes: int,
+def evaluate(learner: Learner, samples: list[EvalSample], cfg: FleetConfig, n_classes: int,
              ignore_id: int) -> dict[str, float]:
     """Held-out scores (``score_views`` keys) of the learner's current state."""
     ft = cfg.finetune
@@ -120,18 +124,20 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
 
 
 def scene_protocol(job: SceneJob) -> EvalProtocol:
-    """How the job's held-out scores are made: S-Ray from ``finetune.eval_n_source`` fixed sources
-    ranked by the shards' neighbour rule; Semantic-NeRF from no sources; both at ``finetune.eval_stride``."""
+    """How the job's held-out scores are made at ``finetune.eval_stride``: from ``finetune.eval_n_source``
+    fixed sources ranked by the shards' neighbour rule (methods that use sources, as S-Ray), or from
+    none (per-scene models, as Semantic-NeRF)."""
     ft = job.config.finetune
-    if job.method == "semantic-nerf":
-        return EvalProtocol.without_sources(ft.eval_stride)
-    return EvalProtocol.from_shards(Path(job.shards), ft.eval_n_source, ft.eval_stride)
+    if get_method(job.method).uses_sources:
+        return EvalProtocol.from_shards(Path(job.shards), ft.eval_n_source, ft.eval_stride)
+    return EvalProtocol.without_sources(ft.eval_stride)
 
 
-def _prepare(job: SceneJob, device: torch.device) -> tuple[Any, Any, list[EvalSample], tuple[int, int, int]]:
-    """The learner, the training loader (one epoch = ``eval_every`` samples), the held-out samples and
-    (classes, ignore id, shared model bytes); ValueError when the scene does not fit the checkpoint."""
-    cfg, ft, shards = job.config, job.config.finetune, Path(job.shards)
+def _prepare(job: SceneJob, device: torch.device) -> tuple[Learner, Any, list[EvalSample], tuple[int, int, int]]:
+    """The method's learner, the training loader (one epoch = ``eval_every`` samples), the held-out samples
+    and (classes, ignore id, shared model bytes); ValueError when the scene does not fit the checkpoint."""
+    ft, shards = job.config.finetune, Path(job.shards)
+    method = get_method(job.method)
     base, train_cfg = model_from_checkpoint(job.checkpoint)
     n_classes, ignore_id = train_cfg.model.n_classes, train_cfg.model.ignore_id
     manifest = read_manifest(shards)
@@ -142,29 +148,19 @@ def _prepare(job: SceneJob, device: torch.device) -> tuple[Any, Any, list[EvalSa
         raise ValueError(f"{shards}/manifest.json: scene {job.scene!r} has {len(class_names)} classes, the checkpoint "
                          f"{job.checkpoint} predicts {n_classes}; use shards of the checkpoint's label space")
     full_bytes = model_bytes(base)
-    if job.method == "sray":
-        learner: Any = SRayLearner(base, job.base_sha256, ft.adapt, ft.lr, ft.grad_clip, ft.precision, device,
-                                   ft.max_nonfinite_in_row)
-        n_source = ft.n_source or train_cfg.model.n_source
-        top_k = ft.top_k or min(train_cfg.data.top_k, int(manifest.neighbours["k"]))
-    elif job.method == "semantic-nerf":
-        samples_per_ray = (cfg.nerf.n_coarse or train_cfg.model.n_coarse, cfg.nerf.n_fine or train_cfg.model.n_fine)
-        net = build_semantic_nerf(shards, job.scene, n_classes, ignore_id, *samples_per_ray, cfg.nerf, ft.seed,
-                                  ft.eval_chunk)
-        learner = NeRFLearner(net, cfg.nerf.lr, ft.grad_clip, ft.precision, device, ft.max_nonfinite_in_row)
-        n_source, top_k = 1, 1  # only the query's rays are used
-    else:
-        raise ValueError(f"method {job.method!r}: use one of 'sray', 'semantic-nerf'")
-    loader = make_train_loader(shards, n_source=n_source, top_k=max(top_k, n_source),
+    setup = method.build(SceneContext(
+        scene=job.scene, shards=shards, base=base, base_sha256=job.base_sha256, train_cfg=train_cfg, cfg=job.config,
+        n_classes=n_classes, ignore_id=ignore_id, stored_neighbours=int(manifest.neighbours["k"]), device=device))
+    loader = make_train_loader(shards, n_source=setup.n_source, top_k=max(setup.top_k, setup.n_source),
                                rays_per_batch=ft.rays_per_batch or train_cfg.data.rays_per_batch,
                                batches_per_epoch=ft.eval_every, rank=0, world_size=1, num_workers=0, seed=ft.seed,
                                scenes=[job.scene])
     samples = list(make_eval_samples(shards, job.scene, split="test", n_source=ft.eval_n_source))
-    return learner, loader, samples, (n_classes, ignore_id, full_bytes)
+    return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes)
 
 
-def finetune_scene(job: SceneJob, logger: Any = None) -> SceneOutcome:
-    """Finetune one (scene, method), write its artifact and ``result.json``; ``logger``: a RunLogger or None."""
+def finetune_scene(job: SceneJob, logger: RunLogger | None = None) -> SceneOutcome:
+    """Finetune one (scene, method), write its artifact and ``result.json``; ``logger``: the child run's or None."""
     from sray.platform.common.progress import make_progress
 
     cfg, ft = job.config, job.config.finetune
@@ -230,15 +226,16 @@ def finetune_scene(job: SceneJob, logger: Any = None) -> SceneOutcome:
     finally:
         bar.close()
     learner.restore(best_state)
-    learner.net.requires_grad_(True)  # the returned model is in the state of a reloaded one (see _Learner.inference)
-    artifact = learner.save(out_dir, job.scene)
+    learner.net.requires_grad_(True)  # the returned model is in the state of a reloaded one (see Learner.inference)
+    artifact = out_dir / get_method(job.method).artifact_file
+    learner.save(artifact, job.scene)
     best_point = best_point or curve[0]
     result = {
         "scene": job.scene, "method": job.method, "status": "finished", "error": None, "attempts": job.attempt,
         "steps_used": step, "max_steps": ft.max_steps, "stopped_early": reason == "patience", "wall_s": train_s,
         "miou_before": curve[0]["miou"], "miou_after": best_point["miou"], "psnr_after": best_point["psnr"],
         "artifact_bytes": artifact.stat().st_size, "full_checkpoint_bytes": full_bytes,
-        "child_run_id": job.run["run_id"] if job.run else None, "protocol": protocol.to_json(), "curve": curve,
+        "child_run_id": job.run.run_id if job.run else None, "protocol": protocol.to_json(), "curve": curve,
     }
     write_result(out_dir, result)
     if logger is not None:
@@ -258,12 +255,11 @@ def run_scene_job(job: SceneJob) -> dict[str, Any]:
     CPUs: more threads than reserved cores oversubscribe a shared machine (measured 10x slower
     steps with 2 threads on a busy 2-core host).
     """
-    from sray.platform.tracking.logger import RunLogger
-    from sray.platform.tracking.runs import RunHandle
+    from sray.platform.tracking.registry import open_logger
 
     torch.set_num_threads(max(1, int(job.config.cpus_per_task)))
 
     if job.run is None:
         return finetune_scene(job).result
-    with RunLogger(RunHandle(**job.run)) as logger:
+    with open_logger(job.run) as logger:
         return finetune_scene(job, logger).result

@@ -1,7 +1,8 @@
 """Rank-0 MLflow logging into a run prepared by the launcher, batched and never fatal.
 
-Every MLflow call goes through :meth:`RunLogger._attempt`. A transient failure (server down,
-network, a locked database) is reported ONCE as a warning; what was being sent stays in a bounded
+MLflow's :class:`~sray.platform.tracking.tracker.RunLogger`. Every MLflow call goes through
+:meth:`MlflowRunLogger._attempt`. A transient failure (server down, network, a locked database)
+is reported ONCE as a warning; what was being sent stays in a bounded
 buffer and is retried on a later flush after an exponential back-off. A permanent refusal (e.g. a
 param whose value changed) drops that item with a warning. Training never stops because of tracking.
 
@@ -24,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from sray.platform.tracking.params import sanitize_key, to_params
-from sray.platform.tracking.runs import RunHandle
+from sray.platform.tracking.tracker import RunHandle, RunLogger
 
 log = logging.getLogger(__name__)
 
@@ -40,13 +41,13 @@ HTTP_DEFAULTS = {"MLFLOW_HTTP_REQUEST_MAX_RETRIES": "0", "MLFLOW_HTTP_REQUEST_TI
 minutes on a dead server; this logger retries later instead."""
 
 
-class RunLogger:
+class MlflowRunLogger(RunLogger):
     """Logs params, metrics, artifacts and a registered model into one fixed MLflow run."""
 
     def __init__(self, handle: RunHandle, *, flush_every_steps: int = 20, flush_every_s: float = 30.0,
                  max_buffered_metrics: int = 100_000, retry_initial_s: float = 2.0, retry_max_s: float = 300.0,
                  client: Any = None) -> None:
-        """``client``: an ``MlflowClient`` for ``handle.tracking_uri`` (built here when None)."""
+        """``client``: an ``MlflowClient`` for ``handle.store`` (built here when None)."""
         for key, value in HTTP_DEFAULTS.items():
             os.environ.setdefault(key, value)
         self.handle = handle
@@ -86,7 +87,7 @@ class RunLogger:
                 self._dropped += 1
                 if self._dropped == 1:
                     log.warning("MLflow metric buffer is full (%d); dropping the oldest buffered metrics until "
-                                "%s is reachable", self._metrics.maxlen, self.handle.tracking_uri)
+                                "%s is reachable", self._metrics.maxlen, self.handle.store)
             self._metrics.append(Metric(key=sanitize_key(key), value=number,
                                         timestamp=timestamp, step=int(step)))
         due_steps = self._last_flush_step is None or step - self._last_flush_step >= self.flush_every_steps
@@ -102,10 +103,6 @@ class RunLogger:
         else:
             self._queue(f"artifact {path}", lambda c: c.log_artifact(self.handle.run_id, str(path), artifact_path))
         self.flush()
-
-    def log_image(self, png: Path, artifact_path: str = "renders") -> None:
-        """Upload a PNG (a semantic render, a chart) under ``artifact_path``."""
-        self.log_artifact(png, artifact_path)
 
     def log_dict(self, obj: Any, artifact_file: str) -> None:
         """Write ``obj`` as JSON to ``artifact_file`` (e.g. ``config.json``) in the run's artifacts."""
@@ -184,18 +181,9 @@ class RunLogger:
         self._queue(f"run status {status}", lambda c: c.set_terminated(self.handle.run_id, status=status))
         if not self.flush(force=True):
             log.warning("MLflow run %s closed with undelivered items %s (tracking store %s unreachable)",
-                        self.handle.run_id, self.pending(), self.handle.tracking_uri)
+                        self.handle.run_id, self.pending(), self.handle.store)
         self._closed = True
         shutil.rmtree(self._staging, ignore_errors=True)
-
-    def __enter__(self) -> RunLogger:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close("FINISHED")
-        else:
-            self.close("KILLED" if issubclass(exc_type, KeyboardInterrupt) else "FAILED")
 
     # ------------------------------------------------------------------------------- internals
     def _queue(self, what: str, op: Callable[[Any], None]) -> None:
@@ -208,8 +196,8 @@ class RunLogger:
             try:
                 from mlflow import MlflowClient
 
-                self._client = MlflowClient(tracking_uri=self.handle.tracking_uri,
-                                            registry_uri=self.handle.tracking_uri)
+                self._client = MlflowClient(tracking_uri=self.handle.store,
+                                            registry_uri=self.handle.store)
             except Exception as e:  # noqa: BLE001 - tracking never crashes training
                 self._transient_failure("connect", e)
         return self._client
@@ -225,7 +213,7 @@ class RunLogger:
             self._transient_failure(what, e)
             return False
         if self._unreachable:
-            log.info("MLflow tracking store %s is reachable again; sending buffered items", self.handle.tracking_uri)
+            log.info("MLflow tracking store %s is reachable again; sending buffered items", self.handle.store)
             self._unreachable = False
         self._delay = self.retry_initial_s
         self._next_attempt = 0.0
@@ -234,7 +222,7 @@ class RunLogger:
     def _transient_failure(self, what: str, error: Exception) -> None:
         if not self._unreachable:
             log.warning("MLflow tracking store %s unreachable while sending %s (%s); training continues, "
-                        "tracking data is buffered and retried with back-off", self.handle.tracking_uri, what,
+                        "tracking data is buffered and retried with back-off", self.handle.store, what,
                         str(error).splitlines()[0][:300] if str(error) else type(error).__name__)
             self._unreachable = True
         self._next_attempt = time.monotonic() + self._delay

@@ -1,9 +1,11 @@
-"""MLflow runs prepared by the launcher, before any Ray worker starts.
+"""MLflow runs prepared by the launcher, before any Ray worker starts (the MLflow side of
+:class:`sray.platform.tracking.mlflow_tracker.MlflowTracker`).
 
 The launcher (driver) creates the store schema, the experiment and the run once, then hands the
-resulting :class:`RunHandle` (plain strings, picklable) to the workers. Rank 0 logs into that fixed
-run id through :class:`sray.platform.tracking.logger.RunLogger`, so a worker group restarted by Ray
-Train's ``FailureConfig`` keeps writing into the same run instead of opening a new one.
+resulting :class:`~sray.platform.tracking.tracker.RunHandle` (plain strings, picklable) to the
+workers. Rank 0 logs into that fixed run id through
+:class:`sray.platform.tracking.logger.MlflowRunLogger`, so a worker group restarted by Ray Train's
+``FailureConfig`` keeps writing into the same run instead of opening a new one.
 
 Default store (no ``--tracking-uri``): a SQLite file ``<workdir>/mlflow.db`` with artifacts under
 ``<workdir>/mlartifacts``. MLflow 3.17's file store raises, so the URI and artifact location are
@@ -15,32 +17,20 @@ from __future__ import annotations
 
 import logging
 import re
-from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+from sray.platform.tracking.tracker import RunHandle
 
 log = logging.getLogger(__name__)
 
+NAME = "mlflow"
+"""Registry name of the MLflow tracker (``RunHandle.tracker`` of every run made here)."""
 DEFAULT_UI_PORT = 5000
 """Port the UI command suggested for a local store listens on."""
 
 PARENT_RUN_TAG = "mlflow.parentRunId"
 """MLflow's tag that nests a run under a parent (fleet: one parent run, one child per scene)."""
-
-
-@dataclass(frozen=True)
-class RunHandle:
-    """Everything a worker needs to log into a run prepared by the launcher (picklable strings)."""
-
-    run_id: str
-    """MLflow run id, fixed for the whole job (restarts included)."""
-    experiment_id: str
-    """Id of the run's experiment."""
-    tracking_uri: str
-    """Tracking URI the run lives in (``sqlite:///...`` or ``http(s)://...``)."""
-    ui_url: str
-    """Browser address of the run's page (for a local store: once the UI command runs)."""
-    ui_hint: str = ""
-    """For a local store: the command that starts the UI; empty for a tracking server."""
 
 
 def default_tracking_uri(workdir: Path) -> str:
@@ -89,7 +79,8 @@ def _ui_links(tracking_uri: str, experiment_id: str, run_id: str) -> tuple[str, 
     return f"http://127.0.0.1:{DEFAULT_UI_PORT}/{page}", hint
 
 
-def _client(tracking_uri: str):
+def mlflow_client(tracking_uri: str) -> Any:
+    """An ``MlflowClient`` for ``tracking_uri`` (also its model registry)."""
     from mlflow import MlflowClient
 
     return MlflowClient(tracking_uri=tracking_uri, registry_uri=tracking_uri)
@@ -105,7 +96,7 @@ def ensure_store(tracking_uri: str) -> None:
     try:
         if db is not None:
             db.parent.mkdir(parents=True, exist_ok=True)
-        _client(tracking_uri).search_experiments(max_results=1)
+        mlflow_client(tracking_uri).search_experiments(max_results=1)
     except Exception as e:  # noqa: BLE001 - re-raised with the URI and the fix
         raise ConnectionError(
             f"MLflow tracking store {tracking_uri!r} is not usable ({e}); check --tracking-uri, or "
@@ -139,7 +130,7 @@ def prepare_run(tracking_uri: str, experiment: str, run_name: str, tags: dict[st
     a tracking server's own ``--artifacts-destination``). ``parent_run_id`` nests the run.
     """
     ensure_store(tracking_uri)
-    client = _client(tracking_uri)
+    client = mlflow_client(tracking_uri)
     experiment_id = _experiment_id(client, tracking_uri, experiment, artifact_root)
     all_tags = {str(k): str(v) for k, v in (tags or {}).items()}
     if parent_run_id:
@@ -151,7 +142,8 @@ def prepare_run(tracking_uri: str, experiment: str, run_name: str, tags: dict[st
 def run_handle(tracking_uri: str, experiment_id: str, run_id: str) -> RunHandle:
     """The handle of an existing run (with its UI links)."""
     url, hint = _ui_links(tracking_uri, experiment_id, run_id)
-    return RunHandle(run_id=run_id, experiment_id=experiment_id, tracking_uri=tracking_uri, ui_url=url, ui_hint=hint)
+    return RunHandle(tracker=NAME, store=tracking_uri, run_id=run_id, experiment_id=experiment_id, ui_url=url,
+                     ui_hint=hint)
 
 
 def find_run(tracking_uri: str, experiment: str, run_name: str) -> RunHandle | None:
@@ -159,7 +151,7 @@ def find_run(tracking_uri: str, experiment: str, run_name: str) -> RunHandle | N
     if "'" in run_name:
         raise ValueError(f"run name {run_name!r}: quotes are not allowed in run names")
     ensure_store(tracking_uri)
-    client = _client(tracking_uri)
+    client = mlflow_client(tracking_uri)
     found = client.get_experiment_by_name(experiment)
     if found is None:
         return None
@@ -168,23 +160,3 @@ def find_run(tracking_uri: str, experiment: str, run_name: str) -> RunHandle | N
     if not runs:
         return None
     return run_handle(tracking_uri, found.experiment_id, runs[0].info.run_id)
-
-
-def resume_run(tracking_uri: str, experiment: str, run_name: str) -> RunHandle:
-    """Find the run of a job being resumed and mark it RUNNING again; LookupError if there is none."""
-    handle = find_run(tracking_uri, experiment, run_name)
-    if handle is None:
-        raise LookupError(f"no MLflow run named {run_name!r} in experiment {experiment!r} at {tracking_uri}; "
-                          "check --name/--resume and --tracking-uri (they must match the original job)")
-    _client(tracking_uri).update_run(handle.run_id, status="RUNNING")
-    return handle
-
-
-def terminate_run(handle: RunHandle, status: str) -> bool:
-    """Mark a run FINISHED, FAILED or KILLED from the launcher; warns and returns False on failure."""
-    try:
-        _client(handle.tracking_uri).set_terminated(handle.run_id, status=status)
-        return True
-    except Exception as e:  # noqa: BLE001 - tracking problems never crash the job
-        log.warning("could not mark MLflow run %s as %s at %s: %s", handle.run_id, status, handle.tracking_uri, e)
-        return False

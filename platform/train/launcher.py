@@ -1,12 +1,13 @@
-"""The driver side of ``sray train``: Ray, resources, the MLflow run, the TorchTrainer, Ctrl-C.
+"""The driver side of ``sray train``: Ray, resources, the tracked run, the TorchTrainer, Ctrl-C.
 
-Order matters: the MLflow store, experiment and run exist before any worker starts (several
+Order matters: the tracker's store, experiment and run exist before any worker starts (several
 processes creating one SQLite store at once corrupt it), and the resource request is checked
 against the cluster before ``fit()`` (an infeasible request would otherwise wait forever).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -20,7 +21,8 @@ from typing import Any
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.config.train_config import TrainConfig
-from sray.platform.tracking.runs import RunHandle, default_tracking_uri, prepare_run, resume_run, terminate_run
+from sray.platform.tracking.registry import get_tracker
+from sray.platform.tracking.tracker import RunHandle, Tracker
 from sray.platform.train.resources import check_feasible
 from sray.platform.train.validation import validation_protocol
 from sray.platform.train.worker import STOP_FILE, train_worker
@@ -120,6 +122,7 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
 
     if cfg.run.precision == "fp16" and cfg.run.gpus_per_worker == 0:
         raise ValueError("--precision fp16 needs CUDA (loss scaling on GPU); on CPU use --precision bf16 or no")
+    tracker = get_tracker(cfg.run.tracker, cfg.run.tracking_uri)
     if not resume:
         cfg.run.name = unique_name(cfg)
     cfg.run.output_dir = str(Path(cfg.run.output_dir).resolve())
@@ -131,21 +134,20 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
 
     init_ray(address)
     check_feasible(cfg.run.workers, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker)
-    uri = cfg.run.tracking_uri or default_tracking_uri(Path.cwd())
-    cfg.run.tracking_uri = uri
+    cfg.run.tracking_uri = tracker.store
     protocol = validation_protocol(cfg)
     tags = {"sray.recipe": cfg.recipe, "sray.job_dir": str(job_dir), "sray.protocol": protocol.describe()}
-    run = (resume_run(uri, cfg.run.experiment, cfg.run.name) if resume
-           else prepare_run(uri, cfg.run.experiment, cfg.run.name, tags=tags))
+    run = (tracker.resume_run(cfg.run.experiment, cfg.run.name) if resume
+           else tracker.start_run(cfg.run.experiment, cfg.run.name, tags=tags))
     if not resume:
-        _log_run_start(run, job_dir / CONFIG_FILE, protocol.to_json())
+        _log_run_start(tracker, run, job_dir / CONFIG_FILE, protocol.to_json())
     print(f"[sray] job {cfg.run.name}: checkpoints in {job_dir / 'checkpoints'}\n"
-          f"[sray] MLflow run: {run.ui_url}" + (f"  ({run.ui_hint})" if run.ui_hint else ""), flush=True)
+          f"[sray] {tracker.label} run: {run.ui_url}" + (f"  ({run.ui_hint})" if run.ui_hint else ""), flush=True)
 
     latest = CheckpointManager(job_dir / "checkpoints").latest() if resume else None
     trainer = TorchTrainer(
         train_worker,
-        train_loop_config={"config": cfg.to_dict(), "run": run.__dict__,
+        train_loop_config={"config": cfg.to_dict(), "run": dataclasses.asdict(run),
                            "resume_from": str(latest) if latest is not None else None},
         scaling_config=ray.train.ScalingConfig(
             num_workers=cfg.run.workers, use_gpu=cfg.run.gpus_per_worker > 0,
@@ -164,12 +166,12 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
         raise
     finally:
         signal.signal(signal.SIGINT, previous)
-        terminate_run(run, status)
+        tracker.end_run(run, status)
     manager = CheckpointManager(job_dir / "checkpoints")
     outcome = TrainOutcome(job_dir, run, manager.best(), manager.latest(), status)
     word = {"KILLED": "stopped", "FINISHED": "finished"}.get(status, status.lower())
     print(f"[sray] {word}: best checkpoint {outcome.best_checkpoint}, latest {outcome.latest_checkpoint}\n"
-          f"[sray] MLflow run: {run.ui_url}", flush=True)
+          f"[sray] {tracker.label} run: {run.ui_url}", flush=True)
     return outcome
 
 
@@ -199,11 +201,9 @@ def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:
     return latest is None or read_meta(latest)["step"] < cfg.optim.steps
 
 
-def _log_run_start(run: RunHandle, config_path: Path, protocol: dict[str, Any]) -> None:
+def _log_run_start(tracker: Tracker, run: RunHandle, config_path: Path, protocol: dict[str, Any]) -> None:
     """Log the config file and, once, the validation protocol (params ``protocol.*``) to a new run."""
-    from sray.platform.tracking.logger import RunLogger
-
-    logger = RunLogger(run)
+    logger = tracker.logger(run)
     logger.log_artifact(config_path)
     logger.log_params({"protocol": protocol})
     logger.flush(force=True)

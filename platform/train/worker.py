@@ -1,7 +1,7 @@
 """The function every Ray Train worker runs: an Accelerate training loop over the shard loader.
 
 Ray creates the process group (gloo on CPU, NCCL on GPU) and sets RANK/WORLD_SIZE; ``Accelerator()``
-picks it up. Rank 0 logs to MLflow into the run the launcher prepared, writes checkpoints and
+picks it up. Rank 0 logs to the tracker into the run the launcher prepared, writes checkpoints and
 renders validation images; every rank reports to Ray at the same steps.
 """
 
@@ -18,7 +18,7 @@ from sray.platform.checkpoints.folders import CheckpointManager, from_ray_checkp
 from sray.platform.common.fault_hook import active_faults, kill_if_due
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.train_config import TrainConfig
-from sray.platform.tracking.runs import RunHandle
+from sray.platform.tracking.tracker import RunHandle
 from sray.platform.train.state import build_training, restore_training, training_state
 from sray.platform.train.step import TrainStep, step_seed
 
@@ -57,7 +57,7 @@ def train_worker(payload: dict[str, Any]) -> None:
 
     from sray.data_tools.loader.shard_loader import make_train_loader
     from sray.platform.common.progress import make_progress
-    from sray.platform.tracking.logger import RunLogger
+    from sray.platform.tracking.registry import open_logger
     from sray.platform.train.validation import validate
 
     cfg = TrainConfig.from_dict(payload["config"])
@@ -89,7 +89,7 @@ def train_worker(payload: dict[str, Any]) -> None:
         train_step.scaler.load_state_dict(state["scaler"])
 
     manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
-    logger = RunLogger(RunHandle(**payload["run"])) if rank == 0 else None
+    logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
     if logger is not None and start == 0:
         logger.log_params(cfg.to_dict())
     # One loader epoch per checkpoint interval: epoch e's stream depends only on (seed, e, rank), so a

@@ -5,14 +5,17 @@ From the fleet result dicts (docs/CONTRACTS.md, "Fleet results"), :func:`write_f
 * ``miou_vs_wall_s.png``, ``miou_vs_step.png``, ``psnr_vs_wall_s.png``, ``psnr_vs_step.png``: held-out
   score against training wall-clock time and against optimisation steps, one panel per scene plus
   (with two scenes or more) a first panel averaging the scenes (curves resampled as step functions
-  on a common grid, :func:`sray.platform.viz.curves.average_curves`). S-Ray zero-shot is the
-  step-0 score of the S-Ray curve (a dashed horizontal line: it costs no per-scene step), S-Ray
-  finetune and Semantic-NeRF from scratch are step curves that hold their value between evaluations;
+  on a common grid, :func:`sray.platform.viz.curves.average_curves`). A method that starts from a
+  zero-shot model (S-Ray) has its step-0 score drawn as a dashed horizontal line (it costs no
+  per-scene step); every method (S-Ray finetune, Semantic-NeRF from scratch, ...) is a step curve
+  that holds its value between evaluations;
 * ``miou_vs_artifact_bytes.png``: held-out mIoU after per-scene optimisation against the bytes a
   scene stores besides the shared model (log axis), one point per (scene, method); zero-shot S-Ray
   stores nothing and sits on a separate "0 B" tick left of an axis break.
 
-Every chart's footnote carries the results' protocol line(s) (:func:`sray.platform.common.eval_protocol.caption_lines`).
+Colours, markers and legend text are each method's :class:`~sray.platform.viz.chart_style.ChartStyle`
+(the method registry). Every chart's footnote carries the results' protocol line(s)
+(:func:`sray.platform.common.eval_protocol.caption_lines`).
 Failed results are left out and named in a footnote. Matplotlib's Agg canvas is used directly (no
 pyplot state), so this is safe in Ray workers and threads.
 """
@@ -22,6 +25,8 @@ from __future__ import annotations
 import logging
 import math
 import textwrap
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -29,25 +34,12 @@ import numpy as np
 
 from sray.model.metrics import DATASET_PROTOCOL
 from sray.platform.common.eval_protocol import caption_lines
-from sray.platform.viz.curves import (
-    METHODS,
-    average_curves,
-    check_result,
-    curve_xy,
-    failure_note,
-    is_chartable,
-    zero_shot_value,
-)
+from sray.platform.viz.chart_style import ChartedMethods
+from sray.platform.viz.curves import average_curves, check_result, curve_xy, failure_note, is_chartable, zero_shot_value
 from sray.platform.viz.figure_io import save_png
 
 log = logging.getLogger(__name__)
 
-STYLES: dict[str, dict[str, Any]] = {
-    "sray": {"label": "S-Ray finetune", "color": "#1f6fb4", "marker": "o"},
-    "semantic-nerf": {"label": "Semantic-NeRF from scratch", "color": "#d1495b", "marker": "s"},
-    "zeroshot": {"label": "S-Ray zero-shot (step 0, no per-scene steps)", "color": "#6b9fd1", "marker": "*"},
-}
-"""Colour, marker and legend text of each curve kind."""
 METRICS = {"miou": ("held-out mIoU", f"held-out mIoU ({DATASET_PROTOCOL})"),
            "psnr": ("held-out PSNR (dB)", "held-out PSNR (dB, mean over held-out views)")}
 """Curve key -> (axis label, title text)."""
@@ -99,57 +91,60 @@ def _save(fig: Any, path: Path) -> Path:
     return save_png(fig, path, DPI)
 
 
-def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str, x_key: str, mean: bool) -> None:
-    """One panel: zero-shot line, then each method's curve (the step-function mean of several)."""
-    zero = [v for r in by_method.get("sray", []) if (v := zero_shot_value(r, metric)) is not None]
-    if zero:
-        z = STYLES["zeroshot"]
-        ax.axhline(float(np.mean(zero)), color=z["color"], ls="--", lw=1.3, zorder=1)
-        ax.plot([0.0], [float(np.mean(zero))], ls="none", marker=z["marker"], ms=11, color=z["color"], zorder=4,
-                clip_on=False)
-    for method in METHODS:
-        results = by_method.get(method, [])
+def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str, x_key: str, mean: bool,
+                methods: ChartedMethods) -> None:
+    """One panel: zero-shot lines, then each method's curve (the step-function mean of several)."""
+    for method in methods.values():
+        zero = [v for r in by_method.get(method.name, []) if (v := zero_shot_value(r, metric, methods)) is not None]
+        if zero:
+            z = method.zero_shot
+            ax.axhline(float(np.mean(zero)), color=z.color, ls="--", lw=1.3, zorder=1)
+            ax.plot([0.0], [float(np.mean(zero))], ls="none", marker=z.marker, ms=11, color=z.color, zorder=4,
+                    clip_on=False)
+    for method in methods.values():
+        results = by_method.get(method.name, [])
         curves = [curve_xy(r["curve"], x_key, metric) for r in results]
         x, y = average_curves(curves) if mean else curves[0] if curves else (np.zeros(0), np.zeros(0))
         if not len(x):
             continue
-        s = STYLES[method]
-        ax.step(x, y, where="post", color=s["color"], lw=1.8, zorder=3)
+        s = method.style
+        ax.step(x, y, where="post", color=s.color, lw=1.8, zorder=3)
         if not mean or len(x) == 1:
-            ax.plot(x, y, ls="none", marker=s["marker"], ms=4.5, color=s["color"], zorder=3)
+            ax.plot(x, y, ls="none", marker=s.marker, ms=4.5, color=s.color, zorder=3)
         if not mean and results[0].get("stopped_early"):
-            ax.plot(x[-1:], y[-1:], ls="none", marker="|", ms=16, mew=2.0, color=s["color"], zorder=4, clip_on=False)
+            ax.plot(x[-1:], y[-1:], ls="none", marker="|", ms=16, mew=2.0, color=s.color, zorder=4, clip_on=False)
     ax.grid(True, alpha=0.3)
     ax.set_xlim(left=0.0)
     ax.tick_params(labelsize=8)
 
 
-def _legend_handles(ok: list[dict[str, Any]]) -> list[Any]:
+def _legend_handles(ok: list[dict[str, Any]], methods: ChartedMethods) -> list[Any]:
     from matplotlib.lines import Line2D
 
     handles = []
-    if any(zero_shot_value(r, "miou") is not None for r in ok):
-        z = STYLES["zeroshot"]
-        handles.append(Line2D([], [], color=z["color"], ls="--", marker=z["marker"], ms=9, label=z["label"]))
-    for method in METHODS:
-        if any(r["method"] == method for r in ok):
-            s = STYLES[method]
-            handles.append(Line2D([], [], color=s["color"], marker=s["marker"], ms=5, label=s["label"]))
+    for method in methods.values():
+        if any(r["method"] == method.name and zero_shot_value(r, "miou", methods) is not None for r in ok):
+            z = method.zero_shot
+            handles.append(Line2D([], [], color=z.color, ls="--", marker=z.marker, ms=9, label=z.label))
+    for method in methods.values():
+        if any(r["method"] == method.name for r in ok):
+            s = method.style
+            handles.append(Line2D([], [], color=s.color, marker=s.marker, ms=5, label=s.label))
     if any(r.get("stopped_early") for r in ok):
         handles.append(Line2D([], [], color="#555555", ls="none", marker="|", ms=12, mew=2.0,
                               label="finetune stopped early (held-out score stopped improving)"))
     return handles
 
 
-def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str) -> Any:
+def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str, methods: ChartedMethods) -> Any:
     """The figure of one (score, x axis) pair: a mean panel (2+ scenes), then one panel per scene."""
     ok = [r for r in results if is_chartable(r)]
     scenes = sorted({r["scene"] for r in ok})
-    by_scene = {s: {m: [r for r in ok if r["scene"] == s and r["method"] == m] for m in METHODS} for s in scenes}
+    by_scene = {s: {m: [r for r in ok if r["scene"] == s and r["method"] == m] for m in methods} for s in scenes}
     panels: list[tuple[str, dict[str, list[dict[str, Any]]], bool]] = []
     if len(scenes) >= 2:
-        by_method = {m: [r for r in ok if r["method"] == m] for m in METHODS}
-        counts = {STYLES[m]["label"]: len(v) for m, v in by_method.items() if v}
+        by_method = {m: [r for r in ok if r["method"] == m] for m in methods}
+        counts = {methods[m].style.label: len(v) for m, v in by_method.items() if v}
         same = len(set(counts.values())) == 1
         title = (f"mean over {len(scenes)} scenes" if same else
                  "mean over scenes (" + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ")")
@@ -162,10 +157,10 @@ def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str) -> Any:
     note = "Curves hold their value between evaluations and after a finetune stops" + (
         "; the mean panel resamples each scene's curve on the union of evaluation points." if len(scenes) >= 2 else ".")
     fig, body = _framed_figure(max(PANEL_SIZE[0] * ncols, MIN_WIDTH), PANEL_SIZE[1] * nrows,
-                               f"{y_title} vs {x_title}", _legend_handles(ok), _footnote_parts(ok, results, note))
+                               f"{y_title} vs {x_title}", _legend_handles(ok, methods), _footnote_parts(ok, results, note))
     axes = body.subplots(nrows, ncols, squeeze=False)
     for ax, (title, by_method, mean) in zip(axes.flat, panels):
-        _draw_panel(ax, by_method, metric, x_key, mean)
+        _draw_panel(ax, by_method, metric, x_key, mean, methods)
         ax.set_title(title, fontsize=9)
         ax.set_xlabel(x_label, fontsize=8)
         ax.set_ylabel(y_label, fontsize=8)
@@ -174,33 +169,33 @@ def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str) -> Any:
     return fig
 
 
-def size_figure(results: list[dict[str, Any]]) -> Any:
+def size_figure(results: list[dict[str, Any]], methods: ChartedMethods) -> Any:
     """mIoU after per-scene optimisation against the per-scene artifact size (log x, '0 B' = zero-shot)."""
     from matplotlib.ticker import NullFormatter, NullLocator
 
     ok = [r for r in results if is_chartable(r)]
-    note = ("One point per (scene, method): the best evaluated state, as stored. Dotted: a scene's S-Ray "
-            "zero-shot -> finetune. Semantic-NeRF stores its whole per-scene model.")
+    note = ("One point per (scene, method): the best evaluated state, as stored. Dotted: a scene's zero-shot "
+            "model -> finetune (S-Ray). Semantic-NeRF stores its whole per-scene model.")
     fig, body = _framed_figure(8.0, 4.6, f"held-out mIoU ({DATASET_PROTOCOL}) vs per-scene artifact size",
-                               _legend_handles(ok), _footnote_parts(ok, results, note))
+                               _legend_handles(ok, methods), _footnote_parts(ok, results, note))
     ax = body.add_subplot()
     sized = [r for r in ok if r.get("artifact_bytes") and r.get("miou_after") is not None]
-    full = [float(r["full_checkpoint_bytes"]) for r in ok if r["method"] == "sray" and r.get("full_checkpoint_bytes")]
+    full = [float(r["full_checkpoint_bytes"]) for r in ok if r.get("full_checkpoint_bytes")]  # the shared model
     biggest = max([float(r["artifact_bytes"]) for r in sized] + full + [10.0])
     smallest = min([float(r["artifact_bytes"]) for r in sized] + [biggest])
     lo_decade, hi_decade = math.floor(math.log10(smallest)), math.ceil(math.log10(biggest * 1.5))
     x_zero = 10.0 ** (lo_decade - 1)
     zero_labels: dict[float, list[str]] = {}
     for r in sized:
-        s = STYLES[r["method"]]
+        method = methods[r["method"]]
         x, y = float(r["artifact_bytes"]), float(r["miou_after"])
-        ax.plot([x], [y], ls="none", marker=s["marker"], ms=7, color=s["color"], zorder=3)
+        ax.plot([x], [y], ls="none", marker=method.style.marker, ms=7, color=method.style.color, zorder=3)
         ax.annotate(r["scene"], (x, y), xytext=(5, 4), textcoords="offset points", fontsize=7, color="#333333")
-        zero = zero_shot_value(r, "miou")
+        zero = zero_shot_value(r, "miou", methods)
         if zero is not None:
             ax.plot([x_zero, x], [zero, y], ls=":", lw=1.0, color="#999999", zorder=2)
-            ax.plot([x_zero], [zero], ls="none", marker=STYLES["zeroshot"]["marker"], ms=11,
-                    color=STYLES["zeroshot"]["color"], zorder=3)
+            ax.plot([x_zero], [zero], ls="none", marker=method.zero_shot.marker, ms=11, color=method.zero_shot.color,
+                    zorder=3)
             zero_labels.setdefault(round(zero, 3), []).append(r["scene"])
     for zero, names in zero_labels.items():  # scenes with the same zero-shot score share one label
         ax.annotate(", ".join(names), (x_zero, zero), xytext=(7, -3), textcoords="offset points", fontsize=7,
@@ -223,21 +218,28 @@ def size_figure(results: list[dict[str, Any]]) -> Any:
     return fig
 
 
-def write_fleet_charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
-    """Write the fleet's charts as PNG files in ``out_dir`` (atomically); returns their paths.
+FleetChart = Callable[[list[dict[str, Any]], ChartedMethods], Any]
+"""``chart(results, methods) -> matplotlib Figure`` of a fleet's results (failed ones included, to name them)."""
 
-    ``results``: fleet result dicts (docs/CONTRACTS.md). Failed results are skipped and named in
-    a footnote; with no finished result at all nothing is written (a warning says so).
+FLEET_CHARTS: dict[str, FleetChart] = {
+    **{f"{metric}_vs_{x_key}": partial(lambda results, methods, m, x: curve_figure(results, m, x, methods),
+                                       m=metric, x=x_key) for metric in METRICS for x_key in X_AXES},
+    "miou_vs_artifact_bytes": size_figure,
+}
+"""Every chart a fleet writes, by file stem (``<stem>.png``): add an entry to add a chart."""
+
+
+def write_fleet_charts(results: list[dict[str, Any]], out_dir: Path, methods: ChartedMethods) -> list[Path]:
+    """Write every chart of :data:`FLEET_CHARTS` as a PNG in ``out_dir`` (atomically); returns their paths.
+
+    ``results``: fleet result dicts (docs/CONTRACTS.md); ``methods``: what charts read of each method
+    (the method registry, in legend order). Failed results are skipped and named in a footnote; with
+    no finished result at all nothing is written (a warning says so).
     """
     for r in results:
-        check_result(r)
+        check_result(r, methods)
     if not any(is_chartable(r) for r in results):
         log.warning("no finished fleet result with an evaluated point: no charts written to %s", out_dir)
         return []
     out_dir = Path(out_dir)
-    paths = []
-    for metric in METRICS:
-        for x_key in X_AXES:
-            paths.append(_save(curve_figure(results, metric, x_key), out_dir / f"{metric}_vs_{x_key}.png"))
-    paths.append(_save(size_figure(results), out_dir / "miou_vs_artifact_bytes.png"))
-    return paths
+    return [_save(chart(results, methods), out_dir / f"{stem}.png") for stem, chart in FLEET_CHARTS.items()]

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-METHODS = ("sray", "semantic-nerf")
-"""Method names a fleet result may carry."""
+from sray.platform.viz.chart_style import ChartedMethods
+
 RESULT_FIELDS = ("scene", "method", "status", "curve")
 """Fields every result must have to be charted."""
 
@@ -35,14 +35,14 @@ def read_fleet_results(fleet_dir: Path) -> list[dict[str, Any]]:
     return results
 
 
-def check_result(result: dict[str, Any]) -> None:
+def check_result(result: dict[str, Any], methods: ChartedMethods) -> None:
     """ValueError naming the result and the missing or unknown field."""
     missing = [f for f in RESULT_FIELDS if f not in result]
     who = f"fleet result {result.get('scene', '?')}/{result.get('method', '?')}"
     if missing:
         raise ValueError(f"{who}: fields {missing} are missing (see docs/CONTRACTS.md, 'Fleet results')")
-    if result["method"] not in METHODS:
-        raise ValueError(f"{who}: field 'method' is {result['method']!r}; use one of {METHODS}")
+    if result["method"] not in methods:
+        raise ValueError(f"{who}: field 'method' is {result['method']!r}; use one of {tuple(methods)}")
 
 
 def is_chartable(result: dict[str, Any]) -> bool:
@@ -87,10 +87,12 @@ def average_curves(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndar
     return grid, values.mean(axis=0)
 
 
-def zero_shot_value(result: dict[str, Any], y_key: str) -> float | None:
-    """The step-0 score of an S-Ray result (the zero-shot model), or None when it has none."""
+def zero_shot_value(result: dict[str, Any], y_key: str, methods: ChartedMethods) -> float | None:
+    """The step-0 score of a result whose method starts from a zero-shot model (S-Ray), or None when it
+    has none (another method, or no step-0 point)."""
+    method = methods.get(result.get("method", ""))
     first = result["curve"][0] if result.get("curve") else None
-    if result.get("method") != "sray" or first is None or int(first.get("step", -1)) != 0:
+    if method is None or method.zero_shot is None or first is None or int(first.get("step", -1)) != 0:
         return None
     value = first.get(y_key)
     return float(value) if value is not None and math.isfinite(float(value)) else None

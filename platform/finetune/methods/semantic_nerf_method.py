@@ -1,0 +1,44 @@
+"""Semantic-NeRF from scratch: the per-scene baseline, a positional-encoding MLP trained on the scene's rays.
+
+It shares nothing with the S-Ray checkpoint but its defaults (samples per ray) and label space; its
+artifact is the whole network and its config
+(:func:`sray.platform.finetune.scene_artifacts.save_semantic_nerf`). It renders held-out views
+from no source view.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from sray.platform.finetune.methods.method import ChartStyle, Method, SceneContext, SceneSetup
+
+if TYPE_CHECKING:
+    from torch import nn
+
+
+def build(ctx: SceneContext) -> SceneSetup:
+    """A seeded Semantic-NeRF of the scene (settings ``nerf.*``) behind a
+    :class:`~sray.platform.finetune.learners.NeRFLearner`; training samples need no source view."""
+    from sray.platform.finetune.learners import NeRFLearner, build_semantic_nerf
+
+    cfg, ft = ctx.cfg, ctx.cfg.finetune
+    samples_per_ray = (cfg.nerf.n_coarse or ctx.train_cfg.model.n_coarse, cfg.nerf.n_fine or ctx.train_cfg.model.n_fine)
+    net = build_semantic_nerf(ctx.shards, ctx.scene, ctx.n_classes, ctx.ignore_id, *samples_per_ray, cfg.nerf, ft.seed,
+                              ft.eval_chunk)
+    learner = NeRFLearner(net, cfg.nerf.lr, ft.grad_clip, ft.precision, ctx.device, ft.max_nonfinite_in_row)
+    return SceneSetup(learner=learner, n_source=1, top_k=1)  # only the query's rays are used
+
+
+def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
+    """The scene's Semantic-NeRF rebuilt from its artifact (the shared checkpoint is not needed)."""
+    from sray.platform.finetune.scene_artifacts import load_semantic_nerf
+
+    return load_semantic_nerf(artifact)
+
+
+METHOD = Method(
+    name="semantic-nerf", summary="train Semantic-NeRF from scratch", build=build,
+    artifact_file="semantic_nerf.safetensors", load=load,
+    style=ChartStyle(label="Semantic-NeRF from scratch", color="#d1495b", marker="s"), uses_sources=False)
+"""The Semantic-NeRF per-scene method."""

@@ -1,0 +1,44 @@
+"""S-Ray finetune: the shared model with only ``finetune.adapt`` trained per scene.
+
+Its artifact is the adapted tensors alone plus the shared checkpoint's checksum
+(:func:`sray.platform.finetune.scene_artifacts.save_sray_delta`); loading it needs that checkpoint.
+Held-out views are rendered from the shards' fixed source views, and its step-0 score is the
+shared model's zero-shot score.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from sray.platform.finetune.methods.method import ChartStyle, Method, SceneContext, SceneSetup
+
+if TYPE_CHECKING:
+    from torch import nn
+
+
+def build(ctx: SceneContext) -> SceneSetup:
+    """An :class:`~sray.platform.finetune.learners.SRayLearner` on the shared model; training samples
+    with the checkpoint's source count (or ``finetune.n_source``) drawn from its ``top_k`` neighbours."""
+    from sray.platform.finetune.learners import SRayLearner
+
+    ft = ctx.cfg.finetune
+    learner = SRayLearner(ctx.base, ctx.base_sha256, ft.adapt, ft.lr, ft.grad_clip, ft.precision, ctx.device,
+                          ft.max_nonfinite_in_row)
+    n_source = ft.n_source or ctx.train_cfg.model.n_source
+    top_k = ft.top_k or min(ctx.train_cfg.data.top_k, ctx.stored_neighbours)
+    return SceneSetup(learner=learner, n_source=n_source, top_k=top_k)
+
+
+def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
+    """The finetuned model: the shared checkpoint plus the artifact (refused if made from another one)."""
+    from sray.platform.finetune.scene_artifacts import load_scene_model
+
+    return load_scene_model(base_checkpoint, artifact)
+
+
+METHOD = Method(
+    name="sray", summary="finetune the shared S-Ray model", build=build, artifact_file="sray_delta.safetensors",
+    load=load, style=ChartStyle(label="S-Ray finetune", color="#1f6fb4", marker="o"), uses_sources=True,
+    zero_shot=ChartStyle(label="S-Ray zero-shot (step 0, no per-scene steps)", color="#6b9fd1", marker="*"))
+"""The S-Ray per-scene method."""

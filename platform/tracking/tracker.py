@@ -1,0 +1,167 @@
+"""The tracker interface: where runs, params, metrics, artifacts and registered models go.
+
+Everything outside ``platform/tracking/`` talks to a :class:`Tracker` (chosen by name through
+:mod:`sray.platform.tracking.registry`) and the :class:`RunLogger` it opens; MLflow is one
+implementation (:mod:`sray.platform.tracking.mlflow_tracker`).
+
+A driver (the launcher, the eval job, the fleet) prepares a run with :meth:`Tracker.start_run` and
+gets a :class:`RunHandle`: plain strings, picklable, handed to Ray workers as they are. A worker
+opens a logger on that handle (:func:`sray.platform.tracking.registry.open_logger`), so a worker
+group restarted by Ray keeps writing into the same run. Tracking never stops a job: loggers buffer
+and warn instead of raising, and :meth:`Tracker.end_run` / :meth:`Tracker.tag_run` only warn.
+"""
+
+from __future__ import annotations
+
+import logging
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+log = logging.getLogger(__name__)
+
+RUN_STATUSES = ("RUNNING", "FINISHED", "FAILED", "KILLED")
+"""States a run can be put in (:meth:`Tracker.set_status`)."""
+
+
+@dataclass(frozen=True)
+class RunHandle:
+    """An opaque, picklable reference to one run of one tracker's store."""
+
+    tracker: str
+    """Registry name of the tracker that made the run (``mlflow``)."""
+    store: str
+    """Where the tracker keeps its runs (MLflow: the tracking URI)."""
+    run_id: str
+    """The run's id in that store, fixed for the whole job (restarts included)."""
+    experiment_id: str = ""
+    """Id of the run's experiment (group of runs) in the store."""
+    ui_url: str = ""
+    """Browser address of the run's page ('' when the tracker has no UI)."""
+    ui_hint: str = ""
+    """How to start that UI when it is not running by itself ('' when nothing is needed)."""
+
+
+class RunLogger(ABC):
+    """Logs into one run; never raises because of the tracking store (it warns and buffers)."""
+
+    handle: RunHandle
+    """The run this logger writes into."""
+
+    @abstractmethod
+    def log_params(self, config: Any) -> None:
+        """Record a (nested) config dataclass or dict as the run's params."""
+
+    @abstractmethod
+    def log_metrics(self, metrics: Mapping[str, Any], step: int) -> None:
+        """Record scalar metrics (floats, ints or 0-d tensors) at ``step`` (may be batched)."""
+
+    @abstractmethod
+    def log_artifact(self, path: Path, artifact_path: str | None = None) -> None:
+        """Store a file, or a folder's contents, under ``artifact_path``; the file must stay until close()."""
+
+    @abstractmethod
+    def register_model(self, checkpoint: Path, name: str, alias: str = "latest") -> str | None:
+        """Store a checkpoint and register it as a new version of model ``name`` reachable as ``name@alias``.
+
+        Returns the version, or None when it could not be made now.
+        """
+
+    @abstractmethod
+    def close(self, status: str = "FINISHED") -> None:
+        """Deliver what is buffered and put the run in ``status`` (one of :data:`RUN_STATUSES`)."""
+
+    def log_image(self, png: Path, artifact_path: str = "renders") -> None:
+        """Store a PNG (a semantic render, a chart) under ``artifact_path``."""
+        self.log_artifact(png, artifact_path)
+
+    def flush(self, force: bool = False) -> bool:
+        """Deliver what is buffered now; True when nothing is left (a logger without a buffer: always)."""
+        return True
+
+    def __enter__(self) -> RunLogger:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: Any) -> None:
+        if exc_type is None:
+            self.close("FINISHED")
+        else:
+            self.close("KILLED" if issubclass(exc_type, KeyboardInterrupt) else "FAILED")
+
+
+class Tracker(ABC):
+    """One tracking backend on one store: prepares runs, finds them again, opens loggers on them."""
+
+    name: ClassVar[str]
+    """Registry name (``--tracker``, ``run.tracker``)."""
+    label: ClassVar[str]
+    """Name shown to people in messages (``MLflow``)."""
+
+    def __init__(self, store: str) -> None:
+        """``store``: where the runs live (MLflow: a tracking URI); see :meth:`default_store`."""
+        self.store = store
+
+    @classmethod
+    @abstractmethod
+    def default_store(cls, workdir: Path) -> str:
+        """The store used when none is given: one inside ``workdir``."""
+
+    def ensure_store(self) -> None:
+        """Make the store usable now, in this process, before workers fan out (default: nothing to do).
+
+        Raises ConnectionError naming the store when it cannot be used.
+        """
+
+    @abstractmethod
+    def start_run(self, experiment: str, run_name: str, tags: Mapping[str, str] | None = None,
+                  parent: RunHandle | None = None) -> RunHandle:
+        """Create a new RUNNING run in ``experiment`` (created if needed), nested under ``parent``."""
+
+    @abstractmethod
+    def find_run(self, experiment: str, run_name: str) -> RunHandle | None:
+        """The newest run called ``run_name`` in ``experiment``, or None (no side effects)."""
+
+    @abstractmethod
+    def get_run(self, run_id: str) -> RunHandle:
+        """The handle of an existing run; raises (any error) when the store has no such run."""
+
+    @abstractmethod
+    def set_status(self, handle: RunHandle, status: str) -> None:
+        """Put a run in ``status`` (one of :data:`RUN_STATUSES`); raises on failure."""
+
+    @abstractmethod
+    def set_tags(self, handle: RunHandle, tags: Mapping[str, str]) -> None:
+        """Set tags on a run; raises on failure."""
+
+    @abstractmethod
+    def logger(self, handle: RunHandle, **options: Any) -> RunLogger:
+        """A logger writing into ``handle``'s run (``options``: the implementation's batching settings)."""
+
+    def resume_run(self, experiment: str, run_name: str) -> RunHandle:
+        """The run of a job being resumed, marked RUNNING again; LookupError when there is none."""
+        handle = self.find_run(experiment, run_name)
+        if handle is None:
+            raise LookupError(f"no {self.label} run named {run_name!r} in experiment {experiment!r} at {self.store}; "
+                              "check --name/--resume and --tracking-uri (they must match the original job)")
+        self.set_status(handle, "RUNNING")
+        return handle
+
+    def end_run(self, handle: RunHandle, status: str) -> bool:
+        """Mark a run FINISHED, FAILED or KILLED from the driver; warns and returns False on failure."""
+        try:
+            self.set_status(handle, status)
+            return True
+        except Exception as e:  # noqa: BLE001 - tracking problems never crash the job
+            log.warning("could not mark %s run %s as %s at %s: %s", self.label, handle.run_id, status, self.store, e)
+            return False
+
+    def tag_run(self, handle: RunHandle, tags: Mapping[str, str]) -> bool:
+        """Set tags from the driver; warns and returns False on failure."""
+        try:
+            self.set_tags(handle, tags)
+            return True
+        except Exception as e:  # noqa: BLE001 - tracking problems never crash the job
+            log.warning("could not tag %s run %s: %s", self.label, handle.run_id, e)
+            return False
