@@ -14,13 +14,13 @@ from train_fixtures import tiny_shards  # noqa: F401
 
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.finetune.scene_artifacts import adapted_keys, checkpoint_sha256
-from sray.platform.finetune.scene_finetune import EarlyStopping, SceneJob, finetune_scene
+from sray.platform.finetune.scene_finetune import EarlyStopping, SceneTask, finetune_scene
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
 
-def _job(checkpoint: Path, shards: Path, out: Path, method: str = "sray", **finetune: object) -> SceneJob:
-    return SceneJob(scene="synth_test_000", method=method, checkpoint=str(checkpoint),
+def _job(checkpoint: Path, shards: Path, out: Path, method: str = "sray", **finetune: object) -> SceneTask:
+    return SceneTask(scene="synth_test_000", method=method, checkpoint=str(checkpoint),
                     base_sha256=checkpoint_sha256(checkpoint), shards=str(shards), out_dir=str(out), run=None,
                     attempt=1, config=tiny_fleet_config(**finetune))
 

@@ -35,7 +35,7 @@ from sray.platform.finetune.learners import Learner
 from sray.platform.finetune.methods.method import ChartStyle, Method, SceneContext, SceneSetup
 from sray.platform.finetune.methods.registry import METHODS, get_method, method_names, register_method
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256
-from sray.platform.finetune.scene_finetune import SceneJob, finetune_scene
+from sray.platform.finetune.scene_finetune import SceneTask, finetune_scene
 from sray.platform.viz.charts import curve_figure, write_fleet_charts
 
 SCENE = "synth_test_000"
@@ -139,7 +139,7 @@ def test_the_cli_reads_the_registry_without_importing_torch():
 
 def test_add_a_method_and_finetune_a_scene_with_it(prior_method, tiny_shards, tiny_checkpoint, tmp_path):
     cfg = tiny_fleet_config(max_steps=6, eval_every=3, patience=5)
-    job = SceneJob(scene=SCENE, method=prior_method.name, checkpoint=str(tiny_checkpoint),
+    job = SceneTask(scene=SCENE, method=prior_method.name, checkpoint=str(tiny_checkpoint),
                    base_sha256=checkpoint_sha256(tiny_checkpoint), shards=str(tiny_shards), out_dir=str(tmp_path),
                    run=None, attempt=1, config=cfg)
     result = finetune_scene(job).result

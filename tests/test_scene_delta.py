@@ -26,7 +26,7 @@ from sray.platform.finetune.scene_artifacts import (
     save_semantic_nerf,
     save_sray_delta,
 )
-from sray.platform.finetune.scene_finetune import SceneJob, SceneOutcome, evaluate, finetune_scene
+from sray.platform.finetune.scene_finetune import SceneTask, SceneOutcome, evaluate, finetune_scene
 
 SCENE = "synth_test_000"
 pytestmark = pytest.mark.usefixtures("one_thread")
@@ -37,7 +37,7 @@ def finetuned(one_thread: None, tiny_shards: Path, tiny_checkpoint: Path,
               tmp_path_factory: pytest.TempPathFactory) -> tuple[SceneOutcome, Path]:
     """A 6-step S-Ray finetune of the tiny test scene (default adapted modules) and its artifact."""
     out = tmp_path_factory.mktemp("delta")
-    job = SceneJob(scene=SCENE, method="sray", checkpoint=str(tiny_checkpoint),
+    job = SceneTask(scene=SCENE, method="sray", checkpoint=str(tiny_checkpoint),
                    base_sha256=checkpoint_sha256(tiny_checkpoint), shards=str(tiny_shards), out_dir=str(out), run=None,
                    attempt=1, config=tiny_fleet_config(patience=5))
     return finetune_scene(job), out / get_method("sray").artifact_file

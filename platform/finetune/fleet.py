@@ -34,7 +34,7 @@ from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
 from sray.platform.finetune.methods.registry import method_names
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256, state_file
-from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneJob, run_scene_job, write_result
+from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneTask, run_scene_task, write_result
 from sray.platform.tracking.fleet_parent_run import parent_run
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import Tracker
@@ -89,12 +89,12 @@ def read_result(out_dir: Path, scene: str, method: str) -> dict[str, Any] | None
         return None
 
 
-def failed_result(job: SceneJob, error: str, full_bytes: int | None) -> dict[str, Any]:
+def failed_result(task: SceneTask, error: str, full_bytes: int | None) -> dict[str, Any]:
     """The contract's result dict of a pair whose last attempt failed (nothing measured)."""
-    return {"scene": job.scene, "method": job.method, "status": "failed", "error": error, "attempts": job.attempt,
-            "steps_used": 0, "max_steps": job.config.finetune.max_steps, "stopped_early": False, "wall_s": 0.0,
+    return {"scene": task.scene, "method": task.method, "status": "failed", "error": error, "attempts": task.attempt,
+            "steps_used": 0, "max_steps": task.config.finetune.max_steps, "stopped_early": False, "wall_s": 0.0,
             "miou_before": None, "miou_after": None, "psnr_after": None, "artifact_bytes": None,
-            "full_checkpoint_bytes": full_bytes, "child_run_id": job.run.run_id if job.run else None,
+            "full_checkpoint_bytes": full_bytes, "child_run_id": task.run.run_id if task.run else None,
             "protocol": None, "curve": []}
 
 
@@ -105,9 +105,9 @@ def _error_text(error: BaseException) -> str:
     return f"{type(cause).__name__}: {message[-1] if message else ''}"[:2000]
 
 
-def _scene_task(job: SceneJob) -> dict[str, Any]:
+def _scene_task(task: SceneTask) -> dict[str, Any]:
     """Ray task body (a module-level function, so workers import it by name)."""
-    return run_scene_job(job)
+    return run_scene_task(task)
 
 
 def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
@@ -159,16 +159,16 @@ def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
         return []
 
 
-def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int,
+def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
               tracker: Tracker) -> dict[tuple[str, str], dict[str, Any]]:
-    """Run the jobs on Ray with the in-flight window, re-runs with back-off and failure reports."""
+    """Run the tasks on Ray with the in-flight window, re-runs with back-off and failure reports."""
     import ray
 
     task = ray.remote(_scene_task).options(num_cpus=cfg.cpus_per_task, num_gpus=cfg.gpus_per_task,
                                            max_retries=0, retry_exceptions=False,
                                            runtime_env={"env_vars": propagated_env()})
-    waiting: list[tuple[float, SceneJob]] = [(0.0, job) for job in jobs]
-    in_flight: dict[Any, SceneJob] = {}
+    waiting: list[tuple[float, SceneTask]] = [(0.0, task) for task in tasks]
+    in_flight: dict[Any, SceneTask] = {}
     results: dict[tuple[str, str], dict[str, Any]] = {}
     try:
         while waiting or in_flight:
@@ -186,32 +186,32 @@ def _schedule(jobs: list[SceneJob], cfg: FleetConfig, full_bytes: int,
             timeout = None if next_ready is None or len(in_flight) >= cfg.max_parallel else max(next_ready - now, 0.05)
             done, _ = ray.wait(list(in_flight), num_returns=1, timeout=timeout)
             for ref in done:
-                job = in_flight.pop(ref)
+                task = in_flight.pop(ref)
                 try:
                     result = ray.get(ref)
                 except Exception as e:  # noqa: BLE001 - a task error or a dead worker: re-run or report
                     error = _error_text(e)
-                    if job.attempt <= cfg.retries:
-                        delay = cfg.retry_backoff_s * 2 ** (job.attempt - 1)
-                        waiting.append((time.monotonic() + delay, dataclasses.replace(job, attempt=job.attempt + 1)))
-                        _say(f"{job.scene}/{job.method} attempt {job.attempt} failed ({error}); re-run in {delay:g} s")
+                    if task.attempt <= cfg.retries:
+                        delay = cfg.retry_backoff_s * 2 ** (task.attempt - 1)
+                        waiting.append((time.monotonic() + delay, dataclasses.replace(task, attempt=task.attempt + 1)))
+                        _say(f"{task.scene}/{task.method} attempt {task.attempt} failed ({error}); re-run in {delay:g} s")
                         continue
-                    result = failed_result(job, error, full_bytes)
-                    write_result(Path(job.out_dir), result)
-                    if job.run:
-                        tracker.tag_run(job.run, {"sray.status": "failed", "sray.error": str(e)})
-                        tracker.end_run(job.run, "FAILED")
-                    _say(f"{job.scene}/{job.method} FAILED after {job.attempt} attempts: {error}")
+                    result = failed_result(task, error, full_bytes)
+                    write_result(Path(task.out_dir), result)
+                    if task.run:
+                        tracker.tag_run(task.run, {"sray.status": "failed", "sray.error": str(e)})
+                        tracker.end_run(task.run, "FAILED")
+                    _say(f"{task.scene}/{task.method} FAILED after {task.attempt} attempts: {error}")
                 else:
-                    _say(f"{job.scene}/{job.method} finished: mIoU {result['miou_before']:.3f} -> "
+                    _say(f"{task.scene}/{task.method} finished: mIoU {result['miou_before']:.3f} -> "
                          f"{result['miou_after']:.3f} in {result['steps_used']} steps ({result['wall_s']:.1f} s)")
-                results[(job.scene, job.method)] = result
+                results[(task.scene, task.method)] = result
     except KeyboardInterrupt:
         for ref in in_flight:
             ray.cancel(ref, force=True)
-        for job in jobs:
-            if job.run and (job.scene, job.method) not in results:
-                tracker.end_run(job.run, "KILLED")
+        for task in tasks:
+            if task.run and (task.scene, task.method) not in results:
+                tracker.end_run(task.run, "KILLED")
         raise
     return results
 
@@ -254,11 +254,11 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     if len(done) < len(pairs):
         init_ray(cfg.address or None)
         check_feasible(1, cfg.cpus_per_task, cfg.gpus_per_task)
-    jobs = []
+    tasks = []
     for scene, method in (p for p in pairs if p not in done):
         child = tracker.start_run(cfg.experiment, f"{scene}/{method}", parent=parent,
                                   tags={"sray.kind": "fleet-scene", "sray.scene": scene, "sray.method": method})
-        jobs.append(SceneJob(scene=scene, method=method, checkpoint=str(checkpoint), base_sha256=base_sha,
+        tasks.append(SceneTask(scene=scene, method=method, checkpoint=str(checkpoint), base_sha256=base_sha,
                              shards=str(shards), out_dir=str(result_dir(out_dir, scene, method)),
                              run=child, attempt=1, config=cfg))
 
@@ -267,8 +267,8 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     try:
         if is_new:
             logger.log_params(cfg.to_dict() | {"checkpoint": str(checkpoint), "shards": str(shards)})
-        if jobs:
-            done |= _schedule(jobs, cfg, full_bytes, tracker)
+        if tasks:
+            done |= _schedule(tasks, cfg, full_bytes, tracker)
         results = [done[p] for p in pairs]
         atomic_write_json(out_dir / "fleet_results.json", results)
         table = results_table(results)

@@ -49,7 +49,7 @@ RESULT_FILE = "result.json"
 
 
 @dataclass(frozen=True)
-class SceneJob:
+class SceneTask:
     """What one fleet task needs (picklable)."""
 
     scene: str
@@ -123,57 +123,57 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
     return path
 
 
-def scene_protocol(job: SceneJob) -> EvalProtocol:
+def scene_protocol(task: SceneTask) -> EvalProtocol:
     """How the job's held-out scores are made at ``finetune.eval_stride``: from ``finetune.eval_n_source``
     fixed sources ranked by the shards' neighbour rule (methods that use sources, as S-Ray), or from
     none (per-scene models, as Semantic-NeRF)."""
-    ft = job.config.finetune
-    if get_method(job.method).uses_sources:
-        return EvalProtocol.from_shards(Path(job.shards), ft.eval_n_source, ft.eval_stride)
+    ft = task.config.finetune
+    if get_method(task.method).uses_sources:
+        return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride)
     return EvalProtocol.without_sources(ft.eval_stride)
 
 
-def _prepare(job: SceneJob, device: torch.device) -> tuple[Learner, Any, list[EvalSample], tuple[int, int, int]]:
+def _prepare(task: SceneTask, device: torch.device) -> tuple[Learner, Any, list[EvalSample], tuple[int, int, int]]:
     """The method's learner, the training loader (one epoch = ``eval_every`` samples), the held-out samples
     and (classes, ignore id, shared model bytes); ValueError when the scene does not fit the checkpoint."""
-    ft, shards = job.config.finetune, Path(job.shards)
-    method = get_method(job.method)
-    base, train_cfg = model_from_checkpoint(job.checkpoint)
+    ft, shards = task.config.finetune, Path(task.shards)
+    method = get_method(task.method)
+    base, train_cfg = model_from_checkpoint(task.checkpoint)
     n_classes, ignore_id = train_cfg.model.n_classes, train_cfg.model.ignore_id
     manifest = read_manifest(shards)
-    if job.scene not in manifest.scenes:
-        raise ValueError(f"{shards}/manifest.json: no scene {job.scene!r}")
-    class_names = manifest.scenes[job.scene].meta["class_names"]
+    if task.scene not in manifest.scenes:
+        raise ValueError(f"{shards}/manifest.json: no scene {task.scene!r}")
+    class_names = manifest.scenes[task.scene].meta["class_names"]
     if len(class_names) != n_classes:
-        raise ValueError(f"{shards}/manifest.json: scene {job.scene!r} has {len(class_names)} classes, the checkpoint "
-                         f"{job.checkpoint} predicts {n_classes}; use shards of the checkpoint's label space")
+        raise ValueError(f"{shards}/manifest.json: scene {task.scene!r} has {len(class_names)} classes, the checkpoint "
+                         f"{task.checkpoint} predicts {n_classes}; use shards of the checkpoint's label space")
     full_bytes = model_bytes(base)
     setup = method.build(SceneContext(
-        scene=job.scene, shards=shards, base=base, base_sha256=job.base_sha256, train_cfg=train_cfg, cfg=job.config,
+        scene=task.scene, shards=shards, base=base, base_sha256=task.base_sha256, train_cfg=train_cfg, cfg=task.config,
         n_classes=n_classes, ignore_id=ignore_id, stored_neighbours=int(manifest.neighbours["k"]), device=device))
     loader = make_train_loader(shards, n_source=setup.n_source, top_k=max(setup.top_k, setup.n_source),
                                rays_per_batch=ft.rays_per_batch or train_cfg.data.rays_per_batch,
                                batches_per_epoch=ft.eval_every, rank=0, world_size=1, num_workers=0, seed=ft.seed,
-                               scenes=[job.scene])
-    samples = list(make_eval_samples(shards, job.scene, split="test", n_source=ft.eval_n_source))
+                               scenes=[task.scene])
+    samples = list(make_eval_samples(shards, task.scene, split="test", n_source=ft.eval_n_source))
     return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes)
 
 
-def finetune_scene(job: SceneJob, logger: RunLogger | None = None) -> SceneOutcome:
+def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOutcome:
     """Finetune one (scene, method), write its artifact and ``result.json``; ``logger``: the child run's or None."""
     from sray.platform.common.progress import make_progress
 
-    cfg, ft = job.config, job.config.finetune
-    fail_if_listed(job.scene, job.attempt)
+    cfg, ft = task.config, task.config.finetune
+    fail_if_listed(task.scene, task.attempt)
     use_cuda = cfg.gpus_per_task > 0 and torch.cuda.is_available()
     device = torch.device("cuda" if use_cuda else "cpu")
-    out_dir = Path(job.out_dir)
-    learner, loader, samples, (n_classes, ignore_id, full_bytes) = _prepare(job, device)
-    protocol = scene_protocol(job)
+    out_dir = Path(task.out_dir)
+    learner, loader, samples, (n_classes, ignore_id, full_bytes) = _prepare(task, device)
+    protocol = scene_protocol(task)
     if logger is not None:
-        logger.log_params(cfg.to_dict() | {"scene": job.scene, "method": job.method, "checkpoint": job.checkpoint,
+        logger.log_params(cfg.to_dict() | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
                                            "protocol": protocol.to_json()})
-        logger.log_metrics({"attempt": job.attempt}, 0)
+        logger.log_metrics({"attempt": task.attempt}, 0)
 
     curve: list[dict[str, float]] = []
     stopper = EarlyStopping(ft.patience, ft.min_delta)
@@ -191,7 +191,7 @@ def finetune_scene(job: SceneJob, logger: RunLogger | None = None) -> SceneOutco
         if logger is not None:
             logger.log_metrics({f"heldout/{k}": v for k, v in scores.items()} | {"heldout/train_s": train_s}, step)
 
-    bar = make_progress(True, total=ft.max_steps, desc=f"{job.scene}/{job.method}")
+    bar = make_progress(True, total=ft.max_steps, desc=f"{task.scene}/{task.method}")
     evaluate_now()
     window: list[torch.Tensor] = []
     try:
@@ -204,7 +204,7 @@ def finetune_scene(job: SceneJob, logger: RunLogger | None = None) -> SceneOutco
             try:
                 outcome = learner.step(loss)
             except NonFiniteTraining as err:
-                raise NonFiniteTraining(f"{job.scene}/{job.method} at step {step}: {err}") from None
+                raise NonFiniteTraining(f"{task.scene}/{task.method} at step {step}: {err}") from None
             train_s += time.perf_counter() - start
             step += 1
             bar.update(1)
@@ -227,15 +227,15 @@ def finetune_scene(job: SceneJob, logger: RunLogger | None = None) -> SceneOutco
         bar.close()
     learner.restore(best_state)
     learner.net.requires_grad_(True)  # the returned model is in the state of a reloaded one (see Learner.inference)
-    artifact = out_dir / get_method(job.method).artifact_file
-    learner.save(artifact, job.scene)
+    artifact = out_dir / get_method(task.method).artifact_file
+    learner.save(artifact, task.scene)
     best_point = best_point or curve[0]
     result = {
-        "scene": job.scene, "method": job.method, "status": "finished", "error": None, "attempts": job.attempt,
+        "scene": task.scene, "method": task.method, "status": "finished", "error": None, "attempts": task.attempt,
         "steps_used": step, "max_steps": ft.max_steps, "stopped_early": reason == "patience", "wall_s": train_s,
         "miou_before": curve[0]["miou"], "miou_after": best_point["miou"], "psnr_after": best_point["psnr"],
         "artifact_bytes": artifact.stat().st_size, "full_checkpoint_bytes": full_bytes,
-        "child_run_id": job.run.run_id if job.run else None, "protocol": protocol.to_json(), "curve": curve,
+        "child_run_id": task.run.run_id if task.run else None, "protocol": protocol.to_json(), "curve": curve,
     }
     write_result(out_dir, result)
     if logger is not None:
@@ -247,7 +247,7 @@ def finetune_scene(job: SceneJob, logger: RunLogger | None = None) -> SceneOutco
     return SceneOutcome(result, learner.net)
 
 
-def run_scene_job(job: SceneJob) -> dict[str, Any]:
+def run_scene_task(task: SceneTask) -> dict[str, Any]:
     """The fleet task body: :func:`finetune_scene` logging into the job's child run; returns the result.
 
     The child run is marked FINISHED on success and FAILED when this attempt raises (a later
@@ -257,9 +257,9 @@ def run_scene_job(job: SceneJob) -> dict[str, Any]:
     """
     from sray.platform.tracking.registry import open_logger
 
-    torch.set_num_threads(max(1, int(job.config.cpus_per_task)))
+    torch.set_num_threads(max(1, int(task.config.cpus_per_task)))
 
-    if job.run is None:
-        return finetune_scene(job).result
-    with open_logger(job.run) as logger:
-        return finetune_scene(job, logger).result
+    if task.run is None:
+        return finetune_scene(task).result
+    with open_logger(task.run) as logger:
+        return finetune_scene(task, logger).result
