@@ -4,10 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-ATTENTION_VARIANTS = ("full", "intra", "cross", "none", "dense")
-"""Cross-Reprojection Attention variants: ``full`` = intra-view radial then cross-view sparse
-attention (the paper's CRA); ``intra`` / ``cross`` = only one of the two; ``none`` = no attention;
-``dense`` = one joint attention over all (view, sample) tokens of a ray (the paper's baseline)."""
+from .attention_variants import ATTENTION_VARIANTS
 
 WEIGHT_MAPS = ("radial", "affine")
 """How the semantic-aware weight net's per-view outputs become weights in C(tau) (``semantic_weights``):
@@ -38,7 +35,8 @@ class SRayConfig:
     """Fine samples per ray drawn from the coarse weights; the fine network sees the sorted union
     of coarse and fine samples, n_coarse + n_fine in all (paper code: 64)."""
     attention: str = "full"
-    """Cross-Reprojection Attention variant, one of ``ATTENTION_VARIANTS``."""
+    """Cross-Reprojection Attention variant, a key of ``attention_variants.ATTENTION_VARIANTS``
+    (``full`` = the paper's CRA, ``intra``, ``cross``, ``none``, ``dense``)."""
     n_heads: int = 4
     """Heads of every multi-head attention (CRA and the geometry net's ray attention; paper: 4)."""
     ffn_mult: int = 0
@@ -82,7 +80,7 @@ class SRayConfig:
             return ValueError(f"sray.model.config.SRayConfig: field `{field}` {why}.")
 
         if self.attention not in ATTENTION_VARIANTS:
-            raise bad("attention", f"is {self.attention!r}; use one of {ATTENTION_VARIANTS}")
+            raise bad("attention", f"is {self.attention!r}; use one of {tuple(ATTENTION_VARIANTS)}")
         if self.weight_map not in WEIGHT_MAPS:
             raise bad("weight_map", f"is {self.weight_map!r}; use one of {WEIGHT_MAPS}")
         if self.depth_freqs < 0:

@@ -23,9 +23,12 @@ they are not zeroed, which saves a pass over the largest tensor.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from .attention_variants import ATTENTION_VARIANTS, POSITION_STAGES
 from .config import SRayConfig
 from .positional_encoding import PositionalEncoding
 
@@ -59,20 +62,49 @@ class AttentionBlock(nn.Module):
         return x
 
 
+def _over_samples(block: AttentionBlock, x: Tensor, valid: Tensor) -> Tensor:
+    """``intra``: attention over the N samples of each (ray, view). x (R, m, N, C), valid (R, m, N)."""
+    r, m, n, c = x.shape
+    return block(x.reshape(r * m, n, c), valid.reshape(r * m, n)).view(r, m, n, c)
+
+
+def _over_views(block: AttentionBlock, x: Tensor, valid: Tensor) -> Tensor:
+    """``cross``: attention over the m views of each (ray, sample)."""
+    r, m, n, c = x.shape
+    xt = x.transpose(1, 2).reshape(r * n, m, c)  # (R*N, m, C)
+    vt = valid.transpose(1, 2).reshape(r * n, m)
+    return block(xt, vt).view(r, n, m, c).transpose(1, 2)
+
+
+def _over_ray(block: AttentionBlock, x: Tensor, valid: Tensor) -> Tensor:
+    """``dense``: one attention over all m * N tokens of a ray."""
+    r, m, n, c = x.shape
+    return block(x.reshape(r, m * n, c), valid.reshape(r, m * n)).view(r, m, n, c)
+
+
+STAGES: dict[str, Callable[[AttentionBlock, Tensor, Tensor], Tensor]] = {
+    "intra": _over_samples, "cross": _over_views, "dense": _over_ray}
+"""How each stage of ``attention_variants`` groups the tokens of M for its attention block."""
+
+
 class CrossReprojectionAttention(nn.Module):
-    """M (R, m, N, C) -> refined M'' (R, m, N, C) with the variant chosen by ``cfg.attention``."""
+    """M (R, m, N, C) -> refined M'' (R, m, N, C) with the stages of the variant ``cfg.attention``.
+
+    Each stage's block is the attribute of the stage's name (``intra``, ``cross``, ``dense``), so a
+    checkpoint's keys name the stages it holds.
+    """
 
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         self.variant = cfg.attention
+        self.stages = ATTENTION_VARIANTS[cfg.attention]
         c, h, f = cfg.feat_dim, cfg.n_heads, cfg.ffn_mult
         self.depth_embedding: nn.Module | None = None
-        if self.variant in ("full", "intra", "dense"):
+        if POSITION_STAGES & set(self.stages):
             encoding = PositionalEncoding(1, cfg.depth_freqs)
             self.depth_embedding = nn.Sequential(encoding, nn.Linear(encoding.out_dim, c))
-        self.intra = AttentionBlock(c, h, f) if self.variant in ("full", "intra") else None
-        self.cross = AttentionBlock(c, h, f) if self.variant in ("full", "cross") else None
-        self.dense = AttentionBlock(c, h, f) if self.variant == "dense" else None
+        for stage in dict.fromkeys(self.stages):
+            self.add_module(stage, AttentionBlock(c, h, f))
 
     def position_signal(self, depth01: Tensor) -> Tensor:
         """The embedding added to every view's token of a sample: depth01 (R, N) in [0, 1] -> (R, N, C)."""
@@ -89,12 +121,6 @@ class CrossReprojectionAttention(nn.Module):
         x = space
         if self.depth_embedding is not None:  # same signal for every view (no view embedding)
             x = x + self.position_signal(depth01)[:, None].to(x.dtype)
-        if self.intra is not None:  # over the N samples of each (ray, view)
-            x = self.intra(x.reshape(r * m, n, c), valid.reshape(r * m, n)).view(r, m, n, c)
-        if self.cross is not None:  # over the m views of each (ray, sample)
-            xt = x.transpose(1, 2).reshape(r * n, m, c)  # (R*N, m, C)
-            vt = valid.transpose(1, 2).reshape(r * n, m)
-            x = self.cross(xt, vt).view(r, n, m, c).transpose(1, 2)
-        if self.dense is not None:  # over all m*N tokens of a ray
-            x = self.dense(x.reshape(r, m * n, c), valid.reshape(r, m * n)).view(r, m, n, c)
+        for stage in self.stages:
+            x = STAGES[stage](getattr(self, stage), x, valid)
         return x

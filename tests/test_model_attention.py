@@ -126,7 +126,7 @@ def test_variants_hold_only_their_layers() -> None:
     present = {}
     for variant in ("full", "intra", "cross", "none", "dense"):
         module, _, _, _ = _case(variant)
-        present[variant] = tuple(getattr(module, k) is not None
+        present[variant] = tuple(getattr(module, k, None) is not None
                                  for k in ("depth_embedding", "intra", "cross", "dense"))
     assert present == {"full": (True, True, True, False), "intra": (True, True, False, False),
                        "cross": (False, False, True, False), "none": (False, False, False, False),
