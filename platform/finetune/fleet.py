@@ -164,9 +164,9 @@ def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
     """Run the tasks on Ray with the in-flight window, re-runs with back-off and failure reports."""
     import ray
 
-    task = ray.remote(_scene_task).options(num_cpus=cfg.cpus_per_task, num_gpus=cfg.gpus_per_task,
-                                           max_retries=0, retry_exceptions=False,
-                                           runtime_env={"env_vars": propagated_env()})
+    remote_task = ray.remote(_scene_task).options(num_cpus=cfg.cpus_per_task, num_gpus=cfg.gpus_per_task,
+                                                  max_retries=0, retry_exceptions=False,
+                                                  runtime_env={"env_vars": propagated_env()})
     waiting: list[tuple[float, SceneTask]] = [(0.0, task) for task in tasks]
     in_flight: dict[Any, SceneTask] = {}
     results: dict[tuple[str, str], dict[str, Any]] = {}
@@ -177,7 +177,7 @@ def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
                 if len(in_flight) >= cfg.max_parallel:
                     break
                 waiting.remove(item)
-                in_flight[task.remote(item[1])] = item[1]
+                in_flight[remote_task.remote(item[1])] = item[1]
                 _say(f"started {item[1].scene}/{item[1].method} (attempt {item[1].attempt})")
             next_ready = min((w[0] for w in waiting), default=None)
             if not in_flight:
