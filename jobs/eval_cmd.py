@@ -24,17 +24,27 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "in this folder)")
     p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--render", choices=["full", "fast"], default="full",
+                   help="full: the whole coarse + fine renderer; fast: the fast render mode (sray.model.fast_render; "
+                        "its accuracy cost is measured by `sray bench speed-accuracy`)")
+    p.add_argument("--fast-stride", type=int, default=4, help="fast mode: render every N-th pixel and upsample")
+    p.add_argument("--fast-confidence", type=float, default=0.9,
+                   help="fast mode: rays whose coarse confidence reaches this skip the fine pass")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table and where everything went; exit 2 on bad input."""
+    from sray.model.fast_render import FastRender
     from sray.platform.eval.zero_shot import evaluate_checkpoint, format_table
+
+    fast = FastRender(args.fast_stride, args.fast_confidence) if args.render == "fast" else None
 
     try:
         report = evaluate_checkpoint(args.checkpoint, args.data, args.scenes, args.out, n_source=args.n_source,
                                      stride=args.stride, tracking_uri=args.tracking_uri,
-                                     experiment=args.experiment, tracker=args.tracker, device=args.device)
+                                     experiment=args.experiment, tracker=args.tracker, device=args.device,
+                                     fast=fast)
     except (FileNotFoundError, ValueError) as e:
         print(f"sray eval: {e}", file=sys.stderr)
         return 2

@@ -1,9 +1,8 @@
-"""``sray train`` (run a training job here or on a cluster) and ``sray submit`` (Ray Jobs API)."""
+"""``sray train``: run a training job here or, with ``--address``, on a Ray cluster."""
 
 from __future__ import annotations
 
 import argparse
-import shlex
 import sys
 
 from sray.jobs.recipes import RECIPES
@@ -26,17 +25,12 @@ def add_train_flags(p: argparse.ArgumentParser) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``sray train`` and ``sray submit``."""
+    """Add ``sray train``."""
     train = sub.add_parser("train", help="train S-Ray with Ray Train + Accelerate, tracked in MLflow")
     add_train_flags(train)
     train.add_argument("--address", help="join this Ray cluster (default: start Ray locally in-process)")
     train.set_defaults(func=_train)
 
-    submit = sub.add_parser("submit", help="send a `sray train` job to a Ray cluster (Ray Jobs API)")
-    add_train_flags(submit)
-    submit.add_argument("--address", required=True, help="Ray dashboard address, e.g. http://head:8265")
-    submit.add_argument("--working-dir", default=".", help="folder shipped to the cluster (default: .)")
-    submit.set_defaults(func=_submit)
 
 
 def build_config(args: argparse.Namespace):
@@ -48,7 +42,9 @@ def build_config(args: argparse.Namespace):
 
     cfg = get_recipe(args.recipe)
     if args.resume:
-        cfg = load_job_config(cfg.run.output_dir, args.resume)
+        # the job's folder is under the output folder the user names (--set run.output_dir=...), else the recipe's
+        named = [a.split("=", 1)[1] for a in args.overrides if a.split("=", 1)[0].strip() == "run.output_dir"]
+        cfg = load_job_config(named[-1] if named else cfg.run.output_dir, args.resume)
         cfg.run.name = args.resume
     flags = {"data.shards": args.data, "run.workers": args.workers, "run.gpus_per_worker": args.gpus_per_worker,
              "run.precision": args.precision, "run.tracker": args.tracker, "run.tracking_uri": args.tracking_uri,
@@ -58,10 +54,17 @@ def build_config(args: argparse.Namespace):
 
 
 def _train(args: argparse.Namespace) -> int:
+    from sray.platform.train.inputs import check_train_inputs
+
+    try:  # inputs are checked before torch and Ray are even imported: a bad one fails in seconds
+        cfg = build_config(args)
+        check_train_inputs(cfg, resume=bool(args.resume))
+    except (FileExistsError, FileNotFoundError, ValueError) as e:
+        print(f"sray train: {e}", file=sys.stderr)
+        return 2
     from sray.platform.train.launcher import launch_training
     from sray.platform.train.resources import InfeasibleRequest
 
-    cfg = build_config(args)
     try:
         outcome = launch_training(cfg, address=args.address, resume=bool(args.resume))
     except (InfeasibleRequest, FileExistsError, FileNotFoundError, ValueError) as e:
@@ -69,29 +72,3 @@ def _train(args: argparse.Namespace) -> int:
         return 2
     return 0 if outcome.status in ("FINISHED", "KILLED") else 1
 
-
-def _submit(args: argparse.Namespace) -> int:
-    from ray.job_submission import JobSubmissionClient
-
-    build_config(args)  # refuse bad flags here, not minutes later on the cluster
-    forwarded = [a for a in sys.argv[sys.argv.index("submit") + 1:]]
-    drop = {"--address", "--working-dir"}
-    entry, skip = [], False
-    for a in forwarded:
-        if skip:
-            skip = False
-            continue
-        if a in drop:
-            skip = True
-            continue
-        if a.split("=", 1)[0] in drop:
-            continue
-        entry.append(a)
-    entrypoint = "sray train --address auto " + " ".join(shlex.quote(a) for a in entry)
-    client = JobSubmissionClient(args.address)
-    job_id = client.submit_job(entrypoint=entrypoint, runtime_env={"working_dir": args.working_dir})
-    print(f"submitted {job_id}: {entrypoint}\n"
-          f"follow:  ray job logs --follow {job_id} --address {args.address}\n"
-          f"status:  ray job status {job_id} --address {args.address}\n"
-          f"stop:    ray job stop {job_id} --address {args.address}")
-    return 0

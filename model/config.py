@@ -11,6 +11,17 @@ WEIGHT_MAPS = ("radial", "affine")
 ``radial`` (default) can approach both bounds tau/m and 1/(tau m); ``affine`` (the first version)
 reaches only (2 - tau)/m from above."""
 
+IMPLS = ("fast", "reference")
+"""Implementations of the per-sample computation (``SRayConfig.impl``): ``fast`` (default) gathers the
+source features with an ``embedding_bag`` (the same bilinear weights as ``grid_sample``, a much cheaper
+backward) and builds every per-view tensor directly in (R, m, N) order; ``reference`` is the first,
+unoptimised path, kept so that benchmarks and equivalence tests compare against it."""
+
+FINE_SAMPLES = ("union", "new")
+"""What the fine pass evaluates (``SRayConfig.fine_samples``): ``union`` (default) the sorted union of
+the coarse and the resampled depths, n_coarse + n_fine per ray (NeRF); ``new`` only the n_fine
+resampled depths (the paper's public code: 128 evaluations per ray at 64 + 64 instead of 192)."""
+
 DENSITY_ACTIVATIONS = ("softplus", "relu")
 """Non-negative activations allowed for the density output."""
 
@@ -70,8 +81,17 @@ class SRayConfig:
     """Weight of the photometric MSE in the training loss (paper: 1)."""
     ignore_id: int = 255
     """Label id of unlabelled pixels; never a prediction target."""
+    class_weights: tuple[float, ...] = ()
+    """Per-class weights of the semantic cross-entropy (n_classes of them; empty = unweighted, the
+    paper's loss). Training fills it from the training set's class frequencies when
+    ``data.class_balance`` asks for it (``sray.data_tools.class_stats.balanced_weights``)."""
     chunk: int = 4096
     """Rays rendered per forward pass by ``render_image`` (bounds its memory)."""
+    impl: str = "fast"
+    """Implementation of the per-sample computation, one of ``IMPLS`` (same parameters, same outputs
+    within float32 rounding; ``reference`` is the unoptimised path)."""
+    fine_samples: str = "union"
+    """Depths the fine pass evaluates, one of ``FINE_SAMPLES``."""
 
     def __post_init__(self) -> None:
         """Reject settings the network cannot run with, naming the field and the fix."""
@@ -83,6 +103,10 @@ class SRayConfig:
             raise bad("attention", f"is {self.attention!r}; use one of {tuple(ATTENTION_VARIANTS)}")
         if self.weight_map not in WEIGHT_MAPS:
             raise bad("weight_map", f"is {self.weight_map!r}; use one of {WEIGHT_MAPS}")
+        if self.impl not in IMPLS:
+            raise bad("impl", f"is {self.impl!r}; use one of {IMPLS}")
+        if self.fine_samples not in FINE_SAMPLES:
+            raise bad("fine_samples", f"is {self.fine_samples!r}; use one of {FINE_SAMPLES}")
         if self.depth_freqs < 0:
             raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
         if self.density_activation not in DENSITY_ACTIVATIONS:
@@ -103,10 +127,13 @@ class SRayConfig:
             raise bad("weight_margin", f"is {self.weight_margin}; it must lie in (0, 1)")
         if self.min_source_depth <= 0.0:
             raise bad("min_source_depth", f"is {self.min_source_depth}; it must be > 0")
+        if self.class_weights and (len(self.class_weights) != self.n_classes or min(self.class_weights) <= 0):
+            raise bad("class_weights", f"holds {len(self.class_weights)} values (min {min(self.class_weights)}); give "
+                      f"none or {self.n_classes} positive weights")
         if len(self.weight_hidden) != 2 or len(self.geo_hidden) != 2:
             raise bad("weight_hidden/geo_hidden", "must each hold exactly two widths")
 
     @property
     def n_fine_total(self) -> int:
-        """Samples per ray seen by the fine network: the sorted union of coarse and fine."""
-        return self.n_coarse + self.n_fine
+        """Samples per ray seen by the fine network: n_coarse + n_fine (``union``) or n_fine (``new``)."""
+        return self.n_fine + (self.n_coarse if self.fine_samples == "union" else 0)

@@ -12,6 +12,7 @@ from torch import Tensor, nn
 
 from .config import SRayConfig
 from .cra import CrossReprojectionAttention
+from .fast_field import cra_forward, geometry_forward, weights_forward
 from .geometry_net import GeometryNet
 from .reprojection import ContextualSpace
 from .semantic_weights import SemanticWeightNet
@@ -29,11 +30,12 @@ class SRayField(nn.Module):
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         c = cfg.feat_dim
-        self.context = ContextualSpace(c, cfg.dir_hidden, cfg.min_source_depth)
+        self.context = ContextualSpace(c, cfg.dir_hidden, cfg.min_source_depth, cfg.impl)
         self.attention = CrossReprojectionAttention(cfg)
         self.view_weights = SemanticWeightNet(cfg)
         self.classifier = nn.Sequential(nn.Linear(c, c), nn.ELU(), nn.Linear(c, cfg.n_classes))
         self.geometry = GeometryNet(cfg)
+        self.impl = cfg.impl
 
     def forward(self, src: SourceSet, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
                 far: Tensor) -> dict[str, Tensor]:
@@ -45,6 +47,12 @@ class SRayField(nn.Module):
         points = origins[:, None, :] + z[..., None] * dirs[:, None, :]  # (R, N, 3)
         depth01 = normalised_depth(z, near, far)  # (R, N)
         ctx = self.context(src, points, dirs)
+        if self.impl == "fast":  # the same computation in (R, N, m) order (fast_field)
+            refined = cra_forward(self.attention, ctx["M"], ctx["valid"], depth01)  # (R, N, m, C)
+            w = weights_forward(self.view_weights, refined, ctx["dir"], ctx["valid"])  # (R, N, m)
+            semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=2)  # (R, N, C)
+            sigma, rgb = geometry_forward(self.geometry, ctx["M"], ctx["valid"], ctx["dir"], ctx["rgb"])
+            return {"sigma": sigma, "logits": self.classifier(semantic), "rgb": rgb, "view_weights": w.transpose(1, 2)}
         refined = self.attention(ctx["M"], ctx["valid"], depth01)  # (R, m, N, C)
         w = self.view_weights(refined, ctx["dir"], ctx["valid"])  # (R, m, N)
         semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=1)  # (R, N, C)

@@ -66,11 +66,14 @@ def _render_pass(field: PassField, name: str, origins: Tensor, dirs: Tensor, z: 
 
 def render_rays(field: PassField, origins: Tensor, dirs: Tensor, near: Tensor | float, far: Tensor | float,
                 n_coarse: int, n_fine: int, stratified: bool,
-                generator: torch.Generator | None = None) -> dict[str, dict[str, Tensor]]:
+                generator: torch.Generator | None = None,
+                fine_samples: str = "union") -> dict[str, dict[str, Tensor]]:
     """Render rays o + t d, t in [near, far] (z-depth for ``pixel_rays`` directions), coarse then fine.
 
     origins, dirs: (R, 3), any direction length; near, far: scalars or (R,). ``stratified``
     jitters coarse and fine samples (training); otherwise sampling is deterministic.
+    ``fine_samples``: the fine pass evaluates the sorted union of coarse and resampled depths
+    (``"union"``, n_coarse + n_fine per ray) or the n_fine resampled depths alone (``"new"``).
     Returns ``{"coarse": pass, "fine": pass}``, a pass holding ``logits`` (R, L), ``rgb`` (R, 3),
     ``depth`` (R,) (expected ray parameter), ``opacity`` (R,), ``weights`` (R, N) and ``z`` (R, N).
     """
@@ -86,7 +89,10 @@ def render_rays(field: PassField, origins: Tensor, dirs: Tensor, near: Tensor | 
     coarse = _render_pass(field, "coarse", origins, dirs, z_coarse, near_r, far_r, ray_length)
     z_fine = sample_pdf(z_coarse, coarse["weights"].detach(), near_r, far_r, n_fine,
                         deterministic=not stratified, generator=generator)  # (R, Nf)
-    z_all = merge_samples(z_coarse, z_fine)  # (R, Nc + Nf)
+    if fine_samples not in ("union", "new"):
+        raise ValueError(f"sray.model.hierarchical.render_rays: fine_samples is {fine_samples!r}; "
+                         "use 'union' or 'new'.")
+    z_all = merge_samples(z_coarse, z_fine) if fine_samples == "union" else z_fine  # (R, Nc + Nf) or (R, Nf)
     fine = _render_pass(field, "fine", origins, dirs, z_all, near_r, far_r, ray_length)
     return {"coarse": coarse, "fine": fine}
 

@@ -4,7 +4,9 @@
 
 - ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean cross-entropy over the LABELLED
   rays of the batch (target != ignore id). A batch without a labelled ray gives ``L_sem = 0``
-  with a zero gradient, never NaN.
+  with a zero gradient, never NaN. With per-class weights ``w`` (the config's optional
+  ``class_weights``, class-frequency-aware training) it is the weighted mean
+  ``sum_i w[y_i] CE_i / sum_i w[y_i]`` over the labelled rays (torch's weighted ``mean``).
 - Label ids outside [0, L) are refused by the loader (once per batch, on the host); here only
   with ``SRAY_DEBUG_CHECKS=1`` (the check reads tensor values: a device sync per step).
 - ``L_rgb = MSE(coarse rgb) + MSE(fine rgb)`` over all rays (photometric loss).
@@ -32,6 +34,7 @@ class LossSettings(Protocol):
     lambda_sem: float
     lambda_rgb: float
     ignore_id: int
+    # optional: ``class_weights: tuple[float, ...]`` (per-class CE weights; absent or empty = unweighted)
 
 
 @dataclass
@@ -44,6 +47,8 @@ class LossConfig:
     """Weight of the photometric MSE (paper: 1)."""
     ignore_id: int = 255
     """Label id of unlabelled pixels; such rays are left out of the cross-entropy."""
+    class_weights: tuple[float, ...] = ()
+    """Per-class weights of the cross-entropy (empty = unweighted)."""
 
 
 def psnr_from_mse(mse: Tensor) -> Tensor:
@@ -51,14 +56,20 @@ def psnr_from_mse(mse: Tensor) -> Tensor:
     return -10.0 * torch.log10(mse)
 
 
-def _labelled_cross_entropy(logits: Tensor, target: Tensor, n_labelled: Tensor, ignore_id: int) -> Tensor:
+def _labelled_cross_entropy(logits: Tensor, target: Tensor, n_labelled: Tensor, ignore_id: int,
+                            weight: Tensor | None = None) -> Tensor:
     """Mean CE over the labelled rays: logits (R, L), target (R,) with ``ignore_id`` for unlabelled.
 
     The ignored rays add 0 to the sum, which is divided by max(n_labelled, 1): an all-unlabelled
     batch gives exactly 0 with a zero gradient. No boolean indexing, so no device -> host sync.
+    ``weight`` (L,): class weights; the sum is then divided by the labelled rays' total weight.
     """
-    summed = F.cross_entropy(logits.float(), target, ignore_index=ignore_id, reduction="sum")
-    return summed / n_labelled.clamp_min(1).to(summed.dtype)
+    summed = F.cross_entropy(logits.float(), target, weight=weight, ignore_index=ignore_id, reduction="sum")
+    if weight is None:
+        return summed / n_labelled.clamp_min(1).to(summed.dtype)
+    labelled = target != ignore_id
+    total = torch.where(labelled, weight[torch.where(labelled, target, 0)], 0.0).sum()  # (R,) -> ()
+    return summed / torch.where(total > 0, total, torch.ones_like(total))
 
 
 def render_loss(
@@ -105,8 +116,11 @@ def render_loss(
         rgb_target = target_rgb.float()
         terms: dict[str, Tensor] = {}
         sem_total = rgb_total = rgb_target.new_zeros(())
+        weights = getattr(cfg, "class_weights", ())
+        weight = (torch.tensor(weights, dtype=torch.float32, device=rgb_target.device)
+                  if weights else None)  # (L,)
         for name in passes:
-            sem = _labelled_cross_entropy(out[name]["logits"], target_label, n_labelled, cfg.ignore_id)
+            sem = _labelled_cross_entropy(out[name]["logits"], target_label, n_labelled, cfg.ignore_id, weight)
             rgb = F.mse_loss(out[name]["rgb"].float(), rgb_target)
             sem_total, rgb_total = sem_total + sem, rgb_total + rgb
             terms[f"sem_{name}"], terms[f"rgb_{name}"] = sem.detach(), rgb.detach()

@@ -24,6 +24,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from .encoder import FEATURE_STRIDE
+from .source_gather import bilinear_taps, gather_bilinear, texel_table
 from .source_set import SourceSet
 
 _GRID_LIMIT = 2.0  # normalised grid coordinates are clamped to +-2 (outside +-1 is invalid anyway)
@@ -86,21 +87,39 @@ def view_direction_difference(points: Tensor, query_dirs: Tensor, centres: Tenso
     return torch.cat([unit_diff, dot], dim=-1)  # (m, R, N, 4)
 
 
-class ContextualSpace(nn.Module):
-    """Builds M (appendix L20-L22): reprojected features plus an MLP of the view-direction difference."""
+def view_direction_difference_nm(points: Tensor, query_dirs: Tensor, centres: Tensor) -> Tensor:
+    """``view_direction_difference`` computed in (R, N, m) order: (R, N, 3), (R, 3), (m, 3) -> (R, N, m, 4)."""
+    q = F.normalize(query_dirs, dim=-1)[:, None, None, :]  # (R, 1, 1, 3)
+    s = F.normalize(points[:, :, None] - centres[None, None], dim=-1)  # (R, N, m, 3)
+    diff = q - s
+    unit_diff = diff / diff.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+    dot = (q * s).sum(-1, keepdim=True)
+    return torch.cat([unit_diff, dot], dim=-1)  # (R, N, m, 4)
 
-    def __init__(self, feat_dim: int, dir_hidden: int, min_depth: float) -> None:
+
+class ContextualSpace(nn.Module):
+    """Builds M (appendix L20-L22): reprojected features plus an MLP of the view-direction difference.
+
+    ``impl="reference"`` samples with ``grid_sample`` and returns (R, m, N, ...) tensors;
+    ``impl="fast"`` gathers with ``source_gather`` and returns the same values in (R, N, m, ...)
+    order (``fast_field``'s layout), within float32 rounding.
+    """
+
+    def __init__(self, feat_dim: int, dir_hidden: int, min_depth: float, impl: str = "fast") -> None:
         super().__init__()
         self.min_depth = min_depth
+        self.impl = impl
         self.dir_mlp = nn.Sequential(nn.Linear(4, dir_hidden), nn.ELU(), nn.Linear(dir_hidden, feat_dim))
 
     def forward(self, src: SourceSet, points: Tensor, query_dirs: Tensor) -> dict[str, Tensor]:
         """points: (R, N, 3) samples of the query rays; query_dirs: (R, 3).
 
         Returns ``M`` (R, m, N, C), ``valid`` (R, m, N) bool, ``rgb`` (R, m, N, 3) source colours
-        at the projections and ``dir`` (R, m, N, 4); entries at invalid projections are finite
-        but meaningless (see the module docstring).
+        at the projections and ``dir`` (R, m, N, 4) (axes m and N swapped with ``impl="fast"``);
+        entries at invalid projections are finite but meaningless (see the module docstring).
         """
+        if self.impl == "fast":
+            return self._fast(src, points, query_dirs)
         uv, depth = project(points.float(), src.K.float(), src.w2c.float(), self.min_depth)
         valid = valid_projection(uv, depth, src.image_hw, self.min_depth)  # (m, R, N)
         feats = sample_maps(src.feats, uv, FEATURE_STRIDE)  # (m, C, R, N)
@@ -110,3 +129,15 @@ class ContextualSpace(nn.Module):
         dirs = dirs.permute(1, 0, 2, 3)  # (R, m, N, 4)
         space = feats.permute(2, 0, 3, 1) + self.dir_mlp(dirs)  # (R, m, N, C)
         return {"M": space, "valid": valid, "rgb": rgb.permute(2, 0, 3, 1), "dir": dirs}
+
+    def _fast(self, src: SourceSet, points: Tensor, query_dirs: Tensor) -> dict[str, Tensor]:
+        """``forward`` with gathered taps and every per-view tensor made in (R, N, m) order."""
+        uv, depth = project(points.float(), src.K.float(), src.w2c.float(), self.min_depth)
+        uv = uv.permute(1, 2, 0, 3)  # (R, N, m, 2): 2 channels are cheap to permute
+        valid = valid_projection(uv, depth.permute(1, 2, 0), src.image_hw, self.min_depth)  # (R, N, m)
+        idx, w = bilinear_taps(uv, 2, tuple(src.feats.shape[-2:]), FEATURE_STRIDE)  # (R, N, m, 4) each
+        feats = gather_bilinear(texel_table(src.feats), idx, w)  # (R, N, m, C)
+        idx, w = bilinear_taps(uv, 2, src.image_hw, 1)
+        rgb = gather_bilinear(texel_table(src.rgb), idx, w)  # (R, N, m, 3)
+        dirs = view_direction_difference_nm(points.float(), query_dirs.float(), src.centres.float())
+        return {"M": feats + self.dir_mlp(dirs), "valid": valid, "rgb": rgb, "dir": dirs}

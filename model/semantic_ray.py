@@ -25,6 +25,7 @@ from torch import Tensor, nn
 
 from .config import SRayConfig
 from .encoder import ResUNetEncoder
+from .fast_render import render_rays_fast
 from .field import SRayField
 from .hierarchical import render_image, render_rays
 from .source_set import SourceSet, rigid_inverse
@@ -72,7 +73,19 @@ class SRayModel(nn.Module):
             return fields[name](src, o, d, z, lo, hi)
 
         return render_rays(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, stratified,
-                           generator)
+                           generator, self.cfg.fine_samples)
+
+    @torch.no_grad()
+    def render_rays_fast(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
+                         far: Tensor | float, confidence: float) -> dict[str, dict[str, Tensor]]:
+        """The fast render mode's rays (``fast_render.render_rays_fast``): deterministic, no grad; a
+        fine pass only for rays whose coarse confidence is below ``confidence``."""
+        fields = {"coarse": self.coarse, "fine": self.fine}
+
+        def field(name: str, o: Tensor, d: Tensor, z: Tensor, lo: Tensor, hi: Tensor) -> dict[str, Tensor]:
+            return fields[name](src, o, d, z, lo, hi)
+
+        return render_rays_fast(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, confidence)
 
     @torch.no_grad()
     def render_image(self, src: SourceSet, K: Tensor, c2w: Tensor, hw: tuple[int, int],

@@ -20,9 +20,11 @@ from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.train.state import lr_lambda, training_state
 
 
-def write_tiny_checkpoint(shards: Path, folder: Path, seed: int = 0) -> Path:
-    """A step-0 checkpoint of a seeded tiny ``RayBatchModel`` (the tiny training config's network)."""
+def write_tiny_checkpoint(shards: Path, folder: Path, seed: int = 0, attention: str = "full") -> Path:
+    """A step-0 checkpoint of a seeded tiny ``RayBatchModel`` (the tiny training config's network, with the
+    ``attention`` variant)."""
     cfg = tiny_config(shards, folder)
+    cfg.model.attention = attention
     torch.manual_seed(seed)
     model = RayBatchModel(cfg.model)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)

@@ -48,5 +48,7 @@ def test_quick_benchmark_produces_both_tables() -> None:
         assert all(float(x) >= 0 for x in cells[1:])
     assert "target <= 0.55" in notes1
     assert "tiny" in table2 and "fp32" in table2
-    step_cells = [c.strip() for c in table2.splitlines()[2].split("|")[1:-1]]
-    assert float(step_cells[7]) > 0 and float(step_cells[8]) > 0 and float(step_cells[10]) > 0
+    ref_cells, fast_cells = ([c.strip() for c in line.split("|")[1:-1]] for line in table2.splitlines()[2:4])
+    assert (ref_cells[6], fast_cells[6]) == ("reference", "fast")
+    assert float(fast_cells[8]) > 0 and float(fast_cells[9]) > 0 and float(fast_cells[11]) > 0
+    assert ref_cells[13] == "-" and float(fast_cells[13].rstrip("x")) > 0  # fast vs reference of the same run

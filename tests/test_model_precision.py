@@ -177,14 +177,17 @@ def coordinate_images(m: int, hw: tuple[int, int]) -> torch.Tensor:
     return torch.stack([u, v, torch.zeros_like(u)])[None].expand(m, 3, h, w)
 
 
+@pytest.mark.parametrize("impl", ["fast", "reference"])
 @pytest.mark.parametrize("dtype", AUTOCAST_DTYPES)
 @pytest.mark.parametrize("hw", RESOLUTIONS)
-def test_field_gathers_sources_at_opencv_projections_under_autocast(hw: tuple[int, int], dtype: torch.dtype) -> None:
+def test_field_gathers_sources_at_opencv_projections_under_autocast(hw: tuple[int, int], dtype: torch.dtype,
+                                                                     impl: str) -> None:
     """The whole geometric chain of an ``SRayField`` pass under autocast (rigid inverse, ``pixel_rays``,
     ray points o + z d, projection, bilinear gathering and the view-direction difference) against
-    float64: the source 'colours' its contextual space gathers from coordinate images equal OpenCV's
-    projections of the float64 sample points to 0.01 px, and its view-direction differences equal
-    numpy's to 1e-5."""
+    float64, for both implementations (``fast`` keeps the contextual space in (R, N, m) order,
+    ``reference`` in (R, m, N)): the source 'colours' its contextual space gathers from coordinate
+    images equal OpenCV's projections of the float64 sample points to 0.01 px, and its view-direction
+    differences equal numpy's to 1e-5."""
     rng = np.random.default_rng([hw[1], 4])
     h, w = hw
     n_rays, n_samples, m = 128, 8, 3
@@ -193,7 +196,7 @@ def test_field_gathers_sources_at_opencv_projections_under_autocast(hw: tuple[in
     query, sources = random_camera(rng, target), np.stack([random_camera(rng, target) for _ in range(m)])
     uv_q = np.stack([rng.uniform(-0.5, w - 0.5, n_rays), rng.uniform(-0.5, h - 0.5, n_rays)], axis=1)
     z = np.sort(rng.uniform(MIN_DEPTH, MAX_DEPTH, (n_rays, n_samples)), axis=1)
-    cfg = SRayConfig(n_classes=3, n_coarse=n_samples, n_fine=n_samples, n_source=m)
+    cfg = SRayConfig(n_classes=3, n_coarse=n_samples, n_fine=n_samples, n_source=m, impl=impl)
     field = SRayField(cfg).eval()
     captured: dict[str, dict[str, torch.Tensor]] = {}
     field.context.register_forward_hook(lambda module, args, out: captured.update(ctx=out))
@@ -203,8 +206,9 @@ def test_field_gathers_sources_at_opencv_projections_under_autocast(hw: tuple[in
                         K=f32(K).expand(m, 3, 3), c2w=f32(sources), w2c=rigid_inverse(f32(sources)))
         origins, dirs = pixel_rays(f32(K), f32(query), f32(uv_q))
         field(src, origins, dirs, f32(z), torch.full((n_rays,), MIN_DEPTH), torch.full((n_rays,), MAX_DEPTH))
-    gathered = captured["ctx"]["rgb"][..., :2]  # (R, m, N, 2) read-back pixel coordinates
-    view_dirs = captured["ctx"]["dir"]  # (R, m, N, 4)
+    in_rmn = (lambda t: t.transpose(1, 2)) if impl == "fast" else (lambda t: t)  # fast: (R, N, m, D)
+    gathered = in_rmn(captured["ctx"]["rgb"])[..., :2]  # (R, m, N, 2) read-back pixel coordinates
+    view_dirs = in_rmn(captured["ctx"]["dir"])  # (R, m, N, 4)
 
     hom = np.concatenate([f32(uv_q).double().numpy(), np.ones((n_rays, 1))], axis=1)
     ray_dirs = (query[:3, :3] @ np.linalg.inv(K) @ hom.T).T  # (R, 3) float64

@@ -13,6 +13,7 @@ from sray.data_tools.scene import IGNORE_ID, Scene, View
 from sray.data_tools.splits import PROTOCOL_WINDOW as WINDOW
 from sray.data_tools.synth.dataset import generate_scene, plan_scene
 from sray.data_tools.synth.rooms import ROOM_TYPES
+from sray.data_tools.synth.trajectory import HEIGHT_RANGE
 
 H, W, N_VIEWS = 60, 80, 30
 
@@ -127,7 +128,8 @@ def test_cameras_stay_inside_the_room_and_outside_furniture(room_type: str) -> N
     lx, ly, _ = plan.room.size
     centres = plan.poses[:, :3, 3]
     assert np.all((centres[:, :2] > 0.3) & (centres[:, :2] < np.array([lx, ly]) - 0.3))
-    assert np.all((centres[:, 2] >= 1.2 - 1e-9) & (centres[:, 2] <= 1.7 + 1e-9))
+    lo, hi = HEIGHT_RANGE
+    assert np.all((centres[:, 2] >= lo - 1e-9) & (centres[:, 2] <= hi + 1e-9))
     for box in plan.room.boxes:
         c, s = math.cos(box.yaw), math.sin(box.yaw)
         rel = centres - np.asarray(box.center)

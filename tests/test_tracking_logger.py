@@ -121,7 +121,7 @@ def test_unreachable_server_warns_once_and_never_raises(tmp_path, caplog):
     png.write_bytes(b"png")
     start = time.perf_counter()
     with caplog.at_level(logging.WARNING, logger="sray.platform.tracking.logger"):
-        logger = MlflowRunLogger(handle, flush_every_steps=1, retry_initial_s=0.0)
+        logger = MlflowRunLogger(handle, flush_every_steps=1, retry_initial_s=0.0, close_timeout_s=0.0)
         logger.log_params({"a": 1})
         for step in range(20):
             logger.log_metrics({"loss": 0.5}, step=step)
@@ -132,6 +132,19 @@ def test_unreachable_server_warns_once_and_never_raises(tmp_path, caplog):
     unreachable = [r for r in caplog.records if "unreachable while sending" in r.getMessage()]
     assert len(unreachable) == 1 and uri in unreachable[0].getMessage()
     assert logger.pending()["metrics"] == 20 and logger.pending()["params"] == 1
+
+
+def test_close_keeps_retrying_until_a_restarted_server_answers(mlflow_uri):
+    handle = prepare_run(mlflow_uri, "sray train", "job-r")
+    client = CountingClient(mlflow_uri, fail_first=8)  # down for the whole run and 3 close attempts
+    logger = MlflowRunLogger(handle, flush_every_steps=1, retry_initial_s=0.0, close_timeout_s=30.0,
+                             close_poll_s=0.1, client=client)
+    for step in range(5):
+        logger.log_metrics({"loss": float(step)}, step=step)
+    assert logger.pending()["metrics"] == 5
+    logger.close()
+    assert _history(mlflow_uri, handle.run_id, "loss") == [(s, float(s)) for s in range(5)]
+    assert MlflowClient(mlflow_uri).get_run(handle.run_id).info.status == "FINISHED"
 
 
 def test_buffered_items_are_delivered_after_an_outage(mlflow_uri, caplog):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from sray.data_tools.loader.augment import Augmentation, rescale_view
 from sray.data_tools.loader.sample_types import EvalSample, QueryCamera, SourceViews, TrainSample
 from sray.data_tools.loader.views import StoredView
 from sray.data_tools.scene import IGNORE_ID
@@ -31,6 +32,20 @@ def _sources(views: dict[str, StoredView], source_ids: list[str]) -> SourceViews
     return SourceViews(rgb=src_rgb, K=K, c2w=c2w)
 
 
+def _augmented_sources(views: dict[str, StoredView], source_ids: list[str], augment: Augmentation,
+                       rng: np.random.Generator) -> SourceViews:
+    """Like :func:`_sources`, each image jittered on its own and all resized by one drawn factor."""
+    scale = augment.scale(rng)
+    images, Ks = [], []
+    for s in source_ids:
+        rgb, K = rescale_view(augment.jitter(views[s].rgb(), rng), views[s].K, scale)
+        images.append(rgb)
+        Ks.append(K)
+    rgb = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2)                      # (m, 3, H', W') uint8
+    c2w = torch.from_numpy(np.stack([views[s].c2w for s in source_ids])).float()
+    return SourceViews(rgb=rgb.float().div_(255.0), K=torch.from_numpy(np.stack(Ks)).float(), c2w=c2w)
+
+
 def _query(view: StoredView) -> QueryCamera:
     """The query view's camera: K (3, 3), c2w (4, 4)."""
     K, c2w = _cameras([view])
@@ -48,22 +63,29 @@ def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str
 
 
 def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
-                 rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int) -> TrainSample:
+                 rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int,
+                 augment: Augmentation | None = None) -> TrainSample:
     """A training sample: sources, query camera and ``n_rays`` random pixels of the query with targets.
 
     Pixels are drawn uniformly without replacement (with replacement only when ``n_rays`` exceeds
-    the pixel count); ``pixels`` (R, 2) holds integer (u, v) pixel centres as float32. Target label
-    ids are checked against the scene's ``n_classes`` (:func:`check_label_ids`).
+    the pixel count) inside the augmentation's crop window (the whole image by default); ``pixels``
+    (R, 2) holds integer (u, v) pixel centres as float32. Target label ids are checked against the
+    scene's ``n_classes`` (:func:`check_label_ids`). ``augment`` (:mod:`.augment`) jitters and
+    resizes the sources; None, or every option off, gives the plain sample.
     """
     query = views[query_id]
     rgb, label = query.rgb(), query.label()                                           # (H, W, 3), (H, W)
     h, w = label.shape
-    flat = rng.choice(h * w, size=n_rays, replace=n_rays > h * w)                     # (R,)
-    v, u = np.divmod(flat, w)
+    v0, u0, ch, cw = augment.crop_window(rng, h, w) if augment is not None else (0, 0, h, w)
+    flat = rng.choice(ch * cw, size=n_rays, replace=n_rays > ch * cw)                 # (R,)
+    v, u = np.divmod(flat, cw)
+    v, u = v + v0, u + u0
     targets = label[v, u].astype(np.int64)                                            # (R,)
     check_label_ids(targets, n_classes, scene, query_id)
+    plain = augment is None or (not augment.jitters_colour and augment.source_scale <= 0)
+    sources = _sources(views, source_ids) if plain else _augmented_sources(views, source_ids, augment, rng)
     return TrainSample(
-        scene=scene, query_id=query_id, sources=_sources(views, source_ids), query=_query(query),
+        scene=scene, query_id=query_id, sources=sources, query=_query(query),
         near=float(near), far=float(far),
         pixels=torch.from_numpy(np.stack([u, v], axis=1).astype(np.float32)),          # (R, 2)
         target_label=torch.from_numpy(targets),

@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
+from sray.data_tools.loader.augment import Augmentation
 from sray.data_tools.loader.sample_types import EvalSample, TrainSample
 from sray.data_tools.loader.samples import eval_sample, ranked_candidates, train_sample
 from sray.data_tools.loader.views import SceneCache, read_scene_views
@@ -71,13 +72,14 @@ class TrainTuples(IterableDataset):
 
     def __init__(self, shards_dir: Path, manifest: Manifest, scenes: list[str], *, n_source: int, top_k: int,
                  rays_per_batch: int, batches_per_epoch: int, rank: int, world_size: int, seed: int,
-                 cache_scenes: int, visit_samples: int) -> None:
+                 cache_scenes: int, visit_samples: int, augment: Augmentation | None = None) -> None:
         self.shards_dir, self.manifest, self.scenes = Path(shards_dir), manifest, scenes
         self.metas = {s: SceneMeta.from_json(manifest.scenes[s].meta) for s in scenes}
         self.pools = {s: source_pool(m) for s, m in self.metas.items()}
         self.n_source, self.top_k, self.rays = n_source, top_k, rays_per_batch
         self.batches, self.rank, self.world_size, self.seed = batches_per_epoch, rank, world_size, seed
         self.cache_scenes, self.visit_samples = cache_scenes, visit_samples
+        self.augment = augment or Augmentation()
         self.epoch = 0
         """Epoch whose random stream the next ``iter()`` produces."""
 
@@ -107,9 +109,9 @@ class TrainTuples(IterableDataset):
                 if len(candidates) < self.n_source:
                     raise ValueError(f"scene {scene!r}, view {query_id!r}: {len(candidates)} ranked neighbours, "
                                      f"n_source={self.n_source} needed; re-shard with a larger --neighbours")
-                sources = [candidates[i] for i in rng.choice(len(candidates), self.n_source, replace=False)]
+                sources = [candidates[i] for i in self.augment.source_choice(rng, len(candidates), self.n_source)]
                 yield train_sample(views, query_id, sources, self.rays, rng, scene, meta.near, meta.far,
-                                   len(meta.class_names))
+                                   len(meta.class_names), self.augment)
                 remaining -= 1
 
 
@@ -152,14 +154,16 @@ def _open(shards_dir: Path, scenes: list[str] | None,
 
 def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_batch: int, batches_per_epoch: int,
                       rank: int, world_size: int, num_workers: int, seed: int, scenes: list[str] | None = None,
-                      cache_scenes: int = 2, visit_samples: int = 16, pin_memory: bool = False) -> EpochLoader:
+                      cache_scenes: int = 2, visit_samples: int = 16, pin_memory: bool = False,
+                      augment: Augmentation | None = None) -> EpochLoader:
     """The training DataLoader of one rank: one :class:`TrainSample` per step (``batch_size=None``).
 
     ``scenes``: scene names to train on; None = every scene whose role is ``train`` (unseen test
     scenes never leak into pretraining; name a test scene explicitly to finetune on it).
 
     Every rank gets exactly ``batches_per_epoch`` samples per epoch. Do NOT pass it to
-    ``accelerator.prepare`` (it drops samples); move tensors to the device yourself.
+    ``accelerator.prepare`` (it drops samples); move tensors to the device yourself. ``augment``:
+    training augmentation (:mod:`sray.data_tools.loader.augment`; None = none).
     """
     manifest, names = _open(shards_dir, scenes)
     if not 0 <= rank < world_size:
@@ -172,7 +176,8 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
                          f">= 1, num_workers ({num_workers}) >= 0")
     dataset = TrainTuples(Path(shards_dir), manifest, names, n_source=n_source, top_k=top_k,
                           rays_per_batch=rays_per_batch, batches_per_epoch=batches_per_epoch, rank=rank,
-                          world_size=world_size, seed=seed, cache_scenes=cache_scenes, visit_samples=visit_samples)
+                          world_size=world_size, seed=seed, cache_scenes=cache_scenes, visit_samples=visit_samples,
+                          augment=augment)
     for scene, pool in dataset.pools.items():
         if len(pool) < n_source + 1:
             raise ValueError(f"scene {scene!r}: {len(pool)} query/source views, n_source + 1 = {n_source + 1} "

@@ -30,8 +30,9 @@ class ReaderOption:
     """A side input only one reader takes (a file path), offered as ``--<name>`` by ``sray data convert``."""
 
     name: str
-    """Keyword of the reader function and key of ``ConvertConfig.options`` (``tsv``, ``classes``); unique
-    across readers, since every option is a flag of the one ``sray data convert`` command."""
+    """Keyword of the reader function and key of ``ConvertConfig.options`` (``tsv``, ``classes``). Every
+    option is a flag of the one ``sray data convert`` command, so readers share a name only when they take
+    the same file (both ScanNet readers take ``tsv``)."""
     help: str
     """What the file is and where the reader looks when it is not given (CLI help)."""
 
@@ -61,6 +62,13 @@ def _load_scannet() -> ReadFunction:
     return read_scannet
 
 
+def _load_scannet_sens() -> ReadFunction:
+    """The raw ScanNet (.sens + label zip) reader, imported on use."""
+    from sray.data_tools.readers.scannet_sens import read_scannet_sens
+
+    return read_scannet_sens
+
+
 def _load_replica() -> ReadFunction:
     """The Replica reader, imported on use."""
     from sray.data_tools.readers.replica import read_replica
@@ -73,6 +81,11 @@ READERS: dict[str, Reader] = {r.name: r for r in (
     Reader(name="scannet", summary="ScanNet SensReader export + label-filt", load=_load_scannet,
            size_hw=(240, 320), frame_skip=10,
            options=(ReaderOption("tsv", "scannetv2-labels.combined.tsv (default: searched next to and above SRC)"),)),
+    # The same scan read raw: <scan>.sens and <scan>_2d-label-filt.zip, no export or unzip step.
+    Reader(name="scannet-sens", summary="raw ScanNet scan: <scan>.sens + <scan>_2d-label-filt.zip",
+           load=_load_scannet_sens, size_hw=(240, 320), frame_skip=10,
+           options=(ReaderOption("tsv", "scannetv2-labels.combined.tsv (default: searched next to and above SRC)"),
+                    ReaderOption("labels", "<scan>_2d-label-filt.zip (default: the one such zip in SRC)"))),
     # The rendered size (640x480 in Semantic-NeRF's release, the paper's size); every 5th frame.
     Reader(name="replica", summary="Replica as rendered for Semantic-NeRF", load=_load_replica,
            size_hw=None, frame_skip=5,

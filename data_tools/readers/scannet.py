@@ -19,6 +19,7 @@ two intrinsics).
 from __future__ import annotations
 
 import csv
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -119,6 +120,34 @@ def read_matrix4(path: Path) -> np.ndarray:
     return m
 
 
+@dataclass(frozen=True)
+class FrameCameras:
+    """The colour and depth intrinsics of a scan, with where they were read (for errors)."""
+
+    K_color: np.ndarray
+    """(3, 3) colour camera intrinsics at the colour images' resolution."""
+    K_depth: np.ndarray
+    """(3, 3) depth camera intrinsics at the depth images' resolution."""
+    color_where: str
+    depth_where: str
+
+
+def frame_view(view_id: str, rgb: np.ndarray, depth_m: np.ndarray, raw_label: np.ndarray, c2w: np.ndarray,
+               cameras: FrameCameras, size_hw: tuple[int, int] | None, lut: np.ndarray, label_where: str) -> View:
+    """One ScanNet frame (colour uint8 (Hc, Wc, 3), depth float32 metres (Hd, Wd), raw label ids (Hl, Wl)) in
+    the target colour camera of size ``size_hw`` (None: the colour size); labels mapped through ``lut``."""
+    color_hw = rgb.shape[:2]
+    check_principal_point(cameras.K_color, color_hw, cameras.color_where)
+    hw = tuple(size_hw) if size_hw is not None else color_hw
+    K = scale_intrinsics(cameras.K_color, color_hw, hw)
+    check_principal_point(cameras.K_depth, depth_m.shape, cameras.depth_where)
+    if raw_label.ndim != 2 or raw_label.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"{label_where}: labels must be a single-channel 8/16-bit PNG")
+    K_label = scale_intrinsics(cameras.K_color, color_hw, raw_label.shape)
+    return View(view_id=view_id, rgb=resize_rgb(rgb, hw), depth=resample_nearest(depth_m, cameras.K_depth, K, hw, 0.0),
+                label=lut[resample_nearest(raw_label, K_label, K, hw, 0)], K=K, c2w=c2w)
+
+
 def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str = "scannet20",
                  size_hw: tuple[int, int] | None = (240, 320), frame_skip: int = 10,
                  depth_scale: float = 1000.0) -> Scene:
@@ -161,23 +190,12 @@ def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str
     ids = kept_view_ids(poses, frame_skip, src, dropped)
 
     def read_view(view_id: str) -> View:
-        """Load, map and resample one frame into the target colour camera."""
+        """Load one exported frame and bring it into the target colour camera."""
         frame = ids[view_id]
-        rgb = read_rgb8(colors[frame])
-        color_hw = rgb.shape[:2]
-        check_principal_point(K_color, color_hw, str(k_color_path))
-        hw = tuple(size_hw) if size_hw is not None else color_hw
-        K = scale_intrinsics(K_color, color_hw, hw)
-        depth = read_depth_m(others["depth"][frame], depth_scale)
-        check_principal_point(K_depth, depth.shape, str(k_depth_path))
         raw = read_image(others["label"][frame])
-        if raw.ndim != 2 or raw.dtype not in (np.uint8, np.uint16):
-            raise ValueError(f"{others['label'][frame]}: labels must be a single-channel 8/16-bit PNG")
-        K_label = scale_intrinsics(K_color, color_hw, raw.shape)
-        return View(view_id=view_id, rgb=resize_rgb(rgb, hw),
-                    depth=resample_nearest(depth, K_depth, K, hw, 0.0),
-                    label=lut[resample_nearest(raw, K_label, K, hw, 0)],
-                    K=K, c2w=poses[frame])
+        return frame_view(view_id, read_rgb8(colors[frame]), read_depth_m(others["depth"][frame], depth_scale), raw,
+                          poses[frame], FrameCameras(K_color, K_depth, str(k_color_path), str(k_depth_path)),
+                          size_hw, lut, str(others["label"][frame]))
 
     meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space),
                      view_ids=list(ids), splits={}, role="train",

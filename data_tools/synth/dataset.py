@@ -33,9 +33,10 @@ from sray.data_tools.synth.trajectory import scan_path
 
 GENERATOR = "sray-synth"
 """Value of ``extra["generator"]`` in every procedural scene."""
-GENERATOR_VERSION = 2
+GENERATOR_VERSION = 3
 """Bumped whenever the same parameters would write different files (pixels, or metadata such as near/far:
-version 2 measures a test scene's bounds from its source and finetune views only)."""
+version 2 measures a test scene's bounds from its source and finetune views only; version 3 is the
+richer world: shape templates, clutter, L-shaped rooms, lighting and camera variety)."""
 HFOV_DEG = 62.0
 """Horizontal field of view (ScanNet's colour camera is about 58 degrees, its depth camera 58-60)."""
 
@@ -64,7 +65,7 @@ def plan_scene(seed: int, n_views: int, room_type: str | None = None) -> ScenePl
     kind = room_type if room_type is not None else ROOM_TYPES[int(rng.integers(len(ROOM_TYPES)))]
     for _ in range(10):
         room = build_room(rng, kind)
-        prepared = RenderScene.prepare(room, exposure=float(rng.uniform(0.9, 1.15)))
+        prepared = RenderScene.prepare(room, exposure=float(2.0 ** rng.uniform(-0.6, 0.6)))
         try:
             return ScenePlan(room, prepared, scan_path(rng, room.size, prepared.boxes, n_views))
         except RuntimeError:
@@ -148,40 +149,59 @@ def _prune_stale_views(scene_dir: Path, view_ids: list[str]) -> None:
                 path.unlink()
 
 
+def _write_scene(out: Path, name: str, scene_seed: int, n_views: int, height: int, width: int, role: str,
+                 room_type: str, on_view: Callable[[], None] | None = None) -> Path:
+    """Generate one scene and write it under ``out`` (scene.json last); returns its folder."""
+    scene_dir = out / name
+    scene = generate_scene(name, scene_seed, n_views, height, width, role, room_type, on_view=on_view)
+    if (scene_dir / "scene.json").exists():
+        (scene_dir / "scene.json").unlink()
+    write_scene(scene, out)
+    _prune_stale_views(scene_dir, scene.meta.view_ids)
+    return scene_dir
+
+
 def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height: int, width: int, seed: int,
-                     progress: bool = True) -> list[Path]:
+                     progress: bool = True, workers: int = 1) -> list[Path]:
     """Write ``n_train`` train and ``n_test`` test scenes under ``out`` (sray layout); returns scene dirs.
 
     Scene names are ``synth_train_000``, ``synth_test_000``, ...; room types cycle through
     ``ROOM_TYPES`` from a seed-dependent offset so a small dataset covers every type. A scene whose
     scene.json already records the same parameters is skipped (scene.json is written last, so its
-    presence means the scene is complete).
+    presence means the scene is complete). ``workers`` > 1 renders that many scenes at once in
+    separate processes; every scene depends only on its own seed, so the files are the same.
     """
+    from concurrent.futures import ProcessPoolExecutor
+
     from tqdm import tqdm
 
     if n_train < 0 or n_test < 0 or n_train + n_test == 0:
         raise ValueError(f"need at least one scene, got n_train={n_train}, n_test={n_test}")
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
     out = Path(out)
     jobs = [("train", i) for i in range(n_train)] + [("test", i) for i in range(n_test)]
     offset = seed % len(ROOM_TYPES)
     bar = tqdm(total=len(jobs) * n_views, unit="view", desc="sray data synth", disable=not progress)
     written: list[Path] = []
+    todo: list[tuple] = []
     for k, (role, i) in enumerate(jobs):
         name = f"synth_{role}_{i:03d}"
         scene_seed, room_type = _scene_seed(seed, role, i), ROOM_TYPES[(offset + k) % len(ROOM_TYPES)]
-        params = scene_params(scene_seed, n_views, height, width, role, room_type)
-        scene_dir = out / name
-        if _is_current(scene_dir, params):
+        written.append(out / name)
+        if _is_current(out / name, scene_params(scene_seed, n_views, height, width, role, room_type)):
             bar.update(n_views)
         else:
-            bar.set_postfix_str(f"{name} ({room_type})")
-            scene = generate_scene(name, scene_seed, n_views, height, width, role, room_type,
-                                   on_view=lambda: bar.update(1))
-            if (scene_dir / "scene.json").exists():
-                (scene_dir / "scene.json").unlink()
-            write_scene(scene, out)
-            _prune_stale_views(scene_dir, scene.meta.view_ids)
-        written.append(scene_dir)
+            todo.append((out, name, scene_seed, n_views, height, width, role, room_type))
+    if workers == 1:
+        for args in todo:
+            bar.set_postfix_str(f"{args[1]} ({args[7]})")
+            _write_scene(*args, on_view=lambda: bar.update(1))
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            for future in [pool.submit(_write_scene, *args) for args in todo]:
+                future.result()
+                bar.update(n_views)
     bar.close()
     write_dataset_index(out, [p.name for p in written])
     return written

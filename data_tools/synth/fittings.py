@@ -15,7 +15,7 @@ from sray.data_tools.synth.furniture import CLS, Piece, span
 from sray.data_tools.synth.geometry import Box
 
 
-def _against_wall(boxes: list[Box], width: float, depth: float, height: float) -> Piece:
+def against_wall(boxes: list[Box], width: float, depth: float, height: float) -> Piece:
     """A piece built with its back at y = 0 and its front at y = depth, recentred on its footprint."""
     moved = [Box(center=(b.center[0], b.center[1] - depth / 2, b.center[2]), size=b.size, label=b.label,
                  material=b.material, yaw=b.yaw, casts_shadow=b.casts_shadow) for b in boxes]
@@ -34,7 +34,7 @@ def door(rng: np.random.Generator, w: float, h: float) -> Piece:
              span(label, casing, w / 2, w / 2 + c, 0.0, 0.045, 0.0, h + c),
              span(label, casing, -w / 2, w / 2, 0.0, 0.045, h, h + c),
              span(label, handle, w / 2 - 0.12, w / 2 - 0.06, 0.03, 0.09, 0.98, 1.02)]
-    return _against_wall(boxes, w + 2 * c, 0.09, h + c)
+    return against_wall(boxes, w + 2 * c, 0.09, h + c)
 
 
 def window(rng: np.random.Generator, w: float, sill: float, h: float) -> Piece:
@@ -53,14 +53,14 @@ def window(rng: np.random.Generator, w: float, sill: float, h: float) -> Piece:
     if rng.random() < 0.5:
         zm = sill + h * float(rng.uniform(0.55, 0.7))
         boxes.append(span(label, frame, -w / 2, w / 2, 0.0, 0.035, zm - 0.02, zm + 0.02))
-    return _against_wall(boxes, w + 2 * f + 0.08, 0.1, top + f)
+    return against_wall(boxes, w + 2 * f + 0.08, 0.1, top + f)
 
 
 def curtain(rng: np.random.Generator, w: float, z0: float, z1: float, material: mat.Material) -> Piece:
     """One curtain panel hanging in front of a wall, from z0 up to its rod at z1."""
     t = float(rng.uniform(0.04, 0.07))
     boxes = [span(CLS["curtain"], material, -w / 2, w / 2, 0.1, 0.1 + t, z0, z1)]
-    return _against_wall(boxes, w, 0.1 + t, z1)
+    return against_wall(boxes, w, 0.1 + t, z1)
 
 
 def picture(rng: np.random.Generator, w: float, h: float, z_centre: float) -> Piece:
@@ -71,7 +71,7 @@ def picture(rng: np.random.Generator, w: float, h: float, z_centre: float) -> Pi
     z0, z1 = z_centre - h / 2, z_centre + h / 2
     boxes = [span(label, frame, -w / 2, w / 2, 0.0, 0.025, z0, z1),
              span(label, mat.canvas(rng), -w / 2 + border, w / 2 - border, 0.0, 0.03, z0 + border, z1 - border)]
-    return _against_wall(boxes, w, 0.03, z1)
+    return against_wall(boxes, w, 0.03, z1)
 
 
 def mirror(rng: np.random.Generator, w: float, h: float, z_centre: float) -> Piece:
@@ -79,7 +79,7 @@ def mirror(rng: np.random.Generator, w: float, h: float, z_centre: float) -> Pie
     glass = mat.Material(mat.PAINT, mat.hsv(rng, (0.5, 0.6), (0.0, 0.1), (0.6, 0.85)), (0, 0, 0),
                          scale=3.0, contrast=0.08, seed=int(rng.integers(0, 2**31 - 1)))
     boxes = [span(IGNORE_ID, glass, -w / 2, w / 2, 0.0, 0.02, z_centre - h / 2, z_centre + h / 2)]
-    return _against_wall(boxes, w, 0.02, z_centre + h / 2)
+    return against_wall(boxes, w, 0.02, z_centre + h / 2)
 
 
 def counter_run(rng: np.random.Generator, length: float, sink_at: float | None) -> Piece:
@@ -105,14 +105,14 @@ def counter_run(rng: np.random.Generator, length: float, sink_at: float | None) 
                   span(CLS["sink"], basin, sx + bw - 0.02, sx + bw, by0, by1, top, rim),
                   span(CLS["sink"], basin, sx - 0.02, sx + 0.02, 0.04, 0.08, top, top + 0.3),
                   span(CLS["sink"], basin, sx - 0.02, sx + 0.02, 0.04, 0.24, top + 0.27, top + 0.3)]
-    return _against_wall(boxes, length, depth, top + 0.3)
+    return against_wall(boxes, length, depth, top + 0.3)
 
 
 def wall_cabinets(rng: np.random.Generator, length: float, z0: float, z1: float) -> Piece:
     """Upper kitchen cabinets hung on a wall between heights z0 and z1."""
     body = mat.furniture_surface(rng, panels=True, panel_width=float(rng.uniform(0.35, 0.6)))
     boxes = [span(CLS["cabinet"], body, -length / 2, length / 2, 0.0, 0.35, z0, z1)]
-    return _against_wall(boxes, length, 0.35, z1)
+    return against_wall(boxes, length, 0.35, z1)
 
 
 def refrigerator(rng: np.random.Generator) -> Piece:
@@ -124,7 +124,7 @@ def refrigerator(rng: np.random.Generator) -> Piece:
     boxes = [span(label, shell, -w / 2, w / 2, 0.0, d, 0.0, h),
              span(label, handle, hx - 0.02, hx + 0.02, d, d + 0.04, h * 0.45, h * 0.62),
              span(label, handle, hx - 0.02, hx + 0.02, d, d + 0.04, h * 0.7, h * 0.85)]
-    return _against_wall(boxes, w, d + 0.04, h)
+    return against_wall(boxes, w, d + 0.04, h)
 
 
 def toilet(rng: np.random.Generator) -> Piece:
@@ -136,7 +136,7 @@ def toilet(rng: np.random.Generator) -> Piece:
              span(label, china, -0.12, 0.12, 0.15, 0.5, 0.0, 0.3),
              span(label, china, -0.18, 0.18, 0.15, 0.68, 0.3, 0.4),
              span(label, seat, -0.19, 0.19, 0.17, 0.7, 0.4, 0.425)]
-    return _against_wall(boxes, 0.44, 0.7, 0.8)
+    return against_wall(boxes, 0.44, 0.7, 0.8)
 
 
 def washbasin(rng: np.random.Generator, vanity: bool) -> Piece:
@@ -157,7 +157,7 @@ def washbasin(rng: np.random.Generator, vanity: bool) -> Piece:
               span(rim, china, w / 2 - 0.04, w / 2, 0.0, d, top - 0.05, top),
               span(rim, tap, -0.02, 0.02, 0.03, 0.07, top, top + 0.18),
               span(rim, tap, -0.02, 0.02, 0.03, 0.2, top + 0.15, top + 0.18)]
-    return _against_wall(boxes, w + 0.1, d, top + 0.18)
+    return against_wall(boxes, w + 0.1, d, top + 0.18)
 
 
 def bathtub(rng: np.random.Generator, length: float, curtain_side: float | None) -> Piece:
@@ -182,7 +182,7 @@ def bathtub(rng: np.random.Generator, length: float, curtain_side: float | None)
         boxes.append(span(IGNORE_ID, mat.metal(rng), -length / 2, length / 2, w - t - 0.055, w - t - 0.025,
                           rod - 0.03, rod))
         top = rod
-    return _against_wall(boxes, length, w, top)
+    return against_wall(boxes, length, w, top)
 
 
 def ceiling_lamp(rng: np.random.Generator, ceiling: float) -> Piece:

@@ -49,6 +49,8 @@ class FloorPlan:
     """Point lights."""
     doors: list[tuple[int, float, float]] = field(default_factory=list)
     """(wall, s0, s1) of each door opening (baseboards stop there)."""
+    windows: list[tuple[float, float, float]] = field(default_factory=list)
+    """A point 0.6 m in front of each window's centre, in the room (where its daylight fill light goes)."""
 
     def wall_length(self, wall: int) -> float:
         """Length of a wall in metres."""

@@ -13,8 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-PAINT, WOOD, PLANKS, TILES, FABRIC, STRIPES, PANELS, SKY, PAINTING, BOOKS, LAMP = range(11)
+PAINT, WOOD, PLANKS, TILES, FABRIC, STRIPES, PANELS, SKY, PAINTING, BOOKS, LAMP, MARBLE = range(12)
 """Pattern kinds; SKY and LAMP are emissive (not shaded)."""
+
+RUNNING_BOND = 2
+"""``TILES`` variant whose every other row is shifted by half a tile (bricks, subway tiles)."""
 
 UNLIT_KINDS = (SKY, LAMP)
 """Kinds whose colour is emitted as is."""
@@ -115,10 +118,33 @@ def metal(rng: np.random.Generator) -> Material:
     return Material(PANELS, a, _shade(a, 0.5), scale=1.0 / 0.7, contrast=0.05, axis=2, seed=_seed(rng))
 
 
+def stone(rng: np.random.Generator) -> Material:
+    """Marble or granite worktops and vanity tops: light to dark stone with veins."""
+    a = hsv(rng, (0, 1), (0.0, 0.2), (0.15, 0.95))
+    b = _shade(a, float(rng.uniform(0.3, 0.7))) if rng.random() < 0.6 else hsv(rng, (0, 1), (0.0, 0.2), (0.1, 0.9))
+    return Material(MARBLE, a, b, scale=float(rng.uniform(1.5, 6.0)), contrast=float(rng.uniform(0.3, 0.9)),
+                    seed=_seed(rng))
+
+
+def brick(rng: np.random.Generator) -> Material:
+    """Brick, painted brick or subway tiles in running bond (walls)."""
+    a = hsv(rng, (0.0, 0.08), (0.35, 0.75), (0.3, 0.7)) if rng.random() < 0.5 else hsv(rng, (0, 1), (0.0, 0.3),
+                                                                                         (0.5, 0.95))
+    return Material(TILES, a, hsv(rng, (0, 1), (0.0, 0.15), (0.5, 0.9)), scale=float(rng.uniform(3.5, 8.0)),
+                    contrast=float(rng.uniform(0.1, 0.3)), variant=RUNNING_BOND, seed=_seed(rng))
+
+
 def wall_paint(rng: np.random.Generator) -> Material:
-    """Walls: pale paint (any hue) with a soft mottle, or striped wallpaper."""
+    """Walls: pale paint (any hue) with a soft mottle, striped wallpaper, brick, or wood panelling."""
     a = hsv(rng, (0, 1), (0.0, 0.3), (0.55, 0.95))
-    if rng.random() < 0.25:
+    pick = rng.random()
+    if pick < 0.1:
+        return brick(rng)
+    if pick < 0.17:
+        b = hsv(rng, (0.03, 0.12), (0.2, 0.7), (0.3, 0.85))
+        return Material(PLANKS, b, _shade(b, rng.uniform(0.6, 0.85)), scale=float(rng.uniform(5, 10)),
+                        contrast=float(rng.uniform(0.2, 0.5)), seed=_seed(rng))
+    if pick < 0.37:
         b = hsv(rng, (0, 1), (0.0, 0.35), (0.45, 0.95))
         return Material(STRIPES, a, b, scale=float(rng.uniform(2, 8)), contrast=float(rng.uniform(0.3, 1.0)),
                         axis=0, seed=_seed(rng))
@@ -133,7 +159,11 @@ def floor_surface(rng: np.random.Generator, wet_room: bool = False) -> Material:
         a = hsv(rng, (0.03, 0.12), (0.25, 0.75), (0.25, 0.85))
         return Material(PLANKS, a, _shade(a, rng.uniform(0.6, 0.85)), scale=float(rng.uniform(4, 9)),
                         contrast=float(rng.uniform(0.2, 0.6)), seed=_seed(rng))
-    if pick < 0.7:
+    if pick < 0.55:
+        a = hsv(rng, (0, 1), (0.0, 0.12), (0.3, 0.8))
+        return Material(PAINT, a, a, scale=float(rng.uniform(2, 6)), contrast=float(rng.uniform(0.15, 0.35)),
+                        seed=_seed(rng))
+    if pick < 0.75:
         return Material(FABRIC, hsv(rng, (0, 1), (0.0, 0.5), (0.2, 0.8)), hsv(rng, (0, 1), (0.0, 0.5), (0.2, 0.8)),
                         scale=float(rng.uniform(30, 60)), contrast=float(rng.uniform(0.1, 0.3)), seed=_seed(rng))
     a = hsv(rng, (0, 1), (0.0, 0.35), (0.35, 0.95))
@@ -185,3 +215,9 @@ def dark_plastic(rng: np.random.Generator) -> Material:
     """Screens, handles and small fittings."""
     a = hsv(rng, (0, 1), (0.0, 0.1), (0.04, 0.3))
     return Material(PAINT, a, a, scale=5.0, contrast=0.05, seed=_seed(rng))
+
+
+def foliage(rng: np.random.Generator) -> Material:
+    """Leaves of a potted plant: green to olive, mottled."""
+    a = hsv(rng, (0.2, 0.42), (0.35, 0.85), (0.2, 0.65))
+    return Material(FABRIC, a, _shade(a, 0.5), scale=float(rng.uniform(20, 40)), contrast=0.6, seed=_seed(rng))

@@ -1,4 +1,4 @@
-"""Parts every room gets: a door, windows with curtains, pictures on the walls and ceiling lights."""
+"""Parts every room gets: a door, windows with curtains, pictures on the walls, small things on the floor."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import numpy as np
 
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import materials as mat
-from sray.data_tools.synth.floor_plan import FloorPlan, Light
-from sray.data_tools.synth.furniture import Piece
+from sray.data_tools.scene import IGNORE_ID
+from sray.data_tools.synth.floor_plan import FloorPlan
+from sray.data_tools.synth.furniture import Piece, span
 
 
 def add_door(rng: np.random.Generator, plan: FloorPlan, width: tuple[float, float] = (0.8, 0.95)) -> bool:
@@ -63,6 +64,8 @@ def add_window(rng: np.random.Generator, plan: FloorPlan, sill: tuple[float, flo
             for p, pose in placed:
                 plan.add(p, *pose, occupies_floor=z_lo < 0.5)
             plan.spans[wall].append((s - total / 2, s + total / 2, z_lo, z_sill + h + 0.1))
+            wx, wy, _ = plan.wall_pose(wall, s, 1.2)
+            plan.windows.append((wx, wy, z_sill + h / 2))
             return True
     return False
 
@@ -82,17 +85,21 @@ def add_pictures(rng: np.random.Generator, plan: FloorPlan, count: int) -> int:
     return placed
 
 
-def add_lights(rng: np.random.Generator, plan: FloorPlan) -> None:
-    """Ceiling lamps (one, or two in large rooms), each with a point light just below it."""
-    lx, ly, h = plan.size
-    n = 2 if lx * ly > 16 else 1
-    warm = (1.0, float(rng.uniform(0.85, 0.97)), float(rng.uniform(0.65, 0.9)))
-    for i in range(n):
-        frac = (i + 0.5) / n
-        x = lx * frac if lx >= ly else lx / 2 + float(rng.uniform(-0.3, 0.3))
-        y = ly / 2 + float(rng.uniform(-0.3, 0.3)) if lx >= ly else ly * frac
-        lamp = fx.ceiling_lamp(rng, h)
-        plan.add(lamp, x, y, 0.0, occupies_floor=False)
-        plan.lights.append(Light((x, y, h - 0.35), float(rng.uniform(2.0, 3.2)) / n ** 0.5, warm))
-    fill = (float(rng.uniform(0.2, lx - 0.2)), float(rng.uniform(0.2, ly - 0.2)), h * float(rng.uniform(0.5, 0.8)))
-    plan.lights.append(Light(fill, float(rng.uniform(0.4, 0.9)), (0.85, 0.92, 1.0)))
+def add_floor_clutter(rng: np.random.Generator, plan: FloorPlan, count: int) -> int:
+    """Boxes, baskets, bags and stacks standing on the floor against the walls (ignore-labelled, like
+    ScanNet's unlabelled props); returns how many fitted."""
+    placed = 0
+    for _ in range(count):
+        w, d, h = float(rng.uniform(0.2, 0.55)), float(rng.uniform(0.2, 0.45)), float(rng.uniform(0.1, 0.5))
+        cover = mat.fabric(rng) if rng.random() < 0.5 else mat.painted(rng)
+        boxes = [span(IGNORE_ID, cover, -w / 2, w / 2, -d / 2, d / 2, 0.0, h)]
+        if rng.random() < 0.4:
+            top = float(rng.uniform(0.5, 0.9))
+            boxes.append(span(IGNORE_ID, mat.painted(rng), -w * top / 2, w * top / 2, -d * top / 2, d * top / 2,
+                              h, h + float(rng.uniform(0.05, 0.25))))
+        piece = Piece(boxes, w, d, max(b.center[2] + b.size[2] / 2 for b in boxes))
+        for wall in [int(k) for k in rng.permutation(4)]:
+            if plan.try_wall(rng, piece, wall, gap=float(rng.uniform(0.01, 0.1)), tries=6) is not None:
+                placed += 1
+                break
+    return placed

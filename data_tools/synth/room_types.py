@@ -12,18 +12,24 @@ from collections.abc import Callable
 import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
+from sray.data_tools.synth import catalog as cat
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import furniture as fu
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.floor_plan import FloorPlan
 from sray.data_tools.synth.room_parts import add_door, add_pictures, add_window
+from sray.data_tools.synth.room_shape import shaped_plan
 
 Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Material]]
 
 
-def _size(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
-          h: tuple[float, float]) -> tuple[float, float, float]:
-    return float(rng.uniform(*lx)), float(rng.uniform(*ly)), float(rng.uniform(*h))
+def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
+          h: tuple[float, float]) -> FloorPlan:
+    """An empty floor plan (maybe L-shaped or with a column) of a size drawn from the ranges, which one
+    scale factor per room widens (0.9-1.2)."""
+    scale = float(rng.uniform(0.9, 1.2))
+    return shaped_plan(rng, (scale * float(rng.uniform(*lx)), scale * float(rng.uniform(*ly)),
+                             float(rng.uniform(*h))))
 
 
 def _walls(rng: np.random.Generator) -> list[int]:
@@ -43,14 +49,14 @@ def _anywhere_on_walls(rng: np.random.Generator, plan: FloorPlan, piece: fu.Piec
 def _chair_facing(rng: np.random.Generator, plan: FloorPlan, x: float, y: float, yaw: float,
                   distance: float) -> bool:
     """A chair at ``distance`` from (x, y) along the direction yaw points +y to, facing back to (x, y)."""
-    chair = fu.chair(rng)
+    chair = cat.chair(rng)
     dx, dy = -math.sin(yaw), math.cos(yaw)
     cx, cy = x + dx * (distance + chair.depth / 2), y + dy * (distance + chair.depth / 2)
     return plan.try_floor(chair, cx, cy, yaw + math.pi + float(rng.uniform(-0.3, 0.3)), clearance=0.02)
 
 
 def _desk_with_chair(rng: np.random.Generator, plan: FloorPlan) -> bool:
-    desk = fu.desk(rng, float(rng.uniform(1.0, 1.6)))
+    desk = cat.desk(rng, float(rng.uniform(1.0, 1.6)))
     spot = _anywhere_on_walls(rng, plan, desk)
     if spot is None:
         return False
@@ -63,7 +69,7 @@ def _dining_set(rng: np.random.Generator, plan: FloorPlan, chairs: int) -> None:
     """A table near the room centre with chairs around it."""
     lx, ly, _ = plan.size
     tw, td = float(rng.uniform(0.9, 1.6)), float(rng.uniform(0.7, 0.95))
-    table = fu.table(rng, tw, td)
+    table = cat.table(rng, tw, td)
     yaw = 0.0 if rng.random() < 0.5 else math.pi / 2
     for _ in range(10):
         x, y = lx / 2 + float(rng.uniform(-0.5, 0.5)), ly / 2 + float(rng.uniform(-0.5, 0.5))
@@ -76,12 +82,12 @@ def _dining_set(rng: np.random.Generator, plan: FloorPlan, chairs: int) -> None:
 
 def bedroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Bed with nightstands, wardrobe, desk and chair, bookshelf, ottoman or bin, pictures."""
-    plan = FloorPlan(_size(rng, (3.4, 5.0), (3.2, 4.6), (2.45, 2.9)))
+    plan = _plan(rng, (3.4, 5.0), (3.2, 4.6), (2.45, 2.9))
     add_door(rng, plan)
     for _ in range(int(rng.integers(1, 3))):
         add_window(rng, plan)
     bw = float(rng.choice([0.9, 1.4, 1.6, 1.8]))
-    bed = fu.bed(rng, bw, float(rng.uniform(1.95, 2.1)))
+    bed = cat.bed(rng, bw, float(rng.uniform(1.95, 2.1)))
     for wall in _walls(rng):
         mid = plan.wall_length(wall) / 2 + float(rng.uniform(-0.4, 0.4))
         s = plan.try_wall(rng, bed, wall, s=mid)
@@ -90,15 +96,15 @@ def bedroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
         if s is not None:
             for side in (-1, 1):
                 if rng.random() < 0.8:
-                    stand = fu.cabinet(rng, float(rng.uniform(0.4, 0.55)), float(rng.uniform(0.35, 0.45)),
+                    stand = cat.cabinet(rng, float(rng.uniform(0.4, 0.55)), float(rng.uniform(0.35, 0.45)),
                                        float(rng.uniform(0.45, 0.6)))
                     plan.try_wall(rng, stand, wall, s=s + side * (bed.width / 2 + 0.06 + stand.width / 2))
             break
-    _anywhere_on_walls(rng, plan, fu.cabinet(rng, float(rng.uniform(0.8, 1.6)), float(rng.uniform(0.55, 0.65)),
+    _anywhere_on_walls(rng, plan, cat.cabinet(rng, float(rng.uniform(0.8, 1.6)), float(rng.uniform(0.55, 0.65)),
                                              float(rng.uniform(1.8, min(2.2, plan.size[2] - 0.2)))))
     _desk_with_chair(rng, plan)
     if rng.random() < 0.6:
-        _anywhere_on_walls(rng, plan, fu.bookshelf(rng, float(rng.uniform(0.6, 1.2))))
+        _anywhere_on_walls(rng, plan, cat.bookshelf(rng, float(rng.uniform(0.6, 1.2))))
     _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     add_pictures(rng, plan, int(rng.integers(1, 4)))
     return plan, mat.wall_paint(rng), mat.floor_surface(rng)
@@ -106,11 +112,11 @@ def bedroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
 
 def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Sofa with coffee table (on a rug) and armchairs, TV cabinet, bookshelves, side table, pictures."""
-    plan = FloorPlan(_size(rng, (4.2, 6.5), (3.6, 5.5), (2.5, 3.0)))
+    plan = _plan(rng, (4.2, 6.5), (3.6, 5.5), (2.5, 3.0))
     add_door(rng, plan)
     for _ in range(int(rng.integers(1, 4))):
         add_window(rng, plan)
-    sofa = fu.sofa(rng, float(rng.uniform(1.6, 2.4)))
+    sofa = cat.sofa(rng, float(rng.uniform(1.6, 2.4)))
     spot = _anywhere_on_walls(rng, plan, sofa)
     if spot is not None:
         x, y, yaw = plan.wall_pose(spot[0], spot[1], sofa.depth, 0.015)
@@ -123,14 +129,14 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
                                     ctd / 2 + 0.5, 0.0, 0.008)], ctw + 0.8, ctd + 1.0, 0.008)
             if plan.is_free(plan.footprint(rug, tx, ty, yaw), clearance=-0.02):
                 plan.add(rug, tx, ty, yaw, occupies_floor=False)
-        if plan.try_floor(fu.table(rng, ctw, ctd, float(rng.uniform(0.38, 0.48))), tx, ty, yaw):
+        if plan.try_floor(cat.table(rng, ctw, ctd, float(rng.uniform(0.38, 0.48))), tx, ty, yaw):
             for side in (-1, 1):
                 if rng.random() < 0.6:
                     chair = fu.armchair(rng)
                     off = ctw / 2 + 0.25 + chair.depth / 2
                     ax, ay = tx + side * math.cos(yaw) * off, ty + side * math.sin(yaw) * off
                     plan.try_floor(chair, ax, ay, yaw + side * math.pi / 2 + float(rng.uniform(-0.3, 0.3)))
-        side_table = fu.table(rng, 0.45, 0.45, float(rng.uniform(0.5, 0.6)))
+        side_table = cat.table(rng, 0.45, 0.45, float(rng.uniform(0.5, 0.6)))
         plan.try_wall(rng, side_table, spot[0], s=spot[1] + (sofa.width / 2 + 0.3) * float(rng.choice([-1, 1])))
     tv_stand = fu.cabinet(rng, float(rng.uniform(1.2, 1.8)), 0.42, float(rng.uniform(0.45, 0.6)))
     tv_w = float(rng.uniform(0.8, 1.3))
@@ -139,7 +145,7 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
     tv_stand.height += tv_w * 0.58
     _anywhere_on_walls(rng, plan, tv_stand)
     for _ in range(int(rng.integers(1, 3))):
-        _anywhere_on_walls(rng, plan, fu.bookshelf(rng, float(rng.uniform(0.6, 1.2))))
+        _anywhere_on_walls(rng, plan, cat.bookshelf(rng, float(rng.uniform(0.6, 1.2))))
     _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     if rng.random() < 0.4:
         _desk_with_chair(rng, plan)
@@ -149,16 +155,16 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
 
 def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Counter run with base and wall cabinets and a sink, fridge, dining table and chairs, bin."""
-    plan = FloorPlan(_size(rng, (3.4, 5.2), (3.0, 4.6), (2.4, 2.8)))
+    plan = _plan(rng, (3.4, 5.2), (3.0, 4.6), (2.4, 2.8))
     add_door(rng, plan)
     add_window(rng, plan, sill=(1.0, 1.15), curtain_prob=0.3)
     for wall in _walls(rng):
         length = float(rng.uniform(1.8, max(1.9, plan.wall_length(wall) - 1.2)))
-        run = fx.counter_run(rng, length, float(rng.uniform(-length / 2 + 0.4, length / 2 - 0.4)))
+        run = cat.counter_run(rng, length, float(rng.uniform(-length / 2 + 0.4, length / 2 - 0.4)))
         s = plan.try_wall(rng, run, wall, z_range=(0.0, 0.95))
         if s is None:
             continue
-        fridge = fx.refrigerator(rng)
+        fridge = cat.refrigerator(rng)
         for side in (-1, 1):
             if plan.try_wall(rng, fridge, wall, s=s + side * (length / 2 + 0.07 + fridge.width / 2)) is not None:
                 break
@@ -174,7 +180,7 @@ def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
         break
     _dining_set(rng, plan, int(rng.integers(2, 5)))
     if rng.random() < 0.5:
-        _anywhere_on_walls(rng, plan, fu.cabinet(rng, float(rng.uniform(0.5, 0.9)), 0.55,
+        _anywhere_on_walls(rng, plan, cat.cabinet(rng, float(rng.uniform(0.5, 0.9)), 0.55,
                                                  float(rng.uniform(1.8, min(2.1, plan.size[2] - 0.2)))))
     _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     add_pictures(rng, plan, int(rng.integers(1, 3)))
@@ -183,7 +189,7 @@ def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
 
 def bathroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Bathtub with shower curtain, toilet, washbasin with mirror, cabinet, bin, small window."""
-    plan = FloorPlan(_size(rng, (2.4, 3.4), (2.1, 3.0), (2.4, 2.7)))
+    plan = _plan(rng, (2.4, 3.4), (2.1, 3.0), (2.4, 2.7))
     add_door(rng, plan, width=(0.7, 0.82))
     add_window(rng, plan, sill=(1.2, 1.5), width=(0.5, 0.9), curtain_prob=0.2)
     walls = sorted(range(4), key=lambda w: -plan.wall_length(w) + float(rng.uniform(0, 0.3)))
@@ -193,13 +199,13 @@ def bathroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mat
         end = length / 2 + 0.02 if rng.random() < 0.5 else plan.wall_length(wall) - length / 2 - 0.02
         if plan.try_wall(rng, tub, wall, s=end, margin=0.0, gap=0.005, z_range=(0.0, 0.6)) is not None:
             break
-    _anywhere_on_walls(rng, plan, fx.toilet(rng))
+    _anywhere_on_walls(rng, plan, cat.toilet(rng))
     basin = fx.washbasin(rng, vanity=rng.random() < 0.5)
     spot = _anywhere_on_walls(rng, plan, basin)
     if spot is not None:
         plan.try_wall(rng, fx.mirror(rng, basin.width, float(rng.uniform(0.5, 0.8)), 1.55), spot[0], s=spot[1],
                       z_range=(1.1, 2.0), occupies_floor=False, gap=0.0)
-    _anywhere_on_walls(rng, plan, fu.cabinet(rng, float(rng.uniform(0.35, 0.6)), float(rng.uniform(0.3, 0.4)),
+    _anywhere_on_walls(rng, plan, cat.cabinet(rng, float(rng.uniform(0.35, 0.6)), float(rng.uniform(0.3, 0.4)),
                                              float(rng.uniform(0.8, 1.8))))
     _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     add_pictures(rng, plan, int(rng.integers(0, 2)))
@@ -209,21 +215,21 @@ def bathroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mat
 
 def office(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Desks with chairs, bookshelves, file cabinets, optional meeting table and sofa, pictures."""
-    plan = FloorPlan(_size(rng, (3.6, 6.0), (3.2, 5.0), (2.5, 3.0)))
+    plan = _plan(rng, (3.6, 6.0), (3.2, 5.0), (2.5, 3.0))
     add_door(rng, plan)
     for _ in range(int(rng.integers(1, 4))):
         add_window(rng, plan, curtain_prob=0.6)
     for _ in range(int(rng.integers(1, 4))):
         _desk_with_chair(rng, plan)
     for _ in range(int(rng.integers(1, 3))):
-        _anywhere_on_walls(rng, plan, fu.bookshelf(rng, float(rng.uniform(0.6, 1.2))))
+        _anywhere_on_walls(rng, plan, cat.bookshelf(rng, float(rng.uniform(0.6, 1.2))))
     for _ in range(int(rng.integers(1, 3))):
-        _anywhere_on_walls(rng, plan, fu.cabinet(rng, float(rng.uniform(0.45, 0.9)), float(rng.uniform(0.45, 0.6)),
+        _anywhere_on_walls(rng, plan, cat.cabinet(rng, float(rng.uniform(0.45, 0.9)), float(rng.uniform(0.45, 0.6)),
                                                  float(rng.uniform(0.7, 1.3))))
     if rng.random() < 0.5:
         _dining_set(rng, plan, int(rng.integers(2, 5)))
     if rng.random() < 0.35:
-        _anywhere_on_walls(rng, plan, fu.sofa(rng, float(rng.uniform(1.4, 2.0))))
+        _anywhere_on_walls(rng, plan, cat.sofa(rng, float(rng.uniform(1.4, 2.0))))
     if rng.random() < 0.7:
         _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     add_pictures(rng, plan, int(rng.integers(1, 4)))

@@ -1,4 +1,4 @@
-"""A procedural room: shell, finishes, lights and the furniture of its room type.
+"""A procedural room: shell (maybe L-shaped), finishes, lights, the furniture of its room type and clutter.
 
 ``build_room(rng, room_type)`` returns a :class:`Room`; the furniture of each room type comes from
 ``synth_room_types``. The room's interior is the box [0, Lx] x [0, Ly] x [0, H] (z up, floor at 0).
@@ -13,7 +13,8 @@ import numpy as np
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.floor_plan import Light
 from sray.data_tools.synth.geometry import Box
-from sray.data_tools.synth.room_parts import add_lights
+from sray.data_tools.synth.lighting import add_lights
+from sray.data_tools.synth.room_parts import add_floor_clutter
 from sray.data_tools.synth.room_types import RECIPES
 
 ROOM_TYPES: tuple[str, ...] = tuple(RECIPES)
@@ -47,7 +48,8 @@ def build_room(rng: np.random.Generator, room_type: str) -> Room:
     if room_type not in RECIPES:
         raise ValueError(f"unknown room type {room_type!r}; known: {list(RECIPES)}")
     plan, wall, floor = RECIPES[room_type](rng)
+    add_floor_clutter(rng, plan, int(rng.integers(0, 4)))
     add_lights(rng, plan)
     plan.add_baseboards(rng)
     return Room(room_type=room_type, size=plan.size, boxes=plan.boxes, lights=plan.lights,
-                ambient=float(rng.uniform(0.25, 0.4)), wall=wall, floor=floor, ceiling=mat.ceiling_paint(rng))
+                ambient=float(rng.uniform(0.12, 0.45)), wall=wall, floor=floor, ceiling=mat.ceiling_paint(rng))

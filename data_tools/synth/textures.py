@@ -15,10 +15,12 @@ from sray.data_tools.synth.materials import (
     BOOKS,
     FABRIC,
     LAMP,
+    MARBLE,
     PAINT,
     PAINTING,
     PANELS,
     PLANKS,
+    RUNNING_BOND,
     SKY,
     STRIPES,
     TILES,
@@ -156,6 +158,9 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
     if kind == TILES:
         u, v = _tangents(q, n_axis)
         fu, fv = u * scale, v * scale
+        bond = m["variant"] == RUNNING_BOND
+        fv = np.where(bond, fv * 2.0, fv)                      # bricks: rows half as tall as they are long
+        fu = np.where(bond & (np.floor(fv) % 2 == 1), fu + 0.5, fu)
         iu, iv = np.floor(fu).astype(np.int64), np.floor(fv).astype(np.int64)
         jitter = hash01(iu, iv, iu * 0 + 3, seed)
         checker = (m["variant"] == 1) & ((iu + iv) % 2 == 1)
@@ -210,6 +215,10 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
         return np.where(((height > tall) | gap)[:, None], b, col)
     if kind == LAMP:
         return a.copy()
+    if kind == MARBLE:
+        warp = fbm(q * scale[:, None], seed, 3)
+        vein = np.abs(np.sin(2 * np.pi * (q[:, 0] + 0.7 * q[:, 1] + 0.4 * q[:, 2] + 2.0 * warp)))
+        return _mix(a, b, contrast * (1.0 - vein) ** 6) * (0.94 + 0.12 * warp)[:, None]
     raise ValueError(f"unknown material kind {kind}")
 
 

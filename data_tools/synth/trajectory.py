@@ -1,8 +1,9 @@
 """Handheld-scan-like camera paths through a procedural room.
 
-The camera walks a smooth arc of an ellipse (a third to a full turn) over free floor at 1.2-1.7 m,
-wobbling a little in position, height and roll, and looks outward across the room at a target near
-the far side that drifts left and right, slightly downward, as a person scanning a room does. Consecutive
+The camera walks a smooth arc of an ellipse (a third to a full turn) or a straight line over free
+floor at 1.0-1.85 m, wobbling a little in position, height and roll, and looks outward across the room
+(or to one side of its walk) at a target near the far side that drifts left and right, at a height
+drawn per path (so pitch varies from level to steeply down), as a person scanning a room does. Consecutive
 views are a few degrees apart, so neighbours overlap strongly. Every camera centre stays inside
 the room, away from the walls, and outside every box grown by a safety margin.
 """
@@ -15,7 +16,7 @@ import numpy as np
 
 from sray.data_tools.synth.geometry import PackedBoxes
 
-HEIGHT_RANGE = (1.2, 1.7)
+HEIGHT_RANGE = (1.0, 1.85)
 """Camera height band in metres."""
 WALL_CLEARANCE = 0.35
 """Minimum distance of a camera centre from any wall, floor or ceiling (metres)."""
@@ -74,11 +75,10 @@ def _near_footprint(points: np.ndarray, boxes: PackedBoxes, radius: float) -> np
     return (np.abs(lx) <= boxes.half[None, :, 0] + radius) & (np.abs(ly) <= boxes.half[None, :, 1] + radius)
 
 
-def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_views: int
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One random path: eyes (n, 3), look-at targets (n, 3) and roll angles (n,) in radians."""
+def _arc(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndarray
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Floor positions x, y (n,) and headings (n,) of an arc of an ellipse, looking outward."""
     lx, ly, _ = size
-    s = np.linspace(0.0, 1.0, n_views)
     centre = np.array([rng.uniform(0.35 * lx, 0.65 * lx), rng.uniform(0.35 * ly, 0.65 * ly)])
     a = float(rng.uniform(0.15, max(0.2, min(centre[0], lx - centre[0]) - WALL_CLEARANCE)))
     b = float(rng.uniform(0.15, max(0.2, min(centre[1], ly - centre[1]) - WALL_CLEARANCE)))
@@ -86,13 +86,39 @@ def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_vie
     theta = float(rng.uniform(0, 2 * math.pi)) + sweep * s
     x = centre[0] + a * np.cos(theta) + _wobble(rng, s, 0.06, (1.5, 5.0))
     y = centre[1] + b * np.sin(theta) + _wobble(rng, s, 0.06, (1.5, 5.0))
-    z = np.clip(float(rng.uniform(1.3, 1.55)) + _wobble(rng, s, 0.1, (1.0, 4.0)), *HEIGHT_RANGE)
-    heading = theta + math.pi + _wobble(rng, s, 0.45, (0.3, 1.2))
+    return x, y, theta + math.pi + _wobble(rng, s, 0.45, (0.3, 1.2))
+
+
+def _walk(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Floor positions and headings of a straight walk (1-2.5 m) looking to one side of the walking line."""
+    lx, ly, _ = size
+    start = np.array([rng.uniform(0.3 * lx, 0.7 * lx), rng.uniform(0.3 * ly, 0.7 * ly)])
+    direction = float(rng.uniform(0, 2 * math.pi))
+    length = float(rng.uniform(1.0, 2.5))
+    x = start[0] + (s - 0.5) * length * math.cos(direction) + _wobble(rng, s, 0.05, (1.5, 4.0))
+    y = start[1] + (s - 0.5) * length * math.sin(direction) + _wobble(rng, s, 0.05, (1.5, 4.0))
+    side = float(rng.choice([-1.0, 1.0])) * float(rng.uniform(0.35, 1.75))
+    return x, y, direction + side + _wobble(rng, s, 0.4, (0.3, 1.0))
+
+
+def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_views: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One random path: eyes (n, 3), look-at targets (n, 3) and roll angles (n,) in radians.
+
+    Path style: an arc of an ellipse (70 %) or a straight walk (30 %); the camera's base height and
+    the height it looks at (its pitch) are drawn per path.
+    """
+    lx, ly, _ = size
+    s = np.linspace(0.0, 1.0, n_views)
+    x, y, heading = (_arc if rng.random() < 0.7 else _walk)(rng, size, s)
+    z = np.clip(float(rng.uniform(HEIGHT_RANGE[0] + 0.05, HEIGHT_RANGE[1] - 0.1)) + _wobble(rng, s, 0.1, (1.0, 4.0)),
+                *HEIGHT_RANGE)
     dx, dy = np.cos(heading), np.sin(heading)
     with np.errstate(divide="ignore"):
         to_wall = np.minimum(np.where(dx > 0, (lx - x) / dx, -x / dx), np.where(dy > 0, (ly - y) / dy, -y / dy))
     reach = np.maximum(0.6, (to_wall - 0.4) * float(rng.uniform(0.6, 1.0)))
-    tz = float(rng.uniform(0.45, 1.0)) + _wobble(rng, s, 0.25, (0.5, 3.0))
+    tz = float(rng.uniform(0.2, 1.3)) + _wobble(rng, s, 0.25, (0.5, 3.0))
     roll = np.radians(_wobble(rng, s, 2.5, (1.0, 4.0)))
     return np.stack([x, y, z], axis=1), np.stack([x + reach * dx, y + reach * dy, tz], axis=1), roll
 

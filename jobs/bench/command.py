@@ -1,4 +1,4 @@
-"""``sray bench loader|model|accuracy``: measured tables, printed and appended to docs/benchmarks.md."""
+"""``sray bench loader|model|profile|speed-accuracy|accuracy``: measured tables, printed and appended to docs/benchmarks.md."""
 
 from __future__ import annotations
 
@@ -21,8 +21,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     model = kinds.add_parser("model", help="CRA vs dense attention cost; training-step time and memory")
     model.add_argument("--device", default="auto", help="cpu, cuda or auto")
     model.add_argument("--quick", action="store_true", help="smaller sizes (for tests)")
+    model.add_argument("--tables", nargs="+", default=["attention", "train"], choices=["attention", "train"],
+                       help="which tables to measure (attention cost, training step)")
     model.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     model.set_defaults(func=_bench_model)
+
+    prof = kinds.add_parser("profile", help="torch.profiler of the training step and of a whole-image render")
+    prof.add_argument("--device", default="auto", help="cpu, cuda or auto")
+    prof.add_argument("--impl", nargs="+", default=["reference", "fast"], choices=["reference", "fast"],
+                      help="implementations to profile (SRayConfig.impl)")
+    prof.add_argument("--workload", nargs="+", default=["train", "render"], choices=["train", "render"])
+    prof.add_argument("--quick", action="store_true", help="tiny sizes (for tests)")
+    prof.add_argument("--doc", type=Path, default=Path("docs/performance.md"))
+    prof.set_defaults(func=_bench_profile)
+
+    speed = kinds.add_parser("speed-accuracy", help="mIoU and PSNR against seconds per view (Pareto chart)")
+    speed.add_argument("--checkpoint", type=Path, required=True, help="checkpoint folder written by `sray train`")
+    speed.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
+    speed.add_argument("--views-per-scene", type=int, default=2, help="test views rendered per scene and setting")
+    speed.add_argument("--tracker", default="mlflow")
+    speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
+    speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
+    speed.set_defaults(func=_bench_speed_accuracy)
 
     accuracy = kinds.add_parser("accuracy", help="ablation (zero-shot) and S-Ray finetune vs Semantic-NeRF")
     accuracy.add_argument("--preset", choices=["cpu-small", "gpu"], default="cpu-small",
@@ -39,6 +59,22 @@ def _bench_accuracy(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_profile(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.model_cost import resolve_device
+    from sray.jobs.bench.profile import run_profiles, write_profiles
+
+    sections = run_profiles(resolve_device(args.device), tuple(args.impl), tuple(args.workload), args.quick)
+    write_profiles(sections, args.doc)
+    return 0
+
+
+def _bench_speed_accuracy(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.speed_accuracy import run_speed_accuracy
+
+    run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker, args.tracking_uri)
+    return 0
+
+
 def _bench_loader(args: argparse.Namespace) -> int:
     from sray.jobs.bench.doc import record
     from sray.jobs.bench.loader_throughput import run_loader_benchmark
@@ -52,6 +88,6 @@ def _bench_model(args: argparse.Namespace) -> int:
     from sray.jobs.bench.doc import record
     from sray.jobs.bench.model_cost import run_model_benchmark
 
-    for title, table, notes in run_model_benchmark(device=args.device, quick=args.quick):
+    for title, table, notes in run_model_benchmark(device=args.device, quick=args.quick, tables=tuple(args.tables)):
         record(title, table, args.doc, notes)
     return 0

@@ -49,12 +49,13 @@ def _same_slot(section: str, title: str) -> bool:
     return f", {device_kind()}," in command or command.endswith(f", {device_kind()}")
 
 
-def record(title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "") -> str:
+def record(title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "", header: str = _HEADER) -> str:
     """Print a benchmark section and write it into ``doc``; returns the section text.
 
     A section with the same title measured on the same kind of device is replaced in place (so the
     document holds the latest numbers once per device); otherwise the section is appended. The file
     is rewritten through a temporary file and a rename, so an interrupted run leaves it intact.
+    ``header`` starts a document that does not exist yet.
     """
     command = "sray " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
@@ -63,7 +64,7 @@ def record(title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str 
     if notes:
         section += f"\n{notes.strip()}\n"
     print("\n" + section)
-    preamble, sections = _split_sections(doc.read_text() if doc.exists() else _HEADER)
+    preamble, sections = _split_sections(doc.read_text() if doc.exists() else header)
     slot = next((i for i, old in enumerate(sections) if _same_slot(old, title)), len(sections))
     sections[slot:slot + 1] = [section]
     text = "\n".join(part.strip("\n") + "\n" for part in [preamble, *sections])

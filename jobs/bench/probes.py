@@ -7,7 +7,7 @@
   CPU, the profiler's allocator trace (``profile_memory=True``): the highest "Total Allocated"
   reached during the call minus the level when it started. Both count PyTorch's allocator only
   (tensors and kernel scratch), the quantity the paper's "memory increment" reports.
-* Training steps run in a fresh spawned process each, so the process peak RSS they report
+* Training steps (``workloads``) run in a fresh spawned process each, so the process peak RSS they report
   (VmHWM) belongs to that configuration alone, as in the reference measurement of the paper's
   public code.
 """
@@ -126,7 +126,7 @@ def peak_bytes(fn: Callable[[], None], device: torch.device, backend: SDPBackend
         return _cpu_peak_from_trace(trace)
 
 
-def _timed_runs(fn: Callable[[], None], device: torch.device, runs: int) -> list[float]:
+def timed_runs(fn: Callable[[], None], device: torch.device, runs: int) -> list[float]:
     """Wall-clock seconds of ``runs`` consecutive calls of ``fn``."""
     times = []
     for _ in range(runs):
@@ -142,7 +142,7 @@ def _timed_runs(fn: Callable[[], None], device: torch.device, runs: int) -> list
 
 def time_call(fn: Callable[[], None], device: torch.device, repeats: int) -> float:
     """Median wall-clock seconds of ``fn`` over ``repeats`` runs after one warm-up run."""
-    times = _timed_runs(fn, device, repeats + 1)[1:]
+    times = timed_runs(fn, device, repeats + 1)[1:]
     return sorted(times)[len(times) // 2]
 
 
@@ -160,67 +160,3 @@ def peak_rss_bytes() -> int:
     except OSError:
         pass
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024  # KiB on Linux
-
-
-def _synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device) -> dict:
-    """Random source images and a camera rig whose sources all look at the query's frustum."""
-    from sray.model.rays import pixel_rays
-
-    h, w = hw
-    gen = torch.Generator().manual_seed(0)
-    K = torch.tensor([[w / 2, 0.0, (w - 1) / 2], [0.0, w / 2, (h - 1) / 2], [0.0, 0.0, 1.0]])
-    c2w = torch.eye(4).repeat(views, 1, 1)
-    c2w[:, 0, 3] = torch.linspace(-0.3, 0.3, views)
-    c2w[:, 1, 3] = 0.1 * torch.sin(torch.arange(views, dtype=torch.float32))
-    uv = torch.rand(rays, 2, generator=gen) * torch.tensor([w - 1.0, h - 1.0])
-    origins, dirs = pixel_rays(K, torch.eye(4), uv)
-    batch = {"src_rgb": torch.rand(views, 3, h, w, generator=gen), "src_K": K.expand(views, 3, 3).clone(),
-             "src_c2w": c2w, "origins": origins, "dirs": dirs,
-             "label": torch.randint(0, 20, (rays,), generator=gen), "rgb": torch.rand(rays, 3, generator=gen)}
-    return {k: v.to(device) for k, v in batch.items()}
-
-
-def train_step_worker(spec: dict) -> dict:
-    """Time full training steps (encode, render, loss, backward, Adam) for one configuration.
-
-    spec: rays, coarse, fine, views, hw, device, dtype ('fp32'|'bf16'|'fp16'), steps, and
-    optionally compile (compile both per-sample fields with ``torch.compile`` in place) and
-    alloc ('thp' needs the environment variable THP_MEM_ALLOC_ENABLE=1 set by the parent before
-    this process starts).
-    Meant to run in a fresh process; returns the first step's time (warm-up, compilation
-    included), the median of the following ``steps`` steps and the process peak RSS.
-    """
-    from sray.model.losses import render_loss
-    from sray.model.semantic_ray import SRayModel
-
-    device = torch.device(spec["device"])
-    torch.manual_seed(0)
-    cfg = SRayConfig(n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"])
-    model = SRayModel(cfg).to(device)
-    if spec.get("compile"):
-        model.coarse.compile()
-        model.fine.compile()
-    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
-    batch = _synthetic_batch(spec["rays"], spec["views"], tuple(spec["hw"]), device)
-    dtype = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}[spec["dtype"]]
-    scaler = torch.amp.GradScaler(device.type, enabled=dtype == torch.float16)
-
-    def step() -> None:
-        with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
-            src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"])
-            out = model.render_rays(src, batch["origins"], batch["dirs"], 1.0, 5.0, stratified=True)
-            loss, _ = render_loss(out, batch["label"], batch["rgb"], cfg)
-        opt.zero_grad(set_to_none=True)
-        scaler.scale(loss).backward()
-        scaler.step(opt)
-        scaler.update()
-        if not torch.isfinite(loss):
-            raise FloatingPointError(f"sray.jobs.bench.model_cost: non-finite loss in {spec}.")
-
-    times = _timed_runs(step, device, int(spec["steps"]) + 1)
-    peak_gpu = int(torch.cuda.max_memory_allocated(device)) if device.type == "cuda" else 0
-    rss = peak_rss_bytes()
-    n_params = sum(p.numel() for p in model.parameters())
-    rest = sorted(times[1:])
-    return {"first": times[0], "seconds": rest[len(rest) // 2], "rss_bytes": rss,
-            "gpu_peak_bytes": peak_gpu, "params": n_params}

@@ -1,4 +1,4 @@
-"""``sray data synth|convert|check|shard``: from whatever a user has to validated shards."""
+"""``sray data synth|convert|check|shard|stats``: from whatever a user has to validated shards."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ DATA_SUBCOMMAND_MODULES = (
     "sray.jobs.data.convert",
     "sray.jobs.data.check",
     "sray.jobs.data.shard",
+    "sray.jobs.data.stats",
 )
 """Each module exposes ``register(subparsers)`` for one ``sray data`` verb."""
 

@@ -19,6 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=int, default=240, help="image height in pixels (default 240)")
     p.add_argument("--width", type=int, default=320, help="image width in pixels (default 320)")
     p.add_argument("--seed", type=int, default=0, help="dataset seed; same seed, identical files (default 0)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="scenes rendered at once in separate processes (default 1); files do not depend on it")
     p.set_defaults(func=_run)
 
 
@@ -26,7 +28,8 @@ def _run(args: argparse.Namespace) -> int:
     from sray.data_tools.synth.dataset import generate_dataset
 
     scenes = generate_dataset(args.out, n_train=args.train_scenes, n_test=args.test_scenes, n_views=args.views,
-                              height=args.height, width=args.width, seed=args.seed, progress=True)
+                              height=args.height, width=args.width, seed=args.seed, progress=True,
+                              workers=args.workers)
     print(f"wrote {len(scenes)} procedural scenes ({args.train_scenes} train, {args.test_scenes} test, "
           f"{args.views} views of {args.height}x{args.width}) to {Path(args.out).resolve()}")
     print(f"index: {Path(args.out).resolve() / 'dataset.json'}")

@@ -21,8 +21,9 @@ from typing import Any
 from sray.data_tools.shards.manifest import Manifest, read_manifest
 from sray.model.metrics import DATASET_PROTOCOL, PER_IMAGE_PROTOCOL
 
-RENDER_MODES = ("full",)
-"""Render modes an evaluation may use (``full``: the whole coarse + fine hierarchical renderer)."""
+RENDER_MODES = ("full", "fast")
+"""Render modes an evaluation may use (``full``: the whole coarse + fine hierarchical renderer;
+``fast``: ``sray.model.fast_render``, whose settings follow in the field, e.g. ``fast (pixel stride 4, ...)``)."""
 INPUTS = ("rgb",)
 """What the model is given of its source views (``rgb``: posed colour images only)."""
 NO_SOURCES = "none (per-scene model)"
@@ -48,7 +49,7 @@ class EvalProtocol:
     stride: int
     """Every ``stride``-th pixel in each direction is rendered and scored; 1 = whole images."""
     render: str = "full"
-    """Render mode, one of :data:`RENDER_MODES`."""
+    """Render mode, one of :data:`RENDER_MODES` (``fast`` followed by its settings)."""
     inputs: str = "rgb"
     """Source-view inputs, one of :data:`INPUTS`."""
     miou: str = DATASET_PROTOCOL
@@ -63,7 +64,7 @@ class EvalProtocol:
         if self.n_source < 0 or (self.n_source == 0) != (self.source_rule == NO_SOURCES):
             raise ValueError(f"eval protocol: n_source {self.n_source} with source_rule {self.source_rule!r}; "
                              f"n_source is 0 exactly when the rule is {NO_SOURCES!r}")
-        if self.render not in RENDER_MODES:
+        if self.render.split(" ")[0] not in RENDER_MODES:
             raise ValueError(f"eval protocol: render is {self.render!r}; use one of {RENDER_MODES}")
         if self.inputs not in INPUTS:
             raise ValueError(f"eval protocol: inputs is {self.inputs!r}; use one of {INPUTS}")

@@ -11,7 +11,9 @@ Entries are ``key=value`` separated by ``;``; lists are comma-separated. Keys:
 * ``train.nan_at_step``: the training loss at that step becomes NaN (the non-finite guard must skip it);
 * ``train.stop_after_step``: the job stops cleanly with a checkpoint once that many steps are done, as
   after Ctrl-C;
-* ``fleet.fail_scenes``: every attempt of a fleet task for these scenes raises :class:`InjectedFailure`.
+* ``fleet.fail_scenes``: every attempt of a fleet task for these scenes raises :class:`InjectedFailure`;
+* ``stability.nan_points``: ``method/axis/level`` entries; the stability suite's renders of that method
+  at that point output NaN (the failure the suite must record and go past).
 
 The driver forwards the variable to Ray Train workers and fleet tasks (:func:`propagated_env`), so
 the hook reaches every process of a run, on one machine or a cluster.
@@ -50,10 +52,14 @@ class Faults:
     """Steps after which training stops cleanly with a checkpoint (-1 = never)."""
     fail_scenes: tuple[str, ...] = ()
     """Scenes whose fleet tasks raise on every attempt."""
+    nan_points: tuple[str, ...] = ()
+    """Stability points (``method/axis/level``, level as the preset writes it) whose renders output NaN."""
 
 
 _KEYS = {"train.kill_at_step": "kill_at_step", "train.nan_at_step": "nan_at_step",
-         "train.stop_after_step": "stop_after_step", "fleet.fail_scenes": "fail_scenes"}
+         "train.stop_after_step": "stop_after_step", "fleet.fail_scenes": "fail_scenes",
+         "stability.nan_points": "nan_points"}
+_LISTS = ("fail_scenes", "nan_points")
 
 
 def parse_faults(text: str) -> Faults:
@@ -66,7 +72,7 @@ def parse_faults(text: str) -> Faults:
             raise ValueError(f"{ENV_VAR}: cannot read {entry!r}; write key=value entries separated by ';' "
                              f"with keys {sorted(_KEYS)}")
         field = _KEYS[key]
-        if field == "fail_scenes":
+        if field in _LISTS:
             values[field] = tuple(s.strip() for s in raw.split(",") if s.strip())
             continue
         try:
@@ -99,6 +105,11 @@ def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path, before_exit
     if before_exit is not None:
         before_exit()
     os._exit(KILL_EXIT_CODE)
+
+
+def poisoned_point(method: str, axis: str, level: object) -> bool:
+    """True when ``stability.nan_points`` lists this (method, axis, level) of the stability suite."""
+    return f"{method}/{axis}/{level}" in active_faults().nan_points
 
 
 def fail_if_listed(scene: str, attempt: int) -> None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
 from sray.platform.config.overrides import set_field
 
@@ -31,6 +32,29 @@ class DataSettings:
     """Held-out views rendered per scene at each validation (whole images, in chunks)."""
     val_downscale: int = 2
     """Validation renders at 1/val_downscale resolution to keep it cheap (1 = full)."""
+    class_balance: str = "none"
+    """Class-frequency-aware semantic loss: ``none`` (the paper), ``inverse-sqrt`` or ``inverse``
+    weights from the training scenes' pixel frequencies (``sray.data_tools.class_stats``), computed
+    when the job starts and stored as ``model.class_weights``."""
+    aug_colour_ev: float = 0.0
+    """Per-source-view exposure jitter, EV stops (uniform in ±value); 0 = off (``loader.augment``)."""
+    aug_channel_ev: float = 0.0
+    """Per-source-view, per-channel extra jitter (white balance), EV stops; 0 = off."""
+    aug_noise_sigma: float = 0.0
+    """Largest Gaussian noise sigma on a source view, 8-bit levels; 0 = off."""
+    aug_min_source: int = 0
+    """Random source-view count: each sample has m in [aug_min_source, model.n_source] sources chosen
+    among a random number (m..top_k) of the top-ranked neighbours; 0 = always model.n_source."""
+    aug_source_scale: float = 0.0
+    """Random source resolution: sources resized by a factor in [1 - value, 1] per sample; 0 = off."""
+    aug_query_crop: float = 0.0
+    """Random query crops: rays drawn in a window of this fraction of each image side; 0 = whole image."""
+
+    def augmentation(self) -> Augmentation:
+        """The loader's :class:`~sray.data_tools.loader.augment.Augmentation` of these settings."""
+        return Augmentation(colour_ev=self.aug_colour_ev, channel_ev=self.aug_channel_ev,
+                            noise_sigma=self.aug_noise_sigma, min_source=self.aug_min_source,
+                            source_scale=self.aug_source_scale, query_crop=self.aug_query_crop)
 
 
 @dataclass
@@ -117,7 +141,7 @@ class TrainConfig:
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
         """Inverse of :meth:`to_dict`."""
         model = dict(d.get("model", {}))
-        for key in ("weight_hidden", "geo_hidden"):
+        for key in ("weight_hidden", "geo_hidden", "class_weights"):
             if key in model:
                 model[key] = tuple(model[key])
         return cls(recipe=d.get("recipe", "custom"), model=SRayConfig(**model),

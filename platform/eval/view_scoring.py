@@ -15,6 +15,7 @@ import torch
 from torch import Tensor, nn
 
 from sray.data_tools.loader.sample_types import EvalSample
+from sray.model.fast_render import FastRender, upsample_to
 from sray.model.metrics import confusion_matrix, per_image_miou, psnr, scene_metrics
 from sray.model.semantic_ray import SourceSet
 from sray.model.ssim import SSIM_WINDOW, ssim
@@ -53,23 +54,34 @@ def strided_pixels(h: int, w: int, stride: int) -> tuple[Tensor, int, int]:
 
 @torch.no_grad()
 def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
-                device: torch.device) -> ViewPrediction:
+                device: torch.device, fast: FastRender | None = None) -> ViewPrediction:
     """Render one evaluation sample (whole query image, fixed source views) with ``render`` in ray
-    chunks of at most ``chunk`` rays, every ``stride``-th pixel in each direction."""
+    chunks of at most ``chunk`` rays, scored at every ``stride``-th pixel in each direction.
+
+    With ``fast`` (the fast render mode; ``render`` must be ``sray_renderer(..., fast)``) the rays are
+    every ``stride * fast.pixel_stride``-th pixel and the logits and colours are upsampled bilinearly
+    to the scored pixels.
+    """
     gt_rgb, gt_label = sample.query_rgb, sample.query_label
     h, w = gt_label.shape
     uv, hh, ww = strided_pixels(h, w, stride)
-    origins, dirs, near, far = ray_batch(sample, uv).query.to(device).rays()  # (R, 3), (R, 3), (R,), (R,)
-    labels, colours = [], []
-    for start in range(0, uv.shape[0], chunk):
+    render_stride = stride * (fast.pixel_stride if fast is not None else 1)
+    uv_r, hr, wr = strided_pixels(h, w, render_stride)
+    origins, dirs, near, far = ray_batch(sample, uv_r).query.to(device).rays()  # (R, 3), (R, 3), (R,), (R,)
+    logits, colours = [], []
+    for start in range(0, uv_r.shape[0], chunk):
         sl = slice(start, start + chunk)
         fine = render(origins[sl], dirs[sl], near[sl], far[sl])["fine"]
-        labels.append(fine["logits"].float().argmax(-1).cpu())
+        logits.append(fine["logits"].float().cpu())
         colours.append(fine["rgb"].float().clamp(0, 1).cpu())
+    pred_logits, pred_rgb = torch.cat(logits), torch.cat(colours)  # (R, L), (R, 3)
+    if render_stride != stride:
+        pred_logits = upsample_to(pred_logits.reshape(hr, wr, -1), (hr, wr), render_stride, uv)
+        pred_rgb = upsample_to(pred_rgb.reshape(hr, wr, 3), (hr, wr), render_stride, uv)
     iu, iv = uv[:, 0].long(), uv[:, 1].long()
     return ViewPrediction(
         query_id=sample.query_id,
-        pred_label=torch.cat(labels).reshape(hh, ww), pred_rgb=torch.cat(colours).reshape(hh, ww, 3),
+        pred_label=pred_logits.argmax(-1).reshape(hh, ww), pred_rgb=pred_rgb.reshape(hh, ww, 3),
         gt_label=gt_label[iv, iu].reshape(hh, ww).long(), gt_rgb=gt_rgb[iv, iu].reshape(hh, ww, 3).float(),
         stride=stride)
 
@@ -80,9 +92,13 @@ def encode_sources(net: nn.Module, sample: EvalSample, device: torch.device) -> 
     return net.encode(sources.rgb, sources.K, sources.c2w)
 
 
-def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device) -> Renderer:
-    """Encode the sample's fixed source views once; return a ray renderer bound to them."""
+def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device,
+                  fast: FastRender | None = None) -> Renderer:
+    """Encode the sample's fixed source views once; return a ray renderer bound to them (the full
+    render, or the fast mode's rays with ``fast``)."""
     src = encode_sources(net, sample, device)
+    if fast is not None:
+        return lambda o, d, near, far: net.render_rays_fast(src, o, d, near, far, fast.confidence)
     return lambda o, d, near, far: net.render_rays(src, o, d, near, far, stratified=False)
 
 

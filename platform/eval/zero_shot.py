@@ -34,6 +34,7 @@ import torch
 from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
+from sray.model.fast_render import FastRender
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
@@ -147,8 +148,11 @@ def flat_metrics(report: dict[str, Any]) -> dict[str, float]:
 def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None, out_dir: Path,
                         n_source: int = 8, stride: int = 1, tracking_uri: str | None = None,
                         experiment: str = "sray-eval", *, tracker: str = DEFAULT_TRACKER, device: str | None = None,
-                        progress: bool = True) -> dict:
+                        progress: bool = True, fast: FastRender | None = None) -> dict:
     """Evaluate ``checkpoint`` on ``scenes`` (default: the manifest's test scenes); see the module doc.
+
+    ``fast``: render with the fast render mode (``sray.model.fast_render``) instead of the full
+    renderer; the protocol's ``render`` field names it with its settings.
 
     Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (the fields of the
     run's :class:`~sray.platform.tracking.tracker.RunHandle`: tracker, store, run id, experiment id,
@@ -165,6 +169,8 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
     checkpoint, shards, out_dir = Path(checkpoint).resolve(), Path(shards).resolve(), Path(out_dir).resolve()
     names, metas = select_scenes(shards, scenes)
     protocol = EvalProtocol.from_shards(shards, n_source, stride)
+    if fast is not None:
+        protocol = dataclasses.replace(protocol, render=fast.describe())
     net, cfg = model_from_checkpoint(checkpoint)
     step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
     n_classes, ignore_id = cfg.model.n_classes, cfg.model.ignore_id
@@ -191,8 +197,8 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
         for name in names:
             views, per_view = [], []
             for sample in make_eval_samples(shards, name, split="test", n_source=n_source):
-                view = render_view(sray_renderer(net, sample, torch_device), sample, stride, cfg.model.chunk,
-                                   torch_device)
+                view = render_view(sray_renderer(net, sample, torch_device, fast), sample, stride, cfg.model.chunk,
+                                   torch_device, fast)
                 pngs = save_view_pngs(view, name, metas[name]["class_names"], ignore_id, out_dir)
                 views.append(view)
                 per_view.append({"query_id": view.query_id, **view_scores(view, n_classes, ignore_id), "pngs": pngs})

@@ -95,7 +95,7 @@ def failed_result(task: SceneTask, error: str, full_bytes: int | None) -> dict[s
             "steps_used": 0, "max_steps": task.config.finetune.max_steps, "stopped_early": False, "wall_s": 0.0,
             "miou_before": None, "miou_after": None, "psnr_after": None, "artifact_bytes": None,
             "full_checkpoint_bytes": full_bytes, "child_run_id": task.run.run_id if task.run else None,
-            "protocol": None, "curve": []}
+            "protocol": None, "curve": [], "node_id": None}
 
 
 def _error_text(error: BaseException) -> str:
@@ -106,8 +106,13 @@ def _error_text(error: BaseException) -> str:
 
 
 def _scene_task(task: SceneTask) -> dict[str, Any]:
-    """Ray task body (a module-level function, so workers import it by name)."""
-    return run_scene_task(task)
+    """Ray task body (a module-level function, so workers import it by name); the result records the
+    Ray node it ran on (``node_id``)."""
+    import ray
+
+    result = run_scene_task(task) | {"node_id": ray.get_runtime_context().get_node_id()}
+    write_result(Path(task.out_dir), result)
+    return result
 
 
 def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:

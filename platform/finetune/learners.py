@@ -25,7 +25,7 @@ import torch
 from torch import Tensor, nn
 
 from sray.data_tools.loader.sample_types import EvalSample, TrainSample
-from sray.data_tools.loader.views import read_scene_views
+from sray.data_tools.loader.views import StoredView, read_scene_views
 from sray.data_tools.scene import SceneMeta
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.losses import render_loss
@@ -184,14 +184,21 @@ class NeRFLearner(Learner):
 def build_semantic_nerf(shards: Path, scene: str, n_classes: int, ignore_id: int, n_coarse: int, n_fine: int,
                         settings: SemanticNeRFSettings, seed: int, chunk: int) -> SemanticNeRF:
     """A fresh Semantic-NeRF (seeded) whose scene box covers the frusta of all the scene's split views."""
-    manifest = read_manifest(shards)
-    entry = manifest.scenes[scene]
-    meta = SceneMeta.from_json(entry.meta)
-    views = read_scene_views(shards, entry)
+    entry = read_manifest(shards).scenes[scene]
+    return semantic_nerf_for_views(SceneMeta.from_json(entry.meta), read_scene_views(shards, entry),
+                                   tuple(entry.image_size), n_classes, ignore_id, n_coarse, n_fine, settings, seed,
+                                   chunk)
+
+
+def semantic_nerf_for_views(meta: SceneMeta, views: dict[str, StoredView], image_size: tuple[int, int],
+                            n_classes: int, ignore_id: int, n_coarse: int, n_fine: int, settings: SemanticNeRFSettings,
+                            seed: int, chunk: int) -> SemanticNeRF:
+    """A fresh Semantic-NeRF (seeded) whose scene box covers the frusta of the split views among ``views``
+    (cameras as given: perturbed cameras move the box as they would for a user)."""
     ids = [v for v in meta.view_ids if any(v in s for s in meta.splits.values())]
     K = torch.from_numpy(np.stack([views[v].K for v in ids]))  # (V, 3, 3)
     c2w = torch.from_numpy(np.stack([views[v].c2w for v in ids]))  # (V, 4, 4)
-    center, scale = scene_box_from_cameras(K, c2w, tuple(entry.image_size), meta.near, meta.far)
+    center, scale = scene_box_from_cameras(K, c2w, image_size, meta.near, meta.far)
     nerf = settings
     torch.manual_seed(seed)
     return SemanticNeRF(SemanticNeRFConfig(

@@ -18,8 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools.perturbations import exposure, gaussian_noise, jpeg, motion_blur, noisy_pose, occlude
-
 POSE_CM_PER_DEG = 2.0
 """Pose-noise level L turns each camera by L degrees and moves it by ``POSE_CM_PER_DEG · L`` centimetres."""
 
@@ -65,6 +63,8 @@ def perturb_views(axis: str, level: float, rgb: np.ndarray, c2w: np.ndarray,
     Each view draws its own perturbation from ``rng`` (in view order), so a (seed, level) pair always
     gives the same result; level 0 (or JPEG quality 100, or blur length 1) returns exact copies.
     """
+    from sray.data_tools.perturbations import exposure, gaussian_noise, jpeg, motion_blur, noisy_pose, occlude
+
     if AXES[axis].kind != "perturb":
         raise ValueError(f"axis {axis!r} does not perturb views (its kind is {AXES[axis].kind!r})")
     rgb_out, c2w_out = rgb.copy(), np.array(c2w, dtype=np.float64, copy=True)
@@ -84,30 +84,3 @@ def perturb_views(axis: str, level: float, rgb: np.ndarray, c2w: np.ndarray,
         elif axis == "occlusion":
             rgb_out[i] = occlude(rgb[i], level, rng)[0]
     return rgb_out, c2w_out
-
-
-@dataclass(frozen=True)
-class Preset:
-    """Levels per axis, seeds and budgets of one suite size."""
-
-    name: str
-    levels: dict[str, tuple]
-    """Axis -> levels, harmless first (``precision``: names)."""
-    seeds: int
-    """Perturbation seeds averaged at every point (at least 3)."""
-
-
-PRESETS: dict[str, Preset] = {p.name: p for p in (
-    Preset("toy", {"source_views": (1, 2), "unseen_rays": (0, 1), "pose_noise": (0, 5), "image_noise": (0, 30),
-                   "blur": (1, 7), "exposure": (0, 2), "jpeg": (100, 10), "occlusion": (0.0, 0.5),
-                   "precision": ("fp32", "bf16")}, seeds=3),
-    Preset("cpu-small", {"source_views": (1, 2, 4, 8), "unseen_rays": (0, 2, 4, 8), "pose_noise": (0, 1, 2, 5, 10),
-                         "image_noise": (0, 5, 10, 20, 40), "blur": (1, 3, 7, 15, 31), "exposure": (0, 1, 2, 3),
-                         "jpeg": (100, 50, 20, 10, 5), "occlusion": (0.0, 0.1, 0.25, 0.5, 0.75),
-                         "precision": ("fp32", "bf16")}, seeds=3),
-    Preset("gpu", {"source_views": (1, 2, 4, 8, 16), "unseen_rays": (0, 2, 4, 8, 12),
-                   "pose_noise": (0, 0.5, 1, 2, 5, 10), "image_noise": (0, 5, 10, 20, 40, 80),
-                   "blur": (1, 3, 7, 15, 31), "exposure": (0, 1, 2, 3, 4), "jpeg": (100, 50, 20, 10, 5),
-                   "occlusion": (0.0, 0.1, 0.25, 0.5, 0.75), "precision": ("fp32", "bf16", "fp16")}, seeds=5),
-)}
-"""The suite sizes of ``sray stability --preset``."""

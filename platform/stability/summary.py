@@ -28,6 +28,8 @@ class LevelStats:
     psnr_mean: float | None
     n_ok: int
     n_failed: int
+    psnr_min: float | None = None
+    psnr_max: float | None = None
 
 
 def _mean(values: list[float]) -> float | None:
@@ -43,10 +45,10 @@ def level_stats(points: list[dict[str, Any]]) -> list[LevelStats]:
     for (axis, method, level), group in groups.items():
         ok = [p for p in group if p["status"] == "ok"]
         mious = [float(p["miou"]) for p in ok]
+        psnrs = [float(p["psnr"]) for p in ok if p.get("psnr") is not None]
         out.append(LevelStats(axis, method, level, _mean([float(p["x"]) for p in ok if isinstance(p.get("x"), (int, float))]),
-                              _mean(mious), min(mious, default=None), max(mious, default=None),
-                              _mean([float(p["psnr"]) for p in ok if p.get("psnr") is not None]),
-                              len(ok), len(group) - len(ok)))
+                              _mean(mious), min(mious, default=None), max(mious, default=None), _mean(psnrs),
+                              len(ok), len(group) - len(ok), min(psnrs, default=None), max(psnrs, default=None)))
     return out
 
 

@@ -26,7 +26,7 @@ import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sray.platform.tracking.runs import DEFAULT_UI_PORT, default_tracking_uri, sqlite_path
+from sray.platform.tracking.runs import DEFAULT_UI_PORT, default_tracking_uri, is_server, probe_server, sqlite_path
 
 SERVER_ENV = {"MLFLOW_SERVER_ENABLE_JOB_EXECUTION": "false", "MLFLOW_DISABLE_TELEMETRY": "true",
               "DO_NOT_TRACK": "true"}
@@ -137,9 +137,21 @@ def _check_port_free(host: str, port: int) -> None:
                           f"there: open it, or pass --port with a free port") from None
 
 
+def is_tracking_server(tracking_uri: str) -> bool:
+    """True for a tracking server's URI (``http(s)://``), which serves its own dashboard."""
+    return is_server(tracking_uri)
+
+
+def server_links(tracking_uri: str) -> dict[str, str]:
+    """A tracking server's own runs views, experiment name -> address (it serves its dashboard itself);
+    ConnectionError naming the URI when it does not answer."""
+    probe_server(tracking_uri)
+    return experiment_links(tracking_uri, tracking_uri)
+
+
 def _resolve_store(tracking_uri: str | None) -> str:
     uri = tracking_uri or default_tracking_uri(Path.cwd())
-    if uri.startswith(("http://", "https://")):
+    if is_server(uri):
         raise ValueError(f"{uri} is a tracking server, which serves its own dashboard: open "
                          f"{runs_view_url(uri, '<experiment id>')} instead of starting another")
     db = sqlite_path(uri)

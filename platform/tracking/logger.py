@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from sray.platform.tracking.params import sanitize_key, to_params
-from sray.platform.tracking.tracker import RunHandle, RunLogger
+from sray.platform.tracking.tracker import DRAIN_TIMEOUT_S, RunHandle, RunLogger
 
 log = logging.getLogger(__name__)
 
@@ -46,8 +46,9 @@ class MlflowRunLogger(RunLogger):
 
     def __init__(self, handle: RunHandle, *, flush_every_steps: int = 20, flush_every_s: float = 30.0,
                  max_buffered_metrics: int = 100_000, retry_initial_s: float = 2.0, retry_max_s: float = 300.0,
-                 client: Any = None) -> None:
-        """``client``: an ``MlflowClient`` for ``handle.store`` (built here when None)."""
+                 close_timeout_s: float = DRAIN_TIMEOUT_S, close_poll_s: float = 2.0, client: Any = None) -> None:
+        """``client``: an ``MlflowClient`` for ``handle.store`` (built here when None); ``close_timeout_s``:
+        how long :meth:`close` keeps retrying undelivered items, every ``close_poll_s`` seconds."""
         for key, value in HTTP_DEFAULTS.items():
             os.environ.setdefault(key, value)
         self.handle = handle
@@ -55,6 +56,8 @@ class MlflowRunLogger(RunLogger):
         self.flush_every_s = flush_every_s
         self.retry_initial_s = retry_initial_s
         self.retry_max_s = retry_max_s
+        self.close_timeout_s = close_timeout_s
+        self.close_poll_s = close_poll_s
         self.registered: dict[str, str] = {}
         """Registered model name -> version, filled once a registration went through."""
         self._client = client
@@ -175,11 +178,11 @@ class MlflowRunLogger(RunLogger):
         return {"params": len(self._params), "metrics": len(self._metrics), "ops": len(self._ops)}
 
     def close(self, status: str = "FINISHED") -> None:
-        """Flush everything (ignoring back-off) and mark the run FINISHED, FAILED or KILLED."""
+        """Deliver everything (retrying for up to ``close_timeout_s``) and mark the run FINISHED, FAILED or KILLED."""
         if self._closed:
             return
         self._queue(f"run status {status}", lambda c: c.set_terminated(self.handle.run_id, status=status))
-        if not self.flush(force=True):
+        if not self.drain(self.close_timeout_s, self.close_poll_s):
             log.warning("MLflow run %s closed with undelivered items %s (tracking store %s unreachable)",
                         self.handle.run_id, self.pending(), self.handle.store)
         self._closed = True

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import logging
 import re
+import urllib.error
+import urllib.request
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +53,8 @@ def sqlite_path(tracking_uri: str) -> Path | None:
     return Path(tracking_uri[len(prefix):]).resolve()
 
 
-def _is_server(tracking_uri: str) -> bool:
+def is_server(tracking_uri: str) -> bool:
+    """True for an ``http(s)://`` tracking server URI."""
     return tracking_uri.startswith(("http://", "https://"))
 
 
@@ -72,7 +75,7 @@ def _experiment_artifact_location(tracking_uri: str, experiment: str, artifact_r
 
 def _ui_links(tracking_uri: str, experiment_id: str, run_id: str) -> tuple[str, str]:
     page = f"#/experiments/{experiment_id}/runs/{run_id}"
-    if _is_server(tracking_uri):
+    if is_server(tracking_uri):
         return f"{tracking_uri.rstrip('/')}/{page}", ""
     hint = (f"sray ui --tracking-uri {tracking_uri}  (a lean MLflow server: --backend-store-uri {tracking_uri}, "
             f"one worker, no job runner, port {DEFAULT_UI_PORT})")
@@ -86,6 +89,20 @@ def mlflow_client(tracking_uri: str) -> Any:
     return MlflowClient(tracking_uri=tracking_uri, registry_uri=tracking_uri)
 
 
+def probe_server(tracking_uri: str, timeout_s: float = 3.0) -> None:
+    """ConnectionError naming the URI unless the server's ``/health`` answers within ``timeout_s``
+    (MLflow's own client would retry for minutes)."""
+    try:
+        with urllib.request.urlopen(f"{tracking_uri.rstrip('/')}/health", timeout=timeout_s):
+            return
+    except urllib.error.HTTPError as e:
+        reason = f"HTTP {e.code}"
+    except (urllib.error.URLError, OSError) as e:
+        reason = str(getattr(e, "reason", e))
+    raise ConnectionError(f"MLflow tracking server {tracking_uri} does not answer ({reason}); start it "
+                          "(`sray cluster up` prints its URI) or fix --tracking-uri")
+
+
 def ensure_store(tracking_uri: str) -> None:
     """Create the store's schema now (for SQLite: the folder and tables), in this one process.
 
@@ -93,6 +110,8 @@ def ensure_store(tracking_uri: str) -> None:
     name the URI (an unreachable server, an unwritable folder).
     """
     db = sqlite_path(tracking_uri)
+    if is_server(tracking_uri):
+        probe_server(tracking_uri)
     try:
         if db is not None:
             db.parent.mkdir(parents=True, exist_ok=True)

@@ -14,6 +14,7 @@ and warn instead of raising, and :meth:`Tracker.end_run` / :meth:`Tracker.tag_ru
 from __future__ import annotations
 
 import logging
+import time
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -22,6 +23,8 @@ from typing import Any, ClassVar
 
 log = logging.getLogger(__name__)
 
+DRAIN_TIMEOUT_S = 120.0
+"""How long a logger keeps retrying what it still holds when its job ends (:meth:`RunLogger.drain`)."""
 RUN_STATUSES = ("RUNNING", "FINISHED", "FAILED", "KILLED")
 """States a run can be put in (:meth:`Tracker.set_status`)."""
 
@@ -79,6 +82,16 @@ class RunLogger(ABC):
 
     def flush(self, force: bool = False) -> bool:
         """Deliver what is buffered now; True when nothing is left (a logger without a buffer: always)."""
+        return True
+
+    def drain(self, timeout_s: float = DRAIN_TIMEOUT_S, poll_s: float = 2.0) -> bool:
+        """Flush until nothing is left or ``timeout_s`` passed (a store restarting meanwhile loses nothing);
+        True when everything was delivered."""
+        deadline = time.monotonic() + timeout_s
+        while not self.flush(force=True):
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(min(poll_s, max(deadline - time.monotonic(), 0.0)))
         return True
 
     def __enter__(self) -> RunLogger:

@@ -20,9 +20,12 @@ from typing import Any
 
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
+from sray.platform.common.ray_quiet import SETUP_HOOK
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import RunHandle, Tracker
+from sray.platform.train.class_balance import set_class_weights
+from sray.platform.train.inputs import check_train_inputs
 from sray.platform.train.resources import check_feasible
 from sray.platform.train.validation import validation_protocol
 from sray.platform.train.worker import STOP_FILE, train_worker
@@ -88,8 +91,9 @@ def init_ray(address: str | None, num_cpus: int | None = None) -> None:
     if not address:
         for key, value in LOCAL_WORKER_ENV.items():
             os.environ.setdefault(key, value)
+    quiet = {"worker_process_setup_hook": SETUP_HOOK}
     if address:
-        ray.init(address=address)
+        ray.init(address=address, runtime_env=quiet)
         return
     # Ray's own processes (gcs, raylet) share the terminal's process group: started with SIGINT
     # ignored (inherited across exec), a Ctrl-C reaches only this driver, which then stops the
@@ -98,7 +102,7 @@ def init_ray(address: str | None, num_cpus: int | None = None) -> None:
     try:
         ray.init(address="local", num_cpus=num_cpus or os.cpu_count(), include_dashboard=False,
                  _temp_dir=tempfile.mkdtemp(prefix="ray", dir="/tmp"), object_store_memory=200 * 2**20,
-                 log_to_driver=True)
+                 log_to_driver=True, runtime_env=quiet)
     finally:
         signal.signal(signal.SIGINT, previous)
 
@@ -120,13 +124,14 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
     import ray.train
     from ray.train.torch import TorchTrainer
 
-    if cfg.run.precision == "fp16" and cfg.run.gpus_per_worker == 0:
-        raise ValueError("--precision fp16 needs CUDA (loss scaling on GPU); on CPU use --precision bf16 or no")
+    check_train_inputs(cfg, resume=resume)  # before Ray: one line, never retried
     tracker = get_tracker(cfg.run.tracker, cfg.run.tracking_uri)
     if not resume:
         cfg.run.name = unique_name(cfg)
     cfg.run.output_dir = str(Path(cfg.run.output_dir).resolve())
     cfg.data.shards = str(Path(cfg.data.shards).resolve())
+    if not resume:
+        set_class_weights(cfg)
     job_dir = cfg.job_dir()
     job_dir.mkdir(parents=True, exist_ok=True)
     (job_dir / STOP_FILE).unlink(missing_ok=True)

@@ -99,7 +99,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     loader = make_train_loader(
         Path(cfg.data.shards), n_source=cfg.model.n_source, top_k=cfg.data.top_k,
         rays_per_batch=cfg.data.rays_per_batch, batches_per_epoch=epoch_len, rank=rank, world_size=world,
-        num_workers=cfg.data.loader_workers, seed=cfg.run.seed)
+        num_workers=cfg.data.loader_workers, seed=cfg.run.seed, augment=cfg.data.augmentation())
 
     def batches_from(step_at: int) -> Any:
         loader.set_epoch(step_at // epoch_len)
@@ -182,4 +182,4 @@ def train_worker(payload: dict[str, Any]) -> None:
     finally:
         bar.close()
         if logger is not None:
-            logger.flush(force=True)
+            logger.drain()  # a tracking server restarting now still gets every metric

@@ -1,0 +1,98 @@
+"""Per-class pixel statistics of a dataset (scene folders or shards) and class weights derived from them.
+
+``count_pixels`` tallies label images; ``dataset_pixel_counts`` reads a folder of scenes in sray layout
+(labels only), ``shard_pixel_counts`` a shard folder (the views the training loader reads);
+``balanced_weights`` turns counts into the weights of the class-frequency-aware semantic loss.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from sray.data_tools.png import decode_png
+from sray.data_tools.scene import IGNORE_ID, SceneMeta
+
+BALANCE_MODES = ("none", "inverse-sqrt", "inverse")
+"""Class weighting of the semantic loss: none, w_c ∝ f_c^-1/2 or w_c ∝ f_c^-1 (f_c: pixel frequency)."""
+
+
+def count_pixels(labels: Iterable[np.ndarray], n_classes: int) -> np.ndarray:
+    """int64 (n_classes + 1,): pixels of each class id, then of the ignore id, over all label images.
+
+    Ids other than 0..n_classes-1 and ``IGNORE_ID`` raise ValueError (a label space mismatch).
+    """
+    counts = np.zeros(n_classes + 1, np.int64)
+    for label in labels:
+        flat = np.asarray(label).ravel().astype(np.int64)
+        ignore = flat == IGNORE_ID
+        if np.any(flat[~ignore] >= n_classes) or np.any(flat < 0):
+            raise ValueError(f"label ids outside 0..{n_classes - 1} and {IGNORE_ID}: "
+                             f"{sorted(set(flat[~ignore & (flat >= n_classes)].tolist()))[:5]}")
+        counts[:n_classes] += np.bincount(flat[~ignore], minlength=n_classes)
+        counts[n_classes] += int(ignore.sum())
+    return counts
+
+
+def dataset_pixel_counts(dataset_dir: Path, roles: tuple[str, ...] = ("train", "test")
+                         ) -> tuple[list[str], dict[str, np.ndarray]]:
+    """(class names, {scene: counts}) of every scene of ``roles`` in a dataset folder (sray layout)."""
+    from sray.data_tools.scene_folder import list_scenes
+
+    names: list[str] | None = None
+    per_scene: dict[str, np.ndarray] = {}
+    for scene_dir in list_scenes(Path(dataset_dir)):
+        meta = SceneMeta.from_json(json.loads((scene_dir / "scene.json").read_text()))
+        if meta.role not in roles:
+            continue
+        names = names or list(meta.class_names)
+        paths = [scene_dir / "label" / f"{v}.png" for v in meta.view_ids]
+        per_scene[meta.name] = count_pixels((decode_png(p.read_bytes(), str(p)) for p in paths), len(names))
+    if names is None:
+        raise ValueError(f"{dataset_dir}: no scene with role in {roles}; is it a dataset written by `sray data synth`?")
+    return names, per_scene
+
+
+def shard_pixel_counts(shards_dir: Path, roles: tuple[str, ...] = ("train",)
+                       ) -> tuple[list[str], dict[str, np.ndarray]]:
+    """(class names, {scene: counts}) of the views of every scene of ``roles`` in a shard folder."""
+    from sray.data_tools.loader.views import read_scene_views
+    from sray.data_tools.shards.manifest import read_manifest
+
+    manifest = read_manifest(Path(shards_dir))
+    names: list[str] | None = None
+    per_scene: dict[str, np.ndarray] = {}
+    for scene, entry in sorted(manifest.scenes.items()):
+        if entry.meta.get("role", "train") not in roles:
+            continue
+        names = names or list(entry.meta["class_names"])
+        views = read_scene_views(Path(shards_dir), entry)
+        per_scene[scene] = count_pixels((v.label() for v in views.values()), len(names))
+    if names is None:
+        raise ValueError(f"{shards_dir}/manifest.json: no scene with role in {roles}")
+    return names, per_scene
+
+
+def balanced_weights(counts: np.ndarray, mode: str, max_ratio: float = 10.0) -> list[float]:
+    """Per-class loss weights (n_classes,) from pixel counts (n_classes,) of the labelled classes.
+
+    ``inverse-sqrt``: w_c ∝ f_c^-1/2; ``inverse``: w_c ∝ f_c^-1; then clipped to ``max_ratio`` times
+    the smallest weight and scaled so the pixel-weighted mean weight is 1 (sum_c f_c w_c = 1, the
+    loss keeps its scale). Classes with no pixel get the largest weight (they never are targets).
+    """
+    if mode not in BALANCE_MODES:
+        raise ValueError(f"class balance mode {mode!r}; use one of {BALANCE_MODES}")
+    counts = np.asarray(counts, np.float64)
+    if mode == "none" or counts.sum() <= 0:
+        return [1.0] * len(counts)
+    freq = counts / counts.sum()
+    present = freq > 0
+    w = np.zeros_like(freq)
+    w[present] = freq[present] ** (-0.5 if mode == "inverse-sqrt" else -1.0)
+    w[present] = np.minimum(w[present], max_ratio * w[present].min())
+    w[~present] = w[present].max()
+    w /= float(np.sum(freq * w))
+    return [float(v) for v in w]

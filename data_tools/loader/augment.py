@@ -1,0 +1,114 @@
+"""Training-sample augmentation that teaches generalization (every option off by default).
+
+* **colour jitter per source view**: each source image independently gets an exposure change of
+  ``colour_ev`` stops at most and a per-channel change of ``channel_ev`` stops at most (a white
+  balance shift), through the stability suite's :func:`sray.data_tools.perturbations.exposure`,
+  and optionally Gaussian noise (:func:`~sray.data_tools.perturbations.gaussian_noise`); the
+  query's target colours are left alone, so the model must see through its inputs' photometry;
+* **random source-view count and neighbour subsets**: each sample carries m sources, m drawn
+  uniformly in [``min_source``, n_source], chosen at random among the first k ranked neighbours,
+  k drawn uniformly in [m, top_k] (near-duplicate or wide-baseline sets);
+* **random source resolution**: all sources of a sample are resized by one factor drawn in
+  [1 - ``source_scale``, 1] (a Gaussian prefilter against aliasing, then bilinear sampling, which
+  keeps pixel centres exact; OpenCV's area filter shifts them by up to 0.05 pixel at non-integer
+  factors), their intrinsics following the pixel-centre rule ``u' + 0.5 = s (u + 0.5)`` (per axis,
+  with the rounded output size), so geometry stays exact;
+* **random query crops**: the sample's rays are drawn inside a random window whose sides are
+  ``query_crop`` of the image's (0 = the whole image): dense local supervision, as a patch.
+
+With every option off nothing is drawn from the sample's random generator, so samples are
+bit-identical to the loader without augmentation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from sray.data_tools.perturbations import exposure, gaussian_noise
+
+
+@dataclass(frozen=True)
+class Augmentation:
+    """Augmentation settings of the training loader (see the module docstring)."""
+
+    colour_ev: float = 0.0
+    """Largest exposure change of a source view, in EV stops (uniform in ±colour_ev); 0 = off."""
+    channel_ev: float = 0.0
+    """Largest extra per-channel change, in EV stops (uniform in ±channel_ev per channel); 0 = off."""
+    noise_sigma: float = 0.0
+    """Largest Gaussian noise sigma of a source view, in 8-bit levels (uniform in [0, value]); 0 = off."""
+    min_source: int = 0
+    """Fewest source views of a sample (m uniform in [min_source, n_source]); 0 = always n_source."""
+    source_scale: float = 0.0
+    """Sources are resized by a factor uniform in [1 - source_scale, 1]; 0 = off."""
+    query_crop: float = 0.0
+    """Rays come from a random window with sides this fraction of the image's; 0 = whole image."""
+
+    def __post_init__(self) -> None:
+        """ValueError naming the field that is out of range."""
+        for name in ("colour_ev", "channel_ev", "noise_sigma", "min_source"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"augmentation: {name} is {getattr(self, name)}; it must be >= 0 (0 = off)")
+        if not 0.0 <= self.source_scale < 1.0:
+            raise ValueError(f"augmentation: source_scale is {self.source_scale}; use 0 (off) up to below 1")
+        if not 0.0 <= self.query_crop <= 1.0:
+            raise ValueError(f"augmentation: query_crop is {self.query_crop}; use 0 (off) or a fraction in (0, 1]")
+
+    @property
+    def jitters_colour(self) -> bool:
+        """Whether source images change photometrically."""
+        return self.colour_ev > 0 or self.channel_ev > 0 or self.noise_sigma > 0
+
+    def source_choice(self, rng: np.random.Generator, n_candidates: int, n_source: int) -> list[int]:
+        """Indices into the ranked candidates of a sample's sources (random subset; see module doc)."""
+        if self.min_source <= 0:
+            return [int(i) for i in rng.choice(n_candidates, n_source, replace=False)]
+        m = int(rng.integers(min(self.min_source, n_source), n_source + 1))
+        k = int(rng.integers(m, n_candidates + 1))
+        return [int(i) for i in rng.choice(k, m, replace=False)]
+
+    def scale(self, rng: np.random.Generator) -> float:
+        """The resize factor of one sample's sources (1.0 when off; draws nothing then)."""
+        return 1.0 if self.source_scale <= 0 else float(rng.uniform(1.0 - self.source_scale, 1.0))
+
+    def jitter(self, rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """uint8 (H, W, 3) source image with this view's own exposure, channel gains and noise."""
+        if not self.jitters_colour:
+            return rgb
+        ev = float(rng.uniform(-self.colour_ev, self.colour_ev)) if self.colour_ev > 0 else 0.0
+        gains = rng.uniform(-self.channel_ev, self.channel_ev, 3) if self.channel_ev > 0 else np.zeros(3)
+        out = np.concatenate([exposure(rgb[..., c:c + 1], ev + float(gains[c])) for c in range(3)], axis=2)
+        if self.noise_sigma > 0:
+            out = gaussian_noise(out, float(rng.uniform(0.0, self.noise_sigma)), rng)
+        return out
+
+    def crop_window(self, rng: np.random.Generator, h: int, w: int) -> tuple[int, int, int, int]:
+        """(v0, u0, height, width) of the window rays are drawn from; the whole image when off."""
+        if self.query_crop <= 0 or self.query_crop >= 1:
+            return 0, 0, h, w
+        ch, cw = max(1, round(self.query_crop * h)), max(1, round(self.query_crop * w))
+        return int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1)), ch, cw
+
+
+def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Resize uint8 (H, W, 3) by ``scale`` (Gaussian prefilter, then bilinear) and move K (3, 3) by the
+    pixel-centre rule.
+
+    The output size is rounded per axis, and each axis uses its exact factor ``W'/W`` or ``H'/H``:
+    ``f' = s f``, ``c' = s (c + 0.5) - 0.5``. Returns the new image and float64 K.
+    """
+    h, w = rgb.shape[:2]
+    nh, nw = max(1, round(h * scale)), max(1, round(w * scale))
+    if (nh, nw) == (h, w):
+        return rgb, np.asarray(K, np.float64)
+    sx, sy = nw / w, nh / h
+    sigma_x, sigma_y = (0.5 * np.sqrt(max(1.0 / f**2 - 1.0, 0.0)) for f in (sx, sy))  # antialiasing, in pixels
+    blurred = cv2.GaussianBlur(rgb, (0, 0), sigmaX=max(sigma_x, 1e-3), sigmaY=max(sigma_y, 1e-3))
+    out = cv2.resize(blurred, (nw, nh), interpolation=cv2.INTER_LINEAR)
+    K2 = np.array(K, np.float64, copy=True)
+    K2[0, 0], K2[0, 1], K2[0, 2] = sx * K2[0, 0], sx * K2[0, 1], sx * (K2[0, 2] + 0.5) - 0.5
+    K2[1, 1], K2[1, 2] = sy * K2[1, 1], sy * (K2[1, 2] + 0.5) - 0.5
+    return out, K2

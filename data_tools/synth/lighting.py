@@ -1,0 +1,76 @@
+"""A room's lights: ceiling lamps, an optional floor lamp and daylight from the windows, each with a
+colour temperature; the ambient level and the camera's exposure are drawn per scene elsewhere.
+
+Colours come from Planck's law: the black-body radiance at three representative wavelengths (610,
+550 and 465 nm) relative to that of a 6504 K body (the sRGB white point), normalised so the largest
+channel is 1, and then half white-balanced (square root), as a camera's auto white balance removes
+part of a colour cast. 2700 K gives (1, 0.76, 0.46), 6500 K white, 10000 K (0.84, 0.89, 1).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sray.data_tools.scene import IGNORE_ID
+from sray.data_tools.synth import fittings as fx
+from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth.floor_plan import FloorPlan, Light
+from sray.data_tools.synth.furniture import Piece, span
+
+WAVELENGTHS_M = (610e-9, 550e-9, 465e-9)
+"""Representative wavelengths of the red, green and blue channels (metres)."""
+WHITE_K = 6504.0
+"""Colour temperature that renders white (the sRGB / D65 white point)."""
+
+
+def _planck(wavelength: float, kelvin: float) -> float:
+    """Black-body spectral radiance up to a constant factor."""
+    h, c, k = 6.62607e-34, 2.99792e8, 1.380649e-23
+    return 1.0 / (wavelength**5 * math.expm1(h * c / (wavelength * k * kelvin)))
+
+
+def kelvin_rgb(kelvin: float) -> tuple[float, float, float]:
+    """Linear RGB tint (max channel 1) of a light of colour temperature ``kelvin`` (module docstring)."""
+    ratio = [_planck(lam, kelvin) / _planck(lam, WHITE_K) for lam in WAVELENGTHS_M]
+    top = max(ratio)
+    return tuple(math.sqrt(r / top) for r in ratio)  # type: ignore[return-value]
+
+
+def _floor_lamp(rng: np.random.Generator, height: float) -> Piece:
+    """A floor lamp: base, pole and an emissive shade (ignore-labelled: ScanNet-20 has no lamp class)."""
+    s, metal = float(rng.uniform(0.14, 0.22)), mat.metal(rng)
+    boxes = [span(IGNORE_ID, metal, -0.13, 0.13, -0.13, 0.13, 0.0, 0.03),
+             span(IGNORE_ID, metal, -0.015, 0.015, -0.015, 0.015, 0.03, height - 0.25),
+             span(IGNORE_ID, mat.lamp_glow(), -s, s, -s, s, height - 0.25, height, casts_shadow=False)]
+    return Piece(boxes, 2 * s, 2 * s, height)
+
+
+def add_lights(rng: np.random.Generator, plan: FloorPlan) -> None:
+    """Ceiling lamps (1-4 by floor area) with a point light under each (the first casts shadows), an
+    optional floor lamp and a daylight fill light in front of each of up to two windows."""
+    lx, ly, h = plan.size
+    base_k = float(rng.uniform(2700.0, 6500.0))
+    n = int(np.clip(round(lx * ly / 9.0 + rng.uniform(-0.5, 0.5)), 1, 4))
+    cols = 1 if n == 1 else 2
+    rows = math.ceil(n / cols)
+    for i in range(n):
+        fx_, fy_ = ((i % cols) + 0.5) / cols, ((i // cols) + 0.5) / rows
+        x = lx * fx_ + float(rng.uniform(-0.25, 0.25)) if lx >= ly else lx * fy_ + float(rng.uniform(-0.25, 0.25))
+        y = ly * fy_ + float(rng.uniform(-0.25, 0.25)) if lx >= ly else ly * fx_ + float(rng.uniform(-0.25, 0.25))
+        x, y = float(np.clip(x, 0.4, lx - 0.4)), float(np.clip(y, 0.4, ly - 0.4))
+        plan.add(fx.ceiling_lamp(rng, h), x, y, 0.0, occupies_floor=False)
+        tint = kelvin_rgb(base_k + float(rng.uniform(-300.0, 300.0)))
+        plan.lights.append(Light((x, y, h - 0.35), float(rng.uniform(1.6, 3.4)) / n ** 0.5, tint))
+    if rng.random() < 0.4:
+        lamp = _floor_lamp(rng, float(rng.uniform(1.4, 1.75)))
+        for wall in [int(w) for w in rng.permutation(4)]:
+            s = plan.try_wall(rng, lamp, wall, gap=0.05, tries=8)
+            if s is not None:
+                x, y, _ = plan.wall_pose(wall, s, lamp.depth, 0.05)
+                plan.lights.append(Light((x, y, lamp.height - 0.12), float(rng.uniform(0.5, 1.2)),
+                                         kelvin_rgb(float(rng.uniform(2400.0, 3200.0)))))
+                break
+    for x, y, z in plan.windows[:2]:
+        plan.lights.append(Light((x, y, z), float(rng.uniform(0.3, 1.0)), kelvin_rgb(float(rng.uniform(6500.0, 10000.0)))))

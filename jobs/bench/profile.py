@@ -1,0 +1,107 @@
+"""``sray bench profile``: ``torch.profiler`` of the paper-config training step and of a whole-image render.
+
+Writes the top operators (self time, the share of the total, calls) to ``docs/performance.md``
+with the command that produced them, one section per (workload, implementation, device), so the
+optimisation decisions there are read off a profile, not guessed.
+
+* training step: 1024 rays, 64+64 samples, 8 source views, 320x240, fp32, encode + render +
+  loss + backward + Adam (``probes.train_step_worker``'s step), profiled after one warm-up step;
+* render: ``SRayModel.render_image`` of one 320x240 view against 8 encoded source views, with the
+  demo's 24+24-sample model (``--quick`` shrinks both).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import torch
+from torch.profiler import ProfilerActivity, profile
+
+from sray.jobs.bench.workloads import make_train_step, render_case
+
+TOP_OPS = 18
+"""Operators listed per profile."""
+
+
+def _top_table(prof: profile, wall_s: float, n: int = TOP_OPS) -> str:
+    """Markdown table of the ``n`` operators with the most self CPU time (and self CUDA time)."""
+    events = [e for e in prof.key_averages() if e.self_cpu_time_total > 0 or e.self_device_time_total > 0]
+    cuda = any(e.self_device_time_total > 0 for e in events)
+    key = (lambda e: e.self_device_time_total) if cuda else (lambda e: e.self_cpu_time_total)
+    total = sum(key(e) for e in events) or 1.0
+    head = "| operator | calls | self CPU ms | share of self time |" + (" self CUDA ms |" if cuda else "")
+    lines = [head, "|---|---:|---:|---:|" + ("---:|" if cuda else "")]
+    for e in sorted(events, key=key, reverse=True)[:n]:
+        row = f"| `{e.key}` | {e.count} | {e.self_cpu_time_total / 1e3:.0f} | {100 * key(e) / total:.1f}% |"
+        lines.append(row + (f" {e.self_device_time_total / 1e3:.0f} |" if cuda else ""))
+    lines.append(f"\nWall time of the profiled call: {wall_s:.2f} s (profiler overhead included).")
+    return "\n".join(lines)
+
+
+def profile_call(fn: Callable[[], None], device: torch.device, warm_up: bool = True) -> tuple[profile, float]:
+    """Run ``fn`` once to warm up (unless ``warm_up`` is False), then once under ``torch.profiler``;
+    returns the profile and its wall time."""
+    if warm_up:
+        fn()
+    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
+    with profile(activities=activities) as prof:
+        t0 = time.perf_counter()
+        fn()
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+        wall = time.perf_counter() - t0
+    return prof, wall
+
+
+def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[str, ...],
+                 quick: bool) -> list[tuple[str, str, str]]:
+    """Profile the ``workloads`` (``train``: the training step, ``render``: a whole-image render) per implementation.
+
+    Returns (title, markdown table, notes) sections for ``docs/performance.md``.
+    """
+    step_spec = ({"rays": 16, "coarse": 4, "fine": 4, "views": 2, "hw": (32, 32)} if quick else
+                 {"rays": 1024, "coarse": 64, "fine": 64, "views": 8, "hw": (240, 320)})
+    render_spec = ({"coarse": 4, "fine": 4, "views": 2, "hw": (32, 48)} if quick else
+                   {"coarse": 24, "fine": 24, "views": 8, "hw": (240, 320)})
+    sections: list[tuple[str, str, str]] = []
+    for impl in impls:
+        if "train" in workloads:
+            sections.append(_profile_train(step_spec, impl, device))
+        if "render" in workloads:
+            sections.append(_profile_render(render_spec, impl, device))
+    return sections
+
+
+def _profile_train(s: dict, impl: str, device: torch.device) -> tuple[str, str, str]:
+    """The profile section of one training step of spec ``s``."""
+    prof, wall = profile_call(make_train_step(dict(s, impl=impl, device=str(device), dtype="fp32")), device)
+    return (f"Profile: training step, impl={impl}", _top_table(prof, wall),
+            f"{s['rays']} rays, {s['coarse']}+{s['fine']} samples, {s['views']} source views, "
+            f"{s['hw'][1]}x{s['hw'][0]}, fp32; encode + render + loss + backward + Adam on a synthetic "
+            "scene, one warm-up step before the profiled one.")
+
+
+def _profile_render(r: dict, impl: str, device: torch.device) -> tuple[str, str, str]:
+    """The profile section of one whole-image render of spec ``r``."""
+    prof, wall = profile_call(render_case(dict(r, impl=impl, device=str(device))), device, warm_up=device.type == "cuda")
+    return (f"Profile: whole-image render, impl={impl}", _top_table(prof, wall),
+            f"`render_image` of one {r['hw'][1]}x{r['hw'][0]} view, {r['views']} source views, "
+            f"{r['coarse']}+{r['fine']} samples (the demo's model size), no grad, chunks of 4096 rays; no "
+            "warm-up render on CPU (nothing to compile, and one render is minutes).")
+
+
+def write_profiles(sections: list[tuple[str, str, str]], doc: Path) -> None:
+    """Record each profile section in ``doc`` (same-title sections on this device are replaced)."""
+    from sray.jobs.bench.doc import record
+
+    for title, table, notes in sections:
+        record(title, table, doc, notes, header=PERFORMANCE_HEADER)
+
+
+PERFORMANCE_HEADER = (
+    "# Performance\n\nWhere the time of a training step and of a whole-image render goes, from "
+    "`torch.profiler` (`sray bench profile`), and what was changed because of it. Every section was "
+    "written by the command it names; self time is the time spent in an operator itself, not in the "
+    "operators it calls.\n")

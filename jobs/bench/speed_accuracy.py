@@ -1,0 +1,169 @@
+"""``sray bench speed-accuracy``: zero-shot mIoU and PSNR of one checkpoint against seconds per view.
+
+Every setting renders the same views of the unseen test scenes (paired), so the accuracy each
+setting gives up is measured against the full render of the same run. Settings trade accuracy for
+speed along the axes of issue 10: samples the fine pass evaluates (the union of coarse and
+resampled depths, or the resampled ones only), source views, precision, and the fast render mode
+(pixel stride = resolution, fine pass only where the coarse pass is unsure). A Pareto chart (PNG)
+and a table go to docs/benchmarks.md; both and the numbers are logged to the tracker.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from contextlib import nullcontext
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.model.fast_render import FastRender
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.eval.view_scoring import render_view, score_views, sray_renderer
+from sray.platform.eval.zero_shot import select_scenes
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One point of the chart: how the views are rendered."""
+
+    name: str
+    n_source: int = 8
+    fine_samples: str = "union"
+    fast: FastRender | None = None
+    bf16: bool = False
+
+
+def default_settings() -> list[Setting]:
+    """The full render (reference point) and the settings traded against it."""
+    return [
+        Setting("full"),
+        Setting("full, fine new only", fine_samples="new"),
+        Setting("full, 4 sources", n_source=4),
+        Setting("full, bf16", bf16=True),
+        Setting("fast s1 c0.9", fast=FastRender(pixel_stride=1, confidence=0.9)),
+        Setting("fast s2 c0.9", fast=FastRender(pixel_stride=2, confidence=0.9)),
+        Setting("fast s4 c0.9", fast=FastRender(pixel_stride=4, confidence=0.9)),
+        Setting("fast s4 c0.7", fast=FastRender(pixel_stride=4, confidence=0.7)),
+        Setting("fast s8 c0.9", fast=FastRender(pixel_stride=8, confidence=0.9)),
+        Setting("fast s4 c0.9, 4 sources", n_source=4, fast=FastRender(pixel_stride=4, confidence=0.9)),
+    ]
+
+
+def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_scene: int,
+            progress: bool = True) -> list[dict]:
+    """Score every setting on the first ``views_per_scene`` test views of each unseen scene.
+
+    Returns one row per setting: name, miou, psnr (dataset-level protocol, mean over scenes),
+    s_per_view (wall-clock render time, source encoding included), views, and the setting.
+    """
+    net, cfg = model_from_checkpoint(checkpoint)
+    net = net.eval()
+    names, _ = select_scenes(shards, None)
+    rows = []
+    for st in settings:
+        net.cfg.fine_samples = st.fine_samples
+        seconds, n_views, per_scene = 0.0, 0, []
+        for scene in names:
+            samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))[:views_per_scene]
+            views = []
+            for sample in samples:
+                autocast = torch.autocast("cpu", dtype=torch.bfloat16) if st.bf16 else nullcontext()
+                t0 = time.perf_counter()
+                with autocast:
+                    views.append(render_view(sray_renderer(net, sample, torch.device("cpu"), st.fast), sample, 1,
+                                             cfg.model.chunk, torch.device("cpu"), st.fast))
+                seconds += time.perf_counter() - t0
+            n_views += len(views)
+            per_scene.append(score_views(views, cfg.model.n_classes, cfg.model.ignore_id))
+        row = {"name": st.name, "miou": 100 * sum(s["miou"] for s in per_scene) / len(per_scene),
+               "psnr": sum(s["psnr"] for s in per_scene) / len(per_scene),
+               "s_per_view": seconds / max(n_views, 1), "views": n_views, "setting": dataclasses.asdict(st)}
+        rows.append(row)
+        if progress:
+            print(f"[speed-accuracy] {st.name}: mIoU {row['miou']:.2f}  PSNR {row['psnr']:.2f}  "
+                  f"{row['s_per_view']:.2f} s/view", flush=True)
+    net.cfg.fine_samples = "union"
+    return rows
+
+
+def pareto(rows: list[dict]) -> list[dict]:
+    """Rows no other row beats on both speed and mIoU, fastest first."""
+    front, best = [], float("-inf")
+    for r in sorted(rows, key=lambda r: (r["s_per_view"], -r["miou"])):
+        if r["miou"] > best:
+            front.append(r)
+            best = r["miou"]
+    return front
+
+
+def table(rows: list[dict]) -> str:
+    """Markdown table: mIoU and its paired difference to the full render, PSNR, seconds per view, speed-up."""
+    ref = rows[0]
+    on_front = {r["name"] for r in pareto(rows)}
+    lines = ["| setting | mIoU % | Δ mIoU vs full (points) | PSNR dB | s / view | speed-up vs full | Pareto |",
+             "|---|---:|---:|---:|---:|---:|:---:|"]
+    for r in rows:
+        lines.append(f"| {r['name']} | {r['miou']:.2f} | {r['miou'] - ref['miou']:+.2f} | {r['psnr']:.2f} | "
+                     f"{r['s_per_view']:.2f} | {ref['s_per_view'] / r['s_per_view']:.1f}x | "
+                     f"{'✓' if r['name'] in on_front else ''} |")
+    return "\n".join(lines)
+
+
+def chart(rows: list[dict], path: Path, protocol: str) -> Path:
+    """Pareto chart: mIoU (%) against seconds per view (log scale), the front joined by a line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sray.platform.viz.figure_io import save_png
+
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    for r in rows:
+        ax.scatter(r["s_per_view"], r["miou"], s=40, color="tab:blue" if r["setting"]["fast"] else "tab:gray")
+        ax.annotate(r["name"], (r["s_per_view"], r["miou"]), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    front = pareto(rows)
+    ax.plot([r["s_per_view"] for r in front], [r["miou"] for r in front], color="tab:orange", lw=1.5,
+            label="Pareto front")
+    ax.set_xscale("log")
+    ax.set_xlabel("seconds per view (log scale, CPU)")
+    ax.set_ylabel("mIoU (%)")
+    ax.set_title(f"S-Ray zero-shot: accuracy against render time\n{protocol}", fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    out = save_png(fig, path, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc: Path, tracker: str,
+                       tracking_uri: str) -> str:
+    """Measure the default settings, write the chart and the table section, log both; returns the section."""
+    from sray.jobs.bench.doc import record
+    from sray.platform.common.eval_protocol import EvalProtocol
+    from sray.platform.tracking.registry import get_tracker
+
+    rows = measure(Path(checkpoint), Path(shards), default_settings(), views_per_scene)
+    protocol = EvalProtocol.from_shards(Path(shards), 8, 1).describe().replace("render: full", "render: per setting")
+    png = chart(rows, doc.parent / "benchmarks" / "speed-accuracy.png", protocol)
+    notes = (f"Checkpoint `{checkpoint}`; the first {views_per_scene} test views of each unseen scene of `{shards}`, "
+             f"the same views for every setting (paired); mIoU dataset-level per scene, then the mean over "
+             f"scenes; s / view is the wall-clock time of encoding the sources and rendering one whole view on "
+             f"this CPU (noisy: other jobs share the 2 cores). 'fast sS cC': the fast render mode "
+             f"(`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine pass (resampled "
+             f"depths only) where the coarse confidence is below C. Protocol: {protocol}.\n\n"
+             f"![speed-accuracy]({png.relative_to(doc.parent)})")
+    section = record("Speed against accuracy (zero-shot, one checkpoint)", table(rows), doc, notes)
+    tracking = get_tracker(tracker, tracking_uri)
+    run = tracking.start_run("sray-bench", f"speed-accuracy-{time.strftime('%Y%m%d-%H%M%S')}",
+                             tags={"sray.kind": "bench", "sray.protocol": protocol})
+    with tracking.logger(run) as logger:
+        logger.log_params({"checkpoint": str(checkpoint), "shards": str(shards), "views_per_scene": views_per_scene})
+        for i, r in enumerate(rows):
+            logger.log_metrics({"miou": r["miou"], "psnr": r["psnr"], "s_per_view": r["s_per_view"]}, i)
+        logger.log_artifact(png)
+    return section

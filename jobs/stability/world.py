@@ -1,0 +1,71 @@
+"""The world a stability preset builds when it is given no data and no checkpoints: procedural scenes,
+their shards, and one pretraining per S-Ray variant (full CRA, and ``attention=none``), each a real
+``sray train`` job (Ray Train, tracked).
+
+Every piece is kept under ``<out>/world`` and reused by a later run: scenes already generated are
+skipped, shards are written once, and a finished pretraining is recorded in ``checkpoints.json``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from sray.data_tools.atomic import atomic_write_json
+from sray.platform.stability.presets import Preset
+
+VARIANT_ATTENTION = {"sray": "full", "sray-no-cra": "none"}
+"""S-Ray method of the suite -> the ``model.attention`` it is pretrained with."""
+CHECKPOINTS_FILE = "checkpoints.json"
+"""Method -> pretrained checkpoint folder, under ``<out>/world``."""
+
+
+def world_shards(preset: Preset, out: Path) -> Path:
+    """Generate the preset's procedural scenes and shard them; a world already sharded under ``out`` is reused
+    as it is (its checkpoints were pretrained on it), even if the generator has changed since."""
+    from sray.data_tools.shards.writer import write_shards
+    from sray.data_tools.synth.dataset import generate_dataset
+
+    w, root = preset.world, out / "world"
+    shards = root / "shards"
+    if (shards / "manifest.json").exists():  # the world the recorded checkpoints were trained on: kept as it is
+        return shards
+    generate_dataset(root / "scenes", n_train=w.train_scenes, n_test=w.test_scenes, n_views=w.views,
+                     height=w.height, width=w.width, seed=0, progress=True)
+    write_shards(root / "scenes", shards)
+    return shards
+
+
+def pretrain(method: str, preset: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:
+    """One ``sray train`` job of the method's variant on the train scenes; its best (else latest) checkpoint."""
+    from sray.jobs.recipes import get_recipe
+    from sray.platform.train.launcher import launch_training
+
+    w = preset.world
+    cfg = get_recipe("synth-paper" if preset.name == "gpu" else "synth-small")
+    cfg.model.attention, cfg.model.n_source = VARIANT_ATTENTION[method], w.train_n_source
+    cfg.model.n_coarse, cfg.model.n_fine = w.n_coarse, w.n_fine
+    cfg.data.shards, cfg.data.rays_per_batch, cfg.data.top_k = str(shards), w.rays, w.train_n_source + 2
+    cfg.optim.steps = w.pretrain_steps
+    cfg.run.workers, cfg.run.output_dir, cfg.run.tracking_uri = w.workers, str(out / "world" / "train"), tracking_uri
+    cfg.run.experiment, cfg.run.register_model = "sray-stability", ""
+    cfg.run.val_every = cfg.run.ckpt_every = max(w.pretrain_steps // 2, 1)
+    if preset.name == "toy":
+        cfg.data.loader_workers, cfg.data.val_views_per_scene, cfg.run.log_every = 0, 1, 1
+    cfg.run.name = f"stability-{method}-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}"
+    outcome = launch_training(cfg)
+    return Path(outcome.best_checkpoint or outcome.latest_checkpoint)
+
+
+def world_checkpoints(preset: Preset, shards: Path, out: Path, tracking_uri: str,
+                      methods: list[str]) -> dict[str, Path]:
+    """The pretrained checkpoint of every S-Ray method in ``methods``, pretraining the missing ones."""
+    import json
+
+    record_path = out / "world" / CHECKPOINTS_FILE
+    record = json.loads(record_path.read_text()) if record_path.exists() else {}
+    for method in (m for m in VARIANT_ATTENTION if m in methods):
+        if method not in record or not Path(record[method]).exists():
+            record[method] = str(pretrain(method, preset, shards, out, tracking_uri))
+            atomic_write_json(record_path, record)
+    return {m: Path(p) for m, p in record.items() if m in methods}

@@ -1,0 +1,100 @@
+"""The record of a local cluster: ``<dir>/cluster.json`` (readable by its owner only).
+
+It holds what ``up`` chose and started (ports, the database password, process ids with their start
+times), so ``status`` can report and ``down`` can stop exactly those processes. It stays after
+``down``: the next ``up`` reuses the password and, where still free, the ports.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from sray.data_tools.atomic import atomic_write_json
+from sray.platform.cluster.processes import ClusterError, ProcessRecord, is_alive
+
+STATE_FILE = "cluster.json"
+"""The record's file name inside the cluster folder."""
+FORMAT = "sray-cluster/1"
+"""Format tag of the record."""
+
+
+@dataclass
+class ClusterState:
+    """Everything ``sray cluster`` needs to know about one cluster folder."""
+
+    dir: str
+    """The cluster folder (absolute): database, artifacts, Ray temp dirs, shared storage, logs."""
+    password: str
+    """The PostgreSQL password of the ``sray`` role."""
+    ports: dict[str, int] = field(default_factory=dict)
+    """``postgres``, ``mlflow``, ``gcs`` and ``dashboard`` ports, all on 127.0.0.1."""
+    workers: int = 2
+    """Ray worker nodes started by the last ``up``."""
+    cpus_per_worker: int = 1
+    """Logical CPUs each worker node offers."""
+    processes: dict[str, dict[str, int]] = field(default_factory=dict)
+    """Name (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-1`` ...) -> ``{pid, started}``."""
+    startup_s: dict[str, float] = field(default_factory=dict)
+    """Seconds each part took to become ready at the last ``up``."""
+
+    @property
+    def root(self) -> Path:
+        """The cluster folder."""
+        return Path(self.dir)
+
+    @property
+    def token_path(self) -> Path:
+        """The Ray auth token every node and client shares."""
+        return self.root / "ray" / "auth_token"
+
+    @property
+    def storage(self) -> Path:
+        """The storage path shared by all nodes (jobs' checkpoints, Ray Train's run folders)."""
+        return self.root / "shared"
+
+    @property
+    def ray_address(self) -> str:
+        """The GCS address for ``--address`` (``ray.init`` and ``ray start``)."""
+        return f"127.0.0.1:{self.ports['gcs']}"
+
+    @property
+    def dashboard_url(self) -> str:
+        """The Ray dashboard and Jobs API (``sray submit --address``)."""
+        return f"http://127.0.0.1:{self.ports['dashboard']}"
+
+    @property
+    def tracking_uri(self) -> str:
+        """The MLflow server for ``--tracking-uri``."""
+        return f"http://127.0.0.1:{self.ports['mlflow']}"
+
+    def record(self, name: str) -> ProcessRecord | None:
+        """The recorded process ``name``, or None."""
+        entry = self.processes.get(name)
+        return ProcessRecord(entry["pid"], entry["started"]) if entry else None
+
+    def alive(self) -> dict[str, bool]:
+        """Each recorded process -> whether it still runs."""
+        return {name: is_alive(ProcessRecord(e["pid"], e["started"])) for name, e in self.processes.items()}
+
+    def save(self) -> None:
+        """Write the record (owner-only permissions: it holds the database password)."""
+        path = self.root / STATE_FILE
+        atomic_write_json(path, {"format": FORMAT, **asdict(self)})
+        os.chmod(path, 0o600)
+
+
+def load_state(root: Path) -> ClusterState | None:
+    """The record in ``root``, or None when there is none; ClusterError for an unreadable one."""
+    path = Path(root) / STATE_FILE
+    if not path.exists():
+        return None
+    try:
+        data = json.loads(path.read_text())
+        if data.pop("format", None) != FORMAT:
+            raise ValueError(f"field 'format' is not {FORMAT!r}")
+        return ClusterState(**data)
+    except (ValueError, TypeError) as e:
+        raise ClusterError(f"{path}: not a sray cluster record ({e}); pass another --dir or remove the file") from None

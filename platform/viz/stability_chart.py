@@ -1,0 +1,116 @@
+"""The stability suite's chart (PNG): one panel per stress axis, a score against the axis's level, one
+line per method with its seed spread (min-max band) and its failed levels marked.
+
+The caller turns its results into :class:`StabilityPanel` objects (this module knows nothing of the
+suite), and hands the methods' :class:`~sray.platform.viz.chart_style.ChartStyle` with them.
+Matplotlib's Agg canvas is used directly (no pyplot state).
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sray.platform.viz.chart_style import ChartStyle
+from sray.platform.viz.figure_io import save_png
+
+PANEL_SIZE = (4.2, 3.2)
+"""Inches per panel (width, height)."""
+COLUMNS = 3
+"""Panels per row."""
+FAILED_COLOR = "#d62728"
+"""Colour of the marks of failed levels."""
+DPI = 110
+
+
+@dataclass(frozen=True)
+class LevelPoint:
+    """One method at one level: the mean over seeds and their spread, or a failure."""
+
+    x: float | str
+    """Where it is drawn: a number, or a category name (a categorical axis)."""
+    mean: float | None
+    """None when every seed failed at this level."""
+    low: float | None = None
+    high: float | None = None
+
+
+@dataclass
+class StabilityPanel:
+    """One axis: its title, x label and one list of points per method, in level order."""
+
+    title: str
+    x_label: str
+    lines: dict[str, list[LevelPoint]] = field(default_factory=dict)
+    log_x: bool = False
+    """Draw x on a log-2 scale (counts of views)."""
+    harmless_high: bool = False
+    """The harmless end of the axis is its largest value (views, JPEG quality): x is drawn decreasing, so
+    every panel reads from harmless (left) to broken (right)."""
+
+
+def _positions(panel: StabilityPanel) -> tuple[dict[float | str, float], list[str] | None]:
+    """x value -> drawn position; category names when the axis is categorical."""
+    xs = list(dict.fromkeys(p.x for pts in panel.lines.values() for p in pts))
+    if any(isinstance(x, str) for x in xs):
+        return {x: float(i) for i, x in enumerate(xs)}, [str(x) for x in xs]
+    return {x: float(x) for x in xs}, None
+
+
+def write_stability_chart(panels: list[StabilityPanel], styles: Mapping[str, ChartStyle], y_label: str, title: str,
+                          footnote: list[str], path: Path) -> Path:
+    """Draw ``panels`` (a failed level: a red x at the bottom of its panel) and write the PNG to ``path``.
+
+    ``title`` may hold several lines (the first is drawn larger: the chart's name; then the protocol).
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    rows = math.ceil(len(panels) / COLUMNS)
+    width = PANEL_SIZE[0] * min(COLUMNS, len(panels))
+    lines = [ln for part in footnote for ln in textwrap.wrap(part, max(60, int(width * 17)))]
+    title_lines = [ln for part in title.split("\n") for ln in textwrap.wrap(part, int(width * 14))]
+    head, foot = 1.0 + 0.2 * len(title_lines), 0.2 + 0.16 * len(lines)
+    height = PANEL_SIZE[1] * rows + head + foot
+    fig = Figure(figsize=(width, height))
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(rows, min(COLUMNS, len(panels)), top=1 - head / height, bottom=foot / height + 0.06,
+                            hspace=0.55, wspace=0.3)
+    handles: dict[str, object] = {}
+    for k, panel in enumerate(panels):
+        ax = fig.add_subplot(grid[k // COLUMNS, k % COLUMNS])
+        pos, categories = _positions(panel)
+        for method, points in panel.lines.items():
+            style = styles[method]
+            ok = [p for p in points if p.mean is not None]
+            xs = [pos[p.x] for p in ok]
+            (line,) = ax.plot(xs, [p.mean for p in ok], color=style.color, marker=style.marker, label=style.label)
+            handles.setdefault(style.label, line)
+            if ok and all(p.low is not None for p in ok):
+                ax.fill_between(xs, [p.low for p in ok], [p.high for p in ok], color=style.color, alpha=0.18,
+                                linewidth=0)
+            failed = [pos[p.x] for p in points if p.mean is None]
+            if failed:
+                mark = ax.scatter(failed, [0.0] * len(failed), color=FAILED_COLOR, marker="x", s=60, zorder=5,
+                                  label="failed (every seed)")
+                handles.setdefault("failed (every seed)", mark)
+        if categories is not None:
+            ax.set_xticks(range(len(categories)), categories)
+        elif panel.log_x:
+            ax.set_xscale("log", base=2)
+        if panel.harmless_high:
+            ax.invert_xaxis()
+        ax.set_title(panel.title, fontsize=10)
+        ax.set_xlabel(textwrap.fill(panel.x_label, 45), fontsize=8)
+        ax.set_ylabel(y_label, fontsize=8)
+        ax.set_ylim(bottom=0.0)
+        ax.grid(alpha=0.3)
+    fig.text(0.5, 1 - 0.1 / height, title_lines[0], fontsize=12, ha="center", va="top")
+    fig.text(0.5, 1 - 0.38 / height, "\n".join(title_lines[1:]), fontsize=8, ha="center", va="top")
+    fig.legend(list(handles.values()), list(handles), loc="upper center", ncols=min(4, len(handles)),
+               bbox_to_anchor=(0.5, 1 - (0.3 + 0.2 * len(title_lines)) / height), fontsize=9, frameon=False)
+    fig.text(0.01, 0.01, "\n".join(lines), fontsize=7, va="bottom", ha="left")
+    return save_png(fig, path, DPI)

@@ -1,0 +1,66 @@
+"""``sray cluster``: PostgreSQL + MLflow server + Ray head and 2 worker nodes as real processes.
+
+Marked ``cluster`` (select with ``-m cluster``); skipped with the reason where PostgreSQL cannot
+be installed. One cluster serves the whole session (``cluster_fixtures.local_cluster``).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cluster_fixtures import LocalCluster, local_cluster  # noqa: E402,F401
+
+pytestmark = pytest.mark.cluster
+
+
+def _status(url: str, headers: dict[str, str]) -> int:
+    try:
+        with urllib.request.urlopen(urllib.request.Request(url, headers=headers), timeout=10) as reply:
+            return reply.status
+    except urllib.error.HTTPError as e:
+        return e.code
+
+
+def test_cluster_up_status_and_the_parts_it_started(local_cluster: LocalCluster) -> None:
+    """Every recorded process runs, 3 Ray nodes are alive, status prints the addresses to pass on."""
+    from sray.platform.cluster.local_cluster import alive_nodes
+
+    state = local_cluster.state
+    assert all(state.alive().values()) and set(state.processes) == {
+        "postgres", "mlflow", "ray-head", "ray-worker-1", "ray-worker-2"}
+    assert alive_nodes(state) == 3
+    shown = local_cluster.sray("cluster", "status", "--dir", str(local_cluster.dir))
+    assert shown.returncode == 0, shown.stderr
+    for text in (f"--address {state.ray_address}", f"--address {state.dashboard_url}",
+                 f"--tracking-uri {state.tracking_uri}", "RAY_AUTH_MODE=token"):
+        assert text in shown.stdout
+    with urllib.request.urlopen(f"{state.tracking_uri}/api/2.0/mlflow/experiments/search?max_results=5",
+                                timeout=10) as reply:
+        assert "experiments" in json.loads(reply.read())
+    assert oct((local_cluster.dir / "cluster.json").stat().st_mode & 0o777) == "0o600"
+
+
+def test_refused_without_the_ray_token_or_with_a_foreign_host_header(local_cluster: LocalCluster) -> None:
+    """The Jobs API answers 401 without the token; MLflow answers 403 to an unknown Host header."""
+    state = local_cluster.state
+    token = state.token_path.read_text().strip()
+    jobs = f"{state.dashboard_url}/api/jobs/"
+    assert _status(jobs, {}) == 401
+    assert _status(jobs, {"Authorization": "Bearer not-the-token"}) in (401, 403)
+    assert _status(jobs, {"Authorization": f"Bearer {token}"}) == 200
+    search = f"{state.tracking_uri}/api/2.0/mlflow/experiments/search?max_results=1"
+    assert _status(search, {"Host": "rebind.example.com"}) == 403
+    assert _status(search, {}) == 200
+    env = {k: v for k, v in local_cluster.env.items() if not k.startswith("RAY_AUTH")}
+    env["RAY_AUTH_MODE"] = "token"
+    env["RAY_AUTH_TOKEN"] = "0" * 64
+    probe = "import ray; ray.init(address='%s'); print('joined')" % state.ray_address
+    joined = local_cluster.python(probe, env=env, timeout=60)
+    assert "joined" not in joined.stdout
