@@ -26,7 +26,7 @@ from sray.platform.finetune.scene_artifacts import (
     save_semantic_nerf,
     save_sray_delta,
 )
-from sray.platform.finetune.scene_finetune import SceneTask, SceneOutcome, evaluate, finetune_scene
+from sray.platform.finetune.scene_finetune import SceneOutcome, SceneTask, evaluate, finetune_scene
 
 SCENE = "synth_test_000"
 pytestmark = pytest.mark.usefixtures("one_thread")

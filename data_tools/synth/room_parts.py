@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import materials as mat
-from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth.floor_plan import FloorPlan
 from sray.data_tools.synth.furniture import Piece, span
 
