@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from fleet_fixtures import tiny_checkpoint  # noqa: F401
+from train_fixtures import tiny_shards  # noqa: F401
+
 from sray.jobs.bench.speed_accuracy import chart, pareto, table
 
 
@@ -29,3 +32,20 @@ def test_table_reports_paired_differences_and_speed_ups_against_the_first_row() 
 def test_chart_is_written(tmp_path: Path) -> None:
     png = chart(ROWS, tmp_path / "sa.png", "protocol line")
     assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_measure_pairs_the_settings_and_the_fast_path_is_lossless(tiny_shards: Path, tiny_checkpoint: Path) -> None:
+    """On the tiny checkpoint: the unoptimised and the optimised full renders score the same views alike
+    (lossless to fp32 tolerance) and halving the samples changes the render."""
+    from sray.jobs.bench.speed_accuracy import Setting, measure
+    from sray.model.fast_render import FastRender
+
+    settings = [Setting("reference", n_source=3, impl="reference"), Setting("fast impl", n_source=3),
+                Setting("half", n_source=3, sample_scale=0.5),
+                Setting("fast s2", n_source=3, fast=FastRender(pixel_stride=2, confidence=0.9))]
+    rows = measure(tiny_checkpoint, tiny_shards, settings, views_per_scene=1, progress=False)
+    by = {r["name"]: r for r in rows}
+    assert [r["name"] for r in rows] == [s.name for s in settings] and all(r["views"] >= 1 for r in rows)
+    assert abs(by["fast impl"]["miou"] - by["reference"]["miou"]) < 1e-6
+    assert abs(by["fast impl"]["psnr"] - by["reference"]["psnr"]) < 1e-3
+    assert by["half"]["psnr"] != by["fast impl"]["psnr"]

@@ -34,12 +34,19 @@ class Setting:
     fine_samples: str = "union"
     fast: FastRender | None = None
     bf16: bool = False
+    impl: str = "fast"
+    """``SRayConfig.impl`` of the per-sample networks: ``reference`` is the unoptimised path (today's render)."""
+    sample_scale: float = 1.0
+    """Coarse and fine samples per ray as a fraction of the checkpoint's."""
 
 
 def default_settings() -> list[Setting]:
-    """The full render (reference point) and the settings traded against it."""
+    """The unoptimised full render (the reference point: speed-ups and mIoU differences are against it),
+    the lossless fast path and the settings traded against it."""
     return [
+        Setting("full, reference path", impl="reference"),
         Setting("full"),
+        Setting("full, half the samples", sample_scale=0.5),
         Setting("full, fine new only", fine_samples="new"),
         Setting("full, 4 sources", n_source=4),
         Setting("full, bf16", bf16=True),
@@ -63,8 +70,9 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     net = net.eval()
     names, _ = select_scenes(shards, None)
     rows = []
+    n_samples = (net.cfg.n_coarse, net.cfg.n_fine)
     for st in settings:
-        net.cfg.fine_samples = st.fine_samples
+        _apply(net, st, n_samples)
         seconds, n_views, per_scene = 0.0, 0, []
         for scene in names:
             samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))[:views_per_scene]
@@ -85,8 +93,17 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
         if progress:
             print(f"[speed-accuracy] {st.name}: mIoU {row['miou']:.2f}  PSNR {row['psnr']:.2f}  "
                   f"{row['s_per_view']:.2f} s/view", flush=True)
-    net.cfg.fine_samples = "union"
     return rows
+
+
+def _apply(net: torch.nn.Module, st: Setting, n_samples: tuple[int, int]) -> None:
+    """Put the setting's render choices on the model: fine samples, implementation and samples per ray
+    (``n_samples``: the checkpoint's coarse and fine counts)."""
+    net.cfg.fine_samples, net.cfg.impl = st.fine_samples, st.impl
+    for module in net.modules():
+        if hasattr(module, "impl"):
+            module.impl = st.impl
+    net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in n_samples)
 
 
 def pareto(rows: list[dict]) -> list[dict]:
@@ -100,10 +117,11 @@ def pareto(rows: list[dict]) -> list[dict]:
 
 
 def table(rows: list[dict]) -> str:
-    """Markdown table: mIoU and its paired difference to the full render, PSNR, seconds per view, speed-up."""
+    """Markdown table: mIoU and its paired difference to the first row (the reference full render), PSNR,
+    seconds per view, speed-up."""
     ref = rows[0]
     on_front = {r["name"] for r in pareto(rows)}
-    lines = ["| setting | mIoU % | Δ mIoU vs full (points) | PSNR dB | s / view | speed-up vs full | Pareto |",
+    lines = ["| setting | mIoU % | Δ mIoU vs reference (points) | PSNR dB | s / view | speed-up vs reference | Pareto |",
              "|---|---:|---:|---:|---:|---:|:---:|"]
     for r in rows:
         lines.append(f"| {r['name']} | {r['miou']:.2f} | {r['miou'] - ref['miou']:+.2f} | {r['psnr']:.2f} | "
