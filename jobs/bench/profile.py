@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 from torch.profiler import ProfilerActivity, profile
 
+from sray.jobs.bench.render_levers import chunk_table, kernel_table
 from sray.jobs.bench.workloads import make_train_step, render_case
 
 TOP_OPS = 18
@@ -57,7 +58,9 @@ def profile_call(fn: Callable[[], None], device: torch.device, warm_up: bool = T
 
 def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[str, ...],
                  quick: bool) -> list[tuple[str, str, str]]:
-    """Profile the ``workloads`` (``train``: the training step, ``render``: a whole-image render) per implementation.
+    """Profile the ``workloads`` (``train``: the training step, ``render``: a whole-image render) per
+    implementation, and time the render's levers (``kernels``: attention implementations at the render's
+    shapes; ``chunks``: rays per chunk, per implementation).
 
     Returns (title, markdown table, notes) sections for ``docs/performance.md``.
     """
@@ -71,6 +74,18 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
             sections.append(_profile_train(step_spec, impl, device))
         if "render" in workloads:
             sections.append(_profile_render(render_spec, impl, device))
+    if "kernels" in workloads:
+        rays, samples = (64, 8) if quick else (4096, 72)
+        sections.append(("Render lever: attention kernels at the render's shapes", kernel_table(rays, samples),
+                         f"One chunk of the render: {rays} rays, {samples} samples seen by the fine pass, 8 views, "
+                         "4 heads of 8 channels, no grad, CPU; median of 2 calls after a warm-up. GFLOP/s counts "
+                         "the two matmuls of attention (4 L^2 d per head)."))
+    if "chunks" in workloads:
+        chunks, crop, samples = ((64, 16), (12, 16), 4) if quick else ((4800, 1024, 256, 64), (60, 80), 24)
+        sections.append(("Render lever: rays per chunk",
+                         "\n\n".join(chunk_table(chunks, impl, crop, samples) for impl in impls),
+                         "`render_image` of an 80x60 crop of the 320x240 camera (the same field of view), 8 source "
+                         "views, 24+24 samples, no grad; median of 2 renders after a warm-up."))
     return sections
 
 

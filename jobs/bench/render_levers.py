@@ -1,0 +1,97 @@
+"""``sray bench profile --workload kernels chunks``: two levers the render profile points at, timed.
+
+* ``kernels``: the attention call that dominates the render profile, at the render's own shapes
+  (a chunk of 4096 rays, 24 + 48 samples seen by the fine pass, 8 source views, 4 heads of 8
+  channels), with each CPU option torch offers: SDPA's flash kernel with a boolean or an additive
+  mask, SDPA's math backend, and an explicit matmul + softmax. All compute the same attention
+  (the table gives their largest difference to the first);
+* ``chunks``: a whole-image render of a small crop (80x60 rays with the 320x240 camera's field of
+  view) at several chunk sizes, since a chunk's token tensors (rays x samples x views x channels) decide whether
+  they stay in cache and whether glibc serves them from its heap or maps fresh pages.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+from torch.nn.attention import SDPBackend, sdpa_kernel
+
+from sray.jobs.bench.probes import time_call
+from sray.jobs.bench.workloads import model_config, synthetic_batch
+
+HEADS, HEAD_DIM, VIEWS = 4, 8, 8
+"""The default model's attention: 4 heads of 8 channels, over 8 source views."""
+
+
+def _explicit(q: Tensor, k: Tensor, v: Tensor, mask: Tensor) -> Tensor:
+    """softmax(q k^T / sqrt(d), masked) v with plain matmuls."""
+    scores = (q @ k.transpose(-1, -2)) * q.shape[-1] ** -0.5
+    return torch.softmax(scores.masked_fill(~mask, float("-inf")), dim=-1) @ v
+
+
+def _kernels(q: Tensor, k: Tensor, v: Tensor, mask: Tensor) -> dict[str, Callable[[], Tensor]]:
+    """The attention implementations compared, each a closure over the same inputs."""
+    additive = torch.zeros(mask.shape).masked_fill(~mask, float("-inf"))
+
+    def math() -> Tensor:
+        with sdpa_kernel(SDPBackend.MATH):
+            return F.scaled_dot_product_attention(q, k, v, attn_mask=mask)
+
+    return {"SDPA flash, boolean mask": lambda: F.scaled_dot_product_attention(q, k, v, attn_mask=mask),
+            "SDPA flash, additive mask": lambda: F.scaled_dot_product_attention(q, k, v, attn_mask=additive),
+            "SDPA math backend": math,
+            "matmul + softmax": lambda: _explicit(q, k, v, mask)}
+
+
+def kernel_table(rays: int, samples: int, repeats: int = 2) -> str:
+    """Seconds per call and GFLOP/s of each implementation for the intra-view stage (per ray and view,
+    over ``samples``) and the cross-view stage (per ray and sample, over the views)."""
+    gen = torch.Generator().manual_seed(0)
+    shapes = {"intra-view": (rays, VIEWS * HEADS, samples), "cross-view": (rays * samples, HEADS, VIEWS)}
+    lines = ["| stage | q, k, v shape | implementation | s / call | GFLOP/s | max abs diff to the first |",
+             "|---|---|---|---:|---:|---:|"]
+    for stage, (batch, heads, length) in shapes.items():
+        q, k, v = (torch.randn(batch, heads, length, HEAD_DIM, generator=gen) for _ in range(3))
+        mask = torch.rand(batch, 1, 1, length, generator=gen) > 0.2
+        mask[..., 0] = True  # every query keeps a key, as the model's key masks guarantee
+        flops = 4 * batch * heads * length * length * HEAD_DIM
+        first = None
+        with torch.no_grad():
+            for name, fn in _kernels(q, k, v, mask).items():
+                seconds = time_call(fn, torch.device("cpu"), repeats)
+                out = fn()
+                first = out if first is None else first
+                lines.append(f"| {stage} | {tuple(q.shape)} | {name} | {seconds:.3f} | {flops / seconds / 1e9:.1f} | "
+                             f"{(out - first).abs().max().item():.1e} |")
+    return "\n".join(lines)
+
+
+def chunk_table(chunks: tuple[int, ...], impl: str, crop: tuple[int, int] = (60, 80), samples: int = 24,
+                repeats: int = 2) -> str:
+    """Seconds to render a ``crop`` (h, w) of the 320x240 view (the same field of view, fewer rays) with
+    ``samples`` + ``samples`` samples at each chunk size, and the whole view's seconds extrapolated."""
+    from sray.model.semantic_ray import SRayModel
+
+    torch.manual_seed(0)
+    model = SRayModel(model_config({"coarse": samples, "fine": samples, "views": VIEWS, "impl": impl})).eval()
+    batch = synthetic_batch(1, VIEWS, (240, 320), torch.device("cpu"))
+    with torch.no_grad():
+        src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"])
+    h, w = crop
+    K = batch["K"].clone()
+    K[0] *= w / 320
+    K[1] *= h / 240
+    n_rays, scale = h * w, 320 * 240 / (h * w)
+    lines = [f"| impl | chunk (rays) | token tensor per chunk (MB) | s for {n_rays} rays | s per 320x240 view "
+             f"(x{scale:g}) |", "|---|---:|---:|---:|---:|"]
+    for chunk in chunks:
+        def render() -> None:
+            with torch.no_grad():
+                model.render_image(src, K, torch.eye(4), crop, 1.0, 5.0, chunk=chunk)
+        seconds = time_call(render, torch.device("cpu"), repeats)
+        mb = min(chunk, n_rays) * 3 * samples * VIEWS * model.cfg.feat_dim * 4 / 2**20
+        lines.append(f"| {impl} | {chunk} | {mb:.0f} | {seconds:.2f} | {scale * seconds:.0f} |")
+    return "\n".join(lines)

@@ -1,0 +1,40 @@
+"""``sray bench profile`` at toy sizes: the profiler tables and the render levers it times."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from sray.jobs.bench.profile import run_profiles, write_profiles
+
+
+def _rows(table: str) -> list[list[str]]:
+    return [[c.strip() for c in line.split("|")[1:-1]] for line in table.splitlines() if line.startswith("| ")][1:]
+
+
+def test_profiles_and_levers_are_written_and_the_kernels_agree(tmp_path: Path) -> None:
+    """Every requested section is written once; the profile tables name operators (aten ones among them)
+    with shares that sum to at most 100%; the four attention implementations agree to fp32 rounding; each chunk size of
+    each implementation has a row."""
+    sections = run_profiles(torch.device("cpu"), ("reference", "fast"), ("train", "render", "kernels", "chunks"),
+                            quick=True)
+    titles = [t for t, _, _ in sections]
+    assert titles == ["Profile: training step, impl=reference", "Profile: whole-image render, impl=reference",
+                      "Profile: training step, impl=fast", "Profile: whole-image render, impl=fast",
+                      "Render lever: attention kernels at the render's shapes", "Render lever: rays per chunk"]
+    for _, table, _ in sections[:4]:
+        rows = _rows(table)
+        assert rows and all(r[0].startswith("`") and r[0].endswith("`") and int(r[1]) >= 1 for r in rows)
+        assert any(r[0].startswith("`aten::") for r in rows)
+        assert 0 < sum(float(r[3].rstrip("%")) for r in rows) <= 100.05
+    kernels = _rows(sections[4][1])
+    assert len(kernels) == 8 and {r[0] for r in kernels} == {"intra-view", "cross-view"}
+    assert all(float(r[5]) < 1e-5 for r in kernels)
+    chunk_rows = [r for part in sections[5][1].split("\n\n") for r in _rows(part)]
+    assert [(r[0], r[1]) for r in chunk_rows] == [("reference", "64"), ("reference", "16"), ("fast", "64"),
+                                                  ("fast", "16")]
+    doc = tmp_path / "performance.md"
+    write_profiles(sections, doc)
+    text = doc.read_text()
+    assert text.startswith("# Performance") and all(text.count(f"## {t}\n") == 1 for t in titles)
