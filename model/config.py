@@ -22,6 +22,11 @@ FINE_SAMPLES = ("union", "new")
 the coarse and the resampled depths, n_coarse + n_fine per ray (NeRF); ``new`` only the n_fine
 resampled depths (the paper's public code: 128 evaluations per ray at 64 + 64 instead of 192)."""
 
+INPUTS = ("rgb", "rgbd")
+"""What the network is given of its source views (``SRayConfig.inputs``): ``rgb`` (default, the paper's
+text) posed colour images only; ``rgbd`` also their depth maps, which place the coarse samples around
+the surfaces the sources saw (``depth_sampling``). The query view's depth is never an input."""
+
 DENSITY_ACTIVATIONS = ("softplus", "relu")
 """Non-negative activations allowed for the density output."""
 
@@ -92,6 +97,15 @@ class SRayConfig:
     within float32 rounding; ``reference`` is the unoptimised path)."""
     fine_samples: str = "union"
     """Depths the fine pass evaluates, one of ``FINE_SAMPLES``."""
+    inputs: str = "rgb"
+    """Source-view inputs, one of ``INPUTS``: ``rgb`` (default) or ``rgbd`` (source depth guides the
+    coarse samples; same parameters, so a checkpoint of either mode loads in the other)."""
+    depth_fraction: float = 0.5
+    """``rgbd`` only: share of the coarse samples placed in the band around the surface the source
+    depths show on the ray (``round(depth_fraction * n_coarse)`` of them); the rest cover the remainder of
+    [near, far] uniformly, so nothing is lost where the sources are wrong or disagree."""
+    depth_band: float = 0.1
+    """``rgbd`` only: half-width of that band in z-depth (scene units, metres), clipped to [near, far]."""
 
     def __post_init__(self) -> None:
         """Reject settings the network cannot run with, naming the field and the fix."""
@@ -107,6 +121,12 @@ class SRayConfig:
             raise bad("impl", f"is {self.impl!r}; use one of {IMPLS}")
         if self.fine_samples not in FINE_SAMPLES:
             raise bad("fine_samples", f"is {self.fine_samples!r}; use one of {FINE_SAMPLES}")
+        if self.inputs not in INPUTS:
+            raise bad("inputs", f"is {self.inputs!r}; use one of {INPUTS}")
+        if not 0.0 <= self.depth_fraction <= 1.0:
+            raise bad("depth_fraction", f"is {self.depth_fraction}; it must lie in [0, 1]")
+        if self.depth_band <= 0.0:
+            raise bad("depth_band", f"is {self.depth_band}; it must be > 0 (metres)")
         if self.depth_freqs < 0:
             raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
         if self.density_activation not in DENSITY_ACTIVATIONS:

@@ -21,8 +21,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from .hierarchical import _render_pass, per_ray_bounds
-from .rendering import sample_pdf, sample_uniform
+from .hierarchical import CoarseSampler, _render_pass, coarse_depths, per_ray_bounds
+from .rendering import sample_pdf
 
 FAST_KEYS = ("logits", "rgb", "depth", "opacity")
 """Per-pass outputs of a fast render (compositing weights and depths differ in size between rays)."""
@@ -45,10 +45,10 @@ class FastRender:
 
 def render_rays_fast(field: Callable[..., dict[str, Tensor]], origins: Tensor, dirs: Tensor,
                      near: Tensor | float, far: Tensor | float, n_coarse: int, n_fine: int,
-                     confidence: float) -> dict[str, dict[str, Tensor]]:
+                     confidence: float, coarse_sampler: CoarseSampler | None = None) -> dict[str, dict[str, Tensor]]:
     """Deterministic coarse pass on every ray, fine pass (resampled depths only) on the uncertain ones.
 
-    field, origins (R, 3), dirs (R, 3), near, far as ``hierarchical.render_rays``. Returns
+    field, origins (R, 3), dirs (R, 3), near, far, coarse_sampler as ``hierarchical.render_rays``. Returns
     ``{"coarse": pass, "fine": pass}`` with ``FAST_KEYS`` per pass; a confident ray's fine pass is
     its coarse pass.
     """
@@ -57,7 +57,7 @@ def render_rays_fast(field: Callable[..., dict[str, Tensor]], origins: Tensor, d
     near_r = per_ray_bounds(near, n_rays, origins, "near")
     far_r = per_ray_bounds(far, n_rays, origins, "far")
     ray_length = dirs.norm(dim=-1)
-    z = sample_uniform(near_r, far_r, n_coarse, stratified=False)
+    z = coarse_depths(coarse_sampler, origins, dirs, near_r, far_r, n_coarse, stratified=False)
     coarse = _render_pass(field, "coarse", origins, dirs, z, near_r, far_r, ray_length)
     fine = {k: coarse[k].clone() for k in FAST_KEYS}
     unsure = torch.softmax(coarse["logits"].float(), dim=-1).amax(-1) < confidence  # (R,)

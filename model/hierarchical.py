@@ -41,6 +41,10 @@ class PassField(Protocol):
         ...
 
 
+CoarseSampler = Callable[[Tensor, Tensor, Tensor, Tensor, int, bool, torch.Generator | None], Tensor]
+"""``sampler(origins (R, 3), dirs (R, 3), near (R,), far (R,), n, stratified, generator) -> z (R, n)``
+sorted coarse depths in [near, far] (the RGB-D mode's ``depth_sampling``); None = ``sample_uniform``."""
+
 RayRenderer = Callable[[Tensor, Tensor], dict[str, dict[str, Tensor]]]
 """``render(origins (R, 3), dirs (R, 3)) -> {"coarse": pass, "fine": pass}`` for fixed bounds."""
 
@@ -64,16 +68,26 @@ def _render_pass(field: PassField, name: str, origins: Tensor, dirs: Tensor, z: 
             "weights": comp["weights"], "z": z}
 
 
+def coarse_depths(sampler: CoarseSampler | None, origins: Tensor, dirs: Tensor, near: Tensor, far: Tensor,
+                  n: int, stratified: bool, generator: torch.Generator | None = None) -> Tensor:
+    """Sorted coarse depths (R, n): ``sampler``'s, or ``sample_uniform``'s equal bins when it is None."""
+    if sampler is None:
+        return sample_uniform(near, far, n, stratified, generator)
+    return sampler(origins, dirs, near, far, n, stratified, generator)
+
+
 def render_rays(field: PassField, origins: Tensor, dirs: Tensor, near: Tensor | float, far: Tensor | float,
                 n_coarse: int, n_fine: int, stratified: bool,
                 generator: torch.Generator | None = None,
-                fine_samples: str = "union") -> dict[str, dict[str, Tensor]]:
+                fine_samples: str = "union",
+                coarse_sampler: CoarseSampler | None = None) -> dict[str, dict[str, Tensor]]:
     """Render rays o + t d, t in [near, far] (z-depth for ``pixel_rays`` directions), coarse then fine.
 
     origins, dirs: (R, 3), any direction length; near, far: scalars or (R,). ``stratified``
     jitters coarse and fine samples (training); otherwise sampling is deterministic.
     ``fine_samples``: the fine pass evaluates the sorted union of coarse and resampled depths
     (``"union"``, n_coarse + n_fine per ray) or the n_fine resampled depths alone (``"new"``).
+    ``coarse_sampler`` places the coarse samples (None: equal bins, ``sample_uniform``).
     Returns ``{"coarse": pass, "fine": pass}``, a pass holding ``logits`` (R, L), ``rgb`` (R, 3),
     ``depth`` (R,) (expected ray parameter), ``opacity`` (R,), ``weights`` (R, N) and ``z`` (R, N).
     """
@@ -85,7 +99,7 @@ def render_rays(field: PassField, origins: Tensor, dirs: Tensor, near: Tensor | 
     near_r = per_ray_bounds(near, n_rays, origins, "near")
     far_r = per_ray_bounds(far, n_rays, origins, "far")
     ray_length = dirs.norm(dim=-1)  # (R,) world length of one unit of t
-    z_coarse = sample_uniform(near_r, far_r, n_coarse, stratified, generator)  # (R, Nc)
+    z_coarse = coarse_depths(coarse_sampler, origins, dirs, near_r, far_r, n_coarse, stratified, generator)  # (R, Nc)
     coarse = _render_pass(field, "coarse", origins, dirs, z_coarse, near_r, far_r, ray_length)
     z_fine = sample_pdf(z_coarse, coarse["weights"].detach(), near_r, far_r, n_fine,
                         deterministic=not stratified, generator=generator)  # (R, Nf)

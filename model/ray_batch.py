@@ -64,6 +64,8 @@ class RayBatch:
     """float32 (m, 4, 4) source camera-to-world, OpenCV axes."""
     query: QueryRays
     """The rays to render."""
+    src_depth: Tensor | None = None
+    """float32 (m, H, W) source z-depth in metres, 0 = unknown (read only with ``model.inputs='rgbd'``)."""
 
 
 class RayBatchModel(nn.Module):
@@ -80,5 +82,5 @@ class RayBatchModel(nn.Module):
         Samples along the rays are stratified in training mode and deterministic in eval mode.
         """
         origins, dirs, near, far = batch.query.rays()
-        src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w)
+        src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
         return self.net.render_rays(src, origins, dirs, near, far, stratified=self.training)

@@ -16,6 +16,8 @@ Design choices where the paper is silent:
   semantic field rendering); colour comes from the geometry net's blending head.
 * Sampling, compositing and the whole-image loop are ``sray.model.hierarchical``'s, shared with
   Semantic-NeRF; this class supplies the per-pass field.
+* ``inputs="rgbd"``: ``encode`` keeps the source depth maps and the coarse samples are placed around the
+  surfaces they show (``depth_sampling``); the networks and their parameters are the rgb mode's.
 """
 
 from __future__ import annotations
@@ -24,10 +26,11 @@ import torch
 from torch import Tensor, nn
 
 from .config import SRayConfig
+from .depth_sampling import source_surface_depth, surface_samples
 from .encoder import ResUNetEncoder
 from .fast_render import render_rays_fast
 from .field import SRayField
-from .hierarchical import render_image, render_rays
+from .hierarchical import CoarseSampler, render_image, render_rays
 from .source_set import SourceSet, rigid_inverse
 
 __all__ = ["SRayModel", "SourceSet"]
@@ -43,8 +46,12 @@ class SRayModel(nn.Module):
         self.coarse = SRayField(cfg)
         self.fine = SRayField(cfg)
 
-    def encode(self, src_rgb: Tensor, src_K: Tensor, src_c2w: Tensor) -> SourceSet:
-        """Encode m source views once: src_rgb (m, 3, H, W) in [0, 1], src_K (m, 3, 3), src_c2w (m, 4, 4)."""
+    def encode(self, src_rgb: Tensor, src_K: Tensor, src_c2w: Tensor, src_depth: Tensor | None = None) -> SourceSet:
+        """Encode m source views once: src_rgb (m, 3, H, W) in [0, 1], src_K (m, 3, 3), src_c2w (m, 4, 4).
+
+        src_depth: (m, H, W) z-depth in metres (0 = unknown), required with ``inputs='rgbd'`` and
+        not kept with ``inputs='rgb'`` (the rgb mode never reads it).
+        """
         m = src_rgb.shape[0]
         if src_rgb.ndim != 4 or src_K.shape != (m, 3, 3) or src_c2w.shape != (m, 4, 4):
             raise ValueError(
@@ -54,9 +61,31 @@ class SRayModel(nn.Module):
         if not src_rgb.is_floating_point():
             raise ValueError(f"sray.model.semantic_ray.encode: src_rgb must be float in [0, 1], got {src_rgb.dtype}; "
                              "divide uint8 images by 255.")
+        depth = None
+        if self.cfg.inputs == "rgbd":
+            if src_depth is None or src_depth.shape != (m, *src_rgb.shape[-2:]):
+                got = None if src_depth is None else tuple(src_depth.shape)
+                raise ValueError(f"sray.model.semantic_ray.encode: model.inputs is 'rgbd', so src_depth must be "
+                                 f"(m, H, W) = {(m, *src_rgb.shape[-2:])} metres (0 = unknown), got {got}; pass the "
+                                 "source views' depth, or use model.inputs=rgb.")
+            depth = src_depth.float()
         feats = self.encoder(src_rgb)  # (m, C, H/4, W/4)
         c2w = src_c2w.float()
-        return SourceSet(feats=feats, rgb=src_rgb, K=src_K.float(), c2w=c2w, w2c=rigid_inverse(c2w))
+        return SourceSet(feats=feats, rgb=src_rgb, K=src_K.float(), c2w=c2w, w2c=rigid_inverse(c2w), depth=depth)
+
+    def coarse_sampler(self, src: SourceSet) -> CoarseSampler | None:
+        """How the coarse samples are placed against ``src``: None (equal bins) with ``inputs='rgb'``,
+        around the surfaces of the source depths with ``inputs='rgbd'`` (``depth_sampling``)."""
+        if self.cfg.inputs == "rgb":
+            return None
+        cfg = self.cfg
+
+        def sampler(o: Tensor, d: Tensor, near: Tensor, far: Tensor, n: int, stratified: bool,
+                    generator: torch.Generator | None) -> Tensor:
+            surface = source_surface_depth(src, o, d, near, far, n, cfg.depth_band, cfg.min_source_depth)  # (R,)
+            return surface_samples(near, far, surface, n, cfg.depth_fraction, cfg.depth_band, stratified, generator)
+
+        return sampler
 
     def render_rays(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                     far: Tensor | float, stratified: bool,
@@ -73,7 +102,7 @@ class SRayModel(nn.Module):
             return fields[name](src, o, d, z, lo, hi)
 
         return render_rays(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, stratified,
-                           generator, self.cfg.fine_samples)
+                           generator, self.cfg.fine_samples, self.coarse_sampler(src))
 
     @torch.no_grad()
     def render_rays_fast(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
@@ -85,7 +114,8 @@ class SRayModel(nn.Module):
         def field(name: str, o: Tensor, d: Tensor, z: Tensor, lo: Tensor, hi: Tensor) -> dict[str, Tensor]:
             return fields[name](src, o, d, z, lo, hi)
 
-        return render_rays_fast(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, confidence)
+        return render_rays_fast(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, confidence,
+                                self.coarse_sampler(src))
 
     @torch.no_grad()
     def render_image(self, src: SourceSet, K: Tensor, c2w: Tensor, hw: tuple[int, int],

@@ -39,6 +39,8 @@ class SourceSet:
     """(m, 4, 4) camera-to-world, OpenCV axes."""
     w2c: Tensor
     """(m, 4, 4) world-to-camera (rigid inverse of c2w)."""
+    depth: Tensor | None = None
+    """(m, H, W) source z-depth in metres, 0 = unknown; only in ``inputs='rgbd'`` (``depth_sampling``)."""
 
     @property
     def n_views(self) -> int:
@@ -58,4 +60,5 @@ class SourceSet:
     def select(self, index: Tensor | list[int]) -> "SourceSet":
         """The views at ``index`` (reorders or subsets m), sharing storage where possible."""
         idx = torch.as_tensor(index, device=self.feats.device, dtype=torch.long)
-        return SourceSet(self.feats[idx], self.rgb[idx], self.K[idx], self.c2w[idx], self.w2c[idx])
+        depth = None if self.depth is None else self.depth[idx]
+        return SourceSet(self.feats[idx], self.rgb[idx], self.K[idx], self.c2w[idx], self.w2c[idx], depth)

@@ -112,3 +112,17 @@ def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarr
     K2[0, 0], K2[0, 1], K2[0, 2] = sx * K2[0, 0], sx * K2[0, 1], sx * (K2[0, 2] + 0.5) - 0.5
     K2[1, 1], K2[1, 2] = sy * K2[1, 1], sy * (K2[1, 2] + 0.5) - 0.5
     return out, K2
+
+
+def rescale_depth(depth: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
+    """float32 (H, W) depth at ``size_hw`` = (H', W'): each output pixel takes the input pixel nearest to
+    its centre under the pixel-centre rule ``u = (u' + 0.5) W / W' - 0.5`` (the geometry of
+    :func:`rescale_view`); depths are never blended, so no value appears between a surface and what is
+    behind it, and 0 (unknown) stays 0."""
+    h, w = depth.shape
+    nh, nw = size_hw
+    if (nh, nw) == (h, w):
+        return depth
+    rows = np.clip(np.rint((np.arange(nh) + 0.5) * h / nh - 0.5), 0, h - 1).astype(np.int64)
+    cols = np.clip(np.rint((np.arange(nw) + 0.5) * w / nw - 0.5), 0, w - 1).astype(np.int64)
+    return np.ascontiguousarray(depth[rows[:, None], cols[None, :]])

@@ -61,6 +61,9 @@ class SourceViews(TensorFields):
     """float32 (m, 3, 3) intrinsics (pixel (u, v) centred at (u, v))."""
     c2w: Tensor
     """float32 (m, 4, 4) camera-to-world, OpenCV axes."""
+    depth: Tensor | None = None
+    """float32 (m, H, W) z-depth in metres, 0 = unknown, at the colours' size (the loader always fills it;
+    the model reads it only with ``model.inputs='rgbd'``). A query view's depth is never a source input."""
 
 
 @dataclass(frozen=True)

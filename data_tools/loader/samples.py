@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from sray.data_tools.loader.augment import Augmentation, rescale_view
+from sray.data_tools.loader.augment import Augmentation, rescale_depth, rescale_view
 from sray.data_tools.loader.sample_types import EvalSample, QueryCamera, SourceViews, TrainSample
 from sray.data_tools.loader.views import StoredView
 from sray.data_tools.scene import IGNORE_ID
@@ -24,26 +24,30 @@ def _cameras(views: list[StoredView]) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def _sources(views: dict[str, StoredView], source_ids: list[str]) -> SourceViews:
-    """The source views' colours (m, 3, H, W) in [0, 1] and cameras."""
+    """The source views' colours (m, 3, H, W) in [0, 1], depth (m, H, W) in metres and cameras."""
     sources = [views[s] for s in source_ids]
     rgb = torch.from_numpy(np.stack([v.rgb() for v in sources])).permute(0, 3, 1, 2)  # (m, 3, H, W) uint8 view
     src_rgb = torch.empty(rgb.shape, dtype=torch.float32).copy_(rgb).div_(255.0)       # one strided pass
     K, c2w = _cameras(sources)
-    return SourceViews(rgb=src_rgb, K=K, c2w=c2w)
+    depth = torch.from_numpy(np.stack([v.depth() for v in sources]))                  # (m, H, W) float32
+    return SourceViews(rgb=src_rgb, K=K, c2w=c2w, depth=depth)
 
 
 def _augmented_sources(views: dict[str, StoredView], source_ids: list[str], augment: Augmentation,
                        rng: np.random.Generator) -> SourceViews:
-    """Like :func:`_sources`, each image jittered on its own and all resized by one drawn factor."""
+    """Like :func:`_sources`, each image jittered on its own and all resized by one drawn factor (depth
+    by nearest pixel centre, never blended: :func:`~sray.data_tools.loader.augment.rescale_depth`)."""
     scale = augment.scale(rng)
-    images, Ks = [], []
+    images, Ks, depths = [], [], []
     for s in source_ids:
         rgb, K = rescale_view(augment.jitter(views[s].rgb(), rng), views[s].K, scale)
         images.append(rgb)
         Ks.append(K)
+        depths.append(rescale_depth(views[s].depth(), rgb.shape[:2]))
     rgb = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2)                      # (m, 3, H', W') uint8
     c2w = torch.from_numpy(np.stack([views[s].c2w for s in source_ids])).float()
-    return SourceViews(rgb=rgb.float().div_(255.0), K=torch.from_numpy(np.stack(Ks)).float(), c2w=c2w)
+    return SourceViews(rgb=rgb.float().div_(255.0), K=torch.from_numpy(np.stack(Ks)).float(), c2w=c2w,
+                       depth=torch.from_numpy(np.stack(depths)))
 
 
 def _query(view: StoredView) -> QueryCamera:

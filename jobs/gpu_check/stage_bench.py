@@ -22,7 +22,7 @@ def render_seconds(ctx: CheckContext, repeats: int) -> float:
             torch.cuda.synchronize(ctx.device)
         start = time.perf_counter()
         with torch.no_grad():
-            src = net.encode(sources.rgb, sources.K, sources.c2w)
+            src = net.encode(sources.rgb, sources.K, sources.c2w, sources.depth)
             net.render_image(src, query.K, query.c2w, ctx.image_hw, 1.0, 5.0)
         if ctx.device.type == "cuda":
             torch.cuda.synchronize(ctx.device)

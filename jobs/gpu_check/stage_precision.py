@@ -56,7 +56,7 @@ def argmax_agreement(ctx: CheckContext, precision: str) -> tuple[float, int]:
     images = []
     for p in ("no", precision):
         with torch.no_grad(), _autocast(ctx, p):
-            src = net.encode(sources.rgb, sources.K, sources.c2w)
+            src = net.encode(sources.rgb, sources.K, sources.c2w, sources.depth)
             images.append(net.render_image(src, query.K, query.c2w, ctx.image_hw, 1.0, 5.0)
                           ["fine"]["logits"].float())
     top2 = images[0].topk(2, dim=-1).values
@@ -76,7 +76,7 @@ def step_agreement(ctx: CheckContext, precision: str) -> tuple[float, float]:
         torch.manual_seed(1)
         origins, dirs, near, far = batch.query.rays()
         with _autocast(ctx, p):
-            src = net.encode(batch.src_rgb, batch.src_K, batch.src_c2w)
+            src = net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
             out = net.render_rays(src, origins, dirs, near, far, stratified=True)
         loss, _ = render_loss(out, sample.target_label, sample.target_rgb, net.cfg)
         loss.backward()

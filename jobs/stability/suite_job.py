@@ -57,19 +57,25 @@ class StabilityJob:
                    experiment=args.experiment, device=args.device)
 
 
-def _load_nets(checkpoints: dict[str, Path], device: Any) -> tuple[dict[str, Any], int | None, int | None]:
+def _load_nets(checkpoints: dict[str, Path], device: Any) -> tuple[dict[str, Any], int | None, int | None, str]:
+    """The checkpoints' models in eval mode, their label space (classes, ignore id) and source inputs
+    (``model.inputs``, ``rgb`` when there is none); ValueError when the checkpoints disagree on either."""
     from sray.platform.checkpoints.model_loading import model_from_checkpoint
 
-    nets, classes = {}, set()
+    nets, classes, inputs = {}, set(), set()
     for method, path in checkpoints.items():
         net, cfg = model_from_checkpoint(path)
         nets[method] = net.to(device).eval()
         classes.add((cfg.model.n_classes, cfg.model.ignore_id))
+        inputs.add(cfg.model.inputs)
     if len(classes) > 1:
         raise ValueError(f"checkpoints {sorted(map(str, checkpoints.values()))} predict different label spaces "
                          f"{sorted(classes)}; pretrain both variants on the same data")
+    if len(inputs) > 1:
+        raise ValueError(f"checkpoints {sorted(map(str, checkpoints.values()))} mix model.inputs {sorted(inputs)}; "
+                         "compare variants trained with the same inputs")
     n_classes, ignore_id = next(iter(classes)) if classes else (None, None)
-    return nets, n_classes, ignore_id
+    return nets, n_classes, ignore_id, next(iter(inputs)) if inputs else "rgb"
 
 
 def run_job(job: StabilityJob) -> dict[str, Any]:
@@ -93,7 +99,7 @@ def run_job(job: StabilityJob) -> dict[str, Any]:
         checkpoints = world_checkpoints(job.preset, shards, job.out, tracking_uri, job.methods)
     names, metas = select_scenes(shards, job.scenes)
     device = torch.device(job.device or ("cuda" if torch.cuda.is_available() else "cpu"))
-    nets, n_classes, ignore_id = _load_nets(checkpoints, device)
+    nets, n_classes, ignore_id, inputs = _load_nets(checkpoints, device)
     scene_classes = {len(m["class_names"]) for m in metas.values()}
     if n_classes is not None and scene_classes != {n_classes}:
         raise ValueError(f"{shards / 'manifest.json'}: scenes have {sorted(scene_classes)} classes, the checkpoints "
@@ -103,7 +109,7 @@ def run_job(job: StabilityJob) -> dict[str, Any]:
     run_points(suite, job.axes, job.methods)
     done = [a for a in AXES if stored_records(suite, planned_points(job.preset, [a], job.methods))]
     records = stored_records(suite, planned_points(job.preset, done, job.methods))
-    protocol = EvalProtocol.from_shards(shards, job.preset.n_source, job.preset.eval_stride).describe()
+    protocol = EvalProtocol.from_shards(shards, job.preset.n_source, job.preset.eval_stride, inputs).describe()
     extra = {"shards": str(shards), "checkpoints": {m: str(p) for m, p in checkpoints.items()},
              "scenes": names, "methods": job.methods}
     outputs = write_outputs(records, job.preset, done, protocol, job.out, extra)

@@ -24,8 +24,10 @@ from sray.model.metrics import DATASET_PROTOCOL, PER_IMAGE_PROTOCOL
 RENDER_MODES = ("full", "fast")
 """Render modes an evaluation may use (``full``: the whole coarse + fine hierarchical renderer;
 ``fast``: ``sray.model.fast_render``, whose settings follow in the field, e.g. ``fast (pixel stride 4, ...)``)."""
-INPUTS = ("rgb",)
-"""What the model is given of its source views (``rgb``: posed colour images only)."""
+INPUTS = ("rgb", "rgbd")
+"""What the model is given of its source views: ``rgb`` posed colour images only; ``rgbd`` also their
+depth maps (``sray.model.config.SRayConfig.inputs``; never the query view's depth). Later papers list
+depth-using methods apart, so every number says which it is."""
 NO_SOURCES = "none (per-scene model)"
 """``source_rule`` of a method that renders without source views (Semantic-NeRF)."""
 
@@ -71,18 +73,20 @@ class EvalProtocol:
 
     @classmethod
     def from_manifest(cls, manifest: Manifest, n_source: int, stride: int,
-                      where: str = "manifest.json") -> EvalProtocol:
-        """The protocol of fixed sources ranked by ``manifest``'s neighbour rule (``where`` names it in errors)."""
+                      where: str = "manifest.json", inputs: str = "rgb") -> EvalProtocol:
+        """The protocol of fixed sources ranked by ``manifest``'s neighbour rule (``where`` names it in errors);
+        ``inputs``: the model's ``model.inputs``."""
         rule, version = manifest.neighbours.get("rule"), manifest.neighbours.get("version")
         if not rule or version is None:
             raise ValueError(f"{where}: field 'neighbours' has no 'rule' and 'version' ({manifest.neighbours}); "
                              "re-run `sray data shard` with this sray")
-        return cls(source_rule=f"{rule} v{version}", n_source=n_source, stride=stride)
+        return cls(source_rule=f"{rule} v{version}", n_source=n_source, stride=stride, inputs=inputs)
 
     @classmethod
-    def from_shards(cls, shards: Path, n_source: int, stride: int) -> EvalProtocol:
+    def from_shards(cls, shards: Path, n_source: int, stride: int, inputs: str = "rgb") -> EvalProtocol:
         """:meth:`from_manifest` of ``shards/manifest.json``."""
-        return cls.from_manifest(read_manifest(Path(shards)), n_source, stride, str(Path(shards) / "manifest.json"))
+        return cls.from_manifest(read_manifest(Path(shards)), n_source, stride, str(Path(shards) / "manifest.json"),
+                                 inputs)
 
     @classmethod
     def without_sources(cls, stride: int) -> EvalProtocol:

@@ -89,7 +89,7 @@ def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
 def encode_sources(net: nn.Module, sample: EvalSample, device: torch.device) -> SourceSet:
     """The sample's fixed source views, moved to ``device`` and encoded by the S-Ray ``net``."""
     sources = sample.sources.to(device)
-    return net.encode(sources.rgb, sources.K, sources.c2w)
+    return net.encode(sources.rgb, sources.K, sources.c2w, sources.depth)
 
 
 def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device,

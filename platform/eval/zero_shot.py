@@ -168,10 +168,10 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
     tracking = get_tracker(tracker, tracking_uri or "")
     checkpoint, shards, out_dir = Path(checkpoint).resolve(), Path(shards).resolve(), Path(out_dir).resolve()
     names, metas = select_scenes(shards, scenes)
-    protocol = EvalProtocol.from_shards(shards, n_source, stride)
+    net, cfg = model_from_checkpoint(checkpoint)
+    protocol = EvalProtocol.from_shards(shards, n_source, stride, cfg.model.inputs)
     if fast is not None:
         protocol = dataclasses.replace(protocol, render=fast.describe())
-    net, cfg = model_from_checkpoint(checkpoint)
     step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
     n_classes, ignore_id = cfg.model.n_classes, cfg.model.ignore_id
     for name in names:

@@ -117,7 +117,7 @@ class SRayLearner(Learner):
         origins, dirs, near, far = batch.query.rays()
         with self.step.autocast():
             with torch.no_grad() if self.encoder_frozen else contextlib.nullcontext():
-                src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w)
+                src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
             out = self.net.render_rays(src, origins, dirs, near, far, stratified=True)
         return render_loss(out, sample.target_label, sample.target_rgb, self.net.cfg)
 

@@ -123,19 +123,21 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
     return path
 
 
-def scene_protocol(task: SceneTask) -> EvalProtocol:
+def scene_protocol(task: SceneTask, inputs: str = "rgb") -> EvalProtocol:
     """How the job's held-out scores are made at ``finetune.eval_stride``: from ``finetune.eval_n_source``
-    fixed sources ranked by the shards' neighbour rule (methods that use sources, as S-Ray), or from
-    none (per-scene models, as Semantic-NeRF)."""
+    fixed sources ranked by the shards' neighbour rule and given as ``inputs`` (the shared checkpoint's
+    ``model.inputs``; methods that use sources, as S-Ray), or from none (per-scene models, as Semantic-NeRF)."""
     ft = task.config.finetune
     if get_method(task.method).uses_sources:
-        return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride)
+        return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride, inputs)
     return EvalProtocol.without_sources(ft.eval_stride)
 
 
-def _prepare(task: SceneTask, device: torch.device) -> tuple[Learner, Any, list[EvalSample], tuple[int, int, int]]:
+def _prepare(task: SceneTask,
+             device: torch.device) -> tuple[Learner, Any, list[EvalSample], tuple[int, int, int, str]]:
     """The method's learner, the training loader (one epoch = ``eval_every`` samples), the held-out samples
-    and (classes, ignore id, shared model bytes); ValueError when the scene does not fit the checkpoint."""
+    and (classes, ignore id, shared model bytes, the shared model's ``model.inputs``); ValueError when the
+    scene does not fit the checkpoint."""
     ft, shards = task.config.finetune, Path(task.shards)
     method = get_method(task.method)
     base, train_cfg = model_from_checkpoint(task.checkpoint)
@@ -156,7 +158,7 @@ def _prepare(task: SceneTask, device: torch.device) -> tuple[Learner, Any, list[
                                batches_per_epoch=ft.eval_every, rank=0, world_size=1, num_workers=0, seed=ft.seed,
                                scenes=[task.scene])
     samples = list(make_eval_samples(shards, task.scene, split="test", n_source=ft.eval_n_source))
-    return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes)
+    return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes, train_cfg.model.inputs)
 
 
 def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOutcome:
@@ -168,8 +170,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     use_cuda = cfg.gpus_per_task > 0 and torch.cuda.is_available()
     device = torch.device("cuda" if use_cuda else "cpu")
     out_dir = Path(task.out_dir)
-    learner, loader, samples, (n_classes, ignore_id, full_bytes) = _prepare(task, device)
-    protocol = scene_protocol(task)
+    learner, loader, samples, (n_classes, ignore_id, full_bytes, inputs) = _prepare(task, device)
+    protocol = scene_protocol(task, inputs)
     if logger is not None:
         logger.log_params(cfg.to_dict() | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
                                            "protocol": protocol.to_json()})

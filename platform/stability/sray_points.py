@@ -96,7 +96,7 @@ def encoded_pool(net: nn.Module, views: dict[str, StoredView], ids: list[str], s
     """Every source a point's queries use, encoded once (each query then takes its ranked subset)."""
     sources = eval_sample(views, scene.test_ids[0], ids, scene.name, scene.meta.near, scene.meta.far).sources
     sources = sources.to(device)
-    return net.encode(sources.rgb, sources.K, sources.c2w)
+    return net.encode(sources.rgb, sources.K, sources.c2w, sources.depth)
 
 
 def bound_renderer(net: nn.Module, pool: SourceSet, index: list[int]) -> Renderer:

@@ -31,8 +31,9 @@ GROUPS = {"val": "train", "zeroshot": "test"}
 
 def validation_protocol(cfg: TrainConfig) -> EvalProtocol:
     """How ``val/*`` and ``zeroshot/*`` are made: ``model.n_source`` fixed sources ranked by the shards'
-    neighbour rule, every ``data.val_downscale``-th pixel."""
-    return EvalProtocol.from_shards(Path(cfg.data.shards), cfg.model.n_source, cfg.data.val_downscale)
+    neighbour rule, every ``data.val_downscale``-th pixel, the model's ``model.inputs``."""
+    return EvalProtocol.from_shards(Path(cfg.data.shards), cfg.model.n_source, cfg.data.val_downscale,
+                                    cfg.model.inputs)
 
 
 def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
