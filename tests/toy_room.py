@@ -44,12 +44,12 @@ def look_at(pos: np.ndarray, target: np.ndarray) -> np.ndarray:
     return c2w
 
 
-def ray_cast(K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int],
-             offset: np.ndarray = np.zeros(3)) -> tuple[np.ndarray, np.ndarray]:
-    """Render (H, W, 3) colours and (H, W) labels of the room seen from ``c2w`` (exact intersections),
-    with the room moved by ``offset`` (3,) in the world."""
-    h, w = hw
-    rays = pixel_rays(torch.tensor(K), torch.tensor(c2w), image_pixels(h, w).double())
+def first_hits(K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int],
+                offset: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Exact first intersections of the pixel rays of ``c2w``: ray parameter t (H*W,) (the camera z-depth,
+    as ``pixel_rays`` directions have camera z 1), label (H*W,), origins and directions (H*W, 3) in room
+    coordinates (the room moved by ``offset``)."""
+    rays = pixel_rays(torch.tensor(K), torch.tensor(c2w), image_pixels(*hw).double())
     o, d = (t.numpy() for t in rays)  # (H*W, 3) float64
     o = o - offset  # room coordinates
     best_t = np.full(len(d), np.inf)
@@ -65,6 +65,15 @@ def ray_cast(K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int],
         t_out = np.maximum(t0, t1).min(1)
         hit = (t_in <= t_out) & (t_in > 1e-6) & (t_in < best_t)
         best_t, label = np.where(hit, t_in, best_t), np.where(hit, lab, label)
+    return best_t, label, o, d
+
+
+def ray_cast(K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int],
+             offset: np.ndarray = np.zeros(3)) -> tuple[np.ndarray, np.ndarray]:
+    """Render (H, W, 3) colours and (H, W) labels of the room seen from ``c2w`` (exact intersections),
+    with the room moved by ``offset`` (3,) in the world."""
+    h, w = hw
+    best_t, label, o, d = first_hits(K, c2w, hw, offset)
     p = o + best_t[:, None] * d
     checker = (np.floor(p[:, 0] * 3) + np.floor(p[:, 1] * 3) + np.floor(p[:, 2] * 3)) % 2
     rgb = COLOURS[label] * (0.75 + 0.25 * checker[:, None])
@@ -113,6 +122,11 @@ class ToyRoom:
         c2w = torch.tensor(np.stack([self.cams[i] for i in SOURCE_IDS]), dtype=torch.float32)
         return rgb.permute(0, 3, 1, 2), K, c2w
 
+    def source_depth(self) -> torch.Tensor:
+        """float32 (m, H, W) exact z-depth of the ``SOURCE_IDS`` views (the room is closed: no unknown pixel)."""
+        depth = [first_hits(self.K, self.cams[i], self.hw, np.zeros(3))[0].reshape(self.hw) for i in SOURCE_IDS]
+        return torch.tensor(np.stack(depth), dtype=torch.float32)
+
 
 def make_room(hw: tuple[int, int], focal: float, offset: np.ndarray = np.zeros(3)) -> ToyRoom:
     """Ray-cast every view of the room, moved by ``offset`` (3,) in the world, at size ``hw`` with
@@ -130,6 +144,7 @@ def overfit(room: ToyRoom, cfg: SRayConfig, steps: int, rays_per_step: int = 128
     rng = np.random.default_rng(0)
     h, w = room.hw
     src_rgb, src_K, src_c2w = room.sources()
+    src_depth = room.source_depth() if cfg.inputs == "rgbd" else None
     net = SRayModel(cfg)
     opt = torch.optim.Adam(net.parameters(), lr=3e-3)
     sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: 1.0 - 0.9 * s / steps)
@@ -139,7 +154,7 @@ def overfit(room: ToyRoom, cfg: SRayConfig, steps: int, rays_per_step: int = 128
         q = TRAIN_IDS[step % len(TRAIN_IDS)]
         pick = torch.tensor(rng.choice(h * w, rays_per_step, replace=False))
         origins, dirs = pixel_rays(K, torch.tensor(room.cams[q], dtype=torch.float32), pixels[pick])
-        src = net.encode(src_rgb, src_K, src_c2w)
+        src = net.encode(src_rgb, src_K, src_c2w, src_depth)
         out = net.render_rays(src, origins, dirs, NEAR, FAR, stratified=True)
         label = torch.tensor(room.views[q][1].reshape(-1)[pick.numpy()])
         rgb = torch.tensor(room.views[q][0].reshape(-1, 3)[pick.numpy()], dtype=torch.float32)
