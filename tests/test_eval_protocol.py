@@ -43,7 +43,7 @@ def test_json_round_trip_and_refusals() -> None:
         EvalProtocol.from_json({k: v for k, v in as_json.items() if k != "stride"})
     with pytest.raises(ValueError, match="expected a JSON object"):
         EvalProtocol.from_json("mIoU over held-out views")  # type: ignore[arg-type]
-    for bad, field in (({"stride": 0}, "stride"), ({"render": "sparse"}, "render"), ({"inputs": "rgbd"}, "inputs"),
+    for bad, field in (({"stride": 0}, "stride"), ({"render": "sparse"}, "render"), ({"inputs": "rgb+lidar"}, "inputs"),
                        ({"n_source": 0}, "n_source")):
         with pytest.raises(ValueError, match=field):
             EvalProtocol(**(as_json | bad))

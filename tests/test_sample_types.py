@@ -19,7 +19,8 @@ from sray.data_tools.shards.manifest import read_manifest
 
 N_SOURCE, RAYS = 3, 50
 TRAIN_SPEC = {"sources.rgb": (torch.float32, ("m", 3, "H", "W")), "sources.K": (torch.float32, ("m", 3, 3)),
-              "sources.c2w": (torch.float32, ("m", 4, 4)), "query.K": (torch.float32, (3, 3)),
+              "sources.c2w": (torch.float32, ("m", 4, 4)), "sources.depth": (torch.float32, ("m", "H", "W")),
+              "query.K": (torch.float32, (3, 3)),
               "query.c2w": (torch.float32, (4, 4)), "pixels": (torch.float32, ("R", 2)),
               "target_label": (torch.int64, ("R",)), "target_rgb": (torch.float32, ("R", 3))}
 """docs/CONTRACTS.md "Loader samples": dtype and shape of every tensor of a training sample."""
