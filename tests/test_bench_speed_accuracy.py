@@ -42,10 +42,13 @@ def test_measure_pairs_the_settings_and_the_fast_path_is_lossless(tiny_shards: P
 
     settings = [Setting("reference", n_source=3, impl="reference"), Setting("fast impl", n_source=3),
                 Setting("half", n_source=3, sample_scale=0.5),
-                Setting("fast s2", n_source=3, fast=FastRender(pixel_stride=2, confidence=0.9))]
+                Setting("fast s2", n_source=3, fast=FastRender(pixel_stride=2, confidence=0.9)),
+                Setting("rgbd", n_source=3, inputs="rgbd"), Setting("rgb again", n_source=3)]
     rows = measure(tiny_checkpoint, tiny_shards, settings, views_per_scene=1, progress=False)
     by = {r["name"]: r for r in rows}
     assert [r["name"] for r in rows] == [s.name for s in settings] and all(r["views"] >= 1 for r in rows)
     assert abs(by["fast impl"]["miou"] - by["reference"]["miou"]) < 1e-6
     assert abs(by["fast impl"]["psnr"] - by["reference"]["psnr"]) < 1e-3
     assert by["half"]["psnr"] != by["fast impl"]["psnr"]
+    assert by["rgbd"]["psnr"] != by["fast impl"]["psnr"]  # the sources' depth moved the samples
+    assert by["rgb again"]["psnr"] == by["fast impl"]["psnr"]  # and the next setting renders rgb again

@@ -40,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed = kinds.add_parser("speed-accuracy", help="mIoU and PSNR against seconds per view (Pareto chart)")
     speed.add_argument("--checkpoint", type=Path, required=True, help="checkpoint folder written by `sray train`")
     speed.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
+    speed.add_argument("--checkpoint-rgbd", type=Path, default=None,
+                       help="a checkpoint trained with model.inputs=rgbd for the rgbd settings (default: --checkpoint's "
+                            "weights rendered with the source depth)")
     speed.add_argument("--views-per-scene", type=int, default=2, help="test views rendered per scene and setting")
     speed.add_argument("--tracker", default="mlflow")
     speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
@@ -73,7 +76,8 @@ def _bench_profile(args: argparse.Namespace) -> int:
 def _bench_speed_accuracy(args: argparse.Namespace) -> int:
     from sray.jobs.bench.speed_accuracy import run_speed_accuracy
 
-    run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker, args.tracking_uri)
+    run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker, args.tracking_uri,
+                       args.checkpoint_rgbd)
     return 0
 
 

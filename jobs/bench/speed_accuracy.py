@@ -3,9 +3,12 @@
 Every setting renders the same views of the unseen test scenes (paired), so the accuracy each
 setting gives up is measured against the full render of the same run. Settings trade accuracy for
 speed along the axes of issue 10: samples the fine pass evaluates (the union of coarse and
-resampled depths, or the resampled ones only), source views, precision, and the fast render mode
-(pixel stride = resolution, fine pass only where the coarse pass is unsure). A Pareto chart (PNG)
-and a table go to docs/benchmarks.md; both and the numbers are logged to the tracker.
+resampled depths, or the resampled ones only), source views, precision, the fast render mode (pixel
+stride = resolution, fine pass only where the coarse pass is unsure) and the RGB-D mode's depth-guided
+samples (issue 12: ``rgbd`` settings render with the sources' depth, by the ``--checkpoint-rgbd`` model
+when one is given, else by the main checkpoint's weights with ``model.inputs`` switched, as both modes
+share their parameters). A Pareto chart (PNG) and a table go to docs/benchmarks.md; both and the
+numbers are logged to the tracker.
 """
 
 from __future__ import annotations
@@ -38,6 +41,9 @@ class Setting:
     """``SRayConfig.impl`` of the per-sample networks: ``reference`` is the unoptimised path (today's render)."""
     sample_scale: float = 1.0
     """Coarse and fine samples per ray as a fraction of the checkpoint's."""
+    inputs: str = ""
+    """``model.inputs`` to render with: ``""`` the checkpoint's own, ``rgbd`` the sources' depth places the
+    coarse samples (``sray.model.depth_sampling``)."""
 
 
 def default_settings() -> list[Setting]:
@@ -56,23 +62,29 @@ def default_settings() -> list[Setting]:
         Setting("fast s4 c0.7", fast=FastRender(pixel_stride=4, confidence=0.7)),
         Setting("fast s8 c0.9", fast=FastRender(pixel_stride=8, confidence=0.9)),
         Setting("fast s4 c0.9, 4 sources", n_source=4, fast=FastRender(pixel_stride=4, confidence=0.9)),
+        Setting("full, rgbd", inputs="rgbd"),
+        Setting("full, rgbd, half the samples", inputs="rgbd", sample_scale=0.5),
     ]
 
 
 def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_scene: int,
-            progress: bool = True) -> list[dict]:
+            progress: bool = True, checkpoint_rgbd: Path | None = None) -> list[dict]:
     """Score every setting on the first ``views_per_scene`` test views of each unseen scene.
 
+    ``checkpoint_rgbd``: the model that renders the ``inputs="rgbd"`` settings (None: ``checkpoint``'s).
     Returns one row per setting: name, miou, psnr (dataset-level protocol, mean over scenes),
     s_per_view (wall-clock render time, source encoding included), views, and the setting.
     """
-    net, cfg = model_from_checkpoint(checkpoint)
-    net = net.eval()
+    loaded = {}
+    for key, path in (("main", checkpoint), ("rgbd", checkpoint_rgbd)):
+        if path is not None:
+            net, cfg = model_from_checkpoint(path)
+            loaded[key] = (net.eval(), cfg, (net.cfg.n_coarse, net.cfg.n_fine, net.cfg.inputs))
     names, _ = select_scenes(shards, None)
     rows = []
-    n_samples = (net.cfg.n_coarse, net.cfg.n_fine)
     for st in settings:
-        _apply(net, st, n_samples)
+        net, cfg, own = loaded["rgbd" if st.inputs == "rgbd" and "rgbd" in loaded else "main"]
+        _apply(net, st, own)
         seconds, n_views, per_scene = 0.0, 0, []
         for scene in names:
             samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))[:views_per_scene]
@@ -96,14 +108,14 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     return rows
 
 
-def _apply(net: torch.nn.Module, st: Setting, n_samples: tuple[int, int]) -> None:
-    """Put the setting's render choices on the model: fine samples, implementation and samples per ray
-    (``n_samples``: the checkpoint's coarse and fine counts)."""
-    net.cfg.fine_samples, net.cfg.impl = st.fine_samples, st.impl
+def _apply(net: torch.nn.Module, st: Setting, own: tuple[int, int, str]) -> None:
+    """Put the setting's render choices on the model: fine samples, implementation, samples per ray and
+    inputs (``own``: the checkpoint's coarse and fine counts and its ``model.inputs``)."""
+    net.cfg.fine_samples, net.cfg.impl, net.cfg.inputs = st.fine_samples, st.impl, st.inputs or own[2]
     for module in net.modules():
         if hasattr(module, "impl"):
             module.impl = st.impl
-    net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in n_samples)
+    net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in own[:2])
 
 
 def pareto(rows: list[dict]) -> list[dict]:
@@ -159,28 +171,35 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
 
 
 def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc: Path, tracker: str,
-                       tracking_uri: str) -> str:
-    """Measure the default settings, write the chart and the table section, log both; returns the section."""
+                       tracking_uri: str, checkpoint_rgbd: Path | None = None) -> str:
+    """Measure the default settings (the ``rgbd`` ones by ``checkpoint_rgbd`` when given), write the chart
+    and the table section, log both; returns the section."""
     from sray.jobs.bench.doc import record
     from sray.platform.common.eval_protocol import EvalProtocol
     from sray.platform.tracking.registry import get_tracker
 
-    rows = measure(Path(checkpoint), Path(shards), default_settings(), views_per_scene)
-    protocol = EvalProtocol.from_shards(Path(shards), 8, 1).describe().replace("render: full", "render: per setting")
+    rows = measure(Path(checkpoint), Path(shards), default_settings(), views_per_scene,
+                   checkpoint_rgbd=Path(checkpoint_rgbd) if checkpoint_rgbd else None)
+    protocol = (EvalProtocol.from_shards(Path(shards), 8, 1).describe().replace("render: full", "render: per setting")
+                .replace("inputs: rgb", "inputs: per setting (the checkpoint's unless the setting says rgbd)"))
     png = chart(rows, doc.parent / "benchmarks" / "speed-accuracy.png", protocol)
+    rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
     notes = (f"Checkpoint `{checkpoint}`; the first {views_per_scene} test views of each unseen scene of `{shards}`, "
              f"the same views for every setting (paired); mIoU dataset-level per scene, then the mean over "
              f"scenes; s / view is the wall-clock time of encoding the sources and rendering one whole view on "
              f"this CPU (noisy: other jobs share the 2 cores). 'fast sS cC': the fast render mode "
              f"(`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine pass (resampled "
-             f"depths only) where the coarse confidence is below C. Protocol: {protocol}.\n\n"
+             f"depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed by the "
+             f"sources' depth (docs/model.md, RGB-D mode), rendered by "
+             f"{rgbd_by}. Protocol: {protocol}.\n\n"
              f"![speed-accuracy]({png.relative_to(doc.parent)})")
     section = record("Speed against accuracy (zero-shot, one checkpoint)", table(rows), doc, notes)
     tracking = get_tracker(tracker, tracking_uri)
     run = tracking.start_run("sray-bench", f"speed-accuracy-{time.strftime('%Y%m%d-%H%M%S')}",
                              tags={"sray.kind": "bench", "sray.protocol": protocol})
     with tracking.logger(run) as logger:
-        logger.log_params({"checkpoint": str(checkpoint), "shards": str(shards), "views_per_scene": views_per_scene})
+        logger.log_params({"checkpoint": str(checkpoint), "checkpoint_rgbd": str(checkpoint_rgbd or checkpoint),
+                           "shards": str(shards), "views_per_scene": views_per_scene})
         for i, r in enumerate(rows):
             logger.log_metrics({"miou": r["miou"], "psnr": r["psnr"], "s_per_view": r["s_per_view"]}, i)
         logger.log_artifact(png)
