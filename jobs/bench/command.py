@@ -41,8 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--checkpoint", type=Path, required=True, help="checkpoint folder written by `sray train`")
     speed.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
     speed.add_argument("--checkpoint-rgbd", type=Path, default=None,
-                       help="a checkpoint trained with model.inputs=rgbd for the rgbd settings (default: --checkpoint's "
-                            "weights rendered with the source depth)")
+                       help="a checkpoint trained with model.inputs=rgbd for the rgbd settings "
+                            "(default: --checkpoint's weights rendered with the source depth)")
     speed.add_argument("--views-per-scene", type=int, default=2, help="test views rendered per scene and setting")
     speed.add_argument("--tracker", default="mlflow")
     speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
