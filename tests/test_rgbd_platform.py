@@ -111,16 +111,39 @@ def test_validation_protocol_follows_the_model(tiny_shards: Path, tmp_path: Path
         dataclasses.replace(protocol, inputs="depth")
 
 
-def test_sray_eval_of_an_rgbd_checkpoint_says_rgbd(tiny_shards: Path, tmp_path: Path, mlflow_uri: str) -> None:
-    from sray.jobs.cli import main
+def _rgbd_checkpoint(shards: Path, root: Path) -> Path:
+    """An untrained tiny S-Ray checkpoint with ``model.inputs = rgbd``, in a ``sray train`` job layout."""
     from sray.platform.checkpoints.folders import write_checkpoint
     from sray.platform.train.state import build_training, training_state
 
-    cfg = tiny_config(tiny_shards, tmp_path)
+    cfg = tiny_config(shards, root)
     cfg.model.inputs = "rgbd"
     model, optimizer, scheduler = build_training(cfg)
-    ckpt = write_checkpoint(training_state(model.net, optimizer, scheduler, None, 3, cfg, None, {}),
-                            tmp_path / "jobs" / "rgbd" / "checkpoints" / "step_000000003", 3)
+    return write_checkpoint(training_state(model.net, optimizer, scheduler, None, 3, cfg, None, {}),
+                            root / "jobs" / "rgbd" / "checkpoints" / "step_000000003", 3)
+
+
+def test_a_finetune_of_an_rgbd_checkpoint_says_rgbd(tiny_shards: Path, tmp_path: Path) -> None:
+    """The fleet's S-Ray finetune trains and scores with the sources' depth and records ``inputs: rgbd``."""
+    from fleet_fixtures import tiny_fleet_config
+
+    from sray.platform.finetune.scene_artifacts import checkpoint_sha256
+    from sray.platform.finetune.scene_finetune import SceneTask, finetune_scene
+
+    ckpt = _rgbd_checkpoint(tiny_shards, tmp_path)
+    scene, _ = _test_scene(tiny_shards)
+    task = SceneTask(scene=scene, method="sray", checkpoint=str(ckpt), base_sha256=checkpoint_sha256(ckpt),
+                     shards=str(tiny_shards), out_dir=str(tmp_path / "ft"), run=None, attempt=1,
+                     config=tiny_fleet_config(max_steps=2, eval_every=2))
+    result = finetune_scene(task).result
+    assert result["protocol"]["inputs"] == "rgbd" and result["steps_used"] == 2
+    assert all(np.isfinite(p["miou"]) for p in result["curve"])
+
+
+def test_sray_eval_of_an_rgbd_checkpoint_says_rgbd(tiny_shards: Path, tmp_path: Path, mlflow_uri: str) -> None:
+    from sray.jobs.cli import main
+
+    ckpt = _rgbd_checkpoint(tiny_shards, tmp_path)
     out = tmp_path / "eval"
     assert main(["eval", "--checkpoint", str(ckpt), "--data", str(tiny_shards), "--n-source", str(N_SOURCE),
                  "--stride", "8", "--out", str(out), "--tracking-uri", mlflow_uri]) == 0
