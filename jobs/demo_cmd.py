@@ -113,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
     report = evaluate_checkpoint(checkpoint, shards, scenes_test, args.out / "eval", n_source=cfg.model.n_source,
                                  stride=args.eval_stride, progress=True)
     print(format_table(report), flush=True)
+    print(_speed_line(checkpoint, shards, cfg.model.n_source), flush=True)
     fleet_cfg = FleetConfig()
     fleet_cfg.finetune.max_seconds = args.finetune_seconds
     fleet_cfg.finetune.eval_n_source = cfg.model.n_source
@@ -125,3 +126,17 @@ def run(args: argparse.Namespace) -> int:
     _say(f"done in {(time.perf_counter() - t0) / 60:.1f} min; results under {args.out.resolve()}")
     _say(f"browse everything in the MLflow dashboard:  {_sray_command()} ui   (then open the printed URL)")
     return 0
+
+
+def _speed_line(checkpoint: Path, shards: Path, n_source: int) -> str:
+    """One line of ``sray bench speed-accuracy``: the full render against the fast render mode on the first
+    test view of each unseen scene (paired, whole images, ``n_source`` source views)."""
+    from sray.jobs.bench.speed_accuracy import Setting, measure
+    from sray.model.fast_render import FastRender
+
+    full, fast = measure(checkpoint, shards, [Setting("full", n_source), Setting("fast", n_source, fast=FastRender())],
+                         1, progress=False)
+    return (f"[demo] speed vs accuracy (first test view per unseen scene, whole image): full render "
+            f"{full['s_per_view']:.1f} s/view, mIoU {full['miou']:.1f}%; fast render {fast['s_per_view']:.2f} s/view "
+            f"({full['s_per_view'] / fast['s_per_view']:.0f}x), mIoU {fast['miou']:.1f}% "
+            f"({fast['miou'] - full['miou']:+.1f} points); more settings: sray bench speed-accuracy")

@@ -33,6 +33,8 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
     for stage in range(1, 9):
         assert f"[demo] {stage}/8" in out
     assert "ui   (then open the printed URL)" in out
+    [speed] = [ln for ln in out.splitlines() if ln.startswith("[demo] speed vs accuracy")]
+    assert "full render" in speed and "fast render" in speed and "points)" in speed
     eval_metrics = json.loads((tmp_path / "demo/eval/metrics.json").read_text())
     assert "synth_test_000" in json.dumps(eval_metrics)
     # --eval-stride 4: the evaluation is strided, so it has no SSIM; the fleet scores every 8th pixel

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as _dt
+import os
 import platform as _stdlib_platform
 import re
 import shlex
@@ -25,8 +26,16 @@ def machine_line() -> str:
     """One line naming the machine a number was measured on."""
     device = device_kind()
     if not torch.cuda.is_available():
-        device += f", {torch.get_num_threads()} torch threads"
+        device += f", {torch.get_num_threads()} torch threads, {os.cpu_count()} cores, load average {_load()} when written"
     return f"{_stdlib_platform.machine()}, {device}, torch {torch.__version__}, Python {_stdlib_platform.python_version()}"
+
+
+def _load() -> str:
+    """The 1-minute load average (other processes on a shared CPU make times noisy), or '?'."""
+    try:
+        return f"{os.getloadavg()[0]:.1f}"
+    except OSError:
+        return "?"
 
 
 _HEADER = ("# Benchmarks\n\nEvery section below was written by the command it names; a rerun on the same "
