@@ -15,7 +15,7 @@ import torch
 
 from sray.model.losses import render_loss
 from sray.platform.checkpoints.folders import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
-from sray.platform.common.fault_hook import active_faults, kill_if_due
+from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_due
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.tracker import RunHandle
@@ -81,6 +81,9 @@ def train_worker(payload: dict[str, Any]) -> None:
              else load_checkpoint(Path(payload["resume_from"])) if payload.get("resume_from") else None)
     if state is not None:
         start, best, counters = restore_training(state, model.net, optimizer, scheduler, None)
+        if rank == 0:
+            how = "a restarted worker group" if resumed is not None else "--resume"
+            print(f"[sray] resumed at step {start} ({how})", flush=True)
     model, optimizer = accelerator.prepare(model, optimizer)
     train_step = TrainStep(list(model.parameters()), optimizer, cfg.optim.grad_clip, cfg.run.precision, device,
                            cfg.optim.max_nonfinite_in_row, world)
@@ -130,6 +133,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     try:
         while step < cfg.optim.steps:
             kill_if_due(faults, step, rank, job_dir, before_exit=lambda: logger.flush(force=True))
+            hold_if_due(faults, step, rank, job_dir, lambda: {"node_id": ray.get_runtime_context().get_node_id()})
 
             if step % epoch_len == 0 and step != start:
                 batches = batches_from(step)
