@@ -131,9 +131,11 @@ def restart(root: Path, name: str, outage_s: float = 0.0) -> ClusterState:
     if record is not None:
         stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM)
     time.sleep(outage_s)
+    t0 = time.monotonic()
     _start_part(state, name)
     if name.startswith("ray-worker-"):
         _wait_nodes(state)
+        _timed(state, name, t0)  # a worker node is ready once Ray lists it, not when its process exists
     state.save()
     return state
 
