@@ -51,22 +51,30 @@ def _cluster(cluster: LocalCluster, *args: str) -> subprocess.Popen:
 
 def test_worker_node_killed_mid_training_resumes_from_the_last_checkpoint(
         local_cluster: LocalCluster, cluster_inputs: ClusterInputs, tmp_path: Path) -> None:
-    """One worker trains; before step 6 (checkpoint at step 4) its node's process group gets SIGKILL. Ray
-    Train restarts the worker on another node from step 4, into the same MLflow run, whose history has no
-    missing step; the killed node is restarted meanwhile (``sray cluster restart``)."""
+    """One worker trains. The MLflow server is stopped before step 3, so the checkpoint at step 4 is written while
+    steps 2-4 are still undelivered; before step 6, with the server still down, the node running rank 0 gets
+    SIGKILL (its recorded ``ray start`` process group). Ray Train restarts the worker on another node from step 4,
+    into the same MLflow run; once the server and the node are back (``sray cluster restart``), the run's history
+    has no missing step."""
     name, log = "node-killed", tmp_path / "submit.log"
+    folder, uri = job_dir(local_cluster, name), local_cluster.state.tracking_uri
     proc = start_job(local_cluster, submit_argv(local_cluster, cluster_inputs.shards, name), log,
-                     faults="train.hold_at_steps=6")
-    held = wait_for_hold(job_dir(local_cluster, name), 6, proc, log)
+                     faults="train.hold_at_steps=3,6")
+    wait_for_hold(folder, 3, proc, log)
+    server = _cluster(local_cluster, "restart", "--part", "mlflow", "--outage", str(OUTAGE_S))
+    eventually(lambda: not healthy(uri), 30, "the MLflow server stopped")
+    release(folder, 3)
+    held = wait_for_hold(folder, 6, proc, log)
+    assert not healthy(uri), f"the server came back before step 6; raise SRAY_TEST_MLFLOW_OUTAGE_S ({OUTAGE_S:g})"
     part = worker_node_of(local_cluster, held["pid"])
     killed_at = time.monotonic()
     os.killpg(local_cluster.state.processes[part]["pid"], signal.SIGKILL)
-    restart = _cluster(local_cluster, "restart", "--part", part)
+    node = _cluster(local_cluster, "restart", "--part", part)
     code, out = finish(proc, log, timeout=180)
     lost_s = time.monotonic() - killed_at
-    restarted = restart.communicate(timeout=120)[0]
+    restarted = [p.communicate(timeout=120)[0] for p in (server, node)]
     local_cluster.refresh()
-    assert restart.returncode == 0, restarted
+    assert server.returncode == 0 and node.returncode == 0, restarted
     assert code == 0, out[-3000:]
     assert "[sray] resumed at step 4 (a restarted worker group)" in out
 

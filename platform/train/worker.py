@@ -24,6 +24,9 @@ from sray.platform.train.step import TrainStep, step_seed
 
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
+UNSENT_METRICS = "unsent_metrics"
+"""Checkpoint entry: ``[key, value, step]`` of each metric rank 0 could not deliver by then (the tracking
+store was unreachable); a worker restarted from the checkpoint logs them again."""
 
 
 def _memory_mb(device: torch.device) -> float:
@@ -95,6 +98,9 @@ def train_worker(payload: dict[str, Any]) -> None:
     logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
     if logger is not None and start == 0:
         logger.log_params(cfg.to_dict())
+    if logger is not None and state is not None:
+        for key, value, logged_at in state.get(UNSENT_METRICS, []):
+            logger.log_metrics({key: value}, logged_at)  # the store missed them before the checkpoint
     # One loader epoch per checkpoint interval: epoch e's stream depends only on (seed, e, rank), so a
     # job resumed at step s re-enters epoch s // E at offset s % E and sees exactly the batches an
     # uninterrupted job would have seen.
@@ -115,7 +121,8 @@ def train_worker(payload: dict[str, Any]) -> None:
     bar = make_progress(rank == 0, total=cfg.optim.steps, initial=start, desc=cfg.run.name)
 
     def checkpoint_and_report(step_done: int, metrics: dict[str, float]) -> None:
-        """Every rank reports; rank 0 flushes metrics (so a restart never leaves a gap) and saves."""
+        """Every rank reports; rank 0 flushes metrics and saves, with what it could not deliver (so a restart
+        never leaves a gap, even while the tracking store is down)."""
         divergence = parameter_divergence(model, world)
         if rank == 0:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
@@ -123,6 +130,7 @@ def train_worker(payload: dict[str, Any]) -> None:
             counters["skipped_steps"] = train_step.skipped_total
             state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
                                    step_done, cfg, best, counters)
+            state[UNSENT_METRICS] = [list(m) for m in logger.unsent_metrics()]  # store unreachable now
             path = manager.save(state, step_done, metrics.get("val/miou"))
             ray.train.report(metrics, checkpoint=to_ray_checkpoint(path))
         else:
