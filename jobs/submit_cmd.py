@@ -49,6 +49,17 @@ def train_command(args: argparse.Namespace, name: str, output_dir: Path, data: P
     return argv
 
 
+def job_runtime_env(working_dir: str | None) -> dict[str, object] | None:
+    """The job's Ray runtime env: the shipped folder, and ``SRAY_FAULTS`` when set here (a drill's faults
+    reach the job's driver, which forwards them to its workers)."""
+    from sray.platform.common.fault_hook import propagated_env
+
+    env: dict[str, object] = {"working_dir": str(Path(working_dir).resolve())} if working_dir else {}
+    if propagated_env():
+        env["env_vars"] = propagated_env()
+    return env or None
+
+
 def run(args: argparse.Namespace) -> int:
     """Check the request here, submit it, and with ``--wait`` follow it; exit 2 for a bad request."""
     from sray.platform.cluster import job_client
@@ -64,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     data = Path(args.data).resolve() if args.data else None
     argv = train_command(args, name, Path(cfg.run.output_dir).resolve(), data)
     entrypoint = " ".join(shlex.quote(a) for a in argv)
-    runtime_env = {"working_dir": str(Path(args.working_dir).resolve())} if args.working_dir else None
+    runtime_env = job_runtime_env(args.working_dir)
     try:
         job_id = job_client.submit(args.address, entrypoint, runtime_env=runtime_env)
     except Exception as e:  # noqa: BLE001 - the head is unreachable or refused us: one line, the fix

@@ -72,6 +72,16 @@ def processes_under(folder: Path) -> list[str]:
     return found
 
 
+@dataclass
+class ClusterInputs:
+    """Tiny inputs on the cluster's shared storage, as a user would place them."""
+
+    shards: Path
+    """2 train scenes + 1 test scene, 20 views of 32x40 each (``train_fixtures.tiny_shards``' data)."""
+    checkpoint: Path
+    """A step-0 checkpoint of the tiny network, the fleet's shared model."""
+
+
 @pytest.fixture(scope="session")
 def local_cluster() -> Iterator[LocalCluster]:
     """``sray cluster up --workers 2`` in a short temp folder; ``down`` and a leftover check at the end."""
@@ -103,3 +113,17 @@ def local_cluster() -> Iterator[LocalCluster]:
         left = processes_under(root)
         shutil.rmtree(root, ignore_errors=True)
         assert not left, "processes left behind by the cluster tests:\n" + "\n".join(left)
+
+
+@pytest.fixture(scope="session")
+def cluster_inputs(local_cluster: LocalCluster) -> ClusterInputs:
+    """Tiny shards and a tiny S-Ray checkpoint under ``<shared storage>/inputs`` (made once per session)."""
+    from fleet_fixtures import write_tiny_checkpoint
+
+    from sray.data_tools.shards.writer import write_shards
+    from sray.data_tools.synth.dataset import generate_dataset
+
+    root = local_cluster.state.storage / "inputs"
+    generate_dataset(root / "scenes", n_train=2, n_test=1, n_views=20, height=32, width=40, seed=3, progress=False)
+    write_shards(root / "scenes", root / "shards", neighbours=8)
+    return ClusterInputs(root / "shards", write_tiny_checkpoint(root / "shards", root / "base"))

@@ -18,6 +18,7 @@ settings.load_profile(os.environ.get("SRAY_HYPOTHESIS", "ci"))
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # shared fixture modules beside the tests
 
+from cluster_fixtures import cluster_inputs, local_cluster  # noqa: E402,F401  (one local cluster per session)
 from ray_fixtures import ray_session  # noqa: E402,F401  (session-wide local Ray, started on first use)
 
 

@@ -1,7 +1,7 @@
 """``sray cluster``: PostgreSQL + MLflow server + Ray head and 2 worker nodes as real processes.
 
 Marked ``cluster`` (select with ``-m cluster``); skipped with the reason where PostgreSQL cannot
-be installed. One cluster serves the whole session (``cluster_fixtures.local_cluster``).
+be installed. One cluster serves the whole session (``cluster_fixtures.local_cluster``, through conftest.py).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster_fixtures import LocalCluster, local_cluster  # noqa: E402,F401
+from cluster_fixtures import LocalCluster  # noqa: E402
 
 pytestmark = pytest.mark.cluster
 

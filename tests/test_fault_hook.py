@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -17,6 +21,8 @@ from sray.platform.common.fault_hook import (
     InjectedFailure,
     active_faults,
     fail_if_listed,
+    hold_if_due,
+    hold_paths,
     parse_faults,
     propagated_env,
 )
@@ -25,12 +31,14 @@ from sray.platform.config.train_config import TrainConfig
 
 def test_parse_reads_every_key_and_defaults_to_off() -> None:
     assert parse_faults("") == Faults()
-    got = parse_faults(" train.kill_at_step=12 ; train.nan_at_step=7;train.stop_after_step=10;fleet.fail_scenes=a, b ;")
-    assert got == Faults(kill_at_step=12, nan_at_step=7, stop_after_step=10, fail_scenes=("a", "b"))
+    got = parse_faults(" train.kill_at_step=12 ; train.nan_at_step=7;train.stop_after_step=10;fleet.fail_scenes=a, b ;"
+                       "train.hold_at_steps=2, 7")
+    assert got == Faults(kill_at_step=12, nan_at_step=7, stop_after_step=10, fail_scenes=("a", "b"), hold_at_steps=(2, 7))
 
 
 @pytest.mark.parametrize("text, named", [("train.kill_at=3", "train.kill_at"), ("train.nan_at_step=x", "integer"),
-                                         ("fleet.fail_scenes", "key=value")])
+                                         ("fleet.fail_scenes", "key=value"),
+                                         ("train.hold_at_steps=2,x", "comma-separated integer steps")])
 def test_parse_errors_name_the_entry_and_the_fix(text: str, named: str) -> None:
     with pytest.raises(ValueError, match=ENV_VAR) as err:
         parse_faults(text)
@@ -61,8 +69,6 @@ for step in range(5):
 
 
 def _run_kill_script(job: Path, rank: int, env_faults: str) -> subprocess.CompletedProcess:
-    import os
-
     env = dict(os.environ, **{ENV_VAR: env_faults})
     return subprocess.run([sys.executable, "-c", KILL_SCRIPT, str(job), str(rank)], env=env, capture_output=True,
                           text=True, timeout=120)
@@ -79,6 +85,29 @@ def test_kill_happens_once_on_rank_zero_only(tmp_path: Path) -> None:
     other = tmp_path / "rank1"
     other.mkdir()
     assert _run_kill_script(other, 1, "train.kill_at_step=3").returncode == 0
+
+
+def test_hold_pauses_rank_zero_once_until_released(tmp_path: Path) -> None:
+    """The marker appears while the pause lasts (with the given facts); the release ends it; the same step
+    never pauses twice in one job folder, nor on another rank, nor at an unlisted step."""
+    faults = parse_faults("train.hold_at_steps=3")
+    marker, release = hold_paths(tmp_path, 3)
+    paused: list[bool] = []
+    waiter = threading.Thread(target=lambda: paused.append(hold_if_due(faults, 3, 0, tmp_path, lambda: {"node": "n"})))
+    waiter.start()
+    deadline = time.monotonic() + 30
+    while not marker.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    assert waiter.is_alive() and json.loads(marker.read_text()) == {"node": "n", "pid": os.getpid(), "step": 3}
+    release.touch()
+    waiter.join(timeout=10)
+    assert paused == [True]
+    assert not hold_if_due(faults, 3, 0, tmp_path, dict, timeout_s=30)
+    assert not hold_if_due(faults, 2, 0, tmp_path, dict, timeout_s=30)
+    other = tmp_path / "other"
+    other.mkdir()
+    assert not hold_if_due(faults, 3, 1, other, dict, timeout_s=30) and not hold_paths(other, 3)[0].exists()
 
 
 def test_configs_written_before_the_hook_still_load() -> None:

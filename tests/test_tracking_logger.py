@@ -172,6 +172,16 @@ def test_backoff_skips_attempts_until_it_expires(mlflow_uri):
     assert client.batches == 1 and logger.pending()["metrics"] == 0
 
 
+def test_unsent_metrics_are_those_the_store_has_not_got(mlflow_uri):
+    handle = prepare_run(mlflow_uri, "sray train", "job-u")
+    client = CountingClient(mlflow_uri, fail_first=1)
+    logger = MlflowRunLogger(handle, flush_every_steps=1, retry_initial_s=60.0, client=client)
+    logger.log_metrics({"loss": 1.5, "lr": 0.5}, step=3)  # the store refuses: both stay buffered
+    assert logger.unsent_metrics() == [("loss", 1.5, 3), ("lr", 0.5, 3)]
+    assert logger.flush(force=True) and logger.unsent_metrics() == []
+    assert _history(mlflow_uri, handle.run_id, "loss") == [(3, 1.5)]
+
+
 def test_bounded_buffer_drops_oldest_with_a_warning(caplog):
     uri = f"http://127.0.0.1:{_closed_port()}"
     handle = RunHandle(tracker="mlflow", store=uri, run_id="0" * 32, experiment_id="1", ui_url=uri)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from sray.platform.cluster import mlflow_server, postgres, ray_nodes
 from sray.platform.cluster.processes import ClusterError, ProcessRecord, free_port, port_open, stop, wait_until
-from sray.platform.cluster.state import ClusterState, load_state
+from sray.platform.cluster.state import ClusterState, load_state, update_state
 
 STOP_ORDER = ("ray-worker", "ray-head", "mlflow", "postgres")
 """Name prefixes in the order ``down`` stops them: Ray first, the database last."""
@@ -58,8 +58,9 @@ def _timed(state: ClusterState, name: str, start: float) -> None:
 
 
 def _started(state: ClusterState, name: str, record: ProcessRecord) -> None:
-    state.processes[name] = {"pid": record.pid, "started": record.started}
-    state.save()
+    """Record process ``name`` on disk (under the record's lock) and in ``state``."""
+    entry = {"pid": record.pid, "started": record.started}
+    state.processes = update_state(state.root, lambda on_disk: on_disk.processes.update({name: entry})).processes
 
 
 def _start_part(state: ClusterState, name: str) -> None:
@@ -131,11 +132,13 @@ def restart(root: Path, name: str, outage_s: float = 0.0) -> ClusterState:
     if record is not None:
         stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM)
     time.sleep(outage_s)
+    t0 = time.monotonic()
     _start_part(state, name)
     if name.startswith("ray-worker-"):
         _wait_nodes(state)
-    state.save()
-    return state
+        _timed(state, name, t0)  # a worker node is ready once Ray lists it, not when its process exists
+    took = state.startup_s[name]
+    return update_state(state.root, lambda on_disk: on_disk.startup_s.update({name: took}))
 
 
 def status(root: Path) -> ClusterState:
@@ -158,8 +161,7 @@ def down(root: Path) -> list[str]:
             # PostgreSQL: SIGINT is its fast shutdown (SIGTERM would wait for every client to leave).
             if record is not None and stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM):
                 stopped.append(name)
-    state.processes = {}
-    state.save()
+    update_state(state.root, lambda on_disk: on_disk.processes.clear())
     return stopped
 
 

@@ -36,12 +36,16 @@ def _ray() -> str:
     return str(beside) if beside.exists() else (shutil.which("ray") or "ray")
 
 
-def _node_env(token_path: Path) -> dict[str, str]:
-    """A node's environment: ours, the token, and this Python environment's scripts (``sray``) first on PATH,
-    so jobs and workers run the same installation as the cluster."""
-    env = {**os.environ, **NODE_ENV, **auth_env(token_path)}
+def _node_env(token_path: Path, gcs_address: str) -> dict[str, str]:
+    """A node's environment: ours, the token, this Python environment's scripts (``sray``) first on PATH (jobs
+    and workers run the same installation as the cluster), and ``RAY_ADDRESS`` naming this cluster.
+
+    Every process a node starts inherits ``RAY_ADDRESS``. Ray's own actors find "their" cluster with
+    ``address="auto"`` (Ray Train's placement-group cleaner, through the state API); with another Ray
+    running on the machine (a local ``sray train``, a test session) that lookup finds two and the
+    cleaner dies with "Found multiple active Ray instances"."""
+    env = {**os.environ, **NODE_ENV, **auth_env(token_path), "RAY_ADDRESS": gcs_address}
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
-    env.pop("RAY_ADDRESS", None)
     return env
 
 
@@ -53,7 +57,7 @@ def start_head(temp_dir: Path, gcs_port: int, dashboard_port: int, token_path: P
            "--num-cpus", "0", "--num-gpus", "0", "--temp-dir", str(temp_dir),
            "--ray-client-server-port", str(free_port()), "--dashboard-agent-listen-port", str(free_port()),
            "--object-store-memory", str(OBJECT_STORE_BYTES), "--disable-usage-stats"]
-    record = spawn(cmd, log_path, env=_node_env(token_path))
+    record = spawn(cmd, log_path, env=_node_env(token_path, f"127.0.0.1:{gcs_port}"))
     wait_until(lambda: port_open("127.0.0.1", dashboard_port), timeout_s, "the Ray head", log_path, record)
     return record
 
@@ -64,4 +68,4 @@ def start_worker(gcs_address: str, temp_dir: Path, cpus: int, token_path: Path, 
            "--num-cpus", str(cpus), "--num-gpus", "0", "--resources", f'{{"{WORKER_RESOURCE}": 1}}',
            "--temp-dir", str(temp_dir), "--dashboard-agent-listen-port", str(free_port()),
            "--object-store-memory", str(OBJECT_STORE_BYTES), "--disable-usage-stats"]
-    return spawn(cmd, log_path, env=_node_env(token_path))
+    return spawn(cmd, log_path, env=_node_env(token_path, gcs_address))

@@ -2,13 +2,17 @@
 
 It holds what ``up`` chose and started (ports, the database password, process ids with their start
 times), so ``status`` can report and ``down`` can stop exactly those processes. It stays after
-``down``: the next ``up`` reuses the password and, where still free, the ports.
+``down``: the next ``up`` reuses the password and, where still free, the ports. Commands that may run
+at the same time (``restart`` of a node while the tracking server restarts) change it through
+:func:`update_state`, under a lock, so neither loses the other's process ids.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -17,6 +21,8 @@ from sray.platform.cluster.processes import ClusterError, ProcessRecord, is_aliv
 
 STATE_FILE = "cluster.json"
 """The record's file name inside the cluster folder."""
+LOCK_FILE = "cluster.lock"
+"""File locked (``flock``) while one command reads, changes and writes the record."""
 FORMAT = "sray-cluster/1"
 """Format tag of the record."""
 
@@ -98,3 +104,16 @@ def load_state(root: Path) -> ClusterState | None:
         return ClusterState(**data)
     except (ValueError, TypeError) as e:
         raise ClusterError(f"{path}: not a sray cluster record ({e}); pass another --dir or remove the file") from None
+
+
+def update_state(root: Path, change: Callable[[ClusterState], None]) -> ClusterState:
+    """Apply ``change`` to the record on disk and save it, holding the folder's lock; returns the new record.
+    ClusterError when ``root`` holds no record."""
+    with open(Path(root) / LOCK_FILE, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        state = load_state(root)
+        if state is None:
+            raise ClusterError(f"{Path(root).resolve()}: no cluster record ({STATE_FILE}) to update")
+        change(state)
+        state.save()
+    return state

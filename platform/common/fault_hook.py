@@ -11,6 +11,10 @@ Entries are ``key=value`` separated by ``;``; lists are comma-separated. Keys:
 * ``train.nan_at_step``: the training loss at that step becomes NaN (the non-finite guard must skip it);
 * ``train.stop_after_step``: the job stops cleanly with a checkpoint once that many steps are done, as
   after Ctrl-C;
+* ``train.hold_at_steps``: rank 0 pauses before each listed step, once per job (a marker file in the job
+  folder remembers it): it writes ``.fault_hold_<step>.json`` (its pid and node) into the job folder and
+  waits until ``.fault_release_<step>`` appears there (at most :data:`HOLD_TIMEOUT_S`), so a drill can
+  kill a node, the driver or the tracking server at a known step instead of after a guessed sleep;
 * ``fleet.fail_scenes``: every attempt of a fleet task for these scenes raises :class:`InjectedFailure`;
 * ``stability.nan_points``: ``method/axis/level`` entries; the stability suite's renders of that method
   at that point output NaN (the failure the suite must record and go past).
@@ -21,10 +25,13 @@ the hook reaches every process of a run, on one machine or a cluster.
 
 from __future__ import annotations
 
+import json
 import os
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 ENV_VAR = "SRAY_FAULTS"
 """Name of the environment variable that carries the faults."""
@@ -34,6 +41,9 @@ KILL_MARKER = ".fault_kill_done"
 
 KILL_EXIT_CODE = 17
 """Exit status of a worker killed by ``train.kill_at_step``."""
+
+HOLD_TIMEOUT_S = 120.0
+"""Longest pause at a ``train.hold_at_steps`` step when nobody releases it (then training goes on)."""
 
 
 class InjectedFailure(RuntimeError):
@@ -50,6 +60,8 @@ class Faults:
     """Training step whose loss becomes NaN (-1 = never)."""
     stop_after_step: int = -1
     """Steps after which training stops cleanly with a checkpoint (-1 = never)."""
+    hold_at_steps: tuple[int, ...] = ()
+    """Training steps before which rank 0 pauses until released (once per job)."""
     fail_scenes: tuple[str, ...] = ()
     """Scenes whose fleet tasks raise on every attempt."""
     nan_points: tuple[str, ...] = ()
@@ -57,9 +69,10 @@ class Faults:
 
 
 _KEYS = {"train.kill_at_step": "kill_at_step", "train.nan_at_step": "nan_at_step",
-         "train.stop_after_step": "stop_after_step", "fleet.fail_scenes": "fail_scenes",
-         "stability.nan_points": "nan_points"}
+         "train.stop_after_step": "stop_after_step", "train.hold_at_steps": "hold_at_steps",
+         "fleet.fail_scenes": "fail_scenes", "stability.nan_points": "nan_points"}
 _LISTS = ("fail_scenes", "nan_points")
+_INT_LISTS = ("hold_at_steps",)
 
 
 def parse_faults(text: str) -> Faults:
@@ -72,13 +85,15 @@ def parse_faults(text: str) -> Faults:
             raise ValueError(f"{ENV_VAR}: cannot read {entry!r}; write key=value entries separated by ';' "
                              f"with keys {sorted(_KEYS)}")
         field = _KEYS[key]
+        items = tuple(s.strip() for s in raw.split(",") if s.strip())
         if field in _LISTS:
-            values[field] = tuple(s.strip() for s in raw.split(",") if s.strip())
+            values[field] = items
             continue
         try:
-            values[field] = int(raw)
+            values[field] = tuple(int(s) for s in items) if field in _INT_LISTS else int(raw)
         except ValueError:
-            raise ValueError(f"{ENV_VAR}: {key} must be an integer step, got {raw!r}") from None
+            what = "comma-separated integer steps" if field in _INT_LISTS else "an integer step"
+            raise ValueError(f"{ENV_VAR}: {key} must be {what}, got {raw!r}") from None
     return Faults(**values)  # type: ignore[arg-type]
 
 
@@ -105,6 +120,30 @@ def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path, before_exit
     if before_exit is not None:
         before_exit()
     os._exit(KILL_EXIT_CODE)
+
+
+def hold_paths(job_dir: Path, step: int) -> tuple[Path, Path]:
+    """``(marker, release)`` files of a ``train.hold_at_steps`` pause at ``step`` in ``job_dir``."""
+    return job_dir / f".fault_hold_{step}.json", job_dir / f".fault_release_{step}"
+
+
+def hold_if_due(faults: Faults, step: int, rank: int, job_dir: Path, facts: Callable[[], dict[str, Any]],
+                timeout_s: float = HOLD_TIMEOUT_S, poll_s: float = 0.1) -> bool:
+    """Pause rank 0 before ``step`` when ``train.hold_at_steps`` lists it and this job has not paused there yet.
+
+    Writes the marker (``facts()`` plus pid and step, as JSON) and waits for the release file, at most
+    ``timeout_s``. Returns True when it paused.
+    """
+    marker, release = hold_paths(job_dir, step)
+    if rank != 0 or step not in faults.hold_at_steps or marker.exists():
+        return False
+    partial = marker.with_suffix(".tmp")
+    partial.write_text(json.dumps({**facts(), "pid": os.getpid(), "step": step}))
+    partial.replace(marker)  # whole or absent: a reader never sees half a marker
+    deadline = time.monotonic() + timeout_s
+    while not release.exists() and time.monotonic() < deadline:
+        time.sleep(poll_s)
+    return True
 
 
 def poisoned_point(method: str, axis: str, level: object) -> bool:

@@ -173,6 +173,10 @@ class MlflowRunLogger(RunLogger):
             self._ops.popleft()
         return True
 
+    def unsent_metrics(self) -> list[tuple[str, float, int]]:
+        """The buffered metrics, oldest first, as ``(key, value, step)``."""
+        return [(m.key, float(m.value), int(m.step)) for m in self._metrics]
+
     def pending(self) -> dict[str, int]:
         """Counts of buffered params, metrics and other operations not delivered yet."""
         return {"params": len(self._params), "metrics": len(self._metrics), "ops": len(self._ops)}

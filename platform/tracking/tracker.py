@@ -84,6 +84,13 @@ class RunLogger(ABC):
         """Deliver what is buffered now; True when nothing is left (a logger without a buffer: always)."""
         return True
 
+    def unsent_metrics(self) -> list[tuple[str, float, int]]:
+        """Metrics logged but not delivered yet, as ``(key, value, step)`` (a logger without a buffer: none).
+
+        A training job stores them with each checkpoint: a worker restarted from it logs them again, so a
+        worker that dies while the store is unreachable leaves no gap in the history."""
+        return []
+
     def drain(self, timeout_s: float = DRAIN_TIMEOUT_S, poll_s: float = 2.0) -> bool:
         """Flush until nothing is left or ``timeout_s`` passed (a store restarting meanwhile loses nothing);
         True when everything was delivered."""

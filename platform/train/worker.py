@@ -15,7 +15,7 @@ import torch
 
 from sray.model.losses import render_loss
 from sray.platform.checkpoints.folders import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
-from sray.platform.common.fault_hook import active_faults, kill_if_due
+from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_due
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.tracker import RunHandle
@@ -24,6 +24,9 @@ from sray.platform.train.step import TrainStep, step_seed
 
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
+UNSENT_METRICS = "unsent_metrics"
+"""Checkpoint entry: ``[key, value, step]`` of each metric rank 0 could not deliver by then (the tracking
+store was unreachable); a worker restarted from the checkpoint logs them again."""
 
 
 def _memory_mb(device: torch.device) -> float:
@@ -81,6 +84,9 @@ def train_worker(payload: dict[str, Any]) -> None:
              else load_checkpoint(Path(payload["resume_from"])) if payload.get("resume_from") else None)
     if state is not None:
         start, best, counters = restore_training(state, model.net, optimizer, scheduler, None)
+        if rank == 0:
+            how = "a restarted worker group" if resumed is not None else "--resume"
+            print(f"[sray] resumed at step {start} ({how})", flush=True)
     model, optimizer = accelerator.prepare(model, optimizer)
     train_step = TrainStep(list(model.parameters()), optimizer, cfg.optim.grad_clip, cfg.run.precision, device,
                            cfg.optim.max_nonfinite_in_row, world)
@@ -92,6 +98,9 @@ def train_worker(payload: dict[str, Any]) -> None:
     logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
     if logger is not None and start == 0:
         logger.log_params(cfg.to_dict())
+    if logger is not None and state is not None:
+        for key, value, logged_at in state.get(UNSENT_METRICS, []):
+            logger.log_metrics({key: value}, logged_at)  # the store missed them before the checkpoint
     # One loader epoch per checkpoint interval: epoch e's stream depends only on (seed, e, rank), so a
     # job resumed at step s re-enters epoch s // E at offset s % E and sees exactly the batches an
     # uninterrupted job would have seen.
@@ -112,7 +121,8 @@ def train_worker(payload: dict[str, Any]) -> None:
     bar = make_progress(rank == 0, total=cfg.optim.steps, initial=start, desc=cfg.run.name)
 
     def checkpoint_and_report(step_done: int, metrics: dict[str, float]) -> None:
-        """Every rank reports; rank 0 flushes metrics (so a restart never leaves a gap) and saves."""
+        """Every rank reports; rank 0 flushes metrics and saves, with what it could not deliver (so a restart
+        never leaves a gap, even while the tracking store is down)."""
         divergence = parameter_divergence(model, world)
         if rank == 0:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
@@ -120,6 +130,7 @@ def train_worker(payload: dict[str, Any]) -> None:
             counters["skipped_steps"] = train_step.skipped_total
             state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
                                    step_done, cfg, best, counters)
+            state[UNSENT_METRICS] = [list(m) for m in logger.unsent_metrics()]  # store unreachable now
             path = manager.save(state, step_done, metrics.get("val/miou"))
             ray.train.report(metrics, checkpoint=to_ray_checkpoint(path))
         else:
@@ -130,6 +141,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     try:
         while step < cfg.optim.steps:
             kill_if_due(faults, step, rank, job_dir, before_exit=lambda: logger.flush(force=True))
+            hold_if_due(faults, step, rank, job_dir, lambda: {"node_id": ray.get_runtime_context().get_node_id()})
 
             if step % epoch_len == 0 and step != start:
                 batches = batches_from(step)
