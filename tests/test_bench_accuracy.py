@@ -1,49 +1,162 @@
-"""``sray bench accuracy`` end to end on a toy preset: ablation table, equal-budget table, charts."""
+"""``sray bench accuracy``: seed statistics and targets against hand-computed values, per-class IoU,
+and the resumable cells end to end on a toy preset (interrupted pretraining resumed, finished cells
+never run again)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from sray.jobs.bench import accuracy as bench_accuracy
-from sray.jobs.bench.accuracy import VARIANTS, Preset, run_accuracy_benchmark
+from sray.jobs.bench import accuracy_cells
+from sray.jobs.bench.accuracy import LONG, Cell, Preset, World, run_accuracy_benchmark
+from sray.jobs.bench.accuracy_cells import class_iou, stored_cells
+from sray.jobs.bench.accuracy_tables import budget_means, class_table, seed_table, targets, write_tables
+from sray.platform.common.eval_protocol import EvalProtocol
 
-TOY = Preset(train_scenes=1, test_scenes=1, views=20, height=36, width=48, steps=2, rays=32, n_coarse=4, n_fine=4,
-             n_source=2, workers=1, gpus_per_worker=0.0, precision="no", budget_s=3.0, budgets=(1.0, 3.0),
-             validations=1, fleet_eval_stride=4)
+TOY = Preset(world=World(train_scenes=1, test_scenes=1, views=20, height=36, width=48),
+             recipe="synth-cpu-hour", overrides=("model.n_coarse=4", "model.n_fine=4", "model.n_source=2",
+                                              "data.rays_per_batch=32", "data.top_k=4", "run.workers=1",
+                                              "data.val_views_per_scene=1",
+                                              "data.aug_source_scale=0.0"),  # 36x48 sources: no room to shrink
+             long_steps=4, ablation_steps=2, validations=1, ckpt_every=2,
+             plan=(Cell(LONG, 0), Cell("full", 0), Cell("full", 1), Cell("none", 0)),
+             eval_sources=2, eval_fast=None, budget_s=3.0, budgets=(1.0, 3.0), fleet_eval_stride=4,
+             fleet_gpus_per_task=0.0)
+
+
+def _cell(variant: str, seed: int, miou: float, class_iou_values: list[float | None] | None = None) -> dict:
+    """A stored cell record with the fields the tables read."""
+    return {"cell": Cell(variant, seed).key, "variant": variant, "seed": seed, "steps": 2, "miou": miou,
+            "total_acc": miou + 0.2, "class_avg_acc": miou + 0.1, "psnr": 20.0, "train_s": 60.0, "eval_s": 30.0,
+            "class_iou": class_iou_values or [miou, None], "class_names": ["wall", "lamp"],
+            "protocol": EvalProtocol(source_rule="r v1", n_source=2, stride=1).to_json()}
+
+
+PLAN3 = dataclasses.replace(TOY, plan=(Cell(LONG, 0), *(Cell("full", s) for s in range(3)),
+                                       *(Cell("none", s) for s in range(3))))
+
+
+def test_cell_names_parse_both_ways() -> None:
+    assert Cell.parse("full:2") == Cell("full", 2) == Cell.parse("full-s2")
+    assert Cell.parse("full-affine:0") == Cell("full-affine", 0)
+    for bad in ("full", "fancy:1", "full:x"):
+        with pytest.raises(ValueError, match="VARIANT:SEED"):
+            Cell.parse(bad)
+
+
+def test_seed_table_mean_and_sample_spread() -> None:
+    stored = {c["cell"]: c for c in [_cell("full", s, m) for s, m in enumerate([0.40, 0.44, 0.42])]
+              + [_cell("none", 0, 0.30)]}
+    header, rows = seed_table(PLAN3, stored)
+    full = dict(zip(header, rows[0], strict=True))
+    assert full["variant"] == "full" and full["seeds"] == "3/3"
+    assert full["mIoU %"] == "42.00 ± 2.00"  # mean 0.42, sample std 0.02
+    assert full["mIoU % per seed"] == "40.00 / 44.00 / 42.00"
+    none = dict(zip(header, rows[1], strict=True))
+    assert none["seeds"] == "1/3" and none["mIoU %"] == "30.00"  # one seed: no spread
+
+
+@pytest.mark.parametrize(("full", "none", "verdict"), [
+    ([0.40, 0.44, 0.42], [0.30, 0.31, 0.35], "do not overlap: met"),
+    ([0.40, 0.44, 0.42], [0.30, 0.31, 0.41], "overlap: not met"),   # gap 8 points but ranges overlap
+    ([0.40, 0.41, 0.42], [0.37, 0.38, 0.39], "do not overlap: not met"),  # apart, but only 3 points
+])
+def test_ablation_target_needs_margin_and_separate_ranges(full: list[float], none: list[float], verdict: str) -> None:
+    stored = {c["cell"]: c for c in [_cell("full", s, m) for s, m in enumerate(full)]
+              + [_cell("none", s, m) for s, m in enumerate(none)]}
+    line = next(ln for ln in targets(PLAN3, stored, None) if "none" in ln)
+    assert line.endswith(verdict + ".")
+    assert f"{100 * (np.mean(full) - np.mean(none)):+.2f} points" in line
+
+
+def test_zero_shot_and_finetune_ratio_targets() -> None:
+    stored = {"long-s0": _cell(LONG, 0, 0.45)}
+    lines = targets(PLAN3, stored, sray_at_60=0.70)
+    assert "45.00% against the 50% target: not met" in lines[0]
+    assert "45.00 / 70.00 = 0.64 against 0.60: met" in lines[1]
+
+
+def test_class_iou_averages_only_scenes_holding_the_class() -> None:
+    report = {"scenes": {"a": {"dataset_level": {"iou_per_class": [0.5, None, 0.2]}},
+                         "b": {"dataset_level": {"iou_per_class": [0.7, None, None]}}}}
+    assert class_iou(report) == [pytest.approx(0.6), None, pytest.approx(0.2)]
+    stored = {"full-s0": _cell("full", 0, 0.4, [0.5, None]), "full-s1": _cell("full", 1, 0.4, [0.7, 0.1])}
+    header, rows = class_table(PLAN3, stored)
+    assert header == ["class", "full IoU %"]
+    assert rows == [["wall", "60.00"], ["lamp", "10.00"]]  # lamp: only the seed whose scenes hold it
+
+
+def test_budget_means_read_the_last_evaluation_before_each_budget() -> None:
+    curve = [{"wall_s": 0.0, "miou": 0.3}, {"wall_s": 10.0, "miou": 0.5}, {"wall_s": 50.0, "miou": 0.7}]
+    results = [{"method": "sray", "status": "finished", "curve": curve},
+               {"method": "sray", "status": "finished", "curve": [{"wall_s": 0.0, "miou": 0.1}]},
+               {"method": "semantic-nerf", "status": "failed", "curve": curve}]
+    means = budget_means(results, (0.0, 20.0, 60.0))
+    assert means["sray"] == pytest.approx([0.2, 0.3, 0.4])
+    assert means["semantic-nerf"] == [None, None, None]
+
+
+def test_partial_tables_name_the_missing_cells(tmp_path: Path) -> None:
+    doc = tmp_path / "docs" / "benchmarks.md"
+    stored = {"full-s0": _cell("full", 0, 0.4), "full-s1": _cell("full", 1, 0.5)}
+    write_tables("toy", PLAN3, stored, tmp_path / "no-fleet", doc)
+    text = doc.read_text()
+    assert "Missing cells: long-s0, full-s2, none-s0, none-s1, none-s2." in text
+    assert "cell long-s0 not run yet" in text and "needs at least 2 seeds of each" in text
+    assert "full | 2 | 2/3 | 45.00 ± 7.07" in text
+    assert (tmp_path / "docs/benchmarks/accuracy-toy/zero_shot_seeds.png").stat().st_size > 0
 
 
 @pytest.mark.slow
-def test_toy_preset_writes_both_tables_and_the_charts(ray_session, tmp_path: Path, monkeypatch) -> None:
-    monkeypatch.setitem(bench_accuracy.PRESETS, "toy", TOY)
-    doc = tmp_path / "docs" / "benchmarks.md"
-    run_accuracy_benchmark("toy", tmp_path / "run", doc)
+def test_toy_benchmark_resumes_cells_and_never_reruns_a_finished_one(ray_session, tmp_path: Path,
+                                                                    monkeypatch) -> None:
+    presets = {"toy": TOY}
+    out, doc = tmp_path / "run", tmp_path / "docs" / "benchmarks.md"
+    trained: list[str] = []
+    real_pretrain = accuracy_cells.pretrain
+
+    def counting_pretrain(cell: Cell, *args, **kwargs):
+        trained.append(cell.key)
+        return real_pretrain(cell, *args, **kwargs)
+
+    monkeypatch.setattr(accuracy_cells, "pretrain", counting_pretrain)
+
+    # 1. the long cell's pretraining is interrupted at step 2 of 4: the run fails, no cell is stored
+    monkeypatch.setenv("SRAY_FAULTS", "train.stop_after_step=2")
+    with pytest.raises(RuntimeError, match="re-run `sray bench accuracy` to resume it"):
+        run_accuracy_benchmark("toy", out, doc, [Cell(LONG, 0)], fleet=False, presets=presets)
+    assert stored_cells(out) == {}
+    monkeypatch.delenv("SRAY_FAULTS")
+
+    # 2. a re-run resumes it from its step-2 checkpoint and finishes it
+    stored = run_accuracy_benchmark("toy", out, doc, [Cell(LONG, 0)], fleet=False, presets=presets)
+    assert list(stored) == ["long-s0"] and stored["long-s0"]["resumed"] is True
+    assert stored["long-s0"]["steps"] == 4
+    history = json.loads((out / "cells" / "long-s0.json").read_text())
+    assert history == stored["long-s0"]
+
+    # 3. the full run trains only the missing cells, then the fleet from the long model
+    stored = run_accuracy_benchmark("toy", out, doc, None, fleet=True, presets=presets)
+    assert trained == ["long-s0", "long-s0", "full-s0", "full-s1", "none-s0"]
+    assert set(stored) == {c.key for c in TOY.plan}
+    assert stored["full-s0"]["resumed"] is False and stored["full-s0"]["steps"] == 2
+    report = json.loads(Path(stored["full-s0"]["metrics_path"]).read_text())
+    assert stored["full-s0"]["miou"] == pytest.approx(report["mean"]["dataset_level"]["miou"])
+    assert stored["full-s0"]["class_iou"] == class_iou(report)
+    assert stored["full-s0"]["seed"] == 0 and stored["full-s1"]["seed"] == 1
+    assert stored["full-s0"]["miou"] != stored["full-s1"]["miou"] or \
+        stored["full-s0"]["psnr"] != stored["full-s1"]["psnr"]  # two seeds, two models
     text = doc.read_text()
-    ablation = text.split("## Accuracy: attention ablation, zero-shot (toy)")[1].split("## ")[0]
-    rows = [ln for ln in ablation.splitlines() if ln.split(" | ")[0] in VARIANTS]
-    assert [r.split(" | ")[0] for r in rows] == list(VARIANTS)
-    header = next(ln for ln in ablation.splitlines() if ln.startswith("variant | ")).split(" | ")
-    for row in rows:
-        cells = dict(zip(header, row.split(" | "), strict=True))
-        assert 0.0 <= float(cells["mIoU %"]) <= 100.0
-        assert -1.0 <= float(cells["SSIM"]) <= 1.0  # zero-shot evaluations render whole images
-    # the protocol line under each table: read from the shards' manifest and the preset
-    rule = json.loads((tmp_path / "run" / "shards" / "manifest.json").read_text())["neighbours"]
-    source_rule = f"{rule['rule']} v{rule['version']}"
-    [caption] = [ln for ln in ablation.splitlines() if ln.startswith("Protocol")]
-    assert caption.startswith(f"Protocol: sources: {TOY.n_source} per query, fixed, top-ranked by {source_rule}; "
-                              "pixels: whole images (stride 1)")
-    budget = text.split("equal wall-clock budgets (toy)")[1]
-    budget_rows = [ln.split(" | ") for ln in budget.splitlines() if ln[:1].isdigit()]
-    assert [r[0] for r in budget_rows] == ["0", "1", "3"]
-    assert all(cell != "-" for r in budget_rows for cell in r[1:])
-    captions = {ln.split(": ", 1)[0]: ln for ln in budget.splitlines() if ln.startswith("Protocol")}
-    assert set(captions) == {"Protocol (sray)", "Protocol (semantic-nerf)"}
-    stride = f"every 4th in each direction (stride {TOY.fleet_eval_stride}), so no SSIM"
-    assert f"{TOY.n_source} per query, fixed, top-ranked by {source_rule}" in captions["Protocol (sray)"]
-    assert "sources: none (per-scene model)" in captions["Protocol (semantic-nerf)"]
-    assert all(stride in c for c in captions.values())
-    charts = list((tmp_path / "docs/benchmarks/accuracy-toy").glob("*.png"))
-    assert charts and all(f"benchmarks/accuracy-toy/{c.name}" in text for c in charts)
+    assert "Missing cells: none." in text
+    assert "equal wall-clock budgets (toy)" in text
+    # the protocol under the tables: whole images, the preset's sources
+    assert f"sources: {TOY.eval_sources} per query" in text and "pixels: whole images (stride 1)" in text
+
+    # 4. nothing left: a re-run trains nothing and rewrites the same tables
+    trained.clear()
+    run_accuracy_benchmark("toy", out, doc, None, fleet=True, presets=presets)
+    assert trained == []

@@ -53,8 +53,8 @@ def _decode(png: Path, n_classes: int, ignore_id: int) -> np.ndarray:
     return ids
 
 
-def _naive_iou(pairs: list[tuple[np.ndarray, np.ndarray]], ignore_id: int) -> float:
-    """mIoU over the classes present in the ground truth of ``pairs``, counted pixel by pixel."""
+def _naive_class_iou(pairs: list[tuple[np.ndarray, np.ndarray]], ignore_id: int) -> dict[int, float]:
+    """IoU of each class present in the ground truth of ``pairs``, counted pixel by pixel."""
     tp, fp, fn, present = {}, {}, {}, set()
     for pred, gt in pairs:
         for p, g in zip(pred.ravel().tolist(), gt.ravel().tolist()):
@@ -66,7 +66,12 @@ def _naive_iou(pairs: list[tuple[np.ndarray, np.ndarray]], ignore_id: int) -> fl
             else:
                 fn[g] = fn.get(g, 0) + 1
                 fp[p] = fp.get(p, 0) + 1
-    ious = [tp.get(c, 0) / (tp.get(c, 0) + fp.get(c, 0) + fn.get(c, 0)) for c in present]
+    return {c: tp.get(c, 0) / (tp.get(c, 0) + fp.get(c, 0) + fn.get(c, 0)) for c in present}
+
+
+def _naive_iou(pairs: list[tuple[np.ndarray, np.ndarray]], ignore_id: int) -> float:
+    """mIoU over the classes present in the ground truth of ``pairs``."""
+    ious = list(_naive_class_iou(pairs, ignore_id).values())
     return sum(ious) / len(ious)
 
 
@@ -123,6 +128,10 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
             assert view["miou_per_image"] == pytest.approx(_naive_iou([(pred, gt)], ignore_id), abs=1e-9)
             pairs.append((pred, gt))
         assert block["dataset_level"]["miou"] == pytest.approx(_naive_iou(pairs, ignore_id), abs=1e-9)
+        per_class = _naive_class_iou(pairs, ignore_id)
+        assert len(block["dataset_level"]["iou_per_class"]) == n_classes
+        for c, iou in enumerate(block["dataset_level"]["iou_per_class"]):
+            assert iou is None if c not in per_class else iou == pytest.approx(per_class[c], abs=1e-9)
         assert block["per_image"]["miou"] == pytest.approx(np.mean([v["miou_per_image"] for v in block["views"]]),
                                                            abs=1e-9)
         right = sum(int(((p == g) & (g != ignore_id)).sum()) for p, g in pairs)

@@ -1,189 +1,207 @@
-"""``sray bench accuracy --preset cpu-small|gpu``: the paper's ablation and per-scene comparison, measured.
+"""``sray bench accuracy --preset cpu-small|gpu``: zero-shot accuracy with seeds, resumable cell by cell.
 
-1. procedural scenes -> shards;
-2. pretraining on the train scenes once per attention variant (full CRA, cross-only, intra-only,
-   none) and once for full CRA with the first (affine) semantic-aware weight map, zero-shot
-   evaluation of each on the unseen test scenes (the paper's ablation table);
-3. a finetune fleet on the unseen scenes from the full model, S-Ray finetune against Semantic-NeRF
-   from scratch under the same wall-clock budget, read off at equal budgets (the paper's
-   per-scene optimisation table);
-4. tables and charts appended to docs/benchmarks.md with the exact command, each table with the
-   protocol line(s) of the numbers in it (:func:`sray.platform.common.eval_protocol.caption_lines`); the
-   stored results (``<out>/eval/<variant>/metrics.json``, the fleet's ``result.json`` files) carry
-   the protocol descriptor.
+1. a procedural world (train scenes + at least 4 unseen test scenes) -> shards, reused when present;
+2. **cells**, each a (variant, seed) pretraining followed by a zero-shot evaluation on the unseen
+   scenes with 8 source views and whole images (:mod:`sray.jobs.bench.accuracy_cells`): the
+   ``long`` cell pretrains the preset's recipe for its whole budget (``synth-cpu-hour`` here), the
+   attention ablation (full CRA, cross-only, intra-only, none) pretrains the same recipe for a shorter
+   budget with several seeds. A finished cell is stored as one JSON file; a re-run fills only the
+   missing cells and resumes an interrupted pretraining from its last checkpoint, so the tables can
+   be completed over several runs (``--cells`` and ``--max-minutes`` pick the piece to run);
+3. a finetune fleet on the unseen scenes from the ``long`` model: S-Ray finetuning against
+   Semantic-NeRF from scratch under the same wall-clock budget, read off at equal budgets;
+4. tables (ablation with seed spread, per-class IoU, equal budgets, the targets) and a chart, written
+   into docs/benchmarks.md with the exact command, each table with its protocol line(s)
+   (:mod:`sray.jobs.bench.accuracy_tables`). The tables are rewritten after every run from whatever
+   cells are stored, and say which are still missing.
 """
 
 from __future__ import annotations
 
-import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-import numpy as np
+from sray.model.fast_render import FastRender
 
-VARIANTS = ("full", "cross", "intra", "none", "full-affine")
-"""Rows of the ablation: the attention variants in the paper's expected order (best first), then the
-full model with the first (``affine``) semantic-aware weight map, against the default ``radial`` one."""
-
-COMPARED = ("sray", "semantic-nerf")
-"""Per-scene methods of the equal-budget table (the paper's per-scene optimisation comparison), by
-registry name; columns are headed with their chart labels."""
+LONG = "long"
+"""Variant name of the cell that pretrains the preset's recipe for its full budget (full CRA)."""
 
 VARIANT_SETTINGS = {"full": ("full", "radial"), "cross": ("cross", "radial"), "intra": ("intra", "radial"),
-                    "none": ("none", "radial"), "full-affine": ("full", "affine")}
-"""Row name -> (``model.attention``, ``model.weight_map``)."""
+                    "none": ("none", "radial"), "full-affine": ("full", "affine"), LONG: ("full", "radial")}
+"""Variant -> (``model.attention``, ``model.weight_map``); ``full-affine`` is full CRA with the first
+(affine) semantic-aware weight map instead of the default radial one."""
+
+COMPARED = ("sray", "semantic-nerf")
+"""Per-scene methods of the equal-budget table (the paper's per-scene optimisation comparison)."""
+
+EXPERIMENT = "sray-bench-accuracy"
+"""Tracking experiment of every pretraining, evaluation and finetune of the benchmark."""
 
 
 @dataclass(frozen=True)
-class Preset:
-    """Sizes of one benchmark preset."""
+class World:
+    """The procedural scenes of a preset."""
 
     train_scenes: int
     test_scenes: int
     views: int
     height: int
     width: int
-    steps: int
-    rays: int
-    n_coarse: int
-    n_fine: int
-    n_source: int
-    workers: int
-    gpus_per_worker: float
-    precision: str
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One pretraining + zero-shot evaluation: a variant (``VARIANT_SETTINGS``) and a training seed."""
+
+    variant: str
+    seed: int
+
+    @property
+    def key(self) -> str:
+        """File and job name part: ``full-s0``."""
+        return f"{self.variant}-s{self.seed}"
+
+    @classmethod
+    def parse(cls, text: str) -> Cell:
+        """``full:0`` or ``full-s0`` -> Cell; ValueError names the accepted forms and variants."""
+        variant, sep, seed = text.rpartition(":") if ":" in text else text.rpartition("-s")
+        if not sep or variant not in VARIANT_SETTINGS or not seed.isdigit():
+            raise ValueError(f"cell {text!r}: write VARIANT:SEED (e.g. full:0) with VARIANT one of "
+                             f"{', '.join(VARIANT_SETTINGS)}")
+        return cls(variant, int(seed))
+
+
+def seeds(variant: str, n: int) -> tuple[Cell, ...]:
+    """Cells of ``variant`` with training seeds 0..n-1."""
+    return tuple(Cell(variant, s) for s in range(n))
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Sizes and plan of one benchmark preset."""
+
+    world: World
+    recipe: str
+    """Pretraining recipe every cell starts from (``jobs/recipes.py``)."""
+    overrides: tuple[str, ...]
+    """``section.field=value`` assignments applied to the recipe in every cell (sizes of small presets)."""
+    long_steps: int | None
+    """Steps of the ``long`` cell (None = the recipe's own)."""
+    ablation_steps: int
+    """Steps of every other cell (the shorter ablation budget)."""
+    validations: int
+    """Held-out validations logged during each pretraining (the cell evaluates its last checkpoint)."""
+    ckpt_every: int
+    """Checkpoint interval of each pretraining: the most an interrupted cell repeats."""
+    plan: tuple[Cell, ...]
+    """Cells in the order they run (the long model first: its number is the headline)."""
+    eval_sources: int
+    """Source views per query in the zero-shot evaluation."""
+    eval_fast: FastRender | None
+    """Render mode of the zero-shot evaluation (None = the full hierarchical renderer)."""
     budget_s: float
     """Wall-clock budget of each finetune (both methods)."""
     budgets: tuple[float, ...]
     """Equal-budget read-off points (seconds)."""
-    validations: int
-    """Held-out validations during each pretraining (the best one's checkpoint is used)."""
     fleet_eval_stride: int
     """Finetune curves score every n-th pixel in each direction of the held-out views."""
+    fleet_gpus_per_task: float
+    """GPUs each finetune task takes (0 on a CPU machine)."""
 
 
 PRESETS = {
-    "cpu-small": Preset(train_scenes=4, test_scenes=2, views=40, height=120, width=160, steps=300, rays=256,
-                        n_coarse=24, n_fine=24, n_source=4, workers=2, gpus_per_worker=0.0, precision="no",
-                        budget_s=150.0, budgets=(30.0, 60.0, 150.0), validations=1,
-                        fleet_eval_stride=4),
-    "gpu": Preset(train_scenes=12, test_scenes=4, views=100, height=240, width=320, steps=20_000, rays=1024,
-                  n_coarse=64, n_fine=64, n_source=8, workers=1, gpus_per_worker=1.0, precision="bf16",
-                  budget_s=600.0, budgets=(60.0, 120.0, 300.0, 600.0), validations=4,
-                  fleet_eval_stride=2),
+    "cpu-small": Preset(
+        world=World(train_scenes=48, test_scenes=4, views=40, height=120, width=160),
+        recipe="synth-cpu-hour", overrides=(), long_steps=None, ablation_steps=600, validations=2, ckpt_every=200,
+        plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
+              Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0)),
+        eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
+        budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
+        fleet_gpus_per_task=0.0),
+    "gpu": Preset(
+        world=World(train_scenes=96, test_scenes=8, views=100, height=240, width=320),
+        recipe="synth-paper", overrides=("data.aug_min_source=2", "data.class_balance=inverse-sqrt",
+                                         "data.aug_colour_ev=0.3", "data.aug_channel_ev=0.1",
+                                         "data.aug_noise_sigma=3.0"),
+        long_steps=20_000, ablation_steps=5_000, validations=4, ckpt_every=1_000,
+        plan=(*seeds(LONG, 3), *seeds("full", 3), *seeds("none", 3), Cell("cross", 0), Cell("intra", 0),
+              Cell("full-affine", 0)),
+        eval_sources=8, eval_fast=None, budget_s=600.0, budgets=(60.0, 120.0, 300.0, 600.0), fleet_eval_stride=2,
+        fleet_gpus_per_task=0.5),
 }
+"""Benchmark presets: ``cpu-small`` fits this 2-core machine over a few runs of about an hour;
+``gpu`` is the paper-size run for a GPU machine."""
 
 
-def _pretrain(variant: str, p: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:
-    """Train one ablation row (``VARIANT_SETTINGS``); returns its best checkpoint (by held-out validation mIoU)."""
-    from sray.jobs.recipes import get_recipe
-    from sray.platform.train.launcher import launch_training
-
-    cfg = get_recipe("synth-small" if p.gpus_per_worker == 0 else "synth-paper")
-    (cfg.model.attention, cfg.model.weight_map), cfg.model.n_source = VARIANT_SETTINGS[variant], p.n_source
-    cfg.model.n_coarse, cfg.model.n_fine = p.n_coarse, p.n_fine
-    cfg.data.shards, cfg.data.rays_per_batch, cfg.data.top_k = str(shards), p.rays, max(p.n_source + 2, 6)
-    cfg.optim.steps = p.steps
-    cfg.run.workers, cfg.run.gpus_per_worker, cfg.run.precision = p.workers, p.gpus_per_worker, p.precision
-    cfg.run.output_dir, cfg.run.tracking_uri = str(out / "train"), tracking_uri
-    cfg.run.experiment, cfg.run.register_model = "sray-bench-accuracy", ""
-    cfg.run.val_every = cfg.run.ckpt_every = max(p.steps // p.validations, 1)
-    cfg.run.name = f"bench-{variant}-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}"
-    outcome = launch_training(cfg)
-    return outcome.best_checkpoint or outcome.latest_checkpoint
-
-
-def _at_budget(result: dict[str, Any], budget: float, key: str) -> float:
-    """The held-out score a finetune had reached after ``budget`` seconds (last evaluation before it)."""
-    from sray.platform.viz.curves import step_hold
-
-    curve = [c for c in result.get("curve", []) if c.get(key) is not None]
-    x = np.array([c["wall_s"] for c in curve], dtype=float)
-    y = np.array([c[key] for c in curve], dtype=float)
-    return float(step_hold(x, y, np.array([budget]))[0])
-
-
-def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str:
-    """A Markdown table with its protocol caption lines under it."""
-    lines = [" | ".join(header), " | ".join("---" for _ in header)]
-    return "\n".join(lines + [" | ".join(r) for r in rows] + ["", *captions])
-
-
-def run_accuracy_benchmark(preset: str, out: Path, doc: Path) -> None:
-    """Run every stage and append the tables (and chart links) to ``doc``."""
+def ensure_world(p: Preset, out: Path) -> Path:
+    """The preset's procedural scenes and shards under ``out`` (generated once; kept when complete)."""
     from sray.data_tools.shards.writer import write_shards
     from sray.data_tools.synth.dataset import generate_dataset
-    from sray.jobs.bench.doc import record
-    from sray.platform.common.eval_protocol import caption_lines
-    from sray.platform.config.fleet_config import FleetConfig
-    from sray.platform.eval.zero_shot import evaluate_checkpoint
-    from sray.platform.finetune.fleet import run_fleet, unseen_scenes
-    from sray.platform.finetune.methods.registry import METHODS, get_method
-    from sray.platform.viz.charts import write_fleet_charts
 
-    p = PRESETS[preset]
+    shards = out / "shards"
+    if (shards / "manifest.json").exists():
+        return shards
+    w = p.world
+    generate_dataset(out / "scenes", n_train=w.train_scenes, n_test=w.test_scenes, n_views=w.views,
+                     height=w.height, width=w.width, seed=w.seed, progress=True)
+    write_shards(out / "scenes", shards)
+    return shards
+
+
+def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] | None = None,
+                           max_minutes: float | None = None, fleet: bool = True,
+                           presets: dict[str, Preset] | None = None) -> dict[str, dict]:
+    """Run the missing cells (``cells``: a subset of the plan; default all) and, when the long model is
+    stored, the fleet; then rewrite the tables in ``doc`` from every stored cell. No new cell starts
+    after ``max_minutes``. Returns the stored cells by key."""
+    from sray.jobs.bench.accuracy_cells import run_cell, stored_cells
+    from sray.jobs.bench.accuracy_tables import write_tables
+    from sray.platform.finetune.fleet import unseen_scenes
+
+    p = (presets or PRESETS)[preset]
     out = out.resolve()
     tracking_uri = f"sqlite:///{out / 'mlflow.db'}"
     t0 = time.perf_counter()
-    generate_dataset(out / "scenes", n_train=p.train_scenes, n_test=p.test_scenes, n_views=p.views,
-                     height=p.height, width=p.width, seed=0, progress=True)
-    shards = out / "shards"
-    write_shards(out / "scenes", shards)
+    shards = ensure_world(p, out)
     scenes = unseen_scenes(shards)
+    wanted = p.plan if cells is None else tuple(c for c in p.plan if c in set(cells))
+    for cell in wanted:
+        if cell.key in stored_cells(out):
+            continue
+        if max_minutes is not None and (time.perf_counter() - t0) / 60 >= max_minutes:
+            print(f"[bench] {max_minutes:g} min reached: cell {cell.key} and later ones are left for the next run",
+                  flush=True)
+            break
+        run_cell(cell, p, shards, scenes, out, tracking_uri)
+    stored = stored_cells(out)
+    long_cell = next((c for c in p.plan if c.variant == LONG and c.key in stored), None)
+    over = max_minutes is not None and (time.perf_counter() - t0) / 60 >= max_minutes
+    if fleet and long_cell is not None and not (out / "fleet" / "done.json").exists() and not over:
+        _run_fleet(p, Path(stored[long_cell.key]["checkpoint"]), shards, scenes, out, tracking_uri)
+    write_tables(preset, p, stored, out / "fleet", doc)
+    return stored
 
-    rows, checkpoints, protocols = [], {}, []
-    for variant in VARIANTS:
-        start = time.perf_counter()
-        checkpoints[variant] = _pretrain(variant, p, shards, out, tracking_uri)
-        train_s = time.perf_counter() - start
-        report = evaluate_checkpoint(checkpoints[variant], shards, scenes, out / "eval" / variant,
-                                     n_source=p.n_source, stride=1, tracking_uri=tracking_uri,
-                                     experiment="sray-bench-accuracy", progress=False)
-        mean, ssim = report["mean"], report["mean"]["colour"]["ssim"]
-        protocols.append((variant, report["protocol"]))
-        rows.append([variant, f"{100 * mean['dataset_level']['miou']:.2f}",
-                     f"{100 * mean['dataset_level']['total_acc']:.2f}",
-                     f"{100 * mean['dataset_level']['class_avg_acc']:.2f}",
-                     f"{100 * mean['per_image']['miou']:.2f}", f"{mean['colour']['psnr_db']:.2f}",
-                     "—" if ssim is None else f"{ssim:.3f}", f"{train_s / 60:.1f}"])
-    ablation = _table(["variant", "mIoU %", "total acc %", "class-avg acc %", "per-image mIoU %", "PSNR dB",
-                       "SSIM", "pretrain min"], rows, caption_lines(protocols))
 
-    fleet_cfg = FleetConfig()
-    fleet_cfg.finetune.max_seconds = p.budget_s
-    fleet_cfg.finetune.max_steps = 100_000
-    fleet_cfg.finetune.patience = 10_000  # equal budgets: no early stop in the comparison
-    fleet_cfg.finetune.eval_n_source = p.n_source
-    fleet_cfg.finetune.eval_stride = p.fleet_eval_stride
-    fleet_cfg.gpus_per_task = 0.5 if p.gpus_per_worker else 0.0
-    fleet_cfg.experiment = "sray-bench-accuracy"
-    results = run_fleet(fleet_cfg, checkpoints["full"], shards, scenes, out / "fleet", tracking_uri, list(COMPARED))
-    charts = write_fleet_charts(results, out / "fleet" / "charts", METHODS)
-    budget_rows = []
-    for budget in (0.0, *p.budgets):
-        cells = [f"{budget:.0f}"]
-        for method in COMPARED:
-            values = [_at_budget(r, budget, "miou") for r in results if r["method"] == method and r["status"] == "finished"]
-            values = [v for v in values if np.isfinite(v)]
-            cells.append(f"{100 * np.mean(values):.2f}" if values else "-")
-        budget_rows.append(cells)
-    equal_budget = _table(["budget s", *(f"{get_method(m).style.label} mIoU %" for m in COMPARED)], budget_rows,
-                          caption_lines((r["method"], r.get("protocol")) for r in results))
+def _run_fleet(p: Preset, checkpoint: Path, shards: Path, scenes: list[str], out: Path, tracking_uri: str) -> None:
+    """Finetune every unseen scene with both methods under the same budget; marks the fleet done."""
+    import json
 
-    figures = doc.parent / "benchmarks" / f"accuracy-{preset}"
-    figures.mkdir(parents=True, exist_ok=True)
-    links = []
-    for chart in charts:
-        shutil.copy(chart, figures / chart.name)
-        links.append(f"![{chart.stem}](benchmarks/accuracy-{preset}/{chart.name})")
-    notes = (f"Scores per scene, then averaged over the {len(scenes)} unseen scenes. "
-             f"Pretraining: {p.steps} steps, {p.rays} rays, "
-             f"{p.n_coarse}+{p.n_fine} samples, {p.workers} worker(s), on {p.train_scenes} procedural scenes "
-             f"({p.width}x{p.height}, {p.views} views). Finetunes: {p.budget_s:.0f} s wall-clock budget each, "
-             f"equal for both methods, read off at the last held-out evaluation before each budget (0 s = "
-             f"zero-shot for S-Ray, untrained for Semantic-NeRF). Total benchmark wall time "
-             f"{(time.perf_counter() - t0) / 60:.1f} min.\n\n" + "\n".join(links))
-    record(f"Accuracy: attention ablation, zero-shot ({preset})", ablation, doc)
-    record(f"Accuracy: S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets ({preset})",
-           equal_budget, doc, notes)
+    from sray.platform.config.fleet_config import FleetConfig
+    from sray.platform.finetune.fleet import run_fleet
+    from sray.platform.finetune.methods.registry import METHODS
+    from sray.platform.viz.charts import write_fleet_charts
+
+    cfg = FleetConfig()
+    cfg.finetune.max_seconds = p.budget_s
+    cfg.finetune.max_steps = 100_000
+    cfg.finetune.patience = 10_000  # equal budgets: no early stop in the comparison
+    cfg.finetune.eval_n_source = p.eval_sources
+    cfg.finetune.eval_stride = p.fleet_eval_stride
+    cfg.gpus_per_task = p.fleet_gpus_per_task
+    cfg.experiment = EXPERIMENT
+    results = run_fleet(cfg, checkpoint, shards, scenes, out / "fleet", tracking_uri, list(COMPARED))
+    write_fleet_charts(results, out / "fleet" / "charts", METHODS)
+    (out / "fleet" / "done.json").write_text(json.dumps({"checkpoint": str(checkpoint)}) + "\n")
+

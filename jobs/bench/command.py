@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -49,18 +50,36 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     speed.set_defaults(func=_bench_speed_accuracy)
 
-    accuracy = kinds.add_parser("accuracy", help="ablation (zero-shot) and S-Ray finetune vs Semantic-NeRF")
+    accuracy = kinds.add_parser("accuracy", help="zero-shot mIoU with seeds (resumable cells), the attention "
+                                "ablation, S-Ray finetune vs Semantic-NeRF")
     accuracy.add_argument("--preset", choices=["cpu-small", "gpu"], default="cpu-small",
-                          help="cpu-small: within an hour on 2 CPU cores; gpu: for a GPU machine")
-    accuracy.add_argument("--out", type=Path, default=Path("outputs/bench-accuracy"), help="work folder")
+                          help="cpu-small: 2 CPU cores, over several runs of about an hour; gpu: for a GPU machine")
+    accuracy.add_argument("--cells", nargs="+", default=None, metavar="VARIANT:SEED",
+                          help="run only these cells of the preset's plan, e.g. long:0 full:1 (default: every "
+                               "missing one)")
+    accuracy.add_argument("--max-minutes", type=float, default=None,
+                          help="start no new cell after this many minutes (the tables are written either way)")
+    accuracy.add_argument("--no-fleet", action="store_true", help="skip the finetune comparison")
+    accuracy.add_argument("--out", type=Path, default=None,
+                          help="work folder, reused by later runs (default: outputs/bench-accuracy/<preset>)")
     accuracy.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     accuracy.set_defaults(func=_bench_accuracy)
 
 
 def _bench_accuracy(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.accuracy import run_accuracy_benchmark
+    from sray.jobs.bench.accuracy import PRESETS, Cell, run_accuracy_benchmark
 
-    run_accuracy_benchmark(args.preset, args.out, args.doc)
+    try:
+        cells = None if args.cells is None else [Cell.parse(c) for c in args.cells]
+        unplanned = [c.key for c in cells or [] if c not in PRESETS[args.preset].plan]
+        if unplanned:
+            raise ValueError(f"{', '.join(unplanned)} not in the {args.preset} plan "
+                             f"({', '.join(c.key for c in PRESETS[args.preset].plan)})")
+    except ValueError as e:
+        print(f"sray bench accuracy: --cells: {e}", file=sys.stderr)
+        return 2
+    out = args.out or Path("outputs/bench-accuracy") / args.preset
+    run_accuracy_benchmark(args.preset, out, args.doc, cells, args.max_minutes, fleet=not args.no_fleet)
     return 0
 
 

@@ -8,6 +8,7 @@ LPIPS is not reported: its backbones are downloaded at run time, which this plat
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -100,6 +101,13 @@ def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device,
     if fast is not None:
         return lambda o, d, near, far: net.render_rays_fast(src, o, d, near, far, fast.confidence)
     return lambda o, d, near, far: net.render_rays(src, o, d, near, far, stratified=False)
+
+
+def class_ious(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> list[float | None]:
+    """Dataset-level IoU of each class over ``views`` (one confusion matrix), None for a class absent
+    from their ground truth."""
+    conf = sum(confusion_matrix(v.pred_label, v.gt_label, n_classes, ignore_id) for v in views)
+    return [None if math.isnan(v) else float(v) for v in scene_metrics(conf)["iou_per_class"]]
 
 
 def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> dict[str, float]:

@@ -10,7 +10,8 @@ Outputs under ``out_dir``:
 * ``metrics.json`` (atomic): ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`: source
   rule from the shard manifest, source views, stride, render mode, inputs), then per scene and the
   mean over scenes, in blocks that each name their metric protocol: ``dataset_level`` (mIoU, total
-  and class-average accuracy from one confusion matrix per scene), ``per_image`` (mIoU per view,
+  and class-average accuracy from one confusion matrix per scene, and per scene each class's IoU,
+  ``iou_per_class``, null for a class absent from its ground truth), ``per_image`` (mIoU per view,
   then averaged), ``colour`` (PSNR; SSIM with its window, null unless stride is 1); per-view scores;
   the LPIPS note (not computable offline);
 * ``renders/<scene>/<view>_{pred,gt,error}.png`` at the render's own resolution (colours from
@@ -39,7 +40,7 @@ from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL,
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
-from sray.platform.eval.view_scoring import ViewPrediction, render_view, score_views, sray_renderer
+from sray.platform.eval.view_scoring import ViewPrediction, class_ious, render_view, score_views, sray_renderer
 from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
@@ -204,6 +205,7 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
                 per_view.append({"query_id": view.query_id, **view_scores(view, n_classes, ignore_id), "pngs": pngs})
                 bar.update(1)
             block = scene_blocks(score_views(views, n_classes, ignore_id), len(views))
+            block["dataset_level"]["iou_per_class"] = class_ious(views, n_classes, ignore_id)
             report["scenes"][name] = {**block, "views": per_view}
         bar.close()
         scene_scores = [report["scenes"][n] for n in names]

@@ -1,0 +1,128 @@
+"""One cell of ``sray bench accuracy``: pretrain a (variant, seed), evaluate it zero-shot, store the result.
+
+A cell's training job is named ``bench-<variant>-s<seed>`` under ``<out>/train``; a job left unfinished
+by an earlier run resumes from its latest checkpoint, a finished one is not trained again. The cell
+evaluates the job's **last** checkpoint (the end of its budget; no checkpoint is picked on the test
+scenes) and stores ``<out>/cells/<key>.json`` in one atomic write: the cell counts as done only once
+that file exists.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from sray.jobs.bench.accuracy import EXPERIMENT, LONG, VARIANT_SETTINGS, Cell, Preset
+
+if TYPE_CHECKING:
+    from sray.platform.config.train_config import TrainConfig
+
+CELLS_DIR = "cells"
+"""Sub-folder of the benchmark's work folder holding one JSON file per finished cell."""
+
+
+def stored_cells(out: Path) -> dict[str, dict[str, Any]]:
+    """Every finished cell under ``out``, by key."""
+    import json
+
+    folder = Path(out) / CELLS_DIR
+    return {p.stem: json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))} if folder.is_dir() else {}
+
+
+def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
+    """The training config of ``cell``: the preset's recipe and overrides, the variant's attention and
+    weight map, the cell's seed and budget, and the benchmark's folders."""
+    from sray.jobs.recipes import get_recipe
+    from sray.platform.config.train_config import apply_override
+
+    cfg = get_recipe(p.recipe)
+    for assignment in p.overrides:
+        apply_override(cfg, assignment)
+    cfg.model.attention, cfg.model.weight_map = VARIANT_SETTINGS[cell.variant]
+    if cell.variant != LONG:
+        cfg.optim.steps = p.ablation_steps
+    elif p.long_steps is not None:
+        cfg.optim.steps = p.long_steps
+    cfg.data.shards = str(shards)
+    cfg.run.seed = cell.seed
+    cfg.run.output_dir, cfg.run.tracking_uri = str(out / "train"), tracking_uri
+    cfg.run.experiment, cfg.run.register_model = EXPERIMENT, ""
+    cfg.run.val_every = max(cfg.optim.steps // p.validations, 1)
+    cfg.run.ckpt_every = min(p.ckpt_every, cfg.optim.steps)
+    cfg.run.name = f"bench-{cell.key}"
+    return cfg
+
+
+def pretrain(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> tuple[Path, float, bool]:
+    """Train ``cell`` to the end of its budget, resuming an unfinished job of the same name.
+
+    Returns (its last checkpoint, seconds trained in this call, whether it resumed an earlier job).
+    RuntimeError when the job stops before its last step.
+    """
+    from sray.platform.checkpoints.folders import CheckpointManager, read_meta
+    from sray.platform.train.launcher import launch_training, load_job_config
+
+    cfg = cell_config(cell, p, shards, out, tracking_uri)
+    job_dir = Path(cfg.run.output_dir) / cfg.run.name
+    latest = CheckpointManager(job_dir / "checkpoints").latest() if job_dir.exists() else None
+    if latest is not None and int(read_meta(latest)["step"]) >= cfg.optim.steps:
+        return latest, 0.0, True
+    start = time.perf_counter()
+    resumed = job_dir.exists()
+    if resumed:
+        saved = load_job_config(cfg.run.output_dir, cfg.run.name)
+        saved.run.tracking_uri = tracking_uri
+        outcome = launch_training(saved, resume=True)
+    else:
+        outcome = launch_training(cfg)
+    last = outcome.latest_checkpoint
+    if last is None or int(read_meta(last)["step"]) < cfg.optim.steps:
+        raise RuntimeError(f"{job_dir}: pretraining of cell {cell.key} ended {outcome.status} before step "
+                           f"{cfg.optim.steps}; re-run `sray bench accuracy` to resume it")
+    return last, time.perf_counter() - start, resumed
+
+
+def class_iou(report: dict[str, Any]) -> list[float | None]:
+    """Per-class IoU of an evaluation report: each class's IoU averaged over the scenes whose ground truth
+    holds it (None for a class absent from every scene)."""
+    rows = np.array([[np.nan if v is None else v for v in s["dataset_level"]["iou_per_class"]]
+                     for s in report["scenes"].values()], dtype=float)
+    present = ~np.isnan(rows)
+    sums = np.where(present, rows, 0.0).sum(axis=0)
+    counts = present.sum(axis=0)
+    return [float(s / c) if c else None for s, c in zip(sums, counts, strict=True)]
+
+
+def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, tracking_uri: str) -> dict[str, Any]:
+    """Pretrain and evaluate ``cell``; store and return its record (``stored_cells``)."""
+    from sray.data_tools.shards.manifest import read_manifest
+    from sray.platform.checkpoints.folders import read_meta
+    from sray.platform.eval.zero_shot import evaluate_checkpoint, write_json_atomic
+
+    print(f"[bench] cell {cell.key}: pretraining", flush=True)
+    checkpoint, train_s, resumed = pretrain(cell, p, shards, out, tracking_uri)
+    print(f"[bench] cell {cell.key}: zero-shot evaluation of {checkpoint}", flush=True)
+    start = time.perf_counter()
+    report = evaluate_checkpoint(checkpoint, shards, scenes, out / "eval" / cell.key, n_source=p.eval_sources,
+                                 stride=1, tracking_uri=tracking_uri, experiment=EXPERIMENT, progress=True,
+                                 fast=p.eval_fast)
+    mean = report["mean"]
+    first = read_manifest(shards).scenes[scenes[0]].meta
+    record = {
+        "cell": cell.key, "variant": cell.variant, "seed": cell.seed,
+        "attention": VARIANT_SETTINGS[cell.variant][0], "weight_map": VARIANT_SETTINGS[cell.variant][1],
+        "recipe": p.recipe, "steps": int(read_meta(checkpoint)["step"]), "checkpoint": str(checkpoint),
+        "train_s": train_s, "resumed": resumed, "eval_s": time.perf_counter() - start,
+        "miou": mean["dataset_level"]["miou"], "total_acc": mean["dataset_level"]["total_acc"],
+        "class_avg_acc": mean["dataset_level"]["class_avg_acc"], "miou_per_image": mean["per_image"]["miou"],
+        "psnr": mean["colour"]["psnr_db"], "ssim": mean["colour"]["ssim"],
+        "scene_miou": {name: report["scenes"][name]["dataset_level"]["miou"] for name in scenes},
+        "class_iou": class_iou(report), "class_names": list(first["class_names"]),
+        "protocol": report["protocol"], "metrics_path": report["metrics_path"],
+    }
+    write_json_atomic(record, out / CELLS_DIR / f"{cell.key}.json")
+    print(f"[bench] cell {cell.key}: zero-shot mIoU {100 * record['miou']:.2f}%", flush=True)
+    return record

@@ -1,0 +1,197 @@
+"""Tables, chart and targets of ``sray bench accuracy``, made from its stored cells and fleet results.
+
+Every table is rebuilt from what is stored, so a partial run writes partial tables that name the cells
+still missing. Spreads are over training seeds: mean ± sample standard deviation, and the min-max range
+used to say whether two variants' spreads overlap.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sray.jobs.bench.accuracy import COMPARED, LONG, Cell, Preset
+
+ZERO_SHOT_TARGET = 0.50
+"""Issue target: zero-shot mIoU of the long (recipe) model, RGB-only."""
+FINETUNE_RATIO_TARGET = 0.60
+"""Issue target: zero-shot mIoU as a fraction of S-Ray's score after a 60 s finetune."""
+ABLATION_MARGIN = 0.05
+"""Issue target: full CRA at least this much mIoU above no attention, with non-overlapping seed ranges."""
+FINETUNE_READ_S = 60.0
+"""Finetune budget (seconds) the zero-shot ratio is read at."""
+
+
+def variant_label(variant: str, p: Preset) -> str:
+    """Row label: ``full`` or, for the long cell, ``full, synth-cpu-hour``."""
+    return f"full, {p.recipe}" if variant == LONG else variant
+
+
+def by_variant(p: Preset, stored: dict[str, dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    """Stored cells of each planned variant, in plan order, seeds ascending (variants with none left out)."""
+    rows: dict[str, list[dict[str, Any]]] = {}
+    for cell in p.plan:
+        if cell.key in stored:
+            rows.setdefault(cell.variant, []).append(stored[cell.key])
+    return {v: sorted(cells, key=lambda c: c["seed"]) for v, cells in rows.items()}
+
+
+def mean_spread(values: list[float]) -> tuple[float, float | None]:
+    """Mean and sample standard deviation (None for a single value)."""
+    return float(np.mean(values)), (float(np.std(values, ddof=1)) if len(values) > 1 else None)
+
+
+def _pct(value: float | None, digits: int = 2) -> str:
+    return "—" if value is None or not np.isfinite(value) else f"{100 * value:.{digits}f}"
+
+
+def seed_table(p: Preset, stored: dict[str, dict[str, Any]]) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the zero-shot table: one row per variant, its seeds' mean ± spread."""
+    header = ["variant", "steps", "seeds", "mIoU %", "mIoU % per seed", "total acc %", "class-avg acc %",
+              "PSNR dB", "pretrain min", "eval min"]
+    rows = []
+    for variant, cells in by_variant(p, stored).items():
+        mean, spread = mean_spread([c["miou"] for c in cells])
+        planned = sum(1 for c in p.plan if c.variant == variant)
+        rows.append([variant_label(variant, p), ", ".join(sorted({str(c["steps"]) for c in cells})),
+                     f"{len(cells)}/{planned}", _pct(mean) + ("" if spread is None else f" ± {_pct(spread)}"),
+                     " / ".join(_pct(c["miou"]) for c in cells), _pct(np.mean([c["total_acc"] for c in cells])),
+                     _pct(np.mean([c["class_avg_acc"] for c in cells])), f"{np.mean([c['psnr'] for c in cells]):.2f}",
+                     f"{np.mean([c['train_s'] for c in cells]) / 60:.1f}",
+                     f"{np.mean([c['eval_s'] for c in cells]) / 60:.1f}"])
+    return header, rows
+
+
+def class_table(p: Preset, stored: dict[str, dict[str, Any]]) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the per-class IoU table: one row per class, one column per variant (mean
+    over its seeds of the class's IoU; ``—`` where no test scene holds the class)."""
+    groups = by_variant(p, stored)
+    if not groups:
+        return [], []
+    names = next(iter(groups.values()))[0]["class_names"]
+    header = ["class", *(f"{variant_label(v, p)} IoU %" for v in groups)]
+    rows = []
+    for k, name in enumerate(names):
+        cells = []
+        for variant_cells in groups.values():
+            values = [c["class_iou"][k] for c in variant_cells if c["class_iou"][k] is not None]
+            cells.append(_pct(float(np.mean(values))) if values else "—")
+        rows.append([name, *cells])
+    return header, rows
+
+
+def at_budget(result: dict[str, Any], budget: float, key: str = "miou") -> float:
+    """The held-out score a finetune had reached after ``budget`` seconds (last evaluation before it)."""
+    from sray.platform.viz.curves import step_hold
+
+    curve = [c for c in result.get("curve", []) if c.get(key) is not None]
+    x = np.array([c["wall_s"] for c in curve], dtype=float)
+    y = np.array([c[key] for c in curve], dtype=float)
+    return float(step_hold(x, y, np.array([budget]))[0])
+
+
+def budget_means(results: list[dict[str, Any]], budgets: tuple[float, ...]) -> dict[str, list[float | None]]:
+    """Method -> its mean held-out mIoU over the finished scenes at each budget (None: no finite value)."""
+    means: dict[str, list[float | None]] = {}
+    for method in COMPARED:
+        finished = [r for r in results if r["method"] == method and r["status"] == "finished"]
+        column = []
+        for budget in budgets:
+            values = [v for v in (at_budget(r, budget) for r in finished) if np.isfinite(v)]
+            column.append(float(np.mean(values)) if values else None)
+        means[method] = column
+    return means
+
+
+def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | None) -> list[str]:
+    """One line per target of the issue: the measured value and whether it is met (or what is missing)."""
+    groups = by_variant(p, stored)
+    lines = []
+    long_cells = groups.get(LONG, [])
+    if long_cells:
+        zero_shot = float(np.mean([c["miou"] for c in long_cells]))
+        lines.append(f"- Zero-shot mIoU of the {p.recipe} model: {_pct(zero_shot)}% against the "
+                     f"{_pct(ZERO_SHOT_TARGET, 0)}% target: {'met' if zero_shot >= ZERO_SHOT_TARGET else 'not met'}.")
+        if sray_at_60 is not None:
+            ratio = zero_shot / sray_at_60 if sray_at_60 > 0 else float("nan")
+            lines.append(f"- Zero-shot / S-Ray after a {FINETUNE_READ_S:.0f} s finetune: {_pct(zero_shot)} / "
+                         f"{_pct(sray_at_60)} = {ratio:.2f} against {FINETUNE_RATIO_TARGET:.2f}: "
+                         f"{'met' if ratio >= FINETUNE_RATIO_TARGET else 'not met'}.")
+    else:
+        lines.append(f"- Zero-shot mIoU of the {p.recipe} model: cell {Cell(LONG, 0).key} not run yet.")
+    full, none = groups.get("full", []), groups.get("none", [])
+    if len(full) > 1 and len(none) > 1:
+        f, n = [c["miou"] for c in full], [c["miou"] for c in none]
+        gap = float(np.mean(f) - np.mean(n))
+        apart = min(f) > max(n)
+        met = gap >= ABLATION_MARGIN and apart
+        lines.append(f"- Full CRA − none: {100 * gap:+.2f} points (target ≥ +{100 * ABLATION_MARGIN:.0f}); seed "
+                     f"ranges {_pct(min(f))}–{_pct(max(f))} and {_pct(min(n))}–{_pct(max(n))} "
+                     f"{'do not overlap' if apart else 'overlap'}: {'met' if met else 'not met'}.")
+    else:
+        lines.append("- Full CRA − none: needs at least 2 seeds of each.")
+    return lines
+
+
+def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str:
+    lines = [" | ".join(header), " | ".join("---" for _ in header)]
+    return "\n".join(lines + [" | ".join(r) for r in rows] + ["", *captions])
+
+
+def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], fleet_dir: Path, doc: Path) -> None:
+    """Write the benchmark's sections into ``doc`` (replacing earlier ones of this preset and device) and
+    its chart(s) into ``<doc folder>/benchmarks/accuracy-<preset>/``."""
+    from sray.jobs.bench.doc import record
+    from sray.platform.common.eval_protocol import caption_lines
+    from sray.platform.finetune.methods.registry import get_method
+    from sray.platform.viz.curves import read_fleet_results
+    from sray.platform.viz.seed_chart import write_seed_chart
+
+    figures = doc.parent / "benchmarks" / f"accuracy-{preset}"
+    figures.mkdir(parents=True, exist_ok=True)
+    captions = caption_lines((variant_label(c["variant"], p), c["protocol"])
+                             for c in sorted(stored.values(), key=lambda c: c["cell"]))
+    missing = [c.key for c in p.plan if c.key not in stored]
+    links = []
+    if stored:
+        groups = by_variant(p, stored)
+        chart = write_seed_chart({variant_label(v, p): [100 * c["miou"] for c in cells] for v, cells in groups.items()},
+                                 "zero-shot mIoU %", f"Zero-shot mIoU on unseen procedural scenes ({preset})",
+                                 " ".join(captions), figures / "zero_shot_seeds.png")
+        links.append(f"![zero-shot mIoU over seeds](benchmarks/accuracy-{preset}/{chart.name})")
+
+    results = read_fleet_results(fleet_dir) if fleet_dir.is_dir() else []
+    budgets = (0.0, *p.budgets)
+    means = budget_means(results, budgets) if results else {}
+    sray_at_60 = budget_means(results, (FINETUNE_READ_S,))["sray"][0] if results else None
+    w = p.world
+    notes = [f"World: {w.train_scenes} train + {w.test_scenes} unseen test procedural scenes, {w.views} views of "
+             f"{w.width}x{w.height}, world seed {w.seed}. Each cell pretrains the `{p.recipe}` recipe "
+             f"(the ablation rows for {p.ablation_steps} steps) with its training seed and is scored on the "
+             "unseen scenes from its last checkpoint; scores per scene, then averaged over scenes; mean ± "
+             "sample standard deviation over seeds. Pretrain/eval minutes: wall time of this machine "
+             "(a resumed cell counts only its last part).",
+             "Missing cells: " + (", ".join(missing) if missing else "none") + ".",
+             "Targets:", *targets(p, stored, sray_at_60), "", *links]
+    header, rows = seed_table(p, stored)
+    record(f"Accuracy: zero-shot with seeds ({preset})", _table(header, rows, captions), doc, "\n".join(notes))
+    header, rows = class_table(p, stored)
+    if rows:
+        record(f"Accuracy: per-class IoU, zero-shot ({preset})", _table(header, rows, captions), doc,
+               "Each class's IoU from one confusion matrix per scene, averaged over the test scenes that hold "
+               "the class, then over seeds.")
+    if results:
+        budget_rows = [[f"{b:.0f}", *(_pct(means[m][i]) for m in COMPARED)] for i, b in enumerate(budgets)]
+        fleet_links = []
+        for chart in sorted((fleet_dir / "charts").glob("*.png")):
+            shutil.copy(chart, figures / chart.name)
+            fleet_links.append(f"![{chart.stem}](benchmarks/accuracy-{preset}/{chart.name})")
+        record(f"Accuracy: S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets ({preset})",
+               _table(["budget s", *(f"{get_method(m).style.label} mIoU %" for m in COMPARED)], budget_rows,
+                      caption_lines((r["method"], r.get("protocol")) for r in results)),
+               doc, f"Finetunes from the `{LONG}` model, {p.budget_s:.0f} s wall-clock budget each, equal for both "
+                    "methods, read off at the last held-out evaluation before each budget (0 s = zero-shot for "
+                    "S-Ray, untrained for Semantic-NeRF).\n\n" + "\n".join(fleet_links))
