@@ -27,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _describe(state) -> str:
+    from sray.platform.cluster.exposure import exposure_line, listeners
     from sray.platform.cluster.local_cluster import client_env
 
     alive = state.alive()
@@ -39,6 +40,7 @@ def _describe(state) -> str:
         f"[cluster] tracking URI:    --tracking-uri {state.tracking_uri}   (MLflow UI there too)",
         f"[cluster] shared storage:  --set run.output_dir={state.storage / 'jobs'}",
         f"[cluster] clients need the Ray token:  export {env}",
+        exposure_line(listeners({n: state.processes[n]["pid"] for n, ok in alive.items() if ok})),
     ])
 
 

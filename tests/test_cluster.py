@@ -7,6 +7,7 @@ be installed. One cluster serves the whole session (``cluster_fixtures.local_clu
 from __future__ import annotations
 
 import json
+import subprocess
 import sys
 import urllib.error
 import urllib.request
@@ -45,6 +46,31 @@ def test_cluster_up_status_and_the_parts_it_started(local_cluster: LocalCluster)
                                 timeout=10) as reply:
         assert "experiments" in json.loads(reply.read())
     assert oct((local_cluster.dir / "cluster.json").stat().st_mode & 0o777) == "0o600"
+
+
+def test_status_reports_the_ports_that_listen_beyond_loopback(local_cluster: LocalCluster) -> None:
+    """The exposure report agrees with the kernel's socket table as ``ss`` prints it: PostgreSQL, MLflow and
+    the dashboard on 127.0.0.1 only; whatever listens on a wildcard address (Ray's GCS) is named."""
+    from sray.platform.cluster.exposure import listeners
+
+    state = local_cluster.state
+    found = listeners({n: r["pid"] for n, r in state.processes.items()})
+    ss = subprocess.run(["ss", "-ltnpH"], capture_output=True, text=True, check=True).stdout.splitlines()
+    pids = {x.pid for x in found}
+    seen = set()
+    for row in ss:
+        pid = next((p for p in pids if f"pid={p}," in row), None)
+        if pid is not None:
+            local, port = row.split()[3].rsplit(":", 1)
+            seen.add((pid, int(port), local.strip("[]") in ("127.0.0.1", "::1", "::ffff:127.0.0.1")))
+    assert {(x.pid, x.port, x.loopback_only) for x in found} == seen
+    for name in ("postgres", "mlflow", "dashboard"):
+        bound = [x for x in found if x.port == state.ports[name]]
+        assert bound and all(x.loopback_only for x in bound), bound
+    shown = local_cluster.sray("cluster", "status", "--dir", str(local_cluster.dir)).stdout
+    open_ = [x for x in found if not x.loopback_only]
+    assert all(f"{x.address}:{x.port}" in shown for x in open_)
+    assert ("beyond loopback" in shown) == bool(open_)
 
 
 def test_refused_without_the_ray_token_or_with_a_foreign_host_header(local_cluster: LocalCluster) -> None:
