@@ -12,6 +12,7 @@ from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 from sray.data_tools.shards import manifest as manifest_module
 from sray.data_tools.shards.manifest import Manifest
 from sray.model.semantic_ray import SRayModel
+from sray.platform.eval.view_scoring import score_views
 from sray.platform.train.validation import validate
 
 
@@ -46,3 +47,25 @@ def test_a_validation_reads_the_manifest_once(tiny_shards: Path, tmp_path: Path,
     assert {k.split("/")[0] for k in metrics} == {"val", "zeroshot"}
     assert manifest_reads["read_manifest"] == [cfg.data.shards]
     assert len(manifest_reads["Manifest.from_json"]) == 1
+
+
+def test_val_scenes_keeps_the_first_scenes_of_each_role(tiny_shards: Path, tmp_path: Path) -> None:
+    """``data.val_scenes=1`` validates the first train scene by name only; 0 validates all of them."""
+    from sray.data_tools.shards.manifest import read_manifest
+    from sray.platform.train.validation import evaluate_group
+
+    cfg = tiny_config(tiny_shards, tmp_path)
+    torch.manual_seed(0)
+    net = SRayModel(cfg.model).eval()
+    manifest = read_manifest(Path(cfg.data.shards))
+    train_names = sorted(n for n, e in manifest.scenes.items() if e.meta["role"] == "train")
+    assert len(train_names) >= 2
+    cfg.data.val_scenes = 1
+    one, renders = evaluate_group(net, cfg, manifest, "train", torch.device("cpu"))
+    assert {scene for scene, _ in renders} == {train_names[0]}
+    cfg.data.val_scenes = 0
+    _, renders = evaluate_group(net, cfg, manifest, "train", torch.device("cpu"))
+    assert {scene for scene, _ in renders} == set(train_names)
+    first = [(s, v) for s, v in renders if s == train_names[0]]
+    assert one["miou"] == pytest.approx(score_views([v for _, v in first], cfg.model.n_classes,
+                                                    cfg.model.ignore_id)["miou"])

@@ -32,6 +32,9 @@ class DataSettings:
     """Held-out views rendered per scene at each validation (whole images, in chunks)."""
     val_downscale: int = 2
     """Validation renders at 1/val_downscale resolution to keep it cheap (1 = full)."""
+    val_scenes: int = 0
+    """Scenes of each role (train, unseen test) validated, the first ones by name; 0 = all of them
+    (a run over many scenes keeps its validations cheap with a few)."""
     class_balance: str = "none"
     """Class-frequency-aware semantic loss: ``none`` (the paper), ``inverse-sqrt`` or ``inverse``
     weights from the training scenes' pixel frequencies (``sray.data_tools.class_stats``), computed

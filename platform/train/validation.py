@@ -43,14 +43,13 @@ def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
 
 def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: str,
                    device: torch.device) -> tuple[dict[str, float], list[tuple[str, ViewPrediction]]]:
-    """Scores averaged over the scenes of ``role`` (each scene scored from its own confusion matrix),
-    and the rendered views (scene, prediction). Empty when no scene of that role has test views.
+    """Scores averaged over the scenes of ``role`` (each scene scored from its own confusion matrix; the
+    first ``data.val_scenes`` of them by name when that is set), and the rendered views (scene, prediction). Empty when no scene of that role has test views.
     ``manifest``: the parsed ``cfg.data.shards`` manifest (not read again here)."""
     per_scene, renders = [], []
-    for name, entry in sorted(manifest.scenes.items()):
-        meta = entry.meta
-        if meta.get("role") != role or not meta.get("splits", {}).get("test"):
-            continue
+    scenes = [(name, entry) for name, entry in sorted(manifest.scenes.items())
+              if entry.meta.get("role") == role and entry.meta.get("splits", {}).get("test")]
+    for name, entry in scenes[:cfg.data.val_scenes or None]:
         samples = itertools.islice(make_eval_samples(Path(cfg.data.shards), name, split="test",
                                                      n_source=cfg.model.n_source, manifest=manifest),
                                    cfg.data.val_views_per_scene)
