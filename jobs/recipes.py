@@ -26,9 +26,11 @@ def synth_small() -> TrainConfig:
     )
 
 
-CPU_HOUR_STEPS = 2400
-"""Steps of ``synth-cpu-hour``: chosen from its measured step time on the 2-core development machine so
-that pretraining, with its validations and checkpoints, ends within 60 minutes (docs/benchmarks.md)."""
+CPU_HOUR_STEPS = 3000
+"""Steps of ``synth-cpu-hour``. Measured on the 2-core development machine (2026-11-23, two runs of 10 and
+40 steps on the 48-scene world of ``sray bench accuracy``, worker CPU time from ``ps``): 1.87 CPU s per
+step summed over the two workers, so about 1 s per step on two idle cores; 3000 steps, the start-up and
+four small validations take about 55 minutes."""
 
 
 def synth_cpu_hour() -> TrainConfig:

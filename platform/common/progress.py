@@ -1,8 +1,23 @@
-"""Rank-0 progress bars that render cleanly whether or not the code runs inside a Ray worker."""
+"""Rank-0 progress that reads cleanly on a terminal, in a log file and in a Ray job's log.
+
+On a terminal a bar redraws in place (plain tqdm, or inside a Ray worker Ray's driver-drawn
+``tqdm_ray``). Written to a file or a job log, every redraw of a bar stays in the text as one more copy
+of the line, so there progress is printed as plain lines instead, one every :data:`LINE_EVERY_S`
+seconds. The driver decides once, from its own standard output, and hands the choice to its Ray
+workers through :data:`PROGRESS_ENV` (:func:`progress_env`), since a worker's output is always a file.
+"""
 
 from __future__ import annotations
 
+import os
+import sys
+import time
 from typing import Any
+
+PROGRESS_ENV = "SRAY_PROGRESS"
+"""Environment variable naming how progress is shown: ``bar`` or ``lines``."""
+LINE_EVERY_S = 30.0
+"""Seconds between two progress lines (the last step always gets one)."""
 
 
 class _NoBar:
@@ -42,13 +57,67 @@ class _RayBar:
         self._bar.close()
 
 
-def make_progress(enabled: bool, total: int, initial: int = 0, desc: str = "") -> Any:
-    """A bar with ETA on rank 0 (``enabled``), a silent stand-in elsewhere.
+class LineProgress:
+    """Progress as plain lines: ``[sray] DESC: step N/TOTAL (P%), R s/step, ETA M:SS, key=value ...``,
+    at most one every ``every_s`` seconds and always one at the last step."""
 
-    Inside a Ray worker the bar is drawn by the driver (``tqdm_ray``); elsewhere it is plain tqdm.
+    def __init__(self, total: int, initial: int = 0, desc: str = "", every_s: float = LINE_EVERY_S) -> None:
+        self.total, self.n, self.desc, self.every_s = total, initial, desc, every_s
+        self._start_n, self._start = initial, time.monotonic()
+        self._last, self._shown_n, self._postfix = self._start, initial, ""
+
+    def update(self, n: int = 1) -> None:
+        """Advance by ``n`` steps; print a line when ``every_s`` has passed or the last step is done."""
+        self.n += n
+        now = time.monotonic()
+        if now - self._last >= self.every_s or self.n >= self.total:
+            self._emit(now)
+
+    def set_postfix(self, **values: Any) -> None:
+        """``key=value`` pairs shown at the end of the next line."""
+        self._postfix = " ".join(f"{k}={v}" for k, v in values.items())
+
+    def close(self) -> None:
+        """Print the final position if the last line did not show it."""
+        if self.n != self._shown_n:
+            self._emit(time.monotonic())
+
+    def _emit(self, now: float) -> None:
+        done, elapsed = self.n - self._start_n, now - self._start
+        parts = [f"step {self.n}/{self.total} ({100 * self.n / max(self.total, 1):.0f}%)"]
+        if done > 0:
+            per_step = elapsed / done
+            eta = int(round(per_step * max(self.total - self.n, 0)))
+            parts.append(f"{per_step:.2f} s/step, ETA {eta // 60}:{eta % 60:02d}")
+        if self._postfix:
+            parts.append(self._postfix)
+        print(f"[sray] {self.desc}: " + ", ".join(parts), flush=True)
+        self._last, self._shown_n = now, self.n
+
+
+def progress_mode() -> str:
+    """``bar`` or ``lines``: :data:`PROGRESS_ENV` when set, else ``bar`` only if standard output is a terminal."""
+    mode = os.environ.get(PROGRESS_ENV, "")
+    if mode in ("bar", "lines"):
+        return mode
+    return "bar" if sys.stdout.isatty() else "lines"
+
+
+def progress_env() -> dict[str, str]:
+    """``{PROGRESS_ENV: mode}`` of this (driver) process, for its Ray workers' runtime environment."""
+    return {PROGRESS_ENV: progress_mode()}
+
+
+def make_progress(enabled: bool, total: int, initial: int = 0, desc: str = "") -> Any:
+    """Progress with ETA on rank 0 (``enabled``), a silent stand-in elsewhere.
+
+    :func:`progress_mode` ``lines``: :class:`LineProgress`. ``bar``: inside a Ray worker the bar is drawn
+    by the driver (``tqdm_ray``); elsewhere it is plain tqdm.
     """
     if not enabled:
         return _NoBar()
+    if progress_mode() == "lines":
+        return LineProgress(total, initial, desc)
     import ray
 
     if ray.is_initialized() and ray.get_runtime_context().worker.mode == ray.WORKER_MODE:

@@ -20,6 +20,12 @@ QUIET = {"ray.train.v2._internal.execution.controller.placement_group_cleaner":
 SETUP_HOOK = "sray.platform.common.ray_quiet.quiet_ray_logs"
 """Import path of :func:`quiet_ray_logs`, for ``runtime_env={"worker_process_setup_hook": ...}``."""
 
+TRAIN_WORKER_ENV = {"RAY_TRAIN_ENABLE_PRINT_PATCH": "0"}
+"""Environment of Ray Train workers. Ray Train V2 replaces ``print`` in its workers with a function that
+sends each line to the root logger and, when ``sys.stdout`` is wrapped (it is, by Ray's own log
+capture), also prints it: every line a worker printed reached the driver twice. Without the patch a
+print is forwarded once, by Ray's normal worker-log streaming."""
+
 
 class DropPrefixes(logging.Filter):
     """Drops log records whose message starts with one of ``prefixes``."""

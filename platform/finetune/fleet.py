@@ -30,6 +30,7 @@ from typing import Any
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
+from sray.platform.common.progress import progress_env
 from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
 from sray.platform.finetune.methods.registry import method_names
@@ -171,7 +172,7 @@ def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
 
     remote_task = ray.remote(_scene_task).options(num_cpus=cfg.cpus_per_task, num_gpus=cfg.gpus_per_task,
                                                   max_retries=0, retry_exceptions=False,
-                                                  runtime_env={"env_vars": propagated_env()})
+                                                  runtime_env={"env_vars": propagated_env() | progress_env()})
     waiting: list[tuple[float, SceneTask]] = [(0.0, task) for task in tasks]
     in_flight: dict[Any, SceneTask] = {}
     results: dict[tuple[str, str], dict[str, Any]] = {}

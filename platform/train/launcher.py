@@ -20,7 +20,8 @@ from typing import Any
 
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
-from sray.platform.common.ray_quiet import SETUP_HOOK
+from sray.platform.common.progress import progress_env
+from sray.platform.common.ray_quiet import SETUP_HOOK, TRAIN_WORKER_ENV
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import RunHandle, Tracker
@@ -160,7 +161,8 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
                                                                        if cfg.run.gpus_per_worker > 0 else {})}),
         run_config=ray.train.RunConfig(name=cfg.run.name, storage_path=str(job_dir / "ray"),
                                        failure_config=ray.train.FailureConfig(max_failures=cfg.run.max_failures),
-                                       worker_runtime_env={"env_vars": propagated_env()}))
+                                       worker_runtime_env={"env_vars": {**TRAIN_WORKER_ENV, **propagated_env(),
+                                                                        **progress_env()}}))
     previous = _install_stop_handler(job_dir)
     status = "FAILED"
     try:
