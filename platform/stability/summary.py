@@ -71,7 +71,7 @@ def breaking_point(stats: list[LevelStats]) -> tuple[Any, str]:
             t = (prev_value - half) / (prev_value - value)
             return prev_level + t * (s.level - prev_level), "interpolated between levels"
         prev_level, prev_value = s.level, value
-    return None, f"never (mIoU stays above {half:.1f}, half of the clean {clean:.1f})"
+    return None, f"mIoU stays above {half:.1f}, half of the clean {clean:.1f}"
 
 
 def _fmt(v: float | None, digits: int = 2) -> str:
@@ -107,6 +107,9 @@ def breaking_summary(stats: list[LevelStats], axes: list[str]) -> list[str]:
         rows = [s for s in stats if s.axis == axis]
         for method in dict.fromkeys(s.method for s in rows):
             level, how = breaking_point([s for s in rows if s.method == method])
-            where = how if level is None else (f"{level:.3g}" if isinstance(level, float) else str(level)) + f" ({how})"
+            if level is None:
+                lines.append(f"{axis} / {method}: keeps half its clean mIoU at every level tested ({how})")
+                continue
+            where = (f"{level:.3g}" if isinstance(level, float) else str(level)) + f" ({how})"
             lines.append(f"{axis} / {method}: half the clean mIoU lost at {where}")
     return lines
