@@ -42,7 +42,8 @@ PLAN3 = dataclasses.replace(TOY, plan=(Cell(LONG, 0), *(Cell("full", s) for s in
 
 def test_cell_names_parse_both_ways() -> None:
     assert Cell.parse("full:2") == Cell("full", 2) == Cell.parse("full-s2")
-    assert Cell.parse("full-affine:0") == Cell("full-affine", 0)
+    assert Cell.parse("full-affine:0") == Cell("full-affine", 0) == Cell.parse("full-affine-s0")
+    assert Cell.parse("full-rgbd-s3") == Cell("full-rgbd", 3)
     for bad in ("full", "fancy:1", "full:x"):
         with pytest.raises(ValueError, match="VARIANT:SEED"):
             Cell.parse(bad)
@@ -71,6 +72,13 @@ def test_ablation_target_needs_margin_and_separate_ranges(full: list[float], non
     line = next(ln for ln in targets(PLAN3, stored, None) if "none" in ln)
     assert line.endswith(verdict + ".")
     assert f"{100 * (np.mean(full) - np.mean(none)):+.2f} points" in line
+
+
+def test_depth_gain_pairs_rgbd_cells_with_the_same_seeds() -> None:
+    stored = {c["cell"]: c for c in [_cell("full", 0, 0.40), _cell("full", 1, 0.50), _cell("full-rgbd", 0, 0.47)]}
+    plan = dataclasses.replace(PLAN3, plan=(*PLAN3.plan, Cell("full-rgbd", 0)))
+    [line] = [ln for ln in targets(plan, stored, None) if "depth" in ln]
+    assert "+7.00 points" in line and "same seeds [0]" in line  # against full seed 0 (40%), not the mean (45%)
 
 
 def test_zero_shot_and_finetune_ratio_targets() -> None:

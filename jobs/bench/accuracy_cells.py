@@ -9,6 +9,7 @@ that file exists.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -41,7 +42,8 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
     cfg = get_recipe(p.recipe)
     for assignment in p.overrides:
         apply_override(cfg, assignment)
-    cfg.model.attention, cfg.model.weight_map = VARIANT_SETTINGS[cell.variant]
+    variant = VARIANT_SETTINGS[cell.variant]
+    cfg.model.attention, cfg.model.weight_map, cfg.model.inputs = variant.attention, variant.weight_map, variant.inputs
     if cell.variant != LONG:
         cfg.optim.steps = p.ablation_steps
     elif p.long_steps is not None:
@@ -113,7 +115,7 @@ def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, 
     first = read_manifest(shards).scenes[scenes[0]].meta
     record = {
         "cell": cell.key, "variant": cell.variant, "seed": cell.seed,
-        "attention": VARIANT_SETTINGS[cell.variant][0], "weight_map": VARIANT_SETTINGS[cell.variant][1],
+        **dataclasses.asdict(VARIANT_SETTINGS[cell.variant]),
         "recipe": p.recipe, "steps": int(read_meta(checkpoint)["step"]), "checkpoint": str(checkpoint),
         "train_s": train_s, "resumed": resumed, "eval_s": time.perf_counter() - start,
         "miou": mean["dataset_level"]["miou"], "total_acc": mean["dataset_level"]["total_acc"],

@@ -133,6 +133,14 @@ def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | No
                      f"{'do not overlap' if apart else 'overlap'}: {'met' if met else 'not met'}.")
     else:
         lines.append("- Full CRA − none: needs at least 2 seeds of each.")
+    rgbd = groups.get("full-rgbd", [])
+    if rgbd and full:
+        same_seed = {c["seed"]: c["miou"] for c in full}
+        paired = [(c["miou"], same_seed[c["seed"]]) for c in rgbd if c["seed"] in same_seed]
+        if paired:
+            gain = float(np.mean([d - r for d, r in paired]))
+            lines.append(f"- What depth buys (RGB-D vs RGB, full CRA, same seeds {sorted(c['seed'] for c in rgbd)}): "
+                         f"{100 * gain:+.2f} points of zero-shot mIoU (measured; no target).")
     return lines
 
 
