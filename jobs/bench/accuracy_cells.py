@@ -10,6 +10,7 @@ that file exists.
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,6 +24,19 @@ if TYPE_CHECKING:
 
 CELLS_DIR = "cells"
 """Sub-folder of the benchmark's work folder holding one JSON file per finished cell."""
+TRAIN_SECONDS_FILE = "bench_train_seconds.json"
+"""File in a cell's job folder summing the wall seconds of every run that trained it (resumes included)."""
+
+
+def _train_seconds(job_dir: Path, add: float = 0.0) -> float:
+    """The job's training wall seconds so far, after adding ``add`` (stored in :data:`TRAIN_SECONDS_FILE`)."""
+    import json
+
+    path = job_dir / TRAIN_SECONDS_FILE
+    total = (json.loads(path.read_text())["seconds"] if path.exists() else 0.0) + add
+    if add:
+        path.write_text(json.dumps({"seconds": total}) + "\n")
+    return total
 
 
 def stored_cells(out: Path) -> dict[str, dict[str, Any]]:
@@ -59,9 +73,11 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
 
 
 def pretrain(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> tuple[Path, float, bool]:
-    """Train ``cell`` to the end of its budget, resuming an unfinished job of the same name.
+    """Train ``cell`` to the end of its budget, resuming an unfinished job of the same name from its latest
+    checkpoint (a job folder without one is started over).
 
-    Returns (its last checkpoint, seconds trained in this call, whether it resumed an earlier job).
+    Returns (its last checkpoint, wall seconds of every run that trained it, whether an earlier run had
+    started it).
     RuntimeError when the job stops before its last step.
     """
     from sray.platform.checkpoints.folders import CheckpointManager, read_meta
@@ -71,20 +87,23 @@ def pretrain(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) 
     job_dir = Path(cfg.run.output_dir) / cfg.run.name
     latest = CheckpointManager(job_dir / "checkpoints").latest() if job_dir.exists() else None
     if latest is not None and int(read_meta(latest)["step"]) >= cfg.optim.steps:
-        return latest, 0.0, True
+        return latest, _train_seconds(job_dir), True
     start = time.perf_counter()
-    resumed = job_dir.exists()
+    if latest is None and job_dir.exists():
+        shutil.rmtree(job_dir)  # stopped before its first checkpoint: nothing to resume, start over
+    resumed = latest is not None
     if resumed:
         saved = load_job_config(cfg.run.output_dir, cfg.run.name)
         saved.run.tracking_uri = tracking_uri
         outcome = launch_training(saved, resume=True)
     else:
         outcome = launch_training(cfg)
+    total_s = _train_seconds(job_dir, time.perf_counter() - start)
     last = outcome.latest_checkpoint
     if last is None or int(read_meta(last)["step"]) < cfg.optim.steps:
         raise RuntimeError(f"{job_dir}: pretraining of cell {cell.key} ended {outcome.status} before step "
                            f"{cfg.optim.steps}; re-run `sray bench accuracy` to resume it")
-    return last, time.perf_counter() - start, resumed
+    return last, total_s, resumed
 
 
 def class_iou(report: dict[str, Any]) -> list[float | None]:

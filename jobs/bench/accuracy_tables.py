@@ -180,8 +180,8 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
              f"{w.width}x{w.height}, world seed {w.seed}. Each cell pretrains the `{p.recipe}` recipe "
              f"(the ablation rows for {p.ablation_steps} steps) with its training seed and is scored on the "
              "unseen scenes from its last checkpoint; scores per scene, then averaged over scenes; mean ± "
-             "sample standard deviation over seeds. Pretrain/eval minutes: wall time of this machine "
-             "(a resumed cell counts only its last part).",
+             "sample standard deviation over seeds. Pretrain/eval minutes: wall time on this machine "
+             "(a resumed pretraining counts every run that trained it and ended).",
              "Missing cells: " + (", ".join(missing) if missing else "none") + ".",
              "Targets:", *targets(p, stored, sray_at_60), "", *links]
     header, rows = seed_table(p, stored)
