@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from sray.jobs.bench import accuracy_cells
-from sray.jobs.bench.accuracy import LONG, Cell, Preset, World, run_accuracy_benchmark
+from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import TRAIN_SECONDS_FILE, class_iou, stored_cells
+from sray.jobs.bench.accuracy_plan import LONG, Cell, Preset, World
 from sray.jobs.bench.accuracy_tables import budget_means, class_table, seed_table, targets, write_tables
 from sray.platform.common.eval_protocol import EvalProtocol
 

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sray.jobs.bench.accuracy import EXPERIMENT, LONG, VARIANT_SETTINGS, Cell, Preset
+from sray.jobs.bench.accuracy_plan import EXPERIMENT, LONG, VARIANT_SETTINGS, Cell, Preset
 
 if TYPE_CHECKING:
     from sray.platform.config.train_config import TrainConfig

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from sray.jobs.bench.accuracy import COMPARED, LONG, Cell, Preset
+from sray.jobs.bench.accuracy_plan import COMPARED, LONG, Cell, Preset
 
 ZERO_SHOT_TARGET = 0.50
 """Issue target: zero-shot mIoU of the long (recipe) model, RGB-only."""

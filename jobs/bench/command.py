@@ -67,7 +67,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _bench_accuracy(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.accuracy import PRESETS, Cell, run_accuracy_benchmark
+    from sray.jobs.bench.accuracy import run_accuracy_benchmark
+    from sray.jobs.bench.accuracy_plan import PRESETS, Cell
 
     try:
         cells = None if args.cells is None else [Cell.parse(c) for c in args.cells]

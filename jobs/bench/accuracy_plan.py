@@ -1,0 +1,133 @@
+"""The plan of ``sray bench accuracy``: its variants, cells, worlds and presets (data only; the run is
+:mod:`sray.jobs.bench.accuracy`, a cell :mod:`sray.jobs.bench.accuracy_cells`, the tables
+:mod:`sray.jobs.bench.accuracy_tables`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sray.model.fast_render import FastRender
+
+LONG = "long"
+"""Variant name of the cell that pretrains the preset's recipe for its full budget (full CRA)."""
+
+@dataclass(frozen=True)
+class Variant:
+    """The model settings a row of the benchmark changes."""
+
+    attention: str = "full"
+    """``model.attention``."""
+    weight_map: str = "radial"
+    """``model.weight_map``."""
+    inputs: str = "rgb"
+    """``model.inputs`` (``rgbd``: the source views' depth guides the samples)."""
+
+
+VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
+                    "full-affine": Variant(weight_map="affine"), "full-rgbd": Variant(inputs="rgbd"),
+                    LONG: Variant()}
+"""Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
+map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth."""
+
+
+COMPARED = ("sray", "semantic-nerf")
+"""Per-scene methods of the equal-budget table (the paper's per-scene optimisation comparison)."""
+
+EXPERIMENT = "sray-bench-accuracy"
+"""Tracking experiment of every pretraining, evaluation and finetune of the benchmark."""
+
+
+@dataclass(frozen=True)
+class World:
+    """The procedural scenes of a preset."""
+
+    train_scenes: int
+    test_scenes: int
+    views: int
+    height: int
+    width: int
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One pretraining + zero-shot evaluation: a variant (``VARIANT_SETTINGS``) and a training seed."""
+
+    variant: str
+    seed: int
+
+    @property
+    def key(self) -> str:
+        """File and job name part: ``full-s0``."""
+        return f"{self.variant}-s{self.seed}"
+
+    @classmethod
+    def parse(cls, text: str) -> Cell:
+        """``full:0`` or ``full-s0`` -> Cell; ValueError names the accepted forms and variants."""
+        variant, sep, seed = text.rpartition(":") if ":" in text else text.rpartition("-s")
+        if not sep or variant not in VARIANT_SETTINGS or not seed.isdigit():
+            raise ValueError(f"cell {text!r}: write VARIANT:SEED (e.g. full:0) with VARIANT one of "
+                             f"{', '.join(VARIANT_SETTINGS)}")
+        return cls(variant, int(seed))
+
+
+def seeds(variant: str, n: int) -> tuple[Cell, ...]:
+    """Cells of ``variant`` with training seeds 0..n-1."""
+    return tuple(Cell(variant, s) for s in range(n))
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Sizes and plan of one benchmark preset."""
+
+    world: World
+    recipe: str
+    """Pretraining recipe every cell starts from (``jobs/recipes.py``)."""
+    overrides: tuple[str, ...]
+    """``section.field=value`` assignments applied to the recipe in every cell (sizes of small presets)."""
+    long_steps: int | None
+    """Steps of the ``long`` cell (None = the recipe's own)."""
+    ablation_steps: int
+    """Steps of every other cell (the shorter ablation budget)."""
+    validations: int
+    """Held-out validations logged during each pretraining (the cell evaluates its last checkpoint)."""
+    ckpt_every: int
+    """Checkpoint interval of each pretraining: the most an interrupted cell repeats."""
+    plan: tuple[Cell, ...]
+    """Cells in the order they run (the long model first: its number is the headline)."""
+    eval_sources: int
+    """Source views per query in the zero-shot evaluation."""
+    eval_fast: FastRender | None
+    """Render mode of the zero-shot evaluation (None = the full hierarchical renderer)."""
+    budget_s: float
+    """Wall-clock budget of each finetune (both methods)."""
+    budgets: tuple[float, ...]
+    """Equal-budget read-off points (seconds)."""
+    fleet_eval_stride: int
+    """Finetune curves score every n-th pixel in each direction of the held-out views."""
+    fleet_gpus_per_task: float
+    """GPUs each finetune task takes (0 on a CPU machine)."""
+
+
+PRESETS = {
+    "cpu-small": Preset(
+        world=World(train_scenes=48, test_scenes=4, views=40, height=120, width=160),
+        recipe="synth-cpu-hour", overrides=(), long_steps=None, ablation_steps=600, validations=2, ckpt_every=200,
+        plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
+              Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0)),
+        eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
+        budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
+        fleet_gpus_per_task=0.0),
+    "gpu": Preset(
+        world=World(train_scenes=96, test_scenes=8, views=100, height=240, width=320),
+        recipe="synth-paper", overrides=("data.aug_min_source=2", "data.class_balance=inverse-sqrt",
+                                         "data.aug_colour_ev=0.3", "data.aug_channel_ev=0.1",
+                                         "data.aug_noise_sigma=3.0"),
+        long_steps=20_000, ablation_steps=5_000, validations=4, ckpt_every=1_000,
+        plan=(*seeds(LONG, 3), *seeds("full", 3), *seeds("none", 3), Cell("cross", 0), Cell("intra", 0),
+              Cell("full-affine", 0), Cell("full-rgbd", 0)),
+        eval_sources=8, eval_fast=None, budget_s=600.0, budgets=(60.0, 120.0, 300.0, 600.0), fleet_eval_stride=2,
+        fleet_gpus_per_task=0.5),
+}
+"""Benchmark presets: ``cpu-small`` fits this 2-core machine over a few runs of about an hour;
+``gpu`` is the paper-size run for a GPU machine."""
