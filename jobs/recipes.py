@@ -26,11 +26,11 @@ def synth_small() -> TrainConfig:
     )
 
 
-CPU_HOUR_STEPS = 3000
-"""Steps of ``synth-cpu-hour``. Measured on the 2-core development machine (2026-11-23, two runs of 10 and
-40 steps on the 48-scene world of ``sray bench accuracy``, worker CPU time from ``ps``): 1.87 CPU s per
-step summed over the two workers, so about 1 s per step on two idle cores; 3000 steps, the start-up and
-four small validations take about 55 minutes."""
+CPU_HOUR_STEPS = 2600
+"""Steps of ``synth-cpu-hour``, from its step time on the 2-core development machine with nothing else
+running: 1.24 s per step (2026-11-23, the first 200 steps of the ``full-s0`` cell of ``sray bench
+accuracy``, its progress lines), so 2600 steps take 54 min and the start-up and four small validations
+fit in the hour."""
 
 
 def synth_cpu_hour() -> TrainConfig:
