@@ -66,6 +66,7 @@ def test_seed_table_mean_and_sample_spread() -> None:
     ([0.40, 0.44, 0.42], [0.30, 0.31, 0.35], "do not overlap: met"),
     ([0.40, 0.44, 0.42], [0.30, 0.31, 0.41], "overlap: not met"),   # gap 8 points but ranges overlap
     ([0.40, 0.41, 0.42], [0.37, 0.38, 0.39], "do not overlap: not met"),  # apart, but only 3 points
+    ([0.21, 0.22, 0.21], [0.23, 0.24, 0.25], "do not overlap: not met"),  # apart, none ahead
 ])
 def test_ablation_target_needs_margin_and_separate_ranges(full: list[float], none: list[float], verdict: str) -> None:
     stored = {c["cell"]: c for c in [_cell("full", s, m) for s, m in enumerate(full)]

@@ -126,8 +126,8 @@ def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | No
     if len(full) > 1 and len(none) > 1:
         f, n = [c["miou"] for c in full], [c["miou"] for c in none]
         gap = float(np.mean(f) - np.mean(n))
-        apart = min(f) > max(n)
-        met = gap >= ABLATION_MARGIN and apart
+        apart = min(f) > max(n) or min(n) > max(f)
+        met = gap >= ABLATION_MARGIN and min(f) > max(n)
         lines.append(f"- Full CRA − none: {100 * gap:+.2f} points (target ≥ +{100 * ABLATION_MARGIN:.0f}); seed "
                      f"ranges {_pct(min(f))}–{_pct(max(f))} and {_pct(min(n))}–{_pct(max(n))} "
                      f"{'do not overlap' if apart else 'overlap'}: {'met' if met else 'not met'}.")
