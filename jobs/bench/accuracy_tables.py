@@ -145,8 +145,10 @@ def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | No
 
 
 def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str:
-    lines = [" | ".join(header), " | ".join("---" for _ in header)]
-    return "\n".join(lines + [" | ".join(r) for r in rows] + ["", *captions])
+    """A Markdown table with its protocol caption lines under it."""
+    from sray.jobs.bench.doc import markdown_table
+
+    return "\n".join([markdown_table(header, rows), "", *captions])
 
 
 def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], fleet_dir: Path, doc: Path) -> None:

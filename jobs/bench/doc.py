@@ -58,6 +58,12 @@ def _same_slot(section: str, title: str) -> bool:
     return f", {device_kind()}," in command or command.endswith(f", {device_kind()}")
 
 
+def markdown_table(header: list[str], rows: list[list[str]]) -> str:
+    """A Markdown table: the header, its rule, one line per row (cells converted with ``str``)."""
+    lines = [" | ".join(header), " | ".join("---" for _ in header)]
+    return "\n".join(lines + [" | ".join(str(c) for c in r) for r in rows])
+
+
 def record(title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "", header: str = _HEADER) -> str:
     """Print a benchmark section and write it into ``doc``; returns the section text.
 

@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
+from sray.jobs.bench.doc import markdown_table
 
 REPORT_FILE = "gpu_check.json"
 STATUSES = ("passed", "failed", "skipped")
@@ -54,19 +55,14 @@ def save_report(out: Path, report: dict) -> Path:
     return path
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    lines = [" | ".join(header), " | ".join("---" for _ in header)]
-    return "\n".join(lines + [" | ".join(str(c) for c in r) for r in rows])
-
-
 def markdown(report: dict, order: list[str]) -> str:
     """The report as Markdown: a summary table in stage order, then each stage's table."""
     stages = report["stages"]
     names = [n for n in order if n in stages]
-    parts = [_table(["stage", "status", "seconds", "summary"],
+    parts = [markdown_table(["stage", "status", "seconds", "summary"],
                     [[n, stages[n].status, f"{stages[n].seconds:.1f}", stages[n].summary] for n in names])]
     for name in names:
         result = stages[name]
         if result.header:
-            parts.append(f"**{name}**\n\n" + _table(result.header, result.rows))
+            parts.append(f"**{name}**\n\n" + markdown_table(result.header, result.rows))
     return "\n\n".join(parts)
