@@ -58,7 +58,7 @@ def _train(args: argparse.Namespace) -> int:
 
     try:  # inputs are checked before torch and Ray are even imported: a bad one fails in seconds
         cfg = build_config(args)
-        check_train_inputs(cfg, resume=bool(args.resume))
+        check_train_inputs(cfg, resume=bool(args.resume), address=args.address)
     except (FileExistsError, FileNotFoundError, ValueError) as e:
         print(f"sray train: {e}", file=sys.stderr)
         return 2

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -16,7 +17,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cluster_fixtures import LocalCluster  # noqa: E402
+from cluster_fixtures import ClusterInputs, LocalCluster  # noqa: E402
 
 pytestmark = pytest.mark.cluster
 
@@ -85,8 +86,29 @@ def test_refused_without_the_ray_token_or_with_a_foreign_host_header(local_clust
     assert _status(search, {"Host": "rebind.example.com"}) == 403
     assert _status(search, {}) == 200
     env = {k: v for k, v in local_cluster.env.items() if not k.startswith("RAY_AUTH")}
-    env["RAY_AUTH_MODE"] = "token"
-    env["RAY_AUTH_TOKEN"] = "0" * 64
+    env |= {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": "0" * 64,
+            "RAY_gcs_server_port_wait_time_s": "1"}  # one attempt, not Ray's 20 s of retries
     probe = "import ray; ray.init(address='%s'); print('joined')" % state.ray_address
     joined = local_cluster.python(probe, env=env, timeout=60)
-    assert "joined" not in joined.stdout
+    assert "joined" not in joined.stdout and "InvalidAuthToken" in joined.stderr, joined.stderr[-2000:]
+
+
+def test_sray_refuses_a_cluster_address_without_its_token_in_one_line(local_cluster: LocalCluster,
+                                                                       cluster_inputs: ClusterInputs,
+                                                                       tmp_path: Path) -> None:
+    """``sray train`` and ``sray finetune-fleet --address`` without the token: exit 2 with one line naming the
+    token variables, before anything is written (Ray itself retries for 20 s, then prints a traceback)."""
+    env = {k: v for k, v in local_cluster.env.items() if not k.startswith("RAY_AUTH")}
+    address = local_cluster.state.ray_address
+    for argv in (["train", "--data", str(cluster_inputs.shards), "--set", f"run.output_dir={tmp_path / 'jobs'}"],
+                 ["finetune-fleet", "--checkpoint", str(cluster_inputs.checkpoint), "--data",
+                  str(cluster_inputs.shards), "--all-test", "--out", str(tmp_path / "fleet")]):
+        t0 = time.monotonic()
+        done = local_cluster.sray(*argv, "--address", address, "--tracking-uri", f"sqlite:///{tmp_path / 'm.db'}",
+                                  env=env, timeout=60, cwd=tmp_path)
+        took = time.monotonic() - t0
+        lines = [line for line in done.stderr.splitlines() if line.strip()]
+        assert done.returncode == 2 and len(lines) == 1, done.stdout[-2000:] + done.stderr[-2000:]
+        assert f"--address {address}: the Ray cluster refused this client's token" in lines[0]
+        assert "RAY_AUTH_TOKEN_PATH" in lines[0] and took < 15, (lines, took)
+    assert not (tmp_path / "jobs").exists() and not (tmp_path / "fleet").exists() and not (tmp_path / "m.db").exists()

@@ -23,6 +23,8 @@ BAD = [
     (["--tracker", "nosuch"], "unknown tracker 'nosuch'"),
     (["--tracking-uri", "http://127.0.0.1:9"], "does not answer"),
     (["--resume", "never-ran"], "no job called 'never-ran'"),
+    (["--address", "127.0.0.1:9"], "--address 127.0.0.1:9: no Ray cluster answers there"),
+    (["--address", "head-without-port"], "expected HOST:PORT of the Ray head"),
 ]
 
 

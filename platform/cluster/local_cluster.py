@@ -63,8 +63,9 @@ def _started(state: ClusterState, name: str, record: ProcessRecord) -> None:
     state.processes = update_state(state.root, lambda on_disk: on_disk.processes.update({name: entry})).processes
 
 
-def _start_part(state: ClusterState, name: str) -> None:
-    """Start part ``name`` (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-<i>``), record it and time it."""
+def _start_part(state: ClusterState, name: str, wait: bool = True) -> None:
+    """Start part ``name`` (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-<i>``), record it and time it.
+    ``wait=False`` leaves the MLflow server starting (:func:`_mlflow_ready` waits and times it)."""
     root, logs, t0 = state.root, state.root / "logs", time.monotonic()
     if name == "postgres":
         bins = postgres.ensure_installed(logs / "apt.log")
@@ -72,8 +73,11 @@ def _start_part(state: ClusterState, name: str) -> None:
         _started(state, name, postgres.start(bins, root / "pg", state.ports["postgres"], logs / "postgres.log"))
         postgres.ensure_database(bins, state.ports["postgres"], state.password)
     elif name == "mlflow":
-        _started(state, name, mlflow_server.start(postgres.backend_uri(state.ports["postgres"]), state.password,
-                                                  root / "artifacts", state.ports["mlflow"], logs / "mlflow.log"))
+        _started(state, name, mlflow_server.spawn_server(postgres.backend_uri(state.ports["postgres"]), state.password,
+                                                         root / "artifacts", state.ports["mlflow"], logs / "mlflow.log"))
+        if not wait:
+            return
+        _mlflow_ready(state)
     elif name == "ray-head":
         _started(state, name, ray_nodes.start_head(root / "ray" / "head", state.ports["gcs"], state.ports["dashboard"],
                                                    state.token_path, logs / "ray-head.log"))
@@ -85,6 +89,12 @@ def _start_part(state: ClusterState, name: str) -> None:
         raise ClusterError(f"no part {name!r}; parts: postgres, mlflow, ray-head, ray-worker-1 ... "
                            f"ray-worker-{state.workers}")
     _timed(state, name, t0)
+
+
+def _mlflow_ready(state: ClusterState) -> None:
+    """Wait for the recorded MLflow server to answer."""
+    record = ProcessRecord(**state.processes["mlflow"])
+    mlflow_server.wait_ready(record, state.ports["mlflow"], state.root / "logs" / "mlflow.log")
 
 
 def _wait_nodes(state: ClusterState, timeout_s: float = 120.0) -> None:
@@ -113,8 +123,13 @@ def up(root: Path, workers: int = 2, cpus_per_worker: int = 1) -> ClusterState:
         state.token_path.chmod(0o600)
     state.save()
     try:
-        for name in ("postgres", "mlflow", "ray-head", *(f"ray-worker-{i}" for i in range(1, workers + 1))):
+        _start_part(state, "postgres")
+        t_mlflow = time.monotonic()
+        _start_part(state, "mlflow", wait=False)  # the server imports MLflow while the Ray nodes start
+        for name in ("ray-head", *(f"ray-worker-{i}" for i in range(1, workers + 1))):
             _start_part(state, name)
+        _mlflow_ready(state)
+        _timed(state, "mlflow", t_mlflow)
         t0 = time.monotonic()
         _wait_nodes(state)
         state.startup_s["ray-workers-joined"] = round(time.monotonic() - t0, 1)

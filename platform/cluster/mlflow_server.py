@@ -32,14 +32,24 @@ def healthy(url: str) -> bool:
         return False
 
 
-def start(backend_uri: str, password: str, artifacts: Path, port: int, log_path: Path,
-          timeout_s: float = 120.0) -> ProcessRecord:
-    """Start ``mlflow server`` on 127.0.0.1:``port`` and wait for ``/health``."""
+def spawn_server(backend_uri: str, password: str, artifacts: Path, port: int, log_path: Path) -> ProcessRecord:
+    """Start ``mlflow server`` on 127.0.0.1:``port`` without waiting for it (:func:`wait_ready`)."""
     artifacts.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, "-m", "mlflow", "server", "--backend-store-uri", backend_uri,
            "--serve-artifacts", "--artifacts-destination", str(artifacts), "--host", "127.0.0.1",
            "--port", str(port), "--workers", "1", "--allowed-hosts", allowed_hosts(port)]
     env = {**os.environ, **SERVER_ENV, "PGPASSWORD": password}
-    record = spawn(cmd, log_path, env=env)
+    return spawn(cmd, log_path, env=env)
+
+
+def wait_ready(record: ProcessRecord, port: int, log_path: Path, timeout_s: float = 120.0) -> None:
+    """Wait until the server of ``record`` answers ``/health``; ClusterError naming ``log_path`` otherwise."""
     wait_until(lambda: healthy(f"http://127.0.0.1:{port}"), timeout_s, "the MLflow server", log_path, record)
+
+
+def start(backend_uri: str, password: str, artifacts: Path, port: int, log_path: Path,
+          timeout_s: float = 120.0) -> ProcessRecord:
+    """Start ``mlflow server`` on 127.0.0.1:``port`` and wait for ``/health``."""
+    record = spawn_server(backend_uri, password, artifacts, port, log_path)
+    wait_ready(record, port, log_path, timeout_s)
     return record

@@ -31,6 +31,7 @@ from sray.data_tools.atomic import atomic_write_json, atomic_write_text
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.common.progress import progress_env
+from sray.platform.common.ray_address import check_ray_address
 from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
 from sray.platform.finetune.methods.registry import method_names
@@ -237,6 +238,8 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     from sray.platform.train.resources import check_feasible
 
     check_fleet_config(cfg)
+    if cfg.address:
+        check_ray_address(cfg.address)
     tracker = get_tracker(cfg.tracker, tracking_uri)
     checkpoint, shards, out_dir = resolve_checkpoint(checkpoint), Path(shards).resolve(), Path(out_dir).resolve()
     scenes = list(dict.fromkeys(scenes))

@@ -2,14 +2,15 @@
 
 A bad input found inside Ray Train costs a minute, a screen of tracebacks and retries of an error
 no retry can fix. :func:`check_train_inputs` finds it first: the resources asked for, the shard
-folder and its manifest, the job folder of a resumed job, the tracker and its store. Each error
-names the file or field and the fix.
+folder and its manifest, the job folder of a resumed job, the tracker and its store, the cluster to
+join. Each error names the file or field and the fix.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from sray.platform.common.ray_address import check_ray_address
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import get_tracker
 
@@ -67,10 +68,13 @@ def check_tracker(cfg: TrainConfig) -> None:
         raise InputError(f"run.tracking_uri / --tracking-uri: {str(e).splitlines()[0]}") from None
 
 
-def check_train_inputs(cfg: TrainConfig, resume: bool = False) -> None:
-    """Every check above, cheapest first; InputError on the first problem."""
+def check_train_inputs(cfg: TrainConfig, resume: bool = False, address: str | None = None) -> None:
+    """Every check above, cheapest first, and the cluster at ``address`` (reachable, token accepted) before
+    the tracker's store is made; InputError (RayAddressError for the address) on the first problem."""
     check_request(cfg.run.workers, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker, cfg.run.precision)
     if resume:
         check_resume(cfg)
     check_shards(Path(cfg.data.shards))
+    if address:
+        check_ray_address(address)
     check_tracker(cfg)

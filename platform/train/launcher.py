@@ -125,7 +125,7 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
     import ray.train
     from ray.train.torch import TorchTrainer
 
-    check_train_inputs(cfg, resume=resume)  # before Ray: one line, never retried
+    check_train_inputs(cfg, resume=resume, address=address)  # before Ray: one line, never retried
     tracker = get_tracker(cfg.run.tracker, cfg.run.tracking_uri)
     if not resume:
         cfg.run.name = unique_name(cfg)
