@@ -1,5 +1,6 @@
 """What ``sray train`` prints when its output goes to a file or a job log: each worker line once,
-progress as plain lines (no carriage-return redraws)."""
+progress as plain lines (no carriage-return redraws), and no traceback from Ray's own actors while
+another Ray runs on the machine (the test session's)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ TINY = ("model.n_source=3", "model.n_coarse=8", "model.n_fine=8", "data.top_k=4"
         "data.loader_workers=0", "optim.steps=6", "run.val_every=100", "run.ckpt_every=6", "run.register_model=")
 
 
-def test_a_job_writing_to_a_file_prints_each_worker_line_once(tiny_shards: Path, tmp_path: Path) -> None:  # noqa: F811
+def test_a_job_writing_to_a_file_prints_each_worker_line_once(ray_session, tiny_shards: Path,  # noqa: F811  (conftest)
+                                                             tmp_path: Path) -> None:
     sets = [a for s in (*TINY, f"run.output_dir={tmp_path / 'jobs'}") for a in ("--set", s)]
     cmd = [sys.executable, "-m", "sray.jobs.cli", "train", "--recipe", "synth-small", "--data", str(tiny_shards),
            "--name", "printing", "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", *sets]
@@ -28,3 +30,6 @@ def test_a_job_writing_to_a_file_prints_each_worker_line_once(tiny_shards: Path,
     assert len(worker_lines) == len(set(worker_lines)), worker_lines                      # patch sent each twice
     assert any("[sray] printing: step 6/6 (100%)" in ln for ln in worker_lines), worker_lines
     assert "\r" not in text
+    # Ray Train's placement-group cleaner looked its cluster up with address="auto" and, with the session's
+    # Ray beside this job's, died with "Found multiple active Ray instances"
+    assert "Traceback" not in text and "multiple active Ray instances" not in text, text[-3000:]

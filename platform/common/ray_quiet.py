@@ -4,8 +4,8 @@ Ray Train V2's placement-group cleaner (a detached actor) polls the controller's
 Ray's state API, which only the dashboard serves. Without a dashboard (sray's local, in-process
 Ray) every poll fails and logs "Failed to query Ray Train Controller actor state" every few seconds:
 14 lines in one demo, 138 in one 80-step run, all forwarded to the user's terminal. The cleaner still
-works (the controller ends its own placement group); the line tells a user nothing. The drivers
-pass :data:`SETUP_HOOK` as the job's ``worker_process_setup_hook``, so the filter sits in the very
+works (the controller ends its own placement group); the line tells a user nothing. The job's
+worker-process hook (:mod:`sray.platform.common.ray_worker_setup`) installs the filter in the very
 process that logs the line; anything else those loggers say still shows.
 """
 
@@ -16,9 +16,6 @@ import logging
 QUIET = {"ray.train.v2._internal.execution.controller.placement_group_cleaner":
          ("Failed to query Ray Train Controller actor state",)}
 """Logger name -> message prefixes dropped from it."""
-
-SETUP_HOOK = "sray.platform.common.ray_quiet.quiet_ray_logs"
-"""Import path of :func:`quiet_ray_logs`, for ``runtime_env={"worker_process_setup_hook": ...}``."""
 
 TRAIN_WORKER_ENV = {"RAY_TRAIN_ENABLE_PRINT_PATCH": "0"}
 """Environment of Ray Train workers. Ray Train V2 replaces ``print`` in its workers with a function that

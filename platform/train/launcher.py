@@ -21,7 +21,8 @@ from typing import Any
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.common.progress import progress_env
-from sray.platform.common.ray_quiet import SETUP_HOOK, TRAIN_WORKER_ENV
+from sray.platform.common.ray_quiet import TRAIN_WORKER_ENV
+from sray.platform.common.ray_worker_setup import SETUP_HOOK
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import RunHandle, Tracker
