@@ -24,7 +24,7 @@ TOY = Preset(world=World(train_scenes=1, test_scenes=1, views=20, height=36, wid
                                               "data.val_views_per_scene=1",
                                               "data.aug_source_scale=0.0"),  # 36x48 sources: no room to shrink
              long_steps=4, ablation_steps=2, validations=1, ckpt_every=2,
-             plan=(Cell(LONG, 0), Cell("full", 0), Cell("full", 1), Cell("none", 0)),
+             plan=(Cell(LONG, 0), Cell("full", 0), Cell("full", 1)),
              eval_sources=2, eval_fast=None, budget_s=3.0, budgets=(1.0, 3.0), fleet_eval_stride=4,
              fleet_gpus_per_task=0.0)
 
@@ -153,7 +153,7 @@ def test_toy_benchmark_resumes_cells_and_never_reruns_a_finished_one(ray_session
 
     # 3. the full run trains only the missing cells, then the fleet from the long model
     stored = run_accuracy_benchmark("toy", out, doc, None, fleet=True, presets=presets)
-    assert trained == ["long-s0", "long-s0", "full-s0", "full-s1", "none-s0"]
+    assert trained == ["long-s0", "long-s0", "full-s0", "full-s1"]
     assert set(stored) == {c.key for c in TOY.plan}
     assert stored["full-s0"]["resumed"] is False and stored["full-s0"]["steps"] == 2
     report = json.loads(Path(stored["full-s0"]["metrics_path"]).read_text())
