@@ -27,7 +27,11 @@ OBJECT_STORE_BYTES = 100 * 1024 * 1024
 @pytest.fixture(scope="session")
 def ray_session() -> Iterator[dict[str, float]]:
     """A running local Ray (``address="local"``, no dashboard); yields ``ray.cluster_resources()``."""
+    from sray.platform.train.launcher import LOCAL_WORKER_ENV
+
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    for key, value in LOCAL_WORKER_ENV.items():  # as sray's own local Ray (launcher.init_ray)
+        os.environ.setdefault(key, value)
     import ray
 
     if ray.is_initialized():

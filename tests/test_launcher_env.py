@@ -1,4 +1,5 @@
-"""A local Ray started by sray gives its workers PyTorch's huge-page CPU allocator path."""
+"""A local Ray started by sray gives its workers PyTorch's huge-page CPU allocator path, and Ray Train's
+controller the 0.5 s poll (``sray.platform.common.ray_polling``)."""
 
 from __future__ import annotations
 
@@ -18,28 +19,31 @@ def probe():
 
 init_ray(None, num_cpus=1)
 env, offset = ray.get(probe.remote())
-print(env, offset)
+from ray.train.v2._internal.constants import get_env_vars_to_propagate
+print(get_env_vars_to_propagate().get("RAY_TRAIN_HEALTH_CHECK_INTERVAL_S"), env, offset)
 ray.shutdown()
 """
 
 
-def _run_probe(extra_env: dict[str, str]) -> tuple[str, int]:
-    env = {k: v for k, v in os.environ.items() if k != "THP_MEM_ALLOC_ENABLE"} | extra_env
+def _run_probe(extra_env: dict[str, str]) -> tuple[str, str, int]:
+    """(poll interval Ray Train passes to its controller, THP_MEM_ALLOC_ENABLE in a worker, a block's page offset)."""
+    ours = ("THP_MEM_ALLOC_ENABLE", "RAY_TRAIN_HEALTH_CHECK_INTERVAL_S")
+    env = {k: v for k, v in os.environ.items() if k not in ours} | extra_env
     out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
-    value, offset = out.stdout.split()[-2:]
-    return value, int(offset)
+    poll, value, offset = out.stdout.split()[-3:]
+    return poll, value, int(offset)
 
 
 def test_local_workers_take_pytorchs_huge_page_path() -> None:
-    value, offset = _run_probe({})
-    assert value == "1"
+    poll, value, offset = _run_probe({})
+    assert value == "1" and poll == "0.5"
     # PyTorch's THP path page-aligns blocks of 2 MiB or more (then madvises MADV_HUGEPAGE);
     # its default path asks for 64-byte alignment, which glibc's mmap'd chunks meet at offset 64.
     assert offset == 0
 
 
 def test_a_users_own_setting_is_kept() -> None:
-    value, offset = _run_probe({"THP_MEM_ALLOC_ENABLE": "0"})
-    assert value == "0"
+    poll, value, offset = _run_probe({"THP_MEM_ALLOC_ENABLE": "0", "RAY_TRAIN_HEALTH_CHECK_INTERVAL_S": "3"})
+    assert value == "0" and poll == "3"
     assert offset != 0

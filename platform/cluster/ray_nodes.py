@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from sray.platform.cluster.processes import ProcessRecord, free_port, port_open, spawn, wait_until
+from sray.platform.common.ray_polling import TRAIN_POLL_ENV
 
 NODE_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
 """Environment of every node: no usage stats, no drain wait on SIGTERM."""
@@ -43,8 +44,9 @@ def _node_env(token_path: Path, gcs_address: str) -> dict[str, str]:
     Every process a node starts inherits ``RAY_ADDRESS``. Ray's own actors find "their" cluster with
     ``address="auto"`` (Ray Train's placement-group cleaner, through the state API); with another Ray
     running on the machine (a local ``sray train``, a test session) that lookup finds two and the
-    cleaner dies with "Found multiple active Ray instances"."""
-    env = {**os.environ, **NODE_ENV, **auth_env(token_path), "RAY_ADDRESS": gcs_address}
+    cleaner dies with "Found multiple active Ray instances". Jobs poll their workers every 0.5 s unless the
+    user's environment says otherwise (:mod:`sray.platform.common.ray_polling`)."""
+    env = {**TRAIN_POLL_ENV, **os.environ, **NODE_ENV, **auth_env(token_path), "RAY_ADDRESS": gcs_address}
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     return env
 

@@ -21,6 +21,7 @@ from typing import Any
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.common.progress import progress_env
+from sray.platform.common.ray_polling import TRAIN_POLL_ENV
 from sray.platform.common.ray_quiet import TRAIN_WORKER_ENV
 from sray.platform.common.ray_worker_setup import SETUP_HOOK
 from sray.platform.config.train_config import TrainConfig
@@ -72,11 +73,13 @@ def load_job_config(output_dir: str, name: str) -> TrainConfig:
     return TrainConfig.from_dict(json.loads(path.read_text()))
 
 
-LOCAL_WORKER_ENV = {"THP_MEM_ALLOC_ENABLE": "1"}
-"""Environment a local Ray cluster's workers inherit unless the user set it otherwise. PyTorch then
-madvises CPU blocks of 2 MiB or more for transparent huge pages: filling a 64 MiB tensor takes 544
-page faults instead of 16385, and a paper-size CPU training step 10.4-11.9 s instead of 12.4-20.2 s
-in ``sray bench model`` (docs/benchmarks.md). CUDA memory is unaffected; the Docker images set it too."""
+LOCAL_WORKER_ENV = {"THP_MEM_ALLOC_ENABLE": "1", **TRAIN_POLL_ENV}
+"""Environment a local Ray cluster's workers inherit unless the user set it otherwise. With
+``THP_MEM_ALLOC_ENABLE``, PyTorch madvises CPU blocks of 2 MiB or more for transparent huge pages:
+filling a 64 MiB tensor takes 544 page faults instead of 16385, and a paper-size CPU training step
+10.4-11.9 s instead of 12.4-20.2 s in ``sray bench model`` (docs/benchmarks.md). CUDA memory is
+unaffected; the Docker images set it too. :data:`TRAIN_POLL_ENV`: Ray Train's controller polls every
+0.5 s (:mod:`sray.platform.common.ray_polling`)."""
 
 
 def init_ray(address: str | None, num_cpus: int | None = None) -> None:
