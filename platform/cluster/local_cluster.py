@@ -145,7 +145,7 @@ def restart(root: Path, name: str, outage_s: float = 0.0) -> ClusterState:
     state = status(root)
     record = state.record(name)
     if record is not None:
-        stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM)
+        stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM, supervisor=name.startswith("ray-"))
     time.sleep(outage_s)
     t0 = time.monotonic()
     _start_part(state, name)
@@ -174,7 +174,8 @@ def down(root: Path) -> list[str]:
         for name in sorted(n for n in state.processes if n.startswith(prefix)):
             record = state.record(name)
             # PostgreSQL: SIGINT is its fast shutdown (SIGTERM would wait for every client to leave).
-            if record is not None and stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM):
+            if record is not None and stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM,
+                                           supervisor=name.startswith("ray-")):
                 stopped.append(name)
     update_state(state.root, lambda on_disk: on_disk.processes.clear())
     return stopped

@@ -95,8 +95,12 @@ def wait_until(check: Callable[[], bool], timeout_s: float, what: str, log_path:
     return time.monotonic() - t0
 
 
-def stop(record: ProcessRecord, timeout_s: float = 20.0, sig: int = signal.SIGTERM) -> bool:
-    """Send ``sig`` to the recorded process's group, SIGKILL after ``timeout_s``; True when it ran."""
+def stop(record: ProcessRecord, timeout_s: float = 20.0, sig: int = signal.SIGTERM, supervisor: bool = False) -> bool:
+    """Send ``sig`` to the recorded process's group, SIGKILL after ``timeout_s``; True when it ran.
+
+    ``supervisor``: the leader only watches the rest of its group (``ray start --block``), so once every
+    other process of the group has ended it gets SIGKILL instead of the wait. Ray's own exit path
+    sometimes sat for the whole 20 s after its raylet had ended (left a zombie, unreaped)."""
     if not is_alive(record):
         return False
     for signum in (sig, signal.SIGKILL):
@@ -106,11 +110,29 @@ def stop(record: ProcessRecord, timeout_s: float = 20.0, sig: int = signal.SIGTE
             return True
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline and is_alive(record):
+            if supervisor and signum != signal.SIGKILL and not group_members(record.pid):
+                break
             time.sleep(0.1)
         if not is_alive(record):
             break
     _kill_group_leftovers(record.pid)
     return True
+
+
+def group_members(pgid: int) -> list[int]:
+    """Running (non-zombie) processes of group ``pgid`` other than its leader, from ``/proc``."""
+    members = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit() or int(proc.name) == pgid:
+            continue
+        try:
+            stat = (proc / "stat").read_text()
+        except OSError:
+            continue
+        state, _, group = stat[stat.rindex(")") + 2:].split()[:3]
+        if int(group) == pgid and state != "Z":
+            members.append(int(proc.name))
+    return members
 
 
 def _kill_group_leftovers(pgid: int) -> None:
