@@ -65,6 +65,8 @@ def test_submitted_job_killed_driver_then_resume_on_the_worker_nodes(
     code, out = finish(start_job(local_cluster, resume, log), log)
     assert code == 0 and "SUCCEEDED" in out, out[-3000:]
     assert "[sray] resumed at step 4" in out and "Traceback" not in out, out[-3000:]
+    finished = f"[sray] finished: best checkpoint {job_dir(local_cluster, name) / 'checkpoints' / 'step_000000010'}"
+    assert out.count(finished) == 1, out[-3000:]  # the driver's last line, once: --wait shows the whole log
     assert {a["node_id"] for a in train_actors(local_cluster, submission_id(out))} == workers
 
     [run] = run_ids(local_cluster, name)

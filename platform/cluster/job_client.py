@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import sys
-import time
 from typing import Any, TextIO
 
 EXIT_CODES = {"SUCCEEDED": 0, "FAILED": 1, "STOPPED": 3}
@@ -29,24 +28,50 @@ def submit(address: str, entrypoint: str, submission_id: str | None = None,
                                       runtime_env=runtime_env or None)
 
 
-async def _tail(jobs: Any, job_id: str, out: TextIO) -> None:
-    async for chunk in jobs.tail_job_logs(job_id):
-        out.write(chunk)
-        out.flush()
+TERMINAL = ("SUCCEEDED", "FAILED", "STOPPED")
+"""Job statuses that do not change any more."""
+
+
+async def _follow(jobs: Any, job_id: str, out: TextIO, poll_s: float) -> str:
+    """Stream the log while polling the status; at a final status, print what the stream has not shown yet
+    from the whole log (the server closes the stream about 3 s after the job ends) and return the status."""
+    written = 0
+
+    async def tail() -> None:
+        nonlocal written
+        async for chunk in jobs.tail_job_logs(job_id):
+            out.write(chunk)
+            out.flush()
+            written += len(chunk)
+
+    streaming = asyncio.ensure_future(tail())
+    try:
+        while True:
+            if streaming.done():
+                await asyncio.sleep(poll_s)
+            else:
+                await asyncio.wait({streaming}, timeout=poll_s)
+                if streaming.done() and streaming.exception() is not None:  # the head restarting: poll on
+                    print(f"[sray] log stream of {job_id} ended ({type(streaming.exception()).__name__}); waiting "
+                          "for the job's status", file=out, flush=True)
+            status = str((await asyncio.to_thread(jobs.get_job_status, job_id)).value)
+            if status in TERMINAL:
+                break
+    finally:
+        streaming.cancel()
+        await asyncio.gather(streaming, return_exceptions=True)
+    try:
+        rest = (await asyncio.to_thread(jobs.get_job_logs, job_id))[written:]
+    except Exception:  # noqa: BLE001 - the status is known; a log that cannot be read is not an error of the job
+        rest = ""
+    out.write(rest)
+    out.flush()
+    return status
 
 
 def follow(address: str, job_id: str, out: TextIO = sys.stdout, poll_s: float = 1.0) -> str:
     """Stream the job's log to ``out`` until it ends; return its final status (SUCCEEDED, FAILED, STOPPED)."""
-    jobs = client(address)
-    try:
-        asyncio.run(_tail(jobs, job_id, out))
-    except Exception as e:  # noqa: BLE001 - the log stream broke (head restarting): fall back to polling
-        print(f"[sray] log stream of {job_id} ended ({type(e).__name__}); waiting for the job's status", flush=True)
-    while True:
-        status = str(jobs.get_job_status(job_id).value)
-        if status in ("SUCCEEDED", "FAILED", "STOPPED"):
-            return status
-        time.sleep(poll_s)
+    return asyncio.run(_follow(client(address), job_id, out, poll_s))
 
 
 def job_info(address: str, job_id: str) -> Any:
