@@ -11,11 +11,26 @@ process that logs the line; anything else those loggers say still shows.
 
 from __future__ import annotations
 
+import importlib.util
 import logging
+import os
+
+
+def _ray_file_logger(relative: str) -> str:
+    """Name of a logger Ray creates with ``logging.getLogger(__file__)``: the module's path in this install."""
+    spec = importlib.util.find_spec("ray")
+    return os.path.join(spec.submodule_search_locations[0], relative) if spec and spec.submodule_search_locations \
+        else relative
+
 
 QUIET = {"ray.train.v2._internal.execution.controller.placement_group_cleaner":
-         ("Failed to query Ray Train Controller actor state",)}
-"""Logger name -> message prefixes dropped from it."""
+         ("Failed to query Ray Train Controller actor state",),
+         "ray.train.v2._internal.execution.storage": ("Checkpoint successfully created at",),
+         _ray_file_logger("train/v2/_internal/execution/context.py"): ("Reporting training result",)}
+"""Logger name -> message prefixes dropped from it. Besides the cleaner's flood: at every checkpoint each
+worker announced its report ("Reporting training result 3: TrainingReport(checkpoint=..., metrics=...)
+from rank 1") and rank 0 the copy in Ray's own storage folder, 3 lines of Ray's internals per checkpoint
+beside sray's own progress line."""
 
 TRAIN_WORKER_ENV = {"RAY_TRAIN_ENABLE_PRINT_PATCH": "0"}
 """Environment of Ray Train workers. Ray Train V2 replaces ``print`` in its workers with a function that
