@@ -38,3 +38,13 @@ def test_profiles_and_levers_are_written_and_the_kernels_agree(tmp_path: Path) -
     write_profiles(sections, doc)
     text = doc.read_text()
     assert text.startswith("# Performance") and all(text.count(f"## {t}\n") == 1 for t in titles)
+
+
+def test_training_kernel_lever_times_forward_and_backward_of_the_flash_options_at_intra_view() -> None:
+    """``train-kernels``: forward + backward rows; the intra-view stage skips the two implementations
+    that store every score matrix, the cross-view stage keeps all four; all agree to fp32 rounding."""
+    [(title, table, _)] = run_profiles(torch.device("cpu"), ("fast",), ("train-kernels",), quick=True)
+    assert title.startswith("Training lever: attention kernels")
+    rows = _rows(table)
+    assert [r[0] for r in rows] == ["intra-view"] * 2 + ["cross-view"] * 4
+    assert all(float(r[3]) > 0 and float(r[5]) < 1e-5 for r in rows)

@@ -32,8 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     prof.add_argument("--impl", nargs="+", default=["reference", "fast"], choices=["reference", "fast"],
                       help="implementations to profile (SRayConfig.impl)")
     prof.add_argument("--workload", nargs="+", default=["train", "render"],
-                      choices=["train", "render", "kernels", "chunks"],
-                      help="train/render: torch.profiler tables; kernels/chunks: the render's levers, timed")
+                      choices=["train", "render", "kernels", "train-kernels", "chunks"],
+                      help="train/render: torch.profiler tables; kernels/chunks: the render's levers, timed; "
+                           "train-kernels: the attention kernels forward + backward at the training step's shapes")
     prof.add_argument("--quick", action="store_true", help="tiny sizes (for tests)")
     prof.add_argument("--doc", type=Path, default=Path("docs/performance.md"))
     prof.set_defaults(func=_bench_profile)

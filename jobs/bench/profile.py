@@ -59,8 +59,9 @@ def profile_call(fn: Callable[[], None], device: torch.device, warm_up: bool = T
 def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[str, ...],
                  quick: bool) -> list[tuple[str, str, str]]:
     """Profile the ``workloads`` (``train``: the training step, ``render``: a whole-image render) per
-    implementation, and time the render's levers (``kernels``: attention implementations at the render's
-    shapes; ``chunks``: rays per chunk, per implementation).
+    implementation, and time the levers (``kernels``: attention implementations at the render's shapes;
+    ``train-kernels``: the same, forward + backward, at the training step's; ``chunks``: rays per chunk,
+    per implementation).
 
     Returns (title, markdown table, notes) sections for ``docs/performance.md``.
     """
@@ -80,6 +81,14 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
                          f"One chunk of the render: {rays} rays, {samples} samples seen by the fine pass, 8 views, "
                          "4 heads of 8 channels, no grad, CPU; median of 2 calls after a warm-up. GFLOP/s counts "
                          "the two matmuls of attention (4 L^2 d per head)."))
+    if "train-kernels" in workloads:
+        rays, samples = (64, 8) if quick else (1024, 64)
+        sections.append(("Training lever: attention kernels at the training step's shapes, forward + backward",
+                         kernel_table(rays, samples, backward=True),
+                         f"One attention stage of one pass of the paper-config training step: {rays} rays, {samples} "
+                         "samples (the coarse pass, and the fine pass with `fine_samples=new`), 8 views, 4 heads of 8 "
+                         "channels, CPU; forward + backward to q, k and v, median of 2 calls after a warm-up. GFLOP/s "
+                         "counts the forward's two matmuls (4 L^2 d per head) and the backward's four (2x), as 3x."))
     if "chunks" in workloads:
         chunks, crop, samples = ((64, 16), (12, 16), 4) if quick else ((4800, 1024, 256, 64), (60, 80), 24)
         sections.append(("Render lever: rays per chunk",

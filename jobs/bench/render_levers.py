@@ -4,7 +4,8 @@
   (a chunk of 4096 rays, 24 + 48 samples seen by the fine pass, 8 source views, 4 heads of 8
   channels), with each CPU option torch offers: SDPA's flash kernel with a boolean or an additive
   mask, SDPA's math backend, and an explicit matmul + softmax. All compute the same attention
-  (the table gives their largest difference to the first);
+  (the table gives their largest difference to the first). ``train-kernels`` times the same options
+  forward + backward at one pass of the paper-config training step (1024 rays, 64 samples);
 * ``chunks``: a whole-image render of a small crop (80x60 rays with the 320x240 camera's field of
   view) at several chunk sizes, since a chunk's token tensors (rays x samples x views x channels) decide whether
   they stay in cache and whether glibc serves them from its heap or maps fresh pages.
@@ -24,6 +25,11 @@ from sray.jobs.bench.workloads import model_config, synthetic_batch
 
 HEADS, HEAD_DIM, VIEWS = 4, 8, 8
 """The default model's attention: 4 heads of 8 channels, over 8 source views."""
+
+
+MATERIALISING = ("SDPA math backend", "matmul + softmax")
+"""The implementations that build the whole (L, L) score matrix; skipped forward + backward at the
+intra-view stage, where the forward table already shows them 8-11x slower than SDPA's flash kernel."""
 
 
 def _explicit(q: Tensor, k: Tensor, v: Tensor, mask: Tensor) -> Tensor:
@@ -46,27 +52,43 @@ def _kernels(q: Tensor, k: Tensor, v: Tensor, mask: Tensor) -> dict[str, Callabl
             "matmul + softmax": lambda: _explicit(q, k, v, mask)}
 
 
-def kernel_table(rays: int, samples: int, repeats: int = 2) -> str:
+def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = False) -> str:
     """Seconds per call and GFLOP/s of each implementation for the intra-view stage (per ray and view,
-    over ``samples``) and the cross-view stage (per ray and sample, over the views)."""
+    over ``samples``) and the cross-view stage (per ray and sample, over the views).
+
+    ``backward``: time forward + backward (the gradient of the outputs' sum with respect to q, k and v),
+    as in a training step, and count the backward's matmuls too (3x the forward's)."""
     gen = torch.Generator().manual_seed(0)
     shapes = {"intra-view": (rays, VIEWS * HEADS, samples), "cross-view": (rays * samples, HEADS, VIEWS)}
     lines = ["| stage | q, k, v shape | implementation | s / call | GFLOP/s | max abs diff to the first |",
              "|---|---|---|---:|---:|---:|"]
     for stage, (batch, heads, length) in shapes.items():
-        q, k, v = (torch.randn(batch, heads, length, HEAD_DIM, generator=gen) for _ in range(3))
+        q, k, v = (torch.randn(batch, heads, length, HEAD_DIM, generator=gen).requires_grad_(backward)
+                   for _ in range(3))
         mask = torch.rand(batch, 1, 1, length, generator=gen) > 0.2
         mask[..., 0] = True  # every query keeps a key, as the model's key masks guarantee
-        flops = 4 * batch * heads * length * length * HEAD_DIM
+        flops = 4 * batch * heads * length * length * HEAD_DIM * (3 if backward else 1)
         first = None
-        with torch.no_grad():
+        with torch.set_grad_enabled(backward):
             for name, fn in _kernels(q, k, v, mask).items():
-                seconds = time_call(fn, torch.device("cpu"), repeats)
-                out = fn()
+                if backward and stage == "intra-view" and name in MATERIALISING:
+                    continue  # minutes per call: they store every (L, L) score matrix for the backward
+                call = _with_backward(fn, (q, k, v)) if backward else fn
+                seconds = time_call(call, torch.device("cpu"), repeats)
+                out = fn().detach()
                 first = out if first is None else first
                 lines.append(f"| {stage} | {tuple(q.shape)} | {name} | {seconds:.3f} | {flops / seconds / 1e9:.1f} | "
                              f"{(out - first).abs().max().item():.1e} |")
     return "\n".join(lines)
+
+
+def _with_backward(fn: Callable[[], Tensor], inputs: tuple[Tensor, ...]) -> Callable[[], Tensor]:
+    """``fn`` followed by the backward pass of its output's sum to ``inputs`` (gradients discarded)."""
+    def call() -> Tensor:
+        out = fn()
+        torch.autograd.grad(out.sum(), inputs)
+        return out
+    return call
 
 
 def chunk_table(chunks: tuple[int, ...], impl: str, crop: tuple[int, int] = (60, 80), samples: int = 24,
