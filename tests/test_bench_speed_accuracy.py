@@ -52,3 +52,34 @@ def test_measure_pairs_the_settings_and_the_fast_path_is_lossless(tiny_shards: P
     assert by["half"]["psnr"] != by["fast impl"]["psnr"]
     assert by["rgbd"]["psnr"] != by["fast impl"]["psnr"]  # the sources' depth moved the samples
     assert by["rgb again"]["psnr"] == by["fast impl"]["psnr"]  # and the next setting renders rgb again
+
+
+def test_chosen_settings_keep_their_order_and_unknown_names_are_refused() -> None:
+    import pytest
+
+    from sray.jobs.bench.speed_accuracy import TITLE, default_settings, section_title, select_settings
+
+    assert [s.name for s in select_settings(None)] == [s.name for s in default_settings()]
+    assert [s.name for s in select_settings(["fast s8 c0.9", "full"])] == ["fast s8 c0.9", "full"]
+    with pytest.raises(ValueError, match="unknown \\['fastest'\\]"):
+        select_settings(["full", "fastest"])
+    assert section_title(None, 2) == TITLE
+    assert section_title(["full", "fast s4 c0.9"], 0).endswith("full vs fast s4 c0.9, every test view")
+
+
+def test_table_names_a_chosen_first_row_as_the_comparison() -> None:
+    header = table([_row("full", 50.0, 40.0), _row("fast a", 49.5, 1.0, True)]).splitlines()[0]
+    assert "Δ mIoU vs 'full' (points)" in header and "speed-up vs 'full' (CPU s)" in header
+
+
+def test_measure_with_zero_views_per_scene_scores_every_test_view(tiny_shards: Path, tiny_checkpoint: Path) -> None:
+    from sray.data_tools.loader.shard_loader import make_eval_samples
+    from sray.jobs.bench.speed_accuracy import Setting, measure
+    from sray.model.fast_render import FastRender
+    from sray.platform.eval.zero_shot import select_scenes
+
+    names, _ = select_scenes(tiny_shards, None)
+    every = sum(len(list(make_eval_samples(tiny_shards, s, split="test", n_source=3))) for s in names)
+    [row] = measure(tiny_checkpoint, tiny_shards, [Setting("fast", n_source=3, fast=FastRender(4, 0.9))], 0,
+                    progress=False)
+    assert row["views"] == every > len(names)

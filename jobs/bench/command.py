@@ -45,7 +45,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--checkpoint-rgbd", type=Path, default=None,
                        help="a checkpoint trained with model.inputs=rgbd for the rgbd settings "
                             "(default: --checkpoint's weights rendered with the source depth)")
-    speed.add_argument("--views-per-scene", type=int, default=2, help="test views rendered per scene and setting")
+    speed.add_argument("--views-per-scene", type=int, default=2,
+                       help="test views rendered per scene and setting (0: every test view)")
+    speed.add_argument("--settings", nargs="+", default=None, metavar="NAME",
+                       help="measure only these settings, by their table names, the first being the row the others "
+                            "are compared with (default: all; a chosen set writes its own section and chart)")
     speed.add_argument("--tracker", default="mlflow")
     speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
     speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
@@ -98,7 +102,7 @@ def _bench_speed_accuracy(args: argparse.Namespace) -> int:
     from sray.jobs.bench.speed_accuracy import run_speed_accuracy
 
     run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker, args.tracking_uri,
-                       args.checkpoint_rgbd)
+                       args.checkpoint_rgbd, args.settings)
     return 0
 
 

@@ -67,12 +67,36 @@ def default_settings() -> list[Setting]:
     ]
 
 
+TITLE = "Speed against accuracy (zero-shot, one checkpoint)"
+"""The section of the whole default set; a run of chosen settings writes its own section (``section_title``)."""
+
+
+def select_settings(names: list[str] | None) -> list[Setting]:
+    """The default settings named in ``names``, in that order (None or empty: all of them). The first is
+    the row the others are compared with."""
+    settings = {st.name: st for st in default_settings()}
+    if not names:
+        return list(settings.values())
+    unknown = [n for n in names if n not in settings]
+    if unknown:
+        raise ValueError(f"sray bench speed-accuracy --settings: unknown {unknown}; choose from {list(settings)}.")
+    return [settings[n] for n in names]
+
+
+def section_title(names: list[str] | None, views_per_scene: int) -> str:
+    """``TITLE`` for the default set, else a title naming the chosen settings and the views."""
+    if not names:
+        return TITLE
+    views = "every test view" if views_per_scene <= 0 else f"{views_per_scene} test views per scene"
+    return f"Speed against accuracy (zero-shot, one checkpoint): {' vs '.join(names)}, {views}"
+
+
 def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_scene: int,
             progress: bool = True, checkpoint_rgbd: Path | None = None) -> list[dict]:
     """Score every setting on the first ``views_per_scene`` test views of each unseen scene.
 
     ``checkpoint_rgbd``: the model that renders the ``inputs="rgbd"`` settings (None: ``checkpoint``'s).
-    Returns one row per setting: name, miou, psnr (dataset-level protocol, mean over scenes),
+    ``views_per_scene`` <= 0 scores every test view. Returns one row per setting: name, miou, psnr (dataset-level protocol, mean over scenes),
     s_per_view (CPU seconds of this process per view, all threads, source encoding included: unlike
     wall-clock time it does not grow when other jobs share the cores), wall_s_per_view, views, and the
     setting.
@@ -89,7 +113,8 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
         _apply(net, st, own)
         seconds, cpu_seconds, n_views, per_scene = 0.0, 0.0, 0, []
         for scene in names:
-            samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))[:views_per_scene]
+            samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))
+            samples = samples[:views_per_scene] if views_per_scene > 0 else samples
             views = []
             for sample in samples:
                 autocast = torch.autocast("cpu", dtype=torch.bfloat16) if st.bf16 else nullcontext()
@@ -133,12 +158,13 @@ def pareto(rows: list[dict]) -> list[dict]:
 
 
 def table(rows: list[dict]) -> str:
-    """Markdown table: mIoU and its paired difference to the first row (the reference full render), PSNR,
-    seconds per view, speed-up."""
+    """Markdown table: mIoU and its paired difference to the first row (the default set's first is the
+    unoptimised full render), PSNR, seconds per view, speed-up against the first row."""
     ref = rows[0]
+    first = "reference" if ref["name"] == "full, reference path" else f"'{ref['name']}'"
     on_front = {r["name"] for r in pareto(rows)}
-    lines = ["| setting | mIoU % | Δ mIoU vs reference (points) | PSNR dB | CPU s / view | wall s / view | "
-             "speed-up vs reference (CPU s) | Pareto |", "|---|---:|---:|---:|---:|---:|---:|:---:|"]
+    lines = [f"| setting | mIoU % | Δ mIoU vs {first} (points) | PSNR dB | CPU s / view | wall s / view | "
+             f"speed-up vs {first} (CPU s) | Pareto |", "|---|---:|---:|---:|---:|---:|---:|:---:|"]
     for r in rows:
         wall = f"{r['wall_s_per_view']:.2f}" if "wall_s_per_view" in r else "-"
         lines.append(f"| {r['name']} | {r['miou']:.2f} | {r['miou'] - ref['miou']:+.2f} | {r['psnr']:.2f} | "
@@ -176,20 +202,24 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
 
 
 def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc: Path, tracker: str,
-                       tracking_uri: str, checkpoint_rgbd: Path | None = None) -> str:
-    """Measure the default settings (the ``rgbd`` ones by ``checkpoint_rgbd`` when given), write the chart
-    and the table section, log both; returns the section."""
+                       tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None) -> str:
+    """Measure the default settings, or those ``names`` chooses (the ``rgbd`` ones by ``checkpoint_rgbd`` when
+    given), write the chart and the table section, log both; returns the section."""
     from sray.jobs.bench.doc import record
     from sray.platform.common.eval_protocol import EvalProtocol
     from sray.platform.tracking.registry import get_tracker
 
-    rows = measure(Path(checkpoint), Path(shards), default_settings(), views_per_scene,
+    title = section_title(names, views_per_scene)
+    rows = measure(Path(checkpoint), Path(shards), select_settings(names), views_per_scene,
                    checkpoint_rgbd=Path(checkpoint_rgbd) if checkpoint_rgbd else None)
     protocol = (EvalProtocol.from_shards(Path(shards), 8, 1).describe().replace("render: full", "render: per setting")
                 .replace("inputs: rgb", "inputs: per setting (the checkpoint's unless the setting says rgbd)"))
-    png = chart(rows, doc.parent / "benchmarks" / "speed-accuracy.png", protocol)
+    stem = "speed-accuracy" if title == TITLE else "speed-accuracy-" + "-".join(
+        "".join(ch if ch.isalnum() else "-" for ch in n).strip("-") for n in names or [])
+    png = chart(rows, doc.parent / "benchmarks" / f"{stem}.png", protocol)
     rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
-    notes = (f"Checkpoint `{checkpoint}`; the first {views_per_scene} test views of each unseen scene of `{shards}`, "
+    which = f"the first {views_per_scene} test views" if views_per_scene > 0 else "every test view"
+    notes = (f"Checkpoint `{checkpoint}`; {which} of each unseen scene of `{shards}`, "
              f"the same views for every setting (paired); mIoU dataset-level per scene, then the mean over "
              f"scenes; CPU s / view is the CPU time this process spent (all its threads) encoding the sources and "
              f"rendering one whole view, the speed measure here because other jobs may share the cores (on a quiet "
@@ -201,7 +231,7 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
              f"sources' depth (docs/model.md, RGB-D mode), rendered by "
              f"{rgbd_by}. Protocol: {protocol}.\n\n"
              f"![speed-accuracy]({png.relative_to(doc.parent)})")
-    section = record("Speed against accuracy (zero-shot, one checkpoint)", table(rows), doc, notes)
+    section = record(title, table(rows), doc, notes)
     tracking = get_tracker(tracker, tracking_uri)
     run = tracking.start_run("sray-bench", f"speed-accuracy-{time.strftime('%Y%m%d-%H%M%S')}",
                              tags={"sray.kind": "bench", "sray.protocol": protocol})
