@@ -24,9 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "in this folder)")
     p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
-    p.add_argument("--render", choices=["full", "fast"], default="full",
-                   help="full: the whole coarse + fine renderer; fast: the fast render mode (sray.model.fast_render; "
-                        "its accuracy cost is measured by `sray bench speed-accuracy`)")
+    p.add_argument("--render", choices=["full", "fast"], default="fast",
+                   help="fast (default): the fast render mode (sray.model.fast_render; its accuracy cost, measured "
+                        "paired against the full render by `sray bench speed-accuracy`, is in docs/benchmarks.md); "
+                        "full: the whole coarse + fine renderer at every pixel")
     p.add_argument("--fast-stride", type=int, default=4, help="fast mode: render every N-th pixel and upsample")
     p.add_argument("--fast-confidence", type=float, default=0.9,
                    help="fast mode: rays whose coarse confidence reaches this skip the fine pass")

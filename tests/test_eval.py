@@ -75,11 +75,11 @@ def _naive_iou(pairs: list[tuple[np.ndarray, np.ndarray]], ignore_id: int) -> fl
     return sum(ious) / len(ious)
 
 
-def _expected_protocol(shards: Path, n_source: int, stride: int) -> dict:
+def _expected_protocol(shards: Path, n_source: int, stride: int, render: str) -> dict:
     """The descriptor an evaluation of ``shards`` must carry, from the raw manifest and the arguments."""
     rule = json.loads((shards / "manifest.json").read_text())["neighbours"]
     return {"source_rule": f"{rule['rule']} v{rule['version']}", "n_source": n_source, "stride": stride,
-            "render": "full", "inputs": "rgb", "miou": DATASET_PROTOCOL, "miou_per_image": PER_IMAGE_PROTOCOL}
+            "render": render, "inputs": "rgb", "miou": DATASET_PROTOCOL, "miou_per_image": PER_IMAGE_PROTOCOL}
 
 
 def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_path,
@@ -98,7 +98,10 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
     test_scenes = sorted(s for s, e in manifest.scenes.items() if e.meta["role"] == "test")
     assert list(report["scenes"]) == test_scenes and report["checkpoint_step"] == 12
     assert report["lpips"] == LPIPS_NOTE
-    assert report["protocol"] == _expected_protocol(tiny_shards, N_SOURCE, STRIDE)
+    # the default render is the fast mode, with the CLI's default settings, and the descriptor says so
+    assert report["protocol"] == _expected_protocol(tiny_shards, N_SOURCE, STRIDE,
+                                                    "fast (pixel stride 4, fine pass where the coarse confidence "
+                                                    "< 0.9, resampled depths only)")
     assert not {"stride", "n_source"} & set(report)  # the descriptor holds them, once
 
     for scene in test_scenes:
@@ -178,11 +181,11 @@ def test_whole_image_eval_scores_ssim(tiny_checkpoint, tiny_shards, mlflow_uri, 
 
     out = tmp_path / "eval"
     code = main(["eval", "--checkpoint", str(tiny_checkpoint), "--data", str(tiny_shards), "--n-source",
-                 str(N_SOURCE), "--out", str(out), "--tracking-uri", mlflow_uri])
+                 str(N_SOURCE), "--out", str(out), "--tracking-uri", mlflow_uri, "--render", "full"])
     printed = capsys.readouterr().out
     assert code == 0
     report = json.loads((out / "metrics.json").read_text())
-    assert report["protocol"] == _expected_protocol(tiny_shards, N_SOURCE, 1)
+    assert report["protocol"] == _expected_protocol(tiny_shards, N_SOURCE, 1, "full")
     for block in [*report["scenes"].values(), report["mean"]]:
         assert isinstance(block["colour"]["ssim"], float) and -1.0 <= block["colour"]["ssim"] <= 1.0
     manifest = read_manifest(tiny_shards)

@@ -41,9 +41,13 @@ def _on_disk(out: Path, scene: str, method: str) -> dict:
     return json.loads((out / "scenes" / scene / method / "result.json").read_text())
 
 
-def _protocol(source_rule: str, n_source: int, stride: int) -> dict:
+SRAY_HELD_OUT_RENDER = "fast (pixel stride 1, fine pass where the coarse confidence < 0.9, resampled depths only)"
+"""S-Ray's default held-out render (``finetune.eval_render``); Semantic-NeRF renders in full."""
+
+
+def _protocol(source_rule: str, n_source: int, stride: int, render: str = "full") -> dict:
     """The descriptor a result must carry (docs/CONTRACTS.md, "Protocol descriptor")."""
-    return {"source_rule": source_rule, "n_source": n_source, "stride": stride, "render": "full", "inputs": "rgb",
+    return {"source_rule": source_rule, "n_source": n_source, "stride": stride, "render": render, "inputs": "rgb",
             "miou": "dataset-level, classes present in ground truth", "miou_per_image": "per-image mean"}
 
 
@@ -69,7 +73,8 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
     for scene in ("synth_train_000", "synth_test_000"):
         r = by_scene[scene]
         assert r["status"] == "finished" and r["attempts"] == 1 and r["error"] is None
-        assert r["protocol"] == _protocol(source_rule, cfg.finetune.eval_n_source, cfg.finetune.eval_stride)
+        assert r["protocol"] == _protocol(source_rule, cfg.finetune.eval_n_source, cfg.finetune.eval_stride,
+                                          SRAY_HELD_OUT_RENDER)
         assert r["steps_used"] == 6 and [p["step"] for p in r["curve"]] == [0, 3, 6]
         assert all(set(p) == CURVE_KEYS for p in r["curve"])
         assert r["miou_before"] == r["curve"][0]["miou"]

@@ -52,3 +52,5 @@ def test_quick_benchmark_produces_both_tables() -> None:
     assert (ref_cells[6], fast_cells[6]) == ("reference", "fast")
     assert float(fast_cells[8]) > 0 and float(fast_cells[9]) > 0 and float(fast_cells[11]) > 0
     assert ref_cells[13] == "-" and float(fast_cells[13].rstrip("x")) > 0  # fast vs reference of the same run
+    # the unoptimised default (reference, union, glibc) is the same row here: the two ratios agree
+    assert ref_cells[14] == "-" and fast_cells[14] == fast_cells[13]

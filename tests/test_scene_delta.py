@@ -16,6 +16,7 @@ from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.config.fleet_config import DEFAULT_ADAPT
+from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.finetune.learners import SRayLearner
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import (
@@ -62,7 +63,9 @@ def test_artifact_reproduces_the_finetuned_model_exactly(finetuned, tiny_shards,
     assert not torch.equal(tuned_out["fine"]["logits"], base_out["fine"]["logits"])  # the finetune changed it
     # The artifact holds the best evaluated state: re-scoring the reloaded model gives miou_after exactly.
     samples = list(make_eval_samples(tiny_shards, SCENE, "test", n_source=3))
-    learner = SRayLearner(loaded, "-", DEFAULT_ADAPT, 0.0, 0.0, "no", torch.device("cpu"), 20)
+    ft = tiny_fleet_config().finetune  # the same held-out render as the finetune's (finetune.eval_render)
+    learner = SRayLearner(loaded, "-", DEFAULT_ADAPT, 0.0, 0.0, "no", torch.device("cpu"), 20,
+                          held_out_fast(ft.eval_render, ft.eval_fast_confidence, "finetune.eval_render"))
     scores = evaluate(learner, samples, tiny_fleet_config(), n_classes=20, ignore_id=255)
     assert scores["miou"] == outcome.result["miou_after"] and scores["psnr"] == outcome.result["psnr_after"]
 

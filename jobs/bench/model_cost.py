@@ -65,7 +65,9 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
         return _Sizes(PAPER_ATTENTION, 64, 1024, steps)
     steps = [dict(paper, dtype="fp32", impl="reference"), dict(paper, dtype="fp32", impl="fast"),
              dict(paper, dtype="fp32", impl="reference", alloc="thp"), dict(paper, dtype="fp32", impl="fast", alloc="thp"),
+             dict(paper, dtype="fp32", impl="reference", fine_samples="new"),
              dict(paper, dtype="fp32", impl="fast", fine_samples="new"),
+             dict(paper, dtype="fp32", impl="fast", fine_samples="new", alloc="thp"),
              dict(small, dtype="fp32", impl="reference"), dict(small, dtype="fp32", impl="fast"),
              dict(small, dtype="bf16", impl="fast")]
     return _Sizes(PAPER_ATTENTION, 64, 256, steps)
@@ -160,16 +162,19 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         for spec in sz.steps:
             runs.setdefault(_row_key(spec), []).append(_run_in_fresh_process(dict(spec, device=str(device))))
     lines = ["| config | rays | samples (fine pass sees) | views | image | precision | impl | CPU allocator | first step s | "
-             "s / step | rays / s | peak RSS GB | GPU peak GB | vs reference (same run, same allocator) | "
-             "vs official code |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "s / step | rays / s | peak RSS GiB | GPU peak GiB | vs reference (same samples and allocator) | "
+             "vs unoptimised default (reference, union, glibc) | vs official code |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     medians = {k: sorted(r["seconds"] for r in v)[len(v) // 2] for k, v in runs.items()}
     for spec in sz.steps:
         key = _row_key(spec)
         if key not in runs or any(_row_key(x) == key for x in sz.steps[:sz.steps.index(spec)]):
             continue
         res, s = runs[key][0], medians[key]
-        ref_key = (key[0], key[1], "reference", key[3], "union")
+        ref_key = (key[0], key[1], "reference", key[3], key[4])
         vs_ref = f"{medians[ref_key] / s:.2f}x" if ref_key in medians and key[2] == "fast" else "-"
+        base_key = (key[0], key[1], "reference", "default", "union")
+        vs_base = f"{medians[base_key] / s:.2f}x" if base_key in medians and key != base_key else "-"
         alloc = spec.get("alloc", "default")
         official = (f"{OFFICIAL_CODE['thp'] / s:.1f}x vs its best (19.7 s)"
                     if spec["name"] == "paper code config" and device.type == "cpu" else "-")
@@ -179,7 +184,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         lines.append(f"| {spec['name']} | {spec['rays']} | {spec['coarse']}+{spec['fine']} ({fine}) | {spec['views']} | "
                      f"{w}x{h} | {spec['dtype']} | {key[2]} | {ALLOCATORS[alloc]} | "
                      f"{res['first']:.2f} | {s:.2f} | {spec['rays'] / s:.0f} | "
-                     f"{rss / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {vs_ref} | {official} |")
+                     f"{rss / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {vs_ref} | {vs_base} | {official} |")
     notes = (
         "One step = encode the source views, render coarse + fine, semantic + photometric loss, "
         "backward, Adam; synthetic scene; 'first step' is the warm-up, 's / step' the median over "

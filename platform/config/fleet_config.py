@@ -13,6 +13,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.config.overrides import set_field
 
 PRECISIONS = ("no", "bf16", "fp16")
@@ -62,6 +63,12 @@ class FinetuneSettings:
     """Held-out views are scored on every ``eval_stride``-th pixel in each direction (speed)."""
     eval_chunk: int = 2048
     """Rays per forward pass when rendering held-out views."""
+    eval_render: str = "fast"
+    """S-Ray's held-out render: ``fast`` (the fine pass only where the coarse pass is below
+    ``eval_fast_confidence``; ``sray.platform.config.held_out_render``) or ``full``. Semantic-NeRF always
+    renders in full."""
+    eval_fast_confidence: float = 0.9
+    """Coarse softmax maximum from which a held-out ray keeps its coarse result (fast render)."""
     precision: str = "no"
     """One of ``PRECISIONS``; fp16 needs ``gpus_per_task > 0``."""
     adapt: tuple[str, ...] = DEFAULT_ADAPT
@@ -152,6 +159,7 @@ def check_fleet_config(cfg: FleetConfig) -> None:
             raise ValueError(f"fleet config: {name} is {value}; it must be >= 0")
     if cfg.cpus_per_task == 0 and cfg.gpus_per_task == 0:
         raise ValueError("fleet config: cpus_per_task and gpus_per_task are both 0; a task needs some CPU or GPU")
+    held_out_fast(ft.eval_render, ft.eval_fast_confidence, "fleet config: finetune.eval_render")
     if ft.precision not in PRECISIONS:
         raise ValueError(f"fleet config: finetune.precision is {ft.precision!r}; use one of {PRECISIONS}")
     if ft.precision == "fp16" and cfg.gpus_per_task == 0:

@@ -9,6 +9,7 @@ from typing import Any
 
 from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
+from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.config.overrides import set_field
 
 PRECISIONS = ("no", "bf16", "fp16")
@@ -32,6 +33,11 @@ class DataSettings:
     """Held-out views rendered per scene at each validation (whole images, in chunks)."""
     val_downscale: int = 2
     """Validation renders at 1/val_downscale resolution to keep it cheap (1 = full)."""
+    val_render: str = "fast"
+    """Validation's render: ``fast`` (the fine pass only where the coarse pass is below
+    ``val_fast_confidence``; ``sray.platform.config.held_out_render``) or ``full``."""
+    val_fast_confidence: float = 0.9
+    """Coarse softmax maximum from which a validation ray keeps its coarse result (fast render)."""
     val_scenes: int = 0
     """Scenes of each role (train, unseen test) validated, the first ones by name; 0 = all of them
     (a run over many scenes keeps its validations cheap with a few)."""
@@ -52,6 +58,9 @@ class DataSettings:
     """Random source resolution: sources resized by a factor in [1 - value, 1] per sample; 0 = off."""
     aug_query_crop: float = 0.0
     """Random query crops: rays drawn in a window of this fraction of each image side; 0 = whole image."""
+
+    def __post_init__(self) -> None:
+        held_out_fast(self.val_render, self.val_fast_confidence, "train config: data.val_render")
 
     def augmentation(self) -> Augmentation:
         """The loader's :class:`~sray.data_tools.loader.augment.Augmentation` of these settings."""
@@ -162,4 +171,8 @@ def apply_override(cfg: TrainConfig, assignment: str) -> None:
     Raises ValueError naming the unknown section or field and listing the valid ones, or a value the
     network cannot run with (the config keeps its previous value then).
     """
-    set_field(cfg, assignment, "optim.lr=5e-4", cfg.model.__post_init__)
+    def check() -> None:
+        cfg.model.__post_init__()
+        cfg.data.__post_init__()
+
+    set_field(cfg, assignment, "optim.lr=5e-4", check)

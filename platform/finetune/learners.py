@@ -28,6 +28,7 @@ from sray.data_tools.loader.sample_types import EvalSample, TrainSample
 from sray.data_tools.loader.views import StoredView, read_scene_views
 from sray.data_tools.scene import SceneMeta
 from sray.data_tools.shards.manifest import read_manifest
+from sray.model.fast_render import FastRender
 from sray.model.losses import render_loss
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box_from_cameras
 from sray.model.semantic_ray import SourceSet, SRayModel
@@ -78,9 +79,12 @@ class Learner(ABC):
         """(loss, terms) of one training sample, the forward pass under ``self.step.autocast()``;
         ``terms`` holds at least ``psnr``."""
 
+    fast: FastRender | None = None
+    """The fast render mode of the held-out renderer (None: the full render; only S-Ray has one)."""
+
     @abstractmethod
     def renderer(self, sample: EvalSample) -> Renderer:
-        """The ray renderer of one held-out evaluation sample (deterministic)."""
+        """The ray renderer of one held-out evaluation sample (deterministic; the fast mode's with ``fast``)."""
 
     @abstractmethod
     def snapshot(self) -> dict[str, Tensor]:
@@ -99,8 +103,10 @@ class SRayLearner(Learner):
     """Trains only the modules ``adapt`` of the shared S-Ray model (the rest stays frozen)."""
 
     def __init__(self, net: SRayModel, base_sha256: str, adapt: tuple[str, ...], lr: float, grad_clip: float,
-                 precision: str, device: torch.device, max_nonfinite_in_row: int) -> None:
+                 precision: str, device: torch.device, max_nonfinite_in_row: int,
+                 fast: FastRender | None = None) -> None:
         net = net.to(device).eval()
+        self.fast = fast
         self.base_sha256, self.adapt = base_sha256, tuple(adapt)
         keys = set(adapted_keys(net, adapt))
         params = [p for name, p in net.named_parameters() if name in keys]
@@ -128,11 +134,13 @@ class SRayLearner(Learner):
         computed at the first evaluation and reused by every later one.
         """
         if not self.encoder_frozen:
-            return sray_renderer(self.net, sample, self.device)
+            return sray_renderer(self.net, sample, self.device, self.fast)
         key = (sample.scene, sample.query_id)
         if key not in self._sources:
             self._sources[key] = encode_sources(self.net, sample, self.device)
-        src = self._sources[key]
+        src, fast = self._sources[key], self.fast
+        if fast is not None:
+            return lambda o, d, near, far: self.net.render_rays_fast(src, o, d, near, far, fast.confidence)
         return lambda o, d, near, far: self.net.render_rays(src, o, d, near, far, stratified=False)
 
     def snapshot(self) -> dict[str, Tensor]:

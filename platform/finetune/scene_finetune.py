@@ -19,6 +19,7 @@ Plain PyTorch, one process: autocast bf16 (CPU/CUDA) or fp16 with a GradScaler (
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -36,6 +37,7 @@ from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
 from sray.platform.config.fleet_config import FleetConfig
+from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.eval.view_scoring import render_view, score_views
 from sray.platform.finetune.learners import Learner
 from sray.platform.finetune.methods.method import SceneContext
@@ -112,7 +114,8 @@ def evaluate(learner: Learner, samples: list[EvalSample], cfg: FleetConfig, n_cl
     """Held-out scores (``score_views`` keys) of the learner's current state."""
     ft = cfg.finetune
     with learner.inference(), learner.step.autocast():
-        views = [render_view(learner.renderer(s), s, ft.eval_stride, ft.eval_chunk, learner.device) for s in samples]
+        views = [render_view(learner.renderer(s), s, ft.eval_stride, ft.eval_chunk, learner.device, learner.fast)
+                 for s in samples]
     return score_views(views, n_classes, ignore_id)
 
 
@@ -126,10 +129,13 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
 def scene_protocol(task: SceneTask, inputs: str = "rgb") -> EvalProtocol:
     """How the job's held-out scores are made at ``finetune.eval_stride``: from ``finetune.eval_n_source``
     fixed sources ranked by the shards' neighbour rule and given as ``inputs`` (the shared checkpoint's
-    ``model.inputs``; methods that use sources, as S-Ray), or from none (per-scene models, as Semantic-NeRF)."""
+    ``model.inputs``), rendered as ``finetune.eval_render`` says (methods that use sources, as S-Ray), or from
+    none, in full (per-scene models, as Semantic-NeRF)."""
     ft = task.config.finetune
     if get_method(task.method).uses_sources:
-        return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride, inputs)
+        protocol = EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride, inputs)
+        fast = held_out_fast(ft.eval_render, ft.eval_fast_confidence, "fleet config: finetune.eval_render")
+        return dataclasses.replace(protocol, render=fast.describe()) if fast is not None else protocol
     return EvalProtocol.without_sources(ft.eval_stride)
 
 
