@@ -28,8 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fast (default): the fast render mode (sray.model.fast_render; its accuracy cost, measured "
                         "paired against the full render by `sray bench speed-accuracy`, is in docs/benchmarks.md); "
                         "full: the whole coarse + fine renderer at every pixel")
-    p.add_argument("--fast-stride", type=int, default=4, help="fast mode: render every N-th pixel and upsample")
-    p.add_argument("--fast-confidence", type=float, default=0.9,
+    p.add_argument("--fast-stride", type=int, default=8,
+                   help="fast mode: render every N-th pixel and upsample (default %(default)s, FastRender's)")
+    p.add_argument("--fast-confidence", type=float, default=0.9,  # FastRender's default
                    help="fast mode: rays whose coarse confidence reaches this skip the fine pass")
     p.set_defaults(func=run)
 

@@ -22,6 +22,7 @@ from train_fixtures import tiny_config, tiny_shards  # noqa: E402,F401
 
 from sray.data_tools.loader.shard_loader import make_eval_samples  # noqa: E402
 from sray.data_tools.shards.manifest import read_manifest  # noqa: E402
+from sray.model.fast_render import FastRender  # noqa: E402
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL  # noqa: E402
 from sray.model.ssim import SSIM_WINDOW  # noqa: E402
 from sray.platform.viz.palette import IGNORE_COLOR, palette  # noqa: E402
@@ -98,10 +99,9 @@ def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny
     test_scenes = sorted(s for s, e in manifest.scenes.items() if e.meta["role"] == "test")
     assert list(report["scenes"]) == test_scenes and report["checkpoint_step"] == 12
     assert report["lpips"] == LPIPS_NOTE
-    # the default render is the fast mode, with the CLI's default settings, and the descriptor says so
-    assert report["protocol"] == _expected_protocol(tiny_shards, N_SOURCE, STRIDE,
-                                                    "fast (pixel stride 4, fine pass where the coarse confidence "
-                                                    "< 0.9, resampled depths only)")
+    # the default render is the fast mode with FastRender's default settings, and the descriptor says so
+    assert report["protocol"] == _expected_protocol(tiny_shards, N_SOURCE, STRIDE, FastRender().describe())
+    assert FastRender().describe().startswith("fast (pixel stride 8, fine pass where the coarse confidence < 0.9")
     assert not {"stride", "n_source"} & set(report)  # the descriptor holds them, once
 
     for scene in test_scenes:
