@@ -87,7 +87,8 @@ def section_title(names: list[str] | None, views_per_scene: int) -> str:
     """``TITLE`` for the default set, else a title naming the chosen settings and the views."""
     if not names:
         return TITLE
-    views = "every test view" if views_per_scene <= 0 else f"{views_per_scene} test views per scene"
+    views = ("every test view" if views_per_scene <= 0 else
+             f"{views_per_scene} test view{'s' if views_per_scene > 1 else ''} per scene")
     return f"Speed against accuracy (zero-shot, one checkpoint): {' vs '.join(names)}, {views}"
 
 
@@ -218,7 +219,8 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
         "".join(ch if ch.isalnum() else "-" for ch in n).strip("-") for n in names or [])
     png = chart(rows, doc.parent / "benchmarks" / f"{stem}.png", protocol)
     rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
-    which = f"the first {views_per_scene} test views" if views_per_scene > 0 else "every test view"
+    which = ("every test view" if views_per_scene <= 0 else "the first test view" if views_per_scene == 1 else
+             f"the first {views_per_scene} test views")
     notes = (f"Checkpoint `{checkpoint}`; {which} of each unseen scene of `{shards}`, "
              f"the same views for every setting (paired); mIoU dataset-level per scene, then the mean over "
              f"scenes; CPU s / view is the CPU time this process spent (all its threads) encoding the sources and "
