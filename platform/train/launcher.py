@@ -73,13 +73,13 @@ def load_job_config(output_dir: str, name: str) -> TrainConfig:
     return TrainConfig.from_dict(json.loads(path.read_text()))
 
 
-LOCAL_WORKER_ENV = {"THP_MEM_ALLOC_ENABLE": "1", **TRAIN_POLL_ENV}
-"""Environment a local Ray cluster's workers inherit unless the user set it otherwise. With
-``THP_MEM_ALLOC_ENABLE``, PyTorch madvises CPU blocks of 2 MiB or more for transparent huge pages:
-filling a 64 MiB tensor takes 544 page faults instead of 16385, and a paper-size CPU training step
-10.4-11.9 s instead of 12.4-20.2 s in ``sray bench model`` (docs/benchmarks.md). CUDA memory is
-unaffected; the Docker images set it too. :data:`TRAIN_POLL_ENV`: Ray Train's controller polls every
-0.5 s (:mod:`sray.platform.common.ray_polling`)."""
+LOCAL_WORKER_ENV = dict(TRAIN_POLL_ENV)
+"""Environment a local Ray cluster's workers inherit unless the user set it otherwise:
+:data:`TRAIN_POLL_ENV`, Ray Train's controller polls every 0.5 s (:mod:`sray.platform.common.ray_polling`).
+PyTorch's huge-page CPU allocator path (``THP_MEM_ALLOC_ENABLE=1``) is not set: in alternating fresh-process
+runs of ``sray bench model`` on a quiet machine it made every paper-size step slower (17.2 -> 19.4 s on the
+reference path, 9.3 -> 12.3 s on the fast one; docs/benchmarks.md); a user who measures a gain on their
+machine sets it in the environment, which is kept."""
 
 
 def init_ray(address: str | None, num_cpus: int | None = None) -> None:
