@@ -53,6 +53,16 @@ def strided_pixels(h: int, w: int, stride: int) -> tuple[Tensor, int, int]:
     return torch.stack([u.reshape(-1), v.reshape(-1)], dim=-1), len(vs), len(us)
 
 
+def fitted_pixel_stride(pixel_stride: int, stride: int, hw: tuple[int, int]) -> int:
+    """The fast mode's pixel stride on an (h, w) image scored every ``stride``-th pixel: ``pixel_stride``,
+    or the largest smaller one whose render grid still holds a ray in each direction (a small image or a
+    large ``stride``: the grid's first pixel, ``stride * s // 2``, must lie inside the image)."""
+    s = pixel_stride
+    while s > 1 and (stride * s) // 2 >= min(hw):
+        s -= 1
+    return s
+
+
 @torch.no_grad()
 def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
                 device: torch.device, fast: FastRender | None = None) -> ViewPrediction:
@@ -60,13 +70,13 @@ def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
     chunks of at most ``chunk`` rays, scored at every ``stride``-th pixel in each direction.
 
     With ``fast`` (the fast render mode; ``render`` must be ``sray_renderer(..., fast)``) the rays are
-    every ``stride * fast.pixel_stride``-th pixel and the logits and colours are upsampled bilinearly
-    to the scored pixels.
+    every ``stride * fast.pixel_stride``-th pixel (fewer where the image is too small for that grid,
+    :func:`fitted_pixel_stride`) and the logits and colours are upsampled bilinearly to the scored pixels.
     """
     gt_rgb, gt_label = sample.query_rgb, sample.query_label
     h, w = gt_label.shape
     uv, hh, ww = strided_pixels(h, w, stride)
-    render_stride = stride * (fast.pixel_stride if fast is not None else 1)
+    render_stride = stride * (fitted_pixel_stride(fast.pixel_stride, stride, (h, w)) if fast is not None else 1)
     uv_r, hr, wr = strided_pixels(h, w, render_stride)
     origins, dirs, near, far = ray_batch(sample, uv_r).query.to(device).rays()  # (R, 3), (R, 3), (R,), (R,)
     logits, colours = [], []
