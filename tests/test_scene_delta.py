@@ -16,7 +16,6 @@ from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.config.fleet_config import DEFAULT_ADAPT
-from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.finetune.learners import SRayLearner
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import (
@@ -64,8 +63,7 @@ def test_artifact_reproduces_the_finetuned_model_exactly(finetuned, tiny_shards,
     # The artifact holds the best evaluated state: re-scoring the reloaded model gives miou_after exactly.
     samples = list(make_eval_samples(tiny_shards, SCENE, "test", n_source=3))
     ft = tiny_fleet_config().finetune  # the same held-out render as the finetune's (finetune.eval_render)
-    learner = SRayLearner(loaded, "-", DEFAULT_ADAPT, 0.0, 0.0, "no", torch.device("cpu"), 20,
-                          held_out_fast(ft.eval_render, ft.eval_fast_confidence, "finetune.eval_render"))
+    learner = SRayLearner(loaded, "-", DEFAULT_ADAPT, 0.0, 0.0, "no", torch.device("cpu"), 20, ft.eval_fast())
     scores = evaluate(learner, samples, tiny_fleet_config(), n_classes=20, ignore_id=255)
     assert scores["miou"] == outcome.result["miou_after"] and scores["psnr"] == outcome.result["psnr_after"]
 

@@ -14,11 +14,12 @@ it is computed only when ``stride == 1`` (:attr:`EvalProtocol.scores_ssim`).
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
 from sray.data_tools.shards.manifest import Manifest, read_manifest
+from sray.model.fast_render import FastRender
 from sray.model.metrics import DATASET_PROTOCOL, PER_IMAGE_PROTOCOL
 
 RENDER_MODES = ("full", "fast")
@@ -119,6 +120,10 @@ class EvalProtocol:
     def scores_ssim(self) -> bool:
         """SSIM is computed on whole images only; a strided render never gets one."""
         return self.whole_images
+
+    def rendered_by(self, fast: FastRender | None) -> EvalProtocol:
+        """This protocol with the render that made the scores: ``fast``'s description, or unchanged (full)."""
+        return replace(self, render=fast.describe()) if fast is not None else self
 
     def describe(self) -> str:
         """One line for table captions and chart footnotes."""

@@ -13,6 +13,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from sray.model.fast_render import FastRender
 from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.config.overrides import set_field
 
@@ -75,6 +76,11 @@ class FinetuneSettings:
     """S-Ray module paths (prefixes of ``SRayModel.state_dict()`` keys) trained and stored per scene."""
     seed: int = 0
     """Seed of ray sampling, data order and Semantic-NeRF's initial weights."""
+
+    def eval_fast(self) -> FastRender | None:
+        """S-Ray's held-out fast render mode (``eval_render``), None for the full render; ValueError on a bad
+        value."""
+        return held_out_fast(self.eval_render, self.eval_fast_confidence, "fleet config: finetune.eval_render")
 
 
 @dataclass
@@ -159,7 +165,7 @@ def check_fleet_config(cfg: FleetConfig) -> None:
             raise ValueError(f"fleet config: {name} is {value}; it must be >= 0")
     if cfg.cpus_per_task == 0 and cfg.gpus_per_task == 0:
         raise ValueError("fleet config: cpus_per_task and gpus_per_task are both 0; a task needs some CPU or GPU")
-    held_out_fast(ft.eval_render, ft.eval_fast_confidence, "fleet config: finetune.eval_render")
+    ft.eval_fast()
     if ft.precision not in PRECISIONS:
         raise ValueError(f"fleet config: finetune.precision is {ft.precision!r}; use one of {PRECISIONS}")
     if ft.precision == "fp16" and cfg.gpus_per_task == 0:

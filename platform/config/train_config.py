@@ -9,6 +9,7 @@ from typing import Any
 
 from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
+from sray.model.fast_render import FastRender
 from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.config.overrides import set_field
 
@@ -60,7 +61,11 @@ class DataSettings:
     """Random query crops: rays drawn in a window of this fraction of each image side; 0 = whole image."""
 
     def __post_init__(self) -> None:
-        held_out_fast(self.val_render, self.val_fast_confidence, "train config: data.val_render")
+        self.val_fast()
+
+    def val_fast(self) -> FastRender | None:
+        """Validation's fast render mode (``val_render``), None for the full render; ValueError on a bad value."""
+        return held_out_fast(self.val_render, self.val_fast_confidence, "train config: data.val_render")
 
     def augmentation(self) -> Augmentation:
         """The loader's :class:`~sray.data_tools.loader.augment.Augmentation` of these settings."""

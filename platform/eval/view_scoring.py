@@ -57,10 +57,7 @@ def fitted_pixel_stride(pixel_stride: int, stride: int, hw: tuple[int, int]) -> 
     """The fast mode's pixel stride on an (h, w) image scored every ``stride``-th pixel: ``pixel_stride``,
     or the largest smaller one whose render grid still holds a ray in each direction (a small image or a
     large ``stride``: the grid's first pixel, ``stride * s // 2``, must lie inside the image)."""
-    s = pixel_stride
-    while s > 1 and (stride * s) // 2 >= min(hw):
-        s -= 1
-    return s
+    return max(1, min(pixel_stride, (2 * min(hw) - 1) // stride))  # stride * s // 2 < min(hw)
 
 
 @torch.no_grad()
@@ -107,7 +104,12 @@ def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device,
                   fast: FastRender | None = None) -> Renderer:
     """Encode the sample's fixed source views once; return a ray renderer bound to them (the full
     render, or the fast mode's rays with ``fast``)."""
-    src = encode_sources(net, sample, device)
+    return source_renderer(net, encode_sources(net, sample, device), fast)
+
+
+def source_renderer(net: nn.Module, src: SourceSet, fast: FastRender | None = None) -> Renderer:
+    """A ray renderer bound to already encoded sources: the full render (deterministic samples), or the
+    fast mode's rays with ``fast``."""
     if fast is not None:
         return lambda o, d, near, far: net.render_rays_fast(src, o, d, near, far, fast.confidence)
     return lambda o, d, near, far: net.render_rays(src, o, d, near, far, stratified=False)

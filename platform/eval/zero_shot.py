@@ -171,8 +171,7 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
     names, metas = select_scenes(shards, scenes)
     net, cfg = model_from_checkpoint(checkpoint)
     protocol = EvalProtocol.from_shards(shards, n_source, stride, cfg.model.inputs)
-    if fast is not None:
-        protocol = dataclasses.replace(protocol, render=fast.describe())
+    protocol = protocol.rendered_by(fast)
     step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
     n_classes, ignore_id = cfg.model.n_classes, cfg.model.ignore_id
     for name in names:

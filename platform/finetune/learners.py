@@ -34,7 +34,7 @@ from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box
 from sray.model.semantic_ray import SourceSet, SRayModel
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.fleet_config import SemanticNeRFSettings
-from sray.platform.eval.view_scoring import Renderer, encode_sources, sray_renderer
+from sray.platform.eval.view_scoring import Renderer, encode_sources, source_renderer, sray_renderer
 from sray.platform.finetune.scene_artifacts import (
     adapted_keys,
     adapted_state,
@@ -138,10 +138,7 @@ class SRayLearner(Learner):
         key = (sample.scene, sample.query_id)
         if key not in self._sources:
             self._sources[key] = encode_sources(self.net, sample, self.device)
-        src, fast = self._sources[key], self.fast
-        if fast is not None:
-            return lambda o, d, near, far: self.net.render_rays_fast(src, o, d, near, far, fast.confidence)
-        return lambda o, d, near, far: self.net.render_rays(src, o, d, near, far, stratified=False)
+        return source_renderer(self.net, self._sources[key], self.fast)
 
     def snapshot(self) -> dict[str, Tensor]:
         """CPU copy of the adapted tensors."""

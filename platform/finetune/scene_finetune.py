@@ -19,7 +19,6 @@ Plain PyTorch, one process: autocast bf16 (CPU/CUDA) or fp16 with a GradScaler (
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -37,7 +36,6 @@ from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
 from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.eval.view_scoring import render_view, score_views
 from sray.platform.finetune.learners import Learner
 from sray.platform.finetune.methods.method import SceneContext
@@ -133,9 +131,8 @@ def scene_protocol(task: SceneTask, inputs: str = "rgb") -> EvalProtocol:
     none, in full (per-scene models, as Semantic-NeRF)."""
     ft = task.config.finetune
     if get_method(task.method).uses_sources:
-        protocol = EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride, inputs)
-        fast = held_out_fast(ft.eval_render, ft.eval_fast_confidence, "fleet config: finetune.eval_render")
-        return dataclasses.replace(protocol, render=fast.describe()) if fast is not None else protocol
+        return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride,
+                                        inputs).rendered_by(ft.eval_fast())
     return EvalProtocol.without_sources(ft.eval_stride)
 
 

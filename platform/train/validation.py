@@ -12,7 +12,6 @@ unless that is 1, and use the fast render mode on those pixels unless ``data.val
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 from pathlib import Path
 from typing import Any
@@ -22,9 +21,7 @@ from torch import nn
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import Manifest, read_manifest
-from sray.model.fast_render import FastRender
 from sray.platform.common.eval_protocol import EvalProtocol
-from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.eval.view_scoring import ViewPrediction, render_view, score_views, sray_renderer
 from sray.platform.viz.renders import render_panel
@@ -33,19 +30,12 @@ GROUPS = {"val": "train", "zeroshot": "test"}
 """Metric prefix -> scene role it is computed on."""
 
 
-def validation_render(cfg: TrainConfig) -> FastRender | None:
-    """Validation's fast render mode (``data.val_render``), None for the full render."""
-    return held_out_fast(cfg.data.val_render, cfg.data.val_fast_confidence, "train config: data.val_render")
-
-
 def validation_protocol(cfg: TrainConfig) -> EvalProtocol:
     """How ``val/*`` and ``zeroshot/*`` are made: ``model.n_source`` fixed sources ranked by the shards'
     neighbour rule, every ``data.val_downscale``-th pixel, the model's ``model.inputs``, the render of
     ``data.val_render``."""
-    protocol = EvalProtocol.from_shards(Path(cfg.data.shards), cfg.model.n_source, cfg.data.val_downscale,
-                                        cfg.model.inputs)
-    fast = validation_render(cfg)
-    return dataclasses.replace(protocol, render=fast.describe()) if fast is not None else protocol
+    return EvalProtocol.from_shards(Path(cfg.data.shards), cfg.model.n_source, cfg.data.val_downscale,
+                                    cfg.model.inputs).rendered_by(cfg.data.val_fast())
 
 
 def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
@@ -61,7 +51,7 @@ def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: s
     per_scene, renders = [], []
     scenes = [(name, entry) for name, entry in sorted(manifest.scenes.items())
               if entry.meta.get("role") == role and entry.meta.get("splits", {}).get("test")]
-    fast = validation_render(cfg)
+    fast = cfg.data.val_fast()
     for name, entry in scenes[:cfg.data.val_scenes or None]:
         samples = itertools.islice(make_eval_samples(Path(cfg.data.shards), name, split="test",
                                                      n_source=cfg.model.n_source, manifest=manifest),

@@ -20,13 +20,11 @@ if TYPE_CHECKING:
 def build(ctx: SceneContext) -> SceneSetup:
     """An :class:`~sray.platform.finetune.learners.SRayLearner` on the shared model; training samples
     with the checkpoint's source count (or ``finetune.n_source``) drawn from its ``top_k`` neighbours."""
-    from sray.platform.config.held_out_render import held_out_fast
     from sray.platform.finetune.learners import SRayLearner
 
     ft = ctx.cfg.finetune
     learner = SRayLearner(ctx.base, ctx.base_sha256, ft.adapt, ft.lr, ft.grad_clip, ft.precision, ctx.device,
-                          ft.max_nonfinite_in_row,
-                          held_out_fast(ft.eval_render, ft.eval_fast_confidence, "fleet config: finetune.eval_render"))
+                          ft.max_nonfinite_in_row, ft.eval_fast())
     n_source = ft.n_source or ctx.train_cfg.model.n_source
     top_k = ft.top_k or min(ctx.train_cfg.data.top_k, ctx.stored_neighbours)
     return SceneSetup(learner=learner, n_source=n_source, top_k=top_k)
