@@ -17,7 +17,7 @@ def synth_small() -> TrainConfig:
     """Minutes on two CPU workers: small images, few rays and samples (the demo and CI)."""
     return TrainConfig(
         recipe="synth-small",
-        model=SRayConfig(n_source=4, n_coarse=24, n_fine=24, chunk=2048),
+        model=SRayConfig(n_source=4, n_coarse=24, n_fine=24),
         data=DataSettings(shards="outputs/demo/shards", top_k=6, rays_per_batch=256,
                           loader_workers=1, val_views_per_scene=2, val_downscale=2),
         optim=OptimSettings(steps=300, lr=1e-3, lr_final=2e-4, grad_clip=1.0),
@@ -43,7 +43,7 @@ def synth_cpu_hour() -> TrainConfig:
     """
     return TrainConfig(
         recipe="synth-cpu-hour",
-        model=SRayConfig(n_source=8, n_coarse=24, n_fine=24, chunk=2048),
+        model=SRayConfig(n_source=8, n_coarse=24, n_fine=24),
         data=DataSettings(shards="outputs/bench-accuracy/cpu-small/shards", top_k=12, rays_per_batch=256,
                           loader_workers=1, val_views_per_scene=1, val_downscale=4, val_scenes=4,
                           class_balance="inverse-sqrt",

@@ -90,8 +90,14 @@ class SRayConfig:
     """Per-class weights of the semantic cross-entropy (n_classes of them; empty = unweighted, the
     paper's loss). Training fills it from the training set's class frequencies when
     ``data.class_balance`` asks for it (``sray.data_tools.class_stats.balanced_weights``)."""
-    chunk: int = 4096
-    """Rays rendered per forward pass by ``render_image`` (bounds its memory)."""
+    chunk: int = 0
+    """Rays rendered per forward pass by ``render_image`` and the evaluations (bounds their memory); 0
+    (default) leaves it to the device: 256 on a CPU, 4096 on a GPU (``ray_chunks``)."""
+    train_piece: int = 0
+    """Rays per piece of a training step's loss (``piecewise_loss``: same loss and gradients, one piece's
+    tensors alive at a time); 0 (default) leaves it to the device: 256 on a CPU, the whole batch on a GPU
+    (``ray_chunks``). Inside a piece of fewer rays than the batch, gradients are not loss-scaled, so use
+    0 with fp16."""
     impl: str = "fast"
     """Implementation of the per-sample computation, one of ``IMPLS`` (same parameters, same outputs
     within float32 rounding; ``reference`` is the unoptimised path)."""
@@ -132,10 +138,12 @@ class SRayConfig:
         if self.density_activation not in DENSITY_ACTIVATIONS:
             raise bad("density_activation",
                       f"is {self.density_activation!r}; use one of {DENSITY_ACTIVATIONS}")
-        for name in ("n_classes", "feat_dim", "n_source", "n_coarse", "n_fine", "n_heads",
-                     "dir_hidden", "chunk"):
+        for name in ("n_classes", "feat_dim", "n_source", "n_coarse", "n_fine", "n_heads", "dir_hidden"):
             if int(getattr(self, name)) < 1:
                 raise bad(name, f"is {getattr(self, name)}; it must be a positive integer")
+        for name in ("chunk", "train_piece"):
+            if int(getattr(self, name)) < 0:
+                raise bad(name, f"is {getattr(self, name)}; use a positive count of rays, or 0 (by device)")
         if self.feat_dim % self.n_heads or self.geo_hidden[-1] % self.n_heads:
             raise bad("n_heads", f"is {self.n_heads}; it must divide feat_dim ({self.feat_dim}) "
                       f"and geo_hidden[-1] ({self.geo_hidden[-1]})")

@@ -77,6 +77,7 @@ def render_loss(
     target_label: Tensor,
     target_rgb: Tensor,
     cfg: LossSettings,
+    shares: tuple[Tensor, Tensor] | None = None,
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """Semantic + photometric loss of a model's ``render_rays`` output.
 
@@ -85,6 +86,11 @@ def render_loss(
     ``cfg.ignore_id`` for unlabelled rays; target_rgb: (R, 3) in [0, 1].
     Returns the scalar total and detached terms: ``sem_<pass>``, ``rgb_<pass>`` per pass,
     ``n_labelled`` and ``psnr`` (of the last pass's colour, the fine one when present).
+
+    shares: for one piece of a larger batch (``piecewise_loss``), the piece's share of the batch's
+    labelled weight and of its rays, both () tensors; every semantic term is multiplied by the first and
+    every photometric term by the second, so the pieces' losses and terms sum to the batch's. ``psnr``
+    is then left out (the caller computes it from the summed colour term).
     """
     passes = [p for p in PASSES if p in out]
     if not passes:
@@ -122,9 +128,23 @@ def render_loss(
         for name in passes:
             sem = _labelled_cross_entropy(out[name]["logits"], target_label, n_labelled, cfg.ignore_id, weight)
             rgb = F.mse_loss(out[name]["rgb"].float(), rgb_target)
+            if shares is not None:
+                sem, rgb = sem * shares[0], rgb * shares[1]
             sem_total, rgb_total = sem_total + sem, rgb_total + rgb
             terms[f"sem_{name}"], terms[f"rgb_{name}"] = sem.detach(), rgb.detach()
         total = cfg.lambda_sem * sem_total + cfg.lambda_rgb * rgb_total
     terms["n_labelled"] = n_labelled.detach()
-    terms["psnr"] = psnr_from_mse(terms[f"rgb_{passes[-1]}"])
+    if shares is None:
+        terms["psnr"] = psnr_from_mse(terms[f"rgb_{passes[-1]}"])
     return total, terms
+
+
+def labelled_weights(target_label: Tensor, cfg: LossSettings) -> Tensor:
+    """(R,) float32 weight of each ray in the semantic mean: 0 for an unlabelled ray, else its class's
+    weight (``class_weights``) or 1."""
+    labelled = target_label != cfg.ignore_id  # (R,)
+    weights = getattr(cfg, "class_weights", ())
+    if not weights:
+        return labelled.float()
+    weight = torch.tensor(weights, dtype=torch.float32, device=target_label.device)  # (L,)
+    return torch.where(labelled, weight[torch.where(labelled, target_label, 0)], 0.0)

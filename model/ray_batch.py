@@ -84,3 +84,21 @@ class RayBatchModel(nn.Module):
         origins, dirs, near, far = batch.query.rays()
         src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
         return self.net.render_rays(src, origins, dirs, near, far, stratified=self.training)
+
+
+class RayBatchLoss(nn.Module):
+    """One ``forward`` = encode a :class:`RayBatch`'s sources + the training loss of its rays
+    (``SRayModel.training_loss``: stratified samples, rendered in pieces); what training runs (DDP
+    included). Holds the network as ``net``, as :class:`RayBatchModel` does, so checkpoints are alike."""
+
+    def __init__(self, cfg: SRayConfig) -> None:
+        """Build the S-Ray network it trains (no device work here)."""
+        super().__init__()
+        self.net = SRayModel(cfg)
+
+    def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
+        """(scalar loss, detached terms) of ``render_loss`` for the batch's R rays: target_label (R,) int64
+        (ignore id for unlabelled), target_rgb (R, 3) in [0, 1]."""
+        origins, dirs, near, far = batch.query.rays()
+        src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
+        return self.net.training_loss(src, origins, dirs, near, far, target_label, target_rgb)

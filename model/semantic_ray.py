@@ -31,6 +31,9 @@ from .encoder import ResUNetEncoder
 from .fast_render import render_rays_fast
 from .field import SRayField
 from .hierarchical import CoarseSampler, render_image, render_rays
+from .losses import render_loss
+from .piecewise_loss import piecewise_render_loss
+from .ray_chunks import render_chunk_rays, train_piece_rays
 from .source_set import SourceSet, rigid_inverse
 
 __all__ = ["SRayModel", "SourceSet"]
@@ -104,6 +107,29 @@ class SRayModel(nn.Module):
         return render_rays(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, stratified,
                            generator, self.cfg.fine_samples, self.coarse_sampler(src))
 
+    def training_loss(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
+                      far: Tensor | float, target_label: Tensor, target_rgb: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
+        """``render_loss`` of rays rendered with stratified samples: origins, dirs (R, 3), near, far scalars
+        or (R,), target_label (R,) int64, target_rgb (R, 3).
+
+        The rays are rendered in pieces of ``cfg.train_piece`` rays (0: by device, ``ray_chunks``), each
+        piece's gradient taken before the next is rendered (``piecewise_loss``): the same loss and
+        gradients as one pass over the batch, within float32 rounding. One piece is one ordinary pass.
+        """
+        n_rays = origins.shape[0]
+        piece = train_piece_rays(self.cfg.train_piece, origins.device, n_rays)
+        if piece >= n_rays:
+            out = self.render_rays(src, origins, dirs, near, far, stratified=True)
+            return render_loss(out, target_label, target_rgb, self.cfg)
+
+        def render(piece_src: SourceSet, sl: slice) -> dict[str, dict[str, Tensor]]:
+            lo = near[sl] if isinstance(near, Tensor) and near.ndim else near
+            hi = far[sl] if isinstance(far, Tensor) and far.ndim else far
+            return self.render_rays(piece_src, origins[sl], dirs[sl], lo, hi, stratified=True)
+
+        params = [p for name, p in self.named_parameters() if not name.startswith("encoder.")]
+        return piecewise_render_loss(render, src, params, n_rays, piece, target_label, target_rgb, self.cfg)
+
     @torch.no_grad()
     def render_rays_fast(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                          far: Tensor | float, confidence: float) -> dict[str, dict[str, Tensor]]:
@@ -125,7 +151,10 @@ class SRayModel(nn.Module):
 
         K (3, 3), c2w (4, 4) of the query camera; near, far scalars. Returns ``{"coarse": ...,
         "fine": ...}`` with ``logits`` (H, W, L), ``rgb`` (H, W, 3), ``depth`` (H, W) and
-        ``opacity`` (H, W) per pass. Memory is bounded by ``chunk`` rays (default ``cfg.chunk``).
+        ``opacity`` (H, W) per pass. Memory is bounded by ``chunk`` rays (default ``cfg.chunk``; 0: by
+        device, ``ray_chunks``).
         """
+        device = src.feats.device
+        rays = render_chunk_rays(int(chunk or self.cfg.chunk), device)
         return render_image(lambda o, d: self.render_rays(src, o, d, near, far, stratified=False),
-                            K, c2w, hw, int(chunk or self.cfg.chunk), src.feats.device)
+                            K, c2w, hw, rays, device)

@@ -54,8 +54,8 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     if quick:
         tiny = {"rays": 16, "coarse": 4, "fine": 4, "views": 2, "hw": (32, 32), "steps": 1}
         return _Sizes({"rays": 8, "samples": 8, "views": 4, "channels": 32}, 4, 8,
-                      [dict(tiny, name="tiny", dtype="fp32", impl="reference"),
-                       dict(tiny, name="tiny", dtype="fp32", impl="fast")])
+                      [dict(tiny, name="tiny", dtype="fp32", impl="reference", piece=16),
+                       dict(tiny, name="tiny", dtype="fp32", impl="fast", piece=4)])
     paper = {"name": "paper code config", "rays": 1024, "coarse": 64, "fine": 64, "views": 8,
              "hw": (240, 320), "steps": 2}
     small = {"name": "small CPU config", "rays": 256, "coarse": 32, "fine": 32, "views": 4,
@@ -63,12 +63,15 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     if device.type == "cuda":
         steps = [dict(paper, dtype=d, steps=10) for d in ("fp32", "bf16", "fp16")]
         return _Sizes(PAPER_ATTENTION, 64, 1024, steps)
-    steps = [dict(paper, dtype="fp32", impl="reference"), dict(paper, dtype="fp32", impl="fast"),
-             dict(paper, dtype="fp32", impl="reference", alloc="thp"), dict(paper, dtype="fp32", impl="fast", alloc="thp"),
-             dict(paper, dtype="fp32", impl="reference", fine_samples="new"),
+    # reference rows: the unoptimised path, the whole batch in one piece; fast rows: the defaults (pieces by
+    # device) unless a whole-batch piece is named
+    whole, whole_small = {"piece": paper["rays"]}, {"piece": small["rays"]}
+    steps = [dict(paper, dtype="fp32", impl="reference", **whole), dict(paper, dtype="fp32", impl="fast"),
+             dict(paper, dtype="fp32", impl="reference", fine_samples="new", **whole),
+             dict(paper, dtype="fp32", impl="fast", fine_samples="new", **whole),
              dict(paper, dtype="fp32", impl="fast", fine_samples="new"),
              dict(paper, dtype="fp32", impl="fast", fine_samples="new", alloc="thp"),
-             dict(small, dtype="fp32", impl="reference"), dict(small, dtype="fp32", impl="fast"),
+             dict(small, dtype="fp32", impl="reference", **whole_small), dict(small, dtype="fp32", impl="fast"),
              dict(small, dtype="bf16", impl="fast")]
     return _Sizes(PAPER_ATTENTION, 64, 256, steps)
 
@@ -148,7 +151,14 @@ def _run_in_fresh_process(spec: dict) -> dict:
 def _row_key(spec: dict) -> tuple:
     """What identifies a training-step row across its repeated runs."""
     return (spec["name"], spec["dtype"], spec.get("impl", "fast"), spec.get("alloc", "default"),
-            spec.get("fine_samples", "union"))
+            spec.get("fine_samples", "union"), _piece(spec))
+
+
+def _piece(spec: dict) -> int:
+    """Rays per piece of the row's training loss (``ray_chunks.train_piece_rays`` of its setting)."""
+    from sray.model.ray_chunks import train_piece_rays
+
+    return train_piece_rays(spec.get("piece", 0), torch.device(spec.get("device", "cpu")), spec["rays"])
 
 
 def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
@@ -158,22 +168,24 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
     load change on the machine hits every row alike; the table shows the median over the rounds.
     """
     runs: dict[tuple, list[dict]] = {}
-    for _ in range(REPEATS if device.type == "cpu" and len(sz.steps) > 1 else 1):
-        for spec in sz.steps:
-            runs.setdefault(_row_key(spec), []).append(_run_in_fresh_process(dict(spec, device=str(device))))
-    lines = ["| config | rays | samples (fine pass sees) | views | image | precision | impl | CPU allocator | first step s | "
+    specs = [dict(spec, device=str(device)) for spec in sz.steps]
+    for _ in range(REPEATS if device.type == "cpu" and len(specs) > 1 else 1):
+        for spec in specs:
+            runs.setdefault(_row_key(spec), []).append(_run_in_fresh_process(spec))
+    lines = ["| config | rays | rays per piece | samples (fine pass sees) | views | image | precision | impl | "
+             "CPU allocator | first step s | "
              "s / step | rays / s | peak RSS GiB | GPU peak GiB | vs reference (same samples and allocator) | "
              "vs unoptimised default (reference, union, glibc) | vs official code |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     medians = {k: sorted(r["seconds"] for r in v)[len(v) // 2] for k, v in runs.items()}
-    for spec in sz.steps:
+    for i, spec in enumerate(specs):
         key = _row_key(spec)
-        if key not in runs or any(_row_key(x) == key for x in sz.steps[:sz.steps.index(spec)]):
+        if key not in runs or any(_row_key(x) == key for x in specs[:i]):
             continue
         res, s = runs[key][0], medians[key]
-        ref_key = (key[0], key[1], "reference", key[3], key[4])
+        ref_key = (key[0], key[1], "reference", key[3], key[4], spec["rays"])
         vs_ref = f"{medians[ref_key] / s:.2f}x" if ref_key in medians and key[2] == "fast" else "-"
-        base_key = (key[0], key[1], "reference", "default", "union")
+        base_key = (key[0], key[1], "reference", "default", "union", spec["rays"])
         vs_base = f"{medians[base_key] / s:.2f}x" if base_key in medians and key != base_key else "-"
         alloc = spec.get("alloc", "default")
         official = (f"{OFFICIAL_CODE['thp'] / s:.1f}x vs its best (19.7 s)"
@@ -181,7 +193,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         h, w = spec["hw"]
         fine = spec["coarse"] + spec["fine"] if spec.get("fine_samples", "union") == "union" else spec["fine"]
         rss = max(r["rss_bytes"] for r in runs[key])
-        lines.append(f"| {spec['name']} | {spec['rays']} | {spec['coarse']}+{spec['fine']} ({fine}) | {spec['views']} | "
+        lines.append(f"| {spec['name']} | {spec['rays']} | {key[5]} | {spec['coarse']}+{spec['fine']} ({fine}) | {spec['views']} | "
                      f"{w}x{h} | {spec['dtype']} | {key[2]} | {ALLOCATORS[alloc]} | "
                      f"{res['first']:.2f} | {s:.2f} | {spec['rays'] / s:.0f} | "
                      f"{rss / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {vs_ref} | {vs_base} | {official} |")
@@ -194,7 +206,10 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         "path of this same commit, `fast` the gathered, transpose-free one (docs/performance.md); both compute "
         "the same values (tests/test_model_fast_path.py). 'samples (fine pass sees)': `fine_samples` union "
         "(the fine pass re-evaluates the coarse depths, 64 + 128 = 192 evaluations per ray) or new (only the "
-        "resampled ones, 64 + 64 = 128, as the official code). Official code: the paper's public S-Ray code at "
+        "resampled ones, 64 + 64 = 128, as the official code). Rays per piece: the loss is computed over pieces of "
+        "that many rays, each piece's gradient taken before the next is rendered (`SRayConfig.train_piece`, "
+        "`model/piecewise_loss.py`): the same loss and gradients as the whole batch at once "
+        "(tests/test_piecewise_loss.py); the reference rows compute the whole batch in one piece. Official code: the paper's public S-Ray code at "
         "its configuration (1024 rays, 64+64 samples, 8 views, 320x240, fp32) took 19.7 s per step with "
         "THP_MEM_ALLOC_ENABLE=1 and 31.9 s without, 11.5 GiB peak RSS, in a side-by-side run on this machine "
         "(fresh processes, alternating, 3x3 steps; issue 10). CPU allocator: THP_MEM_ALLOC_ENABLE=1 (read by "

@@ -3,8 +3,9 @@
 Both run on a synthetic scene (random source images, a camera rig whose sources all look at the
 query's frustum), so they need no data and measure the model alone. A spec dict names the sizes:
 rays, coarse, fine, views, hw, device, and optionally dtype ('fp32'|'bf16'|'fp16'), impl
-('reference'|'fast', ``SRayConfig.impl``), fine_samples ('union'|'new'), compile (both fields
-through ``torch.compile``), steps.
+('reference'|'fast', ``SRayConfig.impl``), fine_samples ('union'|'new'), piece (rays per piece of the
+training loss, ``SRayConfig.train_piece``; 0 = by device), compile (both fields through ``torch.compile``),
+steps.
 """
 
 from __future__ import annotations
@@ -38,12 +39,12 @@ def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.de
 def model_config(spec: dict) -> SRayConfig:
     """The ``SRayConfig`` of a workload spec (paper defaults for everything the spec leaves out)."""
     return SRayConfig(n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"],
-                      impl=spec.get("impl", "fast"), fine_samples=spec.get("fine_samples", "union"))
+                      impl=spec.get("impl", "fast"), fine_samples=spec.get("fine_samples", "union"),
+                      train_piece=spec.get("piece", 0))
 
 
 def make_train_step(spec: dict) -> Callable[[], None]:
     """A closure running one full training step (encode, render, loss, backward, Adam) of ``spec``."""
-    from sray.model.losses import render_loss
     from sray.model.semantic_ray import SRayModel
 
     device = torch.device(spec["device"])
@@ -61,8 +62,7 @@ def make_train_step(spec: dict) -> Callable[[], None]:
     def step() -> None:
         with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
             src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"])
-            out = model.render_rays(src, batch["origins"], batch["dirs"], 1.0, 5.0, stratified=True)
-            loss, _ = render_loss(out, batch["label"], batch["rgb"], cfg)
+            loss, _ = model.training_loss(src, batch["origins"], batch["dirs"], 1.0, 5.0, batch["label"], batch["rgb"])
         opt.zero_grad(set_to_none=True)
         scaler.scale(loss).backward()
         scaler.step(opt)

@@ -62,8 +62,9 @@ class FinetuneSettings:
     """Fixed source views per held-out view (the paper's protocol: 8)."""
     eval_stride: int = 2
     """Held-out views are scored on every ``eval_stride``-th pixel in each direction (speed)."""
-    eval_chunk: int = 2048
-    """Rays per forward pass when rendering held-out views."""
+    eval_chunk: int = 0
+    """Rays per forward pass when rendering held-out views; 0 (default) leaves it to the device (256 on a
+    CPU, 4096 on a GPU: ``sray.model.ray_chunks``)."""
     eval_render: str = "fast"
     """S-Ray's held-out render: ``fast`` (the fine pass only where the coarse pass is below
     ``eval_fast_confidence``; ``sray.platform.config.held_out_render``) or ``full``. Semantic-NeRF always
@@ -144,7 +145,7 @@ def check_fleet_config(cfg: FleetConfig) -> None:
     ft = cfg.finetune
     positive = {"finetune.max_steps": ft.max_steps, "finetune.eval_every": ft.eval_every,
                 "finetune.patience": ft.patience, "finetune.eval_n_source": ft.eval_n_source,
-                "finetune.eval_stride": ft.eval_stride, "finetune.eval_chunk": ft.eval_chunk,
+                "finetune.eval_stride": ft.eval_stride,
                 "finetune.max_nonfinite_in_row": ft.max_nonfinite_in_row, "max_parallel": cfg.max_parallel,
                 "nerf.depth": cfg.nerf.depth, "nerf.width": cfg.nerf.width}
     for name in ("rays_per_batch", "n_source", "top_k"):
@@ -156,7 +157,7 @@ def check_fleet_config(cfg: FleetConfig) -> None:
     for name, value in positive.items():
         if int(value) < 1:
             raise ValueError(f"fleet config: {name} is {value}; it must be a positive integer")
-    non_negative = {"finetune.max_seconds": ft.max_seconds, "finetune.min_delta": ft.min_delta,
+    non_negative = {"finetune.eval_chunk": ft.eval_chunk, "finetune.max_seconds": ft.max_seconds, "finetune.min_delta": ft.min_delta,
                     "finetune.lr": ft.lr, "finetune.grad_clip": ft.grad_clip, "nerf.lr": cfg.nerf.lr,
                     "cpus_per_task": cfg.cpus_per_task, "gpus_per_task": cfg.gpus_per_task,
                     "retries": cfg.retries, "retry_backoff_s": cfg.retry_backoff_s}

@@ -18,6 +18,7 @@ from torch import Tensor, nn
 from sray.data_tools.loader.sample_types import EvalSample
 from sray.model.fast_render import FastRender, upsample_to
 from sray.model.metrics import confusion_matrix, per_image_miou, psnr, scene_metrics
+from sray.model.ray_chunks import render_chunk_rays
 from sray.model.semantic_ray import SourceSet
 from sray.model.ssim import SSIM_WINDOW, ssim
 from sray.platform.common.model_input import ray_batch
@@ -64,7 +65,8 @@ def fitted_pixel_stride(pixel_stride: int, stride: int, hw: tuple[int, int]) -> 
 def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
                 device: torch.device, fast: FastRender | None = None) -> ViewPrediction:
     """Render one evaluation sample (whole query image, fixed source views) with ``render`` in ray
-    chunks of at most ``chunk`` rays, scored at every ``stride``-th pixel in each direction.
+    chunks of at most ``chunk`` rays (0: by device, ``ray_chunks``), scored at every ``stride``-th pixel in
+    each direction.
 
     With ``fast`` (the fast render mode; ``render`` must be ``sray_renderer(..., fast)``) the rays are
     every ``stride * fast.pixel_stride``-th pixel (fewer where the image is too small for that grid,
@@ -77,6 +79,7 @@ def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
     uv_r, hr, wr = strided_pixels(h, w, render_stride)
     origins, dirs, near, far = ray_batch(sample, uv_r).query.to(device).rays()  # (R, 3), (R, 3), (R,), (R,)
     logits, colours = [], []
+    chunk = render_chunk_rays(chunk, device)
     for start in range(0, uv_r.shape[0], chunk):
         sl = slice(start, start + chunk)
         fine = render(origins[sl], dirs[sl], near[sl], far[sl])["fine"]

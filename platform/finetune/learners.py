@@ -124,8 +124,7 @@ class SRayLearner(Learner):
         with self.step.autocast():
             with torch.no_grad() if self.encoder_frozen else contextlib.nullcontext():
                 src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
-            out = self.net.render_rays(src, origins, dirs, near, far, stratified=True)
-        return render_loss(out, sample.target_label, sample.target_rgb, self.net.cfg)
+            return self.net.training_loss(src, origins, dirs, near, far, sample.target_label, sample.target_rgb)
 
     def renderer(self, sample: EvalSample) -> Renderer:
         """Ray renderer bound to the sample's fixed source views.

@@ -7,7 +7,7 @@ from typing import Any
 
 import torch
 
-from sray.model.ray_batch import RayBatchModel
+from sray.model.ray_batch import RayBatchLoss
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.model_loading import bare_model_keys
 from sray.platform.config.train_config import OptimSettings, TrainConfig
@@ -27,10 +27,10 @@ def lr_lambda(opt: OptimSettings) -> Any:
     return factor
 
 
-def build_training(cfg: TrainConfig) -> tuple[RayBatchModel, torch.optim.Optimizer, torch.optim.lr_scheduler.LambdaLR]:
+def build_training(cfg: TrainConfig) -> tuple[RayBatchLoss, torch.optim.Optimizer, torch.optim.lr_scheduler.LambdaLR]:
     """Model (seeded from ``cfg.run.seed``, identical on every rank), Adam and its schedule."""
     torch.manual_seed(cfg.run.seed)
-    model = RayBatchModel(cfg.model)
+    model = RayBatchLoss(cfg.model)
     optimizer = fused_adam(list(model.parameters()), cfg.optim.lr)
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
     return model, optimizer, scheduler

@@ -13,7 +13,6 @@ from typing import Any
 
 import torch
 
-from sray.model.losses import render_loss
 from sray.platform.checkpoints.folders import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
 from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_due
 from sray.platform.common.model_input import ray_batch
@@ -149,8 +148,7 @@ def train_worker(payload: dict[str, Any]) -> None:
             torch.manual_seed(step_seed(cfg.run.seed, rank, step))
             model.train()
             with train_step.autocast():
-                out = model(ray_batch(sample))
-            loss, terms = render_loss(out, sample.target_label, sample.target_rgb, cfg.model)
+                loss, terms = model(ray_batch(sample), sample.target_label, sample.target_rgb)
             if step == faults.nan_at_step:
                 loss = loss * float("nan")
             stop_asked = stop_file.exists() or step + 1 == faults.stop_after_step

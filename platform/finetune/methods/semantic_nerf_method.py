@@ -20,12 +20,13 @@ if TYPE_CHECKING:
 def build(ctx: SceneContext) -> SceneSetup:
     """A seeded Semantic-NeRF of the scene (settings ``nerf.*``) behind a
     :class:`~sray.platform.finetune.learners.NeRFLearner`; training samples need no source view."""
+    from sray.model.ray_chunks import render_chunk_rays
     from sray.platform.finetune.learners import NeRFLearner, build_semantic_nerf
 
     cfg, ft = ctx.cfg, ctx.cfg.finetune
     samples_per_ray = (cfg.nerf.n_coarse or ctx.train_cfg.model.n_coarse, cfg.nerf.n_fine or ctx.train_cfg.model.n_fine)
     net = build_semantic_nerf(ctx.shards, ctx.scene, ctx.n_classes, ctx.ignore_id, *samples_per_ray, cfg.nerf, ft.seed,
-                              ft.eval_chunk)
+                              render_chunk_rays(ft.eval_chunk, ctx.device))
     learner = NeRFLearner(net, cfg.nerf.lr, ft.grad_clip, ft.precision, ctx.device, ft.max_nonfinite_in_row)
     return SceneSetup(learner=learner, n_source=1, top_k=1)  # only the query's rays are used
 

@@ -1,0 +1,93 @@
+"""A training batch's loss computed piece by piece: the same loss and gradients, a fraction of the memory.
+
+Every ray of S-Ray is rendered independently of the others once the source views are encoded, and the
+training loss is a weighted mean over rays. So the batch's loss is the sum of its pieces' losses, each
+scaled by its share of the batch (``render_loss(..., shares=...)``), and so is its gradient.
+:func:`piecewise_render_loss` renders one piece of rays at a time, takes that piece's gradient at once
+(``torch.autograd.grad``) and frees its per-sample tensors before the next piece. The gradients it
+gathered (for the source features and for the network's parameters) are handed back by
+:class:`_PrecomputedGradLoss` when the caller runs ``loss.backward()``, so the caller sees an ordinary
+scalar loss: the encoder's backward runs once, DDP's gradient hooks fire as usual, a loss scaler's scale
+reaches every gradient. On a CPU, pieces that fit the caches also run faster (``ray_chunks``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from .losses import LossSettings, labelled_weights, psnr_from_mse, render_loss
+from .source_set import SourceSet
+
+PieceRenderer = Callable[[SourceSet, slice], dict[str, dict[str, Tensor]]]
+"""(sources, slice of the batch's rays) -> that piece's ``render_rays`` output."""
+
+
+class _PrecomputedGradLoss(torch.autograd.Function):
+    """A scalar loss of (features, *params) whose gradients were computed while evaluating it."""
+
+    @staticmethod
+    def forward(ctx: Any, evaluate: Callable[[Tensor], tuple[Tensor, list[Tensor | None]]], feats: Tensor,
+                *params: Tensor) -> Tensor:
+        """Run ``evaluate(feats)`` -> (loss (), gradients of that loss for [feats, *params]) and keep the
+        gradients for :meth:`backward`."""
+        loss, grads = evaluate(feats)
+        ctx.grads = grads
+        return loss
+
+    @staticmethod
+    def backward(ctx: Any, grad_loss: Tensor) -> tuple[Tensor | None, ...]:
+        """The kept gradients times the incoming one (a loss scaler's scale, or 1)."""
+        return (None, *(None if g is None else g * grad_loss for g in ctx.grads))
+
+
+def piecewise_render_loss(render: PieceRenderer, src: SourceSet, params: list[nn.Parameter], n_rays: int,
+                          piece: int, target_label: Tensor, target_rgb: Tensor,
+                          cfg: LossSettings) -> tuple[Tensor, dict[str, Tensor]]:
+    """``render_loss`` of ``n_rays`` rays rendered ``piece`` rays at a time, with gradients to ``src.feats``
+    and ``params`` (the network's parameters outside the encoder) as if they had been rendered at once.
+
+    target_label (R,) int64, target_rgb (R, 3); ``render(src, slice)`` renders the rays of that slice.
+    Returns the scalar loss (its backward delivers the gathered gradients) and the terms of
+    ``render_loss`` for the whole batch. Without grad mode (or with nothing that needs a gradient) it
+    returns the same values without keeping any gradient.
+    """
+    sem_weight = labelled_weights(target_label, cfg)  # (R,)
+    sem_total = sem_weight.sum()
+    sem_total = torch.where(sem_total > 0, sem_total, torch.ones_like(sem_total))
+    pieces = [slice(start, min(start + piece, n_rays)) for start in range(0, n_rays, piece)]
+    wants_grad = torch.is_grad_enabled() and (src.feats.requires_grad or any(p.requires_grad for p in params))
+    trainable = [p for p in params if p.requires_grad]
+    summed: dict[str, Tensor] = {}
+
+    def evaluate(feats: Tensor) -> tuple[Tensor, list[Tensor | None]]:
+        leaf = feats.detach().requires_grad_(feats.requires_grad)
+        piece_src = dataclasses.replace(src, feats=leaf)
+        inputs = ([leaf] if feats.requires_grad else []) + trainable
+        grads: list[Tensor | None] = [None] * len(inputs)
+        loss = target_rgb.new_zeros((), dtype=torch.float32)
+        with torch.enable_grad() if wants_grad else torch.no_grad():
+            for sl in pieces:
+                shares = (sem_weight[sl].sum() / sem_total, target_rgb.new_tensor((sl.stop - sl.start) / n_rays))
+                piece_loss, terms = render_loss(render(piece_src, sl), target_label[sl], target_rgb[sl], cfg, shares)
+                if wants_grad:
+                    got = torch.autograd.grad(piece_loss, inputs, allow_unused=True)
+                    grads = [g if a is None else a if g is None else a + g for a, g in zip(grads, got)]
+                loss = loss + piece_loss.detach()
+                for key, value in terms.items():
+                    summed[key] = summed[key] + value if key in summed else value
+        by_param = dict(zip(map(id, trainable), grads[len(inputs) - len(trainable):]))
+        feats_grad = grads[0] if feats.requires_grad else None
+        return loss, [feats_grad, *(by_param.get(id(p)) for p in params)]
+
+    if wants_grad:
+        loss = _PrecomputedGradLoss.apply(evaluate, src.feats, *params)
+    else:
+        loss = evaluate(src.feats)[0]
+    last = "fine" if "rgb_fine" in summed else "coarse"
+    summed["psnr"] = psnr_from_mse(summed[f"rgb_{last}"])
+    return loss, summed
