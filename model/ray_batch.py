@@ -5,9 +5,10 @@ camera, the pixels to render, the scene's z-depth bounds as Python floats). :met
 is the one place pixels become rays and the bounds become per-ray (R,) tensors, made by ``torch.full``
 on the pixels' device (a fill: no host-to-device copy, so the host never waits for the device).
 
-``RayBatchModel.forward`` = encode the sources + render the rays. DDP synchronises gradients only for
-work done inside ``forward``, so training goes through this module; it holds the network as ``net``
-(checkpoints store ``net``'s own keys, see ``sray.platform.train.state``).
+``RayBatchLoss.forward`` = encode the sources + the training loss of the rays (rendered in pieces,
+``SRayModel.training_loss``). DDP synchronises gradients only for work done inside ``forward``, so
+training goes through this module; it holds the network as ``net`` (checkpoints store ``net``'s own keys,
+see ``sray.platform.train.state``).
 """
 
 from __future__ import annotations
@@ -68,28 +69,10 @@ class RayBatch:
     """float32 (m, H, W) source z-depth in metres, 0 = unknown (read only with ``model.inputs='rgbd'``)."""
 
 
-class RayBatchModel(nn.Module):
-    """One ``forward`` = encode a :class:`RayBatch`'s sources + render its rays (see the module docstring)."""
-
-    def __init__(self, cfg: SRayConfig) -> None:
-        """Build the S-Ray network it renders with (no device work here)."""
-        super().__init__()
-        self.net = SRayModel(cfg)
-
-    def forward(self, batch: RayBatch) -> dict[str, dict[str, Tensor]]:
-        """``{"coarse": pass, "fine": pass}`` of the batch's R rays (``SRayModel.render_rays``).
-
-        Samples along the rays are stratified in training mode and deterministic in eval mode.
-        """
-        origins, dirs, near, far = batch.query.rays()
-        src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
-        return self.net.render_rays(src, origins, dirs, near, far, stratified=self.training)
-
-
 class RayBatchLoss(nn.Module):
     """One ``forward`` = encode a :class:`RayBatch`'s sources + the training loss of its rays
     (``SRayModel.training_loss``: stratified samples, rendered in pieces); what training runs (DDP
-    included). Holds the network as ``net``, as :class:`RayBatchModel` does, so checkpoints are alike."""
+    included). Holds the network as ``net`` (checkpoints store ``net``'s own keys)."""
 
     def __init__(self, cfg: SRayConfig) -> None:
         """Build the S-Ray network it trains (no device work here)."""

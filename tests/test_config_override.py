@@ -38,3 +38,13 @@ def test_a_value_the_network_rejects_leaves_the_config_as_it_was() -> None:
     with pytest.raises(ValueError, match="attention"):
         apply_override(cfg, "model.attention=sparse")
     assert cfg.model.attention == attention
+
+
+def test_fp16_with_a_loss_in_pieces_is_refused_and_rolled_back() -> None:
+    """fp16 scales the loss, not a piece's own gradients: pieces smaller than the batch are refused."""
+    cfg = get_recipe("synth-small")
+    apply_override(cfg, "run.precision=fp16")
+    apply_override(cfg, f"model.train_piece={cfg.data.rays_per_batch}")  # one piece: allowed
+    with pytest.raises(ValueError, match="model.train_piece=0"):
+        apply_override(cfg, "model.train_piece=64")
+    assert cfg.model.train_piece == cfg.data.rays_per_batch

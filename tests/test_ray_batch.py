@@ -8,7 +8,8 @@ import torch
 
 from sray.data_tools.loader.sample_types import EvalSample, QueryCamera, SourceViews, TrainSample
 from sray.model.config import SRayConfig
-from sray.model.ray_batch import QueryRays, RayBatch, RayBatchModel
+from sray.model.losses import render_loss
+from sray.model.ray_batch import QueryRays, RayBatch, RayBatchLoss
 from sray.model.rays import pixel_rays
 from sray.platform.common.model_input import ray_batch
 
@@ -31,39 +32,39 @@ def _sample(seed: int = 0) -> TrainSample:
                        target_label=torch.randint(0, 5, (R,), generator=g), target_rgb=torch.rand(R, 3, generator=g))
 
 
-def _surface() -> RayBatchModel:
+def _surface() -> RayBatchLoss:
     torch.manual_seed(0)
-    return RayBatchModel(SRayConfig(n_classes=5, feat_dim=8, n_coarse=6, n_fine=6, n_source=M))
+    return RayBatchLoss(SRayConfig(n_classes=5, feat_dim=8, n_coarse=6, n_fine=6, n_source=M, train_piece=R))
 
 
-def _direct(model: RayBatchModel, sample: TrainSample, stratified: bool) -> dict:
-    """The bare network's own calls: encode, ``pixel_rays``, and the scalar bounds expanded by ``render_rays``."""
+def _direct(model: RayBatchLoss, sample: TrainSample) -> tuple[torch.Tensor, dict]:
+    """The bare network's own calls: encode, ``pixel_rays``, the scalar bounds expanded by ``render_rays``
+    (stratified samples), and ``render_loss``."""
     net = model.net
     src = net.encode(sample.sources.rgb, sample.sources.K, sample.sources.c2w)
     origins, dirs = pixel_rays(sample.query.K, sample.query.c2w, sample.pixels)
-    return net.render_rays(src, origins, dirs, sample.near, sample.far, stratified=stratified)
+    out = net.render_rays(src, origins, dirs, sample.near, sample.far, stratified=True)
+    return render_loss(out, sample.target_label, sample.target_rgb, net.cfg)
 
 
-@pytest.mark.parametrize("training", [False, True])
-def test_the_surface_renders_what_encode_and_render_rays_render(training: bool) -> None:
-    """Eval mode (deterministic samples) and training mode (stratified, same seed): every output of
-    both passes matches, and so does the gradient of a loss on them."""
-    model, sample = _surface().train(training), _sample()
-    torch.manual_seed(7)
-    got = model(ray_batch(sample))
-    torch.manual_seed(7)
-    want = _direct(model, sample, stratified=training)
-    for p in ("coarse", "fine"):
-        assert got[p].keys() == want[p].keys()
-        for k in want[p]:
-            torch.testing.assert_close(got[p][k], want[p][k], **TOL, msg=f"{p}/{k}")
-    grads = []
-    for out in (got, want):
+def test_the_surface_computes_the_loss_of_encode_render_rays_and_render_loss() -> None:
+    """One piece (``train_piece`` = the batch), same seed: the loss, its terms and every parameter's
+    gradient match the bare network's calls (pieces of fewer rays: tests/test_piecewise_loss.py)."""
+    model, sample = _surface(), _sample()
+    results = []
+    for compute in (lambda: model(ray_batch(sample), sample.target_label, sample.target_rgb),
+                    lambda: _direct(model, sample)):
         model.zero_grad()
-        out["fine"]["rgb"].square().mean().add(out["coarse"]["logits"].mean()).backward()
-        grads.append({n: q.grad.clone() for n, q in model.named_parameters() if q.grad is not None})
-    assert grads[0].keys() == grads[1].keys() and grads[0]
-    torch.testing.assert_close(grads[0], grads[1], rtol=1e-5, atol=1e-6)
+        torch.manual_seed(7)
+        loss, terms = compute()
+        loss.backward()
+        results.append((loss.detach(), terms, {n: q.grad.clone() for n, q in model.named_parameters()
+                                                if q.grad is not None}))
+    (loss_got, terms_got, grads_got), (loss_want, terms_want, grads_want) = results
+    torch.testing.assert_close(loss_got, loss_want, **TOL)
+    torch.testing.assert_close(terms_got, terms_want, **TOL)
+    assert grads_got.keys() == grads_want.keys() and any(k.startswith("net.encoder.") for k in grads_got)
+    torch.testing.assert_close(grads_got, grads_want, rtol=1e-5, atol=1e-6)
 
 
 def test_query_rays_are_pixel_rays_with_per_ray_bounds() -> None:

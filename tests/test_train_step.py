@@ -9,8 +9,7 @@ from torch.overrides import TorchFunctionMode
 
 from sray.data_tools.loader.sample_types import QueryCamera, SourceViews, TrainSample
 from sray.model.config import SRayConfig
-from sray.model.losses import render_loss
-from sray.model.ray_batch import RayBatchModel
+from sray.model.ray_batch import RayBatchLoss
 from sray.platform.common.model_input import ray_batch
 from sray.platform.train.step import NonFiniteTraining, TrainStep, fused_adam
 
@@ -61,17 +60,16 @@ def _batch(seed: int = 0) -> TrainSample:
                        target_label=labels, target_rgb=torch.rand(64, 3, generator=g))
 
 
-def _setup(precision: str = "no", lr: float = 1e-3) -> tuple[RayBatchModel, TrainStep]:
+def _setup(precision: str = "no", lr: float = 1e-3) -> tuple[RayBatchLoss, TrainStep]:
     torch.manual_seed(0)
-    model = RayBatchModel(SRayConfig(n_classes=5, n_coarse=6, n_fine=6, n_source=3)).train()
+    model = RayBatchLoss(SRayConfig(n_classes=5, n_coarse=6, n_fine=6, n_source=3, train_piece=16)).train()  # 4 pieces
     params = list(model.parameters())
     return model, TrainStep(params, fused_adam(params, lr), 1.0, precision, torch.device("cpu"), 3)
 
 
-def _loss(model: RayBatchModel, step: TrainStep, sample: TrainSample) -> torch.Tensor:
+def _loss(model: RayBatchLoss, step: TrainStep, sample: TrainSample) -> torch.Tensor:
     with step.autocast():
-        out = model(ray_batch(sample))
-    loss, _ = render_loss(out, sample.target_label, sample.target_rgb, model.net.cfg)
+        loss, _ = model(ray_batch(sample), sample.target_label, sample.target_rgb)
     return loss
 
 

@@ -21,6 +21,7 @@ from torch.profiler import ProfilerActivity, profile
 
 from sray.jobs.bench.render_levers import chunk_table, kernel_table
 from sray.jobs.bench.workloads import make_train_step, render_case
+from sray.model.ray_chunks import CUDA_RENDER_RAYS, render_chunk_rays, train_piece_rays
 
 TOP_OPS = 18
 """Operators listed per profile."""
@@ -100,19 +101,23 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
 
 def _profile_train(s: dict, impl: str, device: torch.device) -> tuple[str, str, str]:
     """The profile section of one training step of spec ``s``."""
-    prof, wall = profile_call(make_train_step(dict(s, impl=impl, device=str(device), dtype="fp32")), device)
+    piece = train_piece_rays(s["rays"] if impl == "reference" else 0, device, s["rays"])  # reference: unoptimised
+    prof, wall = profile_call(make_train_step(dict(s, impl=impl, device=str(device), dtype="fp32", piece=piece)),
+                              device)
     return (f"Profile: training step, impl={impl}", _top_table(prof, wall),
-            f"{s['rays']} rays, {s['coarse']}+{s['fine']} samples, {s['views']} source views, "
+            f"{s['rays']} rays in pieces of {piece}, {s['coarse']}+{s['fine']} samples, {s['views']} source views, "
             f"{s['hw'][1]}x{s['hw'][0]}, fp32; encode + render + loss + backward + Adam on a synthetic "
             "scene, one warm-up step before the profiled one.")
 
 
 def _profile_render(r: dict, impl: str, device: torch.device) -> tuple[str, str, str]:
     """The profile section of one whole-image render of spec ``r``."""
-    prof, wall = profile_call(render_case(dict(r, impl=impl, device=str(device))), device, warm_up=device.type == "cuda")
+    chunk = CUDA_RENDER_RAYS if impl == "reference" else render_chunk_rays(0, device)  # reference: unoptimised
+    prof, wall = profile_call(render_case(dict(r, impl=impl, device=str(device), chunk=chunk)), device,
+                              warm_up=device.type == "cuda")
     return (f"Profile: whole-image render, impl={impl}", _top_table(prof, wall),
             f"`render_image` of one {r['hw'][1]}x{r['hw'][0]} view, {r['views']} source views, "
-            f"{r['coarse']}+{r['fine']} samples (the demo's model size), no grad, chunks of 4096 rays; no "
+            f"{r['coarse']}+{r['fine']} samples (the demo's model size), no grad, chunks of {chunk} rays; no "
             "warm-up render on CPU (nothing to compile, and one render is minutes).")
 
 

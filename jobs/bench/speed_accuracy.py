@@ -23,6 +23,7 @@ import torch
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.model.fast_render import FastRender
+from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.eval.view_scoring import render_view, score_views, sray_renderer
 from sray.platform.eval.zero_shot import select_scenes
@@ -39,6 +40,8 @@ class Setting:
     bf16: bool = False
     impl: str = "fast"
     """``SRayConfig.impl`` of the per-sample networks: ``reference`` is the unoptimised path (today's render)."""
+    chunk: int = 0
+    """Rays per render chunk; 0 = by device (``sray.model.ray_chunks``: 256 on a CPU)."""
     sample_scale: float = 1.0
     """Coarse and fine samples per ray as a fraction of the checkpoint's."""
     inputs: str = ""
@@ -50,7 +53,7 @@ def default_settings() -> list[Setting]:
     """The unoptimised full render (the reference point: speed-ups and mIoU differences are against it),
     the lossless fast path and the settings traded against it."""
     return [
-        Setting("full, reference path", impl="reference"),
+        Setting("full, reference path", impl="reference", chunk=CUDA_RENDER_RAYS),
         Setting("full"),
         Setting("full, half the samples", sample_scale=0.5),
         Setting("full, fine new only", fine_samples="new"),
@@ -122,7 +125,7 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
                 t0, c0 = time.perf_counter(), time.process_time()
                 with autocast:
                     views.append(render_view(sray_renderer(net, sample, torch.device("cpu"), st.fast), sample, 1,
-                                             cfg.model.chunk, torch.device("cpu"), st.fast))
+                                             st.chunk, torch.device("cpu"), st.fast))
                 seconds += time.perf_counter() - t0
                 cpu_seconds += time.process_time() - c0
             n_views += len(views)
@@ -226,8 +229,9 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
              f"scenes; CPU s / view is the CPU time this process spent (all its threads) encoding the sources and "
              f"rendering one whole view, the speed measure here because other jobs may share the cores (on a quiet "
              f"machine wall time is about CPU time / torch threads); wall s / view is shown beside it. Settings: "
-             f"'full, reference path' is the unoptimised path (`impl=reference`) with the checkpoint's samples; 'full' is "
-             f"the optimised path, equal to it within fp32 tolerance. 'fast sS cC': the fast render mode "
+             f"'full, reference path' is the unoptimised path (`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with "
+             f"the checkpoint's samples; 'full' is the optimised path (chunks by device: 256 rays on a CPU), equal to it "
+             f"within fp32 tolerance. 'fast sS cC': the fast render mode "
              f"(`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine pass (resampled "
              f"depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed by the "
              f"sources' depth (docs/model.md, RGB-D mode), rendered by "

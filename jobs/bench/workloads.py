@@ -4,7 +4,8 @@ Both run on a synthetic scene (random source images, a camera rig whose sources 
 query's frustum), so they need no data and measure the model alone. A spec dict names the sizes:
 rays, coarse, fine, views, hw, device, and optionally dtype ('fp32'|'bf16'|'fp16'), impl
 ('reference'|'fast', ``SRayConfig.impl``), fine_samples ('union'|'new'), piece (rays per piece of the
-training loss, ``SRayConfig.train_piece``; 0 = by device), compile (both fields through ``torch.compile``),
+training loss, ``SRayConfig.train_piece``; 0 = by device), chunk (rays per render chunk; absent = by
+device), compile (both fields through ``torch.compile``),
 steps.
 """
 
@@ -88,7 +89,7 @@ def render_case(spec: dict) -> Callable[[], None]:
     query = torch.eye(4, device=device)
 
     def render() -> None:
-        model.render_image(src, batch["K"], query, (h, w), 1.0, 5.0)
+        model.render_image(src, batch["K"], query, (h, w), 1.0, 5.0, chunk=spec.get("chunk") or None)
     return render
 
 

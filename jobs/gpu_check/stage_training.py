@@ -9,8 +9,7 @@ import time
 import torch
 
 from sray.model.config import SRayConfig
-from sray.model.losses import render_loss
-from sray.model.ray_batch import RayBatchModel
+from sray.model.ray_batch import RayBatchLoss
 from sray.platform.common.model_input import ray_batch
 from sray.platform.train.step import TrainStep, fused_adam
 
@@ -31,20 +30,18 @@ def timed_steps(ctx: CheckContext, precision: str, steps: int) -> dict[str, floa
 
     accelerator = Accelerator(mixed_precision="no", cpu=ctx.device.type != "cuda")
     torch.manual_seed(0)
-    model = RayBatchModel(SRayConfig(n_coarse=ctx.samples[0], n_fine=ctx.samples[1], n_source=ctx.views))
+    model = RayBatchLoss(SRayConfig(n_coarse=ctx.samples[0], n_fine=ctx.samples[1], n_source=ctx.views))
     params = list(model.parameters())
     model, optimizer = accelerator.prepare(model, fused_adam(params, 1e-4))
     step = TrainStep(list(model.parameters()), optimizer, 1.0, precision, accelerator.device, steps + 1)
     sample = training_sample(ctx.views, ctx.image_hw, ctx.rays, 20, accelerator.device)
     batch = ray_batch(sample)
-    cfg = accelerator.unwrap_model(model).net.cfg
     if ctx.device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(ctx.device)
 
     def one() -> None:
         with step.autocast():
-            out = model(batch)
-        loss, _ = render_loss(out, sample.target_label, sample.target_rgb, cfg)
+            loss, _ = model(batch, sample.target_label, sample.target_rgb)
         step(loss)
 
     one()  # warm-up

@@ -13,7 +13,7 @@ from sray.platform.config.train_config import TrainConfig
 
 LEGACY_PREFIX = "net."
 """Checkpoints written before 2026-11-23 stored the training module's keys (``net.`` + the model's:
-``sray.model.ray_batch.RayBatchModel`` holds the network as ``net``)."""
+``sray.model.ray_batch.RayBatchLoss`` holds the network as ``net``)."""
 
 
 def bare_model_keys(weights: dict[str, Tensor]) -> dict[str, Tensor]:

@@ -150,6 +150,10 @@ class TrainConfig:
     run: RunSettings = field(default_factory=RunSettings)
     """Cadence, precision, placement, outputs."""
 
+    def __post_init__(self) -> None:
+        """Reject settings of different sections that cannot train together."""
+        check_sections(self)
+
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (JSON/YAML-safe; tuples become lists)."""
         return dataclasses.asdict(self)
@@ -170,6 +174,15 @@ class TrainConfig:
         return Path(self.run.output_dir).resolve() / self.run.name
 
 
+def check_sections(cfg: TrainConfig) -> None:
+    """ValueError for fp16 with a loss in pieces smaller than the batch: a piece's gradients are taken
+    before the loss scaler scales them (``sray.model.piecewise_loss``), so small ones could underflow."""
+    if cfg.run.precision == "fp16" and 0 < cfg.model.train_piece < cfg.data.rays_per_batch:
+        raise ValueError(f"train config: model.train_piece is {cfg.model.train_piece} (< data.rays_per_batch "
+                         f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not loss-scaled. "
+                         "Set model.train_piece=0 (the whole batch on a GPU) or run.precision=bf16.")
+
+
 def apply_override(cfg: TrainConfig, assignment: str) -> None:
     """Apply one ``section.field=value`` override in place, parsing the value as the field's type.
 
@@ -179,5 +192,6 @@ def apply_override(cfg: TrainConfig, assignment: str) -> None:
     def check() -> None:
         cfg.model.__post_init__()
         cfg.data.__post_init__()
+        check_sections(cfg)
 
     set_field(cfg, assignment, "optim.lr=5e-4", check)
