@@ -44,10 +44,20 @@ PLAN3 = dataclasses.replace(TOY, plan=(Cell(LONG, 0), *(Cell("full", s) for s in
 def test_cell_names_parse_both_ways() -> None:
     assert Cell.parse("full:2") == Cell("full", 2) == Cell.parse("full-s2")
     assert Cell.parse("full-affine:0") == Cell("full-affine", 0) == Cell.parse("full-affine-s0")
-    assert Cell.parse("full-rgbd-s3") == Cell("full-rgbd", 3)
+    assert Cell.parse("full-rgbd-s3") == Cell("full-rgbd", 3) and Cell.parse("full-new:0") == Cell("full-new", 0)
     for bad in ("full", "fancy:1", "full:x"):
         with pytest.raises(ValueError, match="VARIANT:SEED"):
             Cell.parse(bad)
+
+
+def test_each_variant_sets_its_model_fields_and_nothing_else(tmp_path: Path) -> None:
+    """A cell's config is the preset's recipe with only its variant's model settings changed."""
+    base = accuracy_cells.cell_config(Cell("full", 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db").model
+    changed = {"full-new": {"fine_samples": "new"}, "full-rgbd": {"inputs": "rgbd"}, "none": {"attention": "none"},
+               "full-affine": {"weight_map": "affine"}}
+    for variant, fields in changed.items():
+        model = accuracy_cells.cell_config(Cell(variant, 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db").model
+        assert dataclasses.replace(base, **fields) == model, variant
 
 
 def test_seed_table_mean_and_sample_spread() -> None:

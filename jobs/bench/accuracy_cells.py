@@ -48,8 +48,8 @@ def stored_cells(out: Path) -> dict[str, dict[str, Any]]:
 
 
 def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
-    """The training config of ``cell``: the preset's recipe and overrides, the variant's attention and
-    weight map, the cell's seed and budget, and the benchmark's folders."""
+    """The training config of ``cell``: the preset's recipe and overrides, the variant's model settings
+    (attention, weight map, inputs, fine samples), the cell's seed and budget, and the benchmark's folders."""
     from sray.jobs.recipes import get_recipe
     from sray.platform.config.train_config import apply_override
 
@@ -58,6 +58,7 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
         apply_override(cfg, assignment)
     variant = VARIANT_SETTINGS[cell.variant]
     cfg.model.attention, cfg.model.weight_map, cfg.model.inputs = variant.attention, variant.weight_map, variant.inputs
+    cfg.model.fine_samples = variant.fine_samples
     if cell.variant != LONG:
         cfg.optim.steps = p.ablation_steps
     elif p.long_steps is not None:

@@ -21,13 +21,17 @@ class Variant:
     """``model.weight_map``."""
     inputs: str = "rgb"
     """``model.inputs`` (``rgbd``: the source views' depth guides the samples)."""
+    fine_samples: str = "union"
+    """``model.fine_samples`` (``new``: the fine pass evaluates only the resampled depths, as the official
+    code; half the training step on a CPU, docs/performance.md)."""
 
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
                     "full-affine": Variant(weight_map="affine"), "full-rgbd": Variant(inputs="rgbd"),
-                    LONG: Variant()}
+                    "full-new": Variant(fine_samples="new"), LONG: Variant()}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
-map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth."""
+map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
+full CRA whose fine pass evaluates the resampled depths only."""
 
 
 COMPARED = ("sray", "semantic-nerf")
@@ -114,7 +118,8 @@ PRESETS = {
         world=World(train_scenes=48, test_scenes=4, views=40, height=120, width=160),
         recipe="synth-cpu-hour", overrides=(), long_steps=None, ablation_steps=600, validations=2, ckpt_every=200,
         plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
-              Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0)),
+              Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
+              Cell("full-new", 0)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0),
@@ -125,7 +130,7 @@ PRESETS = {
                                          "data.aug_noise_sigma=3.0"),
         long_steps=20_000, ablation_steps=5_000, validations=4, ckpt_every=1_000,
         plan=(*seeds(LONG, 3), *seeds("full", 3), *seeds("none", 3), Cell("cross", 0), Cell("intra", 0),
-              Cell("full-affine", 0), Cell("full-rgbd", 0)),
+              Cell("full-affine", 0), Cell("full-rgbd", 0), Cell("full-new", 0)),
         eval_sources=8, eval_fast=None, budget_s=600.0, budgets=(60.0, 120.0, 300.0, 600.0), fleet_eval_stride=2,
         fleet_gpus_per_task=0.5),
 }
