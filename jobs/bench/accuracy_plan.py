@@ -119,7 +119,7 @@ PRESETS = {
         recipe="synth-cpu-hour", overrides=(), long_steps=None, ablation_steps=600, validations=2, ckpt_every=200,
         plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
-              Cell("full-new", 0)),
+              *seeds("full-new", 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0),
