@@ -67,9 +67,22 @@ def _labelled_cross_entropy(logits: Tensor, target: Tensor, n_labelled: Tensor, 
     summed = F.cross_entropy(logits.float(), target, weight=weight, ignore_index=ignore_id, reduction="sum")
     if weight is None:
         return summed / n_labelled.clamp_min(1).to(summed.dtype)
-    labelled = target != ignore_id
-    total = torch.where(labelled, weight[torch.where(labelled, target, 0)], 0.0).sum()  # (R,) -> ()
+    total = _ray_weights(target, ignore_id, weight).sum()  # (R,) -> ()
     return summed / torch.where(total > 0, total, torch.ones_like(total))
+
+
+def _class_weights(cfg: LossSettings, device: torch.device) -> Tensor | None:
+    """The config's per-class weights (L,) on ``device``, None when it has none."""
+    weights = getattr(cfg, "class_weights", ())
+    return torch.tensor(weights, dtype=torch.float32, device=device) if weights else None
+
+
+def _ray_weights(target: Tensor, ignore_id: int, weight: Tensor | None) -> Tensor:
+    """(R,) float32 weight of each ray in the semantic mean: 0 unlabelled, else its class's weight or 1."""
+    labelled = target != ignore_id  # (R,)
+    if weight is None:
+        return labelled.float()
+    return torch.where(labelled, weight[torch.where(labelled, target, 0)], 0.0)
 
 
 def render_loss(
@@ -122,9 +135,7 @@ def render_loss(
         rgb_target = target_rgb.float()
         terms: dict[str, Tensor] = {}
         sem_total = rgb_total = rgb_target.new_zeros(())
-        weights = getattr(cfg, "class_weights", ())
-        weight = (torch.tensor(weights, dtype=torch.float32, device=rgb_target.device)
-                  if weights else None)  # (L,)
+        weight = _class_weights(cfg, rgb_target.device)  # (L,) or None
         for name in passes:
             sem = _labelled_cross_entropy(out[name]["logits"], target_label, n_labelled, cfg.ignore_id, weight)
             rgb = F.mse_loss(out[name]["rgb"].float(), rgb_target)
@@ -142,9 +153,4 @@ def render_loss(
 def labelled_weights(target_label: Tensor, cfg: LossSettings) -> Tensor:
     """(R,) float32 weight of each ray in the semantic mean: 0 for an unlabelled ray, else its class's
     weight (``class_weights``) or 1."""
-    labelled = target_label != cfg.ignore_id  # (R,)
-    weights = getattr(cfg, "class_weights", ())
-    if not weights:
-        return labelled.float()
-    weight = torch.tensor(weights, dtype=torch.float32, device=target_label.device)  # (L,)
-    return torch.where(labelled, weight[torch.where(labelled, target_label, 0)], 0.0)
+    return _ray_weights(target_label, cfg.ignore_id, _class_weights(cfg, target_label.device))

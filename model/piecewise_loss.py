@@ -56,33 +56,33 @@ def piecewise_render_loss(render: PieceRenderer, src: SourceSet, params: list[nn
     ``render_loss`` for the whole batch. Without grad mode (or with nothing that needs a gradient) it
     returns the same values without keeping any gradient.
     """
+    pieces = [slice(start, min(start + piece, n_rays)) for start in range(0, n_rays, piece)]
     sem_weight = labelled_weights(target_label, cfg)  # (R,)
     sem_total = sem_weight.sum()
-    sem_total = torch.where(sem_total > 0, sem_total, torch.ones_like(sem_total))
-    pieces = [slice(start, min(start + piece, n_rays)) for start in range(0, n_rays, piece)]
+    sem_shares = torch.stack([sem_weight[sl].sum() for sl in pieces]) / torch.where(
+        sem_total > 0, sem_total, torch.ones_like(sem_total))  # (P,)
+    ray_shares = target_rgb.new_tensor([sl.stop - sl.start for sl in pieces], dtype=torch.float32) / n_rays  # (P,)
     wants_grad = torch.is_grad_enabled() and (src.feats.requires_grad or any(p.requires_grad for p in params))
-    trainable = [p for p in params if p.requires_grad]
     summed: dict[str, Tensor] = {}
 
     def evaluate(feats: Tensor) -> tuple[Tensor, list[Tensor | None]]:
         leaf = feats.detach().requires_grad_(feats.requires_grad)
         piece_src = dataclasses.replace(src, feats=leaf)
-        inputs = ([leaf] if feats.requires_grad else []) + trainable
+        inputs = [t for t in (leaf, *params) if t.requires_grad]
         grads: list[Tensor | None] = [None] * len(inputs)
         loss = target_rgb.new_zeros((), dtype=torch.float32)
         with torch.enable_grad() if wants_grad else torch.no_grad():
-            for sl in pieces:
-                shares = (sem_weight[sl].sum() / sem_total, target_rgb.new_tensor((sl.stop - sl.start) / n_rays))
-                piece_loss, terms = render_loss(render(piece_src, sl), target_label[sl], target_rgb[sl], cfg, shares)
+            for i, sl in enumerate(pieces):
+                piece_loss, terms = render_loss(render(piece_src, sl), target_label[sl], target_rgb[sl], cfg,
+                                                (sem_shares[i], ray_shares[i]))
                 if wants_grad:
                     got = torch.autograd.grad(piece_loss, inputs, allow_unused=True)
                     grads = [g if a is None else a if g is None else a + g for a, g in zip(grads, got)]
                 loss = loss + piece_loss.detach()
                 for key, value in terms.items():
                     summed[key] = summed[key] + value if key in summed else value
-        by_param = dict(zip(map(id, trainable), grads[len(inputs) - len(trainable):]))
-        feats_grad = grads[0] if feats.requires_grad else None
-        return loss, [feats_grad, *(by_param.get(id(p)) for p in params)]
+        grad_of = {id(t): g for t, g in zip(inputs, grads)}
+        return loss, [grad_of.get(id(t)) for t in (leaf, *params)]
 
     if wants_grad:
         loss = _PrecomputedGradLoss.apply(evaluate, src.feats, *params)

@@ -30,7 +30,7 @@ from .depth_sampling import source_surface_depth, surface_samples
 from .encoder import ResUNetEncoder
 from .fast_render import render_rays_fast
 from .field import SRayField
-from .hierarchical import CoarseSampler, render_image, render_rays
+from .hierarchical import CoarseSampler, per_ray_bounds, render_image, render_rays
 from .losses import render_loss
 from .piecewise_loss import piecewise_render_loss
 from .ray_chunks import render_chunk_rays, train_piece_rays
@@ -108,7 +108,8 @@ class SRayModel(nn.Module):
                            generator, self.cfg.fine_samples, self.coarse_sampler(src))
 
     def training_loss(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
-                      far: Tensor | float, target_label: Tensor, target_rgb: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
+                      far: Tensor | float, target_label: Tensor,
+                      target_rgb: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
         """``render_loss`` of rays rendered with stratified samples: origins, dirs (R, 3), near, far scalars
         or (R,), target_label (R,) int64, target_rgb (R, 3).
 
@@ -122,10 +123,11 @@ class SRayModel(nn.Module):
             out = self.render_rays(src, origins, dirs, near, far, stratified=True)
             return render_loss(out, target_label, target_rgb, self.cfg)
 
+        near_r = per_ray_bounds(near, n_rays, origins, "near")  # (R,)
+        far_r = per_ray_bounds(far, n_rays, origins, "far")  # (R,)
+
         def render(piece_src: SourceSet, sl: slice) -> dict[str, dict[str, Tensor]]:
-            lo = near[sl] if isinstance(near, Tensor) and near.ndim else near
-            hi = far[sl] if isinstance(far, Tensor) and far.ndim else far
-            return self.render_rays(piece_src, origins[sl], dirs[sl], lo, hi, stratified=True)
+            return self.render_rays(piece_src, origins[sl], dirs[sl], near_r[sl], far_r[sl], stratified=True)
 
         params = [p for name, p in self.named_parameters() if not name.startswith("encoder.")]
         return piecewise_render_loss(render, src, params, n_rays, piece, target_label, target_rgb, self.cfg)

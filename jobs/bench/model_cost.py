@@ -23,6 +23,7 @@ from sray.jobs.bench.probes import (
     time_call,
 )
 from sray.jobs.bench.workloads import train_step_worker
+from sray.model.ray_chunks import train_piece_rays
 
 VARIANTS = ("full", "intra", "cross", "dense")
 """Attention variants compared in table 1 (``none`` has no attention cost)."""
@@ -156,8 +157,6 @@ def _row_key(spec: dict) -> tuple:
 
 def _piece(spec: dict) -> int:
     """Rays per piece of the row's training loss (``ray_chunks.train_piece_rays`` of its setting)."""
-    from sray.model.ray_chunks import train_piece_rays
-
     return train_piece_rays(spec.get("piece", 0), torch.device(spec.get("device", "cpu")), spec["rays"])
 
 
@@ -193,7 +192,8 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         h, w = spec["hw"]
         fine = spec["coarse"] + spec["fine"] if spec.get("fine_samples", "union") == "union" else spec["fine"]
         rss = max(r["rss_bytes"] for r in runs[key])
-        lines.append(f"| {spec['name']} | {spec['rays']} | {key[5]} | {spec['coarse']}+{spec['fine']} ({fine}) | {spec['views']} | "
+        lines.append(f"| {spec['name']} | {spec['rays']} | {key[5]} | {spec['coarse']}+{spec['fine']} ({fine}) | "
+                     f"{spec['views']} | "
                      f"{w}x{h} | {spec['dtype']} | {key[2]} | {ALLOCATORS[alloc]} | "
                      f"{res['first']:.2f} | {s:.2f} | {spec['rays'] / s:.0f} | "
                      f"{rss / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {vs_ref} | {vs_base} | {official} |")
@@ -209,7 +209,8 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         "resampled ones, 64 + 64 = 128, as the official code). Rays per piece: the loss is computed over pieces of "
         "that many rays, each piece's gradient taken before the next is rendered (`SRayConfig.train_piece`, "
         "`model/piecewise_loss.py`): the same loss and gradients as the whole batch at once "
-        "(tests/test_piecewise_loss.py); the reference rows compute the whole batch in one piece. Official code: the paper's public S-Ray code at "
+        "(tests/test_piecewise_loss.py); the reference rows compute the whole batch in one piece. "
+        "Official code: the paper's public S-Ray code at "
         "its configuration (1024 rays, 64+64 samples, 8 views, 320x240, fp32) took 19.7 s per step with "
         "THP_MEM_ALLOC_ENABLE=1 and 31.9 s without, 11.5 GiB peak RSS, in a side-by-side run on this machine "
         "(fresh processes, alternating, 3x3 steps; issue 10). CPU allocator: THP_MEM_ALLOC_ENABLE=1 (read by "

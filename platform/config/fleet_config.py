@@ -157,7 +157,8 @@ def check_fleet_config(cfg: FleetConfig) -> None:
     for name, value in positive.items():
         if int(value) < 1:
             raise ValueError(f"fleet config: {name} is {value}; it must be a positive integer")
-    non_negative = {"finetune.eval_chunk": ft.eval_chunk, "finetune.max_seconds": ft.max_seconds, "finetune.min_delta": ft.min_delta,
+    non_negative = {"finetune.eval_chunk": ft.eval_chunk, "finetune.max_seconds": ft.max_seconds,
+                    "finetune.min_delta": ft.min_delta,
                     "finetune.lr": ft.lr, "finetune.grad_clip": ft.grad_clip, "nerf.lr": cfg.nerf.lr,
                     "cpus_per_task": cfg.cpus_per_task, "gpus_per_task": cfg.gpus_per_task,
                     "retries": cfg.retries, "retry_backoff_s": cfg.retry_backoff_s}
