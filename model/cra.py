@@ -4,7 +4,7 @@ M has shape (R, m, N, C): R rays, m source views, N samples per ray, C channels.
 
 * intra-view radial attention: for every (ray, view), attention over that view's N samples, after
   adding a learned embedding of each sample's normalised depth (appendix table: L1-L4). Depth, not
-  the sample's rank: in the fine pass (the sorted union of coarse and resampled samples) rank k
+  the sample's rank: in the fine pass (depths resampled on every ray) rank k
   means a different depth on every ray, and a rank table fixes the sample count;
 * cross-view sparse attention: for every (ray, sample), attention over its m views (L5-L6);
 * ``dense``: the paper's costly baseline, one joint attention over all m * N tokens of a ray.

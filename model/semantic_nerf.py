@@ -178,7 +178,7 @@ class SemanticNeRF(nn.Module):
         Returns ``{"coarse": pass, "fine": pass}`` (see ``hierarchical.render_rays``).
         """
         return render_rays(self._field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine,
-                           stratified, generator)
+                           stratified, generator, fine_samples="union")  # NeRF's rule, as Semantic-NeRF
 
     @torch.no_grad()
     def render_image(

@@ -49,9 +49,11 @@ def test_train_and_fleet_configs_refuse_a_bad_render_and_keep_their_value(tiny_s
 def test_the_finetune_learners_held_out_renderer_is_the_chosen_render(tiny_checkpoint: Path, tiny_shards: Path,
                                                                       render: str) -> None:
     """With the encoder frozen the learner reuses encoded sources; its views equal a fresh ``sray_renderer``
-    of the same mode, and the fast views differ from the full ones (the render really changed)."""
+    of the same mode, and the fast views differ from the full ones (the render really changed). The fast
+    mode's threshold is one every coarse ray reaches: with no fine pass its views are the coarse pass's,
+    while a fine pass on every ray would equal the full render (both evaluate the resampled depths only)."""
     net, _ = model_from_checkpoint(tiny_checkpoint)
-    fast = held_out_fast(render, 0.9, "finetune.eval_render")
+    fast = held_out_fast(render, 1e-3, "finetune.eval_render")
     learner = SRayLearner(net, "sha", ("coarse.classifier",), 1e-3, 1.0, "no", torch.device("cpu"), 5, fast)
     assert learner.encoder_frozen and learner.fast == fast
     sample = next(iter(make_eval_samples(tiny_shards, "synth_test_000", split="test", n_source=3)))

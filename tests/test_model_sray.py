@@ -49,9 +49,10 @@ def render(net: SRayModel, r: dict, stratified: bool = False) -> dict:
     return net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=stratified)
 
 
-def test_output_follows_the_contract() -> None:
-    out = render(model(), rig())
-    for name, n in (("coarse", 8), ("fine", 16)):
+@pytest.mark.parametrize(("fine_samples", "n_fine_seen"), [("new", 8), ("union", 16)])
+def test_output_follows_the_contract(fine_samples: str, n_fine_seen: int) -> None:
+    out = render(model(fine_samples=fine_samples), rig())
+    for name, n in (("coarse", 8), ("fine", n_fine_seen)):
         p = out[name]
         assert {k: tuple(v.shape) for k, v in p.items()} == {
             "logits": (24, 5), "rgb": (24, 3), "depth": (24,), "opacity": (24,), "weights": (24, n), "z": (24, n)}
@@ -176,7 +177,7 @@ def test_checkpoint_loads_strictly_into_other_sample_counts(n_coarse: int, n_fin
     other = SRayModel(SRayConfig(n_classes=5, n_coarse=n_coarse, n_fine=n_fine)).eval()
     other.load_state_dict(trained.state_dict(), strict=True)
     out = render(other, r)
-    assert out["coarse"]["z"].shape == (24, n_coarse) and out["fine"]["z"].shape == (24, n_coarse + n_fine)
+    assert out["coarse"]["z"].shape == (24, n_coarse) and out["fine"]["z"].shape == (24, n_fine)
     for p in ("coarse", "fine"):
         assert torch.isfinite(out[p]["logits"]).all() and (out[p]["opacity"] > 0).all()
     # the coarse pass at the same depths gives the same samples' outputs as the trained model's

@@ -13,7 +13,10 @@
 4. tables (ablation with seed spread, per-class IoU, equal budgets, the targets) and a chart, written
    into docs/benchmarks.md with the exact command, each table with its protocol line(s)
    (:mod:`sray.jobs.bench.accuracy_tables`). The tables are rewritten after every run from whatever
-   cells are stored, and say which are still missing.
+   cells are stored, and say which are still missing;
+5. with ``step_times``, the training cost: one pretraining step of every stored variant timed side by side
+   in fresh processes (:mod:`sray.jobs.bench.accuracy_step_cost`), stored beside the cells, and the chart
+   of zero-shot mIoU against seconds per step.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import time
 from pathlib import Path
 
 from sray.jobs.bench.accuracy_plan import COMPARED, EXPERIMENT, LONG, PRESETS, Cell, Preset
+from sray.jobs.bench.accuracy_step_cost import read_step_times
 
 
 def ensure_world(p: Preset, out: Path) -> Path:
@@ -41,10 +45,11 @@ def ensure_world(p: Preset, out: Path) -> Path:
 
 def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] | None = None,
                            max_minutes: float | None = None, fleet: bool = True,
-                           presets: dict[str, Preset] | None = None) -> dict[str, dict]:
+                           presets: dict[str, Preset] | None = None, step_times: bool = False) -> dict[str, dict]:
     """Run the missing cells (``cells``: a subset of the plan; default all) and, when the long model is
-    stored, the fleet; then rewrite the tables in ``doc`` from every stored cell. No new cell starts
-    after ``max_minutes``. Returns the stored cells by key."""
+    stored, the fleet; with ``step_times``, time a pretraining step of every stored variant side by side;
+    then rewrite the tables in ``doc`` from every stored cell and the stored step times. No new cell
+    starts after ``max_minutes``. Returns the stored cells by key."""
     from sray.jobs.bench.accuracy_cells import run_cell, stored_cells
     from sray.jobs.bench.accuracy_tables import write_tables
     from sray.platform.finetune.fleet import unseen_scenes
@@ -69,7 +74,9 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
     over = max_minutes is not None and (time.perf_counter() - t0) / 60 >= max_minutes
     if fleet and long_cell is not None and not (out / "fleet" / "done.json").exists() and not over:
         _run_fleet(p, Path(stored[long_cell.key]["checkpoint"]), shards, scenes, out, tracking_uri)
-    write_tables(preset, p, stored, out / "fleet", doc)
+    if step_times and stored:
+        _time_steps(p, stored, out)
+    write_tables(preset, p, stored, out / "fleet", doc, read_step_times(out))
     return stored
 
 
@@ -94,3 +101,15 @@ def _run_fleet(p: Preset, checkpoint: Path, shards: Path, scenes: list[str], out
     write_fleet_charts(results, out / "fleet" / "charts", METHODS)
     (out / "fleet" / "done.json").write_text(json.dumps({"checkpoint": str(checkpoint)}) + "\n")
 
+
+
+def _time_steps(p: Preset, stored: dict[str, dict], out: Path) -> None:
+    """Time one pretraining step of every variant with a stored cell, side by side, and store the result."""
+    from sray.jobs.bench.accuracy_step_cost import measure_step_times, store_step_times
+    from sray.jobs.bench.accuracy_tables import by_variant
+    from sray.jobs.bench.doc import machine_line
+    from sray.jobs.bench.probes import resolve_device
+
+    machine = machine_line()  # before the timing: the load it reports is the one the steps start under
+    times = measure_step_times(p, list(by_variant(p, stored)), resolve_device("auto"))
+    store_step_times(out, times, machine)

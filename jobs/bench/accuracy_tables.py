@@ -48,10 +48,13 @@ def _pct(value: float | None, digits: int = 2) -> str:
     return "—" if value is None or not np.isfinite(value) else f"{100 * value:.{digits}f}"
 
 
-def seed_table(p: Preset, stored: dict[str, dict[str, Any]]) -> tuple[list[str], list[list[str]]]:
-    """Header and rows of the zero-shot table: one row per variant, its seeds' mean ± spread."""
+def seed_table(p: Preset, stored: dict[str, dict[str, Any]],
+               step_times: dict[str, Any] | None = None) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the zero-shot table: one row per variant, its seeds' mean ± spread (and its
+    seconds per pretraining step where ``step_times``, as ``accuracy_step_cost`` stores them, holds it)."""
+    timed = (step_times or {}).get("variants", {})
     header = ["variant", "steps", "seeds", "mIoU %", "mIoU % per seed", "total acc %", "class-avg acc %",
-              "PSNR dB", "pretrain min", "eval min"]
+              "PSNR dB", "pretrain min", "eval min", *(["s / step (side by side)"] if timed else [])]
     rows = []
     for variant, cells in by_variant(p, stored).items():
         mean, spread = mean_spread([c["miou"] for c in cells])
@@ -61,7 +64,8 @@ def seed_table(p: Preset, stored: dict[str, dict[str, Any]]) -> tuple[list[str],
                      " / ".join(_pct(c["miou"]) for c in cells), _pct(np.mean([c["total_acc"] for c in cells])),
                      _pct(np.mean([c["class_avg_acc"] for c in cells])), f"{np.mean([c['psnr'] for c in cells]):.2f}",
                      f"{np.mean([c['train_s'] for c in cells]) / 60:.1f}",
-                     f"{np.mean([c['eval_s'] for c in cells]) / 60:.1f}"])
+                     f"{np.mean([c['eval_s'] for c in cells]) / 60:.1f}",
+                     *([f"{timed[variant]['s_per_step']:.3f}" if variant in timed else "—"] if timed else [])])
     return header, rows
 
 
@@ -144,6 +148,23 @@ def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | No
     return lines
 
 
+def _step_cost_link(preset: str, p: Preset, groups: dict[str, list[dict[str, Any]]], step_times: dict[str, Any],
+                    caption: str, figures: Path) -> str:
+    """The mIoU-against-step-time chart of the stored variants, and its note and link for the doc."""
+    from sray.jobs.bench.accuracy_step_cost import step_cost_chart
+
+    timed = step_times["variants"]
+    chart = step_cost_chart({variant_label(v, p): [100 * c["miou"] for c in cells] for v, cells in groups.items()},
+                            {variant_label(v, p): timed[v]["s_per_step"] for v in groups if v in timed},
+                            {variant_label(v, p): cells[0]["steps"] for v, cells in groups.items()}, figures / "zero_shot_vs_step_time.png",
+                            f"Zero-shot mIoU against training step time ({preset})", caption)
+    return (f"Step times (`--step-times`): one pretraining step of each variant (its cells' recipe and model "
+            f"section, {next(iter(timed.values()))['rays']} rays per batch, {p.world.width}x{p.world.height}, fp32, "
+            "synthetic scene), fresh processes alternating round by round, median of the rounds; "
+            f"{step_times['machine']}.\n\n![zero-shot mIoU against step time](benchmarks/accuracy-{preset}/"
+            f"{chart.name})")
+
+
 def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str:
     """A Markdown table with its protocol caption lines under it."""
     from sray.jobs.bench.doc import markdown_table
@@ -151,9 +172,11 @@ def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str
     return "\n".join([markdown_table(header, rows), "", *captions])
 
 
-def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], fleet_dir: Path, doc: Path) -> None:
+def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], fleet_dir: Path, doc: Path,
+                 step_times: dict[str, Any] | None = None) -> None:
     """Write the benchmark's sections into ``doc`` (replacing earlier ones of this preset and device) and
-    its chart(s) into ``<doc folder>/benchmarks/accuracy-<preset>/``."""
+    its chart(s) into ``<doc folder>/benchmarks/accuracy-<preset>/``; ``step_times`` (as
+    ``accuracy_step_cost`` stores them) adds the step-time column and the mIoU-against-step-time chart."""
     from sray.jobs.bench.doc import record
     from sray.platform.common.eval_protocol import caption_lines
     from sray.platform.finetune.methods.registry import get_method
@@ -172,6 +195,8 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
                                  "zero-shot mIoU %", f"Zero-shot mIoU on unseen procedural scenes ({preset})",
                                  " ".join(captions), figures / "zero_shot_seeds.png")
         links.append(f"![zero-shot mIoU over seeds](benchmarks/accuracy-{preset}/{chart.name})")
+        if step_times:
+            links.append(_step_cost_link(preset, p, groups, step_times, " ".join(captions), figures))
 
     results = read_fleet_results(fleet_dir) if fleet_dir.is_dir() else []
     budgets = (0.0, *p.budgets)
@@ -186,7 +211,7 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
              "(a resumed pretraining counts every run that trained it and ended).",
              "Missing cells: " + (", ".join(missing) if missing else "none") + ".",
              "Targets:", *targets(p, stored, sray_at_60), "", *links]
-    header, rows = seed_table(p, stored)
+    header, rows = seed_table(p, stored, step_times)
     record(f"Accuracy: zero-shot with seeds ({preset})", _table(header, rows, captions), doc, "\n".join(notes))
     header, rows = class_table(p, stored)
     if rows:

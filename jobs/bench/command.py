@@ -1,4 +1,5 @@
-"""``sray bench loader|model|profile|speed-accuracy|accuracy``: measured tables, printed and appended to docs/benchmarks.md."""
+"""``sray bench loader|model|profile|speed-accuracy|accuracy``: measured tables, printed and appended to
+docs/benchmarks.md."""
 
 from __future__ import annotations
 
@@ -65,6 +66,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     accuracy.add_argument("--max-minutes", type=float, default=None,
                           help="start no new cell after this many minutes (the tables are written either way)")
     accuracy.add_argument("--no-fleet", action="store_true", help="skip the finetune comparison")
+    accuracy.add_argument("--step-times", action="store_true",
+                          help="also time one pretraining step of every stored variant side by side (fresh "
+                               "processes, alternating) and chart zero-shot mIoU against it")
     accuracy.add_argument("--out", type=Path, default=None,
                           help="work folder, reused by later runs (default: outputs/bench-accuracy/<preset>)")
     accuracy.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
@@ -85,7 +89,8 @@ def _bench_accuracy(args: argparse.Namespace) -> int:
         print(f"sray bench accuracy: --cells: {e}", file=sys.stderr)
         return 2
     out = args.out or Path("outputs/bench-accuracy") / args.preset
-    run_accuracy_benchmark(args.preset, out, args.doc, cells, args.max_minutes, fleet=not args.no_fleet)
+    run_accuracy_benchmark(args.preset, out, args.doc, cells, args.max_minutes, fleet=not args.no_fleet,
+                           step_times=args.step_times)
     return 0
 
 

@@ -22,7 +22,7 @@ from sray.jobs.bench.probes import (
     resolve_device,
     time_call,
 )
-from sray.jobs.bench.workloads import train_step_worker
+from sray.jobs.bench.workloads import fine_samples_of, train_step_worker
 from sray.model.ray_chunks import train_piece_rays
 
 VARIANTS = ("full", "intra", "cross", "dense")
@@ -55,8 +55,8 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     if quick:
         tiny = {"rays": 16, "coarse": 4, "fine": 4, "views": 2, "hw": (32, 32), "steps": 1}
         return _Sizes({"rays": 8, "samples": 8, "views": 4, "channels": 32}, 4, 8,
-                      [dict(tiny, name="tiny", dtype="fp32", impl="reference", piece=16),
-                       dict(tiny, name="tiny", dtype="fp32", impl="fast", piece=4)])
+                      [dict(tiny, name="tiny", dtype="fp32", impl="reference", piece=16, fine_samples="union"),
+                       dict(tiny, name="tiny", dtype="fp32", impl="fast", piece=4, fine_samples="union")])
     paper = {"name": "paper code config", "rays": 1024, "coarse": 64, "fine": 64, "views": 8,
              "hw": (240, 320), "steps": 2}
     small = {"name": "small CPU config", "rays": 256, "coarse": 32, "fine": 32, "views": 4,
@@ -65,14 +65,18 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
         steps = [dict(paper, dtype=d, steps=10) for d in ("fp32", "bf16", "fp16")]
         return _Sizes(PAPER_ATTENTION, 64, 1024, steps)
     # reference rows: the unoptimised path, the whole batch in one piece; fast rows: the defaults (pieces by
-    # device) unless a whole-batch piece is named
-    whole, whole_small = {"piece": paper["rays"]}, {"piece": small["rays"]}
-    steps = [dict(paper, dtype="fp32", impl="reference", **whole), dict(paper, dtype="fp32", impl="fast"),
-             dict(paper, dtype="fp32", impl="reference", fine_samples="new", **whole),
-             dict(paper, dtype="fp32", impl="fast", fine_samples="new", **whole),
-             dict(paper, dtype="fp32", impl="fast", fine_samples="new"),
-             dict(paper, dtype="fp32", impl="fast", fine_samples="new", alloc="thp"),
-             dict(small, dtype="fp32", impl="reference", **whole_small), dict(small, dtype="fp32", impl="fast"),
+    # device, fine_samples new) unless a whole-batch piece or the union is named
+    whole, whole_small, union = {"piece": paper["rays"]}, {"piece": small["rays"]}, {"fine_samples": "union"}
+    steps = [dict(paper, dtype="fp32", impl="reference", **union, **whole),
+             dict(paper, dtype="fp32", impl="fast", **union),
+             dict(paper, dtype="fp32", impl="reference", **whole),
+             dict(paper, dtype="fp32", impl="fast", **whole),
+             dict(paper, dtype="fp32", impl="fast"),
+             dict(paper, dtype="fp32", impl="fast", alloc="thp"),
+             dict(small, dtype="fp32", impl="reference", **union, **whole_small),
+             dict(small, dtype="fp32", impl="fast", **union),
+             dict(small, dtype="fp32", impl="reference", **whole_small),
+             dict(small, dtype="fp32", impl="fast"),
              dict(small, dtype="bf16", impl="fast")]
     return _Sizes(PAPER_ATTENTION, 64, 256, steps)
 
@@ -129,7 +133,7 @@ ALLOCATORS = {"default": "glibc malloc", "thp": "THP_MEM_ALLOC_ENABLE=1"}
 """CPU allocator settings a training-step row can use."""
 
 
-def _run_in_fresh_process(spec: dict) -> dict:
+def run_in_fresh_process(spec: dict) -> dict:
     """Run ``train_step_worker(spec)`` in a newly spawned interpreter (clean peak RSS).
 
     The child inherits THP_MEM_ALLOC_ENABLE=1 for ``alloc='thp'`` and 0 otherwise, whatever the
@@ -152,7 +156,7 @@ def _run_in_fresh_process(spec: dict) -> dict:
 def _row_key(spec: dict) -> tuple:
     """What identifies a training-step row across its repeated runs."""
     return (spec["name"], spec["dtype"], spec.get("impl", "fast"), spec.get("alloc", "default"),
-            spec.get("fine_samples", "union"), _piece(spec))
+            fine_samples_of(spec), _piece(spec))
 
 
 def _piece(spec: dict) -> int:
@@ -170,7 +174,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
     specs = [dict(spec, device=str(device)) for spec in sz.steps]
     for _ in range(REPEATS if device.type == "cpu" and len(specs) > 1 else 1):
         for spec in specs:
-            runs.setdefault(_row_key(spec), []).append(_run_in_fresh_process(spec))
+            runs.setdefault(_row_key(spec), []).append(run_in_fresh_process(spec))
     lines = ["| config | rays | rays per piece | samples (fine pass sees) | views | image | precision | impl | "
              "CPU allocator | first step s | "
              "s / step | rays / s | peak RSS GiB | GPU peak GiB | vs reference (same samples and allocator) | "
@@ -190,7 +194,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         official = (f"{OFFICIAL_CODE['thp'] / s:.1f}x vs its best (19.7 s)"
                     if spec["name"] == "paper code config" and device.type == "cpu" else "-")
         h, w = spec["hw"]
-        fine = spec["coarse"] + spec["fine"] if spec.get("fine_samples", "union") == "union" else spec["fine"]
+        fine = spec["coarse"] + spec["fine"] if fine_samples_of(spec) == "union" else spec["fine"]
         rss = max(r["rss_bytes"] for r in runs[key])
         lines.append(f"| {spec['name']} | {spec['rays']} | {key[5]} | {spec['coarse']}+{spec['fine']} ({fine}) | "
                      f"{spec['views']} | "
@@ -205,9 +209,9 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         f"({res['params'] / 1e6:.2f} M parameters). impl: `SRayConfig.impl` — `reference` is the unoptimised "
         "path of this same commit, `fast` the gathered, transpose-free one (docs/performance.md); both compute "
         "the same values (tests/test_model_fast_path.py). 'samples (fine pass sees)': `fine_samples` union "
-        "(the fine pass re-evaluates the coarse depths, 64 + 128 = 192 evaluations per ray) or new (only the "
-        "resampled ones, 64 + 64 = 128, as the official code). Rays per piece: the loss is computed over pieces of "
-        "that many rays, each piece's gradient taken before the next is rendered (`SRayConfig.train_piece`, "
+        "(the fine pass re-evaluates the coarse depths, 64 + 128 = 192 evaluations per ray) or new (the model "
+        "default: only the resampled ones, 64 + 64 = 128, as the official code). Rays per piece: the loss is "
+        "computed over pieces of that many rays, each piece's gradient taken before the next is rendered (`SRayConfig.train_piece`, "
         "`model/piecewise_loss.py`): the same loss and gradients as the whole batch at once "
         "(tests/test_piecewise_loss.py); the reference rows compute the whole batch in one piece. "
         "Official code: the paper's public S-Ray code at "

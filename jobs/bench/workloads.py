@@ -3,14 +3,15 @@
 Both run on a synthetic scene (random source images, a camera rig whose sources all look at the
 query's frustum), so they need no data and measure the model alone. A spec dict names the sizes:
 rays, coarse, fine, views, hw, device, and optionally dtype ('fp32'|'bf16'|'fp16'), impl
-('reference'|'fast', ``SRayConfig.impl``), fine_samples ('union'|'new'), piece (rays per piece of the
-training loss, ``SRayConfig.train_piece``; 0 = by device), chunk (rays per render chunk; absent = by
-device), compile (both fields through ``torch.compile``),
-steps.
+('reference'|'fast', ``SRayConfig.impl``), fine_samples ('union'|'new'; absent = the model default), piece
+(rays per piece of the training loss, ``SRayConfig.train_piece``; 0 = by device), chunk (rays per render chunk; absent = by
+device), compile (both fields through ``torch.compile``), model (any other ``SRayConfig`` fields, e.g. a
+recipe's whole model section), steps. With ``inputs='rgbd'`` (in ``model``) the sources get depth maps.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import torch
@@ -19,8 +20,9 @@ from sray.jobs.bench.probes import peak_rss_bytes, timed_runs
 from sray.model.config import SRayConfig
 
 
-def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device) -> dict:
-    """Random source images (m, 3, H, W), their cameras, ``rays`` query rays, labels and colours."""
+def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device, depth: bool = False) -> dict:
+    """Random source images (m, 3, H, W), their cameras, ``rays`` query rays, labels and colours; with
+    ``depth``, source z-depth maps (m, H, W) in [1.5, 4.5] metres (inside the workloads' near 1, far 5)."""
     from sray.model.rays import pixel_rays
 
     h, w = hw
@@ -34,14 +36,23 @@ def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.de
     batch = {"src_rgb": torch.rand(views, 3, h, w, generator=gen), "src_K": K.expand(views, 3, 3).clone(),
              "src_c2w": c2w, "origins": origins, "dirs": dirs, "K": K,
              "label": torch.randint(0, 20, (rays,), generator=gen), "rgb": torch.rand(rays, 3, generator=gen)}
+    if depth:
+        batch["src_depth"] = 1.5 + 3.0 * torch.rand(views, h, w, generator=gen)
     return {k: v.to(device) for k, v in batch.items()}
 
 
+def fine_samples_of(spec: dict) -> str:
+    """The spec's ``fine_samples`` (or its ``model`` section's), else the model default."""
+    return spec.get("fine_samples", spec.get("model", {}).get("fine_samples", SRayConfig.fine_samples))
+
+
 def model_config(spec: dict) -> SRayConfig:
-    """The ``SRayConfig`` of a workload spec (paper defaults for everything the spec leaves out)."""
-    return SRayConfig(n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"],
-                      impl=spec.get("impl", "fast"), fine_samples=spec.get("fine_samples", "union"),
-                      train_piece=spec.get("piece", 0))
+    """The ``SRayConfig`` of a workload spec: its ``model`` fields, then its sizes, impl, fine_samples and
+    piece (paper defaults for everything the spec leaves out)."""
+    cfg = SRayConfig(**spec.get("model", {}))
+    return dataclasses.replace(cfg, n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"],
+                               impl=spec.get("impl", cfg.impl), fine_samples=fine_samples_of(spec),
+                               train_piece=spec.get("piece", cfg.train_piece))
 
 
 def make_train_step(spec: dict) -> Callable[[], None]:
@@ -56,13 +67,13 @@ def make_train_step(spec: dict) -> Callable[[], None]:
         model.coarse.compile()
         model.fine.compile()
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
-    batch = synthetic_batch(spec["rays"], spec["views"], tuple(spec["hw"]), device)
+    batch = synthetic_batch(spec["rays"], spec["views"], tuple(spec["hw"]), device, depth=cfg.inputs == "rgbd")
     dtype = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}[spec.get("dtype", "fp32")]
     scaler = torch.amp.GradScaler(device.type, enabled=dtype == torch.float16)
 
     def step() -> None:
         with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
-            src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"])
+            src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"], batch.get("src_depth"))
             loss, _ = model.training_loss(src, batch["origins"], batch["dirs"], 1.0, 5.0, batch["label"], batch["rgb"])
         opt.zero_grad(set_to_none=True)
         scaler.scale(loss).backward()

@@ -1,0 +1,67 @@
+"""``sray bench accuracy --step-times``: each variant's timed step is its cells' training step, variants with the
+same step are timed once, the Pareto front against hand-picked points, and the table column and chart."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from test_bench_accuracy import PLAN3, TOY, _cell
+
+from sray.jobs.bench import accuracy_cells
+from sray.jobs.bench.accuracy_plan import LONG, Cell
+from sray.jobs.bench.accuracy_step_cost import (
+    measure_step_times,
+    read_step_times,
+    step_cost_front,
+    step_spec,
+    store_step_times,
+)
+from sray.jobs.bench.accuracy_tables import write_tables
+from sray.jobs.bench.workloads import model_config
+
+CPU = torch.device("cpu")
+
+
+@pytest.mark.parametrize("variant", ["full", "none", "full-new", "full-rgbd", LONG])
+def test_the_timed_step_is_the_cells_training_step(tmp_path: Path, variant: str) -> None:
+    """The spec's model is exactly the cell's model section, at its batch size and the world's image size."""
+    cfg = accuracy_cells.cell_config(Cell(variant, 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    spec = step_spec(variant, TOY, CPU)
+    assert model_config(spec) == cfg.model
+    assert spec["rays"] == cfg.data.rays_per_batch == 32 and spec["hw"] == (36, 48) and spec["dtype"] == "fp32"
+
+
+def test_front_keeps_points_no_other_beats_on_cost_and_score() -> None:
+    points = {"cheap bad": (1.0, 10.0), "cheap good": (1.0, 12.0), "mid": (2.0, 11.0), "dear best": (4.0, 20.0),
+              "dear worse": (5.0, 15.0), "middling": (3.0, 13.0)}
+    assert step_cost_front(points) == ["cheap good", "middling", "dear best"]
+
+
+@pytest.mark.slow
+def test_variants_with_the_same_step_are_timed_once_and_rgbd_steps_run(tmp_path: Path) -> None:
+    times = measure_step_times(TOY, [LONG, "full", "full-rgbd"], CPU, rounds=1)
+    assert times["full"]["same_step_as"] == LONG and times["full"]["runs"] == times[LONG]["runs"]
+    assert times["full-rgbd"]["same_step_as"] == "full-rgbd"
+    assert all(t["s_per_step"] > 0 and t["peak_rss_gib"] > 0 and t["rays"] == 32 for t in times.values())
+    store_step_times(tmp_path, times, "test machine")
+    assert read_step_times(tmp_path) == {"machine": "test machine", "variants": times}
+    assert read_step_times(tmp_path / "elsewhere") is None
+
+
+def test_tables_show_each_variants_step_time_and_chart_it(tmp_path: Path) -> None:
+    doc = tmp_path / "docs" / "benchmarks.md"
+    stored = {"full-s0": _cell("full", 0, 0.4), "full-s1": _cell("full", 1, 0.5), "none-s0": _cell("none", 0, 0.3)}
+    timed = {"variants": {"full": {"s_per_step": 1.25, "rays": 32}, "none": {"s_per_step": 0.5, "rays": 32}},
+             "machine": "test machine"}
+    write_tables("toy", PLAN3, stored, tmp_path / "no-fleet", doc, timed)
+    text = doc.read_text()
+    rows = {line.split(" | ")[0]: line for line in text.splitlines() if " | " in line}
+    assert rows["variant"].endswith("| eval min | s / step (side by side)")
+    assert rows["full"].startswith("full | 2 | 2/3 | 45.00 ± 7.07") and rows["full"].endswith("| 1.250")
+    assert rows["none"].endswith("| 0.500")
+    assert "test machine" in text and "zero_shot_vs_step_time.png" in text
+    assert (tmp_path / "docs/benchmarks/accuracy-toy/zero_shot_vs_step_time.png").stat().st_size > 0
+    write_tables("toy", PLAN3, stored, tmp_path / "no-fleet", tmp_path / "plain.md")
+    assert "s / step" not in (tmp_path / "plain.md").read_text()
