@@ -59,7 +59,8 @@ def read_scene(scene_dir: Path) -> Scene:
     try:
         meta = SceneMeta.from_json(json.loads(meta_path.read_text()))
     except FileNotFoundError:
-        raise FileNotFoundError(f"{meta_path}: missing; is {root} a scene written by `sray data synth/convert`?") from None
+        raise FileNotFoundError(f"{meta_path}: missing; is {root} a scene written by "
+                                "`sray data synth/convert`?") from None
     except KeyError as e:
         raise ValueError(f"{meta_path}: field {e.args[0]!r} is missing") from None
     try:

@@ -124,7 +124,8 @@ def metric_steps(cluster: LocalCluster, run_id: str, key: str) -> list[int]:
 def dashboard_get(cluster: LocalCluster, path: str) -> dict:
     """A JSON answer of the Ray dashboard (with the cluster's token)."""
     token = cluster.state.token_path.read_text().strip()
-    request = urllib.request.Request(f"{cluster.state.dashboard_url}{path}", headers={"Authorization": f"Bearer {token}"})
+    request = urllib.request.Request(f"{cluster.state.dashboard_url}{path}",
+                                     headers={"Authorization": f"Bearer {token}"})
     with urllib.request.urlopen(request, timeout=20) as reply:
         return json.loads(reply.read())
 

@@ -145,7 +145,8 @@ def test_single_method_fleet_and_degenerate_inputs(tmp_path):
     assert write_fleet_charts([synthetic_result("x", "sray", status="failed")], tmp_path / "none", METHODS) == []
     assert not (tmp_path / "none").exists()
     with pytest.raises(ValueError, match=r"fleet result x/sray: fields \['curve'\] are missing"):
-        write_fleet_charts([{k: v for k, v in synthetic_result("x", "sray").items() if k != "curve"}], tmp_path, METHODS)
+        write_fleet_charts([{k: v for k, v in synthetic_result("x", "sray").items() if k != "curve"}], tmp_path,
+                           METHODS)
     with pytest.raises(ValueError, match="field 'method' is 'nerf'"):
         write_fleet_charts([synthetic_result("x", "sray") | {"method": "nerf"}], tmp_path, METHODS)
 

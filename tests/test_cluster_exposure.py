@@ -30,7 +30,8 @@ def test_loopback_and_wildcard_sockets_are_told_apart() -> None:
         assert all(x.part == "probe" and x.pid == child.pid for x in found)
         line = exposure_line(found)
         assert f"0.0.0.0:{any_port}" in line and f":{loop_port}" not in line and "1 of 2" in line
-        assert exposure_line([x for x in found if x.loopback_only]).endswith("all 1 listening ports are on loopback only")
+        assert exposure_line([x for x in found if x.loopback_only]).endswith("all 1 listening ports are on "
+                                                                             "loopback only")
     finally:
         child.kill()
         child.wait()

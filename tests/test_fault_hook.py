@@ -33,7 +33,8 @@ def test_parse_reads_every_key_and_defaults_to_off() -> None:
     assert parse_faults("") == Faults()
     got = parse_faults(" train.kill_at_step=12 ; train.nan_at_step=7;train.stop_after_step=10;fleet.fail_scenes=a, b ;"
                        "train.hold_at_steps=2, 7")
-    assert got == Faults(kill_at_step=12, nan_at_step=7, stop_after_step=10, fail_scenes=("a", "b"), hold_at_steps=(2, 7))
+    assert got == Faults(kill_at_step=12, nan_at_step=7, stop_after_step=10, fail_scenes=("a", "b"),
+                         hold_at_steps=(2, 7))
 
 
 @pytest.mark.parametrize("text, named", [("train.kill_at=3", "train.kill_at"), ("train.nan_at_step=x", "integer"),

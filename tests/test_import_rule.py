@@ -84,7 +84,8 @@ def test_no_import_cycles_between_product_modules() -> None:
         state[node] = 1
         for nxt in sorted(graph[node]):
             if state.get(nxt) == 1:
-                cycles.append(" -> ".join(trail[trail.index(nxt):] + [node, nxt]) if nxt in trail else f"{node} -> {nxt}")
+                cycles.append(" -> ".join(trail[trail.index(nxt):] + [node, nxt]) if nxt in trail
+                              else f"{node} -> {nxt}")
             elif nxt not in state:
                 visit(nxt, trail + [node])
         state[node] = 2
@@ -108,6 +109,19 @@ def test_product_files_stay_short() -> None:
     long = [f"{p.relative_to(REPO)}: {n}" for p in _product_files()
             if (n := len(p.read_text().splitlines())) > MAX_LINES]
     assert not long, "\n".join(long)
+
+
+MAX_LINE_CHARS = 120
+"""Widest line allowed in any Python file of the repository, product and tests."""
+
+
+def test_lines_stay_within_the_width() -> None:
+    files = [*_product_files(), *sorted((REPO / "tests").rglob("*.py"))]
+    wide = [f"{p.relative_to(REPO)}:{i}: {len(line)} characters" for p in files
+            for i, line in enumerate(p.read_text().splitlines(), 1) if len(line) > MAX_LINE_CHARS]
+    assert not wide, "\n".join(wide)
+
+
 TRACKING = "platform/tracking"
 """The one folder whose modules may import mlflow (the MLflow tracker and its helpers)."""
 TRACKER_INTERFACE = ("sray.platform.tracking.tracker", "sray.platform.tracking.registry",

@@ -57,7 +57,8 @@ def test_upsampling_reproduces_a_linear_ramp() -> None:
     us = torch.arange(s // 2, w, s, dtype=torch.float32)
     gv, gu = torch.meshgrid(vs, us, indexing="ij")
     values = torch.stack([2 * gu + 3 * gv, -gu], dim=-1)  # (h', w', 2), linear in (u, v)
-    v, u = torch.meshgrid(torch.arange(float(s // 2), float(vs[-1]) + 1), torch.arange(float(s // 2), float(us[-1]) + 1),
+    v, u = torch.meshgrid(torch.arange(float(s // 2), float(vs[-1]) + 1),
+                          torch.arange(float(s // 2), float(us[-1]) + 1),
                           indexing="ij")
     uv = torch.stack([u.reshape(-1), v.reshape(-1)], dim=-1)  # every pixel inside the rendered grid
     out = upsample_to(values, (len(vs), len(us)), s, uv)

@@ -107,7 +107,8 @@ def test_without_grad_mode_the_loss_is_the_same_and_nothing_is_kept() -> None:
             if piece:
                 loss, _ = net.training_loss(src, r["origins"], r["dirs"], NEAR, FAR, label, rgb)
             else:
-                loss, _ = render_loss(net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, True), label, rgb, net.cfg)
+                loss, _ = render_loss(net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, True), label, rgb,
+                                      net.cfg)
         assert not loss.requires_grad
         losses.append(loss)
     torch.testing.assert_close(losses[1], losses[0], rtol=1e-6, atol=0)
@@ -123,7 +124,8 @@ def test_one_piece_is_the_ordinary_pass() -> None:
     torch.manual_seed(5)
     got, _ = net.training_loss(src, r["origins"], r["dirs"], NEAR, FAR, label, rgb)
     torch.manual_seed(5)
-    want, _ = render_loss(net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=True), label, rgb, net.cfg)
+    want, _ = render_loss(net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=True), label, rgb,
+                          net.cfg)
     assert torch.equal(got, want)
 
 

@@ -70,7 +70,8 @@ def _point(axis: str, method: str, level, seed: int, miou: float | None) -> dict
 def test_breaking_points_by_hand() -> None:
     points = [_point("blur", "sray", lvl, s, v + d) for lvl, v in ((1, 40.0), (3, 30.0), (7, 10.0))
               for s, d in enumerate((-1.0, 0.0, 1.0))]
-    points += [_point("blur", "semantic-nerf", lvl, s, v) for lvl, v in ((1, 20.0), (3, 18.0), (7, 15.0)) for s in range(3)]
+    points += [_point("blur", "semantic-nerf", lvl, s, v) for lvl, v in ((1, 20.0), (3, 18.0), (7, 15.0))
+               for s in range(3)]
     points += [_point("blur", "sray-no-cra", 1, s, 30.0) for s in range(3)]
     points += [_point("blur", "sray-no-cra", 3, s, None) for s in range(3)]  # every seed failed
     points += [_point("precision", "sray", "fp32", s, 40.0) for s in range(3)]
@@ -86,6 +87,7 @@ def test_breaking_points_by_hand() -> None:
     assert breaking_point(prec) == ("bf16", "first level at or below half")
     lines = breaking_summary(stats, ["blur", "precision"])
     assert "blur / sray: half the clean mIoU lost at 5 (interpolated between levels)" in lines
-    assert any(line.startswith("blur / semantic-nerf: keeps half its clean mIoU at every level tested") for line in lines)
+    assert any(line.startswith("blur / semantic-nerf: keeps half its clean mIoU at every level tested")
+               for line in lines)
     table = axis_table(stats, "blur", "motion-blur length (px)")
     assert "| 3 | 30.00 (29.0-31.0) | 20.00 | 18.00 (18.0-18.0) | 20.00 | failed | failed |" in table

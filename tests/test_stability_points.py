@@ -125,9 +125,11 @@ def _record(axis, method, level, seed, miou, psnr=20.0, x=None) -> dict:
 
 def test_chart_panels_and_tables_of_a_known_result(tmp_path) -> None:
     records = [_record("blur", "sray", 1, None, 60.0, 25.0),
-               *(_record("blur", "sray", 7, s, m, p) for s, m, p in [(0, 40.0, 20.0), (1, 50.0, 22.0), (2, 30.0, 18.0)]),
+               *(_record("blur", "sray", 7, s, m, p)
+                 for s, m, p in [(0, 40.0, 20.0), (1, 50.0, 22.0), (2, 30.0, 18.0)]),
                *(_record("blur", "semantic-nerf", lvl, s, m) for lvl, m in [(1, 70.0), (7, None)] for s in range(3)),
-               _record("unseen_rays", "sray", 0, None, 60.0, x=0.05), _record("unseen_rays", "sray", 4, None, 20.0, x=0.4)]
+               _record("unseen_rays", "sray", 0, None, 60.0, x=0.05),
+               _record("unseen_rays", "sray", 4, None, 20.0, x=0.4)]
     (blur, unseen) = panels(level_stats(records), ["blur", "unseen_rays"], "miou")
     sray = blur.lines["sray"]
     assert [(p.x, p.mean, p.low, p.high) for p in sray] == [(1.0, 60.0, 60.0, 60.0), (7.0, 40.0, 30.0, 50.0)]
@@ -141,7 +143,8 @@ def test_chart_panels_and_tables_of_a_known_result(tmp_path) -> None:
     assert "| 7 | 40.00 (30.0-50.0) | 20.00 | failed | failed |" in table
     assert "0 → 5.0 %, 4 → 40.0 %" in out["tables"]["unseen_rays"]
     assert "blur / semantic-nerf: half the clean mIoU lost at 4 (interpolated between levels)" in out["breaking"]
-    assert "blur / sray: keeps half its clean mIoU at every level tested (mIoU stays above 30.0, half of the clean 60.0)" in out["breaking"]
+    assert ("blur / sray: keeps half its clean mIoU at every level tested (mIoU stays above 30.0, half of the "
+            "clean 60.0)") in out["breaking"]
     assert all(c.stat().st_size > 10_000 for c in out["charts"])
 
 

@@ -73,7 +73,8 @@ def test_slab_casting_matches_face_by_face_reference(seed: int) -> None:
 def test_a_box_around_the_origin_is_seen_through() -> None:
     inner = Box(center=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0), label=0, material=PLAIN)
     ahead = Box(center=(3.0, 0.0, 0.0), size=(1.0, 1.0, 1.0), label=0, material=PLAIN)
-    t, idx = cast_rays(np.zeros(3), np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]]), PackedBoxes.from_boxes([inner, ahead]))
+    t, idx = cast_rays(np.zeros(3), np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]]),
+                       PackedBoxes.from_boxes([inner, ahead]))
     assert idx.tolist() == [1, -1]
     assert float(t[0]) == 2.5 and math.isinf(float(t[1]))
 

@@ -71,7 +71,8 @@ def test_mlflow_store_holds_everything(uninterrupted) -> None:
     assert not {"val/ssim", "zeroshot/ssim"} & set(run.data.metrics)
     paths = [a.path for a in client.list_artifacts(run.info.run_id)]
     assert "config.json" in paths
-    renders = [a.path for folder in ("renders/val", "renders/zeroshot") for a in client.list_artifacts(run.info.run_id, folder)]
+    renders = [a.path for folder in ("renders/val", "renders/zeroshot")
+               for a in client.list_artifacts(run.info.run_id, folder)]
     assert any(p.endswith(".png") for p in renders), renders
     versions = client.search_model_versions(f"name = '{cfg.run.register_model}'")
     assert any(v.run_id == run.info.run_id for v in versions)

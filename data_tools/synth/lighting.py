@@ -73,4 +73,5 @@ def add_lights(rng: np.random.Generator, plan: FloorPlan) -> None:
                                          kelvin_rgb(float(rng.uniform(2400.0, 3200.0)))))
                 break
     for x, y, z in plan.windows[:2]:
-        plan.lights.append(Light((x, y, z), float(rng.uniform(0.3, 1.0)), kelvin_rgb(float(rng.uniform(6500.0, 10000.0)))))
+        plan.lights.append(Light((x, y, z), float(rng.uniform(0.3, 1.0)),
+                                 kelvin_rgb(float(rng.uniform(6500.0, 10000.0)))))

@@ -144,7 +144,8 @@ def drawer_chest(rng: np.random.Generator, w: float, d: float, h: float) -> Piec
     step = (h - feet - 0.04) / n
     for i in range(n):
         z0 = feet + 0.02 + i * step
-        boxes.append(span(label, fronts, -w / 2 + 0.02, w / 2 - 0.02, d / 2, d / 2 + 0.015, z0 + 0.008, z0 + step - 0.008))
+        boxes.append(span(label, fronts, -w / 2 + 0.02, w / 2 - 0.02, d / 2, d / 2 + 0.015, z0 + 0.008,
+                          z0 + step - 0.008))
         boxes.append(span(label, knob, -0.04, 0.04, d / 2 + 0.015, d / 2 + 0.035, z0 + step / 2 - 0.012,
                           z0 + step / 2 + 0.012))
     return Piece(boxes, w, d + 0.035, h)

@@ -156,7 +156,8 @@ def _step_cost_link(preset: str, p: Preset, groups: dict[str, list[dict[str, Any
     timed = step_times["variants"]
     chart = step_cost_chart({variant_label(v, p): [100 * c["miou"] for c in cells] for v, cells in groups.items()},
                             {variant_label(v, p): timed[v]["s_per_step"] for v in groups if v in timed},
-                            {variant_label(v, p): cells[0]["steps"] for v, cells in groups.items()}, figures / "zero_shot_vs_step_time.png",
+                            {variant_label(v, p): cells[0]["steps"] for v, cells in groups.items()},
+                            figures / "zero_shot_vs_step_time.png",
                             f"Zero-shot mIoU against training step time ({preset})", caption)
     return (f"Step times (`--step-times`): one pretraining step of each variant (its cells' recipe and model "
             f"section, {next(iter(timed.values()))['rays']} rays per batch, {p.world.width}x{p.world.height}, fp32, "

@@ -26,8 +26,10 @@ def machine_line() -> str:
     """One line naming the machine a number was measured on."""
     device = device_kind()
     if not torch.cuda.is_available():
-        device += f", {torch.get_num_threads()} torch threads, {os.cpu_count()} cores, load average {_load()} when written"
-    return f"{_stdlib_platform.machine()}, {device}, torch {torch.__version__}, Python {_stdlib_platform.python_version()}"
+        device += (f", {torch.get_num_threads()} torch threads, {os.cpu_count()} cores, "
+                   f"load average {_load()} when written")
+    return (f"{_stdlib_platform.machine()}, {device}, torch {torch.__version__}, "
+            f"Python {_stdlib_platform.python_version()}")
 
 
 def _load() -> str:

@@ -100,7 +100,8 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     """Score every setting on the first ``views_per_scene`` test views of each unseen scene.
 
     ``checkpoint_rgbd``: the model that renders the ``inputs="rgbd"`` settings (None: ``checkpoint``'s).
-    ``views_per_scene`` <= 0 scores every test view. Returns one row per setting: name, miou, psnr (dataset-level protocol, mean over scenes),
+    ``views_per_scene`` <= 0 scores every test view. Returns one row per setting: name, miou, psnr
+    (dataset-level protocol, mean over scenes),
     s_per_view (CPU seconds of this process per view, all threads, source encoding included: unlike
     wall-clock time it does not grow when other jobs share the cores), wall_s_per_view, views, and the
     setting.
@@ -229,8 +230,10 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
              f"scenes; CPU s / view is the CPU time this process spent (all its threads) encoding the sources and "
              f"rendering one whole view, the speed measure here because other jobs may share the cores (on a quiet "
              f"machine wall time is about CPU time / torch threads); wall s / view is shown beside it. Settings: "
-             f"'full, reference path' is the unoptimised path (`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with "
-             f"the checkpoint's samples; 'full' is the optimised path (chunks by device: 256 rays on a CPU), equal to it "
+             f"'full, reference path' is the unoptimised path "
+             f"(`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with "
+             f"the checkpoint's samples; 'full' is the optimised path "
+             f"(chunks by device: 256 rays on a CPU), equal to it "
              f"within fp32 tolerance. 'fast sS cC': the fast render mode "
              f"(`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine pass (resampled "
              f"depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed by the "

@@ -3,10 +3,11 @@
 Both run on a synthetic scene (random source images, a camera rig whose sources all look at the
 query's frustum), so they need no data and measure the model alone. A spec dict names the sizes:
 rays, coarse, fine, views, hw, device, and optionally dtype ('fp32'|'bf16'|'fp16'), impl
-('reference'|'fast', ``SRayConfig.impl``), fine_samples ('union'|'new'; absent = the model default), piece
-(rays per piece of the training loss, ``SRayConfig.train_piece``; 0 = by device), chunk (rays per render chunk; absent = by
-device), compile (both fields through ``torch.compile``), model (any other ``SRayConfig`` fields, e.g. a
-recipe's whole model section), steps. With ``inputs='rgbd'`` (in ``model``) the sources get depth maps.
+('reference'|'fast', ``SRayConfig.impl``), fine_samples ('union'|'new'; absent = the model default),
+piece (rays per piece of the training loss, ``SRayConfig.train_piece``; 0 = by device), chunk (rays per
+render chunk; absent = by device), compile (both fields through ``torch.compile``), model (any other
+``SRayConfig`` fields, e.g. a recipe's whole model section), steps. With ``inputs='rgbd'`` (in ``model``)
+the sources get depth maps.
 """
 
 from __future__ import annotations

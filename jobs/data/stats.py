@@ -29,7 +29,8 @@ def format_stats(names: list[str], per_scene: dict[str, np.ndarray]) -> str:
     for i, name in enumerate(names):
         rows.append(f"{name:<16} {100 * total[i] / total.sum():9.2f} {100 * total[i] / labelled:11.2f} "
                     f"{int(present[i]):>4}/{len(per_scene)}")
-    rows.append(f"{'(ignore)':<16} {100 * total[-1] / total.sum():9.2f} {'':>11} {int(present[-1]):>4}/{len(per_scene)}")
+    rows.append(f"{'(ignore)':<16} {100 * total[-1] / total.sum():9.2f} {'':>11} "
+                f"{int(present[-1]):>4}/{len(per_scene)}")
     rows.append(f"{len(per_scene)} scenes, {int(total.sum())} pixels")
     return "\n".join(rows)
 

@@ -33,5 +33,6 @@ def _gpu_check(args: argparse.Namespace) -> int:
         print(f"sray gpu-check: {err}")
         return 2
     failed = [n for n, r in report["stages"].items() if r.status == "failed"]
-    print(f"sray gpu-check: report in {args.out / 'gpu_check.md'}" + (f"; failed: {', '.join(failed)}" if failed else ""))
+    print(f"sray gpu-check: report in {args.out / 'gpu_check.md'}"
+          + (f"; failed: {', '.join(failed)}" if failed else ""))
     return 1 if failed else 0

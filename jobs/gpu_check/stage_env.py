@@ -16,7 +16,8 @@ GPU_TEST_FILES = ("tests/test_model_gpu.py", "tests/test_model_rendering.py")
 MODEL_TEST_FILES = ("tests/test_model_sray.py", "tests/test_model_attention.py", "tests/test_model_weights.py",
                     "tests/test_model_precision.py", "tests/test_train_step.py")
 """Model-level tests that need torch alone (no Ray, MLflow or webdataset)."""
-DRY_RUN_TESTS = ("tests/test_model_gpu.py", "tests/test_model_weights.py::test_radial_weights_come_within_one_percent_of_both_bounds")
+DRY_RUN_TESTS = ("tests/test_model_gpu.py",
+                 "tests/test_model_weights.py::test_radial_weights_come_within_one_percent_of_both_bounds")
 """A dry run only proves the stage runs: the GPU tests (skipping on a CPU) and one quick model test."""
 
 

@@ -74,7 +74,8 @@ def _start_part(state: ClusterState, name: str, wait: bool = True) -> None:
         postgres.ensure_database(bins, state.ports["postgres"], state.password)
     elif name == "mlflow":
         _started(state, name, mlflow_server.spawn_server(postgres.backend_uri(state.ports["postgres"]), state.password,
-                                                         root / "artifacts", state.ports["mlflow"], logs / "mlflow.log"))
+                                                         root / "artifacts", state.ports["mlflow"],
+                                                         logs / "mlflow.log"))
         if not wait:
             return
         _mlflow_ready(state)

@@ -108,7 +108,8 @@ def propagated_env() -> dict[str, str]:
     return {ENV_VAR: value} if value else {}
 
 
-def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path, before_exit: Callable[[], None] | None = None) -> None:
+def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path,
+                before_exit: Callable[[], None] | None = None) -> None:
     """Exit this process abruptly at ``faults.kill_at_step`` (rank 0, first attempt only).
 
     ``before_exit``: run just before the exit (e.g. flushing the tracker).

@@ -179,7 +179,8 @@ def check_sections(cfg: TrainConfig) -> None:
     before the loss scaler scales them (``sray.model.piecewise_loss``), so small ones could underflow."""
     if cfg.run.precision == "fp16" and 0 < cfg.model.train_piece < cfg.data.rays_per_batch:
         raise ValueError(f"train config: model.train_piece is {cfg.model.train_piece} (< data.rays_per_batch "
-                         f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not loss-scaled. "
+                         f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not "
+                         "loss-scaled. "
                          "Set model.train_piece=0 (the whole batch on a GPU) or run.precision=bf16.")
 
 

@@ -201,7 +201,8 @@ def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
                     if task.attempt <= cfg.retries:
                         delay = cfg.retry_backoff_s * 2 ** (task.attempt - 1)
                         waiting.append((time.monotonic() + delay, dataclasses.replace(task, attempt=task.attempt + 1)))
-                        _say(f"{task.scene}/{task.method} attempt {task.attempt} failed ({error}); re-run in {delay:g} s")
+                        _say(f"{task.scene}/{task.method} attempt {task.attempt} failed ({error}); "
+                             f"re-run in {delay:g} s")
                         continue
                     result = failed_result(task, error, full_bytes)
                     write_result(Path(task.out_dir), result)

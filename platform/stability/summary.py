@@ -46,7 +46,8 @@ def level_stats(points: list[dict[str, Any]]) -> list[LevelStats]:
         ok = [p for p in group if p["status"] == "ok"]
         mious = [float(p["miou"]) for p in ok]
         psnrs = [float(p["psnr"]) for p in ok if p.get("psnr") is not None]
-        out.append(LevelStats(axis, method, level, _mean([float(p["x"]) for p in ok if isinstance(p.get("x"), (int, float))]),
+        out.append(LevelStats(axis, method, level,
+                              _mean([float(p["x"]) for p in ok if isinstance(p.get("x"), (int, float))]),
                               _mean(mious), min(mious, default=None), max(mious, default=None), _mean(psnrs),
                               len(ok), len(group) - len(ok), min(psnrs, default=None), max(psnrs, default=None)))
     return out

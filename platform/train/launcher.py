@@ -54,7 +54,8 @@ def unique_name(cfg: TrainConfig) -> str:
     if cfg.run.name:
         if (Path(cfg.run.output_dir) / cfg.run.name).exists():
             raise FileExistsError(f"{Path(cfg.run.output_dir) / cfg.run.name}: a job called {cfg.run.name!r} "
-                                  f"exists; continue it with `sray train --resume {cfg.run.name}` or pick another --name")
+                                  f"exists; continue it with `sray train --resume {cfg.run.name}` "
+                                  "or pick another --name")
         return cfg.run.name
     stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
     name, n = f"{cfg.recipe}-{stamp}", 1

@@ -46,7 +46,8 @@ def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
 def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: str,
                    device: torch.device) -> tuple[dict[str, float], list[tuple[str, ViewPrediction]]]:
     """Scores averaged over the scenes of ``role`` (each scene scored from its own confusion matrix; the
-    first ``data.val_scenes`` of them by name when that is set), and the rendered views (scene, prediction). Empty when no scene of that role has test views.
+    first ``data.val_scenes`` of them by name when that is set), and the rendered views (scene, prediction).
+    Empty when no scene of that role has test views.
     ``manifest``: the parsed ``cfg.data.shards`` manifest (not read again here)."""
     per_scene, renders = [], []
     scenes = [(name, entry) for name, entry in sorted(manifest.scenes.items())

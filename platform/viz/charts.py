@@ -157,7 +157,8 @@ def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str, methods
     note = "Curves hold their value between evaluations and after a finetune stops" + (
         "; the mean panel resamples each scene's curve on the union of evaluation points." if len(scenes) >= 2 else ".")
     fig, body = _framed_figure(max(PANEL_SIZE[0] * ncols, MIN_WIDTH), PANEL_SIZE[1] * nrows,
-                               f"{y_title} vs {x_title}", _legend_handles(ok, methods), _footnote_parts(ok, results, note))
+                               f"{y_title} vs {x_title}", _legend_handles(ok, methods),
+                               _footnote_parts(ok, results, note))
     axes = body.subplots(nrows, ncols, squeeze=False)
     for ax, (title, by_method, mean) in zip(axes.flat, panels):
         _draw_panel(ax, by_method, metric, x_key, mean, methods)
