@@ -23,7 +23,9 @@ class Variant:
     """``model.inputs`` (``rgbd``: the source views' depth guides the samples)."""
     fine_samples: str = "union"
     """``model.fine_samples`` (``new``: the fine pass evaluates only the resampled depths, as the official
-    code; half the training step on a CPU, docs/performance.md)."""
+    code; half the training step on a CPU, docs/performance.md). ``union`` for every variant but
+    ``full-new``, as when their cells were trained, although the model default is ``new`` since the
+    ``full``/``full-new`` comparison."""
 
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
