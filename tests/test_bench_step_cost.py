@@ -3,6 +3,7 @@ same step are timed once, the Pareto front against hand-picked points, and the t
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -31,6 +32,11 @@ def test_the_timed_step_is_the_cells_training_step(tmp_path: Path, variant: str)
     spec = step_spec(variant, TOY, CPU)
     assert model_config(spec) == cfg.model
     assert spec["rays"] == cfg.data.rays_per_batch == 32 and spec["hw"] == (36, 48) and spec["dtype"] == "fp32"
+
+
+def test_the_timed_step_runs_in_the_recipes_precision() -> None:
+    bf16 = dataclasses.replace(TOY, overrides=(*TOY.overrides, "run.precision=bf16"))
+    assert step_spec("full", bf16, CPU)["dtype"] == "bf16"
 
 
 def test_front_keeps_points_no_other_beats_on_cost_and_score() -> None:

@@ -31,7 +31,7 @@ TIMED_STEPS = 3
 
 def step_spec(variant: str, p: Preset, device: torch.device) -> dict[str, Any]:
     """The ``workloads`` spec of one pretraining step of ``variant`` in preset ``p``: its cells' model
-    section whole, their rays per batch, the preset's image size, fp32."""
+    section whole, their rays per batch and precision, the preset's image size."""
     import dataclasses
 
     from sray.jobs.bench.accuracy_cells import cell_config
@@ -39,7 +39,8 @@ def step_spec(variant: str, p: Preset, device: torch.device) -> dict[str, Any]:
     cfg = cell_config(Cell(variant, 0), p, Path("shards"), Path("out"), "")
     m = cfg.model
     return {"name": variant, "rays": cfg.data.rays_per_batch, "coarse": m.n_coarse, "fine": m.n_fine,
-            "views": m.n_source, "hw": (p.world.height, p.world.width), "dtype": "fp32",
+            "views": m.n_source, "hw": (p.world.height, p.world.width),
+            "dtype": {"no": "fp32", "bf16": "bf16", "fp16": "fp16"}[cfg.run.precision],
             "model": dataclasses.asdict(m), "steps": TIMED_STEPS, "device": str(device)}
 
 

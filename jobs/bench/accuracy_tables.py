@@ -160,7 +160,8 @@ def _step_cost_link(preset: str, p: Preset, groups: dict[str, list[dict[str, Any
                             figures / "zero_shot_vs_step_time.png",
                             f"Zero-shot mIoU against training step time ({preset})", caption)
     return (f"Step times (`--step-times`): one pretraining step of each variant (its cells' recipe and model "
-            f"section, {next(iter(timed.values()))['rays']} rays per batch, {p.world.width}x{p.world.height}, fp32, "
+            f"section, {next(iter(timed.values()))['rays']} rays per batch, {p.world.width}x{p.world.height}, its "
+            "precision, "
             "synthetic scene), fresh processes alternating round by round, median of the rounds; "
             f"{step_times['machine']}.\n\n![zero-shot mIoU against step time](benchmarks/accuracy-{preset}/"
             f"{chart.name})")
