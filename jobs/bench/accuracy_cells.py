@@ -59,6 +59,8 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
     variant = VARIANT_SETTINGS[cell.variant]
     cfg.model.attention, cfg.model.weight_map, cfg.model.inputs = variant.attention, variant.weight_map, variant.inputs
     cfg.model.fine_samples = variant.fine_samples
+    if variant.n_heads is not None:
+        cfg.model.n_heads = variant.n_heads
     if cell.variant != LONG:
         cfg.optim.steps = p.ablation_steps
     elif p.long_steps is not None:

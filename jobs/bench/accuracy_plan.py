@@ -26,14 +26,18 @@ class Variant:
     code; half the training step on a CPU, docs/performance.md). ``union`` for every variant but
     ``full-new``, as when their cells were trained, although the model default is ``new`` since the
     ``full``/``full-new`` comparison."""
+    n_heads: int | None = None
+    """``model.n_heads`` (None: the recipe's): fewer, wider heads do less softmax work per token."""
 
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
                     "full-affine": Variant(weight_map="affine"), "full-rgbd": Variant(inputs="rgbd"),
-                    "full-new": Variant(fine_samples="new"), LONG: Variant()}
+                    "full-new": Variant(fine_samples="new"), "full-new-h2": Variant(fine_samples="new", n_heads=2),
+                    LONG: Variant()}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
-full CRA whose fine pass evaluates the resampled depths only."""
+full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
+channels instead of 4 of 8."""
 
 
 COMPARED = ("sray", "semantic-nerf")
@@ -121,7 +125,7 @@ PRESETS = {
         recipe="synth-cpu-hour", overrides=(), long_steps=None, ablation_steps=600, validations=2, ckpt_every=200,
         plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
-              *seeds("full-new", 3)),
+              *seeds("full-new", 3), *seeds("full-new-h2", 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0),
