@@ -7,7 +7,8 @@ from pathlib import Path
 from fleet_fixtures import tiny_checkpoint  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
-from sray.jobs.bench.speed_accuracy import chart, pareto, table
+from sray.jobs.bench.pareto import pareto
+from sray.jobs.bench.speed_accuracy import chart, table
 
 
 def _row(name: str, miou: float, s: float, fast: bool = False) -> dict:
@@ -21,6 +22,13 @@ ROWS = [_row("full", 50.0, 40.0), _row("slow and worse", 45.0, 60.0), _row("fast
 
 def test_pareto_front_keeps_only_undominated_rows_fastest_first() -> None:
     assert [r["name"] for r in pareto(ROWS)] == ["fast b", "fast a", "full"]
+
+
+def test_pareto_front_reads_the_named_cost_and_score_and_breaks_cost_ties_by_score() -> None:
+    points = [{"name": n, "s": s, "score": y} for n, s, y in
+              [("cheap bad", 1.0, 10.0), ("cheap good", 1.0, 12.0), ("mid", 2.0, 11.0), ("dear best", 4.0, 20.0),
+               ("dear worse", 5.0, 15.0), ("middling", 3.0, 13.0)]]
+    assert [r["name"] for r in pareto(points, cost="s", score="score")] == ["cheap good", "middling", "dear best"]
 
 
 def test_table_reports_paired_differences_and_speed_ups_against_the_first_row() -> None:

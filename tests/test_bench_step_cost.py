@@ -15,7 +15,6 @@ from sray.jobs.bench.accuracy_plan import LONG, Cell
 from sray.jobs.bench.accuracy_step_cost import (
     measure_step_times,
     read_step_times,
-    step_cost_front,
     step_spec,
     store_step_times,
 )
@@ -37,12 +36,6 @@ def test_the_timed_step_is_the_cells_training_step(tmp_path: Path, variant: str)
 def test_the_timed_step_runs_in_the_recipes_precision() -> None:
     bf16 = dataclasses.replace(TOY, overrides=(*TOY.overrides, "run.precision=bf16"))
     assert step_spec("full", bf16, CPU)["dtype"] == "bf16"
-
-
-def test_front_keeps_points_no_other_beats_on_cost_and_score() -> None:
-    points = {"cheap bad": (1.0, 10.0), "cheap good": (1.0, 12.0), "mid": (2.0, 11.0), "dear best": (4.0, 20.0),
-              "dear worse": (5.0, 15.0), "middling": (3.0, 13.0)}
-    assert step_cost_front(points) == ["cheap good", "middling", "dear best"]
 
 
 @pytest.mark.slow

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from sray.jobs.bench.accuracy_plan import Cell, Preset
+from sray.jobs.bench.pareto import pareto
 
 STEP_TIMES_FILE = "step_times.json"
 """Stored step times of a benchmark folder: {"machine": ..., "variants": {variant: {...}}}."""
@@ -88,17 +89,6 @@ def read_step_times(out: Path) -> dict[str, Any] | None:
     return json.loads(path.read_text()) if path.exists() else None
 
 
-def step_cost_front(points: dict[str, tuple[float, float]]) -> list[str]:
-    """Labels no other point beats on both cost and score: points label -> (seconds per step, mean mIoU),
-    cheapest first."""
-    front, best = [], float("-inf")
-    for label, (_, score) in sorted(points.items(), key=lambda kv: (kv[1][0], -kv[1][1])):
-        if score > best:
-            front.append(label)
-            best = score
-    return front
-
-
 def step_cost_chart(scores: dict[str, list[float]], seconds: dict[str, float], steps: dict[str, int], path: Path,
                     title: str, caption: str) -> Path:
     """Zero-shot mIoU (%, mean with the seeds' min-max as error bars) against seconds per pretraining step.
@@ -128,7 +118,8 @@ def step_cost_chart(scores: dict[str, list[float]], seconds: dict[str, float], s
                     mfc=None if equal else "white")
         ax.annotate(f"{k} ({len(scores[k])} seed{'s' if len(scores[k]) > 1 else ''}, {steps[k]} steps)", (x, y),
                     textcoords="offset points", xytext=(5, 4), fontsize=7)
-    front = step_cost_front({k: xy for k, xy in points.items() if steps[k] == budget})
+    front = [r["name"] for r in pareto([{"name": k, "s": xy[0], "miou": xy[1]} for k, xy in points.items()
+                                        if steps[k] == budget], cost="s")]
     ax.plot([points[k][0] for k in front], [points[k][1] for k in front], color="tab:orange", lw=1.5,
             label=f"Pareto front ({budget} steps each; mean over seeds)")
     ax.set_xlabel("seconds per pretraining step (measured side by side, this machine)")

@@ -22,7 +22,7 @@ from sray.jobs.bench.probes import (
     resolve_device,
     time_call,
 )
-from sray.jobs.bench.workloads import fine_samples_of, train_step_worker
+from sray.jobs.bench.workloads import model_config, train_step_worker
 from sray.model.ray_chunks import train_piece_rays
 
 VARIANTS = ("full", "intra", "cross", "dense")
@@ -156,7 +156,7 @@ def run_in_fresh_process(spec: dict) -> dict:
 def _row_key(spec: dict) -> tuple:
     """What identifies a training-step row across its repeated runs."""
     return (spec["name"], spec["dtype"], spec.get("impl", "fast"), spec.get("alloc", "default"),
-            fine_samples_of(spec), _piece(spec))
+            model_config(spec).fine_samples, _piece(spec))
 
 
 def _piece(spec: dict) -> int:
@@ -194,7 +194,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         official = (f"{OFFICIAL_CODE['thp'] / s:.1f}x vs its best (19.7 s)"
                     if spec["name"] == "paper code config" and device.type == "cpu" else "-")
         h, w = spec["hw"]
-        fine = spec["coarse"] + spec["fine"] if fine_samples_of(spec) == "union" else spec["fine"]
+        fine = model_config(spec).n_fine_total
         rss = max(r["rss_bytes"] for r in runs[key])
         lines.append(f"| {spec['name']} | {spec['rays']} | {key[5]} | {spec['coarse']}+{spec['fine']} ({fine}) | "
                      f"{spec['views']} | "

@@ -22,6 +22,7 @@ from pathlib import Path
 import torch
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.jobs.bench.pareto import pareto
 from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
@@ -150,16 +151,6 @@ def _apply(net: torch.nn.Module, st: Setting, own: tuple[int, int, str]) -> None
         if hasattr(module, "impl"):
             module.impl = st.impl
     net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in own[:2])
-
-
-def pareto(rows: list[dict]) -> list[dict]:
-    """Rows no other row beats on both speed and mIoU, fastest first."""
-    front, best = [], float("-inf")
-    for r in sorted(rows, key=lambda r: (r["s_per_view"], -r["miou"])):
-        if r["miou"] > best:
-            front.append(r)
-            best = r["miou"]
-    return front
 
 
 def table(rows: list[dict]) -> str:

@@ -42,17 +42,12 @@ def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.de
     return {k: v.to(device) for k, v in batch.items()}
 
 
-def fine_samples_of(spec: dict) -> str:
-    """The spec's ``fine_samples`` (or its ``model`` section's), else the model default."""
-    return spec.get("fine_samples", spec.get("model", {}).get("fine_samples", SRayConfig.fine_samples))
-
-
 def model_config(spec: dict) -> SRayConfig:
     """The ``SRayConfig`` of a workload spec: its ``model`` fields, then its sizes, impl, fine_samples and
     piece (paper defaults for everything the spec leaves out)."""
     cfg = SRayConfig(**spec.get("model", {}))
     return dataclasses.replace(cfg, n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"],
-                               impl=spec.get("impl", cfg.impl), fine_samples=fine_samples_of(spec),
+                               impl=spec.get("impl", cfg.impl), fine_samples=spec.get("fine_samples", cfg.fine_samples),
                                train_piece=spec.get("piece", cfg.train_piece))
 
 
