@@ -8,8 +8,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sray.platform.finetune.methods.registry import METHODS, method_names
+
+if TYPE_CHECKING:
+    from sray.platform.config.fleet_config import FleetConfig
 
 ALL_METHODS = "all"
 """``--methods`` value that runs every registered method."""
@@ -45,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def build_fleet_config(args: argparse.Namespace):
+def build_fleet_config(args: argparse.Namespace) -> FleetConfig:
     """The FleetConfig of the parsed flags: defaults, then the flags, then ``--set`` overrides."""
     from sray.platform.config.fleet_config import FleetConfig, apply_fleet_override
     from sray.platform.config.overrides import apply_settings

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from sray.jobs.recipes import RECIPES
+
+if TYPE_CHECKING:
+    from sray.platform.config.train_config import TrainConfig
 
 
 def add_train_flags(p: argparse.ArgumentParser) -> None:
@@ -33,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 
-def build_config(args: argparse.Namespace):
+def build_config(args: argparse.Namespace) -> TrainConfig:
     """The job's TrainConfig: the recipe (or a resumed job's saved config) plus flags and --set."""
     from sray.jobs.recipes import get_recipe
     from sray.platform.config.overrides import apply_settings

@@ -25,11 +25,14 @@ import time
 import uuid
 from collections import OrderedDict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
 from sray.data_tools.atomic import replace_dir
+
+if TYPE_CHECKING:
+    from ray.train import Checkpoint
 
 log = logging.getLogger(__name__)
 
@@ -191,7 +194,7 @@ class CheckpointManager:
 
 
 # ---------------------------------------------------------------------------------- Ray Train
-def to_ray_checkpoint(directory: Path):
+def to_ray_checkpoint(directory: Path) -> Checkpoint:
     """A ``ray.train.Checkpoint`` of one checkpoint folder (pass it to ``ray.train.report``)."""
     from ray.train import Checkpoint
 
@@ -199,7 +202,7 @@ def to_ray_checkpoint(directory: Path):
     return Checkpoint.from_directory(str(Path(directory).resolve()))
 
 
-def from_ray_checkpoint(checkpoint, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+def from_ray_checkpoint(checkpoint: Checkpoint, map_location: str | torch.device = "cpu") -> dict[str, Any]:
     """The state dict inside a ``ray.train.Checkpoint`` (e.g. from ``ray.train.get_checkpoint()``)."""
     with checkpoint.as_directory() as directory:
         read_meta(Path(directory))
