@@ -203,7 +203,8 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
                      f"{rss / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {vs_ref} | {vs_base} | {official} |")
     notes = (
         "One step = encode the source views, render coarse + fine, semantic + photometric loss, "
-        "backward, Adam; synthetic scene; 'first step' is the warm-up, 's / step' the median over "
+        "backward, fused Adam (the optimizer training uses); synthetic scene; 'first step' is the warm-up, "
+        "'s / step' the median over "
         f"{REPEATS} fresh processes (rows alternating round by round) of each process's median step; "
         "peak RSS is the process's VmHWM, torch runtime included "
         f"({res['params'] / 1e6:.2f} M parameters). impl: `SRayConfig.impl` — `reference` is the unoptimised "

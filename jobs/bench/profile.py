@@ -106,7 +106,7 @@ def _profile_train(s: dict, impl: str, device: torch.device) -> tuple[str, str, 
                               device)
     return (f"Profile: training step, impl={impl}", _top_table(prof, wall),
             f"{s['rays']} rays in pieces of {piece}, {s['coarse']}+{s['fine']} samples, {s['views']} source views, "
-            f"{s['hw'][1]}x{s['hw'][0]}, fp32; encode + render + loss + backward + Adam on a synthetic "
+            f"{s['hw'][1]}x{s['hw'][0]}, fp32; encode + render + loss + backward + fused Adam on a synthetic "
             "scene, one warm-up step before the profiled one.")
 
 

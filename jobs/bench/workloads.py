@@ -19,6 +19,7 @@ import torch
 
 from sray.jobs.bench.probes import peak_rss_bytes, timed_runs
 from sray.model.config import SRayConfig
+from sray.platform.train.step import fused_adam
 
 
 def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device, depth: bool = False) -> dict:
@@ -62,7 +63,7 @@ def make_train_step(spec: dict) -> Callable[[], None]:
     if spec.get("compile"):
         model.coarse.compile()
         model.fine.compile()
-    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    opt = fused_adam(list(model.parameters()), 1e-3)  # the optimizer training uses
     batch = synthetic_batch(spec["rays"], spec["views"], tuple(spec["hw"]), device, depth=cfg.inputs == "rgbd")
     dtype = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}[spec.get("dtype", "fp32")]
     scaler = torch.amp.GradScaler(device.type, enabled=dtype == torch.float16)
