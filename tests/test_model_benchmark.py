@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from sray.jobs.bench.model_cost import run_model_benchmark
+from sray.jobs.bench.model_cost import _row_key, _sizes, run_model_benchmark
 from sray.jobs.bench.probes import attention_flops
 
 
@@ -55,3 +55,14 @@ def test_quick_benchmark_produces_both_tables() -> None:
     assert ref_cells[14] == "-" and float(fast_cells[14].rstrip("x")) > 0  # fast vs reference of the same run
     # the unoptimised default (reference, union, glibc) is the same row here: the two ratios agree
     assert ref_cells[15] == "-" and fast_cells[15] == fast_cells[14]
+
+
+def test_every_gpu_row_is_measured_beside_its_reference_path() -> None:
+    """On CUDA each precision's fast rows (compiled or not) find a reference row of the same precision,
+    samples and rays in the same run, so the table's 'vs reference' column is never empty there."""
+    rows = [dict(spec, device="cuda") for spec in _sizes(torch.device("cuda"), quick=False).steps]
+    keys = {_row_key(spec) for spec in rows}
+    fast = [k for k in keys if k[2] == "fast"]
+    assert {k[1] for k in fast} == {"fp32", "bf16", "fp16"} and any(k[6] and k[1] == "bf16" for k in fast)
+    for name, dtype, _, alloc, fine, _, _ in fast:
+        assert (name, dtype, "reference", alloc, fine, 1024, False) in keys

@@ -62,7 +62,10 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     small = {"name": "small CPU config", "rays": 256, "coarse": 32, "fine": 32, "views": 4,
              "hw": (120, 160), "steps": 3}
     if device.type == "cuda":
-        steps = [dict(paper, dtype=d, steps=10) for d in ("fp32", "bf16", "fp16")]
+        # each precision beside its reference path; bf16 also compiled (the issue's CUDA target precision)
+        gpu = dict(paper, steps=10)
+        steps = [dict(gpu, dtype=d, impl=impl) for d in ("fp32", "bf16", "fp16") for impl in ("reference", "fast")]
+        steps.append(dict(gpu, dtype="bf16", impl="fast", compile=True))
         return _Sizes(PAPER_ATTENTION, 64, 1024, steps)
     # reference rows: the unoptimised path, the whole batch in one piece; fast rows: the defaults (pieces by
     # device, fine_samples new) unless a whole-batch piece or the union is named
@@ -156,7 +159,7 @@ def run_in_fresh_process(spec: dict) -> dict:
 def _row_key(spec: dict) -> tuple:
     """What identifies a training-step row across its repeated runs."""
     return (spec["name"], spec["dtype"], spec.get("impl", "fast"), spec.get("alloc", "default"),
-            model_config(spec).fine_samples, _piece(spec))
+            model_config(spec).fine_samples, _piece(spec), bool(spec.get("compile")))
 
 
 def _piece(spec: dict) -> int:
@@ -186,9 +189,9 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         if key not in runs or any(_row_key(x) == key for x in specs[:i]):
             continue
         res, s = runs[key][0], medians[key]
-        ref_key = (key[0], key[1], "reference", key[3], key[4], spec["rays"])
+        ref_key = (key[0], key[1], "reference", key[3], key[4], spec["rays"], False)
         vs_ref = f"{medians[ref_key] / s:.2f}x" if ref_key in medians and key[2] == "fast" else "-"
-        base_key = (key[0], key[1], "reference", "default", "union", spec["rays"])
+        base_key = (key[0], key[1], "reference", "default", "union", spec["rays"], False)
         vs_base = f"{medians[base_key] / s:.2f}x" if base_key in medians and key != base_key else "-"
         alloc = spec.get("alloc", "default")
         official = (f"{OFFICIAL_CODE['thp'] / s:.1f}x vs its best (19.7 s)"
@@ -198,7 +201,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         rss = max(r["rss_bytes"] for r in runs[key])
         lines.append(f"| {spec['name']} | {spec['rays']} | {key[5]} | {spec['coarse']}+{spec['fine']} ({fine}) | "
                      f"{spec['views']} | "
-                     f"{w}x{h} | {spec['dtype']} | {key[2]} | {ALLOCATORS[alloc]} | "
+                     f"{w}x{h} | {spec['dtype']} | {key[2]}{', compiled' if key[6] else ''} | {ALLOCATORS[alloc]} | "
                      f"{res['first']:.2f} | {s:.2f} | {spec['rays'] / s:.0f} | "
                      f"{rss / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {vs_ref} | {vs_base} | {official} |")
     notes = (
@@ -209,7 +212,9 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         "peak RSS is the process's VmHWM, torch runtime included "
         f"({res['params'] / 1e6:.2f} M parameters). impl: `SRayConfig.impl` — `reference` is the unoptimised "
         "path of this same commit, `fast` the gathered, transpose-free one (docs/performance.md); both compute "
-        "the same values (tests/test_model_fast_path.py). 'samples (fine pass sees)': `fine_samples` union "
+        "the same values (tests/test_model_fast_path.py); 'compiled': the coarse and fine networks through "
+        "`torch.compile` (GPU rows; its compilation is in 'first step'). 'samples (fine pass sees)': "
+        "`fine_samples` union "
         "(the fine pass re-evaluates the coarse depths, 64 + 128 = 192 evaluations per ray) or new (the model "
         "default: only the resampled ones, 64 + 64 = 128, as the official code). Rays per piece: the loss is "
         "computed over pieces of that many rays, each piece's gradient taken before the next is rendered "
