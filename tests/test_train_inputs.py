@@ -20,6 +20,7 @@ BAD = [
     (["--set", "optim.nosuch=1"], "optim.nosuch"),
     (["--workers", "0"], "run.workers: must be at least 1"),
     (["--precision", "fp16"], "fp16 needs CUDA"),
+    (["--workers", "2", "--gpus-per-worker", "0.5"], "refuses two ranks on one GPU"),
     (["--tracker", "nosuch"], "unknown tracker 'nosuch'"),
     (["--tracking-uri", "http://127.0.0.1:9"], "does not answer"),
     (["--resume", "never-ran"], "no job called 'never-ran'"),

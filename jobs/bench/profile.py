@@ -58,11 +58,12 @@ def profile_call(fn: Callable[[], None], device: torch.device, warm_up: bool = T
 
 
 def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[str, ...],
-                 quick: bool) -> list[tuple[str, str, str]]:
+                 quick: bool, step_dtypes: tuple[str, ...] = ("fp32",)) -> list[tuple[str, str, str]]:
     """Profile the ``workloads`` (``train``: the training step, ``render``: a whole-image render) per
     implementation, and time the levers (``kernels``: attention implementations at the render's shapes;
     ``train-kernels``: the same, forward + backward, at the training step's; ``chunks``: rays per chunk,
-    per implementation).
+    per implementation). The training step is profiled in each of ``step_dtypes`` (``fp32``, or autocast
+    to ``bf16`` / ``fp16``).
 
     Returns (title, markdown table, notes) sections for ``docs/performance.md``.
     """
@@ -73,7 +74,7 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
     sections: list[tuple[str, str, str]] = []
     for impl in impls:
         if "train" in workloads:
-            sections.append(_profile_train(step_spec, impl, device))
+            sections.extend(_profile_train(step_spec, impl, device, dtype) for dtype in step_dtypes)
         if "render" in workloads:
             sections.append(_profile_render(render_spec, impl, device))
     if "kernels" in workloads:
@@ -99,14 +100,15 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
     return sections
 
 
-def _profile_train(s: dict, impl: str, device: torch.device) -> tuple[str, str, str]:
-    """The profile section of one training step of spec ``s``."""
+def _profile_train(s: dict, impl: str, device: torch.device, dtype: str = "fp32") -> tuple[str, str, str]:
+    """The profile section of one training step of spec ``s`` in precision ``dtype``."""
     piece = train_piece_rays(s["rays"] if impl == "reference" else 0, device, s["rays"])  # reference: unoptimised
-    prof, wall = profile_call(make_train_step(dict(s, impl=impl, device=str(device), dtype="fp32", piece=piece)),
+    prof, wall = profile_call(make_train_step(dict(s, impl=impl, device=str(device), dtype=dtype, piece=piece)),
                               device)
-    return (f"Profile: training step, impl={impl}", _top_table(prof, wall),
+    title = f"Profile: training step, impl={impl}" + ("" if dtype == "fp32" else f", {dtype}")
+    return (title, _top_table(prof, wall),
             f"{s['rays']} rays in pieces of {piece}, {s['coarse']}+{s['fine']} samples, {s['views']} source views, "
-            f"{s['hw'][1]}x{s['hw'][0]}, fp32; encode + render + loss + backward + fused Adam on a synthetic "
+            f"{s['hw'][1]}x{s['hw'][0]}, {dtype}; encode + render + loss + backward + fused Adam on a synthetic "
             "scene, one warm-up step before the profiled one.")
 
 

@@ -12,8 +12,9 @@ from .report import StageResult
 from .synthetic import model, rig
 
 
-def render_seconds(ctx: CheckContext, repeats: int) -> float:
-    """Median seconds to render one (H, W) view from ``ctx.views`` sources with fp32 weights, no grad."""
+def render_seconds(ctx: CheckContext, repeats: int, dtype: torch.dtype | None = None) -> float:
+    """Median seconds to render one (H, W) view from ``ctx.views`` sources, fp32 weights, no grad; under
+    autocast to ``dtype`` (bf16, fp16) when given, as ``sray eval`` runs a low-precision checkpoint."""
     net = model(ctx.samples, ctx.views, ctx.device).eval()
     sources, query = rig(ctx.views, ctx.image_hw, ctx.device)
     times = []
@@ -21,7 +22,7 @@ def render_seconds(ctx: CheckContext, repeats: int) -> float:
         if ctx.device.type == "cuda":
             torch.cuda.synchronize(ctx.device)
         start = time.perf_counter()
-        with torch.no_grad():
+        with torch.no_grad(), torch.autocast(ctx.device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
             src = net.encode(sources.rgb, sources.K, sources.c2w, sources.depth)
             net.render_image(src, query.K, query.c2w, ctx.image_hw, 1.0, 5.0)
         if ctx.device.type == "cuda":
@@ -42,8 +43,11 @@ def run(ctx: CheckContext) -> StageResult:
         for line in body:
             cells = [c.strip() for c in line.strip().strip("|").split("|")]
             rows.append([title, "; ".join(f"{h} {v}" for h, v in zip(header, cells))])
-    seconds = render_seconds(ctx, 1 if ctx.dry_run else 5)
     h, w = ctx.image_hw
-    rows.append(["whole-view render", f"{w}x{h}, {ctx.views} views, {ctx.samples[0]}+{ctx.samples[1]} samples, "
-                 f"fp32: {seconds:.3f} s/view ({1 / seconds:.2f} views/s)"])
-    return StageResult("passed", f"render {w}x{h}: {seconds:.3f} s/view", header=["benchmark", "row"], rows=rows)
+    seconds = {}
+    for name, dtype in (("fp32", None), ("bf16", torch.bfloat16)):
+        seconds[name] = render_seconds(ctx, 1 if ctx.dry_run else 5, dtype)
+        rows.append(["whole-view render", f"{w}x{h}, {ctx.views} views, {ctx.samples[0]}+{ctx.samples[1]} samples, "
+                     f"{name}: {seconds[name]:.3f} s/view ({1 / seconds[name]:.2f} views/s)"])
+    summary = ", ".join(f"{k} {v:.3f}" for k, v in seconds.items())
+    return StageResult("passed", f"render {w}x{h} s/view: {summary}", header=["benchmark", "row"], rows=rows)

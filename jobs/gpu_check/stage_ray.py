@@ -1,12 +1,18 @@
 """Stage ``ray``: ``sray train`` with one (GPU) worker through Ray Train, Accelerate and MLflow, on
-procedural shards. Skipped, with the reason, where Ray, MLflow or webdataset are not installed."""
+procedural shards, and two Train workers asking for one GPU between them (refused before Ray starts: NCCL
+refuses two ranks on one GPU). Skipped, with the reason, where Ray, MLflow or webdataset are not installed."""
 
 from __future__ import annotations
 
+import copy
 import time
+from typing import TYPE_CHECKING
 
 from .context import CheckContext, has_module
 from .report import StageResult
+
+if TYPE_CHECKING:
+    from sray.platform.config.train_config import TrainConfig
 
 NEEDS = ("ray", "mlflow", "webdataset")
 
@@ -43,7 +49,29 @@ def run(ctx: CheckContext) -> StageResult:
     ok = outcome.latest_checkpoint is not None
     row = [f"{cfg.run.workers} x {'GPU' if cfg.run.gpus_per_worker else 'CPU'}", cfg.run.precision, str(steps),
            f"{seconds:.0f}", str(outcome.latest_checkpoint)]
-    return StageResult("passed" if ok else "failed",
-                       f"sray train: {steps} steps in {seconds:.0f} s (Ray start-up included)"
-                       + ("" if ok else ", no checkpoint written"),
-                       header=["workers", "precision", "steps", "seconds", "checkpoint"], rows=[row])
+    refused, shared_row = shared_gpu_request(cfg)
+    summary = (f"sray train: {steps} steps in {seconds:.0f} s (Ray start-up included)"
+               + ("" if ok else ", no checkpoint written")
+               + ("; 2 workers on one GPU refused in " + shared_row[3] + " s" if refused else
+                  "; 2 workers on one GPU were NOT refused"))
+    return StageResult("passed" if ok and refused else "failed", summary,
+                       header=["workers", "precision", "steps", "seconds", "checkpoint or message"],
+                       rows=[row, shared_row])
+
+
+def shared_gpu_request(cfg: TrainConfig) -> tuple[bool, list[str]]:
+    """Launch ``cfg`` with 2 workers of 0.5 GPU (both would land on one GPU, which NCCL refuses): whether it was
+    refused before Ray started, and the table row (time to the refusal, its message)."""
+    from sray.platform.train.inputs import InputError
+    from sray.platform.train.launcher import launch_training
+
+    shared = copy.deepcopy(cfg)
+    shared.run.workers, shared.run.gpus_per_worker = 2, 0.5
+    shared.run.name = f"{cfg.run.name}-shared-gpu"
+    start = time.perf_counter()
+    try:
+        launch_training(shared)
+        refused, message = False, "ran: not refused"
+    except InputError as err:
+        refused, message = True, str(err)
+    return refused, ["2 x 0.5 GPU", cfg.run.precision, "0", f"{time.perf_counter() - start:.1f}", message]

@@ -114,7 +114,8 @@ class RunSettings:
     cpus_per_worker: float = 1.0
     """CPUs reserved per worker."""
     gpus_per_worker: float = 0.0
-    """GPUs per worker (0 = CPU training)."""
+    """GPUs per worker (0 = CPU training). With more than one worker, a whole number: NCCL refuses two
+    ranks on one GPU, so a fraction is refused before Ray starts (one worker may take a fraction)."""
     seed: int = 0
     """Seed of parameters, sampling and data order."""
     log_every: int = 10

@@ -172,6 +172,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     fail_if_listed(task.scene, task.attempt)
     use_cuda = cfg.gpus_per_task > 0 and torch.cuda.is_available()
     device = torch.device("cuda" if use_cuda else "cpu")
+    if use_cuda:
+        torch.cuda.reset_peak_memory_stats(device)  # this task's peak, not an earlier task's in the same worker
     out_dir = Path(task.out_dir)
     learner, loader, samples, (n_classes, ignore_id, full_bytes, inputs) = _prepare(task, device)
     protocol = scene_protocol(task, inputs)
@@ -241,6 +243,7 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
         "miou_before": curve[0]["miou"], "miou_after": best_point["miou"], "psnr_after": best_point["psnr"],
         "artifact_bytes": artifact.stat().st_size, "full_checkpoint_bytes": full_bytes,
         "child_run_id": task.run.run_id if task.run else None, "protocol": protocol.to_json(), "curve": curve,
+        "gpu_peak_bytes": torch.cuda.max_memory_allocated(device) if use_cuda else None,
     }
     write_result(out_dir, result)
     if logger is not None:

@@ -28,6 +28,11 @@ def check_request(workers: int, cpus_per_worker: float, gpus_per_worker: float, 
                          f"{gpus_per_worker:g}")
     if cpus_per_worker == 0 and gpus_per_worker == 0:
         raise InputError("run.cpus_per_worker and run.gpus_per_worker are both 0: each worker needs some CPU or GPU")
+    if workers > 1 and gpus_per_worker > 0 and gpus_per_worker != int(gpus_per_worker):
+        raise InputError(f"run.gpus_per_worker {gpus_per_worker:g} with {workers} workers: Ray may place two workers "
+                         "on one GPU, and NCCL (the GPU backend of distributed training) refuses two ranks on one GPU "
+                         "('Duplicate GPU detected'); give each worker whole GPUs (--gpus-per-worker 1), or train on "
+                         "a shared GPU with --workers 1")
     if precision == "fp16" and gpus_per_worker == 0:
         raise InputError("--precision fp16 needs CUDA (loss scaling on GPU); on CPU use --precision bf16 or no")
 

@@ -106,7 +106,4 @@ def check_feasible(num_workers: int, cpus_per_worker: float, gpus_per_worker: fl
         if gpus_per_worker > max_gpus + _EPS:
             lines.append(f"Each worker asks for {_fmt(gpus_per_worker)} GPUs but the largest node has "
                          f"{_fmt(max_gpus)}: lower --gpus-per-worker to at most {_fmt(max_gpus)}.")
-    if num_workers > 1 and 0 < total_gpus < gpus_per_worker * num_workers:
-        lines.append(f"With {num_workers} workers, --gpus-per-worker {_fmt(total_gpus / num_workers)} shares "
-                     "the GPUs (Ray allows fractions).")
     raise InfeasibleRequest(" ".join(lines))

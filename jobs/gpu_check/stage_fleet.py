@@ -1,0 +1,103 @@
+"""Stage ``fleet``: the finetune fleet with fractional GPUs. One S-Ray scene task alone on the GPU, then
+``SHARING`` scene tasks at once on it (``1 / SHARING`` GPU each): training seconds per scene against the task
+alone, the fleet's wall time and each task's peak GPU memory. A dry run shares the CPUs instead. Skipped,
+with the reason, where Ray, MLflow or webdataset are not installed."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import torch
+
+from .context import CheckContext, has_module
+from .report import StageResult
+
+NEEDS = ("ray", "mlflow", "webdataset")
+SHARING = 4
+"""Scene tasks sharing the one device in the shared run (the issue's 4)."""
+
+
+def _shards(ctx: CheckContext, root: Path) -> Path:
+    """``SHARING`` unseen procedural scenes (and one train scene), sharded with their neighbours."""
+    from sray.data_tools.shards.writer import write_shards
+    from sray.data_tools.synth.dataset import generate_dataset
+
+    hw = (32, 40) if ctx.dry_run else (120, 160)
+    generate_dataset(root / "scenes", n_train=1, n_test=SHARING, n_views=20, height=hw[0], width=hw[1], seed=0,
+                     progress=False)
+    write_shards(root / "scenes", root / "shards", neighbours=8, progress=False)
+    return root / "shards"
+
+
+def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
+    """A step-0 shared checkpoint of the ``synth-small`` network at this run's sizes (timing needs no
+    pretraining; the fleet reads it as any other checkpoint)."""
+    from sray.jobs.recipes import get_recipe
+    from sray.model.ray_batch import RayBatchLoss
+    from sray.platform.checkpoints.folders import write_checkpoint
+    from sray.platform.train.state import lr_lambda, training_state
+
+    cfg = get_recipe("synth-small")
+    cfg.model.n_source, (cfg.model.n_coarse, cfg.model.n_fine) = min(ctx.views, 4), ctx.samples
+    cfg.data.shards, cfg.data.top_k = str(shards), 6
+    torch.manual_seed(0)
+    model = RayBatchLoss(cfg.model)
+    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)
+    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
+    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
+    return write_checkpoint(state, root / "checkpoint" / "checkpoints" / "step_000000000", 0)
+
+
+def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes: list[str]) -> tuple[float, list]:
+    """Run the fleet on ``scenes`` at once, each task with ``1 / len(scenes)`` of the device; (wall s, results)."""
+    from sray.platform.config.fleet_config import FleetConfig
+    from sray.platform.finetune.fleet import run_fleet
+
+    share = 1.0 / len(scenes)
+    cuda = ctx.device.type == "cuda"
+    cfg = FleetConfig(max_parallel=len(scenes), retries=0, cpus_per_task=1.0 if cuda else 2.0 * share,
+                      gpus_per_task=share if cuda else 0.0)
+    ft = cfg.finetune
+    ft.max_steps, ft.eval_every, ft.patience = (2, 2, 1) if ctx.dry_run else (200, 100, 2)
+    ft.eval_n_source, ft.eval_stride, ft.precision = min(ctx.views, 4), 4, "bf16" if cuda else "no"
+    start = time.perf_counter()
+    results = run_fleet(cfg, checkpoint, shards, scenes, out, f"sqlite:///{out / 'mlflow.db'}", ["sray"])
+    return time.perf_counter() - start, results
+
+
+def _row(name: str, wall: float, results: list) -> list[str]:
+    """One table row: tasks, share of the device, fleet wall s, mean training s per scene, peak GPU MiB."""
+    train_s = sum(r["wall_s"] for r in results) / len(results)
+    peaks = [r["gpu_peak_bytes"] for r in results if r.get("gpu_peak_bytes")]
+    peak = f"{max(peaks) / 2**20:.0f}" if peaks else "- (CPU)"
+    steps = sum(r["steps_used"] for r in results) / len(results)
+    return [name, str(len(results)), f"1/{len(results)}", f"{wall:.1f}", f"{steps:.0f}", f"{train_s:.2f}", peak]
+
+
+def run(ctx: CheckContext) -> StageResult:
+    """One task alone, then ``SHARING`` tasks sharing the device; every task must finish."""
+    missing = [m for m in NEEDS if not has_module(m)]
+    if missing:
+        return StageResult("skipped", f"{', '.join(missing)} not installed here: the fleet stage needs the full stack")
+    from sray.platform.finetune.fleet import unseen_scenes
+
+    root = ctx.out / "fleet"
+    shards = _shards(ctx, root)
+    checkpoint = _checkpoint(ctx, root, shards)
+    scenes = unseen_scenes(shards)[:SHARING]
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    alone_wall, alone = _fleet(ctx, root / f"alone-{stamp}", checkpoint, shards, scenes[:1])
+    shared_wall, shared = _fleet(ctx, root / f"shared-{stamp}", checkpoint, shards, scenes)
+    failed = [f"{r['scene']}: {r['error']}" for r in alone + shared if r["status"] != "finished"]
+    rows = [_row("one task alone", alone_wall, alone), _row(f"{SHARING} tasks sharing", shared_wall, shared)]
+    per_scene = [float(r[5]) for r in rows]
+    summary = (f"{SHARING} tasks on one {'GPU' if ctx.device.type == 'cuda' else 'CPU set'}: "
+               f"{per_scene[1]:.2f} s training per scene against {per_scene[0]:.2f} s alone "
+               f"({per_scene[1] / max(per_scene[0], 1e-9):.2f}x); fleet wall {shared_wall:.0f} s against "
+               f"{alone_wall:.0f} s for one task")
+    if failed:
+        return StageResult("failed", "; ".join(failed)[:300], header=[], rows=[])
+    return StageResult("passed", summary, rows=rows,
+                       header=["run", "tasks", "device share each", "fleet wall s", "steps per scene",
+                               "training s per scene", "peak GPU MiB per task"])
