@@ -48,6 +48,8 @@ class _Sizes:
     flop_rays: int
     mem_rays: int
     steps: list[dict]
+    rounds: int = REPEATS
+    """Fresh processes per training-step row, the rows alternating round by round (1: each row once)."""
 
 
 def _sizes(device: torch.device, quick: bool) -> _Sizes:
@@ -56,7 +58,7 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
         tiny = {"rays": 16, "coarse": 4, "fine": 4, "views": 2, "hw": (32, 32), "steps": 1}
         return _Sizes({"rays": 8, "samples": 8, "views": 4, "channels": 32}, 4, 8,
                       [dict(tiny, name="tiny", dtype="fp32", impl="reference", piece=16, fine_samples="union"),
-                       dict(tiny, name="tiny", dtype="fp32", impl="fast", piece=4, fine_samples="union")])
+                       dict(tiny, name="tiny", dtype="fp32", impl="fast", piece=4, fine_samples="union")], rounds=1)
     paper = {"name": "paper code config", "rays": 1024, "coarse": 64, "fine": 64, "views": 8,
              "hw": (240, 320), "steps": 2}
     small = {"name": "small CPU config", "rays": 256, "coarse": 32, "fine": 32, "views": 4,
@@ -66,7 +68,7 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
         gpu = dict(paper, steps=10)
         steps = [dict(gpu, dtype=d, impl=impl) for d in ("fp32", "bf16", "fp16") for impl in ("reference", "fast")]
         steps.append(dict(gpu, dtype="bf16", impl="fast", compile=True))
-        return _Sizes(PAPER_ATTENTION, 64, 1024, steps)
+        return _Sizes(PAPER_ATTENTION, 64, 1024, steps, rounds=1)  # a GPU is not shared: one round
     # reference rows: the unoptimised path, the whole batch in one piece; fast rows: the defaults (pieces by
     # device, fine_samples new) unless a whole-batch piece or the union is named
     whole, whole_small, union = {"piece": paper["rays"]}, {"piece": small["rays"]}, {"fine_samples": "union"}
@@ -170,12 +172,12 @@ def _piece(spec: dict) -> int:
 def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
     """Table 2: seconds per training step, rays per second and peak memory per configuration.
 
-    Every row runs ``REPEATS`` times in fresh processes, the rows alternating round by round, so a
+    Every row runs ``sz.rounds`` times in fresh processes, the rows alternating round by round, so a
     load change on the machine hits every row alike; the table shows the median over the rounds.
     """
     runs: dict[tuple, list[dict]] = {}
     specs = [dict(spec, device=str(device)) for spec in sz.steps]
-    for _ in range(REPEATS if device.type == "cpu" and len(specs) > 1 else 1):
+    for _ in range(sz.rounds):
         for spec in specs:
             runs.setdefault(_row_key(spec), []).append(run_in_fresh_process(spec))
     lines = ["| config | rays | rays per piece | samples (fine pass sees) | views | image | precision | impl | "
@@ -208,7 +210,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         "One step = encode the source views, render coarse + fine, semantic + photometric loss, "
         "backward, fused Adam (the optimizer training uses); synthetic scene; 'first step' is the warm-up, "
         "'s / step' the median over "
-        f"{REPEATS} fresh processes (rows alternating round by round) of each process's median step; "
+        f"{sz.rounds} fresh process(es) (rows alternating round by round) of each process's median step; "
         "peak RSS is the process's VmHWM, torch runtime included "
         f"({res['params'] / 1e6:.2f} M parameters). impl: `SRayConfig.impl` — `reference` is the unoptimised "
         "path of this same commit, `fast` the gathered, transpose-free one (docs/performance.md); both compute "
