@@ -14,23 +14,16 @@ import pytest
 import torch
 from train_fixtures import tiny_config
 
-from sray.model.ray_batch import RayBatchLoss
-from sray.platform.checkpoints.folders import write_checkpoint
 from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.train.state import lr_lambda, training_state
+from sray.platform.train.state import write_initial_checkpoint
 
 
 def write_tiny_checkpoint(shards: Path, folder: Path, seed: int = 0, attention: str = "full") -> Path:
     """A step-0 checkpoint of a seeded tiny ``RayBatchLoss`` (the tiny training config's network, with the
     ``attention`` variant)."""
     cfg = tiny_config(shards, folder)
-    cfg.model.attention = attention
-    torch.manual_seed(seed)
-    model = RayBatchLoss(cfg.model)
-    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)
-    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
-    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
-    return write_checkpoint(state, folder / "checkpoints" / "step_000000000", 0)
+    cfg.model.attention, cfg.run.seed = attention, seed
+    return write_initial_checkpoint(cfg, folder / "checkpoints" / "step_000000000")
 
 
 @pytest.fixture(scope="session")

@@ -189,3 +189,21 @@ def test_check_accepts_real_training_state():
     parts = _build(0)
     _step(*parts)
     check_weights_only_safe(_state(*parts, step=1))
+
+
+def test_initial_checkpoint_is_the_seeded_untrained_model_at_step_0(tmp_path: Path) -> None:
+    from sray.jobs.recipes import get_recipe
+    from sray.model.semantic_ray import SRayModel
+    from sray.platform.train.state import write_initial_checkpoint
+
+    cfg = get_recipe("synth-small")
+    cfg.model.n_coarse, cfg.model.n_fine, cfg.run.seed = 4, 4, 3
+    state = checkpoints.load_checkpoint(write_initial_checkpoint(cfg, tmp_path / "ck"))
+    assert state["step"] == 0 and state["config"]["run"]["seed"] == 3
+    torch.manual_seed(3)  # the model a fresh job seeded with 3 starts from, built independently here
+    expected = SRayModel(cfg.model).state_dict()
+    assert state["model"].keys() == expected.keys()
+    assert all(torch.equal(state["model"][k], v) for k, v in expected.items())
+    cfg.run.seed = 4
+    other = checkpoints.load_checkpoint(write_initial_checkpoint(cfg, tmp_path / "other"))
+    assert not all(torch.equal(other["model"][k], v) for k, v in expected.items())

@@ -8,8 +8,6 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import torch
-
 from .context import CheckContext, has_module
 from .report import StageResult
 
@@ -36,19 +34,12 @@ def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
     """A step-0 shared checkpoint of the ``synth-small`` network at this run's sizes (timing needs no
     pretraining; the fleet reads it as any other checkpoint)."""
     from sray.jobs.recipes import get_recipe
-    from sray.model.ray_batch import RayBatchLoss
-    from sray.platform.checkpoints.folders import write_checkpoint
-    from sray.platform.train.state import lr_lambda, training_state
+    from sray.platform.train.state import write_initial_checkpoint
 
     cfg = get_recipe("synth-small")
     cfg.model.n_source, (cfg.model.n_coarse, cfg.model.n_fine) = min(ctx.views, 4), ctx.samples
     cfg.data.shards, cfg.data.top_k = str(shards), 6
-    torch.manual_seed(0)
-    model = RayBatchLoss(cfg.model)
-    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.optim.lr)
-    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
-    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
-    return write_checkpoint(state, root / "checkpoint" / "checkpoints" / "step_000000000", 0)
+    return write_initial_checkpoint(cfg, root / "checkpoint" / "checkpoints" / "step_000000000")
 
 
 def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes: list[str]) -> tuple[float, list]:
@@ -92,14 +83,14 @@ def run(ctx: CheckContext) -> StageResult:
     alone_wall, alone = _fleet(ctx, root / f"alone-{stamp}", checkpoint, shards, scenes[:1])
     shared_wall, shared = _fleet(ctx, root / f"shared-{stamp}", checkpoint, shards, scenes)
     failed = [f"{r['scene']}: {r['error']}" for r in alone + shared if r["status"] != "finished"]
+    if failed:
+        return StageResult("failed", "; ".join(failed)[:300])
     rows = [_row("one task alone", alone_wall, alone), _row(f"{len(scenes)} tasks sharing", shared_wall, shared)]
     per_scene = [float(r[5]) for r in rows]
     summary = (f"{len(scenes)} tasks on one {'GPU' if ctx.device.type == 'cuda' else 'CPU set'}: "
                f"{per_scene[1]:.2f} s training per scene against {per_scene[0]:.2f} s alone "
                f"({per_scene[1] / max(per_scene[0], 1e-9):.2f}x); fleet wall {shared_wall:.0f} s against "
                f"{alone_wall:.0f} s for one task")
-    if failed:
-        return StageResult("failed", "; ".join(failed)[:300], header=[], rows=[])
     return StageResult("passed", summary, rows=rows,
                        header=["run", "tasks", "device share each", "fleet wall s", "steps per scene",
                                "training s per scene", "peak GPU MiB per task"])

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import torch
 
 from sray.model.ray_batch import RayBatchLoss
 from sray.model.semantic_ray import SRayModel
+from sray.platform.checkpoints.folders import write_checkpoint
 from sray.platform.checkpoints.model_loading import bare_model_keys
 from sray.platform.config.train_config import OptimSettings, TrainConfig
 from sray.platform.train.step import fused_adam
@@ -51,6 +53,15 @@ def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler
     if scaler is not None:
         state["scaler"] = scaler.state_dict()
     return state
+
+
+def write_initial_checkpoint(cfg: TrainConfig, directory: Path) -> Path:
+    """Write the step-0 checkpoint of ``build_training(cfg)`` (seeded from ``cfg.run.seed``) as folder
+    ``directory``: an untrained shared model that the fleet and evaluation read like any other (the GPU check's
+    fleet timing, tests)."""
+    model, optimizer, scheduler = build_training(cfg)
+    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
+    return write_checkpoint(state, directory, 0)
 
 
 def restore_training(state: dict[str, Any], model: SRayModel, optimizer: torch.optim.Optimizer,
