@@ -70,3 +70,10 @@ def test_without_cuda_it_says_so_in_one_line_and_fails(tmp_path: Path, capsys) -
     out = capsys.readouterr().out.strip().splitlines()
     assert len(out) == 1 and "no CUDA device" in out[0] and "--dry-run" in out[0]
     assert not (tmp_path / REPORT_FILE).exists()
+
+
+def test_table_cells_reads_header_and_rows_and_skips_the_separator() -> None:
+    from sray.jobs.gpu_check.report import table_cells
+
+    table = "| op | calls | ms |\n|---|---:|:---:|\n| `mm` | 4 | 1.5 |\n| `add` | 2 | - |\n\nWall time: 3 s"
+    assert table_cells(table) == (["op", "calls", "ms"], [["`mm`", "4", "1.5"], ["`add`", "2", "-"]])

@@ -39,6 +39,14 @@ class StageResult:
             raise ValueError(f"stage status {self.status!r}: use one of {STATUSES}")
 
 
+def table_cells(table: str) -> tuple[list[str], list[list[str]]]:
+    """The header and the body rows of a Markdown table (its ``|`` lines; the separator row after the header
+    is skipped), as stripped cell strings: how a stage takes over a benchmark's table."""
+    lines = [line.strip().strip("|") for line in table.splitlines() if line.startswith("|")]
+    header, _separator, *body = ([c.strip() for c in line.split("|")] for line in lines)
+    return header, body
+
+
 def load_report(out: Path) -> dict:
     """The report in ``out`` (an empty one if there is none yet)."""
     path = out / REPORT_FILE

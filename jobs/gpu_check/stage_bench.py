@@ -8,7 +8,7 @@ import time
 import torch
 
 from .context import CheckContext
-from .report import StageResult
+from .report import StageResult, table_cells
 from .synthetic import model, rig
 
 
@@ -38,11 +38,8 @@ def run(ctx: CheckContext) -> StageResult:
 
     rows = []
     for title, table, _notes in run_model_benchmark(device=str(ctx.device), quick=ctx.dry_run):
-        body = [line for line in table.splitlines()[2:] if line.strip()]
-        header = [c.strip() for c in table.splitlines()[0].split("|") if c.strip()]
-        for line in body:
-            cells = [c.strip() for c in line.strip().strip("|").split("|")]
-            rows.append([title, "; ".join(f"{h} {v}" for h, v in zip(header, cells))])
+        header, body = table_cells(table)
+        rows.extend([title, "; ".join(f"{h} {v}" for h, v in zip(header, cells))] for cells in body)
     h, w = ctx.image_hw
     seconds = {}
     for name, dtype in (("fp32", None), ("bf16", torch.bfloat16)):

@@ -4,8 +4,10 @@ fast path. On a GPU the full sections also go into ``docs/performance.md``, besi
 
 from __future__ import annotations
 
+import re
+
 from .context import CheckContext
-from .report import StageResult
+from .report import StageResult, table_cells
 
 TOP_ROWS = 5
 """Operators per profile kept in the report (docs/performance.md gets the whole table)."""
@@ -22,11 +24,9 @@ def run(ctx: CheckContext) -> StageResult:
     header = ["profile", "operator", "calls", "self CPU ms", "share of self time", "self CUDA ms"]
     rows, walls = [], []
     for title, table, _notes in sections:
-        lines = table.splitlines()
-        body = [line for line in lines[2:] if line.startswith("|")]
-        for line in body[:TOP_ROWS]:
-            cells = [c.strip() for c in line.strip().strip("|").split("|")]
-            rows.append([title.removeprefix("Profile: "), *cells, *["-"] * (len(header) - 1 - len(cells))])
-        wall = next(line for line in lines if line.startswith("Wall time"))
-        walls.append(f"{title.removeprefix('Profile: ')} {wall.split(': ')[1].split(' ')[0]} s")
+        name = title.removeprefix("Profile: ")
+        _, body = table_cells(table)
+        rows.extend([name, *cells, *["-"] * (len(header) - 1 - len(cells))] for cells in body[:TOP_ROWS])
+        wall = re.search(r"Wall time of the profiled call: ([0-9.]+) s", table)
+        walls.append(f"{name} {wall.group(1) if wall else '?'} s")
     return StageResult("passed", "profiled wall time: " + ", ".join(walls), header=header, rows=rows)
