@@ -13,7 +13,9 @@ lives in (R, N, m, C) order from the gather on, and each attention stage hands
 * cross-view attention (over the m views of each (ray, sample)) is (R * N, heads, m, d);
 * ``dense`` attends over all N * m tokens of a ray (the order of the tokens does not matter to
   attention as long as keys and mask follow it);
-* SDPA's output comes back as (batch, L, heads, d) memory, i.e. (R, N, m, C) again.
+* SDPA's output comes back as (batch, L, heads, d) memory, i.e. (R, N, m, C) again;
+* on a CPU, a stage over 24 to 32 keys (the intra-view stage at the CPU models' sample counts) runs
+  ``sliced_attention`` instead of SDPA's flash kernel: the same attention, scores built in cache-sized slices.
 The first linear layers of the weight net and of the colour score are applied piecewise to their
 inputs instead of to a concatenation (W [a; b] = W_a a + W_b b), which saves two more copies.
 """
@@ -27,6 +29,7 @@ from torch import Tensor
 from .cra import AttentionBlock, CrossReprojectionAttention
 from .geometry_net import GeometryNet, masked_mean_var, masked_softmax
 from .semantic_weights import SemanticWeightNet, bounded_weights, radial_weights
+from .sliced_attention import attention
 
 
 def _key_mask(valid: Tensor, dim: int) -> Tensor:
@@ -56,7 +59,7 @@ def block_forward(block: AttentionBlock, x: Tensor, valid: Tensor, stage: str) -
         def split(t: Tensor) -> Tensor:
             return t.view(r, n * m, heads, d).transpose(1, 2)  # (R, heads, N * m, d)
         mask = _key_mask(valid.reshape(r, n * m), 1)[:, None, None, :]
-    att = F.scaled_dot_product_attention(split(q), split(k), split(v), attn_mask=mask)
+    att = attention(split(q), split(k), split(v), mask)
     x = x + block.proj(att.transpose(1, 2).reshape(r, n, m, c))
     if block.ffn is not None:
         x = x + block.ffn(x)

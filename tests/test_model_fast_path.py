@@ -45,11 +45,12 @@ def test_gather_matches_grid_sample(stride: int, hw_map: tuple[int, int]) -> Non
     torch.testing.assert_close(grad_fast, grad_ref, atol=1e-5, rtol=1e-5)
 
 
-def _train_render(impl: str, fine_samples: str = "union") -> tuple[dict, dict[str, torch.Tensor]]:
-    """Outputs and parameter gradients of one stratified render + a loss touching every output."""
+def _train_render(impl: str, fine_samples: str = "union", samples: int = 8) -> tuple[dict, dict[str, torch.Tensor]]:
+    """Outputs and parameter gradients of one stratified render (``samples`` coarse and fine) + a loss
+    touching every output."""
     r = rig(m=4, facing_away=1)
     torch.manual_seed(0)
-    net = SRayModel(SRayConfig(n_classes=5, n_coarse=8, n_fine=8, impl=impl, fine_samples=fine_samples))
+    net = SRayModel(SRayConfig(n_classes=5, n_coarse=samples, n_fine=samples, impl=impl, fine_samples=fine_samples))
     src = net.encode(r["rgb"], r["K"], r["c2w"])
     gen = torch.Generator().manual_seed(3)
     out = net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=True, generator=gen)
@@ -59,10 +60,11 @@ def _train_render(impl: str, fine_samples: str = "union") -> tuple[dict, dict[st
     return out, {n: p.grad for n, p in net.named_parameters() if p.grad is not None}
 
 
-@pytest.mark.parametrize("fine_samples", ["union", "new"])
-def test_fast_equals_reference_outputs_and_gradients(fine_samples: str) -> None:
-    out_ref, grad_ref = _train_render("reference", fine_samples)
-    out_fast, grad_fast = _train_render("fast", fine_samples)
+@pytest.mark.parametrize(("fine_samples", "samples"), [("union", 8), ("new", 8), ("new", 24)])
+def test_fast_equals_reference_outputs_and_gradients(fine_samples: str, samples: int) -> None:
+    """At 24 samples both passes' intra-view attention runs the CPU's sliced kernel."""
+    out_ref, grad_ref = _train_render("reference", fine_samples, samples)
+    out_fast, grad_fast = _train_render("fast", fine_samples, samples)
     for p in ("coarse", "fine"):
         for key in ("logits", "rgb", "depth", "opacity", "weights", "z"):
             torch.testing.assert_close(out_fast[p][key], out_ref[p][key], atol=1e-5, rtol=1e-5)
@@ -83,16 +85,18 @@ def test_fine_samples_new_evaluates_only_the_resampled_depths() -> None:
 
 
 @pytest.mark.parametrize("stage", ["intra", "cross", "dense"])
-def test_fast_attention_block_equals_the_reference_block(stage: str) -> None:
+@pytest.mark.parametrize(("n", "m"), [(6, 5), (24, 3), (8, 4)])
+def test_fast_attention_block_equals_the_reference_block(stage: str, n: int, m: int) -> None:
     """Each stage of the fast block, on (R, N, m, C) tokens, equals the reference block on its own grouping,
     in value and in gradient, with large random biases (q, k, v and projection), masked keys and fully
-    masked sequences (where the block falls back to all keys)."""
+    masked sequences (where the block falls back to all keys). The sizes put the intra-view stage (24
+    keys) and the dense one (30 and 32 keys) on the CPU's sliced kernel, the others on SDPA."""
     torch.manual_seed(1)
     block = AttentionBlock(16, 4, 2)
     with torch.no_grad():
         block.qkv.bias.normal_(0.0, 3.0)
         block.proj.bias.normal_(0.0, 3.0)
-    r, n, m, c = 3, 6, 5, 16
+    r, c = 3, 16
     x = torch.randn(r, n, m, c, requires_grad=True)
     valid = torch.rand(r, n, m) > 0.3
     valid[0, :, 1] = False  # view 1 sees no sample of ray 0 (intra: all keys masked)

@@ -33,9 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     prof.add_argument("--impl", nargs="+", default=["reference", "fast"], choices=["reference", "fast"],
                       help="implementations to profile (SRayConfig.impl)")
     prof.add_argument("--workload", nargs="+", default=["train", "render"],
-                      choices=["train", "render", "kernels", "train-kernels", "chunks"],
+                      choices=["train", "render", "kernels", "train-kernels", "chunks", "attention-keys"],
                       help="train/render: torch.profiler tables; kernels/chunks: the render's levers, timed; "
-                           "train-kernels: the attention kernels forward + backward at the training step's shapes")
+                           "train-kernels: the attention kernels forward + backward at the training step's shapes; "
+                           "attention-keys: SDPA flash against the sliced CPU kernel by key length")
     prof.add_argument("--quick", action="store_true", help="tiny sizes (for tests)")
     prof.add_argument("--doc", type=Path, default=Path("docs/performance.md"))
     prof.set_defaults(func=_bench_profile)

@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 from torch.profiler import ProfilerActivity, profile
 
+from sray.jobs.bench.attention_keys import key_length_table
 from sray.jobs.bench.render_levers import chunk_table, kernel_table
 from sray.jobs.bench.workloads import make_train_step, render_case
 from sray.model.ray_chunks import CUDA_RENDER_RAYS, render_chunk_rays, train_piece_rays
@@ -62,7 +63,8 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
     """Profile the ``workloads`` (``train``: the training step, ``render``: a whole-image render) per
     implementation, and time the levers (``kernels``: attention implementations at the render's shapes;
     ``train-kernels``: the same, forward + backward, at the training step's; ``chunks``: rays per chunk,
-    per implementation). The training step is profiled in each of ``step_dtypes`` (``fp32``, or autocast
+    per implementation; ``attention-keys``: SDPA's flash kernel against the sliced CPU kernel over the
+    intra-view stage's key lengths). The training step is profiled in each of ``step_dtypes`` (``fp32``, or autocast
     to ``bf16`` / ``fp16``).
 
     Returns (title, markdown table, notes) sections for ``docs/performance.md``.
@@ -91,6 +93,15 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
                          "samples (the coarse pass, and the fine pass with `fine_samples=new`), 8 views, 4 heads of 8 "
                          "channels, CPU; forward + backward to q, k and v, median of 2 calls after a warm-up. GFLOP/s "
                          "counts the forward's two matmuls (4 L^2 d per head) and the backward's four (2x), as 3x."))
+    if "attention-keys" in workloads:
+        samples, rays = ((8, 24), 16) if quick else ((16, 24, 32, 40, 48, 64, 96), 256)
+        sections.append(("Attention kernel by key length: SDPA flash against sliced (CPU)",
+                         key_length_table(samples, rays, repeats=1 if quick else 3),
+                         f"The intra-view stage of one {rays}-ray piece (the CPU's training piece and render chunk), "
+                         "8 source views, 4 heads of 8 channels, on the fast block's transposed views of (R, N, m, C) "
+                         "tokens; forward (a render) and forward + backward to the tokens (a training step), median "
+                         "of 3 calls after a warm-up. 'kernel used': `model.sliced_attention.attention`'s choice "
+                         "(`SLICED_KEYS`)."))
     if "chunks" in workloads:
         chunks, crop, samples = ((64, 16), (12, 16), 4) if quick else ((4800, 1024, 256, 64), (60, 80), 24)
         sections.append(("Render lever: rays per chunk",

@@ -3,7 +3,8 @@
 * ``kernels``: the attention call that dominates the render profile, at the render's own shapes
   (a chunk of 4096 rays, 24 + 48 samples seen by the fine pass, 8 source views, 4 heads of 8
   channels), with each CPU option torch offers: SDPA's flash kernel with a boolean or an additive
-  mask, SDPA's math backend, and an explicit matmul + softmax. All compute the same attention
+  mask, SDPA's math backend, an explicit matmul + softmax, and that done a cache-sized slice of rays at
+  a time (``model.sliced_attention``, the fast path's kernel at 24 to 32 keys on a CPU). All compute the same attention
   (the table gives their largest difference to the first). ``train-kernels`` times the same options
   forward + backward at one pass of the paper-config training step (1024 rays, 64 samples);
 * ``chunks``: a whole-image render of a small crop (80x60 rays with the 320x240 camera's field of
@@ -22,6 +23,7 @@ from torch.nn.attention import SDPBackend, sdpa_kernel
 
 from sray.jobs.bench.probes import time_call
 from sray.jobs.bench.workloads import model_config, synthetic_batch
+from sray.model.sliced_attention import sliced_attention
 
 HEADS, HEAD_DIM, VIEWS = 4, 8, 8
 """The default model's attention: 4 heads of 8 channels, over 8 source views."""
@@ -49,7 +51,8 @@ def _kernels(q: Tensor, k: Tensor, v: Tensor, mask: Tensor) -> dict[str, Callabl
     return {"SDPA flash, boolean mask": lambda: F.scaled_dot_product_attention(q, k, v, attn_mask=mask),
             "SDPA flash, additive mask": lambda: F.scaled_dot_product_attention(q, k, v, attn_mask=additive),
             "SDPA math backend": math,
-            "matmul + softmax": lambda: _explicit(q, k, v, mask)}
+            "matmul + softmax": lambda: _explicit(q, k, v, mask),
+            "matmul + softmax in cache-sized slices (sray's CPU kernel)": lambda: sliced_attention(q, k, v, mask)}
 
 
 def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = False) -> str:

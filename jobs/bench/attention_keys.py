@@ -1,0 +1,63 @@
+"""``sray bench profile --workload attention-keys``: where the sliced CPU kernel beats SDPA's flash kernel.
+
+The intra-view stage of one 256-ray piece (the CPU's training piece and render chunk), 8 source views,
+4 heads of 8 channels, at several sample counts (the stage's key length), timed forward only (a render)
+and forward + backward (a training step) with SDPA's flash kernel and with ``sliced_attention``. The
+table decided ``model.sliced_attention.SLICED_KEYS``; rerun it on another CPU to check the range there.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from sray.jobs.bench.probes import time_call
+from sray.model.sliced_attention import SLICED_KEYS, sliced_attention
+
+HEADS, HEAD_DIM = 4, 8
+"""The default model's attention: 4 heads of 8 channels."""
+
+
+def _stage_inputs(rays: int, samples: int, views: int, grad: bool) -> tuple[Tensor, Tensor]:
+    """Tokens (R, N, m, C) and the intra-view key mask (R, m * heads, 1, N), one key kept per query."""
+    gen = torch.Generator().manual_seed(samples)
+    tokens = torch.randn(rays, samples, views, HEADS * HEAD_DIM, generator=gen).requires_grad_(grad)
+    mask = torch.rand(rays, views * HEADS, 1, samples, generator=gen) > 0.2
+    mask[..., 0] = True  # every query keeps a key, as the model's key masks guarantee
+    return tokens, mask
+
+
+def _timed(kernel: Callable[..., Tensor], rays: int, samples: int, views: int, grad: bool, repeats: int) -> float:
+    """Median seconds of one call of ``kernel`` on the fast block's intra-view views (R, m * heads, N, d)
+    of the tokens, with the backward to the tokens if ``grad``."""
+    tokens, mask = _stage_inputs(rays, samples, views, grad)
+
+    def call() -> None:
+        with torch.set_grad_enabled(grad):
+            q, k, v = (t.view(rays, samples, views * HEADS, HEAD_DIM).transpose(1, 2)
+                       for t in (tokens, tokens * 0.5, -tokens))
+            out = kernel(q, k, v, mask)
+            if grad:
+                torch.autograd.grad(out.sum(), tokens)
+    return time_call(call, torch.device("cpu"), repeats)
+
+
+def key_length_table(samples: tuple[int, ...], rays: int = 256, views: int = 8, repeats: int = 3) -> str:
+    """Milliseconds per intra-view stage with SDPA's flash kernel and with the sliced kernel, per sample
+    count, forward and forward + backward, and which kernel ``attention`` uses there."""
+    def flash(q: Tensor, k: Tensor, v: Tensor, mask: Tensor) -> Tensor:
+        return F.scaled_dot_product_attention(q, k, v, attn_mask=mask)
+
+    lines = ["| samples (keys) | pass | SDPA flash ms | sliced ms | flash / sliced | kernel used on a CPU |",
+             "|---:|---|---:|---:|---:|---|"]
+    for n in samples:
+        used = "sliced" if n in SLICED_KEYS else "SDPA flash"
+        for grad in (False, True):
+            t_flash = _timed(flash, rays, n, views, grad, repeats)
+            t_sliced = _timed(sliced_attention, rays, n, views, grad, repeats)
+            lines.append(f"| {n} | {'forward + backward' if grad else 'forward'} | {1e3 * t_flash:.3g} | "
+                         f"{1e3 * t_sliced:.3g} | {t_flash / t_sliced:.2f} | {used} |")
+    return "\n".join(lines)
