@@ -1,15 +1,16 @@
-"""Attention for the fast path: SDPA, or on a CPU over 24 to 32 keys, scores built in cache-sized slices.
+"""Attention for the fast path: SDPA, or on a CPU over 24 to 64 keys, scores built in cache-sized slices.
 
 SDPA's CPU flash kernel walks each (batch, head) in blocks and keeps a running softmax; with the
 model's 8-channel heads it spends its time on that bookkeeping, not on matmuls (docs/performance.md).
 When the key sequence is short, the whole (L_q, L_k) score matrix of a few rows of the batch is small.
 Built with one matmul, offset by the mask, softmaxed and multiplied by v, a slice of rows at a time so
 that a slice's scores (and in the backward their gradient) stay in the CPU's last-level cache, the same
-attention is faster there at the intra-view stage's 24 to 32 keys (24 and 32 samples per pass: the demo's,
-the accuracy benchmark's and the small CPU configuration's models). The range was read off whole training
-steps and renders timed side by side (docs/performance.md); `sray bench profile --workload attention-keys`
-times the two kernels on one stage per key count. Elsewhere (the cross-view stage attends over the source
-views; 64 samples gained nothing in a whole step and took more memory) and on a GPU, SDPA's kernels stay.
+attention is faster there at the intra-view stage's 24 to 64 keys (the samples per pass of the demo's,
+the accuracy benchmark's, the small CPU configuration's and the paper's models). The range was read off
+whole training steps and renders timed side by side (docs/performance.md); `sray bench profile
+--workload attention-keys` times the two kernels on one stage per key count. Below 24 keys (the
+cross-view stage attends over the 4 to 8 source views, where the two kernels are even) and on a GPU,
+SDPA's kernels stay.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from torch import Tensor
 SLICE_SCORES = 1 << 20
 """Score elements per slice: 4 MiB in fp32, which with its softmax stays in this CPU's 32 MiB L3."""
 
-SLICED_KEYS = range(24, 33)
+SLICED_KEYS = range(24, 65)
 """Key counts at which the sliced kernel replaces SDPA on a CPU (measured: docs/performance.md)."""
 
 

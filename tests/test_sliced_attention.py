@@ -84,7 +84,7 @@ def test_sliced_attention_in_bf16_autocast_stays_near_fp32() -> None:
 
 
 @pytest.mark.parametrize("keys", [8, SLICED_KEYS.start - 1, SLICED_KEYS.start, SLICED_KEYS.stop - 1,
-                                  SLICED_KEYS.stop, 64])
+                                  SLICED_KEYS.stop, 96])
 def test_attention_uses_the_sliced_kernel_on_a_cpu_only_within_its_key_range(keys: int) -> None:
     gen = torch.Generator().manual_seed(keys)
     q, k, v = (torch.randn(3, 4, keys, 8, generator=gen) for _ in range(3))

@@ -21,27 +21,34 @@ HEADS, HEAD_DIM = 4, 8
 """The default model's attention: 4 heads of 8 channels."""
 
 
-def _stage_inputs(rays: int, samples: int, views: int, grad: bool) -> tuple[Tensor, Tensor]:
-    """Tokens (R, N, m, C) and the intra-view key mask (R, m * heads, 1, N), one key kept per query."""
+def _stage_inputs(rays: int, samples: int, views: int, grad: bool) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Tokens (R, N, m, C), the q/k/v weight (3C, C), the intra-view key mask (R, m * heads, 1, N) with one
+    key kept per query, and a dense upstream gradient (R, m * heads, N, d) for the stage's output."""
     gen = torch.Generator().manual_seed(samples)
-    tokens = torch.randn(rays, samples, views, HEADS * HEAD_DIM, generator=gen).requires_grad_(grad)
+    c = HEADS * HEAD_DIM
+    tokens = torch.randn(rays, samples, views, c, generator=gen).requires_grad_(grad)
+    weight = (torch.randn(3 * c, c, generator=gen) * c ** -0.5).requires_grad_(grad)
     mask = torch.rand(rays, views * HEADS, 1, samples, generator=gen) > 0.2
     mask[..., 0] = True  # every query keeps a key, as the model's key masks guarantee
-    return tokens, mask
+    upstream = torch.randn(rays, views * HEADS, samples, HEAD_DIM, generator=gen)
+    return tokens, weight, mask, upstream
 
 
 def _timed(kernel: Callable[..., Tensor], rays: int, samples: int, views: int, grad: bool, repeats: int) -> float:
-    """Median seconds of one call of ``kernel`` on the fast block's intra-view views (R, m * heads, N, d)
-    of the tokens, with the backward to the tokens if ``grad``."""
-    tokens, mask = _stage_inputs(rays, samples, views, grad)
+    """Median seconds of the stage as the fast block runs it: q, k and v as three linears of the tokens,
+    their (R, m * heads, N, d) views, ``kernel``; with ``grad``, the backward of a dense upstream gradient
+    to the tokens and the weight (an ``out.sum()`` would hand the kernels a stride-0 gradient, which
+    sends batched matmuls down a per-matrix path that no training step takes)."""
+    tokens, weight, mask, upstream = _stage_inputs(rays, samples, views, grad)
+    c = HEADS * HEAD_DIM
 
     def call() -> None:
         with torch.set_grad_enabled(grad):
-            q, k, v = (t.view(rays, samples, views * HEADS, HEAD_DIM).transpose(1, 2)
-                       for t in (tokens, tokens * 0.5, -tokens))
+            q, k, v = (F.linear(tokens, weight[i * c:(i + 1) * c]).view(rays, samples, views * HEADS, HEAD_DIM)
+                       .transpose(1, 2) for i in range(3))
             out = kernel(q, k, v, mask)
             if grad:
-                torch.autograd.grad(out.sum(), tokens)
+                torch.autograd.grad(out, (tokens, weight), upstream)
     return time_call(call, torch.device("cpu"), repeats)
 
 

@@ -98,9 +98,10 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
         sections.append(("Attention kernel by key length: SDPA flash against sliced (CPU)",
                          key_length_table(samples, rays, repeats=1 if quick else 3),
                          f"The intra-view stage of one {rays}-ray piece (the CPU's training piece and render chunk), "
-                         "8 source views, 4 heads of 8 channels, on the fast block's transposed views of (R, N, m, C) "
-                         "tokens; forward (a render) and forward + backward to the tokens (a training step), median "
-                         "of 3 calls after a warm-up. 'kernel used': `model.sliced_attention.attention`'s choice "
+                         "8 source views, 4 heads of 8 channels, as the fast block runs it: q, k and v three linears of "
+                         "(R, N, m, C) tokens, viewed as (R, m * heads, N, d); forward (a render) and forward + backward "
+                         "of a dense gradient to the tokens and weights (a training step), median of 3 calls after a "
+                         "warm-up. 'kernel used': `model.sliced_attention.attention`'s choice "
                          "(`SLICED_KEYS`)."))
     if "chunks" in workloads:
         chunks, crop, samples = ((64, 16), (12, 16), 4) if quick else ((4800, 1024, 256, 64), (60, 80), 24)

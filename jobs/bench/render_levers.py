@@ -4,7 +4,7 @@
   (a chunk of 4096 rays, 24 + 48 samples seen by the fine pass, 8 source views, 4 heads of 8
   channels), with each CPU option torch offers: SDPA's flash kernel with a boolean or an additive
   mask, SDPA's math backend, an explicit matmul + softmax, and that done a cache-sized slice of rays at
-  a time (``model.sliced_attention``, the fast path's kernel at 24 to 32 keys on a CPU). All compute the same attention
+  a time (``model.sliced_attention``, the fast path's kernel at 24 to 64 keys on a CPU). All compute the same attention
   (the table gives their largest difference to the first). ``train-kernels`` times the same options
   forward + backward at one pass of the paper-config training step (1024 rays, 64 samples);
 * ``chunks``: a whole-image render of a small crop (80x60 rays with the 320x240 camera's field of
@@ -59,7 +59,7 @@ def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = Fal
     """Seconds per call and GFLOP/s of each implementation for the intra-view stage (per ray and view,
     over ``samples``) and the cross-view stage (per ray and sample, over the views).
 
-    ``backward``: time forward + backward (the gradient of the outputs' sum with respect to q, k and v),
+    ``backward``: time forward + backward (a dense random gradient of the output to q, k and v),
     as in a training step, and count the backward's matmuls too (3x the forward's)."""
     gen = torch.Generator().manual_seed(0)
     shapes = {"intra-view": (rays, VIEWS * HEADS, samples), "cross-view": (rays * samples, HEADS, VIEWS)}
@@ -86,10 +86,14 @@ def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = Fal
 
 
 def _with_backward(fn: Callable[[], Tensor], inputs: tuple[Tensor, ...]) -> Callable[[], Tensor]:
-    """``fn`` followed by the backward pass of its output's sum to ``inputs`` (gradients discarded)."""
+    """``fn`` followed by the backward pass of a dense random gradient of its output to ``inputs``
+    (gradients discarded). Dense as in a training step: the gradient of ``out.sum()`` is a stride-0
+    tensor, which sends batched matmuls down a per-matrix path that inflates the materialising kernels."""
+    upstream = torch.randn(fn().shape, generator=torch.Generator().manual_seed(1))
+
     def call() -> Tensor:
         out = fn()
-        torch.autograd.grad(out.sum(), inputs)
+        torch.autograd.grad(out, inputs, upstream)
         return out
     return call
 
