@@ -5,10 +5,11 @@ model's 8-channel heads it spends its time on that bookkeeping, not on matmuls (
 When the key sequence is short, the whole (L_q, L_k) score matrix of a few rows of the batch is small.
 Built with one matmul, offset by the mask, softmaxed and multiplied by v, a slice of rows at a time so
 that a slice's scores (and in the backward their gradient) stay in the CPU's last-level cache, the same
-attention is faster there at the intra-view stage's 24 to 64 keys (the samples per pass of the demo's,
-the accuracy benchmark's, the small CPU configuration's and the paper's models). The range was read off
-whole training steps and renders timed side by side (docs/performance.md); `sray bench profile
---workload attention-keys` times the two kernels on one stage per key count. Below 24 keys (the
+attention is faster there at the intra-view stage's usual key counts. Whole renders and training steps
+timed side by side (docs/performance.md) set the ranges: without a gradient (a render) 24 to 64 keys
+(1.17x per view at 24 samples); with one (a training step) only 24 to 32, where it gains a few percent,
+because at 64 samples the step gained nothing and each slice's stored softmax cost 0.6 GiB. `sray bench
+profile --workload attention-keys` times the two kernels on one stage per key count. Below 24 keys (the
 cross-view stage attends over the 4 to 8 source views, where the two kernels are even) and on a GPU,
 SDPA's kernels stay.
 """
@@ -22,18 +23,23 @@ from torch import Tensor
 SLICE_SCORES = 1 << 20
 """Score elements per slice: 4 MiB in fp32, which with its softmax stays in this CPU's 32 MiB L3."""
 
-SLICED_KEYS = range(24, 65)
-"""Key counts at which the sliced kernel replaces SDPA on a CPU (measured: docs/performance.md)."""
+SLICED_KEYS_FORWARD = range(24, 65)
+"""Key counts at which the sliced kernel replaces SDPA on a CPU when no gradient is taken (a render)."""
+
+SLICED_KEYS_TRAINING = range(24, 33)
+"""Key counts at which it replaces SDPA on a CPU when a gradient flows (a training step)."""
 
 
 def attention(q: Tensor, k: Tensor, v: Tensor, key_mask: Tensor) -> Tensor:
-    """Scaled dot-product attention with a boolean key mask, by the fastest kernel for the shape.
+    """Scaled dot-product attention with a boolean key mask, by the faster kernel for the shape and pass.
 
     q: (B, H, L_q, d); k, v: (B, H, L_k, d); key_mask: (B or 1, H or 1, 1, L_k) bool, True = attend, at
     least one key per query. Returns (B, H, L_q, d), the values of ``F.scaled_dot_product_attention``.
     """
-    if q.device.type == "cpu" and k.shape[-2] in SLICED_KEYS:
-        return sliced_attention(q, k, v, key_mask)
+    if q.device.type == "cpu":
+        training = torch.is_grad_enabled() and (q.requires_grad or k.requires_grad or v.requires_grad)
+        if k.shape[-2] in (SLICED_KEYS_TRAINING if training else SLICED_KEYS_FORWARD):
+            return sliced_attention(q, k, v, key_mask)
     return F.scaled_dot_product_attention(q, k, v, attn_mask=key_mask)
 
 

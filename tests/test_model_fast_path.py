@@ -74,6 +74,23 @@ def test_fast_equals_reference_outputs_and_gradients(fine_samples: str, samples:
         torch.testing.assert_close(grad_fast[name], g, atol=1e-6 * scale, rtol=1e-4, msg=name)
 
 
+def test_fast_equals_reference_without_gradient_at_forward_only_sliced_lengths() -> None:
+    """A no-grad render at 40 samples per pass: a length at which only a render (no gradient) runs the
+    CPU's sliced attention kernel; the outputs still equal the reference path's."""
+    r = rig(m=4, facing_away=1)
+    outs = {}
+    for impl in ("reference", "fast"):
+        torch.manual_seed(0)
+        net = SRayModel(SRayConfig(n_classes=5, n_coarse=40, n_fine=40, impl=impl, fine_samples="new"))
+        with torch.no_grad():
+            src = net.encode(r["rgb"], r["K"], r["c2w"])
+            outs[impl] = net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=True,
+                                         generator=torch.Generator().manual_seed(3))
+    for p in ("coarse", "fine"):
+        for key in ("logits", "rgb", "depth", "weights"):
+            torch.testing.assert_close(outs["fast"][p][key], outs["reference"][p][key], atol=1e-5, rtol=1e-5)
+
+
 def test_fine_samples_new_evaluates_only_the_resampled_depths() -> None:
     out_union, _ = _train_render("fast", "union")
     out_new, _ = _train_render("fast", "new")

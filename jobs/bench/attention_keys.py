@@ -3,7 +3,8 @@
 The intra-view stage of one 256-ray piece (the CPU's training piece and render chunk), 8 source views,
 4 heads of 8 channels, at several sample counts (the stage's key length), timed forward only (a render)
 and forward + backward (a training step) with SDPA's flash kernel and with ``sliced_attention``. The
-table decided ``model.sliced_attention.SLICED_KEYS``; rerun it on another CPU to check the range there.
+table shows the kernel ``model.sliced_attention.attention`` picks for each; on another CPU, rerun it (and
+the whole-step trials in docs/performance.md) before trusting the ranges there.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from sray.jobs.bench.probes import time_call
-from sray.model.sliced_attention import SLICED_KEYS, sliced_attention
+from sray.model.sliced_attention import SLICED_KEYS_FORWARD, SLICED_KEYS_TRAINING, sliced_attention
 
 HEADS, HEAD_DIM = 4, 8
 """The default model's attention: 4 heads of 8 channels."""
@@ -61,8 +62,8 @@ def key_length_table(samples: tuple[int, ...], rays: int = 256, views: int = 8, 
     lines = ["| samples (keys) | pass | SDPA flash ms | sliced ms | flash / sliced | kernel used on a CPU |",
              "|---:|---|---:|---:|---:|---|"]
     for n in samples:
-        used = "sliced" if n in SLICED_KEYS else "SDPA flash"
         for grad in (False, True):
+            used = "sliced" if n in (SLICED_KEYS_TRAINING if grad else SLICED_KEYS_FORWARD) else "SDPA flash"
             t_flash = _timed(flash, rays, n, views, grad, repeats)
             t_sliced = _timed(sliced_attention, rays, n, views, grad, repeats)
             lines.append(f"| {n} | {'forward + backward' if grad else 'forward'} | {1e3 * t_flash:.3g} | "

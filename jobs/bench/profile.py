@@ -91,18 +91,19 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
                          kernel_table(rays, samples, backward=True),
                          f"One attention stage of one pass of the paper-config training step: {rays} rays, {samples} "
                          "samples (the coarse pass, and the fine pass with `fine_samples=new`), 8 views, 4 heads of 8 "
-                         "channels, CPU; forward + backward to q, k and v, median of 2 calls after a warm-up. GFLOP/s "
+                         "channels, CPU; forward + backward of a dense random gradient to q, k and v, median of 2 "
+                         "calls after a warm-up. GFLOP/s "
                          "counts the forward's two matmuls (4 L^2 d per head) and the backward's four (2x), as 3x."))
     if "attention-keys" in workloads:
         samples, rays = ((8, 24), 16) if quick else ((16, 24, 32, 40, 48, 64, 96), 256)
         sections.append(("Attention kernel by key length: SDPA flash against sliced (CPU)",
                          key_length_table(samples, rays, repeats=1 if quick else 3),
                          f"The intra-view stage of one {rays}-ray piece (the CPU's training piece and render chunk), "
-                         "8 source views, 4 heads of 8 channels, as the fast block runs it: q, k and v three linears of "
-                         "(R, N, m, C) tokens, viewed as (R, m * heads, N, d); forward (a render) and forward + backward "
-                         "of a dense gradient to the tokens and weights (a training step), median of 3 calls after a "
-                         "warm-up. 'kernel used': `model.sliced_attention.attention`'s choice "
-                         "(`SLICED_KEYS`)."))
+                         "8 source views, 4 heads of 8 channels, as the fast block runs it: q, k and v three linears "
+                         "of (R, N, m, C) tokens, viewed as (R, m * heads, N, d); forward (a render) and forward + "
+                         "backward of a dense gradient to the tokens and weights (a training step), median of 3 calls "
+                         "after a warm-up. 'kernel used': `model.sliced_attention.attention`'s choice "
+                         "(`SLICED_KEYS_FORWARD`, `SLICED_KEYS_TRAINING`)."))
     if "chunks" in workloads:
         chunks, crop, samples = ((64, 16), (12, 16), 4) if quick else ((4800, 1024, 256, 64), (60, 80), 24)
         sections.append(("Render lever: rays per chunk",
