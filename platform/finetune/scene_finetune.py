@@ -261,11 +261,15 @@ def run_scene_task(task: SceneTask) -> dict[str, Any]:
     The child run is marked FINISHED on success and FAILED when this attempt raises (a later
     successful re-run marks it FINISHED again). Torch uses as many threads as the task reserved
     CPUs: more threads than reserved cores oversubscribe a shared machine (measured 10x slower
-    steps with 2 threads on a busy 2-core host).
+    steps with 2 threads on a busy 2-core host). The count is set only when it differs: even a call that
+    keeps it (Ray's OMP_NUM_THREADS already matches) made SDPA's CPU flash kernel ~13% slower here
+    (docs/performance.md, "Short key sequences").
     """
     from sray.platform.tracking.registry import open_logger
 
-    torch.set_num_threads(max(1, int(task.config.cpus_per_task)))
+    threads = max(1, int(task.config.cpus_per_task))
+    if torch.get_num_threads() != threads:
+        torch.set_num_threads(threads)
 
     if task.run is None:
         return finetune_scene(task).result
