@@ -14,9 +14,8 @@ lives in (R, N, m, C) order from the gather on, and each attention stage hands
 * ``dense`` attends over all N * m tokens of a ray (the order of the tokens does not matter to
   attention as long as keys and mask follow it);
 * SDPA's output comes back as (batch, L, heads, d) memory, i.e. (R, N, m, C) again;
-* on a CPU, the intra-view stage at the usual sample counts (24 to 64 keys in a render, 24 to 32 in a
-  training step) runs ``sliced_attention`` instead of SDPA's flash kernel: the same attention, scores
-  built in cache-sized slices.
+* in a CPU render (no gradient), the intra-view stage at 24 to 64 samples runs ``sliced_attention``
+  instead of SDPA's flash kernel: the same attention, scores built in cache-sized slices.
 The first linear layers of the weight net and of the colour score are applied piecewise to their
 inputs instead of to a concatenation (W [a; b] = W_a a + W_b b), which saves two more copies.
 """

@@ -1,17 +1,17 @@
-"""Attention for the fast path: SDPA, or on a CPU over 24 to 64 keys, scores built in cache-sized slices.
+"""Attention for the fast path: SDPA, or in a CPU render over 24 to 64 keys, scores built in cache-sized slices.
 
 SDPA's CPU flash kernel walks each (batch, head) in blocks and keeps a running softmax; with the
 model's 8-channel heads it spends its time on that bookkeeping, not on matmuls (docs/performance.md).
 When the key sequence is short, the whole (L_q, L_k) score matrix of a few rows of the batch is small.
 Built with one matmul, offset by the mask, softmaxed and multiplied by v, a slice of rows at a time so
-that a slice's scores (and in the backward their gradient) stay in the CPU's last-level cache, the same
-attention is faster there at the intra-view stage's usual key counts. Whole renders and training steps
-timed side by side (docs/performance.md) set the ranges: without a gradient (a render) 24 to 64 keys
-(1.17x per view at 24 samples); with one (a training step) only 24 to 32, where it gains a few percent,
-because at 64 samples the step gained nothing and each slice's stored softmax cost 0.6 GiB. `sray bench
-profile --workload attention-keys` times the two kernels on one stage per key count. Below 24 keys (the
-cross-view stage attends over the 4 to 8 source views, where the two kernels are even) and on a GPU,
-SDPA's kernels stay.
+that a slice's scores stay in the CPU's last-level cache, the same attention is faster there at the
+intra-view stage's usual key counts. Whole renders and training steps timed side by side
+(docs/performance.md) set where it is used: a render (no gradient) at 24 to 64 keys, 1.17x per view at 24
+samples. A training step gained 3-7% at 24 and 32 samples, within the run-to-run spread of the
+benchmark, and nothing at 64 while every slice's stored softmax cost 0.6 GiB, so training keeps SDPA.
+Below 24 keys (the cross-view stage attends over the 4 to 8 source views, where the two kernels are even)
+and on a GPU, SDPA's kernels stay. `sray bench profile --workload attention-keys` times the two kernels
+on one stage per key count.
 """
 
 from __future__ import annotations
@@ -23,11 +23,8 @@ from torch import Tensor
 SLICE_SCORES = 1 << 20
 """Score elements per slice: 4 MiB in fp32, which with its softmax stays in this CPU's 32 MiB L3."""
 
-SLICED_KEYS_FORWARD = range(24, 65)
-"""Key counts at which the sliced kernel replaces SDPA on a CPU when no gradient is taken (a render)."""
-
-SLICED_KEYS_TRAINING = range(24, 33)
-"""Key counts at which it replaces SDPA on a CPU when a gradient flows (a training step)."""
+SLICED_KEYS = range(24, 65)
+"""Key counts at which the sliced kernel replaces SDPA in a CPU render (no gradient taken)."""
 
 
 def attention(q: Tensor, k: Tensor, v: Tensor, key_mask: Tensor) -> Tensor:
@@ -36,10 +33,9 @@ def attention(q: Tensor, k: Tensor, v: Tensor, key_mask: Tensor) -> Tensor:
     q: (B, H, L_q, d); k, v: (B, H, L_k, d); key_mask: (B or 1, H or 1, 1, L_k) bool, True = attend, at
     least one key per query. Returns (B, H, L_q, d), the values of ``F.scaled_dot_product_attention``.
     """
-    if q.device.type == "cpu":
-        training = torch.is_grad_enabled() and (q.requires_grad or k.requires_grad or v.requires_grad)
-        if k.shape[-2] in (SLICED_KEYS_TRAINING if training else SLICED_KEYS_FORWARD):
-            return sliced_attention(q, k, v, key_mask)
+    grad = torch.is_grad_enabled() and (q.requires_grad or k.requires_grad or v.requires_grad)
+    if q.device.type == "cpu" and not grad and k.shape[-2] in SLICED_KEYS:
+        return sliced_attention(q, k, v, key_mask)
     return F.scaled_dot_product_attention(q, k, v, attn_mask=key_mask)
 
 

@@ -8,7 +8,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from sray.model.sliced_attention import SLICED_KEYS_FORWARD, SLICED_KEYS_TRAINING, attention, sliced_attention
+from sray.model.sliced_attention import SLICED_KEYS, attention, sliced_attention
 
 
 def _naive(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -83,12 +83,12 @@ def test_sliced_attention_in_bf16_autocast_stays_near_fp32() -> None:
     torch.testing.assert_close(got.float(), want, atol=3e-2, rtol=3e-2)
 
 
-@pytest.mark.parametrize("keys", sorted({8, SLICED_KEYS_TRAINING.start - 1, SLICED_KEYS_TRAINING.start,
-                                         SLICED_KEYS_TRAINING.stop - 1, SLICED_KEYS_TRAINING.stop,
-                                         SLICED_KEYS_FORWARD.stop - 1, SLICED_KEYS_FORWARD.stop, 96}))
+@pytest.mark.parametrize("keys", [8, SLICED_KEYS.start - 1, SLICED_KEYS.start, 32, SLICED_KEYS.stop - 1,
+                                  SLICED_KEYS.stop, 96])
 @pytest.mark.parametrize("grad", [False, True])
-def test_attention_uses_the_sliced_kernel_on_a_cpu_only_within_its_key_range(keys: int, grad: bool) -> None:
-    """Without a gradient the forward range applies, with one (inputs that require grad) the training range."""
+def test_attention_uses_the_sliced_kernel_only_in_a_cpu_render_within_its_key_range(keys: int, grad: bool) -> None:
+    """Without a gradient (inputs that need none, or under no_grad) the sliced kernel runs within its key
+    range; when a gradient flows, SDPA always does."""
     gen = torch.Generator().manual_seed(keys)
     q, k, v = (torch.randn(3, 4, keys, 8, generator=gen).requires_grad_(grad) for _ in range(3))
     mask = torch.rand(3, 1, 1, keys, generator=gen) > 0.3
@@ -97,7 +97,7 @@ def test_attention_uses_the_sliced_kernel_on_a_cpu_only_within_its_key_range(key
     sliced = sliced_attention(q, k, v, mask)
     sdpa = F.scaled_dot_product_attention(q, k, v, attn_mask=mask)
     assert not torch.equal(sliced, sdpa)  # the two kernels round differently, so the choice is visible
-    expected = keys in (SLICED_KEYS_TRAINING if grad else SLICED_KEYS_FORWARD)
-    assert torch.equal(got, sliced if expected else sdpa)
-    with torch.no_grad():  # no gradient is taken under no_grad, whatever the inputs require
-        assert torch.equal(attention(q, k, v, mask), sliced if keys in SLICED_KEYS_FORWARD else sdpa)
+    in_range = keys in SLICED_KEYS
+    assert torch.equal(got, sliced if in_range and not grad else sdpa)
+    with torch.no_grad():
+        assert torch.equal(attention(q, k, v, mask), sliced if in_range else sdpa)

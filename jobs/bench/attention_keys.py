@@ -16,7 +16,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from sray.jobs.bench.probes import time_call
-from sray.model.sliced_attention import SLICED_KEYS_FORWARD, SLICED_KEYS_TRAINING, sliced_attention
+from sray.model.sliced_attention import SLICED_KEYS, sliced_attention
 
 HEADS, HEAD_DIM = 4, 8
 """The default model's attention: 4 heads of 8 channels."""
@@ -63,7 +63,7 @@ def key_length_table(samples: tuple[int, ...], rays: int = 256, views: int = 8, 
              "|---:|---|---:|---:|---:|---|"]
     for n in samples:
         for grad in (False, True):
-            used = "sliced" if n in (SLICED_KEYS_TRAINING if grad else SLICED_KEYS_FORWARD) else "SDPA flash"
+            used = "sliced" if n in SLICED_KEYS and not grad else "SDPA flash"
             t_flash = _timed(flash, rays, n, views, grad, repeats)
             t_sliced = _timed(sliced_attention, rays, n, views, grad, repeats)
             lines.append(f"| {n} | {'forward + backward' if grad else 'forward'} | {1e3 * t_flash:.3g} | "

@@ -103,7 +103,7 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
                          "of (R, N, m, C) tokens, viewed as (R, m * heads, N, d); forward (a render) and forward + "
                          "backward of a dense gradient to the tokens and weights (a training step), median of 3 calls "
                          "after a warm-up. 'kernel used': `model.sliced_attention.attention`'s choice "
-                         "(`SLICED_KEYS_FORWARD`, `SLICED_KEYS_TRAINING`)."))
+                         "(`SLICED_KEYS`, without a gradient only)."))
     if "chunks" in workloads:
         chunks, crop, samples = ((64, 16), (12, 16), 4) if quick else ((4800, 1024, 256, 64), (60, 80), 24)
         sections.append(("Render lever: rays per chunk",
