@@ -62,6 +62,23 @@ def test_measure_pairs_the_settings_and_the_fast_path_is_lossless(tiny_shards: P
     assert by["rgb again"]["psnr"] == by["fast impl"]["psnr"]  # and the next setting renders rgb again
 
 
+def test_full_settings_render_with_the_checkpoints_own_fine_samples(tiny_shards: Path,
+                                                                     tiny_checkpoint: Path) -> None:
+    """A setting that names no fine-sample choice renders as the checkpoint was trained (as ``sray eval --render
+    full`` does); naming the checkpoint's own choice gives the same render, naming the other one another."""
+    from sray.jobs.bench.speed_accuracy import Setting, measure
+    from sray.platform.checkpoints.model_loading import model_from_checkpoint
+
+    own = model_from_checkpoint(tiny_checkpoint)[0].cfg.fine_samples
+    other = {"new": "union", "union": "new"}[own]
+    settings = [Setting("own", n_source=3), Setting("named own", n_source=3, fine_samples=own),
+                Setting("other", n_source=3, fine_samples=other), Setting("own again", n_source=3)]
+    by = {r["name"]: r for r in measure(tiny_checkpoint, tiny_shards, settings, views_per_scene=1, progress=False)}
+    assert [by[n]["fine_samples"] for n in ("own", "named own", "other", "own again")] == [own, own, other, own]
+    assert by["named own"]["psnr"] == by["own"]["psnr"] == by["own again"]["psnr"]
+    assert by["other"]["psnr"] != by["own"]["psnr"]
+
+
 def test_chosen_settings_keep_their_order_and_unknown_names_are_refused() -> None:
     import pytest
 

@@ -36,7 +36,9 @@ class Setting:
 
     name: str
     n_source: int = 8
-    fine_samples: str = "union"
+    fine_samples: str = ""
+    """``SRayConfig.fine_samples`` to render with: ``""`` the checkpoint's own (what ``sray eval --render full``
+    renders), ``union`` (the fine pass re-evaluates the coarse depths too) or ``new`` (resampled depths only)."""
     fast: FastRender | None = None
     bf16: bool = False
     impl: str = "fast"
@@ -57,6 +59,7 @@ def default_settings() -> list[Setting]:
         Setting("full, reference path", impl="reference", chunk=CUDA_RENDER_RAYS),
         Setting("full"),
         Setting("full, half the samples", sample_scale=0.5),
+        Setting("full, fine union", fine_samples="union"),
         Setting("full, fine new only", fine_samples="new"),
         Setting("full, 4 sources", n_source=4),
         Setting("full, bf16", bf16=True),
@@ -111,7 +114,7 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     for key, path in (("main", checkpoint), ("rgbd", checkpoint_rgbd)):
         if path is not None:
             net, cfg = model_from_checkpoint(path)
-            loaded[key] = (net.eval(), cfg, (net.cfg.n_coarse, net.cfg.n_fine, net.cfg.inputs))
+            loaded[key] = (net.eval(), cfg, (net.cfg.n_coarse, net.cfg.n_fine, net.cfg.inputs, net.cfg.fine_samples))
     names, _ = select_scenes(shards, None)
     rows = []
     for st in settings:
@@ -135,7 +138,7 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
         row = {"name": st.name, "miou": 100 * sum(s["miou"] for s in per_scene) / len(per_scene),
                "psnr": sum(s["psnr"] for s in per_scene) / len(per_scene),
                "s_per_view": cpu_seconds / max(n_views, 1), "wall_s_per_view": seconds / max(n_views, 1),
-               "views": n_views, "setting": dataclasses.asdict(st)}
+               "views": n_views, "fine_samples": net.cfg.fine_samples, "setting": dataclasses.asdict(st)}
         rows.append(row)
         if progress:
             print(f"[speed-accuracy] {st.name}: mIoU {row['miou']:.2f}  PSNR {row['psnr']:.2f}  "
@@ -143,10 +146,12 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     return rows
 
 
-def _apply(net: torch.nn.Module, st: Setting, own: tuple[int, int, str]) -> None:
+def _apply(net: torch.nn.Module, st: Setting, own: tuple[int, int, str, str]) -> None:
     """Put the setting's render choices on the model: fine samples, implementation, samples per ray and
-    inputs (``own``: the checkpoint's coarse and fine counts and its ``model.inputs``)."""
-    net.cfg.fine_samples, net.cfg.impl, net.cfg.inputs = st.fine_samples, st.impl, st.inputs or own[2]
+    inputs (``own``: the checkpoint's coarse and fine counts, its ``model.inputs`` and ``model.fine_samples``,
+    which a setting that leaves them empty keeps)."""
+    net.cfg.fine_samples, net.cfg.impl = st.fine_samples or own[3], st.impl
+    net.cfg.inputs = st.inputs or own[2]
     for module in net.modules():
         if hasattr(module, "impl"):
             module.impl = st.impl
@@ -214,6 +219,8 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
         "".join(ch if ch.isalnum() else "-" for ch in n).strip("-") for n in names or [])
     png = chart(rows, doc.parent / "benchmarks" / f"{stem}.png", protocol)
     rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
+    own_fine = ", ".join(sorted({f"`fine_samples={r['fine_samples']}`" for r in rows
+                                 if not r["setting"]["fine_samples"] and not r["setting"]["fast"]})) or "-"
     which = ("every test view" if views_per_scene <= 0 else "the first test view" if views_per_scene == 1 else
              f"the first {views_per_scene} test views")
     notes = (f"Checkpoint `{checkpoint}`; {which} of each unseen scene of `{shards}`, "
@@ -225,7 +232,9 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
              f"(`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with "
              f"the checkpoint's samples; 'full' is the optimised path "
              f"(chunks by device: 256 rays on a CPU), equal to it "
-             f"within fp32 tolerance. 'fast sS cC': the fast render mode "
+             f"within fp32 tolerance. Both render as the checkpoint was trained ({own_fine}), as `sray eval "
+             f"--render full` does; 'fine union' makes the fine pass re-evaluate the coarse depths too, 'fine new "
+             f"only' evaluates the resampled depths alone. 'fast sS cC': the fast render mode "
              f"(`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine pass (resampled "
              f"depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed by the "
              f"sources' depth (docs/model.md, RGB-D mode), rendered by "
