@@ -175,7 +175,11 @@ def table(rows: list[dict]) -> str:
 
 
 def chart(rows: list[dict], path: Path, protocol: str) -> Path:
-    """Pareto chart: mIoU (%) against seconds per view (log scale), the front joined by a line."""
+    """Pareto chart: mIoU (%) against CPU seconds per view (log scale), the front joined by a line. Points are
+    numbered and a key beside the axes names them (names of nearby settings would overlap); the protocol is
+    wrapped into the title."""
+    import textwrap
+
     import matplotlib
 
     matplotlib.use("Agg")
@@ -183,20 +187,25 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
 
     from sray.platform.viz.figure_io import save_png
 
-    fig, ax = plt.subplots(figsize=(8, 5.5))
-    for r in rows:
+    fig = plt.figure(figsize=(11, 6.5))
+    ax = fig.add_axes((0.07, 0.1, 0.56, 0.74))
+    for i, r in enumerate(rows, 1):
         ax.scatter(r["s_per_view"], r["miou"], s=40, color="tab:blue" if r["setting"]["fast"] else "tab:gray")
-        ax.annotate(r["name"], (r["s_per_view"], r["miou"]), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        ax.annotate(str(i), (r["s_per_view"], r["miou"]), textcoords="offset points", xytext=(4, 3), fontsize=8)
     front = pareto(rows)
     ax.plot([r["s_per_view"] for r in front], [r["miou"] for r in front], color="tab:orange", lw=1.5,
             label="Pareto front")
+    ax.scatter([], [], color="tab:blue", label="fast render mode")
+    ax.scatter([], [], color="tab:gray", label="full render")
     ax.set_xscale("log")
     ax.set_xlabel("CPU seconds per view (log scale; this process, all threads)")
     ax.set_ylabel("mIoU (%)")
-    ax.set_title(f"S-Ray zero-shot: accuracy against render time\n{protocol}", fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(loc="lower right")
-    fig.tight_layout()
+    ax.legend(loc="lower right", fontsize=8)
+    key = [f"{i:>2}  {r['name']}: {r['miou']:.2f}%, {r['s_per_view']:.2f} CPU s" for i, r in enumerate(rows, 1)]
+    fig.text(0.66, 0.84, "\n".join(key), va="top", ha="left", family="monospace", fontsize=8)
+    title = ["S-Ray zero-shot: accuracy against render time"] + textwrap.wrap(protocol, 150)
+    fig.text(0.5, 0.98, "\n".join(title), va="top", ha="center", fontsize=8)
     out = save_png(fig, path, dpi=120)
     plt.close(fig)
     return out
