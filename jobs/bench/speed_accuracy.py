@@ -201,7 +201,7 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
     ax.set_xlabel("CPU seconds per view (log scale; this process, all threads)")
     ax.set_ylabel("mIoU (%)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
+    fig.legend(*ax.get_legend_handles_labels(), loc="lower left", bbox_to_anchor=(0.655, 0.1), fontsize=8)
     key = [f"{i:>2}  {r['name']}: {r['miou']:.2f}%, {r['s_per_view']:.2f} CPU s" for i, r in enumerate(rows, 1)]
     fig.text(0.66, 0.84, "\n".join(key), va="top", ha="left", family="monospace", fontsize=8)
     title = ["S-Ray zero-shot: accuracy against render time"] + textwrap.wrap(protocol, 150)
