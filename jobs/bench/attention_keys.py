@@ -16,23 +16,20 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from sray.jobs.bench.probes import time_call
+from sray.jobs.bench.render_levers import HEAD_DIM, HEADS, with_backward
 from sray.model.sliced_attention import SLICED_KEYS, sliced_attention
 
-HEADS, HEAD_DIM = 4, 8
-"""The default model's attention: 4 heads of 8 channels."""
 
-
-def _stage_inputs(rays: int, samples: int, views: int, grad: bool) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """Tokens (R, N, m, C), the q/k/v weight (3C, C), the intra-view key mask (R, m * heads, 1, N) with one
-    key kept per query, and a dense upstream gradient (R, m * heads, N, d) for the stage's output."""
+def _stage_inputs(rays: int, samples: int, views: int, grad: bool) -> tuple[Tensor, Tensor, Tensor]:
+    """Tokens (R, N, m, C), the q/k/v weight (3C, C) and the intra-view key mask (R, m * heads, 1, N) with
+    one key kept per query."""
     gen = torch.Generator().manual_seed(samples)
     c = HEADS * HEAD_DIM
     tokens = torch.randn(rays, samples, views, c, generator=gen).requires_grad_(grad)
     weight = (torch.randn(3 * c, c, generator=gen) * c ** -0.5).requires_grad_(grad)
     mask = torch.rand(rays, views * HEADS, 1, samples, generator=gen) > 0.2
     mask[..., 0] = True  # every query keeps a key, as the model's key masks guarantee
-    upstream = torch.randn(rays, views * HEADS, samples, HEAD_DIM, generator=gen)
-    return tokens, weight, mask, upstream
+    return tokens, weight, mask
 
 
 def _timed(kernel: Callable[..., Tensor], rays: int, samples: int, views: int, grad: bool, repeats: int) -> float:
@@ -40,17 +37,18 @@ def _timed(kernel: Callable[..., Tensor], rays: int, samples: int, views: int, g
     their (R, m * heads, N, d) views, ``kernel``; with ``grad``, the backward of a dense upstream gradient
     to the tokens and the weight (an ``out.sum()`` would hand the kernels a stride-0 gradient, which
     sends batched matmuls down a per-matrix path that no training step takes)."""
-    tokens, weight, mask, upstream = _stage_inputs(rays, samples, views, grad)
+    tokens, weight, mask = _stage_inputs(rays, samples, views, grad)
     c = HEADS * HEAD_DIM
 
-    def call() -> None:
-        with torch.set_grad_enabled(grad):
-            q, k, v = (F.linear(tokens, weight[i * c:(i + 1) * c]).view(rays, samples, views * HEADS, HEAD_DIM)
-                       .transpose(1, 2) for i in range(3))
-            out = kernel(q, k, v, mask)
-            if grad:
-                torch.autograd.grad(out, (tokens, weight), upstream)
-    return time_call(call, torch.device("cpu"), repeats)
+    def stage() -> Tensor:
+        q, k, v = (F.linear(tokens, weight[i * c:(i + 1) * c]).view(rays, samples, views * HEADS, HEAD_DIM)
+                   .transpose(1, 2) for i in range(3))
+        return kernel(q, k, v, mask)
+
+    if grad:
+        return time_call(with_backward(stage, (tokens, weight)), torch.device("cpu"), repeats)
+    with torch.no_grad():
+        return time_call(stage, torch.device("cpu"), repeats)
 
 
 def key_length_table(samples: tuple[int, ...], rays: int = 256, views: int = 8, repeats: int = 3) -> str:

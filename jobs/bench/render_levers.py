@@ -76,7 +76,7 @@ def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = Fal
             for name, fn in _kernels(q, k, v, mask).items():
                 if backward and stage == "intra-view" and name in MATERIALISING:
                     continue  # minutes per call: they store every (L, L) score matrix for the backward
-                call = _with_backward(fn, (q, k, v)) if backward else fn
+                call = with_backward(fn, (q, k, v)) if backward else fn
                 seconds = time_call(call, torch.device("cpu"), repeats)
                 out = fn().detach()
                 first = out if first is None else first
@@ -85,7 +85,7 @@ def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = Fal
     return "\n".join(lines)
 
 
-def _with_backward(fn: Callable[[], Tensor], inputs: tuple[Tensor, ...]) -> Callable[[], Tensor]:
+def with_backward(fn: Callable[[], Tensor], inputs: tuple[Tensor, ...]) -> Callable[[], Tensor]:
     """``fn`` followed by the backward pass of a dense random gradient of its output to ``inputs``
     (gradients discarded). Dense as in a training step: the gradient of ``out.sum()`` is a stride-0
     tensor, which sends batched matmuls down a per-matrix path that inflates the materialising kernels."""

@@ -23,6 +23,7 @@ import torch
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.jobs.bench.pareto import pareto
+from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
@@ -114,7 +115,7 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     for key, path in (("main", checkpoint), ("rgbd", checkpoint_rgbd)):
         if path is not None:
             net, cfg = model_from_checkpoint(path)
-            loaded[key] = (net.eval(), cfg, (net.cfg.n_coarse, net.cfg.n_fine, net.cfg.inputs, net.cfg.fine_samples))
+            loaded[key] = (net.eval(), cfg, dataclasses.replace(net.cfg))  # the checkpoint's own model config
     names, _ = select_scenes(shards, None)
     rows = []
     for st in settings:
@@ -146,16 +147,15 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     return rows
 
 
-def _apply(net: torch.nn.Module, st: Setting, own: tuple[int, int, str, str]) -> None:
+def _apply(net: torch.nn.Module, st: Setting, own: SRayConfig) -> None:
     """Put the setting's render choices on the model: fine samples, implementation, samples per ray and
-    inputs (``own``: the checkpoint's coarse and fine counts, its ``model.inputs`` and ``model.fine_samples``,
-    which a setting that leaves them empty keeps)."""
-    net.cfg.fine_samples, net.cfg.impl = st.fine_samples or own[3], st.impl
-    net.cfg.inputs = st.inputs or own[2]
+    inputs, starting from ``own``, the checkpoint's model config (what a setting leaves empty keeps)."""
+    net.cfg.fine_samples, net.cfg.impl = st.fine_samples or own.fine_samples, st.impl
+    net.cfg.inputs = st.inputs or own.inputs
     for module in net.modules():
         if hasattr(module, "impl"):
             module.impl = st.impl
-    net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in own[:2])
+    net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in (own.n_coarse, own.n_fine))
 
 
 def table(rows: list[dict]) -> str:
