@@ -1,5 +1,5 @@
 """``sray gpu-check``: the dry run exercises every stage on the CPU, a re-run resumes, a failing stage is a
-result, and a machine without CUDA is told so in one line."""
+result, a machine without CUDA is told so in one line, and the checkout's tests and docs are found from any folder."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from sray.jobs.cli import main
-from sray.jobs.gpu_check import runner
+from sray.jobs.gpu_check import context, runner
 from sray.jobs.gpu_check.report import REPORT_FILE, StageResult, load_report
 from sray.jobs.gpu_check.stage_names import STAGE_NAMES
 
@@ -16,8 +16,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.slow
-def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Path, monkeypatch, capsys) -> None:
-    monkeypatch.chdir(REPO)
+def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Path, capsys) -> None:
     assert main(["gpu-check", "--dry-run", "--out", str(tmp_path)]) == 0
     report = load_report(tmp_path)
     assert list(report["stages"]) == list(STAGE_NAMES)
@@ -70,6 +69,41 @@ def test_without_cuda_it_says_so_in_one_line_and_fails(tmp_path: Path, capsys) -
     out = capsys.readouterr().out.strip().splitlines()
     assert len(out) == 1 and "no CUDA device" in out[0] and "--dry-run" in out[0]
     assert not (tmp_path / REPORT_FILE).exists()
+
+
+def test_from_another_folder_the_tests_stage_runs_the_checkouts_tests(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main(["gpu-check", "--dry-run", "--out", "out", "--stages", "tests"]) == 0
+    result = load_report(tmp_path / "out")["stages"]["tests"]
+    assert result.status == "passed", result.summary
+    assert "passed" in result.summary and "skipped" in result.summary  # the quick model test; the gpu tests skip
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # nothing but --out, which stays relative
+
+
+def test_from_another_folder_the_report_goes_to_the_checkouts_docs(tmp_path: Path, monkeypatch) -> None:
+    seen = {}
+
+    def fake_run(stages: list[str], out: Path, dry_run: bool, fresh: bool, repo: Path, doc: Path | None) -> dict:
+        seen.update(repo=repo, doc=doc)
+        return {"device": None, "stages": {}}
+
+    monkeypatch.setattr(runner, "run_gpu_check", fake_run)
+    monkeypatch.chdir(tmp_path)
+    assert main(["gpu-check", "--out", "out"]) == 0
+    assert seen == {"repo": REPO, "doc": REPO / "docs" / "benchmarks.md"}
+    assert main(["gpu-check", "--out", "out", "--doc", "mine.md"]) == 0
+    assert seen["doc"] == Path("mine.md")  # a path the user names stays relative to the working directory
+
+
+def test_an_installation_without_the_checkout_is_refused_in_one_line(tmp_path: Path, monkeypatch, capsys) -> None:
+    wheel = tmp_path / "site-packages" / "sray"
+    (wheel / "jobs").mkdir(parents=True)
+    monkeypatch.setattr(context, "INSTALLED_AT", wheel)
+    monkeypatch.chdir(tmp_path)
+    assert main(["gpu-check", "--dry-run", "--out", "out"]) == 2
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1 and str(wheel) in out[0] and "tests/ or docs/" in out[0] and "pip install -e ." in out[0]
+    assert not (tmp_path / "out").exists()
 
 
 def test_table_cells_reads_header_and_rows_and_skips_the_separator() -> None:

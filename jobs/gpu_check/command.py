@@ -19,17 +19,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("outputs/gpu-check"), help="report and scratch folder")
     p.add_argument("--dry-run", action="store_true", help="every stage on the CPU at toy size (tests the command)")
     p.add_argument("--fresh", action="store_true", help="ignore stages already in the report and run them again")
-    p.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"),
-                   help="where a GPU run writes its section (dry runs write only under --out)")
+    p.add_argument("--doc", type=Path, default=None,
+                   help="where a GPU run writes its section (default: docs/benchmarks.md of the checkout sray is "
+                        "installed from; dry runs write only under --out)")
     p.set_defaults(func=_gpu_check)
 
 
 def _gpu_check(args: argparse.Namespace) -> int:
+    from sray.jobs.gpu_check.context import NotACheckout, checkout_root
     from sray.jobs.gpu_check.runner import NoCudaDevice, run_gpu_check
 
     try:
-        report = run_gpu_check(args.stages, args.out, args.dry_run, args.fresh, Path.cwd(), args.doc)
-    except NoCudaDevice as err:
+        repo = checkout_root()
+        report = run_gpu_check(args.stages, args.out, args.dry_run, args.fresh, repo,
+                               args.doc or repo / "docs" / "benchmarks.md")
+    except (NotACheckout, NoCudaDevice) as err:
         print(f"sray gpu-check: {err}")
         return 2
     failed = [n for n, r in report["stages"].items() if r.status == "failed"]

@@ -8,6 +8,29 @@ from pathlib import Path
 
 import torch
 
+INSTALLED_AT = Path(__file__).resolve().parents[2]
+"""The folder holding the installed ``sray.jobs`` package: the checkout's root under an editable install (or
+the folders linked onto the path), ``site-packages/sray`` under a wheel."""
+CHECKOUT_FOLDERS = ("tests", "docs")
+"""What the check needs beside the package: the suite (the ``tests`` stage) and the reports (``docs/``)."""
+
+
+class NotACheckout(RuntimeError):
+    """``sray gpu-check`` from an installation without the checkout's ``tests/`` and ``docs/`` beside it."""
+
+
+def checkout_root() -> Path:
+    """The checkout sray is installed from (its ``tests/`` and ``docs/``), whatever the working directory.
+
+    Raises :class:`NotACheckout` when they are not beside the installed package (a wheel install).
+    """
+    missing = [f"{name}/" for name in CHECKOUT_FOLDERS if not (INSTALLED_AT / name).is_dir()]
+    if missing:
+        raise NotACheckout(f"sray is installed at {INSTALLED_AT}, which has no {' or '.join(missing)}: run it from a "
+                           "git checkout of sray installed with pip install -e . (or with its folders on the path, "
+                           "docs/gpu.md)")
+    return INSTALLED_AT
+
 
 @dataclass(frozen=True)
 class CheckContext:
