@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.png import decode_png
-from sray.data_tools.scene import IGNORE_ID, SceneMeta
+from sray.data_tools.scene import IGNORE_ID, SceneMeta, source_pool
 
 BALANCE_MODES = ("none", "inverse-sqrt", "inverse")
 """Class weighting of the semantic loss: none, w_c ∝ f_c^-1/2 or w_c ∝ f_c^-1 (f_c: pixel frequency)."""
@@ -58,7 +58,9 @@ def dataset_pixel_counts(dataset_dir: Path, roles: tuple[str, ...] = ("train", "
 
 def shard_pixel_counts(shards_dir: Path, roles: tuple[str, ...] = ("train",)
                        ) -> tuple[list[str], dict[str, np.ndarray]]:
-    """(class names, {scene: counts}) of the views of every scene of ``roles`` in a shard folder."""
+    """(class names, {scene: counts}) of every scene of ``roles`` in a shard folder, over the views the training
+    loader reads (``source_pool``: a train scene's ``train`` split minus its held-out views; a test scene's
+    ``source`` and ``finetune`` views), so class weights never read a held-out or test view's labels."""
     from sray.data_tools.loader.views import read_scene_views
     from sray.data_tools.shards.manifest import read_manifest
 
@@ -70,7 +72,8 @@ def shard_pixel_counts(shards_dir: Path, roles: tuple[str, ...] = ("train",)
             continue
         names = names or list(entry.meta["class_names"])
         views = read_scene_views(Path(shards_dir), entry)
-        per_scene[scene] = count_pixels((v.label() for v in views.values()), len(names))
+        pool = source_pool(SceneMeta.from_json(entry.meta))
+        per_scene[scene] = count_pixels((views[v].label() for v in pool), len(names))
     if names is None:
         raise ValueError(f"{shards_dir}/manifest.json: no scene with role in {roles}")
     return names, per_scene

@@ -85,6 +85,10 @@ class SRayConfig:
     """Weight of the semantic cross-entropy in the training loss (paper: 1)."""
     lambda_rgb: float = 1.0
     """Weight of the photometric MSE in the training loss (paper: 1)."""
+    lambda_src_sem: float = 0.0
+    """Weight of the auxiliary per-pixel cross-entropy on the source views' own labels, read off the encoder's
+    feature maps by a linear head (``source_semantics``; a departure from the paper, docs/model.md); 0 (the
+    paper) builds no head. The head exists only in training: rendering never reads it."""
     ignore_id: int = 255
     """Label id of unlabelled pixels; never a prediction target."""
     class_weights: tuple[float, ...] = ()
@@ -134,6 +138,8 @@ class SRayConfig:
             raise bad("depth_fraction", f"is {self.depth_fraction}; it must lie in [0, 1]")
         if self.depth_band <= 0.0:
             raise bad("depth_band", f"is {self.depth_band}; it must be > 0 (metres)")
+        if self.lambda_src_sem < 0:
+            raise bad("lambda_src_sem", f"is {self.lambda_src_sem}; use 0 (no source-view head) or a positive weight")
         if self.depth_freqs < 0:
             raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
         if self.density_activation not in DENSITY_ACTIVATIONS:

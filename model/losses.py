@@ -71,6 +71,12 @@ def _labelled_cross_entropy(logits: Tensor, target: Tensor, n_labelled: Tensor, 
     return summed / torch.where(total > 0, total, torch.ones_like(total))
 
 
+def labelled_cross_entropy(logits: Tensor, target: Tensor, ignore_id: int, weight: Tensor | None = None) -> Tensor:
+    """Mean (``weight``-weighted) cross-entropy over the labelled entries: logits (N, L), target (N,) int64 with
+    ``ignore_id`` for unlabelled; exactly 0 with a zero gradient when nothing is labelled."""
+    return _labelled_cross_entropy(logits, target, (target != ignore_id).sum(), ignore_id, weight)
+
+
 def _class_weights(cfg: LossSettings, device: torch.device) -> Tensor | None:
     """The config's per-class weights (L,) on ``device``, None when it has none."""
     weights = getattr(cfg, "class_weights", ())

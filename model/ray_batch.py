@@ -21,6 +21,7 @@ from torch import Tensor, nn
 from .config import SRayConfig
 from .rays import pixel_rays
 from .semantic_ray import SRayModel
+from .source_semantics import source_semantic_loss
 
 
 @dataclass(frozen=True)
@@ -67,21 +68,48 @@ class RayBatch:
     """The rays to render."""
     src_depth: Tensor | None = None
     """float32 (m, H, W) source z-depth in metres, 0 = unknown (read only with ``model.inputs='rgbd'``)."""
+    src_label: Tensor | None = None
+    """int64 (m, H, W) source class ids, ignore id for unlabelled; read only by the training loss's
+    source-view term (``model.lambda_src_sem`` > 0), never by rendering."""
 
 
 class RayBatchLoss(nn.Module):
     """One ``forward`` = encode a :class:`RayBatch`'s sources + the training loss of its rays
-    (``SRayModel.training_loss``: stratified samples, rendered in pieces); what training runs (DDP
-    included). Holds the network as ``net`` (checkpoints store ``net``'s own keys)."""
+    (``SRayModel.training_loss``: stratified samples, rendered in pieces), plus, with ``lambda_src_sem`` > 0
+    and source labels in the batch, ``lambda_src_sem`` times the source views' per-pixel cross-entropy
+    (``source_semantics``); what training runs (DDP included). Holds the network as ``net`` (checkpoints
+    store ``net``'s own keys)."""
 
     def __init__(self, cfg: SRayConfig) -> None:
         """Build the S-Ray network it trains (no device work here)."""
         super().__init__()
         self.net = SRayModel(cfg)
 
-    def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
-        """(scalar loss, detached terms) of ``render_loss`` for the batch's R rays: target_label (R,) int64
-        (ignore id for unlabelled), target_rgb (R, 3) in [0, 1]."""
-        origins, dirs, near, far = batch.query.rays()
-        src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
-        return self.net.training_loss(src, origins, dirs, near, far, target_label, target_rgb)
+    def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor,
+                render: bool = True) -> tuple[Tensor, dict[str, Tensor]]:
+        """(scalar loss, detached terms) for the batch's R rays: target_label (R,) int64 (ignore id for
+        unlabelled), target_rgb (R, 3) in [0, 1]. Terms: ``render_loss``'s, and ``sem_src`` when the
+        source-view term is on.
+
+        ``render=False`` (the 2D warm-up): the source-view term alone; nothing is rendered, and every
+        parameter outside the encoder and its head enters the loss with weight 0, so each parameter
+        still receives a gradient (DDP requires one per parameter and step).
+        """
+        net = self.net
+        src = net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
+        use_src = net.src_head is not None and batch.src_label is not None
+        if not render and not use_src:
+            raise ValueError("sray.model.ray_batch: a 2D-only step needs model.lambda_src_sem > 0 and source "
+                             "labels in the batch (src_label); set model.lambda_src_sem or render the rays.")
+        if render:
+            loss, terms = net.training_loss(src, *batch.query.rays(), target_label, target_rgb)
+        else:
+            idle = [p for name, p in net.named_parameters() if not name.startswith(("encoder.", "src_head."))]
+            loss = torch.stack([p.view(-1)[0] for p in idle]).sum() * 0.0
+            terms = {}
+        if use_src:
+            logits = net.src_head(src.feats, tuple(batch.src_rgb.shape[-2:]))  # (m, L, H, W)
+            src_loss = source_semantic_loss(logits, batch.src_label, net.cfg)
+            loss = loss + net.cfg.lambda_src_sem * src_loss
+            terms = terms | {"sem_src": src_loss.detach()}
+        return loss, terms

@@ -34,6 +34,7 @@ from .hierarchical import CoarseSampler, per_ray_bounds, render_image, render_ra
 from .losses import render_loss
 from .piecewise_loss import piecewise_render_loss
 from .ray_chunks import render_chunk_rays, train_piece_rays
+from .source_semantics import SourceSemanticHead
 from .source_set import SourceSet, rigid_inverse
 
 __all__ = ["SRayModel", "SourceSet"]
@@ -48,6 +49,8 @@ class SRayModel(nn.Module):
         self.encoder = ResUNetEncoder(cfg.feat_dim)
         self.coarse = SRayField(cfg)
         self.fine = SRayField(cfg)
+        self.src_head = SourceSemanticHead(cfg) if cfg.lambda_src_sem > 0 else None
+        """Training-only per-pixel classifier of the source views' features (``lambda_src_sem`` > 0)."""
 
     def encode(self, src_rgb: Tensor, src_K: Tensor, src_c2w: Tensor, src_depth: Tensor | None = None) -> SourceSet:
         """Encode m source views once: src_rgb (m, 3, H, W) in [0, 1], src_K (m, 3, 3), src_c2w (m, 4, 4).

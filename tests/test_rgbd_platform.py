@@ -13,7 +13,7 @@ import torch
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: F401  (pytest fixtures, used by name)
 from train_fixtures import tiny_config, tiny_shards  # noqa: F401  (pytest fixture, used by name)
 
-from sray.data_tools.loader.augment import Augmentation, rescale_depth
+from sray.data_tools.loader.augment import Augmentation, rescale_nearest
 from sray.data_tools.loader.samples import ranked_candidates, train_sample
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.loader.views import read_scene_views
@@ -59,11 +59,11 @@ def test_resized_sources_keep_depth_aligned_and_unblended(tiny_shards: Path) -> 
         assert set(np.unique(sample.sources.depth[i].numpy()).tolist()) <= stored
 
 
-def test_rescale_depth_follows_the_pixel_centre_rule() -> None:
+def test_rescale_nearest_follows_the_pixel_centre_rule() -> None:
     depth = np.arange(16, dtype=np.float32).reshape(4, 4)
-    assert rescale_depth(depth, (4, 4)) is depth
+    assert rescale_nearest(depth, (4, 4)) is depth
     # doubling: output pixel u' has centre (u' + 0.5) / 2 - 0.5 -> input pixel u'//2 (ties never occur)
-    up = rescale_depth(depth, (8, 8))
+    up = rescale_nearest(depth, (8, 8))
     np.testing.assert_array_equal(up, depth[np.arange(8)[:, None] // 2, np.arange(8)[None, :] // 2])
 
 

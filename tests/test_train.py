@@ -113,3 +113,27 @@ def test_infeasible_request_fails_fast(ray_session, tiny_shards, tmp_path) -> No
     with pytest.raises(InfeasibleRequest, match="2 CPUs"):
         launch_training(cfg)
     assert time.perf_counter() - start < 30
+
+
+def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(ray_session, tiny_shards,  # noqa: F811
+                                                                                 tmp_path) -> None:
+    """``optim.cpu_seconds`` ends the job at the first step whose CPU seconds (both ranks, summed) reach the
+    budget, long before the step cap; the learning rate decays with the CPU fraction; the 2D warm-up steps
+    (source labels only) and the source-view term after them keep the two DDP ranks identical."""
+    cfg = tiny_config(tiny_shards, tmp_path, name="budget")
+    cfg.optim.steps, cfg.optim.cpu_seconds, cfg.optim.warmup_2d_steps = 400, 12.0, 3
+    cfg.model.lambda_src_sem = 0.5
+    cfg.run.val_every, cfg.run.ckpt_every = 1000, 1000
+    outcome = launch_training(cfg)
+    assert outcome.status == "FINISHED"
+    cpu = sorted(_history(cfg, "train/cpu_seconds"))
+    last_step, spent = cpu[-1]
+    assert last_step < cfg.optim.steps and spent >= cfg.optim.cpu_seconds > cpu[-2][1], cpu[-3:]
+    assert load_checkpoint(outcome.latest_checkpoint)["counters"]["cpu_seconds"] == pytest.approx(spent)
+    lr = dict(_history(cfg, "train/lr"))
+    assert lr[last_step] < 0.5 * cfg.optim.lr  # decayed by the CPU fraction, not by last_step / 400
+    src_steps, ray_steps = ({s for s, _ in _history(cfg, key)} for key in ("train/sem_src", "train/sem_fine"))
+    assert src_steps == set(range(1, last_step + 1))  # every step, warm-up included
+    assert ray_steps == set(range(4, last_step + 1))  # rays rendered only after the 3 warm-up steps
+    divergence = _history(cfg, "ddp/param_divergence")
+    assert divergence and all(v == 0.0 for _, v in divergence), divergence

@@ -114,11 +114,12 @@ def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarr
     return out, K2
 
 
-def rescale_depth(depth: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
-    """float32 (H, W) depth at ``size_hw`` = (H', W'): each output pixel takes the input pixel nearest to
-    its centre under the pixel-centre rule ``u = (u' + 0.5) W / W' - 0.5`` (the geometry of
-    :func:`rescale_view`); depths are never blended, so no value appears between a surface and what is
-    behind it, and 0 (unknown) stays 0."""
+def rescale_nearest(depth: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
+    """A per-pixel map (H, W) (float32 depth in metres, or integer class ids) at ``size_hw`` = (H', W'): each
+    output pixel takes the input pixel nearest to its centre under the pixel-centre rule
+    ``u = (u' + 0.5) W / W' - 0.5`` (the geometry of :func:`rescale_view`); values are never blended, so no
+    depth appears between a surface and what is behind it, no class id between two classes, and 0
+    (unknown depth) stays 0."""
     h, w = depth.shape
     nh, nw = size_hw
     if (nh, nw) == (h, w):

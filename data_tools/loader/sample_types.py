@@ -64,6 +64,9 @@ class SourceViews(TensorFields):
     depth: Tensor | None = None
     """float32 (m, H, W) z-depth in metres, 0 = unknown, at the colours' size (the loader always fills it;
     the model reads it only with ``model.inputs='rgbd'``). A query view's depth is never a source input."""
+    label: Tensor | None = None
+    """int64 (m, H, W) class ids, ``IGNORE_ID`` (255) unlabelled, at the colours' size: filled only when the
+    training loader is asked for source labels (the source-view semantic loss); evaluation never fills it."""
 
 
 @dataclass(frozen=True)

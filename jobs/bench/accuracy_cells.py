@@ -24,6 +24,8 @@ if TYPE_CHECKING:
 
 CELLS_DIR = "cells"
 """Sub-folder of the benchmark's work folder holding one JSON file per finished cell."""
+HELD_OUT_SCENES = 8
+"""Training scenes whose held-out views each cell also scores (fitting, beside the zero-shot transfer)."""
 TRAIN_SECONDS_FILE = "bench_train_seconds.json"
 """File in a cell's job folder summing the wall seconds of every run that trained it (resumes included)."""
 
@@ -49,7 +51,8 @@ def stored_cells(out: Path) -> dict[str, dict[str, Any]]:
 
 def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
     """The training config of ``cell``: the preset's recipe and overrides, the variant's model settings
-    (attention, weight map, inputs, fine samples), the cell's seed and budget, and the benchmark's folders."""
+    (attention, weight map, inputs, fine samples, heads, source-view loss and 2D warm-up), the cell's seed and
+    budget, and the benchmark's folders."""
     from sray.jobs.recipes import get_recipe
     from sray.platform.config.train_config import apply_override
 
@@ -61,6 +64,7 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
     cfg.model.fine_samples = variant.fine_samples
     if variant.n_heads is not None:
         cfg.model.n_heads = variant.n_heads
+    cfg.model.lambda_src_sem, cfg.optim.warmup_2d_steps = variant.lambda_src_sem, variant.warmup_2d_steps
     if cell.variant != LONG:
         cfg.optim.steps = p.ablation_steps
     elif p.long_steps is not None:
@@ -123,7 +127,7 @@ def class_iou(report: dict[str, Any]) -> list[float | None]:
 def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, tracking_uri: str) -> dict[str, Any]:
     """Pretrain and evaluate ``cell``; store and return its record (``stored_cells``)."""
     from sray.data_tools.shards.manifest import read_manifest
-    from sray.platform.checkpoints.folders import read_meta
+    from sray.platform.checkpoints.folders import load_checkpoint, read_meta
     from sray.platform.eval.zero_shot import evaluate_checkpoint, write_json_atomic
 
     print(f"[bench] cell {cell.key}: pretraining", flush=True)
@@ -134,7 +138,15 @@ def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, 
                                  stride=1, tracking_uri=tracking_uri, experiment=EXPERIMENT, progress=True,
                                  fast=p.eval_fast)
     mean = report["mean"]
-    first = read_manifest(shards).scenes[scenes[0]].meta
+    manifest = read_manifest(shards)
+    first = manifest.scenes[scenes[0]].meta
+    # fitting against transfer: every held-out view of the first HELD_OUT_SCENES training scenes, with the
+    # zero-shot protocol (the same sources rule, render and whole images)
+    seen = sorted(s for s, e in manifest.scenes.items() if e.meta.get("role", "train") == "train")[:HELD_OUT_SCENES]
+    held_out = evaluate_checkpoint(checkpoint, shards, seen, out / "eval-heldout" / cell.key, n_source=p.eval_sources,
+                                   stride=1, tracking_uri=tracking_uri, experiment=EXPERIMENT, progress=True,
+                                   fast=p.eval_fast)
+    state = load_checkpoint(checkpoint)
     record = {
         "cell": cell.key, "variant": cell.variant, "seed": cell.seed,
         **dataclasses.asdict(VARIANT_SETTINGS[cell.variant]),
@@ -144,9 +156,13 @@ def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, 
         "class_avg_acc": mean["dataset_level"]["class_avg_acc"], "miou_per_image": mean["per_image"]["miou"],
         "psnr": mean["colour"]["psnr_db"], "ssim": mean["colour"]["ssim"],
         "scene_miou": {name: report["scenes"][name]["dataset_level"]["miou"] for name in scenes},
+        "heldout_miou": held_out["mean"]["dataset_level"]["miou"], "heldout_scenes": seen,
+        "heldout_class_iou": class_iou(held_out),
+        "train_cpu_s": state.get("counters", {}).get("cpu_seconds"),
         "class_iou": class_iou(report), "class_names": list(first["class_names"]),
         "protocol": report["protocol"], "metrics_path": report["metrics_path"],
     }
     write_json_atomic(record, out / CELLS_DIR / f"{cell.key}.json")
-    print(f"[bench] cell {cell.key}: zero-shot mIoU {100 * record['miou']:.2f}%", flush=True)
+    print(f"[bench] cell {cell.key}: zero-shot mIoU {100 * record['miou']:.2f}%, held-out views of "
+          f"{len(seen)} training scenes {100 * record['heldout_miou']:.2f}%", flush=True)
     return record

@@ -18,8 +18,9 @@ def ray_batch(sample: SceneQuery, pixels: Tensor | None = None) -> RayBatch:
 
     pixels: float32 (R, 2) (u, v) of the query image to render; None = a training sample's own
     ``pixels`` (an evaluation sample has none: pass the pixels to render, e.g. a strided grid).
-    The sources' depth travels with them (read by the model in ``rgbd`` mode only); an evaluation
-    sample's ``query_depth`` never enters the batch.
+    The sources' depth travels with them (read by the model in ``rgbd`` mode only), and their labels when
+    the loader delivered them (the source-view training loss); an evaluation sample's ``query_depth`` never
+    enters the batch.
     """
     if pixels is None:
         if not isinstance(sample, TrainSample):
@@ -28,4 +29,5 @@ def ray_batch(sample: SceneQuery, pixels: Tensor | None = None) -> RayBatch:
         pixels = sample.pixels
     return RayBatch(src_rgb=sample.sources.rgb, src_K=sample.sources.K, src_c2w=sample.sources.c2w,
                     query=QueryRays(K=sample.query.K, c2w=sample.query.c2w, pixels=pixels,
-                                    near=sample.near, far=sample.far), src_depth=sample.sources.depth)
+                                    near=sample.near, far=sample.far), src_depth=sample.sources.depth,
+                    src_label=sample.sources.label)

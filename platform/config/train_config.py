@@ -30,6 +30,11 @@ class DataSettings:
     """Rays per training step and rank (paper: 1024)."""
     loader_workers: int = 1
     """DataLoader worker processes per rank."""
+    visit_samples: int = 16
+    """Consecutive samples each loader worker draws from one scene before it picks its next scene at random
+    (1 = scenes interleaved step by step; larger reuses a decoded scene more, ``shard_loader``)."""
+    cache_scenes: int = 2
+    """Scenes each loader worker keeps decoded-ready in memory (encoded views; least recently used dropped)."""
     val_views_per_scene: int = 2
     """Held-out views rendered per scene at each validation (whole images, in chunks)."""
     val_downscale: int = 2
@@ -61,6 +66,10 @@ class DataSettings:
     """Random query crops: rays drawn in a window of this fraction of each image side; 0 = whole image."""
 
     def __post_init__(self) -> None:
+        """ValueError naming a field out of range."""
+        if self.visit_samples < 1 or self.cache_scenes < 1:
+            raise ValueError(f"train config: data.visit_samples ({self.visit_samples}) and data.cache_scenes "
+                             f"({self.cache_scenes}) must be >= 1")
         self.val_fast()
 
     def val_fast(self) -> FastRender | None:
@@ -88,6 +97,14 @@ class OptimSettings:
     """Linear warm-up steps before the decay starts."""
     grad_clip: float = 1.0
     """Global gradient-norm clipping threshold (0 disables clipping)."""
+    cpu_seconds: float = 0.0
+    """Stop once the job has spent this many CPU seconds, summed over its ranks and their loader processes
+    (``sray.platform.train.cpu_clock``), or at ``steps``, whichever comes first; the learning-rate decay then
+    follows the larger of the step and the CPU fraction (set ``steps`` as a cap). 0 = steps only."""
+    warmup_2d_steps: int = 0
+    """The first this many steps train the encoder and its source-view head on the source views' labels
+    alone (nothing rendered; a departure from the paper, docs/model.md); they count toward ``steps``. Needs
+    ``model.lambda_src_sem`` > 0; 0 = off."""
     max_nonfinite_in_row: int = 20
     """A non-finite loss or gradient skips the step; this many in a row stop the job."""
 
@@ -176,8 +193,17 @@ class TrainConfig:
 
 
 def check_sections(cfg: TrainConfig) -> None:
-    """ValueError for fp16 with a loss in pieces smaller than the batch: a piece's gradients are taken
-    before the loss scaler scales them (``sray.model.piecewise_loss``), so small ones could underflow."""
+    """ValueError for settings of different sections that cannot train together: fp16 with a loss in pieces
+    smaller than the batch (a piece's gradients are taken before the loss scaler scales them,
+    ``sray.model.piecewise_loss``, so small ones could underflow), and a 2D warm-up without the source-view
+    head it trains."""
+    if cfg.optim.cpu_seconds < 0:
+        raise ValueError(f"train config: optim.cpu_seconds is {cfg.optim.cpu_seconds}; use 0 (steps only) or a "
+                         "positive CPU-second budget")
+    if cfg.optim.warmup_2d_steps < 0 or (cfg.optim.warmup_2d_steps > 0 and cfg.model.lambda_src_sem <= 0):
+        raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
+                         "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "
+                         f"(is {cfg.model.lambda_src_sem}). Set model.lambda_src_sem=1 or optim.warmup_2d_steps=0.")
     if cfg.run.precision == "fp16" and 0 < cfg.model.train_piece < cfg.data.rays_per_batch:
         raise ValueError(f"train config: model.train_piece is {cfg.model.train_piece} (< data.rays_per_batch "
                          f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not "

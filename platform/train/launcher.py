@@ -207,10 +207,16 @@ def _fit_in_thread(trainer: Any) -> None:
 
 
 def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:
+    """Whether the job's last checkpoint ends short of both its step cap and its CPU-second budget."""
     latest = CheckpointManager(job_dir / "checkpoints").latest()
-    from sray.platform.checkpoints.folders import read_meta
+    from sray.platform.checkpoints.folders import load_checkpoint, read_meta
 
-    return latest is None or read_meta(latest)["step"] < cfg.optim.steps
+    if latest is None:
+        return True
+    if read_meta(latest)["step"] >= cfg.optim.steps:
+        return False
+    budget = cfg.optim.cpu_seconds
+    return budget <= 0 or load_checkpoint(latest)["counters"].get("cpu_seconds", 0.0) < budget
 
 
 def _log_run_start(tracker: Tracker, run: RunHandle, config_path: Path, protocol: dict[str, Any]) -> None:

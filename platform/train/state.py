@@ -39,7 +39,8 @@ def build_training(cfg: TrainConfig) -> tuple[RayBatchLoss, torch.optim.Optimize
 
 
 def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler: Any, scaler: Any,
-                   step: int, cfg: TrainConfig, best_metric: float | None, counters: dict[str, int]) -> dict[str, Any]:
+                   step: int, cfg: TrainConfig, best_metric: float | None,
+                   counters: dict[str, int | float]) -> dict[str, Any]:
     """Full checkpoint state (weights_only-safe) of the bare model: the step is the NEXT step to run."""
     state: dict[str, Any] = {
         "model": model.state_dict(),
@@ -48,7 +49,7 @@ def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler
         "step": int(step),
         "config": cfg.to_dict(),
         "best_metric": None if best_metric is None else float(best_metric),
-        "counters": {k: int(v) for k, v in counters.items()},
+        "counters": {k: float(v) if isinstance(v, float) else int(v) for k, v in counters.items()},
     }
     if scaler is not None:
         state["scaler"] = scaler.state_dict()

@@ -3,7 +3,8 @@
 A step reads top to bottom: seed -> (caller: forward under :meth:`TrainStep.autocast`, loss) ->
 backward (scaled under fp16) -> unscale -> clip -> non-finite guard -> optimiser step -> scaler
 update -> zero grads. It waits for the device exactly once: the guard's flags (non-finite loss or
-gradient, and a stop request from any rank) are brought to the host in one transfer. Loss terms stay
+gradient, and a stop request from any rank) and the ranks' CPU seconds are summed over the ranks and
+brought to the host in one transfer. Loss terms stay
 on the device; callers stack them and read them at their logging interval.
 
 Non-finite steps are skipped (no parameter or optimiser-state change), counted, and after
@@ -46,6 +47,8 @@ class StepOutcome:
     """True when any rank asked to stop (read in the same transfer as the guard)."""
     grad_norm: Tensor
     """Total gradient norm before clipping, a device scalar (read it only when logging)."""
+    cpu_seconds: float = 0.0
+    """The CPU seconds the ranks passed to this step, summed over the ranks."""
 
 
 class TrainStep:
@@ -77,17 +80,19 @@ class TrainStep:
             return torch.nn.utils.clip_grad_norm_(grads, self.grad_clip)
         return torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in grads]))
 
-    def __call__(self, loss: Tensor, stop_requested: bool = False) -> StepOutcome:
-        """Apply one update from ``loss`` (a scalar with a graph); see the module docstring."""
+    def __call__(self, loss: Tensor, stop_requested: bool = False, cpu_seconds: float = 0.0) -> StepOutcome:
+        """Apply one update from ``loss`` (a scalar with a graph); see the module docstring. ``cpu_seconds``:
+        this rank's CPU time so far, summed over the ranks into ``StepOutcome.cpu_seconds``."""
         (self.scaler.scale(loss) if self.scaler is not None else loss).backward()
         if self.scaler is not None:
             self.scaler.unscale_(self.optimizer)
         norm = self._gradient_norm(loss)
         bad = ~(torch.isfinite(norm) & torch.isfinite(loss.detach()))
-        flags = torch.stack([bad.float(), torch.tensor(float(stop_requested), device=norm.device)])
+        host = torch.tensor([float(stop_requested), cpu_seconds], dtype=torch.float64, device=norm.device)
+        flags = torch.cat([bad.to(torch.float64).reshape(1), host])  # float64: CPU seconds stay exact
         if self.world_size > 1:
-            torch.distributed.all_reduce(flags, op=torch.distributed.ReduceOp.MAX)
-        nonfinite, stop = flags.tolist()  # the step's one device -> host transfer
+            torch.distributed.all_reduce(flags, op=torch.distributed.ReduceOp.SUM)  # a flag > 0: some rank set it
+        nonfinite, stop, cpu_total = flags.tolist()  # the step's one device -> host transfer
         if not nonfinite:
             self.optimizer.step()
         if self.scaler is not None:
@@ -102,7 +107,7 @@ class TrainStep:
                     "rate, clip gradients harder, or train in precision 'no' or 'bf16'")
         else:
             self.skipped_in_row = 0
-        return StepOutcome(applied=not nonfinite, stop=bool(stop), grad_norm=norm.detach())
+        return StepOutcome(applied=not nonfinite, stop=stop > 0, grad_norm=norm.detach(), cpu_seconds=cpu_total)
 
 
 def fused_adam(params: list[nn.Parameter], lr: float) -> torch.optim.Adam:

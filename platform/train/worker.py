@@ -18,7 +18,8 @@ from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.tracker import RunHandle
-from sray.platform.train.state import build_training, restore_training, training_state
+from sray.platform.train.cpu_clock import CpuClock
+from sray.platform.train.state import build_training, lr_lambda, restore_training, training_state
 from sray.platform.train.step import TrainStep, step_seed
 
 STOP_FILE = "STOP"
@@ -93,6 +94,9 @@ def train_worker(payload: dict[str, Any]) -> None:
     if state is not None and train_step.scaler is not None and "scaler" in state:
         train_step.scaler.load_state_dict(state["scaler"])
 
+    # CPU seconds of every rank and its loader processes, across resumes (optim.cpu_seconds budgets them)
+    clock, cpu_total = CpuClock(counters.get("cpu_seconds", 0.0) / world), counters.get("cpu_seconds", 0.0)
+    lr_factor = lr_lambda(cfg.optim)
     manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
     logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
     if logger is not None and start == 0:
@@ -107,7 +111,9 @@ def train_worker(payload: dict[str, Any]) -> None:
     loader = make_train_loader(
         Path(cfg.data.shards), n_source=cfg.model.n_source, top_k=cfg.data.top_k,
         rays_per_batch=cfg.data.rays_per_batch, batches_per_epoch=epoch_len, rank=rank, world_size=world,
-        num_workers=cfg.data.loader_workers, seed=cfg.run.seed, augment=cfg.data.augmentation())
+        num_workers=cfg.data.loader_workers, seed=cfg.run.seed, augment=cfg.data.augmentation(),
+        source_labels=cfg.model.lambda_src_sem > 0, visit_samples=cfg.data.visit_samples,
+        cache_scenes=cfg.data.cache_scenes)
 
     def batches_from(step_at: int) -> Any:
         loader.set_epoch(step_at // epoch_len)
@@ -126,7 +132,7 @@ def train_worker(payload: dict[str, Any]) -> None:
         if rank == 0:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
             logger.flush(force=True)
-            counters["skipped_steps"] = train_step.skipped_total
+            counters["skipped_steps"], counters["cpu_seconds"] = train_step.skipped_total, cpu_total
             state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
                                    step_done, cfg, best, counters)
             state[UNSENT_METRICS] = [list(m) for m in logger.unsent_metrics()]  # store unreachable now
@@ -135,8 +141,19 @@ def train_worker(payload: dict[str, Any]) -> None:
         else:
             ray.train.report(metrics)
 
+    budget = cfg.optim.cpu_seconds
+
+    def follow_cpu_budget(next_step: int) -> None:
+        """With a CPU budget, the next step's learning rate follows whichever is further along: the steps or
+        the CPU seconds (as a share of ``steps``)."""
+        if budget > 0:
+            progress = max(next_step, cpu_total / budget * cfg.optim.steps)
+            for group in optimizer.param_groups:
+                group["lr"] = group["initial_lr"] * lr_factor(progress)
+
     window_start, window_terms, term_names = time.perf_counter(), [], None
     step = start
+    follow_cpu_budget(start)
     try:
         while step < cfg.optim.steps:
             kill_if_due(faults, step, rank, job_dir, before_exit=lambda: logger.flush(force=True))
@@ -147,31 +164,37 @@ def train_worker(payload: dict[str, Any]) -> None:
             sample = next(batches).to(device, non_blocking=True)
             torch.manual_seed(step_seed(cfg.run.seed, rank, step))
             model.train()
-            with train_step.autocast():
-                loss, terms = model(ray_batch(sample), sample.target_label, sample.target_rgb)
+            with train_step.autocast():  # the first optim.warmup_2d_steps steps train on source labels only
+                loss, terms = model(ray_batch(sample), sample.target_label, sample.target_rgb,
+                                    render=step >= cfg.optim.warmup_2d_steps)
             if step == faults.nan_at_step:
                 loss = loss * float("nan")
             stop_asked = stop_file.exists() or step + 1 == faults.stop_after_step
-            outcome = train_step(loss, stop_requested=stop_asked)
+            outcome = train_step(loss, stop_requested=stop_asked, cpu_seconds=clock.seconds())
+            cpu_total = outcome.cpu_seconds
             scheduler.step()
+            follow_cpu_budget(step + 1)
+            finished = step + 1 == cfg.optim.steps or (budget > 0 and cpu_total >= budget)
             if outcome.applied:
-                term_names = term_names or [*terms, "loss"]
+                if term_names != [*terms, "loss"]:  # a new set of terms (the 2D warm-up ended) opens a new window
+                    term_names, window_terms = [*terms, "loss"], []
                 window_terms.append(torch.stack([*(terms[k].float() for k in term_names[:-1]), loss.detach().float()]))
             step += 1
             bar.update(1)
 
-            if rank == 0 and (step % cfg.run.log_every == 0 or step == cfg.optim.steps):
+            if rank == 0 and (step % cfg.run.log_every == 0 or finished):
                 elapsed = time.perf_counter() - window_start
                 means = (dict(zip(term_names, torch.stack(window_terms).mean(0).tolist()))
                          if window_terms else {})  # one read of the whole window's terms
                 logger.log_metrics({f"train/{k}": v for k, v in means.items()} | {
-                    "train/lr": scheduler.get_last_lr()[0], "train/grad_norm": float(outcome.grad_norm),
+                    "train/lr": optimizer.param_groups[0]["lr"], "train/grad_norm": float(outcome.grad_norm),
+                    "train/cpu_seconds": cpu_total,
                     "train/rays_per_s": cfg.data.rays_per_batch * world * cfg.run.log_every / max(elapsed, 1e-9),
                     "train/skipped_steps": train_step.skipped_total, "train/memory_mb": _memory_mb(device)}, step)
                 bar.set_postfix(loss=f"{means.get('loss', float('nan')):.3f}")
                 window_start, window_terms = time.perf_counter(), []
             metrics: dict[str, float] = {"step": step}
-            if step % cfg.run.val_every == 0 or step == cfg.optim.steps:
+            if step % cfg.run.val_every == 0 or finished:
                 if rank == 0:
                     metrics |= validate(accelerator.unwrap_model(model).net, cfg, step, logger, job_dir, device)
                     miou = metrics.get("val/miou")
@@ -182,8 +205,10 @@ def train_worker(payload: dict[str, Any]) -> None:
                 if rank == 0:
                     print(f"[sray] stopped at step {step}; resume with: sray train --resume {cfg.run.name}", flush=True)
                 return
-            if step % cfg.run.ckpt_every == 0 or step == cfg.optim.steps:
+            if step % cfg.run.ckpt_every == 0 or finished:
                 checkpoint_and_report(step, metrics)
+            if finished:
+                break
         if rank == 0:
             final = manager.best() or manager.latest()
             if cfg.run.register_model and final is not None:

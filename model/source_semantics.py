@@ -1,0 +1,65 @@
+"""Dense 2D supervision of the encoder: a per-pixel semantic head on the source views' feature maps.
+
+S-Ray's ray loss sends the encoder the gradient of R labelled query pixels per step, while the m
+source images it encodes in the same step carry m x H x W labels. :class:`SourceSemanticHead` reads
+class logits off each source view's feature map with one 1x1 convolution (a linear read-out, so the
+class information has to sit in the features the semantic field aggregates), and
+:func:`source_semantic_loss` is their cross-entropy against the source views' own labels:
+
+* the logits (m, L, H/4, W/4) are brought to full resolution by two pixel-centre-aligned 2x
+  up-samplings (``encoder.upsample_to``: feature pixel j sits on image pixel 4j, so up-sampled pixel i
+  reads feature coordinate i/4), then
+* the mean cross-entropy over the labelled pixels of all m views (``ignore_id`` left out), weighted by
+  the model's ``class_weights`` when it has them, exactly as the ray loss weights its rays.
+
+This is a departure from the paper (docs/model.md): it adds ``n_classes x (feat_dim + 1)`` parameters,
+used in training only; rendering never reads the head.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+from .config import SRayConfig
+from .encoder import FEATURE_STRIDE, upsample_to
+from .losses import labelled_cross_entropy
+
+
+class SourceSemanticHead(nn.Module):
+    """Linear per-pixel classifier on encoder features: (m, C, h, w) -> logits (m, L, H, W)."""
+
+    def __init__(self, cfg: SRayConfig) -> None:
+        """A 1x1 convolution from ``cfg.feat_dim`` channels to ``cfg.n_classes`` logits (no device work)."""
+        super().__init__()
+        self.classify = nn.Conv2d(cfg.feat_dim, cfg.n_classes, 1)
+
+    def forward(self, feats: Tensor, image_hw: tuple[int, int]) -> Tensor:
+        """Logits (m, L, H, W) at the images' size ``image_hw`` = (H, W) from features (m, C, h, w) with
+        h = ceil(ceil(H/2)/2) (the encoder's output for those images)."""
+        h, w = image_hw
+        expected = (math.ceil(math.ceil(h / 2) / 2), math.ceil(math.ceil(w / 2) / 2))
+        if tuple(feats.shape[-2:]) != expected:
+            raise ValueError(f"sray.model.source_semantics: features {tuple(feats.shape[-2:])} do not belong to "
+                             f"{image_hw} images (expected {expected} at stride {FEATURE_STRIDE}); pass the encoder's "
+                             "output for these source images.")
+        logits = self.classify(feats)  # (m, L, h, w)
+        half = upsample_to(logits, (math.ceil(h / 2), math.ceil(w / 2)))  # (m, L, H/2, W/2)
+        return upsample_to(half, (h, w))  # (m, L, H, W)
+
+
+def source_semantic_loss(logits: Tensor, labels: Tensor, cfg: SRayConfig) -> Tensor:
+    """Mean (class-weighted) cross-entropy of source-view logits (m, L, H, W) against their labels (m, H, W)
+    int64 (``cfg.ignore_id`` = unlabelled, left out); 0 with a zero gradient when no pixel is labelled.
+    Computed in float32 whatever the autocast region."""
+    if labels.shape != (logits.shape[0], *logits.shape[-2:]) or labels.dtype != torch.int64:
+        raise ValueError(f"sray.model.source_semantics: labels must be int64 (m, H, W) = "
+                         f"{(logits.shape[0], *logits.shape[-2:])} for logits {tuple(logits.shape)}, got "
+                         f"{labels.dtype} {tuple(labels.shape)}; pass the source views' label maps at their size.")
+    flat_logits = logits.permute(0, 2, 3, 1).reshape(-1, logits.shape[1])  # (m H W, L)
+    flat_labels = labels.reshape(-1)  # (m H W,)
+    weight = torch.tensor(cfg.class_weights, dtype=torch.float32, device=logits.device) if cfg.class_weights else None
+    with torch.autocast(device_type=logits.device.type, enabled=False):
+        return labelled_cross_entropy(flat_logits.float(), flat_labels, cfg.ignore_id, weight)
