@@ -1,5 +1,5 @@
-"""``sray bench loader|model|profile|speed-accuracy|accuracy``: measured tables, printed and appended to
-docs/benchmarks.md."""
+"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|segmenter``: measured tables, printed and
+appended to docs/benchmarks.md."""
 
 from __future__ import annotations
 
@@ -74,6 +74,49 @@ def register(sub: argparse._SubParsersAction) -> None:
                           help="work folder, reused by later runs (default: outputs/bench-accuracy/<preset>)")
     accuracy.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     accuracy.set_defaults(func=_bench_accuracy)
+
+    ceilings = kinds.add_parser("ceilings", help="where zero-shot accuracy is lost: label-transfer ceilings, the "
+                                "field at the true surface and linear probes, on zero-shot's views and sources")
+    ceilings.add_argument("--checkpoint", type=Path, required=True, help="checkpoint folder written by `sray train`")
+    ceilings.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
+    ceilings.add_argument("--n-source", type=int, default=8, help="fixed source views per test view (as sray eval)")
+    ceilings.add_argument("--views-per-scene", type=int, default=0, help="first test views per scene (0: all)")
+    ceilings.add_argument("--segmenter", type=Path, default=None,
+                          help="2D segmenter folder (`sray bench segmenter`); without it rows b and c are left out")
+    ceilings.add_argument("--probe-steps", type=int, default=300, help="Adam steps of each linear probe's fit")
+    ceilings.add_argument("--probe-views", type=int, default=64, help="train-scene views the probes are fitted on")
+    ceilings.add_argument("--tolerance", type=float, default=0.05,
+                          help="occlusion test: relative depth agreement of a source's depth with the point")
+    ceilings.add_argument("--out", type=Path, default=Path("outputs/bench-ceilings"), help="folder of ceilings.json")
+    ceilings.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
+    ceilings.set_defaults(func=_bench_ceilings)
+
+    segmenter = kinds.add_parser("segmenter", help="train the 2D segmenter (encoder + linear head) of the ceilings "
+                                 "rows for a CPU-second budget on the train scenes' source views")
+    segmenter.add_argument("--data", type=Path, required=True, help="shard folder with train scenes")
+    segmenter.add_argument("--cpu-seconds", type=float, required=True,
+                           help="training budget in CPU seconds of this process (time.process_time)")
+    segmenter.add_argument("--out", type=Path, required=True, help="folder the segmenter is saved in")
+    segmenter.add_argument("--recipe", default="synth-cpu-hour",
+                           help="recipe whose augmentation, class balance and source counts the training uses")
+    segmenter.add_argument("--seed", type=int, default=0)
+    segmenter.set_defaults(func=_bench_segmenter)
+
+
+def _bench_ceilings(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.ceilings import run_ceilings
+
+    run_ceilings(args.checkpoint, args.data, args.out, args.doc, n_source=args.n_source,
+                 views_per_scene=args.views_per_scene, segmenter=args.segmenter, probe_steps=args.probe_steps,
+                 probe_views=args.probe_views, tolerance=args.tolerance)
+    return 0
+
+
+def _bench_segmenter(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.ceilings import run_segmenter
+
+    run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed)
+    return 0
 
 
 def _bench_accuracy(args: argparse.Namespace) -> int:

@@ -1,0 +1,77 @@
+"""``sray bench ceilings`` and ``sray bench segmenter``: where zero-shot accuracy is lost, as a table.
+
+``ceilings`` scores the rows of :mod:`sray.platform.eval.ceilings` on a checkpoint's unseen test scenes,
+stores them as ``ceilings.json`` in ``--out``, prints the Markdown table and writes it into the benchmark
+document as the section "Ceilings" (replaced on a rerun on the same kind of device). ``segmenter`` trains
+the 2D segmenter those rows use for a CPU-second budget, with a recipe's images and augmentation.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from sray.jobs.bench.doc import markdown_table, record
+from sray.jobs.recipes import get_recipe
+from sray.platform.eval.ceilings import measure_ceilings
+from sray.platform.eval.segmenter import SegmenterRecord
+from sray.platform.eval.segmenter_training import train_segmenter
+from sray.platform.eval.zero_shot import write_json_atomic
+
+TITLE = "Ceilings"
+REPORT_FILE = "ceilings.json"
+
+
+def _pct(value: float | None) -> str:
+    """A share as a percentage with one decimal, "—" when there is none."""
+    return "—" if value is None else f"{100 * value:.1f}"
+
+
+def ceilings_table(rows: list[dict[str, Any]]) -> str:
+    """The Markdown table of a report's rows (oracle rows marked; coverage "—" for per-pixel rows)."""
+    header = ["row", "what", "inputs", "oracle", "mIoU %", "total acc %", "coverage %", "acc on covered %",
+              "s/view", "budget"]
+    body = [[r["key"], r["title"], r["protocol"]["inputs"], "**oracle**" if r["oracle"] else "no", _pct(r["miou"]),
+             _pct(r["total_acc"]), _pct(r["coverage"]), _pct(r["acc_on_covered"]),
+             "—" if r["seconds_per_view"] is None else f"{r['seconds_per_view']:.3f}", r["budget"] or "—"]
+            for r in rows]
+    return markdown_table(header, body)
+
+
+def ceilings_notes(report: dict[str, Any]) -> str:
+    """The protocol lines printed under the table."""
+    views = f"the first {report['views_per_scene']} test view(s)" if report["views_per_scene"] else "every test view"
+    return (f"Checkpoint `{report['checkpoint']}` (step {report['checkpoint_step']}), shards `{report['shards']}`: "
+            f"{len(report['scenes'])} unseen test scene(s), {views} of each, "
+            f"{report['n_source']} fixed sources ({report['source_rule']}). mIoU: dataset-level per scene, "
+            f"unweighted mean over scenes; {report['unseen_rule']}. Coverage: labelled query pixels some source "
+            f"sees by the row's geometry (occlusion test: relative depth agreement {report['tolerance']}); "
+            f"{report['coverage_of_d']}. Votes: {report['tie_rule']}. Oracle rows read the query view's "
+            "ground-truth depth and never sit in a comparison column; e rows read the query image, which S-Ray "
+            "never sees. s/view: wall seconds of a row's prediction per view on this machine (probe fits and "
+            "segmenter training are in the budget column).")
+
+
+def run_ceilings(checkpoint: Path, shards: Path, out: Path, doc: Path, *, n_source: int = 8, views_per_scene: int = 0,
+                 segmenter: Path | None = None, probe_steps: int = 300, probe_views: int = 64,
+                 tolerance: float = 0.05, progress: bool = True) -> dict[str, Any]:
+    """Measure, store ``out/ceilings.json``, print and record the table in ``doc``; returns the report."""
+    report = measure_ceilings(checkpoint, shards, n_source=n_source, views_per_scene=views_per_scene,
+                              segmenter=segmenter, probe_steps=probe_steps, probe_views=probe_views,
+                              tolerance=tolerance, progress=progress)
+    path = write_json_atomic(report, Path(out) / REPORT_FILE)
+    record(TITLE, ceilings_table(report["rows"]), Path(doc), ceilings_notes(report))
+    print(f"rows stored in {path}")
+    return report
+
+
+def run_segmenter(shards: Path, cpu_seconds: float, out: Path, recipe: str = "synth-cpu-hour",
+                  seed: int = 0) -> SegmenterRecord:
+    """Train the 2D segmenter with ``recipe``'s augmentation, class balance and source counts for
+    ``cpu_seconds``; saved in ``out``."""
+    cfg = get_recipe(recipe)
+    result = train_segmenter(shards, cpu_seconds, out, seed, augment=cfg.data.augmentation(),
+                             class_balance=cfg.data.class_balance, n_source=cfg.model.n_source,
+                             top_k=cfg.data.top_k, feat_dim=cfg.model.feat_dim)
+    print(f"segmenter saved in {out}: {result.budget()}, final loss {result.training['final_loss']:.3f}")
+    return result

@@ -1,0 +1,199 @@
+"""Where zero-shot accuracy goes: ceiling rows scored on zero-shot evaluation's own views and sources.
+
+Every row is scored on the same query views (each unseen test scene's ``test`` views, the first
+``views_per_scene`` of them) with the same fixed source views (``make_eval_samples``: each query's
+``n_source`` top-ranked neighbours in the scene's ``source`` split) and the same metric as ``sray eval``
+(:mod:`sray.platform.eval.ceiling_rows`). The rows (:func:`row_descriptors`):
+
+* ``a`` ground-truth source labels carried by ground-truth geometry (backward transfer with the query's
+  depth and the occlusion test, :mod:`~sray.platform.eval.label_transfer`): the ceiling of any method that
+  labels a query from its sources (an oracle);
+* ``b`` the same transfer of the 2D segmenter's predictions on the source images (an oracle);
+* ``c`` the segmenter's predictions splatted forward with the source depth (the ``2d-transfer`` method:
+  the RGB-D protocol's inputs, nothing of the query but its camera);
+* ``d`` S-Ray's fine field at the ground-truth surface (:mod:`~sray.platform.eval.surface_field`, an oracle);
+* ``e`` linear probes on frozen encoder features (:mod:`~sray.platform.eval.linear_probe`) of the
+  checkpoint, of the segmenter and of a random initialisation: they read the query image itself, which
+  S-Ray never sees.
+
+Rows b and c need a segmenter folder; without one they (and its probe) are left out.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from itertools import islice
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+from tqdm import tqdm
+
+from sray.data_tools.loader.sample_types import EvalSample
+from sray.data_tools.loader.samples import ranked_candidates
+from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.data_tools.loader.views import StoredView, read_scene_views
+from sray.data_tools.scene import SceneMeta
+from sray.data_tools.shards.manifest import read_manifest
+from sray.model.semantic_ray import SRayModel
+from sray.platform.checkpoints.folders import read_meta
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.eval.ceiling_rows import UNSEEN_RULE, CeilingRow, RowProtocol
+from sray.platform.eval.label_transfer import LabelTransfer, transfer_labels
+from sray.platform.eval.linear_probe import LinearProbe, fit_probe, random_encoder
+from sray.platform.eval.segmenter import Segmenter, load_segmenter
+from sray.platform.eval.surface_field import field_at_surface
+from sray.platform.eval.view_scoring import encode_sources
+from sray.platform.eval.zero_shot import select_scenes
+
+TIE_RULE = "majority of the sources that see a pixel; a tie goes to the label of the best-ranked source among them"
+
+
+def row_descriptors(with_segmenter: bool, rgbd: bool) -> list[tuple[str, str, RowProtocol]]:
+    """(key, title, protocol) of every row measured, in table order; ``rgbd``: the checkpoint's model reads
+    the source depth (``model.inputs='rgbd'``)."""
+    rows = [("a", "GT source labels, GT geometry (source-based ceiling)",
+             RowProtocol("source GT labels", "backward from query GT depth, occlusion-tested", query_depth=True,
+                         source_depth=True, source_labels=True))]
+    if with_segmenter:
+        rows += [("b", "segmenter on sources, GT geometry",
+                  RowProtocol("segmenter on source images", "backward from query GT depth, occlusion-tested",
+                              query_depth=True, source_images=True, source_depth=True, segmenter=True)),
+                 ("c", "segmenter on sources, source-depth splatting (2d-transfer)",
+                  RowProtocol("segmenter on source images", "forward splatting of source depth, z-buffered",
+                              source_images=True, source_depth=True, segmenter=True))]
+    rows.append(("d", "S-Ray fine field at the GT surface",
+                 RowProtocol("S-Ray fine field", "one ray point at the query GT depth", query_depth=True,
+                             source_images=True, source_depth=rgbd)))
+    probes = [("e", "linear probe, checkpoint encoder (reads the query image)")]
+    if with_segmenter:
+        probes.append(("e-seg", "linear probe, segmenter encoder (reads the query image)"))
+    probes.append(("e-rand", "linear probe, random encoder (reads the query image)"))
+    return rows + [(k, t, RowProtocol("linear probe on the query image's features", "—", query_image=True))
+                   for k, t in probes]
+
+
+def source_ids(sample: EvalSample, views: dict[str, StoredView], meta: SceneMeta, n_source: int) -> list[str]:
+    """The ids of ``sample``'s source views (ranked ``source``-split neighbours of test scenes, ``train``-split
+    of train scenes, as ``make_eval_samples`` picks them), checked against the sample's source cameras."""
+    allowed = set(meta.splits["source" if meta.role == "test" else "train"])
+    ids = ranked_candidates(views[sample.query_id], allowed, n_source)
+    cameras = torch.from_numpy(np.stack([views[i].c2w for i in ids])).float()
+    if not torch.equal(cameras, sample.sources.c2w):
+        raise RuntimeError(f"scene {sample.scene!r}, view {sample.query_id!r}: the source ids {ids} do not match "
+                           "the evaluation sample's sources; make_eval_samples changed its source rule, update "
+                           "sray.platform.eval.ceilings.source_ids to match it")
+    return ids
+
+
+def timed(fn: Callable[[], Any]) -> tuple[Any, float]:
+    """``fn()`` and the wall seconds it took."""
+    start = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - start
+
+
+@dataclass
+class ViewScorer:
+    """What predicts the rows of one view: the checkpoint, the segmenter, the probes and the transfer's test."""
+
+    net: SRayModel
+    """The checkpoint's S-Ray network (eval mode, CPU)."""
+    segmenter: Segmenter | None
+    """The 2D segmenter of rows b and c, or None."""
+    probes: dict[str, LinearProbe]
+    """Fitted probes by row key."""
+    tolerance: float
+    """The occlusion test's relative depth agreement."""
+
+    def score(self, rows: dict[str, CeilingRow], sample: EvalSample, gt_sources: Tensor) -> None:
+        """Predict every row for ``sample`` and add it to ``rows``; gt_sources (m, H, W) int64 are the ground-truth
+        labels of the sample's source views."""
+        cfg = self.net.cfg
+        src, gt, scene = sample.sources, sample.query_label, sample.scene
+        geometry = (src.K, src.c2w, src.depth, sample.query.K, sample.query.c2w, tuple(gt.shape))
+
+        def transfer(labels: Tensor, mode: str) -> LabelTransfer:
+            return transfer_labels(labels, *geometry, mode, tolerance=self.tolerance, ignore_id=cfg.ignore_id,
+                                   query_depth=sample.query_depth if mode == "backward" else None)
+
+        oracle, seconds = timed(lambda: transfer(gt_sources, "backward"))
+        rows["a"].add(scene, oracle.labels, gt, cfg.n_classes, cfg.ignore_id, seconds, oracle.seen)
+        if self.segmenter is not None:
+            seg_labels, seg_seconds = timed(lambda: self.segmenter.predict(src.rgb))  # (m, H, W)
+            for key, mode in (("b", "backward"), ("c", "forward")):
+                out, seconds = timed(lambda: transfer(seg_labels, mode))  # noqa: B023 - called at once
+                rows[key].add(scene, out.labels, gt, cfg.n_classes, cfg.ignore_id, seg_seconds + seconds, out.seen)
+        pred, seconds = timed(lambda: field_at_surface(self.net, encode_sources(self.net, sample, torch.device("cpu")),
+                                                       sample.query.K, sample.query.c2w, sample.query_depth,
+                                                       sample.near, sample.far))
+        rows["d"].add(scene, pred, gt, cfg.n_classes, cfg.ignore_id, seconds, oracle.seen)
+        query_rgb = sample.query_rgb.permute(2, 0, 1)[None]  # (1, 3, H, W)
+        for key, probe in self.probes.items():
+            pred, seconds = timed(lambda: probe.predict(query_rgb)[0])  # noqa: B023 - called at once
+            rows[key].add(scene, pred, gt, cfg.n_classes, cfg.ignore_id, seconds)
+
+
+def fit_probes(net: SRayModel, segmenter: Segmenter | None, shards: Path, steps: int, max_views: int,
+               seed: int) -> dict[str, LinearProbe]:
+    """Probes on the checkpoint's encoder (``e``), the segmenter's (``e-seg``, when given) and a random one
+    (``e-rand``, initialised under ``seed``), all fitted alike."""
+    encoders = {"e": net.encoder, "e-seg": None if segmenter is None else segmenter.encoder,
+                "e-rand": random_encoder(net.cfg.feat_dim, seed)}
+    return {key: fit_probe(encoder, shards, net.cfg, steps=steps, max_views=max_views)
+            for key, encoder in encoders.items() if encoder is not None}
+
+
+def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views_per_scene: int = 0,
+                     segmenter: Path | None = None, probe_steps: int = 300, probe_views: int = 64,
+                     tolerance: float = 0.05, seed: int = 0, progress: bool = True) -> dict[str, Any]:
+    """Score every row (module doc) on the unseen test scenes of ``shards``; returns the JSON-ready report.
+
+    ``views_per_scene``: the first test views of each scene (0 = all); ``segmenter``: a folder written by
+    :func:`~sray.platform.eval.segmenter_training.train_segmenter`; ``probe_steps``/``probe_views``: the
+    probes' fit; ``tolerance``: the occlusion test's relative depth agreement; ``seed``: the random encoder's.
+    Runs on the CPU.
+    """
+    checkpoint, shards = Path(checkpoint).resolve(), Path(shards).resolve()
+    net, cfg = model_from_checkpoint(checkpoint)
+    step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
+    names, metas = select_scenes(shards, None)
+    wrong = [s for s in names if len(metas[s]["class_names"]) != cfg.model.n_classes]
+    if wrong:
+        raise ValueError(f"{shards / 'manifest.json'}: scenes {wrong} have {len(metas[wrong[0]]['class_names'])} "
+                         f"classes, the checkpoint's model predicts {cfg.model.n_classes}; measure on data of the "
+                         "label space the model was trained on")
+    manifest = read_manifest(shards)
+    seg, record = load_segmenter(segmenter) if segmenter is not None else (None, None)
+    if seg is not None and seg.cfg.n_classes != cfg.model.n_classes:
+        raise ValueError(f"{segmenter}: the segmenter predicts {seg.cfg.n_classes} classes, the checkpoint "
+                         f"{cfg.model.n_classes}; train both on the same label space")
+    scorer = ViewScorer(net, seg, fit_probes(net, seg, shards, probe_steps, probe_views, seed), tolerance)
+    seg_budget = record.budget() if record else ""
+    budgets = {"b": seg_budget, "c": seg_budget, "d": f"checkpoint step {step}",
+               **{k: f"{p.budget()}; encoder: " + {"e": f"checkpoint step {step}", "e-seg": seg_budget,
+                                                   "e-rand": f"random init, seed {seed}"}[k]
+                  for k, p in scorer.probes.items()}}
+    rows = {k: CeilingRow(k, t, p, budgets.get(k, ""), geometric=not p.query_image)
+            for k, t, p in row_descriptors(seg is not None, cfg.model.inputs == "rgbd")}
+    bar = tqdm(desc="ceilings views", unit="view", disable=not progress)
+    for scene in names:
+        meta = SceneMeta.from_json(metas[scene])
+        views = read_scene_views(shards, manifest.scenes[scene])
+        samples = make_eval_samples(shards, scene, split="test", n_source=n_source, manifest=manifest)
+        for sample in islice(samples, views_per_scene or None):
+            ids = source_ids(sample, views, meta, n_source)
+            scorer.score(rows, sample, torch.from_numpy(np.stack([views[i].label() for i in ids]).astype(np.int64)))
+            bar.update(1)
+    bar.close()
+    return {"checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards), "scenes": names,
+            "n_source": n_source, "views_per_scene": views_per_scene, "tolerance": tolerance,
+            "source_rule": "make_eval_samples: each test view's top-ranked neighbours in its scene's source split",
+            "unseen_rule": UNSEEN_RULE, "tie_rule": TIE_RULE,
+            "coverage_of_d": "row d's coverage is row a's (the same geometry)",
+            "segmenter": None if record is None else {"folder": str(segmenter), **record.training},
+            "rows": [row.summary(cfg.model.n_classes) for row in rows.values()]}

@@ -1,0 +1,177 @@
+"""Label transfer between posed views: per-pixel labels of m source views carried into a query view.
+
+One function, :func:`transfer_labels`, with two geometries and one vote (pixel (u, v) is centred at
+(u, v); cameras in OpenCV axes; depth is camera z in metres, 0 = unknown):
+
+* ``backward`` (an oracle: it reads the query view's ground-truth depth). Each query pixel with depth
+  d > 0 is placed at d K^-1 [u, v, 1] in the query camera, moved to the world, projected into every
+  source view and rounded to the nearest source pixel. Source j sees it when the point lies in front of
+  the camera, inside the image, and agrees with source j's own depth there: D_j > 0 and
+  |z_j - D_j| < ``tolerance`` * D_j (the occlusion test).
+* ``forward`` (splatting: what a method given the source views' depth has; of the query it reads only
+  the camera). Each source pixel with depth > 0 is unprojected, projected into the query camera and
+  splatted to the nearest query pixel. Per source a z-buffer keeps the nearest point of each query pixel
+  (equal depths: the lowest source pixel index). The nearest of the sources' buffers, z*, is the pixel's
+  surface; source j sees the pixel when its own buffer holds a point within ``tolerance`` * z* of it.
+* the vote: every source that sees a pixel gives it the label of the source pixel it saw, unless that
+  label is ``ignore_id``. The label with the most votes wins; a tie goes to the tied label whose first
+  voter comes earliest in the source order (the best-ranked source). A pixel no source sees, or seen only
+  by unlabelled source pixels, gets :data:`UNSEEN`.
+
+Geometry runs in float64 whatever the inputs' dtype (pixel rounding must not move with float32 noise).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from sray.model.reprojection import project
+from sray.model.source_set import rigid_inverse
+
+UNSEEN = -1
+"""Transferred label of a query pixel that no source view sees (never a class id)."""
+
+MODES = ("backward", "forward")
+"""Transfer geometries: ``backward`` (query depth, an oracle) or ``forward`` (source depth splatting)."""
+
+
+@dataclass(frozen=True)
+class LabelTransfer:
+    """The labels carried into one query view."""
+
+    labels: Tensor
+    """int64 (H, W) class ids; :data:`UNSEEN` where no source view gives a label."""
+    seen: Tensor
+    """bool (H, W) pixels at least one source view sees, by the transfer's geometry (labelled or not)."""
+
+
+def project_points(points: Tensor, K: Tensor, c2w: Tensor) -> tuple[Tensor, Tensor]:
+    """Pinhole projection of world points (P, 3) into m cameras K (m, 3, 3), c2w (m, 4, 4).
+
+    Returns float64 uv (m, P, 2) pixel coordinates and z (m, P) camera depth (uv meaningless where z <= 0).
+    """
+    c2w64 = c2w.double()
+    return project(points.double(), K.double(), rigid_inverse(c2w64), min_depth=1e-12)
+
+
+def unproject(depth: Tensor, K: Tensor, c2w: Tensor) -> Tensor:
+    """World points of every pixel of m depth maps (m, H, W) with K (m, 3, 3), c2w (m, 4, 4): float64
+    (m, H*W, 3) in row-major pixel order (a pixel with depth 0 lands on its camera centre)."""
+    m, h, w = depth.shape
+    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float64, device=depth.device),
+                          torch.arange(w, dtype=torch.float64, device=depth.device), indexing="ij")
+    pix = torch.stack([u.reshape(-1), v.reshape(-1), torch.ones(h * w, dtype=torch.float64, device=depth.device)], -1)
+    rays = pix @ torch.linalg.inv(K.double()).transpose(1, 2)  # (m, P, 3) camera rays with z = 1
+    cam = rays * depth.double().reshape(m, -1, 1)  # (m, P, 3)
+    c2w64 = c2w.double()
+    return cam @ c2w64[:, :3, :3].transpose(1, 2) + c2w64[:, None, :3, 3]  # (m, P, 3)
+
+
+def nearest_pixel(uv: Tensor, hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
+    """Nearest pixel centre of coordinates uv (..., 2): flat index v * W + u (..., ) int64 (0 where outside)
+    and whether it lies inside the (H, W) image (..., ) bool."""
+    h, w = hw
+    iu, iv = torch.floor(uv[..., 0] + 0.5).long(), torch.floor(uv[..., 1] + 0.5).long()
+    inside = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
+    return torch.where(inside, iv * w + iu, torch.zeros_like(iu)), inside
+
+
+def backward_hits(source_depth: Tensor, source_K: Tensor, source_c2w: Tensor, query_depth: Tensor,
+                  query_K: Tensor, query_c2w: Tensor, tolerance: float) -> tuple[Tensor, Tensor]:
+    """Which source pixel each query pixel reaches by its ground-truth depth (module doc, ``backward``).
+
+    source_depth (m, H, W); query_depth (Hq, Wq). Returns source pixel index (m, Hq*Wq) int64 and
+    visible (m, Hq*Wq) bool.
+    """
+    points = unproject(query_depth[None], query_K[None], query_c2w[None])[0]  # (P, 3)
+    uv, z = project_points(points, source_K, source_c2w)  # (m, P, 2), (m, P)
+    index, inside = nearest_pixel(uv, tuple(source_depth.shape[-2:]))  # (m, P)
+    seen_depth = source_depth.double().reshape(source_depth.shape[0], -1).gather(1, index)  # (m, P)
+    known = (query_depth.reshape(1, -1) > 0) & inside & (z > 0) & (seen_depth > 0)
+    return index, known & ((z - seen_depth).abs() < tolerance * seen_depth)
+
+
+def forward_hits(source_depth: Tensor, source_K: Tensor, source_c2w: Tensor, query_K: Tensor,
+                 query_c2w: Tensor, hw: tuple[int, int], tolerance: float) -> tuple[Tensor, Tensor]:
+    """Which source pixel lands on each query pixel by splatting with the source depth (module doc,
+    ``forward``). source_depth (m, H, W); ``hw`` the query's (Hq, Wq). Returns source pixel index
+    (m, Hq*Wq) int64 and visible (m, Hq*Wq) bool."""
+    m, h, w = source_depth.shape
+    n_query, n_src = hw[0] * hw[1], h * w
+    points = unproject(source_depth, source_K, source_c2w).reshape(1, -1, 3)[0]  # (m*P, 3)
+    uv, z = project_points(points, query_K[None], query_c2w[None])  # (1, m*P, 2), (1, m*P)
+    target, inside = nearest_pixel(uv[0], hw)  # (m*P,)
+    valid = inside & (z[0] > 0) & (source_depth.reshape(-1) > 0)
+    view = torch.arange(m, device=source_depth.device).repeat_interleave(n_src)  # (m*P,) source of each point
+    slot = (view * n_query + target)[valid]  # per-source z-buffer slots
+    depth = z[0][valid]
+    zbuf = torch.full((m * n_query,), float("inf"), dtype=torch.float64, device=source_depth.device)
+    zbuf = zbuf.scatter_reduce(0, slot, depth, "amin")
+    front = depth == zbuf[slot]
+    pixel = torch.arange(m * n_src, device=source_depth.device)[valid][front] % n_src
+    index = torch.full((m * n_query,), n_src, dtype=torch.int64, device=source_depth.device)
+    index = index.scatter_reduce(0, slot[front], pixel, "amin").reshape(m, n_query)
+    zbuf = zbuf.reshape(m, n_query)
+    nearest = zbuf.min(0).values  # (Hq*Wq,) z*, inf where nothing lands
+    visible = torch.isfinite(zbuf) & ((zbuf - nearest).abs() < tolerance * nearest)
+    return index.clamp_max(n_src - 1), visible
+
+
+def vote(candidates: Tensor) -> Tensor:
+    """Majority label per pixel of per-source candidates (m, P) int64 (:data:`UNSEEN` = no vote): (P,) int64,
+    ties to the tied label whose first voter has the lowest source index, :data:`UNSEEN` without votes."""
+    m, n = candidates.shape
+    voted = candidates >= 0
+    if not bool(voted.any()):
+        return torch.full((n,), UNSEEN, dtype=torch.int64, device=candidates.device)
+    n_labels = int(candidates.max()) + 1
+    slot = torch.where(voted, candidates, torch.zeros_like(candidates))  # (m, P)
+    counts = torch.zeros(n, n_labels, dtype=torch.int64, device=candidates.device)
+    counts.scatter_add_(1, slot.T, voted.T.long())
+    order = torch.arange(m, device=candidates.device)[:, None].expand(m, n)
+    first = torch.full((n, n_labels), m, dtype=torch.int64, device=candidates.device)
+    first.scatter_reduce_(1, slot.T, torch.where(voted, order, torch.full_like(order, m)).T, "amin")
+    score = counts * (m + 1) + (m - first)  # more votes first, then the earliest first voter
+    return torch.where(voted.any(0), score.argmax(1), torch.full((n,), UNSEEN, device=candidates.device))
+
+
+def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor, source_depth: Tensor,
+                    query_K: Tensor, query_c2w: Tensor, hw: tuple[int, int], mode: str, *,
+                    query_depth: Tensor | None = None, tolerance: float = 0.05, ignore_id: int = 255) -> LabelTransfer:
+    """Carry source labels into a query view (see the module doc).
+
+    source_labels (m, H, W) integer class ids (``ignore_id`` = unlabelled: never a vote); source_K (m, 3, 3);
+    source_c2w (m, 4, 4); source_depth (m, H, W) metres, 0 = unknown; query_K (3, 3); query_c2w (4, 4);
+    ``hw`` = the query's (Hq, Wq); ``mode``: one of :data:`MODES`; ``query_depth`` (Hq, Wq): required by
+    ``backward``, refused by ``forward`` (which must not read it); ``tolerance``: the relative depth
+    agreement of the occlusion test.
+    """
+    m = source_labels.shape[0]
+    if source_labels.shape != source_depth.shape or source_K.shape != (m, 3, 3) or source_c2w.shape != (m, 4, 4):
+        raise ValueError(f"label_transfer: expected source_labels and source_depth (m, H, W), source_K (m, 3, 3), "
+                         f"source_c2w (m, 4, 4); got {tuple(source_labels.shape)}, {tuple(source_depth.shape)}, "
+                         f"{tuple(source_K.shape)}, {tuple(source_c2w.shape)}")
+    if mode not in MODES:
+        raise ValueError(f"label_transfer: mode {mode!r}; use one of {MODES}")
+    if (mode == "backward") != (query_depth is not None):
+        raise ValueError(f"label_transfer: mode {mode!r} {'needs' if mode == 'backward' else 'must not read'} the "
+                         "query depth; pass query_depth only to the backward (oracle) transfer")
+    if query_depth is not None and tuple(query_depth.shape) != tuple(hw):
+        raise ValueError(f"label_transfer: query_depth is {tuple(query_depth.shape)}, the query image {tuple(hw)}")
+    if mode == "backward":
+        index, visible = backward_hits(source_depth, source_K, source_c2w, query_depth, query_K, query_c2w, tolerance)
+    else:
+        index, visible = forward_hits(source_depth, source_K, source_c2w, query_K, query_c2w, tuple(hw), tolerance)
+    labels = source_labels.long().reshape(m, -1).gather(1, index)  # (m, Hq*Wq)
+    candidates = torch.where(visible & (labels != ignore_id), labels, torch.full_like(labels, UNSEEN))
+    return LabelTransfer(labels=vote(candidates).reshape(hw), seen=visible.any(0).reshape(hw))
+
+
+def coverage_counts(seen: Tensor, gt_label: Tensor, ignore_id: int) -> tuple[int, int]:
+    """(labelled query pixels some source sees, labelled query pixels) of seen (H, W) bool and the query's
+    ground truth gt_label (H, W) (``ignore_id`` = unlabelled, not counted)."""
+    labelled = gt_label != ignore_id
+    return int((seen & labelled).sum()), int(labelled.sum())

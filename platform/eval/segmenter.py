@@ -1,0 +1,117 @@
+"""The plain 2D segmenter: the project's own encoder (``ResUNetEncoder``) plus a per-pixel linear head.
+
+The head is :class:`sray.model.source_semantics.SourceSemanticHead` (a 1x1 convolution on the 1/4-resolution
+features, brought to full resolution by centre-aligned up-sampling) and the loss is
+:func:`~sray.model.source_semantics.source_semantic_loss` (class-weighted cross-entropy over labelled
+pixels): the same read-out S-Ray's auxiliary source-view loss uses, trained alone. It labels the source
+views for the label-transfer rows of ``sray bench ceilings`` and the ``2d-transfer`` method.
+
+A trained segmenter is a folder: ``segmenter.pt`` (the state dict, ``torch.load(weights_only=True)``-safe)
+and ``segmenter.json`` (:class:`SegmenterConfig` plus what its training spent and read).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
+from sray.model.config import SRayConfig
+from sray.model.encoder import ResUNetEncoder
+from sray.model.source_semantics import SourceSemanticHead, source_semantic_loss
+
+WEIGHTS_FILE = "segmenter.pt"
+CONFIG_FILE = "segmenter.json"
+
+
+@dataclass(frozen=True)
+class SegmenterConfig:
+    """What builds a segmenter network (stored beside its weights)."""
+
+    n_classes: int
+    """Classes L of the label space it predicts."""
+    feat_dim: int = 32
+    """Channels of the encoder's features (S-Ray's ``model.feat_dim``)."""
+    ignore_id: int = 255
+    """Label id of unlabelled pixels (never a target)."""
+    class_weights: tuple[float, ...] = ()
+    """Per-class weights of the training cross-entropy (empty = unweighted)."""
+
+    def head_config(self) -> SRayConfig:
+        """The S-Ray config whose ``SourceSemanticHead`` and ``source_semantic_loss`` this segmenter uses."""
+        return SRayConfig(n_classes=self.n_classes, feat_dim=self.feat_dim, ignore_id=self.ignore_id,
+                          class_weights=tuple(self.class_weights))
+
+
+class Segmenter(nn.Module):
+    """RGB (B, 3, H, W) in [0, 1] -> class logits (B, L, H, W): ResUNet encoder + linear per-pixel head."""
+
+    def __init__(self, cfg: SegmenterConfig) -> None:
+        """Build the encoder and head of ``cfg`` (no device work)."""
+        super().__init__()
+        self.cfg = cfg
+        self.encoder = ResUNetEncoder(cfg.feat_dim)
+        self.head = SourceSemanticHead(cfg.head_config())
+
+    def forward(self, rgb: Tensor) -> Tensor:
+        """Logits (B, L, H, W) of images rgb (B, 3, H, W) in [0, 1]."""
+        return self.head(self.encoder(rgb), tuple(rgb.shape[-2:]))
+
+    def loss(self, rgb: Tensor, labels: Tensor) -> Tensor:
+        """Mean class-weighted cross-entropy of images rgb (B, 3, H, W) against labels (B, H, W) int64."""
+        return source_semantic_loss(self(rgb), labels, self.cfg.head_config())
+
+    @torch.no_grad()
+    def predict(self, rgb: Tensor, batch: int = 4) -> Tensor:
+        """Argmax class ids (B, H, W) int64 of images rgb (B, 3, H, W), ``batch`` images per forward pass."""
+        return torch.cat([self(rgb[i:i + batch]).argmax(1) for i in range(0, rgb.shape[0], batch)])
+
+
+@dataclass
+class SegmenterRecord:
+    """A saved segmenter: its network config and the account of its training."""
+
+    config: SegmenterConfig
+    """How to build the network."""
+    training: dict[str, Any] = field(default_factory=dict)
+    """Budget and spend (``cpu_seconds_budget``, ``cpu_seconds``, ``steps``, ``images``), data (shards, scenes,
+    split rule, augmentation), seed and optimiser."""
+
+    def budget(self) -> str:
+        """One line for a table: the CPU seconds and steps the segmenter trained for."""
+        t = self.training
+        spent, steps, images = t.get("cpu_seconds", 0.0), t.get("steps", 0), t.get("images", 0)
+        return f"segmenter {spent:.0f} CPU s, {steps} steps of {images} images"
+
+
+def save_segmenter(model: Segmenter, training: dict[str, Any], out: Path) -> Path:
+    """Write ``model``'s weights and config (plus ``training``) into folder ``out`` atomically; returns ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    buffer = io.BytesIO()
+    torch.save({k: v.detach().cpu() for k, v in model.state_dict().items()}, buffer)
+    atomic_write_bytes(out / WEIGHTS_FILE, buffer.getvalue())
+    atomic_write_json(out / CONFIG_FILE, {"config": asdict(model.cfg), "training": training})
+    return out
+
+
+def load_segmenter(folder: Path, map_location: str | torch.device = "cpu") -> tuple[Segmenter, SegmenterRecord]:
+    """The segmenter (eval mode) saved in ``folder`` and its record; errors name the file and the fix."""
+    folder = Path(folder)
+    for name in (CONFIG_FILE, WEIGHTS_FILE):
+        if not (folder / name).exists():
+            raise FileNotFoundError(f"{folder / name}: missing; train a segmenter with `sray bench segmenter "
+                                    f"--data SHARDS --cpu-seconds S --out {folder}`")
+    stored = json.loads((folder / CONFIG_FILE).read_text())
+    raw = dict(stored["config"])
+    raw["class_weights"] = tuple(raw.get("class_weights", ()))
+    record = SegmenterRecord(SegmenterConfig(**raw), stored.get("training", {}))
+    model = Segmenter(record.config)
+    model.load_state_dict(torch.load(folder / WEIGHTS_FILE, map_location=map_location, weights_only=True))
+    return model.eval(), record

@@ -1,0 +1,132 @@
+"""``sray bench ceilings`` end to end on exactly consistent fixture scenes with an untrained tiny checkpoint, and
+the split rule of the segmenter and the probe: they read labels of train scenes' source pools only."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import scene_fixtures
+import torch
+from fleet_fixtures import one_thread  # noqa: F401
+from train_fixtures import tiny_config
+
+from sray.data_tools.loader import views as views_module
+from sray.data_tools.loader.augment import Augmentation
+from sray.data_tools.loader.views import KEY_SEPARATOR
+from sray.data_tools.scene import SceneMeta, source_pool
+from sray.data_tools.shards.manifest import read_manifest
+from sray.data_tools.shards.writer import write_shards
+from sray.jobs.bench.ceilings import REPORT_FILE
+from sray.jobs.cli import main
+from sray.model.config import SRayConfig
+from sray.platform.eval.label_transfer import UNSEEN
+from sray.platform.eval.linear_probe import fit_probe, random_encoder
+from sray.platform.eval.segmenter import load_segmenter
+from sray.platform.eval.segmenter_training import train_segmenter
+from sray.platform.eval.surface_field import field_at_surface
+from sray.platform.train.state import write_initial_checkpoint
+
+
+@pytest.fixture(scope="module")
+def shards(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Two 12-view train scenes and one 12-view unseen test scene of 32x40 pixels (the encoder's minimum side),
+    10 ranked neighbours per view."""
+    root = tmp_path_factory.mktemp("ceilings")
+    scenes = scene_fixtures.write_dataset(root / "scenes", [("a", 12, "train"), ("b", 12, "train"),
+                                                            ("t", 12, "test")], height=32, width=40)
+    write_shards(scenes, root / "shards", views_per_shard=6, neighbours=10, progress=False)
+    return root / "shards"
+
+
+@pytest.fixture(scope="module")
+def segmenter(shards: Path, tmp_path_factory: pytest.TempPathFactory, one_thread: None) -> Path:  # noqa: F811
+    """A segmenter trained for half a CPU second."""
+    out = tmp_path_factory.mktemp("segmenter")
+    train_segmenter(shards, 0.5, out, seed=0, augment=Augmentation(min_source=2), n_source=3, top_k=8,
+                    progress=False)
+    return out
+
+
+def test_rows_run_end_to_end_and_the_oracle_transfer_is_near_perfect(shards: Path, segmenter: Path, tmp_path: Path,
+                                                                     one_thread: None) -> None:  # noqa: F811
+    """``sray bench ceilings`` scores every row on the test scene's two test views with an untrained checkpoint;
+    the ground-truth transfer on exactly consistent scenes labels nearly every covered pixel right; oracle rows
+    are marked; the JSON, the table and the document section are written."""
+    cfg = tiny_config(shards, tmp_path)
+    checkpoint = write_initial_checkpoint(cfg, tmp_path / "job" / "checkpoints" / "step_000000000")
+    doc = tmp_path / "benchmarks.md"
+    assert main(["bench", "ceilings", "--checkpoint", str(checkpoint), "--data", str(shards), "--n-source", "4",
+                 "--segmenter", str(segmenter), "--probe-steps", "10", "--probe-views", "8",
+                 "--out", str(tmp_path / "out"), "--doc", str(doc)]) == 0
+    rows = {r["key"]: r for r in json.loads((tmp_path / "out" / REPORT_FILE).read_text())["rows"]}
+    assert list(rows) == ["a", "b", "c", "d", "e", "e-seg", "e-rand"]
+    assert {k for k, r in rows.items() if r["oracle"]} == {"a", "b", "d"}
+    assert all(r["views"] == 2 and r["seconds_per_view"] > 0 and 0 <= r["miou"] <= 1 for r in rows.values())
+    assert all(rows[k]["coverage"] is None for k in ("e", "e-seg", "e-rand"))
+    assert 0.5 < rows["a"]["coverage"] <= 1 and rows["b"]["coverage"] == rows["a"]["coverage"]
+    assert 0 < rows["c"]["coverage"] <= 1
+    assert rows["a"]["acc_on_covered"] > 0.97, rows["a"]
+    assert rows["a"]["total_acc"] >= 0.97 * rows["a"]["coverage"]
+    assert rows["a"]["miou"] > 0.5
+    assert "segmenter" in rows["b"]["budget"] and "steps" in rows["c"]["budget"]
+    text = doc.read_text()
+    assert text.count("## Ceilings") == 1 and "**oracle**" in text and "reads the query image" in text
+
+
+def test_cli_trains_a_segmenter_and_loads_it(shards: Path, tmp_path: Path, one_thread: None) -> None:  # noqa: F811
+    """``sray bench segmenter`` saves a folder that loads back with its budget recorded."""
+    assert main(["bench", "segmenter", "--data", str(shards), "--cpu-seconds", "0.2", "--out", str(tmp_path / "seg"),
+                 "--recipe", "synth-small"]) == 0
+    model, record = load_segmenter(tmp_path / "seg")
+    assert record.training["steps"] >= 1 and record.training["cpu_seconds_budget"] == 0.2
+    assert model.predict(torch.rand(1, 3, 32, 40)).shape == (1, 32, 40)
+
+
+def test_segmenter_and_probe_read_only_train_scene_source_pools(shards: Path, tmp_path: Path,
+                                                                monkeypatch: pytest.MonkeyPatch,
+                                                                one_thread: None) -> None:  # noqa: F811
+    """Every label map the segmenter's training and the probe's fit decode belongs to a train scene's source
+    pool: never a test scene's view, never a held-out view of a train scene."""
+    read: list[str] = []
+    original = views_module.StoredView.label
+
+    def recording(self: views_module.StoredView) -> np.ndarray:
+        read.append(self.where)
+        return original(self)
+
+    monkeypatch.setattr(views_module.StoredView, "label", recording)
+    train_segmenter(shards, 0.3, tmp_path / "seg", augment=Augmentation(min_source=2), n_source=3, top_k=8,
+                    progress=False)
+    fit_probe(random_encoder(32, 0), shards, tiny_config(shards, tmp_path).model, steps=2, max_views=100)
+    manifest = read_manifest(shards)
+    allowed = {(name, v) for name, entry in manifest.scenes.items() if entry.meta.get("role") == "train"
+               for v in source_pool(SceneMeta.from_json(entry.meta))}
+    seen = {tuple(where.rsplit(":", 1)[1].split(KEY_SEPARATOR, 1)) for where in read}
+    assert seen and seen <= allowed
+    assert len(seen) == len(allowed)  # the probe's fit read every pool view (max_views above the pool size)
+
+
+@pytest.mark.parametrize("fine_samples", ["new", "union"])
+def test_the_field_is_read_at_the_ground_truth_depth(fine_samples: str) -> None:
+    """A stand-in fine field that scores class c only at a sample exactly at depth c (class 0 otherwise) is read at
+    the sample that is the ground-truth depth: the prediction is the depth itself, UNSEEN where it is unknown; the
+    bracket it is given is sorted, holds n_fine samples around the surface (plus the coarse centres with union)."""
+    cfg = SRayConfig(n_classes=6, n_coarse=4, n_fine=6, fine_samples=fine_samples, chunk=5)
+    seen_z: list[torch.Tensor] = []
+
+    def fine(src: object, origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor, lo: torch.Tensor,
+             hi: torch.Tensor) -> dict[str, torch.Tensor]:
+        seen_z.append(z)
+        return {"logits": ((z[..., None] - torch.arange(6.0)).abs() < 1e-6).float()}
+
+    depth = torch.tensor([[1.0, 2.0, 0.0], [3.0, 4.0, 5.0], [2.0, 0.0, 1.0]])
+    K = torch.tensor([[3.0, 0.0, 1.0], [0.0, 3.0, 1.0], [0.0, 0.0, 1.0]])
+    net = SimpleNamespace(cfg=cfg, fine=fine)
+    pred = field_at_surface(net, SimpleNamespace(feats=torch.zeros(1)), K, torch.eye(4), depth, 0.5, 6.0)
+    torch.testing.assert_close(pred, torch.where(depth > 0, depth.long(), torch.full_like(pred, UNSEEN)))
+    z = torch.cat(seen_z)
+    assert z.shape == (7, 6 + (4 if fine_samples == "union" else 0)) and bool((z.diff(dim=-1) >= 0).all())
