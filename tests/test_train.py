@@ -62,7 +62,9 @@ def test_mlflow_store_holds_everything(uninterrupted) -> None:
     client = MlflowClient(cfg.run.tracking_uri)
     run = client.get_run(outcome.run.run_id)
     assert run.data.params["optim.steps"] == "20" and run.info.status == "FINISHED"
-    assert {"train/loss", "train/lr", "val/miou", "zeroshot/miou"} <= set(run.data.metrics)
+    assert {"train/loss", "train/lr", "val/miou", "zeroshot/miou", "train/rays_per_s", "train/data_wait_share",
+            "train/memory_mb", "train/cpu_seconds", "system/node0/cpu_utilization_percentage",
+            "system/node0/system_memory_usage_megabytes"} <= set(run.data.metrics)
     # the validation protocol, logged once: strided renders (val_downscale 2), so no SSIM was logged
     rule = json.loads((Path(cfg.data.shards) / "manifest.json").read_text())["neighbours"]
     assert run.data.params["protocol.source_rule"] == f"{rule['rule']} v{rule['version']}"
@@ -123,7 +125,7 @@ def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(r
     cfg = tiny_config(tiny_shards, tmp_path, name="budget")
     cfg.optim.steps, cfg.optim.cpu_seconds, cfg.optim.warmup_2d_steps = 400, 12.0, 3
     cfg.model.lambda_src_sem = 0.5
-    cfg.run.val_every, cfg.run.ckpt_every = 1000, 1000
+    cfg.run.val_every, cfg.run.ckpt_every, cfg.run.system_metrics_s = 1000, 1000, 0.0
     outcome = launch_training(cfg)
     assert outcome.status == "FINISHED"
     cpu = sorted(_history(cfg, "train/cpu_seconds"))
@@ -137,3 +139,5 @@ def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(r
     assert ray_steps == set(range(4, last_step + 1))  # rays rendered only after the 3 warm-up steps
     divergence = _history(cfg, "ddp/param_divergence")
     assert divergence and all(v == 0.0 for _, v in divergence), divergence
+    run = MlflowClient(cfg.run.tracking_uri).get_run(outcome.run.run_id)
+    assert not any(k.startswith("system/") for k in run.data.metrics)  # run.system_metrics_s = 0: switched off

@@ -33,7 +33,7 @@ def tiny_config(shards: Path, out: Path, **run: object) -> TrainConfig:
     cfg.optim.steps, cfg.optim.lr, cfg.optim.lr_final = 20, 3e-3, 1e-3
     cfg.run.output_dir, cfg.run.tracking_uri = str(out / "jobs"), f"sqlite:///{out / 'mlflow.db'}"
     cfg.run.workers, cfg.run.log_every, cfg.run.val_every, cfg.run.ckpt_every = 2, 1, 10, 5
-    cfg.run.max_failures = 1
+    cfg.run.max_failures, cfg.run.system_metrics_s = 1, 0.5
     for key, value in run.items():
         setattr(cfg.run, key, value)
     return cfg

@@ -35,6 +35,7 @@ from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
+from sray.platform.common.throughput import ThroughputWindow, progress_postfix
 from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.eval.view_scoring import render_view, score_views
 from sray.platform.finetune.learners import Learner
@@ -199,6 +200,7 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
             logger.log_metrics({f"heldout/{k}": v for k, v in scores.items()} | {"heldout/train_s": train_s}, step)
 
     bar = make_progress(True, total=ft.max_steps, desc=f"{task.scene}/{task.method}")
+    throughput = ThroughputWindow(loader.dataset.rays, 1, device)
     evaluate_now()
     window: list[torch.Tensor] = []
     try:
@@ -207,21 +209,26 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
             if step % ft.eval_every == 0:
                 batches = iter(loader)  # one loader epoch = eval_every samples
             torch.manual_seed(step_seed(ft.seed, 0, step))
-            loss, terms = learner.loss(next(batches))
+            loss, terms = learner.loss(throughput.next_batch(batches))
             try:
                 outcome = learner.step(loss)
             except NonFiniteTraining as err:
                 raise NonFiniteTraining(f"{task.scene}/{task.method} at step {step}: {err}") from None
             train_s += time.perf_counter() - start
             step += 1
+            throughput.step_done()
             bar.update(1)
             if outcome.applied:
                 window.append(loss.detach())
             out_of_time = 0 < ft.max_seconds <= train_s
             if step % ft.eval_every == 0 or step == ft.max_steps or out_of_time:
-                if logger is not None and window:
-                    logger.log_metrics({"train/loss": float(torch.stack(window).mean()),
-                                        "train/psnr": float(terms["psnr"])}, step)
+                figures = throughput.report()
+                if window:
+                    mean_loss = float(torch.stack(window).mean())
+                    bar.set_postfix(**progress_postfix(mean_loss, figures))
+                    if logger is not None:
+                        logger.log_metrics({"train/loss": mean_loss, "train/psnr": float(terms["psnr"])}
+                                           | {f"train/{k}": v for k, v in figures.items()}, step)
                 window = []
                 evaluate_now()
                 if stopper.should_stop and step < ft.max_steps:

@@ -192,6 +192,16 @@ class MlflowRunLogger(RunLogger):
         self._closed = True
         shutil.rmtree(self._staging, ignore_errors=True)
 
+    def watch_system(self, node: str, interval_s: float) -> Callable[[], None]:
+        """MLflow's system-metrics monitor on this run (metrics ``system/<node>/...``, continuing the run's system
+        steps after a restart); the returned function stops it and delivers what it sampled."""
+        from mlflow.system_metrics.system_metrics_monitor import SystemMetricsMonitor
+
+        monitor = SystemMetricsMonitor(self.handle.run_id, sampling_interval=interval_s, resume_logging=True,
+                                       node_id=node, tracking_uri=self.handle.store)
+        monitor.start()
+        return monitor.finish
+
     # ------------------------------------------------------------------------------- internals
     def _queue(self, what: str, op: Callable[[Any], None]) -> None:
         if len(self._ops) == self._ops.maxlen:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -75,6 +75,12 @@ class RunLogger(ABC):
     @abstractmethod
     def close(self, status: str = "FINISHED") -> None:
         """Deliver what is buffered and put the run in ``status`` (one of :data:`RUN_STATUSES`)."""
+
+    def watch_system(self, node: str, interval_s: float) -> Callable[[], None]:
+        """Record this machine's system metrics (CPU, memory, disk, network, GPU where present) into the run every
+        ``interval_s`` seconds, named after ``node``, until the returned function is called. A tracker without
+        system metrics records nothing (and returns a function that does nothing)."""
+        return lambda: None
 
     def log_image(self, png: Path, artifact_path: str = "renders") -> None:
         """Store a PNG (a semantic render, a chart) under ``artifact_path``."""

@@ -7,7 +7,6 @@ renders validation images; every rank reports to Ray at the same steps.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +15,7 @@ import torch
 from sray.platform.checkpoints.folders import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
 from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_due
 from sray.platform.common.model_input import ray_batch
+from sray.platform.common.throughput import ThroughputWindow, progress_postfix
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.tracker import RunHandle
 from sray.platform.train.cpu_clock import CpuClock
@@ -27,14 +27,6 @@ STOP_FILE = "STOP"
 UNSENT_METRICS = "unsent_metrics"
 """Checkpoint entry: ``[key, value, step]`` of each metric rank 0 could not deliver by then (the tracking
 store was unreachable); a worker restarted from the checkpoint logs them again."""
-
-
-def _memory_mb(device: torch.device) -> float:
-    if device.type == "cuda":
-        return torch.cuda.max_memory_allocated(device) / 2**20
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def parameter_divergence(model: torch.nn.Module, world: int) -> float:
@@ -99,6 +91,10 @@ def train_worker(payload: dict[str, Any]) -> None:
     lr_factor = lr_lambda(cfg.optim)
     manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
     logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
+    # the first worker of each node records that node's system metrics into the job's run
+    node_logger = (logger or open_logger(RunHandle(**payload["run"]))) if ctx.get_local_rank() == 0 else None
+    stop_watching = (node_logger.watch_system(f"node{ctx.get_node_rank()}", cfg.run.system_metrics_s)
+                     if node_logger is not None and cfg.run.system_metrics_s > 0 else lambda: None)
     if logger is not None and start == 0:
         logger.log_params(cfg.to_dict())
     if logger is not None and state is not None:
@@ -151,7 +147,8 @@ def train_worker(payload: dict[str, Any]) -> None:
             for group in optimizer.param_groups:
                 group["lr"] = group["initial_lr"] * lr_factor(progress)
 
-    window_start, window_terms, term_names = time.perf_counter(), [], None
+    window_terms, term_names = [], None
+    throughput = ThroughputWindow(cfg.data.rays_per_batch, world, device)
     step = start
     follow_cpu_budget(start)
     try:
@@ -161,7 +158,7 @@ def train_worker(payload: dict[str, Any]) -> None:
 
             if step % epoch_len == 0 and step != start:
                 batches = batches_from(step)
-            sample = next(batches).to(device, non_blocking=True)
+            sample = throughput.next_batch(batches).to(device, non_blocking=True)
             torch.manual_seed(step_seed(cfg.run.seed, rank, step))
             model.train()
             with train_step.autocast():  # the first optim.warmup_2d_steps steps train on source labels only
@@ -180,19 +177,19 @@ def train_worker(payload: dict[str, Any]) -> None:
                     term_names, window_terms = [*terms, "loss"], []
                 window_terms.append(torch.stack([*(terms[k].float() for k in term_names[:-1]), loss.detach().float()]))
             step += 1
+            throughput.step_done()
             bar.update(1)
 
             if rank == 0 and (step % cfg.run.log_every == 0 or finished):
-                elapsed = time.perf_counter() - window_start
+                figures = throughput.report()
                 means = (dict(zip(term_names, torch.stack(window_terms).mean(0).tolist()))
                          if window_terms else {})  # one read of the whole window's terms
                 logger.log_metrics({f"train/{k}": v for k, v in means.items()} | {
                     "train/lr": optimizer.param_groups[0]["lr"], "train/grad_norm": float(outcome.grad_norm),
-                    "train/cpu_seconds": cpu_total,
-                    "train/rays_per_s": cfg.data.rays_per_batch * world * cfg.run.log_every / max(elapsed, 1e-9),
-                    "train/skipped_steps": train_step.skipped_total, "train/memory_mb": _memory_mb(device)}, step)
-                bar.set_postfix(loss=f"{means.get('loss', float('nan')):.3f}")
-                window_start, window_terms = time.perf_counter(), []
+                    "train/cpu_seconds": cpu_total, "train/skipped_steps": train_step.skipped_total}
+                    | {f"train/{k}": v for k, v in figures.items()}, step)
+                bar.set_postfix(**progress_postfix(means.get("loss", float("nan")), figures))
+                window_terms = []
             metrics: dict[str, float] = {"step": step}
             if step % cfg.run.val_every == 0 or finished:
                 if rank == 0:
@@ -216,5 +213,6 @@ def train_worker(payload: dict[str, Any]) -> None:
             print(f"[sray] finished {step} steps; best checkpoint: {final}", flush=True)
     finally:
         bar.close()
+        stop_watching()
         if logger is not None:
             logger.drain()  # a tracking server restarting now still gets every metric
