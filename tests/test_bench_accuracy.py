@@ -54,10 +54,13 @@ def test_each_variant_sets_its_model_fields_and_nothing_else(tmp_path: Path) -> 
     """A cell's config is the preset's recipe with only its variant's model settings changed."""
     base = accuracy_cells.cell_config(Cell("full", 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db").model
     changed = {"full-new": {"fine_samples": "new"}, "full-rgbd": {"inputs": "rgbd"}, "none": {"attention": "none"},
-               "full-affine": {"weight_map": "affine"}, "full-new-h2": {"fine_samples": "new", "n_heads": 2}}
+               "full-affine": {"weight_map": "affine"}, "full-new-h2": {"fine_samples": "new", "n_heads": 2},
+               "full-new-src": {"fine_samples": "new", "lambda_src_sem": 1.0},
+               "full-new-src-w": {"fine_samples": "new", "lambda_src_sem": 1.0}}
     for variant, fields in changed.items():
-        model = accuracy_cells.cell_config(Cell(variant, 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db").model
-        assert dataclasses.replace(base, **fields) == model, variant
+        cfg = accuracy_cells.cell_config(Cell(variant, 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+        assert dataclasses.replace(base, **fields) == cfg.model, variant
+        assert cfg.optim.warmup_2d_steps == (100 if variant == "full-new-src-w" else 0), variant
 
 
 def test_seed_table_mean_and_sample_spread() -> None:
@@ -70,6 +73,11 @@ def test_seed_table_mean_and_sample_spread() -> None:
     assert full["mIoU % per seed"] == "40.00 / 44.00 / 42.00"
     none = dict(zip(header, rows[1], strict=True))
     assert none["seeds"] == "1/3" and none["mIoU %"] == "30.00"  # one seed: no spread
+    assert full["held-out train-scene mIoU %"] == full["pretrain CPU min"] == "—"  # stored before those fields
+    stored["full-s0"] |= {"heldout_miou": 0.60, "train_cpu_s": 600.0}
+    stored["full-s1"] |= {"heldout_miou": 0.70, "train_cpu_s": 1200.0}
+    full = dict(zip(header, seed_table(PLAN3, stored)[1][0], strict=True))
+    assert full["held-out train-scene mIoU %"] == "65.00 (2/3)" and full["pretrain CPU min"] == "15.0 (2/3)"
 
 
 @pytest.mark.parametrize(("full", "none", "verdict"), [

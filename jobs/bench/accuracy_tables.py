@@ -48,22 +48,34 @@ def _pct(value: float | None, digits: int = 2) -> str:
     return "—" if value is None or not np.isfinite(value) else f"{100 * value:.{digits}f}"
 
 
+def _stored_mean(cells: list[dict[str, Any]], key: str, show: Any) -> str:
+    """``show`` of the mean of ``key`` over the cells holding it, with ``(k/n)`` when only k of n cells do (cells
+    stored before the field existed); ``—`` when none does."""
+    values = [c[key] for c in cells if c.get(key) is not None]
+    if not values:
+        return "—"
+    return show(float(np.mean(values))) + ("" if len(values) == len(cells) else f" ({len(values)}/{len(cells)})")
+
+
 def seed_table(p: Preset, stored: dict[str, dict[str, Any]],
                step_times: dict[str, Any] | None = None) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the zero-shot table: one row per variant, its seeds' mean ± spread (and its
     seconds per pretraining step where ``step_times``, as ``accuracy_step_cost`` stores them, holds it)."""
     timed = (step_times or {}).get("variants", {})
-    header = ["variant", "steps", "seeds", "mIoU %", "mIoU % per seed", "total acc %", "class-avg acc %",
-              "PSNR dB", "pretrain min", "eval min", *(["s / step (side by side)"] if timed else [])]
+    header = ["variant", "steps", "seeds", "mIoU %", "mIoU % per seed", "held-out train-scene mIoU %", "total acc %",
+              "class-avg acc %", "PSNR dB", "pretrain min", "pretrain CPU min", "eval min",
+              *(["s / step (side by side)"] if timed else [])]
     rows = []
     for variant, cells in by_variant(p, stored).items():
         mean, spread = mean_spread([c["miou"] for c in cells])
         planned = sum(1 for c in p.plan if c.variant == variant)
         rows.append([variant_label(variant, p), ", ".join(sorted({str(c["steps"]) for c in cells})),
                      f"{len(cells)}/{planned}", _pct(mean) + ("" if spread is None else f" ± {_pct(spread)}"),
-                     " / ".join(_pct(c["miou"]) for c in cells), _pct(np.mean([c["total_acc"] for c in cells])),
+                     " / ".join(_pct(c["miou"]) for c in cells), _stored_mean(cells, "heldout_miou", _pct),
+                     _pct(np.mean([c["total_acc"] for c in cells])),
                      _pct(np.mean([c["class_avg_acc"] for c in cells])), f"{np.mean([c['psnr'] for c in cells]):.2f}",
                      f"{np.mean([c['train_s'] for c in cells]) / 60:.1f}",
+                     _stored_mean(cells, "train_cpu_s", lambda v: f"{v / 60:.1f}"),
                      f"{np.mean([c['eval_s'] for c in cells]) / 60:.1f}",
                      *([f"{timed[variant]['s_per_step']:.3f}" if variant in timed else "—"] if timed else [])])
     return header, rows
