@@ -43,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tracker", help="tracker to log to, by registry name (tracker; default: mlflow)")
     p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
                                                       "SQLite store in this folder)")
+    p.add_argument("--clip-frames", type=int, default=0, metavar="N",
+                   help="render an N-frame fly-through per S-Ray scene before and after finetuning, logged to the "
+                        "scene's run (default 0: none; docs/render.md)")
     p.add_argument("--address", help="join this Ray cluster (default: start Ray locally in-process)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="[SECTION.]FIELD=VALUE",
                    help="override a fleet config field, e.g. --set finetune.patience=5 (repeatable)")
@@ -75,8 +78,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = build_fleet_config(args)
         scenes = unseen_scenes(args.data) if args.all_test else args.scenes
+        if args.clip_frames < 0:
+            raise ValueError(f"--clip-frames is {args.clip_frames}; give 0 (no clips) or a number of frames")
         results = run_fleet(cfg, args.checkpoint, args.data, scenes, args.out, args.tracking_uri,
-                            chosen_methods(args.methods))
+                            chosen_methods(args.methods), args.clip_frames)
     except (InfeasibleRequest, FileNotFoundError, ValueError) as e:
         print(f"sray finetune-fleet: {e}", file=sys.stderr)
         return 2

@@ -140,6 +140,28 @@ def _seen_by_query(points: list[np.ndarray], proj_query: np.ndarray, hw: tuple[i
     return np.array([_fractions(p, proj_query[None], hw)[0] for p in points])
 
 
+def rank_order(capture: np.ndarray, score: np.ndarray, cos: np.ndarray, dist: np.ndarray, k: int) -> np.ndarray:
+    """Positions (<= k,) of the best candidates (rule step 3): ``score`` (C,) descending (to 1e-6), ties broken
+    by the larger ``cos`` (C,) between optical axes, the smaller camera-centre ``dist`` (C,), the earlier
+    ``capture`` index (C,)."""
+    return np.lexsort((capture, dist, -cos, -np.round(score, 6)))[:k]                 # last key sorts first
+
+
+def rank_camera(K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int], c2ws: np.ndarray, points: list[np.ndarray],
+                k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rank C candidates in capture order for a camera no depth is known for, as a :func:`blind_views` view is.
+
+    K (3, 3), c2w (4, 4) and ``hw``: the camera; c2ws (C, 4, 4): the candidates' poses; points: their
+    :func:`grid_points` (C arrays (P_c, 3)). Returns (positions of the top ``k`` candidates, best first; their
+    scores), the ranking :func:`rank_neighbours` gives a blind view.
+    """
+    score = _seen_by_query(points, projection_matrices(K[None], c2w[None])[0], hw)
+    cos = c2ws[:, :3, 2] @ c2w[:3, 2]
+    dist = np.linalg.norm(c2ws[:, :3, 3] - c2w[:3, 3], axis=1)
+    order = rank_order(np.arange(len(points)), score, cos, dist, k)
+    return order, score[order]
+
+
 def rank_neighbours(view_ids: list[str], Ks: np.ndarray, c2ws: np.ndarray, hw: tuple[int, int],
                     points: dict[str, np.ndarray], pool: list[str], k: int) -> dict[str, Neighbours]:
     """Top-``k`` neighbours from ``pool`` for every view (see the module rule).
@@ -167,6 +189,6 @@ def rank_neighbours(view_ids: list[str], Ks: np.ndarray, c2ws: np.ndarray, hw: t
             score = _seen_by_query([points[view_ids[j]] for j in others], proj[i], hw)
         cos = axes[others] @ axes[i]
         dist = np.linalg.norm(centres[others] - centres[i], axis=1)
-        order = np.lexsort((others, dist, -cos, -np.round(score, 6)))[:k]            # last key sorts first
+        order = rank_order(others, score, cos, dist, k)
         out[vid] = Neighbours(ids=[view_ids[j] for j in others[order]], scores=[float(s) for s in score[order]])
     return out

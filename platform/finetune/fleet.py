@@ -225,11 +225,12 @@ def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
 
 
 def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str], out_dir: Path,
-              tracking_uri: str, methods: list[str]) -> list[dict[str, Any]]:
+              tracking_uri: str, methods: list[str], clip_frames: int = 0) -> list[dict[str, Any]]:
     """Finetune every (scene, method) pair; returns their result dicts (docs/CONTRACTS.md), scenes-major.
 
     ``checkpoint``: a checkpoint folder, a job's ``checkpoints/`` or a job folder. ``tracking_uri``:
     the store of the tracker ``cfg.tracker``; empty = its default store in the working directory.
+    ``clip_frames``: frames of a fly-through per S-Ray pair before and after its finetune (0: none).
     Ray is started locally unless ``cfg.address`` names a cluster (or Ray is already running in this
     process).
     """
@@ -270,7 +271,7 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
                                   tags={"sray.kind": "fleet-scene", "sray.scene": scene, "sray.method": method})
         tasks.append(SceneTask(scene=scene, method=method, checkpoint=str(checkpoint), base_sha256=base_sha,
                              shards=str(shards), out_dir=str(result_dir(out_dir, scene, method)),
-                             run=child, attempt=1, config=cfg))
+                             run=child, attempt=1, config=cfg, clip_frames=clip_frames))
 
     logger = tracker.logger(parent)
     status = "FAILED"

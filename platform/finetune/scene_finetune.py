@@ -42,6 +42,7 @@ from sray.platform.finetune.learners import Learner
 from sray.platform.finetune.methods.method import SceneContext
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import model_bytes
+from sray.platform.finetune.scene_clips import SceneClips
 from sray.platform.tracking.tracker import RunHandle, RunLogger
 from sray.platform.train.step import NonFiniteTraining, step_seed
 
@@ -71,6 +72,8 @@ class SceneTask:
     """1 for the first try, 2 for the first re-run, ..."""
     config: FleetConfig
     """The fleet's configuration."""
+    clip_frames: int = 0
+    """Frames of the fly-through rendered before and after the finetune (0: none; ``scene_clips.py``)."""
 
 
 @dataclass
@@ -178,6 +181,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     out_dir = Path(task.out_dir)
     learner, loader, samples, (n_classes, ignore_id, full_bytes, inputs) = _prepare(task, device)
     protocol = scene_protocol(task, inputs)
+    clips = (SceneClips(learner.net, Path(task.shards), task.scene, task.clip_frames, cfg)
+             if task.clip_frames and get_method(task.method).uses_sources else None)
     if logger is not None:
         logger.log_params(cfg.to_dict() | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
                                            "protocol": protocol.to_json()})
@@ -199,6 +204,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
         if logger is not None:
             logger.log_metrics({f"heldout/{k}": v for k, v in scores.items()} | {"heldout/train_s": train_s}, step)
 
+    if clips is not None:
+        clips.render("before", learner, out_dir, logger)
     bar = make_progress(True, total=ft.max_steps, desc=f"{task.scene}/{task.method}")
     throughput = ThroughputWindow(loader.dataset.rays, 1, device)
     evaluate_now()
@@ -241,6 +248,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
         bar.close()
     learner.restore(best_state)
     learner.net.requires_grad_(True)  # the returned model is in the state of a reloaded one (see Learner.inference)
+    if clips is not None:
+        clips.render("after", learner, out_dir, logger)
     artifact = out_dir / get_method(task.method).artifact_file
     learner.save(artifact, task.scene)
     best_point = best_point or curve[0]

@@ -1,0 +1,112 @@
+"""Writing a fly-through's frames as videos people open, with no half-written file under a final name.
+
+* ``<stem>.webm``: VP8 (OpenCV's FFmpeg writer, fourcc ``VP80``); browsers and MLflow's artifact viewer
+  play it. OpenCV's bundled FFmpeg cannot encode H.264, so no H.264 MP4 is offered.
+* ``<stem>.mp4``: MPEG-4 part 2 (fourcc ``mp4v``), to download and open in a desktop player.
+* ``<stem>.gif``: a small preview (at most :data:`GIF_WIDTH` pixels wide, at most :data:`GIF_FRAMES` frames,
+  Pillow's adaptive palette), for pages that show images but no video.
+
+Everything is written into a staging folder ``.<name>.tmp<pid>`` inside the output folder (same file system)
+and renamed into place by :meth:`VideoSet.finish`; an error or an interrupt removes the staging folder, and a
+killed process leaves only that hidden folder, never a partial video under its final name. FFmpeg picks the
+container from the file name, so the staging files keep their final names inside the hidden folder.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+from pathlib import Path
+from types import TracebackType
+
+import cv2
+import numpy as np
+from PIL import Image
+
+GIF_WIDTH = 480
+"""Widest GIF preview in pixels (larger frames are scaled down)."""
+GIF_FRAMES = 60
+"""Most frames in a GIF preview (longer videos keep every k-th frame)."""
+CODECS = {"webm": "VP80", "mp4": "mp4v"}
+"""Video file suffix -> OpenCV fourcc."""
+
+
+class VideoSet:
+    """The WebM, MP4 and GIF of one fly-through (module doc); a context manager that cleans up on error."""
+
+    def __init__(self, out_dir: Path, stem: str, fps: float, size_hw: tuple[int, int], n_frames: int) -> None:
+        """Open the writers for ``n_frames`` frames of ``size_hw`` = (H, W) at ``fps`` under ``out_dir/<stem>.*``."""
+        self.out_dir, self.stem, self.fps, self.size_hw = Path(out_dir), stem, float(fps), size_hw
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.staging = self.out_dir / f".{stem}.tmp{os.getpid()}"
+        shutil.rmtree(self.staging, ignore_errors=True)
+        self.staging.mkdir()
+        self.gif_every = max(1, -(-n_frames // GIF_FRAMES))
+        self._gif: list[Image.Image] = []
+        self._count = 0
+        self._writers: dict[str, cv2.VideoWriter] = {}
+        h, w = size_hw
+        for suffix, fourcc in CODECS.items():
+            path = self.staging / f"{stem}.{suffix}"
+            writer = cv2.VideoWriter(str(path), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*fourcc), self.fps, (w, h))
+            if not writer.isOpened():
+                self.abort()
+                raise OSError(f"{self.out_dir / path.name}: OpenCV could not open a {fourcc} video writer; this "
+                              "OpenCV build lacks FFmpeg (install opencv-contrib-python-headless as pinned)")
+            self._writers[suffix] = writer
+
+    def write(self, frame: np.ndarray) -> None:
+        """Append a uint8 (H, W, 3) RGB frame of the size given at opening."""
+        if frame.shape != (*self.size_hw, 3) or frame.dtype != np.uint8:
+            raise ValueError(f"frame {self._count}: {frame.dtype} {frame.shape}, expected uint8 {(*self.size_hw, 3)}")
+        bgr = np.ascontiguousarray(frame[..., ::-1])
+        for writer in self._writers.values():
+            writer.write(bgr)
+        if self._count % self.gif_every == 0:
+            image = Image.fromarray(frame)
+            if image.width > GIF_WIDTH:
+                size = (GIF_WIDTH, round(image.height * GIF_WIDTH / image.width))
+                image = image.resize(size, Image.Resampling.LANCZOS)
+            self._gif.append(image.quantize(colors=256, method=Image.Quantize.MEDIANCUT))
+        self._count += 1
+
+    def finish(self, extra: dict[str, bytes]) -> dict[str, Path]:
+        """Close the videos, write the GIF and the ``extra`` files (name -> bytes), and rename everything into
+        the output folder; returns {name: final path} (videos as ``webm``, ``mp4``, ``gif``)."""
+        for writer in self._writers.values():
+            writer.release()
+        self._writers = {}
+        if not self._gif:
+            self.abort()
+            raise ValueError(f"{self.out_dir}: no frame was written; a video needs at least one")
+        buf = io.BytesIO()
+        duration_ms = max(20, int(round(1000.0 * self.gif_every / self.fps)))
+        self._gif[0].save(buf, format="GIF", save_all=True, append_images=self._gif[1:], duration=duration_ms,
+                          loop=0)
+        staged = {**{s: self.staging / f"{self.stem}.{s}" for s in (*CODECS, "gif")},
+                  **{name: self.staging / name for name in extra}}
+        staged["gif"].write_bytes(buf.getvalue())
+        for name, data in extra.items():
+            staged[name].write_bytes(data)
+        final = {}
+        for key, path in staged.items():
+            final[key] = self.out_dir / path.name
+            os.replace(path, final[key])
+        shutil.rmtree(self.staging, ignore_errors=True)
+        return final
+
+    def abort(self) -> None:
+        """Release the writers and remove the staging folder (nothing reaches the output folder)."""
+        for writer in self._writers.values():
+            writer.release()
+        self._writers = {}
+        shutil.rmtree(self.staging, ignore_errors=True)
+
+    def __enter__(self) -> VideoSet:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if exc_type is not None:
+            self.abort()
