@@ -7,16 +7,14 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
-import numpy as np
 import pytest
 import scene_fixtures
 import torch
 from fleet_fixtures import one_thread  # noqa: F401
+from label_reads import record_label_reads
 from train_fixtures import tiny_config
 
-from sray.data_tools.loader import views as views_module
 from sray.data_tools.loader.augment import Augmentation
-from sray.data_tools.loader.views import KEY_SEPARATOR
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
@@ -91,21 +89,14 @@ def test_segmenter_and_probe_read_only_train_scene_source_pools(shards: Path, tm
                                                                 one_thread: None) -> None:  # noqa: F811
     """Every label map the segmenter's training and the probe's fit decode belongs to a train scene's source
     pool: never a test scene's view, never a held-out view of a train scene."""
-    read: list[str] = []
-    original = views_module.StoredView.label
-
-    def recording(self: views_module.StoredView) -> np.ndarray:
-        read.append(self.where)
-        return original(self)
-
-    monkeypatch.setattr(views_module.StoredView, "label", recording)
+    read = record_label_reads(monkeypatch)
     train_segmenter(shards, 0.3, tmp_path / "seg", augment=Augmentation(min_source=2), n_source=3, top_k=8,
                     progress=False)
     fit_probe(random_encoder(32, 0), shards, tiny_config(shards, tmp_path).model, steps=2, max_views=100)
     manifest = read_manifest(shards)
     allowed = {(name, v) for name, entry in manifest.scenes.items() if entry.meta.get("role") == "train"
                for v in source_pool(SceneMeta.from_json(entry.meta))}
-    seen = {tuple(where.rsplit(":", 1)[1].split(KEY_SEPARATOR, 1)) for where in read}
+    seen = set(read)
     assert seen and seen <= allowed
     assert len(seen) == len(allowed)  # the probe's fit read every pool view (max_views above the pool size)
 

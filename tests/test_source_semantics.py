@@ -11,13 +11,13 @@ import pytest
 import scene_fixtures
 import torch
 import torch.nn.functional as F
+from label_reads import record_label_reads
 
 from sray.data_tools.class_stats import count_pixels, shard_pixel_counts
-from sray.data_tools.loader import views as views_module
 from sray.data_tools.loader.augment import Augmentation, rescale_nearest
 from sray.data_tools.loader.samples import train_sample
 from sray.data_tools.loader.shard_loader import make_train_loader
-from sray.data_tools.loader.views import KEY_SEPARATOR, read_scene_views
+from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.scene import IGNORE_ID, SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
@@ -183,14 +183,7 @@ def test_source_labels_come_only_from_training_views_of_training_scenes(shards: 
                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """Every label map the training loader decodes (queries' and sources') belongs to a train scene's source
     pool: never a test scene's view, never a held-out view of a train scene."""
-    read: list[str] = []
-    original = views_module.StoredView.label
-
-    def recording(self: views_module.StoredView) -> np.ndarray:
-        read.append(self.where)
-        return original(self)
-
-    monkeypatch.setattr(views_module.StoredView, "label", recording)
+    read = record_label_reads(monkeypatch)
     loader = make_train_loader(shards, n_source=3, top_k=8, rays_per_batch=8, batches_per_epoch=40, rank=0,
                                world_size=1, num_workers=0, seed=3, source_labels=True,
                                augment=Augmentation(min_source=2))
@@ -199,11 +192,7 @@ def test_source_labels_come_only_from_training_views_of_training_scenes(shards: 
     manifest = read_manifest(shards)
     allowed = {(name, v) for name, entry in manifest.scenes.items() if entry.meta.get("role") == "train"
                for v in source_pool(SceneMeta.from_json(entry.meta))}
-    seen = set()
-    for where in read:  # "<shard url>:<scene><KEY_SEPARATOR><view id>"
-        key = where.rsplit(":", 1)[1]
-        scene, view = key.split(KEY_SEPARATOR, 1)
-        seen.add((scene, view))
+    seen = set(read)
     assert seen and seen <= allowed
     assert len(seen) > 12  # sources beyond the queries were read
 

@@ -62,6 +62,25 @@ def fitted_pixel_stride(pixel_stride: int, stride: int, hw: tuple[int, int]) -> 
 
 
 @torch.no_grad()
+def render_in_chunks(render: Renderer, origins: Tensor, dirs: Tensor, near: Tensor, far: Tensor, chunk: int,
+                     with_depth: bool = False) -> tuple[Tensor, ...]:
+    """The fine pass of R rays (origins, dirs (R, 3); near, far (R,)) rendered ``chunk`` rays at a time (0: by
+    device, ``ray_chunks``), on the host in float32: logits (R, L), colours (R, 3) clamped to [0, 1], and with
+    ``with_depth`` the z-depth (R, 1)."""
+    logits, colours, depths = [], [], []
+    chunk = render_chunk_rays(chunk, origins.device)
+    for start in range(0, origins.shape[0], chunk):
+        sl = slice(start, start + chunk)
+        fine = render(origins[sl], dirs[sl], near[sl], far[sl])["fine"]
+        logits.append(fine["logits"].float().cpu())
+        colours.append(fine["rgb"].float().clamp(0, 1).cpu())
+        if with_depth:
+            depths.append(fine["depth"].float().cpu())
+    out = (torch.cat(logits), torch.cat(colours))
+    return (*out, torch.cat(depths)[:, None]) if with_depth else out
+
+
+@torch.no_grad()
 def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
                 device: torch.device, fast: FastRender | None = None) -> ViewPrediction:
     """Render one evaluation sample (whole query image, fixed source views) with ``render`` in ray
@@ -78,14 +97,7 @@ def render_view(render: Renderer, sample: EvalSample, stride: int, chunk: int,
     render_stride = stride * (fitted_pixel_stride(fast.pixel_stride, stride, (h, w)) if fast is not None else 1)
     uv_r, hr, wr = strided_pixels(h, w, render_stride)
     origins, dirs, near, far = ray_batch(sample, uv_r).query.to(device).rays()  # (R, 3), (R, 3), (R,), (R,)
-    logits, colours = [], []
-    chunk = render_chunk_rays(chunk, device)
-    for start in range(0, uv_r.shape[0], chunk):
-        sl = slice(start, start + chunk)
-        fine = render(origins[sl], dirs[sl], near[sl], far[sl])["fine"]
-        logits.append(fine["logits"].float().cpu())
-        colours.append(fine["rgb"].float().clamp(0, 1).cpu())
-    pred_logits, pred_rgb = torch.cat(logits), torch.cat(colours)  # (R, L), (R, 3)
+    pred_logits, pred_rgb = render_in_chunks(render, origins, dirs, near, far, chunk)  # (R, L), (R, 3)
     if render_stride != stride:
         pred_logits = upsample_to(pred_logits.reshape(hr, wr, -1), (hr, wr), render_stride, uv)
         pred_rgb = upsample_to(pred_rgb.reshape(hr, wr, 3), (hr, wr), render_stride, uv)

@@ -16,9 +16,8 @@ from torch import Tensor
 
 from sray.data_tools.loader.sample_types import SceneQuery
 from sray.model.fast_render import FastRender, upsample_to
-from sray.model.ray_chunks import render_chunk_rays
 from sray.platform.common.model_input import ray_batch
-from sray.platform.eval.view_scoring import Renderer, fitted_pixel_stride, strided_pixels
+from sray.platform.eval.view_scoring import Renderer, fitted_pixel_stride, render_in_chunks, strided_pixels
 
 
 @dataclass(frozen=True)
@@ -46,15 +45,7 @@ def render_frame(render: Renderer, sample: SceneQuery, hw: tuple[int, int], chun
     stride = fitted_pixel_stride(fast.pixel_stride, 1, hw) if fast is not None else 1
     uv_r, hr, wr = strided_pixels(h, w, stride)
     origins, dirs, near, far = ray_batch(sample, uv_r).query.to(device).rays()       # (R, 3), (R, 3), (R,), (R,)
-    logits, colours, depths = [], [], []
-    chunk = render_chunk_rays(chunk, device)
-    for start in range(0, uv_r.shape[0], chunk):
-        sl = slice(start, start + chunk)
-        fine = render(origins[sl], dirs[sl], near[sl], far[sl])["fine"]
-        logits.append(fine["logits"].float().cpu())
-        colours.append(fine["rgb"].float().clamp(0, 1).cpu())
-        depths.append(fine["depth"].float().cpu())
-    pred_logits, pred_rgb, pred_depth = torch.cat(logits), torch.cat(colours), torch.cat(depths)[:, None]
+    pred_logits, pred_rgb, pred_depth = render_in_chunks(render, origins, dirs, near, far, chunk, with_depth=True)
     if stride != 1:
         pred_logits = upsample_to(pred_logits.reshape(hr, wr, -1), (hr, wr), stride, uv)
         pred_rgb = upsample_to(pred_rgb.reshape(hr, wr, 3), (hr, wr), stride, uv)
