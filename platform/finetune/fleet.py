@@ -267,7 +267,7 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
         check_feasible(1, cfg.cpus_per_task, cfg.gpus_per_task)
     tasks = []
     for scene, method in (p for p in pairs if p not in done):
-        child = tracker.start_run(cfg.experiment, f"{scene}/{method}", parent=parent,
+        child = tracker.start_run(cfg.experiment, f"{scene} · {method}", parent=parent,
                                   tags={"sray.kind": "fleet-scene", "sray.scene": scene, "sray.method": method})
         tasks.append(SceneTask(scene=scene, method=method, checkpoint=str(checkpoint), base_sha256=base_sha,
                              shards=str(shards), out_dir=str(result_dir(out_dir, scene, method)),

@@ -263,7 +263,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     }
     write_result(out_dir, result)
     if logger is not None:
-        logger.log_metrics({"result/steps_used": step, "result/miou_after": result["miou_after"],
+        logger.log_metrics({"result/steps_used": step, "result/miou_before": result["miou_before"],
+                            "result/miou_after": result["miou_after"], "result/psnr_after": result["psnr_after"],
                             "result/best_step": best_point["step"], "result/stopped_early": float(reason == "patience"),
                             "result/artifact_bytes": result["artifact_bytes"], "result/train_s": train_s}, step)
         logger.log_artifact(out_dir / RESULT_FILE)

@@ -1,14 +1,16 @@
 """The MLflow dashboard on a store: a lean ``mlflow server`` bound to localhost (``sray ui``).
 
 Lean: no job runner (``MLFLOW_SERVER_ENABLE_JOB_EXECUTION=false``) and one worker, which makes it
-2 processes and ~0.5 GiB instead of 15-27 processes and 2-3 GiB; telemetry is off (offline
-machines). Artifacts: the experiments :mod:`sray.platform.tracking.runs` creates carry an explicit
-``file://`` artifact location, which the server reads directly when the UI asks for a run's
-artifacts; experiments created from the UI itself store theirs through the server's artifact proxy
-into ``--artifacts-destination``, the same ``mlartifacts`` folder beside the SQLite database.
+2 processes and ~0.5 GiB instead of 15-27 processes and 2-3 GiB; telemetry and the AI Gateway are
+off (offline machines). The app is :mod:`sray.platform.tracking.ui_app`: MLflow's, with a new
+browser opening the model-training view instead of MLflow's GenAI view. Artifacts: the experiments
+:mod:`sray.platform.tracking.runs` creates carry an explicit ``file://`` artifact location, which the
+server reads directly when the UI asks for a run's artifacts; experiments created from the UI itself
+store theirs through the server's artifact proxy into ``--artifacts-destination``, the same
+``mlartifacts`` folder beside the SQLite database.
 
-The UI opens in its GenAI view; :func:`runs_view_url` is the address of the classic runs table.
-The server runs in its own process group so that :meth:`DashboardHandle.stop` ends it and its
+:func:`runs_view_url` is the address of an experiment's classic runs table, whatever view a browser
+last chose. The server runs in its own process group so that :meth:`DashboardHandle.stop` ends it and its
 worker, and nothing else.
 """
 
@@ -24,13 +26,17 @@ import time
 import urllib.error
 import urllib.request
 from dataclasses import dataclass, field
+from importlib.metadata import distributions
 from pathlib import Path
 
 from sray.platform.tracking.runs import DEFAULT_UI_PORT, default_tracking_uri, is_server, probe_server, sqlite_path
 
 SERVER_ENV = {"MLFLOW_SERVER_ENABLE_JOB_EXECUTION": "false", "MLFLOW_DISABLE_TELEMETRY": "true",
-              "DO_NOT_TRACK": "true"}
-"""Environment of the server process: no job runner, no telemetry."""
+              "DO_NOT_TRACK": "true", "MLFLOW_ENABLE_AI_GATEWAY": "false"}
+"""Environment of the server process: no job runner, no telemetry, no AI Gateway (endpoints and UI)."""
+UI_APP = "sray-ui"
+"""The server app (``mlflow server --app-name``): MLflow's, opening on model training
+(:mod:`sray.platform.tracking.ui_app`, entry point group ``mlflow.app``)."""
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 
 
@@ -40,7 +46,7 @@ folding them under their parent (it nests only when sorting by creation time wit
 
 
 def runs_view_url(base_url: str, experiment_id: str, flat: bool = False) -> str:
-    """Address of an experiment's classic runs table (the UI otherwise opens its GenAI view);
+    """Address of an experiment's classic runs table (whichever view the browser last chose);
     ``flat``: sorted by run name, child runs listed beside their parents rather than folded."""
     url = f"{base_url.rstrip('/')}/#/experiments/{experiment_id}/runs?workflowType=machine_learning"
     return f"{url}&{SORT_BY_RUN_NAME}" if flat else url
@@ -155,10 +161,18 @@ def _resolve_store(tracking_uri: str | None) -> str:
         raise ValueError(f"{uri} is a tracking server, which serves its own dashboard: open "
                          f"{runs_view_url(uri, '<experiment id>')} instead of starting another")
     db = sqlite_path(uri)
-    if db is not None and not db.is_file():
+    if db is None:
+        return uri
+    if not db.is_file():
         raise FileNotFoundError(f"{db}: no MLflow store there; run a job first (sray train / eval / "
                                 "finetune-fleet log into the working directory's store) or pass --tracking-uri")
-    return uri
+    return f"sqlite:///{db}"
+
+
+def _ui_app_installed() -> bool:
+    """True when an installed distribution offers :data:`UI_APP`. Every distribution is read: ``entry_points()``
+    keeps one per name, and a stale ``sray.egg-info`` in the working directory would hide the installed one."""
+    return any(ep.group == "mlflow.app" and ep.name == UI_APP for dist in distributions() for ep in dist.entry_points)
 
 
 def _wait_ready(proc: subprocess.Popen, base_url: str, log_path: Path, timeout_s: float) -> None:
@@ -187,18 +201,23 @@ def start_dashboard(tracking_uri: str | None = None, port: int = DEFAULT_UI_PORT
     Errors: FileNotFoundError (no store), ValueError (a tracking server URI: it has its own UI),
     OSError (port taken), RuntimeError/TimeoutError (the server failed; the message holds its log).
     """
-    uri = _resolve_store(tracking_uri)
+    uri = _resolve_store(tracking_uri)  # absolute: the server runs outside the working directory (see below)
     _check_port_free(host, port)
+    if not _ui_app_installed():
+        raise RuntimeError(f"the MLflow server app {UI_APP!r} is not installed; reinstall sray "
+                           "(make setup, or pip install -e . in the repository)")
     cmd = [sys.executable, "-m", "mlflow", "server", "--backend-store-uri", uri, "--host", host,
-           "--port", str(port), "--workers", "1"]
+           "--port", str(port), "--workers", "1", "--app-name", UI_APP]
     destination = artifact_destination(uri)
     if destination is not None:
         destination.mkdir(parents=True, exist_ok=True)
         cmd += ["--artifacts-destination", str(destination)]
     log_path = Path(tempfile.mkstemp(prefix=f"sray-ui-{port}-", suffix=".log")[1])
+    # In the log's folder: MLflow finds --app-name among entry points, which a stale sray.egg-info in the
+    # working directory (a repository checkout) would otherwise hide.
     with open(log_path, "wb") as log_file:
         proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                env={**os.environ, **SERVER_ENV}, start_new_session=True)
+                                env={**os.environ, **SERVER_ENV}, cwd=log_path.parent, start_new_session=True)
     url_host = f"[{host}]" if ":" in host else host
     base_url = f"http://{url_host}:{port}"
     handle = DashboardHandle(process=proc, base_url=base_url, url=base_url + "/", log_path=log_path)

@@ -18,7 +18,8 @@ log = logging.getLogger(__name__)
 
 def parent_run(tracker: Tracker, record: dict[str, Any], experiment: str, out_dir: Path) -> tuple[RunHandle, bool]:
     """The parent run: the one ``record`` names (marked RUNNING again) if it still exists in this
-    tracker's store, else a new one. Returns (handle, whether it is new).
+    tracker's store, else a new one named ``fleet · <folder's parent>/<folder>``. Returns (handle, whether
+    it is new).
 
     ``record``: the fleet's ``fleet.json`` (``parent_run_id``, ``tracking_uri`` = the store, and
     ``tracker``, absent in records written before trackers had names: MLflow then).
@@ -31,6 +32,6 @@ def parent_run(tracker: Tracker, record: dict[str, Any], experiment: str, out_di
             return handle, False
         except Exception as e:  # noqa: BLE001 - deleted or unreachable: start a new parent
             log.warning("parent run %s not usable (%s); starting a new one", record["parent_run_id"], e)
-    handle = tracker.start_run(experiment, f"fleet:{out_dir.name}",
+    handle = tracker.start_run(experiment, f"fleet · {out_dir.parent.name}/{out_dir.name}",
                                tags={"sray.kind": "fleet", "sray.fleet_dir": str(out_dir)})
     return handle, True

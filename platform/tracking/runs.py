@@ -33,6 +33,10 @@ DEFAULT_UI_PORT = 5000
 
 PARENT_RUN_TAG = "mlflow.parentRunId"
 """MLflow's tag that nests a run under a parent (fleet: one parent run, one child per scene)."""
+EXPERIMENT_KIND_TAG = "mlflow.experimentKind"
+"""MLflow's experiment tag naming what an experiment is for (its UI offers views by kind)."""
+EXPERIMENT_KIND = "custom_model_development"
+"""The kind of every experiment sray creates or logs into: model training (not ``genai_development``)."""
 
 
 def default_tracking_uri(workdir: Path) -> str:
@@ -123,14 +127,16 @@ def ensure_store(tracking_uri: str) -> None:
 
 
 def _experiment_id(client, tracking_uri: str, experiment: str, artifact_root: Path | None) -> str:
-    """Id of ``experiment``, created (with an explicit artifact location) or restored if needed."""
+    """Id of ``experiment``, created (with an explicit artifact location) or restored if needed; it carries
+    :data:`EXPERIMENT_KIND` (set on an existing experiment that has no kind yet)."""
     from mlflow.exceptions import MlflowException
 
     found = client.get_experiment_by_name(experiment)
     if found is None:
         location = _experiment_artifact_location(tracking_uri, experiment, artifact_root)
         try:
-            return client.create_experiment(experiment, artifact_location=location)
+            return client.create_experiment(experiment, artifact_location=location,
+                                            tags={EXPERIMENT_KIND_TAG: EXPERIMENT_KIND})
         except MlflowException:
             found = client.get_experiment_by_name(experiment)  # created concurrently by another launcher
             if found is None:
@@ -138,6 +144,8 @@ def _experiment_id(client, tracking_uri: str, experiment: str, artifact_root: Pa
     if found.lifecycle_stage == "deleted":
         client.restore_experiment(found.experiment_id)
         log.info("restored deleted MLflow experiment %r", experiment)
+    if EXPERIMENT_KIND_TAG not in found.tags:
+        client.set_experiment_tag(found.experiment_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND)
     return found.experiment_id
 
 
