@@ -145,9 +145,9 @@ class RunSettings:
     """Recent checkpoints kept besides the best."""
     max_failures: int = 2
     """Worker-group restarts Ray Train attempts after a worker dies."""
-    system_metrics_s: float = 10.0
+    system_metrics_s: float = 0.0
     """Every this many seconds the first worker of each node records the node's system metrics (CPU, memory,
-    disk, network, GPU where present) into the job's run as ``system/node<k>/...``; 0 = off."""
+    disk, network, GPU where present) into the job's run as ``system/node<k>/...``; 0 = off (the default)."""
     register_model: str = "sray"
     """Name the final checkpoint is registered under in the tracker's model registry ('' = do not register)."""
 
