@@ -2,7 +2,7 @@
 
 procedural scenes -> ``sray data check`` -> shards (+ verification) -> a picture of a loader
 sample -> a short S-Ray training run on local Ray with two CPU workers, tracked in MLflow ->
-zero-shot evaluation on the unseen scenes -> a finetune fleet (S-Ray and Semantic-NeRF) on them
+zero-shot evaluation on the unseen scenes -> a short fly-through video of one of them -> a finetune fleet (S-Ray and Semantic-NeRF) on them
 -> accuracy-against-time charts -> the results table and the ``sray ui`` command. Each printed
 table ends with its protocol line (sources, stride, render mode, inputs).
 Everything goes under ``--out`` (default ``outputs/demo``); the MLflow store is the working
@@ -33,6 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="score every n-th pixel in each direction in the zero-shot evaluation "
                         "(the fleet's held-out curves use twice this); 1 = full images, the only stride "
                         "with SSIM")
+    p.add_argument("--clip-frames", type=int, default=24,
+                   help="frames of the zero-shot fly-through video rendered after the evaluation")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
@@ -114,6 +116,10 @@ def run(args: argparse.Namespace) -> int:
                                  stride=args.eval_stride, progress=True)
     print(format_table(report), flush=True)
     print(_speed_line(checkpoint, shards, cfg.model.n_source), flush=True)
+    clip = _flythrough(checkpoint, shards, scenes_test[0], args.out / "render", args.clip_frames)
+    _say(f"    a {args.clip_frames}-frame fly-through of {scenes_test[0]} (RGB, labels, depth, confidence): {clip}")
+    _say(f"    render any scene yourself:  {_sray_command()} render --checkpoint {checkpoint} --data {shards} "
+         f"--scene {scenes_test[0]} --out {args.out / 'render'}")
     fleet_cfg = FleetConfig()
     fleet_cfg.finetune.max_seconds = args.finetune_seconds
     fleet_cfg.finetune.eval_n_source = cfg.model.n_source
@@ -126,6 +132,25 @@ def run(args: argparse.Namespace) -> int:
     _say(f"done in {(time.perf_counter() - t0) / 60:.1f} min; results under {args.out.resolve()}")
     _say(f"browse everything in the MLflow dashboard:  {_sray_command()} ui   (then open the printed URL)")
     return 0
+
+
+def _flythrough(checkpoint: Path, shards: Path, scene: str, out: Path, n_frames: int) -> Path:
+    """Render the zero-shot fly-through ``sray render`` makes by default (spline through the scene's cameras, fast
+    mode, 8 sources), ``n_frames`` long, tracked in the working directory's store; returns the WebM's path."""
+    import torch
+
+    from sray.model.fast_render import FastRender
+    from sray.platform.finetune.render_model import render_model
+    from sray.platform.render.flythrough import Flythrough
+    from sray.platform.render.plan import plan_flythrough
+    from sray.platform.render.tracked import tracked_flythrough
+
+    plan = plan_flythrough(shards, scene, path="spline", n_frames=n_frames)
+    net, about = render_model(checkpoint, None, scene)
+    fly = Flythrough(net, plan, 8, FastRender())
+    result = tracked_flythrough(fly, out, torch.device("cpu"), about=about, label="zero-shot", tracker="mlflow",
+                                tracking_uri="", experiment="sray-render")
+    return Path(result["files"]["webm"])
 
 
 def _speed_line(checkpoint: Path, shards: Path, n_source: int) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import pytest
 
 from sray.jobs.cli import main
@@ -27,7 +28,7 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
 
     monkeypatch.chdir(tmp_path)
     code = main(["demo", "--out", "demo", "--train-scenes", "2", "--test-scenes", "1", "--views", "20",
-                 "--height", "48", "--width", "64", "--steps", "4", "--finetune-seconds", "2", "--eval-stride", "4"])
+                 "--height", "48", "--width", "64", "--steps", "4", "--finetune-seconds", "2", "--eval-stride", "4", "--clip-frames", "3"])
     assert code == 0
     out = capsys.readouterr().out
     for stage in range(1, 9):
@@ -45,9 +46,17 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
         assert result["status"] == "finished" and result["steps_used"] > 0
         assert result["protocol"]["stride"] == 8
     assert "(stride 4), so no SSIM" in out and "Protocol (semantic-nerf): sources: none (per-scene model)" in out
+    [webm] = (tmp_path / "demo/render").rglob("*.webm")
+    video = cv2.VideoCapture(str(webm))
+    frames = 0
+    while video.read()[0]:
+        frames += 1
+    assert frames == 3, f"{webm}: {frames} frames decoded, the demo asked for 3"
+    assert f"render --checkpoint {tmp_path / 'demo/train'}" in out or "render --checkpoint demo/train" in out
     charts = sorted(p.name for p in (fleet / "charts").glob("*.png"))
     assert charts, "the fleet wrote no chart"
     client = MlflowClient(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
     names = {e.name for e in client.search_experiments()}
     runs = client.search_runs([e.experiment_id for e in client.search_experiments()])
-    assert len(runs) >= 4 and len(names) >= 2  # training, evaluation, fleet parent and its children
+    assert len(runs) >= 5 and len(names) >= 3  # training, evaluation, the fly-through, fleet parent and its children
+    assert "sray-render" in names
