@@ -41,7 +41,7 @@ PRODUCT = ("model", "data_tools", "platform", "jobs")
 """The four top-level folders installed as ``sray.<folder>``."""
 
 PLATFORM_LEVELS = {"common": 0, "config": 0, "checkpoints": 1, "tracking": 1, "viz": 1, "eval": 2, "train": 3,
-                   "render": 3, "finetune": 4, "stability": 5, "cluster": 2}
+                   "render": 3, "finetune": 4, "sweep": 4, "stability": 5, "cluster": 2}
 """docs/architecture.md: a ``platform`` sub-package imports only itself and sub-packages of a lower level."""
 
 MAX_LINES = 300

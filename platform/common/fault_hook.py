@@ -16,6 +16,7 @@ Entries are ``key=value`` separated by ``;``; lists are comma-separated. Keys:
   waits until ``.fault_release_<step>`` appears there (at most :data:`HOLD_TIMEOUT_S`), so a drill can
   kill a node, the driver or the tracking server at a known step instead of after a guessed sleep;
 * ``fleet.fail_scenes``: every attempt of a fleet task for these scenes raises :class:`InjectedFailure`;
+* ``sweep.fail_trials``: every launch of these sweep trials (keys such as ``t002``) raises :class:`InjectedFailure`;
 * ``stability.nan_points``: ``method/axis/level`` entries; the stability suite's renders of that method
   at that point output NaN (the failure the suite must record and go past).
 
@@ -64,14 +65,16 @@ class Faults:
     """Training steps before which rank 0 pauses until released (once per job)."""
     fail_scenes: tuple[str, ...] = ()
     """Scenes whose fleet tasks raise on every attempt."""
+    fail_trials: tuple[str, ...] = ()
+    """Sweep trial keys whose every launch raises."""
     nan_points: tuple[str, ...] = ()
     """Stability points (``method/axis/level``, level as the preset writes it) whose renders output NaN."""
 
 
 _KEYS = {"train.kill_at_step": "kill_at_step", "train.nan_at_step": "nan_at_step",
          "train.stop_after_step": "stop_after_step", "train.hold_at_steps": "hold_at_steps",
-         "fleet.fail_scenes": "fail_scenes", "stability.nan_points": "nan_points"}
-_LISTS = ("fail_scenes", "nan_points")
+         "fleet.fail_scenes": "fail_scenes", "sweep.fail_trials": "fail_trials", "stability.nan_points": "nan_points"}
+_LISTS = ("fail_scenes", "fail_trials", "nan_points")
 _INT_LISTS = ("hold_at_steps",)
 
 
@@ -156,3 +159,9 @@ def fail_if_listed(scene: str, attempt: int) -> None:
     """Raise :class:`InjectedFailure` when ``scene`` is listed in ``fleet.fail_scenes``."""
     if scene in active_faults().fail_scenes:
         raise InjectedFailure(f"scene {scene!r} is listed in {ENV_VAR} fleet.fail_scenes; attempt {attempt}")
+
+
+def fail_trial_if_listed(key: str) -> None:
+    """Raise :class:`InjectedFailure` when the sweep trial ``key`` is listed in ``sweep.fail_trials``."""
+    if key in active_faults().fail_trials:
+        raise InjectedFailure(f"sweep trial {key!r} is listed in {ENV_VAR} sweep.fail_trials")

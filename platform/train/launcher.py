@@ -14,6 +14,7 @@ import signal
 import tempfile
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -125,8 +126,14 @@ def _install_stop_handler(job_dir: Path) -> Any:
     return signal.signal(signal.SIGINT, handler)
 
 
-def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool = False) -> TrainOutcome:
-    """Run a training job to the end (or a clean stop); ``resume`` continues ``cfg.run.name``."""
+def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool = False, *,
+                    parent: RunHandle | None = None, callbacks: Sequence[Any] = ()) -> TrainOutcome:
+    """Run a training job to the end (or a clean stop); ``resume`` continues ``cfg.run.name``.
+
+    ``parent``: the tracked run a new job's run is nested under (a sweep's run); ``callbacks``: Ray Train
+    callbacks of the job (a sweep trial passes Tune's report callback). Off the main thread (inside a Tune
+    trial) no Ctrl-C handler is installed: Python allows signal handlers on the main thread only.
+    """
     import ray.train
     from ray.train.torch import TorchTrainer
 
@@ -149,7 +156,7 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
     protocol = validation_protocol(cfg)
     tags = {"sray.recipe": cfg.recipe, "sray.job_dir": str(job_dir), "sray.protocol": protocol.describe()}
     run = (tracker.resume_run(cfg.run.experiment, cfg.run.name) if resume
-           else tracker.start_run(cfg.run.experiment, cfg.run.name, tags=tags))
+           else tracker.start_run(cfg.run.experiment, cfg.run.name, tags=tags, parent=parent))
     if not resume:
         _log_run_start(tracker, run, job_dir / CONFIG_FILE, protocol.to_json())
     print(f"[sray] job {cfg.run.name}: checkpoints in {job_dir / 'checkpoints'}\n"
@@ -164,11 +171,12 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
             num_workers=cfg.run.workers, use_gpu=cfg.run.gpus_per_worker > 0,
             resources_per_worker={"CPU": cfg.run.cpus_per_worker, **({"GPU": cfg.run.gpus_per_worker}
                                                                        if cfg.run.gpus_per_worker > 0 else {})}),
-        run_config=ray.train.RunConfig(name=cfg.run.name, storage_path=str(job_dir / "ray"),
+        run_config=ray.train.RunConfig(name=cfg.run.name, storage_path=str(job_dir / "ray"), callbacks=list(callbacks),
                                        failure_config=ray.train.FailureConfig(max_failures=cfg.run.max_failures),
                                        worker_runtime_env={"env_vars": {**TRAIN_WORKER_ENV, **propagated_env(),
                                                                         **progress_env()}}))
-    previous = _install_stop_handler(job_dir)
+    on_main_thread = threading.current_thread() is threading.main_thread()
+    previous = _install_stop_handler(job_dir) if on_main_thread else None
     status = "FAILED"
     try:
         _fit_in_thread(trainer)
@@ -177,7 +185,8 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
         status = "KILLED"
         raise
     finally:
-        signal.signal(signal.SIGINT, previous)
+        if on_main_thread:
+            signal.signal(signal.SIGINT, previous)
         tracker.end_run(run, status)
     manager = CheckpointManager(job_dir / "checkpoints")
     outcome = TrainOutcome(job_dir, run, manager.best(), manager.latest(), status)

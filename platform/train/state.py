@@ -18,7 +18,7 @@ from sray.platform.train.step import fused_adam
 
 def lr_lambda(opt: OptimSettings) -> Any:
     """Multiplier of the base lr at a step: linear warm-up, then exponential decay to lr_final."""
-    ratio = opt.lr_final / opt.lr
+    ratio = opt.lr_final / opt.lr if opt.lr > 0 else 1.0  # a learning rate of 0 (a sweep's control arm) stays 0
     decay_steps = max(opt.steps - opt.warmup_steps, 1)
 
     def factor(step: int) -> float:

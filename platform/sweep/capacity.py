@@ -1,0 +1,67 @@
+"""How many training trials the Ray cluster runs at once, checked before a sweep starts.
+
+Tune knows only what a trial's own process asks for (nothing: :data:`TRIAL_RESOURCES`); the trial's Ray Train
+workers reserve the CPUs and GPUs. More trials at once than the cluster can give workers would leave worker
+groups waiting for each other's resources, so the concurrency is derived from the cluster (or a requested
+one is refused) here, before anything is written: a node with ``c`` CPUs and ``g`` GPUs hosts
+``min(c // cpus_per_worker, g // gpus_per_worker)`` workers (``sray.platform.train.resources``), and each trial
+needs ``run.workers`` of them.
+"""
+
+from __future__ import annotations
+
+import os
+
+from sray.platform.config.train_config import TrainConfig
+from sray.platform.train.resources import InfeasibleRequest, NodeResources, live_nodes, workers_per_node
+
+TRIAL_RESOURCES = {"memory": 1.0}
+"""What Tune reserves for a training trial's own process, which only drives its job: one byte of memory (Tune
+refuses an empty request; any CPU would be taken from the trial's own workers)."""
+
+
+def expected_nodes() -> list[NodeResources]:
+    """The nodes of the Ray cluster this process is connected to, or else of the local Ray that ``sray`` starts
+    (``launcher.init_ray``: every CPU of this machine, its CUDA GPUs), known before it starts."""
+    import ray
+
+    if ray.is_initialized():
+        return live_nodes()
+    import torch
+
+    return [NodeResources("this machine", float(os.cpu_count() or 1), float(torch.cuda.device_count()))]
+
+
+def trials_at_once(cfg: TrainConfig, nodes: list[NodeResources]) -> int:
+    """Trials of ``cfg``'s size the nodes host at once (0 when not even one fits)."""
+    workers = sum(workers_per_node(n, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker) for n in nodes)
+    return workers // cfg.run.workers
+
+
+def _size(cfg: TrainConfig) -> str:
+    return f"{cfg.run.workers} worker(s) of {cfg.run.cpus_per_worker:g} CPU + {cfg.run.gpus_per_worker:g} GPU"
+
+
+def plan_concurrency(requested: int, configs: list[TrainConfig], nodes: list[NodeResources]) -> int:
+    """The number of trials to run at once on ``nodes``: ``requested`` if they fit that many trials of every
+    size in ``configs``, as many as fit when ``requested`` is 0; :class:`InfeasibleRequest` naming the fix."""
+    have = (f"{sum(n.cpus for n in nodes):g} CPUs and {sum(n.gpus for n in nodes):g} GPUs on {len(nodes)} "
+            "node(s)")
+    fit, widest = None, configs[0]
+    for cfg in configs:
+        n = trials_at_once(cfg, nodes)
+        if n == 0:
+            raise InfeasibleRequest(
+                f"run.workers / run.cpus_per_worker / run.gpus_per_worker: a trial trains {_size(cfg)}, which the "
+                f"cluster ({have}) cannot host at once; lower --workers, --set run.cpus_per_worker or "
+                "--gpus-per-worker, or join a larger cluster with --address")
+        if fit is None or n < fit:
+            fit, widest = n, cfg
+    if requested == 0:
+        return fit
+    if requested > fit:
+        raise InfeasibleRequest(
+            f"--max-concurrent {requested}: each trial trains {_size(widest)} and the cluster ({have}) fits {fit} "
+            f"such trial(s) at once; use --max-concurrent {fit} (or 0 for as many as fit), fewer workers per trial "
+            "(--workers), or fractional CPUs (--set run.cpus_per_worker=0.5)")
+    return requested

@@ -1,0 +1,137 @@
+"""The value grammar of a sweep parameter: ``section.field=SPEC``, SPEC one of four distributions.
+
+* ``choice(a, b, ...)``: each trial draws one of the values, uniformly;
+* ``uniform(lo, hi)``: a float drawn uniformly in [lo, hi];
+* ``loguniform(lo, hi)``: a float whose logarithm is uniform in [log lo, log hi] (0 < lo);
+* ``grid(a, b, ...)``: every value, crossed with every other grid parameter (each drawn sample of the
+  random parameters runs once per grid combination).
+
+Values are kept as the text the user wrote (choice and grid) or as floats (ranges); the field's own type
+parses them when a trial's config is built (``sray.platform.config.overrides``), so a sweep takes any field
+``sray train --set`` takes. This module knows the grammar only; which fields exist is checked where the
+trial's config is made (``sray.platform.sweep.training_trial``).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import re
+from dataclasses import dataclass
+
+KINDS = ("choice", "uniform", "loguniform", "grid")
+"""The distributions a parameter may have."""
+_CALL = re.compile(r"^\s*([A-Za-z_]+)\s*\((.*)\)\s*$", re.S)
+_PATH = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)+$")
+_BRACKETS = {"(": ")", "[": "]"}
+
+
+class SpecError(ValueError):
+    """A sweep spec is wrong; the message names the parameter or option and the fix, on one line."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One swept config field and its distribution."""
+
+    path: str
+    """``section.field`` of the trial config, as ``--set`` takes it."""
+    kind: str
+    """One of :data:`KINDS`."""
+    values: tuple[str, ...]
+    """The listed values of ``choice`` and ``grid``, as written; the two bounds of a range, as written."""
+
+    @property
+    def spec(self) -> str:
+        """The distribution as the user writes it, e.g. ``loguniform(1e-4, 1e-2)``."""
+        return f"{self.kind}({', '.join(self.values)})"
+
+    def bounds(self) -> tuple[float, float]:
+        """``(lo, hi)`` of a range parameter."""
+        return float(self.values[0]), float(self.values[1])
+
+    def draw(self, rng: random.Random) -> str | float:
+        """One random value (``choice``, ``uniform``, ``loguniform``; a grid parameter is not drawn)."""
+        if self.kind == "choice":
+            return rng.choice(self.values)
+        lo, hi = self.bounds()
+        if self.kind == "uniform":
+            return rng.uniform(lo, hi)
+        if self.kind == "loguniform":
+            return math.exp(rng.uniform(math.log(lo), math.log(hi)))
+        raise ValueError(f"sweep parameter {self.path}: a grid parameter is enumerated, not drawn")
+
+
+def split_items(text: str) -> list[str]:
+    """Comma-separated items at the top level (commas inside brackets belong to an item), stripped."""
+    items, depth, current = [], [], ""
+    for char in text:
+        if char in _BRACKETS:
+            depth.append(_BRACKETS[char])
+        elif depth and char == depth[-1]:
+            depth.pop()
+        elif char == "," and not depth:
+            items.append(current.strip())
+            current = ""
+            continue
+        current += char
+    items.append(current.strip())
+    return items if any(items) else []
+
+
+def _number(path: str, kind: str, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise SpecError(f"sweep parameter {path}: {kind} bound {text!r} is not a number; "
+                        f"write e.g. {kind}(1e-4, 1e-2)") from None
+    if not math.isfinite(value):
+        raise SpecError(f"sweep parameter {path}: {kind} bound {text!r} is not finite")
+    return value
+
+
+def parse_param(path: str, spec: str) -> Param:
+    """The parameter ``path`` with distribution ``spec``; :class:`SpecError` naming it when either is malformed."""
+    path = path.strip()
+    if not _PATH.match(path):
+        raise SpecError(f"sweep parameter {path!r}: expected section.field (as --set takes it), e.g. optim.lr")
+    match = _CALL.match(str(spec))
+    if not match or match.group(1) not in KINDS:
+        raise SpecError(f"sweep parameter {path}: {spec!r} is not a distribution; write one of "
+                        "choice(a,b,...), uniform(lo,hi), loguniform(lo,hi), grid(a,b,...)")
+    kind, items = match.group(1), split_items(match.group(2))
+    if any(not item for item in items):
+        raise SpecError(f"sweep parameter {path}: {spec!r} has an empty value; separate values by single commas")
+    if kind in ("choice", "grid"):
+        if not items:
+            raise SpecError(f"sweep parameter {path}: {kind}() lists no value; write e.g. {kind}(0.5, 1.0)")
+        if len(set(items)) != len(items):
+            raise SpecError(f"sweep parameter {path}: {spec!r} lists a value twice; list each value once")
+        return Param(path, kind, tuple(items))
+    if len(items) != 2:
+        raise SpecError(f"sweep parameter {path}: {kind} takes two bounds, got {len(items)} in {spec!r}; "
+                        f"write {kind}(lo, hi)")
+    lo, hi = (_number(path, kind, item) for item in items)
+    if not lo < hi:
+        raise SpecError(f"sweep parameter {path}: {spec!r} needs lo < hi")
+    if kind == "loguniform" and lo <= 0:
+        raise SpecError(f"sweep parameter {path}: {spec!r} needs 0 < lo (it draws the logarithm); "
+                        "use uniform(lo, hi) for a range that reaches 0")
+    return Param(path, kind, tuple(items))
+
+
+def parse_assignment(assignment: str) -> Param:
+    """A ``section.field=SPEC`` flag (``--param``) as a :class:`Param`."""
+    path, sep, spec = assignment.partition("=")
+    if not sep:
+        raise SpecError(f"--param {assignment!r}: expected section.field=SPEC, e.g. optim.lr=loguniform(1e-4,1e-2)")
+    return parse_param(path, spec)
+
+
+def check_unique(params: list[Param]) -> None:
+    """:class:`SpecError` when two parameters name the same field."""
+    seen: set[str] = set()
+    for param in params:
+        if param.path in seen:
+            raise SpecError(f"sweep parameter {param.path}: given twice; give each field one distribution")
+        seen.add(param.path)

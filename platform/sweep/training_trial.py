@@ -1,0 +1,120 @@
+"""The trial of a training sweep: one real training job (``launch_training``) with the point's values set.
+
+Each trial's config is the sweep's base config with the point's ``section.field=value`` overrides applied
+through the same typed ``--set`` path as ``sray train`` (:func:`trial_config`), so every field ``sray train
+--set`` takes can be swept and every value is checked the same way. The job is named ``<sweep>-<key>``,
+writes under the sweep's ``jobs/`` folder, logs into a tracked run nested under the sweep's run, and reports
+its validation metrics to Tune through Ray Train's ``TuneReportCallback`` (rank 0's report at each checkpoint
+step). A second launch of the trial (a resumed sweep) resumes the job from its last checkpoint; a stop request
+(scheduler, wall-time budget) becomes the job's own STOP file, so it checkpoints and ends cleanly.
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import shutil
+import threading
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from sray.platform.config.train_config import TrainConfig, apply_override
+from sray.platform.sweep.study import TrialContext
+from sray.platform.sweep.spec import Param, SpecError
+from sray.platform.tracking.tracker import RunHandle
+from sray.platform.train.launcher import CONFIG_FILE, launch_training, load_job_config
+from sray.platform.train.validation import GROUPS
+from sray.platform.train.worker import STOP_FILE
+
+TIME_ATTR = "step"
+"""Key of a training job's reports that measures its progress (ASHA's time axis)."""
+SCORE_NAMES = ("miou", "total_acc", "class_avg_acc", "miou_per_image", "psnr", "ssim")
+"""Scores each validation group reports (``sray.platform.eval.view_scoring.score_views``)."""
+
+
+def job_name(sweep: str, key: str) -> str:
+    """The training job (and tracked run) of trial ``key``: ``<sweep>-<key>``."""
+    return f"{sweep}-{key}"
+
+
+def _text(value: Any) -> str:
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def trial_config(base: TrainConfig, point: Mapping[str, Any]) -> TrainConfig:
+    """``base`` with the point's values set (a copy); :class:`SpecError` naming the parameter a value breaks."""
+    cfg = copy.deepcopy(base)
+    for path, value in point.items():
+        try:
+            apply_override(cfg, f"{path}={_text(value)}")
+        except ValueError as e:
+            raise SpecError(f"sweep parameter {path}: {e}") from None
+    return cfg
+
+
+def trial_job_config(base: TrainConfig, point: Mapping[str, Any], sweep: str, key: str) -> TrainConfig:
+    """The config of trial ``key``'s training job: :func:`trial_config` named ``<sweep>-<key>``."""
+    cfg = trial_config(base, point)
+    cfg.run.name = job_name(sweep, key)
+    return cfg
+
+
+def check_params(base: TrainConfig, params: list[Param]) -> None:
+    """Each parameter names a field of the config, each listed value (each bound of a range) is valid there, and
+    a range's field is a float; :class:`SpecError` naming the parameter otherwise."""
+    for param in params:
+        ranged = param.kind in ("uniform", "loguniform")
+        hint = ("; uniform and loguniform draw floats: for an integer or text field list the values with choice(...) "
+                "or grid(...)") if ranged else ""
+        try:
+            configs = [trial_config(base, {param.path: value}) for value in param.values]
+        except SpecError as e:
+            raise SpecError(f"{e}{hint}") from None
+        if ranged and not all(isinstance(functools.reduce(getattr, param.path.split("."), c), float) for c in configs):
+            raise SpecError(f"sweep parameter {param.path}: {param.spec} on a field that is not a float{hint}")
+
+
+def check_metric(metric: str, configs: list[TrainConfig]) -> None:
+    """The metric is a validation score every report of every trial carries (validation at each checkpoint)."""
+    group, _, score = metric.partition("/")
+    if group not in GROUPS or score not in SCORE_NAMES:
+        raise SpecError(f"--metric {metric!r}: a training trial reports {', '.join(f'{g}/<score>' for g in GROUPS)} "
+                        f"with <score> one of {', '.join(SCORE_NAMES)}, e.g. val/miou")
+    for cfg in configs:
+        if cfg.run.ckpt_every % cfg.run.val_every:
+            raise SpecError(f"run.val_every {cfg.run.val_every}: a trial reports to the sweep at each checkpoint "
+                            f"(run.ckpt_every {cfg.run.ckpt_every}) and only a validation gives {metric}; set "
+                            f"run.val_every to a divisor of run.ckpt_every, e.g. {cfg.run.ckpt_every}")
+
+
+def _forward_stop(ctx: TrialContext, stop_file: Path, done: threading.Event) -> None:
+    """Turn the trial's stop request into the job's STOP file (the workers checkpoint and end)."""
+    while not done.wait(0.5):
+        if ctx.stop_requested() and stop_file.parent.is_dir():
+            stop_file.touch()
+            return
+
+
+def run_training_trial(point: dict[str, Any], ctx: TrialContext, base: dict[str, Any], sweep: str,
+                       parent: RunHandle) -> None:
+    """The point function of a training sweep: train ``base`` with ``point`` set, nested under ``parent``.
+
+    ``base``: the sweep's base config as a dict (output folder, tracking store and shards absolute).
+    """
+    from ray.tune.integration.ray_train import TuneReportCallback
+
+    cfg = trial_job_config(TrainConfig.from_dict(base), point, sweep, ctx.key)
+    job_dir = cfg.job_dir()
+    resume = (job_dir / CONFIG_FILE).is_file()
+    if resume:
+        cfg = load_job_config(cfg.run.output_dir, cfg.run.name)
+    elif job_dir.exists():
+        shutil.rmtree(job_dir)  # a launch that died before writing its config left nothing to resume
+    done = threading.Event()
+    watcher = threading.Thread(target=_forward_stop, args=(ctx, job_dir / STOP_FILE, done), daemon=True)
+    watcher.start()
+    try:
+        launch_training(cfg, resume=resume, parent=parent, callbacks=[TuneReportCallback()])
+    finally:
+        done.set()
