@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
 from sray.platform.config.train_config import DataSettings, OptimSettings, RunSettings, TrainConfig
 
@@ -47,8 +48,8 @@ def synth_cpu_hour() -> TrainConfig:
         data=DataSettings(shards="outputs/bench-accuracy/cpu-small/shards", top_k=12, rays_per_batch=256,
                           loader_workers=1, val_views_per_scene=1, val_downscale=4, val_scenes=4,
                           class_balance="inverse-sqrt",
-                          aug_colour_ev=0.3, aug_channel_ev=0.1, aug_noise_sigma=3.0, aug_min_source=2,
-                          aug_source_scale=0.25),
+                          aug=Augmentation(colour_ev=0.3, channel_ev=0.1, noise_sigma=3.0, min_source=2,
+                                           source_scale=0.25)),
         optim=OptimSettings(steps=CPU_HOUR_STEPS, lr=1e-3, lr_final=1e-4, warmup_steps=100, grad_clip=1.0),
         run=RunSettings(experiment="sray-synth-cpu-hour", workers=2, cpus_per_worker=1.0, log_every=20,
                         val_every=CPU_HOUR_STEPS // 4, ckpt_every=200),

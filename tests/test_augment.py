@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,10 @@ from sray.data_tools.loader.shard_loader import make_train_loader
 from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
+from sray.jobs.cli import build_parser
+from sray.jobs.train_cmd import build_config
+from sray.platform.config.train_config import TrainConfig
+from sray.platform.train.job_loader import job_loader
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +68,15 @@ def test_loader_with_augmentation_off_yields_identical_batches(shards: Path) -> 
         assert a.query_id == b.query_id
         for x, y in ((a.pixels, b.pixels), (a.sources.rgb, b.sources.rgb), (a.sources.c2w, b.sources.c2w)):
             assert torch.equal(x, y)
+
+
+def test_set_data_aug_reaches_the_training_loader(shards: Path) -> None:
+    """``sray train --set data.aug.<field>=...`` -> the config the workers receive -> a rank's loader."""
+    args = build_parser().parse_args(["train", "--data", str(shards), "--set", "data.aug.colour_ev=0.3",
+                                      "--set", "data.aug.query_crop=0.5", "--set", "model.n_source=3"])
+    payload = json.loads(json.dumps(build_config(args).to_dict()))  # as the launcher hands it to the workers
+    loader = job_loader(TrainConfig.from_dict(payload), rank=0, world_size=1, batches_per_epoch=2)
+    assert loader.dataset.augment == Augmentation(colour_ev=0.3, query_crop=0.5)
 
 
 @pytest.mark.parametrize("scale", [0.5, 0.63, 0.8])

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sray.data_tools.loader.augment import Augmentation
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import TRAIN_SECONDS_FILE, class_iou, stored_cells
-from sray.jobs.bench.accuracy_plan import LONG, Cell, Preset, World
+from sray.jobs.bench.accuracy_plan import LONG, PRESETS, Cell, Preset, World
 from sray.jobs.bench.accuracy_tables import budget_means, class_table, seed_table, targets, write_tables
 from sray.platform.common.eval_protocol import EvalProtocol
 
@@ -22,7 +23,7 @@ TOY = Preset(world=World(train_scenes=1, test_scenes=1, views=20, height=36, wid
              recipe="synth-cpu-hour", overrides=("model.n_coarse=4", "model.n_fine=4", "model.n_source=2",
                                               "data.rays_per_batch=32", "data.top_k=4", "run.workers=1",
                                               "data.val_views_per_scene=1",
-                                              "data.aug_source_scale=0.0"),  # 36x48 sources: no room to shrink
+                                              "data.aug.source_scale=0.0"),  # 36x48 sources: no room to shrink
              long_steps=4, ablation_steps=2, validations=1, ckpt_every=2,
              plan=(Cell(LONG, 0), Cell("full", 0), Cell("full", 1)),
              eval_sources=2, eval_fast=None, budget_s=3.0, budgets=(1.0, 3.0), fleet_eval_stride=4,
@@ -61,6 +62,12 @@ def test_each_variant_sets_its_model_fields_and_nothing_else(tmp_path: Path) -> 
         cfg = accuracy_cells.cell_config(Cell(variant, 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db")
         assert dataclasses.replace(base, **fields) == cfg.model, variant
         assert cfg.optim.warmup_2d_steps == (100 if variant == "full-new-src-w" else 0), variant
+
+
+def test_the_gpu_preset_augments_through_the_data_aug_section(tmp_path: Path) -> None:
+    cfg = accuracy_cells.cell_config(Cell("full", 0), PRESETS["gpu"], tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    assert cfg.data.aug == Augmentation(colour_ev=0.3, channel_ev=0.1, noise_sigma=3.0, min_source=2)
+    assert cfg.data.class_balance == "inverse-sqrt"
 
 
 def test_seed_table_mean_and_sample_spread() -> None:

@@ -1,14 +1,19 @@
-"""Training checkpoints hold the bare model's keys; checkpoints of the old ``net.``-prefixed form still load."""
+"""Training checkpoints hold the bare model's keys; checkpoints of the old ``net.``-prefixed form still load, and so
+do checkpoints and job configs whose data section holds the augmentation settings flat (``aug_<field>``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import json
+
 import torch
 from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
+from sray.data_tools.loader.augment import Augmentation
 from sray.platform.checkpoints.folders import load_checkpoint, write_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.train.launcher import CONFIG_FILE, load_job_config
 from sray.platform.train.state import build_training, restore_training, training_state
 
 
@@ -35,3 +40,20 @@ def test_new_checkpoints_hold_bare_keys_and_legacy_ones_still_load(tiny_shards: 
         assert step == 3
         for key, value in wrapper.net.state_dict().items():
             torch.testing.assert_close(other.net.state_dict()[key], value, rtol=0, atol=0)
+
+
+def test_checkpoints_and_job_configs_with_flat_augmentation_keys_load_into_data_aug(tiny_shards: Path,
+                                                                                    tmp_path: Path) -> None:
+    cfg = tiny_config(tiny_shards, tmp_path)
+    wrapper, optimizer, scheduler = build_training(cfg)
+    state = training_state(wrapper.net, optimizer, scheduler, None, 3, cfg, None, {})
+    del state["config"]["data"]["aug"]
+    state["config"]["data"].update(aug_colour_ev=0.3, aug_channel_ev=0.1, aug_noise_sigma=3.0, aug_min_source=2,
+                                   aug_source_scale=0.25, aug_query_crop=0.0)  # the flat form
+    expected = Augmentation(colour_ev=0.3, channel_ev=0.1, noise_sigma=3.0, min_source=2, source_scale=0.25)
+
+    _, loaded = model_from_checkpoint(write_checkpoint(state, tmp_path / "flat" / "step_000000003", 3))
+    assert loaded.data.aug == expected and loaded.data.top_k == cfg.data.top_k
+    (tmp_path / "jobs" / "flat-job").mkdir(parents=True)
+    (tmp_path / "jobs" / "flat-job" / CONFIG_FILE).write_text(json.dumps(state["config"]))
+    assert load_job_config(str(tmp_path / "jobs"), "flat-job").data.aug == expected  # sray train --resume

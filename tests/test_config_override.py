@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
+
 import pytest
 
+from sray.data_tools.loader.augment import Augmentation
 from sray.jobs.recipes import get_recipe
-from sray.platform.config.train_config import apply_override
+from sray.platform.config.train_config import TrainConfig, apply_override
 
 
 def test_each_field_type_is_parsed_from_its_annotation() -> None:
@@ -20,7 +24,8 @@ def test_each_field_type_is_parsed_from_its_annotation() -> None:
 @pytest.mark.parametrize("assignment, message", [
     ("train.lr=1", "no section 'train'; sections: model, data, optim, run"),
     ("optim.nope=1", "no field 'nope' in OptimSettings"),
-    ("model=1", "no field 'model' in TrainConfig"),
+    ("model=1", "no field 'model' in TrainConfig; 'model' is a section: set its fields, model.<field>"),
+    ("data.aug=0.3", "'aug' is a section: set its fields, data.aug.<field> with <field> one of channel_ev, colour_ev"),
     ("optim.steps=many", "not a valid int"),
     ("optim.lr", "expected"),
 ])
@@ -48,3 +53,43 @@ def test_fp16_with_a_loss_in_pieces_is_refused_and_rolled_back() -> None:
     with pytest.raises(ValueError, match="model.train_piece=0"):
         apply_override(cfg, "model.train_piece=64")
     assert cfg.model.train_piece == cfg.data.rays_per_batch
+
+
+def test_augmentation_is_set_field_by_field_in_the_data_aug_section() -> None:
+    cfg = get_recipe("synth-small")
+    apply_override(cfg, "data.aug.colour_ev=0.3")
+    apply_override(cfg, "data.aug.min_source=2")
+    assert cfg.data.aug == Augmentation(colour_ev=0.3, min_source=2)
+    with pytest.raises(ValueError, match="source_scale"):
+        apply_override(cfg, "data.aug.source_scale=1.0")
+    assert cfg.data.aug == Augmentation(colour_ev=0.3, min_source=2)  # the rejected value left no trace
+    with pytest.raises(ValueError, match="no field 'colour' in Augmentation; fields: channel_ev, colour_ev"):
+        apply_override(cfg, "data.aug.colour=0.3")
+
+
+@pytest.mark.parametrize("field", [f.name for f in dataclasses.fields(Augmentation)])
+def test_a_flat_augmentation_key_names_its_place_in_the_section(field: str) -> None:
+    cfg = get_recipe("synth-cpu-hour")
+    before = cfg.to_dict()
+    with pytest.raises(ValueError) as caught:
+        apply_override(cfg, f"data.aug_{field}=0.5")
+    assert str(caught.value) == (f"--set 'data.aug_{field}=0.5': augmentation settings are the data.aug section; "
+                                 f"use --set data.aug.{field}=0.5")
+    assert cfg.to_dict() == before
+
+
+MAIN_FLAT_AUG = {"aug_colour_ev": 0.3, "aug_channel_ev": 0.1, "aug_noise_sigma": 3.0, "aug_min_source": 2,
+                 "aug_source_scale": 0.25, "aug_query_crop": 0.5}
+"""The data section's augmentation keys as configs and checkpoints stored them flat."""
+
+
+def test_a_stored_config_with_flat_augmentation_keys_loads_into_the_section() -> None:
+    stored = get_recipe("synth-small").to_dict()
+    del stored["data"]["aug"]
+    stored["data"].update(MAIN_FLAT_AUG)
+    cfg = TrainConfig.from_dict(json.loads(json.dumps(stored)))
+    assert cfg.data.aug == Augmentation(colour_ev=0.3, channel_ev=0.1, noise_sigma=3.0, min_source=2,
+                                        source_scale=0.25, query_crop=0.5)
+    assert cfg.data.top_k == stored["data"]["top_k"]
+    assert TrainConfig.from_dict(cfg.to_dict()).to_dict() == cfg.to_dict()
+    assert "aug_colour_ev" not in cfg.to_dict()["data"] and cfg.to_dict()["data"]["aug"]["colour_ev"] == 0.3

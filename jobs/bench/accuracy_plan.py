@@ -138,9 +138,9 @@ PRESETS = {
         fleet_gpus_per_task=0.0),
     "gpu": Preset(
         world=World(train_scenes=96, test_scenes=8, views=100, height=240, width=320),
-        recipe="synth-paper", overrides=("data.aug_min_source=2", "data.class_balance=inverse-sqrt",
-                                         "data.aug_colour_ev=0.3", "data.aug_channel_ev=0.1",
-                                         "data.aug_noise_sigma=3.0"),
+        recipe="synth-paper", overrides=("data.aug.min_source=2", "data.class_balance=inverse-sqrt",
+                                         "data.aug.colour_ev=0.3", "data.aug.channel_ev=0.1",
+                                         "data.aug.noise_sigma=3.0"),
         long_steps=20_000, ablation_steps=5_000, validations=4, ckpt_every=1_000,
         plan=(*seeds(LONG, 3), *seeds("full", 3), *seeds("none", 3), Cell("cross", 0), Cell("intra", 0),
               Cell("full-affine", 0), Cell("full-rgbd", 0), Cell("full-new", 0)),

@@ -70,7 +70,7 @@ def run_segmenter(shards: Path, cpu_seconds: float, out: Path, recipe: str = "sy
     """Train the 2D segmenter with ``recipe``'s augmentation, class balance and source counts for
     ``cpu_seconds``; saved in ``out``."""
     cfg = get_recipe(recipe)
-    result = train_segmenter(shards, cpu_seconds, out, seed, augment=cfg.data.augmentation(),
+    result = train_segmenter(shards, cpu_seconds, out, seed, augment=cfg.data.aug,
                              class_balance=cfg.data.class_balance, n_source=cfg.model.n_source,
                              top_k=cfg.data.top_k, feat_dim=cfg.model.feat_dim)
     print(f"segmenter saved in {out}: {result.budget()}, final loss {result.training['final_loss']:.3f}")

@@ -2,7 +2,8 @@
 
 A value is parsed as the field's annotated type (int, float, str, bool, ``X | None``, tuple or list
 of X); an unknown section or field is refused with the valid names; a value the config's own checks
-reject is rolled back, so the config stays valid.
+reject is rolled back, so the config stays valid. A frozen section (an immutable value such as the
+loader's ``Augmentation``) is rebuilt with the new value, which runs its own checks, and put in place.
 """
 
 from __future__ import annotations
@@ -39,33 +40,50 @@ def _sections(node: Any) -> list[str]:
     return [f.name for f in dataclasses.fields(node) if dataclasses.is_dataclass(getattr(node, f.name))]
 
 
+def _frozen(node: Any) -> bool:
+    """Whether the dataclass instance ``node`` is frozen (its fields cannot be assigned)."""
+    return bool(type(node).__dataclass_params__.frozen)
+
+
 def set_field(cfg: Any, assignment: str, example: str, validate: Callable[[], None]) -> None:
     """Apply one ``[section.]field=value`` to ``cfg`` in place, then ``validate()``.
 
     ``example`` is shown when the assignment has no ``=``. If ``validate`` raises ValueError the
-    field gets its previous value back and the error propagates.
+    field gets its previous value back and the error propagates. Frozen sections on the path are
+    replaced by copies holding the new value (``dataclasses.replace``), from the field up to the first
+    mutable section.
     """
     if "=" not in assignment:
         raise ValueError(f"--set {assignment!r}: expected [section.]field=value, e.g. {example}")
     path, raw = assignment.split("=", 1)
     parts = path.strip().split(".")
-    target: Any = cfg
+    chain: list[Any] = [cfg]
     for part in parts[:-1]:
-        child = getattr(target, part, None)
+        child = getattr(chain[-1], part, None)
         if not dataclasses.is_dataclass(child):
-            raise ValueError(f"--set {assignment!r}: no section {part!r}; sections: {', '.join(_sections(target))}")
-        target = child
-    name = parts[-1]
+            raise ValueError(f"--set {assignment!r}: no section {part!r}; sections: {', '.join(_sections(chain[-1]))}")
+        chain.append(child)
+    target, name = chain[-1], parts[-1]
     fields = {f.name for f in dataclasses.fields(target)} - set(_sections(target))
+    if name in _sections(target):
+        inner = sorted(f.name for f in dataclasses.fields(getattr(target, name)))
+        raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; {name!r} is a section: "
+                         f"set its fields, {path.strip()}.<field> with <field> one of {', '.join(inner)}")
     if name not in fields:
         raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; "
                          f"fields: {', '.join(sorted(fields))}")
-    previous = getattr(target, name)
-    setattr(target, name, parse_value(typing.get_type_hints(type(target))[name], raw.strip(), assignment))
+    value = parse_value(typing.get_type_hints(type(target))[name], raw.strip(), assignment)
+    depth = len(parts) - 1
+    while depth > 0 and _frozen(chain[depth]):
+        value = dataclasses.replace(chain[depth], **{parts[depth]: value})
+        depth -= 1
+    owner, key = chain[depth], parts[depth]
+    previous = getattr(owner, key)
+    setattr(owner, key, value)
     try:
         validate()
     except ValueError:
-        setattr(target, name, previous)
+        setattr(owner, key, previous)
         raise
 
 

@@ -51,19 +51,10 @@ class DataSettings:
     """Class-frequency-aware semantic loss: ``none`` (the paper), ``inverse-sqrt`` or ``inverse``
     weights from the training scenes' pixel frequencies (``sray.data_tools.class_stats``), computed
     when the job starts and stored as ``model.class_weights``."""
-    aug_colour_ev: float = 0.0
-    """Per-source-view exposure jitter, EV stops (uniform in ±value); 0 = off (``loader.augment``)."""
-    aug_channel_ev: float = 0.0
-    """Per-source-view, per-channel extra jitter (white balance), EV stops; 0 = off."""
-    aug_noise_sigma: float = 0.0
-    """Largest Gaussian noise sigma on a source view, 8-bit levels; 0 = off."""
-    aug_min_source: int = 0
-    """Random source-view count: each sample has m in [aug_min_source, model.n_source] sources chosen
-    among a random number (m..top_k) of the top-ranked neighbours; 0 = always model.n_source."""
-    aug_source_scale: float = 0.0
-    """Random source resolution: sources resized by a factor in [1 - value, 1] per sample; 0 = off."""
-    aug_query_crop: float = 0.0
-    """Random query crops: rays drawn in a window of this fraction of each image side; 0 = whole image."""
+    aug: Augmentation = field(default_factory=Augmentation)
+    """Training-sample augmentation (``sray.data_tools.loader.augment``: source colour jitter and noise,
+    random source count, source resolution and query crops; every option off by default), set field by
+    field: ``--set data.aug.colour_ev=0.3``."""
 
     def __post_init__(self) -> None:
         """ValueError naming a field out of range."""
@@ -75,12 +66,6 @@ class DataSettings:
     def val_fast(self) -> FastRender | None:
         """Validation's fast render mode (``val_render``), None for the full render; ValueError on a bad value."""
         return held_out_fast(self.val_render, self.val_fast_confidence, "train config: data.val_render")
-
-    def augmentation(self) -> Augmentation:
-        """The loader's :class:`~sray.data_tools.loader.augment.Augmentation` of these settings."""
-        return Augmentation(colour_ev=self.aug_colour_ev, channel_ev=self.aug_channel_ev,
-                            noise_sigma=self.aug_noise_sigma, min_source=self.aug_min_source,
-                            source_scale=self.aug_source_scale, query_crop=self.aug_query_crop)
 
 
 @dataclass
@@ -155,6 +140,18 @@ class RunSettings:
 RETIRED_RUN_KEYS = frozenset({"fail_at_step", "nan_at_step", "stop_after_step"})
 """Run settings that configs written before the fault hook (``SRAY_FAULTS``) may still hold; ignored on load."""
 
+FLAT_AUG_PREFIX = "aug_"
+"""Configs and checkpoints written before ``data.aug`` was a section hold each of its fields flat in the data
+section as ``aug_<field>`` (``aug_colour_ev``, ...); :func:`data_settings` reads them into ``data.aug``."""
+
+
+def data_settings(d: dict[str, Any]) -> DataSettings:
+    """The data section of a stored config, its flat ``aug_<field>`` keys (:data:`FLAT_AUG_PREFIX`) read as
+    ``aug.<field>``."""
+    flat = {k.removeprefix(FLAT_AUG_PREFIX): v for k, v in d.items() if k.startswith(FLAT_AUG_PREFIX)}
+    rest = {k: v for k, v in d.items() if not k.startswith(FLAT_AUG_PREFIX) and k != "aug"}
+    return DataSettings(**rest, aug=Augmentation(**flat, **d.get("aug", {})))
+
 
 @dataclass
 class TrainConfig:
@@ -181,13 +178,14 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`."""
+        """Inverse of :meth:`to_dict`; also reads the configs that earlier versions stored (flat ``data.aug_<field>``
+        keys, :data:`RETIRED_RUN_KEYS`)."""
         model = dict(d.get("model", {}))
         for key in ("weight_hidden", "geo_hidden", "class_weights"):
             if key in model:
                 model[key] = tuple(model[key])
         return cls(recipe=d.get("recipe", "custom"), model=SRayConfig(**model),
-                   data=DataSettings(**d.get("data", {})), optim=OptimSettings(**d.get("optim", {})),
+                   data=data_settings(d.get("data", {})), optim=OptimSettings(**d.get("optim", {})),
                    run=RunSettings(**{k: v for k, v in d.get("run", {}).items() if k not in RETIRED_RUN_KEYS}))
 
     def job_dir(self) -> Path:
@@ -217,9 +215,16 @@ def check_sections(cfg: TrainConfig) -> None:
 def apply_override(cfg: TrainConfig, assignment: str) -> None:
     """Apply one ``section.field=value`` override in place, parsing the value as the field's type.
 
-    Raises ValueError naming the unknown section or field and listing the valid ones, or a value the
-    network cannot run with (the config keeps its previous value then).
+    Raises ValueError naming the unknown section or field and listing the valid ones (for a flat
+    ``data.aug_<field>``, its name in the ``data.aug`` section), or a value the network cannot run with
+    (the config keeps its previous value then).
     """
+    path, _, raw = assignment.partition("=")
+    flat = path.strip().removeprefix(f"data.{FLAT_AUG_PREFIX}")
+    if flat != path.strip() and flat in {f.name for f in dataclasses.fields(Augmentation)}:
+        raise ValueError(f"--set {assignment!r}: augmentation settings are the data.aug section; "
+                         f"use --set data.aug.{flat}={raw.strip()}")
+
     def check() -> None:
         cfg.model.__post_init__()
         cfg.data.__post_init__()

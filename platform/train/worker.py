@@ -50,9 +50,9 @@ def train_worker(payload: dict[str, Any]) -> None:
     import ray.train
     from accelerate import Accelerator
 
-    from sray.data_tools.loader.shard_loader import make_train_loader
     from sray.platform.common.progress import make_progress
     from sray.platform.tracking.registry import open_logger
+    from sray.platform.train.job_loader import job_loader
     from sray.platform.train.validation import validate
 
     cfg = TrainConfig.from_dict(payload["config"])
@@ -104,12 +104,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     # job resumed at step s re-enters epoch s // E at offset s % E and sees exactly the batches an
     # uninterrupted job would have seen.
     epoch_len = cfg.run.ckpt_every
-    loader = make_train_loader(
-        Path(cfg.data.shards), n_source=cfg.model.n_source, top_k=cfg.data.top_k,
-        rays_per_batch=cfg.data.rays_per_batch, batches_per_epoch=epoch_len, rank=rank, world_size=world,
-        num_workers=cfg.data.loader_workers, seed=cfg.run.seed, augment=cfg.data.augmentation(),
-        source_labels=cfg.model.lambda_src_sem > 0, visit_samples=cfg.data.visit_samples,
-        cache_scenes=cfg.data.cache_scenes)
+    loader = job_loader(cfg, rank, world, epoch_len)
 
     def batches_from(step_at: int) -> Any:
         loader.set_epoch(step_at // epoch_len)
