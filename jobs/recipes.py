@@ -29,7 +29,7 @@ def synth_small() -> TrainConfig:
 
 CPU_HOUR_STEPS = 2500
 """Steps of ``synth-cpu-hour``, from its step time on the 2-core development machine with nothing else
-running: 1.24 s per step, 1.32 s with a validation in the window (2026-11-23, the ``full-s0`` cell of
+running: 1.24 s per step, 1.32 s with a validation in the window (the ``full-s0`` cell of
 ``sray bench accuracy``, its progress lines), so 2500 steps take about 55 min and the start-up and the
 four small validations fit in the hour."""
 

@@ -2,7 +2,7 @@
 
 The reference forward keeps the contextual space M in (R, m, N, C) order and transposes it to
 (R, N, m, C) and back around every cross-view attention: full copies of the largest tensors, which
-the profile (docs/performance.md) shows as ``copy_`` and ``cat`` time. Here every per-view tensor
+the profile (docs/benchmarks.md, "Profiles") shows as ``copy_`` and ``cat`` time. Here every per-view tensor
 lives in (R, N, m, C) order from the gather on, and each attention stage hands
 ``scaled_dot_product_attention`` strided views instead of copies:
 

@@ -2,9 +2,9 @@
 
 On a CPU, the per-sample tensors of a chunk (rays x samples x views x channels) are the working set of
 every operator; kept near the caches, the same work runs faster. Measured on the 2-core CPU: a render in
-chunks of 256 rays took 5.02 s against 6.80 s in chunks of 4800 (docs/performance.md, "Render lever: rays
-per chunk"), and a paper-config training step in pieces of 256 rays took 39% less time and 45% less memory than
-the whole 1024-ray batch at once (9.70 -> 5.95 s, 4.03 -> 2.22 GiB) (docs/benchmarks.md, "S-Ray training step").
+chunks of 256 rays took 5.02 s against 6.80 s in chunks of 4800, and a paper-config training step in pieces of
+256 rays took 42% less time and 47% less memory than the whole 1024-ray batch at once (8.24 -> 4.81 s,
+4.08 -> 2.16 GiB) (docs/performance.md, `model.chunk` and `model.train_piece`).
 A GPU wants the opposite: large chunks keep it busy, so there the render takes 4096 rays per pass and
 training computes the batch in one piece.
 """

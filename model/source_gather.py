@@ -1,7 +1,7 @@
 """Bilinear sampling of per-view maps as a weighted gather: the fast path of ``reprojection.sample_maps``.
 
 ``grid_sample``'s backward on CPU scatters every sample's gradient one element at a time and was the
-largest single cost of a training step (docs/performance.md). The same bilinear interpolation is a
+largest single cost of a training step (docs/benchmarks.md, "Profiles"). The same bilinear interpolation is a
 weighted sum of the 4 neighbouring texels; written as ``F.embedding_bag(mode="sum")`` over a
 texel table (m * h * w, D) with per-sample weights, its forward is one gather and its backward one
 sorted, vectorised accumulation. The output comes directly in the (R, m, N, D) token order the

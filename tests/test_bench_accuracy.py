@@ -17,6 +17,7 @@ from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import TRAIN_SECONDS_FILE, class_iou, stored_cells
 from sray.jobs.bench.accuracy_plan import LONG, PRESETS, Cell, Preset, World
 from sray.jobs.bench.accuracy_tables import budget_means, class_table, seed_table, targets, write_tables
+from sray.jobs.bench.doc import Bench, bench_dir
 from sray.platform.common.eval_protocol import EvalProtocol
 
 TOY = Preset(world=World(train_scenes=1, test_scenes=1, views=20, height=36, width=48),
@@ -143,7 +144,8 @@ def test_partial_tables_name_the_missing_cells(tmp_path: Path) -> None:
     assert "Missing cells: long-s0, full-s2, none-s0, none-s1, none-s2." in text
     assert "cell long-s0 not run yet" in text and "needs at least 2 seeds of each" in text
     assert "full | 2 | 2/3 | 45.00 ± 7.07" in text
-    assert (tmp_path / "docs/benchmarks/accuracy-toy/zero_shot_seeds.png").stat().st_size > 0
+    figures = bench_dir(doc, Bench("accuracy-toy", "Accuracy, toy"))  # charts beside the section's data
+    assert (figures / "zero_shot_seeds.png").stat().st_size > 0 and (figures / "tables.json").exists()
 
 
 @pytest.mark.slow

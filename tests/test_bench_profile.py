@@ -6,6 +6,7 @@ from pathlib import Path
 
 import torch
 
+from sray.jobs.bench.doc import device_kind
 from sray.jobs.bench.profile import run_profiles, write_profiles
 
 
@@ -34,10 +35,10 @@ def test_profiles_and_levers_are_written_and_the_kernels_agree(tmp_path: Path) -
     chunk_rows = [r for part in sections[5][1].split("\n\n") for r in _rows(part)]
     assert [(r[0], r[1]) for r in chunk_rows] == [("reference", "64"), ("reference", "16"), ("fast", "64"),
                                                   ("fast", "16")]
-    doc = tmp_path / "performance.md"
+    doc = tmp_path / "benchmarks.md"
     write_profiles(sections, doc)
     text = doc.read_text()
-    assert text.startswith("# Performance") and all(text.count(f"## {t}\n") == 1 for t in titles)
+    assert text.count(f"## Profiles ({device_kind()})\n") == 1 and all(text.count(f"### {t}\n") == 1 for t in titles)
 
 
 def test_training_kernel_lever_times_forward_and_backward_of_the_flash_options_at_intra_view() -> None:

@@ -82,14 +82,15 @@ def test_full_settings_render_with_the_checkpoints_own_fine_samples(tiny_shards:
 def test_chosen_settings_keep_their_order_and_unknown_names_are_refused() -> None:
     import pytest
 
-    from sray.jobs.bench.speed_accuracy import TITLE, default_settings, section_title, select_settings
+    from sray.jobs.bench.speed_accuracy import (CHOSEN_TABLE, DEFAULT_TABLE, default_settings, select_settings,
+                                                table_title)
 
     assert [s.name for s in select_settings(None)] == [s.name for s in default_settings()]
     assert [s.name for s in select_settings(["fast s8 c0.9", "full"])] == ["fast s8 c0.9", "full"]
     with pytest.raises(ValueError, match="unknown \\['fastest'\\]"):
         select_settings(["full", "fastest"])
-    assert section_title(None, 2) == TITLE
-    assert section_title(["full", "fast s4 c0.9"], 0).endswith("full vs fast s4 c0.9, every test view")
+    assert table_title(None) == DEFAULT_TABLE and table_title([]) == DEFAULT_TABLE
+    assert table_title(["full", "fast s4 c0.9"]) == CHOSEN_TABLE  # one table for chosen sets, replaced by the next
 
 
 def test_table_names_a_chosen_first_row_as_the_comparison() -> None:

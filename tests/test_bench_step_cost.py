@@ -18,7 +18,8 @@ from sray.jobs.bench.accuracy_step_cost import (
     step_spec,
     store_step_times,
 )
-from sray.jobs.bench.accuracy_tables import write_tables
+from sray.jobs.bench.accuracy_tables import accuracy_bench, write_tables
+from sray.jobs.bench.doc import bench_dir
 from sray.jobs.bench.workloads import model_config
 
 CPU = torch.device("cpu")
@@ -61,6 +62,6 @@ def test_tables_show_each_variants_step_time_and_chart_it(tmp_path: Path) -> Non
     assert rows["full"].startswith("full | 2 | 2/3 | 45.00 ± 7.07") and rows["full"].endswith("| 1.250")
     assert rows["none"].endswith("| 0.500")
     assert "test machine" in text and "zero_shot_vs_step_time.png" in text
-    assert (tmp_path / "docs/benchmarks/accuracy-toy/zero_shot_vs_step_time.png").stat().st_size > 0
+    assert (bench_dir(doc, accuracy_bench("toy")) / "zero_shot_vs_step_time.png").stat().st_size > 0
     write_tables("toy", PLAN3, stored, tmp_path / "no-fleet", tmp_path / "plain.md")
     assert "s / step" not in (tmp_path / "plain.md").read_text()

@@ -35,3 +35,17 @@ def test_mentioned_paths_and_modules_exist(doc: Path) -> None:
                and not p.startswith(("docs/benchmarks/",))]
     missing += [d for d in DOTTED.findall(text) if not _existing_module(d)]
     assert not missing, f"{doc.name} mentions what does not exist: {sorted(set(missing))}"
+
+
+MACHINE_FOLDER = re.compile(r"(?<![\w.-])/(?:tmp|work|home|root|Users|private/var)/[\w.-]+")
+
+
+@pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
+def test_no_line_names_one_machines_absolute_folder(doc: Path) -> None:
+    """Commands and notes name repository-relative paths or placeholders (``OUT/…``), never a folder of the
+    machine that wrote them; the benchmarks' stored data neither."""
+    texts = [(doc.name, doc.read_text())]
+    if doc.name == "benchmarks.md":
+        texts += [(str(p.relative_to(REPO)), p.read_text()) for p in (REPO / "docs" / "benchmarks").rglob("*.json")]
+    found = [f"{name}: {m.group(0)}" for name, text in texts for m in MACHINE_FOLDER.finditer(text)]
+    assert not found, f"absolute folders of one machine: {found}"

@@ -66,3 +66,24 @@ def test_every_gpu_row_is_measured_beside_its_reference_path() -> None:
     assert {k[1] for k in fast} == {"fp32", "bf16", "fp16"} and any(k[6] and k[1] == "bf16" for k in fast)
     for name, dtype, _, alloc, fine, _, _ in fast:
         assert (name, dtype, "reference", alloc, fine, 1024, False) in keys
+
+
+def test_the_official_code_table_reads_a_same_run_side_by_side(tmp_path) -> None:
+    """``--official-side-by-side``: medians over the timed steps (each process's first is its warm-up) and every
+    ratio against sray's default of the same file, never a stored constant."""
+    import json
+
+    from sray.jobs.bench.official_code import official_side_by_side
+
+    def runs(*steps: list[float], gib: float) -> list[dict]:
+        return [{"times": [99.0, *s], "rss_bytes": gib * 2**30, "torch": "2.x", "threads": 2} for s in steps]
+
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps({"official, THP_MEM_ALLOC_ENABLE=1": runs([13.0, 14.0], [13.5, 13.5], gib=11.0),
+                                "sray default (no THP)": runs([4.0, 4.1], [3.9, 4.0], gib=2.0)}))
+    title, table, notes = official_side_by_side(path)
+    rows = {line.split(" | ")[0]: line.split(" | ") for line in table.splitlines()[2:]}
+    official, sray = rows["official, THP_MEM_ALLOC_ENABLE=1"], rows["sray default (no THP)"]
+    assert official[1] == "13.50" and sray[1] == "4.00" and sray[5:] == ["1.00x", "1.00x"]
+    assert official[5:] == ["3.38x", "5.50x"] and "99" not in official[2]
+    assert "same run" in title and "official_side_by_side/run.py" in notes

@@ -17,6 +17,7 @@ from injected_faults import injected_faults  # noqa: E402
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
 from train_fixtures import tiny_shards  # noqa: E402,F401
 
+from sray.jobs.bench.doc import Bench, bench_dir  # noqa: E402
 from sray.jobs.cli import main  # noqa: E402
 from sray.platform.stability.axes import AXES  # noqa: E402
 from sray.platform.stability.presets import PRESETS  # noqa: E402
@@ -57,9 +58,10 @@ def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(tiny_shar
         assert "| 30 | failed |" in (out / "tables" / "image_noise.md").read_text()
         for chart in ("stability_miou.png", "stability_psnr.png"):
             assert (out / chart).stat().st_size > 10_000
-            assert (doc.parent / "benchmarks" / "stability-toy" / chart).exists()
+            assert (bench_dir(doc, Bench("stability-toy", "Stability, toy")) / chart).exists()
         text = doc.read_text()
-        assert text.count("## Stability (toy): ") == len(AXES) + 1
+        assert text.count("## Stability, toy (") == 1  # one section: a table per axis and the breaking points
+        assert text.count("\n### ") == len(AXES) + 1
 
         # a re-run finds every point stored and computes none
         from sray.platform.stability import suite as suite_module

@@ -1,4 +1,4 @@
-"""Zero-shot evaluation uses only what a user has at test time (issue 8, item 4).
+"""Zero-shot evaluation uses only what a user has at test time.
 
 A test view of an unseen scene is known to the user by its pose and intrinsics alone; its depth,
 labels and colours are the ground truth it is scored against. Rewriting them on disk and running the

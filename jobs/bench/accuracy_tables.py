@@ -7,6 +7,7 @@ used to say whether two variants' spreads overlap.
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 from typing import Any
@@ -14,15 +15,21 @@ from typing import Any
 import numpy as np
 
 from sray.jobs.bench.accuracy_plan import COMPARED, LONG, Cell, Preset
+from sray.jobs.bench.doc import Bench, bench_dir, markdown_table, record
 
 ZERO_SHOT_TARGET = 0.50
-"""Issue target: zero-shot mIoU of the long (recipe) model, RGB-only."""
+"""Target: zero-shot mIoU of the long (recipe) model, RGB-only."""
 FINETUNE_RATIO_TARGET = 0.60
-"""Issue target: zero-shot mIoU as a fraction of S-Ray's score after a 60 s finetune."""
+"""Target: zero-shot mIoU as a fraction of S-Ray's score after a 60 s finetune."""
 ABLATION_MARGIN = 0.05
-"""Issue target: full CRA at least this much mIoU above no attention, with non-overlapping seed ranges."""
+"""Target: full CRA at least this much mIoU above no attention, with non-overlapping seed ranges."""
 FINETUNE_READ_S = 60.0
 """Finetune budget (seconds) the zero-shot ratio is read at."""
+
+
+def accuracy_bench(preset: str) -> Bench:
+    """The benchmark's section (and folder of data and charts) for one preset."""
+    return Bench(f"accuracy-{preset}", f"Accuracy, {preset}")
 
 
 def variant_label(variant: str, p: Preset) -> str:
@@ -123,7 +130,7 @@ def budget_means(results: list[dict[str, Any]], budgets: tuple[float, ...]) -> d
 
 
 def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | None) -> list[str]:
-    """One line per target of the issue: the measured value and whether it is met (or what is missing)."""
+    """One line per target of the benchmark: the measured value and whether it is met (or what is missing)."""
     groups = by_variant(p, stored)
     lines = []
     long_cells = groups.get(LONG, [])
@@ -161,7 +168,7 @@ def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | No
 
 
 def _step_cost_link(preset: str, p: Preset, groups: dict[str, list[dict[str, Any]]], step_times: dict[str, Any],
-                    caption: str, figures: Path) -> str:
+                    caption: str, figures: Path, doc: Path) -> str:
     """The mIoU-against-step-time chart of the stored variants, and its note and link for the doc."""
     from sray.jobs.bench.accuracy_step_cost import step_cost_chart
 
@@ -175,29 +182,26 @@ def _step_cost_link(preset: str, p: Preset, groups: dict[str, list[dict[str, Any
             f"section, {next(iter(timed.values()))['rays']} rays per batch, {p.world.width}x{p.world.height}, its "
             "precision, "
             "synthetic scene), fresh processes alternating round by round, median of the rounds; "
-            f"{step_times['machine']}.\n\n![zero-shot mIoU against step time](benchmarks/accuracy-{preset}/"
-            f"{chart.name})")
+            f"{step_times['machine']}.\n\n![zero-shot mIoU against step time]({os.path.relpath(chart, doc.parent)})")
 
 
 def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str:
     """A Markdown table with its protocol caption lines under it."""
-    from sray.jobs.bench.doc import markdown_table
-
     return "\n".join([markdown_table(header, rows), "", *captions])
 
 
 def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], fleet_dir: Path, doc: Path,
                  step_times: dict[str, Any] | None = None) -> None:
-    """Write the benchmark's sections into ``doc`` (replacing earlier ones of this preset and device) and
-    its chart(s) into ``<doc folder>/benchmarks/accuracy-<preset>/``; ``step_times`` (as
+    """Write the benchmark's tables into its section of ``doc`` (replacing earlier ones of this preset and
+    device) and its chart(s) beside their data (``doc.bench_dir``); ``step_times`` (as
     ``accuracy_step_cost`` stores them) adds the step-time column and the mIoU-against-step-time chart."""
-    from sray.jobs.bench.doc import record
     from sray.platform.common.eval_protocol import caption_lines
     from sray.platform.finetune.methods.registry import get_method
     from sray.platform.viz.curves import read_fleet_results
     from sray.platform.viz.seed_chart import write_seed_chart
 
-    figures = doc.parent / "benchmarks" / f"accuracy-{preset}"
+    bench = accuracy_bench(preset)
+    figures = bench_dir(doc, bench)
     figures.mkdir(parents=True, exist_ok=True)
     captions = caption_lines((variant_label(c["variant"], p), c["protocol"])
                              for c in sorted(stored.values(), key=lambda c: c["cell"]))
@@ -208,9 +212,9 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
         chart = write_seed_chart({variant_label(v, p): [100 * c["miou"] for c in cells] for v, cells in groups.items()},
                                  "zero-shot mIoU %", f"Zero-shot mIoU on unseen procedural scenes ({preset})",
                                  " ".join(captions), figures / "zero_shot_seeds.png")
-        links.append(f"![zero-shot mIoU over seeds](benchmarks/accuracy-{preset}/{chart.name})")
+        links.append(f"![zero-shot mIoU over seeds]({os.path.relpath(chart, doc.parent)})")
         if step_times:
-            links.append(_step_cost_link(preset, p, groups, step_times, " ".join(captions), figures))
+            links.append(_step_cost_link(preset, p, groups, step_times, " ".join(captions), figures, doc))
 
     results = read_fleet_results(fleet_dir) if fleet_dir.is_dir() else []
     budgets = (0.0, *p.budgets)
@@ -226,10 +230,10 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
              "Missing cells: " + (", ".join(missing) if missing else "none") + ".",
              "Targets:", *targets(p, stored, sray_at_60), "", *links]
     header, rows = seed_table(p, stored, step_times)
-    record(f"Accuracy: zero-shot with seeds ({preset})", _table(header, rows, captions), doc, "\n".join(notes))
+    record(bench, "Zero-shot with seeds", _table(header, rows, captions), doc, "\n".join(notes))
     header, rows = class_table(p, stored)
     if rows:
-        record(f"Accuracy: per-class IoU, zero-shot ({preset})", _table(header, rows, captions), doc,
+        record(bench, "Per-class IoU, zero-shot", _table(header, rows, captions), doc,
                "Each class's IoU from one confusion matrix per scene, averaged over the test scenes that hold "
                "the class, then over seeds.")
     if results:
@@ -237,8 +241,8 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
         fleet_links = []
         for chart in sorted((fleet_dir / "charts").glob("*.png")):
             shutil.copy(chart, figures / chart.name)
-            fleet_links.append(f"![{chart.stem}](benchmarks/accuracy-{preset}/{chart.name})")
-        record(f"Accuracy: S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets ({preset})",
+            fleet_links.append(f"![{chart.stem}]({os.path.relpath(figures / chart.name, doc.parent)})")
+        record(bench, "S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets",
                _table(["budget s", *(f"{get_method(m).style.label} mIoU %" for m in COMPARED)], budget_rows,
                       caption_lines((r["method"], r.get("protocol")) for r in results)),
                doc, f"Finetunes from the `{LONG}` model, {p.budget_s:.0f} s wall-clock budget each, equal for both "

@@ -2,7 +2,7 @@
 
 ``ceilings`` scores the rows of :mod:`sray.platform.eval.ceilings` on a checkpoint's unseen test scenes,
 stores them as ``ceilings.json`` in ``--out``, prints the Markdown table and writes it into the benchmark
-document as the section "Ceilings" (replaced on a rerun on the same kind of device). ``segmenter`` trains
+document's section "Ceilings" of this device (replaced on a rerun on the same kind of device). ``segmenter`` trains
 the 2D segmenter those rows use for a CPU-second budget, with a recipe's images and augmentation.
 """
 
@@ -11,14 +11,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from sray.jobs.bench.doc import markdown_table, record
+from sray.jobs.bench.doc import Bench, markdown_table, record
 from sray.jobs.recipes import get_recipe
 from sray.platform.eval.ceilings import measure_ceilings
 from sray.platform.eval.segmenter import SegmenterRecord
 from sray.platform.eval.segmenter_training import train_segmenter
 from sray.platform.eval.zero_shot import write_json_atomic
 
-TITLE = "Ceilings"
+CEILINGS = Bench("ceilings", "Ceilings")
+"""The benchmark's section in docs/benchmarks.md."""
+TITLE = "Where zero-shot accuracy is lost"
 REPORT_FILE = "ceilings.json"
 
 
@@ -60,7 +62,7 @@ def run_ceilings(checkpoint: Path, shards: Path, out: Path, doc: Path, *, n_sour
                               segmenter=segmenter, probe_steps=probe_steps, probe_views=probe_views,
                               tolerance=tolerance, progress=progress)
     path = write_json_atomic(report, Path(out) / REPORT_FILE)
-    record(TITLE, ceilings_table(report["rows"]), Path(doc), ceilings_notes(report))
+    record(CEILINGS, TITLE, ceilings_table(report["rows"]), Path(doc), ceilings_notes(report))
     print(f"rows stored in {path}")
     return report
 

@@ -1,5 +1,5 @@
-"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|segmenter``: measured tables, printed and
-appended to docs/benchmarks.md."""
+"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|segmenter``: measured tables, printed,
+stored as data beside their charts and rendered into docs/benchmarks.md (one section per benchmark and device)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray bench`` and its sub-benchmarks."""
-    bench = sub.add_parser("bench", help="run a benchmark and append its table to docs/benchmarks.md")
+    bench = sub.add_parser("bench", help="run a benchmark and write its tables into docs/benchmarks.md")
     kinds = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
 
     loader = kinds.add_parser("loader", help="shard loader samples/s and rays/s with 0, 1, 2 DataLoader workers")
@@ -25,6 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     model.add_argument("--quick", action="store_true", help="smaller sizes (for tests)")
     model.add_argument("--tables", nargs="+", default=["attention", "train"], choices=["attention", "train"],
                        help="which tables to measure (attention cost, training step)")
+    model.add_argument("--official-side-by-side", type=Path, default=None, metavar="RESULTS_JSON",
+                       help="results.json of a same-run side-by-side of the official S-Ray code and sray "
+                            "(the shared tools' official_side_by_side/run.py): adds its table to the section")
     model.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     model.set_defaults(func=_bench_model)
 
@@ -38,7 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                            "train-kernels: the attention kernels forward + backward at the training step's shapes; "
                            "attention-keys: SDPA flash against the sliced CPU kernel by key length")
     prof.add_argument("--quick", action="store_true", help="tiny sizes (for tests)")
-    prof.add_argument("--doc", type=Path, default=Path("docs/performance.md"))
+    prof.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     prof.set_defaults(func=_bench_profile)
 
     speed = kinds.add_parser("speed-accuracy", help="mIoU and PSNR against seconds per view (Pareto chart)")
@@ -51,7 +54,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="test views rendered per scene and setting (0: every test view)")
     speed.add_argument("--settings", nargs="+", default=None, metavar="NAME",
                        help="measure only these settings, by their table names, the first being the row the others "
-                            "are compared with (default: all; a chosen set writes its own section and chart)")
+                            "are compared with (default: all; a chosen set replaces the 'chosen settings' table "
+                            "and chart)")
     speed.add_argument("--tracker", default="mlflow")
     speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
     speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
@@ -157,17 +161,21 @@ def _bench_speed_accuracy(args: argparse.Namespace) -> int:
 
 def _bench_loader(args: argparse.Namespace) -> int:
     from sray.jobs.bench.doc import record
-    from sray.jobs.bench.loader_throughput import run_loader_benchmark
+    from sray.jobs.bench.loader_throughput import LOADER, run_loader_benchmark
 
     title, table, notes = run_loader_benchmark(args.data, batches=args.batches)
-    record(title, table, args.doc, notes)
+    record(LOADER, title, table, args.doc, notes)
     return 0
 
 
 def _bench_model(args: argparse.Namespace) -> int:
     from sray.jobs.bench.doc import record
-    from sray.jobs.bench.model_cost import run_model_benchmark
+    from sray.jobs.bench.model_cost import MODEL, run_model_benchmark
+    from sray.jobs.bench.official_code import official_side_by_side
 
-    for title, table, notes in run_model_benchmark(device=args.device, quick=args.quick, tables=tuple(args.tables)):
-        record(title, table, args.doc, notes)
+    sections = run_model_benchmark(device=args.device, quick=args.quick, tables=tuple(args.tables))
+    if args.official_side_by_side is not None:
+        sections.append(official_side_by_side(args.official_side_by_side))
+    for title, table, notes in sections:
+        record(MODEL, title, table, args.doc, notes)
     return 0

@@ -11,6 +11,10 @@ from pathlib import Path
 from sray.data_tools.loader.shard_loader import make_train_loader
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
+from sray.jobs.bench.doc import Bench
+
+LOADER = Bench("loader", "Shard loader")
+"""The benchmark's section in docs/benchmarks.md."""
 
 BENCH_SCENES, BENCH_VIEWS, BENCH_HW = 2, 20, (240, 320)
 """Procedural data used when no shard folder is given: 2 train scenes x 20 views at 320x240 (ScanNet size)."""

@@ -1,7 +1,7 @@
 """``sray bench model``: the cost of Cross-Reprojection Attention against dense attention, and
 training-step time and memory of the whole S-Ray model. Every ratio is measured in the same run.
 
-How each number is taken is documented in ``model.bench_probes``.
+How each number is taken is documented in ``sray.jobs.bench.probes``.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import torch
 from torch.nn.attention import SDPBackend
 
+from sray.jobs.bench.doc import Bench
 from sray.jobs.bench.probes import (
     attention_call,
     attention_case,
@@ -25,6 +26,9 @@ from sray.jobs.bench.probes import (
 from sray.jobs.bench.workloads import model_config, train_step_worker
 from sray.model.ray_chunks import train_piece_rays
 
+MODEL = Bench("model", "Model cost")
+"""The benchmark's section in docs/benchmarks.md."""
+
 VARIANTS = ("full", "intra", "cross", "dense")
 """Attention variants compared in table 1 (``none`` has no attention cost)."""
 
@@ -32,10 +36,6 @@ PAPER_ATTENTION = {"rays": 1024, "samples": 64, "views": 8, "channels": 32}
 """The paper's CRA cost setting: 1024 rays x 64 samples x 8 views x 32 channels."""
 
 PAPER_REFERENCE = "paper (GPU): CRA 5.40 GFLOPs / 4143 MB vs dense 10.25 GFLOPs / 17647 MB"
-OFFICIAL_CODE = {"thp": 19.7, "default": 31.9, "rss_gib": 11.5}
-"""The paper's public code at its own configuration (1024 rays, 64+64 samples, 8 views, 320x240, fp32) in a
-side-by-side run on this 2-core CPU (fresh processes, alternating, 3x3 steps; issue 10): median seconds per
-step with THP_MEM_ALLOC_ENABLE=1 and without, and peak RSS."""
 REPEATS = 2
 """Fresh processes per training-step row, run alternately with the other rows (rounds)."""
 
@@ -64,7 +64,7 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     small = {"name": "small CPU config", "rays": 256, "coarse": 32, "fine": 32, "views": 4,
              "hw": (120, 160), "steps": 12}  # a 0.3 s step: more steps per process for a steadier median
     if device.type == "cuda":
-        # each precision beside its reference path; bf16 also compiled (the issue's CUDA target precision)
+        # each precision beside its reference path; bf16 also compiled (the CUDA target precision)
         gpu = dict(paper, steps=10)
         steps = [dict(gpu, dtype=d, impl=impl) for d in ("fp32", "bf16", "fp16") for impl in ("reference", "fast")]
         steps.append(dict(gpu, dtype="bf16", impl="fast", compile=True))
@@ -131,7 +131,7 @@ def _attention_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         f"does), 'default' is what SDPA picks here ({backend}), which never stores it, so dense "
         f"attention's memory no longer grows with (m N)^2 there. Time: median of 3, default backend, "
         f"scaled. {verdict} Reference, {PAPER_REFERENCE}.")
-    return "S-Ray attention stage: CRA variants vs dense attention", "\n".join(lines), notes
+    return "Attention stage: CRA variants vs dense attention", "\n".join(lines), notes
 
 
 ALLOCATORS = {"default": "glibc malloc", "thp": "THP_MEM_ALLOC_ENABLE=1"}
@@ -183,8 +183,8 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
     lines = ["| config | rays | rays per piece | samples (fine pass sees) | views | image | precision | impl | "
              "CPU allocator | first step s | "
              "s / step | rays / s | peak RSS GiB | GPU peak GiB | vs reference (same samples and allocator) | "
-             "vs unoptimised default (reference, union, glibc) | vs official code |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "vs unoptimised default (reference, union, glibc) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     medians = {k: sorted(r["seconds"] for r in v)[len(v) // 2] for k, v in runs.items()}
     for i, spec in enumerate(specs):
         key = _row_key(spec)
@@ -196,8 +196,6 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         base_key = (key[0], key[1], "reference", "default", "union", spec["rays"], False)
         vs_base = f"{medians[base_key] / s:.2f}x" if base_key in medians and key != base_key else "-"
         alloc = spec.get("alloc", "default")
-        official = (f"{OFFICIAL_CODE['thp'] / s:.1f}x vs its best (19.7 s)"
-                    if spec["name"] == "paper code config" and device.type == "cpu" else "-")
         h, w = spec["hw"]
         fine = model_config(spec).n_fine_total
         rss = max(r["rss_bytes"] for r in runs[key])
@@ -205,7 +203,7 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
                      f"{spec['views']} | "
                      f"{w}x{h} | {spec['dtype']} | {key[2]}{', compiled' if key[6] else ''} | {ALLOCATORS[alloc]} | "
                      f"{res['first']:.2f} | {s:.2f} | {spec['rays'] / s:.0f} | "
-                     f"{rss / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {vs_ref} | {vs_base} | {official} |")
+                     f"{rss / 2**30:.2f} | {res['gpu_peak_bytes'] / 2**30:.2f} | {vs_ref} | {vs_base} |")
     notes = (
         "One step = encode the source views, render coarse + fine, semantic + photometric loss, "
         "backward, fused Adam (the optimizer training uses); synthetic scene; 'first step' is the warm-up, "
@@ -223,13 +221,11 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         "(`SRayConfig.train_piece`, "
         "`model/piecewise_loss.py`): the same loss and gradients as the whole batch at once "
         "(tests/test_piecewise_loss.py); the reference rows compute the whole batch in one piece. "
-        "Official code: the paper's public S-Ray code at "
-        "its configuration (1024 rays, 64+64 samples, 8 views, 320x240, fp32) took 19.7 s per step with "
-        "THP_MEM_ALLOC_ENABLE=1 and 31.9 s without, 11.5 GiB peak RSS, in a side-by-side run on this machine "
-        "(fresh processes, alternating, 3x3 steps; issue 10). CPU allocator: THP_MEM_ALLOC_ENABLE=1 (read by "
+        "The paper's public code is compared in a run of its own beside sray's default step "
+        "(`--official-side-by-side`, its own table). CPU allocator: THP_MEM_ALLOC_ENABLE=1 (read by "
         "PyTorch at start-up) backs large allocations with 2 MiB huge pages. The machine is shared: absolute "
         "times are noisy, ratios within one run are what carries over.")
-    return "S-Ray training step: time and memory", "\n".join(lines), notes
+    return "Training step: time and memory", "\n".join(lines), notes
 
 
 def run_model_benchmark(device: str = "auto", quick: bool = False,

@@ -1,8 +1,8 @@
 """``sray bench profile``: ``torch.profiler`` of the paper-config training step and of a whole-image render.
 
-Writes the top operators (self time, the share of the total, calls) to ``docs/performance.md``
-with the command that produced them, one section per (workload, implementation, device), so the
-optimisation decisions there are read off a profile, not guessed.
+Writes the top operators (self time, the share of the total, calls) as tables of the "Profiles" section
+of ``docs/benchmarks.md`` (one per device), each table replaced when its workload and implementation
+are profiled again, so the decisions in ``docs/performance.md`` are read off a profile, not guessed.
 
 * training step: 1024 rays, 64+64 samples, 8 source views, 320x240, fp32, encode + render +
   loss + backward + Adam (``probes.train_step_worker``'s step), profiled after one warm-up step;
@@ -20,6 +20,7 @@ import torch
 from torch.profiler import ProfilerActivity, profile
 
 from sray.jobs.bench.attention_keys import key_length_table
+from sray.jobs.bench.doc import Bench, record
 from sray.jobs.bench.render_levers import chunk_table, kernel_table
 from sray.jobs.bench.workloads import make_train_step, render_case
 from sray.model.ray_chunks import CUDA_RENDER_RAYS, render_chunk_rays, train_piece_rays
@@ -67,7 +68,7 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
     intra-view stage's key lengths). The training step is profiled in each of ``step_dtypes`` (``fp32``, or autocast
     to ``bf16`` / ``fp16``).
 
-    Returns (title, markdown table, notes) sections for ``docs/performance.md``.
+    Returns (title, markdown table, notes) sections, written by :func:`write_profiles`.
     """
     step_spec = ({"rays": 16, "coarse": 4, "fine": 4, "views": 2, "hw": (32, 32)} if quick else
                  {"rays": 1024, "coarse": 64, "fine": 64, "views": 8, "hw": (240, 320)})
@@ -136,16 +137,12 @@ def _profile_render(r: dict, impl: str, device: torch.device) -> tuple[str, str,
             "warm-up render on CPU (nothing to compile, and one render is minutes).")
 
 
+PROFILES = Bench("profile", "Profiles")
+"""The section of ``sray bench profile``'s tables: where the time of a training step and of a render goes
+(self time: the time spent in an operator itself, not in the operators it calls) and the levers timed."""
+
+
 def write_profiles(sections: list[tuple[str, str, str]], doc: Path) -> None:
-    """Record each profile section in ``doc`` (same-title sections on this device are replaced)."""
-    from sray.jobs.bench.doc import record
-
+    """Record each profile table in ``doc``'s "Profiles" section of this device (same-title tables replaced)."""
     for title, table, notes in sections:
-        record(title, table, doc, notes, header=PERFORMANCE_HEADER)
-
-
-PERFORMANCE_HEADER = (
-    "# Performance\n\nWhere the time of a training step and of a whole-image render goes, from "
-    "`torch.profiler` (`sray bench profile`), and what was changed because of it. Every section was "
-    "written by the command it names; self time is the time spent in an operator itself, not in the "
-    "operators it calls.\n")
+        record(PROFILES, title, table, doc, notes)

@@ -2,18 +2,20 @@
 
 Every setting renders the same views of the unseen test scenes (paired), so the accuracy each
 setting gives up is measured against the full render of the same run. Settings trade accuracy for
-speed along the axes of issue 10: samples the fine pass evaluates (the union of coarse and
-resampled depths, or the resampled ones only), source views, precision, the fast render mode (pixel
-stride = resolution, fine pass only where the coarse pass is unsure) and the RGB-D mode's depth-guided
-samples (issue 12: ``rgbd`` settings render with the sources' depth, by the ``--checkpoint-rgbd`` model
-when one is given, else by the main checkpoint's weights with ``model.inputs`` switched, as both modes
-share their parameters). A Pareto chart (PNG) and a table go to docs/benchmarks.md; both and the
-numbers are logged to the tracker.
+speed along these axes: samples the fine pass evaluates (the union of coarse and resampled depths, or
+the resampled ones only), source views, precision, the fast render mode (pixel stride = resolution,
+fine pass only where the coarse pass is unsure) and the RGB-D mode's depth-guided samples (``rgbd``
+settings render with the sources' depth, by the ``--checkpoint-rgbd`` model when one is given, else by
+the main checkpoint's weights with ``model.inputs`` switched, as both modes share their parameters).
+A Pareto chart (PNG) and its table go into the benchmark's section of docs/benchmarks.md: the default
+set as one table, a run of chosen settings (``--settings``) as the other, each replaced by the next run
+of its kind; chart and numbers are also logged to the tracker.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -22,6 +24,7 @@ from pathlib import Path
 import torch
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.jobs.bench.doc import Bench, bench_dir, record
 from sray.jobs.bench.pareto import pareto
 from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
@@ -43,7 +46,7 @@ class Setting:
     fast: FastRender | None = None
     bf16: bool = False
     impl: str = "fast"
-    """``SRayConfig.impl`` of the per-sample networks: ``reference`` is the unoptimised path (today's render)."""
+    """``SRayConfig.impl`` of the per-sample networks: ``reference`` is the unoptimised first implementation."""
     chunk: int = 0
     """Rays per render chunk; 0 = by device (``sray.model.ray_chunks``: 256 on a CPU)."""
     sample_scale: float = 1.0
@@ -75,8 +78,10 @@ def default_settings() -> list[Setting]:
     ]
 
 
-TITLE = "Speed against accuracy (zero-shot, one checkpoint)"
-"""The section of the whole default set; a run of chosen settings writes its own section (``section_title``)."""
+SPEED = Bench("speed-accuracy", "Speed against accuracy")
+"""The benchmark's section in docs/benchmarks.md."""
+DEFAULT_TABLE, CHOSEN_TABLE = "Default settings", "Chosen settings"
+"""The section's two tables: the whole default set, and the latest run of chosen settings."""
 
 
 def select_settings(names: list[str] | None) -> list[Setting]:
@@ -91,13 +96,9 @@ def select_settings(names: list[str] | None) -> list[Setting]:
     return [settings[n] for n in names]
 
 
-def section_title(names: list[str] | None, views_per_scene: int) -> str:
-    """``TITLE`` for the default set, else a title naming the chosen settings and the views."""
-    if not names:
-        return TITLE
-    views = ("every test view" if views_per_scene <= 0 else
-             f"{views_per_scene} test view{'s' if views_per_scene > 1 else ''} per scene")
-    return f"Speed against accuracy (zero-shot, one checkpoint): {' vs '.join(names)}, {views}"
+def table_title(names: list[str] | None) -> str:
+    """``DEFAULT_TABLE`` for the default set, else ``CHOSEN_TABLE`` (its command names the settings)."""
+    return CHOSEN_TABLE if names else DEFAULT_TABLE
 
 
 def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_scene: int,
@@ -215,18 +216,15 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
                        tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None) -> str:
     """Measure the default settings, or those ``names`` chooses (the ``rgbd`` ones by ``checkpoint_rgbd`` when
     given), write the chart and the table section, log both; returns the section."""
-    from sray.jobs.bench.doc import record
     from sray.platform.common.eval_protocol import EvalProtocol
     from sray.platform.tracking.registry import get_tracker
 
-    title = section_title(names, views_per_scene)
+    title = table_title(names)
     rows = measure(Path(checkpoint), Path(shards), select_settings(names), views_per_scene,
                    checkpoint_rgbd=Path(checkpoint_rgbd) if checkpoint_rgbd else None)
     protocol = (EvalProtocol.from_shards(Path(shards), 8, 1).describe().replace("render: full", "render: per setting")
                 .replace("inputs: rgb", "inputs: per setting (the checkpoint's unless the setting says rgbd)"))
-    stem = "speed-accuracy" if title == TITLE else "speed-accuracy-" + "-".join(
-        "".join(ch if ch.isalnum() else "-" for ch in n).strip("-") for n in names or [])
-    png = chart(rows, doc.parent / "benchmarks" / f"{stem}.png", protocol)
+    png = chart(rows, bench_dir(doc, SPEED) / ("chosen.png" if names else "default.png"), protocol)
     rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
     own_fine = ", ".join(sorted({f"`fine_samples={r['fine_samples']}`" for r in rows
                                  if not r["setting"]["fine_samples"] and not r["setting"]["fast"]})) or "-"
@@ -248,8 +246,8 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
              f"depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed by the "
              f"sources' depth (docs/model.md, RGB-D mode), rendered by "
              f"{rgbd_by}. Protocol: {protocol}.\n\n"
-             f"![speed-accuracy]({png.relative_to(doc.parent)})")
-    section = record(title, table(rows), doc, notes)
+             f"![speed-accuracy]({os.path.relpath(png, doc.parent)})")
+    section = record(SPEED, title, table(rows), doc, notes)
     tracking = get_tracker(tracker, tracking_uri)
     run = tracking.start_run("sray-bench", f"speed-accuracy-{time.strftime('%Y%m%d-%H%M%S')}",
                              tags={"sray.kind": "bench", "sray.protocol": protocol})

@@ -3,7 +3,7 @@
 Each stage is a function ``CheckContext -> StageResult`` (the ``stage_*`` modules). A stage that
 raises is recorded as failed with its error and the next one runs. Results are saved after every
 stage, so an interrupted or partial run resumes where it stopped; ``--fresh`` starts over. On a GPU
-the report becomes the device's section of docs/benchmarks.md; a dry run (CPU, toy sizes) writes it
+the report becomes the "GPU check" section of docs/benchmarks.md for that device; a dry run (CPU, toy sizes) writes it
 under ``--out`` only.
 """
 
@@ -25,7 +25,7 @@ STAGES: dict[str, Callable[[CheckContext], StageResult]] = dict(zip(STAGE_NAMES,
     stage_env.environment, stage_env.tests, stage_precision.run, stage_training.run, stage_bench.run,
     stage_profile.run, stage_ray.run, stage_fleet.run), strict=True))
 """Every stage, in the order they run (each at most a few minutes on a GPU)."""
-REPORT_TITLE = "GPU check (sray gpu-check)"
+REPORT_TITLE = "Stages"
 
 
 class NoCudaDevice(RuntimeError):
@@ -73,7 +73,7 @@ def run_gpu_check(stages: list[str], out: Path, dry_run: bool, fresh: bool, repo
     text = markdown(report, list(STAGES))
     (ctx.out / "gpu_check.md").write_text(text + "\n")
     if doc is not None and not dry_run:
-        from sray.jobs.bench.doc import record
+        from sray.jobs.bench.doc import Bench, record
 
-        record(REPORT_TITLE, text, doc)
+        record(Bench("gpu-check", "GPU check"), REPORT_TITLE, text, doc)
     return report

@@ -13,7 +13,7 @@ from .report import StageResult
 
 NEEDS = ("ray", "mlflow", "webdataset")
 SHARING = 4
-"""Scene tasks sharing the one GPU in the shared run (the issue's 4)."""
+"""Scene tasks sharing the one GPU in the shared run."""
 DRY_RUN_SHARING = 2
 """Scene tasks sharing the CPUs in a dry run (one CPU each, as on a 2-core machine: the dry run stays within a
 minute)."""

@@ -1,6 +1,6 @@
 """Stage ``profile``: ``sray bench profile`` on this device: the operators with the most self time (self
 CUDA time on a GPU) of the paper-config training step in fp32 and bf16 and of a whole-image render, on the
-fast path. On a GPU the full sections also go into ``docs/performance.md``, beside the CPU ones."""
+fast path. On a GPU the full tables also go into the "Profiles" section of ``docs/benchmarks.md`` for that GPU."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from .context import CheckContext
 from .report import StageResult, table_cells
 
 TOP_ROWS = 5
-"""Operators per profile kept in the report (docs/performance.md gets the whole table)."""
+"""Operators per profile kept in the report (docs/benchmarks.md gets the whole table)."""
 
 
 def run(ctx: CheckContext) -> StageResult:
@@ -20,7 +20,7 @@ def run(ctx: CheckContext) -> StageResult:
     sections = run_profiles(ctx.device, ("fast",), ("train", "render"), quick=ctx.dry_run,
                             step_dtypes=("fp32", "bf16"))
     if not ctx.dry_run:
-        write_profiles(sections, ctx.repo / "docs" / "performance.md")
+        write_profiles(sections, ctx.repo / "docs" / "benchmarks.md")
     header = ["profile", "operator", "calls", "self CPU ms", "share of self time", "self CUDA ms"]
     rows, walls = [], []
     for title, table, _notes in sections:

@@ -3,13 +3,14 @@ chart where each breaks (:mod:`sray.platform.stability`).
 
 Without ``--data`` and ``--checkpoint`` a preset builds its own world (:mod:`sray.jobs.stability.world`).
 Points are stored as they finish under ``--out``, so an axis-by-axis run (``--axes pose_noise``) or a
-re-run after an interruption computes only what is missing. Tables go into ``docs/benchmarks.md``
-(``--doc``), one section per axis plus the breaking points with the charts.
+re-run after an interruption computes only what is missing. Tables go into the preset's section of
+``docs/benchmarks.md`` (``--doc``): one table per axis plus the breaking points with the charts.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -74,19 +75,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _record(job: object, outputs: dict) -> None:
-    """One ``docs/benchmarks.md`` section per axis, then the breaking points with the charts."""
-    from sray.jobs.bench.doc import record
+    """The preset's section of ``docs/benchmarks.md``: one table per axis, then the breaking points with the
+    charts (copied beside the section's data)."""
+    from sray.jobs.bench.doc import Bench, bench_dir, record
 
     preset, doc = job.preset.name, job.doc
-    figures = doc.parent / "benchmarks" / f"stability-{preset}"
+    bench = Bench(f"stability-{preset}", f"Stability, {preset}")
+    figures = bench_dir(doc, bench)
     figures.mkdir(parents=True, exist_ok=True)
     links = []
     for chart in outputs["charts"]:
         shutil.copy(chart, figures / chart.name)
-        links.append(f"![{chart.stem}](benchmarks/stability-{preset}/{chart.name})")
+        links.append(f"![{chart.stem}]({os.path.relpath(figures / chart.name, doc.parent)})")
     footer = "\n\n".join(outputs["notes"])
     for axis in outputs["axes"]:
-        record(f"Stability ({preset}): {axis.replace('_', ' ')}", outputs["tables"][axis], doc, footer)
+        record(bench, axis.replace("_", " ").capitalize(), outputs["tables"][axis], doc, footer)
     summary = "\n".join(f"- {line}" for line in outputs["breaking"])
-    record(f"Stability ({preset}): where each method loses half its clean mIoU", summary, doc,
-           footer + "\n\n" + "\n".join(links))
+    record(bench, "Where each method loses half its clean mIoU", summary, doc, footer + "\n\n" + "\n".join(links))

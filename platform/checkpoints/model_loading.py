@@ -12,7 +12,7 @@ from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.config.train_config import TrainConfig
 
 LEGACY_PREFIX = "net."
-"""Checkpoints written before 2026-11-23 stored the training module's keys (``net.`` + the model's:
+"""Older checkpoints stored the training module's keys (``net.`` + the model's:
 ``sray.model.ray_batch.RayBatchLoss`` holds the network as ``net``)."""
 
 
@@ -27,8 +27,8 @@ def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayMod
     """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder."""
     state = load_checkpoint(Path(path), map_location)
     if any(k.endswith("attention.pos") for k in state["model"]):
-        raise ValueError(f"{path}: this checkpoint embeds sample ranks (sray before the depth position signal "
-                         "of issue 8); it cannot be loaded into the current model. Retrain it with `sray train`.")
+        raise ValueError(f"{path}: this checkpoint embeds sample ranks (an sray version before the depth position "
+                         "signal); it cannot be loaded into the current model. Retrain it with `sray train`.")
     cfg = TrainConfig.from_dict(state["config"])
     net = SRayModel(cfg.model)
     net.load_state_dict(bare_model_keys(state["model"]))

@@ -280,7 +280,7 @@ def run_scene_task(task: SceneTask) -> dict[str, Any]:
     CPUs: more threads than reserved cores oversubscribe a shared machine (measured 10x slower
     steps with 2 threads on a busy 2-core host). The count is set only when it differs: even a call that
     keeps it (Ray's OMP_NUM_THREADS already matches) made SDPA's CPU flash kernel ~13% slower here
-    (docs/performance.md, "Short key sequences").
+    (docs/performance.md, "`torch.set_num_threads` only when the count changes").
     """
     from sray.platform.tracking.registry import open_logger
 

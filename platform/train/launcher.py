@@ -79,9 +79,8 @@ LOCAL_WORKER_ENV = dict(TRAIN_POLL_ENV)
 """Environment a local Ray cluster's workers inherit unless the user set it otherwise:
 :data:`TRAIN_POLL_ENV`, Ray Train's controller polls every 0.5 s (:mod:`sray.platform.common.ray_polling`).
 PyTorch's huge-page CPU allocator path (``THP_MEM_ALLOC_ENABLE=1``) is not set: in alternating fresh-process
-runs of ``sray bench model`` on a quiet machine it made every paper-size step slower (17.2 -> 19.4 s on the
-reference path, 9.3 -> 12.3 s on the fast one; docs/benchmarks.md); a user who measures a gain on their
-machine sets it in the environment, which is kept."""
+runs of ``sray bench model`` it made the default paper-config step slower (4.81 -> 7.11 s; docs/performance.md,
+"No huge pages"); a user who measures a gain on their machine sets it in the environment, which is kept."""
 
 
 def init_ray(address: str | None, num_cpus: int | None = None) -> None:
