@@ -28,7 +28,8 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
 
     monkeypatch.chdir(tmp_path)
     code = main(["demo", "--out", "demo", "--train-scenes", "2", "--test-scenes", "1", "--views", "20",
-                 "--height", "48", "--width", "64", "--steps", "4", "--finetune-seconds", "2", "--eval-stride", "4", "--clip-frames", "3"])
+                 "--height", "48", "--width", "64", "--steps", "4", "--finetune-seconds", "2", "--eval-stride", "4",
+                 "--clip-frames", "3"])
     assert code == 0
     out = capsys.readouterr().out
     for stage in range(1, 9):
