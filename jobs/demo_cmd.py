@@ -3,8 +3,8 @@
 procedural scenes -> ``sray data check`` -> shards (+ verification) -> a picture of a loader
 sample -> a short S-Ray training run on local Ray with two CPU workers, tracked in MLflow ->
 zero-shot evaluation on the unseen scenes -> a short fly-through video of one of them -> a finetune
-fleet (S-Ray and Semantic-NeRF) on them -> accuracy-against-time charts -> the results table and the ``sray ui`` command. Each printed
-table ends with its protocol line (sources, stride, render mode, inputs).
+fleet (S-Ray and Semantic-NeRF) on them -> accuracy-against-time charts -> the results table and the
+``sray ui`` command. Each printed table ends with its protocol line (sources, stride, render mode, inputs).
 Everything goes under ``--out`` (default ``outputs/demo``); the MLflow store is the working
 directory's default SQLite store.
 """
