@@ -56,31 +56,24 @@ def _sray_command() -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Run every stage, printing where each result went; exit 1 if the data fails its checks."""
-    from sray.data_tools.check.scenes import check_dataset
     from sray.data_tools.loader.shard_loader import make_train_loader
-    from sray.data_tools.shards.manifest import read_manifest, verify_shards
-    from sray.data_tools.shards.writer import write_shards
-    from sray.data_tools.synth.dataset import generate_dataset
+    from sray.data_tools.shards.manifest import read_manifest
+    from sray.data_tools.shards.writer import DatasetRejected
+    from sray.data_tools.synth.world import SCENES, World, WorldFolderError, make_world
     from sray.jobs.sample_picture import write_sample_picture
 
     t0 = time.perf_counter()
-    scenes, shards = args.out / "scenes", args.out / "shards"
+    world = World(train_scenes=args.train_scenes, test_scenes=args.test_scenes, views=args.views,
+                  height=args.height, width=args.width, seed=args.seed)
     _say(f"1/8 generating {args.train_scenes} train + {args.test_scenes} unseen test scenes "
-         f"({args.views} views, {args.width}x{args.height}) in {scenes}")
-    generate_dataset(scenes, n_train=args.train_scenes, n_test=args.test_scenes, n_views=args.views,
-                     height=args.height, width=args.width, seed=args.seed, progress=True)
-    _say("2/8 checking the scenes (sray data check)")
-    problems = check_dataset(scenes)
-    if problems:
-        for p in problems:
-            print(f"  {p.file}: {p.what} -> {p.fix}", file=sys.stderr)
+         f"({args.views} views, {args.width}x{args.height}) in {args.out / SCENES}, unless already there")
+    try:
+        shards = make_world(world, args.out)
+    except (DatasetRejected, WorldFolderError) as err:
+        print(err, file=sys.stderr)
         return 1
-    _say(f"3/8 sharding into {shards}")
-    write_shards(scenes, shards)
-    damaged = verify_shards(shards)
-    if damaged:
-        print("\n".join(damaged), file=sys.stderr)
-        return 1
+    _say("2/8 the scenes passed sray data check before sharding")
+    _say(f"3/8 sharded into {shards}")
     manifest = read_manifest(shards)
     _say(f"    {len(manifest.scenes)} scenes, {len(manifest.shards)} shards, checksums verified")
     n_source = 4

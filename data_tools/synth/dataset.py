@@ -123,8 +123,13 @@ def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, 
     return scene
 
 
-def _scene_seed(seed: int, role: str, index: int) -> int:
-    """Independent per-scene seed derived from the dataset seed."""
+def scene_name(role: str, index: int) -> str:
+    """Folder and scene name of the ``index``-th scene of a role: ``synth_train_000``, ``synth_test_000``, ..."""
+    return f"synth_{role}_{index:03d}"
+
+
+def scene_seed(seed: int, role: str, index: int) -> int:
+    """Independent per-scene seed derived from the dataset seed (recorded as ``extra["seed"]`` of the scene)."""
     return int(np.random.SeedSequence([seed, 0 if role == "train" else 1, index]).generate_state(1)[0])
 
 
@@ -149,11 +154,11 @@ def _prune_stale_views(scene_dir: Path, view_ids: list[str]) -> None:
                 path.unlink()
 
 
-def _write_scene(out: Path, name: str, scene_seed: int, n_views: int, height: int, width: int, role: str,
+def _write_scene(out: Path, name: str, own_seed: int, n_views: int, height: int, width: int, role: str,
                  room_type: str, on_view: Callable[[], None] | None = None) -> Path:
     """Generate one scene and write it under ``out`` (scene.json last); returns its folder."""
     scene_dir = out / name
-    scene = generate_scene(name, scene_seed, n_views, height, width, role, room_type, on_view=on_view)
+    scene = generate_scene(name, own_seed, n_views, height, width, role, room_type, on_view=on_view)
     if (scene_dir / "scene.json").exists():
         (scene_dir / "scene.json").unlink()
     write_scene(scene, out)
@@ -186,13 +191,13 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
     written: list[Path] = []
     todo: list[tuple] = []
     for k, (role, i) in enumerate(jobs):
-        name = f"synth_{role}_{i:03d}"
-        scene_seed, room_type = _scene_seed(seed, role, i), ROOM_TYPES[(offset + k) % len(ROOM_TYPES)]
+        name = scene_name(role, i)
+        own_seed, room_type = scene_seed(seed, role, i), ROOM_TYPES[(offset + k) % len(ROOM_TYPES)]
         written.append(out / name)
-        if _is_current(out / name, scene_params(scene_seed, n_views, height, width, role, room_type)):
+        if _is_current(out / name, scene_params(own_seed, n_views, height, width, role, room_type)):
             bar.update(n_views)
         else:
-            todo.append((out, name, scene_seed, n_views, height, width, role, room_type))
+            todo.append((out, name, own_seed, n_views, height, width, role, room_type))
     if workers == 1:
         for args in todo:
             bar.set_postfix_str(f"{args[1]} ({args[7]})")

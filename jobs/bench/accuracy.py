@@ -24,23 +24,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from sray.data_tools.synth.world import make_world
 from sray.jobs.bench.accuracy_plan import COMPARED, EXPERIMENT, LONG, PRESETS, Cell, Preset
 from sray.jobs.bench.accuracy_step_cost import read_step_times
-
-
-def ensure_world(p: Preset, out: Path) -> Path:
-    """The preset's procedural scenes and shards under ``out`` (generated once; kept when complete)."""
-    from sray.data_tools.shards.writer import write_shards
-    from sray.data_tools.synth.dataset import generate_dataset
-
-    shards = out / "shards"
-    if (shards / "manifest.json").exists():
-        return shards
-    w = p.world
-    generate_dataset(out / "scenes", n_train=w.train_scenes, n_test=w.test_scenes, n_views=w.views,
-                     height=w.height, width=w.width, seed=w.seed, progress=True)
-    write_shards(out / "scenes", shards)
-    return shards
 
 
 def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] | None = None,
@@ -58,7 +44,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
     out = out.resolve()
     tracking_uri = f"sqlite:///{out / 'mlflow.db'}"
     t0 = time.perf_counter()
-    shards = ensure_world(p, out)
+    shards = make_world(p.world, out)
     scenes = unseen_scenes(shards)
     wanted = p.plan if cells is None else tuple(c for c in p.plan if c in set(cells))
     for cell in wanted:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from sray.data_tools.synth.world import World
 from sray.model.fast_render import FastRender
 
 LONG = "long"
@@ -52,18 +53,6 @@ COMPARED = ("sray", "semantic-nerf")
 
 EXPERIMENT = "sray-bench-accuracy"
 """Tracking experiment of every pretraining, evaluation and finetune of the benchmark."""
-
-
-@dataclass(frozen=True)
-class World:
-    """The procedural scenes of a preset."""
-
-    train_scenes: int
-    test_scenes: int
-    views: int
-    height: int
-    width: int
-    seed: int = 0
 
 
 @dataclass(frozen=True)

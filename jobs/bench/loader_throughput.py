@@ -11,6 +11,7 @@ from pathlib import Path
 from sray.data_tools.loader.shard_loader import make_train_loader
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
+from sray.data_tools.synth.world import World, make_world
 from sray.jobs.bench.doc import Bench
 
 LOADER = Bench("loader", "Shard loader")
@@ -22,13 +23,9 @@ BENCH_SCENES, BENCH_VIEWS, BENCH_HW = 2, 20, (240, 320)
 
 def procedural_shards(root: Path, seed: int = 0) -> Path:
     """Generate small procedural scenes under ``root`` and shard them; returns the shard folder."""
-    from sray.data_tools.shards.writer import write_shards
-    from sray.data_tools.synth.dataset import generate_dataset
-
-    generate_dataset(root / "scenes", n_train=BENCH_SCENES, n_test=0, n_views=BENCH_VIEWS, height=BENCH_HW[0],
-                     width=BENCH_HW[1], seed=seed, progress=True)
-    write_shards(root / "scenes", root / "shards", progress=True)
-    return root / "shards"
+    world = World(train_scenes=BENCH_SCENES, test_scenes=0, views=BENCH_VIEWS, height=BENCH_HW[0],
+                  width=BENCH_HW[1], seed=seed)
+    return make_world(world, root)
 
 
 def component_bytes(shards_dir: Path) -> tuple[int, Counter]:

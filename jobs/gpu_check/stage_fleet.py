@@ -21,14 +21,11 @@ minute)."""
 
 def _shards(ctx: CheckContext, root: Path) -> Path:
     """``SHARING`` unseen procedural scenes (and one train scene), sharded with their neighbours."""
-    from sray.data_tools.shards.writer import write_shards
-    from sray.data_tools.synth.dataset import generate_dataset
+    from sray.data_tools.synth.world import World, make_world
 
     hw = (32, 40) if ctx.dry_run else (120, 160)
-    generate_dataset(root / "scenes", n_train=1, n_test=SHARING, n_views=20, height=hw[0], width=hw[1], seed=0,
-                     progress=False)
-    write_shards(root / "scenes", root / "shards", neighbours=8, progress=False)
-    return root / "shards"
+    world = World(train_scenes=1, test_scenes=SHARING, views=20, height=hw[0], width=hw[1], seed=0, neighbours=8)
+    return make_world(world, root, progress=False)
 
 
 def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:

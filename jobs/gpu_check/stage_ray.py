@@ -22,20 +22,18 @@ def run(ctx: CheckContext) -> StageResult:
     missing = [m for m in NEEDS if not has_module(m)]
     if missing:
         return StageResult("skipped", f"{', '.join(missing)} not installed here: the Ray stage needs the full stack")
-    from sray.data_tools.shards.writer import write_shards
-    from sray.data_tools.synth.dataset import generate_dataset
+    from sray.data_tools.synth.world import World, make_world
     from sray.jobs.recipes import get_recipe
     from sray.platform.train.launcher import launch_training
 
     root = ctx.out / "ray"
     hw = (32, 40) if ctx.dry_run else (120, 160)
-    generate_dataset(root / "scenes", n_train=2, n_test=1, n_views=20, height=hw[0], width=hw[1], seed=0,
-                     progress=False)
-    write_shards(root / "scenes", root / "shards", neighbours=8, progress=False)
+    world = World(train_scenes=2, test_scenes=1, views=20, height=hw[0], width=hw[1], seed=0, neighbours=8)
+    shards = make_world(world, root, progress=False)
     cfg = get_recipe("synth-small")
     steps = 2 if ctx.dry_run else 100
     cfg.model.n_source, (cfg.model.n_coarse, cfg.model.n_fine) = min(ctx.views, 4), ctx.samples
-    cfg.data.shards, cfg.data.top_k, cfg.data.rays_per_batch = str(root / "shards"), 6, ctx.rays
+    cfg.data.shards, cfg.data.top_k, cfg.data.rays_per_batch = str(shards), 6, ctx.rays
     cfg.data.loader_workers, cfg.data.val_views_per_scene = 0, 1
     cfg.optim.steps = steps
     cfg.run.workers, cfg.run.gpus_per_worker = 1, (1.0 if ctx.device.type == "cuda" else 0.0)

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
+from sray.data_tools.synth.world import World, make_world
 from sray.platform.stability.presets import Preset
 
 VARIANT_ATTENTION = {"sray": "full", "sray-no-cra": "none"}
@@ -21,19 +22,12 @@ CHECKPOINTS_FILE = "checkpoints.json"
 
 
 def world_shards(preset: Preset, out: Path) -> Path:
-    """Generate the preset's procedural scenes and shard them; a world already sharded under ``out`` is reused
-    as it is (its checkpoints were pretrained on it), even if the generator has changed since."""
-    from sray.data_tools.shards.writer import write_shards
-    from sray.data_tools.synth.dataset import generate_dataset
-
-    w, root = preset.world, out / "world"
-    shards = root / "shards"
-    if (shards / "manifest.json").exists():  # the world the recorded checkpoints were trained on: kept as it is
-        return shards
-    generate_dataset(root / "scenes", n_train=w.train_scenes, n_test=w.test_scenes, n_views=w.views,
-                     height=w.height, width=w.width, seed=0, progress=True)
-    write_shards(root / "scenes", shards)
-    return shards
+    """Generate the preset's procedural scenes (seed 0) and shard them; a world already sharded under ``out`` is
+    reused as it is (its checkpoints were pretrained on it), even if the generator has changed since."""
+    w = preset.world
+    world = World(train_scenes=w.train_scenes, test_scenes=w.test_scenes, views=w.views, height=w.height,
+                  width=w.width, seed=0)
+    return make_world(world, out / "world")
 
 
 def pretrain(method: str, preset: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:

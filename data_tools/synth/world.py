@@ -1,0 +1,103 @@
+"""One procedural world: its settings (:class:`World`) and :func:`make_world`, which generates its scenes,
+shards them and verifies the shards, or reuses a folder that already holds it.
+
+A world folder holds ``scenes/`` (as ``sray data synth`` writes them) and ``shards/`` (as ``sray data shard``
+writes them). The shards' ``manifest.json``, written last, is the record of a complete world: it lists every
+scene with its role, views and image size, each scene's seed (``extra["seed"]``) and the neighbours kept per
+view, so every field of :class:`World` can be read back from it, also in folders made before this module.
+
+* no manifest yet (a new or interrupted folder): the scenes are generated (those already written with the same
+  parameters are skipped), checked and sharded (shards already written are left alone);
+* a manifest recording the asked world: reused as it is, even if the generator has changed since, so models
+  trained on it stay comparable with later runs;
+* a manifest recording another world: refused, naming the folder, the fields and the fix.
+
+Either way the shards are then verified against the manifest's sizes and sha256 checksums.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from sray.data_tools.shards.manifest import MANIFEST_NAME, Manifest, read_manifest, verify_shards
+from sray.data_tools.shards.writer import write_shards
+from sray.data_tools.synth.dataset import generate_dataset, scene_name, scene_seed
+
+SCENES, SHARDS = "scenes", "shards"
+"""Sub-folders of a world folder: the scenes (sray layout) and their shards."""
+
+
+@dataclass(frozen=True)
+class World:
+    """The settings that determine a procedural world: same settings, same files."""
+
+    train_scenes: int
+    """Training scenes (``synth_train_000``, ...)."""
+    test_scenes: int
+    """Unseen test scenes (``synth_test_000``, ...)."""
+    views: int
+    """Views per scene (a test scene needs at least 20: 8 source, 8 finetune, 4 test)."""
+    height: int
+    """Image height in pixels."""
+    width: int
+    """Image width in pixels."""
+    seed: int = 0
+    """Dataset seed; each scene's own seed is derived from it."""
+    neighbours: int = 32
+    """Ranked source views kept per view in the shards (a loader's ``top_k`` must not exceed it)."""
+
+
+class WorldFolderError(ValueError):
+    """A world folder that cannot be used: it holds another world, or its shards no longer match the manifest."""
+
+
+def recorded_differences(world: World, manifest: Manifest) -> list[str]:
+    """Each field in which the world ``manifest`` records differs from ``world``, as ``"views 40 (asked 20)"``;
+    empty when it records ``world``. The seed is compared scene by scene when the scene counts agree."""
+    scenes = manifest.scenes.values()
+    roles = [s.meta.get("role") for s in scenes]
+    recorded = {"train_scenes": roles.count("train"), "test_scenes": roles.count("test"),
+                "views": _one({s.n_views for s in scenes}), "height": _one({s.image_size[0] for s in scenes}),
+                "width": _one({s.image_size[1] for s in scenes}), "neighbours": manifest.neighbours.get("k")}
+    asked = asdict(world)
+    problems = [f"{name} {value} (asked {asked[name]})" for name, value in recorded.items() if value != asked[name]]
+    if recorded["train_scenes"] == world.train_scenes and recorded["test_scenes"] == world.test_scenes:
+        for role, count in (("train", world.train_scenes), ("test", world.test_scenes)):
+            for i in range(count):
+                entry = manifest.scenes.get(scene_name(role, i))
+                if entry is None or entry.meta.get("extra", {}).get("seed") != scene_seed(world.seed, role, i):
+                    return [*problems, f"seed: scene {scene_name(role, i)} was not generated from seed {world.seed}"]
+    return problems
+
+
+def _one(values: set[int]) -> int | list[int]:
+    """The value all scenes share, else every value found (sorted)."""
+    return next(iter(values)) if len(values) == 1 else sorted(values)
+
+
+def make_world(world: World, root: Path, progress: bool = True) -> Path:
+    """The verified shard folder of ``world`` under ``root`` (``root/scenes``, ``root/shards``): generated,
+    checked by ``sray data check`` and sharded when ``root`` holds no complete world, reused when it holds this one.
+
+    Raises :class:`WorldFolderError` when ``root`` holds another world or damaged shards (naming the folder, the
+    problem and the fix), and :class:`~sray.data_tools.shards.writer.DatasetRejected` when the generated scenes
+    fail ``sray data check``. ``progress`` shows the generator's and the shard writer's progress bars.
+    """
+    root = Path(root)
+    shards = root / SHARDS
+    if (shards / MANIFEST_NAME).exists():
+        problems = recorded_differences(world, read_manifest(shards))
+        if problems:
+            raise WorldFolderError(f"{shards / MANIFEST_NAME}: this folder holds another procedural world than the "
+                                   f"one asked: {'; '.join(problems)}. Delete {root} to generate the asked world "
+                                   "there, or choose another output folder")
+    else:
+        generate_dataset(root / SCENES, n_train=world.train_scenes, n_test=world.test_scenes, n_views=world.views,
+                         height=world.height, width=world.width, seed=world.seed, progress=progress)
+        write_shards(root / SCENES, shards, neighbours=world.neighbours, progress=progress)
+    damaged = verify_shards(shards)
+    if damaged:
+        raise WorldFolderError(f"{shards}: {len(damaged)} shard problem(s):\n" + "\n".join(damaged)
+                               + f"\n(or delete {root} to generate the world again)")
+    return shards
