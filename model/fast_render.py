@@ -3,9 +3,10 @@
 Three savings, each a setting of :class:`FastRender` (its accuracy cost is measured by
 ``sray bench speed-accuracy``, paired against the full render, never assumed):
 
-* ``pixel_stride``: render every s-th pixel in each direction and upsample the rendered logits and
-  colours bilinearly to the pixels asked for (:func:`upsample_to`); label maps are piecewise
-  constant, so most of a view is interior to a region;
+* ``pixel_stride``: render every s-th pixel in each direction and upsample the rendered maps (logits,
+  colours, depth, opacity) bilinearly to the pixels asked for (:func:`upsample_to`, applied by the whole-view
+  renderer ``view_render.render_view``); label maps are piecewise constant, so most of a view is interior
+  to a region;
 * ``confidence``: a ray whose coarse pass already classifies it with probability >= ``confidence``
   keeps its coarse result; only the uncertain rays (boundaries, thin structures) get a fine pass;
 * the fine pass evaluates only the resampled depths (``fine_samples="new"``), placed by inverse CDF
@@ -39,6 +40,12 @@ class FastRender:
     (docs/benchmarks.md, "Speed against accuracy")."""
     confidence: float = 0.9
     """A ray whose coarse softmax maximum reaches this keeps its coarse result (> 1: every ray gets a fine pass)."""
+
+    def fitted_pixel_stride(self, stride: int, hw: tuple[int, int]) -> int:
+        """The pixel stride of a render of an (h, w) image scored every ``stride``-th pixel: ``pixel_stride``, or
+        the largest smaller one whose ray grid still holds a ray in each direction (a small image or a large
+        ``stride``: the grid's first pixel, ``stride * s // 2``, must lie inside the image)."""
+        return max(1, min(self.pixel_stride, (2 * min(hw) - 1) // stride))  # stride * s // 2 < min(hw)
 
     def describe(self) -> str:
         """One phrase for protocol descriptors: ``fast (pixel stride 4, fine pass below 0.9 confidence, ...)``."""
@@ -78,7 +85,7 @@ def upsample_to(values: Tensor, grid_hw: tuple[int, int], stride: int, uv: Tenso
     """Bilinear values at pixels ``uv`` (P, 2) from a map rendered at every ``stride``-th pixel.
 
     values: (h', w', D) rendered at the pixel centres (stride // 2 + stride j, stride // 2 + stride i)
-    (``strided_pixels``' grid); grid_hw = (h', w'). Returns (P, D); clamped at the border.
+    (``view_render.strided_pixels``' grid); grid_hw = (h', w'). Returns (P, D); clamped at the border.
     """
     hh, ww = grid_hw
     fx = (uv[:, 0].float() - stride // 2) / stride

@@ -2,7 +2,8 @@
 
 Every method (S-Ray, Semantic-NeRF, the next one) supplies a *pass field*, a callable that gives
 per-sample density, semantic logits and colour along a batch of rays for one named pass; this module
-owns the sampling, the compositing and the chunked whole-image loop. The rules it applies:
+owns the sampling and the compositing of a batch of rays (the whole-view loop over them is
+``view_render.render_view``). The rules it applies:
 
 * coarse samples: ``n_coarse`` equal bins of [near, far], stratified in training, bin centres in
   evaluation; fine samples: ``n_fine`` draws from the detached coarse weights; the fine pass sees
@@ -19,13 +20,12 @@ from typing import Protocol
 import torch
 from torch import Tensor
 
-from .rays import image_pixels, pixel_rays
 from .rendering import composite, merge_samples, sample_pdf, sample_uniform
 
 PASSES = ("coarse", "fine")
 """Render passes in order."""
 IMAGE_KEYS = ("logits", "rgb", "depth", "opacity")
-"""Per-pass outputs ``render_image`` assembles into images (weights and z are left out)."""
+"""Per-pass outputs ``view_render.render_view`` assembles into images (weights and z are left out)."""
 
 
 class PassField(Protocol):
@@ -44,10 +44,6 @@ class PassField(Protocol):
 CoarseSampler = Callable[[Tensor, Tensor, Tensor, Tensor, int, bool, torch.Generator | None], Tensor]
 """``sampler(origins (R, 3), dirs (R, 3), near (R,), far (R,), n, stratified, generator) -> z (R, n)``
 sorted coarse depths in [near, far] (the RGB-D mode's ``depth_sampling``); None = ``sample_uniform``."""
-
-RayRenderer = Callable[[Tensor, Tensor], dict[str, dict[str, Tensor]]]
-"""``render(origins (R, 3), dirs (R, 3)) -> {"coarse": pass, "fine": pass}`` for fixed bounds."""
-
 
 def per_ray_bounds(value: Tensor | float, n_rays: int, like: Tensor, name: str) -> Tensor:
     """A bound given as a Python scalar, a 0-d or an (R,) tensor, as a float32 (R,) tensor on ``like``'s device."""
@@ -109,26 +105,3 @@ def render_rays(field: PassField, origins: Tensor, dirs: Tensor, near: Tensor | 
     z_all = merge_samples(z_coarse, z_fine) if fine_samples == "union" else z_fine  # (R, Nc + Nf) or (R, Nf)
     fine = _render_pass(field, "fine", origins, dirs, z_all, near_r, far_r, ray_length)
     return {"coarse": coarse, "fine": fine}
-
-
-@torch.no_grad()
-def render_image(render: RayRenderer, K: Tensor, c2w: Tensor, hw: tuple[int, int], chunk: int,
-                 device: torch.device) -> dict[str, dict[str, Tensor]]:
-    """Render a whole (H, W) query image ``chunk`` rays at a time, no grad.
-
-    render: rays -> passes (deterministic sampling, bounds bound in); K (3, 3), c2w (4, 4) of the
-    query camera. Returns ``{"coarse": ..., "fine": ...}`` with ``logits`` (H, W, L), ``rgb``
-    (H, W, 3), ``depth`` (H, W) and ``opacity`` (H, W) per pass, float32.
-    """
-    h, w = hw
-    if chunk < 1:
-        raise ValueError(f"sray.model.hierarchical.render_image: chunk must be >= 1, got {chunk}.")
-    origins, dirs = pixel_rays(K.to(device).float(), c2w.to(device).float(), image_pixels(h, w, device=device))
-    parts: dict[str, dict[str, list[Tensor]]] = {p: {k: [] for k in IMAGE_KEYS} for p in PASSES}
-    for start in range(0, h * w, chunk):
-        out = render(origins[start:start + chunk], dirs[start:start + chunk])
-        for p, per_pass in parts.items():
-            for k, items in per_pass.items():
-                items.append(out[p][k].float())
-    return {p: {k: torch.cat(v).reshape(h, w, *v[0].shape[1:]) for k, v in per_pass.items()}
-            for p, per_pass in parts.items()}

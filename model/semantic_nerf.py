@@ -24,8 +24,9 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from sray.model.hierarchical import render_image, render_rays
+from sray.model.hierarchical import render_rays
 from sray.model.positional_encoding import PositionalEncoding
+from sray.model.view_render import render_view
 
 
 @dataclass
@@ -180,20 +181,19 @@ class SemanticNeRF(nn.Module):
         return render_rays(self._field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine,
                            stratified, generator, fine_samples="union")  # NeRF's rule, as Semantic-NeRF
 
-    @torch.no_grad()
-    def render_image(
-        self, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: Tensor | float,
-        far: Tensor | float, chunk: int | None = None,
-    ) -> dict[str, dict[str, Tensor]]:
-        """Render a whole (H, W) view, deterministic samples, ``chunk`` rays at a time, no grad.
+    def render_image(self, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
+                     chunk: int | None = None, stride: int = 1) -> dict[str, dict[str, Tensor]]:
+        """Render the (H, W) = ``hw`` view of the camera K (3, 3), c2w (4, 4) (OpenCV axes) with the one whole-view
+        renderer (``view_render.render_view``): deterministic samples, every ``stride``-th pixel, ``chunk`` rays
+        at a time (default ``cfg.chunk``), no grad; near, far: scalar z-depth bounds.
 
-        K: (3, 3); c2w: (4, 4) OpenCV axes; near, far: scalars. Returns, like
-        ``SRayModel.render_image``, ``{"coarse": ..., "fine": ...}`` with ``logits`` (H, W, L),
-        ``rgb`` (H, W, 3), ``depth`` (H, W) (expected z-depth, not divided by opacity; see
-        ``sray.model.rendering.composite``) and ``opacity`` (H, W) per pass.
+        Returns, like ``SRayModel.render_image``, ``{"coarse": ..., "fine": ...}`` with ``logits`` (h', w', L),
+        ``rgb`` (h', w', 3) in [0, 1], ``depth`` (h', w') (expected z-depth, not divided by opacity; see
+        ``sray.model.rendering.composite``) and ``opacity`` (h', w') per pass ((H, W) at stride 1).
         """
-        return render_image(lambda o, d: self.render_rays(o, d, near, far, stratified=False),
-                            K, c2w, hw, int(chunk or self.cfg.chunk), self.scene_center.device)
+        chunk = self.cfg.chunk if chunk is None else chunk
+        return render_view(lambda o, d, lo, hi: self.render_rays(o, d, lo, hi, stratified=False), K, c2w, hw, near,
+                           far, chunk, self.scene_center.device, stride)
 
 
 def scene_box_from_cameras(

@@ -14,8 +14,8 @@ Design choices where the paper is silent:
   (``rendering.sample_pdf``), with the same stratified / deterministic switch.
 * The semantic logits of every sample are composited with the density weights (the paper's
   semantic field rendering); colour comes from the geometry net's blending head.
-* Sampling, compositing and the whole-image loop are ``sray.model.hierarchical``'s, shared with
-  Semantic-NeRF; this class supplies the per-pass field.
+* Sampling and compositing are ``sray.model.hierarchical``'s and the whole-image loop is
+  ``sray.model.view_render``'s, both shared with Semantic-NeRF; this class supplies the per-pass field.
 * ``inputs="rgbd"``: ``encode`` keeps the source depth maps and the coarse samples are placed around the
   surfaces they show (``depth_sampling``); the networks and their parameters are the rgb mode's.
 """
@@ -28,14 +28,15 @@ from torch import Tensor, nn
 from .config import SRayConfig
 from .depth_sampling import source_surface_depth, surface_samples
 from .encoder import ResUNetEncoder
-from .fast_render import render_rays_fast
+from .fast_render import FastRender, render_rays_fast
 from .field import SRayField
-from .hierarchical import CoarseSampler, per_ray_bounds, render_image, render_rays
+from .hierarchical import CoarseSampler, per_ray_bounds, render_rays
 from .losses import render_loss
 from .piecewise_loss import piecewise_render_loss
-from .ray_chunks import render_chunk_rays, train_piece_rays
+from .ray_chunks import train_piece_rays
 from .source_semantics import SourceSemanticHead
 from .source_set import SourceSet, rigid_inverse
+from .view_render import RayRenderer, render_view
 
 __all__ = ["SRayModel", "SourceSet"]
 
@@ -148,18 +149,24 @@ class SRayModel(nn.Module):
         return render_rays_fast(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, confidence,
                                 self.coarse_sampler(src))
 
-    @torch.no_grad()
-    def render_image(self, src: SourceSet, K: Tensor, c2w: Tensor, hw: tuple[int, int],
-                     near: Tensor | float, far: Tensor | float,
-                     chunk: int | None = None) -> dict[str, dict[str, Tensor]]:
-        """Render a whole (H, W) query image in chunks of rays, deterministic sampling, no grad.
+    def ray_renderer(self, src: SourceSet, fast: FastRender | None = None) -> RayRenderer:
+        """A deterministic ray renderer bound to the encoded sources ``src`` (``view_render.RayRenderer``): the
+        full render, or with ``fast`` the fast mode's rays (a fine pass only below ``fast.confidence``)."""
+        if fast is not None:
+            return lambda o, d, near, far: self.render_rays_fast(src, o, d, near, far, fast.confidence)
+        return lambda o, d, near, far: self.render_rays(src, o, d, near, far, stratified=False)
 
-        K (3, 3), c2w (4, 4) of the query camera; near, far scalars. Returns ``{"coarse": ...,
-        "fine": ...}`` with ``logits`` (H, W, L), ``rgb`` (H, W, 3), ``depth`` (H, W) and
-        ``opacity`` (H, W) per pass. Memory is bounded by ``chunk`` rays (default ``cfg.chunk``; 0: by
-        device, ``ray_chunks``).
+    def render_image(self, src: SourceSet, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
+                     chunk: int | None = None, stride: int = 1,
+                     fast: FastRender | None = None) -> dict[str, dict[str, Tensor]]:
+        """Render the (H, W) = ``hw`` image of the query camera K (3, 3), c2w (4, 4) against ``src`` with the one
+        whole-view renderer (``view_render.render_view``): deterministic sampling, no grad, every ``stride``-th
+        pixel, the full render or the fast mode (``fast``); near, far: scalar z-depth bounds.
+
+        Returns ``{"coarse": ..., "fine": ...}`` with ``logits`` (h', w', L), ``rgb`` (h', w', 3) in [0, 1],
+        ``depth`` (h', w') and ``opacity`` (h', w') per pass ((H, W) at stride 1). Memory is bounded by
+        ``chunk`` rays (default ``cfg.chunk``; 0: by device, ``ray_chunks``).
         """
-        device = src.feats.device
-        rays = render_chunk_rays(int(chunk or self.cfg.chunk), device)
-        return render_image(lambda o, d: self.render_rays(src, o, d, near, far, stratified=False),
-                            K, c2w, hw, rays, device)
+        chunk = self.cfg.chunk if chunk is None else chunk
+        return render_view(self.ray_renderer(src, fast), K, c2w, hw, near, far, chunk, src.feats.device, stride,
+                           fast)

@@ -16,7 +16,7 @@ from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.config.fleet_config import check_fleet_config
 from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.config.train_config import apply_override
-from sray.platform.eval.view_scoring import render_view, sray_renderer
+from sray.platform.eval.view_scoring import predict_view, sray_renderer
 from sray.platform.finetune.learners import SRayLearner
 from sray.platform.train.validation import validation_protocol
 
@@ -58,11 +58,11 @@ def test_the_finetune_learners_held_out_renderer_is_the_chosen_render(tiny_check
     assert learner.encoder_frozen and learner.fast == fast
     sample = next(iter(make_eval_samples(tiny_shards, "synth_test_000", split="test", n_source=3)))
     with torch.no_grad():
-        got = render_view(learner.renderer(sample), sample, 2, 512, torch.device("cpu"), learner.fast)
-        again = render_view(learner.renderer(sample), sample, 2, 512, torch.device("cpu"), learner.fast)  # cached
-        want = render_view(sray_renderer(net, sample, torch.device("cpu"), fast), sample, 2, 512,
+        got = predict_view(learner.renderer(sample), sample, 2, 512, torch.device("cpu"), learner.fast)
+        again = predict_view(learner.renderer(sample), sample, 2, 512, torch.device("cpu"), learner.fast)  # cached
+        want = predict_view(sray_renderer(net, sample, torch.device("cpu"), fast), sample, 2, 512,
                            torch.device("cpu"), fast)
-        full = render_view(sray_renderer(net, sample, torch.device("cpu")), sample, 2, 512, torch.device("cpu"))
+        full = predict_view(sray_renderer(net, sample, torch.device("cpu")), sample, 2, 512, torch.device("cpu"))
     for view in (got, again):
         torch.testing.assert_close(view.pred_rgb, want.pred_rgb, rtol=0, atol=0)
         assert torch.equal(view.pred_label, want.pred_label)
@@ -72,14 +72,13 @@ def test_the_finetune_learners_held_out_renderer_is_the_chosen_render(tiny_check
 def test_a_render_grid_too_coarse_for_a_small_image_shrinks_to_fit(tiny_checkpoint: Path, tiny_shards: Path) -> None:
     """32x40 views scored every 8th pixel: pixel stride 8 would put the first ray at pixel 32, outside the
     image; the render uses the largest stride that fits (7), exactly as if it had been asked for."""
-    from sray.platform.eval.view_scoring import fitted_pixel_stride
-
-    assert fitted_pixel_stride(8, 8, (32, 40)) == 7 and fitted_pixel_stride(8, 1, (240, 320)) == 8
-    assert fitted_pixel_stride(8, 64, (32, 40)) == 1
+    eight = FastRender(8)
+    assert eight.fitted_pixel_stride(8, (32, 40)) == 7 and eight.fitted_pixel_stride(1, (240, 320)) == 8
+    assert eight.fitted_pixel_stride(64, (32, 40)) == 1
     net, _ = model_from_checkpoint(tiny_checkpoint)
     sample = next(iter(make_eval_samples(tiny_shards, "synth_test_000", split="test", n_source=3)))
     cpu = torch.device("cpu")
-    views = [render_view(sray_renderer(net, sample, cpu, f), sample, 8, 512, cpu, f)
+    views = [predict_view(sray_renderer(net, sample, cpu, f), sample, 8, 512, cpu, f)
              for f in (FastRender(8, 0.9), FastRender(7, 0.9))]
     assert views[0].pred_label.shape == (4, 5)
     assert torch.equal(views[0].pred_label, views[1].pred_label)

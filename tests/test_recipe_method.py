@@ -29,7 +29,7 @@ from sray.data_tools.loader.sample_types import EvalSample, TrainSample
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.jobs.fleet_cmd import register
 from sray.model.losses import psnr_from_mse
-from sray.platform.eval.view_scoring import strided_pixels
+from sray.model.view_render import strided_pixels
 from sray.platform.finetune.fleet_report import results_table
 from sray.platform.finetune.learners import Learner
 from sray.platform.finetune.methods.method import ChartStyle, Method, SceneContext, SceneSetup

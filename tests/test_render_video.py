@@ -23,7 +23,7 @@ from sray.data_tools.loader.samples import eval_sample
 from sray.data_tools.loader.views import StoredView
 from sray.data_tools.scene import source_pool
 from sray.model.fast_render import FastRender
-from sray.platform.eval.view_scoring import render_view, source_renderer, sray_renderer
+from sray.platform.eval.view_scoring import predict_view, sray_renderer
 from sray.platform.finetune.render_model import render_model
 from sray.platform.finetune.scene_artifacts import adapted_state, checkpoint_sha256, save_sray_delta
 from sray.platform.render.camera_paths import CameraPath, spline_path
@@ -70,11 +70,11 @@ def test_a_frame_at_a_source_pose_equals_the_eval_render(tiny_shards, tiny_check
     assert ids[0] == query and set(ids) <= set(plan.meta.splits["source"])  # a view sees all of itself
 
     sample = eval_sample(plan.views, query, ids, SCENE, plan.meta.near, plan.meta.far)
-    expected = render_view(sray_renderer(net, sample, CPU, fast), sample, 1, net.cfg.chunk, CPU, fast)
+    expected = predict_view(sray_renderer(net, sample, CPU, fast), sample, 1, net.cfg.chunk, CPU, fast)
     camera = SceneQuery(scene=SCENE, query_id="frame 0", sources=fly.picker.sources(ids),
                         query=QueryCamera(K=sample.query.K, c2w=sample.query.c2w), near=sample.near, far=sample.far)
     src = camera.sources
-    frame = render_frame(source_renderer(net, net.encode(src.rgb, src.K, src.c2w, src.depth), fast), camera, hw,
+    frame = render_frame(net.ray_renderer(net.encode(src.rgb, src.K, src.c2w, src.depth), fast), camera, hw,
                          net.cfg.chunk, CPU, fast)
     torch.testing.assert_close(frame.label, expected.pred_label, rtol=0, atol=0)
     torch.testing.assert_close(frame.rgb, expected.pred_rgb, rtol=0, atol=1e-6)

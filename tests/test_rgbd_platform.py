@@ -22,7 +22,7 @@ from sray.model.config import SRayConfig
 from sray.model.semantic_ray import SRayModel
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.config.train_config import apply_override
-from sray.platform.eval.view_scoring import render_view, sray_renderer
+from sray.platform.eval.view_scoring import predict_view, sray_renderer
 
 N_SOURCE = 3
 
@@ -68,7 +68,7 @@ def test_rescale_nearest_follows_the_pixel_centre_rule() -> None:
 
 
 def _renders(net: SRayModel, sample, stride: int = 4) -> tuple[torch.Tensor, torch.Tensor]:
-    view = render_view(sray_renderer(net, sample, torch.device("cpu")), sample, stride, 4096, torch.device("cpu"))
+    view = predict_view(sray_renderer(net, sample, torch.device("cpu")), sample, stride, 4096, torch.device("cpu"))
     return view.pred_label, view.pred_rgb
 
 

@@ -61,7 +61,7 @@ def test_clean_sources_are_sray_evals_and_dropping_moves_down_the_ranking(tiny_s
 
 def test_unseen_fraction_matches_opencv_projection(tiny_shards) -> None:
     from sray.data_tools.loader.samples import eval_sample
-    from sray.platform.eval.view_scoring import strided_pixels
+    from sray.model.view_render import strided_pixels
 
     (scene,) = load_scenes(tiny_shards, [SCENE])
     q = scene.test_ids[1]

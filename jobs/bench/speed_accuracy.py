@@ -30,7 +30,8 @@ from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.eval.view_scoring import render_view, score_views, sray_renderer
+from sray.platform.eval.scene_scoring import score_scene
+from sray.platform.eval.view_scoring import sray_renderer
 from sray.platform.eval.zero_shot import select_scenes
 
 
@@ -108,8 +109,8 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     ``checkpoint_rgbd``: the model that renders the ``inputs="rgbd"`` settings (None: ``checkpoint``'s).
     ``views_per_scene`` <= 0 scores every test view. Returns one row per setting: name, miou, psnr
     (dataset-level protocol, mean over scenes),
-    s_per_view (CPU seconds of this process per view, all threads, source encoding included: unlike
-    wall-clock time it does not grow when other jobs share the cores), wall_s_per_view, views, and the
+    s_per_view (CPU seconds of this process per view, all threads, source encoding and scoring included:
+    unlike wall-clock time it does not grow when other jobs share the cores), wall_s_per_view, views, and the
     setting.
     """
     loaded = {}
@@ -118,6 +119,7 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
             net, cfg = model_from_checkpoint(path)
             loaded[key] = (net.eval(), cfg, dataclasses.replace(net.cfg))  # the checkpoint's own model config
     names, _ = select_scenes(shards, None)
+    cpu = torch.device("cpu")
     rows = []
     for st in settings:
         net, cfg, own = loaded["rgbd" if st.inputs == "rgbd" and "rgbd" in loaded else "main"]
@@ -126,17 +128,15 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
         for scene in names:
             samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))
             samples = samples[:views_per_scene] if views_per_scene > 0 else samples
-            views = []
-            for sample in samples:
-                autocast = torch.autocast("cpu", dtype=torch.bfloat16) if st.bf16 else nullcontext()
-                t0, c0 = time.perf_counter(), time.process_time()
-                with autocast:
-                    views.append(render_view(sray_renderer(net, sample, torch.device("cpu"), st.fast), sample, 1,
-                                             st.chunk, torch.device("cpu"), st.fast))
-                seconds += time.perf_counter() - t0
-                cpu_seconds += time.process_time() - c0
-            n_views += len(views)
-            per_scene.append(score_views(views, cfg.model.n_classes, cfg.model.ignore_id))
+            autocast = torch.autocast("cpu", dtype=torch.bfloat16) if st.bf16 else nullcontext()
+            t0, c0 = time.perf_counter(), time.process_time()
+            with autocast:
+                scored = score_scene(lambda s: sray_renderer(net, s, cpu, st.fast), samples, cfg.model.n_classes,
+                                     cfg.model.ignore_id, 1, st.chunk, cpu, st.fast)
+            seconds += time.perf_counter() - t0
+            cpu_seconds += time.process_time() - c0
+            n_views += len(scored.views)
+            per_scene.append(scored.scores)
         row = {"name": st.name, "miou": 100 * sum(s["miou"] for s in per_scene) / len(per_scene),
                "psnr": sum(s["psnr"] for s in per_scene) / len(per_scene),
                "s_per_view": cpu_seconds / max(n_views, 1), "wall_s_per_view": seconds / max(n_views, 1),
@@ -232,8 +232,9 @@ def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc
              f"the first {views_per_scene} test views")
     notes = (f"Checkpoint `{checkpoint}`; {which} of each unseen scene of `{shards}`, "
              f"the same views for every setting (paired); mIoU dataset-level per scene, then the mean over "
-             f"scenes; CPU s / view is the CPU time this process spent (all its threads) encoding the sources and "
-             f"rendering one whole view, the speed measure here because other jobs may share the cores (on a quiet "
+             f"scenes; CPU s / view is the CPU time this process spent (all its threads) encoding the sources, "
+             f"rendering and scoring one whole view (`sray eval`'s loop), the speed measure here because other "
+             f"jobs may share the cores (on a quiet "
              f"machine wall time is about CPU time / torch threads); wall s / view is shown beside it. Settings: "
              f"'full, reference path' is the unoptimised path "
              f"(`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with "

@@ -1,7 +1,8 @@
 """``sray eval``: score a checkpoint on unseen scenes with the paper's generalization protocol.
 
-Every ``test`` view of a scene is rendered (in ray chunks, every ``stride``-th pixel in each
-direction; stride 1 = the whole image) from its ``n_source`` FIXED source views (its top-ranked
+Every ``test`` view of a scene is rendered and scored by the shared loop, ``scene_scoring.score_scene`` (the
+model's whole-view renderer in ray chunks, every ``stride``-th pixel in each direction; stride 1 = the whole
+image), from its ``n_source`` FIXED source views (its top-ranked
 neighbours inside the scene's ``source`` split), by the pretrained model as it is: no per-scene
 optimisation.
 
@@ -40,7 +41,8 @@ from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL,
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
-from sray.platform.eval.view_scoring import ViewPrediction, class_ious, render_view, score_views, sray_renderer
+from sray.platform.eval.scene_scoring import score_scene
+from sray.platform.eval.view_scoring import ViewPrediction, class_ious, sray_renderer
 from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
@@ -195,16 +197,18 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
         bar = tqdm(total=sum(len(metas[s]["splits"]["test"]) for s in names), desc="eval views", unit="view",
                    disable=not progress)
         for name in names:
-            views, per_view = [], []
-            for sample in make_eval_samples(shards, name, split="test", n_source=n_source):
-                view = render_view(sray_renderer(net, sample, torch_device, fast), sample, stride, cfg.model.chunk,
-                                   torch_device, fast)
-                pngs = save_view_pngs(view, name, metas[name]["class_names"], ignore_id, out_dir)
-                views.append(view)
+            per_view = []
+
+            def record_view(view: ViewPrediction, scene: str = name) -> None:
+                pngs = save_view_pngs(view, scene, metas[scene]["class_names"], ignore_id, out_dir)
                 per_view.append({"query_id": view.query_id, **view_scores(view, n_classes, ignore_id), "pngs": pngs})
                 bar.update(1)
-            block = scene_blocks(score_views(views, n_classes, ignore_id), len(views))
-            block["dataset_level"]["iou_per_class"] = class_ious(views, n_classes, ignore_id)
+
+            scored = score_scene(lambda s: sray_renderer(net, s, torch_device, fast),
+                                 make_eval_samples(shards, name, split="test", n_source=n_source), n_classes,
+                                 ignore_id, stride, cfg.model.chunk, torch_device, fast, on_view=record_view)
+            block = scene_blocks(scored.scores, len(scored.views))
+            block["dataset_level"]["iou_per_class"] = class_ious(scored.views, n_classes, ignore_id)
             report["scenes"][name] = {**block, "views": per_view}
         bar.close()
         scene_scores = [report["scenes"][n] for n in names]

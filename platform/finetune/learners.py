@@ -32,9 +32,10 @@ from sray.model.fast_render import FastRender
 from sray.model.losses import render_loss
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig, scene_box_from_cameras
 from sray.model.semantic_ray import SourceSet, SRayModel
+from sray.model.view_render import RayRenderer
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.fleet_config import SemanticNeRFSettings
-from sray.platform.eval.view_scoring import Renderer, encode_sources, source_renderer, sray_renderer
+from sray.platform.eval.view_scoring import encode_sources, sray_renderer
 from sray.platform.finetune.scene_artifacts import (
     adapted_keys,
     adapted_state,
@@ -83,7 +84,7 @@ class Learner(ABC):
     """The fast render mode of the held-out renderer (None: the full render; only S-Ray has one)."""
 
     @abstractmethod
-    def renderer(self, sample: EvalSample) -> Renderer:
+    def renderer(self, sample: EvalSample) -> RayRenderer:
         """The ray renderer of one held-out evaluation sample (deterministic; the fast mode's with ``fast``)."""
 
     @abstractmethod
@@ -126,7 +127,7 @@ class SRayLearner(Learner):
                 src = self.net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
             return self.net.training_loss(src, origins, dirs, near, far, sample.target_label, sample.target_rgb)
 
-    def renderer(self, sample: EvalSample) -> Renderer:
+    def renderer(self, sample: EvalSample) -> RayRenderer:
         """Ray renderer bound to the sample's fixed source views.
 
         While the encoder is frozen the encoded sources of a held-out view never change: they are
@@ -137,7 +138,7 @@ class SRayLearner(Learner):
         key = (sample.scene, sample.query_id)
         if key not in self._sources:
             self._sources[key] = encode_sources(self.net, sample, self.device)
-        return source_renderer(self.net, self._sources[key], self.fast)
+        return self.net.ray_renderer(self._sources[key], self.fast)
 
     def snapshot(self) -> dict[str, Tensor]:
         """CPU copy of the adapted tensors."""
@@ -168,7 +169,7 @@ class NeRFLearner(Learner):
         return render_loss(out, sample.target_label.to(self.device), sample.target_rgb.to(self.device),
                            self.net.cfg)
 
-    def renderer(self, sample: EvalSample) -> Renderer:
+    def renderer(self, sample: EvalSample) -> RayRenderer:
         """Ray renderer (deterministic samples)."""
         return lambda o, d, near, far: self.net.render_rays(o, d, near, far, stratified=False)
 

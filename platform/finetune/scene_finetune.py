@@ -37,7 +37,7 @@ from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
 from sray.platform.common.throughput import ThroughputWindow, progress_postfix
 from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.eval.view_scoring import render_view, score_views
+from sray.platform.eval.scene_scoring import score_scene
 from sray.platform.finetune.learners import Learner
 from sray.platform.finetune.methods.method import SceneContext
 from sray.platform.finetune.methods.registry import get_method
@@ -113,12 +113,11 @@ class EarlyStopping:
 @torch.no_grad()
 def evaluate(learner: Learner, samples: list[EvalSample], cfg: FleetConfig, n_classes: int,
              ignore_id: int) -> dict[str, float]:
-    """Held-out scores (``score_views`` keys) of the learner's current state."""
+    """Held-out scores (``score_views`` keys) of the learner's current state (``score_scene``)."""
     ft = cfg.finetune
     with learner.inference(), learner.step.autocast():
-        views = [render_view(learner.renderer(s), s, ft.eval_stride, ft.eval_chunk, learner.device, learner.fast)
-                 for s in samples]
-    return score_views(views, n_classes, ignore_id)
+        return score_scene(learner.renderer, samples, n_classes, ignore_id, ft.eval_stride, ft.eval_chunk,
+                           learner.device, learner.fast).scores
 
 
 def write_result(out_dir: Path, result: dict[str, Any]) -> Path:

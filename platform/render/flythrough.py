@@ -28,7 +28,6 @@ from sray.model.fast_render import FastRender
 from sray.model.semantic_ray import SRayModel, SourceSet
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.progress import make_progress
-from sray.platform.eval.view_scoring import source_renderer
 from sray.platform.render.frames import render_frame
 from sray.platform.render.panels import compose_panels, panel_layout
 from sray.platform.render.plan import FlythroughPlan
@@ -91,7 +90,7 @@ class Flythrough:
         plan, path = self.plan, self.plan.path
         ids = self.picker.choose(path.K[index], path.c2w[index], path.hw)
         sample = _sample(plan, index, self.picker, ids)
-        renderer = source_renderer(self.net, self._sources(ids, sample, device), self.fast)
+        renderer = self.net.ray_renderer(self._sources(ids, sample, device), self.fast)
         frame = render_frame(renderer, sample, path.hw, self.net.cfg.chunk, device, self.fast)
         title = " | ".join(filter(None, [plan.meta.name, label, path.describe, f"frame {index + 1}/{len(path)}"]))
         picture = compose_panels(frame.rgb.numpy(), frame.label.numpy(), frame.depth.numpy(), frame.confidence.numpy(),

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from sray.data_tools.loader.samples import eval_sample, train_sample
-from sray.platform.eval.view_scoring import render_view, score_views
+from sray.platform.eval.scene_scoring import score_scene
 from sray.platform.finetune.learners import NeRFLearner, semantic_nerf_for_views
 from sray.platform.stability.point_spec import PointSpec
 from sray.platform.stability.presets import Preset
@@ -55,11 +55,11 @@ def nerf_point(scene: StressScene, spec: PointSpec, preset: Preset, n_classes: i
         learner.step(loss)
         steps, train_s = steps + 1, train_s + time.perf_counter() - start
     watch = OutputWatch(poison)
+    samples = [eval_sample(scene.views, q, [train_ids[0]], scene.name, scene.meta.near, scene.meta.far)
+               for q in scene.test_ids]
     with learner.inference(), learner.step.autocast():
-        rendered = [render_view(watch.wrap(learner.renderer(s)), s, preset.eval_stride, preset.chunk, device)
-                    for s in (eval_sample(scene.views, q, [train_ids[0]], scene.name, scene.meta.near,
-                                          scene.meta.far) for q in scene.test_ids)]
-    scores = score_views(rendered, n_classes, ignore_id)
+        scores = score_scene(lambda s: watch.wrap(learner.renderer(s)), samples, n_classes, ignore_id,
+                             preset.eval_stride, preset.chunk, device).scores
     return {"miou": scores["miou"], "psnr": scores["psnr"], "nonfinite_rays": watch.nonfinite_rays,
             "steps": steps, "train_s": train_s, "train_views": len(train_ids),
             "scenes": {scene.name: {"miou": scores["miou"], "psnr": scores["psnr"]}}}

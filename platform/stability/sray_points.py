@@ -3,8 +3,9 @@ as ``sray eval`` renders them, and scored.
 
 With no perturbation, ``n_source`` protocol sources, fp32 and the same stride, a point reproduces
 ``sray eval``'s dataset-level mIoU and PSNR exactly: the sources are the query's top-ranked
-neighbours in the ``source`` split, each view is rendered by :func:`render_view` in ``chunk``-ray
-passes, each scene is scored from one confusion matrix and scenes are averaged unweighted.
+neighbours in the ``source`` split, each scene's views are rendered and scored by ``sray eval``'s loop
+(:func:`~sray.platform.eval.scene_scoring.score_scene`, ``chunk``-ray passes, one confusion matrix per
+scene) and scenes are averaged unweighted.
 """
 
 from __future__ import annotations
@@ -21,8 +22,10 @@ from sray.data_tools.loader.views import StoredView
 from sray.model.rendering import sample_uniform
 from sray.model.reprojection import project, valid_projection
 from sray.model.source_set import SourceSet, rigid_inverse
+from sray.model.view_render import RayRenderer, strided_pixels
 from sray.platform.common.model_input import ray_batch
-from sray.platform.eval.view_scoring import Renderer, render_view, score_views, strided_pixels
+from sray.platform.eval.scene_scoring import score_scene
+from sray.platform.eval.view_scoring import predict_view
 from sray.platform.stability.point_spec import PointSpec
 from sray.platform.stability.stress_scenes import StressScene, perturbed_views
 
@@ -65,7 +68,7 @@ class OutputWatch:
     def __init__(self, poison: bool) -> None:
         self.nonfinite_rays, self.poison = 0, poison
 
-    def wrap(self, render: Renderer) -> Renderer:
+    def wrap(self, render: RayRenderer) -> RayRenderer:
         """The renderer, watched."""
 
         def watched(o: Tensor, d: Tensor, near: Tensor, far: Tensor) -> dict[str, dict[str, Tensor]]:
@@ -99,10 +102,9 @@ def encoded_pool(net: nn.Module, views: dict[str, StoredView], ids: list[str], s
     return net.encode(sources.rgb, sources.K, sources.c2w, sources.depth)
 
 
-def bound_renderer(net: nn.Module, pool: SourceSet, index: list[int]) -> Renderer:
+def bound_renderer(net: nn.Module, pool: SourceSet, index: list[int]) -> RayRenderer:
     """A deterministic ray renderer of ``net`` from the pool's views at ``index``, in that order."""
-    src = pool.select(index)
-    return lambda o, d, near, far: net.render_rays(src, o, d, near, far, stratified=False)
+    return net.ray_renderer(pool.select(index))
 
 
 def sray_point(net: nn.Module, scenes: list[StressScene], spec: PointSpec, stride: int, chunk: int,
@@ -123,20 +125,20 @@ def sray_point(net: nn.Module, scenes: list[StressScene], spec: PointSpec, strid
         with precision_context(spec.precision, device):
             pool = encoded_pool(net, views, ids, scene, device)
         reference = encoded_pool(net, views, ids, scene, device) if spec.precision != "fp32" else None
-        rendered = []
-        for q, chosen in plan.items():
-            sample = eval_sample(views, q, chosen, scene.name, scene.meta.near, scene.meta.far)
-            index = [ids.index(s) for s in chosen]
-            with precision_context(spec.precision, device):
-                view = render_view(watch.wrap(bound_renderer(net, pool, index)), sample, stride, chunk, device)
+        samples = [eval_sample(views, q, chosen, scene.name, scene.meta.near, scene.meta.far)
+                   for q, chosen in plan.items()]
+        index = {q: [ids.index(s) for s in chosen] for q, chosen in plan.items()}
+        with precision_context(spec.precision, device):
+            scored = score_scene(lambda s: watch.wrap(bound_renderer(net, pool, index[s.query_id])), samples,
+                                 n_classes, ignore_id, stride, chunk, device)
+        for sample, view in zip(samples, scored.views):
             if reference is not None:
-                fp32 = render_view(bound_renderer(net, reference, index), sample, stride, chunk, device)
+                fp32 = predict_view(bound_renderer(net, reference, index[sample.query_id]), sample, stride, chunk,
+                                    device)
                 agree += int((fp32.pred_label == view.pred_label).sum())
                 total += fp32.pred_label.numel()
             unseen.append(unseen_fraction(sample, stride, net.cfg.n_coarse, net.cfg.min_source_depth))
-            rendered.append(view)
-        scores = score_views(rendered, n_classes, ignore_id)
-        per_scene[scene.name] = {"miou": scores["miou"], "psnr": scores["psnr"]}
+        per_scene[scene.name] = {"miou": scored.scores["miou"], "psnr": scored.scores["psnr"]}
     return {"miou": sum(s["miou"] for s in per_scene.values()) / len(per_scene),
             "psnr": sum(s["psnr"] for s in per_scene.values()) / len(per_scene),
             "unseen_fraction": sum(unseen) / len(unseen), "nonfinite_rays": watch.nonfinite_rays,

@@ -23,7 +23,8 @@ from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import Manifest, read_manifest
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.config.train_config import TrainConfig
-from sray.platform.eval.view_scoring import ViewPrediction, render_view, score_views, sray_renderer
+from sray.platform.eval.scene_scoring import score_scene
+from sray.platform.eval.view_scoring import ViewPrediction, sray_renderer
 from sray.platform.viz.renders import render_panel
 
 GROUPS = {"val": "train", "zeroshot": "test"}
@@ -57,12 +58,10 @@ def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: s
         samples = itertools.islice(make_eval_samples(Path(cfg.data.shards), name, split="test",
                                                      n_source=cfg.model.n_source, manifest=manifest),
                                    cfg.data.val_views_per_scene)
-        views = []
-        for sample in samples:
-            views.append(render_view(sray_renderer(net, sample, device, fast), sample, cfg.data.val_downscale,
-                                     cfg.model.chunk, device, fast))
-        per_scene.append(score_views(views, cfg.model.n_classes, cfg.model.ignore_id))
-        renders += [(name, v) for v in views]
+        scored = score_scene(lambda s: sray_renderer(net, s, device, fast), samples, cfg.model.n_classes,
+                             cfg.model.ignore_id, cfg.data.val_downscale, cfg.model.chunk, device, fast)
+        per_scene.append(scored.scores)
+        renders += [(name, v) for v in scored.views]
     return (_mean(per_scene) if per_scene else {}), renders
 
 
