@@ -3,7 +3,9 @@ bad specs refused in one line with exit code 2 before anything is written."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
 from pathlib import Path
 
 import pytest
@@ -59,6 +61,51 @@ def test_a_finished_trial_never_runs_again_and_an_errored_one_stays_errored(tmp_
     request_stop(trial_folder(tmp_path, "t002"), BY_SCHEDULER, 4)
     _run_trial({"key": "t002"}, job)
     assert calls == ["t000"], "neither the errored trial nor the stopped one ran again"
+
+
+def test_a_study_run_piece_by_piece_keeps_results_imports_old_ones_and_reruns_only_errors(tmp_path: Path,
+                                                                                        monkeypatch) -> None:
+    """The harnesses' way of running the engine (``incremental``), with Tune replaced by the trial wrapper run
+    in this process: results kept in the records, an imported result never computed, an errored trial run again
+    by the next launch, no trial started past the time limit."""
+    from sray.platform.sweep import incremental
+    from sray.platform.sweep.study import StudySettings
+
+    def run_here(plan: dict, point_fn, settings: StudySettings, resume: bool = False) -> list:
+        job = _TrialJob(point_fn, plan, str(settings.folder), {}, settings.start_by)
+        for key in plan:
+            try:
+                _run_trial({"key": key}, job)
+            except InjectedFailure:
+                pass
+        return collect_outcomes(settings.folder, plan, {}, settings.time_attr)
+
+    monkeypatch.setattr(incremental, "run_study", run_here)
+    calls: list[str] = []
+
+    def square(point: dict, ctx: TrialContext) -> dict:
+        calls.append(ctx.key)
+        return {"y": point["x"] ** 2}
+
+    plan = {k: {"x": x} for k, x in (("a", 2), ("b", 3), ("c", 4), ("d", 5))}
+    settings = StudySettings(folder=tmp_path, metric="y", mode="max", label="test")
+    assert incremental.import_result(tmp_path, "c", {"y": -1}, tmp_path / "old" / "c.json")
+    with injected_faults("sweep.fail_trials=b"):
+        first = incremental.run_missing(plan, square, settings)
+    assert [(o.key, o.reason, o.result) for o in first] == [
+        ("a", "finished", {"y": 4}), ("b", "errored", None), ("c", "finished", {"y": -1}), ("d", "finished", {"y": 25})]
+    assert calls == ["a", "d"] and read_record(trial_folder(tmp_path, "c")).imported.endswith("c.json")
+    assert not incremental.import_result(tmp_path, "a", {"y": 0}, tmp_path / "old" / "a.json")  # finished stays
+    assert incremental.missing(tmp_path, plan) == {"b": {"x": 3}}
+    late = dataclasses.replace(settings, start_by=time.time() - 1)
+    assert [o.reason for o in incremental.run_missing(plan, square, late)][1] == "errored" and len(calls) == 2
+    job = _TrialJob(square, plan, str(tmp_path), {}, time.time() - 1)  # the trial wrapper's own gate
+    _run_trial({"key": "e"}, dataclasses.replace(job, plan={**plan, "e": {"x": 1}}))
+    assert read_record(trial_folder(tmp_path, "e")).launches == [] and len(calls) == 2
+    second = incremental.run_missing(plan, square, settings)
+    assert calls == ["a", "d", "b"] and [o.reason for o in second] == ["finished"] * 4
+    assert len(read_record(trial_folder(tmp_path, "b")).launches) == 2
+    assert incremental.stored_results(tmp_path) == {"a": {"y": 4}, "b": {"y": 9}, "c": {"y": -1}, "d": {"y": 25}}
 
 
 def test_outcomes_name_why_each_trial_ended(tmp_path: Path) -> None:

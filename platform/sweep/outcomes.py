@@ -35,6 +35,8 @@ class TrialOutcome:
     """Every result it reported, in order (``time_s``: its running time across launches)."""
     launches: int = 0
     """How many times the trial was started (more than one after a resumed study)."""
+    result: dict[str, Any] | None = None
+    """What the trial's point function returned (or what was imported as its result); None when nothing."""
 
     @property
     def last(self) -> dict[str, Any]:
@@ -77,5 +79,5 @@ def collect_outcomes(study: Path, plan: Mapping[str, Mapping[str, Any]], tune_er
                                reached[-1] if reached else None)
         if reason == "errored":
             note = record.error or tune_errors.get(key, "")
-        outcomes.append(TrialOutcome(key, dict(point), reason, note, history, len(record.launches)))
+        outcomes.append(TrialOutcome(key, dict(point), reason, note, history, len(record.launches), record.result))
     return outcomes

@@ -33,8 +33,9 @@ class TrialContext:
         ray.tune.report(dict(metrics))
 
 
-PointFunction = Callable[[dict[str, Any], TrialContext], None]
-"""Runs the trial of one point; reports through Tune; raises on failure."""
+PointFunction = Callable[[dict[str, Any], TrialContext], "dict[str, Any] | None"]
+"""Runs the trial of one point; reports through Tune; may return its result (a JSON-able dict, kept in the
+trial's record); raises on failure."""
 
 
 @dataclass(frozen=True)
@@ -63,3 +64,12 @@ class StudySettings:
     """ASHA: about 1 in this many trials continues at each rung."""
     wall_budget_s: float = 0.0
     """A trial is asked to stop once it has run this long across its launches (0 = no limit)."""
+    start_by: float = 0.0
+    """Unix time after which no trial starts (0 = no limit): a trial Tune hands over later returns at once,
+    without a launch or an outcome, and stays unfinished for the next launch of the study. Running trials go on."""
+    reuse_actors: bool = False
+    """Run the trials one after another in the same process (Tune's ``reuse_actors``): for short trials whose
+    point function keeps what it loaded between calls. Off: each trial gets a fresh process (a trial that
+    trains with Accelerate needs one)."""
+    label: str = "sweep"
+    """Prefix of the study's progress lines (``[sweep] t001 started: ...``)."""

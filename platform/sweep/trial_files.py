@@ -1,8 +1,10 @@
 """A study's files per trial, under ``<study>/trials/<key>/``, each with one writer.
 
 * ``trial.json`` (:class:`TrialRecord`), written only by the trial's own process: when each launch began and,
-  once the point function has returned or raised, the outcome (``finished`` or ``errored`` with the error).
-  A trial with an outcome never runs again, whatever state Tune saved.
+  once the point function has returned or raised, the outcome (``finished`` with what the function returned,
+  or ``errored`` with the error). A trial with an outcome never runs again, whatever state Tune saved. A
+  study completed launch after launch (``sray.platform.sweep.incremental``) also writes it, before any trial
+  runs: to import a result an earlier harness stored elsewhere, or to reopen an errored trial.
 * ``stop_request.json``, written only by the driver: a request to end the trial early, by the scheduler or
   at the wall-time budget (``by``), at a value of the time attribute (``at``). The trial stops itself (a
   training job checkpoints and ends), so its workers hand their resources back before the next trial starts.
@@ -48,6 +50,11 @@ class TrialRecord:
     """:data:`FINISHED` or :data:`ERRORED` once the point function returned or raised; None before."""
     error: str = ""
     """``Type: message`` of the error of an errored trial."""
+    result: dict[str, Any] | None = None
+    """What the point function returned (a JSON-able dict), recorded with the outcome; None when it returned
+    nothing."""
+    imported: str = ""
+    """The file an imported result was read from ('' when the trial computed it)."""
 
     @property
     def done(self) -> bool:

@@ -8,6 +8,7 @@ where they were instead of starting at zero again.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -36,6 +37,8 @@ class TrialLog(Callback):
         self.metric = settings.metric
         self.time_attr = settings.time_attr
         self.wall_budget_s = settings.wall_budget_s
+        self.label = settings.label
+        self.start_by = settings.start_by
         self.plan = {k: dict(v) for k, v in plan.items()}
         self._offsets: dict[tuple[str, int], float] = {}
 
@@ -46,7 +49,10 @@ class TrialLog(Callback):
     def on_trial_start(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
         """Print which point a trial runs."""
         key = trial.config["key"]
-        print(f"[sweep] {key} started: {_point_text(self.plan.get(key, {}))}", flush=True)
+        if self.start_by and time.time() >= self.start_by:
+            print(f"[{self.label}] {key} not started: no trial starts after the study's time limit", flush=True)
+            return
+        print(f"[{self.label}] {key} started: {_point_text(self.plan.get(key, {}))}", flush=True)
 
     def on_trial_result(self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any],
                         **info: Any) -> None:
@@ -62,12 +68,13 @@ class TrialLog(Callback):
                   if k not in _SKIPPED and isinstance(v, (int, float)) and not isinstance(v, bool)}
         append_history(folder, {"launch": launch, "time_s": round(time_s, 3)} | values)
         if self.metric in values:
-            print(f"[sweep] {key} {self.time_attr} {values.get(self.time_attr)}: {self.metric} "
+            print(f"[{self.label}] {key} {self.time_attr} {values.get(self.time_attr)}: {self.metric} "
                   f"{values[self.metric]:.4g} ({time_s:.0f} s)", flush=True)
         if 0 < self.wall_budget_s <= time_s and read_stop_request(folder) is None:
             request_stop(folder, BY_BUDGET, values.get(self.time_attr))
-            print(f"[sweep] {key} reached its wall-time budget ({self.wall_budget_s:.0f} s): stopping it", flush=True)
+            print(f"[{self.label}] {key} reached its wall-time budget ({self.wall_budget_s:.0f} s): stopping it",
+                  flush=True)
 
     def on_trial_error(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
         """Say that a trial failed (its error is in its record and in the results table)."""
-        print(f"[sweep] {trial.config['key']} errored; the other trials go on", flush=True)
+        print(f"[{self.label}] {trial.config['key']} errored; the other trials go on", flush=True)

@@ -1,0 +1,77 @@
+"""A study completed launch after launch: each launch runs only those of its trials that have no result yet.
+
+The benchmark harnesses are studies of this kind (``sray bench accuracy``'s cells, ``sray stability``'s
+points): a fixed plan of which one launch asks for a part (``--cells``, ``--axes``), for a limited time
+(``--max-minutes``). Across launches the trials' own records (``trial_files``) are the store:
+
+* a finished trial (its result in its record) never runs again;
+* an errored trial runs again in the next launch that asks for it (its record is reopened, the error printed);
+  an unfinished one (a killed driver, a launch's time limit, a process that died) simply runs;
+* a result that an earlier harness stored in a file of its own is imported as a finished trial
+  (:func:`import_result`) and never computed again.
+
+Each launch is a new Tune experiment over the trials it runs (``run_study`` without ``resume``), so one launch's
+plan may differ from the last one's. Ray must be running when some trial is left to run (:func:`missing` says).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from sray.platform.sweep.engine import run_study
+from sray.platform.sweep.outcomes import TrialOutcome, collect_outcomes
+from sray.platform.sweep.study import PointFunction, StudySettings
+from sray.platform.sweep.trial_files import (ERRORED, FINISHED, TRIALS, TrialRecord, read_record, trial_folder,
+                                             write_record)
+
+
+def import_result(study: Path, key: str, result: dict[str, Any], source: Path) -> bool:
+    """Record ``result``, read from ``source``, as the finished trial ``key`` of ``study``, unless that trial has
+    finished already; True when it was imported."""
+    folder = trial_folder(study, key)
+    record = read_record(folder)
+    if record.outcome == FINISHED:
+        return False
+    folder.mkdir(parents=True, exist_ok=True)
+    write_record(folder, TrialRecord(launches=record.launches, outcome=FINISHED, result=result,
+                                     imported=str(source)))
+    return True
+
+
+def stored_results(study: Path) -> dict[str, dict[str, Any]]:
+    """The result of every finished trial in ``study`` (imported ones included), by key in sorted order."""
+    root = Path(study) / TRIALS
+    if not root.is_dir():
+        return {}
+    results = {}
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        record = read_record(folder)
+        if record.outcome == FINISHED and record.result is not None:
+            results[folder.name] = record.result
+    return results
+
+
+def missing(study: Path, plan: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
+    """The trials of ``plan`` without a finished outcome (errored, unfinished or never started), in plan order."""
+    return {k: dict(v) for k, v in plan.items() if read_record(trial_folder(study, k)).outcome != FINISHED}
+
+
+def run_missing(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction,
+                settings: StudySettings) -> list[TrialOutcome]:
+    """Run the trials of ``plan`` that have no result (errored ones again), none after ``settings.start_by``;
+    every trial's outcome in plan order (``TrialOutcome.result``: what it returned or what was imported)."""
+    todo = missing(settings.folder, plan)
+    ran: dict[str, TrialOutcome] = {}
+    if todo and not (settings.start_by and time.time() >= settings.start_by):
+        for key in todo:
+            folder = trial_folder(settings.folder, key)
+            record = read_record(folder)
+            if record.outcome == ERRORED:
+                print(f"[{settings.label}] {key} errored in an earlier launch ({record.error}): running it again",
+                      flush=True)
+                write_record(folder, TrialRecord(launches=record.launches))
+        ran = {o.key: o for o in run_study(todo, point_fn, settings)}
+    return [ran.get(o.key, o) for o in collect_outcomes(settings.folder, plan, {}, settings.time_attr)]
