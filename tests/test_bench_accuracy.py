@@ -1,6 +1,6 @@
 """``sray bench accuracy``: seed statistics and targets against hand-computed values, per-class IoU,
-and the resumable cells end to end on a toy preset (interrupted pretraining resumed, finished cells
-never run again)."""
+and the cells end to end on a toy preset as trials of the study engine (a failed cell recorded while the
+next one runs, then resumed from its checkpoint; finished and imported old-format cells never run again)."""
 
 from __future__ import annotations
 
@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.loader.augment import Augmentation
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy import run_accuracy_benchmark
-from sray.jobs.bench.accuracy_cells import TRAIN_SECONDS_FILE, class_iou, stored_cells
+from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_plan import LONG, PRESETS, Cell, Preset, World
 from sray.jobs.bench.accuracy_tables import budget_means, class_table, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir
@@ -149,53 +150,59 @@ def test_partial_tables_name_the_missing_cells(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_toy_benchmark_resumes_cells_and_never_reruns_a_finished_one(ray_session, tmp_path: Path,
-                                                                    monkeypatch) -> None:
+def test_toy_benchmark_cells_are_trials_that_never_rerun_and_import_old_cells(ray_session, tmp_path: Path,
+                                                                              monkeypatch) -> None:
+    from sray.platform.sweep import incremental
+    from sray.platform.sweep.trial_files import read_record, trial_folder
+
     presets = {"toy": TOY}
     out, doc = tmp_path / "run", tmp_path / "docs" / "benchmarks.md"
-    trained: list[str] = []
-    real_pretrain = accuracy_cells.pretrain
+    study = out / STUDY_DIR
+    old = _cell("full", 1, 0.123, [0.5] * len(SCANNET20)) | {"class_names": list(SCANNET20)}  # stored by the
+    # earlier harness (the world's label space): imported, never trained
+    (out / "cells").mkdir(parents=True)
+    (out / "cells" / "full-s1.json").write_text(json.dumps(old))
 
-    def counting_pretrain(cell: Cell, *args, **kwargs):
-        trained.append(cell.key)
-        return real_pretrain(cell, *args, **kwargs)
-
-    monkeypatch.setattr(accuracy_cells, "pretrain", counting_pretrain)
-
-    # 1. the long cell's pretraining is interrupted at step 2 of 4: the run fails, no cell is stored
+    # 1. the long cell's pretraining is interrupted at step 2 of 4: that cell is recorded as failed, the next
+    #    cell (2 steps, within the fault) still runs, and the old cell is read
     monkeypatch.setenv("SRAY_FAULTS", "train.stop_after_step=2")
-    with pytest.raises(RuntimeError, match="re-run `sray bench accuracy` to resume it"):
-        run_accuracy_benchmark("toy", out, doc, [Cell(LONG, 0)], fleet=False, presets=presets)
-    assert stored_cells(out) == {}
+    stored = run_accuracy_benchmark("toy", out, doc, [Cell(LONG, 0), Cell("full", 0)], fleet=False, presets=presets)
     monkeypatch.delenv("SRAY_FAULTS")
+    assert sorted(stored) == ["full-s0", "full-s1"] and stored["full-s1"] == old
+    assert "re-run `sray bench accuracy` to resume it" in cell_errors(out)["long-s0"]
+    assert read_record(trial_folder(study, "full-s1")).imported == str(out / "cells" / "full-s1.json")
+    assert not (out / "train" / "bench-full-s1").exists()
+    text = doc.read_text()
+    assert "Missing cells: long-s0." in text and "a re-run runs them again): long-s0." in text
+    assert "full | 2 | 2/2 |" in text and "12.30" in text  # the imported cell is in the table
+    full_s0 = read_record(trial_folder(study, "full-s0"))
+    full_s0_seconds = (out / "train" / "bench-full-s0" / TRAIN_SECONDS_FILE).read_text()
 
-    # 2. a re-run resumes it from its step-2 checkpoint and finishes it
-    stored = run_accuracy_benchmark("toy", out, doc, [Cell(LONG, 0)], fleet=False, presets=presets)
-    assert list(stored) == ["long-s0"] and stored["long-s0"]["resumed"] is True
-    assert stored["long-s0"]["steps"] == 4
+    # 2. a re-run resumes the failed cell from its step-2 checkpoint; the finished and imported cells are
+    #    neither trained nor evaluated again; then the fleet from the long model
+    stored = run_accuracy_benchmark("toy", out, doc, None, fleet=True, presets=presets)
+    assert set(stored) == {c.key for c in TOY.plan} and cell_errors(out) == {}
+    assert stored["long-s0"]["resumed"] is True and stored["long-s0"]["steps"] == 4
     total = json.loads((out / "train" / "bench-long-s0" / TRAIN_SECONDS_FILE).read_text())["seconds"]
     assert stored["long-s0"]["train_s"] == pytest.approx(total) and total > 0  # the interrupted run and the resume
-    history = json.loads((out / "cells" / "long-s0.json").read_text())
-    assert history == stored["long-s0"]
-
-    # 3. the full run trains only the missing cells, then the fleet from the long model
-    stored = run_accuracy_benchmark("toy", out, doc, None, fleet=True, presets=presets)
-    assert trained == ["long-s0", "long-s0", "full-s0", "full-s1"]
-    assert set(stored) == {c.key for c in TOY.plan}
-    assert stored["full-s0"]["resumed"] is False and stored["full-s0"]["steps"] == 2
+    assert len(read_record(trial_folder(study, "long-s0")).launches) == 2
+    assert read_record(trial_folder(study, "full-s0")) == full_s0 and stored["full-s1"] == old
+    assert (out / "train" / "bench-full-s0" / TRAIN_SECONDS_FILE).read_text() == full_s0_seconds
+    assert stored["full-s0"]["resumed"] is False and stored["full-s0"]["steps"] == 2 and stored["full-s0"]["seed"] == 0
     report = json.loads(Path(stored["full-s0"]["metrics_path"]).read_text())
     assert stored["full-s0"]["miou"] == pytest.approx(report["mean"]["dataset_level"]["miou"])
     assert stored["full-s0"]["class_iou"] == class_iou(report)
-    assert stored["full-s0"]["seed"] == 0 and stored["full-s1"]["seed"] == 1
-    assert stored["full-s0"]["miou"] != stored["full-s1"]["miou"] or \
-        stored["full-s0"]["psnr"] != stored["full-s1"]["psnr"]  # two seeds, two models
+    assert stored_cells(out) == stored
     text = doc.read_text()
-    assert "Missing cells: none." in text
-    assert "equal wall-clock budgets (toy)" in text
+    assert "Missing cells: none." in text and "Failed in their last run" not in text
+    assert "S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets" in text
     # the protocol under the tables: whole images, the preset's sources
     assert f"sources: {TOY.eval_sources} per query" in text and "pixels: whole images (stride 1)" in text
 
-    # 4. nothing left: a re-run trains nothing and rewrites the same tables
-    trained.clear()
-    run_accuracy_benchmark("toy", out, doc, None, fleet=True, presets=presets)
-    assert trained == []
+    # 3. nothing left: a re-run starts no trial (not even past a time limit) and rewrites the same tables
+    def refuse(*args, **kwargs):
+        raise AssertionError("a finished cell was run again")
+
+    monkeypatch.setattr(incremental, "run_study", refuse)
+    assert run_accuracy_benchmark("toy", out, doc, None, 0.0, fleet=True, presets=presets) == stored
+    assert "Missing cells: none." in doc.read_text()

@@ -175,12 +175,41 @@ def test_preset_world_pretrains_each_variant_once_and_reuses_it(tmp_path, monkey
 def test_points_are_reused_only_under_the_same_preset_definition(tmp_path) -> None:
     import dataclasses
 
-    from sray.platform.stability.suite import PRESET_FILE, Suite, check_preset_record
+    from sray.platform.stability.points_study import PRESET_FILE, check_preset_record, import_stored_points
 
-    suite = Suite(TOY, [], {}, 20, 255, tmp_path)
-    check_preset_record(suite)
-    check_preset_record(suite)
-    assert (tmp_path / "points" / "toy" / PRESET_FILE).exists()
-    changed = Suite(dataclasses.replace(TOY, eval_stride=TOY.eval_stride * 2), [], {}, 20, 255, tmp_path)
+    check_preset_record(tmp_path / "study", TOY)
+    check_preset_record(tmp_path / "study", TOY)
+    assert (tmp_path / "study" / PRESET_FILE).exists()
+    changed = dataclasses.replace(TOY, eval_stride=TOY.eval_stride * 2)
     with pytest.raises(ValueError, match="another definition of preset 'toy'; use a new --out"):
-        check_preset_record(changed)
+        check_preset_record(tmp_path / "study", changed)
+    old = tmp_path / "points" / "toy"  # the earlier store: refused the same way, never written to
+    check_preset_record(old, TOY)
+    with pytest.raises(ValueError, match="another definition of preset 'toy'"):
+        import_stored_points(tmp_path, changed, {})
+
+
+def test_point_records_come_from_the_study_and_an_errored_trial_is_a_failed_point(tmp_path) -> None:
+    """Each planned point reads its spec's trial: finished -> its result, errored -> failed with the error,
+    missing -> no records (the axis is not complete)."""
+    from sray.platform.stability.points_study import point_records, study_folder, study_plan
+    from sray.platform.sweep.incremental import import_result
+    from sray.platform.sweep.trial_files import TrialRecord, trial_folder, write_record
+
+    planned = planned_points(TOY, ["exposure"], ["sray"])
+    plan = study_plan(TOY, planned)
+    assert len(plan) == 1 + TOY.seeds  # the clean point once, the perturbed level per seed
+    study = study_folder(tmp_path, TOY)
+    clean, *seeded = plan
+    ok = {"status": "ok", "miou": 40.0, "psnr": 20.0, "error": None}
+    for key in (clean, *seeded[:-1]):
+        import_result(study, key, ok, tmp_path / "x.json")
+    assert point_records(tmp_path, TOY, planned) is None  # the last seed is missing
+    assert point_records(tmp_path, TOY, planned, {seeded[-1]: "RayActorError: died"})[-1]["error"] == \
+        "RayActorError: died"
+    (trial_folder(study, seeded[-1])).mkdir(parents=True)
+    write_record(trial_folder(study, seeded[-1]), TrialRecord([1.0], "errored", "MemoryError: out"))
+    records = point_records(tmp_path, TOY, planned)
+    assert [(r["level"], r["seed"], r["status"], r["miou"]) for r in records] == \
+        [(0, None, "ok", 40.0), (2, 0, "ok", 40.0), (2, 1, "ok", 40.0), (2, 2, "failed", None)]
+    assert records[-1]["error"] == "MemoryError: out" and records[0]["x"] == 0.0 and records[-1]["x"] is None

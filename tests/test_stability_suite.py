@@ -1,6 +1,7 @@
 """``sray stability`` end to end on the toy preset, from tiny shards and two tiny checkpoints (full CRA and
 ``attention=none``): every axis and method, the clean point against ``sray eval``, an injected NaN
-recorded as a failure while the rest completes, resuming without recomputing, and the tracked runs.
+recorded as a failure while the rest completes, a point of the earlier store imported, resuming without
+running any trial again, and the tracked runs.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ from sray.platform.stability.axes import AXES  # noqa: E402
 from sray.platform.stability.presets import PRESETS  # noqa: E402
 
 POISONED = "sray/image_noise/30"
+OLD_POINT = "semantic-nerf_pool-d0-n0_blur-7_fp32_s1"
+"""A point the earlier store holds (``points/toy/<key>.json``): imported, never computed."""
 
 
 @pytest.fixture(scope="module")
@@ -38,9 +41,16 @@ def _run(shards: Path, checkpoints: dict[str, Path], out: Path, doc: Path, uri: 
                  "--tracking-uri", uri, "--device", "cpu", *extra])
 
 
-def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(tiny_shards, toy_checkpoints, mlflow_uri,
-                                                                       tmp_path, monkeypatch) -> None:
+def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(ray_session, tiny_shards, toy_checkpoints,
+                                                                       mlflow_uri, tmp_path, monkeypatch) -> None:
+    import dataclasses
+
     out, doc = tmp_path / "suite", tmp_path / "benchmarks.md"
+    old_store = out / "points" / "toy"
+    old_store.mkdir(parents=True)
+    (old_store / "preset.json").write_text(json.dumps(dataclasses.asdict(PRESETS["toy"])))
+    old = {"miou": 12.5, "psnr": 9.5, "nonfinite_rays": 0, "status": "ok", "error": None, "spec": OLD_POINT}
+    (old_store / f"{OLD_POINT}.json").write_text(json.dumps(old))
     with injected_faults(f"stability.nan_points={POISONED}"):
         assert _run(tiny_shards, toy_checkpoints, out, doc, mlflow_uri) == 0
         result = json.loads((out / "stability.json").read_text())
@@ -53,6 +63,10 @@ def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(tiny_shar
         assert all(p["status"] == "failed" and p["error"].startswith("NonFiniteOutput") for p in poisoned)
         others = [p for p in points if p not in poisoned]
         assert others and all(p["status"] == "ok" and p["miou"] is not None for p in others)
+        [imported] = [p for p in points if p["key"] == OLD_POINT]
+        assert (imported["axis"], imported["level"], imported["seed"], imported["miou"]) == ("blur", 7, 1, 12.5)
+        record = json.loads((out / "study" / "toy" / "trials" / OLD_POINT / "trial.json").read_text())
+        assert record["imported"] == str(old_store / f"{OLD_POINT}.json") and record["launches"] == []
         assert any(line.startswith("image_noise / sray: half the clean mIoU lost at 15 (interpolated")
                    for line in result["breaking_points"])
         assert "| 30 | failed |" in (out / "tables" / "image_noise.md").read_text()
@@ -63,13 +77,13 @@ def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(tiny_shar
         assert text.count("## Stability, toy (") == 1  # one section: a table per axis and the breaking points
         assert text.count("\n### ") == len(AXES) + 1
 
-        # a re-run finds every point stored and computes none
-        from sray.platform.stability import suite as suite_module
+        # a re-run finds every point stored and starts no trial
+        from sray.platform.sweep import incremental
 
         def refuse(*args, **kwargs):
             raise AssertionError("a stored point was computed again")
 
-        monkeypatch.setattr(suite_module, "compute_spec", refuse)
+        monkeypatch.setattr(incremental, "run_study", refuse)
         assert _run(tiny_shards, toy_checkpoints, out, doc, mlflow_uri, "--axes", "blur") == 0
         again = json.loads((out / "stability.json").read_text())
         assert [(p["key"], p["miou"]) for p in again["points"]] == [(p["key"], p["miou"]) for p in points]
@@ -89,16 +103,11 @@ def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(tiny_shar
     history = client.get_metric_history(noise.info.run_id, "sray-no-cra/miou")
     assert [m.step for m in history] == [0, 1]
 
-
-def test_clean_point_equals_sray_eval(tiny_shards, toy_checkpoints, mlflow_uri, tmp_path) -> None:
+    # the clean point is `sray eval` on the same data, stride and sources
     from sray.platform.eval.zero_shot import evaluate_checkpoint
 
     preset = PRESETS["toy"]
-    out = tmp_path / "suite"
-    assert _run(tiny_shards, toy_checkpoints, out, tmp_path / "doc.md", mlflow_uri, "--axes", "pose_noise",
-                "--methods", "sray") == 0
-    points = json.loads((out / "stability.json").read_text())["points"]
-    clean = next(p for p in points if p["level"] == 0)
+    clean = next(p for p in points if (p["axis"], p["method"], p["level"]) == ("pose_noise", "sray", 0))
     report = evaluate_checkpoint(toy_checkpoints["full"], tiny_shards, None, tmp_path / "eval",
                                  n_source=preset.n_source, stride=preset.eval_stride, tracking_uri=mlflow_uri,
                                  progress=False)

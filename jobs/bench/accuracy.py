@@ -2,12 +2,13 @@
 
 1. a procedural world (train scenes + at least 4 unseen test scenes) -> shards, reused when present;
 2. **cells**, each a (variant, seed) pretraining followed by a zero-shot evaluation on the unseen
-   scenes with 8 source views and whole images (:mod:`sray.jobs.bench.accuracy_cells`): the
-   ``long`` cell pretrains the preset's recipe for its whole budget (``synth-cpu-hour`` here), the
-   attention ablation (full CRA, cross-only, intra-only, none) pretrains the same recipe for a shorter
-   budget with several seeds. A finished cell is stored as one JSON file; a re-run fills only the
-   missing cells and resumes an interrupted pretraining from its last checkpoint, so the tables can
-   be completed over several runs (``--cells`` and ``--max-minutes`` pick the piece to run);
+   scenes with 8 source views and whole images, each a trial of the study engine
+   (:mod:`sray.jobs.bench.accuracy_cells`): the ``long`` cell pretrains the preset's recipe for its whole
+   budget (``synth-cpu-hour`` here), the attention ablation (full CRA, cross-only, intra-only, none)
+   pretrains the same recipe for a shorter budget with several seeds. A finished cell's record is kept in
+   its trial's record; a re-run runs only the cells without one (a failed cell again) and resumes an
+   interrupted pretraining from its last checkpoint, so the tables can be completed over several runs
+   (``--cells`` and ``--max-minutes`` pick the piece to run; no cell starts after the limit);
 3. a finetune fleet on the unseen scenes from the ``long`` model: S-Ray finetuning against
    Semantic-NeRF from scratch under the same wall-clock budget, read off at equal budgets;
 4. tables (ablation with seed spread, per-class IoU, equal budgets, the targets) and a chart, written
@@ -32,37 +33,37 @@ from sray.jobs.bench.accuracy_step_cost import read_step_times
 def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] | None = None,
                            max_minutes: float | None = None, fleet: bool = True,
                            presets: dict[str, Preset] | None = None, step_times: bool = False) -> dict[str, dict]:
-    """Run the missing cells (``cells``: a subset of the plan; default all) and, when the long model is
-    stored, the fleet; with ``step_times``, time a pretraining step of every stored variant side by side;
-    then rewrite the tables in ``doc`` from every stored cell and the stored step times. No new cell
-    starts after ``max_minutes``. Returns the stored cells by key."""
-    from sray.jobs.bench.accuracy_cells import run_cell, stored_cells
+    """Run the missing cells (``cells``: a subset of the plan; default all; a cell that raises is recorded
+    and the next ones run) and, when the long model is stored, the fleet; with ``step_times``, time a
+    pretraining step of every stored variant side by side; then rewrite the tables in ``doc`` from every
+    stored cell and the stored step times. No new cell starts after ``max_minutes``. Returns the stored
+    cells by key."""
+    from sray.jobs.bench.accuracy_cells import cell_errors, import_old_cells, run_cells, stored_cells
     from sray.jobs.bench.accuracy_tables import write_tables
     from sray.platform.finetune.fleet import unseen_scenes
 
     p = (presets or PRESETS)[preset]
     out = out.resolve()
     tracking_uri = f"sqlite:///{out / 'mlflow.db'}"
-    t0 = time.perf_counter()
+    start_by = 0.0 if max_minutes is None else time.time() + 60 * max_minutes
     shards = make_world(p.world, out)
     scenes = unseen_scenes(shards)
+    imported = import_old_cells(out)
+    if imported:
+        print(f"[bench] cells {', '.join(imported)} read from {out / 'cells'} (not computed again)", flush=True)
     wanted = p.plan if cells is None else tuple(c for c in p.plan if c in set(cells))
-    for cell in wanted:
-        if cell.key in stored_cells(out):
-            continue
-        if max_minutes is not None and (time.perf_counter() - t0) / 60 >= max_minutes:
-            print(f"[bench] {max_minutes:g} min reached: cell {cell.key} and later ones are left for the next run",
-                  flush=True)
-            break
-        run_cell(cell, p, shards, scenes, out, tracking_uri)
+    outcomes = run_cells(wanted, p, shards, scenes, out, tracking_uri, start_by)
+    over = bool(start_by) and time.time() >= start_by
+    left = [o.key for o in outcomes if o.reason == "unfinished"]
+    if over and left:
+        print(f"[bench] {max_minutes:g} min reached: cells {', '.join(left)} are left for the next run", flush=True)
     stored = stored_cells(out)
     long_cell = next((c for c in p.plan if c.variant == LONG and c.key in stored), None)
-    over = max_minutes is not None and (time.perf_counter() - t0) / 60 >= max_minutes
     if fleet and long_cell is not None and not (out / "fleet" / "done.json").exists() and not over:
         _run_fleet(p, Path(stored[long_cell.key]["checkpoint"]), shards, scenes, out, tracking_uri)
     if step_times and stored:
         _time_steps(p, stored, out)
-    write_tables(preset, p, stored, out / "fleet", doc, read_step_times(out))
+    write_tables(preset, p, stored, out / "fleet", doc, read_step_times(out), cell_errors(out))
     return stored
 
 

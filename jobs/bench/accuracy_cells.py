@@ -1,29 +1,46 @@
-"""One cell of ``sray bench accuracy``: pretrain a (variant, seed), evaluate it zero-shot, store the result.
+"""The cells of ``sray bench accuracy``, each a trial of the study engine: pretrain a (variant, seed), evaluate it
+zero-shot, return the cell's record.
+
+The cells are a study under ``<out>/study`` (``sray.platform.sweep.incremental``): the record a cell returns is
+kept in its trial's record (``study/trials/<key>/trial.json``) and the cell counts as done once it is there; a
+later run never trains or evaluates it again. A cell that raises is recorded with its error and the next
+cells run; a later run runs it again. Cells stored by the benchmark's earlier harness
+(``<out>/cells/<key>.json``) are imported as finished trials, never recomputed.
 
 A cell's training job is named ``bench-<variant>-s<seed>`` under ``<out>/train``; a job left unfinished
 by an earlier run resumes from its latest checkpoint, a finished one is not trained again. The cell
 evaluates the job's **last** checkpoint (the end of its budget; no checkpoint is picked on the test
-scenes) and stores ``<out>/cells/<key>.json`` in one atomic write: the cell counts as done only once
-that file exists.
+scenes). The cells run one at a time, one after another in one trial process (Tune's ``reuse_actors``) that
+only drives them: each cell's pretraining runs in its own Ray Train workers, which reserve the CPUs and GPUs;
+its evaluation runs in the trial process once they have ended, with as many torch threads as they had CPUs.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 import time
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sray.jobs.bench.accuracy_plan import EXPERIMENT, LONG, VARIANT_SETTINGS, Cell, Preset
+from sray.platform.sweep.capacity import TRIAL_RESOURCES
+from sray.platform.sweep.incremental import import_result, missing, run_missing, stored_results
+from sray.platform.sweep.outcomes import TrialOutcome
+from sray.platform.sweep.study import StudySettings, TrialContext
+from sray.platform.sweep.trial_files import ERRORED, TRIALS, read_record
 
 if TYPE_CHECKING:
     from sray.platform.config.train_config import TrainConfig
 
-CELLS_DIR = "cells"
-"""Sub-folder of the benchmark's work folder holding one JSON file per finished cell."""
+STUDY_DIR = "study"
+"""Sub-folder of the benchmark's work folder holding the cells' study (one trial per cell key)."""
+OLD_CELLS_DIR = "cells"
+"""Sub-folder where the benchmark's earlier harness stored one JSON file per finished cell (imported)."""
 HELD_OUT_SCENES = 8
 """Training scenes whose held-out views each cell also scores (fitting, beside the zero-shot transfer)."""
 TRAIN_SECONDS_FILE = "bench_train_seconds.json"
@@ -32,8 +49,6 @@ TRAIN_SECONDS_FILE = "bench_train_seconds.json"
 
 def _train_seconds(job_dir: Path, add: float = 0.0) -> float:
     """The job's training wall seconds so far, after adding ``add`` (stored in :data:`TRAIN_SECONDS_FILE`)."""
-    import json
-
     path = job_dir / TRAIN_SECONDS_FILE
     total = (json.loads(path.read_text())["seconds"] if path.exists() else 0.0) + add
     if add:
@@ -42,11 +57,23 @@ def _train_seconds(job_dir: Path, add: float = 0.0) -> float:
 
 
 def stored_cells(out: Path) -> dict[str, dict[str, Any]]:
-    """Every finished cell under ``out``, by key."""
-    import json
+    """Every finished cell's record under ``out`` (imported ones included), by key."""
+    return stored_results(Path(out) / STUDY_DIR)
 
-    folder = Path(out) / CELLS_DIR
-    return {p.stem: json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))} if folder.is_dir() else {}
+
+def cell_errors(out: Path) -> dict[str, str]:
+    """Key -> error of every cell whose last launch raised (the next run that asks for it runs it again)."""
+    root = Path(out) / STUDY_DIR / TRIALS
+    records = {p.name: read_record(p) for p in sorted(root.iterdir()) if p.is_dir()} if root.is_dir() else {}
+    return {key: r.error for key, r in records.items() if r.outcome == ERRORED}
+
+
+def import_old_cells(out: Path) -> list[str]:
+    """Import every ``<out>/cells/<key>.json`` of the earlier harness as the finished trial ``key`` (unless the
+    study has finished that cell already); the keys imported."""
+    folder = Path(out) / OLD_CELLS_DIR
+    files = sorted(folder.glob("*.json")) if folder.is_dir() else []
+    return [p.stem for p in files if import_result(Path(out) / STUDY_DIR, p.stem, json.loads(p.read_text()), p)]
 
 
 def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
@@ -125,13 +152,17 @@ def class_iou(report: dict[str, Any]) -> list[float | None]:
 
 
 def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, tracking_uri: str) -> dict[str, Any]:
-    """Pretrain and evaluate ``cell``; store and return its record (``stored_cells``)."""
+    """Pretrain and evaluate ``cell``; return its record (what ``stored_cells`` gives once its trial ends)."""
+    import torch
+
     from sray.data_tools.shards.manifest import read_manifest
     from sray.platform.checkpoints.folders import load_checkpoint, read_meta
-    from sray.platform.eval.zero_shot import evaluate_checkpoint, write_json_atomic
+    from sray.platform.eval.zero_shot import evaluate_checkpoint
 
     print(f"[bench] cell {cell.key}: pretraining", flush=True)
     checkpoint, train_s, resumed = pretrain(cell, p, shards, out, tracking_uri)
+    run = cell_config(cell, p, shards, out, tracking_uri).run
+    torch.set_num_threads(max(1, int(run.workers * run.cpus_per_worker)))  # the CPUs its workers held
     print(f"[bench] cell {cell.key}: zero-shot evaluation of {checkpoint}", flush=True)
     start = time.perf_counter()
     report = evaluate_checkpoint(checkpoint, shards, scenes, out / "eval" / cell.key, n_source=p.eval_sources,
@@ -162,7 +193,31 @@ def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, 
         "class_iou": class_iou(report), "class_names": list(first["class_names"]),
         "protocol": report["protocol"], "metrics_path": report["metrics_path"],
     }
-    write_json_atomic(record, out / CELLS_DIR / f"{cell.key}.json")
     print(f"[bench] cell {cell.key}: zero-shot mIoU {100 * record['miou']:.2f}%, held-out views of "
           f"{len(seen)} training scenes {100 * record['heldout_miou']:.2f}%", flush=True)
     return record
+
+
+def cell_trial(point: dict[str, Any], ctx: TrialContext, preset: Preset, shards: str, scenes: list[str], out: str,
+               tracking_uri: str) -> dict[str, Any]:
+    """The point function of the cells' study: run the cell ``point`` names (``variant``, ``seed``)."""
+    record = run_cell(Cell(point["variant"], int(point["seed"])), preset, Path(shards), scenes, Path(out),
+                      tracking_uri)
+    ctx.report({"miou": float(record["miou"]), "heldout_miou": float(record["heldout_miou"])})
+    return record
+
+
+def run_cells(cells: tuple[Cell, ...], p: Preset, shards: Path, scenes: list[str], out: Path, tracking_uri: str,
+              start_by: float = 0.0) -> list[TrialOutcome]:
+    """Run the cells without a stored record, in plan order, one at a time; none starts after ``start_by``
+    (Unix time, 0 = no limit). Returns every cell's outcome."""
+    from sray.platform.train.launcher import init_ray
+
+    plan = {c.key: {"variant": c.variant, "seed": c.seed} for c in cells}
+    settings = StudySettings(folder=Path(out) / STUDY_DIR, metric="miou", mode="max", max_concurrent=1,
+                             trial_resources=TRIAL_RESOURCES, start_by=start_by, reuse_actors=True, label="bench")
+    if missing(settings.folder, plan):
+        init_ray(None)
+    point_fn = partial(cell_trial, preset=p, shards=str(shards), scenes=list(scenes), out=str(out),
+                       tracking_uri=tracking_uri)
+    return run_missing(plan, point_fn, settings)

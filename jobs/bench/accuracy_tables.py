@@ -191,10 +191,11 @@ def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str
 
 
 def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], fleet_dir: Path, doc: Path,
-                 step_times: dict[str, Any] | None = None) -> None:
+                 step_times: dict[str, Any] | None = None, errors: dict[str, str] | None = None) -> None:
     """Write the benchmark's tables into its section of ``doc`` (replacing earlier ones of this preset and
     device) and its chart(s) beside their data (``doc.bench_dir``); ``step_times`` (as
-    ``accuracy_step_cost`` stores them) adds the step-time column and the mIoU-against-step-time chart."""
+    ``accuracy_step_cost`` stores them) adds the step-time column and the mIoU-against-step-time chart;
+    ``errors`` (cell key -> error of its last launch) names the missing cells that failed."""
     from sray.platform.common.eval_protocol import caption_lines
     from sray.platform.finetune.methods.registry import get_method
     from sray.platform.viz.curves import read_fleet_results
@@ -206,6 +207,7 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
     captions = caption_lines((variant_label(c["variant"], p), c["protocol"])
                              for c in sorted(stored.values(), key=lambda c: c["cell"]))
     missing = [c.key for c in p.plan if c.key not in stored]
+    failed = [key for key in errors or {} if key in missing]
     links = []
     if stored:
         groups = by_variant(p, stored)
@@ -228,6 +230,8 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
              "sample standard deviation over seeds. Pretrain/eval minutes: wall time on this machine "
              "(a resumed pretraining counts every run that trained it and ended).",
              "Missing cells: " + (", ".join(missing) if missing else "none") + ".",
+             *([f"Failed in their last run (the error is in the cell's trial record, `study/trials/<cell>/"
+                f"trial.json`; a re-run runs them again): {', '.join(failed)}."] if failed else []),
              "Targets:", *targets(p, stored, sray_at_60), "", *links]
     header, rows = seed_table(p, stored, step_times)
     record(bench, "Zero-shot with seeds", _table(header, rows, captions), doc, "\n".join(notes))

@@ -125,6 +125,7 @@ def _bench_segmenter(args: argparse.Namespace) -> int:
 
 def _bench_accuracy(args: argparse.Namespace) -> int:
     from sray.jobs.bench.accuracy import run_accuracy_benchmark
+    from sray.jobs.bench.accuracy_cells import cell_errors
     from sray.jobs.bench.accuracy_plan import PRESETS, Cell
 
     try:
@@ -139,7 +140,11 @@ def _bench_accuracy(args: argparse.Namespace) -> int:
     out = args.out or Path("outputs/bench-accuracy") / args.preset
     run_accuracy_benchmark(args.preset, out, args.doc, cells, args.max_minutes, fleet=not args.no_fleet,
                            step_times=args.step_times)
-    return 0
+    failed = cell_errors(out)
+    if failed:
+        print(f"sray bench accuracy: cells {', '.join(failed)} failed (errors in the tables); a re-run runs them "
+              "again", file=sys.stderr)
+    return 1 if failed else 0
 
 
 def _bench_profile(args: argparse.Namespace) -> int:

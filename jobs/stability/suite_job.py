@@ -57,15 +57,14 @@ class StabilityJob:
                    experiment=args.experiment, device=args.device)
 
 
-def _load_nets(checkpoints: dict[str, Path], device: Any) -> tuple[dict[str, Any], int | None, int | None, str]:
-    """The checkpoints' models in eval mode, their label space (classes, ignore id) and source inputs
-    (``model.inputs``, ``rgb`` when there is none); ValueError when the checkpoints disagree on either."""
+def _check_checkpoints(checkpoints: dict[str, Path]) -> tuple[int | None, int | None, str]:
+    """The checkpoints' label space (classes, ignore id) and source inputs (``model.inputs``, ``rgb`` when there
+    is none); ValueError when the checkpoints disagree on either."""
     from sray.platform.checkpoints.model_loading import model_from_checkpoint
 
-    nets, classes, inputs = {}, set(), set()
-    for method, path in checkpoints.items():
-        net, cfg = model_from_checkpoint(path)
-        nets[method] = net.to(device).eval()
+    classes, inputs = set(), set()
+    for path in checkpoints.values():
+        _, cfg = model_from_checkpoint(path)
         classes.add((cfg.model.n_classes, cfg.model.ignore_id))
         inputs.add(cfg.model.inputs)
     if len(classes) > 1:
@@ -75,7 +74,7 @@ def _load_nets(checkpoints: dict[str, Path], device: Any) -> tuple[dict[str, Any
         raise ValueError(f"checkpoints {sorted(map(str, checkpoints.values()))} mix model.inputs {sorted(inputs)}; "
                          "compare variants trained with the same inputs")
     n_classes, ignore_id = next(iter(classes)) if classes else (None, None)
-    return nets, n_classes, ignore_id, next(iter(inputs)) if inputs else "rgb"
+    return n_classes, ignore_id, next(iter(inputs)) if inputs else "rgb"
 
 
 def run_job(job: StabilityJob) -> dict[str, Any]:
@@ -86,9 +85,10 @@ def run_job(job: StabilityJob) -> dict[str, Any]:
     from sray.jobs.stability.world import world_checkpoints, world_shards
     from sray.platform.common.eval_protocol import EvalProtocol
     from sray.platform.eval.zero_shot import select_scenes
+    from sray.platform.stability.point_trial import SuiteInputs
+    from sray.platform.stability.points_study import point_records, run_points
     from sray.platform.stability.report import track, write_outputs
-    from sray.platform.stability.stress_scenes import load_scenes
-    from sray.platform.stability.suite import Suite, planned_points, run_points, stored_records
+    from sray.platform.stability.suite import planned_points
     from sray.platform.tracking.registry import get_tracker
 
     job.out.mkdir(parents=True, exist_ok=True)
@@ -99,16 +99,17 @@ def run_job(job: StabilityJob) -> dict[str, Any]:
         checkpoints = world_checkpoints(job.preset, shards, job.out, tracking_uri, job.methods)
     names, metas = select_scenes(shards, job.scenes)
     device = torch.device(job.device or ("cuda" if torch.cuda.is_available() else "cpu"))
-    nets, n_classes, ignore_id, inputs = _load_nets(checkpoints, device)
+    n_classes, ignore_id, inputs = _check_checkpoints(checkpoints)
     scene_classes = {len(m["class_names"]) for m in metas.values()}
     if n_classes is not None and scene_classes != {n_classes}:
         raise ValueError(f"{shards / 'manifest.json'}: scenes have {sorted(scene_classes)} classes, the checkpoints "
                          f"predict {n_classes}; score them on data of their own label space")
-    suite = Suite(job.preset, load_scenes(shards, names), nets, n_classes or scene_classes.pop(),
-                  IGNORE_ID if ignore_id is None else ignore_id, job.out, device)
-    run_points(suite, job.axes, job.methods)
-    done = [a for a in AXES if stored_records(suite, planned_points(job.preset, [a], job.methods))]
-    records = stored_records(suite, planned_points(job.preset, done, job.methods))
+    suite = SuiteInputs(job.preset, str(shards), tuple(names), tuple((m, str(p)) for m, p in checkpoints.items()),
+                        n_classes or scene_classes.pop(), IGNORE_ID if ignore_id is None else ignore_id, str(device))
+    outcomes = run_points(job.out, planned_points(job.preset, job.axes, job.methods), suite)
+    errors = {o.key: o.note for o in outcomes if o.reason == "errored"}
+    done = [a for a in AXES if point_records(job.out, job.preset, planned_points(job.preset, [a], job.methods), errors)]
+    records = point_records(job.out, job.preset, planned_points(job.preset, done, job.methods), errors)
     protocol = EvalProtocol.from_shards(shards, job.preset.n_source, job.preset.eval_stride, inputs).describe()
     extra = {"shards": str(shards), "checkpoints": {m: str(p) for m, p in checkpoints.items()},
              "scenes": names, "methods": job.methods}

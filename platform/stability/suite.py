@@ -1,10 +1,10 @@
-"""The stability suite's loop: every (axis, method, level, seed) a run asks for, each a stored result.
+"""What the stability suite computes: every (axis, method, level, seed) a run asks for, and one point's result.
 
-A point is computed once per :class:`~sray.platform.stability.point_spec.PointSpec` and stored at
-``<out>/points/<spec key>.json`` the moment it finishes (atomically), so an interrupted suite, or one
-run axis by axis, computes only what is missing when run again. A method that raises, diverges or
-outputs non-finite values at a point is recorded there as ``failed`` with a one-line reason, and the
-suite goes on.
+Points that show a method the same input share one :class:`~sray.platform.stability.point_spec.PointSpec`,
+computed once: :func:`point_key` names it (the spec's key), and the suite's study
+(:mod:`sray.platform.stability.points_study`) runs one trial per key on the study engine. A method that
+raises, diverges or outputs non-finite values at a point is recorded there as ``failed`` with a one-line
+reason (:func:`compute_spec` never raises), and the suite goes on.
 
 A point record (what :mod:`sray.platform.stability.summary` reads): ``axis``, ``method``, ``level``,
 ``seed`` (None for a deterministic point, computed once), ``status``, ``miou`` and ``psnr`` (dataset-
@@ -15,17 +15,13 @@ spec's result (non-finite rays, fp32 agreement, unseen fraction, steps, per-scen
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import torch
 from torch import nn
 
-from sray.data_tools.atomic import atomic_write_json
 from sray.platform.common.fault_hook import poisoned_point
 from sray.platform.stability.axes import AXES, SOURCE_METHODS
 from sray.platform.stability.nerf_points import nerf_point
@@ -34,13 +30,10 @@ from sray.platform.stability.presets import Preset
 from sray.platform.stability.sray_points import sray_point
 from sray.platform.stability.stress_scenes import StressScene
 
-PRESET_FILE = "preset.json"
-"""The preset definition the stored points of a folder were made with."""
-
 
 @dataclass
 class Suite:
-    """What one suite run stresses, with what, and where its results go."""
+    """What the suite stresses, and with what."""
 
     preset: Preset
     scenes: list[StressScene]
@@ -48,25 +41,7 @@ class Suite:
     """S-Ray method name -> its pretrained network (in eval mode, on ``device``)."""
     n_classes: int
     ignore_id: int
-    out_dir: Path
     device: torch.device = field(default_factory=lambda: torch.device("cpu"))
-
-    def points_dir(self) -> Path:
-        """Where each spec's result is stored: one folder per preset name."""
-        return self.out_dir / "points" / self.preset.name
-
-
-def check_preset_record(suite: Suite) -> None:
-    """Record the preset the stored points were made with (``preset.json``) or refuse a changed one: a stored
-    point is only reused under the same levels, budgets and evaluation settings."""
-    path = suite.points_dir() / PRESET_FILE
-    now = json.loads(json.dumps(dataclasses.asdict(suite.preset)))
-    if path.exists():
-        if json.loads(path.read_text()) != now:
-            raise ValueError(f"{path}: the points in {path.parent} were made with another definition of preset "
-                             f"{suite.preset.name!r}; use a new --out, or delete that folder to start again")
-        return
-    atomic_write_json(path, now)
 
 
 def planned_points(preset: Preset, axes: list[str], methods: list[str]) -> list[tuple[str, str, Any, int | None]]:
@@ -115,45 +90,16 @@ def compute_spec(suite: Suite, spec: PointSpec, poison: bool) -> dict[str, Any]:
     return {**result, "spec": spec.key(), "wall_s": time.perf_counter() - start}
 
 
-def _stored_at(suite: Suite, axis: str, method: str, level: Any, seed: int | None) -> tuple[PointSpec, bool, Path]:
-    """The point's spec, whether a fault drill poisons it, and the file its result is stored in."""
-    spec = point_spec(axis, method, level, 0 if seed is None else seed, suite.preset)
+def point_key(preset: Preset, axis: str, method: str, level: Any, seed: int | None) -> tuple[str, PointSpec, bool]:
+    """The key a point's result is stored under (its spec's key, ``_poisoned`` added when a fault drill poisons
+    it), its spec, and whether it is poisoned."""
+    spec = point_spec(axis, method, level, 0 if seed is None else seed, preset)
     poison = poisoned_point(method, axis, level)
-    return spec, poison, suite.points_dir() / f"{spec.key()}{'_poisoned' if poison else ''}.json"
+    return f"{spec.key()}{'_poisoned' if poison else ''}", spec, poison
 
 
-def _record(axis: str, method: str, level: Any, seed: int | None, result: dict[str, Any], path: Path) -> dict[str, Any]:
+def point_record(axis: str, method: str, level: Any, seed: int | None, result: dict[str, Any],
+                 key: str) -> dict[str, Any]:
+    """The record of one point (see the module docstring) from the result of its spec."""
     return {**result, "axis": axis, "method": method, "level": level, "seed": seed,
-            "x": _x(axis, level, result) if result["status"] == "ok" else None, "key": path.stem}
-
-
-def run_points(suite: Suite, axes: list[str], methods: list[str], progress: bool = True) -> list[dict[str, Any]]:
-    """Every planned point's record, computing (and storing) the specs not stored yet."""
-    from tqdm import tqdm
-
-    planned = planned_points(suite.preset, axes, methods)
-    check_preset_record(suite)
-    records, bar = [], tqdm(total=len(planned), desc="stability points", unit="point", disable=not progress)
-    for axis, method, level, seed in planned:
-        spec, poison, path = _stored_at(suite, axis, method, level, seed)
-        if path.exists():
-            result = json.loads(path.read_text())
-        else:
-            bar.set_postfix_str(f"{axis}/{method}/{level}")
-            result = compute_spec(suite, spec, poison)
-            atomic_write_json(path, result)
-        records.append(_record(axis, method, level, seed, result, path))
-        bar.update(1)
-    bar.close()
-    return records
-
-
-def stored_records(suite: Suite, planned: list[tuple[str, str, Any, int | None]]) -> list[dict[str, Any]] | None:
-    """The records of ``planned`` points from storage alone; None when any of them is not stored yet."""
-    records = []
-    for axis, method, level, seed in planned:
-        _, _, path = _stored_at(suite, axis, method, level, seed)
-        if not path.exists():
-            return None
-        records.append(_record(axis, method, level, seed, json.loads(path.read_text()), path))
-    return records
+            "x": _x(axis, level, result) if result["status"] == "ok" else None, "key": key}
