@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
-from sray.data_tools.synth.world import World, make_world
+from sray.data_tools.synth.world import make_world
 from sray.platform.stability.presets import Preset
 
 VARIANT_ATTENTION = {"sray": "full", "sray-no-cra": "none"}
@@ -24,10 +24,7 @@ CHECKPOINTS_FILE = "checkpoints.json"
 def world_shards(preset: Preset, out: Path) -> Path:
     """Generate the preset's procedural scenes (seed 0) and shard them; a world already sharded under ``out`` is
     reused as it is (its checkpoints were pretrained on it), even if the generator has changed since."""
-    w = preset.world
-    world = World(train_scenes=w.train_scenes, test_scenes=w.test_scenes, views=w.views, height=w.height,
-                  width=w.width, seed=0)
-    return make_world(world, out / "world")
+    return make_world(preset.world.scenes, out / "world")
 
 
 def pretrain(method: str, preset: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:

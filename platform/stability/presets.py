@@ -12,19 +12,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from sray.data_tools.synth.world import World
 from sray.platform.config.fleet_config import SemanticNeRFSettings
 
 
 @dataclass(frozen=True)
-class World:
+class PresetWorld:
     """The procedural scenes a preset generates and how it pretrains S-Ray on them."""
 
-    train_scenes: int
-    test_scenes: int
-    views: int
-    """Views per scene (a test scene needs at least 20: 8 source, 8 finetune, 4 test)."""
-    height: int
-    width: int
+    scenes: World
+    """The procedural world (world seed 0)."""
     pretrain_steps: int
     rays: int
     """Rays per pretraining step."""
@@ -45,7 +42,7 @@ class Preset:
     """Axis -> levels, harmless first (``precision``: names)."""
     seeds: int
     """Perturbation seeds averaged at every point that draws one (at least 3)."""
-    world: World
+    world: PresetWorld
     n_source: int
     """Fixed source views of the clean point and of every perturbation axis (the paper's protocol: 8)."""
     unseen_n_source: int
@@ -73,7 +70,7 @@ PRESETS: dict[str, Preset] = {p.name: p for p in (
     Preset("toy", {"source_views": (3, 1), "unseen_rays": (0, 3), "pose_noise": (0, 5), "image_noise": (0, 30),
                    "blur": (1, 7), "exposure": (0, 2), "jpeg": (100, 10), "occlusion": (0.0, 0.5),
                    "precision": ("fp32", "bf16")}, seeds=3,
-           world=World(train_scenes=1, test_scenes=1, views=20, height=32, width=40, pretrain_steps=6, rays=64,
+           world=PresetWorld(World(1, 1, 20, 32, 40), pretrain_steps=6, rays=64,
                        n_coarse=6, n_fine=6, train_n_source=3, workers=1),
            n_source=3, unseen_n_source=2, eval_stride=4, chunk=4096, nerf_scenes=1, nerf_steps=4,
            nerf_seconds=5.0, nerf_rays=64,
@@ -82,7 +79,7 @@ PRESETS: dict[str, Preset] = {p.name: p for p in (
                          "pose_noise": (0, 2, 5, 10), "image_noise": (0, 10, 25, 50), "blur": (1, 5, 11, 21),
                          "exposure": (0, 1, 2, 3), "jpeg": (100, 30, 10, 5), "occlusion": (0.0, 0.25, 0.5, 0.75),
                          "precision": ("fp32", "bf16")}, seeds=3,
-           world=World(train_scenes=4, test_scenes=2, views=40, height=120, width=160, pretrain_steps=300, rays=256,
+           world=PresetWorld(World(4, 2, 40, 120, 160), pretrain_steps=300, rays=256,
                        n_coarse=24, n_fine=24, train_n_source=4, workers=2),
            n_source=8, unseen_n_source=4, eval_stride=8, chunk=4096, nerf_scenes=1, nerf_steps=150,
            nerf_seconds=600.0, nerf_rays=512,
@@ -91,7 +88,7 @@ PRESETS: dict[str, Preset] = {p.name: p for p in (
                    "pose_noise": (0, 0.5, 1, 2, 5, 10), "image_noise": (0, 5, 10, 20, 40, 80),
                    "blur": (1, 3, 7, 15, 31), "exposure": (0, 1, 2, 3, 4), "jpeg": (100, 50, 20, 10, 5),
                    "occlusion": (0.0, 0.1, 0.25, 0.5, 0.75), "precision": ("fp32", "bf16", "fp16")}, seeds=5,
-           world=World(train_scenes=12, test_scenes=4, views=100, height=240, width=320, pretrain_steps=20_000,
+           world=PresetWorld(World(12, 4, 100, 240, 320), pretrain_steps=20_000,
                        rays=1024, n_coarse=64, n_fine=64, train_n_source=8, workers=1),
            n_source=8, unseen_n_source=8, eval_stride=1, chunk=8192, nerf_scenes=4, nerf_steps=5000,
            nerf_seconds=300.0, nerf_rays=1024, nerf=SemanticNeRFSettings()),
