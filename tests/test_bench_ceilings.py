@@ -80,8 +80,13 @@ def test_cli_trains_a_segmenter_and_loads_it(shards: Path, tmp_path: Path, one_t
     assert main(["bench", "segmenter", "--data", str(shards), "--cpu-seconds", "0.2", "--out", str(tmp_path / "seg"),
                  "--recipe", "synth-small"]) == 0
     model, record = load_segmenter(tmp_path / "seg")
-    assert record.training["steps"] >= 1 and record.training["cpu_seconds_budget"] == 0.2
-    assert model.predict(torch.rand(1, 3, 32, 40)).shape == (1, 32, 40)
+    t = record.training
+    assert t["steps"] >= 1 and t["cpu_seconds_budget"] == 0.2
+    assert t["cpu_seconds"] >= 0.2, "training stopped before its CPU budget"
+    assert t["images"] >= t["steps"], "every step trains on at least one labelled source image"
+    labels = model.predict(torch.rand(1, 3, 32, 40))
+    n_classes = len(next(iter(read_manifest(shards).scenes.values())).meta["class_names"])
+    assert labels.shape == (1, 32, 40) and int(labels.min()) >= 0 and int(labels.max()) < n_classes
 
 
 def test_segmenter_and_probe_read_only_train_scene_source_pools(shards: Path, tmp_path: Path,
