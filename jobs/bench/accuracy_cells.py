@@ -78,7 +78,7 @@ def import_old_cells(out: Path) -> list[str]:
 
 def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
     """The training config of ``cell``: the preset's recipe and overrides, the variant's model settings
-    (attention, weight map, inputs, fine samples, heads, source-view loss and 2D warm-up), the cell's seed and
+    (attention, weight map, inputs, fine samples, heads, source-view loss, 2D warm-up and scene interleaving), the cell's seed and
     budget, and the benchmark's folders."""
     from sray.jobs.recipes import get_recipe
     from sray.platform.config.train_config import apply_override
@@ -92,6 +92,7 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
     if variant.n_heads is not None:
         cfg.model.n_heads = variant.n_heads
     cfg.model.lambda_src_sem, cfg.optim.warmup_2d_steps = variant.lambda_src_sem, variant.warmup_2d_steps
+    cfg.data.visit_samples, cfg.data.cache_scenes = variant.visit_samples, variant.cache_scenes
     if cell.variant != LONG:
         cfg.optim.steps = p.ablation_steps
     elif p.long_steps is not None:

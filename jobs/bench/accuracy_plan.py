@@ -33,6 +33,11 @@ class Variant:
     """``model.lambda_src_sem``: weight of the source views' per-pixel semantic loss on the encoder (0 = off)."""
     warmup_2d_steps: int = 0
     """``optim.warmup_2d_steps``: first steps trained on the source views' labels alone (0 = none)."""
+    visit_samples: int = 16
+    """``data.visit_samples``: consecutive samples drawn from one scene before the loader picks the next
+    (1 = scenes interleaved step by step)."""
+    cache_scenes: int = 2
+    """``data.cache_scenes``: decoded scenes the loader keeps."""
 
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
@@ -40,12 +45,16 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     "full-new": Variant(fine_samples="new"), "full-new-h2": Variant(fine_samples="new", n_heads=2),
                     "full-new-src": Variant(fine_samples="new", lambda_src_sem=1.0),
                     "full-new-src-w": Variant(fine_samples="new", lambda_src_sem=1.0, warmup_2d_steps=100),
+                    "full-new-mix": Variant(fine_samples="new", visit_samples=1, cache_scenes=4),
+                    "full-new-src-mix": Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4),
                     LONG: Variant()}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
 channels instead of 4 of 8; ``full-new-src`` full-new with the source views' per-pixel semantic loss on the
-encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget."""
+encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget;
+``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
+(one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene."""
 
 
 COMPARED = ("sray", "semantic-nerf")
@@ -121,7 +130,8 @@ PRESETS = {
         recipe="synth-cpu-hour", overrides=(), long_steps=None, ablation_steps=600, validations=2, ckpt_every=200,
         plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
-              *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0)),
+              *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
+              *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0),
