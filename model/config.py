@@ -11,12 +11,6 @@ WEIGHT_MAPS = ("radial", "affine")
 ``radial`` (default) can approach both bounds tau/m and 1/(tau m); ``affine`` (the first version)
 reaches only (2 - tau)/m from above."""
 
-IMPLS = ("fast", "reference")
-"""Implementations of the per-sample computation (``SRayConfig.impl``): ``fast`` (default) gathers the
-source features with an ``embedding_bag`` (the same bilinear weights as ``grid_sample``, a much cheaper
-backward) and builds every per-view tensor directly in (R, m, N) order; ``reference`` is the first,
-unoptimised path, kept so that benchmarks and equivalence tests compare against it."""
-
 FINE_SAMPLES = ("union", "new")
 """What the fine pass evaluates (``SRayConfig.fine_samples``): ``new`` (default) only the n_fine
 resampled depths (the paper's public code: 128 evaluations per ray at 64 + 64); ``union`` the sorted
@@ -34,7 +28,8 @@ DENSITY_ACTIVATIONS = ("softplus", "relu")
 
 @dataclass
 class SRayConfig:
-    """Every setting of the S-Ray network, its sampling and its loss weights.
+    """Every setting of the S-Ray network, its sampling and its loss weights: what a checkpoint stores. How the
+    network is run (implementation, rays per pass) is ``runtime.Runtime``, passed to each call.
 
     Defaults are the paper's (Method section and appendix tables) where it states a value.
     """
@@ -95,17 +90,6 @@ class SRayConfig:
     """Per-class weights of the semantic cross-entropy (n_classes of them; empty = unweighted, the
     paper's loss). Training fills it from the training set's class frequencies when
     ``data.class_balance`` asks for it (``sray.data_tools.class_stats.balanced_weights``)."""
-    chunk: int = 0
-    """Rays rendered per forward pass by ``render_image`` and the evaluations (bounds their memory); 0
-    (default) leaves it to the device: 256 on a CPU, 4096 on a GPU (``ray_chunks``)."""
-    train_piece: int = 0
-    """Rays per piece of a training step's loss (``piecewise_loss``: same loss and gradients, one piece's
-    tensors alive at a time); 0 (default) leaves it to the device: 256 on a CPU, the whole batch on a GPU
-    (``ray_chunks``). Inside a piece of fewer rays than the batch, gradients are not loss-scaled, so use
-    0 with fp16."""
-    impl: str = "fast"
-    """Implementation of the per-sample computation, one of ``IMPLS`` (same parameters, same outputs
-    within float32 rounding; ``reference`` is the unoptimised path)."""
     fine_samples: str = "new"
     """Depths the fine pass evaluates, one of ``FINE_SAMPLES``."""
     inputs: str = "rgb"
@@ -128,8 +112,6 @@ class SRayConfig:
             raise bad("attention", f"is {self.attention!r}; use one of {tuple(ATTENTION_VARIANTS)}")
         if self.weight_map not in WEIGHT_MAPS:
             raise bad("weight_map", f"is {self.weight_map!r}; use one of {WEIGHT_MAPS}")
-        if self.impl not in IMPLS:
-            raise bad("impl", f"is {self.impl!r}; use one of {IMPLS}")
         if self.fine_samples not in FINE_SAMPLES:
             raise bad("fine_samples", f"is {self.fine_samples!r}; use one of {FINE_SAMPLES}")
         if self.inputs not in INPUTS:
@@ -148,9 +130,6 @@ class SRayConfig:
         for name in ("n_classes", "feat_dim", "n_source", "n_coarse", "n_fine", "n_heads", "dir_hidden"):
             if int(getattr(self, name)) < 1:
                 raise bad(name, f"is {getattr(self, name)}; it must be a positive integer")
-        for name in ("chunk", "train_piece"):
-            if int(getattr(self, name)) < 0:
-                raise bad(name, f"is {getattr(self, name)}; use a positive count of rays, or 0 (by device)")
         if self.feat_dim % self.n_heads or self.geo_hidden[-1] % self.n_heads:
             raise bad("n_heads", f"is {self.n_heads}; it must divide feat_dim ({self.feat_dim}) "
                       f"and geo_hidden[-1] ({self.geo_hidden[-1]})")

@@ -1,4 +1,4 @@
-"""The fast forward of ``SRayField`` (``SRayConfig.impl="fast"``): same parameters, same values, fewer copies.
+"""The fast forward of ``SRayField`` (``Runtime.impl="fast"``): same parameters, same values, fewer copies.
 
 The reference forward keeps the contextual space M in (R, m, N, C) order and transposes it to
 (R, N, m, C) and back around every cross-view attention: full copies of the largest tensors, which

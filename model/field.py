@@ -30,24 +30,24 @@ class SRayField(nn.Module):
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         c = cfg.feat_dim
-        self.context = ContextualSpace(c, cfg.dir_hidden, cfg.min_source_depth, cfg.impl)
+        self.context = ContextualSpace(c, cfg.dir_hidden, cfg.min_source_depth)
         self.attention = CrossReprojectionAttention(cfg)
         self.view_weights = SemanticWeightNet(cfg)
         self.classifier = nn.Sequential(nn.Linear(c, c), nn.ELU(), nn.Linear(c, cfg.n_classes))
         self.geometry = GeometryNet(cfg)
-        self.impl = cfg.impl
 
     def forward(self, src: SourceSet, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
-                far: Tensor) -> dict[str, Tensor]:
-        """origins, dirs: (R, 3); z: (R, N) sample depths (ray parameters); near, far: (R,).
+                far: Tensor, impl: str) -> dict[str, Tensor]:
+        """origins, dirs: (R, 3); z: (R, N) sample depths (ray parameters); near, far: (R,); ``impl``: the
+        implementation, one of ``runtime.IMPLS`` (the same values within float32 rounding).
 
         Returns ``sigma`` (R, N) float32 >= 0 per world unit, ``logits`` (R, N, L), ``rgb`` (R, N, 3)
         float32 and ``view_weights`` (R, m, N) float32 (the semantic-aware weights).
         """
         points = origins[:, None, :] + z[..., None] * dirs[:, None, :]  # (R, N, 3)
         depth01 = normalised_depth(z, near, far)  # (R, N)
-        ctx = self.context(src, points, dirs)
-        if self.impl == "fast":  # the same computation in (R, N, m) order (fast_field)
+        ctx = self.context(src, points, dirs, impl)
+        if impl == "fast":  # the same computation in (R, N, m) order (fast_field)
             refined = cra_forward(self.attention, ctx["M"], ctx["valid"], depth01)  # (R, N, m, C)
             w = weights_forward(self.view_weights, refined, ctx["dir"], ctx["valid"])  # (R, N, m)
             semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=2)  # (R, N, C)

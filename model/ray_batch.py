@@ -20,6 +20,7 @@ from torch import Tensor, nn
 
 from .config import SRayConfig
 from .rays import pixel_rays
+from .runtime import Runtime
 from .semantic_ray import SRayModel
 from .source_semantics import source_semantic_loss
 
@@ -78,12 +79,13 @@ class RayBatchLoss(nn.Module):
     (``SRayModel.training_loss``: stratified samples, rendered in pieces), plus, with ``lambda_src_sem`` > 0
     and source labels in the batch, ``lambda_src_sem`` times the source views' per-pixel cross-entropy
     (``source_semantics``); what training runs (DDP included). Holds the network as ``net`` (checkpoints
-    store ``net``'s own keys)."""
+    store ``net``'s own keys) and the ``runtime`` its loss is computed with (implementation, rays per piece)."""
 
-    def __init__(self, cfg: SRayConfig) -> None:
-        """Build the S-Ray network it trains (no device work here)."""
+    def __init__(self, cfg: SRayConfig, runtime: Runtime = Runtime()) -> None:
+        """Build the S-Ray network it trains (no device work here); ``runtime``: how its loss is run."""
         super().__init__()
         self.net = SRayModel(cfg)
+        self.runtime = runtime
 
     def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor,
                 render: bool = True) -> tuple[Tensor, dict[str, Tensor]]:
@@ -102,7 +104,7 @@ class RayBatchLoss(nn.Module):
             raise ValueError("sray.model.ray_batch: a 2D-only step needs model.lambda_src_sem > 0 and source "
                              "labels in the batch (src_label); set model.lambda_src_sem or render the rays.")
         if render:
-            loss, terms = net.training_loss(src, *batch.query.rays(), target_label, target_rgb)
+            loss, terms = net.training_loss(src, *batch.query.rays(), target_label, target_rgb, self.runtime)
         else:
             idle = [p for name, p in net.named_parameters() if not name.startswith(("encoder.", "src_head."))]
             loss = torch.stack([p.view(-1)[0] for p in idle]).sum() * 0.0

@@ -4,7 +4,7 @@ On a CPU, the per-sample tensors of a chunk (rays x samples x views x channels) 
 every operator; kept near the caches, the same work runs faster. Measured on the 2-core CPU: a render in
 chunks of 256 rays took 5.02 s against 6.80 s in chunks of 4800, and a paper-config training step in pieces of
 256 rays took 42% less time and 47% less memory than the whole 1024-ray batch at once (8.24 -> 4.81 s,
-4.08 -> 2.16 GiB) (docs/performance.md, `model.chunk` and `model.train_piece`).
+4.08 -> 2.16 GiB) (docs/performance.md, `runtime.chunk` and `runtime.train_piece`).
 A GPU wants the opposite: large chunks keep it busy, so there the render takes 4096 rays per pass and
 training computes the batch in one piece.
 """

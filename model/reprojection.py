@@ -105,20 +105,19 @@ class ContextualSpace(nn.Module):
     order (``fast_field``'s layout), within float32 rounding.
     """
 
-    def __init__(self, feat_dim: int, dir_hidden: int, min_depth: float, impl: str = "fast") -> None:
+    def __init__(self, feat_dim: int, dir_hidden: int, min_depth: float) -> None:
         super().__init__()
         self.min_depth = min_depth
-        self.impl = impl
         self.dir_mlp = nn.Sequential(nn.Linear(4, dir_hidden), nn.ELU(), nn.Linear(dir_hidden, feat_dim))
 
-    def forward(self, src: SourceSet, points: Tensor, query_dirs: Tensor) -> dict[str, Tensor]:
-        """points: (R, N, 3) samples of the query rays; query_dirs: (R, 3).
+    def forward(self, src: SourceSet, points: Tensor, query_dirs: Tensor, impl: str) -> dict[str, Tensor]:
+        """points: (R, N, 3) samples of the query rays; query_dirs: (R, 3); ``impl``: one of ``runtime.IMPLS``.
 
         Returns ``M`` (R, m, N, C), ``valid`` (R, m, N) bool, ``rgb`` (R, m, N, 3) source colours
         at the projections and ``dir`` (R, m, N, 4) (axes m and N swapped with ``impl="fast"``);
         entries at invalid projections are finite but meaningless (see the module docstring).
         """
-        if self.impl == "fast":
+        if impl == "fast":
             return self._fast(src, points, query_dirs)
         uv, depth = project(points.float(), src.K.float(), src.w2c.float(), self.min_depth)
         valid = valid_projection(uv, depth, src.image_hw, self.min_depth)  # (m, R, N)

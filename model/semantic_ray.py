@@ -5,6 +5,9 @@ Usage (pixelNeRF's encode / query split; the module keeps no state between the c
     src = model.encode(src_rgb, src_K, src_c2w)          # once per source set
     out = model.render_rays(src, origins, dirs, near, far, stratified=True)   # any number of times
 
+Every call that renders takes a ``runtime.Runtime`` (implementation, rays per pass; default: the fast path,
+rays per pass by device): how the network is run is the caller's choice, not part of the network.
+
 Design choices where the paper is silent:
 
 * One shared ResUNet encoder; two separate per-sample networks (``coarse`` for n_coarse samples,
@@ -34,6 +37,7 @@ from .hierarchical import CoarseSampler, per_ray_bounds, render_rays
 from .losses import render_loss
 from .piecewise_loss import piecewise_render_loss
 from .ray_chunks import train_piece_rays
+from .runtime import Runtime
 from .source_semantics import SourceSemanticHead
 from .source_set import SourceSet, rigid_inverse
 from .view_render import RayRenderer, render_view
@@ -95,69 +99,73 @@ class SRayModel(nn.Module):
         return sampler
 
     def render_rays(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
-                    far: Tensor | float, stratified: bool,
-                    generator: torch.Generator | None = None) -> dict[str, dict[str, Tensor]]:
+                    far: Tensor | float, stratified: bool, generator: torch.Generator | None = None,
+                    runtime: Runtime = Runtime()) -> dict[str, dict[str, Tensor]]:
         """Render rays o + t d, t in [near, far] (camera z-depth for ``pixel_rays`` directions).
 
         origins, dirs: (R, 3); near, far: scalars or (R,). ``stratified`` jitters coarse and fine
-        samples (training); otherwise sampling is deterministic (evaluation).
-        Returns ``{"coarse": pass, "fine": pass}`` (see ``hierarchical.render_rays``).
+        samples (training); otherwise sampling is deterministic (evaluation). The fields run
+        ``runtime.impl``. Returns ``{"coarse": pass, "fine": pass}`` (see ``hierarchical.render_rays``).
         """
         fields = {"coarse": self.coarse, "fine": self.fine}
 
         def field(name: str, o: Tensor, d: Tensor, z: Tensor, lo: Tensor, hi: Tensor) -> dict[str, Tensor]:
-            return fields[name](src, o, d, z, lo, hi)
+            return fields[name](src, o, d, z, lo, hi, runtime.impl)
 
         return render_rays(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, stratified,
                            generator, self.cfg.fine_samples, self.coarse_sampler(src))
 
     def training_loss(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
-                      far: Tensor | float, target_label: Tensor,
-                      target_rgb: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
+                      far: Tensor | float, target_label: Tensor, target_rgb: Tensor,
+                      runtime: Runtime = Runtime()) -> tuple[Tensor, dict[str, Tensor]]:
         """``render_loss`` of rays rendered with stratified samples: origins, dirs (R, 3), near, far scalars
         or (R,), target_label (R,) int64, target_rgb (R, 3).
 
-        The rays are rendered in pieces of ``cfg.train_piece`` rays (0: by device, ``ray_chunks``), each
-        piece's gradient taken before the next is rendered (``piecewise_loss``): the same loss and
-        gradients as one pass over the batch, within float32 rounding. One piece is one ordinary pass.
+        The rays are rendered (fields: ``runtime.impl``) in pieces of ``runtime.train_piece`` rays (0: by device,
+        ``ray_chunks``), each piece's gradient taken before the next is rendered (``piecewise_loss``): the same
+        loss and gradients as one pass over the batch, within float32 rounding. One piece is one ordinary pass.
         """
         n_rays = origins.shape[0]
-        piece = train_piece_rays(self.cfg.train_piece, origins.device, n_rays)
+        piece = train_piece_rays(runtime.train_piece, origins.device, n_rays)
         if piece >= n_rays:
-            out = self.render_rays(src, origins, dirs, near, far, stratified=True)
+            out = self.render_rays(src, origins, dirs, near, far, stratified=True, runtime=runtime)
             return render_loss(out, target_label, target_rgb, self.cfg)
 
         near_r = per_ray_bounds(near, n_rays, origins, "near")  # (R,)
         far_r = per_ray_bounds(far, n_rays, origins, "far")  # (R,)
 
         def render(piece_src: SourceSet, sl: slice) -> dict[str, dict[str, Tensor]]:
-            return self.render_rays(piece_src, origins[sl], dirs[sl], near_r[sl], far_r[sl], stratified=True)
+            return self.render_rays(piece_src, origins[sl], dirs[sl], near_r[sl], far_r[sl], stratified=True,
+                                    runtime=runtime)
 
         params = [p for name, p in self.named_parameters() if not name.startswith("encoder.")]
         return piecewise_render_loss(render, src, params, n_rays, piece, target_label, target_rgb, self.cfg)
 
     @torch.no_grad()
     def render_rays_fast(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
-                         far: Tensor | float, confidence: float) -> dict[str, dict[str, Tensor]]:
+                         far: Tensor | float, confidence: float,
+                         runtime: Runtime = Runtime()) -> dict[str, dict[str, Tensor]]:
         """The fast render mode's rays (``fast_render.render_rays_fast``): deterministic, no grad; a
-        fine pass only for rays whose coarse confidence is below ``confidence``."""
+        fine pass only for rays whose coarse confidence is below ``confidence``; fields: ``runtime.impl``."""
         fields = {"coarse": self.coarse, "fine": self.fine}
 
         def field(name: str, o: Tensor, d: Tensor, z: Tensor, lo: Tensor, hi: Tensor) -> dict[str, Tensor]:
-            return fields[name](src, o, d, z, lo, hi)
+            return fields[name](src, o, d, z, lo, hi, runtime.impl)
 
         return render_rays_fast(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, confidence,
                                 self.coarse_sampler(src))
 
-    def ray_renderer(self, src: SourceSet, fast: FastRender | None = None) -> RayRenderer:
+    def ray_renderer(self, src: SourceSet, fast: FastRender | None = None,
+                     runtime: Runtime = Runtime()) -> RayRenderer:
         """A deterministic ray renderer bound to the encoded sources ``src`` (``view_render.RayRenderer``): the
-        full render, or with ``fast`` the fast mode's rays (a fine pass only below ``fast.confidence``)."""
+        full render, or with ``fast`` the fast mode's rays (a fine pass only below ``fast.confidence``); fields:
+        ``runtime.impl``."""
         if fast is not None:
-            return lambda o, d, near, far: self.render_rays_fast(src, o, d, near, far, fast.confidence)
-        return lambda o, d, near, far: self.render_rays(src, o, d, near, far, stratified=False)
+            return lambda o, d, near, far: self.render_rays_fast(src, o, d, near, far, fast.confidence, runtime)
+        return lambda o, d, near, far: self.render_rays(src, o, d, near, far, stratified=False, runtime=runtime)
 
     def render_image(self, src: SourceSet, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
-                     chunk: int | None = None, stride: int = 1,
+                     runtime: Runtime = Runtime(), stride: int = 1,
                      fast: FastRender | None = None) -> dict[str, dict[str, Tensor]]:
         """Render the (H, W) = ``hw`` image of the query camera K (3, 3), c2w (4, 4) against ``src`` with the one
         whole-view renderer (``view_render.render_view``): deterministic sampling, no grad, every ``stride``-th
@@ -165,8 +173,7 @@ class SRayModel(nn.Module):
 
         Returns ``{"coarse": ..., "fine": ...}`` with ``logits`` (h', w', L), ``rgb`` (h', w', 3) in [0, 1],
         ``depth`` (h', w') and ``opacity`` (h', w') per pass ((H, W) at stride 1). Memory is bounded by
-        ``chunk`` rays (default ``cfg.chunk``; 0: by device, ``ray_chunks``).
+        ``runtime.chunk`` rays per pass (0: by device, ``ray_chunks``); the fields run ``runtime.impl``.
         """
-        chunk = self.cfg.chunk if chunk is None else chunk
-        return render_view(self.ray_renderer(src, fast), K, c2w, hw, near, far, chunk, src.feats.device, stride,
-                           fast)
+        return render_view(self.ray_renderer(src, fast, runtime), K, c2w, hw, near, far, runtime.chunk,
+                           src.feats.device, stride, fast)

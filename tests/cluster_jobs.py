@@ -20,7 +20,7 @@ from pathlib import Path
 
 from cluster_fixtures import SRAY, LocalCluster
 
-TINY_TRAIN = {"model.n_source": 3, "model.n_coarse": 8, "model.n_fine": 8, "model.chunk": 1024, "data.top_k": 4,
+TINY_TRAIN = {"model.n_source": 3, "model.n_coarse": 8, "model.n_fine": 8, "runtime.chunk": 1024, "data.top_k": 4,
               "data.rays_per_batch": 64, "data.loader_workers": 0, "data.val_views_per_scene": 1,
               "data.val_downscale": 2, "optim.steps": 10, "optim.lr": 3e-3, "optim.lr_final": 1e-3,
               "run.log_every": 1, "run.val_every": 10, "run.ckpt_every": 4, "run.register_model": ""}

@@ -21,6 +21,7 @@ from sray.data_tools.shards.writer import write_shards
 from sray.jobs.bench.ceilings import REPORT_FILE
 from sray.jobs.cli import main
 from sray.model.config import SRayConfig
+from sray.model.runtime import Runtime
 from sray.platform.eval.label_transfer import UNSEEN
 from sray.platform.eval.linear_probe import fit_probe, random_encoder
 from sray.platform.eval.segmenter import load_segmenter
@@ -110,19 +111,22 @@ def test_segmenter_and_probe_read_only_train_scene_source_pools(shards: Path, tm
 def test_the_field_is_read_at_the_ground_truth_depth(fine_samples: str) -> None:
     """A stand-in fine field that scores class c only at a sample exactly at depth c (class 0 otherwise) is read at
     the sample that is the ground-truth depth: the prediction is the depth itself, UNSEEN where it is unknown; the
-    bracket it is given is sorted, holds n_fine samples around the surface (plus the coarse centres with union)."""
-    cfg = SRayConfig(n_classes=6, n_coarse=4, n_fine=6, fine_samples=fine_samples, chunk=5)
+    bracket it is given is sorted, holds n_fine samples around the surface (plus the coarse centres with union); the
+    field runs the runtime's implementation, in chunks of its rays."""
+    cfg = SRayConfig(n_classes=6, n_coarse=4, n_fine=6, fine_samples=fine_samples)
     seen_z: list[torch.Tensor] = []
 
     def fine(src: object, origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor, lo: torch.Tensor,
-             hi: torch.Tensor) -> dict[str, torch.Tensor]:
+             hi: torch.Tensor, impl: str) -> dict[str, torch.Tensor]:
+        assert impl == "reference"
         seen_z.append(z)
         return {"logits": ((z[..., None] - torch.arange(6.0)).abs() < 1e-6).float()}
 
     depth = torch.tensor([[1.0, 2.0, 0.0], [3.0, 4.0, 5.0], [2.0, 0.0, 1.0]])
     K = torch.tensor([[3.0, 0.0, 1.0], [0.0, 3.0, 1.0], [0.0, 0.0, 1.0]])
     net = SimpleNamespace(cfg=cfg, fine=fine)
-    pred = field_at_surface(net, SimpleNamespace(feats=torch.zeros(1)), K, torch.eye(4), depth, 0.5, 6.0)
+    pred = field_at_surface(net, SimpleNamespace(feats=torch.zeros(1)), K, torch.eye(4), depth, 0.5, 6.0,
+                            Runtime(impl="reference", chunk=5))
     torch.testing.assert_close(pred, torch.where(depth > 0, depth.long(), torch.full_like(pred, UNSEEN)))
     z = torch.cat(seen_z)
     assert z.shape == (7, 6 + (4 if fine_samples == "union" else 0)) and bool((z.diff(dim=-1) >= 0).all())

@@ -1,5 +1,6 @@
 """Training checkpoints hold the bare model's keys; checkpoints of the old ``net.``-prefixed form still load, and so
-do checkpoints and job configs whose data section holds the augmentation settings flat (``aug_<field>``)."""
+do checkpoints and job configs whose data section holds the augmentation settings flat (``aug_<field>``) or whose
+model section holds the runtime settings."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import torch
 from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
 from sray.data_tools.loader.augment import Augmentation
+from sray.model.runtime import Runtime
 from sray.platform.checkpoints.folders import load_checkpoint, write_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.train.launcher import CONFIG_FILE, load_job_config
@@ -57,3 +59,23 @@ def test_checkpoints_and_job_configs_with_flat_augmentation_keys_load_into_data_
     (tmp_path / "jobs" / "flat-job").mkdir(parents=True)
     (tmp_path / "jobs" / "flat-job" / CONFIG_FILE).write_text(json.dumps(state["config"]))
     assert load_job_config(str(tmp_path / "jobs"), "flat-job").data.aug == expected  # sray train --resume
+
+
+def test_checkpoints_hold_the_network_and_its_loss_and_ones_with_runtime_fields_in_the_model_section_load(
+        tiny_shards: Path, tmp_path: Path) -> None:
+    """A new checkpoint's model section holds no runtime field (they are the job's ``runtime`` section); a
+    checkpoint whose model section holds them (``impl``, ``chunk``, ``train_piece``) loads the same weights and
+    reads them into ``runtime``."""
+    cfg = tiny_config(tiny_shards, tmp_path)
+    wrapper, optimizer, scheduler = build_training(cfg)
+    state = training_state(wrapper.net, optimizer, scheduler, None, 3, cfg, None, {})
+    assert not {"impl", "chunk", "train_piece"} & set(state["config"]["model"])
+    assert state["config"]["runtime"] == {"impl": "fast", "chunk": 1024, "train_piece": 24}
+    old = dict(state["config"])
+    old["model"] = {**old["model"], **old.pop("runtime"), "impl": "reference"}  # the runtime in the model section
+
+    path = write_checkpoint(dict(state, config=old), tmp_path / "old" / "step_000000003", 3)
+    net, loaded = model_from_checkpoint(path)
+    assert loaded.runtime == Runtime(impl="reference", chunk=1024, train_piece=24) and loaded.model == cfg.model
+    for key, value in wrapper.net.state_dict().items():
+        torch.testing.assert_close(net.state_dict()[key], value, rtol=0, atol=0)

@@ -9,6 +9,7 @@ import pytest
 
 from sray.data_tools.loader.augment import Augmentation
 from sray.jobs.recipes import get_recipe
+from sray.model.runtime import Runtime
 from sray.platform.config.train_config import TrainConfig, apply_override
 
 
@@ -22,7 +23,7 @@ def test_each_field_type_is_parsed_from_its_annotation() -> None:
 
 
 @pytest.mark.parametrize("assignment, message", [
-    ("train.lr=1", "no section 'train'; sections: model, data, optim, run"),
+    ("train.lr=1", "no section 'train'; sections: model, data, optim, run, runtime"),
     ("optim.nope=1", "no field 'nope' in OptimSettings"),
     ("model=1", "no field 'model' in TrainConfig; 'model' is a section: set its fields, model.<field>"),
     ("data.aug=0.3", "'aug' is a section: set its fields, data.aug.<field> with <field> one of channel_ev, colour_ev"),
@@ -49,10 +50,10 @@ def test_fp16_with_a_loss_in_pieces_is_refused_and_rolled_back() -> None:
     """fp16 scales the loss, not a piece's own gradients: pieces smaller than the batch are refused."""
     cfg = get_recipe("synth-small")
     apply_override(cfg, "run.precision=fp16")
-    apply_override(cfg, f"model.train_piece={cfg.data.rays_per_batch}")  # one piece: allowed
-    with pytest.raises(ValueError, match="model.train_piece=0"):
-        apply_override(cfg, "model.train_piece=64")
-    assert cfg.model.train_piece == cfg.data.rays_per_batch
+    apply_override(cfg, f"runtime.train_piece={cfg.data.rays_per_batch}")  # one piece: allowed
+    with pytest.raises(ValueError, match="runtime.train_piece=0"):
+        apply_override(cfg, "runtime.train_piece=64")
+    assert cfg.runtime.train_piece == cfg.data.rays_per_batch
 
 
 def test_augmentation_is_set_field_by_field_in_the_data_aug_section() -> None:
@@ -93,3 +94,35 @@ def test_a_stored_config_with_flat_augmentation_keys_loads_into_the_section() ->
     assert cfg.data.top_k == stored["data"]["top_k"]
     assert TrainConfig.from_dict(cfg.to_dict()).to_dict() == cfg.to_dict()
     assert "aug_colour_ev" not in cfg.to_dict()["data"] and cfg.to_dict()["data"]["aug"]["colour_ev"] == 0.3
+
+
+MAIN_MODEL_RUNTIME = {"impl": "reference", "chunk": 512, "train_piece": 64}
+"""The runtime settings as configs and checkpoints stored them in the model section."""
+
+
+def test_a_stored_config_with_runtime_fields_in_the_model_section_loads_them_into_the_runtime_section() -> None:
+    stored = get_recipe("synth-small").to_dict()
+    del stored["runtime"]
+    stored["model"].update(MAIN_MODEL_RUNTIME)
+    cfg = TrainConfig.from_dict(json.loads(json.dumps(stored)))
+    assert cfg.runtime == Runtime(impl="reference", chunk=512, train_piece=64)
+    assert cfg.model == get_recipe("synth-small").model
+    saved = cfg.to_dict()
+    assert not set(MAIN_MODEL_RUNTIME) & set(saved["model"]) and saved["runtime"] == MAIN_MODEL_RUNTIME
+    assert TrainConfig.from_dict(saved) == cfg
+
+
+def test_runtime_settings_are_set_in_the_runtime_section_and_checked() -> None:
+    cfg = get_recipe("synth-small")
+    apply_override(cfg, "runtime.impl=reference")
+    apply_override(cfg, "runtime.chunk=4096")
+    assert cfg.runtime == Runtime(impl="reference", chunk=4096)
+    with pytest.raises(ValueError, match="impl"):
+        apply_override(cfg, "runtime.impl=slow")
+    assert cfg.runtime == Runtime(impl="reference", chunk=4096)  # the rejected value left no trace
+    before = cfg.to_dict()
+    with pytest.raises(ValueError) as caught:
+        apply_override(cfg, "model.chunk=256")
+    assert str(caught.value) == ("--set 'model.chunk=256': how the network is run is the runtime section; "
+                                 "use --set runtime.chunk=256")
+    assert cfg.to_dict() == before

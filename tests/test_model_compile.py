@@ -26,7 +26,7 @@ def _setup() -> tuple[SRayModel, object, torch.Tensor, torch.Tensor, torch.Tenso
 
 def _outputs_and_grads(fn, net: SRayModel, src, origins, dirs, z) -> tuple[dict, list[torch.Tensor]]:
     net.zero_grad()
-    out = fn(src, origins, dirs, z, torch.full((10,), 1.0), torch.full((10,), 4.0))
+    out = fn(src, origins, dirs, z, torch.full((10,), 1.0), torch.full((10,), 4.0), "fast")
     (out["sigma"].sum() + out["logits"].square().sum() + out["rgb"].sum()).backward(retain_graph=True)
     return out, [p.grad.clone() for p in net.coarse.parameters()]
 

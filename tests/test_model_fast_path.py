@@ -1,9 +1,10 @@
-"""The fast implementation (``SRayConfig.impl="fast"``) computes what the reference path computes.
+"""The fast implementation (``Runtime(impl="fast")``) computes what the reference path computes.
 
 Independent references: ``F.grid_sample`` (align_corners=True, border padding) for the gathered
-bilinear taps, and the whole ``impl="reference"`` model for outputs and parameter gradients of a
-training-mode render (stratified samples from the same generator, a rig with one view facing away,
-so invalid projections and border clamping occur).
+bilinear taps, and the same model run with ``impl="reference"`` (the implementation is an argument of the
+call, the weights are shared) for outputs and parameter gradients of a training-mode render (stratified
+samples from the same generator, a rig with one view facing away, so invalid projections and border
+clamping occur).
 
 Tolerances: float32 reordering of sums only, so outputs agree to 1e-5 absolute; each parameter's
 gradient agrees to 1e-4 relative, plus 1e-6 of the largest gradient of the model absolute (some
@@ -13,14 +14,17 @@ output is centred, and are pure rounding noise in both paths).
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 import torch.nn.functional as F
-from test_model_sray import FAR, NEAR, rig
+from test_model_sray import FAR, H, K, NEAR, W, rig
 
 from sray.model.config import SRayConfig
 from sray.model.cra import STAGES, AttentionBlock
 from sray.model.fast_field import block_forward
+from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SRayModel
 from sray.model.source_gather import bilinear_taps, gather_bilinear, texel_table
 
@@ -49,10 +53,11 @@ def _train_render(impl: str, fine_samples: str = "union") -> tuple[dict, dict[st
     """Outputs and parameter gradients of one stratified render + a loss touching every output."""
     r = rig(m=4, facing_away=1)
     torch.manual_seed(0)
-    net = SRayModel(SRayConfig(n_classes=5, n_coarse=8, n_fine=8, impl=impl, fine_samples=fine_samples))
+    net = SRayModel(SRayConfig(n_classes=5, n_coarse=8, n_fine=8, fine_samples=fine_samples))
     src = net.encode(r["rgb"], r["K"], r["c2w"])
     gen = torch.Generator().manual_seed(3)
-    out = net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=True, generator=gen)
+    out = net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=True, generator=gen,
+                          runtime=Runtime(impl=impl))
     loss = sum((out[p]["logits"].square().mean() + out[p]["rgb"].sum() + out[p]["depth"].sum())
                for p in ("coarse", "fine"))
     loss.backward()
@@ -76,14 +81,14 @@ def test_fast_equals_reference_without_gradient_at_forward_only_sliced_lengths()
     """A no-grad render at 40 samples per pass, where the intra-view stage runs the CPU's sliced attention
     kernel: the outputs still equal the reference path's."""
     r = rig(m=4, facing_away=1)
+    torch.manual_seed(0)
+    net = SRayModel(SRayConfig(n_classes=5, n_coarse=40, n_fine=40, fine_samples="new"))
     outs = {}
-    for impl in ("reference", "fast"):
-        torch.manual_seed(0)
-        net = SRayModel(SRayConfig(n_classes=5, n_coarse=40, n_fine=40, impl=impl, fine_samples="new"))
-        with torch.no_grad():
-            src = net.encode(r["rgb"], r["K"], r["c2w"])
+    with torch.no_grad():
+        src = net.encode(r["rgb"], r["K"], r["c2w"])
+        for impl in ("reference", "fast"):
             outs[impl] = net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=True,
-                                         generator=torch.Generator().manual_seed(3))
+                                         generator=torch.Generator().manual_seed(3), runtime=Runtime(impl=impl))
     for p in ("coarse", "fine"):
         for key in ("logits", "rgb", "depth", "weights"):
             torch.testing.assert_close(outs["fast"][p][key], outs["reference"][p][key], atol=1e-5, rtol=1e-5)
@@ -127,3 +132,22 @@ def test_fast_attention_block_equals_the_reference_block(stage: str, n: int, m: 
     grads_ref = torch.autograd.grad(grouped, [x, *block.parameters()], g)
     for got, want in zip(grads_fast, grads_ref):
         torch.testing.assert_close(got, want, atol=1e-4, rtol=1e-4)
+
+
+def test_one_model_renders_a_whole_image_alike_with_either_implementation_passed_to_the_call() -> None:
+    """``render_image`` of one model with ``Runtime(impl=...)`` as its argument: both implementations give the
+    same image within float32 rounding, and the call changes nothing on the model (its config holds no
+    implementation, no module keeps one)."""
+    r = rig(m=3, facing_away=1)
+    torch.manual_seed(0)
+    net = SRayModel(SRayConfig(n_classes=5, n_coarse=8, n_fine=8)).eval()
+    cfg = dataclasses.replace(net.cfg)
+    with torch.no_grad():
+        src = net.encode(r["rgb"], r["K"], r["c2w"])
+        images = {impl: net.render_image(src, K, r["query"], (H, W), NEAR, FAR, Runtime(impl=impl, chunk=300))
+                  for impl in ("reference", "fast")}
+    for p in ("coarse", "fine"):
+        for key in ("logits", "rgb", "depth", "opacity"):
+            torch.testing.assert_close(images["fast"][p][key], images["reference"][p][key], atol=1e-5, rtol=1e-5)
+    assert net.cfg == cfg and not hasattr(net.cfg, "impl")
+    assert not any(hasattr(module, "impl") for module in net.modules())

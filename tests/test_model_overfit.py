@@ -7,6 +7,7 @@ import torch
 from toy_room import FAR, N_CLASSES, NEAR, make_room, miou, one_thread, overfit
 
 from sray.model.config import SRayConfig
+from sray.model.runtime import Runtime
 
 STEPS = 120  # 128 rays, 8 + 8 samples, 4 source views per step
 
@@ -25,7 +26,8 @@ def test_overfits_a_training_view_of_a_small_scene() -> None:
         with torch.no_grad():
             src = net.encode(*room.sources())
             img = net.render_image(src, torch.tensor(room.K, dtype=torch.float32),
-                                   torch.tensor(room.cams[4], dtype=torch.float32), room.hw, NEAR, FAR, chunk=512)
+                                   torch.tensor(room.cams[4], dtype=torch.float32), room.hw, NEAR, FAR,
+                                   Runtime(chunk=512))
     pred = img["fine"]["logits"].argmax(-1).numpy()
     score = miou(pred, room.views[4][1], N_CLASSES)
     assert score > 0.9, f"mIoU {score:.3f} after {STEPS} steps"

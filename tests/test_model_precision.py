@@ -24,6 +24,7 @@ from sray.model.field import SRayField
 from sray.model.rays import pixel_rays
 from sray.model.rendering import PDF_EPS, sample_pdf
 from sray.model.reprojection import project
+from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SRayModel
 from sray.model.source_set import SourceSet, rigid_inverse
 
@@ -196,7 +197,7 @@ def test_field_gathers_sources_at_opencv_projections_under_autocast(hw: tuple[in
     query, sources = random_camera(rng, target), np.stack([random_camera(rng, target) for _ in range(m)])
     uv_q = np.stack([rng.uniform(-0.5, w - 0.5, n_rays), rng.uniform(-0.5, h - 0.5, n_rays)], axis=1)
     z = np.sort(rng.uniform(MIN_DEPTH, MAX_DEPTH, (n_rays, n_samples)), axis=1)
-    cfg = SRayConfig(n_classes=3, n_coarse=n_samples, n_fine=n_samples, n_source=m, impl=impl)
+    cfg = SRayConfig(n_classes=3, n_coarse=n_samples, n_fine=n_samples, n_source=m)
     field = SRayField(cfg).eval()
     captured: dict[str, dict[str, torch.Tensor]] = {}
     field.context.register_forward_hook(lambda module, args, out: captured.update(ctx=out))
@@ -205,7 +206,7 @@ def test_field_gathers_sources_at_opencv_projections_under_autocast(hw: tuple[in
         src = SourceSet(feats=torch.zeros(m, cfg.feat_dim, *feat_hw), rgb=coordinate_images(m, hw),
                         K=f32(K).expand(m, 3, 3), c2w=f32(sources), w2c=rigid_inverse(f32(sources)))
         origins, dirs = pixel_rays(f32(K), f32(query), f32(uv_q))
-        field(src, origins, dirs, f32(z), torch.full((n_rays,), MIN_DEPTH), torch.full((n_rays,), MAX_DEPTH))
+        field(src, origins, dirs, f32(z), torch.full((n_rays,), MIN_DEPTH), torch.full((n_rays,), MAX_DEPTH), impl)
     in_rmn = (lambda t: t.transpose(1, 2)) if impl == "fast" else (lambda t: t)  # fast: (R, N, m, D)
     gathered = in_rmn(captured["ctx"]["rgb"])[..., :2]  # (R, m, N, 2) read-back pixel coordinates
     view_dirs = in_rmn(captured["ctx"]["dir"])  # (R, m, N, 4)
@@ -266,7 +267,7 @@ def render_logits(net: SRayModel, room: ToyRoom, view: int, autocast: bool) -> t
     """Fine logits (H, W, L) of ``view``, encoded and rendered under bf16 autocast or in float32."""
     with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=autocast):
         src = net.encode(*room.sources())
-        out = net.render_image(src, f32(room.K), f32(room.cams[view]), room.hw, NEAR, FAR, chunk=1024)
+        out = net.render_image(src, f32(room.K), f32(room.cams[view]), room.hw, NEAR, FAR, Runtime(chunk=1024))
     return out["fine"]["logits"].float()
 
 

@@ -15,6 +15,7 @@ from sray.model.config import SRayConfig
 from sray.model.depth_sampling import source_surface_depth, surface_samples
 from sray.model.rays import image_pixels, pixel_rays
 from sray.model.rendering import sample_uniform
+from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SRayModel
 from sray.model.source_set import SourceSet, rigid_inverse
 
@@ -111,28 +112,30 @@ def test_rays_without_a_surface_get_the_rgb_samples(stratified: bool) -> None:
     assert torch.equal(z[nan], plain[nan]) and not torch.equal(z[~nan], plain[~nan])
 
 
-def _cfg(impl: str, inputs: str) -> SRayConfig:
+def _cfg(inputs: str) -> SRayConfig:
     return SRayConfig(n_classes=4, feat_dim=8, n_heads=2, n_coarse=16, n_fine=8, geo_hidden=(16, 8),
-                      dir_hidden=8, weight_hidden=(8, 4), impl=impl, inputs=inputs)
+                      dir_hidden=8, weight_hidden=(8, 4), inputs=inputs)
 
 
-def _nets(impl: str) -> tuple[SRayModel, SRayModel]:
+def _nets() -> tuple[SRayModel, SRayModel]:
     """An rgb model and an rgbd model with the same weights (an rgb state dict loads in rgbd)."""
     torch.manual_seed(0)
-    rgb_net = SRayModel(_cfg(impl, "rgb")).eval()
-    rgbd_net = SRayModel(_cfg(impl, "rgbd")).eval()
+    rgb_net = SRayModel(_cfg("rgb")).eval()
+    rgbd_net = SRayModel(_cfg("rgbd")).eval()
     rgbd_net.load_state_dict(rgb_net.state_dict())
     return rgb_net, rgbd_net
 
 
 @pytest.mark.parametrize("impl", ["fast", "reference"])
 def test_rgb_mode_is_unchanged_by_source_depth(impl: str) -> None:
-    rgb_net, _ = _nets(impl)
+    rgb_net, _ = _nets()
     rgb, K, c2w, depth = _wall_sources()
     o, d, near, far, _ = _query(every=9)
+    run = Runtime(impl=impl)
     with torch.no_grad():
-        plain = rgb_net.render_rays(rgb_net.encode(rgb, K, c2w), o, d, near, far, stratified=False)
-        given = rgb_net.render_rays(rgb_net.encode(rgb, K, c2w, depth), o, d, near, far, stratified=False)
+        plain = rgb_net.render_rays(rgb_net.encode(rgb, K, c2w), o, d, near, far, stratified=False, runtime=run)
+        given = rgb_net.render_rays(rgb_net.encode(rgb, K, c2w, depth), o, d, near, far, stratified=False,
+                                    runtime=run)
     assert torch.equal(plain["coarse"]["z"], sample_uniform(near, far, 16, stratified=False))
     for p in ("coarse", "fine"):
         for k in ("logits", "rgb", "z", "weights"):
@@ -141,24 +144,26 @@ def test_rgb_mode_is_unchanged_by_source_depth(impl: str) -> None:
 
 @pytest.mark.parametrize("impl", ["fast", "reference"])
 def test_rgbd_without_known_depth_renders_as_rgb(impl: str) -> None:
-    rgb_net, rgbd_net = _nets(impl)
+    rgb_net, rgbd_net = _nets()
     rgb, K, c2w, _ = _wall_sources()
     o, d, near, far, _ = _query(every=9)
+    run = Runtime(impl=impl)
     with torch.no_grad():
-        a = rgb_net.render_rays(rgb_net.encode(rgb, K, c2w), o, d, near, far, stratified=False)
+        a = rgb_net.render_rays(rgb_net.encode(rgb, K, c2w), o, d, near, far, stratified=False, runtime=run)
         b = rgbd_net.render_rays(rgbd_net.encode(rgb, K, c2w, torch.zeros(len(SOURCES), H, W)), o, d, near, far,
-                                 stratified=False)
+                                 stratified=False, runtime=run)
     for p in ("coarse", "fine"):
         assert torch.equal(a[p]["logits"], b[p]["logits"]) and torch.equal(a[p]["z"], b[p]["z"])
 
 
 @pytest.mark.parametrize("impl", ["fast", "reference"])
 def test_rgbd_coarse_samples_gather_at_the_wall(impl: str) -> None:
-    _, net = _nets(impl)
+    _, net = _nets()
     rgb, K, c2w, depth = _wall_sources()
     o, d, near, far, wall = _query(every=9)
     with torch.no_grad():
-        out = net.render_rays(net.encode(rgb, K, c2w, depth), o, d, near, far, stratified=True)
+        out = net.render_rays(net.encode(rgb, K, c2w, depth), o, d, near, far, stratified=True,
+                              runtime=Runtime(impl=impl))
     z = out["coarse"]["z"]
     near_wall = ((z - wall[:, None]).abs() <= BAND + 0.02).sum(-1)
     assert (near_wall >= round(0.5 * 16)).all()
@@ -175,7 +180,7 @@ def test_bad_inputs_are_refused_naming_the_field() -> None:
         SRayConfig(inputs="rgbd", depth_band=0.0)
     rgb, K, c2w, _ = _wall_sources()
     with pytest.raises(ValueError, match="src_depth"):
-        _nets("fast")[1].encode(rgb, K, c2w)
+        _nets()[1].encode(rgb, K, c2w)
 
 
 def test_rgbd_overfits_a_training_view_of_a_small_scene() -> None:
@@ -186,6 +191,7 @@ def test_rgbd_overfits_a_training_view_of_a_small_scene() -> None:
         with torch.no_grad():
             src = net.encode(*room.sources(), room.source_depth())
             img = net.render_image(src, torch.tensor(room.K, dtype=torch.float32),
-                                   torch.tensor(room.cams[4], dtype=torch.float32), room.hw, NEAR, FAR, chunk=512)
+                                   torch.tensor(room.cams[4], dtype=torch.float32), room.hw, NEAR, FAR,
+                                   Runtime(chunk=512))
     score = miou(img["fine"]["logits"].argmax(-1).numpy(), room.views[4][1], N_CLASSES)
     assert score > 0.9, f"mIoU {score:.3f} after 120 rgbd steps"

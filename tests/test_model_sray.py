@@ -8,6 +8,7 @@ import torch
 from sray.model.config import SRayConfig
 from sray.model.rays import image_pixels, pixel_rays
 from sray.model.reprojection import project, valid_projection
+from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SRayModel
 
 H, W, NEAR, FAR = 32, 40, 1.5, 4.5
@@ -142,8 +143,8 @@ def test_encode_then_render_keeps_no_state_on_the_module() -> None:
 def test_chunked_render_image_equals_unchunked_and_render_rays() -> None:
     net, r = model(), rig(m=3)
     src = net.encode(r["rgb"], r["K"], r["c2w"])
-    small = net.render_image(src, K, r["query"], (H, W), NEAR, FAR, chunk=97)
-    whole = net.render_image(src, K, r["query"], (H, W), NEAR, FAR, chunk=H * W)
+    small = net.render_image(src, K, r["query"], (H, W), NEAR, FAR, Runtime(chunk=97))
+    whole = net.render_image(src, K, r["query"], (H, W), NEAR, FAR, Runtime(chunk=H * W))
     origins, dirs = pixel_rays(K, r["query"], image_pixels(H, W))
     with torch.no_grad():
         rays = net.render_rays(src, origins, dirs, torch.full((H * W,), NEAR), torch.full((H * W,), FAR),

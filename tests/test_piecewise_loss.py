@@ -16,18 +16,24 @@ from test_model_sray import FAR, NEAR, rig
 from sray.model.config import SRayConfig
 from sray.model.losses import render_loss
 from sray.model.ray_chunks import CPU_RAYS, CUDA_RENDER_RAYS, render_chunk_rays, train_piece_rays
-from sray.model.semantic_ray import SRayModel
+from sray.model.runtime import Runtime
+from sray.model.semantic_ray import SourceSet, SRayModel
 
 N_CLASSES = 5
 
 
-def _net(piece: int, **kw) -> SRayModel:
+def _net(**kw) -> SRayModel:
     """A seeded small network whose renders are deterministic whatever ``stratified`` asks."""
     torch.manual_seed(0)
-    net = SRayModel(SRayConfig(n_classes=N_CLASSES, n_coarse=6, n_fine=6, train_piece=piece, **kw))
+    net = SRayModel(SRayConfig(n_classes=N_CLASSES, n_coarse=6, n_fine=6, **kw))
     plain = net.render_rays
-    net.render_rays = lambda src, o, d, near, far, stratified, generator=None: plain(  # type: ignore[method-assign]
-        src, o, d, near, far, stratified=False)
+
+    def deterministic(src: SourceSet, o: torch.Tensor, d: torch.Tensor, near: torch.Tensor | float,
+                      far: torch.Tensor | float, stratified: bool, generator: torch.Generator | None = None,
+                      runtime: Runtime = Runtime()) -> dict[str, dict[str, torch.Tensor]]:
+        return plain(src, o, d, near, far, stratified=False, runtime=runtime)
+
+    net.render_rays = deterministic  # type: ignore[method-assign]
     return net
 
 
@@ -40,15 +46,17 @@ def _targets(n: int) -> tuple[torch.Tensor, torch.Tensor]:
     return label, torch.rand(n, 3, generator=gen)
 
 
-def _loss_and_grads(net: SRayModel, pieces: bool, scale: float = 1.0,
+def _loss_and_grads(net: SRayModel, piece: int, scale: float = 1.0,
                     frozen_encoder: bool = False) -> tuple[torch.Tensor, dict, dict[str, torch.Tensor]]:
+    """Loss, terms and parameter gradients of the rig's batch: ``training_loss`` in pieces of ``piece`` rays, or
+    with ``piece`` 0 the reference, the batch rendered at once and ``render_loss`` over all of it."""
     r = rig(m=3, facing_away=1)
     label, rgb = _targets(r["origins"].shape[0])
     near = torch.full((r["origins"].shape[0],), NEAR)  # (R,) bounds: the pieces slice them
     with torch.no_grad() if frozen_encoder else torch.enable_grad():
         src = net.encode(r["rgb"], r["K"], r["c2w"])
-    if pieces:
-        loss, terms = net.training_loss(src, r["origins"], r["dirs"], near, FAR, label, rgb)
+    if piece:
+        loss, terms = net.training_loss(src, r["origins"], r["dirs"], near, FAR, label, rgb, Runtime(train_piece=piece))
     else:
         out = net.render_rays(src, r["origins"], r["dirs"], near, FAR, stratified=True)
         loss, terms = render_loss(out, label, rgb, net.cfg)
@@ -67,8 +75,8 @@ def _assert_grads_close(got: dict[str, torch.Tensor], want: dict[str, torch.Tens
 @pytest.mark.parametrize("fine_samples", ["union", "new"])
 def test_pieces_give_the_whole_batch_loss_terms_and_gradients(class_weights: tuple, fine_samples: str) -> None:
     kw = {"class_weights": class_weights, "fine_samples": fine_samples}
-    loss_w, terms_w, grads_w = _loss_and_grads(_net(0, **kw), pieces=False)
-    loss_p, terms_p, grads_p = _loss_and_grads(_net(5, **kw), pieces=True)  # 24 rays: pieces of 5, 5, 5, 5, 4
+    loss_w, terms_w, grads_w = _loss_and_grads(_net(**kw), piece=0)
+    loss_p, terms_p, grads_p = _loss_and_grads(_net(**kw), piece=5)  # 24 rays: pieces of 5, 5, 5, 5, 4
     torch.testing.assert_close(loss_p, loss_w, rtol=1e-6, atol=0)
     assert set(terms_p) == set(terms_w)
     for key in terms_w:
@@ -79,19 +87,19 @@ def test_pieces_give_the_whole_batch_loss_terms_and_gradients(class_weights: tup
 
 def test_a_scaled_backward_scales_every_gradient() -> None:
     """A loss scaler multiplies the loss before ``backward``: the gathered gradients follow it."""
-    _, _, grads_1 = _loss_and_grads(_net(7), pieces=True)
-    _, _, grads_8 = _loss_and_grads(_net(7), pieces=True, scale=8.0)
+    _, _, grads_1 = _loss_and_grads(_net(), piece=7)
+    _, _, grads_8 = _loss_and_grads(_net(), piece=7, scale=8.0)
     _assert_grads_close({k: g / 8.0 for k, g in grads_8.items()}, grads_1)
 
 
 def test_frozen_modules_get_no_gradient_and_the_rest_match() -> None:
     """Finetuning: sources encoded without grad, only some modules trainable."""
-    nets = [_net(0), _net(4)]
+    nets = [_net(), _net()]
     for net in nets:
         for name, p in net.named_parameters():
             p.requires_grad_(name.startswith("fine."))
-    _, _, grads_w = _loss_and_grads(nets[0], pieces=False, frozen_encoder=True)
-    _, _, grads_p = _loss_and_grads(nets[1], pieces=True, frozen_encoder=True)
+    _, _, grads_w = _loss_and_grads(nets[0], piece=0, frozen_encoder=True)
+    _, _, grads_p = _loss_and_grads(nets[1], piece=4, frozen_encoder=True)
     assert grads_w and all(name.startswith("fine.") for name in grads_p)
     _assert_grads_close(grads_p, grads_w)
 
@@ -101,11 +109,12 @@ def test_without_grad_mode_the_loss_is_the_same_and_nothing_is_kept() -> None:
     label, rgb = _targets(r["origins"].shape[0])
     losses = []
     for piece in (0, 5):
-        net = _net(piece)
+        net = _net()
         with torch.no_grad():
             src = net.encode(r["rgb"], r["K"], r["c2w"])
             if piece:
-                loss, _ = net.training_loss(src, r["origins"], r["dirs"], NEAR, FAR, label, rgb)
+                loss, _ = net.training_loss(src, r["origins"], r["dirs"], NEAR, FAR, label, rgb,
+                                            Runtime(train_piece=piece))
             else:
                 loss, _ = render_loss(net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, True), label, rgb,
                                       net.cfg)
@@ -119,10 +128,10 @@ def test_one_piece_is_the_ordinary_pass() -> None:
     r = rig(m=3)
     label, rgb = _targets(r["origins"].shape[0])
     torch.manual_seed(0)
-    net = SRayModel(SRayConfig(n_classes=N_CLASSES, n_coarse=6, n_fine=6, train_piece=24))
+    net = SRayModel(SRayConfig(n_classes=N_CLASSES, n_coarse=6, n_fine=6))
     src = net.encode(r["rgb"], r["K"], r["c2w"])
     torch.manual_seed(5)
-    got, _ = net.training_loss(src, r["origins"], r["dirs"], NEAR, FAR, label, rgb)
+    got, _ = net.training_loss(src, r["origins"], r["dirs"], NEAR, FAR, label, rgb, Runtime(train_piece=24))
     torch.manual_seed(5)
     want, _ = render_loss(net.render_rays(src, r["origins"], r["dirs"], NEAR, FAR, stratified=True), label, rgb,
                           net.cfg)
@@ -138,4 +147,4 @@ def test_ray_counts_by_device() -> None:
     with pytest.raises(ValueError, match="0 for the device's default"):
         render_chunk_rays(-1, cpu)
     with pytest.raises(ValueError, match="train_piece"):
-        SRayConfig(train_piece=-4)
+        Runtime(train_piece=-4)

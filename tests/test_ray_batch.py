@@ -11,6 +11,7 @@ from sray.model.config import SRayConfig
 from sray.model.losses import render_loss
 from sray.model.ray_batch import QueryRays, RayBatch, RayBatchLoss
 from sray.model.rays import pixel_rays
+from sray.model.runtime import Runtime
 from sray.platform.common.model_input import ray_batch
 
 H, W, M, R, NEAR, FAR = 32, 40, 3, 40, 1.2, 4.5
@@ -34,7 +35,7 @@ def _sample(seed: int = 0) -> TrainSample:
 
 def _surface() -> RayBatchLoss:
     torch.manual_seed(0)
-    return RayBatchLoss(SRayConfig(n_classes=5, feat_dim=8, n_coarse=6, n_fine=6, n_source=M, train_piece=R))
+    return RayBatchLoss(SRayConfig(n_classes=5, feat_dim=8, n_coarse=6, n_fine=6, n_source=M), Runtime(train_piece=R))
 
 
 def _direct(model: RayBatchLoss, sample: TrainSample) -> tuple[torch.Tensor, dict]:

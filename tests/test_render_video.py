@@ -70,12 +70,12 @@ def test_a_frame_at_a_source_pose_equals_the_eval_render(tiny_shards, tiny_check
     assert ids[0] == query and set(ids) <= set(plan.meta.splits["source"])  # a view sees all of itself
 
     sample = eval_sample(plan.views, query, ids, SCENE, plan.meta.near, plan.meta.far)
-    expected = predict_view(sray_renderer(net, sample, CPU, fast), sample, 1, net.cfg.chunk, CPU, fast)
+    expected = predict_view(sray_renderer(net, sample, CPU, fast), sample, 1, fly.runtime.chunk, CPU, fast)
     camera = SceneQuery(scene=SCENE, query_id="frame 0", sources=fly.picker.sources(ids),
                         query=QueryCamera(K=sample.query.K, c2w=sample.query.c2w), near=sample.near, far=sample.far)
     src = camera.sources
     frame = render_frame(net.ray_renderer(net.encode(src.rgb, src.K, src.c2w, src.depth), fast), camera, hw,
-                         net.cfg.chunk, CPU, fast)
+                         fly.runtime.chunk, CPU, fast)
     torch.testing.assert_close(frame.label, expected.pred_label, rtol=0, atol=0)
     torch.testing.assert_close(frame.rgb, expected.pred_rgb, rtol=0, atol=1e-6)
     assert ((frame.confidence >= 1 / net.cfg.n_classes - 1e-6) & (frame.confidence <= 1 + 1e-6)).all()

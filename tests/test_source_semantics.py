@@ -23,6 +23,7 @@ from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
 from sray.model.config import SRayConfig
 from sray.model.ray_batch import QueryRays, RayBatch, RayBatchLoss
+from sray.model.runtime import Runtime
 from sray.model.source_semantics import SourceSemanticHead, source_semantic_loss
 from sray.platform.config.train_config import TrainConfig, apply_override
 
@@ -30,7 +31,7 @@ H, W, M, R, L = 32, 40, 2, 24, 5
 
 
 def _cfg(**changes: object) -> SRayConfig:
-    base = dict(n_classes=L, feat_dim=8, n_coarse=4, n_fine=4, n_source=M, train_piece=R, lambda_src_sem=0.5)
+    base = dict(n_classes=L, feat_dim=8, n_coarse=4, n_fine=4, n_source=M, lambda_src_sem=0.5)
     return SRayConfig(**(base | changes))
 
 
@@ -100,7 +101,7 @@ def test_a_step_adds_lambda_times_the_source_term_to_the_ray_loss() -> None:
     """Same seed: loss with source labels = loss without + lambda_src_sem x the head's cross-entropy computed
     here from the encoder's features; without labels the term is absent."""
     torch.manual_seed(0)
-    model = RayBatchLoss(_cfg())
+    model = RayBatchLoss(_cfg(), Runtime(train_piece=R))
     batch, (label, rgb) = _batch(), _targets()
     torch.manual_seed(5)
     with_term, terms = model(batch, label, rgb)

@@ -10,6 +10,7 @@ from torch.overrides import TorchFunctionMode
 from sray.data_tools.loader.sample_types import QueryCamera, SourceViews, TrainSample
 from sray.model.config import SRayConfig
 from sray.model.ray_batch import RayBatchLoss
+from sray.model.runtime import Runtime
 from sray.platform.common.model_input import ray_batch
 from sray.platform.train.step import NonFiniteTraining, TrainStep, fused_adam
 
@@ -62,7 +63,8 @@ def _batch(seed: int = 0) -> TrainSample:
 
 def _setup(precision: str = "no", lr: float = 1e-3) -> tuple[RayBatchLoss, TrainStep]:
     torch.manual_seed(0)
-    model = RayBatchLoss(SRayConfig(n_classes=5, n_coarse=6, n_fine=6, n_source=3, train_piece=16)).train()  # 4 pieces
+    pieces = Runtime(train_piece=16)  # 4 pieces of the 64 rays
+    model = RayBatchLoss(SRayConfig(n_classes=5, n_coarse=6, n_fine=6, n_source=3), pieces).train()
     params = list(model.parameters())
     return model, TrainStep(params, fused_adam(params, lr), 1.0, precision, torch.device("cpu"), 3)
 

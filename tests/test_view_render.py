@@ -26,6 +26,7 @@ from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.model.fast_render import FastRender, upsample_to
 from sray.model.rays import image_pixels, pixel_rays
+from sray.model.runtime import Runtime
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.model.view_render import RayRenderer
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
@@ -99,7 +100,7 @@ def test_sray_render_image_equals_one_pass_over_its_pixels() -> None:
     """Every other pixel (the whole image in chunks: ``tests/test_model_sray.py``)."""
     net, r = model(), rig(m=3)
     src = net.encode(r["rgb"], r["K"], r["c2w"])
-    image = net.render_image(src, K, r["query"], (H, W), NEAR, FAR, chunk=97, stride=2)
+    image = net.render_image(src, K, r["query"], (H, W), NEAR, FAR, Runtime(chunk=97), stride=2)
     uv, hh, ww = _grid(H, W, 2)
     _close_to_one_pass(image, _one_pass(net.ray_renderer(src), uv, r["query"]), (hh, ww))
 
@@ -135,7 +136,7 @@ def test_the_fast_mode_upsamples_its_own_strided_rays() -> None:
     net, r = model(fine_samples="new"), rig(m=3)
     src = net.encode(r["rgb"], r["K"], r["c2w"])
     fast = FastRender(pixel_stride, confidence=0.5)
-    image = net.render_image(src, K, r["query"], (H, W), NEAR, FAR, chunk=50, fast=fast)
+    image = net.render_image(src, K, r["query"], (H, W), NEAR, FAR, Runtime(chunk=50), fast=fast)
     uv, hh, ww = _grid(H, W, pixel_stride)
     rays = _one_pass(net.ray_renderer(src, fast), uv, r["query"])
     vs = np.arange(pixel_stride // 2, H, pixel_stride, dtype=np.float64)

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from sray.jobs.recipes import get_recipe
+from sray.model.runtime import Runtime
 from sray.platform.config.train_config import TrainConfig
 
 
@@ -26,8 +27,8 @@ def tiny_config(shards: Path, out: Path, **run: object) -> TrainConfig:
     """A seconds-per-run config: 2 workers, 64 rays in pieces of 24 (DDP over the piecewise loss), 8+8 samples,
     checkpoints every 5 steps."""
     cfg = get_recipe("synth-small")
-    cfg.model.n_source, cfg.model.n_coarse, cfg.model.n_fine, cfg.model.chunk = 3, 8, 8, 1024
-    cfg.model.train_piece = 24
+    cfg.model.n_source, cfg.model.n_coarse, cfg.model.n_fine = 3, 8, 8
+    cfg.runtime = Runtime(chunk=1024, train_piece=24)
     cfg.data.shards, cfg.data.top_k, cfg.data.rays_per_batch = str(shards), 4, 64
     cfg.data.loader_workers, cfg.data.val_views_per_scene, cfg.data.val_downscale = 0, 1, 2
     cfg.optim.steps, cfg.optim.lr, cfg.optim.lr_final = 20, 3e-3, 1e-3

@@ -32,7 +32,8 @@ TIMED_STEPS = 3
 
 def step_spec(variant: str, p: Preset, device: torch.device) -> dict[str, Any]:
     """The ``workloads`` spec of one pretraining step of ``variant`` in preset ``p``: its cells' model
-    section whole, their rays per batch and precision, the preset's image size."""
+    section whole, their implementation and rays per piece, rays per batch and precision, the preset's image
+    size."""
     import dataclasses
 
     from sray.jobs.bench.accuracy_cells import cell_config
@@ -42,7 +43,8 @@ def step_spec(variant: str, p: Preset, device: torch.device) -> dict[str, Any]:
     return {"name": variant, "rays": cfg.data.rays_per_batch, "coarse": m.n_coarse, "fine": m.n_fine,
             "views": m.n_source, "hw": (p.world.height, p.world.width),
             "dtype": {"no": "fp32", "bf16": "bf16", "fp16": "fp16"}[cfg.run.precision],
-            "model": dataclasses.asdict(m), "steps": TIMED_STEPS, "device": str(device)}
+            "model": dataclasses.asdict(m), "impl": cfg.runtime.impl, "piece": cfg.runtime.train_piece,
+            "steps": TIMED_STEPS, "device": str(device)}
 
 
 def _step_key(spec: dict[str, Any]) -> str:

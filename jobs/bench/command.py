@@ -34,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     prof = kinds.add_parser("profile", help="torch.profiler of the training step and of a whole-image render")
     prof.add_argument("--device", default="auto", help="cpu, cuda or auto")
     prof.add_argument("--impl", nargs="+", default=["reference", "fast"], choices=["reference", "fast"],
-                      help="implementations to profile (SRayConfig.impl)")
+                      help="implementations to profile (runtime.impl)")
     prof.add_argument("--workload", nargs="+", default=["train", "render"],
                       choices=["train", "render", "kernels", "train-kernels", "chunks", "attention-keys"],
                       help="train/render: torch.profiler tables; kernels/chunks: the render's levers, timed; "

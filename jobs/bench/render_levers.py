@@ -23,6 +23,7 @@ from torch.nn.attention import SDPBackend, sdpa_kernel
 
 from sray.jobs.bench.probes import time_call
 from sray.jobs.bench.workloads import model_config, synthetic_batch
+from sray.model.runtime import Runtime
 from sray.model.sliced_attention import sliced_attention
 
 HEADS, HEAD_DIM, VIEWS = 4, 8, 8
@@ -105,7 +106,7 @@ def chunk_table(chunks: tuple[int, ...], impl: str, crop: tuple[int, int] = (60,
     from sray.model.semantic_ray import SRayModel
 
     torch.manual_seed(0)
-    model = SRayModel(model_config({"coarse": samples, "fine": samples, "views": VIEWS, "impl": impl})).eval()
+    model = SRayModel(model_config({"coarse": samples, "fine": samples, "views": VIEWS})).eval()
     batch = synthetic_batch(1, VIEWS, (240, 320), torch.device("cpu"))
     with torch.no_grad():
         src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"])
@@ -119,7 +120,7 @@ def chunk_table(chunks: tuple[int, ...], impl: str, crop: tuple[int, int] = (60,
     for chunk in chunks:
         def render() -> None:
             with torch.no_grad():
-                model.render_image(src, K, torch.eye(4), crop, 1.0, 5.0, chunk=chunk)
+                model.render_image(src, K, torch.eye(4), crop, 1.0, 5.0, Runtime(impl=impl, chunk=chunk))
         seconds = time_call(render, torch.device("cpu"), repeats)
         mb = min(chunk, n_rays) * 3 * samples * VIEWS * model.cfg.feat_dim * 4 / 2**20
         lines.append(f"| {impl} | {chunk} | {mb:.0f} | {seconds:.2f} | {scale * seconds:.0f} |")

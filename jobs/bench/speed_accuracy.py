@@ -29,6 +29,7 @@ from sray.jobs.bench.pareto import pareto
 from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
+from sray.model.runtime import Runtime
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.eval.scene_scoring import score_scene
 from sray.platform.eval.view_scoring import sray_renderer
@@ -47,7 +48,7 @@ class Setting:
     fast: FastRender | None = None
     bf16: bool = False
     impl: str = "fast"
-    """``SRayConfig.impl`` of the per-sample networks: ``reference`` is the unoptimised first implementation."""
+    """``Runtime.impl`` of the per-sample networks: ``reference`` is the unoptimised first implementation."""
     chunk: int = 0
     """Rays per render chunk; 0 = by device (``sray.model.ray_chunks``: 256 on a CPU)."""
     sample_scale: float = 1.0
@@ -55,6 +56,10 @@ class Setting:
     inputs: str = ""
     """``model.inputs`` to render with: ``""`` the checkpoint's own, ``rgbd`` the sources' depth places the
     coarse samples (``sray.model.depth_sampling``)."""
+
+    def runtime(self) -> Runtime:
+        """The ``Runtime`` the setting's views are rendered with: its implementation and rays per chunk."""
+        return Runtime(impl=self.impl, chunk=self.chunk)
 
 
 def default_settings() -> list[Setting]:
@@ -124,6 +129,7 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     for st in settings:
         net, cfg, own = loaded["rgbd" if st.inputs == "rgbd" and "rgbd" in loaded else "main"]
         _apply(net, st, own)
+        runtime = st.runtime()
         seconds, cpu_seconds, n_views, per_scene = 0.0, 0.0, 0, []
         for scene in names:
             samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))
@@ -131,8 +137,8 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
             autocast = torch.autocast("cpu", dtype=torch.bfloat16) if st.bf16 else nullcontext()
             t0, c0 = time.perf_counter(), time.process_time()
             with autocast:
-                scored = score_scene(lambda s: sray_renderer(net, s, cpu, st.fast), samples, cfg.model.n_classes,
-                                     cfg.model.ignore_id, 1, st.chunk, cpu, st.fast)
+                scored = score_scene(lambda s: sray_renderer(net, s, cpu, st.fast, runtime), samples,
+                                     cfg.model.n_classes, cfg.model.ignore_id, 1, runtime.chunk, cpu, st.fast)
             seconds += time.perf_counter() - t0
             cpu_seconds += time.process_time() - c0
             n_views += len(scored.views)
@@ -149,13 +155,9 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
 
 
 def _apply(net: torch.nn.Module, st: Setting, own: SRayConfig) -> None:
-    """Put the setting's render choices on the model: fine samples, implementation, samples per ray and
-    inputs, starting from ``own``, the checkpoint's model config (what a setting leaves empty keeps)."""
-    net.cfg.fine_samples, net.cfg.impl = st.fine_samples or own.fine_samples, st.impl
-    net.cfg.inputs = st.inputs or own.inputs
-    for module in net.modules():
-        if hasattr(module, "impl"):
-            module.impl = st.impl
+    """Put the setting's sampling choices on the model: fine samples, samples per ray and inputs, starting from
+    ``own``, the checkpoint's model config (what a setting leaves empty keeps)."""
+    net.cfg.fine_samples, net.cfg.inputs = st.fine_samples or own.fine_samples, st.inputs or own.inputs
     net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in (own.n_coarse, own.n_fine))
 
 

@@ -3,9 +3,9 @@
 Both run on a synthetic scene (random source images, a camera rig whose sources all look at the
 query's frustum), so they need no data and measure the model alone. A spec dict names the sizes:
 rays, coarse, fine, views, hw, device, and optionally dtype ('fp32'|'bf16'|'fp16'), impl
-('reference'|'fast', ``SRayConfig.impl``), fine_samples ('union'|'new'; absent = the model default),
-piece (rays per piece of the training loss, ``SRayConfig.train_piece``; 0 = by device), chunk (rays per
-render chunk; absent = by device), compile (both fields through ``torch.compile``), model (any other
+('reference'|'fast', ``Runtime.impl``), fine_samples ('union'|'new'; absent = the model default),
+piece (rays per piece of the training loss, ``Runtime.train_piece``; 0 = by device), chunk (rays per
+render chunk, ``Runtime.chunk``; absent = by device), compile (both fields through ``torch.compile``), model (any other
 ``SRayConfig`` fields, e.g. a recipe's whole model section), steps. With ``inputs='rgbd'`` (in ``model``)
 the sources get depth maps.
 """
@@ -19,6 +19,7 @@ import torch
 
 from sray.jobs.bench.probes import peak_rss_bytes, timed_runs
 from sray.model.config import SRayConfig
+from sray.model.runtime import Runtime
 from sray.platform.train.step import fused_adam
 
 
@@ -44,12 +45,18 @@ def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.de
 
 
 def model_config(spec: dict) -> SRayConfig:
-    """The ``SRayConfig`` of a workload spec: its ``model`` fields, then its sizes, impl, fine_samples and
-    piece (paper defaults for everything the spec leaves out)."""
+    """The ``SRayConfig`` of a workload spec: its ``model`` fields, then its sizes and fine_samples (paper
+    defaults for everything the spec leaves out)."""
     cfg = SRayConfig(**spec.get("model", {}))
     return dataclasses.replace(cfg, n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"],
-                               impl=spec.get("impl", cfg.impl), fine_samples=spec.get("fine_samples", cfg.fine_samples),
-                               train_piece=spec.get("piece", cfg.train_piece))
+                               fine_samples=spec.get("fine_samples", cfg.fine_samples))
+
+
+def spec_runtime(spec: dict) -> Runtime:
+    """The ``Runtime`` of a workload spec: its impl, piece and chunk (the defaults for what it leaves out or
+    sets to 0)."""
+    fields = {"impl": "impl", "piece": "train_piece", "chunk": "chunk"}
+    return Runtime(**{field: spec[key] for key, field in fields.items() if spec.get(key)})
 
 
 def make_train_step(spec: dict) -> Callable[[], None]:
@@ -58,7 +65,7 @@ def make_train_step(spec: dict) -> Callable[[], None]:
 
     device = torch.device(spec["device"])
     torch.manual_seed(0)
-    cfg = model_config(spec)
+    cfg, runtime = model_config(spec), spec_runtime(spec)
     model = SRayModel(cfg).to(device)
     if spec.get("compile"):
         model.coarse.compile()
@@ -71,7 +78,8 @@ def make_train_step(spec: dict) -> Callable[[], None]:
     def step() -> None:
         with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
             src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"], batch.get("src_depth"))
-            loss, _ = model.training_loss(src, batch["origins"], batch["dirs"], 1.0, 5.0, batch["label"], batch["rgb"])
+            loss, _ = model.training_loss(src, batch["origins"], batch["dirs"], 1.0, 5.0, batch["label"], batch["rgb"],
+                                          runtime)
         opt.zero_grad(set_to_none=True)
         scaler.scale(loss).backward()
         scaler.step(opt)
@@ -89,7 +97,7 @@ def render_case(spec: dict) -> Callable[[], None]:
 
     device = torch.device(spec["device"])
     torch.manual_seed(0)
-    model = SRayModel(model_config(spec)).to(device).eval()
+    model, runtime = SRayModel(model_config(spec)).to(device).eval(), spec_runtime(spec)
     h, w = spec["hw"]
     batch = synthetic_batch(1, spec["views"], (h, w), device)
     with torch.no_grad():
@@ -97,7 +105,7 @@ def render_case(spec: dict) -> Callable[[], None]:
     query = torch.eye(4, device=device)
 
     def render() -> None:
-        model.render_image(src, batch["K"], query, (h, w), 1.0, 5.0, chunk=spec.get("chunk") or None)
+        model.render_image(src, batch["K"], query, (h, w), 1.0, 5.0, runtime)
     return render
 
 

@@ -10,6 +10,7 @@ from typing import Any
 from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
+from sray.model.runtime import Runtime
 from sray.platform.config.held_out_render import held_out_fast
 from sray.platform.config.overrides import set_field
 
@@ -153,6 +154,21 @@ def data_settings(d: dict[str, Any]) -> DataSettings:
     return DataSettings(**rest, aug=Augmentation(**flat, **d.get("aug", {})))
 
 
+RUNTIME_FIELDS = tuple(f.name for f in dataclasses.fields(Runtime))
+"""Fields of the ``runtime`` section (``impl``, ``chunk``, ``train_piece``). Configs and checkpoints written
+before it was a section hold them in the model section; :func:`model_and_runtime` reads them as
+``runtime.<field>``."""
+
+
+def model_and_runtime(d: dict[str, Any]) -> tuple[SRayConfig, Runtime]:
+    """The model and runtime sections of a stored config ``d`` (a :meth:`TrainConfig.to_dict`), the runtime
+    fields a model section holds (:data:`RUNTIME_FIELDS`) read into the runtime section."""
+    model = {k: tuple(v) if k in ("weight_hidden", "geo_hidden", "class_weights") else v
+             for k, v in d.get("model", {}).items() if k not in RUNTIME_FIELDS}
+    moved = {k: v for k, v in d.get("model", {}).items() if k in RUNTIME_FIELDS}
+    return SRayConfig(**model), Runtime(**moved, **d.get("runtime", {}))
+
+
 @dataclass
 class TrainConfig:
     """Everything a training job needs; recipes return one, ``--set a.b=value`` overrides fields."""
@@ -160,13 +176,16 @@ class TrainConfig:
     recipe: str = "synth-small"
     """Name of the recipe this config came from."""
     model: SRayConfig = field(default_factory=SRayConfig)
-    """The network (paper defaults)."""
+    """The network and its loss (paper defaults): what the job's checkpoints hold besides their weights."""
     data: DataSettings = field(default_factory=DataSettings)
     """Shards and sample assembly."""
     optim: OptimSettings = field(default_factory=OptimSettings)
     """Optimiser and schedule."""
     run: RunSettings = field(default_factory=RunSettings)
     """Cadence, precision, placement, outputs."""
+    runtime: Runtime = field(default_factory=Runtime)
+    """How the network is run in training and validation: implementation, rays per training piece and per
+    render chunk (``sray.model.runtime``), set field by field: ``--set runtime.chunk=4096``."""
 
     def __post_init__(self) -> None:
         """Reject settings of different sections that cannot train together."""
@@ -179,14 +198,12 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
         """Inverse of :meth:`to_dict`; also reads the configs that earlier versions stored (flat ``data.aug_<field>``
-        keys, :data:`RETIRED_RUN_KEYS`)."""
-        model = dict(d.get("model", {}))
-        for key in ("weight_hidden", "geo_hidden", "class_weights"):
-            if key in model:
-                model[key] = tuple(model[key])
-        return cls(recipe=d.get("recipe", "custom"), model=SRayConfig(**model),
+        keys, :data:`RETIRED_RUN_KEYS`, runtime fields in the model section: :data:`RUNTIME_FIELDS`)."""
+        model, runtime = model_and_runtime(d)
+        return cls(recipe=d.get("recipe", "custom"), model=model,
                    data=data_settings(d.get("data", {})), optim=OptimSettings(**d.get("optim", {})),
-                   run=RunSettings(**{k: v for k, v in d.get("run", {}).items() if k not in RETIRED_RUN_KEYS}))
+                   run=RunSettings(**{k: v for k, v in d.get("run", {}).items() if k not in RETIRED_RUN_KEYS}),
+                   runtime=runtime)
 
     def job_dir(self) -> Path:
         """Folder of this job's checkpoints and run state."""
@@ -205,25 +222,30 @@ def check_sections(cfg: TrainConfig) -> None:
         raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
                          "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "
                          f"(is {cfg.model.lambda_src_sem}). Set model.lambda_src_sem=1 or optim.warmup_2d_steps=0.")
-    if cfg.run.precision == "fp16" and 0 < cfg.model.train_piece < cfg.data.rays_per_batch:
-        raise ValueError(f"train config: model.train_piece is {cfg.model.train_piece} (< data.rays_per_batch "
+    if cfg.run.precision == "fp16" and 0 < cfg.runtime.train_piece < cfg.data.rays_per_batch:
+        raise ValueError(f"train config: runtime.train_piece is {cfg.runtime.train_piece} (< data.rays_per_batch "
                          f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not "
                          "loss-scaled. "
-                         "Set model.train_piece=0 (the whole batch on a GPU) or run.precision=bf16.")
+                         "Set runtime.train_piece=0 (the whole batch on a GPU) or run.precision=bf16.")
 
 
 def apply_override(cfg: TrainConfig, assignment: str) -> None:
     """Apply one ``section.field=value`` override in place, parsing the value as the field's type.
 
     Raises ValueError naming the unknown section or field and listing the valid ones (for a flat
-    ``data.aug_<field>``, its name in the ``data.aug`` section), or a value the network cannot run with
-    (the config keeps its previous value then).
+    ``data.aug_<field>``, its name in the ``data.aug`` section; for ``model.<field>`` of a runtime field, its
+    name in the ``runtime`` section), or a value the network cannot run with (the config keeps its previous
+    value then).
     """
     path, _, raw = assignment.partition("=")
     flat = path.strip().removeprefix(f"data.{FLAT_AUG_PREFIX}")
     if flat != path.strip() and flat in {f.name for f in dataclasses.fields(Augmentation)}:
         raise ValueError(f"--set {assignment!r}: augmentation settings are the data.aug section; "
                          f"use --set data.aug.{flat}={raw.strip()}")
+    moved = path.strip().removeprefix("model.")
+    if moved != path.strip() and moved in RUNTIME_FIELDS:
+        raise ValueError(f"--set {assignment!r}: how the network is run is the runtime section; "
+                         f"use --set runtime.{moved}={raw.strip()}")
 
     def check() -> None:
         cfg.model.__post_init__()

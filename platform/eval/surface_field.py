@@ -18,6 +18,7 @@ from torch import Tensor
 from sray.model.ray_chunks import render_chunk_rays
 from sray.model.rays import image_pixels, pixel_rays
 from sray.model.rendering import sample_uniform
+from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SRayModel, SourceSet
 from sray.platform.eval.label_transfer import UNSEEN
 
@@ -37,23 +38,23 @@ def surface_brackets(depth: Tensor, near: Tensor, far: Tensor, n_coarse: int, n_
 
 @torch.no_grad()
 def field_at_surface(net: SRayModel, src: SourceSet, K: Tensor, c2w: Tensor, depth: Tensor, near: float,
-                     far: float) -> Tensor:
+                     far: float, runtime: Runtime = Runtime()) -> Tensor:
     """Class ids (H, W) int64 of the fine field at the ground-truth depth (H, W) of the query camera K (3, 3),
     c2w (4, 4) against the encoded sources ``src``; :data:`UNSEEN` where the depth is unknown. Rays run in
-    chunks of ``net.cfg.chunk`` (0: by device)."""
+    chunks of ``runtime.chunk`` (0: by device) through the field's ``runtime.impl``."""
     h, w = depth.shape
     device = src.feats.device
     origins, dirs = pixel_rays(K.to(device).float(), c2w.to(device).float(), image_pixels(h, w, device))
     surface = depth.to(device).float().reshape(-1)  # (H*W,)
     known = (surface > 0).nonzero().squeeze(1)
     pred = torch.full((h * w,), UNSEEN, dtype=torch.int64, device=device)
-    chunk = render_chunk_rays(net.cfg.chunk, device)
+    chunk = render_chunk_rays(runtime.chunk, device)
     cfg = net.cfg
     for start in range(0, known.numel(), chunk):
         rays = known[start:start + chunk]
         lo = torch.full((rays.numel(),), near, device=device)
         hi = torch.full((rays.numel(),), far, device=device)
         z, at = surface_brackets(surface[rays], lo, hi, cfg.n_coarse, cfg.n_fine, cfg.fine_samples == "union")
-        logits = net.fine(src, origins[rays], dirs[rays], z, lo, hi)["logits"]  # (r, N, L)
+        logits = net.fine(src, origins[rays], dirs[rays], z, lo, hi, runtime.impl)["logits"]  # (r, N, L)
         pred[rays] = logits[torch.arange(rays.numel(), device=device), at].argmax(-1)
     return pred.reshape(h, w).cpu()

@@ -19,6 +19,7 @@ from torch import Tensor, nn
 from sray.data_tools.loader.sample_types import EvalSample
 from sray.model.fast_render import FastRender
 from sray.model.metrics import confusion_matrix, per_image_miou, psnr, scene_metrics
+from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SourceSet
 from sray.model.ssim import SSIM_WINDOW, ssim
 from sray.model.view_render import RayRenderer, render_view, strided_pixels
@@ -66,11 +67,11 @@ def encode_sources(net: nn.Module, sample: EvalSample, device: torch.device) -> 
     return net.encode(sources.rgb, sources.K, sources.c2w, sources.depth)
 
 
-def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device,
-                  fast: FastRender | None = None) -> RayRenderer:
+def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device, fast: FastRender | None = None,
+                  runtime: Runtime = Runtime()) -> RayRenderer:
     """Encode the sample's fixed source views once; return the S-Ray ray renderer bound to them (the full
-    render, or the fast mode's rays with ``fast``: ``SRayModel.ray_renderer``)."""
-    return net.ray_renderer(encode_sources(net, sample, device), fast)
+    render, or the fast mode's rays with ``fast``: ``SRayModel.ray_renderer``), its fields run ``runtime.impl``."""
+    return net.ray_renderer(encode_sources(net, sample, device), fast, runtime)
 
 
 def class_ious(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> list[float | None]:

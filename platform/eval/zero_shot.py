@@ -38,6 +38,7 @@ from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.fast_render import FastRender
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
+from sray.model.runtime import Runtime
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
@@ -151,11 +152,12 @@ def flat_metrics(report: dict[str, Any]) -> dict[str, float]:
 def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None, out_dir: Path,
                         n_source: int = 8, stride: int = 1, tracking_uri: str | None = None,
                         experiment: str = "sray-eval", *, tracker: str = DEFAULT_TRACKER, device: str | None = None,
-                        progress: bool = True, fast: FastRender | None = None) -> dict:
+                        progress: bool = True, fast: FastRender | None = None, runtime: Runtime = Runtime()) -> dict:
     """Evaluate ``checkpoint`` on ``scenes`` (default: the manifest's test scenes); see the module doc.
 
     ``fast``: render with the fast render mode (``sray.model.fast_render``) instead of the full
-    renderer; the protocol's ``render`` field names it with its settings.
+    renderer; the protocol's ``render`` field names it with its settings. ``runtime``: the implementation and
+    rays per chunk the network runs with (default: the fast path, chunks by device).
 
     Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (the fields of the
     run's :class:`~sray.platform.tracking.tracker.RunHandle`: tracker, store, run id, experiment id,
@@ -204,9 +206,9 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
                 per_view.append({"query_id": view.query_id, **view_scores(view, n_classes, ignore_id), "pngs": pngs})
                 bar.update(1)
 
-            scored = score_scene(lambda s: sray_renderer(net, s, torch_device, fast),
+            scored = score_scene(lambda s: sray_renderer(net, s, torch_device, fast, runtime),
                                  make_eval_samples(shards, name, split="test", n_source=n_source), n_classes,
-                                 ignore_id, stride, cfg.model.chunk, torch_device, fast, on_view=record_view)
+                                 ignore_id, stride, runtime.chunk, torch_device, fast, on_view=record_view)
             block = scene_blocks(scored.scores, len(scored.views))
             block["dataset_level"]["iou_per_class"] = class_ious(scored.views, n_classes, ignore_id)
             report["scenes"][name] = {**block, "views": per_view}

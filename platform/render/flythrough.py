@@ -25,6 +25,7 @@ import torch
 
 from sray.data_tools.loader.sample_types import QueryCamera, SceneQuery
 from sray.model.fast_render import FastRender
+from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SRayModel, SourceSet
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.progress import make_progress
@@ -60,15 +61,17 @@ def _sample(plan: FlythroughPlan, index: int, picker: SourcePicker, ids: list[st
 class Flythrough:
     """A fly-through ready to render: the model, the plan, the source picker and the protocol, all checked."""
 
-    def __init__(self, net: SRayModel, plan: FlythroughPlan, n_source: int, fast: FastRender | None = None) -> None:
+    def __init__(self, net: SRayModel, plan: FlythroughPlan, n_source: int, fast: FastRender | None = None,
+                 runtime: Runtime = Runtime()) -> None:
         """Check that ``plan``'s scene fits ``net`` and can give ``n_source`` sources per frame (ValueError naming
         the manifest or the scene otherwise); nothing is rendered or written. ``fast``: the fast render mode
-        (None: the full renderer); rays per chunk and the protocol's inputs are the model's (``net.cfg``)."""
+        (None: the full renderer); the protocol's inputs are the model's (``net.cfg``); ``runtime``: the
+        implementation and rays per chunk the network runs with."""
         names = plan.meta.class_names
         if len(names) != net.cfg.n_classes:
             raise ValueError(f"{plan.shards / 'manifest.json'}: scene {plan.meta.name!r} has {len(names)} classes, "
                              f"the model predicts {net.cfg.n_classes}; render data of the model's label space")
-        self.net, self.plan, self.fast = net.eval(), plan, fast
+        self.net, self.plan, self.fast, self.runtime = net.eval(), plan, fast, runtime
         self.picker = SourcePicker(plan.views, plan.meta, n_source)
         self.protocol = flythrough_protocol(plan, n_source, net.cfg.inputs, fast)
         self.layout = panel_layout(plan.path.hw, len(names))
@@ -90,8 +93,8 @@ class Flythrough:
         plan, path = self.plan, self.plan.path
         ids = self.picker.choose(path.K[index], path.c2w[index], path.hw)
         sample = _sample(plan, index, self.picker, ids)
-        renderer = self.net.ray_renderer(self._sources(ids, sample, device), self.fast)
-        frame = render_frame(renderer, sample, path.hw, self.net.cfg.chunk, device, self.fast)
+        renderer = self.net.ray_renderer(self._sources(ids, sample, device), self.fast, self.runtime)
+        frame = render_frame(renderer, sample, path.hw, self.runtime.chunk, device, self.fast)
         title = " | ".join(filter(None, [plan.meta.name, label, path.describe, f"frame {index + 1}/{len(path)}"]))
         picture = compose_panels(frame.rgb.numpy(), frame.label.numpy(), frame.depth.numpy(), frame.confidence.numpy(),
                                  plan.meta.class_names, plan.meta.near, plan.meta.far, title, plan.meta.ignore_id)

@@ -30,9 +30,10 @@ def lr_lambda(opt: OptimSettings) -> Any:
 
 
 def build_training(cfg: TrainConfig) -> tuple[RayBatchLoss, torch.optim.Optimizer, torch.optim.lr_scheduler.LambdaLR]:
-    """Model (seeded from ``cfg.run.seed``, identical on every rank), Adam and its schedule."""
+    """Model (seeded from ``cfg.run.seed``, identical on every rank; its loss run with ``cfg.runtime``), Adam and
+    its schedule."""
     torch.manual_seed(cfg.run.seed)
-    model = RayBatchLoss(cfg.model)
+    model = RayBatchLoss(cfg.model, cfg.runtime)
     optimizer = fused_adam(list(model.parameters()), cfg.optim.lr)
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
     return model, optimizer, scheduler

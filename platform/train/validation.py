@@ -58,8 +58,8 @@ def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: s
         samples = itertools.islice(make_eval_samples(Path(cfg.data.shards), name, split="test",
                                                      n_source=cfg.model.n_source, manifest=manifest),
                                    cfg.data.val_views_per_scene)
-        scored = score_scene(lambda s: sray_renderer(net, s, device, fast), samples, cfg.model.n_classes,
-                             cfg.model.ignore_id, cfg.data.val_downscale, cfg.model.chunk, device, fast)
+        scored = score_scene(lambda s: sray_renderer(net, s, device, fast, cfg.runtime), samples, cfg.model.n_classes,
+                             cfg.model.ignore_id, cfg.data.val_downscale, cfg.runtime.chunk, device, fast)
         per_scene.append(scored.scores)
         renders += [(name, v) for v in scored.views]
     return (_mean(per_scene) if per_scene else {}), renders
