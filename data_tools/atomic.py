@@ -3,16 +3,19 @@
 A reader sees either the old file or the whole new one, never a partial file. The temporary file is
 ``.<name>.tmp<pid>`` in the target's folder (same file system, so the rename is atomic); it is
 removed when the write fails or is interrupted, and :data:`TEMP_NAME` matches the ones a killed
-process may leave behind. Importable from every part of sray (``sray.data_tools.atomic``).
+process may leave behind. :func:`save_png` writes a matplotlib figure the same way. Importable from every
+part of sray (``sray.data_tools.atomic``).
 """
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
 import shutil
 from pathlib import Path
+from typing import Any
 
 TEMP_NAME = re.compile(r"^\..+\.tmp\d+$")
 """File names of this module's temporary files (left over only when a process was killed)."""
@@ -42,6 +45,14 @@ def atomic_write_text(path: Path, text: str) -> None:
 def atomic_write_json(path: Path, obj: object) -> None:
     """Write ``obj`` as indented JSON (one space, trailing newline) to ``path`` atomically."""
     atomic_write_text(path, json.dumps(obj, indent=1) + "\n")
+
+
+def save_png(fig: Any, path: Path, dpi: int) -> Path:
+    """Render the matplotlib figure ``fig`` to PNG in memory and write it to ``path`` atomically; returns ``path``."""
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=dpi, format="png")
+    atomic_write_bytes(Path(path), buf.getvalue())
+    return Path(path)
 
 
 def replace_dir(ready: Path, target: Path, aside: Path) -> None:

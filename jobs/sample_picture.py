@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sray.data_tools.atomic import save_png
 from sray.data_tools.loader.sample_types import TrainSample
-from sray.platform.viz.figure_io import save_png
 
 
 def write_sample_picture(sample: TrainSample, class_names: list[str], path: Path, ignore_id: int = 255) -> Path:

@@ -7,8 +7,7 @@ from pathlib import Path
 from fleet_fixtures import tiny_checkpoint  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
-from sray.jobs.bench.pareto import pareto
-from sray.jobs.bench.speed_accuracy import chart, table
+from sray.jobs.bench.speed_accuracy import chart, pareto, table
 
 
 def _row(name: str, miou: float, s: float, fast: bool = False) -> dict:

@@ -9,8 +9,7 @@ import pytest
 
 from sray.jobs.cli import main
 from sray.jobs.gpu_check import context, runner
-from sray.jobs.gpu_check.report import REPORT_FILE, StageResult, load_report
-from sray.jobs.gpu_check.stage_names import STAGE_NAMES
+from sray.jobs.gpu_check.report import REPORT_FILE, STAGE_NAMES, StageResult, load_report
 
 REPO = Path(__file__).resolve().parents[1]
 

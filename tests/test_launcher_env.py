@@ -1,4 +1,4 @@
-"""A local Ray started by sray gives Ray Train's controller the 0.5 s poll (``sray.platform.common.ray_polling``)
+"""A local Ray started by sray gives Ray Train's controller the 0.5 s poll (``sray.platform.common.ray_env``)
 and leaves PyTorch's CPU allocator as the user set it (no huge-page path unless asked for: it was slower
 in ``sray bench model``)."""
 

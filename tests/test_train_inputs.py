@@ -51,7 +51,7 @@ def test_submit_refuses_bad_input_before_contacting_the_cluster(tmp_path: Path) 
 
 
 def test_ray_train_controller_query_warnings_are_dropped_and_others_kept() -> None:
-    from sray.platform.common.ray_quiet import QUIET, quiet_ray_logs
+    from sray.platform.common.ray_env import QUIET, quiet_ray_logs
 
     name = next(iter(QUIET))
     logger = logging.getLogger(name)

@@ -33,5 +33,5 @@ def test_a_job_writing_to_a_file_prints_each_worker_line_once(ray_session, tiny_
     # Ray Train's placement-group cleaner looked its cluster up with address="auto" and, with the session's
     # Ray beside this job's, died with "Found multiple active Ray instances"
     assert "Traceback" not in text and "multiple active Ray instances" not in text, text[-3000:]
-    # Ray Train's own lines at each checkpoint (ray_quiet.QUIET): each worker's report, rank 0's storage copy
+    # Ray Train's own lines at each checkpoint (ray_env.QUIET): each worker's report, rank 0's storage copy
     assert "Reporting training result" not in text and "Checkpoint successfully created" not in text, text[-3000:]

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from sray.jobs.bench.accuracy_plan import Cell, Preset
-from sray.jobs.bench.pareto import pareto
+from sray.jobs.bench.speed_accuracy import pareto
 
 STEP_TIMES_FILE = "step_times.json"
 """Stored step times of a benchmark folder: {"machine": ..., "variants": {variant: {...}}}."""
@@ -106,7 +106,7 @@ def step_cost_chart(scores: dict[str, list[float]], seconds: dict[str, float], s
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sray.platform.viz.figure_io import save_png
+    from sray.data_tools.atomic import save_png
 
     labels = [k for k in scores if k in seconds]
     budget = Counter(steps[k] for k in labels).most_common(1)[0][0] if labels else 0

@@ -25,7 +25,6 @@ import torch
 
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.jobs.bench.doc import Bench, bench_dir, record
-from sray.jobs.bench.pareto import pareto
 from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
@@ -161,6 +160,17 @@ def _apply(net: torch.nn.Module, st: Setting, own: SRayConfig) -> None:
     net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in (own.n_coarse, own.n_fine))
 
 
+def pareto(rows: list[dict], cost: str = "s_per_view", score: str = "miou") -> list[dict]:
+    """Rows no other row beats on both ``cost`` (lower is better) and ``score`` (higher is better),
+    cheapest first."""
+    front, best = [], float("-inf")
+    for r in sorted(rows, key=lambda r: (r[cost], -r[score])):
+        if r[score] > best:
+            front.append(r)
+            best = r[score]
+    return front
+
+
 def table(rows: list[dict]) -> str:
     """Markdown table: mIoU and its paired difference to the first row (the default set's first is the
     unoptimised full render), PSNR, seconds per view, speed-up against the first row."""
@@ -188,7 +198,7 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sray.platform.viz.figure_io import save_png
+    from sray.data_tools.atomic import save_png
 
     fig = plt.figure(figsize=(11, 6.5))
     ax = fig.add_axes((0.07, 0.1, 0.56, 0.74))

@@ -8,11 +8,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sray.jobs.gpu_check.report import STAGE_NAMES
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray gpu-check``."""
-    from sray.jobs.gpu_check.stage_names import STAGE_NAMES
-
     p = sub.add_parser("gpu-check", help="check the CUDA path stage by stage; report into docs/benchmarks.md")
     p.add_argument("--stages", nargs="+", default=list(STAGE_NAMES), choices=list(STAGE_NAMES),
                    metavar="STAGE", help=f"stages to run, in order (default: all of {', '.join(STAGE_NAMES)})")

@@ -18,8 +18,7 @@ import torch
 
 from . import stage_bench, stage_env, stage_fleet, stage_precision, stage_profile, stage_ray, stage_training
 from .context import CheckContext
-from .report import StageResult, load_report, markdown, save_report
-from .stage_names import STAGE_NAMES
+from .report import STAGE_NAMES, StageResult, load_report, markdown, save_report
 
 STAGES: dict[str, Callable[[CheckContext], StageResult]] = dict(zip(STAGE_NAMES, (
     stage_env.environment, stage_env.tests, stage_precision.run, stage_training.run, stage_bench.run,

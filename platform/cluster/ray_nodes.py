@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from sray.platform.cluster.processes import ProcessRecord, free_port, port_open, spawn, wait_until
-from sray.platform.common.ray_polling import TRAIN_POLL_ENV
+from sray.platform.common.ray_env import TRAIN_POLL_ENV
 
 NODE_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
 """Environment of every node: no usage stats, no drain wait on SIGTERM."""
@@ -45,7 +45,7 @@ def _node_env(token_path: Path, gcs_address: str) -> dict[str, str]:
     ``address="auto"`` (Ray Train's placement-group cleaner, through the state API); with another Ray
     running on the machine (a local ``sray train``, a test session) that lookup finds two and the
     cleaner dies with "Found multiple active Ray instances". Jobs poll their workers every 0.5 s unless the
-    user's environment says otherwise (:mod:`sray.platform.common.ray_polling`)."""
+    user's environment says otherwise (:mod:`sray.platform.common.ray_env`)."""
     env = {**TRAIN_POLL_ENV, **os.environ, **NODE_ENV, **auth_env(token_path), "RAY_ADDRESS": gcs_address}
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     return env

@@ -22,9 +22,7 @@ from typing import Any
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.common.progress import progress_env
-from sray.platform.common.ray_polling import TRAIN_POLL_ENV
-from sray.platform.common.ray_quiet import TRAIN_WORKER_ENV
-from sray.platform.common.ray_worker_setup import SETUP_HOOK
+from sray.platform.common.ray_env import SETUP_HOOK, TRAIN_POLL_ENV, TRAIN_WORKER_ENV
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import RunHandle, Tracker
@@ -77,7 +75,7 @@ def load_job_config(output_dir: str, name: str) -> TrainConfig:
 
 LOCAL_WORKER_ENV = dict(TRAIN_POLL_ENV)
 """Environment a local Ray cluster's workers inherit unless the user set it otherwise:
-:data:`TRAIN_POLL_ENV`, Ray Train's controller polls every 0.5 s (:mod:`sray.platform.common.ray_polling`).
+:data:`TRAIN_POLL_ENV`, Ray Train's controller polls every 0.5 s (:mod:`sray.platform.common.ray_env`).
 PyTorch's huge-page CPU allocator path (``THP_MEM_ALLOC_ENABLE=1``) is not set: in alternating fresh-process
 runs of ``sray bench model`` it made the default paper-config step slower (4.81 -> 7.11 s; docs/performance.md,
 "No huge pages"); a user who measures a gain on their machine sets it in the environment, which is kept."""

@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
+from sray.data_tools.atomic import save_png
 from sray.model.metrics import DATASET_PROTOCOL
 from sray.platform.common.eval_protocol import caption_lines
 from sray.platform.viz.chart_style import ChartedMethods
 from sray.platform.viz.curves import average_curves, check_result, curve_xy, failure_note, is_chartable, zero_shot_value
-from sray.platform.viz.figure_io import save_png
 
 log = logging.getLogger(__name__)
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.platform.viz.figure_io import save_png
+from sray.data_tools.atomic import save_png
 from sray.platform.viz.palette import IGNORE_COLOR, colorize, palette
 
 MARGIN = 10

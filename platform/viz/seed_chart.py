@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.platform.viz.figure_io import save_png
+from sray.data_tools.atomic import save_png
 
 
 def write_seed_chart(values: dict[str, list[float]], y_label: str, title: str, footnote: str, path: Path) -> Path:

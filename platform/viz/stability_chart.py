@@ -14,8 +14,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from sray.data_tools.atomic import save_png
 from sray.platform.viz.chart_style import ChartStyle
-from sray.platform.viz.figure_io import save_png
 
 PANEL_SIZE = (4.2, 3.2)
 """Inches per panel (width, height)."""

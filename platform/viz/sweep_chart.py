@@ -11,7 +11,7 @@ import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
-from sray.platform.viz.figure_io import save_png
+from sray.data_tools.atomic import save_png
 
 ENDS = {"finished": ("o", "-", ""), "stopped": ("X", "-", " (stopped early)"),
         "errored": ("x", ":", " (errored)"), "unfinished": (">", ":", " (unfinished)")}
