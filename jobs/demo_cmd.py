@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     if args.steps <= 0:
         _say(f"done in {time.perf_counter() - t0:.0f} s (data only); results under {args.out.resolve()}")
         return 0
-    from sray.jobs.recipes import get_recipe
+    from sray.platform.config.recipes import get_recipe
     from sray.platform.config.fleet_config import FleetConfig
     from sray.platform.eval.zero_shot import evaluate_checkpoint, format_table
     from sray.platform.finetune.fleet import run_fleet, unseen_scenes

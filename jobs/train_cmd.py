@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from sray.jobs.recipes import RECIPES
+from sray.platform.config.recipes import RECIPES
 
 if TYPE_CHECKING:
     from sray.platform.config.train_config import TrainConfig
@@ -39,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def build_config(args: argparse.Namespace) -> TrainConfig:
     """The job's TrainConfig: the recipe (or a resumed job's saved config) plus flags and --set."""
-    from sray.jobs.recipes import get_recipe
+    from sray.platform.config.recipes import get_recipe
     from sray.platform.config.overrides import apply_settings
     from sray.platform.config.train_config import apply_override
     from sray.platform.train.launcher import load_job_config

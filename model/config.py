@@ -89,7 +89,7 @@ class SRayConfig:
     class_weights: tuple[float, ...] = ()
     """Per-class weights of the semantic cross-entropy (n_classes of them; empty = unweighted, the
     paper's loss). Training fills it from the training set's class frequencies when
-    ``data.class_balance`` asks for it (``sray.data_tools.class_stats.balanced_weights``)."""
+    ``data.class_balance`` asks for it (``sray.data_tools.loader.class_stats.balanced_weights``)."""
     fine_samples: str = "new"
     """Depths the fine pass evaluates, one of ``FINE_SAMPLES``."""
     inputs: str = "rgb"

@@ -192,7 +192,7 @@ def test_check_accepts_real_training_state():
 
 
 def test_initial_checkpoint_is_the_seeded_untrained_model_at_step_0(tmp_path: Path) -> None:
-    from sray.jobs.recipes import get_recipe
+    from sray.platform.config.recipes import get_recipe
     from sray.model.semantic_ray import SRayModel
     from sray.platform.train.state import write_initial_checkpoint
 

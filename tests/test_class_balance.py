@@ -9,7 +9,7 @@ import pytest
 import scene_fixtures
 import torch
 
-from sray.data_tools.class_stats import balanced_weights, count_pixels, dataset_pixel_counts
+from sray.data_tools.loader.class_stats import balanced_weights, count_pixels, dataset_pixel_counts
 from sray.data_tools.scene import IGNORE_ID
 from sray.jobs.data.stats import format_stats
 from sray.model.losses import LossConfig, render_loss

@@ -8,8 +8,8 @@ import json
 import pytest
 
 from sray.data_tools.loader.augment import Augmentation
-from sray.jobs.recipes import get_recipe
 from sray.model.runtime import Runtime
+from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import TrainConfig, apply_override
 
 

@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from label_reads import record_label_reads
 
-from sray.data_tools.class_stats import count_pixels, shard_pixel_counts
+from sray.data_tools.loader.class_stats import count_pixels, shard_pixel_counts
 from sray.data_tools.loader.augment import Augmentation, rescale_nearest
 from sray.data_tools.loader.samples import train_sample
 from sray.data_tools.loader.shard_loader import make_train_loader

@@ -20,8 +20,8 @@ from injected_faults import injected_faults
 from mlflow.tracking import MlflowClient
 from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
-from sray.jobs.recipes import get_recipe
 from sray.platform.common.fault_hook import ENV_VAR, hold_paths
+from sray.platform.config.recipes import get_recipe
 from sray.platform.sweep.driver import run_sweep
 from sray.platform.sweep.finish import SweepResult
 from sray.platform.sweep.options import SweepOptions

@@ -12,8 +12,8 @@ import pytest
 from injected_faults import injected_faults
 
 from sray.jobs.cli import main
-from sray.jobs.recipes import get_recipe
 from sray.platform.common.fault_hook import InjectedFailure
+from sray.platform.config.recipes import get_recipe
 from sray.platform.sweep.capacity import plan_concurrency
 from sray.platform.sweep.engine import _run_trial, _TrialJob
 from sray.platform.sweep.outcomes import collect_outcomes

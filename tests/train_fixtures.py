@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from sray.jobs.recipes import get_recipe
 from sray.model.runtime import Runtime
+from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import TrainConfig
 
 

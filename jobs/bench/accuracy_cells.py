@@ -80,7 +80,7 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
     """The training config of ``cell``: the preset's recipe and overrides, the variant's model settings
     (attention, weight map, inputs, fine samples, heads, source-view loss, 2D warm-up and scene interleaving), the cell's seed and
     budget, and the benchmark's folders."""
-    from sray.jobs.recipes import get_recipe
+    from sray.platform.config.recipes import get_recipe
     from sray.platform.config.train_config import apply_override
 
     cfg = get_recipe(p.recipe)

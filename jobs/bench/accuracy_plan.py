@@ -97,7 +97,7 @@ class Preset:
 
     world: World
     recipe: str
-    """Pretraining recipe every cell starts from (``jobs/recipes.py``)."""
+    """Pretraining recipe every cell starts from (``platform/config/recipes.py``)."""
     overrides: tuple[str, ...]
     """``section.field=value`` assignments applied to the recipe in every cell (sizes of small presets)."""
     long_steps: int | None

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from sray.jobs.bench.doc import Bench, markdown_table, record
-from sray.jobs.recipes import get_recipe
+from sray.platform.config.recipes import get_recipe
 from sray.platform.eval.ceilings import measure_ceilings
 from sray.platform.eval.segmenter import SegmenterRecord
 from sray.platform.eval.segmenter_training import train_segmenter

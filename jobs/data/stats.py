@@ -36,7 +36,7 @@ def format_stats(names: list[str], per_scene: dict[str, np.ndarray]) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from sray.data_tools.class_stats import dataset_pixel_counts, shard_pixel_counts
+    from sray.data_tools.loader.class_stats import dataset_pixel_counts, shard_pixel_counts
 
     roles = tuple(args.roles)
     if (args.path / "manifest.json").exists():

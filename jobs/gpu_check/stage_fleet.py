@@ -31,7 +31,7 @@ def _shards(ctx: CheckContext, root: Path) -> Path:
 def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
     """A step-0 shared checkpoint of the ``synth-small`` network at this run's sizes (timing needs no
     pretraining; the fleet reads it as any other checkpoint)."""
-    from sray.jobs.recipes import get_recipe
+    from sray.platform.config.recipes import get_recipe
     from sray.platform.train.state import write_initial_checkpoint
 
     cfg = get_recipe("synth-small")

@@ -23,7 +23,7 @@ def run(ctx: CheckContext) -> StageResult:
     if missing:
         return StageResult("skipped", f"{', '.join(missing)} not installed here: the Ray stage needs the full stack")
     from sray.data_tools.synth.world import World, make_world
-    from sray.jobs.recipes import get_recipe
+    from sray.platform.config.recipes import get_recipe
     from sray.platform.train.launcher import launch_training
 
     root = ctx.out / "ray"

@@ -29,7 +29,7 @@ def world_shards(preset: Preset, out: Path) -> Path:
 
 def pretrain(method: str, preset: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:
     """One ``sray train`` job of the method's variant on the train scenes; its best (else latest) checkpoint."""
-    from sray.jobs.recipes import get_recipe
+    from sray.platform.config.recipes import get_recipe
     from sray.platform.train.launcher import launch_training
 
     w = preset.world

@@ -50,7 +50,7 @@ class DataSettings:
     (a run over many scenes keeps its validations cheap with a few)."""
     class_balance: str = "none"
     """Class-frequency-aware semantic loss: ``none`` (the paper), ``inverse-sqrt`` or ``inverse``
-    weights from the training scenes' pixel frequencies (``sray.data_tools.class_stats``), computed
+    weights from the training scenes' pixel frequencies (``sray.data_tools.loader.class_stats``), computed
     when the job starts and stored as ``model.class_weights``."""
     aug: Augmentation = field(default_factory=Augmentation)
     """Training-sample augmentation (``sray.data_tools.loader.augment``: source colour jitter and noise,

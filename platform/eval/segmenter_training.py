@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from sray.data_tools.class_stats import balanced_weights, count_pixels
+from sray.data_tools.loader.class_stats import balanced_weights, count_pixels
 from sray.data_tools.loader.augment import Augmentation
 from sray.data_tools.loader.shard_loader import make_train_loader
 from sray.data_tools.loader.views import read_scene_views

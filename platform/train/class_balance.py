@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from sray.data_tools.class_stats import BALANCE_MODES, balanced_weights, shard_pixel_counts
+from sray.data_tools.loader.class_stats import BALANCE_MODES, balanced_weights, shard_pixel_counts
 from sray.platform.config.train_config import TrainConfig
 
 
@@ -14,7 +14,7 @@ def set_class_weights(cfg: TrainConfig) -> None:
     ``cfg.data.class_balance`` asks (nothing for ``none`` or when weights are set already).
 
     The counts are over every view of every train scene in the shards (labelled pixels only); the
-    weights follow :func:`sray.data_tools.class_stats.balanced_weights` and are recorded in the
+    weights follow :func:`sray.data_tools.loader.class_stats.balanced_weights` and are recorded in the
     job's config, so a resumed job and its checkpoints keep them.
     """
     if cfg.data.class_balance not in BALANCE_MODES:

@@ -13,8 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
+from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.png import decode_png
 from sray.data_tools.scene import IGNORE_ID, SceneMeta, source_pool
+from sray.data_tools.scene_folder import list_scenes
+from sray.data_tools.shards.manifest import read_manifest
 
 BALANCE_MODES = ("none", "inverse-sqrt", "inverse")
 """Class weighting of the semantic loss: none, w_c ∝ f_c^-1/2 or w_c ∝ f_c^-1 (f_c: pixel frequency)."""
@@ -40,8 +43,6 @@ def count_pixels(labels: Iterable[np.ndarray], n_classes: int) -> np.ndarray:
 def dataset_pixel_counts(dataset_dir: Path, roles: tuple[str, ...] = ("train", "test")
                          ) -> tuple[list[str], dict[str, np.ndarray]]:
     """(class names, {scene: counts}) of every scene of ``roles`` in a dataset folder (sray layout)."""
-    from sray.data_tools.scene_folder import list_scenes
-
     names: list[str] | None = None
     per_scene: dict[str, np.ndarray] = {}
     for scene_dir in list_scenes(Path(dataset_dir)):
@@ -61,9 +62,6 @@ def shard_pixel_counts(shards_dir: Path, roles: tuple[str, ...] = ("train",)
     """(class names, {scene: counts}) of every scene of ``roles`` in a shard folder, over the views the training
     loader reads (``source_pool``: a train scene's ``train`` split minus its held-out views; a test scene's
     ``source`` and ``finetune`` views), so class weights never read a held-out or test view's labels."""
-    from sray.data_tools.loader.views import read_scene_views
-    from sray.data_tools.shards.manifest import read_manifest
-
     manifest = read_manifest(Path(shards_dir))
     names: list[str] | None = None
     per_scene: dict[str, np.ndarray] = {}
