@@ -26,24 +26,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _describe(state) -> str:
-    from sray.platform.cluster.exposure import exposure_line, listeners
-    from sray.platform.cluster.local_cluster import client_env
-
-    alive = state.alive()
-    running = ", ".join(f"{n} {'up' if ok else 'DOWN'} (pid {state.processes[n]['pid']})" for n, ok in alive.items())
-    env = " ".join(f"{k}={v}" for k, v in client_env(state).items())
-    return "\n".join([
-        f"[cluster] processes: {running or 'none running'}",
-        f"[cluster] Ray address:     --address {state.ray_address}   (sray train / finetune-fleet)",
-        f"[cluster] Jobs API:        --address {state.dashboard_url}   (sray submit; Ray dashboard)",
-        f"[cluster] tracking URI:    --tracking-uri {state.tracking_uri}   (MLflow UI there too)",
-        f"[cluster] shared storage:  --set run.output_dir={state.storage / 'jobs'}",
-        f"[cluster] clients need the Ray token:  export {env}",
-        exposure_line(listeners({n: state.processes[n]["pid"] for n, ok in alive.items() if ok})),
-    ])
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the action; exit 2 with one line when the cluster cannot be started or found."""
     from sray.platform.cluster import local_cluster
@@ -54,14 +36,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"[cluster] starting in {args.dir.resolve()} ...", flush=True)
             state = local_cluster.up(args.dir, workers=args.workers, cpus_per_worker=args.cpus_per_worker)
             took = ", ".join(f"{k} {v:g} s" for k, v in state.startup_s.items())
-            print(f"[cluster] up: {took}\n{_describe(state)}", flush=True)
+            print(f"[cluster] up: {took}\n{local_cluster.describe(state)}", flush=True)
         elif args.action == "status":
-            print(_describe(local_cluster.status(args.dir)))
+            print(local_cluster.describe(local_cluster.status(args.dir)))
         elif args.action == "restart":
             if not args.part:
                 raise ClusterError("restart needs --part (postgres, mlflow, ray-head or ray-worker-<i>)")
             state = local_cluster.restart(args.dir, args.part, outage_s=args.outage)
-            print(f"[cluster] restarted {args.part} in {state.startup_s[args.part]:g} s\n{_describe(state)}")
+            print(f"[cluster] restarted {args.part} in {state.startup_s[args.part]:g} s\n"
+                  f"{local_cluster.describe(state)}")
         else:
             stopped = local_cluster.down(args.dir)
             print(f"[cluster] stopped {', '.join(stopped) if stopped else 'nothing (nothing was running)'}; "

@@ -1,19 +1,8 @@
-"""``sray demo``: the README's main job on the embedded defaults.
-
-procedural scenes -> ``sray data check`` -> shards (+ verification) -> a picture of a loader
-sample -> a short S-Ray training run on local Ray with two CPU workers, tracked in MLflow ->
-zero-shot evaluation on the unseen scenes -> a short fly-through video of one of them -> a finetune
-fleet (S-Ray and Semantic-NeRF) on them -> accuracy-against-time charts -> the results table and the
-``sray ui`` command. Each printed table ends with its protocol line (sources, stride, render mode, inputs).
-Everything goes under ``--out`` (default ``outputs/demo``); the MLflow store is the working
-directory's default SQLite store.
-"""
+"""``sray demo``: the README's main job on the embedded defaults (its stages: :mod:`sray.jobs.demo`)."""
 
 from __future__ import annotations
 
 import argparse
-import sys
-import time
 from pathlib import Path
 
 
@@ -39,122 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _say(msg: str) -> None:
-    print(f"[demo] {msg}", flush=True)
-
-
-def _sray_command() -> str:
-    """How to call ``sray`` again from here: the script this process was started as, else ``sray``."""
-    script = Path(sys.argv[0])
-    if script.name == "sray" and script.exists():
-        try:
-            return str(script.resolve().relative_to(Path.cwd()))
-        except ValueError:
-            return str(script)
-    return "sray"
-
-
 def run(args: argparse.Namespace) -> int:
-    """Run every stage, printing where each result went; exit 1 if the data fails its checks."""
-    from sray.data_tools.loader.shard_loader import make_train_loader
-    from sray.data_tools.shards.manifest import read_manifest
-    from sray.data_tools.shards.writer import DatasetRejected
-    from sray.data_tools.synth.world import SCENES, World, WorldFolderError, make_world
-    from sray.jobs.sample_picture import write_sample_picture
+    """Run the demo (``sray.jobs.demo``); exit 1 if the data fails its checks."""
+    from sray.jobs.demo import run_demo
 
-    t0 = time.perf_counter()
-    world = World(train_scenes=args.train_scenes, test_scenes=args.test_scenes, views=args.views,
-                  height=args.height, width=args.width, seed=args.seed)
-    _say(f"1/8 generating {args.train_scenes} train + {args.test_scenes} unseen test scenes "
-         f"({args.views} views, {args.width}x{args.height}) in {args.out / SCENES}, unless already there")
-    try:
-        shards = make_world(world, args.out)
-    except (DatasetRejected, WorldFolderError) as err:
-        print(err, file=sys.stderr)
-        return 1
-    _say("2/8 the scenes passed sray data check before sharding")
-    _say(f"3/8 sharded into {shards}")
-    manifest = read_manifest(shards)
-    _say(f"    {len(manifest.scenes)} scenes, {len(manifest.shards)} shards, checksums verified")
-    n_source = 4
-    sample = next(iter(make_train_loader(shards, n_source=n_source, top_k=6, rays_per_batch=512,
-                                         batches_per_epoch=1, rank=0, world_size=1, num_workers=0, seed=args.seed)))
-    class_names = next(iter(manifest.scenes.values())).meta["class_names"]
-    picture = write_sample_picture(sample, class_names, args.out / "loader_sample.png")
-    _say(f"4/8 a training sample from the loader: {picture}")
-    if args.steps <= 0:
-        _say(f"done in {time.perf_counter() - t0:.0f} s (data only); results under {args.out.resolve()}")
-        return 0
-    from sray.platform.config.recipes import get_recipe
-    from sray.platform.config.fleet_config import FleetConfig
-    from sray.platform.eval.zero_shot import evaluate_checkpoint, format_table
-    from sray.platform.finetune.fleet import run_fleet, unseen_scenes
-    from sray.platform.finetune.fleet_report import results_table
-    from sray.platform.train.launcher import launch_training
-
-    cfg = get_recipe("synth-small")
-    cfg.data.shards = str(shards)
-    cfg.optim.steps = args.steps
-    cfg.run.output_dir = str(args.out / "train")
-    cfg.run.seed = args.seed
-    cfg.run.ckpt_every = max(args.steps // 2, 1)
-    cfg.run.val_every = args.steps  # one validation, at the end: it costs about a minute on 2 cores
-    _say(f"5/8 training S-Ray for {args.steps} steps on local Ray with {cfg.run.workers} CPU workers")
-    outcome = launch_training(cfg)
-    checkpoint = outcome.best_checkpoint or outcome.latest_checkpoint
-    scenes_test = unseen_scenes(shards)
-    _say(f"6/8 zero-shot evaluation of {checkpoint.name} on the unseen scenes {', '.join(scenes_test)} "
-         f"(scored on 1 pixel in every {args.eval_stride}x{args.eval_stride} block)")
-    report = evaluate_checkpoint(checkpoint, shards, scenes_test, args.out / "eval", n_source=cfg.model.n_source,
-                                 stride=args.eval_stride, progress=True)
-    print(format_table(report), flush=True)
-    print(_speed_line(checkpoint, shards, cfg.model.n_source), flush=True)
-    clip = _flythrough(checkpoint, shards, scenes_test[0], args.out / "render", args.clip_frames)
-    _say(f"    a {args.clip_frames}-frame fly-through of {scenes_test[0]} (RGB, labels, depth, confidence): {clip}")
-    _say(f"    render any scene yourself:  {_sray_command()} render --checkpoint {checkpoint} --data {shards} "
-         f"--scene {scenes_test[0]} --out {args.out / 'render'}")
-    fleet_cfg = FleetConfig()
-    fleet_cfg.finetune.max_seconds = args.finetune_seconds
-    fleet_cfg.finetune.eval_n_source = cfg.model.n_source
-    fleet_cfg.finetune.eval_stride = 2 * args.eval_stride
-    _say(f"7/8 finetune fleet on {len(scenes_test)} unseen scenes: S-Ray (from the trained model) and "
-         f"Semantic-NeRF (from scratch), {args.finetune_seconds:.0f} s budget each, early stopping on held-out mIoU")
-    results = run_fleet(fleet_cfg, checkpoint, shards, scenes_test, args.out / "fleet", "", ["sray", "semantic-nerf"])
-    _say(f"8/8 results (charts in {args.out / 'fleet' / 'charts'}):")
-    print(results_table(results), flush=True)
-    _say(f"done in {(time.perf_counter() - t0) / 60:.1f} min; results under {args.out.resolve()}")
-    _say(f"browse everything in the MLflow dashboard:  {_sray_command()} ui   (then open the printed URL)")
-    return 0
-
-
-def _flythrough(checkpoint: Path, shards: Path, scene: str, out: Path, n_frames: int) -> Path:
-    """Render the zero-shot fly-through ``sray render`` makes by default (spline through the scene's cameras, fast
-    mode, 8 sources), ``n_frames`` long, tracked in the working directory's store; returns the WebM's path."""
-    import torch
-
-    from sray.model.fast_render import FastRender
-    from sray.platform.finetune.render_model import render_model
-    from sray.platform.render.flythrough import Flythrough
-    from sray.platform.render.plan import plan_flythrough
-    from sray.platform.render.tracked import tracked_flythrough
-
-    plan = plan_flythrough(shards, scene, path="spline", n_frames=n_frames)
-    net, about = render_model(checkpoint, None, scene)
-    fly = Flythrough(net, plan, 8, FastRender())
-    result = tracked_flythrough(fly, out, torch.device("cpu"), about=about, label="zero-shot", tracker="mlflow",
-                                tracking_uri="", experiment="sray-render")
-    return Path(result["files"]["webm"])
-
-
-def _speed_line(checkpoint: Path, shards: Path, n_source: int) -> str:
-    """One line of ``sray bench speed-accuracy``: the full render against the fast render mode on the first
-    test view of each unseen scene (paired, whole images, ``n_source`` source views)."""
-    from sray.jobs.bench.speed_accuracy import Setting, measure
-    from sray.model.fast_render import FastRender
-
-    full, fast = measure(checkpoint, shards, [Setting("full", n_source), Setting("fast", n_source, fast=FastRender())],
-                         1, progress=False)
-    return (f"[demo] speed vs accuracy (first test view per unseen scene, whole image): full render "
-            f"{full['s_per_view']:.1f} s/view, mIoU {full['miou']:.1f}%; fast render {fast['s_per_view']:.2f} s/view "
-            f"({full['s_per_view'] / fast['s_per_view']:.0f}x), mIoU {fast['miou']:.1f}% "
-            f"({fast['miou'] - full['miou']:+.1f} points); more settings: sray bench speed-accuracy")
+    return run_demo(args)

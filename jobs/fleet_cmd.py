@@ -8,12 +8,9 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 from sray.platform.finetune.methods.registry import METHODS, method_names
-
-if TYPE_CHECKING:
-    from sray.platform.config.fleet_config import FleetConfig
 
 ALL_METHODS = "all"
 """``--methods`` value that runs every registered method."""
@@ -52,17 +49,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def build_fleet_config(args: argparse.Namespace) -> FleetConfig:
-    """The FleetConfig of the parsed flags: defaults, then the flags, then ``--set`` overrides."""
-    from sray.platform.config.fleet_config import FleetConfig, apply_fleet_override
-    from sray.platform.config.overrides import apply_settings
-
-    cfg = FleetConfig()
-    flags = {"max_parallel": args.max_parallel, "cpus_per_task": args.cpus_per_task,
-             "gpus_per_task": args.gpus_per_task, "finetune.precision": args.precision, "address": args.address,
-             "tracker": args.tracker}
-    apply_settings(cfg, flags, args.overrides, apply_fleet_override)
-    return cfg
+def fleet_flags(args: argparse.Namespace) -> dict[str, Any]:
+    """The FleetConfig fields the parsed flags set (``path -> value``, None = not given)."""
+    return {"max_parallel": args.max_parallel, "cpus_per_task": args.cpus_per_task,
+            "gpus_per_task": args.gpus_per_task, "finetune.precision": args.precision, "address": args.address,
+            "tracker": args.tracker}
 
 
 def chosen_methods(values: list[str]) -> list[str]:
@@ -72,11 +63,13 @@ def chosen_methods(values: list[str]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Run the fleet; exit 0 when every pair finished, 1 when some failed, 2 for a bad request."""
-    from sray.platform.finetune.fleet import run_fleet, unseen_scenes
+    from sray.data_tools.shards.manifest import unseen_scenes
+    from sray.platform.config.fleet_config import build_fleet_config
+    from sray.platform.finetune.fleet import run_fleet
     from sray.platform.train.resources import InfeasibleRequest
 
     try:
-        cfg = build_fleet_config(args)
+        cfg = build_fleet_config(fleet_flags(args), args.overrides)
         scenes = unseen_scenes(args.data) if args.all_test else args.scenes
         if args.clip_frames < 0:
             raise ValueError(f"--clip-frames is {args.clip_frames}; give 0 (no clips) or a number of frames")

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from sray.jobs.train_cmd import add_train_flags, build_config
+from sray.platform.common.fault_hook import propagated_env
 
 FORWARDED = {"recipe": "--recipe", "workers": "--workers", "gpus_per_worker": "--gpus-per-worker",
              "precision": "--precision", "tracker": "--tracker", "tracking_uri": "--tracking-uri"}
@@ -52,8 +53,6 @@ def train_command(args: argparse.Namespace, name: str, output_dir: Path, data: P
 def job_runtime_env(working_dir: str | None) -> dict[str, object] | None:
     """The job's Ray runtime env: the shipped folder, and ``SRAY_FAULTS`` when set here (a drill's faults
     reach the job's driver, which forwards them to its workers)."""
-    from sray.platform.common.fault_hook import propagated_env
-
     env: dict[str, object] = {"working_dir": str(Path(working_dir).resolve())} if working_dir else {}
     if propagated_env():
         env["env_vars"] = propagated_env()
@@ -62,7 +61,6 @@ def job_runtime_env(working_dir: str | None) -> dict[str, object] | None:
 
 def run(args: argparse.Namespace) -> int:
     """Check the request here, submit it, and with ``--wait`` follow it; exit 2 for a bad request."""
-    from sray.platform.cluster import job_client
     from sray.platform.train.inputs import InputError, check_train_inputs
 
     try:
@@ -71,6 +69,8 @@ def run(args: argparse.Namespace) -> int:
     except (InputError, FileNotFoundError, FileExistsError, ValueError) as e:
         print(f"sray submit: {e}", file=sys.stderr)
         return 2
+    from sray.platform.cluster import job_client
+
     name = args.resume or cfg.run.name or f"{cfg.recipe}-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}"
     data = Path(args.data).resolve() if args.data else None
     argv = train_command(args, name, Path(cfg.run.output_dir).resolve(), data)

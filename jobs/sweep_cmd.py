@@ -15,7 +15,6 @@ from sray.platform.sweep.options import SpecFile, load_spec_file, merge_options
 from sray.platform.sweep.request import SweepRequest
 from sray.platform.sweep.spec import check_unique, parse_assignment
 from sray.platform.train.inputs import InputError
-from sray.platform.train.resources import InfeasibleRequest
 
 DEFAULT_OUT = "outputs/sweeps"
 """Folder holding sweeps unless ``--out`` says otherwise."""
@@ -88,6 +87,8 @@ def _refuse(message: str) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    from sray.platform.train.resources import InfeasibleRequest
+
     refused = (FileExistsError, FileNotFoundError, ValueError, InputError, InfeasibleRequest)
     if args.resume and (args.spec or args.params or args.overrides or args.name):
         return _refuse(f"--resume {args.resume} continues the recorded sweep; leave out the spec file, --param, "

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING
 
-from sray.platform.config.recipes import RECIPES
-
-if TYPE_CHECKING:
-    from sray.platform.config.train_config import TrainConfig
+from sray.platform.config.overrides import apply_settings
+from sray.platform.config.recipes import RECIPES, get_recipe
+from sray.platform.config.train_config import TrainConfig, apply_override, load_job_config
 
 
 def add_train_flags(p: argparse.ArgumentParser) -> None:
@@ -39,11 +37,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def build_config(args: argparse.Namespace) -> TrainConfig:
     """The job's TrainConfig: the recipe (or a resumed job's saved config) plus flags and --set."""
-    from sray.platform.config.recipes import get_recipe
-    from sray.platform.config.overrides import apply_settings
-    from sray.platform.config.train_config import apply_override
-    from sray.platform.train.launcher import load_job_config
-
     cfg = get_recipe(args.recipe)
     if args.resume:
         # the job's folder is under the output folder the user names (--set run.output_dir=...), else the recipe's

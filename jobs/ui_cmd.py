@@ -8,6 +8,9 @@ import signal
 import sys
 from typing import Any
 
+from sray.platform.tracking.dashboard import (DEFAULT_UI_PORT, is_tracking_server, server_links, start_dashboard,
+                                              tunnel_hint)
+
 
 class _Stop(Exception):
     """Raised in the main thread by SIGTERM or SIGHUP: stop the dashboard and exit."""
@@ -15,8 +18,6 @@ class _Stop(Exception):
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray ui``."""
-    from sray.platform.tracking.dashboard import DEFAULT_UI_PORT
-
     p = sub.add_parser("ui", help="open the MLflow dashboard (runs, fleets, charts, renders) on 127.0.0.1")
     p.add_argument("--tracking-uri", help="store to show (default: the SQLite store in this folder, mlflow.db), or "
                                           "a tracking server (http://...), whose own dashboard is listed")
@@ -28,8 +29,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _show_server(uri: str) -> int:
     """List a tracking server's experiments and their runs views; exit 2 when it does not answer."""
-    from sray.platform.tracking.dashboard import server_links
-
     try:
         links = server_links(uri)
     except ConnectionError as e:
@@ -47,8 +46,6 @@ def _raise_stop(signum: int, frame: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Start the dashboard, print where to open it, serve until stopped; exit 1 if the server dies."""
-    from sray.platform.tracking.dashboard import is_tracking_server, start_dashboard, tunnel_hint
-
     if args.tracking_uri and is_tracking_server(args.tracking_uri):
         return _show_server(args.tracking_uri)
     previous = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGHUP)}

@@ -15,7 +15,7 @@ from sray.data_tools.loader.augment import Augmentation
 from sray.model.runtime import Runtime
 from sray.platform.checkpoints.folders import load_checkpoint, write_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.train.launcher import CONFIG_FILE, load_job_config
+from sray.platform.config.train_config import CONFIG_FILE, load_job_config
 from sray.platform.train.state import build_training, restore_training, training_state
 
 

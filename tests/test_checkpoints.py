@@ -12,13 +12,8 @@ from rng_state import capture_rng, restore_rng
 from torch import nn
 
 from sray.platform.checkpoints import folders as checkpoints
-from sray.platform.checkpoints.folders import (
-    CheckpointManager,
-    check_weights_only_safe,
-    from_ray_checkpoint,
-    load_checkpoint,
-    to_ray_checkpoint,
-)
+from sray.platform.checkpoints.folders import CheckpointManager, check_weights_only_safe, load_checkpoint
+from sray.platform.train.worker import from_ray_checkpoint, to_ray_checkpoint
 
 
 def _build(seed: int):

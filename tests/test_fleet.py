@@ -13,8 +13,9 @@ from injected_faults import injected_faults
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
-from sray.platform.checkpoints.folders import load_checkpoint
-from sray.platform.finetune.fleet import resolve_checkpoint, run_fleet, unseen_scenes
+from sray.data_tools.shards.manifest import unseen_scenes
+from sray.platform.checkpoints.folders import load_checkpoint, resolve_checkpoint
+from sray.platform.finetune.fleet import run_fleet
 
 CONTRACT_KEYS = {"scene", "method", "status", "error", "attempts", "steps_used", "max_steps", "stopped_early", "wall_s",
                  "miou_before", "miou_after", "psnr_after", "artifact_bytes", "full_checkpoint_bytes", "child_run_id",

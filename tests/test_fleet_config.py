@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from sray.jobs.fleet_cmd import build_fleet_config, chosen_methods, register
-from sray.platform.config.fleet_config import FleetConfig, apply_fleet_override
+from sray.jobs.fleet_cmd import chosen_methods, fleet_flags, register
+from sray.platform.config.fleet_config import FleetConfig, apply_fleet_override, build_fleet_config
 from sray.platform.finetune.fleet_report import human_bytes, results_table, summary_metrics
 
 
@@ -51,7 +51,7 @@ def test_cli_flags_map_onto_the_config():
     args = _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test", "--max-parallel", "3",
                    "--gpus-per-task", "0.5", "--precision", "fp16", "--methods", "sray", "semantic-nerf",
                    "--tracker", "mlflow", "--set", "finetune.max_steps=50"])
-    cfg = build_fleet_config(args)
+    cfg = build_fleet_config(fleet_flags(args), args.overrides)
     assert args.all_test and args.scenes is None and args.methods == ["sray", "semantic-nerf"]
     assert (cfg.max_parallel, cfg.gpus_per_task, cfg.finetune.precision, cfg.finetune.max_steps) == (3, 0.5, "fp16", 50)
     assert cfg.tracker == "mlflow" and FleetConfig().tracker == "mlflow"

@@ -151,8 +151,7 @@ def test_chart_panels_and_tables_of_a_known_result(tmp_path) -> None:
 def test_preset_world_pretrains_each_variant_once_and_reuses_it(tmp_path, monkeypatch) -> None:
     from types import SimpleNamespace
 
-    from sray.jobs.stability.world import world_checkpoints
-    from sray.platform.train import launcher
+    from sray.jobs.stability import world
 
     seen = []
 
@@ -162,13 +161,13 @@ def test_preset_world_pretrains_each_variant_once_and_reuses_it(tmp_path, monkey
         folder.mkdir()
         return SimpleNamespace(best_checkpoint=folder, latest_checkpoint=folder)
 
-    monkeypatch.setattr(launcher, "launch_training", fake_launch)
+    monkeypatch.setattr(world, "launch_training", fake_launch)
     methods = ["sray", "sray-no-cra", "semantic-nerf"]
-    first = world_checkpoints(TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db", methods)
+    first = world.world_checkpoints(TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db", methods)
     w = TOY.world
     assert seen == [("full", w.pretrain_steps, w.n_coarse, "sray-stability"),
                     ("none", w.pretrain_steps, w.n_coarse, "sray-stability")]
-    assert world_checkpoints(TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db", methods) == first
+    assert world.world_checkpoints(TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db", methods) == first
     assert len(seen) == 2 and sorted(first) == ["sray", "sray-no-cra"]
 
 

@@ -33,6 +33,7 @@ from typing import BinaryIO
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from sray.data_tools.label_spaces import class_names
 from sray.data_tools.readers.common import kept_view_ids
@@ -112,8 +113,6 @@ def read_sens_header(f: BinaryIO, path: Path) -> SensHeader:
 
 def index_frames(f: BinaryIO, header: SensHeader, path: Path, progress: bool) -> list[SensFrame]:
     """Stream over every frame once: its pose and the offsets of its bytes (the bytes are skipped)."""
-    from tqdm import tqdm
-
     frames = []
     for _ in tqdm(range(header.n_frames), desc=f"{path.name}: index", unit="frame", disable=not progress):
         values = _FRAME_HEAD.unpack(_read(f, _FRAME_HEAD.size, path, f"head of frame {len(frames)}"))

@@ -140,3 +140,8 @@ def verify_shards(shards_dir: Path, checksums: bool = True) -> list[str]:
         elif checksums and (digest := sha256_file(path)) != entry.sha256:
             problems.append(f"{path}: sha256 {digest[:12]}… differs from the manifest's {entry.sha256[:12]}…; {fix}")
     return problems
+
+
+def unseen_scenes(shards: Path) -> list[str]:
+    """Names of the unseen test scenes (role ``test``) of a shard folder, sorted."""
+    return sorted(name for name, e in read_manifest(Path(shards)).scenes.items() if e.meta.get("role") == "test")

@@ -33,6 +33,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sray.data_tools.atomic import TEMP_NAME, atomic_write_bytes
+from sray.data_tools.check.scenes import check_dataset
 from sray.data_tools.png import depth_to_png16, encode_png
 from sray.data_tools.scene import Scene, View, depth_views, source_pool
 from sray.data_tools.scene_folder import list_scenes, read_scene
@@ -186,8 +187,6 @@ def is_current(path: Path, data: bytes) -> bool:
 
 def _check_input(scenes_dir: Path) -> None:
     """Refuse input that ``sray data check`` rejects."""
-    from sray.data_tools.check.scenes import check_dataset
-
     problems = check_dataset(Path(scenes_dir))
     if problems:
         raise DatasetRejected(problems)

@@ -18,10 +18,12 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.scene import Scene, SceneMeta, View, scene_depth_bounds
@@ -176,10 +178,6 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
     presence means the scene is complete). ``workers`` > 1 renders that many scenes at once in
     separate processes; every scene depends only on its own seed, so the files are the same.
     """
-    from concurrent.futures import ProcessPoolExecutor
-
-    from tqdm import tqdm
-
     if n_train < 0 or n_test < 0 or n_train + n_test == 0:
         raise ValueError(f"need at least one scene, got n_train={n_train}, n_test={n_test}")
     if workers < 1:

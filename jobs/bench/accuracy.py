@@ -22,12 +22,22 @@
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
+from sray.data_tools.shards.manifest import unseen_scenes
 from sray.data_tools.synth.world import make_world
+from sray.jobs.bench.accuracy_cells import cell_errors, import_old_cells, run_cells, stored_cells
 from sray.jobs.bench.accuracy_plan import COMPARED, EXPERIMENT, LONG, PRESETS, Cell, Preset
-from sray.jobs.bench.accuracy_step_cost import read_step_times
+from sray.jobs.bench.accuracy_step_cost import measure_step_times, read_step_times, store_step_times
+from sray.jobs.bench.accuracy_tables import by_variant, write_tables
+from sray.jobs.bench.doc import machine_line
+from sray.jobs.bench.probes import resolve_device
+from sray.platform.config.fleet_config import FleetConfig
+from sray.platform.finetune.fleet import run_fleet
+from sray.platform.finetune.methods.registry import METHODS
+from sray.platform.viz.charts import write_fleet_charts
 
 
 def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] | None = None,
@@ -38,10 +48,6 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
     pretraining step of every stored variant side by side; then rewrite the tables in ``doc`` from every
     stored cell and the stored step times. No new cell starts after ``max_minutes``. Returns the stored
     cells by key."""
-    from sray.jobs.bench.accuracy_cells import cell_errors, import_old_cells, run_cells, stored_cells
-    from sray.jobs.bench.accuracy_tables import write_tables
-    from sray.platform.finetune.fleet import unseen_scenes
-
     p = (presets or PRESETS)[preset]
     out = out.resolve()
     tracking_uri = f"sqlite:///{out / 'mlflow.db'}"
@@ -69,13 +75,6 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
 
 def _run_fleet(p: Preset, checkpoint: Path, shards: Path, scenes: list[str], out: Path, tracking_uri: str) -> None:
     """Finetune every unseen scene with both methods under the same budget; marks the fleet done."""
-    import json
-
-    from sray.platform.config.fleet_config import FleetConfig
-    from sray.platform.finetune.fleet import run_fleet
-    from sray.platform.finetune.methods.registry import METHODS
-    from sray.platform.viz.charts import write_fleet_charts
-
     cfg = FleetConfig()
     cfg.finetune.max_seconds = p.budget_s
     cfg.finetune.max_steps = 100_000
@@ -92,11 +91,6 @@ def _run_fleet(p: Preset, checkpoint: Path, shards: Path, scenes: list[str], out
 
 def _time_steps(p: Preset, stored: dict[str, dict], out: Path) -> None:
     """Time one pretraining step of every variant with a stored cell, side by side, and store the result."""
-    from sray.jobs.bench.accuracy_step_cost import measure_step_times, store_step_times
-    from sray.jobs.bench.accuracy_tables import by_variant
-    from sray.jobs.bench.doc import machine_line
-    from sray.jobs.bench.probes import resolve_device
-
     machine = machine_line()  # before the timing: the load it reports is the one the steps start under
     times = measure_step_times(p, list(by_variant(p, stored)), resolve_device("auto"))
     store_step_times(out, times, machine)

@@ -26,13 +26,20 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import torch
 
+from sray.data_tools.shards.manifest import read_manifest
 from sray.jobs.bench.accuracy_plan import EXPERIMENT, LONG, VARIANT_SETTINGS, Cell, Preset
+from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
+from sray.platform.config.recipes import get_recipe
+from sray.platform.config.train_config import apply_override, load_job_config
+from sray.platform.eval.zero_shot import evaluate_checkpoint
 from sray.platform.sweep.capacity import TRIAL_RESOURCES
 from sray.platform.sweep.incremental import import_result, missing, run_missing, stored_results
 from sray.platform.sweep.outcomes import TrialOutcome
 from sray.platform.sweep.study import StudySettings, TrialContext
 from sray.platform.sweep.trial_files import ERRORED, TRIALS, read_record
+from sray.platform.train.launcher import init_ray, launch_training
 
 if TYPE_CHECKING:
     from sray.platform.config.train_config import TrainConfig
@@ -80,9 +87,6 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
     """The training config of ``cell``: the preset's recipe and overrides, the variant's model settings
     (attention, weight map, inputs, fine samples, heads, source-view loss, 2D warm-up and scene interleaving), the cell's seed and
     budget, and the benchmark's folders."""
-    from sray.platform.config.recipes import get_recipe
-    from sray.platform.config.train_config import apply_override
-
     cfg = get_recipe(p.recipe)
     for assignment in p.overrides:
         apply_override(cfg, assignment)
@@ -115,9 +119,6 @@ def pretrain(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) 
     started it).
     RuntimeError when the job stops before its last step.
     """
-    from sray.platform.checkpoints.folders import CheckpointManager, read_meta
-    from sray.platform.train.launcher import launch_training, load_job_config
-
     cfg = cell_config(cell, p, shards, out, tracking_uri)
     job_dir = Path(cfg.run.output_dir) / cfg.run.name
     latest = CheckpointManager(job_dir / "checkpoints").latest() if job_dir.exists() else None
@@ -154,12 +155,6 @@ def class_iou(report: dict[str, Any]) -> list[float | None]:
 
 def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, tracking_uri: str) -> dict[str, Any]:
     """Pretrain and evaluate ``cell``; return its record (what ``stored_cells`` gives once its trial ends)."""
-    import torch
-
-    from sray.data_tools.shards.manifest import read_manifest
-    from sray.platform.checkpoints.folders import load_checkpoint, read_meta
-    from sray.platform.eval.zero_shot import evaluate_checkpoint
-
     print(f"[bench] cell {cell.key}: pretraining", flush=True)
     checkpoint, train_s, resumed = pretrain(cell, p, shards, out, tracking_uri)
     run = cell_config(cell, p, shards, out, tracking_uri).run
@@ -212,8 +207,6 @@ def run_cells(cells: tuple[Cell, ...], p: Preset, shards: Path, scenes: list[str
               start_by: float = 0.0) -> list[TrialOutcome]:
     """Run the cells without a stored record, in plan order, one at a time; none starts after ``start_by``
     (Unix time, 0 = no limit). Returns every cell's outcome."""
-    from sray.platform.train.launcher import init_ray
-
     plan = {c.key: {"variant": c.variant, "seed": c.seed} for c in cells}
     settings = StudySettings(folder=Path(out) / STUDY_DIR, metric="miou", mode="max", max_concurrent=1,
                              trial_resources=TRIAL_RESOURCES, start_by=start_by, reuse_actors=True, label="bench")

@@ -11,15 +11,23 @@ the tables read it from there.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import statistics
+import textwrap
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
+from sray.data_tools.atomic import save_png
+from sray.jobs.bench.accuracy_cells import cell_config
 from sray.jobs.bench.accuracy_plan import Cell, Preset
+from sray.jobs.bench.model_cost import run_in_fresh_process
 from sray.jobs.bench.speed_accuracy import pareto
 
 STEP_TIMES_FILE = "step_times.json"
@@ -34,10 +42,6 @@ def step_spec(variant: str, p: Preset, device: torch.device) -> dict[str, Any]:
     """The ``workloads`` spec of one pretraining step of ``variant`` in preset ``p``: its cells' model
     section whole, their implementation and rays per piece, rays per batch and precision, the preset's image
     size."""
-    import dataclasses
-
-    from sray.jobs.bench.accuracy_cells import cell_config
-
     cfg = cell_config(Cell(variant, 0), p, Path("shards"), Path("out"), "")
     m = cfg.model
     return {"name": variant, "rays": cfg.data.rays_per_batch, "coarse": m.n_coarse, "fine": m.n_fine,
@@ -59,8 +63,6 @@ def measure_step_times(p: Preset, variants: list[str], device: torch.device,
     Variants whose steps are the same work (``long`` and ``full``: only the budget differs) are timed once.
     Returns variant -> {"s_per_step": median over the rounds, "runs": every round's seconds, "rays",
     "peak_rss_gib", "same_step_as": the variant that was timed}."""
-    from sray.jobs.bench.model_cost import run_in_fresh_process
-
     specs = {v: step_spec(v, p, device) for v in variants}
     first_of: dict[str, str] = {}  # a step's spec -> the first variant with it (long and full share one)
     same_as = {v: first_of.setdefault(_step_key(specs[v]), v) for v in variants}
@@ -98,20 +100,12 @@ def step_cost_chart(scores: dict[str, list[float]], seconds: dict[str, float], s
     ``scores`` label -> per-seed mIoU %, ``seconds`` label -> s/step, ``steps`` label -> pretraining steps.
     The Pareto front joins the points trained for the most common number of steps (equal budgets); a
     point trained longer or shorter is drawn hollow, off the front."""
-    import textwrap
-    from collections import Counter
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from sray.data_tools.atomic import save_png
-
     labels = [k for k in scores if k in seconds]
     budget = Counter(steps[k] for k in labels).most_common(1)[0][0] if labels else 0
     points = {k: (seconds[k], float(np.mean(scores[k]))) for k in labels}
-    fig, ax = plt.subplots(figsize=(8, 5.5))
+    fig = Figure(figsize=(8, 5.5))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
     for k in labels:
         x, y = points[k]
         lo, hi = y - min(scores[k]), max(scores[k]) - y
@@ -131,6 +125,4 @@ def step_cost_chart(scores: dict[str, list[float]], seconds: dict[str, float], s
     ax.grid(True, alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
-    out = save_png(fig, path, dpi=120)
-    plt.close(fig)
-    return out
+    return save_png(fig, path, dpi=120)

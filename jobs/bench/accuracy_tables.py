@@ -15,7 +15,12 @@ from typing import Any
 import numpy as np
 
 from sray.jobs.bench.accuracy_plan import COMPARED, LONG, Cell, Preset
+from sray.jobs.bench.accuracy_step_cost import step_cost_chart
 from sray.jobs.bench.doc import Bench, bench_dir, markdown_table, record
+from sray.platform.common.eval_protocol import caption_lines
+from sray.platform.finetune.methods.registry import get_method
+from sray.platform.viz.curves import read_fleet_results, step_hold
+from sray.platform.viz.seed_chart import write_seed_chart
 
 ZERO_SHOT_TARGET = 0.50
 """Target: zero-shot mIoU of the long (recipe) model, RGB-only."""
@@ -108,8 +113,6 @@ def class_table(p: Preset, stored: dict[str, dict[str, Any]]) -> tuple[list[str]
 
 def at_budget(result: dict[str, Any], budget: float, key: str = "miou") -> float:
     """The held-out score a finetune had reached after ``budget`` seconds (last evaluation before it)."""
-    from sray.platform.viz.curves import step_hold
-
     curve = [c for c in result.get("curve", []) if c.get(key) is not None]
     x = np.array([c["wall_s"] for c in curve], dtype=float)
     y = np.array([c[key] for c in curve], dtype=float)
@@ -170,8 +173,6 @@ def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | No
 def _step_cost_link(preset: str, p: Preset, groups: dict[str, list[dict[str, Any]]], step_times: dict[str, Any],
                     caption: str, figures: Path, doc: Path) -> str:
     """The mIoU-against-step-time chart of the stored variants, and its note and link for the doc."""
-    from sray.jobs.bench.accuracy_step_cost import step_cost_chart
-
     timed = step_times["variants"]
     chart = step_cost_chart({variant_label(v, p): [100 * c["miou"] for c in cells] for v, cells in groups.items()},
                             {variant_label(v, p): timed[v]["s_per_step"] for v in groups if v in timed},
@@ -196,11 +197,6 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
     device) and its chart(s) beside their data (``doc.bench_dir``); ``step_times`` (as
     ``accuracy_step_cost`` stores them) adds the step-time column and the mIoU-against-step-time chart;
     ``errors`` (cell key -> error of its last launch) names the missing cells that failed."""
-    from sray.platform.common.eval_protocol import caption_lines
-    from sray.platform.finetune.methods.registry import get_method
-    from sray.platform.viz.curves import read_fleet_results
-    from sray.platform.viz.seed_chart import write_seed_chart
-
     bench = accuracy_bench(preset)
     figures = bench_dir(doc, bench)
     figures.mkdir(parents=True, exist_ok=True)

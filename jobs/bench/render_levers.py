@@ -24,6 +24,7 @@ from torch.nn.attention import SDPBackend, sdpa_kernel
 from sray.jobs.bench.probes import time_call
 from sray.jobs.bench.workloads import model_config, synthetic_batch
 from sray.model.runtime import Runtime
+from sray.model.semantic_ray import SRayModel
 from sray.model.sliced_attention import sliced_attention
 
 HEADS, HEAD_DIM, VIEWS = 4, 8, 8
@@ -103,8 +104,6 @@ def chunk_table(chunks: tuple[int, ...], impl: str, crop: tuple[int, int] = (60,
                 repeats: int = 2) -> str:
     """Seconds to render a ``crop`` (h, w) of the 320x240 view (the same field of view, fewer rays) with
     ``samples`` + ``samples`` samples at each chunk size, and the whole view's seconds extrapolated."""
-    from sray.model.semantic_ray import SRayModel
-
     torch.manual_seed(0)
     model = SRayModel(model_config({"coarse": samples, "fine": samples, "views": VIEWS})).eval()
     batch = synthetic_batch(1, VIEWS, (240, 320), torch.device("cpu"))

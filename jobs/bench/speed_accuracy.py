@@ -16,13 +16,17 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import textwrap
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
+from sray.data_tools.atomic import save_png
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.jobs.bench.doc import Bench, bench_dir, record
 from sray.model.config import SRayConfig
@@ -30,9 +34,11 @@ from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.model.runtime import Runtime
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.scene_scoring import score_scene
 from sray.platform.eval.view_scoring import sray_renderer
 from sray.platform.eval.zero_shot import select_scenes
+from sray.platform.tracking.registry import get_tracker
 
 
 @dataclass(frozen=True)
@@ -191,16 +197,8 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
     """Pareto chart: mIoU (%) against CPU seconds per view (log scale), the front joined by a line. Points are
     numbered and a key beside the axes names them (names of nearby settings would overlap); the protocol is
     wrapped into the title."""
-    import textwrap
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from sray.data_tools.atomic import save_png
-
-    fig = plt.figure(figsize=(11, 6.5))
+    fig = Figure(figsize=(11, 6.5))
+    FigureCanvasAgg(fig)
     ax = fig.add_axes((0.07, 0.1, 0.56, 0.74))
     for i, r in enumerate(rows, 1):
         ax.scatter(r["s_per_view"], r["miou"], s=40, color="tab:blue" if r["setting"]["fast"] else "tab:gray")
@@ -219,18 +217,13 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
     fig.text(0.66, 0.84, "\n".join(key), va="top", ha="left", family="monospace", fontsize=8)
     title = ["S-Ray zero-shot: accuracy against render time"] + textwrap.wrap(protocol, 150)
     fig.text(0.5, 0.98, "\n".join(title), va="top", ha="center", fontsize=8)
-    out = save_png(fig, path, dpi=120)
-    plt.close(fig)
-    return out
+    return save_png(fig, path, dpi=120)
 
 
 def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc: Path, tracker: str,
                        tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None) -> str:
     """Measure the default settings, or those ``names`` chooses (the ``rgbd`` ones by ``checkpoint_rgbd`` when
     given), write the chart and the table section, log both; returns the section."""
-    from sray.platform.common.eval_protocol import EvalProtocol
-    from sray.platform.tracking.registry import get_tracker
-
     title = table_title(names)
     rows = measure(Path(checkpoint), Path(shards), select_settings(names), views_per_scene,
                    checkpoint_rgbd=Path(checkpoint_rgbd) if checkpoint_rgbd else None)

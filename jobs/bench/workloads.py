@@ -19,15 +19,15 @@ import torch
 
 from sray.jobs.bench.probes import peak_rss_bytes, timed_runs
 from sray.model.config import SRayConfig
+from sray.model.rays import pixel_rays
 from sray.model.runtime import Runtime
+from sray.model.semantic_ray import SRayModel
 from sray.platform.train.step import fused_adam
 
 
 def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device, depth: bool = False) -> dict:
     """Random source images (m, 3, H, W), their cameras, ``rays`` query rays, labels and colours; with
     ``depth``, source z-depth maps (m, H, W) in [1.5, 4.5] metres (inside the workloads' near 1, far 5)."""
-    from sray.model.rays import pixel_rays
-
     h, w = hw
     gen = torch.Generator().manual_seed(0)
     K = torch.tensor([[w / 2, 0.0, (w - 1) / 2], [0.0, w / 2, (h - 1) / 2], [0.0, 0.0, 1.0]])
@@ -61,8 +61,6 @@ def spec_runtime(spec: dict) -> Runtime:
 
 def make_train_step(spec: dict) -> Callable[[], None]:
     """A closure running one full training step (encode, render, loss, backward, Adam) of ``spec``."""
-    from sray.model.semantic_ray import SRayModel
-
     device = torch.device(spec["device"])
     torch.manual_seed(0)
     cfg, runtime = model_config(spec), spec_runtime(spec)
@@ -93,8 +91,6 @@ def make_train_step(spec: dict) -> Callable[[], None]:
 
 def render_case(spec: dict) -> Callable[[], None]:
     """A closure rendering one whole (H, W) view of the synthetic scene with ``render_image`` (no grad)."""
-    from sray.model.semantic_ray import SRayModel
-
     device = torch.device(spec["device"])
     torch.manual_seed(0)
     model, runtime = SRayModel(model_config(spec)).to(device).eval(), spec_runtime(spec)

@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from sray.data_tools.scene_folder import list_scenes
+
 
 def register(verbs: argparse._SubParsersAction) -> None:
     """Add ``sray data check``."""
@@ -47,6 +49,4 @@ def run(args: argparse.Namespace) -> int:
 
 def _scene_names(root: Path) -> list[str]:
     """Scene names of a dataset that passed the check (dataset.json if present, else scene folders)."""
-    from sray.data_tools.scene_folder import list_scenes
-
     return [p.name for p in list_scenes(root) if not p.name.startswith(".")]

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import torch
 
+from sray.jobs.bench.doc import Bench, record
+
 from . import stage_bench, stage_env, stage_fleet, stage_precision, stage_profile, stage_ray, stage_training
 from .context import CheckContext
 from .report import STAGE_NAMES, StageResult, load_report, markdown, save_report
@@ -72,7 +74,5 @@ def run_gpu_check(stages: list[str], out: Path, dry_run: bool, fresh: bool, repo
     text = markdown(report, list(STAGES))
     (ctx.out / "gpu_check.md").write_text(text + "\n")
     if doc is not None and not dry_run:
-        from sray.jobs.bench.doc import Bench, record
-
         record(Bench("gpu-check", "GPU check"), REPORT_TITLE, text, doc)
     return report

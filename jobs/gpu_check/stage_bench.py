@@ -7,6 +7,8 @@ import time
 
 import torch
 
+from sray.jobs.bench.model_cost import run_model_benchmark
+
 from .context import CheckContext
 from .report import StageResult, table_cells
 from .synthetic import model, rig
@@ -34,8 +36,6 @@ def render_seconds(ctx: CheckContext, repeats: int, dtype: torch.dtype | None = 
 
 def run(ctx: CheckContext) -> StageResult:
     """The model benchmark's two tables, flattened into one, plus the whole-view render time."""
-    from sray.jobs.bench.model_cost import run_model_benchmark
-
     rows = []
     for title, table, _notes in run_model_benchmark(device=str(ctx.device), quick=ctx.dry_run):
         header, body = table_cells(table)

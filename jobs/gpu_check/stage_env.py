@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
+from importlib.metadata import PackageNotFoundError, version
 
 import torch
 
@@ -41,8 +42,6 @@ def environment(ctx: CheckContext) -> StageResult:
 def _version(name: str) -> str:
     if not has_module(name):
         return "not installed"
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return version(name)
     except PackageNotFoundError:

@@ -8,6 +8,12 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from sray.data_tools.shards.manifest import unseen_scenes
+from sray.data_tools.synth.world import World, make_world
+from sray.platform.config.fleet_config import FleetConfig
+from sray.platform.config.recipes import get_recipe
+from sray.platform.train.state import write_initial_checkpoint
+
 from .context import CheckContext, has_module
 from .report import StageResult
 
@@ -21,8 +27,6 @@ minute)."""
 
 def _shards(ctx: CheckContext, root: Path) -> Path:
     """``SHARING`` unseen procedural scenes (and one train scene), sharded with their neighbours."""
-    from sray.data_tools.synth.world import World, make_world
-
     hw = (32, 40) if ctx.dry_run else (120, 160)
     world = World(train_scenes=1, test_scenes=SHARING, views=20, height=hw[0], width=hw[1], seed=0, neighbours=8)
     return make_world(world, root, progress=False)
@@ -31,9 +35,6 @@ def _shards(ctx: CheckContext, root: Path) -> Path:
 def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
     """A step-0 shared checkpoint of the ``synth-small`` network at this run's sizes (timing needs no
     pretraining; the fleet reads it as any other checkpoint)."""
-    from sray.platform.config.recipes import get_recipe
-    from sray.platform.train.state import write_initial_checkpoint
-
     cfg = get_recipe("synth-small")
     cfg.model.n_source, (cfg.model.n_coarse, cfg.model.n_fine) = min(ctx.views, 4), ctx.samples
     cfg.data.shards, cfg.data.top_k = str(shards), 6
@@ -42,7 +43,6 @@ def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
 
 def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes: list[str]) -> tuple[float, list]:
     """Run the fleet on ``scenes`` at once, each task with ``1 / len(scenes)`` of the device; (wall s, results)."""
-    from sray.platform.config.fleet_config import FleetConfig
     from sray.platform.finetune.fleet import run_fleet
 
     share = 1.0 / len(scenes)
@@ -74,8 +74,6 @@ def run(ctx: CheckContext) -> StageResult:
     missing = [m for m in NEEDS if not has_module(m)]
     if missing:
         return StageResult("skipped", f"{', '.join(missing)} not installed here: the fleet stage needs the full stack")
-    from sray.platform.finetune.fleet import unseen_scenes
-
     root = ctx.out / "fleet"
     shards = _shards(ctx, root)
     checkpoint = _checkpoint(ctx, root, shards)

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import re
 
+from sray.jobs.bench.profile import run_profiles, write_profiles
+
 from .context import CheckContext
 from .report import StageResult, table_cells
 
@@ -15,8 +17,6 @@ TOP_ROWS = 5
 
 def run(ctx: CheckContext) -> StageResult:
     """Profile the step and the render; the top operators of each profile become the stage's rows."""
-    from sray.jobs.bench.profile import run_profiles, write_profiles
-
     sections = run_profiles(ctx.device, ("fast",), ("train", "render"), quick=ctx.dry_run,
                             step_dtypes=("fp32", "bf16"))
     if not ctx.dry_run:

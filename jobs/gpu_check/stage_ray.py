@@ -8,6 +8,10 @@ import copy
 import time
 from typing import TYPE_CHECKING
 
+from sray.data_tools.synth.world import World, make_world
+from sray.platform.config.recipes import get_recipe
+from sray.platform.train.inputs import InputError
+
 from .context import CheckContext, has_module
 from .report import StageResult
 
@@ -22,8 +26,6 @@ def run(ctx: CheckContext) -> StageResult:
     missing = [m for m in NEEDS if not has_module(m)]
     if missing:
         return StageResult("skipped", f"{', '.join(missing)} not installed here: the Ray stage needs the full stack")
-    from sray.data_tools.synth.world import World, make_world
-    from sray.platform.config.recipes import get_recipe
     from sray.platform.train.launcher import launch_training
 
     root = ctx.out / "ray"
@@ -60,7 +62,6 @@ def run(ctx: CheckContext) -> StageResult:
 def shared_gpu_request(cfg: TrainConfig) -> tuple[bool, list[str]]:
     """Launch ``cfg`` with 2 workers of 0.5 GPU (both would land on one GPU, which NCCL refuses): whether it was
     refused before Ray started, and the table row (time to the refusal, its message)."""
-    from sray.platform.train.inputs import InputError
     from sray.platform.train.launcher import launch_training
 
     shared = copy.deepcopy(cfg)

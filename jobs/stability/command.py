@@ -15,15 +15,16 @@ import shutil
 import sys
 from pathlib import Path
 
+from sray.jobs.bench.doc import Bench, bench_dir, record
+from sray.platform.stability.axes import ALL_METHODS, AXES
+from sray.platform.stability.presets import PRESETS
+
 CHECKPOINT_NAMES = {"full": "sray", "none": "sray-no-cra"}
 """``--checkpoint NAME=PATH`` names -> the suite's S-Ray methods."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray stability``."""
-    from sray.platform.stability.axes import ALL_METHODS, AXES
-    from sray.platform.stability.presets import PRESETS
-
     p = sub.add_parser("stability", help="where S-Ray, S-Ray without CRA and Semantic-NeRF break: charts and tables")
     p.add_argument("--data", type=Path, help="shard folder with unseen test scenes (default: the preset's own world)")
     p.add_argument("--checkpoint", action="append", default=[], metavar="NAME=PATH",
@@ -77,8 +78,6 @@ def run(args: argparse.Namespace) -> int:
 def _record(job: object, outputs: dict) -> None:
     """The preset's section of ``docs/benchmarks.md``: one table per axis, then the breaking points with the
     charts (copied beside the section's data)."""
-    from sray.jobs.bench.doc import Bench, bench_dir, record
-
     preset, doc = job.preset.name, job.doc
     bench = Bench(f"stability-{preset}", f"Stability, {preset}")
     figures = bench_dir(doc, bench)

@@ -8,8 +8,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import torch
+
+from sray.data_tools.scene import IGNORE_ID
+from sray.jobs.stability.world import world_checkpoints, world_shards
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.common.eval_protocol import EvalProtocol
+from sray.platform.eval.zero_shot import select_scenes
 from sray.platform.stability.axes import AXES, SOURCE_METHODS
+from sray.platform.stability.point_trial import SuiteInputs
+from sray.platform.stability.points_study import point_records, run_points
 from sray.platform.stability.presets import PRESETS, Preset
+from sray.platform.stability.report import track, write_outputs
+from sray.platform.stability.suite import planned_points
+from sray.platform.tracking.registry import get_tracker
 
 
 @dataclass
@@ -60,8 +72,6 @@ class StabilityJob:
 def _check_checkpoints(checkpoints: dict[str, Path]) -> tuple[int | None, int | None, str]:
     """The checkpoints' label space (classes, ignore id) and source inputs (``model.inputs``, ``rgb`` when there
     is none); ValueError when the checkpoints disagree on either."""
-    from sray.platform.checkpoints.model_loading import model_from_checkpoint
-
     classes, inputs = set(), set()
     for path in checkpoints.values():
         _, cfg = model_from_checkpoint(path)
@@ -79,18 +89,6 @@ def _check_checkpoints(checkpoints: dict[str, Path]) -> tuple[int | None, int | 
 
 def run_job(job: StabilityJob) -> dict[str, Any]:
     """Run the suite; returns :func:`~sray.platform.stability.report.write_outputs`'s dict plus ``parent_run``."""
-    import torch
-
-    from sray.data_tools.scene import IGNORE_ID
-    from sray.jobs.stability.world import world_checkpoints, world_shards
-    from sray.platform.common.eval_protocol import EvalProtocol
-    from sray.platform.eval.zero_shot import select_scenes
-    from sray.platform.stability.point_trial import SuiteInputs
-    from sray.platform.stability.points_study import point_records, run_points
-    from sray.platform.stability.report import track, write_outputs
-    from sray.platform.stability.suite import planned_points
-    from sray.platform.tracking.registry import get_tracker
-
     job.out.mkdir(parents=True, exist_ok=True)
     tracking_uri = job.tracking_uri or f"sqlite:///{job.out / 'mlflow.db'}"
     shards, checkpoints = job.shards, dict(job.checkpoints)

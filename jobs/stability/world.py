@@ -8,12 +8,15 @@ skipped, shards are written once, and a finished pretraining is recorded in ``ch
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.synth.world import make_world
+from sray.platform.config.recipes import get_recipe
 from sray.platform.stability.presets import Preset
+from sray.platform.train.launcher import launch_training
 
 VARIANT_ATTENTION = {"sray": "full", "sray-no-cra": "none"}
 """S-Ray method of the suite -> the ``model.attention`` it is pretrained with."""
@@ -29,9 +32,6 @@ def world_shards(preset: Preset, out: Path) -> Path:
 
 def pretrain(method: str, preset: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:
     """One ``sray train`` job of the method's variant on the train scenes; its best (else latest) checkpoint."""
-    from sray.platform.config.recipes import get_recipe
-    from sray.platform.train.launcher import launch_training
-
     w = preset.world
     cfg = get_recipe("synth-paper" if preset.name == "gpu" else "synth-small")
     cfg.model.attention, cfg.model.n_source = VARIANT_ATTENTION[method], w.train_n_source
@@ -51,8 +51,6 @@ def pretrain(method: str, preset: Preset, shards: Path, out: Path, tracking_uri:
 def world_checkpoints(preset: Preset, shards: Path, out: Path, tracking_uri: str,
                       methods: list[str]) -> dict[str, Path]:
     """The pretrained checkpoint of every S-Ray method in ``methods``, pretraining the missing ones."""
-    import json
-
     record_path = out / "world" / CHECKPOINTS_FILE
     record = json.loads(record_path.read_text()) if record_path.exists() else {}
     for method in (m for m in VARIANT_ATTENTION if m in methods):

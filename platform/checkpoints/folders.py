@@ -10,7 +10,7 @@ One checkpoint is a folder ``step_<step:09d>/`` holding
 A folder is assembled under a hidden temporary name and renamed into place, so a crash during a
 save leaves the previous checkpoints untouched; :class:`CheckpointManager` derives ``latest`` (the
 highest step) and ``best`` (by the validation metric) from the complete folders alone. The same
-folder is what goes into a Ray Train checkpoint (:func:`to_ray_checkpoint`).
+folder is what goes into a Ray Train checkpoint (``sray.platform.train.worker.to_ray_checkpoint``).
 """
 
 from __future__ import annotations
@@ -25,14 +25,11 @@ import time
 import uuid
 from collections import OrderedDict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import torch
 
 from sray.data_tools.atomic import replace_dir
-
-if TYPE_CHECKING:
-    from ray.train import Checkpoint
 
 log = logging.getLogger(__name__)
 
@@ -193,17 +190,17 @@ class CheckpointManager:
                 shutil.rmtree(path, ignore_errors=True)
 
 
-# ---------------------------------------------------------------------------------- Ray Train
-def to_ray_checkpoint(directory: Path) -> Checkpoint:
-    """A ``ray.train.Checkpoint`` of one checkpoint folder (pass it to ``ray.train.report``)."""
-    from ray.train import Checkpoint
-
-    read_meta(directory)
-    return Checkpoint.from_directory(str(Path(directory).resolve()))
-
-
-def from_ray_checkpoint(checkpoint: Checkpoint, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """The state dict inside a ``ray.train.Checkpoint`` (e.g. from ``ray.train.get_checkpoint()``)."""
-    with checkpoint.as_directory() as directory:
-        read_meta(Path(directory))
-        return load_checkpoint(Path(directory), map_location)
+def resolve_checkpoint(path: Path) -> Path:
+    """A checkpoint folder from a checkpoint folder, a job's ``checkpoints/`` folder or a job folder
+    (best checkpoint, else the latest); FileNotFoundError names the path and what was expected."""
+    path = Path(path).resolve()
+    for root in (path, path / "checkpoints"):
+        if (root / "state.pt").is_file():
+            return root
+        if root.is_dir() and any(root.glob("step_*")):
+            manager = CheckpointManager(root)
+            found = manager.best() or manager.latest()
+            if found is not None:
+                return found
+    raise FileNotFoundError(f"{path}: no sray checkpoint here; pass a step_XXXXXXXXX folder (holding state.pt), "
+                            "a job's checkpoints/ folder or the job folder")

@@ -12,6 +12,8 @@ from __future__ import annotations
 import ipaddress
 from dataclasses import dataclass
 
+import psutil
+
 
 @dataclass(frozen=True)
 class Listener:
@@ -38,8 +40,6 @@ class Listener:
 def listeners(parts: dict[str, int]) -> list[Listener]:
     """Listening TCP sockets of each part's process tree (``parts``: name -> root pid), sorted by part
     and port; a part whose process is gone contributes nothing."""
-    import psutil
-
     owner: dict[int, tuple[str, str]] = {}
     for part, pid in parts.items():
         try:

@@ -10,14 +10,14 @@ import asyncio
 import sys
 from typing import Any, TextIO
 
+from ray.job_submission import JobSubmissionClient
+
 EXIT_CODES = {"SUCCEEDED": 0, "FAILED": 1, "STOPPED": 3}
 """Exit status of ``sray submit --wait`` per final job status (anything else: 1)."""
 
 
 def client(address: str) -> Any:
     """A ``JobSubmissionClient`` for the dashboard at ``address`` (http://host:port)."""
-    from ray.job_submission import JobSubmissionClient
-
     return JobSubmissionClient(address)
 
 

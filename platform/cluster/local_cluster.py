@@ -19,6 +19,7 @@ import urllib.request
 from pathlib import Path
 
 from sray.platform.cluster import mlflow_server, postgres, ray_nodes
+from sray.platform.cluster.exposure import exposure_line, listeners
 from sray.platform.cluster.processes import ClusterError, ProcessRecord, free_port, port_open, stop, wait_until
 from sray.platform.cluster.state import ClusterState, load_state, update_state
 
@@ -185,3 +186,20 @@ def down(root: Path) -> list[str]:
 def client_env(state: ClusterState) -> dict[str, str]:
     """Environment a client of this cluster needs (the Ray token)."""
     return ray_nodes.auth_env(state.token_path)
+
+
+def describe(state: ClusterState) -> str:
+    """What ``sray cluster up|status|restart`` print: each process and whether it runs, the addresses and the
+    token clients need, and the ports open beyond loopback."""
+    alive = state.alive()
+    running = ", ".join(f"{n} {'up' if ok else 'DOWN'} (pid {state.processes[n]['pid']})" for n, ok in alive.items())
+    env = " ".join(f"{k}={v}" for k, v in client_env(state).items())
+    return "\n".join([
+        f"[cluster] processes: {running or 'none running'}",
+        f"[cluster] Ray address:     --address {state.ray_address}   (sray train / finetune-fleet)",
+        f"[cluster] Jobs API:        --address {state.dashboard_url}   (sray submit; Ray dashboard)",
+        f"[cluster] tracking URI:    --tracking-uri {state.tracking_uri}   (MLflow UI there too)",
+        f"[cluster] shared storage:  --set run.output_dir={state.storage / 'jobs'}",
+        f"[cluster] clients need the Ray token:  export {env}",
+        exposure_line(listeners({n: state.processes[n]["pid"] for n, ok in alive.items() if ok})),
+    ])

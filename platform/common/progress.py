@@ -14,6 +14,10 @@ import sys
 import time
 from typing import Any
 
+import ray
+from ray.experimental import tqdm_ray
+from tqdm import tqdm
+
 PROGRESS_ENV = "SRAY_PROGRESS"
 """Environment variable naming how progress is shown: ``bar`` or ``lines``."""
 LINE_EVERY_S = 30.0
@@ -37,8 +41,6 @@ class _RayBar:
     """Ray's driver-rendered bar (``ray.experimental.tqdm_ray``): ETA and rate, one line per bar."""
 
     def __init__(self, total: int, initial: int, desc: str) -> None:
-        from ray.experimental import tqdm_ray
-
         self.desc = desc
         self._bar = tqdm_ray.tqdm(total=total, desc=desc, unit="step")
         if initial:
@@ -118,10 +120,6 @@ def make_progress(enabled: bool, total: int, initial: int = 0, desc: str = "") -
         return _NoBar()
     if progress_mode() == "lines":
         return LineProgress(total, initial, desc)
-    import ray
-
     if ray.is_initialized() and ray.get_runtime_context().worker.mode == ray.WORKER_MODE:
         return _RayBar(total, initial, desc)
-    from tqdm import tqdm
-
     return tqdm(total=total, initial=initial, desc=desc, unit="step", mininterval=1.0)

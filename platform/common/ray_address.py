@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+import threading
 from collections.abc import Iterator
 
 WHERE = "`sray cluster status` prints the address and the token variables"
@@ -68,8 +69,6 @@ def check_ray_address(address: str, timeout_s: float = 3.0) -> None:
 def _ask_gcs(address: str, timeout_s: float) -> bool | None:
     """One GCS request with this process's token: False when accepted, True when the token was refused, None
     when no answer came within ``timeout_s`` (the client runs in a daemon thread: Ray's own wait is 40 s)."""
-    import threading
-
     from ray._raylet import GcsClient
     from ray.exceptions import AuthenticationError
 

@@ -15,7 +15,7 @@ from typing import Any
 
 from sray.model.fast_render import FastRender
 from sray.platform.config.held_out_render import held_out_fast
-from sray.platform.config.overrides import set_field
+from sray.platform.config.overrides import apply_settings, set_field
 
 PRECISIONS = ("no", "bf16", "fp16")
 """fp32, bfloat16 autocast (CPU and CUDA), float16 autocast with loss scaling (CUDA only)."""
@@ -188,3 +188,11 @@ def apply_fleet_override(cfg: FleetConfig, assignment: str) -> None:
     out of range (the config keeps its previous value then).
     """
     set_field(cfg, assignment, "finetune.patience=5", lambda: check_fleet_config(cfg))
+
+
+def build_fleet_config(flags: dict[str, Any], assignments: list[str]) -> FleetConfig:
+    """A command's FleetConfig: the defaults, then its flags (``path -> value``, None = not given), then its
+    ``--set`` assignments."""
+    cfg = FleetConfig()
+    apply_settings(cfg, flags, assignments, apply_fleet_override)
+    return cfg

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -253,3 +254,16 @@ def apply_override(cfg: TrainConfig, assignment: str) -> None:
         check_sections(cfg)
 
     set_field(cfg, assignment, "optim.lr=5e-4", check)
+
+
+CONFIG_FILE = "config.json"
+"""The job's full config, written into its folder (and logged as an artifact)."""
+
+
+def load_job_config(output_dir: str, name: str) -> TrainConfig:
+    """The saved config of an existing job (for ``--resume``); errors name the file and the fix."""
+    path = Path(output_dir) / name / CONFIG_FILE
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no job called {name!r} under {output_dir}; "
+                                "check --name/--resume and the output folder (run.output_dir)")
+    return TrainConfig.from_dict(json.loads(path.read_text()))

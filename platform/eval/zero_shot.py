@@ -30,8 +30,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples
@@ -40,6 +42,7 @@ from sray.model.fast_render import FastRender
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
 from sray.model.runtime import Runtime
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
+from sray.platform.checkpoints.folders import read_meta
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.scene_scoring import score_scene
@@ -70,8 +73,6 @@ def write_json_atomic(obj: Any, path: Path) -> Path:
 
 def write_png_atomic(rgb: np.ndarray, path: Path) -> Path:
     """Write a uint8 (H, W, 3) RGB image as PNG through a temporary name; returns ``path``."""
-    import cv2
-
     ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]))
     if not ok:
         raise OSError(f"{path}: OpenCV could not encode a {rgb.shape} {rgb.dtype} image as PNG")
@@ -164,10 +165,6 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
     UI url and hint). ``tracker``: a registry name; ``tracking_uri``: its store (None = the tracker's
     default store in the working directory).
     """
-    from tqdm import tqdm
-
-    from sray.platform.checkpoints.folders import read_meta
-
     if stride < 1 or n_source < 1:
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")
     tracking = get_tracker(tracker, tracking_uri or "")

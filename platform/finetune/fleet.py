@@ -27,19 +27,26 @@ import time
 from pathlib import Path
 from typing import Any
 
+import ray
+
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
-from sray.platform.checkpoints.folders import CheckpointManager
+from sray.data_tools.shards.manifest import read_manifest
+from sray.platform.checkpoints.folders import resolve_checkpoint
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.common.progress import progress_env
 from sray.platform.common.ray_address import check_ray_address
 from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
-from sray.platform.finetune.methods.registry import method_names
-from sray.platform.finetune.scene_artifacts import checkpoint_sha256, state_file
+from sray.platform.finetune.methods.registry import METHODS, method_names
+from sray.platform.finetune.scene_artifacts import checkpoint_sha256, model_bytes, state_file
 from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneTask, run_scene_task, write_result
 from sray.platform.tracking.fleet_parent_run import parent_run
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import Tracker
+from sray.platform.train.launcher import init_ray
+from sray.platform.train.resources import check_feasible
+from sray.platform.viz.charts import write_fleet_charts
 
 log = logging.getLogger(__name__)
 
@@ -49,29 +56,6 @@ FLEET_FILE = "fleet.json"
 
 def _say(msg: str) -> None:
     print(f"[fleet] {msg}", flush=True)
-
-
-def resolve_checkpoint(path: Path) -> Path:
-    """A checkpoint folder from a checkpoint folder, a job's ``checkpoints/`` folder or a job folder
-    (best checkpoint, else the latest); FileNotFoundError names the path and what was expected."""
-    path = Path(path).resolve()
-    for root in (path, path / "checkpoints"):
-        if (root / "state.pt").is_file():
-            return root
-        if root.is_dir() and any(root.glob("step_*")):
-            manager = CheckpointManager(root)
-            found = manager.best() or manager.latest()
-            if found is not None:
-                return found
-    raise FileNotFoundError(f"{path}: no sray checkpoint here; pass a step_XXXXXXXXX folder (holding state.pt), "
-                            "a job's checkpoints/ folder or the job folder")
-
-
-def unseen_scenes(shards: Path) -> list[str]:
-    """Names of the unseen test scenes (role ``test``) of a shard folder, sorted."""
-    from sray.data_tools.shards.manifest import read_manifest
-
-    return sorted(name for name, e in read_manifest(Path(shards)).scenes.items() if e.meta.get("role") == "test")
 
 
 def result_dir(out_dir: Path, scene: str, method: str) -> Path:
@@ -110,8 +94,6 @@ def _error_text(error: BaseException) -> str:
 def _scene_task(task: SceneTask) -> dict[str, Any]:
     """Ray task body (a module-level function, so workers import it by name); the result records the
     Ray node it ran on (``node_id``)."""
-    import ray
-
     result = run_scene_task(task) | {"node_id": ray.get_runtime_context().get_node_id()}
     write_result(Path(task.out_dir), result)
     return result
@@ -119,8 +101,6 @@ def _scene_task(task: SceneTask) -> dict[str, Any]:
 
 def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
     """ValueError naming what is wrong with the request, before anything starts."""
-    from sray.data_tools.shards.manifest import read_manifest
-
     known = method_names()
     bad = [m for m in methods if m not in known]
     if bad or not methods:
@@ -150,15 +130,7 @@ def _fleet_record(out_dir: Path, base_sha256: str, tracker: Tracker) -> dict[str
 
 
 def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
-    """PNGs of ``sray.platform.viz.charts.write_fleet_charts`` ([] when the module is not installed)."""
-    try:
-        from sray.platform.finetune.methods.registry import METHODS
-        from sray.platform.viz.charts import write_fleet_charts
-    except ModuleNotFoundError as e:
-        if e.name != "sray.platform.viz.charts":
-            raise
-        _say("charts skipped: sray.platform.viz.charts is not available")
-        return []
+    """PNGs of ``sray.platform.viz.charts.write_fleet_charts`` ([] when drawing them fails)."""
     try:
         return [Path(p) for p in write_fleet_charts(results, out_dir / "charts", METHODS)]
     except Exception as e:  # noqa: BLE001 - the results are saved already; a chart bug must not lose them
@@ -169,8 +141,6 @@ def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
 def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
               tracker: Tracker) -> dict[tuple[str, str], dict[str, Any]]:
     """Run the tasks on Ray with the in-flight window, re-runs with back-off and failure reports."""
-    import ray
-
     remote_task = ray.remote(_scene_task).options(num_cpus=cfg.cpus_per_task, num_gpus=cfg.gpus_per_task,
                                                   max_retries=0, retry_exceptions=False,
                                                   runtime_env={"env_vars": propagated_env() | progress_env()})
@@ -234,11 +204,6 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     Ray is started locally unless ``cfg.address`` names a cluster (or Ray is already running in this
     process).
     """
-    from sray.platform.checkpoints.model_loading import model_from_checkpoint
-    from sray.platform.finetune.scene_artifacts import model_bytes
-    from sray.platform.train.launcher import init_ray
-    from sray.platform.train.resources import check_feasible
-
     check_fleet_config(cfg)
     if cfg.address:
         check_ray_address(cfg.address)

@@ -10,8 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from sray.model.semantic_ray import SRayModel
+from sray.platform.checkpoints.folders import resolve_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.finetune.fleet import resolve_checkpoint
 from sray.platform.finetune.methods.sray_method import METHOD
 from sray.platform.finetune.scene_artifacts import load_scene_model, read_sray_delta
 

@@ -31,6 +31,7 @@ from sray.data_tools.shards.manifest import sha256_file
 from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import STATE_FILE
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
 
 FORMAT = "sray-scene-delta"
 """``format`` metadata of every scene artifact."""
@@ -134,8 +135,6 @@ def load_scene_model(base_checkpoint: Path, artifact: Path, map_location: str = 
 
     Refuses (ValueError) an artifact whose recorded base checksum is not the checkpoint's.
     """
-    from sray.platform.checkpoints.model_loading import model_from_checkpoint
-
     tensors, metadata = read_sray_delta(artifact)
     actual = checkpoint_sha256(base_checkpoint)
     if metadata.get("base_sha256") != actual:

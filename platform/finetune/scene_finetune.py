@@ -35,6 +35,7 @@ from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
+from sray.platform.common.progress import make_progress
 from sray.platform.common.throughput import ThroughputWindow, progress_postfix
 from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.eval.scene_scoring import score_scene
@@ -43,6 +44,7 @@ from sray.platform.finetune.methods.method import SceneContext
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import model_bytes
 from sray.platform.finetune.scene_clips import SceneClips
+from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle, RunLogger
 from sray.platform.train.step import NonFiniteTraining, step_seed
 
@@ -169,8 +171,6 @@ def _prepare(task: SceneTask,
 
 def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOutcome:
     """Finetune one (scene, method), write its artifact and ``result.json``; ``logger``: the child run's or None."""
-    from sray.platform.common.progress import make_progress
-
     cfg, ft = task.config, task.config.finetune
     fail_if_listed(task.scene, task.attempt)
     use_cuda = cfg.gpus_per_task > 0 and torch.cuda.is_available()
@@ -281,8 +281,6 @@ def run_scene_task(task: SceneTask) -> dict[str, Any]:
     keeps it (Ray's OMP_NUM_THREADS already matches) made SDPA's CPU flash kernel ~13% slower here
     (docs/performance.md, "`torch.set_num_threads` only when the count changes").
     """
-    from sray.platform.tracking.registry import open_logger
-
     threads = max(1, int(task.config.cpus_per_task))
     if torch.get_num_threads() != threads:
         torch.set_num_threads(threads)

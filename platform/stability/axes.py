@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sray.data_tools.perturbations import exposure, gaussian_noise, jpeg, motion_blur, noisy_pose, occlude
+
 POSE_CM_PER_DEG = 2.0
 """Pose-noise level L turns each camera by L degrees and moves it by ``POSE_CM_PER_DEG · L`` centimetres."""
 
@@ -63,8 +65,6 @@ def perturb_views(axis: str, level: float, rgb: np.ndarray, c2w: np.ndarray,
     Each view draws its own perturbation from ``rng`` (in view order), so a (seed, level) pair always
     gives the same result; level 0 (or JPEG quality 100, or blur length 1) returns exact copies.
     """
-    from sray.data_tools.perturbations import exposure, gaussian_noise, jpeg, motion_blur, noisy_pose, occlude
-
     if AXES[axis].kind != "perturb":
         raise ValueError(f"axis {axis!r} does not perturb views (its kind is {AXES[axis].kind!r})")
     rgb_out, c2w_out = rgb.copy(), np.array(c2w, dtype=np.float64, copy=True)

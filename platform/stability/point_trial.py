@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import ray
 import torch
 
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
@@ -82,7 +83,5 @@ def stability_point(point: dict[str, Any], ctx: TrialContext, inputs: SuiteInput
 
 def trial_resources(device: str) -> dict[str, float]:
     """What one point reserves: every CPU of the local Ray (its torch threads), and one GPU on CUDA."""
-    import ray
-
     cpus = float(min(os.cpu_count() or 1, int(ray.cluster_resources().get("CPU", 1))))
     return {"CPU": max(cpus, 1.0), **({"GPU": 1.0} if device.startswith("cuda") else {})}

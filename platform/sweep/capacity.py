@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import os
 
+import ray
+import torch
+
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.train.resources import InfeasibleRequest, NodeResources, live_nodes, workers_per_node
 
@@ -23,12 +26,8 @@ refuses an empty request; any CPU would be taken from the trial's own workers)."
 def expected_nodes() -> list[NodeResources]:
     """The nodes of the Ray cluster this process is connected to, or else of the local Ray that ``sray`` starts
     (``launcher.init_ray``: every CPU of this machine, its CUDA GPUs), known before it starts."""
-    import ray
-
     if ray.is_initialized():
         return live_nodes()
-    import torch
-
     return [NodeResources("this machine", float(os.cpu_count() or 1), float(torch.cuda.device_count()))]
 
 

@@ -32,6 +32,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from ray import tune
+
 from sray.platform.common.fault_hook import fail_trial_if_listed, propagated_env
 from sray.platform.sweep.outcomes import TrialOutcome, collect_outcomes
 from sray.platform.sweep.schedulers import build_scheduler
@@ -97,8 +99,6 @@ def run_study(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction, se
     ``resume``: continue the study in ``settings.folder`` (Tune's saved state when there is any; the trials'
     own records in any case). ``point_fn`` must be picklable (a module-level function or a partial of one).
     """
-    from ray import tune
-
     os.environ["TUNE_DISABLE_STRICT_METRIC_CHECKING"] = "1"
     job = _TrialJob(point_fn, {k: dict(v) for k, v in plan.items()}, str(settings.folder), propagated_env(),
                     settings.start_by)

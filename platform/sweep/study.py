@@ -8,6 +8,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import ray.tune
+
 from sray.platform.sweep.trial_files import read_stop_request
 
 
@@ -28,8 +30,6 @@ class TrialContext:
 
     def report(self, metrics: Mapping[str, float]) -> None:
         """Send one result to Tune (a point function that is not a Ray Train job reports this way)."""
-        import ray.tune
-
         ray.tune.report(dict(metrics))
 
 

@@ -19,11 +19,13 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from sray.platform.config.train_config import TrainConfig, apply_override
+from ray.tune.integration.ray_train import TuneReportCallback
+
+from sray.platform.config.train_config import CONFIG_FILE, TrainConfig, apply_override, load_job_config
 from sray.platform.sweep.study import TrialContext
 from sray.platform.sweep.spec import Param, SpecError
 from sray.platform.tracking.tracker import RunHandle
-from sray.platform.train.launcher import CONFIG_FILE, launch_training, load_job_config
+from sray.platform.train.launcher import launch_training
 from sray.platform.train.validation import GROUPS
 from sray.platform.train.worker import STOP_FILE
 
@@ -102,8 +104,6 @@ def run_training_trial(point: dict[str, Any], ctx: TrialContext, base: dict[str,
 
     ``base``: the sweep's base config as a dict (output folder, tracking store and shards absolute).
     """
-    from ray.tune.integration.ray_train import TuneReportCallback
-
     cfg = trial_job_config(TrainConfig.from_dict(base), point, sweep, ctx.key)
     job_dir = cfg.job_dir()
     resume = (job_dir / CONFIG_FILE).is_file()

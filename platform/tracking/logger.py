@@ -24,6 +24,11 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from mlflow import MlflowClient
+from mlflow.entities import Metric, Param
+from mlflow.exceptions import MlflowException
+from mlflow.system_metrics.system_metrics_monitor import SystemMetricsMonitor
+
 from sray.platform.tracking.params import sanitize_key, to_params
 from sray.platform.tracking.tracker import DRAIN_TIMEOUT_S, RunHandle, RunLogger
 
@@ -81,8 +86,6 @@ class MlflowRunLogger(RunLogger):
 
     def log_metrics(self, metrics: Mapping[str, Any], step: int) -> None:
         """Buffer scalar metrics (floats, ints or 0-d tensors) at ``step``; flushes every N steps/s."""
-        from mlflow.entities import Metric
-
         timestamp = int(time.time() * 1000)
         for key, value in metrics.items():
             number = float(value.item() if hasattr(value, "item") else value)
@@ -126,8 +129,6 @@ class MlflowRunLogger(RunLogger):
         created: list[str] = []  # the version, once made: a retry after a failed alias does not make another
 
         def register(client: Any) -> None:
-            from mlflow.exceptions import MlflowException
-
             if not created:
                 try:
                     client.create_registered_model(name)
@@ -151,8 +152,6 @@ class MlflowRunLogger(RunLogger):
         client = self._get_client()
         if client is None:
             return False
-        from mlflow.entities import Param
-
         while self._params:
             chunk = dict(list(self._params.items())[:PARAMS_PER_BATCH])
             params = [Param(k, v) for k, v in chunk.items()]
@@ -195,8 +194,6 @@ class MlflowRunLogger(RunLogger):
     def watch_system(self, node: str, interval_s: float) -> Callable[[], None]:
         """MLflow's system-metrics monitor on this run (metrics ``system/<node>/...``, continuing the run's system
         steps after a restart); the returned function stops it and delivers what it sampled."""
-        from mlflow.system_metrics.system_metrics_monitor import SystemMetricsMonitor
-
         monitor = SystemMetricsMonitor(self.handle.run_id, sampling_interval=interval_s, resume_logging=True,
                                        node_id=node, tracking_uri=self.handle.store)
         monitor.start()
@@ -211,8 +208,6 @@ class MlflowRunLogger(RunLogger):
     def _get_client(self) -> Any:
         if self._client is None:
             try:
-                from mlflow import MlflowClient
-
                 self._client = MlflowClient(tracking_uri=self.handle.store,
                                             registry_uri=self.handle.store)
             except Exception as e:  # noqa: BLE001 - tracking never crashes training

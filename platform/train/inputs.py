@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.common.ray_address import check_ray_address
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import get_tracker
@@ -39,8 +40,6 @@ def check_request(workers: int, cpus_per_worker: float, gpus_per_worker: float, 
 
 def check_shards(shards: Path) -> None:
     """The shard folder exists and holds a readable ``manifest.json`` naming at least one scene."""
-    from sray.data_tools.shards.manifest import read_manifest
-
     shards = Path(shards)
     if not shards.is_dir():
         raise InputError(f"{shards}: no such shard folder (data.shards / --data); make one with "

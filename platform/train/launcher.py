@@ -19,11 +19,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sray.platform.checkpoints.folders import CheckpointManager
+import ray
+import ray.train
+from ray.train.torch import TorchTrainer
+
+from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.common.progress import progress_env
 from sray.platform.common.ray_env import SETUP_HOOK, TRAIN_POLL_ENV, TRAIN_WORKER_ENV
-from sray.platform.config.train_config import TrainConfig
+from sray.platform.config.train_config import CONFIG_FILE, TrainConfig
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import RunHandle, Tracker
 from sray.platform.train.class_balance import set_class_weights
@@ -31,10 +35,6 @@ from sray.platform.train.inputs import check_train_inputs
 from sray.platform.train.resources import check_feasible
 from sray.platform.train.validation import validation_protocol
 from sray.platform.train.worker import STOP_FILE, train_worker
-
-CONFIG_FILE = "config.json"
-"""The job's full config, written into its folder (and logged as an artifact)."""
-
 
 @dataclass
 class TrainOutcome:
@@ -64,15 +64,6 @@ def unique_name(cfg: TrainConfig) -> str:
     return name
 
 
-def load_job_config(output_dir: str, name: str) -> TrainConfig:
-    """The saved config of an existing job (for ``--resume``); errors name the file and the fix."""
-    path = Path(output_dir) / name / CONFIG_FILE
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no job called {name!r} under {output_dir}; "
-                                "check --name/--resume and the output folder (run.output_dir)")
-    return TrainConfig.from_dict(json.loads(path.read_text()))
-
-
 LOCAL_WORKER_ENV = dict(TRAIN_POLL_ENV)
 """Environment a local Ray cluster's workers inherit unless the user set it otherwise:
 :data:`TRAIN_POLL_ENV`, Ray Train's controller polls every 0.5 s (:mod:`sray.platform.common.ray_env`).
@@ -87,8 +78,6 @@ def init_ray(address: str | None, num_cpus: int | None = None) -> None:
     A local cluster's processes inherit this process's environment, with ``LOCAL_WORKER_ENV``
     added where the variable is unset.
     """
-    import ray
-
     if ray.is_initialized():
         return
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -131,9 +120,6 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
     callbacks of the job (a sweep trial passes Tune's report callback). Off the main thread (inside a Tune
     trial) no Ctrl-C handler is installed: Python allows signal handlers on the main thread only.
     """
-    import ray.train
-    from ray.train.torch import TorchTrainer
-
     check_train_inputs(cfg, resume=resume, address=address)  # before Ray: one line, never retried
     tracker = get_tracker(cfg.run.tracker, cfg.run.tracking_uri)
     if not resume:
@@ -215,8 +201,6 @@ def _fit_in_thread(trainer: Any) -> None:
 def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:
     """Whether the job's last checkpoint ends short of both its step cap and its CPU-second budget."""
     latest = CheckpointManager(job_dir / "checkpoints").latest()
-    from sray.platform.checkpoints.folders import load_checkpoint, read_meta
-
     if latest is None:
         return True
     if read_meta(latest)["step"] >= cfg.optim.steps:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import ray
+
 _EPS = 1e-9
 """Slack for fractional requests (0.1 * 3 is not exactly 0.3)."""
 
@@ -54,8 +56,6 @@ def nodes_from_totals(resources: dict[str, float]) -> list[NodeResources]:
 
 def live_nodes() -> list[NodeResources]:
     """Alive nodes of the Ray cluster this process is connected to (``ray.init`` already called)."""
-    import ray
-
     return [NodeResources(str(n.get("NodeManagerAddress") or n.get("NodeID")),
                           float(n["Resources"].get("CPU", 0.0)), float(n["Resources"].get("GPU", 0.0)))
             for n in ray.nodes() if n.get("Alive")]

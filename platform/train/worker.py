@@ -10,17 +10,24 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import ray.train
 import torch
+from accelerate import Accelerator
+from ray.train import Checkpoint
 
-from sray.platform.checkpoints.folders import CheckpointManager, from_ray_checkpoint, load_checkpoint, to_ray_checkpoint
+from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_due
 from sray.platform.common.model_input import ray_batch
+from sray.platform.common.progress import make_progress
 from sray.platform.common.throughput import ThroughputWindow, progress_postfix
 from sray.platform.config.train_config import TrainConfig
+from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle
 from sray.platform.train.cpu_clock import CpuClock
+from sray.platform.train.job_loader import job_loader
 from sray.platform.train.state import build_training, lr_lambda, restore_training, training_state
 from sray.platform.train.step import TrainStep, step_seed
+from sray.platform.train.validation import validate
 
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
@@ -45,16 +52,21 @@ def parameter_divergence(model: torch.nn.Module, world: int) -> float:
     return float(torch.stack(gathered).amax(0).sub(torch.stack(gathered).amin(0)).abs().max())
 
 
+def to_ray_checkpoint(directory: Path) -> Checkpoint:
+    """A ``ray.train.Checkpoint`` of one checkpoint folder (pass it to ``ray.train.report``)."""
+    read_meta(directory)
+    return Checkpoint.from_directory(str(Path(directory).resolve()))
+
+
+def from_ray_checkpoint(checkpoint: Checkpoint, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """The state dict inside a ``ray.train.Checkpoint`` (e.g. from ``ray.train.get_checkpoint()``)."""
+    with checkpoint.as_directory() as directory:
+        read_meta(Path(directory))
+        return load_checkpoint(Path(directory), map_location)
+
+
 def train_worker(payload: dict[str, Any]) -> None:
     """Ray Train entry point. ``payload`` = {"config": TrainConfig.to_dict(), "run": RunHandle fields}."""
-    import ray.train
-    from accelerate import Accelerator
-
-    from sray.platform.common.progress import make_progress
-    from sray.platform.tracking.registry import open_logger
-    from sray.platform.train.job_loader import job_loader
-    from sray.platform.train.validation import validate
-
     cfg = TrainConfig.from_dict(payload["config"])
     ctx = ray.train.get_context()
     rank, world = ctx.get_world_rank(), ctx.get_world_size()

@@ -31,6 +31,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.ticker import NullFormatter, NullLocator
 
 from sray.data_tools.atomic import save_png
 from sray.model.metrics import DATASET_PROTOCOL
@@ -71,9 +75,6 @@ def _framed_figure(width: float, body_height: float, title: str, handles: list[A
 
     Returns (figure, body sub-figure); sizes in inches.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     ncols = 4 if width >= 12 else 2
     head_h = 0.45 + 0.22 * math.ceil(len(handles) / ncols)
     lines = [line for part in footnote for line in textwrap.wrap(part, max(60, int(width * 17)))]
@@ -119,8 +120,6 @@ def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str
 
 
 def _legend_handles(ok: list[dict[str, Any]], methods: ChartedMethods) -> list[Any]:
-    from matplotlib.lines import Line2D
-
     handles = []
     for method in methods.values():
         if any(r["method"] == method.name and zero_shot_value(r, "miou", methods) is not None for r in ok):
@@ -172,8 +171,6 @@ def curve_figure(results: list[dict[str, Any]], metric: str, x_key: str, methods
 
 def size_figure(results: list[dict[str, Any]], methods: ChartedMethods) -> Any:
     """mIoU after per-scene optimisation against the per-scene artifact size (log x, '0 B' = zero-shot)."""
-    from matplotlib.ticker import NullFormatter, NullLocator
-
     ok = [r for r in results if is_chartable(r)]
     note = ("One point per (scene, method): the best evaluated state, as stored. Dotted: a scene's zero-shot "
             "model -> finetune (S-Ray). Semantic-NeRF stores its whole per-scene model.")

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 from sray.data_tools.atomic import save_png
 from sray.platform.viz.palette import IGNORE_COLOR, colorize, palette
@@ -102,9 +104,6 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
     ``pred_labels``, ``gt_labels``: int (H, W) class ids (``ignore_id`` = unlabelled in gt);
     ``pred_rgb``, ``gt_rgb``: (H, W, 3) floats in [0, 1] or uint8; ``class_names``: the label space.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     pred, gt = np.asarray(pred_labels), np.asarray(gt_labels)
     if pred.shape != gt.shape or pred.ndim != 2:
         raise ValueError(f"pred_labels {pred.shape} and gt_labels {gt.shape} must be the same (H, W)")

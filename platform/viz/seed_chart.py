@@ -7,6 +7,8 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 from sray.data_tools.atomic import save_png
 
@@ -17,9 +19,6 @@ def write_seed_chart(values: dict[str, list[float]], y_label: str, title: str, f
     A row with two or more seeds gets a standard-deviation error bar; every seed is drawn as a dot.
     ValueError when no row has a value.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     rows = {label: v for label, v in values.items() if v}
     if not rows:
         raise ValueError(f"{path}: no scores to chart")

@@ -14,6 +14,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
 from sray.data_tools.atomic import save_png
 from sray.platform.viz.chart_style import ChartStyle
 
@@ -66,9 +69,6 @@ def write_stability_chart(panels: list[StabilityPanel], styles: Mapping[str, Cha
 
     ``title`` may hold several lines (the first is drawn larger: the chart's name; then the protocol).
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     rows = math.ceil(len(panels) / COLUMNS)
     width = PANEL_SIZE[0] * min(COLUMNS, len(panels))
     lines = [ln for part in footnote for ln in textwrap.wrap(part, max(60, int(width * 17)))]

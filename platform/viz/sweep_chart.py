@@ -11,6 +11,10 @@ import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
+from matplotlib import colormaps
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
 from sray.data_tools.atomic import save_png
 
 ENDS = {"finished": ("o", "-", ""), "stopped": ("X", "-", " (stopped early)"),
@@ -39,10 +43,6 @@ def write_sweep_chart(curves: list[TrialCurve], metric: str, title: str, footnot
 
     ValueError when no curve has a point.
     """
-    from matplotlib import colormaps
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     drawn = [c for c in curves if c.values]
     if not drawn:
         raise ValueError(f"{path}: no trial reported {metric}; nothing to chart")
