@@ -91,14 +91,6 @@ def _error_text(error: BaseException) -> str:
     return f"{type(cause).__name__}: {message[-1] if message else ''}"[:2000]
 
 
-def _scene_task(task: SceneTask) -> dict[str, Any]:
-    """Ray task body (a module-level function, so workers import it by name); the result records the
-    Ray node it ran on (``node_id``)."""
-    result = run_scene_task(task) | {"node_id": ray.get_runtime_context().get_node_id()}
-    write_result(Path(task.out_dir), result)
-    return result
-
-
 def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
     """ValueError naming what is wrong with the request, before anything starts."""
     known = method_names()
@@ -141,9 +133,9 @@ def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
 def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
               tracker: Tracker) -> dict[tuple[str, str], dict[str, Any]]:
     """Run the tasks on Ray with the in-flight window, re-runs with back-off and failure reports."""
-    remote_task = ray.remote(_scene_task).options(num_cpus=cfg.cpus_per_task, num_gpus=cfg.gpus_per_task,
-                                                  max_retries=0, retry_exceptions=False,
-                                                  runtime_env={"env_vars": propagated_env() | progress_env()})
+    remote_task = ray.remote(run_scene_task).options(num_cpus=cfg.cpus_per_task, num_gpus=cfg.gpus_per_task,
+                                                     max_retries=0, retry_exceptions=False,
+                                                     runtime_env={"env_vars": propagated_env() | progress_env()})
     waiting: list[tuple[float, SceneTask]] = [(0.0, task) for task in tasks]
     in_flight: dict[Any, SceneTask] = {}
     results: dict[tuple[str, str], dict[str, Any]] = {}

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import ray
 import torch
 from torch import nn
 
@@ -272,7 +273,9 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
 
 
 def run_scene_task(task: SceneTask) -> dict[str, Any]:
-    """The fleet task body: :func:`finetune_scene` logging into the job's child run; returns the result.
+    """The fleet's Ray task body (here, so that Ray's workers import what a finetune needs and no more):
+    :func:`finetune_scene` logging into the job's child run; the result, with the Ray node it ran on
+    (``node_id``), is written to the task's folder and returned.
 
     The child run is marked FINISHED on success and FAILED when this attempt raises (a later
     successful re-run marks it FINISHED again). Torch uses as many threads as the task reserved
@@ -286,6 +289,10 @@ def run_scene_task(task: SceneTask) -> dict[str, Any]:
         torch.set_num_threads(threads)
 
     if task.run is None:
-        return finetune_scene(task).result
-    with open_logger(task.run) as logger:
-        return finetune_scene(task, logger).result
+        outcome = finetune_scene(task)
+    else:
+        with open_logger(task.run) as logger:
+            outcome = finetune_scene(task, logger)
+    result = outcome.result | {"node_id": ray.get_runtime_context().get_node_id()}
+    write_result(Path(task.out_dir), result)
+    return result
