@@ -1,8 +1,9 @@
 """The ``sray`` console script: one parser, a few shallow subcommands.
 
 Each subcommand module exposes ``register(subparsers)``, which adds its parser and sets
-``func`` to a callable taking the parsed namespace and returning an exit code. Heavy imports
-(torch, ray, mlflow) happen inside those callables so that ``sray --help`` stays instant.
+``func`` to a callable taking the parsed namespace and returning an exit code. What only a running
+command needs (Ray, MLflow, the training stack) is imported inside that callable, its entry function,
+so that ``sray --help`` stays fast (docs/architecture.md, "Imports at the top of a module").
 """
 
 from __future__ import annotations
