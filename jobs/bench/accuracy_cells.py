@@ -85,8 +85,8 @@ def import_old_cells(out: Path) -> list[str]:
 
 def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
     """The training config of ``cell``: the preset's recipe and overrides, the variant's model settings
-    (attention, weight map, inputs, fine samples, heads, source-view loss, 2D warm-up and scene interleaving), the cell's seed and
-    budget, and the benchmark's folders."""
+    (attention, weight map, inputs, fine samples, heads, source-view loss, 2D warm-up and scene
+    interleaving), the cell's seed and budget, and the benchmark's folders."""
     cfg = get_recipe(p.recipe)
     for assignment in p.overrides:
         apply_override(cfg, assignment)

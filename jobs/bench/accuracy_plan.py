@@ -46,7 +46,8 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     "full-new-src": Variant(fine_samples="new", lambda_src_sem=1.0),
                     "full-new-src-w": Variant(fine_samples="new", lambda_src_sem=1.0, warmup_2d_steps=100),
                     "full-new-mix": Variant(fine_samples="new", visit_samples=1, cache_scenes=4),
-                    "full-new-src-mix": Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4),
+                    "full-new-src-mix": Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1,
+                                                cache_scenes=4),
                     LONG: Variant()}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
