@@ -10,7 +10,8 @@ from sray.data_tools.synth.world import World
 from sray.model.fast_render import FastRender
 
 LONG = "long"
-"""Variant name of the cell that pretrains the preset's recipe for its full budget (full CRA)."""
+"""Variant name of the cell that pretrains for the preset's full step budget with the first hour recipe's
+settings (full CRA, union fine pass, 16 samples per scene visit, no source-view loss)."""
 
 @dataclass(frozen=True)
 class Variant:
