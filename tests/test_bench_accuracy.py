@@ -16,10 +16,11 @@ from sray.data_tools.loader.augment import Augmentation
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
-from sray.jobs.bench.accuracy_plan import LONG, PRESETS, Cell, Preset, World
+from sray.jobs.bench.accuracy_plan import HOUR, LONG, PRESETS, VARIANT_SETTINGS, Cell, Preset, World
 from sray.jobs.bench.accuracy_tables import budget_means, class_table, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir
 from sray.platform.common.eval_protocol import EvalProtocol
+from sray.platform.config.recipes import get_recipe
 
 TOY = Preset(world=World(train_scenes=1, test_scenes=1, views=20, height=36, width=48),
              recipe="synth-cpu-hour", overrides=("model.n_coarse=4", "model.n_fine=4", "model.n_source=2",
@@ -64,6 +65,22 @@ def test_each_variant_sets_its_model_fields_and_nothing_else(tmp_path: Path) -> 
         cfg = accuracy_cells.cell_config(Cell(variant, 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db")
         assert dataclasses.replace(base, **fields) == cfg.model, variant
         assert cfg.optim.warmup_2d_steps == (100 if variant == "full-new-src-w" else 0), variant
+
+
+def test_the_hour_cell_is_the_recipe_with_its_cpu_budget_and_the_others_count_steps(tmp_path: Path) -> None:
+    """``hour`` trains synth-cpu-hour as it is (settings and CPU-second budget); ``long`` keeps its fixed step
+    budget and ablation cells their short one, both without a CPU budget, so their stored cells stay valid."""
+    recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
+    hour = accuracy_cells.cell_config(Cell(HOUR, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    assert hour.model == recipe.model and hour.optim == recipe.optim and hour.run.seed == 1
+    assert dataclasses.replace(hour.data, shards=recipe.data.shards) == recipe.data
+    assert hour.optim.cpu_seconds > 0 and hour.run.val_every == recipe.run.val_every
+    long = accuracy_cells.cell_config(Cell(LONG, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    assert (long.optim.steps, long.optim.cpu_seconds, long.run.val_every) == (2500, 0.0, 2500 // preset.validations)
+    assert long.model.fine_samples == "union" and long.model.lambda_src_sem == 0.0 and long.data.visit_samples == 16
+    for variant in VARIANT_SETTINGS.keys() - {HOUR, LONG}:
+        cfg = accuracy_cells.cell_config(Cell(variant, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+        assert (cfg.optim.steps, cfg.optim.cpu_seconds) == (preset.ablation_steps, 0.0), variant
 
 
 def test_the_gpu_preset_augments_through_the_data_aug_section(tmp_path: Path) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import time
 from pathlib import Path
@@ -14,7 +15,7 @@ from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
 from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.common.fault_hook import KILL_MARKER
-from sray.platform.train.launcher import launch_training
+from sray.platform.train.launcher import budget_spent, launch_training
 from sray.platform.train.resources import InfeasibleRequest
 
 pytestmark = pytest.mark.slow
@@ -132,6 +133,9 @@ def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(r
     last_step, spent = cpu[-1]
     assert last_step < cfg.optim.steps and spent >= cfg.optim.cpu_seconds > cpu[-2][1], cpu[-3:]
     assert load_checkpoint(outcome.latest_checkpoint)["counters"]["cpu_seconds"] == pytest.approx(spent)
+    job_dir, larger = Path(cfg.run.output_dir) / cfg.run.name, copy.deepcopy(cfg)
+    larger.optim.cpu_seconds = 2 * spent
+    assert budget_spent(job_dir, cfg) and not budget_spent(job_dir, larger)  # what a resume or a bench cell reads
     lr = dict(_history(cfg, "train/lr"))
     assert lr[last_step] < 0.5 * cfg.optim.lr  # decayed by the CPU fraction, not by last_step / 400
     src_steps, ray_steps = ({s for s, _ in _history(cfg, key)} for key in ("train/sem_src", "train/sem_fine"))

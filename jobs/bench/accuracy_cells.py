@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from sray.data_tools.shards.manifest import read_manifest
-from sray.jobs.bench.accuracy_plan import EXPERIMENT, LONG, VARIANT_SETTINGS, Cell, Preset
+from sray.jobs.bench.accuracy_plan import EXPERIMENT, HOUR, LONG, VARIANT_SETTINGS, Cell, Preset
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import apply_override, load_job_config
@@ -39,7 +39,7 @@ from sray.platform.sweep.incremental import import_result, missing, run_missing,
 from sray.platform.sweep.outcomes import TrialOutcome
 from sray.platform.sweep.study import StudySettings, TrialContext
 from sray.platform.sweep.trial_files import ERRORED, TRIALS, read_record
-from sray.platform.train.launcher import init_ray, launch_training
+from sray.platform.train.launcher import budget_spent, init_ray, launch_training
 
 if TYPE_CHECKING:
     from sray.platform.config.train_config import TrainConfig
@@ -97,15 +97,14 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
         cfg.model.n_heads = variant.n_heads
     cfg.model.lambda_src_sem, cfg.optim.warmup_2d_steps = variant.lambda_src_sem, variant.warmup_2d_steps
     cfg.data.visit_samples, cfg.data.cache_scenes = variant.visit_samples, variant.cache_scenes
-    if cell.variant != LONG:
-        cfg.optim.steps = p.ablation_steps
-    elif p.long_steps is not None:
-        cfg.optim.steps = p.long_steps
+    if cell.variant != HOUR:  # step-budgeted cells: the ablation budget, or the long one
+        cfg.optim.cpu_seconds = 0.0
+        cfg.optim.steps = p.ablation_steps if cell.variant != LONG else (p.long_steps or cfg.optim.steps)
+        cfg.run.val_every = max(cfg.optim.steps // p.validations, 1)
     cfg.data.shards = str(shards)
     cfg.run.seed = cell.seed
     cfg.run.output_dir, cfg.run.tracking_uri = str(out / "train"), tracking_uri
     cfg.run.experiment, cfg.run.register_model = EXPERIMENT, ""
-    cfg.run.val_every = max(cfg.optim.steps // p.validations, 1)
     cfg.run.ckpt_every = min(p.ckpt_every, cfg.optim.steps)
     cfg.run.name = f"bench-{cell.key}"
     return cfg
@@ -122,7 +121,7 @@ def pretrain(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) 
     cfg = cell_config(cell, p, shards, out, tracking_uri)
     job_dir = Path(cfg.run.output_dir) / cfg.run.name
     latest = CheckpointManager(job_dir / "checkpoints").latest() if job_dir.exists() else None
-    if latest is not None and int(read_meta(latest)["step"]) >= cfg.optim.steps:
+    if latest is not None and budget_spent(job_dir, cfg):
         return latest, _train_seconds(job_dir), True
     start = time.perf_counter()
     if latest is None and job_dir.exists():
@@ -136,9 +135,9 @@ def pretrain(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) 
         outcome = launch_training(cfg)
     total_s = _train_seconds(job_dir, time.perf_counter() - start)
     last = outcome.latest_checkpoint
-    if last is None or int(read_meta(last)["step"]) < cfg.optim.steps:
+    if last is None or not budget_spent(job_dir, cfg):
         raise RuntimeError(f"{job_dir}: pretraining of cell {cell.key} ended {outcome.status} before step "
-                           f"{cfg.optim.steps}; re-run `sray bench accuracy` to resume it")
+                           f"{cfg.optim.steps} and its CPU budget; re-run `sray bench accuracy` to resume it")
     return last, total_s, resumed
 
 

@@ -10,8 +10,15 @@ from sray.data_tools.synth.world import World
 from sray.model.fast_render import FastRender
 
 LONG = "long"
-"""Variant name of the cell that pretrains for the preset's full step budget with the first hour recipe's
-settings (full CRA, union fine pass, 16 samples per scene visit, no source-view loss)."""
+"""Variant name of the cell that pretrains for the preset's ``long_steps`` with the first hour recipe's
+settings (full CRA, union fine pass, 16 samples per scene visit, no source-view loss, no CPU budget)."""
+
+HOUR = "hour"
+"""Variant name of the cell that pretrains with the preset recipe exactly as it is: its settings and its own
+budget (``synth-cpu-hour``: CPU seconds)."""
+
+RECIPE_BUDGET = (LONG, HOUR)
+"""Variants whose cells train for the long budget instead of the preset's ``ablation_steps``."""
 
 @dataclass(frozen=True)
 class Variant:
@@ -49,14 +56,16 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     "full-new-mix": Variant(fine_samples="new", visit_samples=1, cache_scenes=4),
                     "full-new-src-mix": Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1,
                                                 cache_scenes=4),
-                    LONG: Variant()}
+                    LONG: Variant(),
+                    HOUR: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4)}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
 channels instead of 4 of 8; ``full-new-src`` full-new with the source views' per-pixel semantic loss on the
 encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget;
 ``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
-(one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene."""
+(one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds
+``synth-cpu-hour``'s own settings (a test keeps them equal)."""
 
 
 COMPARED = ("sray", "semantic-nerf")
@@ -103,7 +112,7 @@ class Preset:
     overrides: tuple[str, ...]
     """``section.field=value`` assignments applied to the recipe in every cell (sizes of small presets)."""
     long_steps: int | None
-    """Steps of the ``long`` cell (None = the recipe's own)."""
+    """Steps of the ``long`` cell (None = the recipe's own step cap)."""
     ablation_steps: int
     """Steps of every other cell (the shorter ablation budget)."""
     validations: int
@@ -129,11 +138,11 @@ class Preset:
 PRESETS = {
     "cpu-small": Preset(
         world=World(train_scenes=48, test_scenes=4, views=40, height=120, width=160),
-        recipe="synth-cpu-hour", overrides=(), long_steps=None, ablation_steps=600, validations=2, ckpt_every=200,
+        recipe="synth-cpu-hour", overrides=(), long_steps=2500, ablation_steps=600, validations=2, ckpt_every=200,
         plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
-              *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3)),
+              *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), *seeds(HOUR, 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0),

@@ -163,7 +163,7 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
     status = "FAILED"
     try:
         _fit_in_thread(trainer)
-        status = "KILLED" if (job_dir / STOP_FILE).exists() or _stopped_early(job_dir, cfg) else "FINISHED"
+        status = "KILLED" if (job_dir / STOP_FILE).exists() or not budget_spent(job_dir, cfg) else "FINISHED"
     except KeyboardInterrupt:
         status = "KILLED"
         raise
@@ -198,15 +198,15 @@ def _fit_in_thread(trainer: Any) -> None:
         raise failure[0]
 
 
-def _stopped_early(job_dir: Path, cfg: TrainConfig) -> bool:
-    """Whether the job's last checkpoint ends short of both its step cap and its CPU-second budget."""
+def budget_spent(job_dir: Path, cfg: TrainConfig) -> bool:
+    """Whether the job's last checkpoint reached its step cap or its CPU-second budget (``optim.cpu_seconds``)."""
     latest = CheckpointManager(job_dir / "checkpoints").latest()
     if latest is None:
-        return True
-    if read_meta(latest)["step"] >= cfg.optim.steps:
         return False
+    if read_meta(latest)["step"] >= cfg.optim.steps:
+        return True
     budget = cfg.optim.cpu_seconds
-    return budget <= 0 or load_checkpoint(latest)["counters"].get("cpu_seconds", 0.0) < budget
+    return budget > 0 and load_checkpoint(latest)["counters"].get("cpu_seconds", 0.0) >= budget
 
 
 def _log_run_start(tracker: Tracker, run: RunHandle, config_path: Path, protocol: dict[str, Any]) -> None:
