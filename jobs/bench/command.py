@@ -44,8 +44,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     prof.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     prof.set_defaults(func=_bench_profile)
 
-    speed = kinds.add_parser("speed-accuracy", help="mIoU and PSNR against seconds per view (Pareto chart)")
-    speed.add_argument("--checkpoint", type=Path, required=True, help="checkpoint folder written by `sray train`")
+    speed = kinds.add_parser("speed-accuracy", help="mIoU (overall and per class) and PSNR against seconds per view "
+                             "(Pareto chart); the default render chosen by the rule")
+    speed.add_argument("--checkpoint", type=Path, required=True, action="append",
+                       help="checkpoint folder written by `sray train`; repeat it (e.g. a recipe's seeds) to apply the "
+                            "default-render rule to each and to their mean")
     speed.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
     speed.add_argument("--checkpoint-rgbd", type=Path, default=None,
                        help="a checkpoint trained with model.inputs=rgbd for the rgbd settings "
@@ -157,7 +160,7 @@ def _bench_profile(args: argparse.Namespace) -> int:
 
 
 def _bench_speed_accuracy(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.speed_accuracy import run_speed_accuracy
+    from sray.jobs.bench.speed_accuracy_run import run_speed_accuracy
 
     run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker, args.tracking_uri,
                        args.checkpoint_rgbd, args.settings)
