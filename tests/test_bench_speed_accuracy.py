@@ -160,8 +160,8 @@ def test_the_rule_column_and_the_verdict_table_say_what_was_chosen_and_why_the_f
     assert cells == {"full": "reference", "fast a": "**chosen**", "fast b": "✗ chair -5.00", "4 sources": "not offered"}
     today = {"sray eval": "fast b", "validation": None}
     [_, _, line] = verdict_table(["ckpt-0"], [choice], today).splitlines()
-    assert [c.strip() for c in line.split("|")] == ["ckpt-0", "fast a", "fast b: chair -5.00",
-                                                     "sray eval (fast b): fails (chair -5.00); validation: not measured"]
+    verdict = "sray eval (fast b): fails (chair -5.00); validation: not measured"
+    assert [c.strip() for c in line.split("|")] == ["ckpt-0", "fast a", "fast b: chair -5.00", verdict]
     assert rule_choice(rows[1:], settings[1:]) is None  # the first row is no full render: no reference
 
 

@@ -52,8 +52,8 @@ def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: i
     today = todays_settings(settings)
     if choices[-1] is not None:
         rule = (f"Default render by the rule: the fastest setting offered that loses at most {MAX_MIOU_LOSS:g} "
-                f"point of mIoU and at most {MAX_CLASS_LOSS:g} points on every class holding at least {100 * MIN_CLASS_SHARE:g}% of "
-                f"the labelled test pixels, against '{rows[0]['name']}':")
+                f"point of mIoU and at most {MAX_CLASS_LOSS:g} points on every class holding at least "
+                f"{100 * MIN_CLASS_SHARE:g}% of the labelled test pixels, against '{rows[0]['name']}':")
         body += "\n\n" + rule + "\n\n" + verdict_table(labels, choices, today)
     protocol = (EvalProtocol.from_shards(shards, 8, 1).describe().replace("render: full", "render: per setting")
                 .replace("inputs: rgb", "inputs: per setting (the checkpoint's unless the setting says rgbd)"))
@@ -109,6 +109,7 @@ def notes(rows: list[dict], checkpoints: list[Path], shards: Path, views_per_sce
             f"sources' depth (docs/model.md, RGB-D mode), rendered by "
             f"{rgbd_by}. The default-render rule (`jobs/bench/render_default.py`) is offered the settings that differ "
             f"from the first row only in how they render (full or fast, implementation): the same sources, inputs, "
-            f"samples and precision; 'not offered' marks the others. Today's defaults render as: {defaults} (validation and the fleet score a strided "
-            f"grid of their own and render its every pixel: per scored pixel, pixel stride 1). Protocol: {protocol}.\n\n"
+            f"samples and precision; 'not offered' marks the others. Today's defaults render as: {defaults} "
+            f"(validation and the fleet score a strided grid of their own and render its every pixel: per scored "
+            f"pixel, pixel stride 1). Protocol: {protocol}.\n\n"
             f"![speed-accuracy]({os.path.relpath(png, doc.parent)})")
