@@ -1,5 +1,6 @@
-"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|segmenter``: measured tables, printed,
-stored as data beside their charts and rendered into docs/benchmarks.md (one section per benchmark and device)."""
+"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|segmenter|recipe-cards``: measured tables,
+printed, stored as data beside their charts and rendered into docs/benchmarks.md (one section per benchmark and
+device); ``recipe-cards`` reads stored results into the README's cards as well."""
 
 from __future__ import annotations
 
@@ -98,6 +99,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     ceilings.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     ceilings.set_defaults(func=_bench_ceilings)
 
+    cards = kinds.add_parser("recipe-cards", help="regenerate the recipe cards (README and docs/benchmarks.md) from "
+                             "stored results: time, memory and accuracy of every recipe on every machine")
+    cards.add_argument("--results", type=Path, required=True, metavar="LIST_JSON",
+                       help="JSON list of each recipe's stored results per machine (format: docs/benchmarks.md, "
+                            "'Recipe cards'); paths relative to its folder")
+    cards.add_argument("--readme", type=Path, default=Path("README.md"),
+                       help="file whose recipe-cards markers enclose the table")
+    cards.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
+    cards.set_defaults(func=_bench_recipe_cards)
+
     segmenter = kinds.add_parser("segmenter", help="train the 2D segmenter (encoder + linear head) of the ceilings "
                                  "rows for a CPU-second budget on the train scenes' source views")
     segmenter.add_argument("--data", type=Path, required=True, help="shard folder with train scenes")
@@ -108,6 +119,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                            help="recipe whose augmentation, class balance and source counts the training uses")
     segmenter.add_argument("--seed", type=int, default=0)
     segmenter.set_defaults(func=_bench_segmenter)
+
+
+def _bench_recipe_cards(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.recipe_cards import run_recipe_cards
+
+    try:
+        run_recipe_cards(args.results, args.readme, args.doc)
+    except ValueError as e:
+        print(f"sray bench recipe-cards: {e}", file=sys.stderr)
+        return 2
+    print(f"[bench] recipe cards written into {args.readme} and {args.doc}")
+    return 0
 
 
 def _bench_ceilings(args: argparse.Namespace) -> int:
