@@ -9,6 +9,8 @@ over all labelled ones. Every setting renders the same views, so the shares are 
 
 from __future__ import annotations
 
+import math
+
 from torch import Tensor
 
 from sray.jobs.bench.doc_blocks import markdown_table
@@ -22,7 +24,7 @@ MEAN_KEYS = ("miou", "psnr", "s_per_view", "wall_s_per_view")
 def class_scores(conf: Tensor) -> tuple[list[float | None], list[float]]:
     """IoU of each class in % (None for a class absent from the ground truth) and each class's share of the
     labelled pixels (0..1; all 0 when nothing is labelled), from an (L, L) confusion matrix (ground-truth rows)."""
-    ious = [None if v != v else 100.0 * float(v) for v in scene_metrics(conf)["iou_per_class"]]  # NaN: absent
+    ious = [None if math.isnan(v) else 100.0 * float(v) for v in scene_metrics(conf)["iou_per_class"]]
     counts = conf.sum(1).double()
     total = float(counts.sum())
     return ious, [float(c) / total if total else 0.0 for c in counts]
