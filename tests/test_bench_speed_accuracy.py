@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fleet_fixtures import tiny_checkpoint  # noqa: F401
+import pytest
+from fleet_fixtures import one_thread, tiny_checkpoint  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
 from sray.jobs.bench.speed_accuracy import chart, pareto, table
+from sray.model.fast_render import FastRender
 
 
 def _row(name: str, miou: float, s: float, fast: bool = False) -> dict:
@@ -108,3 +110,113 @@ def test_measure_with_zero_views_per_scene_scores_every_test_view(tiny_shards: P
     [row] = measure(tiny_checkpoint, tiny_shards, [Setting("fast", n_source=3, fast=FastRender(4, 0.9))], 0,
                     progress=False)
     assert row["views"] == every > len(names)
+
+
+def test_class_scores_of_a_hand_made_confusion_matrix() -> None:
+    """IoU = TP / (ground truth + predicted - TP) per class, in %, None for a class absent from the ground truth;
+    shares are ground-truth rows over all labelled pixels."""
+    import torch
+
+    from sray.jobs.bench.speed_classes import class_scores
+
+    conf = torch.tensor([[8, 2, 0], [1, 4, 0], [0, 0, 0]])  # rows: ground truth, columns: prediction
+    ious, shares = class_scores(conf)
+    assert ious[0] == pytest.approx(100 * 8 / 11) and ious[1] == pytest.approx(100 * 4 / 7) and ious[2] is None
+    assert shares == pytest.approx([10 / 15, 5 / 15, 0.0])
+    assert class_scores(torch.zeros(2, 2, dtype=torch.int64)) == ([None, None], [0.0, 0.0])
+
+
+def _class_row(name: str, miou: float, s: float, ious: list, fast: bool = False) -> dict:
+    return _row(name, miou, s, fast) | {"wall_s_per_view": s / 2, "class_names": ["wall", "chair", "lamp"],
+                                        "class_iou": ious, "class_share": [0.7, 0.295, 0.005]}
+
+
+CLASS_ROWS = [_class_row("full", 50.0, 40.0, [80.0, 30.0, 20.0]), _class_row("fast a", 49.5, 1.0, [80.0, 28.0, 0.0]),
+              _class_row("fast b", 49.8, 0.5, [81.0, 25.0, 20.0])]
+
+
+def test_class_table_shows_the_counted_classes_their_share_and_paired_differences() -> None:
+    from sray.jobs.bench.speed_classes import class_table
+
+    lines = [[c.strip() for c in ln.split("|")] for ln in class_table(CLASS_ROWS, chosen="fast a").splitlines()]
+    assert lines[0] == ["IoU % (Δ vs first row, points)", "wall", "chair"]  # lamp holds 0.5%: not shown
+    assert lines[2] == ["share of labelled test pixels", "70.0%", "29.5%"]
+    assert lines[3] == ["full", "80.0 (+0.0)", "30.0 (+0.0)"]
+    assert lines[4] == ["**fast a** (chosen)", "80.0 (+0.0)", "28.0 (-2.0)"]
+
+
+def test_the_rule_column_and_the_verdict_table_say_what_was_chosen_and_why_the_faster_ones_were_not() -> None:
+    """The bench's rows go through the rule: 'fast b' is fastest but loses 5 points on chair; 'fast a' passes;
+    today's sray eval default is 'fast b' here, validation's was not measured."""
+    from sray.jobs.bench.speed_accuracy import Setting
+    from sray.jobs.bench.speed_verdict import rule_choice, verdict_table
+
+    settings = [Setting("full"), Setting("fast a", fast=FastRender(4, 0.9)), Setting("fast b", fast=FastRender()),
+                Setting("4 sources", n_source=4)]
+    rows = [*CLASS_ROWS, _class_row("4 sources", 10.0, 0.1, [10.0, 1.0, 0.0])]
+    choice = rule_choice(rows, settings)
+    assert choice.chosen == "fast a" and "4 sources" not in choice.shortfalls  # evaluates otherwise: not offered
+    cells = {ln.split("|")[1].strip(): ln.split("|")[-2].strip() for ln in table(rows, choice).splitlines()[2:]}
+    assert cells == {"full": "reference", "fast a": "**chosen**", "fast b": "✗ chair -5.00", "4 sources": "not offered"}
+    today = {"sray eval": "fast b", "validation": None}
+    [_, _, line] = verdict_table(["ckpt-0"], [choice], today).splitlines()
+    verdict = "sray eval (fast b): fails (chair -5.00); validation: not measured"
+    assert [c.strip() for c in line.split("|")] == ["ckpt-0", "fast a", "fast b: chair -5.00", verdict]
+    assert rule_choice(rows[1:], settings[1:]) is None  # the first row is no full render: no reference
+
+
+def test_mean_rows_average_each_setting_over_the_checkpoints() -> None:
+    from sray.jobs.bench.speed_classes import mean_rows
+
+    other = [r | {"miou": r["miou"] + 2.0, "s_per_view": 3 * r["s_per_view"],
+                  "class_iou": [None if i == 2 else v + 1.0 for i, v in enumerate(r["class_iou"])]} for r in CLASS_ROWS]
+    mean = mean_rows([CLASS_ROWS, other])
+    assert [r["name"] for r in mean] == ["full", "fast a", "fast b"] and mean[0]["checkpoints"] == 2
+    assert mean[1]["miou"] == pytest.approx(50.5) and mean[1]["s_per_view"] == pytest.approx(2.0)
+    assert mean[1]["class_iou"] == [pytest.approx(80.5), pytest.approx(28.5), None]  # absent in one run: no mean
+    with pytest.raises(ValueError, match="other settings"):
+        mean_rows([CLASS_ROWS, CLASS_ROWS[:2]])
+
+
+def test_measure_scores_every_class_over_the_rendered_views(tiny_shards: Path, tiny_checkpoint: Path,
+                                                           one_thread: None) -> None:
+    """With one test scene, the dataset-level mIoU is the mean of the per-class IoUs of the classes present; the
+    shares are those of the labelled pixels and equal in every setting (same views)."""
+    from sray.jobs.bench.speed_accuracy import Setting, measure
+
+    rows = measure(tiny_checkpoint, tiny_shards, [Setting("fast s4", n_source=3, fast=FastRender(4, 0.9)),
+                                                  Setting("fast s8", n_source=3, fast=FastRender(8, 0.9))], 1,
+                   progress=False)
+    for row in rows:
+        present = [v for v in row["class_iou"] if v is not None]
+        assert row["miou"] == pytest.approx(sum(present) / len(present))
+        assert sum(row["class_share"]) == pytest.approx(1.0) and len(row["class_names"]) == len(row["class_iou"])
+    assert rows[0]["class_share"] == rows[1]["class_share"]
+
+
+def test_the_command_over_two_checkpoints_applies_the_rule_to_each_and_to_their_mean(
+        tiny_shards: Path, tiny_checkpoint: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        one_thread: None) -> None:
+    """Both checkpoints' rows, their mean and the rule's verdicts go into the stored table of the section."""
+    import json
+    from unittest.mock import MagicMock
+
+    from sray.jobs.bench import speed_accuracy_run
+    from sray.jobs.bench.speed_accuracy import Setting
+
+    settings = [Setting("full", n_source=3), Setting("fast s8 c0.9", n_source=3, fast=FastRender())]
+    monkeypatch.setattr(speed_accuracy_run, "select_settings", lambda names: settings)
+    monkeypatch.setattr(speed_accuracy_run, "get_tracker", lambda *args: MagicMock())
+    doc = tmp_path / "docs" / "benchmarks.md"
+    section = speed_accuracy_run.run_speed_accuracy([tiny_checkpoint, tiny_checkpoint], tiny_shards, 1, doc,
+                                                    "mlflow", "")
+    assert "IoU per class" in section and "Default render by the rule" in section
+    [stored] = json.loads((doc.parent / "benchmarks/speed-accuracy/cpu-only/tables.json").read_text())["tables"]
+    tables = [b for b in stored["blocks"] if "header" in b]
+    assert [t["header"][0] for t in tables] == ["setting", "IoU % (Δ vs first row, points)", "checkpoint"]
+    assert tables[0]["header"][-1] == "default rule"
+    verdicts = tables[2]["rows"]
+    assert [r[0] for r in verdicts] == ["fleet-checkpoint/step_000000000"] * 2 + ["mean of 2"]
+    assert all("sray eval (fast s8 c0.9)" in r[3] and "validation, fleet held-out: not measured" in r[3]
+               for r in verdicts)
+    assert "Checkpoints" in stored["notes"] and "mean over them" in stored["notes"]

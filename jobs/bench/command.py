@@ -1,5 +1,6 @@
-"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|segmenter``: measured tables, printed,
-stored as data beside their charts and rendered into docs/benchmarks.md (one section per benchmark and device)."""
+"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|segmenter|recipe-cards``: measured tables,
+printed, stored as data beside their charts and rendered into docs/benchmarks.md (one section per benchmark and
+device); ``recipe-cards`` reads stored results into the README's cards as well."""
 
 from __future__ import annotations
 
@@ -44,8 +45,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     prof.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     prof.set_defaults(func=_bench_profile)
 
-    speed = kinds.add_parser("speed-accuracy", help="mIoU and PSNR against seconds per view (Pareto chart)")
-    speed.add_argument("--checkpoint", type=Path, required=True, help="checkpoint folder written by `sray train`")
+    speed = kinds.add_parser("speed-accuracy", help="mIoU (overall and per class) and PSNR against seconds per view "
+                             "(Pareto chart); the default render chosen by the rule")
+    speed.add_argument("--checkpoint", type=Path, required=True, action="append",
+                       help="checkpoint folder written by `sray train`; repeat it (e.g. a recipe's seeds) to apply the "
+                            "default-render rule to each and to their mean")
     speed.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
     speed.add_argument("--checkpoint-rgbd", type=Path, default=None,
                        help="a checkpoint trained with model.inputs=rgbd for the rgbd settings "
@@ -95,6 +99,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     ceilings.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     ceilings.set_defaults(func=_bench_ceilings)
 
+    cards = kinds.add_parser("recipe-cards", help="regenerate the recipe cards (README and docs/benchmarks.md) from "
+                             "stored results: time, memory and accuracy of every recipe on every machine")
+    cards.add_argument("--results", type=Path, required=True, metavar="LIST_JSON",
+                       help="JSON list of each recipe's stored results per machine (format: docs/benchmarks.md, "
+                            "'Recipe cards'); paths relative to its folder")
+    cards.add_argument("--readme", type=Path, default=Path("README.md"),
+                       help="file whose recipe-cards markers enclose the table")
+    cards.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
+    cards.set_defaults(func=_bench_recipe_cards)
+
     segmenter = kinds.add_parser("segmenter", help="train the 2D segmenter (encoder + linear head) of the ceilings "
                                  "rows for a CPU-second budget on the train scenes' source views")
     segmenter.add_argument("--data", type=Path, required=True, help="shard folder with train scenes")
@@ -105,6 +119,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                            help="recipe whose augmentation, class balance and source counts the training uses")
     segmenter.add_argument("--seed", type=int, default=0)
     segmenter.set_defaults(func=_bench_segmenter)
+
+
+def _bench_recipe_cards(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.recipe_cards import run_recipe_cards
+
+    try:
+        run_recipe_cards(args.results, args.readme, args.doc)
+    except ValueError as e:
+        print(f"sray bench recipe-cards: {e}", file=sys.stderr)
+        return 2
+    print(f"[bench] recipe cards written into {args.readme} and {args.doc}")
+    return 0
 
 
 def _bench_ceilings(args: argparse.Namespace) -> int:
@@ -157,7 +183,7 @@ def _bench_profile(args: argparse.Namespace) -> int:
 
 
 def _bench_speed_accuracy(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.speed_accuracy import run_speed_accuracy
+    from sray.jobs.bench.speed_accuracy_run import run_speed_accuracy
 
     run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker, args.tracking_uri,
                        args.checkpoint_rgbd, args.settings)

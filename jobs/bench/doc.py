@@ -103,9 +103,10 @@ def _repo_root(doc: Path) -> Path:
     return folder.parent if folder.name == "docs" else Path.cwd()
 
 
-def record(bench: Bench, title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "") -> str:
-    """Print a measured table, store it as ``bench``'s table ``title`` on this device and rewrite the
-    benchmark's section of ``doc``; returns the section's text.
+def record(bench: Bench, title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "",
+           kind: str | None = None) -> str:
+    """Print a measured table, store it as ``bench``'s table ``title`` on this device (or under ``kind``: a table
+    whose rows name their machines) and rewrite the benchmark's section of ``doc``; returns the section's text.
 
     The command is this process's (``sray`` + its arguments); it and the notes name absolute paths
     relative to the repository, or as ``OUT/…``.
@@ -116,7 +117,7 @@ def record(bench: Bench, title: str, table_markdown: str, doc: Path = DEFAULT_DO
                         measured_utc=_dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%MZ"),
                         blocks=parse_blocks(table_markdown), notes=notes.strip())
     print(f"\n### {title}\n\n{render_blocks(entry.blocks)}\n\n{entry.notes}\n".rstrip() + "\n")
-    return store_table(bench, entry, doc)
+    return store_table(bench, entry, doc, kind)
 
 
 def store_table(bench: Bench, entry: TableRecord, doc: Path = DEFAULT_DOC, kind: str | None = None) -> str:

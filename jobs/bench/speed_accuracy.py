@@ -1,4 +1,4 @@
-"""``sray bench speed-accuracy``: zero-shot mIoU and PSNR of one checkpoint against seconds per view.
+"""``sray bench speed-accuracy``: the settings, their paired measurement, the table and the Pareto chart.
 
 Every setting renders the same views of the unseen test scenes (paired), so the accuracy each
 setting gives up is measured against the full render of the same run. Settings trade accuracy for
@@ -7,15 +7,13 @@ the resampled ones only), source views, precision, the fast render mode (pixel s
 fine pass only where the coarse pass is unsure) and the RGB-D mode's depth-guided samples (``rgbd``
 settings render with the sources' depth, by the ``--checkpoint-rgbd`` model when one is given, else by
 the main checkpoint's weights with ``model.inputs`` switched, as both modes share their parameters).
-A Pareto chart (PNG) and its table go into the benchmark's section of docs/benchmarks.md: the default
-set as one table, a run of chosen settings (``--settings``) as the other, each replaced by the next run
-of its kind; chart and numbers are also logged to the tracker.
+Each setting is also scored per class (``speed_classes``), for the default-render rule (``render_default``).
+The command itself, over one checkpoint or several, is ``speed_accuracy_run``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import os
 import textwrap
 import time
 from contextlib import nullcontext
@@ -28,17 +26,17 @@ from matplotlib.figure import Figure
 
 from sray.data_tools.atomic import save_png
 from sray.data_tools.loader.shard_loader import make_eval_samples
-from sray.jobs.bench.doc import Bench, bench_dir, record
+from sray.jobs.bench.doc import Bench
+from sray.jobs.bench.render_default import DefaultChoice
+from sray.jobs.bench.speed_classes import class_scores
 from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.model.runtime import Runtime
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import sray_renderer
+from sray.platform.eval.view_scoring import sray_renderer, views_confusion
 from sray.platform.eval.zero_shot import select_scenes
-from sray.platform.tracking.registry import get_tracker
 
 
 @dataclass(frozen=True)
@@ -65,6 +63,12 @@ class Setting:
     def runtime(self) -> Runtime:
         """The ``Runtime`` the setting's views are rendered with: its implementation and rays per chunk."""
         return Runtime(impl=self.impl, chunk=self.chunk)
+
+    def same_evaluation(self, other: Setting) -> bool:
+        """Whether the two settings differ at most in how they render (full or fast with its stride and confidence,
+        implementation, rays per chunk): the same sources, inputs, samples and precision, so either may stand in for
+        the other as a default render. Fewer sources, depth inputs, other samples or bf16 change what is evaluated."""
+        return dataclasses.replace(self, name=other.name, fast=other.fast, impl=other.impl, chunk=other.chunk) == other
 
 
 def default_settings() -> list[Setting]:
@@ -118,7 +122,9 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
 
     ``checkpoint_rgbd``: the model that renders the ``inputs="rgbd"`` settings (None: ``checkpoint``'s).
     ``views_per_scene`` <= 0 scores every test view. Returns one row per setting: name, miou, psnr
-    (dataset-level protocol, mean over scenes),
+    (dataset-level protocol, mean over scenes), class_iou and class_share (each class's IoU in % over every
+    rendered view, None when absent, and its share of their labelled pixels: ``speed_classes.class_scores``),
+    class_names,
     s_per_view (CPU seconds of this process per view, all threads, source encoding and scoring included:
     unlike wall-clock time it does not grow when other jobs share the cores), wall_s_per_view, views, and the
     setting.
@@ -128,14 +134,14 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
         if path is not None:
             net, cfg = model_from_checkpoint(path)
             loaded[key] = (net.eval(), cfg, dataclasses.replace(net.cfg))  # the checkpoint's own model config
-    names, _ = select_scenes(shards, None)
+    names, metas = select_scenes(shards, None)
     cpu = torch.device("cpu")
     rows = []
     for st in settings:
         net, cfg, own = loaded["rgbd" if st.inputs == "rgbd" and "rgbd" in loaded else "main"]
         _apply(net, st, own)
         runtime = st.runtime()
-        seconds, cpu_seconds, n_views, per_scene = 0.0, 0.0, 0, []
+        seconds, cpu_seconds, n_views, per_scene, conf = 0.0, 0.0, 0, [], 0
         for scene in names:
             samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))
             samples = samples[:views_per_scene] if views_per_scene > 0 else samples
@@ -148,10 +154,13 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
             cpu_seconds += time.process_time() - c0
             n_views += len(scored.views)
             per_scene.append(scored.scores)
+            conf = conf + views_confusion(scored.views, cfg.model.n_classes, cfg.model.ignore_id)
+        class_iou, class_share = class_scores(conf)
         row = {"name": st.name, "miou": 100 * sum(s["miou"] for s in per_scene) / len(per_scene),
                "psnr": sum(s["psnr"] for s in per_scene) / len(per_scene),
                "s_per_view": cpu_seconds / max(n_views, 1), "wall_s_per_view": seconds / max(n_views, 1),
-               "views": n_views, "fine_samples": net.cfg.fine_samples, "setting": dataclasses.asdict(st)}
+               "views": n_views, "fine_samples": net.cfg.fine_samples, "setting": dataclasses.asdict(st),
+               "class_iou": class_iou, "class_share": class_share, "class_names": list(metas[names[0]]["class_names"])}
         rows.append(row)
         if progress:
             print(f"[speed-accuracy] {st.name}: mIoU {row['miou']:.2f}  PSNR {row['psnr']:.2f}  "
@@ -177,20 +186,36 @@ def pareto(rows: list[dict], cost: str = "s_per_view", score: str = "miou") -> l
     return front
 
 
-def table(rows: list[dict]) -> str:
+def table(rows: list[dict], choice: DefaultChoice | None = None) -> str:
     """Markdown table: mIoU and its paired difference to the first row (the default set's first is the
-    unoptimised full render), PSNR, seconds per view, speed-up against the first row."""
+    unoptimised full render), PSNR, seconds per view, speed-up against the first row; with ``choice``, a last
+    column saying what the default-render rule made of each setting (:func:`rule_cell`)."""
     ref = rows[0]
     first = "reference" if ref["name"] == "full, reference path" else f"'{ref['name']}'"
     on_front = {r["name"] for r in pareto(rows)}
+    rule = (" default rule |", ":---|") if choice is not None else ("", "")
     lines = [f"| setting | mIoU % | Δ mIoU vs {first} (points) | PSNR dB | CPU s / view | wall s / view | "
-             f"speed-up vs {first} (CPU s) | Pareto |", "|---|---:|---:|---:|---:|---:|---:|:---:|"]
+             f"speed-up vs {first} (CPU s) | Pareto |{rule[0]}", f"|---|---:|---:|---:|---:|---:|---:|:---:|{rule[1]}"]
     for r in rows:
         wall = f"{r['wall_s_per_view']:.2f}" if "wall_s_per_view" in r else "-"
+        verdict = f" {rule_cell(r['name'], choice)} |" if choice is not None else ""
         lines.append(f"| {r['name']} | {r['miou']:.2f} | {r['miou'] - ref['miou']:+.2f} | {r['psnr']:.2f} | "
                      f"{r['s_per_view']:.2f} | {wall} | {ref['s_per_view'] / r['s_per_view']:.1f}x | "
-                     f"{'✓' if r['name'] in on_front else ''} |")
+                     f"{'✓' if r['name'] in on_front else ''} |{verdict}")
     return "\n".join(lines)
+
+
+def rule_cell(name: str, choice: DefaultChoice) -> str:
+    """What the rule made of setting ``name``: ``**chosen**``, ``passes``, ``reference``, the shortfalls that
+    rejected it (``✗ chair -4.20``), or ``not offered`` for a setting that evaluates otherwise (sources, inputs,
+    samples, precision)."""
+    if name not in choice.shortfalls:
+        return "not offered"
+    if name == choice.chosen:
+        return "**chosen**"
+    if name == choice.reference:
+        return "reference"
+    return "passes" if choice.passes(name) else "✗ " + ", ".join(s.describe() for s in choice.shortfalls[name])
 
 
 def chart(rows: list[dict], path: Path, protocol: str) -> Path:
@@ -218,50 +243,3 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
     title = ["S-Ray zero-shot: accuracy against render time"] + textwrap.wrap(protocol, 150)
     fig.text(0.5, 0.98, "\n".join(title), va="top", ha="center", fontsize=8)
     return save_png(fig, path, dpi=120)
-
-
-def run_speed_accuracy(checkpoint: Path, shards: Path, views_per_scene: int, doc: Path, tracker: str,
-                       tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None) -> str:
-    """Measure the default settings, or those ``names`` chooses (the ``rgbd`` ones by ``checkpoint_rgbd`` when
-    given), write the chart and the table section, log both; returns the section."""
-    title = table_title(names)
-    rows = measure(Path(checkpoint), Path(shards), select_settings(names), views_per_scene,
-                   checkpoint_rgbd=Path(checkpoint_rgbd) if checkpoint_rgbd else None)
-    protocol = (EvalProtocol.from_shards(Path(shards), 8, 1).describe().replace("render: full", "render: per setting")
-                .replace("inputs: rgb", "inputs: per setting (the checkpoint's unless the setting says rgbd)"))
-    png = chart(rows, bench_dir(doc, SPEED) / ("chosen.png" if names else "default.png"), protocol)
-    rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
-    own_fine = ", ".join(sorted({f"`fine_samples={r['fine_samples']}`" for r in rows
-                                 if not r["setting"]["fine_samples"] and not r["setting"]["fast"]})) or "-"
-    which = ("every test view" if views_per_scene <= 0 else "the first test view" if views_per_scene == 1 else
-             f"the first {views_per_scene} test views")
-    notes = (f"Checkpoint `{checkpoint}`; {which} of each unseen scene of `{shards}`, "
-             f"the same views for every setting (paired); mIoU dataset-level per scene, then the mean over "
-             f"scenes; CPU s / view is the CPU time this process spent (all its threads) encoding the sources, "
-             f"rendering and scoring one whole view (`sray eval`'s loop), the speed measure here because other "
-             f"jobs may share the cores (on a quiet "
-             f"machine wall time is about CPU time / torch threads); wall s / view is shown beside it. Settings: "
-             f"'full, reference path' is the unoptimised path "
-             f"(`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with "
-             f"the checkpoint's samples; 'full' is the optimised path "
-             f"(chunks by device: 256 rays on a CPU), equal to it "
-             f"within fp32 tolerance. Both render as the checkpoint was trained ({own_fine}), as `sray eval "
-             f"--render full` does; 'fine union' makes the fine pass re-evaluate the coarse depths too, 'fine new "
-             f"only' evaluates the resampled depths alone. 'fast sS cC': the fast render mode "
-             f"(`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine pass (resampled "
-             f"depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed by the "
-             f"sources' depth (docs/model.md, RGB-D mode), rendered by "
-             f"{rgbd_by}. Protocol: {protocol}.\n\n"
-             f"![speed-accuracy]({os.path.relpath(png, doc.parent)})")
-    section = record(SPEED, title, table(rows), doc, notes)
-    tracking = get_tracker(tracker, tracking_uri)
-    run = tracking.start_run("sray-bench", f"speed-accuracy-{time.strftime('%Y%m%d-%H%M%S')}",
-                             tags={"sray.kind": "bench", "sray.protocol": protocol})
-    with tracking.logger(run) as logger:
-        logger.log_params({"checkpoint": str(checkpoint), "checkpoint_rgbd": str(checkpoint_rgbd or checkpoint),
-                           "shards": str(shards), "views_per_scene": views_per_scene})
-        for i, r in enumerate(rows):
-            logger.log_metrics({"miou": r["miou"], "psnr": r["psnr"], "cpu_s_per_view": r["s_per_view"],
-                                "wall_s_per_view": r["wall_s_per_view"]}, i)
-        logger.log_artifact(png)
-    return section

@@ -74,10 +74,16 @@ def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device, fast
     return net.ray_renderer(encode_sources(net, sample, device), fast, runtime)
 
 
+def views_confusion(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> Tensor:
+    """The (L, L) int64 confusion matrix (ground-truth row, predicted column) summed over ``views``: the one
+    matrix of the dataset-level protocol."""
+    return sum(confusion_matrix(v.pred_label, v.gt_label, n_classes, ignore_id) for v in views)
+
+
 def class_ious(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> list[float | None]:
     """Dataset-level IoU of each class over ``views`` (one confusion matrix), None for a class absent
     from their ground truth."""
-    conf = sum(confusion_matrix(v.pred_label, v.gt_label, n_classes, ignore_id) for v in views)
+    conf = views_confusion(views, n_classes, ignore_id)
     return [None if math.isnan(v) else float(v) for v in scene_metrics(conf)["iou_per_class"]]
 
 
@@ -88,8 +94,7 @@ def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> 
     (per-image protocol), ``psnr``, and ``ssim`` only when every view is a whole image (stride 1):
     a strided render never gets an SSIM. Whole images smaller than the SSIM window score NaN.
     """
-    conf = sum(confusion_matrix(v.pred_label, v.gt_label, n_classes, ignore_id) for v in views)
-    dataset = scene_metrics(conf)
+    dataset = scene_metrics(views_confusion(views, n_classes, ignore_id))
     per_image = per_image_miou([v.pred_label for v in views], [v.gt_label for v in views], n_classes, ignore_id)
     psnrs = [psnr(v.pred_rgb, v.gt_rgb) for v in views]
     scores = {"miou": float(dataset["miou"]), "total_acc": float(dataset["total_acc"]),

@@ -7,6 +7,7 @@ renders validation images; every rank reports to Ray at the same steps.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,7 @@ from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint
 from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_due
 from sray.platform.common.model_input import ray_batch
 from sray.platform.common.progress import make_progress
-from sray.platform.common.throughput import ThroughputWindow, progress_postfix
+from sray.platform.common.throughput import ThroughputWindow, peak_memory_mb, progress_postfix
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle
@@ -100,6 +101,9 @@ def train_worker(payload: dict[str, Any]) -> None:
 
     # CPU seconds of every rank and its loader processes, across resumes (optim.cpu_seconds budgets them)
     clock, cpu_total = CpuClock(counters.get("cpu_seconds", 0.0) / world), counters.get("cpu_seconds", 0.0)
+    # rank 0's wall seconds since the set-up, across resumes; unknown (never stored) for a job resumed from a
+    # checkpoint written before sray counted them
+    wall_start, wall_before = time.perf_counter(), counters.get("wall_seconds", 0.0 if start == 0 else None)
     lr_factor = lr_lambda(cfg.optim)
     manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
     logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
@@ -136,6 +140,9 @@ def train_worker(payload: dict[str, Any]) -> None:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
             logger.flush(force=True)
             counters["skipped_steps"], counters["cpu_seconds"] = train_step.skipped_total, cpu_total
+            if wall_before is not None:
+                counters["wall_seconds"] = wall_before + time.perf_counter() - wall_start
+            counters["peak_memory_mb"] = max(counters.get("peak_memory_mb", 0.0), peak_memory_mb(device))
             state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
                                    step_done, cfg, best, counters)
             state[UNSENT_METRICS] = [list(m) for m in logger.unsent_metrics()]  # store unreachable now

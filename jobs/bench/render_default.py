@@ -1,0 +1,132 @@
+"""The evaluation's default render, chosen by a rule from paired measurements, and the renders used today.
+
+The rule (:func:`choose_default`): the default is the **fastest** measured setting that loses at most
+:data:`MAX_MIOU_LOSS` points of mIoU overall **and** at most :data:`MAX_CLASS_LOSS` points of IoU on every class
+holding at least :data:`MIN_CLASS_SHARE` of the labelled test pixels, both against the full render measured on the
+same views. Classes under that share are not counted (a few pixels swing their IoU by tens of points). Ties in
+time go to the higher mIoU, then to the setting listed first. The full render loses nothing against itself, so
+some setting always qualifies. The rule reads only the rows it is given: which settings may be a default at all
+is the caller's choice (``sray bench speed-accuracy`` offers the render modes the defaults can name).
+
+:func:`todays_defaults` names the render each user of the default renders with today: ``sray eval`` (its
+``--fast-stride``/``--fast-confidence`` defaults are ``FastRender()``'s), validation (``data.val_render``) and the
+fleet's S-Ray held-out scores (``finetune.eval_render``). Validation and the fleet score a strided pixel grid of
+their own and render each of its pixels (pixel stride 1), so per scored pixel they match the bench's ``fast s1``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sray.model.fast_render import FastRender
+from sray.platform.config.fleet_config import FinetuneSettings
+from sray.platform.config.train_config import DataSettings
+
+MAX_MIOU_LOSS = 1.0
+"""Points of mIoU (overall: the mean over scenes) the default may lose against the full render."""
+MAX_CLASS_LOSS = 3.0
+"""Points of IoU the default may lose on any counted class."""
+MIN_CLASS_SHARE = 0.01
+"""Share of the labelled test pixels from which a class is counted."""
+_FLOAT_SLACK = 1e-9
+"""Points: a loss within this of its limit passes (differences of percentages carry float noise)."""
+
+
+@dataclass(frozen=True)
+class Measured:
+    """One setting's paired measurement, as the rule reads it."""
+
+    name: str
+    miou: float
+    """mIoU in %, overall."""
+    seconds: float
+    """Time per view (the bench: CPU seconds), lower is faster."""
+    class_iou: dict[str, float | None]
+    """Class name -> IoU in % over the test views (None: the class is absent from their ground truth)."""
+    class_share: dict[str, float]
+    """Class name -> its share of the labelled test pixels (0..1)."""
+
+
+@dataclass(frozen=True)
+class Shortfall:
+    """Where a setting loses more than the rule allows."""
+
+    where: str
+    """``overall`` or the class's name."""
+    loss: float
+    """Points lost against the full render."""
+    limit: float
+    """Points the rule allows there."""
+
+    def describe(self) -> str:
+        """``chair -4.20`` (points, against the full render)."""
+        return f"{self.where} {-self.loss:+.2f}"
+
+
+@dataclass(frozen=True)
+class DefaultChoice:
+    """What the rule decided on one set of rows."""
+
+    reference: str
+    """The full render every loss is measured against."""
+    chosen: str
+    """The fastest qualifying setting."""
+    counted: tuple[str, ...]
+    """Classes holding at least ``MIN_CLASS_SHARE`` of the labelled test pixels, by the reference's ground truth."""
+    shortfalls: dict[str, tuple[Shortfall, ...]]
+    """Every setting's shortfalls (empty: it qualifies), fastest setting first."""
+
+    def passes(self, name: str) -> bool:
+        """Whether setting ``name`` qualifies (KeyError for a setting the rule was not given)."""
+        return not self.shortfalls[name]
+
+    def rejected(self) -> dict[str, tuple[Shortfall, ...]]:
+        """The settings faster than the chosen one, each with why the rule rejected it, fastest first."""
+        faster = list(self.shortfalls)[:list(self.shortfalls).index(self.chosen)]
+        return {name: self.shortfalls[name] for name in faster}
+
+
+def counted_classes(reference: Measured) -> tuple[str, ...]:
+    """The classes whose share of the labelled test pixels reaches ``MIN_CLASS_SHARE``, in the reference's order."""
+    return tuple(c for c, share in reference.class_share.items() if share >= MIN_CLASS_SHARE)
+
+
+def shortfalls(row: Measured, reference: Measured, counted: tuple[str, ...]) -> tuple[Shortfall, ...]:
+    """Where ``row`` loses more than the rule allows against ``reference``: overall first, then the counted classes.
+
+    ValueError when ``row`` has no IoU for a counted class (rows measured on other views).
+    """
+    found = []
+    if reference.miou - row.miou > MAX_MIOU_LOSS + _FLOAT_SLACK:
+        found.append(Shortfall("overall", reference.miou - row.miou, MAX_MIOU_LOSS))
+    for name in counted:
+        iou, ref = row.class_iou.get(name), reference.class_iou.get(name)
+        if iou is None or ref is None:
+            raise ValueError(f"default render rule: setting {row.name!r} or the reference {reference.name!r} has no "
+                             f"IoU for class {name!r}, which holds {100 * reference.class_share[name]:.1f}% of the "
+                             "test pixels; compare rows measured on the same views")
+        if ref - iou > MAX_CLASS_LOSS + _FLOAT_SLACK:
+            found.append(Shortfall(name, ref - iou, MAX_CLASS_LOSS))
+    return tuple(found)
+
+
+def choose_default(rows: list[Measured], reference: str) -> DefaultChoice:
+    """Apply the rule (module docstring) to ``rows`` against the row named ``reference`` (the full render).
+
+    ValueError when ``reference`` is not among the rows.
+    """
+    by_name = {r.name: r for r in rows}
+    if reference not in by_name:
+        raise ValueError(f"default render rule: the reference {reference!r} is not among the rows {list(by_name)}")
+    ref = by_name[reference]
+    counted = counted_classes(ref)
+    order = sorted(range(len(rows)), key=lambda i: (rows[i].seconds, -rows[i].miou, i))
+    found = {rows[i].name: shortfalls(rows[i], ref, counted) for i in order}
+    chosen = next(name for name, short in found.items() if not short)
+    return DefaultChoice(reference=reference, chosen=chosen, counted=counted, shortfalls=found)
+
+
+def todays_defaults() -> dict[str, FastRender | None]:
+    """Who uses a default render today -> the fast render mode it uses (None: the full render)."""
+    return {"sray eval": FastRender(), "validation": DataSettings().val_fast(),
+            "fleet held-out": FinetuneSettings().eval_fast()}

@@ -1,0 +1,115 @@
+"""``sray bench speed-accuracy`` as a command: the settings measured on one checkpoint or several (a recipe's seeds),
+the default-render rule applied to each and to their mean, chart and tables written into the benchmark's section
+of docs/benchmarks.md and logged to the tracker.
+
+The section's first table holds one checkpoint's rows, or with several the mean over them (per setting: mIoU,
+PSNR, times and each class's IoU; each checkpoint's own tables are printed). With the full render as the first
+row, it gains a column saying what the rule (``render_default``) made of each setting, and two tables follow: the
+IoU of every class holding at least 1% of the labelled test pixels, and the rule's verdict per checkpoint (and on
+the mean): the chosen setting, why each faster one was rejected, whether today's defaults pass. The default set
+fills one table of the section, a run of chosen settings (``--settings``) the other; each is replaced by the next
+run of its kind.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+from sray.jobs.bench.doc import bench_dir, record
+from sray.jobs.bench.render_default import MAX_CLASS_LOSS, MAX_MIOU_LOSS, MIN_CLASS_SHARE, DefaultChoice
+from sray.jobs.bench.speed_accuracy import SPEED, chart, measure, select_settings, table, table_title
+from sray.jobs.bench.speed_classes import class_table, mean_rows
+from sray.jobs.bench.speed_verdict import checkpoint_label, rule_choice, todays_settings, verdict_table
+from sray.model.ray_chunks import CUDA_RENDER_RAYS
+from sray.platform.common.eval_protocol import EvalProtocol
+from sray.platform.tracking.registry import get_tracker
+
+
+def report(rows: list[dict], choice: DefaultChoice | None) -> str:
+    """The main table (with the rule's column when there is a ``choice``) and the per-class table."""
+    classes = (f"IoU per class (%, each class's IoU over every rendered test view; the classes holding at least "
+               f"{100 * MIN_CLASS_SHARE:g}% of the labelled test pixels):")
+    return "\n\n".join([table(rows, choice), classes, class_table(rows, choice.chosen if choice else None)])
+
+
+def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: int, doc: Path, tracker: str,
+                       tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None) -> str:
+    """Measure the default settings, or those ``names`` chooses (the ``rgbd`` ones by ``checkpoint_rgbd`` when
+    given), on each of ``checkpoints``; apply the default-render rule to each and to their mean; write the chart
+    and the table section, log both; returns the section."""
+    settings, shards = select_settings(names), Path(shards)
+    rgbd = Path(checkpoint_rgbd) if checkpoint_rgbd else None
+    runs = [measure(Path(c), shards, settings, views_per_scene, checkpoint_rgbd=rgbd) for c in checkpoints]
+    rows = runs[0] if len(runs) == 1 else mean_rows(runs)
+    labels = [checkpoint_label(c) for c in checkpoints] + ([f"mean of {len(runs)}"] if len(runs) > 1 else [])
+    choices = [rule_choice(r, settings) for r in (runs if len(runs) == 1 else [*runs, rows])]
+    if len(runs) > 1:
+        for label, run, choice in zip(labels[:len(runs)], runs, choices[:len(runs)], strict=True):
+            print(f"\n[speed-accuracy] {label}\n\n{report(run, choice)}", flush=True)
+    body = report(rows, choices[-1])
+    today = todays_settings(settings)
+    if choices[-1] is not None:
+        rule = (f"Default render by the rule: the fastest setting offered that loses at most {MAX_MIOU_LOSS:g} "
+                f"point of mIoU and at most {MAX_CLASS_LOSS:g} points on every class holding at least "
+                f"{100 * MIN_CLASS_SHARE:g}% of the labelled test pixels, against '{rows[0]['name']}':")
+        body += "\n\n" + rule + "\n\n" + verdict_table(labels, choices, today)
+    protocol = (EvalProtocol.from_shards(shards, 8, 1).describe().replace("render: full", "render: per setting")
+                .replace("inputs: rgb", "inputs: per setting (the checkpoint's unless the setting says rgbd)"))
+    png = chart(rows, bench_dir(doc, SPEED) / ("chosen.png" if names else "default.png"), protocol)
+    section = record(SPEED, table_title(names), body, doc,
+                     notes(rows, checkpoints, shards, views_per_scene, checkpoint_rgbd, today, protocol, png, doc))
+    tracking = get_tracker(tracker, tracking_uri)
+    run = tracking.start_run("sray-bench", f"speed-accuracy-{time.strftime('%Y%m%d-%H%M%S')}",
+                             tags={"sray.kind": "bench", "sray.protocol": protocol})
+    with tracking.logger(run) as logger:
+        logger.log_params({"checkpoint": ", ".join(str(c) for c in checkpoints),
+                           "checkpoint_rgbd": str(checkpoint_rgbd or "same weights"), "shards": str(shards),
+                           "views_per_scene": views_per_scene,
+                           "default_by_rule": choices[-1].chosen if choices[-1] is not None else "not applied"})
+        for i, r in enumerate(rows):
+            logger.log_metrics({"miou": r["miou"], "psnr": r["psnr"], "cpu_s_per_view": r["s_per_view"],
+                                "wall_s_per_view": r["wall_s_per_view"]}, i)
+            if len(runs) > 1:
+                logger.log_metrics({f"ckpt{k}/miou": run_rows[i]["miou"] for k, run_rows in enumerate(runs)}, i)
+        logger.log_artifact(png)
+    return section
+
+
+def notes(rows: list[dict], checkpoints: list[Path], shards: Path, views_per_scene: int,
+          checkpoint_rgbd: Path | None, today: dict[str, str | None], protocol: str, png: Path, doc: Path) -> str:
+    """The notes under the section's tables: what was measured on which views, what each setting means, the
+    per-class and rule conventions, the setting each of ``today``'s defaults renders as, the protocol, the chart."""
+    rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
+    own_fine = ", ".join(sorted({f"`fine_samples={r['fine_samples']}`" for r in rows
+                                 if not r["setting"]["fine_samples"] and not r["setting"]["fast"]})) or "-"
+    which = ("every test view" if views_per_scene <= 0 else "the first test view" if views_per_scene == 1 else
+             f"the first {views_per_scene} test views")
+    defaults = "; ".join(f"{user} '{name}'" if name else f"{user} not measured" for user, name in today.items())
+    named = ", ".join(f"`{c}`" for c in checkpoints)
+    whose = (f"Checkpoint {named}" if len(checkpoints) == 1 else
+             f"Checkpoints {named}; rows, per-class IoU and the rule's last line are the mean over them")
+    return (f"{whose}; {which} of each unseen scene of `{shards}`, "
+            f"the same views for every setting (paired); mIoU dataset-level per scene, then the mean over "
+            f"scenes; per-class IoU dataset-level over all those views together (one confusion matrix). CPU s / view "
+            f"is the CPU time this process spent (all its threads) encoding the sources, "
+            f"rendering and scoring one whole view (`sray eval`'s loop), the speed measure here because other "
+            f"jobs may share the cores (on a quiet "
+            f"machine wall time is about CPU time / torch threads); wall s / view is shown beside it. Settings: "
+            f"'full, reference path' is the unoptimised path "
+            f"(`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with "
+            f"the checkpoint's samples; 'full' is the optimised path "
+            f"(chunks by device: 256 rays on a CPU), equal to it "
+            f"within fp32 tolerance. Both render as the checkpoint was trained ({own_fine}), as `sray eval "
+            f"--render full` does; 'fine union' makes the fine pass re-evaluate the coarse depths too, 'fine new "
+            f"only' evaluates the resampled depths alone. 'fast sS cC': the fast render mode "
+            f"(`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine pass (resampled "
+            f"depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed by the "
+            f"sources' depth (docs/model.md, RGB-D mode), rendered by "
+            f"{rgbd_by}. The default-render rule (`jobs/bench/render_default.py`) is offered the settings that differ "
+            f"from the first row only in how they render (full or fast, implementation): the same sources, inputs, "
+            f"samples and precision; 'not offered' marks the others. Today's defaults render as: {defaults} "
+            f"(validation and the fleet score a strided grid of their own and render its every pixel: per scored "
+            f"pixel, pixel stride 1). Protocol: {protocol}.\n\n"
+            f"![speed-accuracy]({os.path.relpath(png, doc.parent)})")

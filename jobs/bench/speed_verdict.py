@@ -1,0 +1,66 @@
+"""The default-render rule applied to ``sray bench speed-accuracy``'s rows: which settings it is offered, which
+measured setting each user of a default renders with today, and the verdict table (one line per checkpoint and
+one for their mean)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sray.jobs.bench.doc_blocks import markdown_table
+from sray.jobs.bench.render_default import DefaultChoice, choose_default, todays_defaults
+from sray.jobs.bench.speed_accuracy import Setting
+from sray.jobs.bench.speed_classes import measured
+
+
+def rule_choice(rows: list[dict], settings: list[Setting]) -> DefaultChoice | None:
+    """The rule over the rows whose settings evaluate as the first row does (``Setting.same_evaluation``), against
+    the first row; None when the first row is not a full render (then there is no reference for the losses)."""
+    by_name = {s.name: s for s in settings}
+    first = by_name[rows[0]["name"]]
+    if first.fast is not None:
+        return None
+    return choose_default([measured(r) for r in rows if by_name[r["name"]].same_evaluation(first)], first.name)
+
+
+def todays_settings(settings: list[Setting]) -> dict[str, str | None]:
+    """Each user of a default render (``render_default.todays_defaults``) -> the setting among ``settings`` that
+    renders as it does, on the optimised path and evaluating as the first setting does; None when there is none."""
+    found = {}
+    for user, fast in todays_defaults().items():
+        match = [s.name for s in settings if s.same_evaluation(settings[0]) and s.impl == "fast" and s.fast == fast]
+        found[user] = match[0] if match else None
+    return found
+
+
+def checkpoint_label(path: Path) -> str:
+    """A checkpoint's short name in a table: ``<job>/<step folder>`` for a job's checkpoint, else its folder name."""
+    path = Path(path)
+    return f"{path.parent.parent.name}/{path.name}" if path.parent.name == "checkpoints" else path.name
+
+
+def today_cell(choice: DefaultChoice, today: dict[str, str | None]) -> str:
+    """Whether the setting of each of today's defaults passes: ``sray eval (fast s8 c0.9): fails (chair -4.20)``,
+    users sharing a setting named together."""
+    users: dict[str | None, list[str]] = {}
+    for user, name in today.items():
+        users.setdefault(name, []).append(user)
+    parts = []
+    for name, who in users.items():
+        if name is None or name not in choice.shortfalls:
+            parts.append(f"{', '.join(who)}: not measured")
+            continue
+        why = ", ".join(s.describe() for s in choice.shortfalls[name])
+        parts.append(f"{', '.join(who)} ({name}): " + (f"fails ({why})" if why else "passes"))
+    return "; ".join(parts)
+
+
+def verdict_table(labels: list[str], choices: list[DefaultChoice], today: dict[str, str | None]) -> str:
+    """Markdown table, one line per label (a checkpoint, or their mean): the setting the rule chose, each faster
+    setting it rejected and why, and whether today's defaults pass."""
+    lines = []
+    for label, choice in zip(labels, choices, strict=True):
+        rejected = "; ".join(f"{name}: {', '.join(s.describe() for s in why)}"
+                             for name, why in choice.rejected().items())
+        lines.append([label, choice.chosen, rejected or "none", today_cell(choice, today)])
+    return markdown_table(["checkpoint", "default by the rule", "faster settings rejected (points lost)",
+                           "today's defaults"], lines)
