@@ -16,6 +16,7 @@ from sray.data_tools.loader.augment import Augmentation
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
+from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_plan import HOUR, LONG, PRESETS, VARIANT_SETTINGS, Cell, Preset, World
 from sray.jobs.bench.accuracy_tables import budget_means, class_table, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir
@@ -223,3 +224,28 @@ def test_toy_benchmark_cells_are_trials_that_never_rerun_and_import_old_cells(ra
     monkeypatch.setattr(incremental, "run_study", refuse)
     assert run_accuracy_benchmark("toy", out, doc, None, 0.0, fleet=True, presets=presets) == stored
     assert "Missing cells: none." in doc.read_text()
+
+
+def test_cpu_time_arms_join_budgets_of_equal_settings_and_chart_them(tmp_path: Path) -> None:
+    """``hour`` joins ``full-new-src-mix`` and ``long`` joins ``full`` (equal settings, other budget); each
+    point's CPU hours and scores are the cells' own; a cell without CPU time is named, not charted."""
+    plan = dataclasses.replace(TOY, plan=(Cell(LONG, 0), Cell("full", 0), Cell("full-new-src-mix", 0),
+                                          Cell("full-new-src-mix", 1), Cell(HOUR, 0)))
+    assert (arm_of(HOUR), arm_of(LONG), arm_of("none")) == ("full-new-src-mix", "full", "none")
+    stored = {"long-s0": _cell(LONG, 0, 0.24), "full-s0": _cell("full", 0, 0.20) | {"train_cpu_s": 1800.0},
+              "full-new-src-mix-s0": _cell("full-new-src-mix", 0, 0.26) | {"train_cpu_s": 1440.0,
+                                                                             "heldout_miou": 0.30},
+              "full-new-src-mix-s1": _cell("full-new-src-mix", 1, 0.28) | {"train_cpu_s": 1584.0},
+              "hour-s0": _cell(HOUR, 0, 0.40) | {"train_cpu_s": 7200.0, "heldout_miou": 0.55}}
+    points, untimed = budget_points(plan, stored)
+    assert untimed == ["long-s0"]
+    by_variant = {pt.variant: pt for pt in points}
+    mix = by_variant["full-new-src-mix"]
+    assert mix.arm == by_variant[HOUR].arm == "full-new-src-mix" and by_variant["full"].arm == "full"
+    assert mix.cpu_hours == [0.4, 0.44] and mix.zero_shot == pytest.approx([26.0, 28.0])
+    assert mix.seeds_of("held_out") == ([0.4], [pytest.approx(30.0)])
+    header, rows = cpu_time_rows(points)
+    row = dict(zip(header, next(r for r in rows if r[1] == "full-new-src-mix"), strict=True))
+    assert row["pretrain CPU h"] == "0.42" and row["zero-shot mIoU %"] == "27.00 ± 1.41"
+    assert row["held-out train-scene mIoU %"] == "30.00"
+    assert cpu_time_chart(points, tmp_path / "c.png", "t", "c").stat().st_size > 0

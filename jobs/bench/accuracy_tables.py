@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from sray.jobs.bench.accuracy_cpu_time import budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_plan import COMPARED, HOUR, LONG, Cell, Preset
 from sray.jobs.bench.accuracy_step_cost import step_cost_chart
 from sray.jobs.bench.doc import Bench, bench_dir, markdown_table, record
@@ -219,6 +220,7 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
         links.append(f"![zero-shot mIoU over seeds]({os.path.relpath(chart, doc.parent)})")
         if step_times:
             links.append(_step_cost_link(preset, p, groups, step_times, " ".join(captions), figures, doc))
+    points, untimed = budget_points(p, stored)
 
     results = read_fleet_results(fleet_dir) if fleet_dir.is_dir() else []
     budgets = (0.0, *p.budgets)
@@ -237,6 +239,18 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
              "Targets:", *targets(p, stored, sray_at_60), "", *links]
     header, rows = seed_table(p, stored, step_times)
     record(bench, "Zero-shot with seeds", _table(header, rows, captions), doc, "\n".join(notes))
+    if points:
+        chart = cpu_time_chart(points, figures / "miou_vs_cpu_hours.png",
+                               f"Zero-shot and held-out training-scene mIoU against pretraining CPU hours ({preset})",
+                               " ".join(captions))
+        header, rows = cpu_time_rows(points)
+        record(bench, "Accuracy against pretraining CPU time", _table(header, rows, captions), doc,
+               "An arm is a set of model and data settings; its cells differ in budget (the ablation steps, "
+               f"`{LONG}`, or the recipe's own CPU-second budget, `{HOUR}`) and seed. CPU hours: the job's CPU "
+               "seconds summed over its ranks and their loader processes (`train/cpu_seconds`), mean over seeds; "
+               "the chart's band is the seeds' range."
+               + (f" Not charted (stored before CPU time was recorded): {', '.join(untimed)}." if untimed else "")
+               + f"\n\n![mIoU against pretraining CPU hours]({os.path.relpath(chart, doc.parent)})")
     header, rows = class_table(p, stored)
     if rows:
         record(bench, "Per-class IoU, zero-shot", _table(header, rows, captions), doc,
