@@ -1,4 +1,9 @@
-"""``sray eval``: zero-shot scores of a checkpoint on unseen scenes (the paper's generalization protocol)."""
+"""``sray eval``: zero-shot scores of a registered method's pretrained model on unseen scenes (the paper's
+generalization protocol): an S-Ray checkpoint (``--method sray``, the default) or ``2d-transfer``'s segmenter.
+
+The ``--method`` choices come from the method registry (:mod:`sray.platform.finetune.methods.registry`): every
+method with an ``eval_model`` builder.
+"""
 
 from __future__ import annotations
 
@@ -6,12 +11,20 @@ import argparse
 import sys
 from pathlib import Path
 
+from sray.platform.finetune.methods.method import EvalRequest
+from sray.platform.finetune.methods.registry import eval_method_names, get_method
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray eval``."""
-    p = sub.add_parser("eval", help="score a checkpoint on unseen scenes: metrics.json, PNGs, a tracked run")
-    p.add_argument("--checkpoint", type=Path, required=True,
-                   help="checkpoint folder (…/checkpoints/step_XXXXXXXXX) written by `sray train`")
+    p = sub.add_parser("eval", help="score a pretrained model on unseen scenes: metrics.json, PNGs, a tracked run")
+    p.add_argument("--method", default="sray", choices=eval_method_names(),
+                   help="registered method to score (default sray; 2d-transfer: a 2D segmenter's source labels "
+                        "carried by the source depth, RGB-D)")
+    p.add_argument("--checkpoint", type=Path,
+                   help="checkpoint folder (…/checkpoints/step_XXXXXXXXX) written by `sray train` (method sray)")
+    p.add_argument("--segmenter", type=Path,
+                   help="2D segmenter folder written by `sray bench segmenter` (method 2d-transfer)")
     p.add_argument("--data", type=Path, required=True, help="shard folder holding manifest.json")
     p.add_argument("--scenes", nargs="+", metavar="SCENE",
                    help="scenes to evaluate (default: every scene whose role is 'test')")
@@ -25,9 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--render", choices=["full", "fast"], default="fast",
-                   help="fast (default): the fast render mode (sray.model.fast_render; its accuracy cost, measured "
-                        "paired against the full render by `sray bench speed-accuracy`, is in docs/benchmarks.md); "
-                        "full: the whole coarse + fine renderer at every pixel")
+                   help="S-Ray's render (2d-transfer has one); fast (default): the fast render mode "
+                        "(sray.model.fast_render; its accuracy cost, measured paired against the full render by "
+                        "`sray bench speed-accuracy`, is in docs/benchmarks.md); full: the whole coarse + fine "
+                        "renderer at every pixel")
     p.add_argument("--fast-stride", type=int, default=8,
                    help="fast mode: render every N-th pixel and upsample (default %(default)s, FastRender's)")
     p.add_argument("--fast-confidence", type=float, default=0.9,  # FastRender's default
@@ -38,15 +52,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table and where everything went; exit 2 on bad input."""
     from sray.model.fast_render import FastRender
-    from sray.platform.eval.zero_shot import evaluate_checkpoint, format_table
+    from sray.platform.eval.zero_shot import evaluate_model, format_table
 
     fast = FastRender(args.fast_stride, args.fast_confidence) if args.render == "fast" else None
-
+    request = EvalRequest(checkpoint=args.checkpoint, segmenter=args.segmenter, device=args.device, fast=fast)
     try:
-        report = evaluate_checkpoint(args.checkpoint, args.data, args.scenes, args.out, n_source=args.n_source,
-                                     stride=args.stride, tracking_uri=args.tracking_uri,
-                                     experiment=args.experiment, tracker=args.tracker, device=args.device,
-                                     fast=fast)
+        model = get_method(args.method).eval_model(request)
+        report = evaluate_model(model, args.data, args.scenes, args.out, n_source=args.n_source, stride=args.stride,
+                                tracking_uri=args.tracking_uri, experiment=args.experiment, tracker=args.tracker)
     except (FileNotFoundError, ValueError) as e:
         print(f"sray eval: {e}", file=sys.stderr)
         return 2

@@ -36,6 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cpus-per-task", type=float, help="CPUs per scene task, fractions allowed")
     p.add_argument("--gpus-per-task", type=float, help="GPUs per scene task, fractions share a GPU")
     p.add_argument("--precision", choices=["no", "bf16", "fp16"], help="autocast (fp16: CUDA only)")
+    p.add_argument("--segmenter", help="pretrained 2D segmenter folder of method 2d-transfer, written by `sray bench "
+                                       "segmenter` (transfer.segmenter)")
     p.add_argument("--out", type=Path, default=Path("outputs/fleet"), help="fleet folder (default outputs/fleet)")
     p.add_argument("--tracker", help="tracker to log to, by registry name (tracker; default: mlflow)")
     p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
@@ -53,7 +55,7 @@ def fleet_flags(args: argparse.Namespace) -> dict[str, Any]:
     """The FleetConfig fields the parsed flags set (``path -> value``, None = not given)."""
     return {"max_parallel": args.max_parallel, "cpus_per_task": args.cpus_per_task,
             "gpus_per_task": args.gpus_per_task, "finetune.precision": args.precision, "address": args.address,
-            "tracker": args.tracker}
+            "tracker": args.tracker, "transfer.segmenter": args.segmenter}
 
 
 def chosen_methods(values: list[str]) -> list[str]:

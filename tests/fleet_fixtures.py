@@ -1,8 +1,9 @@
-"""A tiny shared S-Ray checkpoint (written without Ray Train) and a tiny fleet config for the fleet tests.
+"""A tiny shared S-Ray checkpoint (written without Ray Train), a tiny 2D segmenter and a tiny fleet config for
+the fleet tests.
 
 Use from a test module (the tests folder is not a package)::
 
-    from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config  # noqa: F401
+    from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config, tiny_segmenter  # noqa: F401
     from train_fixtures import tiny_shards  # noqa: F401
 """
 
@@ -15,6 +16,7 @@ import torch
 from train_fixtures import tiny_config
 
 from sray.platform.config.fleet_config import FleetConfig
+from sray.platform.eval.segmenter_training import train_segmenter
 from sray.platform.train.state import write_initial_checkpoint
 
 
@@ -34,6 +36,16 @@ def tiny_checkpoint(tiny_shards: Path, tmp_path_factory: pytest.TempPathFactory)
     if not (path / "state.pt").exists():
         write_tiny_checkpoint(tiny_shards, folder)
     return path
+
+
+@pytest.fixture(scope="session")
+def tiny_segmenter(tiny_shards: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Folder of a 2D segmenter trained for half a CPU second on the tiny shards' train scenes (built once per
+    session, at a fixed path; ``sray bench segmenter``'s output)."""
+    folder = tmp_path_factory.getbasetemp() / "fleet-segmenter"
+    if not (folder / "segmenter.json").exists():
+        train_segmenter(tiny_shards, 0.5, folder, seed=0, n_source=2, top_k=4, progress=False)
+    return folder
 
 
 @pytest.fixture(scope="module")

@@ -50,14 +50,15 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 def test_cli_flags_map_onto_the_config():
     args = _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test", "--max-parallel", "3",
                    "--gpus-per-task", "0.5", "--precision", "fp16", "--methods", "sray", "semantic-nerf",
-                   "--tracker", "mlflow", "--set", "finetune.max_steps=50"])
+                   "--tracker", "mlflow", "--segmenter", "seg", "--set", "finetune.max_steps=50"])
     cfg = build_fleet_config(fleet_flags(args), args.overrides)
     assert args.all_test and args.scenes is None and args.methods == ["sray", "semantic-nerf"]
     assert (cfg.max_parallel, cfg.gpus_per_task, cfg.finetune.precision, cfg.finetune.max_steps) == (3, 0.5, "fp16", 50)
     assert cfg.tracker == "mlflow" and FleetConfig().tracker == "mlflow"
+    assert cfg.transfer.segmenter == "seg" and FleetConfig().transfer.segmenter == ""
     assert _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test"]).methods == ["sray"]
     every = _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test", "--method", "all"]).methods
-    assert chosen_methods(every) == ["sray", "semantic-nerf"]
+    assert chosen_methods(every) == ["sray", "semantic-nerf", "2d-transfer"]
     assert chosen_methods(["semantic-nerf", "sray", "semantic-nerf"]) == ["semantic-nerf", "sray"]
     with pytest.raises(SystemExit):  # not a registered method
         _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test", "--methods", "nerf"])

@@ -18,6 +18,8 @@ LAZY_IMPORTS_ALLOWED = {
         "artifact loader when it is built or loaded (tests/test_recipe_method.py)",
     "platform/finetune/methods/semantic_nerf_method.py":
         "method plug-ins: as sray_method.py",
+    "platform/finetune/methods/transfer_method.py":
+        "method plug-ins: as sray_method.py",
     "platform/common/ray_address.py":
         "the GCS request imports Ray only once a TCP connection to the address succeeded: `sray train` refuses a "
         "bad input with Ray never imported (tests/test_train_inputs.py)",

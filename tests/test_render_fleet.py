@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config  # noqa: F401
+from fleet_fixtures import one_thread, tiny_checkpoint, tiny_fleet_config, tiny_segmenter  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
@@ -41,10 +41,11 @@ class RecordingLogger:
         self.artifacts.append((Path(path), artifact_path))
 
 
-def _task(checkpoint: Path, shards: Path, out: Path, method: str) -> SceneTask:
+def _task(checkpoint: Path, shards: Path, out: Path, method: str, segmenter: Path | None = None) -> SceneTask:
+    config = tiny_fleet_config(max_steps=2, eval_every=2, lr=0.05)
+    config.transfer.segmenter = str(segmenter or "")
     return SceneTask(scene=SCENE, method=method, checkpoint=str(checkpoint), base_sha256=checkpoint_sha256(checkpoint),
-                     shards=str(shards), out_dir=str(out), run=None, attempt=1,
-                     config=tiny_fleet_config(max_steps=2, eval_every=2, lr=0.05), clip_frames=FRAMES)
+                     shards=str(shards), out_dir=str(out), run=None, attempt=1, config=config, clip_frames=FRAMES)
 
 
 def _first_frame(path: Path) -> np.ndarray:
@@ -74,7 +75,9 @@ def test_clips_show_the_model_before_and_after_finetuning(tiny_shards, tiny_chec
         assert 10 * np.log10(255.0**2 / max(mse, 1e-12)) >= 30.0, stage
 
 
-def test_methods_without_sources_get_no_clip(tiny_shards, tiny_checkpoint, tmp_path):
+@pytest.mark.parametrize("method", ["semantic-nerf", "2d-transfer"])
+def test_methods_without_an_sray_network_get_no_clip(method, tiny_shards, tiny_checkpoint, tiny_segmenter, tmp_path):
+    """Semantic-NeRF (no sources) and 2d-transfer (sources, but a 2D segmenter) render no fly-through."""
     logger = RecordingLogger()
-    finetune_scene(_task(tiny_checkpoint, tiny_shards, tmp_path, "semantic-nerf"), logger)
+    finetune_scene(_task(tiny_checkpoint, tiny_shards, tmp_path, method, tiny_segmenter), logger)
     assert not list(tmp_path.glob("flythrough_*")) and not any(a and "flythrough" in a for _, a in logger.artifacts)

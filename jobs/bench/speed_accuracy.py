@@ -35,7 +35,7 @@ from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.model.runtime import Runtime
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import sray_renderer, views_confusion
+from sray.platform.eval.view_scoring import scene_confusion, sray_renderer
 from sray.platform.eval.zero_shot import select_scenes
 
 
@@ -154,8 +154,9 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
             cpu_seconds += time.process_time() - c0
             n_views += len(scored.views)
             per_scene.append(scored.scores)
-            conf = conf + views_confusion(scored.views, cfg.model.n_classes, cfg.model.ignore_id)
-        class_iou, class_share = class_scores(conf)
+            conf = conf + scene_confusion(scored.views, cfg.model.n_classes, cfg.model.ignore_id)
+        # the last class of the matrix counts pixels without prediction: misses of their true class, never a class
+        class_iou, class_share = (v[:cfg.model.n_classes] for v in class_scores(conf))
         row = {"name": st.name, "miou": 100 * sum(s["miou"] for s in per_scene) / len(per_scene),
                "psnr": sum(s["psnr"] for s in per_scene) / len(per_scene),
                "s_per_view": cpu_seconds / max(n_views, 1), "wall_s_per_view": seconds / max(n_views, 1),

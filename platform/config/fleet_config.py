@@ -107,6 +107,22 @@ class SemanticNeRFSettings:
 
 
 @dataclass
+class TransferSettings:
+    """2D label transfer (method ``2d-transfer``): the pretrained segmenter it starts from and its finetune."""
+
+    segmenter: str = ""
+    """Folder of the pretrained 2D segmenter (``sray bench segmenter --out``); required by ``2d-transfer``
+    (``--segmenter``), unused by the other methods."""
+    lr: float = 1e-3
+    """Adam learning rate of the whole segmenter (constant; the rate ``sray bench segmenter`` pretrains with)."""
+    images_per_step: int = 4
+    """Labelled images per finetune step: a training sample's source views, drawn from its ``finetune.top_k``
+    neighbours in the scene's finetune pool."""
+    tolerance: float = 0.05
+    """Relative depth agreement of the forward splatting's occlusion test (``label_transfer``)."""
+
+
+@dataclass
 class FleetConfig:
     """Everything a fleet needs besides the checkpoint, the shards, the scenes and the methods."""
 
@@ -114,6 +130,8 @@ class FleetConfig:
     """Per-scene budgets and optimisation."""
     nerf: SemanticNeRFSettings = field(default_factory=SemanticNeRFSettings)
     """The Semantic-NeRF baseline's network and learning rate."""
+    transfer: TransferSettings = field(default_factory=TransferSettings)
+    """The 2D label-transfer method's segmenter and finetune."""
     max_parallel: int = 2
     """Most scene tasks in flight at once."""
     cpus_per_task: float = 1.0
@@ -147,7 +165,8 @@ def check_fleet_config(cfg: FleetConfig) -> None:
                 "finetune.patience": ft.patience, "finetune.eval_n_source": ft.eval_n_source,
                 "finetune.eval_stride": ft.eval_stride,
                 "finetune.max_nonfinite_in_row": ft.max_nonfinite_in_row, "max_parallel": cfg.max_parallel,
-                "nerf.depth": cfg.nerf.depth, "nerf.width": cfg.nerf.width}
+                "nerf.depth": cfg.nerf.depth, "nerf.width": cfg.nerf.width,
+                "transfer.images_per_step": cfg.transfer.images_per_step}
     for name in ("rays_per_batch", "n_source", "top_k"):
         if getattr(ft, name) is not None:
             positive[f"finetune.{name}"] = getattr(ft, name)
@@ -160,11 +179,15 @@ def check_fleet_config(cfg: FleetConfig) -> None:
     non_negative = {"finetune.eval_chunk": ft.eval_chunk, "finetune.max_seconds": ft.max_seconds,
                     "finetune.min_delta": ft.min_delta,
                     "finetune.lr": ft.lr, "finetune.grad_clip": ft.grad_clip, "nerf.lr": cfg.nerf.lr,
+                    "transfer.lr": cfg.transfer.lr,
                     "cpus_per_task": cfg.cpus_per_task, "gpus_per_task": cfg.gpus_per_task,
                     "retries": cfg.retries, "retry_backoff_s": cfg.retry_backoff_s}
     for name, value in non_negative.items():
         if value < 0:
             raise ValueError(f"fleet config: {name} is {value}; it must be >= 0")
+    if cfg.transfer.tolerance <= 0:
+        raise ValueError(f"fleet config: transfer.tolerance is {cfg.transfer.tolerance}; it must be > 0 (a relative "
+                         "depth agreement, e.g. 0.05)")
     if cfg.cpus_per_task == 0 and cfg.gpus_per_task == 0:
         raise ValueError("fleet config: cpus_per_task and gpus_per_task are both 0; a task needs some CPU or GPU")
     ft.eval_fast()

@@ -4,7 +4,8 @@ Scores follow zero-shot evaluation's dataset-level protocol (one confusion matri
 scored views, mIoU over the classes present in that scene's ground truth, then the unweighted mean over
 scenes). A pixel a row gives no prediction (:data:`~sray.platform.eval.label_transfer.UNSEEN`) is counted
 as predicted in an extra "unseen" class L that is never a ground-truth class: it is a miss (a false
-negative of its true class) and never a match. Coverage is the share of labelled query pixels that at
+negative of its true class) and never a match (``label_transfer.unseen_as_class``: every held-out score
+counts it so). Coverage is the share of labelled query pixels that at
 least one source view sees by the row's own geometry (None for rows without one); accuracy on covered
 pixels is the share of those covered pixels predicted right.
 """
@@ -16,14 +17,10 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-import torch
 from torch import Tensor
 
 from sray.model.metrics import DATASET_PROTOCOL, confusion_matrix, scene_metrics
-from sray.platform.eval.label_transfer import UNSEEN
-
-UNSEEN_RULE = ("a pixel without prediction counts as an extra 'unseen' class that is never correct: a miss of "
-               "its true class")
+from sray.platform.eval.label_transfer import unseen_as_class
 
 
 @dataclass(frozen=True)
@@ -95,8 +92,7 @@ class CeilingRow:
                              f"{tuple(gt.shape)} differ in size")
         if self.geometric == (seen is None):
             raise ValueError(f"ceilings row {self.key!r}: pass a coverage mask exactly for geometric rows")
-        mapped = torch.where(pred == UNSEEN, torch.full_like(pred, n_classes), pred)
-        conf = confusion_matrix(mapped, gt, n_classes + 1, ignore_id)
+        conf = confusion_matrix(unseen_as_class(pred, n_classes), gt, n_classes + 1, ignore_id)
         self.confusions[scene] = self.confusions.get(scene, 0) + conf
         labelled = gt != ignore_id
         self.labelled += int(labelled.sum())

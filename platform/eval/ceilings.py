@@ -9,8 +9,9 @@ Every row is scored on the same query views (each unseen test scene's ``test`` v
   depth and the occlusion test, :mod:`~sray.platform.eval.label_transfer`): the ceiling of any method that
   labels a query from its sources (an oracle);
 * ``b`` the same transfer of the 2D segmenter's predictions on the source images (an oracle);
-* ``c`` the segmenter's predictions splatted forward with the source depth (the ``2d-transfer`` method:
-  the RGB-D protocol's inputs, nothing of the query but its camera);
+* ``c`` the segmenter's predictions splatted forward with the source depth (the ``2d-transfer`` method's own
+  transfer, :func:`~sray.platform.eval.transfer_view.source_depth_transfer`: the RGB-D protocol's inputs,
+  nothing of the query but its camera);
 * ``d`` S-Ray's fine field at the ground-truth surface (:mod:`~sray.platform.eval.surface_field`, an oracle);
 * ``e`` linear probes on frozen encoder features (:mod:`~sray.platform.eval.linear_probe`) of the
   checkpoint, of the segmenter and of a random initialisation: they read the query image itself, which
@@ -42,11 +43,12 @@ from sray.data_tools.shards.manifest import read_manifest
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import read_meta
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.eval.ceiling_rows import UNSEEN_RULE, CeilingRow, RowProtocol
-from sray.platform.eval.label_transfer import LabelTransfer, transfer_labels
+from sray.platform.eval.ceiling_rows import CeilingRow, RowProtocol
+from sray.platform.eval.label_transfer import UNSEEN_RULE, LabelTransfer, transfer_labels
 from sray.platform.eval.linear_probe import LinearProbe, fit_probe, random_encoder
 from sray.platform.eval.segmenter import Segmenter, load_segmenter
 from sray.platform.eval.surface_field import field_at_surface
+from sray.platform.eval.transfer_view import source_depth_transfer
 from sray.platform.eval.view_scoring import encode_sources
 from sray.platform.eval.zero_shot import select_scenes
 
@@ -117,17 +119,19 @@ class ViewScorer:
         src, gt, scene = sample.sources, sample.query_label, sample.scene
         geometry = (src.K, src.c2w, src.depth, sample.query.K, sample.query.c2w, tuple(gt.shape))
 
-        def transfer(labels: Tensor, mode: str) -> LabelTransfer:
-            return transfer_labels(labels, *geometry, mode, tolerance=self.tolerance, ignore_id=cfg.ignore_id,
-                                   query_depth=sample.query_depth if mode == "backward" else None)
+        def backward(labels: Tensor) -> LabelTransfer:
+            return transfer_labels(labels, *geometry, "backward", tolerance=self.tolerance, ignore_id=cfg.ignore_id,
+                                   query_depth=sample.query_depth)
 
-        oracle, seconds = timed(lambda: transfer(gt_sources, "backward"))
+        oracle, seconds = timed(lambda: backward(gt_sources))
         rows["a"].add(scene, oracle.labels, gt, cfg.n_classes, cfg.ignore_id, seconds, oracle.seen)
         if self.segmenter is not None:
             seg_labels, seg_seconds = timed(lambda: self.segmenter.predict(src.rgb))  # (m, H, W)
-            for key, mode in (("b", "backward"), ("c", "forward")):
-                out, seconds = timed(lambda: transfer(seg_labels, mode))  # noqa: B023 - called at once
-                rows[key].add(scene, out.labels, gt, cfg.n_classes, cfg.ignore_id, seg_seconds + seconds, out.seen)
+            guided, seconds = timed(lambda: backward(seg_labels))
+            rows["b"].add(scene, guided.labels, gt, cfg.n_classes, cfg.ignore_id, seg_seconds + seconds, guided.seen)
+            splat, seconds = timed(lambda: source_depth_transfer(seg_labels, src, sample.query, self.tolerance,
+                                                                 cfg.ignore_id))  # the 2d-transfer method's
+            rows["c"].add(scene, splat.labels, gt, cfg.n_classes, cfg.ignore_id, seg_seconds + seconds, splat.seen)
         pred, seconds = timed(lambda: field_at_surface(self.net, encode_sources(self.net, sample, torch.device("cpu")),
                                                        sample.query.K, sample.query.c2w, sample.query_depth,
                                                        sample.near, sample.far))

@@ -17,6 +17,11 @@ One function, :func:`transfer_labels`, with two geometries and one vote (pixel (
   label is ``ignore_id``. The label with the most votes wins; a tie goes to the tied label whose first
   voter comes earliest in the source order (the best-ranked source). A pixel no source sees, or seen only
   by unlabelled source pixels, gets :data:`UNSEEN`.
+* colours (on request): a pixel's colour is the mean of the colours of the source pixels that see it (the
+  same geometry, labelled or not); black where no source sees it.
+
+A pixel without a label is scored as a miss (:data:`UNSEEN_RULE`, :func:`unseen_as_class`): the ceilings rows
+and every held-out score of ``sray.platform.eval.view_scoring`` count it the same way.
 
 Geometry runs in float64 whatever the inputs' dtype (pixel rounding must not move with float32 noise).
 """
@@ -34,6 +39,10 @@ from sray.model.source_set import rigid_inverse
 UNSEEN = -1
 """Transferred label of a query pixel that no source view sees (never a class id)."""
 
+UNSEEN_RULE = ("a pixel without prediction counts as an extra 'unseen' class that is never correct: a miss of "
+               "its true class")
+"""How every score counts an :data:`UNSEEN` pixel (:func:`unseen_as_class`)."""
+
 MODES = ("backward", "forward")
 """Transfer geometries: ``backward`` (query depth, an oracle) or ``forward`` (source depth splatting)."""
 
@@ -46,6 +55,9 @@ class LabelTransfer:
     """int64 (H, W) class ids; :data:`UNSEEN` where no source view gives a label."""
     seen: Tensor
     """bool (H, W) pixels at least one source view sees, by the transfer's geometry (labelled or not)."""
+    rgb: Tensor | None = None
+    """float32 (H, W, 3) mean colour of the source pixels that see each pixel, 0 where none does; None unless
+    the source colours were given."""
 
 
 def project_points(points: Tensor, K: Tensor, c2w: Tensor) -> tuple[Tensor, Tensor]:
@@ -138,16 +150,35 @@ def vote(candidates: Tensor) -> Tensor:
     return torch.where(voted.any(0), score.argmax(1), torch.full((n,), UNSEEN, device=candidates.device))
 
 
+def unseen_as_class(pred: Tensor, n_classes: int) -> Tensor:
+    """Predictions (any shape) int64 as scored: :data:`UNSEEN` becomes the extra class ``n_classes`` (L), which no
+    ground truth holds, so in an (L+1, L+1) confusion matrix such a pixel is a miss of its true class and a
+    false positive of no class (:data:`UNSEEN_RULE`)."""
+    return torch.where(pred == UNSEEN, torch.full_like(pred, n_classes), pred)
+
+
+def carried_colours(source_rgb: Tensor, index: Tensor, visible: Tensor, hw: tuple[int, int]) -> Tensor:
+    """Mean colour (Hq, Wq, 3) float32 of the source pixels ``index`` (m, Hq*Wq) that are ``visible`` (m, Hq*Wq)
+    in source images source_rgb (m, 3, H, W); 0 where no source sees the pixel."""
+    m = source_rgb.shape[0]
+    colours = source_rgb.float().reshape(m, 3, -1).gather(2, index[:, None].expand(m, 3, -1))  # (m, 3, Hq*Wq)
+    weight = visible.float()[:, None]  # (m, 1, Hq*Wq)
+    mean = (colours * weight).sum(0) / weight.sum(0).clamp_min(1)  # (3, Hq*Wq)
+    return mean.T.reshape(*hw, 3)
+
+
 def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor, source_depth: Tensor,
                     query_K: Tensor, query_c2w: Tensor, hw: tuple[int, int], mode: str, *,
-                    query_depth: Tensor | None = None, tolerance: float = 0.05, ignore_id: int = 255) -> LabelTransfer:
+                    query_depth: Tensor | None = None, tolerance: float = 0.05, ignore_id: int = 255,
+                    source_rgb: Tensor | None = None) -> LabelTransfer:
     """Carry source labels into a query view (see the module doc).
 
     source_labels (m, H, W) integer class ids (``ignore_id`` = unlabelled: never a vote); source_K (m, 3, 3);
     source_c2w (m, 4, 4); source_depth (m, H, W) metres, 0 = unknown; query_K (3, 3); query_c2w (4, 4);
     ``hw`` = the query's (Hq, Wq); ``mode``: one of :data:`MODES`; ``query_depth`` (Hq, Wq): required by
     ``backward``, refused by ``forward`` (which must not read it); ``tolerance``: the relative depth
-    agreement of the occlusion test.
+    agreement of the occlusion test; ``source_rgb`` (m, 3, H, W) in [0, 1]: carry the colours too
+    (``LabelTransfer.rgb``).
     """
     m = source_labels.shape[0]
     if source_labels.shape != source_depth.shape or source_K.shape != (m, 3, 3) or source_c2w.shape != (m, 4, 4):
@@ -159,6 +190,9 @@ def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor,
     if (mode == "backward") != (query_depth is not None):
         raise ValueError(f"label_transfer: mode {mode!r} {'needs' if mode == 'backward' else 'must not read'} the "
                          "query depth; pass query_depth only to the backward (oracle) transfer")
+    if source_rgb is not None and tuple(source_rgb.shape) != (m, 3, *source_labels.shape[1:]):
+        raise ValueError(f"label_transfer: source_rgb is {tuple(source_rgb.shape)}, expected (m, 3, H, W) = "
+                         f"{(m, 3, *source_labels.shape[1:])}")
     if query_depth is not None and tuple(query_depth.shape) != tuple(hw):
         raise ValueError(f"label_transfer: query_depth is {tuple(query_depth.shape)}, the query image {tuple(hw)}")
     if mode == "backward":
@@ -167,7 +201,8 @@ def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor,
         index, visible = forward_hits(source_depth, source_K, source_c2w, query_K, query_c2w, tuple(hw), tolerance)
     labels = source_labels.long().reshape(m, -1).gather(1, index)  # (m, Hq*Wq)
     candidates = torch.where(visible & (labels != ignore_id), labels, torch.full_like(labels, UNSEEN))
-    return LabelTransfer(labels=vote(candidates).reshape(hw), seen=visible.any(0).reshape(hw))
+    rgb = None if source_rgb is None else carried_colours(source_rgb, index, visible, tuple(hw))
+    return LabelTransfer(labels=vote(candidates).reshape(hw), seen=visible.any(0).reshape(hw), rgb=rgb)
 
 
 def coverage_counts(seen: Tensor, gt_label: Tensor, ignore_id: int) -> tuple[int, int]:

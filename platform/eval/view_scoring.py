@@ -5,6 +5,9 @@
 scores a scene's views. Every score names its protocol (``sray.model.metrics``): semantic scores both from one
 confusion matrix per scene ("dataset-level") and per image ("per-image mean"); colour by PSNR, and by SSIM
 on whole images only (a strided render has no SSIM: its pixels are not neighbours in the image).
+A ray renderer may leave a pixel without prediction (every logit -inf: ``2d-transfer`` where no source sees
+the pixel); the view holds ``UNSEEN`` there and every score counts it as a miss of its true class, never a
+match (``label_transfer.UNSEEN_RULE``, as the ceilings rows count it). S-Ray and Semantic-NeRF always predict.
 LPIPS is not reported: its backbones are downloaded at run time, which this platform cannot do.
 """
 
@@ -23,6 +26,7 @@ from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SourceSet
 from sray.model.ssim import SSIM_WINDOW, ssim
 from sray.model.view_render import RayRenderer, render_view, strided_pixels
+from sray.platform.eval.label_transfer import UNSEEN, unseen_as_class
 
 
 @dataclass
@@ -31,7 +35,7 @@ class ViewPrediction:
 
     query_id: str
     pred_label: Tensor
-    """int64 (h, w) argmax of the fine pass's rendered logits."""
+    """int64 (h, w) argmax of the fine pass's rendered logits; ``UNSEEN`` where they are all -inf (no prediction)."""
     pred_rgb: Tensor
     """float32 (h, w, 3) fine-pass colour in [0, 1]."""
     gt_label: Tensor
@@ -48,15 +52,18 @@ def predict_view(render: RayRenderer, sample: EvalSample, stride: int, chunk: in
     """Render one evaluation sample (whole query image, fixed source views) with the ray renderer ``render``
     (bound to the sample's sources) in chunks of at most ``chunk`` rays (0: by device), at every ``stride``-th
     pixel in each direction: ``view_render.render_view``, the fast mode's rays and upsampling with ``fast``
-    (``render`` must then be the fast mode's, ``sray_renderer(..., fast)``). Predictions land on the host."""
+    (``render`` must then be the fast mode's, ``sray_renderer(..., fast)``). Predictions land on the host; a pixel
+    whose logits are all -inf has none (``UNSEEN``)."""
     gt_rgb, gt_label = sample.query_rgb, sample.query_label
     h, w = gt_label.shape
     fine = render_view(render, sample.query.K, sample.query.c2w, (h, w), sample.near, sample.far, chunk, device,
                        stride, fast, passes=("fine",), keys=("logits", "rgb"))["fine"]
     uv, hh, ww = strided_pixels(h, w, stride)
     iu, iv = uv[:, 0].long(), uv[:, 1].long()
+    logits = fine["logits"]  # (h', w', L)
+    pred = torch.where(torch.isneginf(logits).all(-1), UNSEEN, logits.argmax(-1))  # (h', w')
     return ViewPrediction(
-        query_id=sample.query_id, pred_label=fine["logits"].argmax(-1).cpu(), pred_rgb=fine["rgb"].cpu(),
+        query_id=sample.query_id, pred_label=pred.cpu(), pred_rgb=fine["rgb"].cpu(),
         gt_label=gt_label[iv, iu].reshape(hh, ww).long(), gt_rgb=gt_rgb[iv, iu].reshape(hh, ww, 3).float(),
         stride=stride)
 
@@ -74,17 +81,24 @@ def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device, fast
     return net.ray_renderer(encode_sources(net, sample, device), fast, runtime)
 
 
-def views_confusion(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> Tensor:
-    """The (L, L) int64 confusion matrix (ground-truth row, predicted column) summed over ``views``: the one
-    matrix of the dataset-level protocol."""
-    return sum(confusion_matrix(v.pred_label, v.gt_label, n_classes, ignore_id) for v in views)
+def scene_confusion(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> Tensor:
+    """One (L+1, L+1) int64 confusion matrix over ``views``: column L counts the pixels without prediction
+    (``unseen_as_class``); row L is empty (no ground truth holds it)."""
+    return sum(confusion_matrix(unseen_as_class(v.pred_label, n_classes), v.gt_label, n_classes + 1, ignore_id)
+               for v in views)
+
+
+def per_image_scores(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> dict[str, float]:
+    """``per_image_miou`` of ``views``, pixels without prediction counted as misses (``unseen_as_class``)."""
+    return per_image_miou([unseen_as_class(v.pred_label, n_classes) for v in views], [v.gt_label for v in views],
+                          n_classes + 1, ignore_id)
 
 
 def class_ious(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> list[float | None]:
-    """Dataset-level IoU of each class over ``views`` (one confusion matrix), None for a class absent
+    """Dataset-level IoU of each of the L classes over ``views`` (one confusion matrix), None for a class absent
     from their ground truth."""
-    conf = views_confusion(views, n_classes, ignore_id)
-    return [None if math.isnan(v) else float(v) for v in scene_metrics(conf)["iou_per_class"]]
+    ious = scene_metrics(scene_confusion(views, n_classes, ignore_id))["iou_per_class"][:n_classes]
+    return [None if math.isnan(v) else float(v) for v in ious]
 
 
 def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> dict[str, float]:
@@ -94,8 +108,8 @@ def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> 
     (per-image protocol), ``psnr``, and ``ssim`` only when every view is a whole image (stride 1):
     a strided render never gets an SSIM. Whole images smaller than the SSIM window score NaN.
     """
-    dataset = scene_metrics(views_confusion(views, n_classes, ignore_id))
-    per_image = per_image_miou([v.pred_label for v in views], [v.gt_label for v in views], n_classes, ignore_id)
+    dataset = scene_metrics(scene_confusion(views, n_classes, ignore_id))
+    per_image = per_image_scores(views, n_classes, ignore_id)
     psnrs = [psnr(v.pred_rgb, v.gt_rgb) for v in views]
     scores = {"miou": float(dataset["miou"]), "total_acc": float(dataset["total_acc"]),
               "class_avg_acc": float(dataset["class_avg_acc"]), "miou_per_image": float(per_image["miou"]),

@@ -1,14 +1,17 @@
-"""``sray eval``: score a checkpoint on unseen scenes with the paper's generalization protocol.
+"""``sray eval``: score a pretrained model on unseen scenes with the paper's generalization protocol.
 
-Every ``test`` view of a scene is rendered and scored by the shared loop, ``scene_scoring.score_scene`` (the
-model's whole-view renderer in ray chunks, every ``stride``-th pixel in each direction; stride 1 = the whole
-image), from its ``n_source`` FIXED source views (its top-ranked
-neighbours inside the scene's ``source`` split), by the pretrained model as it is: no per-scene
+The model is any registered method's :class:`~sray.platform.eval.eval_model.EvalModel`: an S-Ray checkpoint
+(:func:`evaluate_checkpoint`), or ``2d-transfer``'s 2D segmenter. Every ``test`` view of a scene is rendered and
+scored by the shared loop, ``scene_scoring.score_scene`` (the model's whole-view renderer in ray chunks, every
+``stride``-th pixel in each direction; stride 1 = the whole image), from its ``n_source`` FIXED source views
+(its top-ranked neighbours inside the scene's ``source`` split), by the pretrained model as it is: no per-scene
 optimisation.
 
 Outputs under ``out_dir``:
 
-* ``metrics.json`` (atomic): ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`: source
+* ``metrics.json`` (atomic): what the model is (``EvalModel.record``: S-Ray's ``checkpoint`` and
+  ``checkpoint_step``; 2d-transfer's ``method``, ``segmenter`` and ``tolerance``),
+  ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`: source
   rule from the shard manifest, source views, stride, render mode, inputs), then per scene and the
   mean over scenes, in blocks that each name their metric protocol: ``dataset_level`` (mIoU, total
   and class-average accuracy from one confusion matrix per scene, and per scene each class's IoU,
@@ -16,10 +19,11 @@ Outputs under ``out_dir``:
   then averaged), ``colour`` (PSNR; SSIM with its window, null unless stride is 1); per-view scores;
   the LPIPS note (not computable offline);
 * ``renders/<scene>/<view>_{pred,gt,error}.png`` at the render's own resolution (colours from
-  :mod:`sray.platform.viz.palette`) and ``<view>_panel.png`` (:func:`sray.platform.viz.renders.render_panel`).
+  :mod:`sray.platform.viz.palette`; a pixel without prediction is drawn in the unlabelled colour and counts as
+  an error) and ``<view>_panel.png`` (:func:`sray.platform.viz.renders.render_panel`).
 
-All of it goes into a new run of the chosen tracker (metrics at the checkpoint's training step,
-metrics.json and the PNGs as artifacts).
+All of it goes into a new run of the chosen tracker (metrics at the checkpoint's training step, 0 for a model
+without one; metrics.json and the PNGs as artifacts).
 """
 
 from __future__ import annotations
@@ -32,21 +36,20 @@ from typing import Any
 
 import cv2
 import numpy as np
-import torch
 from tqdm import tqdm
 
 from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.fast_render import FastRender
-from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, per_image_miou, psnr
+from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, psnr
 from sray.model.runtime import Runtime
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
-from sray.platform.checkpoints.folders import read_meta
-from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
+from sray.platform.eval.eval_model import EvalModel, checkpoint_model
+from sray.platform.eval.label_transfer import UNSEEN
 from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import ViewPrediction, class_ious, sray_renderer
+from sray.platform.eval.view_scoring import ViewPrediction, class_ious, per_image_scores
 from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
@@ -106,13 +109,15 @@ def save_view_pngs(view: ViewPrediction, scene: str, class_names: list[str], ign
                    out_dir: Path) -> dict[str, str]:
     """Predicted / ground-truth semantics, error map and the combined panel of one view, written
     under ``out_dir/renders/<scene>/``. Returns {kind: path relative to ``out_dir``}."""
-    pred, gt = view.pred_label.numpy(), view.gt_label.numpy()
+    gt = view.gt_label.numpy()
+    pred = np.where(view.pred_label.numpy() == UNSEEN, ignore_id, view.pred_label.numpy())  # no prediction: blank
     n = len(class_names)
     stem = out_dir / "renders" / scene / str(view.query_id)
     files = {
         "pred": write_png_atomic(colorize(pred, n, ignore_id), stem.with_name(f"{stem.name}_pred.png")),
         "gt": write_png_atomic(colorize(gt, n, ignore_id), stem.with_name(f"{stem.name}_gt.png")),
-        "error": write_png_atomic(error_map(pred, gt, ignore_id), stem.with_name(f"{stem.name}_error.png")),
+        "error": write_png_atomic(error_map(view.pred_label.numpy(), gt, ignore_id),
+                                  stem.with_name(f"{stem.name}_error.png")),
         "panel": render_panel(pred, gt, view.pred_rgb.numpy(), view.gt_rgb.numpy(), class_names,
                               stem.with_name(f"{stem.name}_panel.png"), ignore_id,
                               title=f"zero-shot: {scene} view {view.query_id}"),
@@ -134,7 +139,7 @@ def scene_blocks(scores: dict[str, float | None], n_views: int) -> dict[str, Any
 
 def view_scores(view: ViewPrediction, n_classes: int, ignore_id: int) -> dict[str, float]:
     """Per-image mIoU and PSNR of one view."""
-    miou = per_image_miou([view.pred_label], [view.gt_label], n_classes, ignore_id)["miou"]
+    miou = per_image_scores([view], n_classes, ignore_id)["miou"]
     return {"miou_per_image": float(miou), "psnr_db": psnr(view.pred_rgb, view.gt_rgb)}
 
 
@@ -154,11 +159,20 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
                         n_source: int = 8, stride: int = 1, tracking_uri: str | None = None,
                         experiment: str = "sray-eval", *, tracker: str = DEFAULT_TRACKER, device: str | None = None,
                         progress: bool = True, fast: FastRender | None = None, runtime: Runtime = Runtime()) -> dict:
-    """Evaluate ``checkpoint`` on ``scenes`` (default: the manifest's test scenes); see the module doc.
+    """:func:`evaluate_model` of the S-Ray checkpoint ``checkpoint`` (``eval_model.checkpoint_model``).
 
     ``fast``: render with the fast render mode (``sray.model.fast_render``) instead of the full
     renderer; the protocol's ``render`` field names it with its settings. ``runtime``: the implementation and
     rays per chunk the network runs with (default: the fast path, chunks by device).
+    """
+    return evaluate_model(checkpoint_model(checkpoint, device, fast, runtime), shards, scenes, out_dir, n_source,
+                          stride, tracking_uri, experiment, tracker=tracker, progress=progress)
+
+
+def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out_dir: Path, n_source: int = 8,
+                   stride: int = 1, tracking_uri: str | None = None, experiment: str = "sray-eval", *,
+                   tracker: str = DEFAULT_TRACKER, progress: bool = True) -> dict:
+    """Evaluate ``model`` on ``scenes`` (default: the manifest's test scenes); see the module doc.
 
     Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (the fields of the
     run's :class:`~sray.platform.tracking.tracker.RunHandle`: tracker, store, run id, experiment id,
@@ -168,31 +182,23 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
     if stride < 1 or n_source < 1:
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")
     tracking = get_tracker(tracker, tracking_uri or "")
-    checkpoint, shards, out_dir = Path(checkpoint).resolve(), Path(shards).resolve(), Path(out_dir).resolve()
+    shards, out_dir = Path(shards).resolve(), Path(out_dir).resolve()
     names, metas = select_scenes(shards, scenes)
-    net, cfg = model_from_checkpoint(checkpoint)
-    protocol = EvalProtocol.from_shards(shards, n_source, stride, cfg.model.inputs)
-    protocol = protocol.rendered_by(fast)
-    step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
-    n_classes, ignore_id = cfg.model.n_classes, cfg.model.ignore_id
+    protocol = EvalProtocol.from_shards(shards, n_source, stride, model.inputs)
+    protocol = protocol.rendered_by(model.fast)
+    n_classes, ignore_id = model.n_classes, model.ignore_id
     for name in names:
         if len(metas[name]["class_names"]) != n_classes:
             raise ValueError(f"{shards / 'manifest.json'}: scene {name!r} has {len(metas[name]['class_names'])} "
-                             f"classes, the checkpoint's model predicts {n_classes}; evaluate on data of the "
+                             f"classes, {model.subject} predicts {n_classes}; evaluate on data of the "
                              "label space the model was trained on")
-    torch_device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
-    net = net.to(torch_device).eval()
-    job = f"{checkpoint.parent.parent.name}-" if checkpoint.parent.name == "checkpoints" else ""
-    run = tracking.start_run(experiment, f"eval-{job}{checkpoint.name}-{time.strftime('%Y%m%d-%H%M%S')}",
-                              tags={"sray.kind": "eval", "sray.checkpoint": str(checkpoint),
-                                    "sray.protocol": protocol.describe()})
-    report: dict[str, Any] = {
-        "checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards),
-        "protocol": protocol.to_json(), "lpips": LPIPS_NOTE, "scenes": {}}
+    run = tracking.start_run(experiment, f"eval-{model.name}-{time.strftime('%Y%m%d-%H%M%S')}",
+                             tags={"sray.kind": "eval", **model.tags, "sray.protocol": protocol.describe()})
+    report: dict[str, Any] = {**model.record, "shards": str(shards), "protocol": protocol.to_json(),
+                              "lpips": LPIPS_NOTE, "scenes": {}}
     t0 = time.perf_counter()
     with tracking.logger(run) as logger:
-        logger.log_params({"checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards),
-                           "scenes": names, "protocol": protocol.to_json()})
+        logger.log_params({**model.record, "shards": str(shards), "scenes": names, "protocol": protocol.to_json()})
         bar = tqdm(total=sum(len(metas[s]["splits"]["test"]) for s in names), desc="eval views", unit="view",
                    disable=not progress)
         for name in names:
@@ -203,9 +209,9 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
                 per_view.append({"query_id": view.query_id, **view_scores(view, n_classes, ignore_id), "pngs": pngs})
                 bar.update(1)
 
-            scored = score_scene(lambda s: sray_renderer(net, s, torch_device, fast, runtime),
-                                 make_eval_samples(shards, name, split="test", n_source=n_source), n_classes,
-                                 ignore_id, stride, runtime.chunk, torch_device, fast, on_view=record_view)
+            scored = score_scene(model.renderer, make_eval_samples(shards, name, split="test", n_source=n_source),
+                                 n_classes, ignore_id, stride, model.chunk, model.device, model.fast,
+                                 on_view=record_view)
             block = scene_blocks(scored.scores, len(scored.views))
             block["dataset_level"]["iou_per_class"] = class_ious(scored.views, n_classes, ignore_id)
             report["scenes"][name] = {**block, "views": per_view}
@@ -214,7 +220,7 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
         report["mean"] = mean_blocks(scene_scores)
         report["wall_s"] = time.perf_counter() - t0
         metrics_path = write_json_atomic(report, out_dir / METRICS_FILE)
-        logger.log_metrics(flat_metrics(_finite_or_none(report)), step)
+        logger.log_metrics(flat_metrics(_finite_or_none(report)), model.step)
         logger.log_artifact(metrics_path)
         for name in names:  # only this evaluation's scenes, whatever else the folder holds
             logger.log_artifact(out_dir / "renders" / name, f"renders/{name}")

@@ -2,8 +2,9 @@
 
 Order of events:
 
-1. validate the request; pairs whose ``result.json`` already says ``finished`` are skipped (a
-   re-launched fleet with the same ``out_dir`` only runs what is missing or failed);
+1. validate the request (with each method's ``checked_config``: ``2d-transfer`` needs ``transfer.segmenter``);
+   pairs whose ``result.json`` already says ``finished`` are skipped (a re-launched fleet with the same
+   ``out_dir`` only runs what is missing or failed);
 2. in this process, before any task starts: the tracker's store (``FleetConfig.tracker``), the
    parent run (reused on a re-launch) and one child run per pair to run (concurrent SQLite schema
    creation corrupts stores);
@@ -38,7 +39,7 @@ from sray.platform.common.progress import progress_env
 from sray.platform.common.ray_address import check_ray_address
 from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
-from sray.platform.finetune.methods.registry import METHODS, method_names
+from sray.platform.finetune.methods.registry import METHODS, get_method, method_names
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256, model_bytes, state_file
 from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneTask, run_scene_task, write_result
 from sray.platform.tracking.fleet_parent_run import parent_run
@@ -203,6 +204,9 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     checkpoint, shards, out_dir = resolve_checkpoint(checkpoint), Path(shards).resolve(), Path(out_dir).resolve()
     scenes = list(dict.fromkeys(scenes))
     _validate(shards, scenes, list(methods))
+    for name in dict.fromkeys(methods):  # each method's own settings (2d-transfer's segmenter), before anything starts
+        if (check := get_method(name).checked_config) is not None:
+            cfg = check(cfg)
     base_sha = checkpoint_sha256(checkpoint)
     out_dir.mkdir(parents=True, exist_ok=True)
     record = _fleet_record(out_dir, base_sha, tracker)

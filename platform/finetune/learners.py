@@ -6,11 +6,14 @@
   by default the image encoder, attention and geometry, frozen; sources are encoded without
   gradient while the encoder is frozen); its artifact holds the adapted tensors only;
 * :class:`NeRFLearner`: a Semantic-NeRF trained from scratch on the same rays (the training sample's
-  source views are ignored); its artifact is the whole network.
+  source views are ignored); its artifact is the whole network;
+* :class:`TransferLearner`: the 2D segmenter of ``2d-transfer``, finetuned whole on the training samples'
+  labelled source images (the scene's finetune pool); held-out views are its labels of their source views
+  carried by the source depth. Its artifact is the whole segmenter.
 
-Both update through the shared :class:`sray.platform.train.step.TrainStep` (autocast bf16 on CPU and
+All update through the shared :class:`sray.platform.train.step.TrainStep` (autocast bf16 on CPU and
 CUDA or fp16 with a GradScaler on CUDA, clipping, the non-finite guard); the loss itself is computed in
-float32 by ``render_loss``.
+float32 (``render_loss``; the segmenter's ``source_semantic_loss``).
 """
 
 from __future__ import annotations
@@ -35,11 +38,14 @@ from sray.model.semantic_ray import SourceSet, SRayModel
 from sray.model.view_render import RayRenderer
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.fleet_config import SemanticNeRFSettings
+from sray.platform.eval.segmenter import Segmenter
+from sray.platform.eval.transfer_view import transfer_renderer
 from sray.platform.eval.view_scoring import encode_sources, sray_renderer
 from sray.platform.finetune.scene_artifacts import (
     adapted_keys,
     adapted_state,
     apply_delta,
+    save_segmenter_artifact,
     save_semantic_nerf,
     save_sray_delta,
 )
@@ -153,13 +159,25 @@ class SRayLearner(Learner):
         save_sray_delta(path, self.snapshot(), self.base_sha256, self.adapt, scene)
 
 
-class NeRFLearner(Learner):
-    """Trains a Semantic-NeRF of the scene from scratch (every parameter)."""
+class WholeNetLearner(Learner):
+    """A learner that trains every parameter of its network (the whole state dict is its snapshot)."""
 
-    def __init__(self, net: SemanticNeRF, lr: float, grad_clip: float, precision: str, device: torch.device,
+    def __init__(self, net: nn.Module, lr: float, grad_clip: float, precision: str, device: torch.device,
                  max_nonfinite_in_row: int) -> None:
         net = net.to(device).eval()
         super().__init__(net, list(net.parameters()), lr, grad_clip, precision, device, max_nonfinite_in_row)
+
+    def snapshot(self) -> dict[str, Tensor]:
+        """CPU copy of the whole state dict."""
+        return {k: v.detach().to("cpu", copy=True) for k, v in self.net.state_dict().items()}
+
+    def restore(self, state: dict[str, Tensor]) -> None:
+        """Put back a :meth:`snapshot`."""
+        self.net.load_state_dict(state)
+
+
+class NeRFLearner(WholeNetLearner):
+    """Trains a Semantic-NeRF of the scene from scratch (every parameter)."""
 
     def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
         """Loss of one training sample's rays (its source views are not used)."""
@@ -173,17 +191,39 @@ class NeRFLearner(Learner):
         """Ray renderer (deterministic samples)."""
         return lambda o, d, near, far: self.net.render_rays(o, d, near, far, stratified=False)
 
-    def snapshot(self) -> dict[str, Tensor]:
-        """CPU copy of the whole state dict."""
-        return {k: v.detach().to("cpu", copy=True) for k, v in self.net.state_dict().items()}
-
-    def restore(self, state: dict[str, Tensor]) -> None:
-        """Put back a :meth:`snapshot`."""
-        self.net.load_state_dict(state)
-
     def save(self, path: Path, scene: str) -> None:
         """Write the scene artifact (the whole model as it is now: Semantic-NeRF shares nothing)."""
         save_semantic_nerf(path, self.net, scene)
+
+
+class TransferLearner(WholeNetLearner):
+    """Finetunes the 2D segmenter of ``2d-transfer`` (every parameter) on labelled images of the scene."""
+
+    def __init__(self, net: Segmenter, lr: float, grad_clip: float, precision: str, device: torch.device,
+                 max_nonfinite_in_row: int, tolerance: float) -> None:
+        """``tolerance``: the relative depth agreement of the held-out transfer's occlusion test."""
+        super().__init__(net, lr, grad_clip, precision, device, max_nonfinite_in_row)
+        self.tolerance = tolerance
+
+    def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
+        """The segmenter's class-weighted cross-entropy on the sample's source images (m, 3, H, W) against their
+        labels (m, H, W) (the query's rays are not used). It predicts no colour: ``psnr`` is NaN."""
+        sources = sample.sources.to(self.device)
+        if sources.label is None:
+            raise ValueError("2d-transfer trains on labelled source images: build its loader with source_labels "
+                             "(SceneSetup.source_labels=True)")
+        with self.step.autocast():
+            loss = self.net.loss(sources.rgb, sources.label)
+        return loss, {"ce": loss.detach(), "psnr": torch.full((), float("nan"), device=self.device)}
+
+    def renderer(self, sample: EvalSample) -> RayRenderer:
+        """The segmenter's labels of the sample's source views carried into its query view by their depth
+        (``transfer_view.transfer_renderer``: nothing of the query view but its camera is read)."""
+        return transfer_renderer(self.net, sample, self.tolerance, self.device)
+
+    def save(self, path: Path, scene: str) -> None:
+        """Write the scene artifact (the whole segmenter as it is now, with its config)."""
+        save_segmenter_artifact(path, self.net, scene)
 
 
 def build_semantic_nerf(shards: Path, scene: str, n_classes: int, ignore_id: int, n_coarse: int, n_fine: int,

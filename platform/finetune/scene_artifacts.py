@@ -6,7 +6,8 @@ they were trained from and the adapted module list. :func:`load_scene_model` = s
 artifact, bit for bit the finetuned model; an artifact of another base checkpoint is refused.
 
 Semantic-NeRF (``semantic_nerf.safetensors``): the whole state dict (it shares nothing) and its
-config, rebuilt by :func:`load_semantic_nerf`.
+config, rebuilt by :func:`load_semantic_nerf`. ``2d-transfer`` (``segmenter.safetensors``): the whole finetuned
+2D segmenter and its config, rebuilt by :func:`load_segmenter_artifact`.
 
 The file names are the methods' (``artifact_file`` in :mod:`sray.platform.finetune.methods`).
 
@@ -32,6 +33,7 @@ from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import STATE_FILE
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.eval.segmenter import Segmenter, SegmenterConfig
 
 FORMAT = "sray-scene-delta"
 """``format`` metadata of every scene artifact."""
@@ -163,5 +165,25 @@ def load_semantic_nerf(artifact: Path, map_location: str = "cpu") -> SemanticNeR
     fields = json.loads(metadata["config"])
     fields["scene_center"] = tuple(fields["scene_center"])
     model = SemanticNeRF(SemanticNeRFConfig(**fields))
+    model.load_state_dict(tensors)
+    return model.to(map_location).eval()
+
+
+def save_segmenter_artifact(path: Path, model: Segmenter, scene: str) -> int:
+    """Write a ``2d-transfer`` scene artifact (the whole segmenter's state dict + its config); returns its bytes."""
+    tensors = {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
+    metadata = {"format": FORMAT, "version": VERSION, "method": "2d-transfer", "scene": scene,
+                "config": json.dumps(dataclasses.asdict(model.cfg))}
+    return _atomic_save(tensors, metadata, path)
+
+
+def load_segmenter_artifact(artifact: Path, map_location: str = "cpu") -> Segmenter:
+    """The finetuned 2D segmenter of one scene (eval mode) rebuilt from its ``2d-transfer`` artifact."""
+    tensors, metadata = _read(artifact)
+    if metadata.get("method") != "2d-transfer":
+        raise ValueError(f"{artifact}: field 'method' is {metadata.get('method')!r}, expected '2d-transfer'")
+    fields = json.loads(metadata["config"])
+    fields["class_weights"] = tuple(fields["class_weights"])
+    model = Segmenter(SegmenterConfig(**fields))
     model.load_state_dict(tensors)
     return model.to(map_location).eval()

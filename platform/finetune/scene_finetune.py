@@ -1,12 +1,12 @@
 """One scene's finetune (the body of a fleet task) with any registered method (:mod:`sray.platform.finetune.methods`):
-S-Ray from the shared model, Semantic-NeRF from scratch, ...
+S-Ray from the shared model, Semantic-NeRF from scratch, 2d-transfer from its pretrained segmenter, ...
 
 Every method trains on the scene's loader pool (test scenes: ``source`` + ``finetune`` views; train
-scenes: ``train`` minus held-out views) with the shared loss, and are scored on the held-out ``test``
-views rendered from their fixed source views (``make_eval_samples``), every ``eval_every`` steps and
-at step 0 (zero-shot S-Ray, untrained Semantic-NeRF). The score is the dataset-level mIoU (one
-confusion matrix over the scene's held-out views); how it was made (sources, stride, render mode,
-inputs) is the result's ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`). A
+scenes: ``train`` minus held-out views) with its learner's loss, and is scored on the held-out ``test``
+views rendered from their fixed source views (``make_eval_samples``), every ``eval_every`` steps and at
+step 0 (zero-shot S-Ray, untrained Semantic-NeRF, 2d-transfer's pretrained segmenter). The score is the
+dataset-level mIoU (one confusion matrix over the scene's held-out views); how it was made (sources, stride,
+render mode, inputs) is the result's ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`). A
 finetune stops at the first of: ``patience`` evaluations without an improvement > ``min_delta``
 (early stop), ``max_steps``, ``max_seconds`` of training time. The best evaluated state is kept
 and stored as the scene artifact (:mod:`sray.platform.finetune.scene_artifacts`). Sampling uses the scene's own
@@ -33,6 +33,7 @@ from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader
 from sray.data_tools.shards.manifest import read_manifest
+from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
@@ -130,15 +131,15 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
     return path
 
 
-def scene_protocol(task: SceneTask, inputs: str = "rgb") -> EvalProtocol:
+def scene_protocol(task: SceneTask, inputs: str = "rgb", fast: FastRender | None = None) -> EvalProtocol:
     """How the job's held-out scores are made at ``finetune.eval_stride``: from ``finetune.eval_n_source``
-    fixed sources ranked by the shards' neighbour rule and given as ``inputs`` (the shared checkpoint's
-    ``model.inputs``), rendered as ``finetune.eval_render`` says (methods that use sources, as S-Ray), or from
-    none, in full (per-scene models, as Semantic-NeRF)."""
-    ft = task.config.finetune
-    if get_method(task.method).uses_sources:
+    fixed sources ranked by the shards' neighbour rule and given as the method's ``inputs`` (else ``inputs``, the
+    shared checkpoint's ``model.inputs``), rendered by the learner's ``fast`` mode or in full (methods that use
+    sources: S-Ray, 2d-transfer), or from none, in full (per-scene models, as Semantic-NeRF)."""
+    ft, method = task.config.finetune, get_method(task.method)
+    if method.uses_sources:
         return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride,
-                                        inputs).rendered_by(ft.eval_fast())
+                                        method.inputs or inputs).rendered_by(fast)
     return EvalProtocol.without_sources(ft.eval_stride)
 
 
@@ -165,7 +166,7 @@ def _prepare(task: SceneTask,
     loader = make_train_loader(shards, n_source=setup.n_source, top_k=max(setup.top_k, setup.n_source),
                                rays_per_batch=ft.rays_per_batch or train_cfg.data.rays_per_batch,
                                batches_per_epoch=ft.eval_every, rank=0, world_size=1, num_workers=0, seed=ft.seed,
-                               scenes=[task.scene])
+                               scenes=[task.scene], source_labels=setup.source_labels)
     samples = list(make_eval_samples(shards, task.scene, split="test", n_source=ft.eval_n_source))
     return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes, train_cfg.model.inputs)
 
@@ -180,9 +181,9 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
         torch.cuda.reset_peak_memory_stats(device)  # this task's peak, not an earlier task's in the same worker
     out_dir = Path(task.out_dir)
     learner, loader, samples, (n_classes, ignore_id, full_bytes, inputs) = _prepare(task, device)
-    protocol = scene_protocol(task, inputs)
+    protocol = scene_protocol(task, inputs, learner.fast)
     clips = (SceneClips(learner.net, Path(task.shards), task.scene, task.clip_frames, cfg)
-             if task.clip_frames and get_method(task.method).uses_sources else None)
+             if task.clip_frames and get_method(task.method).clips else None)
     if logger is not None:
         logger.log_params(cfg.to_dict() | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
                                            "protocol": protocol.to_json()})

@@ -5,8 +5,9 @@ A fleet task (:mod:`sray.platform.finetune.scene_finetune`) builds the method's 
 scene, trains it on the scene's rays (:meth:`Learner.loss` and its shared training step), scores it
 on the held-out views with :meth:`Learner.renderer`, and stores the best state with
 :meth:`Learner.save` as ``Method.artifact_file``; :meth:`Method.load_artifact` reads it back. Charts
-draw the method with its :class:`ChartStyle`. This module imports nothing heavy (no torch): the CLI
-builds its ``--methods`` choices from the registry.
+draw the method with its :class:`ChartStyle`. ``sray eval`` scores a method's pretrained model, with no per-scene
+step, through its ``eval_model`` builder (given an :class:`EvalRequest`). This module imports nothing heavy (no
+torch): the CLI builds its ``--methods`` choices from the registry.
 """
 
 from __future__ import annotations
@@ -22,7 +23,9 @@ if TYPE_CHECKING:
     import torch
     from torch import nn
 
+    from sray.model.fast_render import FastRender
     from sray.platform.config.fleet_config import FleetConfig
+    from sray.platform.eval.eval_model import EvalModel
     from sray.platform.config.train_config import TrainConfig
     from sray.platform.finetune.learners import Learner
 
@@ -63,6 +66,22 @@ class SceneSetup:
     """Source views per training sample (1 for methods that use none: only the query's rays count)."""
     top_k: int
     """Training sources are drawn from this many top-ranked neighbours of the query."""
+    source_labels: bool = False
+    """Training samples also carry their source views' labels (a method that trains on whole source images)."""
+
+
+@dataclass(frozen=True)
+class EvalRequest:
+    """What ``sray eval`` hands a method's ``eval_model`` builder (each method reads what it needs)."""
+
+    checkpoint: Path | None
+    """``--checkpoint``: an S-Ray training checkpoint folder."""
+    segmenter: Path | None
+    """``--segmenter``: a 2D segmenter folder (``sray bench segmenter``)."""
+    device: str | None
+    """``--device`` (None: CUDA if available, else the CPU)."""
+    fast: FastRender | None
+    """``--render fast``'s settings (None: the full render); a method without a fast mode ignores it."""
 
 
 @dataclass(frozen=True)
@@ -85,6 +104,17 @@ class Method:
     """Held-out views are rendered from the shards' fixed source views (else from none: a per-scene model)."""
     zero_shot: ChartStyle | None = None
     """Set when the step-0 score is a zero-shot model (no per-scene step): charts draw it as its own line."""
+    eval_model: Callable[[EvalRequest], EvalModel] | None = None
+    """Builds its pretrained model for ``sray eval`` (ValueError naming the missing flag); None: it has none (it
+    trains per scene)."""
+    inputs: str = ""
+    """Source-view inputs its held-out protocol names (``rgb`` or ``rgbd``); empty: the shared checkpoint's
+    ``model.inputs`` (S-Ray reads what its checkpoint reads)."""
+    checked_config: Callable[[FleetConfig], FleetConfig] | None = None
+    """Checks a fleet's config before any task starts and returns it as the tasks get it (e.g. a path made
+    absolute); ValueError or FileNotFoundError naming the field and the fix. None: nothing to check."""
+    clips: bool = False
+    """Its learner's network is an S-Ray model that renders fly-throughs (``--clip-frames``)."""
 
     def load_artifact(self, result_dir: Path, base_checkpoint: Path) -> nn.Module:
         """The model stored in ``<result_dir>/<artifact_file>`` (``result_dir``: a pair's result folder)."""

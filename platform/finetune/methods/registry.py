@@ -1,7 +1,7 @@
 """The method registry: every per-scene method a fleet runs, by name.
 
-``sray finetune-fleet --methods`` takes its choices from :data:`METHODS`, the fleet validates its
-request against it, a fleet task builds its learner through it, and the charts and artifact loaders
+``sray finetune-fleet --methods`` and ``sray eval --method`` take their choices from :data:`METHODS`, the fleet
+validates its request against it, a fleet task builds its learner through it, and the charts and artifact loaders
 look methods up here: nothing else lists the methods. Like the reader registry, this imports no
 torch: a method module imports its learner only when the method is built.
 
@@ -12,10 +12,11 @@ workers know them too (a method registered at run time serves fleet tasks in tha
 
 from __future__ import annotations
 
-from sray.platform.finetune.methods import semantic_nerf_method, sray_method
+from sray.platform.finetune.methods import semantic_nerf_method, sray_method, transfer_method
 from sray.platform.finetune.methods.method import Method
 
-METHODS: dict[str, Method] = {m.name: m for m in (sray_method.METHOD, semantic_nerf_method.METHOD)}
+METHODS: dict[str, Method] = {m.name: m for m in (sray_method.METHOD, semantic_nerf_method.METHOD,
+                                                  transfer_method.METHOD)}
 """Every known per-scene method by name, in chart and table order."""
 
 
@@ -36,3 +37,8 @@ def get_method(name: str) -> Method:
 def method_names() -> list[str]:
     """Names of every registered method, in registration order."""
     return list(METHODS)
+
+
+def eval_method_names() -> list[str]:
+    """Names of the registered methods ``sray eval`` can score (those with an ``eval_model`` builder)."""
+    return [name for name, m in METHODS.items() if m.eval_model is not None]

@@ -3,7 +3,7 @@
 Its artifact is the adapted tensors alone plus the shared checkpoint's checksum
 (:func:`sray.platform.finetune.scene_artifacts.save_sray_delta`); loading it needs that checkpoint.
 Held-out views are rendered from the shards' fixed source views, and its step-0 score is the
-shared model's zero-shot score.
+shared model's zero-shot score (``sray eval --checkpoint``).
 """
 
 from __future__ import annotations
@@ -11,10 +11,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from sray.platform.finetune.methods.method import ChartStyle, Method, SceneContext, SceneSetup
+from sray.platform.finetune.methods.method import ChartStyle, EvalRequest, Method, SceneContext, SceneSetup
 
 if TYPE_CHECKING:
     from torch import nn
+
+    from sray.platform.eval.eval_model import EvalModel
 
 
 def build(ctx: SceneContext) -> SceneSetup:
@@ -37,8 +39,19 @@ def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
     return load_scene_model(base_checkpoint, artifact)
 
 
+def eval_model(request: EvalRequest) -> EvalModel:
+    """The shared model of ``--checkpoint`` as it is (zero-shot), rendered as ``--render`` says."""
+    from sray.platform.eval.eval_model import checkpoint_model
+
+    if request.checkpoint is None:
+        raise ValueError("method sray scores a checkpoint: pass --checkpoint FOLDER (a step_XXXXXXXXX folder written "
+                         "by `sray train`)")
+    return checkpoint_model(request.checkpoint, request.device, request.fast)
+
+
 METHOD = Method(
     name="sray", summary="finetune the shared S-Ray model", build=build, artifact_file="sray_delta.safetensors",
     load=load, style=ChartStyle(label="S-Ray finetune", color="#1f6fb4", marker="o"), uses_sources=True,
-    zero_shot=ChartStyle(label="S-Ray zero-shot (step 0, no per-scene steps)", color="#6b9fd1", marker="*"))
+    zero_shot=ChartStyle(label="S-Ray zero-shot (step 0, no per-scene steps)", color="#6b9fd1", marker="*"),
+    eval_model=eval_model, clips=True)
 """The S-Ray per-scene method."""

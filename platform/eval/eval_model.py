@@ -1,0 +1,95 @@
+"""What ``sray eval`` scores: a method's pretrained model as one record, :class:`EvalModel`, whatever the method.
+
+A method's ``eval_model`` builder (``sray.platform.finetune.methods``) makes it: S-Ray from a training checkpoint
+(:func:`checkpoint_model`), ``2d-transfer`` from a 2D segmenter folder (:func:`segmenter_model`). The zero-shot
+loop (:func:`sray.platform.eval.zero_shot.evaluate_model`) renders and scores every test view with it and writes
+``record`` at the top of ``metrics.json`` and into the tracked run's params.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from sray.data_tools.loader.sample_types import EvalSample
+from sray.model.fast_render import FastRender
+from sray.model.runtime import Runtime
+from sray.model.view_render import RayRenderer
+from sray.platform.checkpoints.folders import read_meta
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.eval.segmenter import load_segmenter
+from sray.platform.eval.transfer_view import transfer_renderer
+from sray.platform.eval.view_scoring import sray_renderer
+
+
+@dataclass(frozen=True)
+class EvalModel:
+    """A pretrained model ready to score unseen scenes with no per-scene step."""
+
+    renderer: Callable[[EvalSample], RayRenderer]
+    """The ray renderer of one evaluation sample (bound to its fixed sources)."""
+    n_classes: int
+    """Classes L it predicts (the scenes' label space must have as many)."""
+    ignore_id: int
+    """Label id of unlabelled pixels."""
+    inputs: str
+    """Source-view inputs of its protocol (``rgb`` or ``rgbd``, ``EvalProtocol.inputs``)."""
+    fast: FastRender | None
+    """The fast render mode its renderer uses (None: the full render)."""
+    chunk: int
+    """Rays per forward pass (0: by device)."""
+    device: torch.device
+    """Where it renders."""
+    step: int
+    """Step the tracked metrics are logged at (the checkpoint's training step; 0 for a model without one)."""
+    record: dict[str, Any]
+    """What it is, first in ``metrics.json`` and the run's params (e.g. ``checkpoint``, ``checkpoint_step``)."""
+    name: str
+    """Short name inside the tracked run's name (``eval-<name>-<time>``)."""
+    tags: dict[str, str]
+    """Run tags naming it (e.g. ``sray.checkpoint``)."""
+    subject: str
+    """What predicts, in error messages ("the checkpoint's model")."""
+
+
+def torch_device(device: str | None) -> torch.device:
+    """``device`` (a torch device name), or CUDA when available, else the CPU."""
+    return torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+
+
+def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRender | None = None,
+                     runtime: Runtime = Runtime()) -> EvalModel:
+    """The S-Ray model of a training checkpoint folder, rendering with ``fast`` (None: the full render) and
+    ``runtime`` (implementation, rays per chunk) on ``device`` (default: CUDA if available)."""
+    checkpoint = Path(checkpoint).resolve()
+    net, cfg = model_from_checkpoint(checkpoint)
+    step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
+    where = torch_device(device)
+    net = net.to(where).eval()
+    job = f"{checkpoint.parent.parent.name}-" if checkpoint.parent.name == "checkpoints" else ""
+    return EvalModel(renderer=lambda s: sray_renderer(net, s, where, fast, runtime), n_classes=cfg.model.n_classes,
+                     ignore_id=cfg.model.ignore_id, inputs=cfg.model.inputs, fast=fast, chunk=runtime.chunk,
+                     device=where, step=step, record={"checkpoint": str(checkpoint), "checkpoint_step": step},
+                     name=f"{job}{checkpoint.name}", tags={"sray.checkpoint": str(checkpoint)},
+                     subject="the checkpoint's model")
+
+
+def segmenter_model(folder: Path, device: str | None = None, tolerance: float = 0.05) -> EvalModel:
+    """The ``2d-transfer`` method with the 2D segmenter saved in ``folder`` (``sray bench segmenter``): source
+    labels splatted by the source depth (``transfer_view``, occlusion test ``tolerance``), an RGB-D method with one
+    render (recorded as ``full``)."""
+    folder = Path(folder).resolve()
+    segmenter, record = load_segmenter(folder)
+    where = torch_device(device)
+    segmenter = segmenter.to(where).eval()
+    return EvalModel(renderer=lambda s: transfer_renderer(segmenter, s, tolerance, where),
+                     n_classes=segmenter.cfg.n_classes, ignore_id=segmenter.cfg.ignore_id, inputs="rgbd", fast=None,
+                     chunk=0, device=where, step=0,
+                     record={"method": "2d-transfer", "segmenter": {"folder": str(folder), **record.training},
+                             "tolerance": tolerance},
+                     name=f"2d-transfer-{folder.name}",
+                     tags={"sray.method": "2d-transfer", "sray.segmenter": str(folder)}, subject="the segmenter")

@@ -1,0 +1,89 @@
+"""2D label transfer (``2d-transfer``): a 2D segmenter labels the source views, and their labels are carried into
+the query view by the SOURCE views' depth (``sray.platform.eval.transfer_view``). An RGB-D method: it reads the
+source images, cameras and depth, and of the query view only its camera.
+
+Zero-shot (step 0; ``sray eval --method 2d-transfer --segmenter FOLDER``) it uses the pretrained segmenter of
+``transfer.segmenter`` (``sray bench segmenter``); in a fleet it finetunes the whole segmenter on the scene's
+finetune pool (the training samples' labelled source images, ``transfer.images_per_step`` per step) under the
+fleet's budget and early stopping, like the other methods. Its artifact is the finetuned segmenter and its config
+(:func:`sray.platform.finetune.scene_artifacts.save_segmenter_artifact`); loading it needs no checkpoint. A held-out
+pixel no source sees gets no prediction and scores as a miss (``label_transfer.UNSEEN_RULE``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from sray.platform.finetune.methods.method import ChartStyle, EvalRequest, Method, SceneContext, SceneSetup
+
+if TYPE_CHECKING:
+    from torch import nn
+
+    from sray.platform.config.fleet_config import FleetConfig
+    from sray.platform.eval.eval_model import EvalModel
+
+NAME = "2d-transfer"
+"""The method's registry name."""
+
+
+def build(ctx: SceneContext) -> SceneSetup:
+    """A :class:`~sray.platform.finetune.learners.TransferLearner` on the pretrained segmenter of
+    ``transfer.segmenter``; training samples carry ``transfer.images_per_step`` labelled source images drawn from
+    the checkpoint's ``top_k`` neighbours (or ``finetune.top_k``). ValueError when the segmenter's classes are not
+    the checkpoint's."""
+    from sray.platform.eval.segmenter import load_segmenter
+    from sray.platform.finetune.learners import TransferLearner
+
+    cfg, ft = ctx.cfg, ctx.cfg.finetune
+    segmenter, _ = load_segmenter(Path(cfg.transfer.segmenter))
+    if segmenter.cfg.n_classes != ctx.n_classes:
+        raise ValueError(f"fleet config: transfer.segmenter {cfg.transfer.segmenter} predicts "
+                         f"{segmenter.cfg.n_classes} classes, the checkpoint and scene {ctx.scene!r} have "
+                         f"{ctx.n_classes}; train the segmenter on the checkpoint's label space")
+    learner = TransferLearner(segmenter, cfg.transfer.lr, ft.grad_clip, ft.precision, ctx.device,
+                              ft.max_nonfinite_in_row, cfg.transfer.tolerance)
+    top_k = ft.top_k or min(ctx.train_cfg.data.top_k, ctx.stored_neighbours)
+    n_images = min(cfg.transfer.images_per_step, top_k)
+    return SceneSetup(learner=learner, n_source=n_images, top_k=top_k, source_labels=True)
+
+
+def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
+    """The scene's finetuned segmenter rebuilt from its artifact (the shared checkpoint is not needed)."""
+    from sray.platform.finetune.scene_artifacts import load_segmenter_artifact
+
+    return load_segmenter_artifact(artifact)
+
+
+def eval_model(request: EvalRequest) -> EvalModel:
+    """The pretrained segmenter of ``--segmenter`` with the source-depth transfer (``--render`` does not apply)."""
+    from sray.platform.eval.eval_model import segmenter_model
+
+    if request.segmenter is None:
+        raise ValueError(f"method {NAME} needs a 2D segmenter: pass --segmenter FOLDER (written by `sray bench "
+                         "segmenter --data SHARDS --cpu-seconds S --out FOLDER`)")
+    return segmenter_model(request.segmenter, request.device)
+
+
+def checked_config(cfg: FleetConfig) -> FleetConfig:
+    """``cfg`` with ``transfer.segmenter`` made absolute (tasks may run elsewhere), once it is set and the segmenter
+    there loads; ValueError or FileNotFoundError naming the field and the fix."""
+    from sray.platform.eval.segmenter import load_segmenter
+
+    if not cfg.transfer.segmenter:
+        raise ValueError(f"fleet config: transfer.segmenter is empty; method {NAME} starts from a pretrained 2D "
+                         "segmenter: pass --segmenter FOLDER (or --set transfer.segmenter=FOLDER), a folder written "
+                         "by `sray bench segmenter`")
+    folder = Path(cfg.transfer.segmenter).resolve()
+    load_segmenter(folder)
+    return dataclasses.replace(cfg, transfer=dataclasses.replace(cfg.transfer, segmenter=str(folder)))
+
+
+METHOD = Method(
+    name=NAME, summary="2D segmenter labels carried by the source depth (RGB-D), segmenter finetuned", build=build,
+    artifact_file="segmenter.safetensors", load=load,
+    style=ChartStyle(label="2d-transfer finetune (RGB-D)", color="#e08a1e", marker="D"), uses_sources=True,
+    zero_shot=ChartStyle(label="2d-transfer zero-shot (pretrained segmenter, RGB-D)", color="#f2c27b", marker="X"),
+    eval_model=eval_model, inputs="rgbd", checked_config=checked_config)
+"""The 2D label-transfer per-scene method."""
