@@ -8,6 +8,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from sray.jobs.bench.speed_methods import other_methods
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray bench`` and its sub-benchmarks."""
@@ -60,6 +62,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="measure only these settings, by their table names, the first being the row the others "
                             "are compared with (default: all; a chosen set replaces the 'chosen settings' table "
                             "and chart)")
+    speed.add_argument("--methods", nargs="+", default=[], choices=other_methods(), metavar="METHOD",
+                       help="also time these registered methods' zero-shot models (choices: "
+                            f"{', '.join(other_methods())}), each on the same views and sources as S-Ray's setting "
+                            "of its inputs, listed beside it ('full, rgbd' is added for an RGB-D method when the "
+                            "settings lack one); never offered to the default-render rule")
+    speed.add_argument("--segmenter", type=Path, default=None,
+                       help="2D segmenter folder (`sray bench segmenter`) for a method of --methods that reads one "
+                            "(2d-transfer)")
     speed.add_argument("--tracker", default="mlflow")
     speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
     speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
@@ -185,8 +195,12 @@ def _bench_profile(args: argparse.Namespace) -> int:
 def _bench_speed_accuracy(args: argparse.Namespace) -> int:
     from sray.jobs.bench.speed_accuracy_run import run_speed_accuracy
 
-    run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker, args.tracking_uri,
-                       args.checkpoint_rgbd, args.settings)
+    try:
+        run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker,
+                           args.tracking_uri, args.checkpoint_rgbd, args.settings, args.methods, args.segmenter)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"sray bench speed-accuracy: {e}", file=sys.stderr)
+        return 2
     return 0
 
 
