@@ -76,7 +76,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.set_defaults(func=_bench_speed_accuracy)
 
     accuracy = kinds.add_parser("accuracy", help="zero-shot mIoU with seeds (resumable cells), the attention "
-                                "ablation, S-Ray finetune vs Semantic-NeRF")
+                                "ablation, the registered per-scene methods at equal finetune budgets")
     accuracy.add_argument("--preset", choices=["cpu-small", "gpu"], default="cpu-small",
                           help="cpu-small: 2 CPU cores, over several runs of about an hour; gpu: for a GPU machine")
     accuracy.add_argument("--cells", nargs="+", default=None, metavar="VARIANT:SEED",
@@ -85,6 +85,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     accuracy.add_argument("--max-minutes", type=float, default=None,
                           help="start no new cell after this many minutes (the tables are written either way)")
     accuracy.add_argument("--no-fleet", action="store_true", help="skip the finetune comparison")
+    accuracy.add_argument("--segmenter", type=Path, default=None,
+                          help="2D segmenter folder (`sray bench segmenter`): the fleet comparison then includes "
+                               "2d-transfer, whose requirement it is (every registered method whose requirements are "
+                               "met is compared)")
     accuracy.add_argument("--step-times", action="store_true",
                           help="also time one pretraining step of every stored variant side by side (fresh "
                                "processes, alternating) and chart zero-shot mIoU against it")
@@ -162,6 +166,7 @@ def _bench_segmenter(args: argparse.Namespace) -> int:
 def _bench_accuracy(args: argparse.Namespace) -> int:
     from sray.jobs.bench.accuracy import run_accuracy_benchmark
     from sray.jobs.bench.accuracy_cells import cell_errors
+    from sray.jobs.bench.accuracy_fleet import compared_methods, fleet_config
     from sray.jobs.bench.accuracy_plan import PRESETS, Cell
 
     try:
@@ -173,9 +178,14 @@ def _bench_accuracy(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"sray bench accuracy: --cells: {e}", file=sys.stderr)
         return 2
+    try:  # a given segmenter that does not load stops the command before any cell runs
+        compared_methods(fleet_config(PRESETS[args.preset], args.segmenter))
+    except FileNotFoundError as e:
+        print(f"sray bench accuracy: --segmenter: {e}", file=sys.stderr)
+        return 2
     out = args.out or Path("outputs/bench-accuracy") / args.preset
     run_accuracy_benchmark(args.preset, out, args.doc, cells, args.max_minutes, fleet=not args.no_fleet,
-                           step_times=args.step_times)
+                           step_times=args.step_times, segmenter=args.segmenter)
     failed = cell_errors(out)
     if failed:
         print(f"sray bench accuracy: cells {', '.join(failed)} failed (errors in the tables); a re-run runs them "
