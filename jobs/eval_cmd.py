@@ -13,7 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sray.jobs.method_flags import GivenFlag, refusal, unread_flags
+from sray.jobs.methods.flags import GivenFlag, refusal, unread_flags
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import eval_method_names, get_method
 

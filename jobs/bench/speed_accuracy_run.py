@@ -25,7 +25,7 @@ from sray.jobs.bench.speed_chart import chart
 from sray.jobs.bench.speed_classes import class_table, mean_rows
 from sray.jobs.bench.speed_methods import method_models
 from sray.jobs.bench.speed_verdict import checkpoint_label, rule_choice, todays_settings, verdict_table
-from sray.jobs.method_flags import flags_reading
+from sray.jobs.methods.flags import flags_reading
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.platform.common.eval_protocol import EvalProtocol, inputs_name
 from sray.platform.finetune.methods.registry import get_method

@@ -3,7 +3,7 @@ zero-shot model (a registry record with an ``eval_model``) but S-Ray, whose rows
 
 A method's model is built from its record as ``sray eval --method NAME`` builds it, from the bench's flags
 (``--checkpoint``, ``--segmenter``), on the CPU and with its full render; a flag none of the chosen methods reads
-is refused (``method_flags``), as ``sray eval`` refuses it.
+is refused (``sray.jobs.methods.flags``), as ``sray eval`` refuses it.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from sray.jobs.method_flags import refusal, unread_flags
+from sray.jobs.methods.flags import refusal, unread_flags
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import eval_method_names, get_method
 from sray.platform.finetune.methods.sray_method import NAME as SRAY

@@ -1,4 +1,4 @@
-"""The flags that build a registered method's pretrained model (an
+"""How the commands address registered methods: the flags that build a method's pretrained model (an
 :class:`~sray.platform.finetune.methods.method.EvalRequest`), and which of them a chosen method reads.
 
 A method's record names the request fields its ``eval_model`` reads (``Method.eval_reads``); a command refuses a
