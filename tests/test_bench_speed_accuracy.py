@@ -289,14 +289,15 @@ def test_the_command_lists_the_method_beside_sray_rgbd_and_refuses_what_cannot_b
         tiny_shards: Path, tiny_checkpoint: Path, tiny_segmenter: Path, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], one_thread: None) -> None:
     """With ``--methods 2d-transfer --segmenter S`` the stored table holds S-Ray's added RGB-D row and the method's
-    row after it, marked RGB-D and never judged by the rule; a method without its flag, or a flag no chosen method
-    reads, exits 2 naming it before anything is measured."""
+    row after it, marked RGB-D and never judged by the rule; a method without its flag, a flag no chosen method
+    reads, or a model of another label space exits 2 naming it before anything is measured."""
     import json
     from unittest.mock import MagicMock
 
     from sray.jobs.bench import speed_accuracy_run
     from sray.jobs.bench.speed_accuracy import Setting
     from sray.jobs.cli import main
+    from sray.platform.eval.segmenter import Segmenter, SegmenterConfig, save_segmenter
 
     monkeypatch.setattr(speed_accuracy_run, "select_settings", lambda names: [Setting("full", n_source=3)])
     monkeypatch.setattr(speed_accuracy_run, "get_tracker", lambda *args: MagicMock())
@@ -317,4 +318,7 @@ def test_the_command_lists_the_method_beside_sray_rgbd_and_refuses_what_cannot_b
     assert "pass --segmenter FOLDER" in capsys.readouterr().err
     assert main([*base, "--segmenter", str(tiny_segmenter)]) == 2
     assert "--segmenter does not apply to --methods (none)" in capsys.readouterr().err
+    wrong = save_segmenter(Segmenter(SegmenterConfig(n_classes=3)), {}, tmp_path / "three-classes")
+    assert main([*base, "--methods", "2d-transfer", "--segmenter", str(wrong)]) == 2
+    assert "method 2d-transfer: the segmenter predicts 3 classes" in capsys.readouterr().err
     assert not (tmp_path / "other.md").exists()

@@ -188,6 +188,10 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
             loaded[key] = (net.eval(), cfg, dataclasses.replace(net.cfg))  # the checkpoint's own model config
     names, metas = select_scenes(shards, None)
     class_names, cpu = list(metas[names[0]]["class_names"]), torch.device("cpu")
+    for name, model in (others or {}).items():
+        if model.n_classes != len(class_names):
+            raise ValueError(f"speed-accuracy: method {name}: {model.subject} predicts {model.n_classes} classes, the "
+                             f"test scenes of {shards} have {len(class_names)}; give it a model of their label space")
     after = {name: twin(settings, model.inputs).name for name, model in (others or {}).items()}
     rows = []
     for st in settings:
