@@ -139,21 +139,27 @@ def twin(settings: list[Setting], inputs: str) -> Setting:
     return named[-1]
 
 
-def _views(shards: Path, scenes: list[str], n_source: int, views_per_scene: int) -> dict[str, list[EvalSample]]:
-    """Scene -> its first ``views_per_scene`` test views (every one when <= 0), with ``n_source`` fixed sources."""
-    samples = {s: list(make_eval_samples(shards, s, split="test", n_source=n_source)) for s in scenes}
-    return {s: v[:views_per_scene] if views_per_scene > 0 else v for s, v in samples.items()}
+def _views(shards: Path, n_source: int, views_per_scene: int) -> Callable[[str], list[EvalSample]]:
+    """Scene -> its first ``views_per_scene`` test views (every one when <= 0), with ``n_source`` fixed sources
+    (decoded on each call: one scene in memory at a time)."""
+    def views(scene: str) -> list[EvalSample]:
+        samples = list(make_eval_samples(shards, scene, split="test", n_source=n_source))
+        return samples[:views_per_scene] if views_per_scene > 0 else samples
+
+    return views
 
 
-def timed_scores(renderer: Callable[[EvalSample], RayRenderer], views: dict[str, list[EvalSample]], n_classes: int,
-                 ignore_id: int, chunk: int, fast: FastRender | None, device: torch.device,
+def timed_scores(renderer: Callable[[EvalSample], RayRenderer], scenes: list[str],
+                 views: Callable[[str], list[EvalSample]], n_classes: int, ignore_id: int, chunk: int,
+                 fast: FastRender | None, device: torch.device,
                  context: Callable[[], AbstractContextManager] = nullcontext) -> dict[str, Any]:
-    """Render and score ``views`` (scene -> samples) with ``renderer`` inside ``context``, timed: a row's miou and
-    psnr (dataset-level per scene, mean over scenes), class_iou and class_share (``speed_classes.class_scores`` of
-    one confusion matrix over every view), s_per_view (CPU seconds of this process, all threads), wall_s_per_view
+    """Render and score the ``views`` of each of ``scenes`` with ``renderer`` inside ``context``, timed: a row's miou
+    and psnr (dataset-level per scene, mean over scenes), class_iou and class_share (``speed_classes.class_scores``
+    of one confusion matrix over every view), s_per_view (CPU seconds of this process, all threads), wall_s_per_view
     and views. Source encoding (or segmentation) and scoring count; decoding the shards does not."""
-    seconds, cpu_seconds, per_scene, conf = 0.0, 0.0, [], 0
-    for samples in views.values():
+    seconds, cpu_seconds, per_scene, conf, n_views = 0.0, 0.0, [], 0, 0
+    for scene in scenes:
+        samples = views(scene)
         t0, c0 = time.perf_counter(), time.process_time()
         with context():
             scored = score_scene(renderer, samples, n_classes, ignore_id, 1, chunk, device, fast)
@@ -161,7 +167,7 @@ def timed_scores(renderer: Callable[[EvalSample], RayRenderer], views: dict[str,
         cpu_seconds += time.process_time() - c0
         per_scene.append(scored.scores)
         conf = conf + scene_confusion(scored.views, n_classes, ignore_id)
-    n_views = sum(len(v) for v in views.values())
+        n_views += len(scored.views)
     # the last class of the matrix counts pixels without prediction: misses of their true class, never a class
     class_iou, class_share = (v[:n_classes] for v in class_scores(conf))
     return {"miou": 100 * sum(s["miou"] for s in per_scene) / len(per_scene),
@@ -197,16 +203,16 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     for st in settings:
         net, cfg, own = loaded["rgbd" if st.inputs == "rgbd" and "rgbd" in loaded else "main"]
         _apply(net, st, own)
-        runtime, views = st.runtime(), _views(shards, names, st.n_source, views_per_scene)
+        runtime, views = st.runtime(), _views(shards, st.n_source, views_per_scene)
         autocast = (lambda: torch.autocast("cpu", dtype=torch.bfloat16)) if st.bf16 else nullcontext
-        scores = timed_scores(lambda s: sray_renderer(net, s, cpu, st.fast, runtime), views, cfg.model.n_classes,
-                              cfg.model.ignore_id, runtime.chunk, st.fast, cpu, autocast)
+        scores = timed_scores(lambda s: sray_renderer(net, s, cpu, st.fast, runtime), names, views,
+                              cfg.model.n_classes, cfg.model.ignore_id, runtime.chunk, st.fast, cpu, autocast)
         new = [{"name": st.name, "method": SRAY, "inputs": net.cfg.inputs, **scores, "class_names": class_names,
                 "fine_samples": net.cfg.fine_samples, "setting": dataclasses.asdict(st)}]
         for name in (n for n, t in after.items() if t == st.name):
             model = others[name]
-            scores = timed_scores(model.renderer, views, model.n_classes, model.ignore_id, model.chunk, model.fast,
-                                  model.device)
+            scores = timed_scores(model.renderer, names, views, model.n_classes, model.ignore_id, model.chunk,
+                                  model.fast, model.device)
             new.append({"name": name, "method": name, "inputs": model.inputs, **scores, "class_names": class_names,
                         "fine_samples": None, "setting": None})
         rows.extend(new)
