@@ -57,7 +57,7 @@ def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
 
 
 def eval_model(request: EvalRequest) -> EvalModel:
-    """The pretrained segmenter of ``--segmenter`` with the source-depth transfer (``--render`` does not apply)."""
+    """The pretrained segmenter of ``--segmenter`` with the source-depth transfer (it reads no render flag)."""
     from sray.platform.eval.eval_model import segmenter_model
 
     if request.segmenter is None:
