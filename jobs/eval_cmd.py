@@ -2,7 +2,9 @@
 generalization protocol): an S-Ray checkpoint (``--method sray``, the default) or ``2d-transfer``'s segmenter.
 
 The ``--method`` choices come from the method registry (:mod:`sray.platform.finetune.methods.registry`): every
-method with an ``eval_model`` builder.
+method with an ``eval_model`` builder. A flag the chosen method does not read (its record's ``eval_reads``:
+``--checkpoint`` and ``--render``/``--fast-*`` for S-Ray, ``--segmenter`` for ``2d-transfer``) is refused with exit
+status 2, never ignored.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from sray.jobs.methods.flags import GivenFlag, refusal, unread_flags
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import eval_method_names, get_method
 
@@ -21,9 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", default="sray", choices=eval_method_names(),
                    help="registered method to score (default sray; 2d-transfer: a 2D segmenter's source labels "
                         "carried by the source depth, RGB-D)")
-    p.add_argument("--checkpoint", type=Path,
+    p.add_argument("--checkpoint", type=Path, action=GivenFlag,
                    help="checkpoint folder (…/checkpoints/step_XXXXXXXXX) written by `sray train` (method sray)")
-    p.add_argument("--segmenter", type=Path,
+    p.add_argument("--segmenter", type=Path, action=GivenFlag,
                    help="2D segmenter folder written by `sray bench segmenter` (method 2d-transfer)")
     p.add_argument("--data", type=Path, required=True, help="shard folder holding manifest.json")
     p.add_argument("--scenes", nargs="+", metavar="SCENE",
@@ -37,27 +40,33 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "in this folder)")
     p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
-    p.add_argument("--render", choices=["full", "fast"], default="fast",
-                   help="S-Ray's render (2d-transfer has one); fast (default): the fast render mode "
-                        "(sray.model.fast_render; its accuracy cost, measured paired against the full render by "
-                        "`sray bench speed-accuracy`, is in docs/benchmarks.md); full: the whole coarse + fine "
-                        "renderer at every pixel")
-    p.add_argument("--fast-stride", type=int, default=8,
+    p.add_argument("--render", choices=["full", "fast"], default="fast", action=GivenFlag,
+                   help="S-Ray's render (2d-transfer has one and refuses the flag); fast (default): the fast "
+                        "render mode (sray.model.fast_render; its accuracy cost, measured paired against the full "
+                        "render by `sray bench speed-accuracy`, is in docs/benchmarks.md); full: the whole coarse + "
+                        "fine renderer at every pixel")
+    p.add_argument("--fast-stride", type=int, default=8, action=GivenFlag,
                    help="fast mode: render every N-th pixel and upsample (default %(default)s, FastRender's)")
-    p.add_argument("--fast-confidence", type=float, default=0.9,  # FastRender's default
+    p.add_argument("--fast-confidence", type=float, default=0.9, action=GivenFlag,  # FastRender's default
                    help="fast mode: rays whose coarse confidence reaches this skip the fine pass")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, given=())
 
 
 def run(args: argparse.Namespace) -> int:
-    """Evaluate, print the table and where everything went; exit 2 on bad input."""
+    """Evaluate, print the table and where everything went; exit 2 on bad input (a flag the method does not read
+    included)."""
     from sray.model.fast_render import FastRender
     from sray.platform.eval.zero_shot import evaluate_model, format_table
 
+    method = get_method(args.method)
+    unread = unread_flags(args.given, method.eval_reads)
+    if unread:
+        print(f"sray eval: {refusal(unread, f'--method {method.name}', method.eval_reads)}", file=sys.stderr)
+        return 2
     fast = FastRender(args.fast_stride, args.fast_confidence) if args.render == "fast" else None
     request = EvalRequest(checkpoint=args.checkpoint, segmenter=args.segmenter, device=args.device, fast=fast)
     try:
-        model = get_method(args.method).eval_model(request)
+        model = method.eval_model(request)
         report = evaluate_model(model, args.data, args.scenes, args.out, n_source=args.n_source, stride=args.stride,
                                 tracking_uri=args.tracking_uri, experiment=args.experiment, tracker=args.tracker)
     except (FileNotFoundError, ValueError) as e:

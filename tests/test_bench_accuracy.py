@@ -18,7 +18,8 @@ from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_plan import HOUR, LONG, PRESETS, VARIANT_SETTINGS, Cell, Preset, World
-from sray.jobs.bench.accuracy_tables import budget_means, class_table, seed_table, targets, write_tables
+from sray.jobs.bench.accuracy_budgets import budget_means
+from sray.jobs.bench.accuracy_tables import class_table, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.config.recipes import get_recipe
@@ -213,7 +214,7 @@ def test_toy_benchmark_cells_are_trials_that_never_rerun_and_import_old_cells(ra
     assert stored_cells(out) == stored
     text = doc.read_text()
     assert "Missing cells: none." in text and "Failed in their last run" not in text
-    assert "S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets" in text
+    assert "Per-scene methods at equal wall-clock budgets" in text
     # the protocol under the tables: whole images, the preset's sources
     assert f"sources: {TOY.eval_sources} per query" in text and "pixels: whole images (stride 1)" in text
 

@@ -5,15 +5,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from fleet_fixtures import one_thread, tiny_checkpoint  # noqa: F401
+from fleet_fixtures import one_thread, tiny_checkpoint, tiny_segmenter  # noqa: F401
+from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
-from sray.jobs.bench.speed_accuracy import chart, pareto, table
+from sray.jobs.bench.speed_accuracy import pareto, table
+from sray.jobs.bench.speed_chart import chart
 from sray.model.fast_render import FastRender
 
 
 def _row(name: str, miou: float, s: float, fast: bool = False) -> dict:
-    return {"name": name, "miou": miou, "psnr": 20.0, "s_per_view": s, "views": 4,
+    return {"name": name, "method": "sray", "inputs": "rgb", "miou": miou, "psnr": 20.0, "s_per_view": s, "views": 4,
             "setting": {"fast": {"pixel_stride": 4} if fast else None}}
 
 
@@ -34,8 +36,8 @@ def test_pareto_front_reads_the_named_cost_and_score_and_breaks_cost_ties_by_sco
 
 def test_table_reports_paired_differences_and_speed_ups_against_the_first_row() -> None:
     lines = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[1:-1]] for ln in table(ROWS).splitlines()[2:]}
-    assert lines["fast a"][2] == "-0.50" and lines["fast a"][6] == "40.0x" and lines["fast a"][7] == "✓"
-    assert lines["full"][2] == "+0.00" and lines["dominated"][7] == ""
+    assert lines["fast a"][3] == "-0.50" and lines["fast a"][7] == "40.0x" and lines["fast a"][8] == "✓"
+    assert lines["full"][3] == "+0.00" and lines["dominated"][8] == "" and lines["full"][1] == "RGB"
 
 
 def test_chart_is_written(tmp_path: Path) -> None:
@@ -213,10 +215,110 @@ def test_the_command_over_two_checkpoints_applies_the_rule_to_each_and_to_their_
     assert "IoU per class" in section and "Default render by the rule" in section
     [stored] = json.loads((doc.parent / "benchmarks/speed-accuracy/cpu-only/tables.json").read_text())["tables"]
     tables = [b for b in stored["blocks"] if "header" in b]
-    assert [t["header"][0] for t in tables] == ["setting", "IoU % (Δ vs first row, points)", "checkpoint"]
+    assert [t["header"][0] for t in tables] == ["setting or method", "IoU % (Δ vs first row, points)", "checkpoint"]
     assert tables[0]["header"][-1] == "default rule"
     verdicts = tables[2]["rows"]
     assert [r[0] for r in verdicts] == ["fleet-checkpoint/step_000000000"] * 2 + ["mean of 2"]
     assert all("sray eval (fast s8 c0.9)" in r[3] and "validation, fleet held-out: not measured" in r[3]
                for r in verdicts)
     assert "Checkpoints" in stored["notes"] and "mean over them" in stored["notes"]
+
+
+def test_paired_settings_add_sray_s_row_of_a_methods_inputs_and_the_twin_is_the_last_naming_them() -> None:
+    from sray.jobs.bench.speed_accuracy import Setting, paired_settings, twin
+
+    rgb = [Setting("full", n_source=3), Setting("fast", n_source=3, fast=FastRender())]
+    added = paired_settings(rgb, ["rgbd", "rgbd"])
+    assert added == [*rgb, Setting("full, rgbd", n_source=3, inputs="rgbd")]  # the first setting's sources
+    both = [*rgb, Setting("rgbd a", inputs="rgbd"), Setting("rgbd b", inputs="rgbd", sample_scale=0.5)]
+    assert paired_settings(both, ["rgbd"]) == both and twin(both, "rgbd").name == "rgbd b"
+    with pytest.raises(ValueError, match="no setting renders S-Ray with inputs 'rgbd'"):
+        twin(rgb, "rgbd")
+
+
+def test_the_rule_never_offers_another_methods_row() -> None:
+    """A 2d-transfer row faster than every setting and losing nothing is neither chosen nor judged; the table marks
+    it as another method and shows its inputs."""
+    from sray.jobs.bench.speed_accuracy import Setting
+    from sray.jobs.bench.speed_verdict import rule_choice
+
+    settings = [Setting("full"), Setting("fast a", fast=FastRender(4, 0.9)), Setting("fast b", fast=FastRender())]
+    transfer = _class_row("2d-transfer", 60.0, 0.01, [90.0, 40.0, 20.0]) | {"method": "2d-transfer",
+                                                                             "inputs": "rgbd", "setting": None}
+    rows = [*CLASS_ROWS, transfer]
+    choice = rule_choice(rows, settings)
+    assert choice.chosen == "fast a" and "2d-transfer" not in choice.shortfalls
+    cells = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[1:-1]] for ln in
+             table(rows, choice).splitlines()[2:]}
+    assert cells["2d-transfer"][1] == "RGB-D" and cells["2d-transfer"][-1] == "another method"
+    assert cells["fast a"][-1] == "**chosen**"
+
+
+def test_a_2d_transfer_row_is_timed_beside_sray_rgbd_on_the_same_views_and_scores_as_sray_eval(
+        tiny_shards: Path, tiny_checkpoint: Path, tiny_segmenter: Path, mlflow_uri: str, tmp_path: Path,
+        one_thread: None) -> None:
+    """The 2d-transfer row comes right after S-Ray's RGB-D row (added, with the first setting's sources), has its own
+    CPU and wall time per view, is scored on the same views (same pixel shares) and its mIoU is `sray eval --method
+    2d-transfer`'s on them."""
+    import json
+
+    from sray.jobs.bench.speed_accuracy import Setting, measure, paired_settings
+    from sray.jobs.bench.speed_methods import method_models
+    from sray.jobs.cli import main
+
+    others = method_models(["2d-transfer"], tiny_checkpoint, tiny_segmenter)
+    settings = paired_settings([Setting("fast s8", n_source=3, fast=FastRender(8, 0.9))],
+                               [m.inputs for m in others.values()])
+    rows = measure(tiny_checkpoint, tiny_shards, settings, 0, progress=False, others=others)
+    assert [(r["name"], r["method"], r["inputs"]) for r in rows] == [
+        ("fast s8", "sray", "rgb"), ("full, rgbd", "sray", "rgbd"), ("2d-transfer", "2d-transfer", "rgbd")]
+    sray_rgbd, transfer = rows[1], rows[2]
+    assert transfer["setting"] is None and transfer["views"] == sray_rgbd["views"] > 1
+    assert transfer["class_share"] == sray_rgbd["class_share"]  # the same labelled pixels
+    assert 0 < transfer["s_per_view"] != sray_rgbd["s_per_view"] and transfer["wall_s_per_view"] > 0
+
+    out = tmp_path / "eval"
+    assert main(["eval", "--method", "2d-transfer", "--segmenter", str(tiny_segmenter), "--data", str(tiny_shards),
+                 "--n-source", "3", "--out", str(out), "--tracking-uri", mlflow_uri]) == 0
+    report = json.loads((out / "metrics.json").read_text())
+    assert transfer["miou"] == pytest.approx(100 * report["mean"]["dataset_level"]["miou"], abs=1e-9)
+    assert transfer["miou"] != pytest.approx(sray_rgbd["miou"])
+
+
+def test_the_command_lists_the_method_beside_sray_rgbd_and_refuses_what_cannot_be_built(
+        tiny_shards: Path, tiny_checkpoint: Path, tiny_segmenter: Path, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], one_thread: None) -> None:
+    """With ``--methods 2d-transfer --segmenter S`` the stored table holds S-Ray's added RGB-D row and the method's
+    row after it, marked RGB-D and never judged by the rule; a method without its flag, a flag no chosen method
+    reads, or a model of another label space exits 2 naming it before anything is measured."""
+    import json
+    from unittest.mock import MagicMock
+
+    from sray.jobs.bench import speed_accuracy_run
+    from sray.jobs.bench.speed_accuracy import Setting
+    from sray.jobs.cli import main
+    from sray.platform.eval.segmenter import Segmenter, SegmenterConfig, save_segmenter
+
+    monkeypatch.setattr(speed_accuracy_run, "select_settings", lambda names: [Setting("full", n_source=3)])
+    monkeypatch.setattr(speed_accuracy_run, "get_tracker", lambda *args: MagicMock())
+    doc = tmp_path / "docs" / "benchmarks.md"
+    speed_accuracy_run.run_speed_accuracy([tiny_checkpoint], tiny_shards, 1, doc, "mlflow", "",
+                                          methods=["2d-transfer"], segmenter=tiny_segmenter)
+    [stored] = json.loads((doc.parent / "benchmarks/speed-accuracy/cpu-only/tables.json").read_text())["tables"]
+    main_table = next(b for b in stored["blocks"] if "header" in b)
+    assert main_table["header"][:2] == ["setting or method", "inputs"]
+    assert [(r[0], r[1], r[-1]) for r in main_table["rows"]] == [
+        ("full", "RGB", "**chosen**"), ("full, rgbd", "RGB-D", "not offered"),
+        ("2d-transfer", "RGB-D", "another method")]
+    assert "'2d-transfer' (RGB-D, built from `--segmenter`)" in stored["notes"]
+
+    base = ["bench", "speed-accuracy", "--checkpoint", str(tiny_checkpoint), "--data", str(tiny_shards),
+            "--doc", str(tmp_path / "other.md")]
+    assert main([*base, "--methods", "2d-transfer"]) == 2
+    assert "pass --segmenter FOLDER" in capsys.readouterr().err
+    assert main([*base, "--segmenter", str(tiny_segmenter)]) == 2
+    assert "--segmenter does not apply to --methods (none)" in capsys.readouterr().err
+    wrong = save_segmenter(Segmenter(SegmenterConfig(n_classes=3)), {}, tmp_path / "three-classes")
+    assert main([*base, "--methods", "2d-transfer", "--segmenter", str(wrong)]) == 2
+    assert "method 2d-transfer: the segmenter predicts 3 classes" in capsys.readouterr().err
+    assert not (tmp_path / "other.md").exists()

@@ -208,3 +208,32 @@ def test_eval_refuses_bad_input(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_pa
     assert "stride (0)" in capsys.readouterr().err
     assert main([*args[:2], str(tmp_path / "nowhere"), *args[3:]]) == 2
     assert "nowhere" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("extra", "refused"), [
+    (["--method", "2d-transfer", "--segmenter", "seg", "--render", "full"], "--render does not apply to --method "
+                                                                           "2d-transfer (it reads --segmenter)"),
+    (["--method", "2d-transfer", "--segmenter", "seg", "--fast-stride", "8", "--fast-confidence", "0.9"],
+     "--fast-stride, --fast-confidence do not apply to --method 2d-transfer"),  # their default values: still given
+    (["--method", "2d-transfer", "--segmenter", "seg", "--checkpoint", "ckpt"], "--checkpoint does not apply"),
+    (["--checkpoint", "ckpt", "--segmenter", "seg"], "--segmenter does not apply to --method sray (it reads "
+                                                     "--checkpoint, --render, --fast-stride, --fast-confidence)"),
+])
+def test_eval_refuses_flags_the_method_does_not_read(extra, refused, tmp_path, capsys):
+    """A flag the chosen method's record does not read is refused (exit 2, the flag and the method named) before
+    anything is loaded or written, instead of being silently ignored."""
+    from sray.jobs.cli import main
+
+    out = tmp_path / "eval"
+    assert main(["eval", "--data", str(tmp_path / "shards"), "--out", str(out), *extra]) == 2
+    assert refused in capsys.readouterr().err and not out.exists()
+
+
+def test_eval_records_the_flags_typed_whatever_their_value():
+    """Only typed flags count as given (the defaults of --render and --fast-* are not refused)."""
+    from sray.jobs.cli import build_parser
+
+    parse = build_parser().parse_args
+    assert parse(["eval", "--method", "2d-transfer", "--segmenter", "s", "--data", "d"]).given == ("--segmenter",)
+    assert parse(["eval", "--checkpoint", "c", "--data", "d", "--render", "fast"]).given == ("--checkpoint",
+                                                                                            "--render")

@@ -9,8 +9,9 @@
    its trial's record; a re-run runs only the cells without one (a failed cell again) and resumes an
    interrupted pretraining from its last checkpoint, so the tables can be completed over several runs
    (``--cells`` and ``--max-minutes`` pick the piece to run; no cell starts after the limit);
-3. a finetune fleet on the unseen scenes from the ``long`` model: S-Ray finetuning against
-   Semantic-NeRF from scratch under the same wall-clock budget, read off at equal budgets;
+3. a finetune fleet on the unseen scenes from the ``long`` model: every registered method whose requirements are
+   met (:mod:`sray.jobs.bench.accuracy_fleet`: S-Ray finetuning, Semantic-NeRF from scratch, and ``2d-transfer``
+   when a segmenter is given) under the same wall-clock budget, read off at equal budgets;
 4. tables (ablation with seed spread, per-class IoU, equal budgets, the targets) and a chart, written
    into docs/benchmarks.md with the exact command, each table with its protocol line(s)
    (:mod:`sray.jobs.bench.accuracy_tables`). The tables are rewritten after every run from whatever
@@ -22,36 +23,38 @@
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 from sray.data_tools.shards.manifest import unseen_scenes
 from sray.data_tools.synth.world import make_world
 from sray.jobs.bench.accuracy_cells import cell_errors, import_old_cells, run_cells, stored_cells
-from sray.jobs.bench.accuracy_plan import COMPARED, EXPERIMENT, LONG, PRESETS, Cell, Preset
+from sray.jobs.bench.accuracy_fleet import compared_methods, fleet_config, run_comparison
+from sray.jobs.bench.accuracy_plan import LONG, PRESETS, Cell, Preset
 from sray.jobs.bench.accuracy_step_cost import measure_step_times, read_step_times, store_step_times
 from sray.jobs.bench.accuracy_tables import by_variant, write_tables
 from sray.jobs.bench.doc import machine_line
 from sray.jobs.bench.probes import resolve_device
-from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.finetune.fleet import run_fleet
-from sray.platform.finetune.methods.registry import METHODS
-from sray.platform.viz.charts import write_fleet_charts
 
 
 def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] | None = None,
                            max_minutes: float | None = None, fleet: bool = True,
-                           presets: dict[str, Preset] | None = None, step_times: bool = False) -> dict[str, dict]:
+                           presets: dict[str, Preset] | None = None, step_times: bool = False,
+                           segmenter: Path | None = None) -> dict[str, dict]:
     """Run the missing cells (``cells``: a subset of the plan; default all; a cell that raises is recorded
-    and the next ones run) and, when the long model is stored, the fleet; with ``step_times``, time a
-    pretraining step of every stored variant side by side; then rewrite the tables in ``doc`` from every
-    stored cell and the stored step times. No new cell starts after ``max_minutes``. Returns the stored
-    cells by key."""
+    and the next ones run) and, when the long model is stored, the fleet of every registered method whose
+    requirements are met (``segmenter``: the 2D segmenter ``2d-transfer`` starts from; checked before any cell
+    runs); with ``step_times``, time a pretraining step of every stored variant side by side; then rewrite the
+    tables in ``doc`` from every stored cell, fleet result and the stored step times. No new cell starts after
+    ``max_minutes``. Returns the stored cells by key."""
     p = (presets or PRESETS)[preset]
     out = out.resolve()
     tracking_uri = f"sqlite:///{out / 'mlflow.db'}"
     start_by = 0.0 if max_minutes is None else time.time() + 60 * max_minutes
+    cfg, methods, left_out = compared_methods(fleet_config(p, segmenter))
+    if fleet:
+        for name, why in left_out.items():
+            print(f"[bench] fleet: method {name} left out: {why}", flush=True)
     shards = make_world(p.world, out)
     scenes = unseen_scenes(shards)
     imported = import_old_cells(out)
@@ -65,28 +68,13 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
         print(f"[bench] {max_minutes:g} min reached: cells {', '.join(left)} are left for the next run", flush=True)
     stored = stored_cells(out)
     long_cell = next((c for c in p.plan if c.variant == LONG and c.key in stored), None)
-    if fleet and long_cell is not None and not (out / "fleet" / "done.json").exists() and not over:
-        _run_fleet(p, Path(stored[long_cell.key]["checkpoint"]), shards, scenes, out, tracking_uri)
+    if fleet and long_cell is not None and not over:
+        run_comparison(cfg, methods, Path(stored[long_cell.key]["checkpoint"]), shards, scenes, out / "fleet",
+                       tracking_uri)
     if step_times and stored:
         _time_steps(p, stored, out)
     write_tables(preset, p, stored, out / "fleet", doc, read_step_times(out), cell_errors(out))
     return stored
-
-
-def _run_fleet(p: Preset, checkpoint: Path, shards: Path, scenes: list[str], out: Path, tracking_uri: str) -> None:
-    """Finetune every unseen scene with both methods under the same budget; marks the fleet done."""
-    cfg = FleetConfig()
-    cfg.finetune.max_seconds = p.budget_s
-    cfg.finetune.max_steps = 100_000
-    cfg.finetune.patience = 10_000  # equal budgets: no early stop in the comparison
-    cfg.finetune.eval_n_source = p.eval_sources
-    cfg.finetune.eval_stride = p.fleet_eval_stride
-    cfg.gpus_per_task = p.fleet_gpus_per_task
-    cfg.experiment = EXPERIMENT
-    results = run_fleet(cfg, checkpoint, shards, scenes, out / "fleet", tracking_uri, list(COMPARED))
-    write_fleet_charts(results, out / "fleet" / "charts", METHODS)
-    (out / "fleet" / "done.json").write_text(json.dumps({"checkpoint": str(checkpoint)}) + "\n")
-
 
 
 def _time_steps(p: Preset, stored: dict[str, dict], out: Path) -> None:

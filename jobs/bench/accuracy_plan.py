@@ -68,9 +68,6 @@ encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up
 ``synth-cpu-hour``'s own settings (a test keeps them equal)."""
 
 
-COMPARED = ("sray", "semantic-nerf")
-"""Per-scene methods of the equal-budget table (the paper's per-scene optimisation comparison)."""
-
 EXPERIMENT = "sray-bench-accuracy"
 """Tracking experiment of every pretraining, evaluation and finetune of the benchmark."""
 

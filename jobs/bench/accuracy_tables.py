@@ -14,13 +14,14 @@ from typing import Any
 
 import numpy as np
 
+from sray.jobs.bench.accuracy_budgets import BUDGET_TABLE, FORMER_TITLES, budget_means, budget_table, step_zero
 from sray.jobs.bench.accuracy_cpu_time import budget_points, cpu_time_chart, cpu_time_rows
-from sray.jobs.bench.accuracy_plan import COMPARED, HOUR, LONG, Cell, Preset
+from sray.jobs.bench.accuracy_plan import HOUR, LONG, Cell, Preset
 from sray.jobs.bench.accuracy_step_cost import step_cost_chart
 from sray.jobs.bench.doc import Bench, bench_dir, markdown_table, record
 from sray.platform.common.eval_protocol import caption_lines
-from sray.platform.finetune.methods.registry import get_method
-from sray.platform.viz.curves import read_fleet_results, step_hold
+from sray.platform.finetune.methods.sray_method import NAME as SRAY
+from sray.platform.viz.curves import read_fleet_results
 from sray.platform.viz.seed_chart import write_seed_chart
 
 ZERO_SHOT_TARGET = 0.50
@@ -113,27 +114,6 @@ def class_table(p: Preset, stored: dict[str, dict[str, Any]]) -> tuple[list[str]
     return header, rows
 
 
-def at_budget(result: dict[str, Any], budget: float, key: str = "miou") -> float:
-    """The held-out score a finetune had reached after ``budget`` seconds (last evaluation before it)."""
-    curve = [c for c in result.get("curve", []) if c.get(key) is not None]
-    x = np.array([c["wall_s"] for c in curve], dtype=float)
-    y = np.array([c[key] for c in curve], dtype=float)
-    return float(step_hold(x, y, np.array([budget]))[0])
-
-
-def budget_means(results: list[dict[str, Any]], budgets: tuple[float, ...]) -> dict[str, list[float | None]]:
-    """Method -> its mean held-out mIoU over the finished scenes at each budget (None: no finite value)."""
-    means: dict[str, list[float | None]] = {}
-    for method in COMPARED:
-        finished = [r for r in results if r["method"] == method and r["status"] == "finished"]
-        column = []
-        for budget in budgets:
-            values = [v for v in (at_budget(r, budget) for r in finished) if np.isfinite(v)]
-            column.append(float(np.mean(values)) if values else None)
-        means[method] = column
-    return means
-
-
 def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | None) -> list[str]:
     """One line per target of the benchmark: the measured value and whether it is met (or what is missing)."""
     groups = by_variant(p, stored)
@@ -223,9 +203,7 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
     points, untimed = budget_points(p, stored)
 
     results = read_fleet_results(fleet_dir) if fleet_dir.is_dir() else []
-    budgets = (0.0, *p.budgets)
-    means = budget_means(results, budgets) if results else {}
-    sray_at_60 = budget_means(results, (FINETUNE_READ_S,))["sray"][0] if results else None
+    sray_at_60 = budget_means(results, (FINETUNE_READ_S,)).get(SRAY, [None])[0]
     w = p.world
     notes = [f"World: {w.train_scenes} train + {w.test_scenes} unseen test procedural scenes, {w.views} views of "
              f"{w.width}x{w.height}, world seed {w.seed}. Each cell pretrains the `{p.recipe}` recipe "
@@ -257,14 +235,16 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
                "Each class's IoU from one confusion matrix per scene, averaged over the test scenes that hold "
                "the class, then over seeds.")
     if results:
-        budget_rows = [[f"{b:.0f}", *(_pct(means[m][i]) for m in COMPARED)] for i, b in enumerate(budgets)]
         fleet_links = []
         for chart in sorted((fleet_dir / "charts").glob("*.png")):
             shutil.copy(chart, figures / chart.name)
             fleet_links.append(f"![{chart.stem}]({os.path.relpath(figures / chart.name, doc.parent)})")
-        record(bench, "S-Ray finetune vs Semantic-NeRF at equal wall-clock budgets",
-               _table(["budget s", *(f"{get_method(m).style.label} mIoU %" for m in COMPARED)], budget_rows,
-                      caption_lines((r["method"], r.get("protocol")) for r in results)),
-               doc, f"Finetunes from the `{LONG}` model, {p.budget_s:.0f} s wall-clock budget each, equal for both "
-                    "methods, read off at the last held-out evaluation before each budget (0 s = zero-shot for "
-                    "S-Ray, untrained for Semantic-NeRF).\n\n" + "\n".join(fleet_links))
+        header, rows = budget_table(results, (0.0, *p.budgets), _pct)
+        record(bench, BUDGET_TABLE,
+               _table(header, rows, caption_lines((r["method"], r.get("protocol")) for r in results)),
+               doc, f"Finetunes from the `{LONG}` model, {p.budget_s:.0f} s wall-clock budget each, equal for every "
+                    "method, read off at the last held-out evaluation before each budget (0 s = "
+                    f"{step_zero(results)}). Columns: every registered method with stored results, with the inputs "
+                    "its results' protocol records; a method whose requirement a run did not meet (2d-transfer "
+                    "without `--segmenter`) was left out of that run's fleet.\n\n" + "\n".join(fleet_links),
+               replaces=FORMER_TITLES)

@@ -8,6 +8,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from sray.jobs.bench.speed_methods import other_methods
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray bench`` and its sub-benchmarks."""
@@ -60,13 +62,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="measure only these settings, by their table names, the first being the row the others "
                             "are compared with (default: all; a chosen set replaces the 'chosen settings' table "
                             "and chart)")
+    speed.add_argument("--methods", nargs="+", default=[], choices=other_methods(), metavar="METHOD",
+                       help="also time these registered methods' zero-shot models (choices: "
+                            f"{', '.join(other_methods())}), each on the same views and sources as S-Ray's setting "
+                            "of its inputs, listed beside it ('full, rgbd' is added for an RGB-D method when the "
+                            "settings lack one); never offered to the default-render rule")
+    speed.add_argument("--segmenter", type=Path, default=None,
+                       help="2D segmenter folder (`sray bench segmenter`) for a method of --methods that reads one "
+                            "(2d-transfer)")
     speed.add_argument("--tracker", default="mlflow")
     speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
     speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     speed.set_defaults(func=_bench_speed_accuracy)
 
     accuracy = kinds.add_parser("accuracy", help="zero-shot mIoU with seeds (resumable cells), the attention "
-                                "ablation, S-Ray finetune vs Semantic-NeRF")
+                                "ablation, the registered per-scene methods at equal finetune budgets")
     accuracy.add_argument("--preset", choices=["cpu-small", "gpu"], default="cpu-small",
                           help="cpu-small: 2 CPU cores, over several runs of about an hour; gpu: for a GPU machine")
     accuracy.add_argument("--cells", nargs="+", default=None, metavar="VARIANT:SEED",
@@ -75,6 +85,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     accuracy.add_argument("--max-minutes", type=float, default=None,
                           help="start no new cell after this many minutes (the tables are written either way)")
     accuracy.add_argument("--no-fleet", action="store_true", help="skip the finetune comparison")
+    accuracy.add_argument("--segmenter", type=Path, default=None,
+                          help="2D segmenter folder (`sray bench segmenter`): the fleet comparison then includes "
+                               "2d-transfer, whose requirement it is (every registered method whose requirements are "
+                               "met is compared)")
     accuracy.add_argument("--step-times", action="store_true",
                           help="also time one pretraining step of every stored variant side by side (fresh "
                                "processes, alternating) and chart zero-shot mIoU against it")
@@ -152,6 +166,7 @@ def _bench_segmenter(args: argparse.Namespace) -> int:
 def _bench_accuracy(args: argparse.Namespace) -> int:
     from sray.jobs.bench.accuracy import run_accuracy_benchmark
     from sray.jobs.bench.accuracy_cells import cell_errors
+    from sray.jobs.bench.accuracy_fleet import compared_methods, fleet_config
     from sray.jobs.bench.accuracy_plan import PRESETS, Cell
 
     try:
@@ -163,9 +178,14 @@ def _bench_accuracy(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"sray bench accuracy: --cells: {e}", file=sys.stderr)
         return 2
+    try:  # a given segmenter that does not load stops the command before any cell runs
+        compared_methods(fleet_config(PRESETS[args.preset], args.segmenter))
+    except FileNotFoundError as e:
+        print(f"sray bench accuracy: --segmenter: {e}", file=sys.stderr)
+        return 2
     out = args.out or Path("outputs/bench-accuracy") / args.preset
     run_accuracy_benchmark(args.preset, out, args.doc, cells, args.max_minutes, fleet=not args.no_fleet,
-                           step_times=args.step_times)
+                           step_times=args.step_times, segmenter=args.segmenter)
     failed = cell_errors(out)
     if failed:
         print(f"sray bench accuracy: cells {', '.join(failed)} failed (errors in the tables); a re-run runs them "
@@ -185,8 +205,12 @@ def _bench_profile(args: argparse.Namespace) -> int:
 def _bench_speed_accuracy(args: argparse.Namespace) -> int:
     from sray.jobs.bench.speed_accuracy_run import run_speed_accuracy
 
-    run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker, args.tracking_uri,
-                       args.checkpoint_rgbd, args.settings)
+    try:
+        run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker,
+                           args.tracking_uri, args.checkpoint_rgbd, args.settings, args.methods, args.segmenter)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"sray bench speed-accuracy: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

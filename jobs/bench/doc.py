@@ -104,9 +104,10 @@ def _repo_root(doc: Path) -> Path:
 
 
 def record(bench: Bench, title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "",
-           kind: str | None = None) -> str:
+           kind: str | None = None, replaces: tuple[str, ...] = ()) -> str:
     """Print a measured table, store it as ``bench``'s table ``title`` on this device (or under ``kind``: a table
     whose rows name their machines) and rewrite the benchmark's section of ``doc``; returns the section's text.
+    ``replaces``: titles the table was stored under before (such a table is replaced, in its place).
 
     The command is this process's (``sray`` + its arguments); it and the notes name absolute paths
     relative to the repository, or as ``OUT/…``.
@@ -117,19 +118,21 @@ def record(bench: Bench, title: str, table_markdown: str, doc: Path = DEFAULT_DO
                         measured_utc=_dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%MZ"),
                         blocks=parse_blocks(table_markdown), notes=notes.strip())
     print(f"\n### {title}\n\n{render_blocks(entry.blocks)}\n\n{entry.notes}\n".rstrip() + "\n")
-    return store_table(bench, entry, doc, kind)
+    return store_table(bench, entry, doc, kind, replaces)
 
 
-def store_table(bench: Bench, entry: TableRecord, doc: Path = DEFAULT_DOC, kind: str | None = None) -> str:
+def store_table(bench: Bench, entry: TableRecord, doc: Path = DEFAULT_DOC, kind: str | None = None,
+                replaces: tuple[str, ...] = ()) -> str:
     """Put ``entry`` into ``bench``'s ``tables.json`` on this (or ``kind``) device, replacing the table of
-    the same title, and rewrite the benchmark's section of ``doc`` from the file; returns the section."""
+    the same title or of one of the former titles ``replaces`` (in the first one's place), and rewrite the
+    benchmark's section of ``doc`` from the file; returns the section."""
     kind = kind or device_kind()
     data_path = bench_dir(doc, bench, kind) / DATA_FILE
     data = (json.loads(data_path.read_text()) if data_path.exists()
             else {"benchmark": bench.title, "device": kind, "tables": []})
-    tables = data["tables"]
-    slot = next((i for i, t in enumerate(tables) if t["title"] == entry.title), len(tables))
-    tables[slot:slot + 1] = [asdict(entry)]
+    tables, titles = data["tables"], {entry.title, *replaces}
+    slot = next((i for i, t in enumerate(tables) if t["title"] in titles), len(tables))
+    tables = data["tables"] = [*tables[:slot], asdict(entry), *(t for t in tables[slot:] if t["title"] not in titles)]
     atomic_write_json(data_path, data)
     section = render_section(bench, kind, [TableRecord(**t) for t in tables], doc)
     replace_section(doc, section_title(bench, kind), section)

@@ -1,4 +1,4 @@
-"""``sray bench speed-accuracy``: the settings, their paired measurement, the table and the Pareto chart.
+"""``sray bench speed-accuracy``: the settings, their paired measurement and the table.
 
 Every setting renders the same views of the unseen test scenes (paired), so the accuracy each
 setting gives up is measured against the full render of the same run. Settings trade accuracy for
@@ -7,24 +7,25 @@ the resampled ones only), source views, precision, the fast render mode (pixel s
 fine pass only where the coarse pass is unsure) and the RGB-D mode's depth-guided samples (``rgbd``
 settings render with the sources' depth, by the ``--checkpoint-rgbd`` model when one is given, else by
 the main checkpoint's weights with ``model.inputs`` switched, as both modes share their parameters).
-Each setting is also scored per class (``speed_classes``), for the default-render rule (``render_default``).
-The command itself, over one checkpoint or several, is ``speed_accuracy_run``.
+Other registered methods' zero-shot models (``speed_methods``) are rows too, each scored and timed on the same
+views as the S-Ray row of its inputs listed just above it (:func:`paired_settings`). Each row is also scored per
+class (``speed_classes``); the default-render rule (``render_default``) reads only S-Ray's rows. The chart is
+``speed_chart``; the command itself, over one checkpoint or several, is ``speed_accuracy_run``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import textwrap
 import time
-from contextlib import nullcontext
+from collections.abc import Callable, Iterable
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import torch
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
-from sray.data_tools.atomic import save_png
+from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.jobs.bench.doc import Bench
 from sray.jobs.bench.render_default import DefaultChoice
@@ -33,10 +34,14 @@ from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.model.runtime import Runtime
+from sray.model.view_render import RayRenderer
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.common.eval_protocol import inputs_name
+from sray.platform.eval.eval_model import EvalModel
 from sray.platform.eval.scene_scoring import score_scene
 from sray.platform.eval.view_scoring import scene_confusion, sray_renderer
 from sray.platform.eval.zero_shot import select_scenes
+from sray.platform.finetune.methods.sray_method import NAME as SRAY
 
 
 @dataclass(frozen=True)
@@ -116,18 +121,71 @@ def table_title(names: list[str] | None) -> str:
     return CHOSEN_TABLE if names else DEFAULT_TABLE
 
 
+def paired_settings(settings: list[Setting], inputs: Iterable[str]) -> list[Setting]:
+    """``settings`` plus, for each of ``inputs`` (``rgb``, ``rgbd``) that no setting names, ``full, <inputs>`` with
+    the first setting's sources: S-Ray's row of those inputs, beside which a method reading them is listed."""
+    named = {st.inputs for st in settings}
+    return [*settings, *(Setting(f"full, {x}", n_source=settings[0].n_source, inputs=x)
+                         for x in dict.fromkeys(inputs) if x not in named)]
+
+
+def twin(settings: list[Setting], inputs: str) -> Setting:
+    """The setting a method reading ``inputs`` is listed after and scored like: the last one naming those inputs;
+    ValueError when none does (:func:`paired_settings` adds one)."""
+    named = [st for st in settings if st.inputs == inputs]
+    if not named:
+        raise ValueError(f"speed-accuracy: no setting renders S-Ray with inputs {inputs!r}, the row a method reading "
+                         f"them is compared with; add one (e.g. 'full, {inputs}')")
+    return named[-1]
+
+
+def _views(shards: Path, n_source: int, views_per_scene: int) -> Callable[[str], list[EvalSample]]:
+    """Scene -> its first ``views_per_scene`` test views (every one when <= 0), with ``n_source`` fixed sources
+    (decoded on each call: one scene in memory at a time)."""
+    def views(scene: str) -> list[EvalSample]:
+        samples = list(make_eval_samples(shards, scene, split="test", n_source=n_source))
+        return samples[:views_per_scene] if views_per_scene > 0 else samples
+
+    return views
+
+
+def timed_scores(renderer: Callable[[EvalSample], RayRenderer], scenes: list[str],
+                 views: Callable[[str], list[EvalSample]], n_classes: int, ignore_id: int, chunk: int,
+                 fast: FastRender | None, device: torch.device,
+                 context: Callable[[], AbstractContextManager] = nullcontext) -> dict[str, Any]:
+    """Render and score the ``views`` of each of ``scenes`` with ``renderer`` inside ``context``, timed: a row's miou
+    and psnr (dataset-level per scene, mean over scenes), class_iou and class_share (``speed_classes.class_scores``
+    of one confusion matrix over every view), s_per_view (CPU seconds of this process, all threads), wall_s_per_view
+    and views. Source encoding (or segmentation) and scoring count; decoding the shards does not."""
+    seconds, cpu_seconds, per_scene, conf, n_views = 0.0, 0.0, [], 0, 0
+    for scene in scenes:
+        samples = views(scene)
+        t0, c0 = time.perf_counter(), time.process_time()
+        with context():
+            scored = score_scene(renderer, samples, n_classes, ignore_id, 1, chunk, device, fast)
+        seconds += time.perf_counter() - t0
+        cpu_seconds += time.process_time() - c0
+        per_scene.append(scored.scores)
+        conf = conf + scene_confusion(scored.views, n_classes, ignore_id)
+        n_views += len(scored.views)
+    # the last class of the matrix counts pixels without prediction: misses of their true class, never a class
+    class_iou, class_share = (v[:n_classes] for v in class_scores(conf))
+    return {"miou": 100 * sum(s["miou"] for s in per_scene) / len(per_scene),
+            "psnr": sum(s["psnr"] for s in per_scene) / len(per_scene), "s_per_view": cpu_seconds / max(n_views, 1),
+            "wall_s_per_view": seconds / max(n_views, 1), "views": n_views, "class_iou": class_iou,
+            "class_share": class_share}
+
+
 def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_scene: int,
-            progress: bool = True, checkpoint_rgbd: Path | None = None) -> list[dict]:
-    """Score every setting on the first ``views_per_scene`` test views of each unseen scene.
+            progress: bool = True, checkpoint_rgbd: Path | None = None,
+            others: dict[str, EvalModel] | None = None) -> list[dict]:
+    """Score every setting on the first ``views_per_scene`` test views of each unseen scene (<= 0: every one).
 
     ``checkpoint_rgbd``: the model that renders the ``inputs="rgbd"`` settings (None: ``checkpoint``'s).
-    ``views_per_scene`` <= 0 scores every test view. Returns one row per setting: name, miou, psnr
-    (dataset-level protocol, mean over scenes), class_iou and class_share (each class's IoU in % over every
-    rendered view, None when absent, and its share of their labelled pixels: ``speed_classes.class_scores``),
-    class_names,
-    s_per_view (CPU seconds of this process per view, all threads, source encoding and scoring included:
-    unlike wall-clock time it does not grow when other jobs share the cores), wall_s_per_view, views, and the
-    setting.
+    ``others``: registered methods' zero-shot models by method name; each is scored on the views and sources of its
+    :func:`twin` and listed right after it. Returns one row per setting or method: name, method, inputs,
+    :func:`timed_scores`' values, class_names, and for S-Ray's rows the setting and its fine_samples (None for
+    another method's row).
     """
     loaded = {}
     for key, path in (("main", checkpoint), ("rgbd", checkpoint_rgbd)):
@@ -135,37 +193,34 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
             net, cfg = model_from_checkpoint(path)
             loaded[key] = (net.eval(), cfg, dataclasses.replace(net.cfg))  # the checkpoint's own model config
     names, metas = select_scenes(shards, None)
-    cpu = torch.device("cpu")
+    class_names, cpu = list(metas[names[0]]["class_names"]), torch.device("cpu")
+    for name, model in (others or {}).items():
+        if model.n_classes != len(class_names):
+            raise ValueError(f"speed-accuracy: method {name}: {model.subject} predicts {model.n_classes} classes, the "
+                             f"test scenes of {shards} have {len(class_names)}; give it a model of their label space")
+    after = {name: twin(settings, model.inputs).name for name, model in (others or {}).items()}
     rows = []
     for st in settings:
         net, cfg, own = loaded["rgbd" if st.inputs == "rgbd" and "rgbd" in loaded else "main"]
         _apply(net, st, own)
-        runtime = st.runtime()
-        seconds, cpu_seconds, n_views, per_scene, conf = 0.0, 0.0, 0, [], 0
-        for scene in names:
-            samples = list(make_eval_samples(shards, scene, split="test", n_source=st.n_source))
-            samples = samples[:views_per_scene] if views_per_scene > 0 else samples
-            autocast = torch.autocast("cpu", dtype=torch.bfloat16) if st.bf16 else nullcontext()
-            t0, c0 = time.perf_counter(), time.process_time()
-            with autocast:
-                scored = score_scene(lambda s: sray_renderer(net, s, cpu, st.fast, runtime), samples,
-                                     cfg.model.n_classes, cfg.model.ignore_id, 1, runtime.chunk, cpu, st.fast)
-            seconds += time.perf_counter() - t0
-            cpu_seconds += time.process_time() - c0
-            n_views += len(scored.views)
-            per_scene.append(scored.scores)
-            conf = conf + scene_confusion(scored.views, cfg.model.n_classes, cfg.model.ignore_id)
-        # the last class of the matrix counts pixels without prediction: misses of their true class, never a class
-        class_iou, class_share = (v[:cfg.model.n_classes] for v in class_scores(conf))
-        row = {"name": st.name, "miou": 100 * sum(s["miou"] for s in per_scene) / len(per_scene),
-               "psnr": sum(s["psnr"] for s in per_scene) / len(per_scene),
-               "s_per_view": cpu_seconds / max(n_views, 1), "wall_s_per_view": seconds / max(n_views, 1),
-               "views": n_views, "fine_samples": net.cfg.fine_samples, "setting": dataclasses.asdict(st),
-               "class_iou": class_iou, "class_share": class_share, "class_names": list(metas[names[0]]["class_names"])}
-        rows.append(row)
+        runtime, views = st.runtime(), _views(shards, st.n_source, views_per_scene)
+        autocast = (lambda: torch.autocast("cpu", dtype=torch.bfloat16)) if st.bf16 else nullcontext
+        scores = timed_scores(lambda s: sray_renderer(net, s, cpu, st.fast, runtime), names, views,
+                              cfg.model.n_classes, cfg.model.ignore_id, runtime.chunk, st.fast, cpu, autocast)
+        new = [{"name": st.name, "method": SRAY, "inputs": net.cfg.inputs, **scores, "class_names": class_names,
+                "fine_samples": net.cfg.fine_samples, "setting": dataclasses.asdict(st)}]
+        for name in (n for n, t in after.items() if t == st.name):
+            model = others[name]
+            scores = timed_scores(model.renderer, names, views, model.n_classes, model.ignore_id, model.chunk,
+                                  model.fast, model.device)
+            new.append({"name": name, "method": name, "inputs": model.inputs, **scores, "class_names": class_names,
+                        "fine_samples": None, "setting": None})
+        rows.extend(new)
         if progress:
-            print(f"[speed-accuracy] {st.name}: mIoU {row['miou']:.2f}  PSNR {row['psnr']:.2f}  "
-                  f"{row['s_per_view']:.2f} CPU s/view ({row['wall_s_per_view']:.2f} s wall)", flush=True)
+            for row in new:
+                print(f"[speed-accuracy] {row['name']} ({inputs_name(row['inputs'])}): mIoU {row['miou']:.2f}  "
+                      f"PSNR {row['psnr']:.2f}  {row['s_per_view']:.2f} CPU s/view ({row['wall_s_per_view']:.2f} s "
+                      "wall)", flush=True)
     return rows
 
 
@@ -188,20 +243,24 @@ def pareto(rows: list[dict], cost: str = "s_per_view", score: str = "miou") -> l
 
 
 def table(rows: list[dict], choice: DefaultChoice | None = None) -> str:
-    """Markdown table: mIoU and its paired difference to the first row (the default set's first is the
-    unoptimised full render), PSNR, seconds per view, speed-up against the first row; with ``choice``, a last
-    column saying what the default-render rule made of each setting (:func:`rule_cell`)."""
+    """Markdown table: each row's inputs, mIoU and its paired difference to the first row (the default set's first
+    is the unoptimised full render), PSNR, seconds per view, speed-up against the first row; with ``choice``, a last
+    column saying what the default-render rule made of each S-Ray setting (:func:`rule_cell`; another method's row:
+    ``another method``)."""
     ref = rows[0]
     first = "reference" if ref["name"] == "full, reference path" else f"'{ref['name']}'"
     on_front = {r["name"] for r in pareto(rows)}
     rule = (" default rule |", ":---|") if choice is not None else ("", "")
-    lines = [f"| setting | mIoU % | Δ mIoU vs {first} (points) | PSNR dB | CPU s / view | wall s / view | "
-             f"speed-up vs {first} (CPU s) | Pareto |{rule[0]}", f"|---|---:|---:|---:|---:|---:|---:|:---:|{rule[1]}"]
+    lines = [f"| setting or method | inputs | mIoU % | Δ mIoU vs {first} (points) | PSNR dB | CPU s / view | "
+             f"wall s / view | speed-up vs {first} (CPU s) | Pareto |{rule[0]}",
+             f"|---|:---|---:|---:|---:|---:|---:|---:|:---:|{rule[1]}"]
     for r in rows:
         wall = f"{r['wall_s_per_view']:.2f}" if "wall_s_per_view" in r else "-"
-        verdict = f" {rule_cell(r['name'], choice)} |" if choice is not None else ""
-        lines.append(f"| {r['name']} | {r['miou']:.2f} | {r['miou'] - ref['miou']:+.2f} | {r['psnr']:.2f} | "
-                     f"{r['s_per_view']:.2f} | {wall} | {ref['s_per_view'] / r['s_per_view']:.1f}x | "
+        verdict = ""
+        if choice is not None:
+            verdict = f" {'another method' if r['setting'] is None else rule_cell(r['name'], choice)} |"
+        lines.append(f"| {r['name']} | {inputs_name(r['inputs'])} | {r['miou']:.2f} | {r['miou'] - ref['miou']:+.2f} | "
+                     f"{r['psnr']:.2f} | {r['s_per_view']:.2f} | {wall} | {ref['s_per_view'] / r['s_per_view']:.1f}x | "
                      f"{'✓' if r['name'] in on_front else ''} |{verdict}")
     return "\n".join(lines)
 
@@ -217,30 +276,3 @@ def rule_cell(name: str, choice: DefaultChoice) -> str:
     if name == choice.reference:
         return "reference"
     return "passes" if choice.passes(name) else "✗ " + ", ".join(s.describe() for s in choice.shortfalls[name])
-
-
-def chart(rows: list[dict], path: Path, protocol: str) -> Path:
-    """Pareto chart: mIoU (%) against CPU seconds per view (log scale), the front joined by a line. Points are
-    numbered and a key beside the axes names them (names of nearby settings would overlap); the protocol is
-    wrapped into the title."""
-    fig = Figure(figsize=(11, 6.5))
-    FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.07, 0.1, 0.56, 0.74))
-    for i, r in enumerate(rows, 1):
-        ax.scatter(r["s_per_view"], r["miou"], s=40, color="tab:blue" if r["setting"]["fast"] else "tab:gray")
-        ax.annotate(str(i), (r["s_per_view"], r["miou"]), textcoords="offset points", xytext=(4, 3), fontsize=8)
-    front = pareto(rows)
-    ax.plot([r["s_per_view"] for r in front], [r["miou"] for r in front], color="tab:orange", lw=1.5,
-            label="Pareto front")
-    ax.scatter([], [], color="tab:blue", label="fast render mode")
-    ax.scatter([], [], color="tab:gray", label="full render")
-    ax.set_xscale("log")
-    ax.set_xlabel("CPU seconds per view (log scale; this process, all threads)")
-    ax.set_ylabel("mIoU (%)")
-    ax.grid(True, which="both", alpha=0.3)
-    fig.legend(*ax.get_legend_handles_labels(), loc="lower left", bbox_to_anchor=(0.655, 0.1), fontsize=8)
-    key = [f"{i:>2}  {r['name']}: {r['miou']:.2f}%, {r['s_per_view']:.2f} CPU s" for i, r in enumerate(rows, 1)]
-    fig.text(0.66, 0.84, "\n".join(key), va="top", ha="left", family="monospace", fontsize=8)
-    title = ["S-Ray zero-shot: accuracy against render time"] + textwrap.wrap(protocol, 150)
-    fig.text(0.5, 0.98, "\n".join(title), va="top", ha="center", fontsize=8)
-    return save_png(fig, path, dpi=120)

@@ -1,8 +1,9 @@
 """``sray bench speed-accuracy`` as a command: the settings measured on one checkpoint or several (a recipe's seeds),
-the default-render rule applied to each and to their mean, chart and tables written into the benchmark's section
-of docs/benchmarks.md and logged to the tracker.
+with the rows of other registered methods (``--methods``, ``speed_methods``) beside S-Ray's row of their inputs, the
+default-render rule applied to each checkpoint's S-Ray rows and to their mean, chart and tables written into the
+benchmark's section of docs/benchmarks.md and logged to the tracker.
 
-The section's first table holds one checkpoint's rows, or with several the mean over them (per setting: mIoU,
+The section's first table holds one checkpoint's rows, or with several the mean over them (per row: mIoU,
 PSNR, times and each class's IoU; each checkpoint's own tables are printed). With the full render as the first
 row, it gains a column saying what the rule (``render_default``) made of each setting, and two tables follow: the
 IoU of every class holding at least 1% of the labelled test pixels, and the rule's verdict per checkpoint (and on
@@ -19,11 +20,15 @@ from pathlib import Path
 
 from sray.jobs.bench.doc import bench_dir, record
 from sray.jobs.bench.render_default import MAX_CLASS_LOSS, MAX_MIOU_LOSS, MIN_CLASS_SHARE, DefaultChoice
-from sray.jobs.bench.speed_accuracy import SPEED, chart, measure, select_settings, table, table_title
+from sray.jobs.bench.speed_accuracy import SPEED, measure, paired_settings, select_settings, table, table_title
+from sray.jobs.bench.speed_chart import chart
 from sray.jobs.bench.speed_classes import class_table, mean_rows
+from sray.jobs.bench.speed_methods import method_models
 from sray.jobs.bench.speed_verdict import checkpoint_label, rule_choice, todays_settings, verdict_table
+from sray.jobs.methods.flags import flags_reading
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
-from sray.platform.common.eval_protocol import EvalProtocol
+from sray.platform.common.eval_protocol import EvalProtocol, inputs_name
+from sray.platform.finetune.methods.registry import get_method
 from sray.platform.tracking.registry import get_tracker
 
 
@@ -35,13 +40,19 @@ def report(rows: list[dict], choice: DefaultChoice | None) -> str:
 
 
 def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: int, doc: Path, tracker: str,
-                       tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None) -> str:
+                       tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None,
+                       methods: list[str] | None = None, segmenter: Path | None = None) -> str:
     """Measure the default settings, or those ``names`` chooses (the ``rgbd`` ones by ``checkpoint_rgbd`` when
-    given), on each of ``checkpoints``; apply the default-render rule to each and to their mean; write the chart
-    and the table section, log both; returns the section."""
-    settings, shards = select_settings(names), Path(shards)
+    given), and the zero-shot models of the registered ``methods`` (built with ``segmenter`` where one reads it;
+    S-Ray's setting of each one's inputs is added when missing) on each of ``checkpoints``; apply the default-render
+    rule to each and to their mean; write the chart and the table section, log both; returns the section.
+    ValueError or FileNotFoundError (before anything is measured) for a method that cannot be built."""
+    shards, methods = Path(shards), list(methods or [])
+    others = [method_models(methods, Path(c), segmenter) for c in checkpoints]
+    settings = paired_settings(select_settings(names), (m.inputs for m in others[0].values()))
     rgbd = Path(checkpoint_rgbd) if checkpoint_rgbd else None
-    runs = [measure(Path(c), shards, settings, views_per_scene, checkpoint_rgbd=rgbd) for c in checkpoints]
+    runs = [measure(Path(c), shards, settings, views_per_scene, checkpoint_rgbd=rgbd, others=o)
+            for c, o in zip(checkpoints, others, strict=True)]
     rows = runs[0] if len(runs) == 1 else mean_rows(runs)
     labels = [checkpoint_label(c) for c in checkpoints] + ([f"mean of {len(runs)}"] if len(runs) > 1 else [])
     choices = [rule_choice(r, settings) for r in (runs if len(runs) == 1 else [*runs, rows])]
@@ -56,7 +67,7 @@ def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: i
                 f"{100 * MIN_CLASS_SHARE:g}% of the labelled test pixels, against '{rows[0]['name']}':")
         body += "\n\n" + rule + "\n\n" + verdict_table(labels, choices, today)
     protocol = (EvalProtocol.from_shards(shards, 8, 1).describe().replace("render: full", "render: per setting")
-                .replace("inputs: rgb", "inputs: per setting (the checkpoint's unless the setting says rgbd)"))
+                .replace("inputs: rgb", "inputs: per row (the table's inputs column)"))
     png = chart(rows, bench_dir(doc, SPEED) / ("chosen.png" if names else "default.png"), protocol)
     section = record(SPEED, table_title(names), body, doc,
                      notes(rows, checkpoints, shards, views_per_scene, checkpoint_rgbd, today, protocol, png, doc))
@@ -66,7 +77,8 @@ def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: i
     with tracking.logger(run) as logger:
         logger.log_params({"checkpoint": ", ".join(str(c) for c in checkpoints),
                            "checkpoint_rgbd": str(checkpoint_rgbd or "same weights"), "shards": str(shards),
-                           "views_per_scene": views_per_scene,
+                           "views_per_scene": views_per_scene, "methods": ", ".join(methods) or "none",
+                           "segmenter": str(segmenter or "none"),
                            "default_by_rule": choices[-1].chosen if choices[-1] is not None else "not applied"})
         for i, r in enumerate(rows):
             logger.log_metrics({"miou": r["miou"], "psnr": r["psnr"], "cpu_s_per_view": r["s_per_view"],
@@ -82,8 +94,8 @@ def notes(rows: list[dict], checkpoints: list[Path], shards: Path, views_per_sce
     """The notes under the section's tables: what was measured on which views, what each setting means, the
     per-class and rule conventions, the setting each of ``today``'s defaults renders as, the protocol, the chart."""
     rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
-    own_fine = ", ".join(sorted({f"`fine_samples={r['fine_samples']}`" for r in rows
-                                 if not r["setting"]["fine_samples"] and not r["setting"]["fast"]})) or "-"
+    own_fine = ", ".join(sorted({f"`fine_samples={r['fine_samples']}`" for r in rows if r["setting"] is not None
+                                 and not r["setting"]["fine_samples"] and not r["setting"]["fast"]})) or "-"
     which = ("every test view" if views_per_scene <= 0 else "the first test view" if views_per_scene == 1 else
              f"the first {views_per_scene} test views")
     defaults = "; ".join(f"{user} '{name}'" if name else f"{user} not measured" for user, name in today.items())
@@ -109,7 +121,22 @@ def notes(rows: list[dict], checkpoints: list[Path], shards: Path, views_per_sce
             f"sources' depth (docs/model.md, RGB-D mode), rendered by "
             f"{rgbd_by}. The default-render rule (`jobs/bench/render_default.py`) is offered the settings that differ "
             f"from the first row only in how they render (full or fast, implementation): the same sources, inputs, "
-            f"samples and precision; 'not offered' marks the others. Today's defaults render as: {defaults} "
+            f"samples and precision; 'not offered' marks the others, and it never reads another method's row. "
+            f"{method_sentence(rows)}Today's defaults render as: {defaults} "
             f"(validation and the fleet score a strided grid of their own and render its every pixel: per scored "
             f"pixel, pixel stride 1). Protocol: {protocol}.\n\n"
             f"![speed-accuracy]({os.path.relpath(png, doc.parent)})")
+
+
+def method_sentence(rows: list[dict]) -> str:
+    """What the rows of other registered methods are (empty when there are none), for the notes."""
+    others = [r for r in rows if r["setting"] is None]
+    if not others:
+        return ""
+    named = ", ".join(f"'{r['name']}' ({inputs_name(r['inputs'])}, built from "
+                      f"{', '.join(f'`{f}`' for f in flags_reading(get_method(r['method']).eval_reads))})"
+                      for r in others)
+    return (f"Other registered methods' rows ({named}): each method's zero-shot model as `sray eval --method NAME` "
+            "builds it, full render, scored on the same views with the same sources as the S-Ray setting of its "
+            "inputs listed just above it (S-Ray's RGB-D row beside an RGB-D method) and timed the same way, "
+            "everything it runs per view included. ")

@@ -1,6 +1,6 @@
-"""The default-render rule applied to ``sray bench speed-accuracy``'s rows: which settings it is offered, which
-measured setting each user of a default renders with today, and the verdict table (one line per checkpoint and
-one for their mean)."""
+"""The default-render rule applied to ``sray bench speed-accuracy``'s rows: which of S-Ray's settings it is offered
+(never another method's row), which measured setting each user of a default renders with today, and the verdict
+table (one line per checkpoint and one for their mean)."""
 
 from __future__ import annotations
 
@@ -13,13 +13,15 @@ from sray.jobs.bench.speed_classes import measured
 
 
 def rule_choice(rows: list[dict], settings: list[Setting]) -> DefaultChoice | None:
-    """The rule over the rows whose settings evaluate as the first row does (``Setting.same_evaluation``), against
-    the first row; None when the first row is not a full render (then there is no reference for the losses)."""
+    """The rule over S-Ray's rows (those carrying a ``setting``; another method's row is never offered) whose
+    settings evaluate as the first row does (``Setting.same_evaluation``), against the first row; None when the first
+    row is not a full render (then there is no reference for the losses)."""
     by_name = {s.name: s for s in settings}
     first = by_name[rows[0]["name"]]
     if first.fast is not None:
         return None
-    return choose_default([measured(r) for r in rows if by_name[r["name"]].same_evaluation(first)], first.name)
+    offered = [r for r in rows if r["setting"] is not None and by_name[r["name"]].same_evaluation(first)]
+    return choose_default([measured(r) for r in offered], first.name)
 
 
 def todays_settings(settings: list[Setting]) -> dict[str, str | None]:

@@ -29,8 +29,17 @@ INPUTS = ("rgb", "rgbd")
 """What the model is given of its source views: ``rgb`` posed colour images only; ``rgbd`` also their
 depth maps (``sray.model.config.SRayConfig.inputs``; never the query view's depth). Later papers list
 depth-using methods apart, so every number says which it is."""
+INPUT_NAMES = {"rgb": "RGB", "rgbd": "RGB-D"}
+"""How tables and legends name each of :data:`INPUTS`."""
 NO_SOURCES = "none (per-scene model)"
 """``source_rule`` of a method that renders without source views (Semantic-NeRF)."""
+
+
+def inputs_name(inputs: str) -> str:
+    """``RGB`` or ``RGB-D`` for a protocol's ``inputs``; ValueError naming the known ones otherwise."""
+    if inputs not in INPUT_NAMES:
+        raise ValueError(f"eval protocol: inputs is {inputs!r}; use one of {INPUTS}")
+    return INPUT_NAMES[inputs]
 
 
 def _ordinal(n: int) -> str:

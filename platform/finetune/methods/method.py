@@ -81,7 +81,7 @@ class EvalRequest:
     device: str | None
     """``--device`` (None: CUDA if available, else the CPU)."""
     fast: FastRender | None
-    """``--render fast``'s settings (None: the full render); a method without a fast mode ignores it."""
+    """``--render fast``'s settings (None: the full render); read only by a method whose ``eval_reads`` names it."""
 
 
 @dataclass(frozen=True)
@@ -107,6 +107,9 @@ class Method:
     eval_model: Callable[[EvalRequest], EvalModel] | None = None
     """Builds its pretrained model for ``sray eval`` (ValueError naming the missing flag); None: it has none (it
     trains per scene)."""
+    eval_reads: tuple[str, ...] = ()
+    """The :class:`EvalRequest` fields its ``eval_model`` reads besides ``device`` (``checkpoint``, ``segmenter``,
+    ``fast``): a command refuses the flags that set any other (``sray eval --method 2d-transfer --render fast``)."""
     inputs: str = ""
     """Source-view inputs its held-out protocol names (``rgb`` or ``rgbd``); empty: the shared checkpoint's
     ``model.inputs`` (S-Ray reads what its checkpoint reads)."""

@@ -19,6 +19,10 @@ if TYPE_CHECKING:
     from sray.platform.eval.eval_model import EvalModel
 
 
+NAME = "sray"
+"""The method's registry name."""
+
+
 def build(ctx: SceneContext) -> SceneSetup:
     """An :class:`~sray.platform.finetune.learners.SRayLearner` on the shared model; training samples
     with the checkpoint's source count (or ``finetune.n_source``) drawn from its ``top_k`` neighbours."""
@@ -50,8 +54,8 @@ def eval_model(request: EvalRequest) -> EvalModel:
 
 
 METHOD = Method(
-    name="sray", summary="finetune the shared S-Ray model", build=build, artifact_file="sray_delta.safetensors",
+    name=NAME, summary="finetune the shared S-Ray model", build=build, artifact_file="sray_delta.safetensors",
     load=load, style=ChartStyle(label="S-Ray finetune", color="#1f6fb4", marker="o"), uses_sources=True,
     zero_shot=ChartStyle(label="S-Ray zero-shot (step 0, no per-scene steps)", color="#6b9fd1", marker="*"),
-    eval_model=eval_model, clips=True)
+    eval_model=eval_model, eval_reads=("checkpoint", "fast"), clips=True)
 """The S-Ray per-scene method."""

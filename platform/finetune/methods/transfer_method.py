@@ -57,7 +57,7 @@ def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
 
 
 def eval_model(request: EvalRequest) -> EvalModel:
-    """The pretrained segmenter of ``--segmenter`` with the source-depth transfer (``--render`` does not apply)."""
+    """The pretrained segmenter of ``--segmenter`` with the source-depth transfer (it reads no render flag)."""
     from sray.platform.eval.eval_model import segmenter_model
 
     if request.segmenter is None:
@@ -85,5 +85,5 @@ METHOD = Method(
     artifact_file="segmenter.safetensors", load=load,
     style=ChartStyle(label="2d-transfer finetune (RGB-D)", color="#e08a1e", marker="D"), uses_sources=True,
     zero_shot=ChartStyle(label="2d-transfer zero-shot (pretrained segmenter, RGB-D)", color="#f2c27b", marker="X"),
-    eval_model=eval_model, inputs="rgbd", checked_config=checked_config)
+    eval_model=eval_model, eval_reads=("segmenter",), inputs="rgbd", checked_config=checked_config)
 """The 2D label-transfer per-scene method."""

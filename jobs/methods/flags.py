@@ -1,0 +1,49 @@
+"""How the commands address registered methods: the flags that build a method's pretrained model (an
+:class:`~sray.platform.finetune.methods.method.EvalRequest`), and which of them a chosen method reads.
+
+A method's record names the request fields its ``eval_model`` reads (``Method.eval_reads``); a command refuses a
+flag that sets any other field (``sray eval --method 2d-transfer --render fast``) instead of ignoring it.
+:class:`GivenFlag` records which flags were typed, so that a flag given with its default value counts too.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+REQUEST_FLAGS: dict[str, str] = {"--checkpoint": "checkpoint", "--segmenter": "segmenter", "--render": "fast",
+                                 "--fast-stride": "fast", "--fast-confidence": "fast"}
+"""Command-line flag -> the ``EvalRequest`` field it sets."""
+
+
+class GivenFlag(argparse.Action):
+    """``store``, and the flag's option string appended to ``namespace.given`` (a tuple; give the parser
+    ``set_defaults(given=())``)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        """Store ``values`` under the flag's destination and record ``option_string`` as given."""
+        setattr(namespace, self.dest, values)
+        namespace.given = (*getattr(namespace, "given", ()), option_string)
+
+
+def flags_reading(reads: Iterable[str]) -> list[str]:
+    """The flags (``REQUEST_FLAGS``) that set one of the request fields ``reads``."""
+    fields = set(reads)
+    return [flag for flag, field in REQUEST_FLAGS.items() if field in fields]
+
+
+def unread_flags(given: Sequence[str], reads: Iterable[str]) -> list[str]:
+    """The flags among ``given`` that set a request field outside ``reads``, each once, in the order given."""
+    fields = set(reads)
+    return [flag for flag in dict.fromkeys(given) if flag in REQUEST_FLAGS and REQUEST_FLAGS[flag] not in fields]
+
+
+def refusal(flags: list[str], who: str, reads: Iterable[str]) -> str:
+    """The error for ``flags`` that ``who`` (``--method 2d-transfer``) does not read: the flags, what it reads, the
+    fix."""
+    them = "it" if len(flags) == 1 else "them"
+    used = ", ".join(flags_reading(reads)) or "none of these flags"
+    return (f"{', '.join(flags)} {'does' if len(flags) == 1 else 'do'} not apply to {who} (it reads {used}); "
+            f"drop {them}")
