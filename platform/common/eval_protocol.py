@@ -30,8 +30,6 @@ INPUTS = ("rgb", "rgbd")
 """What the model is given of its source views: ``rgb`` posed colour images only; ``rgbd`` also their
 depth maps (``sray.model.config.SRayConfig.inputs``; never the query view's depth). Later papers list
 depth-using methods apart, so every number says which it is."""
-LATER_FIELDS = ("train_inputs",)
-"""Fields added after descriptors were first stored: a stored descriptor may lack them (the default applies)."""
 NO_SOURCES = "none (per-scene model)"
 """``source_rule`` of a method that renders without source views (Semantic-NeRF)."""
 
@@ -40,6 +38,10 @@ def _ordinal(n: int) -> str:
     """2 -> '2nd', 3 -> '3rd', 4 -> '4th', 11 -> '11th'."""
     suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
     return f"{n}{suffix}"
+
+
+LATER_FIELDS = ("train_inputs",)
+"""Fields added after descriptors were first stored: a stored descriptor may lack them (the default applies)."""
 
 
 @dataclass(frozen=True)
