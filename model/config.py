@@ -84,6 +84,12 @@ class SRayConfig:
     """Weight of the auxiliary per-pixel cross-entropy on the source views' own labels, read off the encoder's
     feature maps by a linear head (``source_semantics``; a departure from the paper, docs/model.md); 0 (the
     paper) builds no head. The head exists only in training: rendering never reads it."""
+    lambda_depth: float = 0.0
+    """Weight of the training-time depth loss (``depth_loss``; a departure from the paper, docs/model.md): per
+    pass, the L1 distance between the rendered expected z-depth and the query pixel's ground-truth z-depth, in
+    units of the ray's depth range far - near, over the rays whose ground-truth depth is known. It reads the
+    training query's depth, never a test view's: evaluation stays RGB-only. 0 (the paper) leaves the loss
+    unchanged and the loader does not decode the query's depth."""
     ignore_id: int = 255
     """Label id of unlabelled pixels; never a prediction target."""
     class_weights: tuple[float, ...] = ()
@@ -122,6 +128,8 @@ class SRayConfig:
             raise bad("depth_band", f"is {self.depth_band}; it must be > 0 (metres)")
         if self.lambda_src_sem < 0:
             raise bad("lambda_src_sem", f"is {self.lambda_src_sem}; use 0 (no source-view head) or a positive weight")
+        if not self.lambda_depth >= 0:
+            raise bad("lambda_depth", f"is {self.lambda_depth}; use 0 (no depth loss) or a positive weight")
         if self.depth_freqs < 0:
             raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
         if self.density_activation not in DENSITY_ACTIVATIONS:
@@ -146,6 +154,13 @@ class SRayConfig:
                       f"none or {self.n_classes} positive weights")
         if len(self.weight_hidden) != 2 or len(self.geo_hidden) != 2:
             raise bad("weight_hidden/geo_hidden", "must each hold exactly two widths")
+
+    @property
+    def train_inputs(self) -> str:
+        """What training read of its views besides colours and labels, in ``INPUTS``' words: ``rgbd`` when it read
+        ground-truth depth (the sources' with ``inputs='rgbd'``, the query's with ``lambda_depth`` > 0), else
+        ``rgb``. Evaluation reads ``inputs`` only."""
+        return "rgbd" if self.inputs == "rgbd" or self.lambda_depth > 0 else "rgb"
 
     @property
     def n_fine_total(self) -> int:

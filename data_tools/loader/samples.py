@@ -83,7 +83,8 @@ def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str
 
 def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
                  rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int,
-                 augment: Augmentation | None = None, source_labels: bool = False) -> TrainSample:
+                 augment: Augmentation | None = None, source_labels: bool = False,
+                 query_depth: bool = False) -> TrainSample:
     """A training sample: sources, query camera and ``n_rays`` random pixels of the query with targets.
 
     Pixels are drawn uniformly without replacement (with replacement only when ``n_rays`` exceeds
@@ -91,7 +92,9 @@ def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[s
     (R, 2) holds integer (u, v) pixel centres as float32. Target label ids are checked against the
     scene's ``n_classes`` (:func:`check_label_ids`). ``augment`` (:mod:`.augment`) jitters and
     resizes the sources; None, or every option off, gives the plain sample. ``source_labels`` also
-    delivers the source views' class ids (``SourceViews.label``, for the source-view semantic loss).
+    delivers the source views' class ids (``SourceViews.label``, for the source-view semantic loss);
+    ``query_depth`` the query view's stored z-depth at the sampled pixels (``target_depth``, for the depth loss;
+    its PNG is decoded only then).
     """
     query = views[query_id]
     rgb, label = query.rgb(), query.label()                                           # (H, W, 3), (H, W)
@@ -111,7 +114,8 @@ def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[s
         near=float(near), far=float(far),
         pixels=torch.from_numpy(np.stack([u, v], axis=1).astype(np.float32)),          # (R, 2)
         target_label=torch.from_numpy(targets),
-        target_rgb=torch.from_numpy(rgb[v, u].astype(np.float32) / 255.0))            # (R, 3)
+        target_rgb=torch.from_numpy(rgb[v, u].astype(np.float32) / 255.0),            # (R, 3)
+        target_depth=torch.from_numpy(query.depth()[v, u]) if query_depth else None)  # (R,) metres
 
 
 def eval_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], scene: str,

@@ -6,9 +6,10 @@ Every metrics JSON sray writes (``sray eval``'s metrics.json, a fleet's result.j
 :meth:`EvalProtocol.describe` under it (:func:`caption_lines`).
 
 Fields: how the source views were chosen (the shard manifest's neighbour rule and its version, read
-from ``manifest.json``, never assumed), how many, whole or strided images, render mode and inputs,
-and the names of the two mIoU protocols (:mod:`sray.model.metrics`). SSIM is a whole-image score:
-it is computed only when ``stride == 1`` (:attr:`EvalProtocol.scores_ssim`).
+from ``manifest.json``, never assumed), how many, whole or strided images, render mode and inputs, what the
+model's training read (``train_inputs``: ground-truth depth a model never gets at test time), and the names
+of the two mIoU protocols (:mod:`sray.model.metrics`). SSIM is a whole-image score: it is computed only when
+``stride == 1`` (:attr:`EvalProtocol.scores_ssim`).
 """
 
 from __future__ import annotations
@@ -48,6 +49,10 @@ def _ordinal(n: int) -> str:
     return f"{n}{suffix}"
 
 
+LATER_FIELDS = ("train_inputs",)
+"""Fields added after descriptors were first stored: a stored descriptor may lack them (the default applies)."""
+
+
 @dataclass(frozen=True)
 class EvalProtocol:
     """How a set of evaluation scores was made (JSON: :meth:`to_json`, one line: :meth:`describe`)."""
@@ -64,6 +69,11 @@ class EvalProtocol:
     """Render mode, one of :data:`RENDER_MODES` (``fast`` followed by its settings)."""
     inputs: str = "rgb"
     """Source-view inputs, one of :data:`INPUTS`."""
+    train_inputs: str = ""
+    """What the evaluated model's training read of its views besides colours and labels, one of :data:`INPUTS`:
+    ``rgbd`` when it read ground-truth depth (``SRayConfig.train_inputs``: the training query's depth with
+    ``model.lambda_depth`` > 0, the sources' with ``model.inputs='rgbd'``), else ``rgb``. Empty (the default, and
+    descriptors stored before the field existed) means the same as ``inputs``; it is then filled with it."""
     miou: str = DATASET_PROTOCOL
     """Protocol of ``miou`` and the accuracies (one confusion matrix per scene)."""
     miou_per_image: str = PER_IMAGE_PROTOCOL
@@ -80,23 +90,31 @@ class EvalProtocol:
             raise ValueError(f"eval protocol: render is {self.render!r}; use one of {RENDER_MODES}")
         if self.inputs not in INPUTS:
             raise ValueError(f"eval protocol: inputs is {self.inputs!r}; use one of {INPUTS}")
+        if not self.train_inputs:
+            object.__setattr__(self, "train_inputs", self.inputs)  # frozen: filled once, here
+        if self.train_inputs not in INPUTS:
+            raise ValueError(f"eval protocol: train_inputs is {self.train_inputs!r}; use one of {INPUTS} "
+                             "(or leave it empty: the same as inputs)")
 
     @classmethod
     def from_manifest(cls, manifest: Manifest, n_source: int, stride: int,
-                      where: str = "manifest.json", inputs: str = "rgb") -> EvalProtocol:
+                      where: str = "manifest.json", inputs: str = "rgb", train_inputs: str = "") -> EvalProtocol:
         """The protocol of fixed sources ranked by ``manifest``'s neighbour rule (``where`` names it in errors);
-        ``inputs``: the model's ``model.inputs``."""
+        ``inputs``: the model's ``model.inputs``; ``train_inputs``: its ``SRayConfig.train_inputs`` (empty: the
+        same as ``inputs``)."""
         rule, version = manifest.neighbours.get("rule"), manifest.neighbours.get("version")
         if not rule or version is None:
             raise ValueError(f"{where}: field 'neighbours' has no 'rule' and 'version' ({manifest.neighbours}); "
                              "re-run `sray data shard` with this sray")
-        return cls(source_rule=f"{rule} v{version}", n_source=n_source, stride=stride, inputs=inputs)
+        return cls(source_rule=f"{rule} v{version}", n_source=n_source, stride=stride, inputs=inputs,
+                   train_inputs=train_inputs)
 
     @classmethod
-    def from_shards(cls, shards: Path, n_source: int, stride: int, inputs: str = "rgb") -> EvalProtocol:
+    def from_shards(cls, shards: Path, n_source: int, stride: int, inputs: str = "rgb",
+                    train_inputs: str = "") -> EvalProtocol:
         """:meth:`from_manifest` of ``shards/manifest.json``."""
         return cls.from_manifest(read_manifest(Path(shards)), n_source, stride, str(Path(shards) / "manifest.json"),
-                                 inputs)
+                                 inputs, train_inputs)
 
     @classmethod
     def without_sources(cls, stride: int) -> EvalProtocol:
@@ -105,19 +123,20 @@ class EvalProtocol:
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> EvalProtocol:
-        """Inverse of :meth:`to_json`; ValueError names missing or unknown fields."""
+        """Inverse of :meth:`to_json`; ValueError names missing or unknown fields (:data:`LATER_FIELDS` may be
+        missing: they take their defaults)."""
         if not isinstance(d, dict):
             raise ValueError(f"eval protocol {d!r}: expected a JSON object (docs/CONTRACTS.md); a file written "
                              "before sray recorded protocol descriptors: evaluate again to replace it")
         names = {f.name for f in fields(cls)}
-        missing, unknown = sorted(names - set(d)), sorted(set(d) - names)
+        missing, unknown = sorted(names - set(LATER_FIELDS) - set(d)), sorted(set(d) - names)
         if missing or unknown:
             raise ValueError(f"eval protocol {d}: fields {missing} missing, {unknown} unknown "
                              f"(expected {sorted(names)}; see docs/CONTRACTS.md)")
         return cls(**d)
 
     def to_json(self) -> dict[str, Any]:
-        """``{"source_rule", "n_source", "stride", "render", "inputs", "miou", "miou_per_image"}``."""
+        """``{"source_rule", "n_source", "stride", "render", "inputs", "train_inputs", "miou", "miou_per_image"}``."""
         return asdict(self)
 
     @property
@@ -140,7 +159,8 @@ class EvalProtocol:
                    f"{self.n_source} per query, fixed, top-ranked by {self.source_rule}")
         pixels = ("whole images (stride 1)" if self.whole_images else
                   f"every {_ordinal(self.stride)} in each direction (stride {self.stride}), so no SSIM")
-        return (f"sources: {sources}; pixels: {pixels}; render: {self.render}; inputs: {self.inputs}; "
+        trained = "" if self.train_inputs == self.inputs else f" (training read {self.train_inputs})"
+        return (f"sources: {sources}; pixels: {pixels}; render: {self.render}; inputs: {self.inputs}{trained}; "
                 f"mIoU: {self.miou}; mIoU/img: {self.miou_per_image}")
 
 

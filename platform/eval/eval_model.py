@@ -54,6 +54,9 @@ class EvalModel:
     """Run tags naming it (e.g. ``sray.checkpoint``)."""
     subject: str
     """What predicts, in error messages ("the checkpoint's model")."""
+    train_inputs: str = ""
+    """What its training read besides colours and labels (``EvalProtocol.train_inputs``; empty: the same as
+    ``inputs``)."""
 
 
 def torch_device(device: str | None) -> torch.device:
@@ -75,7 +78,7 @@ def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRend
                      ignore_id=cfg.model.ignore_id, inputs=cfg.model.inputs, fast=fast, chunk=runtime.chunk,
                      device=where, step=step, record={"checkpoint": str(checkpoint), "checkpoint_step": step},
                      name=f"{job}{checkpoint.name}", tags={"sray.checkpoint": str(checkpoint)},
-                     subject="the checkpoint's model")
+                     subject="the checkpoint's model", train_inputs=cfg.model.train_inputs)
 
 
 def segmenter_model(folder: Path, device: str | None = None, tolerance: float = 0.05) -> EvalModel:

@@ -33,6 +33,7 @@ from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader
 from sray.data_tools.shards.manifest import read_manifest
+from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
@@ -131,23 +132,23 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
     return path
 
 
-def scene_protocol(task: SceneTask, inputs: str = "rgb", fast: FastRender | None = None) -> EvalProtocol:
+def scene_protocol(task: SceneTask, shared: SRayConfig, fast: FastRender | None = None) -> EvalProtocol:
     """How the job's held-out scores are made at ``finetune.eval_stride``: from ``finetune.eval_n_source``
-    fixed sources ranked by the shards' neighbour rule and given as the method's ``inputs`` (else ``inputs``, the
-    shared checkpoint's ``model.inputs``), rendered by the learner's ``fast`` mode or in full (methods that use
-    sources: S-Ray, 2d-transfer), or from none, in full (per-scene models, as Semantic-NeRF)."""
+    fixed sources ranked by the shards' neighbour rule and given as the method's ``inputs`` (else the shared
+    checkpoint's ``model.inputs``, with what its training read, ``train_inputs``), rendered by the learner's
+    ``fast`` mode or in full (S-Ray, 2d-transfer), or from none, in full (per-scene models, as Semantic-NeRF)."""
     ft, method = task.config.finetune, get_method(task.method)
     if method.uses_sources:
-        return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride,
-                                        method.inputs or inputs).rendered_by(fast)
+        inputs = (method.inputs, "") if method.inputs else (shared.inputs, shared.train_inputs)  # (test, training)
+        return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride, *inputs).rendered_by(fast)
     return EvalProtocol.without_sources(ft.eval_stride)
 
 
 def _prepare(task: SceneTask,
-             device: torch.device) -> tuple[Learner, Any, list[EvalSample], tuple[int, int, int, str]]:
+             device: torch.device) -> tuple[Learner, Any, list[EvalSample], tuple[int, int, int, SRayConfig]]:
     """The method's learner, the training loader (one epoch = ``eval_every`` samples), the held-out samples
-    and (classes, ignore id, shared model bytes, the shared model's ``model.inputs``); ValueError when the
-    scene does not fit the checkpoint."""
+    and (classes, ignore id, shared model bytes, the shared model's config); ValueError when the scene does not
+    fit the checkpoint."""
     ft, shards = task.config.finetune, Path(task.shards)
     method = get_method(task.method)
     base, train_cfg = model_from_checkpoint(task.checkpoint)
@@ -168,7 +169,7 @@ def _prepare(task: SceneTask,
                                batches_per_epoch=ft.eval_every, rank=0, world_size=1, num_workers=0, seed=ft.seed,
                                scenes=[task.scene], source_labels=setup.source_labels)
     samples = list(make_eval_samples(shards, task.scene, split="test", n_source=ft.eval_n_source))
-    return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes, train_cfg.model.inputs)
+    return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes, train_cfg.model)
 
 
 def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOutcome:
@@ -180,8 +181,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     if use_cuda:
         torch.cuda.reset_peak_memory_stats(device)  # this task's peak, not an earlier task's in the same worker
     out_dir = Path(task.out_dir)
-    learner, loader, samples, (n_classes, ignore_id, full_bytes, inputs) = _prepare(task, device)
-    protocol = scene_protocol(task, inputs, learner.fast)
+    learner, loader, samples, (n_classes, ignore_id, full_bytes, shared) = _prepare(task, device)
+    protocol = scene_protocol(task, shared, learner.fast)
     clips = (SceneClips(learner.net, Path(task.shards), task.scene, task.clip_frames, cfg)
              if task.clip_frames and get_method(task.method).clips else None)
     if logger is not None:

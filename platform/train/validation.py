@@ -33,10 +33,10 @@ GROUPS = {"val": "train", "zeroshot": "test"}
 
 def validation_protocol(cfg: TrainConfig) -> EvalProtocol:
     """How ``val/*`` and ``zeroshot/*`` are made: ``model.n_source`` fixed sources ranked by the shards'
-    neighbour rule, every ``data.val_downscale``-th pixel, the model's ``model.inputs``, the render of
-    ``data.val_render``."""
+    neighbour rule, every ``data.val_downscale``-th pixel, the model's ``model.inputs`` (and what its training read:
+    ``SRayConfig.train_inputs``, ``rgbd`` with the depth loss), the render of ``data.val_render``."""
     return EvalProtocol.from_shards(Path(cfg.data.shards), cfg.model.n_source, cfg.data.val_downscale,
-                                    cfg.model.inputs).rendered_by(cfg.data.val_fast())
+                                    cfg.model.inputs, cfg.model.train_inputs).rendered_by(cfg.data.val_fast())
 
 
 def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
