@@ -74,6 +74,19 @@ def test_wall_clock_budget_stops_the_finetune(tiny_shards, tiny_checkpoint, tmp_
     assert r["steps_used"] == 1 and not r["stopped_early"] and [p["step"] for p in r["curve"]] == [0, 1]
 
 
+@pytest.mark.parametrize("method", ["sray", "semantic-nerf"])
+def test_cpu_second_budget_stops_the_finetune(tiny_shards, tiny_checkpoint, tmp_path, method):
+    """``finetune.max_cpu_seconds`` ends the finetune at the first step past it, counting this process's CPU time
+    of the training steps (the held-out evaluations are left out)."""
+    budget = 0.4
+    r = finetune_scene(_job(tiny_checkpoint, tiny_shards, tmp_path, method, max_cpu_seconds=budget, max_steps=1000,
+                            eval_every=10_000, patience=5)).result
+    assert r["stop_reason"] == "max_cpu_seconds" and not r["stopped_early"] and 1 < r["steps_used"] < 1000
+    per_step = r["cpu_s"] / r["steps_used"]
+    assert budget <= r["cpu_s"] < budget + per_step + 0.05  # stopped by the first step past the budget
+    assert [p["step"] for p in r["curve"]] == [0, r["steps_used"]]
+
+
 def test_only_adapted_modules_change(tiny_shards, tiny_checkpoint, tmp_path):
     cfg_adapt = ("fine.classifier", "coarse.view_weights")
     outcome = finetune_scene(_job(tiny_checkpoint, tiny_shards, tmp_path, adapt=cfg_adapt, max_steps=3,

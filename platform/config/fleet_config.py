@@ -39,6 +39,10 @@ class FinetuneSettings:
     max_seconds: float = 0.0
     """Training wall-clock budget per scene in seconds (evaluation time not counted); 0 = none.
     Equal budgets let methods be compared at equal wall-clock time."""
+    max_cpu_seconds: float = 0.0
+    """Training CPU budget per scene in seconds (``time.process_time`` of the task's process over its training
+    steps, evaluation not counted: ``sray.platform.finetune.step_budget``); 0 = none. Unlike wall time it does not
+    depend on what else shares the cores, so equal budgets compare methods at equal compute on a busy machine."""
     eval_every: int = 25
     """Held-out evaluation cadence in steps (also after step 0, the zero-shot model)."""
     patience: int = 3
@@ -177,6 +181,7 @@ def check_fleet_config(cfg: FleetConfig) -> None:
         if int(value) < 1:
             raise ValueError(f"fleet config: {name} is {value}; it must be a positive integer")
     non_negative = {"finetune.eval_chunk": ft.eval_chunk, "finetune.max_seconds": ft.max_seconds,
+                    "finetune.max_cpu_seconds": ft.max_cpu_seconds,
                     "finetune.min_delta": ft.min_delta,
                     "finetune.lr": ft.lr, "finetune.grad_clip": ft.grad_clip, "nerf.lr": cfg.nerf.lr,
                     "transfer.lr": cfg.transfer.lr,

@@ -79,8 +79,8 @@ def read_result(out_dir: Path, scene: str, method: str) -> dict[str, Any] | None
 def failed_result(task: SceneTask, error: str, full_bytes: int | None) -> dict[str, Any]:
     """The contract's result dict of a pair whose last attempt failed (nothing measured)."""
     return {"scene": task.scene, "method": task.method, "status": "failed", "error": error, "attempts": task.attempt,
-            "steps_used": 0, "max_steps": task.config.finetune.max_steps, "stopped_early": False, "wall_s": 0.0,
-            "miou_before": None, "miou_after": None, "psnr_after": None, "artifact_bytes": None,
+            "steps_used": 0, "max_steps": task.config.finetune.max_steps, "stopped_early": False, "stop_reason": None,
+            "wall_s": 0.0, "cpu_s": 0.0, "miou_before": None, "miou_after": None, "psnr_after": None, "artifact_bytes": None,
             "full_checkpoint_bytes": full_bytes, "child_run_id": task.run.run_id if task.run else None,
             "protocol": None, "curve": [], "node_id": None, "gpu_peak_bytes": None}
 

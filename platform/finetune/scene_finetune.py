@@ -7,20 +7,19 @@ views rendered from their fixed source views (``make_eval_samples``), every ``ev
 step 0 (zero-shot S-Ray, untrained Semantic-NeRF, 2d-transfer's pretrained segmenter). The score is the
 dataset-level mIoU (one confusion matrix over the scene's held-out views); how it was made (sources, stride,
 render mode, inputs) is the result's ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`). A
-finetune stops at the first of: ``patience`` evaluations without an improvement > ``min_delta``
-(early stop), ``max_steps``, ``max_seconds`` of training time. The best evaluated state is kept
-and stored as the scene artifact (:mod:`sray.platform.finetune.scene_artifacts`). Sampling uses the scene's own
-near/far from the shard metadata.
+finetune stops at the first of: ``patience`` evaluations without an improvement > ``min_delta`` (early stop),
+``max_steps``, ``max_seconds`` of training wall time, ``max_cpu_seconds`` of training CPU time. The best evaluated
+state is kept and stored as the scene artifact (:mod:`sray.platform.finetune.scene_artifacts`). Sampling uses the
+scene's own near/far from the shard metadata.
 
-Time: ``wall_s`` (curve and result) counts training time only (data, forward, backward, update);
-evaluation is protocol overhead and is left out, so methods compare at equal training time.
-Plain PyTorch, one process: autocast bf16 (CPU/CUDA) or fp16 with a GradScaler (CUDA).
+Time: ``wall_s`` (curve and result) and ``cpu_s`` (result) count training steps only (data, forward, backward,
+update: :mod:`sray.platform.finetune.step_budget`); evaluation is protocol overhead and is left out, so methods
+compare at equal training time. Plain PyTorch, one process: autocast bf16 (CPU/CUDA) or fp16 with a GradScaler.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,6 +46,7 @@ from sray.platform.finetune.methods.method import SceneContext
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import model_bytes
 from sray.platform.finetune.scene_clips import SceneClips
+from sray.platform.finetune.step_budget import StepClock, time_limit_reached
 from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle, RunLogger
 from sray.platform.train.step import NonFiniteTraining, step_seed
@@ -192,19 +192,19 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
 
     curve: list[dict[str, float]] = []
     stopper = EarlyStopping(ft.patience, ft.min_delta)
-    train_s, step, reason = 0.0, 0, "max_steps"
+    clock, step, reason = StepClock(), 0, "max_steps"
     best_state, best_point = learner.snapshot(), None
 
     def evaluate_now() -> None:
         nonlocal best_state, best_point
         scores = evaluate(learner, samples, cfg, n_classes, ignore_id)
-        point = {"step": step, "wall_s": train_s, "miou": scores["miou"], "miou_per_image": scores["miou_per_image"],
-                 "psnr": scores["psnr"]}
+        point = {"step": step, "wall_s": clock.wall_s, "miou": scores["miou"],
+                 "miou_per_image": scores["miou_per_image"], "psnr": scores["psnr"]}
         curve.append(point)
         if stopper.update(scores["miou"]):
             best_state, best_point = learner.snapshot(), point
         if logger is not None:
-            logger.log_metrics({f"heldout/{k}": v for k, v in scores.items()} | {"heldout/train_s": train_s}, step)
+            logger.log_metrics({f"heldout/{k}": v for k, v in (scores | {"train_s": clock.wall_s}).items()}, step)
 
     if clips is not None:
         clips.render("before", learner, out_dir, logger)
@@ -214,22 +214,21 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     window: list[torch.Tensor] = []
     try:
         while step < ft.max_steps:
-            start = time.perf_counter()
-            if step % ft.eval_every == 0:
-                batches = iter(loader)  # one loader epoch = eval_every samples
-            torch.manual_seed(step_seed(ft.seed, 0, step))
-            loss, terms = learner.loss(throughput.next_batch(batches))
-            try:
-                outcome = learner.step(loss)
-            except NonFiniteTraining as err:
-                raise NonFiniteTraining(f"{task.scene}/{task.method} at step {step}: {err}") from None
-            train_s += time.perf_counter() - start
+            with clock.step():
+                if step % ft.eval_every == 0:
+                    batches = iter(loader)  # one loader epoch = eval_every samples
+                torch.manual_seed(step_seed(ft.seed, 0, step))
+                loss, terms = learner.loss(throughput.next_batch(batches))
+                try:
+                    outcome = learner.step(loss)
+                except NonFiniteTraining as err:
+                    raise NonFiniteTraining(f"{task.scene}/{task.method} at step {step}: {err}") from None
             step += 1
             throughput.step_done()
             bar.update(1)
             if outcome.applied:
                 window.append(loss.detach())
-            out_of_time = 0 < ft.max_seconds <= train_s
+            out_of_time = time_limit_reached(ft, clock)
             if step % ft.eval_every == 0 or step == ft.max_steps or out_of_time:
                 figures = throughput.report()
                 if window:
@@ -244,7 +243,7 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
                     reason = "patience"
                     break
             if out_of_time:
-                reason = "max_seconds"
+                reason = out_of_time
                 break
     finally:
         bar.close()
@@ -257,8 +256,9 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     best_point = best_point or curve[0]
     result = {
         "scene": task.scene, "method": task.method, "status": "finished", "error": None, "attempts": task.attempt,
-        "steps_used": step, "max_steps": ft.max_steps, "stopped_early": reason == "patience", "wall_s": train_s,
-        "miou_before": curve[0]["miou"], "miou_after": best_point["miou"], "psnr_after": best_point["psnr"],
+        "steps_used": step, "max_steps": ft.max_steps, "stopped_early": reason == "patience", "stop_reason": reason,
+        "wall_s": clock.wall_s, "cpu_s": clock.cpu_s, "miou_before": curve[0]["miou"],
+        "miou_after": best_point["miou"], "psnr_after": best_point["psnr"],
         "artifact_bytes": artifact.stat().st_size, "full_checkpoint_bytes": full_bytes,
         "child_run_id": task.run.run_id if task.run else None, "protocol": protocol.to_json(), "curve": curve,
         "gpu_peak_bytes": torch.cuda.max_memory_allocated(device) if use_cuda else None,
@@ -268,7 +268,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
         logger.log_metrics({"result/steps_used": step, "result/miou_before": result["miou_before"],
                             "result/miou_after": result["miou_after"], "result/psnr_after": result["psnr_after"],
                             "result/best_step": best_point["step"], "result/stopped_early": float(reason == "patience"),
-                            "result/artifact_bytes": result["artifact_bytes"], "result/train_s": train_s}, step)
+                            "result/artifact_bytes": result["artifact_bytes"], "result/train_s": clock.wall_s,
+                            "result/train_cpu_s": clock.cpu_s}, step)
         logger.log_artifact(out_dir / RESULT_FILE)
         logger.log_artifact(artifact, "scene_artifact")
     return SceneOutcome(result, learner.net)
