@@ -16,47 +16,56 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from train_fixtures import tiny_shards  # noqa: E402,F401
 
 from sray.data_tools.loader.shard_loader import make_eval_samples  # noqa: E402
-from sray.platform.stability.nerf_points import training_views  # noqa: E402
+from sray.platform.common.eval_protocol import EvalProtocol  # noqa: E402
 from sray.platform.stability.point_spec import point_spec  # noqa: E402
 from sray.platform.stability.presets import PRESETS  # noqa: E402
 from sray.platform.stability.report import panels, write_outputs  # noqa: E402
-from sray.platform.stability.sray_points import choose_sources, unseen_fraction  # noqa: E402
+from sray.platform.stability.rows import MODES, suite_rows  # noqa: E402
+from sray.platform.stability.scene_points import training_views  # noqa: E402
 from sray.platform.stability.stress_scenes import load_scenes, perturbed_views  # noqa: E402
 from sray.platform.stability.suite import planned_points  # noqa: E402
 from sray.platform.stability.summary import level_stats  # noqa: E402
+from sray.platform.stability.view_choice import choose_sources, unseen_fraction  # noqa: E402
 
 TOY = PRESETS["toy"]
 SCENE = "synth_test_000"
+ROWS = {r.name: r for r in suite_rows(["sray", "semantic-nerf", "2d-transfer"], list(MODES), "rgb", "rgb")}
+SRAY, NERF = ROWS["sray"], ROWS["semantic-nerf-scene"]
 
 
 def test_clean_levels_share_one_spec_and_deterministic_points_are_planned_once() -> None:
-    clean = {point_spec(axis, "sray", level, 2, TOY).key() for axis, level in
+    clean = {point_spec(axis, SRAY, level, 2, TOY).key() for axis, level in
              [("pose_noise", 0), ("blur", 1), ("jpeg", 100), ("occlusion", 0.0), ("precision", "fp32"),
               ("source_views", TOY.n_source)]}
-    assert len(clean) == 1 and point_spec("pose_noise", "sray", 0, 2, TOY).seed is None
-    assert point_spec("pose_noise", "sray", 5, 2, TOY).key() != point_spec("pose_noise", "sray", 5, 1, TOY).key()
-    nerf = point_spec("pose_noise", "semantic-nerf", 0, 1, TOY)
-    assert nerf.seed == 1 and nerf.n_views == 0  # Semantic-NeRF's training draws from its seed even when clean
-    planned = planned_points(TOY, ["pose_noise"], ["sray", "semantic-nerf"])
-    assert planned.count(("pose_noise", "sray", 0, None)) == 1
-    assert [p for p in planned if p[1] == "sray" and p[2] == 5] == [("pose_noise", "sray", 5, s) for s in range(3)]
-    assert len([p for p in planned if p[1] == "semantic-nerf"]) == 2 * TOY.seeds
-    with pytest.raises(ValueError, match="does not apply"):
-        point_spec("precision", "semantic-nerf", "bf16", 0, TOY)
+    assert len(clean) == 1 and point_spec("pose_noise", SRAY, 0, 2, TOY).seed is None
+    assert point_spec("pose_noise", SRAY, 5, 2, TOY).key() != point_spec("pose_noise", SRAY, 5, 1, TOY).key()
+    nerf = point_spec("pose_noise", NERF, 0, 1, TOY)
+    assert nerf.seed == 1 and nerf.n_views == 0  # a trained row's training draws from its seed even when clean
+    tuned = point_spec("pose_noise", ROWS["sray-scene"], 0, 1, TOY)
+    assert tuned.seed == 1 and tuned.n_views == TOY.n_source and tuned.key() != point_spec("pose_noise", SRAY, 0, 1,
+                                                                                             TOY).key()
+    planned = planned_points(TOY, ["pose_noise"], [SRAY, NERF])
+    assert planned.count(("pose_noise", SRAY, 0, None)) == 1
+    assert [p for p in planned if p[1] == SRAY and p[2] == 5] == [("pose_noise", SRAY, 5, s) for s in range(3)]
+    assert len([p for p in planned if p[1] == NERF]) == 2 * TOY.seeds
+    with pytest.raises(ValueError, match="does not stress"):
+        point_spec("precision", ROWS["sray-scene"], "bf16", 0, TOY)
+    with pytest.raises(ValueError, match="does not stress"):
+        point_spec("unseen_rays", NERF, 4, 0, TOY)
 
 
 def test_clean_sources_are_sray_evals_and_dropping_moves_down_the_ranking(tiny_shards) -> None:
     (scene,) = load_scenes(tiny_shards, [SCENE])
-    clean = point_spec("pose_noise", "sray", 0, 0, TOY)
+    clean = point_spec("pose_noise", SRAY, 0, 0, TOY)
     for sample in make_eval_samples(tiny_shards, SCENE, n_source=TOY.n_source):
         assert choose_sources(scene, sample.query_id, clean) == [
             v for v in scene.views[sample.query_id].neighbours.ids if v in scene.source_ids][:TOY.n_source]
     q = scene.test_ids[0]
     ranked = [v for v in scene.views[q].neighbours.ids if v in scene.pool_ids]
-    far = point_spec("unseen_rays", "sray", 4, 0, TOY)
+    far = point_spec("unseen_rays", SRAY, 4, 0, TOY)
     assert choose_sources(scene, q, far) == ranked[4:4 + TOY.unseen_n_source]
     with pytest.raises(ValueError, match="lower the level"):
-        choose_sources(scene, q, point_spec("unseen_rays", "sray", 15, 0, TOY))
+        choose_sources(scene, q, point_spec("unseen_rays", SRAY, 15, 0, TOY))
 
 
 def test_unseen_fraction_matches_opencv_projection(tiny_shards) -> None:
@@ -65,7 +74,7 @@ def test_unseen_fraction_matches_opencv_projection(tiny_shards) -> None:
 
     (scene,) = load_scenes(tiny_shards, [SCENE])
     q = scene.test_ids[1]
-    sample = eval_sample(scene.views, q, choose_sources(scene, q, point_spec("unseen_rays", "sray", 4, 0, TOY)),
+    sample = eval_sample(scene.views, q, choose_sources(scene, q, point_spec("unseen_rays", SRAY, 4, 0, TOY)),
                          SCENE, scene.meta.near, scene.meta.far)
     h, w = sample.query_label.shape
     uv, _, _ = strided_pixels(h, w, 2)
@@ -124,31 +133,35 @@ def _record(axis, method, level, seed, miou, psnr=20.0, x=None) -> dict:
 
 
 def test_chart_panels_and_tables_of_a_known_result(tmp_path) -> None:
+    nerf = NERF.name
     records = [_record("blur", "sray", 1, None, 60.0, 25.0),
                *(_record("blur", "sray", 7, s, m, p)
                  for s, m, p in [(0, 40.0, 20.0), (1, 50.0, 22.0), (2, 30.0, 18.0)]),
-               *(_record("blur", "semantic-nerf", lvl, s, m) for lvl, m in [(1, 70.0), (7, None)] for s in range(3)),
+               *(_record("blur", nerf, lvl, s, m) for lvl, m in [(1, 70.0), (7, None)] for s in range(3)),
                _record("unseen_rays", "sray", 0, None, 60.0, x=0.05),
                _record("unseen_rays", "sray", 4, None, 20.0, x=0.4)]
     (blur, unseen) = panels(level_stats(records), ["blur", "unseen_rays"], "miou")
     sray = blur.lines["sray"]
     assert [(p.x, p.mean, p.low, p.high) for p in sray] == [(1.0, 60.0, 60.0, 60.0), (7.0, 40.0, 30.0, 50.0)]
-    assert [(p.x, p.mean) for p in blur.lines["semantic-nerf"]] == [(1.0, 70.0), (7.0, None)]
+    assert [(p.x, p.mean) for p in blur.lines[nerf]] == [(1.0, 70.0), (7.0, None)]
     assert [(p.x, p.mean) for p in unseen.lines["sray"]] == [(0.05, 60.0), (0.4, 20.0)]
     (psnr_blur,) = panels(level_stats(records), ["blur"], "psnr")
     assert [(p.mean, p.low, p.high) for p in psnr_blur.lines["sray"]][1] == (20.0, 18.0, 22.0)
-    out = write_outputs(records, TOY, ["blur", "unseen_rays"], "a protocol", tmp_path, {})
+    protocols = {"sray": EvalProtocol("a rule v1", TOY.n_source, TOY.eval_stride), nerf: EvalProtocol.without_sources(4)}
+    out = write_outputs(records, TOY, ["blur", "unseen_rays"], [SRAY, NERF], protocols, tmp_path, {})
     table = out["tables"]["blur"]
+    assert table.startswith("| motion-blur length (px) | sray (never saw the scene, RGB) mIoU % (min-max) | ")
+    assert "| semantic-nerf-scene (trained on the scene, RGB) mIoU % (min-max) |" in table
     assert "| 1 | 60.00 (60.0-60.0) | 25.00 | 70.00 (70.0-70.0) | 20.00 |" in table
     assert "| 7 | 40.00 (30.0-50.0) | 20.00 | failed | failed |" in table
     assert "0 → 5.0 %, 4 → 40.0 %" in out["tables"]["unseen_rays"]
-    assert "blur / semantic-nerf: half the clean mIoU lost at 4 (interpolated between levels)" in out["breaking"]
+    assert f"blur / {nerf}: half the clean mIoU lost at 4 (interpolated between levels)" in out["breaking"]
     assert ("blur / sray: keeps half its clean mIoU at every level tested (mIoU stays above 30.0, half of the "
             "clean 60.0)") in out["breaking"]
     assert all(c.stat().st_size > 10_000 for c in out["charts"])
 
 
-def test_preset_world_pretrains_each_variant_once_and_reuses_it(tmp_path, monkeypatch) -> None:
+def test_preset_world_pretrains_each_model_once_and_reuses_it(tmp_path, monkeypatch) -> None:
     from types import SimpleNamespace
 
     from sray.jobs.stability import world
@@ -161,31 +174,35 @@ def test_preset_world_pretrains_each_variant_once_and_reuses_it(tmp_path, monkey
         folder.mkdir()
         return SimpleNamespace(best_checkpoint=folder, latest_checkpoint=folder)
 
+    def fake_segmenter(shards, cpu_seconds, out, **kwargs):
+        seen.append(("segmenter", cpu_seconds))
+        Path(out).mkdir(parents=True)
+
     monkeypatch.setattr(world, "launch_training", fake_launch)
-    methods = ["sray", "sray-no-cra", "semantic-nerf"]
-    first = world.world_checkpoints(TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db", methods)
+    monkeypatch.setattr(world, "train_segmenter", fake_segmenter)
+    first = world.world_models(TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db")
     w = TOY.world
     assert seen == [("full", w.pretrain_steps, w.n_coarse, "sray-stability"),
-                    ("none", w.pretrain_steps, w.n_coarse, "sray-stability")]
-    assert world.world_checkpoints(TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db", methods) == first
-    assert len(seen) == 2 and sorted(first) == ["sray", "sray-no-cra"]
+                    ("none", w.pretrain_steps, w.n_coarse, "sray-stability"), ("segmenter", w.segmenter_cpu_seconds)]
+    assert world.world_models(TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db") == first
+    assert len(seen) == 3 and first.segmenter == tmp_path / "world" / "segmenter"
 
 
-def test_points_are_reused_only_under_the_same_preset_definition(tmp_path) -> None:
+def test_points_are_reused_only_under_the_same_preset_and_models(tmp_path) -> None:
     import dataclasses
 
-    from sray.platform.stability.points_study import PRESET_FILE, check_preset_record, import_stored_points
+    from sray.platform.stability.points_study import DEFINITION_FILE, check_definition
+    from sray.platform.stability.rows import SuiteModels
 
-    check_preset_record(tmp_path / "study", TOY)
-    check_preset_record(tmp_path / "study", TOY)
-    assert (tmp_path / "study" / PRESET_FILE).exists()
+    study = tmp_path / "study"
+    check_definition(study, TOY, SuiteModels(tmp_path / "c"))
+    check_definition(study, TOY, SuiteModels(tmp_path / "c", segmenter=tmp_path / "s"))  # a model added later
+    assert (study / DEFINITION_FILE).exists()
     changed = dataclasses.replace(TOY, eval_stride=TOY.eval_stride * 2)
     with pytest.raises(ValueError, match="another definition of preset 'toy'; use a new --out"):
-        check_preset_record(tmp_path / "study", changed)
-    old = tmp_path / "points" / "toy"  # the earlier store: refused the same way, never written to
-    check_preset_record(old, TOY)
-    with pytest.raises(ValueError, match="another definition of preset 'toy'"):
-        import_stored_points(tmp_path, changed, {})
+        check_definition(study, changed, SuiteModels(tmp_path / "c"))
+    with pytest.raises(ValueError, match=r"other models as \['segmenter'\]"):
+        check_definition(study, TOY, SuiteModels(tmp_path / "c", segmenter=tmp_path / "other"))
 
 
 def test_point_records_come_from_the_study_and_an_errored_trial_is_a_failed_point(tmp_path) -> None:
@@ -195,7 +212,7 @@ def test_point_records_come_from_the_study_and_an_errored_trial_is_a_failed_poin
     from sray.platform.sweep.incremental import import_result
     from sray.platform.sweep.trial_files import TrialRecord, trial_folder, write_record
 
-    planned = planned_points(TOY, ["exposure"], ["sray"])
+    planned = planned_points(TOY, ["exposure"], [SRAY])
     plan = study_plan(TOY, planned)
     assert len(plan) == 1 + TOY.seeds  # the clean point once, the perturbed level per seed
     study = study_folder(tmp_path, TOY)

@@ -1,7 +1,8 @@
-"""``sray stability``: stress S-Ray (full CRA), S-Ray without CRA and Semantic-NeRF along each axis and
-chart where each breaks (:mod:`sray.platform.stability`).
+"""``sray stability``: stress every registered method's rows (zero-shot, and trained on the scene at one CPU-second
+budget) along each axis and chart where each breaks (:mod:`sray.platform.stability`).
 
-Without ``--data`` and ``--checkpoint`` a preset builds its own world (:mod:`sray.jobs.stability.world`).
+Given ``--checkpoint`` (and ``--checkpoint-no-cra``, ``--segmenter``) the suite stresses those models and pretrains
+nothing; without them a preset builds its own world and pretrains its models (:mod:`sray.jobs.stability.world`).
 Points are stored as they finish under ``--out``, so an axis-by-axis run (``--axes pose_noise``) or a
 re-run after an interruption computes only what is missing. Tables go into the preset's section of
 ``docs/benchmarks.md`` (``--doc``): one table per axis plus the breaking points with the charts.
@@ -16,23 +17,30 @@ import sys
 from pathlib import Path
 
 from sray.jobs.bench.doc import Bench, bench_dir, record
-from sray.platform.stability.axes import ALL_METHODS, AXES
+from sray.platform.finetune.methods.registry import method_names
+from sray.platform.stability.axes import AXES
 from sray.platform.stability.presets import PRESETS
-
-CHECKPOINT_NAMES = {"full": "sray", "none": "sray-no-cra"}
-"""``--checkpoint NAME=PATH`` names -> the suite's S-Ray methods."""
+from sray.platform.stability.rows import MODES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray stability``."""
-    p = sub.add_parser("stability", help="where S-Ray, S-Ray without CRA and Semantic-NeRF break: charts and tables")
-    p.add_argument("--data", type=Path, help="shard folder with unseen test scenes (default: the preset's own world)")
-    p.add_argument("--checkpoint", action="append", default=[], metavar="NAME=PATH",
-                   help="pretrained S-Ray checkpoint: full=PATH (full CRA) and none=PATH (attention=none); "
-                        "default: the preset pretrains both")
+    p = sub.add_parser("stability", help="where the registered methods break (zero-shot, and trained on the scene at "
+                                         "one CPU budget): charts and tables")
+    p.add_argument("--checkpoint", type=Path, metavar="FOLDER",
+                   help="S-Ray checkpoint to stress (zero-shot rows; the shared model of the trained rows); default: "
+                        "the preset builds its world and pretrains every model")
+    p.add_argument("--checkpoint-no-cra", type=Path, metavar="FOLDER",
+                   help="S-Ray checkpoint trained with model.attention=none: adds the zero-shot 'without CRA' row")
+    p.add_argument("--segmenter", type=Path, metavar="FOLDER",
+                   help="2D segmenter of method 2d-transfer (written by `sray bench segmenter`)")
+    p.add_argument("--data", type=Path, help="shard folder with unseen test scenes (default: the shards --checkpoint "
+                                             "was trained on; without --checkpoint, the preset's own world)")
     p.add_argument("--axes", nargs="+", choices=list(AXES), default=list(AXES), help="axes to run (default: all)")
-    p.add_argument("--methods", nargs="+", choices=list(ALL_METHODS), default=list(ALL_METHODS),
-                   help="methods to stress (default: all three)")
+    p.add_argument("--methods", nargs="+", choices=method_names(), default=method_names(),
+                   help="registered methods whose rows are stressed (default: every one)")
+    p.add_argument("--modes", nargs="+", choices=list(MODES), default=list(MODES),
+                   help="zero-shot rows, rows trained on the scene, or both (default)")
     p.add_argument("--preset", choices=list(PRESETS), default="cpu-small", help="levels, seeds and budgets")
     p.add_argument("--scenes", nargs="+", metavar="SCENE", help="test scenes (default: every role 'test' scene)")
     p.add_argument("--out", type=Path, help="output folder (default: outputs/stability/<preset>)")
@@ -44,30 +52,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def parse_checkpoints(values: list[str]) -> dict[str, Path]:
-    """``["full=A", "none=B"]`` -> ``{"sray": A, "sray-no-cra": B}``; ValueError names the bad entry."""
-    out = {}
-    for value in values:
-        name, sep, path = value.partition("=")
-        if not sep or name not in CHECKPOINT_NAMES:
-            raise ValueError(f"--checkpoint {value!r}: write NAME=PATH with NAME one of {sorted(CHECKPOINT_NAMES)}")
-        if not Path(path).exists():
-            raise ValueError(f"--checkpoint {value!r}: {path} does not exist; pass a checkpoint folder written by "
-                             "`sray train` (…/checkpoints/step_XXXXXXXXX)")
-        out[CHECKPOINT_NAMES[name]] = Path(path)
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the suite and write its outputs; exit 2 on bad input."""
-    from sray.jobs.stability.suite_job import StabilityJob, run_job
+    from sray.jobs.stability.suite_job import StabilityJob, prepare, run_job
 
     try:
-        job = StabilityJob.from_args(args, parse_checkpoints(args.checkpoint))
+        job = StabilityJob.from_args(args)
+        suite, rows = prepare(job)
     except (FileNotFoundError, ValueError) as e:
         print(f"sray stability: {e}", file=sys.stderr)
         return 2
-    outputs = run_job(job)
+    outputs = run_job(job, suite, rows)
     _record(job, outputs)
     print(f"[sray] results: {outputs['json']}")
     print(f"[sray] charts: {', '.join(str(c) for c in outputs['charts'])}")

@@ -1,27 +1,38 @@
-"""One ``sray stability`` job: its inputs checked up front, the world built or read, the suite run, and the
-outputs written over every axis whose points are all stored (so axis-by-axis runs add up to one table)."""
+"""One ``sray stability`` job: its inputs checked up front, the models given or pretrained, the rows read off the
+method registry, the suite run, and the outputs written over every axis whose points are all stored (so
+axis-by-axis runs add up to one table).
+
+Given models (``--checkpoint``, ``--checkpoint-no-cra``, ``--segmenter``) are used as they are and nothing is
+pretrained; the data defaults to the shards the checkpoint was trained on. Without ``--checkpoint`` the preset
+builds its own world and pretrains every model (:mod:`sray.jobs.stability.world`).
+"""
 
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field
+import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
 
-from sray.data_tools.scene import IGNORE_ID
-from sray.jobs.stability.world import world_checkpoints, world_shards
+from sray.jobs.stability.world import world_models, world_shards
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.zero_shot import select_scenes
-from sray.platform.stability.axes import AXES, SOURCE_METHODS
+from sray.platform.finetune.methods.registry import get_method
+from sray.platform.stability.axes import AXES
 from sray.platform.stability.point_trial import SuiteInputs
 from sray.platform.stability.points_study import point_records, run_points
 from sray.platform.stability.presets import PRESETS, Preset
 from sray.platform.stability.report import track, write_outputs
+from sray.platform.stability.rows import Row, SuiteModels, suite_rows
+from sray.platform.stability.scene_points import scene_settings
 from sray.platform.stability.suite import planned_points
 from sray.platform.tracking.registry import get_tracker
+
+MODEL_FLAGS = {"checkpoint": "--checkpoint", "checkpoint_no_cra": "--checkpoint-no-cra", "segmenter": "--segmenter"}
+"""``SuiteModels`` field -> the flag that gives it."""
 
 
 @dataclass
@@ -31,11 +42,15 @@ class StabilityJob:
     preset: Preset
     axes: list[str]
     methods: list[str]
+    """Registered method names whose rows are stressed."""
+    modes: list[str]
+    """``zero-shot`` and/or ``scene`` (``rows.MODES``)."""
     out: Path
     doc: Path
-    shards: Path | None = None
-    """None: the preset builds its own world under ``out``."""
-    checkpoints: dict[str, Path] = field(default_factory=dict)
+    given: SuiteModels | None = None
+    """The models given on the command line (None: the preset builds its world and pretrains them)."""
+    data: Path | None = None
+    """Shards of the test scenes (None: the checkpoint's training shards, or the preset's world)."""
     scenes: list[str] | None = None
     tracker: str = "mlflow"
     tracking_uri: str | None = None
@@ -43,76 +58,114 @@ class StabilityJob:
     device: str | None = None
 
     @classmethod
-    def from_args(cls, args: argparse.Namespace, checkpoints: dict[str, Path]) -> StabilityJob:
+    def from_args(cls, args: argparse.Namespace) -> StabilityJob:
         """The job of parsed CLI arguments; ValueError names the flag and the fix."""
+        paths = {field: getattr(args, field) for field in MODEL_FLAGS}
+        for field, path in paths.items():
+            if path is not None and not Path(path).exists():
+                raise ValueError(f"{MODEL_FLAGS[field]} {path}: no such folder; pass a checkpoint folder written by "
+                                 "`sray train` (…/checkpoints/step_XXXXXXXXX) or, for --segmenter, a folder written "
+                                 "by `sray bench segmenter`")
+        if paths["checkpoint"] is None and (args.data is not None or any(paths.values())):
+            raise ValueError("--data, --checkpoint-no-cra and --segmenter need --checkpoint (the S-Ray model the rows "
+                             "are built from); leave them all out to let the preset build its world and pretrain "
+                             "every model")
+        if args.data is not None and not (Path(args.data) / "manifest.json").exists():
+            raise ValueError(f"--data {args.data}: no manifest.json there; pass a folder written by `sray data shard`")
+        given = None if paths["checkpoint"] is None else SuiteModels(
+            **{field: None if path is None else Path(path).resolve() for field, path in paths.items()})
         preset = PRESETS[args.preset]
-        if args.data is None and checkpoints:
-            raise ValueError("--checkpoint needs --data (the shards the checkpoints are scored on); leave both out "
-                             "to let the preset build its world and pretrain both variants")
-        if args.data is not None:
-            if not (Path(args.data) / "manifest.json").exists():
-                raise ValueError(f"--data {args.data}: no manifest.json there; pass a folder written by "
-                                 "`sray data shard`")
-            missing = [m for m in SOURCE_METHODS if m in args.methods and m not in checkpoints]
-            if missing:
-                names = {v: k for k, v in {"full": "sray", "none": "sray-no-cra"}.items()}
-                raise ValueError(f"--data given without checkpoints for {missing}: add "
-                                 + " ".join(f"--checkpoint {names[m]}=PATH" for m in missing)
-                                 + " or leave those methods out with --methods")
-        methods = [m for m in args.methods if any(m in AXES[a].methods for a in args.axes)]
-        if not methods:
-            raise ValueError(f"--axes {args.axes} apply to none of --methods {args.methods}")
         out = args.out or Path("outputs/stability") / preset.name
-        return cls(preset=preset, axes=list(args.axes), methods=methods, out=Path(out).resolve(), doc=args.doc,
-                   shards=None if args.data is None else Path(args.data).resolve(), checkpoints=checkpoints,
-                   scenes=args.scenes, tracker=args.tracker, tracking_uri=args.tracking_uri,
-                   experiment=args.experiment, device=args.device)
+        return cls(preset=preset, axes=list(args.axes), methods=list(dict.fromkeys(args.methods)),
+                   modes=list(dict.fromkeys(args.modes)), out=Path(out).resolve(), doc=args.doc, given=given,
+                   data=None if args.data is None else Path(args.data).resolve(), scenes=args.scenes,
+                   tracker=args.tracker, tracking_uri=args.tracking_uri, experiment=args.experiment,
+                   device=args.device)
+
+    @property
+    def store(self) -> str:
+        """The tracker's store (default: a SQLite store in the output folder)."""
+        return self.tracking_uri or f"sqlite:///{self.out / 'mlflow.db'}"
 
 
-def _check_checkpoints(checkpoints: dict[str, Path]) -> tuple[int | None, int | None, str]:
-    """The checkpoints' label space (classes, ignore id) and source inputs (``model.inputs``, ``rgb`` when there
-    is none); ValueError when the checkpoints disagree on either."""
-    classes, inputs = set(), set()
-    for path in checkpoints.values():
-        _, cfg = model_from_checkpoint(path)
-        classes.add((cfg.model.n_classes, cfg.model.ignore_id))
-        inputs.add(cfg.model.inputs)
-    if len(classes) > 1:
-        raise ValueError(f"checkpoints {sorted(map(str, checkpoints.values()))} predict different label spaces "
-                         f"{sorted(classes)}; pretrain both variants on the same data")
-    if len(inputs) > 1:
-        raise ValueError(f"checkpoints {sorted(map(str, checkpoints.values()))} mix model.inputs {sorted(inputs)}; "
-                         "compare variants trained with the same inputs")
-    n_classes, ignore_id = next(iter(classes)) if classes else (None, None)
-    return n_classes, ignore_id, next(iter(inputs)) if inputs else "rgb"
-
-
-def run_job(job: StabilityJob) -> dict[str, Any]:
-    """Run the suite; returns :func:`~sray.platform.stability.report.write_outputs`'s dict plus ``parent_run``."""
-    job.out.mkdir(parents=True, exist_ok=True)
-    tracking_uri = job.tracking_uri or f"sqlite:///{job.out / 'mlflow.db'}"
-    shards, checkpoints = job.shards, dict(job.checkpoints)
-    if shards is None:
+def resolve_models(job: StabilityJob) -> tuple[Path, SuiteModels]:
+    """(shards, models): the given models and ``--data`` (default: the checkpoint's training shards), nothing
+    pretrained; or, with no model given, the preset's world and its pretrained models."""
+    if job.given is None:
+        job.out.mkdir(parents=True, exist_ok=True)
         shards = world_shards(job.preset, job.out)
-        checkpoints = world_checkpoints(job.preset, shards, job.out, tracking_uri, job.methods)
+        return shards, world_models(job.preset, shards, job.out, job.store)
+    if job.data is not None:
+        return job.data, job.given
+    _, cfg = model_from_checkpoint(job.given.checkpoint)
+    shards = Path(cfg.data.shards).resolve()
+    if not (shards / "manifest.json").exists():
+        raise ValueError(f"--checkpoint {job.given.checkpoint}: its training shards {cfg.data.shards} (data.shards) "
+                         "hold no manifest.json here; pass --data SHARDS with the unseen test scenes")
+    return shards, job.given
+
+
+def _label_space(models: SuiteModels) -> tuple[int, int, str, str | None]:
+    """(classes, ignore id, ``model.inputs``) of the S-Ray checkpoint, and the no-CRA checkpoint's ``model.inputs``
+    (None without one); ValueError when the two predict different label spaces."""
+    _, cfg = model_from_checkpoint(models.checkpoint)
+    if models.checkpoint_no_cra is None:
+        return cfg.model.n_classes, cfg.model.ignore_id, cfg.model.inputs, None
+    _, other = model_from_checkpoint(models.checkpoint_no_cra)
+    if (other.model.n_classes, other.model.ignore_id) != (cfg.model.n_classes, cfg.model.ignore_id):
+        raise ValueError(f"--checkpoint-no-cra {models.checkpoint_no_cra} predicts {other.model.n_classes} classes, "
+                         f"--checkpoint {models.checkpoint} {cfg.model.n_classes}; pretrain both on the same data")
+    return cfg.model.n_classes, cfg.model.ignore_id, cfg.model.inputs, other.model.inputs
+
+
+def check_rows(rows: list[Row], models: SuiteModels, preset: Preset, n_classes: int, where: Path) -> None:
+    """Build each zero-shot row's model once (on the CPU) and each trained row's fleet settings, so that a missing
+    or mismatched model fails now, naming its flag; ValueError otherwise."""
+    for row in rows:
+        if not row.trained:
+            model = get_method(row.method).eval_model(row.request(models, "cpu"))
+            if model.n_classes != n_classes:
+                raise ValueError(f"{where}: the scenes have {n_classes} classes, {model.subject} of row {row.name!r} "
+                                 f"predicts {model.n_classes}; give models of the scenes' label space")
+    cfg = scene_settings(preset, models.segmenter)
+    for method in dict.fromkeys(r.method for r in rows if r.trained):
+        check = get_method(method).checked_config
+        cfg = check(cfg) if check is not None else cfg
+
+
+def prepare(job: StabilityJob) -> tuple[SuiteInputs, list[Row]]:
+    """The suite's inputs and rows, every model found and checked (pretrained first when none is given)."""
+    shards, models = resolve_models(job)
     names, metas = select_scenes(shards, job.scenes)
-    device = torch.device(job.device or ("cuda" if torch.cuda.is_available() else "cpu"))
-    n_classes, ignore_id, inputs = _check_checkpoints(checkpoints)
+    n_classes, ignore_id, inputs, no_cra_inputs = _label_space(models)
     scene_classes = {len(m["class_names"]) for m in metas.values()}
-    if n_classes is not None and scene_classes != {n_classes}:
-        raise ValueError(f"{shards / 'manifest.json'}: scenes have {sorted(scene_classes)} classes, the checkpoints "
-                         f"predict {n_classes}; score them on data of their own label space")
-    suite = SuiteInputs(job.preset, str(shards), tuple(names), tuple((m, str(p)) for m, p in checkpoints.items()),
-                        n_classes or scene_classes.pop(), IGNORE_ID if ignore_id is None else ignore_id, str(device))
-    outcomes = run_points(job.out, planned_points(job.preset, job.axes, job.methods), suite)
+    if scene_classes != {n_classes}:
+        raise ValueError(f"{shards / 'manifest.json'}: scenes have {sorted(scene_classes)} classes, the checkpoint "
+                         f"predicts {n_classes}; score it on data of its own label space")
+    rows = suite_rows(job.methods, job.modes, inputs, no_cra_inputs)
+    rows = [r for r in rows if any(AXES[a].applies(r) for a in job.axes)]
+    if not rows:
+        raise ValueError(f"--axes {job.axes} stress none of the rows of --methods {job.methods} --modes {job.modes}")
+    check_rows(rows, models, job.preset, n_classes, shards / "manifest.json")
+    device = job.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    return SuiteInputs(job.preset, str(shards), tuple(names), tuple(rows), models, n_classes, ignore_id, device), rows
+
+
+def run_job(job: StabilityJob, suite: SuiteInputs, rows: list[Row]) -> dict[str, Any]:
+    """Run the suite; returns :func:`~sray.platform.stability.report.write_outputs`'s dict plus ``parent_run`` and
+    ``axes`` (those whose points are all stored)."""
+    job.out.mkdir(parents=True, exist_ok=True)
+    outcomes = run_points(job.out, planned_points(job.preset, job.axes, rows), suite)
     errors = {o.key: o.note for o in outcomes if o.reason == "errored"}
-    done = [a for a in AXES if point_records(job.out, job.preset, planned_points(job.preset, [a], job.methods), errors)]
-    records = point_records(job.out, job.preset, planned_points(job.preset, done, job.methods), errors)
-    protocol = EvalProtocol.from_shards(shards, job.preset.n_source, job.preset.eval_stride, inputs).describe()
-    extra = {"shards": str(shards), "checkpoints": {m: str(p) for m, p in checkpoints.items()},
-             "scenes": names, "methods": job.methods}
-    outputs = write_outputs(records, job.preset, done, protocol, job.out, extra)
-    tracker = get_tracker(job.tracker, tracking_uri)
+    done = [a for a in AXES if point_records(job.out, job.preset, planned_points(job.preset, [a], rows), errors)]
+    records = point_records(job.out, job.preset, planned_points(job.preset, done, rows), errors)
+    shards = Path(suite.shards)
+    protocols = {r.name: r.protocol(shards, job.preset.n_source, job.preset.eval_stride) for r in rows}
+    extra = {"shards": suite.shards, "models": {k: str(v) for k, v in dataclasses.asdict(suite.models).items() if v is not None},
+             "scenes": list(suite.scenes), "methods": job.methods, "modes": job.modes}
+    shown = [r for r in rows if any(AXES[a].applies(r) for a in done)]
+    outputs = write_outputs(records, job.preset, done, shown, protocols, job.out, extra)
+    tracker = get_tracker(job.tracker, job.store)
     run_name = f"stability-{job.preset.name}-{job.out.name}"
     outputs["parent_run"] = track(tracker, job.experiment, run_name, outputs, records, done, job.preset)
     outputs["axes"] = done

@@ -1,9 +1,10 @@
-"""The world a stability preset builds when it is given no data and no checkpoints: procedural scenes,
-their shards, and one pretraining per S-Ray variant (full CRA, and ``attention=none``), each a real
-``sray train`` job (Ray Train, tracked).
+"""The world a stability preset builds when it is given no checkpoint: procedural scenes, their shards, one
+pretraining per S-Ray variant (full CRA, and ``attention=none``), each a real ``sray train`` job (Ray Train,
+tracked), and the 2D segmenter of ``2d-transfer`` (``sray bench segmenter``'s training, for the preset's CPU
+seconds).
 
 Every piece is kept under ``<out>/world`` and reused by a later run: scenes already generated are
-skipped, shards are written once, and a finished pretraining is recorded in ``checkpoints.json``.
+skipped, shards are written once, and a finished pretraining is recorded in ``models.json``.
 """
 
 from __future__ import annotations
@@ -15,26 +16,29 @@ from pathlib import Path
 from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.synth.world import make_world
 from sray.platform.config.recipes import get_recipe
+from sray.platform.eval.segmenter_training import train_segmenter
 from sray.platform.stability.presets import Preset
+from sray.platform.stability.rows import SuiteModels
 from sray.platform.train.launcher import launch_training
 
-VARIANT_ATTENTION = {"sray": "full", "sray-no-cra": "none"}
-"""S-Ray method of the suite -> the ``model.attention`` it is pretrained with."""
-CHECKPOINTS_FILE = "checkpoints.json"
-"""Method -> pretrained checkpoint folder, under ``<out>/world``."""
+CHECKPOINT_ATTENTION = {"checkpoint": "full", "checkpoint_no_cra": "none"}
+"""``SuiteModels`` field of each pretrained S-Ray checkpoint -> the ``model.attention`` it is pretrained with."""
+MODELS_FILE = "models.json"
+"""``SuiteModels`` field -> pretrained model folder, under ``<out>/world``."""
 
 
 def world_shards(preset: Preset, out: Path) -> Path:
     """Generate the preset's procedural scenes (seed 0) and shard them; a world already sharded under ``out`` is
-    reused as it is (its checkpoints were pretrained on it), even if the generator has changed since."""
+    reused as it is (its models were pretrained on it), even if the generator has changed since."""
     return make_world(preset.world.scenes, out / "world")
 
 
-def pretrain(method: str, preset: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:
-    """One ``sray train`` job of the method's variant on the train scenes; its best (else latest) checkpoint."""
+def pretrain(role: str, preset: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:
+    """One ``sray train`` job of the S-Ray checkpoint ``role`` (its attention variant) on the train scenes; its best
+    (else latest) checkpoint."""
     w = preset.world
     cfg = get_recipe("synth-paper" if preset.name == "gpu" else "synth-small")
-    cfg.model.attention, cfg.model.n_source = VARIANT_ATTENTION[method], w.train_n_source
+    cfg.model.attention, cfg.model.n_source = CHECKPOINT_ATTENTION[role], w.train_n_source
     cfg.model.n_coarse, cfg.model.n_fine = w.n_coarse, w.n_fine
     cfg.data.shards, cfg.data.rays_per_batch, cfg.data.top_k = str(shards), w.rays, w.train_n_source + 2
     cfg.optim.steps = w.pretrain_steps
@@ -43,18 +47,27 @@ def pretrain(method: str, preset: Preset, shards: Path, out: Path, tracking_uri:
     cfg.run.val_every = cfg.run.ckpt_every = max(w.pretrain_steps // 2, 1)
     if preset.name == "toy":
         cfg.data.loader_workers, cfg.data.val_views_per_scene, cfg.run.log_every = 0, 1, 1
-    cfg.run.name = f"stability-{method}-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}"
+    cfg.run.name = f"stability-{CHECKPOINT_ATTENTION[role]}-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}"
     outcome = launch_training(cfg)
     return Path(outcome.best_checkpoint or outcome.latest_checkpoint)
 
 
-def world_checkpoints(preset: Preset, shards: Path, out: Path, tracking_uri: str,
-                      methods: list[str]) -> dict[str, Path]:
-    """The pretrained checkpoint of every S-Ray method in ``methods``, pretraining the missing ones."""
-    record_path = out / "world" / CHECKPOINTS_FILE
+def pretrain_segmenter(preset: Preset, shards: Path, out: Path) -> Path:
+    """The 2D segmenter of ``2d-transfer`` trained on the train scenes for ``world.segmenter_cpu_seconds``, with as
+    many images per step as S-Ray's pretraining has sources; its folder."""
+    w, folder = preset.world, out / "world" / "segmenter"
+    train_segmenter(shards, w.segmenter_cpu_seconds, folder, seed=0, n_source=w.train_n_source,
+                    top_k=w.train_n_source + 2)
+    return folder
+
+
+def world_models(preset: Preset, shards: Path, out: Path, tracking_uri: str) -> SuiteModels:
+    """Every model the preset's rows may need, pretraining the missing ones (each once, recorded)."""
+    record_path = out / "world" / MODELS_FILE
     record = json.loads(record_path.read_text()) if record_path.exists() else {}
-    for method in (m for m in VARIANT_ATTENTION if m in methods):
-        if method not in record or not Path(record[method]).exists():
-            record[method] = str(pretrain(method, preset, shards, out, tracking_uri))
+    for role in (*CHECKPOINT_ATTENTION, "segmenter"):
+        if role not in record or not Path(record[role]).exists():
+            record[role] = str(pretrain(role, preset, shards, out, tracking_uri) if role in CHECKPOINT_ATTENTION
+                               else pretrain_segmenter(preset, shards, out))
             atomic_write_json(record_path, record)
-    return {m: Path(p) for m, p in record.items() if m in methods}
+    return SuiteModels(**{role: Path(path) for role, path in record.items()})

@@ -8,6 +8,7 @@ loop (:func:`sray.platform.eval.zero_shot.evaluate_model`) renders and scores ev
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,18 +66,23 @@ def torch_device(device: str | None) -> torch.device:
 
 
 def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRender | None = None,
-                     runtime: Runtime = Runtime()) -> EvalModel:
+                     runtime: Runtime = Runtime(), inputs: str = "") -> EvalModel:
     """The S-Ray model of a training checkpoint folder, rendering with ``fast`` (None: the full render) and
-    ``runtime`` (implementation, rays per chunk) on ``device`` (default: CUDA if available)."""
+    ``runtime`` (implementation, rays per chunk) on ``device`` (default: CUDA if available), reading the source
+    ``inputs`` (``rgb`` or ``rgbd``; empty: the checkpoint's ``model.inputs``; both modes share their parameters,
+    docs/model.md "RGB-D mode")."""
     checkpoint = Path(checkpoint).resolve()
     net, cfg = model_from_checkpoint(checkpoint)
+    if inputs:
+        net.cfg = dataclasses.replace(net.cfg, inputs=inputs)  # checked like any model config
     step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
     where = torch_device(device)
     net = net.to(where).eval()
     job = f"{checkpoint.parent.parent.name}-" if checkpoint.parent.name == "checkpoints" else ""
+    record = {"checkpoint": str(checkpoint), "checkpoint_step": step} | ({"inputs": inputs} if inputs else {})
     return EvalModel(renderer=lambda s: sray_renderer(net, s, where, fast, runtime), n_classes=cfg.model.n_classes,
-                     ignore_id=cfg.model.ignore_id, inputs=cfg.model.inputs, fast=fast, chunk=runtime.chunk,
-                     device=where, step=step, record={"checkpoint": str(checkpoint), "checkpoint_step": step},
+                     ignore_id=cfg.model.ignore_id, inputs=net.cfg.inputs, fast=fast, chunk=runtime.chunk,
+                     device=where, step=step, record=record,
                      name=f"{job}{checkpoint.name}", tags={"sray.checkpoint": str(checkpoint)},
                      subject="the checkpoint's model", train_inputs=cfg.model.train_inputs)
 

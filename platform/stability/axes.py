@@ -8,8 +8,11 @@ An axis is one of three kinds:
   neighbours are dropped, so more samples are seen by no source view);
 * ``precision``: the autocast precision of inference (a categorical axis, fp32 first).
 
-Semantic-NeRF has no source views: on ``perturb`` axes its training views get the same perturbation,
-and on ``source_views`` the level is its number of training views.
+Which rows an axis stresses follows from the row (:meth:`Axis.applies`): every axis stresses every row, except
+``unseen_rays`` (rows that render from source views) and ``precision`` (zero-shot rows: a pretrained model run
+at another precision). A row that renders from no source view (Semantic-NeRF) has its training views perturbed on
+``perturb`` axes, and on ``source_views`` the level is its number of training views; a row trained on the scene
+that renders from sources is trained on the perturbed views and rendered from perturbed sources.
 """
 
 from __future__ import annotations
@@ -19,19 +22,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from sray.data_tools.perturbations import exposure, gaussian_noise, jpeg, motion_blur, noisy_pose, occlude
+from sray.platform.stability.rows import Row
 
 POSE_CM_PER_DEG = 2.0
 """Pose-noise level L turns each camera by L degrees and moves it by ``POSE_CM_PER_DEG · L`` centimetres."""
 
-SOURCE_METHODS = ("sray", "sray-no-cra")
-"""Methods that read source views (S-Ray with full CRA, and S-Ray pretrained with ``attention=none``)."""
-ALL_METHODS = (*SOURCE_METHODS, "semantic-nerf")
-"""Every method the suite compares."""
-
 
 @dataclass(frozen=True)
 class Axis:
-    """One stress axis: its kind, the unit of its levels and which methods it applies to."""
+    """One stress axis: its kind, the unit of its levels and which rows it stresses."""
 
     name: str
     """Axis id (CLI ``--axes``, chart panel, MLflow child run)."""
@@ -39,21 +38,27 @@ class Axis:
     """``perturb``, ``sources`` or ``precision``."""
     unit: str
     """What a level means, for chart axes and tables."""
-    methods: tuple[str, ...]
-    """Methods this axis applies to."""
+    sources_only: bool = False
+    """Stresses only rows that render from source views."""
+    zero_shot_only: bool = False
+    """Stresses only zero-shot rows."""
+
+    def applies(self, row: Row) -> bool:
+        """Whether this axis stresses ``row``."""
+        return (row.uses_sources or not self.sources_only) and (not row.trained or not self.zero_shot_only)
 
 
 AXES: dict[str, Axis] = {a.name: a for a in (
-    Axis("source_views", "sources", "source views (Semantic-NeRF: training views)", ALL_METHODS),
+    Axis("source_views", "sources", "source views (per-scene models: training views)"),
     Axis("unseen_rays", "sources", "nearest ranked neighbours dropped (x: fraction of samples no source sees)",
-         SOURCE_METHODS),
-    Axis("pose_noise", "perturb", f"rotation in degrees (translation {POSE_CM_PER_DEG:g} cm per degree)", ALL_METHODS),
-    Axis("image_noise", "perturb", "Gaussian noise sigma (8-bit levels)", ALL_METHODS),
-    Axis("blur", "perturb", "motion-blur length (px)", ALL_METHODS),
-    Axis("exposure", "perturb", "under-exposure (EV stops)", ALL_METHODS),
-    Axis("jpeg", "perturb", "JPEG quality (100 = best)", ALL_METHODS),
-    Axis("occlusion", "perturb", "fraction of each image occluded", ALL_METHODS),
-    Axis("precision", "precision", "autocast precision", SOURCE_METHODS),
+         sources_only=True),
+    Axis("pose_noise", "perturb", f"rotation in degrees (translation {POSE_CM_PER_DEG:g} cm per degree)"),
+    Axis("image_noise", "perturb", "Gaussian noise sigma (8-bit levels)"),
+    Axis("blur", "perturb", "motion-blur length (px)"),
+    Axis("exposure", "perturb", "under-exposure (EV stops)"),
+    Axis("jpeg", "perturb", "JPEG quality (100 = best)"),
+    Axis("occlusion", "perturb", "fraction of each image occluded"),
+    Axis("precision", "precision", "autocast precision", zero_shot_only=True),
 )}
 """Every axis, in the order the suite runs and charts them."""
 

@@ -2,11 +2,11 @@
 
 One trial per point key (``suite.point_key``: a spec computed once whatever the axes that ask for it), under
 ``<out>/study/<preset>/``, completed launch after launch (``sray.platform.sweep.incremental``): a finished
-point never runs again, whatever axes a later run asks for; a point whose trial errored (its process died, say)
-counts as ``failed`` in the tables until a later run that asks for it runs it again. Points stored by the
-suite's earlier store (``<out>/points/<preset>/<key>.json``) are imported as finished trials, never computed
-again. ``preset.json`` in the study folder records the preset definition the points were made with: a run
-under a changed definition is refused (a stored point is reused only under the same levels and budgets).
+point never runs again, whatever axes or rows a later run asks for; a point whose trial errored (its process died,
+say) counts as ``failed`` in the tables until a later run that asks for it runs it again. ``definition.json`` in the
+study folder records the preset definition and the models the points were made with: a run under a changed
+definition, or with another model in a role both runs name, is refused (a stored point is reused only for the
+same levels, budgets and models).
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ from typing import Any
 from sray.data_tools.atomic import atomic_write_json
 from sray.platform.stability.point_trial import SuiteInputs, spec_point, stability_point, trial_resources
 from sray.platform.stability.presets import Preset
-from sray.platform.stability.suite import point_key, point_record
-from sray.platform.sweep.incremental import import_result, missing, run_missing
+from sray.platform.stability.rows import SuiteModels
+from sray.platform.stability.suite import Planned, point_key, point_record
+from sray.platform.sweep.incremental import missing, run_missing
 from sray.platform.sweep.outcomes import TrialOutcome
 from sray.platform.sweep.study import StudySettings
 from sray.platform.sweep.trial_files import ERRORED, FINISHED, read_record, trial_folder
@@ -29,13 +30,8 @@ from sray.platform.train.launcher import init_ray
 
 STUDY_DIR = "study"
 """Folder of ``--out`` holding one study per preset name."""
-OLD_POINTS_DIR = "points"
-"""Folder of ``--out`` where the suite's earlier store kept one JSON file per point key, per preset name."""
-PRESET_FILE = "preset.json"
-"""The preset definition the points of a folder were made with."""
-
-Planned = list[tuple[str, str, Any, int | None]]
-"""(axis, method, level, seed) of points (``suite.planned_points``)."""
+DEFINITION_FILE = "definition.json"
+"""The preset definition and the models the points of a study folder were made with."""
 
 
 def study_folder(out: Path, preset: Preset) -> Path:
@@ -43,38 +39,31 @@ def study_folder(out: Path, preset: Preset) -> Path:
     return Path(out) / STUDY_DIR / preset.name
 
 
-def check_preset_record(folder: Path, preset: Preset, write: bool = True) -> None:
-    """Refuse a folder whose points were made under another definition of ``preset`` (ValueError naming the
-    fix); record the definition there when it has none yet (``write``)."""
-    path = Path(folder) / PRESET_FILE
+def check_definition(folder: Path, preset: Preset, models: SuiteModels) -> None:
+    """Refuse a folder whose points were made under another definition of ``preset``, or from another model in a
+    role both runs name (ValueError naming the fix); record the definition, and each model role when first given."""
+    path = Path(folder) / DEFINITION_FILE
     now = json.loads(json.dumps(dataclasses.asdict(preset)))
-    if path.exists():
-        if json.loads(path.read_text()) != now:
-            raise ValueError(f"{path}: the points in {path.parent} were made with another definition of preset "
-                             f"{preset.name!r}; use a new --out, or delete that folder to start again")
-    elif write:
-        atomic_write_json(path, now)
+    given = {role: str(value) for role, value in dataclasses.asdict(models).items() if value is not None}
+    record = json.loads(path.read_text()) if path.exists() else {"preset": now, "models": {}}
+    if record["preset"] != now:
+        raise ValueError(f"{path}: the points in {path.parent} were made with another definition of preset "
+                         f"{preset.name!r}; use a new --out, or delete that folder to start again")
+    changed = sorted(role for role, value in given.items() if record["models"].get(role, value) != value)
+    if changed:
+        raise ValueError(f"{path}: the points in {path.parent} were made with other models as {changed} "
+                         f"({ {r: record['models'][r] for r in changed} }); use a new --out for these models")
+    if not path.exists() or given.keys() - record["models"].keys():
+        atomic_write_json(path, {"preset": now, "models": {**record["models"], **given}})
 
 
 def study_plan(preset: Preset, planned: Planned) -> dict[str, dict[str, Any]]:
     """Point key -> the plan's point (the spec's fields), each key once, in the order of ``planned``."""
     plan: dict[str, dict[str, Any]] = {}
-    for axis, method, level, seed in planned:
-        key, spec, poison = point_key(preset, axis, method, level, seed)
+    for axis, row, level, seed in planned:
+        key, spec, poison = point_key(preset, axis, row, level, seed)
         plan.setdefault(key, spec_point(spec, poison))
     return plan
-
-
-def import_stored_points(out: Path, preset: Preset, plan: dict[str, dict[str, Any]]) -> list[str]:
-    """Import the points of ``plan`` that the earlier store holds under ``out`` as finished trials (refused, as
-    a resumed run, when that store was made under another preset definition); the keys imported."""
-    old = Path(out) / OLD_POINTS_DIR / preset.name
-    if not old.is_dir():
-        return []
-    check_preset_record(old, preset, write=False)
-    study = study_folder(out, preset)
-    return [key for key in plan if (old / f"{key}.json").is_file()
-            and import_result(study, key, json.loads((old / f"{key}.json").read_text()), old / f"{key}.json")]
 
 
 def run_points(out: Path, planned: Planned, inputs: SuiteInputs) -> list[TrialOutcome]:
@@ -82,12 +71,8 @@ def run_points(out: Path, planned: Planned, inputs: SuiteInputs) -> list[TrialOu
     outcome of every point key."""
     preset = inputs.preset
     study = study_folder(out, preset)
-    check_preset_record(study, preset)
+    check_definition(study, preset, inputs.models)
     plan = study_plan(preset, planned)
-    imported = import_stored_points(out, preset, plan)
-    if imported:
-        print(f"[stability] {len(imported)} point(s) read from {Path(out) / OLD_POINTS_DIR / preset.name}",
-              flush=True)
     todo = missing(study, plan)
     if todo:
         init_ray(None)
@@ -102,8 +87,8 @@ def point_records(out: Path, preset: Preset, planned: Planned,
     its error; ``errors``: key -> error of trials that died without recording one); None when any is missing."""
     study, errors = study_folder(out, preset), errors or {}
     records = []
-    for axis, method, level, seed in planned:
-        key, _, _ = point_key(preset, axis, method, level, seed)
+    for axis, row, level, seed in planned:
+        key, _, _ = point_key(preset, axis, row, level, seed)
         record = read_record(trial_folder(study, key))
         if record.outcome == FINISHED and record.result is not None:
             result = record.result
@@ -112,5 +97,5 @@ def point_records(out: Path, preset: Preset, planned: Planned,
                       "spec": key}
         else:
             return None
-        records.append(point_record(axis, method, level, seed, result, key))
+        records.append(point_record(axis, row, level, seed, result, key))
     return records

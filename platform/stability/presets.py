@@ -1,11 +1,11 @@
 """The sizes of ``sray stability --preset toy|cpu-small|gpu``: levels per axis, seeds, the procedural
-world and pretraining a preset builds when no data and checkpoints are given, and the budgets of its
-evaluations.
+world and pretraining a preset builds when no checkpoint is given, the budgets of its evaluations and the one
+CPU-second budget of its trained-on-scene rows.
 
-Points whose inputs draw nothing at random (the clean point, fewer or farther source views, another
-precision) are deterministic: they are computed once per method and reported with one "seed". Every
-point that draws a perturbation is a mean over ``seeds`` perturbation seeds. Each preset pretrains
-each S-Ray variant once (one pretraining seed); its tables say so.
+Points whose inputs draw nothing at random (a zero-shot row's clean point, fewer or farther source views, another
+precision) are deterministic: they are computed once per row and reported with one "seed". Every
+point that draws a perturbation, and every point of a row trained on the scene, is a mean over ``seeds`` seeds.
+A preset's own world pretrains each model once (one pretraining seed); its tables say so.
 """
 
 from __future__ import annotations
@@ -31,6 +31,8 @@ class PresetWorld:
     """Source views per pretraining sample."""
     workers: int
     """Ray Train workers of each pretraining."""
+    segmenter_cpu_seconds: float
+    """CPU seconds of the 2D segmenter's training (``sray bench segmenter``) on the train scenes."""
 
 
 @dataclass(frozen=True)
@@ -52,16 +54,17 @@ class Preset:
     """Every ``eval_stride``-th pixel of each held-out view in each direction is rendered and scored."""
     chunk: int
     """Rays per forward pass of an evaluation."""
-    nerf_scenes: int
-    """Semantic-NeRF is trained on the first this many test scenes (a from-scratch training per point)."""
-    nerf_steps: int
-    """Semantic-NeRF's step budget per point (the fleet's ``finetune.max_steps`` rule)."""
-    nerf_seconds: float
-    """Semantic-NeRF's training-time budget per point (the fleet's ``finetune.max_seconds`` rule). The CPU
-    presets budget steps and keep this only as a guard: on a shared machine a time budget would make the
-    score depend on the load."""
-    nerf_rays: int
-    """Rays per Semantic-NeRF step."""
+    trained_scenes: int
+    """Rows trained on the scene are trained and scored on the first this many test scenes (a training per
+    point); zero-shot rows are scored on every test scene."""
+    scene_cpu_seconds: float
+    """The training budget of every row trained on the scene, per point and scene: CPU seconds of its training
+    steps (the fleet's ``finetune.max_cpu_seconds``), the same for every method. CPU time, not steps or wall
+    time: methods whose steps cost differently compare at equal compute, and the load of a shared machine does
+    not change the budget."""
+    scene_rays: int | None
+    """Rays per training step of the rows trained on the scene (the fleet's ``finetune.rays_per_batch``); None:
+    the checkpoint's ``data.rays_per_batch``."""
     nerf: SemanticNeRFSettings
     """Semantic-NeRF's network and learning rate."""
 
@@ -71,26 +74,26 @@ PRESETS: dict[str, Preset] = {p.name: p for p in (
                    "blur": (1, 7), "exposure": (0, 2), "jpeg": (100, 10), "occlusion": (0.0, 0.5),
                    "precision": ("fp32", "bf16")}, seeds=3,
            world=PresetWorld(World(1, 1, 20, 32, 40), pretrain_steps=6, rays=64,
-                       n_coarse=6, n_fine=6, train_n_source=3, workers=1),
-           n_source=3, unseen_n_source=2, eval_stride=4, chunk=4096, nerf_scenes=1, nerf_steps=4,
-           nerf_seconds=5.0, nerf_rays=64,
+                       n_coarse=6, n_fine=6, train_n_source=3, workers=1, segmenter_cpu_seconds=1.0),
+           n_source=3, unseen_n_source=2, eval_stride=4, chunk=4096, trained_scenes=1, scene_cpu_seconds=0.1,
+           scene_rays=64,
            nerf=SemanticNeRFSettings(depth=2, width=32, skip_layer=1, pos_freqs=4, dir_freqs=2, lr=5e-3)),
     Preset("cpu-small", {"source_views": (8, 4, 2, 1), "unseen_rays": (0, 4, 8, 12),
                          "pose_noise": (0, 2, 5, 10), "image_noise": (0, 10, 25, 50), "blur": (1, 5, 11, 21),
                          "exposure": (0, 1, 2, 3), "jpeg": (100, 30, 10, 5), "occlusion": (0.0, 0.25, 0.5, 0.75),
                          "precision": ("fp32", "bf16")}, seeds=3,
            world=PresetWorld(World(4, 2, 40, 120, 160), pretrain_steps=300, rays=256,
-                       n_coarse=24, n_fine=24, train_n_source=4, workers=2),
-           n_source=8, unseen_n_source=4, eval_stride=8, chunk=4096, nerf_scenes=1, nerf_steps=150,
-           nerf_seconds=600.0, nerf_rays=512,
+                       n_coarse=24, n_fine=24, train_n_source=4, workers=2, segmenter_cpu_seconds=600.0),
+           n_source=8, unseen_n_source=4, eval_stride=8, chunk=4096, trained_scenes=1, scene_cpu_seconds=60.0,
+           scene_rays=512,
            nerf=SemanticNeRFSettings(depth=4, width=128, skip_layer=2, pos_freqs=10, dir_freqs=4, lr=2e-3)),
     Preset("gpu", {"source_views": (16, 8, 4, 2, 1), "unseen_rays": (0, 2, 4, 8, 12),
                    "pose_noise": (0, 0.5, 1, 2, 5, 10), "image_noise": (0, 5, 10, 20, 40, 80),
                    "blur": (1, 3, 7, 15, 31), "exposure": (0, 1, 2, 3, 4), "jpeg": (100, 50, 20, 10, 5),
                    "occlusion": (0.0, 0.1, 0.25, 0.5, 0.75), "precision": ("fp32", "bf16", "fp16")}, seeds=5,
-           world=PresetWorld(World(12, 4, 100, 240, 320), pretrain_steps=20_000,
-                       rays=1024, n_coarse=64, n_fine=64, train_n_source=8, workers=1),
-           n_source=8, unseen_n_source=8, eval_stride=1, chunk=8192, nerf_scenes=4, nerf_steps=5000,
-           nerf_seconds=300.0, nerf_rays=1024, nerf=SemanticNeRFSettings()),
+           world=PresetWorld(World(12, 4, 100, 240, 320), pretrain_steps=20_000, rays=1024, n_coarse=64,
+                       n_fine=64, train_n_source=8, workers=1, segmenter_cpu_seconds=3600.0),
+           n_source=8, unseen_n_source=8, eval_stride=1, chunk=8192, trained_scenes=4, scene_cpu_seconds=600.0,
+           scene_rays=1024, nerf=SemanticNeRFSettings()),
 )}
 """The suite sizes of ``sray stability --preset``."""

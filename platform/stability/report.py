@@ -1,9 +1,10 @@
 """What a stability run leaves: ``stability.json``, the chart of each score, a table per axis, the
 breaking points, and the tracked runs (a parent run, a child run per axis).
 
-Scores are the dataset-level mIoU (%) and PSNR (dB) of the held-out views, averaged over scenes;
-each table and chart carries the evaluation protocol of the S-Ray points and says how Semantic-NeRF
-was scored.
+Scores are the dataset-level mIoU (%) and PSNR (dB) of the held-out views, averaged over scenes. Every legend
+entry and table header says whether its row saw the scene it is scored on (zero-shot, or trained on it) and which
+source inputs it was given (RGB or RGB-D, from the row's protocol descriptor); the footnotes carry each row's
+protocol (``eval_protocol.caption_lines``) and the one training budget of the trained rows.
 """
 
 from __future__ import annotations
@@ -13,24 +14,17 @@ from pathlib import Path
 from typing import Any
 
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
+from sray.platform.common.eval_protocol import EvalProtocol, caption_lines
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.stability.axes import AXES
 from sray.platform.stability.presets import Preset
+from sray.platform.stability.rows import Row
 from sray.platform.stability.summary import LevelStats, axis_table, breaking_summary, level_stats
 from sray.platform.tracking.tracker import Tracker
-from sray.platform.viz.chart_style import ChartStyle
 from sray.platform.viz.stability_chart import LevelPoint, StabilityPanel, write_stability_chart
 
 RESULTS_FILE = "stability.json"
-"""Every point record of the run, its preset, protocol and breaking points, under the run's folder."""
-
-
-def method_styles() -> dict[str, ChartStyle]:
-    """How each method of the suite is drawn (colours of the fleet's methods, S-Ray without CRA in green)."""
-    sray, nerf = get_method("sray").style, get_method("semantic-nerf").style
-    return {"sray": ChartStyle("S-Ray, full CRA (zero-shot)", sray.color, sray.marker),
-            "sray-no-cra": ChartStyle("S-Ray without CRA (zero-shot)", "#2ca02c", "^"),
-            "semantic-nerf": ChartStyle(nerf.label, nerf.color, nerf.marker)}
+"""Every point record of the run, its preset, protocols and breaking points, under the run's folder."""
 
 
 def panels(stats: list[LevelStats], axes: list[str], metric: str) -> list[StabilityPanel]:
@@ -51,15 +45,33 @@ def panels(stats: list[LevelStats], axes: list[str], metric: str) -> list[Stabil
     return out
 
 
-def notes(preset: Preset, protocol_line: str) -> list[str]:
-    """The lines every table and chart of the run carries."""
-    return [f"S-Ray points — {protocol_line}.",
-            f"Semantic-NeRF — trained from scratch per point on the first {preset.nerf_scenes} test scene(s), at most "
-            f"{preset.nerf_steps} steps / {preset.nerf_seconds:g} s of training, {preset.nerf_rays} rays a step, "
-            "scored on the same held-out views (stride and chunk as S-Ray).",
-            f"Every perturbed point: mean over {preset.seeds} perturbation seeds, band = min-max; points that draw "
-            "nothing at random (clean, source-view choice, precision) are computed once. One pretraining seed per "
-            "S-Ray variant."]
+def seen_line(preset: Preset, rows: list[Row]) -> str:
+    """The chart's subtitle: which rows saw the scene, and the trained rows' one budget."""
+    line = "Zero-shot rows never saw the test scenes"
+    if any(r.trained for r in rows):
+        line += (f"; rows trained on the scene had {preset.scene_cpu_seconds:g} CPU seconds of training on each, the "
+                 "same for every method")
+    return line
+
+
+def notes(preset: Preset, rows: list[Row], protocols: dict[str, EvalProtocol]) -> list[str]:
+    """The lines every table and chart of the run carries: each row's protocol, how the trained rows were trained,
+    and the seeds."""
+    lines = caption_lines([(r.name, protocols[r.name].to_json()) for r in rows])
+    trained = [r for r in rows if r.trained]
+    if trained:
+        rays = f"{preset.scene_rays} rays" if preset.scene_rays else "the checkpoint's rays"
+        lines.append(f"Trained on the scene — per point, each method's fleet learner trained on the first "
+                     f"{preset.trained_scenes} test scene(s) for {preset.scene_cpu_seconds:g} CPU seconds of training "
+                     f"steps (time.process_time; one budget for every method), {rays} a step, then scored on the same "
+                     "held-out views (stride and chunk as zero-shot; no early stopping): "
+                     + "; ".join(f"{r.name}: {get_method(r.method).summary}" for r in trained) + ".")
+    if any(not r.trained for r in rows):
+        lines.append("Zero-shot — pretrained models, never trained on the test scenes, scored on every test scene.")
+    lines.append(f"Every perturbed point and every point of a trained row: mean over {preset.seeds} seeds, band = "
+                 "min-max; zero-shot points that draw nothing at random (clean, source-view choice, precision) are "
+                 "computed once. One pretraining seed per pretrained model.")
+    return lines
 
 
 def precision_table(records: list[dict[str, Any]]) -> str:
@@ -73,22 +85,25 @@ def precision_table(records: list[dict[str, Any]]) -> str:
     return "\n".join(rows)
 
 
-def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str], protocol_line: str,
-                  out_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
-    """Write ``stability.json``, the two charts and one Markdown table per axis under ``out_dir``.
+def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str], rows: list[Row],
+                  protocols: dict[str, EvalProtocol], out_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
+    """Write ``stability.json``, the two charts and one Markdown table per axis under ``out_dir``; ``protocols``:
+    row name -> how its scores were made.
 
-    Returns ``{"tables": {axis: markdown}, "charts": [png paths], "breaking": [lines], "json": path}``.
+    Returns ``{"tables": {axis: markdown}, "charts": [png paths], "breaking": [lines], "json": path, "notes": lines}``.
     """
     stats = level_stats(records)
-    styles = method_styles()
-    lines = notes(preset, protocol_line)
+    styles = {r.name: r.style(protocols[r.name]) for r in rows}
+    headers = {r.name: r.header for r in rows}
+    lines = notes(preset, rows, protocols)
     title = f"Where the methods break — sray stability --preset {preset.name}"
-    charts = [write_stability_chart(panels(stats, axes, metric), styles, label, f"{title}: {name}\n{protocol_line}",
-                                    lines[1:], out_dir / f"stability_{metric}.png")
+    charts = [write_stability_chart(panels(stats, axes, metric), styles, label,
+                                    f"{title}: {name}\n{seen_line(preset, rows)}", lines,
+                                    out_dir / f"stability_{metric}.png")
               for metric, name, label in (("miou", "mIoU", "mIoU (%)"), ("psnr", "PSNR", "PSNR (dB)"))]
     tables = {}
     for axis in axes:
-        table = axis_table(stats, axis, AXES[axis].unit)
+        table = axis_table(stats, axis, AXES[axis].unit, headers)
         if axis == "precision":
             table += "\n\n" + precision_table(records)
         if axis == "unseen_rays":
@@ -99,9 +114,10 @@ def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str]
         atomic_write_text(out_dir / "tables" / f"{axis}.md", table + "\n")
     breaking = breaking_summary(stats, axes)
     path = out_dir / RESULTS_FILE
-    atomic_write_json(path, {"preset": preset.name, "axes": axes, "protocol": protocol_line, "notes": lines,
-                             "breaking_points": breaking, **extra, "points": records,
-                             "stats": [dataclasses.asdict(s) for s in stats]})
+    atomic_write_json(path, {"preset": preset.name, "axes": axes, "notes": lines, "breaking_points": breaking,
+                             "rows": [{**dataclasses.asdict(r), "header": r.header, "label": styles[r.name].label,
+                                       "protocol": protocols[r.name].to_json()} for r in rows],
+                             **extra, "points": records, "stats": [dataclasses.asdict(s) for s in stats]})
     return {"tables": tables, "charts": charts, "breaking": breaking, "json": path, "notes": lines}
 
 
@@ -111,7 +127,8 @@ def track(tracker: Tracker, experiment: str, run_name: str, outputs: dict[str, A
     (its table, and ``<method>/miou`` and ``<method>/psnr`` at step = level index). Returns the parent run id."""
     parent = tracker.start_run(experiment, run_name, tags={"sray.kind": "stability", "sray.preset": preset.name})
     with tracker.logger(parent) as log:
-        log.log_params({"preset": preset.name, "axes": axes, "seeds": preset.seeds, "levels": preset.levels})
+        log.log_params({"preset": preset.name, "axes": axes, "seeds": preset.seeds, "levels": preset.levels,
+                        "scene_cpu_seconds": preset.scene_cpu_seconds})
         for chart in outputs["charts"]:
             log.log_image(chart, "charts")
         log.log_artifact(outputs["json"])

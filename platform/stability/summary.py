@@ -79,13 +79,15 @@ def _fmt(v: float | None, digits: int = 2) -> str:
     return "failed" if v is None else f"{v:.{digits}f}"
 
 
-def axis_table(stats: list[LevelStats], axis: str, unit: str) -> str:
-    """Markdown table of one axis: a row per level, a column pair per method (mIoU with its seed range)."""
+def axis_table(stats: list[LevelStats], axis: str, unit: str, headers: dict[str, str] | None = None) -> str:
+    """Markdown table of one axis: a row per level, a column pair per method (mIoU with its seed range), headed by
+    ``headers[method]`` (default: the method's name)."""
     rows = [s for s in stats if s.axis == axis]
     methods = list(dict.fromkeys(s.method for s in rows))
     levels = list(dict.fromkeys(s.level for s in rows))
     by = {(s.method, s.level): s for s in rows}
-    head = f"| {unit} | " + " | ".join(f"{m} mIoU % (min-max) | {m} PSNR dB" for m in methods) + " |"
+    names = {m: (headers or {}).get(m, m) for m in methods}
+    head = f"| {unit} | " + " | ".join(f"{names[m]} mIoU % (min-max) | {names[m]} PSNR dB" for m in methods) + " |"
     lines = [head, "|" + "---|" * (1 + 2 * len(methods))]
     for level in levels:
         cells = []

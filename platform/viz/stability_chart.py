@@ -27,6 +27,10 @@ COLUMNS = 3
 FAILED_COLOR = "#d62728"
 """Colour of the marks of failed levels."""
 DPI = 110
+LEGEND_CHARS_PER_INCH = 15
+"""About how many legend characters (9 pt) fit in an inch: legends of long labels get fewer columns."""
+LEGEND_ROW_INCHES = 0.22
+"""Height of one legend row."""
 
 
 @dataclass(frozen=True)
@@ -73,7 +77,12 @@ def write_stability_chart(panels: list[StabilityPanel], styles: Mapping[str, Cha
     width = PANEL_SIZE[0] * min(COLUMNS, len(panels))
     lines = [ln for part in footnote for ln in textwrap.wrap(part, max(60, int(width * 17)))]
     title_lines = [ln for part in title.split("\n") for ln in textwrap.wrap(part, int(width * 14))]
-    head, foot = 1.0 + 0.2 * len(title_lines), 0.2 + 0.16 * len(lines)
+    labels = [styles[m].label for panel in panels for m in panel.lines]
+    longest = max((len(label) for label in labels), default=0)
+    columns = max(1, min(4, len(set(labels)) + 1, int(width // (longest / LEGEND_CHARS_PER_INCH + 0.7))))
+    legend_rows = math.ceil((len(set(labels)) + 1) / columns)  # + the failed-level mark
+    head = 0.8 + 0.2 * len(title_lines) + LEGEND_ROW_INCHES * legend_rows
+    foot = 0.2 + 0.16 * len(lines)
     height = PANEL_SIZE[1] * rows + head + foot
     fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
@@ -110,7 +119,7 @@ def write_stability_chart(panels: list[StabilityPanel], styles: Mapping[str, Cha
         ax.grid(alpha=0.3)
     fig.text(0.5, 1 - 0.1 / height, title_lines[0], fontsize=12, ha="center", va="top")
     fig.text(0.5, 1 - 0.38 / height, "\n".join(title_lines[1:]), fontsize=8, ha="center", va="top")
-    fig.legend(list(handles.values()), list(handles), loc="upper center", ncols=min(4, len(handles)),
+    fig.legend(list(handles.values()), list(handles), loc="upper center", ncols=min(columns, len(handles)),
                bbox_to_anchor=(0.5, 1 - (0.3 + 0.2 * len(title_lines)) / height), fontsize=9, frameon=False)
     fig.text(0.01, 0.01, "\n".join(lines), fontsize=7, va="bottom", ha="left")
     return save_png(fig, path, DPI)

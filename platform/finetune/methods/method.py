@@ -82,6 +82,9 @@ class EvalRequest:
     """``--device`` (None: CUDA if available, else the CPU)."""
     fast: FastRender | None
     """``--render fast``'s settings (None: the full render); read only by a method whose ``eval_reads`` names it."""
+    inputs: str = ""
+    """Source-view inputs to render with (``rgbd``: an RGB checkpoint given the source depth, docs/model.md "RGB-D
+    mode"; empty: the checkpoint's own ``model.inputs``); read only by a method whose ``eval_reads`` names it."""
 
 
 @dataclass(frozen=True)
@@ -109,7 +112,8 @@ class Method:
     trains per scene)."""
     eval_reads: tuple[str, ...] = ()
     """The :class:`EvalRequest` fields its ``eval_model`` reads besides ``device`` (``checkpoint``, ``segmenter``,
-    ``fast``): a command refuses the flags that set any other (``sray eval --method 2d-transfer --render fast``)."""
+    ``fast``, ``inputs``): a command refuses the flags that set any other (``sray eval --method 2d-transfer --render
+    fast``)."""
     inputs: str = ""
     """Source-view inputs its held-out protocol names (``rgb`` or ``rgbd``); empty: the shared checkpoint's
     ``model.inputs`` (S-Ray reads what its checkpoint reads)."""

@@ -44,18 +44,19 @@ def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
 
 
 def eval_model(request: EvalRequest) -> EvalModel:
-    """The shared model of ``--checkpoint`` as it is (zero-shot), rendered as ``--render`` says."""
+    """The shared model of ``--checkpoint`` as it is (zero-shot), rendered as ``--render`` says, with the request's
+    source inputs (its own when the request names none)."""
     from sray.platform.eval.eval_model import checkpoint_model
 
     if request.checkpoint is None:
         raise ValueError("method sray scores a checkpoint: pass --checkpoint FOLDER (a step_XXXXXXXXX folder written "
                          "by `sray train`)")
-    return checkpoint_model(request.checkpoint, request.device, request.fast)
+    return checkpoint_model(request.checkpoint, request.device, request.fast, inputs=request.inputs)
 
 
 METHOD = Method(
     name=NAME, summary="finetune the shared S-Ray model", build=build, artifact_file="sray_delta.safetensors",
     load=load, style=ChartStyle(label="S-Ray finetune", color="#1f6fb4", marker="o"), uses_sources=True,
     zero_shot=ChartStyle(label="S-Ray zero-shot (step 0, no per-scene steps)", color="#6b9fd1", marker="*"),
-    eval_model=eval_model, eval_reads=("checkpoint", "fast"), clips=True)
+    eval_model=eval_model, eval_reads=("checkpoint", "fast", "inputs"), clips=True)
 """The S-Ray per-scene method."""

@@ -1,0 +1,147 @@
+"""The rows of the stability suite, read off the method registry: which model of which method is stressed, in
+which mode, and how its legend and table header name what it saw and what it was given.
+
+Every registered method (:mod:`sray.platform.finetune.methods.registry`) gives up to two rows:
+
+* ``<name>``, **zero-shot**: its pretrained model with no per-scene step, built by its ``eval_model`` from the
+  suite's given models (a method without one, as Semantic-NeRF, has no zero-shot row);
+* ``<name>-scene``, **trained on the scene**: its fleet learner (``Method.build``) trained on the test scene's views
+  for the suite's one CPU-second budget, the same for every method (``Preset.scene_cpu_seconds``).
+
+A method that renders from source views and reads them as its checkpoint does (``uses_sources`` and an empty
+``inputs``: S-Ray) also gets
+
+* ``<name>-no-cra``, zero-shot, from the checkpoint trained with ``model.attention=none``, when one is given;
+* ``<name>-rgbd`` (``<name>-rgbd-scene``): its checkpoint rendered with the source views' depth
+  (``model.inputs=rgbd``, docs/model.md "RGB-D mode") in every mode where a method that reads depth
+  (``inputs == "rgbd"``, as ``2d-transfer``) has a row, placed just before that row: a depth-using method is always
+  shown beside S-Ray given the same depth.
+
+Which axes stress a row follows from the row too (:meth:`sray.platform.stability.axes.Axis.applies`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from sray.platform.common.eval_protocol import EvalProtocol
+from sray.platform.finetune.methods.method import EvalRequest
+from sray.platform.finetune.methods.registry import get_method
+from sray.platform.viz.chart_style import ChartStyle
+
+MODES = ("zero-shot", "scene")
+"""``zero-shot``: pretrained models with no per-scene step; ``scene``: trained on the test scene's views."""
+INPUT_WORDS = {"rgb": "RGB", "rgbd": "RGB-D"}
+"""How legends and headers name a protocol's ``inputs``."""
+SEEN_WORDS = {False: "never saw the scene", True: "trained on the scene"}
+"""How legends and headers say whether a row saw the scene it is scored on."""
+VARIANTS = {"": ("", None), "no-cra": (", without CRA", ChartStyle("", "#2ca02c", "^")),
+            "rgbd": (", with source depth", ChartStyle("", "#8c564b", "v"))}
+"""Variant -> (words added to the method's label, the colour and marker it is drawn with; None: the method's)."""
+
+
+@dataclass(frozen=True)
+class SuiteModels:
+    """The pretrained models a run stresses, given (``--checkpoint``, ``--checkpoint-no-cra``, ``--segmenter``) or
+    pretrained by the preset's own world."""
+
+    checkpoint: Path
+    """S-Ray training checkpoint folder: the zero-shot S-Ray rows, and the shared model every trained row's method
+    is built with (as a fleet's checkpoint)."""
+    checkpoint_no_cra: Path | None = None
+    """S-Ray checkpoint trained with ``model.attention=none`` (None: no ``-no-cra`` row)."""
+    segmenter: Path | None = None
+    """2D segmenter folder (``sray bench segmenter``) of ``2d-transfer``."""
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of the suite's charts and one column pair of its tables."""
+
+    name: str
+    """Its key (points, tables, tracked metrics): ``<method>[-no-cra|-rgbd][-scene]``."""
+    method: str
+    """The registered method it runs."""
+    trained: bool
+    """Trained on the test scene (else zero-shot)."""
+    variant: str
+    """``""``, ``no-cra`` (the no-CRA checkpoint) or ``rgbd`` (the checkpoint given the source depth)."""
+    inputs: str
+    """What it is given of the source views (``EvalProtocol.inputs``): ``rgb`` or ``rgbd``."""
+    uses_sources: bool
+    """Held-out views are rendered from source views (else from none: a per-scene model)."""
+
+    @property
+    def mode(self) -> str:
+        """``scene`` or ``zero-shot`` (:data:`MODES`)."""
+        return MODES[1] if self.trained else MODES[0]
+
+    def protocol(self, shards: Path, n_source: int, stride: int) -> EvalProtocol:
+        """How its scores are made: ``n_source`` fixed sources given as its ``inputs``, or none."""
+        if self.uses_sources:
+            return EvalProtocol.from_shards(shards, n_source, stride, self.inputs)
+        return EvalProtocol.without_sources(stride)
+
+    @property
+    def header(self) -> str:
+        """Table header: its name, whether it saw the scene and its inputs."""
+        return f"{self.name} ({SEEN_WORDS[self.trained]}, {INPUT_WORDS[self.inputs]})"
+
+    def request(self, models: SuiteModels, device: str) -> EvalRequest:
+        """What the method's ``eval_model`` builds this zero-shot row's model from (the full render)."""
+        checkpoint = models.checkpoint_no_cra if self.variant == "no-cra" else models.checkpoint
+        return EvalRequest(checkpoint=checkpoint, segmenter=models.segmenter, device=device, fast=None,
+                           inputs="rgbd" if self.variant == "rgbd" else "")
+
+    def style(self, protocol: EvalProtocol) -> ChartStyle:
+        """Legend and look: the method's own label for the mode, the variant, whether it saw the scene and the
+        inputs its ``protocol`` names."""
+        method = get_method(self.method)
+        base = method.style if self.trained else method.zero_shot or ChartStyle(
+            f"{method.name} zero-shot", method.style.color, method.style.marker)
+        words, look = VARIANTS[self.variant]
+        look = look or base
+        label = f"{base.label}{words} [{SEEN_WORDS[self.trained]} · {INPUT_WORDS[protocol.inputs]}]"
+        return ChartStyle(label, look.color, look.marker)
+
+
+def follows_checkpoint(method: str) -> bool:
+    """Whether the method renders from source views and reads them as its checkpoint does (S-Ray)."""
+    record = get_method(method)
+    return record.uses_sources and not record.inputs
+
+
+def _row(method: str, trained: bool, variant: str, inputs: str) -> Row:
+    suffix = (f"-{variant}" if variant else "") + ("-scene" if trained else "")
+    return Row(f"{method}{suffix}", method, trained, variant, inputs, get_method(method).uses_sources)
+
+
+def mode_rows(methods: list[str], trained: bool, checkpoint_inputs: str, no_cra_inputs: str | None) -> list[Row]:
+    """The rows of one mode (see the module doc), in registry order with the variants placed."""
+    rows = []
+    for name in methods:
+        record = get_method(name)
+        if not trained and record.eval_model is None:
+            continue
+        own = checkpoint_inputs if follows_checkpoint(name) else record.inputs or "rgb"
+        rows.append(_row(name, trained, "", own))
+        if follows_checkpoint(name) and not trained and no_cra_inputs is not None:
+            rows.append(_row(name, trained, "no-cra", no_cra_inputs))
+    depth_rows = [i for i, r in enumerate(rows) if not follows_checkpoint(r.method) and r.inputs == "rgbd"]
+    if depth_rows:
+        given_depth = [_row(r.method, trained, "rgbd", "rgbd") for r in rows
+                       if follows_checkpoint(r.method) and not r.variant and r.inputs != "rgbd"]
+        rows[depth_rows[0]:depth_rows[0]] = given_depth
+    return rows
+
+
+def suite_rows(methods: list[str], modes: list[str], checkpoint_inputs: str,
+               no_cra_inputs: str | None) -> list[Row]:
+    """Every row of ``methods`` (registered names) in ``modes``, zero-shot rows first. ``checkpoint_inputs``: the
+    S-Ray checkpoint's ``model.inputs``; ``no_cra_inputs``: the no-CRA checkpoint's (None: none given, no row)."""
+    unknown = [m for m in modes if m not in MODES]
+    if unknown:
+        raise ValueError(f"stability modes {unknown}: use {list(MODES)}")
+    return [row for trained in (False, True) if MODES[trained] in modes
+            for row in mode_rows(methods, trained, checkpoint_inputs, no_cra_inputs)]
