@@ -18,8 +18,8 @@ from sray.platform.checkpoints.folders import load_checkpoint, resolve_checkpoin
 from sray.platform.finetune.fleet import run_fleet
 
 CONTRACT_KEYS = {"scene", "method", "status", "error", "attempts", "steps_used", "max_steps", "stopped_early",
-                 "stop_reason", "wall_s", "cpu_s", "miou_before", "miou_after", "psnr_after", "artifact_bytes", "full_checkpoint_bytes", "child_run_id",
-                 "protocol", "curve", "node_id", "gpu_peak_bytes"}
+                 "stop_reason", "wall_s", "cpu_s", "miou_before", "miou_after", "psnr_after", "artifact_bytes",
+                 "full_checkpoint_bytes", "child_run_id", "protocol", "curve", "node_id", "gpu_peak_bytes"}
 """docs/CONTRACTS.md, "Fleet results"."""
 CURVE_KEYS = {"step", "wall_s", "miou", "miou_per_image", "psnr"}
 SCENES = ["synth_train_000", "synth_train_001", "synth_test_000"]

@@ -147,7 +147,8 @@ def test_chart_panels_and_tables_of_a_known_result(tmp_path) -> None:
     assert [(p.x, p.mean) for p in unseen.lines["sray"]] == [(0.05, 60.0), (0.4, 20.0)]
     (psnr_blur,) = panels(level_stats(records), ["blur"], "psnr")
     assert [(p.mean, p.low, p.high) for p in psnr_blur.lines["sray"]][1] == (20.0, 18.0, 22.0)
-    protocols = {"sray": EvalProtocol("a rule v1", TOY.n_source, TOY.eval_stride), nerf: EvalProtocol.without_sources(4)}
+    protocols = {"sray": EvalProtocol("a rule v1", TOY.n_source, TOY.eval_stride),
+                 nerf: EvalProtocol.without_sources(4)}
     out = write_outputs(records, TOY, ["blur", "unseen_rays"], [SRAY, NERF], protocols, tmp_path, {})
     table = out["tables"]["blur"]
     assert table.startswith("| motion-blur length (px) | sray (never saw the scene, RGB) mIoU % (min-max) | ")

@@ -1,7 +1,8 @@
-"""``sray stability`` end to end on the toy preset, from tiny shards and two tiny checkpoints (full CRA and
-``attention=none``): every axis and method, the clean point against ``sray eval``, an injected NaN
-recorded as a failure while the rest completes, a point of the earlier store imported, resuming without
-running any trial again, and the tracked runs.
+"""``sray stability`` end to end on the toy preset, from tiny shards and two given tiny checkpoints (full CRA and
+``attention=none``): every axis, the S-Ray and Semantic-NeRF rows (zero-shot, and trained on the scene at the
+preset's CPU budget), the clean point against ``sray eval``, an injected NaN recorded as a failure while the rest
+completes, resuming without running any trial again, and the tracked runs. (``2d-transfer``'s rows and S-Ray's RGB-D
+rows beside them are checked without Ray in ``test_stability_models.py``.)
 """
 
 from __future__ import annotations
@@ -24,8 +25,6 @@ from sray.platform.stability.axes import AXES  # noqa: E402
 from sray.platform.stability.presets import PRESETS  # noqa: E402
 
 POISONED = "sray/image_noise/30"
-OLD_POINT = "semantic-nerf_pool-d0-n0_blur-7_fp32_s1"
-"""A point the earlier store holds (``points/toy/<key>.json``): imported, never computed."""
 
 
 @pytest.fixture(scope="module")
@@ -36,37 +35,34 @@ def toy_checkpoints(tiny_shards: Path, tmp_path_factory: pytest.TempPathFactory)
 
 
 def _run(shards: Path, checkpoints: dict[str, Path], out: Path, doc: Path, uri: str, *extra: str) -> int:
-    return main(["stability", "--preset", "toy", "--data", str(shards), "--checkpoint", f"full={checkpoints['full']}",
-                 "--checkpoint", f"none={checkpoints['none']}", "--out", str(out), "--doc", str(doc),
-                 "--tracking-uri", uri, "--device", "cpu", *extra])
+    return main(["stability", "--preset", "toy", "--data", str(shards), "--checkpoint", str(checkpoints["full"]),
+                 "--checkpoint-no-cra", str(checkpoints["none"]), "--methods", "sray", "semantic-nerf", "--out",
+                 str(out), "--doc", str(doc), "--tracking-uri", uri, "--device", "cpu", *extra])
 
 
 def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(ray_session, tiny_shards, toy_checkpoints,
                                                                        mlflow_uri, tmp_path, monkeypatch) -> None:
-    import dataclasses
-
     out, doc = tmp_path / "suite", tmp_path / "benchmarks.md"
-    old_store = out / "points" / "toy"
-    old_store.mkdir(parents=True)
-    (old_store / "preset.json").write_text(json.dumps(dataclasses.asdict(PRESETS["toy"])))
-    old = {"miou": 12.5, "psnr": 9.5, "nonfinite_rays": 0, "status": "ok", "error": None, "spec": OLD_POINT}
-    (old_store / f"{OLD_POINT}.json").write_text(json.dumps(old))
     with injected_faults(f"stability.nan_points={POISONED}"):
         assert _run(tiny_shards, toy_checkpoints, out, doc, mlflow_uri) == 0
         result = json.loads((out / "stability.json").read_text())
         assert result["axes"] == list(AXES)
         points = result["points"]
         methods = {(p["axis"], p["method"]) for p in points}
-        assert ("precision", "semantic-nerf") not in methods and ("pose_noise", "semantic-nerf") in methods
+        assert {m for _, m in methods} == {"sray", "sray-no-cra", "sray-scene", "semantic-nerf-scene"}
+        assert ("precision", "sray-scene") not in methods and ("pose_noise", "semantic-nerf-scene") in methods
+        assert ("unseen_rays", "sray-scene") in methods and ("unseen_rays", "semantic-nerf-scene") not in methods
+        budget = PRESETS["toy"].scene_cpu_seconds
+        trained = [p for p in points if p["method"].endswith("-scene")]
+        assert trained and all(p["seed"] is not None and min(p["cpu_s"]) >= budget for p in trained)
+        labels = {r["name"]: r["label"] for r in result["rows"]}
+        assert labels["sray-scene"].endswith("[trained on the scene · RGB]")
+        assert labels["sray-no-cra"].endswith("[never saw the scene · RGB]")
         poisoned = [p for p in points if (p["method"], p["axis"], p["level"]) == ("sray", "image_noise", 30)]
         assert len(poisoned) == PRESETS["toy"].seeds
         assert all(p["status"] == "failed" and p["error"].startswith("NonFiniteOutput") for p in poisoned)
         others = [p for p in points if p not in poisoned]
         assert others and all(p["status"] == "ok" and p["miou"] is not None for p in others)
-        [imported] = [p for p in points if p["key"] == OLD_POINT]
-        assert (imported["axis"], imported["level"], imported["seed"], imported["miou"]) == ("blur", 7, 1, 12.5)
-        record = json.loads((out / "study" / "toy" / "trials" / OLD_POINT / "trial.json").read_text())
-        assert record["imported"] == str(old_store / f"{OLD_POINT}.json") and record["launches"] == []
         assert any(line.startswith("image_noise / sray: half the clean mIoU lost at 15 (interpolated")
                    for line in result["breaking_points"])
         assert "| 30 | failed |" in (out / "tables" / "image_noise.md").read_text()
@@ -117,10 +113,10 @@ def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(ray_sessi
 
 
 def test_bad_input_is_one_clear_line(tiny_shards, toy_checkpoints, tmp_path, capsys) -> None:
-    assert main(["stability", "--preset", "toy", "--data", str(tiny_shards), "--checkpoint",
-                 f"full={toy_checkpoints['full']}", "--out", str(tmp_path)]) == 2
-    assert "--checkpoint none=PATH" in capsys.readouterr().err
-    assert main(["stability", "--preset", "toy", "--data", str(tmp_path), "--checkpoint", "full=/no/such"]) == 2
-    assert "/no/such does not exist" in capsys.readouterr().err
-    assert main(["stability", "--preset", "toy", "--checkpoint", f"full={toy_checkpoints['full']}"]) == 2
-    assert "--checkpoint needs --data" in capsys.readouterr().err
+    assert main(["stability", "--preset", "toy", "--data", str(tmp_path), "--checkpoint",
+                 str(toy_checkpoints["full"])]) == 2
+    assert "no manifest.json there" in capsys.readouterr().err
+    assert main(["stability", "--preset", "toy", "--checkpoint", "/no/such"]) == 2
+    assert "/no/such: no such folder" in capsys.readouterr().err
+    assert main(["stability", "--preset", "toy", "--data", str(tiny_shards)]) == 2
+    assert "need --checkpoint" in capsys.readouterr().err

@@ -148,7 +148,8 @@ def prepare(job: StabilityJob) -> tuple[SuiteInputs, list[Row]]:
         raise ValueError(f"--axes {job.axes} stress none of the rows of --methods {job.methods} --modes {job.modes}")
     check_rows(rows, models, job.preset, n_classes, shards / "manifest.json")
     device = job.device or ("cuda" if torch.cuda.is_available() else "cpu")
-    return SuiteInputs(job.preset, str(shards), tuple(names), tuple(rows), models, n_classes, ignore_id, device), rows
+    suite = SuiteInputs(job.preset, str(shards), tuple(names), tuple(rows), models, n_classes, ignore_id, device)
+    return suite, rows
 
 
 def run_job(job: StabilityJob, suite: SuiteInputs, rows: list[Row]) -> dict[str, Any]:
@@ -161,8 +162,9 @@ def run_job(job: StabilityJob, suite: SuiteInputs, rows: list[Row]) -> dict[str,
     records = point_records(job.out, job.preset, planned_points(job.preset, done, rows), errors)
     shards = Path(suite.shards)
     protocols = {r.name: r.protocol(shards, job.preset.n_source, job.preset.eval_stride) for r in rows}
-    extra = {"shards": suite.shards, "models": {k: str(v) for k, v in dataclasses.asdict(suite.models).items() if v is not None},
-             "scenes": list(suite.scenes), "methods": job.methods, "modes": job.modes}
+    models = {k: str(v) for k, v in dataclasses.asdict(suite.models).items() if v is not None}
+    extra = {"shards": suite.shards, "models": models, "scenes": list(suite.scenes), "methods": job.methods,
+             "modes": job.modes}
     shown = [r for r in rows if any(AXES[a].applies(r) for a in done)]
     outputs = write_outputs(records, job.preset, done, shown, protocols, job.out, extra)
     tracker = get_tracker(job.tracker, job.store)

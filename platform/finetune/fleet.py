@@ -80,9 +80,10 @@ def failed_result(task: SceneTask, error: str, full_bytes: int | None) -> dict[s
     """The contract's result dict of a pair whose last attempt failed (nothing measured)."""
     return {"scene": task.scene, "method": task.method, "status": "failed", "error": error, "attempts": task.attempt,
             "steps_used": 0, "max_steps": task.config.finetune.max_steps, "stopped_early": False, "stop_reason": None,
-            "wall_s": 0.0, "cpu_s": 0.0, "miou_before": None, "miou_after": None, "psnr_after": None, "artifact_bytes": None,
-            "full_checkpoint_bytes": full_bytes, "child_run_id": task.run.run_id if task.run else None,
-            "protocol": None, "curve": [], "node_id": None, "gpu_peak_bytes": None}
+            "wall_s": 0.0, "cpu_s": 0.0, "miou_before": None, "miou_after": None, "psnr_after": None,
+            "artifact_bytes": None, "full_checkpoint_bytes": full_bytes,
+            "child_run_id": task.run.run_id if task.run else None, "protocol": None, "curve": [], "node_id": None,
+            "gpu_peak_bytes": None}
 
 
 def _error_text(error: BaseException) -> str:

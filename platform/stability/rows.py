@@ -36,9 +36,11 @@ INPUT_WORDS = {"rgb": "RGB", "rgbd": "RGB-D"}
 """How legends and headers name a protocol's ``inputs``."""
 SEEN_WORDS = {False: "never saw the scene", True: "trained on the scene"}
 """How legends and headers say whether a row saw the scene it is scored on."""
-VARIANTS = {"": ("", None), "no-cra": (", without CRA", ChartStyle("", "#2ca02c", "^")),
-            "rgbd": (", with source depth", ChartStyle("", "#8c564b", "v"))}
-"""Variant -> (words added to the method's label, the colour and marker it is drawn with; None: the method's)."""
+VARIANT_WORDS = {"": "", "no-cra": ", without CRA", "rgbd": ", with source depth"}
+"""Variant -> the words added to the method's label."""
+VARIANT_LOOKS = {("no-cra", False): ChartStyle("", "#2ca02c", "^"), ("rgbd", False): ChartStyle("", "#8c564b", "v"),
+                 ("rgbd", True): ChartStyle("", "#9467bd", "P")}
+"""(variant, trained) -> the colour and marker its row is drawn with (the method's own where none is listed)."""
 
 
 @dataclass(frozen=True)
@@ -100,9 +102,9 @@ class Row:
         method = get_method(self.method)
         base = method.style if self.trained else method.zero_shot or ChartStyle(
             f"{method.name} zero-shot", method.style.color, method.style.marker)
-        words, look = VARIANTS[self.variant]
-        look = look or base
-        label = f"{base.label}{words} [{SEEN_WORDS[self.trained]} · {INPUT_WORDS[protocol.inputs]}]"
+        look = VARIANT_LOOKS.get((self.variant, self.trained), base)
+        tag = f"[{SEEN_WORDS[self.trained]} · {INPUT_WORDS[protocol.inputs]}]"
+        label = f"{base.label}{VARIANT_WORDS[self.variant]} {tag}"
         return ChartStyle(label, look.color, look.marker)
 
 
