@@ -75,7 +75,7 @@ def suite_for(inputs: SuiteInputs) -> Suite:
         net_cfg = (training.base if training else model_from_checkpoint(inputs.models.checkpoint)[0]).cfg
         suite = Suite(inputs.preset, load_scenes(Path(inputs.shards), list(inputs.scenes)),
                       {row.name: row for row in inputs.rows}, models, training,
-                      (net_cfg.n_coarse, net_cfg.min_source_depth), torch.device(inputs.device))
+                      (net_cfg.n_coarse, net_cfg.min_source_depth))
         _loaded.append((inputs, suite))
     return _loaded[0][1]
 

@@ -18,10 +18,8 @@ spec's result (non-finite rays, fp32 agreement, unseen fraction, training steps 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
-
-import torch
 
 from sray.platform.common.fault_hook import poisoned_point
 from sray.platform.eval.eval_model import EvalModel
@@ -46,12 +44,11 @@ class Suite:
     rows: dict[str, Row]
     """Row name -> row."""
     models: dict[str, EvalModel]
-    """Zero-shot row name -> its pretrained model (on ``device``)."""
+    """Zero-shot row name -> its pretrained model (on the run's device)."""
     training: SceneTraining | None
     """What trained rows start from (None: the run has none)."""
     probe: tuple[int, float]
     """Coarse depths per ray and nearest source depth of the unseen fraction (the S-Ray checkpoint's)."""
-    device: torch.device = field(default_factory=lambda: torch.device("cpu"))
 
 
 def planned_points(preset: Preset, axes: list[str], rows: list[Row]) -> Planned:
