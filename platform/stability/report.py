@@ -18,7 +18,7 @@ from sray.platform.common.eval_protocol import EvalProtocol, caption_lines
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.stability.axes import AXES
 from sray.platform.stability.presets import Preset
-from sray.platform.stability.rows import Row
+from sray.platform.stability.rows import VARIANT_WORDS, Row
 from sray.platform.stability.summary import LevelStats, axis_table, breaking_summary, level_stats
 from sray.platform.tracking.tracker import Tracker
 from sray.platform.viz.stability_chart import LevelPoint, StabilityPanel, write_stability_chart
@@ -65,7 +65,8 @@ def notes(preset: Preset, rows: list[Row], protocols: dict[str, EvalProtocol]) -
                      f"{preset.trained_scenes} test scene(s) for {preset.scene_cpu_seconds:g} CPU seconds of training "
                      f"steps (time.process_time; one budget for every method), {rays} a step, then scored on the same "
                      "held-out views (stride and chunk as zero-shot; no early stopping): "
-                     + "; ".join(f"{r.name}: {get_method(r.method).summary}" for r in trained) + ".")
+                     + "; ".join(f"{r.name}: {get_method(r.method).summary}{VARIANT_WORDS[r.variant]}"
+                                 for r in trained) + ".")
     if any(not r.trained for r in rows):
         lines.append("Zero-shot — pretrained models, never trained on the test scenes, scored on every test scene.")
     lines.append(f"Every perturbed point and every point of a trained row: mean over {preset.seeds} seeds, band = "
