@@ -64,6 +64,7 @@ def test_every_rgbd_method_has_sray_given_the_depth_beside_it(monkeypatch) -> No
     assert _names(["sray", "2d-transfer"], ["scene"]) == ["sray-scene", "sray-rgbd-scene", "2d-transfer-scene"]
     assert _names(["2d-transfer", "sray"], no_cra=None) == ["sray-rgbd", "2d-transfer", "sray", "sray-rgbd-scene",
                                                             "2d-transfer-scene", "sray-scene"]
+    assert _names(["2d-transfer"]) == ["sray-rgbd", "2d-transfer", "sray-rgbd-scene", "2d-transfer-scene"]
     # a checkpoint that reads depth already is its own RGB-D row
     assert [r.name for r in suite_rows(["sray", "2d-transfer"], ["zero-shot"], "rgbd", None)] == ["sray",
                                                                                                  "2d-transfer"]

@@ -14,8 +14,8 @@ A method that renders from source views and reads them as its checkpoint does (`
 * ``<name>-no-cra``, zero-shot, from the checkpoint trained with ``model.attention=none``, when one is given;
 * ``<name>-rgbd`` (``<name>-rgbd-scene``): its checkpoint rendered with the source views' depth
   (``model.inputs=rgbd``, docs/model.md "RGB-D mode") in every mode where a method that reads depth
-  (``inputs == "rgbd"``, as ``2d-transfer``) has a row, placed just before that row: a depth-using method is always
-  shown beside S-Ray given the same depth.
+  (``inputs == "rgbd"``, as ``2d-transfer``) has a row, placed just before that row, even when its own method was
+  not asked for: a depth-using method is always shown beside S-Ray given the same depth.
 
 Which axes stress a row follows from the row too (:meth:`sray.platform.stability.axes.Axis.applies`).
 """
@@ -27,7 +27,7 @@ from pathlib import Path
 
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.finetune.methods.method import EvalRequest
-from sray.platform.finetune.methods.registry import get_method
+from sray.platform.finetune.methods.registry import get_method, method_names
 from sray.platform.viz.chart_style import ChartStyle
 
 MODES = ("zero-shot", "scene")
@@ -131,10 +131,10 @@ def mode_rows(methods: list[str], trained: bool, checkpoint_inputs: str, no_cra_
         if follows_checkpoint(name) and not trained and no_cra_inputs is not None:
             rows.append(_row(name, trained, "no-cra", no_cra_inputs))
     depth_rows = [i for i, r in enumerate(rows) if not follows_checkpoint(r.method) and r.inputs == "rgbd"]
-    if depth_rows:
-        given_depth = [_row(r.method, trained, "rgbd", "rgbd") for r in rows
-                       if follows_checkpoint(r.method) and not r.variant and r.inputs != "rgbd"]
-        rows[depth_rows[0]:depth_rows[0]] = given_depth
+    if depth_rows:  # every registered checkpoint method given the depth, even when not asked for
+        given_depth = [_row(name, trained, "" if checkpoint_inputs == "rgbd" else "rgbd", "rgbd")
+                       for name in method_names() if follows_checkpoint(name)]
+        rows[depth_rows[0]:depth_rows[0]] = [r for r in given_depth if r not in rows]
     return rows
 
 
