@@ -1,8 +1,8 @@
 """``sray stability`` end to end on the toy preset, from tiny shards and two given tiny checkpoints (full CRA and
-``attention=none``): every axis, the S-Ray and Semantic-NeRF rows (zero-shot, and trained on the scene at the
+``attention=none``): every axis, S-Ray's rows (zero-shot with and without CRA, and finetuned on the scene at the
 preset's CPU budget), the clean point against ``sray eval``, an injected NaN recorded as a failure while the rest
-completes, resuming without running any trial again, and the tracked runs. (``2d-transfer``'s rows and S-Ray's RGB-D
-rows beside them are checked without Ray in ``test_stability_models.py``.)
+completes, resuming without running any trial again, and the tracked runs. (The other methods' rows, and S-Ray's
+RGB-D rows beside ``2d-transfer``, are computed without Ray in ``test_stability_models.py``.)
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def toy_checkpoints(tiny_shards: Path, tmp_path_factory: pytest.TempPathFactory)
 
 def _run(shards: Path, checkpoints: dict[str, Path], out: Path, doc: Path, uri: str, *extra: str) -> int:
     return main(["stability", "--preset", "toy", "--data", str(shards), "--checkpoint", str(checkpoints["full"]),
-                 "--checkpoint-no-cra", str(checkpoints["none"]), "--methods", "sray", "semantic-nerf", "--out",
+                 "--checkpoint-no-cra", str(checkpoints["none"]), "--methods", "sray", "--out",
                  str(out), "--doc", str(doc), "--tracking-uri", uri, "--device", "cpu", *extra])
 
 
@@ -49,9 +49,9 @@ def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(ray_sessi
         assert result["axes"] == list(AXES)
         points = result["points"]
         methods = {(p["axis"], p["method"]) for p in points}
-        assert {m for _, m in methods} == {"sray", "sray-no-cra", "sray-scene", "semantic-nerf-scene"}
-        assert ("precision", "sray-scene") not in methods and ("pose_noise", "semantic-nerf-scene") in methods
-        assert ("unseen_rays", "sray-scene") in methods and ("unseen_rays", "semantic-nerf-scene") not in methods
+        assert {m for _, m in methods} == {"sray", "sray-no-cra", "sray-scene"}
+        assert ("precision", "sray-scene") not in methods and ("pose_noise", "sray-scene") in methods
+        assert ("unseen_rays", "sray-scene") in methods and ("precision", "sray-no-cra") in methods
         budget = PRESETS["toy"].scene_cpu_seconds
         trained = [p for p in points if p["method"].endswith("-scene")]
         assert trained and all(p["seed"] is not None and min(p["cpu_s"]) >= budget for p in trained)
