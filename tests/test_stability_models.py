@@ -77,7 +77,7 @@ def test_a_missing_or_misplaced_model_is_one_clear_line(tiny_shards, tiny_checkp
 def _inputs(shards: Path, checkpoint: Path, segmenter: Path, modes: list[str]) -> SuiteInputs:
     _, cfg = model_from_checkpoint(checkpoint)
     preset = dataclasses.replace(PRESETS["toy"], scene_cpu_seconds=BUDGET)
-    rows = suite_rows(method_names(), modes, cfg.model.inputs, None)
+    rows = suite_rows(method_names(), modes, cfg.model, None)
     return SuiteInputs(preset, str(shards), (SCENE,), tuple(rows), SuiteModels(checkpoint, segmenter=segmenter),
                        cfg.model.n_classes, cfg.model.ignore_id, "cpu")
 

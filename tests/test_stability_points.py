@@ -16,6 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from train_fixtures import tiny_shards  # noqa: E402,F401
 
 from sray.data_tools.loader.shard_loader import make_eval_samples  # noqa: E402
+from sray.model.config import SRayConfig  # noqa: E402
 from sray.platform.common.eval_protocol import EvalProtocol  # noqa: E402
 from sray.platform.stability.point_spec import point_spec  # noqa: E402
 from sray.platform.stability.presets import PRESETS  # noqa: E402
@@ -29,7 +30,8 @@ from sray.platform.stability.view_choice import choose_sources, unseen_fraction 
 
 TOY = PRESETS["toy"]
 SCENE = "synth_test_000"
-ROWS = {r.name: r for r in suite_rows(["sray", "semantic-nerf", "2d-transfer"], list(MODES), "rgb", "rgb")}
+ROWS = {r.name: r for r in suite_rows(["sray", "semantic-nerf", "2d-transfer"], list(MODES), SRayConfig(),
+                                     SRayConfig())}
 SRAY, NERF = ROWS["sray"], ROWS["semantic-nerf-scene"]
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from sray.jobs.cli import build_parser
+from sray.model.config import SRayConfig
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.finetune.methods import registry
 from sray.platform.finetune.methods.method import Method
@@ -18,6 +19,8 @@ from sray.platform.stability.rows import MODES, SuiteModels, suite_rows
 from sray.platform.viz.chart_style import ChartStyle
 
 BUILTIN = ["sray", "semantic-nerf", "2d-transfer"]
+RGB = SRayConfig()
+"""A checkpoint's model config that reads and trained on colours only."""
 
 
 def _fake(name: str, inputs: str = "", uses_sources: bool = True) -> Method:
@@ -30,8 +33,8 @@ def _fake(name: str, inputs: str = "", uses_sources: bool = True) -> Method:
                   zero_shot=ChartStyle("Fake zero-shot", "#111111", "x"), eval_model=never, inputs=inputs)
 
 
-def _names(methods: list[str], modes: list[str] = list(MODES), no_cra: str | None = "rgb") -> list[str]:
-    return [r.name for r in suite_rows(methods, modes, "rgb", no_cra)]
+def _names(methods: list[str], modes: list[str] = list(MODES), no_cra: SRayConfig | None = RGB) -> list[str]:
+    return [r.name for r in suite_rows(methods, modes, RGB, no_cra)]
 
 
 def test_a_registered_method_gets_its_rows_and_its_cli_choice_and_loses_them_when_removed(monkeypatch) -> None:
@@ -46,13 +49,13 @@ def test_a_registered_method_gets_its_rows_and_its_cli_choice_and_loses_them_whe
         assert _names(registry.method_names()) == ["sray", "sray-no-cra", "sray-rgbd", "2d-transfer", "fake-seg",
                                                    "sray-scene", "semantic-nerf-scene", "sray-rgbd-scene",
                                                    "2d-transfer-scene", "fake-seg-scene"]
-        (fake,) = [r for r in suite_rows(["fake-seg"], list(MODES), "rgb", None) if not r.trained]
+        (fake,) = [r for r in suite_rows(["fake-seg"], list(MODES), RGB, None) if not r.trained]
         assert AXES["source_views"].applies(fake) and not AXES["unseen_rays"].applies(fake)  # it uses no sources
     assert "fake-seg" not in choices() and "fake-seg" not in _names(registry.method_names())
 
 
 def test_axes_follow_the_row_record() -> None:
-    rows = {r.name: r for r in suite_rows(BUILTIN, list(MODES), "rgb", "rgb")}
+    rows = {r.name: r for r in suite_rows(BUILTIN, list(MODES), RGB, RGB)}
     stressed = {axis: sorted(name for name, r in rows.items() if AXES[axis].applies(r)) for axis in AXES}
     assert stressed["precision"] == sorted(["sray", "sray-no-cra", "sray-rgbd", "2d-transfer"])  # zero-shot only
     assert stressed["unseen_rays"] == sorted(set(rows) - {"semantic-nerf-scene"})  # rows that render from sources
@@ -66,11 +69,14 @@ def test_every_rgbd_method_has_sray_given_the_depth_beside_it(monkeypatch) -> No
                                                             "2d-transfer-scene", "sray-scene"]
     assert _names(["2d-transfer"]) == ["sray-rgbd", "2d-transfer", "sray-rgbd-scene", "2d-transfer-scene"]
     # a checkpoint that reads depth already is its own RGB-D row
-    assert [r.name for r in suite_rows(["sray", "2d-transfer"], ["zero-shot"], "rgbd", None)] == ["sray",
-                                                                                                 "2d-transfer"]
+    by = {r.name: r for r in suite_rows(["sray", "2d-transfer"], list(MODES), RGB, None)}
+    assert (by["sray-rgbd"].train_inputs, by["sray-rgbd-scene"].train_inputs) == ("rgb", "rgbd")  # what training read
+    depth_read = suite_rows(["sray", "2d-transfer"], ["zero-shot"], SRayConfig(inputs="rgbd"), None)
+    assert [(r.name, r.inputs, r.train_inputs) for r in depth_read] == [("sray", "rgbd", "rgbd"),
+                                                                        ("2d-transfer", "rgbd", "")]
     monkeypatch.setitem(registry.METHODS, "fake-depth", _fake("fake-depth", inputs="rgbd"))
     assert _names(["sray", "fake-depth"], ["zero-shot"], None) == ["sray", "sray-rgbd", "fake-depth"]
-    rgbd = next(r for r in suite_rows(["sray", "fake-depth"], ["zero-shot"], "rgb", None) if r.variant == "rgbd")
+    rgbd = next(r for r in suite_rows(["sray", "fake-depth"], ["zero-shot"], RGB, None) if r.variant == "rgbd")
     request = rgbd.request(SuiteModels(Path("c"), Path("c-none"), Path("s")), "cpu")
     assert (request.checkpoint, request.inputs, rgbd.method) == (Path("c"), "rgbd", "sray")
 
@@ -81,11 +87,11 @@ def test_every_rgbd_method_has_sray_given_the_depth_beside_it(monkeypatch) -> No
     ("sray-scene", "trained on the scene", "RGB"), ("semantic-nerf-scene", "trained on the scene", "RGB"),
     ("sray-rgbd-scene", "trained on the scene", "RGB-D"), ("2d-transfer-scene", "trained on the scene", "RGB-D")])
 def test_legends_and_headers_say_what_each_row_saw_and_was_given(name: str, seen: str, inputs: str) -> None:
-    row = next(r for r in suite_rows(BUILTIN, list(MODES), "rgb", "rgb") if r.name == name)
-    protocol = (EvalProtocol("rule v1", 8, 8, inputs=row.inputs) if row.uses_sources else
-                EvalProtocol.without_sources(8))
+    row = next(r for r in suite_rows(BUILTIN, list(MODES), RGB, RGB) if r.name == name)
+    protocol = (EvalProtocol("rule v1", 8, 8, inputs=row.inputs, train_inputs=row.train_inputs) if row.uses_sources
+                else EvalProtocol.without_sources(8))
     label = row.style(protocol).label
     assert label.endswith(f"[{seen} · {inputs}]") and row.header == f"{name} ({seen}, {inputs})"
     assert ("without CRA" in label) == (row.variant == "no-cra")
     assert ("with source depth" in label) == (row.variant == "rgbd")
-    assert len({r.style(protocol).color for r in suite_rows(BUILTIN, list(MODES), "rgb", "rgb")}) == 8  # told apart
+    assert len({r.style(protocol).color for r in suite_rows(BUILTIN, list(MODES), RGB, RGB)}) == 8  # told apart

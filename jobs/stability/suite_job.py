@@ -18,6 +18,7 @@ from typing import Any
 import torch
 
 from sray.jobs.stability.world import world_models, world_shards
+from sray.model.config import SRayConfig
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.eval.zero_shot import select_scenes
 from sray.platform.finetune.methods.registry import get_method
@@ -105,17 +106,17 @@ def resolve_models(job: StabilityJob) -> tuple[Path, SuiteModels]:
     return shards, job.given
 
 
-def _label_space(models: SuiteModels) -> tuple[int, int, str, str | None]:
-    """(classes, ignore id, ``model.inputs``) of the S-Ray checkpoint, and the no-CRA checkpoint's ``model.inputs``
-    (None without one); ValueError when the two predict different label spaces."""
+def _label_space(models: SuiteModels) -> tuple[SRayConfig, SRayConfig | None]:
+    """The model configs of the S-Ray checkpoint and of the no-CRA checkpoint (None without one); ValueError when
+    the two predict different label spaces."""
     _, cfg = model_from_checkpoint(models.checkpoint)
     if models.checkpoint_no_cra is None:
-        return cfg.model.n_classes, cfg.model.ignore_id, cfg.model.inputs, None
+        return cfg.model, None
     _, other = model_from_checkpoint(models.checkpoint_no_cra)
     if (other.model.n_classes, other.model.ignore_id) != (cfg.model.n_classes, cfg.model.ignore_id):
         raise ValueError(f"--checkpoint-no-cra {models.checkpoint_no_cra} predicts {other.model.n_classes} classes, "
                          f"--checkpoint {models.checkpoint} {cfg.model.n_classes}; pretrain both on the same data")
-    return cfg.model.n_classes, cfg.model.ignore_id, cfg.model.inputs, other.model.inputs
+    return cfg.model, other.model
 
 
 def check_rows(rows: list[Row], models: SuiteModels, preset: Preset, n_classes: int, where: Path) -> None:
@@ -137,18 +138,20 @@ def prepare(job: StabilityJob) -> tuple[SuiteInputs, list[Row]]:
     """The suite's inputs and rows, every model found and checked (pretrained first when none is given)."""
     shards, models = resolve_models(job)
     names, metas = select_scenes(shards, job.scenes)
-    n_classes, ignore_id, inputs, no_cra_inputs = _label_space(models)
+    checkpoint, no_cra = _label_space(models)
+    n_classes = checkpoint.n_classes
     scene_classes = {len(m["class_names"]) for m in metas.values()}
     if scene_classes != {n_classes}:
         raise ValueError(f"{shards / 'manifest.json'}: scenes have {sorted(scene_classes)} classes, the checkpoint "
                          f"predicts {n_classes}; score it on data of its own label space")
-    rows = suite_rows(job.methods, job.modes, inputs, no_cra_inputs)
+    rows = suite_rows(job.methods, job.modes, checkpoint, no_cra)
     rows = [r for r in rows if any(AXES[a].applies(r) for a in job.axes)]
     if not rows:
         raise ValueError(f"--axes {job.axes} stress none of the rows of --methods {job.methods} --modes {job.modes}")
     check_rows(rows, models, job.preset, n_classes, shards / "manifest.json")
     device = job.device or ("cuda" if torch.cuda.is_available() else "cpu")
-    suite = SuiteInputs(job.preset, str(shards), tuple(names), tuple(rows), models, n_classes, ignore_id, device)
+    suite = SuiteInputs(job.preset, str(shards), tuple(names), tuple(rows), models, n_classes, checkpoint.ignore_id,
+                        device)
     return suite, rows
 
 

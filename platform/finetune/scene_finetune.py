@@ -12,9 +12,8 @@ finetune stops at the first of: ``patience`` evaluations without an improvement 
 state is kept and stored as the scene artifact (:mod:`sray.platform.finetune.scene_artifacts`). Sampling uses the
 scene's own near/far from the shard metadata.
 
-Time: ``wall_s`` (curve and result) and ``cpu_s`` (result) count training steps only (data, forward, backward,
-update: :mod:`sray.platform.finetune.step_budget`); evaluation is protocol overhead and is left out, so methods
-compare at equal training time. Plain PyTorch, one process: autocast bf16 (CPU/CUDA) or fp16 with a GradScaler.
+Time: ``wall_s`` and ``cpu_s`` count training steps only (data, forward, backward, update: ``step_budget``); evaluation
+is left out, so methods compare at equal training time. One process: bf16 autocast, or fp16 with a GradScaler.
 """
 
 from __future__ import annotations

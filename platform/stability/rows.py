@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from sray.model.config import SRayConfig
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import get_method, method_names
@@ -73,6 +74,8 @@ class Row:
     """What it is given of the source views (``EvalProtocol.inputs``): ``rgb`` or ``rgbd``."""
     uses_sources: bool
     """Held-out views are rendered from source views (else from none: a per-scene model)."""
+    train_inputs: str = ""
+    """What its training read besides colours and labels (``EvalProtocol.train_inputs``; empty: as ``inputs``)."""
 
     @property
     def mode(self) -> str:
@@ -82,7 +85,7 @@ class Row:
     def protocol(self, shards: Path, n_source: int, stride: int) -> EvalProtocol:
         """How its scores are made: ``n_source`` fixed sources given as its ``inputs``, or none."""
         if self.uses_sources:
-            return EvalProtocol.from_shards(shards, n_source, stride, self.inputs)
+            return EvalProtocol.from_shards(shards, n_source, stride, self.inputs, self.train_inputs)
         return EvalProtocol.without_sources(stride)
 
     @property
@@ -114,36 +117,45 @@ def follows_checkpoint(method: str) -> bool:
     return record.uses_sources and not record.inputs
 
 
-def _row(method: str, trained: bool, variant: str, inputs: str) -> Row:
+def _row(method: str, trained: bool, variant: str, inputs: str, train_inputs: str = "") -> Row:
     suffix = (f"-{variant}" if variant else "") + ("-scene" if trained else "")
-    return Row(f"{method}{suffix}", method, trained, variant, inputs, get_method(method).uses_sources)
+    return Row(f"{method}{suffix}", method, trained, variant, inputs, get_method(method).uses_sources, train_inputs)
 
 
-def mode_rows(methods: list[str], trained: bool, checkpoint_inputs: str, no_cra_inputs: str | None) -> list[Row]:
+def _given_depth(method: str, trained: bool, checkpoint: SRayConfig) -> Row:
+    """``method`` (which follows its checkpoint) given the source depth: the checkpoint's own row when it reads depth
+    already, else its ``rgbd`` variant (whose training read depth only when it is trained on the scene with it)."""
+    if checkpoint.inputs == "rgbd":
+        return _row(method, trained, "", "rgbd", checkpoint.train_inputs)
+    return _row(method, trained, "rgbd", "rgbd", "rgbd" if trained else checkpoint.train_inputs)
+
+
+def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
     """The rows of one mode (see the module doc), in registry order with the variants placed."""
     rows = []
     for name in methods:
         record = get_method(name)
         if not trained and record.eval_model is None:
             continue
-        own = checkpoint_inputs if follows_checkpoint(name) else record.inputs or "rgb"
-        rows.append(_row(name, trained, "", own))
-        if follows_checkpoint(name) and not trained and no_cra_inputs is not None:
-            rows.append(_row(name, trained, "no-cra", no_cra_inputs))
+        if not follows_checkpoint(name):
+            rows.append(_row(name, trained, "", record.inputs or "rgb"))
+            continue
+        rows.append(_row(name, trained, "", checkpoint.inputs, checkpoint.train_inputs))
+        if not trained and no_cra is not None:
+            rows.append(_row(name, trained, "no-cra", no_cra.inputs, no_cra.train_inputs))
     depth_rows = [i for i, r in enumerate(rows) if not follows_checkpoint(r.method) and r.inputs == "rgbd"]
     if depth_rows:  # every registered checkpoint method given the depth, even when not asked for
-        given_depth = [_row(name, trained, "" if checkpoint_inputs == "rgbd" else "rgbd", "rgbd")
-                       for name in method_names() if follows_checkpoint(name)]
+        given_depth = [_given_depth(name, trained, checkpoint) for name in method_names() if follows_checkpoint(name)]
         rows[depth_rows[0]:depth_rows[0]] = [r for r in given_depth if r not in rows]
     return rows
 
 
-def suite_rows(methods: list[str], modes: list[str], checkpoint_inputs: str,
-               no_cra_inputs: str | None) -> list[Row]:
-    """Every row of ``methods`` (registered names) in ``modes``, zero-shot rows first. ``checkpoint_inputs``: the
-    S-Ray checkpoint's ``model.inputs``; ``no_cra_inputs``: the no-CRA checkpoint's (None: none given, no row)."""
+def suite_rows(methods: list[str], modes: list[str], checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
+    """Every row of ``methods`` (registered names) in ``modes``, zero-shot rows first. ``checkpoint``: the S-Ray
+    checkpoint's model config (its ``inputs`` and ``train_inputs``); ``no_cra``: the no-CRA checkpoint's (None: none
+    given, no row)."""
     unknown = [m for m in modes if m not in MODES]
     if unknown:
         raise ValueError(f"stability modes {unknown}: use {list(MODES)}")
     return [row for trained in (False, True) if MODES[trained] in modes
-            for row in mode_rows(methods, trained, checkpoint_inputs, no_cra_inputs)]
+            for row in mode_rows(methods, trained, checkpoint, no_cra)]
