@@ -80,7 +80,8 @@ def _expected_protocol(shards: Path, n_source: int, stride: int, render: str) ->
     """The descriptor an evaluation of ``shards`` must carry, from the raw manifest and the arguments."""
     rule = json.loads((shards / "manifest.json").read_text())["neighbours"]
     return {"source_rule": f"{rule['rule']} v{rule['version']}", "n_source": n_source, "stride": stride,
-            "render": render, "inputs": "rgb", "miou": DATASET_PROTOCOL, "miou_per_image": PER_IMAGE_PROTOCOL}
+            "render": render, "inputs": "rgb", "train_inputs": "rgb", "miou": DATASET_PROTOCOL,
+            "miou_per_image": PER_IMAGE_PROTOCOL}
 
 
 def test_eval_writes_both_protocols_pngs_and_an_mlflow_run(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_path,

@@ -49,7 +49,8 @@ SRAY_HELD_OUT_RENDER = "fast (pixel stride 1, fine pass where the coarse confide
 def _protocol(source_rule: str, n_source: int, stride: int, render: str = "full") -> dict:
     """The descriptor a result must carry (docs/CONTRACTS.md, "Protocol descriptor")."""
     return {"source_rule": source_rule, "n_source": n_source, "stride": stride, "render": render, "inputs": "rgb",
-            "miou": "dataset-level, classes present in ground truth", "miou_per_image": "per-image mean"}
+            "train_inputs": "rgb", "miou": "dataset-level, classes present in ground truth",
+            "miou_per_image": "per-image mean"}
 
 
 def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, tiny_shards, tiny_checkpoint,
