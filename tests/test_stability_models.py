@@ -56,7 +56,8 @@ def test_given_models_are_used_and_nothing_is_pretrained(tiny_shards, tiny_check
     suite, rows = prepare(_job(tmp_path, *given))
     assert suite.models == SuiteModels(tiny_checkpoint.resolve(), no_cra_checkpoint.resolve(),
                                        tiny_segmenter.resolve())
-    assert Path(suite.shards) == tiny_shards.resolve() and suite.scenes == (SCENE,)  # the checkpoint's shards
+    trained_on = Path(model_from_checkpoint(tiny_checkpoint)[1].data.shards).resolve()
+    assert Path(suite.shards) == trained_on and suite.scenes == (SCENE,)  # the checkpoint's shards, not --data
     assert [r.name for r in rows] == ["sray", "sray-no-cra", "sray-rgbd", "2d-transfer", "sray-scene",
                                       "semantic-nerf-scene", "sray-rgbd-scene", "2d-transfer-scene"]
     with pytest.raises(AssertionError, match="pretrained although"):  # the same job with no model pretrains
