@@ -17,7 +17,8 @@ from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
-from sray.jobs.bench.accuracy_plan import HOUR, LONG, PRESETS, VARIANT_SETTINGS, Cell, Preset, World
+from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, LONG, PRESETS, ROOMS_198, ROOMS_498, VARIANT_SETTINGS,
+                                           Cell, Preset, World)
 from sray.jobs.bench.accuracy_budgets import budget_means
 from sray.jobs.bench.accuracy_tables import class_table, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir
@@ -80,9 +81,12 @@ def test_the_hour_cell_is_the_recipe_with_its_cpu_budget_and_the_others_count_st
     long = accuracy_cells.cell_config(Cell(LONG, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
     assert (long.optim.steps, long.optim.cpu_seconds, long.run.val_every) == (2500, 0.0, 2500 // preset.validations)
     assert long.model.fine_samples == "union" and long.model.lambda_src_sem == 0.0 and long.data.visit_samples == 16
-    for variant in VARIANT_SETTINGS.keys() - {HOUR, LONG}:
+    for variant in VARIANT_SETTINGS.keys() - {*CPU_BUDGETED, LONG}:
         cfg = accuracy_cells.cell_config(Cell(variant, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
         assert (cfg.optim.steps, cfg.optim.cpu_seconds) == (preset.ablation_steps, 0.0), variant
+    for variant in (ROOMS_198, ROOMS_498):  # the recipe as it is; only the world (shards) differs
+        cfg = accuracy_cells.cell_config(Cell(variant, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+        assert dataclasses.replace(cfg, run=hour.run) == hour and cfg.run.name == f"bench-{variant}-s1"
 
 
 def test_the_gpu_preset_augments_through_the_data_aug_section(tmp_path: Path) -> None:
@@ -231,13 +235,14 @@ def test_cpu_time_arms_join_budgets_of_equal_settings_and_chart_them(tmp_path: P
     """``hour`` joins ``full-new-src-mix`` and ``long`` joins ``full`` (equal settings, other budget); each
     point's CPU hours and scores are the cells' own; a cell without CPU time is named, not charted."""
     plan = dataclasses.replace(TOY, plan=(Cell(LONG, 0), Cell("full", 0), Cell("full-new-src-mix", 0),
-                                          Cell("full-new-src-mix", 1), Cell(HOUR, 0)))
+                                          Cell("full-new-src-mix", 1), Cell(HOUR, 0), Cell(ROOMS_198, 0)))
     assert (arm_of(HOUR), arm_of(LONG), arm_of("none")) == ("full-new-src-mix", "full", "none")
     stored = {"long-s0": _cell(LONG, 0, 0.24), "full-s0": _cell("full", 0, 0.20) | {"train_cpu_s": 1800.0},
               "full-new-src-mix-s0": _cell("full-new-src-mix", 0, 0.26) | {"train_cpu_s": 1440.0,
                                                                              "heldout_miou": 0.30},
               "full-new-src-mix-s1": _cell("full-new-src-mix", 1, 0.28) | {"train_cpu_s": 1584.0},
-              "hour-s0": _cell(HOUR, 0, 0.40) | {"train_cpu_s": 7200.0, "heldout_miou": 0.55}}
+              "hour-s0": _cell(HOUR, 0, 0.40) | {"train_cpu_s": 7200.0, "heldout_miou": 0.55},
+              "hour-198-s0": _cell(ROOMS_198, 0, 0.45) | {"train_cpu_s": 7200.0}}
     points, untimed = budget_points(plan, stored)
     assert untimed == ["long-s0"]
     by_variant = {pt.variant: pt for pt in points}
@@ -248,5 +253,7 @@ def test_cpu_time_arms_join_budgets_of_equal_settings_and_chart_them(tmp_path: P
     header, rows = cpu_time_rows(points)
     row = dict(zip(header, next(r for r in rows if r[1] == "full-new-src-mix"), strict=True))
     assert row["pretrain CPU h"] == "0.42" and row["zero-shot mIoU %"] == "27.00 ± 1.41"
-    assert row["held-out train-scene mIoU %"] == "30.00"
+    assert row["held-out train-scene mIoU %"] == "30.00" and row["training rooms"] == "1"  # the preset world's
+    rooms = dict(zip(header, next(r for r in rows if r[1] == ROOMS_198), strict=True))  # its own arm and world
+    assert (rooms["arm"], rooms["training rooms"], rooms["zero-shot mIoU %"]) == (ROOMS_198, "198", "45.00")
     assert cpu_time_chart(points, tmp_path / "c.png", "t", "c").stat().st_size > 0

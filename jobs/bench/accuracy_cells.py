@@ -29,7 +29,8 @@ import numpy as np
 import torch
 
 from sray.data_tools.shards.manifest import read_manifest
-from sray.jobs.bench.accuracy_plan import EXPERIMENT, HOUR, LONG, VARIANT_SETTINGS, Cell, Preset
+from sray.jobs.bench.accuracy_plan import CPU_BUDGETED, EXPERIMENT, LONG, VARIANT_SETTINGS, Cell, Preset
+from sray.jobs.bench.accuracy_worlds import cell_shards
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import apply_override, load_job_config
@@ -97,7 +98,7 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
         cfg.model.n_heads = variant.n_heads
     cfg.model.lambda_src_sem, cfg.optim.warmup_2d_steps = variant.lambda_src_sem, variant.warmup_2d_steps
     cfg.data.visit_samples, cfg.data.cache_scenes = variant.visit_samples, variant.cache_scenes
-    if cell.variant != HOUR:  # step-budgeted cells: the ablation budget, or the long one
+    if cell.variant not in CPU_BUDGETED:  # step-budgeted cells: the ablation budget, or the long one
         cfg.optim.cpu_seconds = 0.0
         cfg.optim.steps = p.ablation_steps if cell.variant != LONG else (p.long_steps or cfg.optim.steps)
         cfg.run.val_every = max(cfg.optim.steps // p.validations, 1)
@@ -152,9 +153,11 @@ def class_iou(report: dict[str, Any]) -> list[float | None]:
     return [float(s / c) if c else None for s, c in zip(sums, counts, strict=True)]
 
 
-def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, tracking_uri: str) -> dict[str, Any]:
-    """Pretrain and evaluate ``cell``; return its record (what ``stored_cells`` gives once its trial ends)."""
-    print(f"[bench] cell {cell.key}: pretraining", flush=True)
+def run_cell(cell: Cell, p: Preset, base: Path, scenes: list[str], out: Path, tracking_uri: str) -> dict[str, Any]:
+    """Pretrain and evaluate ``cell`` on its world (the preset world's shards ``base``, or its variant's own
+    room count with the same test scenes); return its record (what ``stored_cells`` gives once its trial ends)."""
+    shards, world_cpu_s = cell_shards(cell.variant, p, base, out)
+    print(f"[bench] cell {cell.key}: pretraining on {shards}", flush=True)
     checkpoint, train_s, resumed = pretrain(cell, p, shards, out, tracking_uri)
     run = cell_config(cell, p, shards, out, tracking_uri).run
     torch.set_num_threads(max(1, int(run.workers * run.cpus_per_worker)))  # the CPUs its workers held
@@ -176,6 +179,7 @@ def run_cell(cell: Cell, p: Preset, shards: Path, scenes: list[str], out: Path, 
     record = {
         "cell": cell.key, "variant": cell.variant, "seed": cell.seed,
         **dataclasses.asdict(VARIANT_SETTINGS[cell.variant]),
+        "shards": str(shards), "world_cpu_s": world_cpu_s,
         "recipe": p.recipe, "steps": int(read_meta(checkpoint)["step"]), "checkpoint": str(checkpoint),
         "train_s": train_s, "resumed": resumed, "eval_s": time.perf_counter() - start,
         "miou": mean["dataset_level"]["miou"], "total_acc": mean["dataset_level"]["total_acc"],

@@ -33,6 +33,8 @@ class BudgetPoint:
 
     arm: str
     variant: str
+    rooms: int
+    """Training rooms of the arm's world."""
     cpu_hours: list[float]
     zero_shot: list[float]
     """Zero-shot mIoU %, one per seed."""
@@ -59,6 +61,7 @@ def budget_points(p: Preset, stored: dict[str, dict[str, Any]]) -> tuple[list[Bu
             continue
         grouped.setdefault(cell.variant, []).append(record)
     points = [BudgetPoint(arm=arm_of(variant), variant=variant,
+                          rooms=VARIANT_SETTINGS[variant].train_scenes or p.world.train_scenes,
                           cpu_hours=[c["train_cpu_s"] / 3600.0 for c in cells],
                           zero_shot=[100.0 * c["miou"] for c in cells],
                           held_out=[None if c.get("heldout_miou") is None else 100.0 * c["heldout_miou"]
@@ -77,9 +80,12 @@ def _cell(values: list[float]) -> str:
 
 
 def cpu_time_rows(points: list[BudgetPoint]) -> tuple[list[str], list[list[str]]]:
-    """The table of ``points``: arm, budget (variant), seeds, CPU hours, zero-shot and held-out mIoU."""
-    header = ["arm", "cell (budget)", "seeds", "pretrain CPU h", "zero-shot mIoU %", "held-out train-scene mIoU %"]
-    rows = [[pt.arm, pt.variant, str(len(pt.zero_shot)), f"{np.mean(pt.cpu_hours):.2f}", _cell(pt.zero_shot),
+    """The table of ``points``: arm, budget (variant), training rooms, seeds, CPU hours, zero-shot and held-out
+    mIoU."""
+    header = ["arm", "cell (budget)", "training rooms", "seeds", "pretrain CPU h", "zero-shot mIoU %",
+              "held-out train-scene mIoU %"]
+    rows = [[pt.arm, pt.variant, str(pt.rooms), str(len(pt.zero_shot)), f"{np.mean(pt.cpu_hours):.2f}",
+             _cell(pt.zero_shot),
              _cell(pt.seeds_of("held_out")[1])] for pt in points]
     return header, rows
 

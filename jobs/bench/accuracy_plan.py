@@ -17,8 +17,11 @@ HOUR = "hour"
 """Variant name of the cell that pretrains with the preset recipe exactly as it is: its settings and its own
 budget (``synth-cpu-hour``: CPU seconds)."""
 
-RECIPE_BUDGET = (LONG, HOUR)
-"""Variants whose cells train for the long budget instead of the preset's ``ablation_steps``."""
+ROOMS_198, ROOMS_498 = "hour-198", "hour-498"
+"""Variant names of the hour recipe trained on 198 and 498 procedural rooms instead of the preset world's."""
+
+CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498)
+"""Variants whose cells train for the preset recipe's own budget (its CPU seconds) instead of a step budget."""
 
 @dataclass(frozen=True)
 class Variant:
@@ -46,6 +49,11 @@ class Variant:
     (1 = scenes interleaved step by step)."""
     cache_scenes: int = 2
     """``data.cache_scenes``: decoded scenes the loader keeps."""
+    train_scenes: int | None = None
+    """Training rooms of the cell's world (None: the preset world's). The world keeps the preset's seed, views,
+    image size and test scenes: the generator cycles its 5 room types over the train scenes first, so a count
+    that differs from the preset's by a multiple of 5 (48 -> 198, 498) leaves every test scene unchanged, which
+    the cell checks before it trains."""
 
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
@@ -57,7 +65,11 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     "full-new-src-mix": Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1,
                                                 cache_scenes=4),
                     LONG: Variant(),
-                    HOUR: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4)}
+                    HOUR: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4),
+                    ROOMS_198: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
+                                       train_scenes=198),
+                    ROOMS_498: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
+                                       train_scenes=498)}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
@@ -65,7 +77,8 @@ channels instead of 4 of 8; ``full-new-src`` full-new with the source views' per
 encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget;
 ``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
 (one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds
-``synth-cpu-hour``'s own settings (a test keeps them equal)."""
+``synth-cpu-hour``'s own settings (a test keeps them equal); ``hour-198`` and ``hour-498`` are ``hour`` on 198
+and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget)."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -139,7 +152,8 @@ PRESETS = {
         plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
-              *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), *seeds(HOUR, 3)),
+              *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), *seeds(HOUR, 3), Cell(ROOMS_198, 0),
+              Cell(ROOMS_498, 0), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0),

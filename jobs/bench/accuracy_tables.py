@@ -16,7 +16,7 @@ import numpy as np
 
 from sray.jobs.bench.accuracy_budgets import BUDGET_TABLE, FORMER_TITLES, budget_means, budget_table, step_zero
 from sray.jobs.bench.accuracy_cpu_time import budget_points, cpu_time_chart, cpu_time_rows
-from sray.jobs.bench.accuracy_plan import HOUR, LONG, Cell, Preset
+from sray.jobs.bench.accuracy_plan import CPU_BUDGETED, HOUR, LONG, VARIANT_SETTINGS, Cell, Preset
 from sray.jobs.bench.accuracy_step_cost import step_cost_chart
 from sray.jobs.bench.doc import Bench, bench_dir, markdown_table, record
 from sray.platform.common.eval_protocol import caption_lines
@@ -40,8 +40,12 @@ def accuracy_bench(preset: str) -> Bench:
 
 
 def variant_label(variant: str, p: Preset) -> str:
-    """Row label: the variant's name; the recipe's name for the ``hour`` cell, and for the ``long`` cell the
-    first form of the recipe it kept (``full, first synth-cpu-hour``)."""
+    """Row label: the variant's name; the recipe's name for the ``hour`` cell (with the room count for the hour
+    cells on their own world: ``synth-cpu-hour, 198 rooms``), and for the ``long`` cell the first form of the
+    recipe it kept (``full, first synth-cpu-hour``)."""
+    rooms = VARIANT_SETTINGS[variant].train_scenes
+    if variant in CPU_BUDGETED and rooms is not None:
+        return f"{p.recipe}, {rooms} rooms"
     return {LONG: f"full, first {p.recipe}", HOUR: p.recipe}.get(variant, variant)
 
 
