@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from typing import Any
 
 import torch
 from safetensors import safe_open
@@ -149,41 +150,45 @@ def load_scene_model(base_checkpoint: Path, artifact: Path, map_location: str = 
     return model.eval()
 
 
-def save_semantic_nerf(path: Path, model: SemanticNeRF, scene: str) -> int:
-    """Write a Semantic-NeRF scene artifact (whole state dict + config); returns its bytes."""
+def _save_whole(path: Path, model: SemanticNeRF | Segmenter, scene: str, method: str) -> int:
+    """Write the scene artifact of a per-scene model saved whole (its state dict + its config) under ``method``;
+    returns its bytes."""
     tensors = {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
-    metadata = {"format": FORMAT, "version": VERSION, "method": "semantic-nerf", "scene": scene,
+    metadata = {"format": FORMAT, "version": VERSION, "method": method, "scene": scene,
                 "config": json.dumps(dataclasses.asdict(model.cfg))}
     return _atomic_save(tensors, metadata, path)
 
 
+def _read_whole(artifact: Path, method: str) -> tuple[dict[str, Tensor], dict[str, Any]]:
+    """(state dict, config fields) of a whole-model artifact; ValueError naming the file unless ``method``
+    wrote it."""
+    tensors, metadata = _read(artifact)
+    if metadata.get("method") != method:
+        raise ValueError(f"{artifact}: field 'method' is {metadata.get('method')!r}, expected {method!r}")
+    return tensors, json.loads(metadata["config"])
+
+
+def save_semantic_nerf(path: Path, model: SemanticNeRF, scene: str) -> int:
+    """Write a Semantic-NeRF scene artifact (whole state dict + config); returns its bytes."""
+    return _save_whole(path, model, scene, "semantic-nerf")
+
+
 def load_semantic_nerf(artifact: Path, map_location: str = "cpu") -> SemanticNeRF:
     """The Semantic-NeRF of one scene (eval mode) rebuilt from its artifact."""
-    tensors, metadata = _read(artifact)
-    if metadata.get("method") != "semantic-nerf":
-        raise ValueError(f"{artifact}: field 'method' is {metadata.get('method')!r}, expected 'semantic-nerf'")
-    fields = json.loads(metadata["config"])
-    fields["scene_center"] = tuple(fields["scene_center"])
-    model = SemanticNeRF(SemanticNeRFConfig(**fields))
+    tensors, fields = _read_whole(artifact, "semantic-nerf")
+    model = SemanticNeRF(SemanticNeRFConfig(**{**fields, "scene_center": tuple(fields["scene_center"])}))
     model.load_state_dict(tensors)
     return model.to(map_location).eval()
 
 
 def save_segmenter_artifact(path: Path, model: Segmenter, scene: str) -> int:
     """Write a ``2d-transfer`` scene artifact (the whole segmenter's state dict + its config); returns its bytes."""
-    tensors = {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
-    metadata = {"format": FORMAT, "version": VERSION, "method": "2d-transfer", "scene": scene,
-                "config": json.dumps(dataclasses.asdict(model.cfg))}
-    return _atomic_save(tensors, metadata, path)
+    return _save_whole(path, model, scene, "2d-transfer")
 
 
 def load_segmenter_artifact(artifact: Path, map_location: str = "cpu") -> Segmenter:
     """The finetuned 2D segmenter of one scene (eval mode) rebuilt from its ``2d-transfer`` artifact."""
-    tensors, metadata = _read(artifact)
-    if metadata.get("method") != "2d-transfer":
-        raise ValueError(f"{artifact}: field 'method' is {metadata.get('method')!r}, expected '2d-transfer'")
-    fields = json.loads(metadata["config"])
-    fields["class_weights"] = tuple(fields["class_weights"])
-    model = Segmenter(SegmenterConfig(**fields))
+    tensors, fields = _read_whole(artifact, "2d-transfer")
+    model = Segmenter(SegmenterConfig(**{**fields, "class_weights": tuple(fields["class_weights"])}))
     model.load_state_dict(tensors)
     return model.to(map_location).eval()

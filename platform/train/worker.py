@@ -202,7 +202,8 @@ def train_worker(payload: dict[str, Any]) -> None:
                     "train/lr": optimizer.param_groups[0]["lr"], "train/grad_norm": float(outcome.grad_norm),
                     "train/cpu_seconds": cpu_total, "train/skipped_steps": train_step.skipped_total}
                     | {f"train/{k}": v for k, v in figures.items()}, step)
-                bar.set_postfix(**progress_postfix(means.get("loss", float("nan")), figures))
+                spent = {"cpu_budget": f"{cpu_total / budget:.0%}"} if budget > 0 else {}  # the budget that stops it
+                bar.set_postfix(**progress_postfix(means.get("loss", float("nan")), figures), **spent)
                 window_terms = []
             metrics: dict[str, float] = {"step": step}
             if step % cfg.run.val_every == 0 or finished:
