@@ -86,16 +86,18 @@ def import_old_cells(out: Path) -> list[str]:
 
 def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
     """The training config of ``cell``: the preset's recipe and overrides, the variant's model settings
-    (attention, weight map, inputs, fine samples, heads, source-view loss, 2D warm-up and scene
-    interleaving), the cell's seed and budget, and the benchmark's folders."""
+    (attention, the weight net's map, inputs and tau, the source inputs, fine samples, heads, source-view loss,
+    2D warm-up and scene interleaving), the cell's seed and budget, and the benchmark's folders."""
     cfg = get_recipe(p.recipe)
     for assignment in p.overrides:
         apply_override(cfg, assignment)
     variant = VARIANT_SETTINGS[cell.variant]
     cfg.model.attention, cfg.model.weight_map, cfg.model.inputs = variant.attention, variant.weight_map, variant.inputs
-    cfg.model.fine_samples = variant.fine_samples
+    cfg.model.fine_samples, cfg.model.weight_inputs = variant.fine_samples, variant.weight_inputs
     if variant.n_heads is not None:
         cfg.model.n_heads = variant.n_heads
+    if variant.tau is not None:
+        cfg.model.tau = variant.tau
     cfg.model.lambda_src_sem, cfg.optim.warmup_2d_steps = variant.lambda_src_sem, variant.warmup_2d_steps
     cfg.data.visit_samples, cfg.data.cache_scenes = variant.visit_samples, variant.cache_scenes
     if cell.variant not in CPU_BUDGETED:  # step-budgeted cells: the ablation budget, or the long one

@@ -20,7 +20,11 @@ budget (``synth-cpu-hour``: CPU seconds)."""
 ROOMS_198, ROOMS_498 = "hour-198", "hour-498"
 """Variant names of the hour recipe trained on 198 and 498 procedural rooms instead of the preset world's."""
 
-CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498)
+OCCL, OCCL_T5 = "hour-occl", "hour-occl-t5"
+"""Variant names of the hour recipe with the occlusion-aware weight net inputs (``model.weight_inputs=cross-view``),
+at the model's tau (0.7) and at tau 0.5 (a wider weight range)."""
+
+CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5)
 """Variants whose cells train for the preset recipe's own budget (its CPU seconds) instead of a step budget."""
 
 @dataclass(frozen=True)
@@ -31,6 +35,11 @@ class Variant:
     """``model.attention``."""
     weight_map: str = "radial"
     """``model.weight_map``."""
+    weight_inputs: str = "view"
+    """``model.weight_inputs`` (``cross-view``: the weight net also reads each view's distance from the valid
+    views' mean feature and their variance)."""
+    tau: float | None = None
+    """``model.tau`` (None: the recipe's): the bound of the semantic-aware weights, tau/m < w_i < 1/(tau m)."""
     inputs: str = "rgb"
     """``model.inputs`` (``rgbd``: the source views' depth guides the samples)."""
     fine_samples: str = "union"
@@ -69,7 +78,11 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     ROOMS_198: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
                                        train_scenes=198),
                     ROOMS_498: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
-                                       train_scenes=498)}
+                                       train_scenes=498),
+                    OCCL: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
+                                  weight_inputs="cross-view"),
+                    OCCL_T5: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
+                                     weight_inputs="cross-view", tau=0.5)}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
@@ -78,7 +91,9 @@ encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up
 ``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
 (one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds
 ``synth-cpu-hour``'s own settings (a test keeps them equal); ``hour-198`` and ``hour-498`` are ``hour`` on 198
-and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget)."""
+and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget); ``hour-occl`` is
+``hour`` whose weight net also reads the cross-view statistics, ``hour-occl-t5`` the same at tau 0.5 (the two
+occlusion levers, docs/model.md), both at the recipe's CPU budget."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -153,7 +168,7 @@ PRESETS = {
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
               *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), *seeds(HOUR, 3), Cell(ROOMS_198, 0),
-              Cell(ROOMS_498, 0), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
+              Cell(ROOMS_498, 0), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), Cell(OCCL, 0), Cell(OCCL_T5, 0)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0),
