@@ -6,6 +6,23 @@ import argparse
 from pathlib import Path
 
 
+SEGMENTER_CPU_CAP = 120.0
+"""Default of ``--segmenter-cpu-seconds``. Uncapped, the segmenter would get the CPU seconds of S-Ray's 300 demo
+steps (480 and 518 CPU s in two runs on the 2-core machine): 4 more minutes of wall time on a demo of about 8;
+120 CPU s is about a minute."""
+
+
+def _cpu_cap(text: str) -> float:
+    """``--segmenter-cpu-seconds``: a number of CPU seconds >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of CPU seconds") from None
+    if not value >= 0:  # also refuses nan
+        raise argparse.ArgumentTypeError(f"{text} CPU seconds: give 0 (no cap) or more")
+    return value
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray demo``."""
     p = sub.add_parser("demo", help="the main job: scenes -> shards -> a short training run (local Ray)")
@@ -16,8 +33,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=int, default=120)
     p.add_argument("--width", type=int, default=160)
     p.add_argument("--steps", type=int, default=300, help="training steps (0 = data only)")
+    p.add_argument("--segmenter-cpu-seconds", type=_cpu_cap, default=SEGMENTER_CPU_CAP, metavar="S",
+                   help="2d-transfer's 2D segmenter trains for the CPU seconds S-Ray's training spent, but at most S "
+                        f"(default {SEGMENTER_CPU_CAP:.0f}: about a minute on 2 cores, so the demo stays near 10 "
+                        "minutes); 0 = no cap, equal CPU")
     p.add_argument("--finetune-seconds", type=float, default=60.0,
-                   help="wall-clock budget of each per-scene finetune (both methods)")
+                   help="wall-clock budget of each per-scene finetune (every method)")
     p.add_argument("--eval-stride", type=int, default=2,
                    help="score every n-th pixel in each direction in the zero-shot evaluation "
                         "(the fleet's held-out curves use twice this); 1 = full images, the only stride "

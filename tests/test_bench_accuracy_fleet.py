@@ -104,10 +104,10 @@ def test_the_budget_table_has_a_column_per_registered_method_with_its_inputs(mon
                _result("s0", "2d-transfer", [(0.0, 0.3), (0.5, 0.4)], "rgbd"),
                _result("s0", "sray", [(0.0, 0.2), (0.5, 0.6)], "rgb")]
     header, rows = budget_table(results, (0.0, 1.0, 3.0), lambda v: "—" if v is None else f"{100 * v:.0f}")
-    assert header == ["budget s", "S-Ray finetune mIoU % (RGB)", "2d-transfer finetune (RGB-D) mIoU % (RGB-D)",
+    assert header == ["budget s", "S-Ray finetune mIoU % (RGB)", "2d-transfer finetune mIoU % (RGB-D)",
                       "fake label mIoU % (RGB-D)"]
     assert rows == [["0", "20", "30", "10"], ["1", "60", "40", "10"], ["3", "60", "40", "90"]]
-    assert step_zero(results) == "zero-shot for S-Ray finetune, 2d-transfer finetune (RGB-D); untrained for fake label"
+    assert step_zero(results) == "zero-shot for S-Ray finetune, 2d-transfer finetune; untrained for fake label"
     with pytest.raises(ValueError, match="unknown method 'gone'"):
         budget_table([_result("s0", "gone", [(0.0, 0.1)], "rgb")], (0.0,), str)
 

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sray.platform.finetune.methods.registry import METHODS, get_method
-from sray.platform.viz.charts import curve_figure, write_fleet_charts
+from sray.platform.viz.charts import curve_figure, size_figure, write_fleet_charts
 from sray.platform.viz.curves import average_curves, curve_xy, read_fleet_results, step_hold, zero_shot_value
 
 CHART_FILES = ["miou_vs_wall_s.png", "miou_vs_step.png", "psnr_vs_wall_s.png", "psnr_vs_step.png",
@@ -162,3 +162,23 @@ def test_read_fleet_results_from_the_contract_layout(tmp_path):
     (tmp_path / "scenes" / "scene_b" / "sray" / "result.json").write_text("{broken")
     with pytest.raises(ValueError, match=r"scene_b/sray/result.json: not valid JSON"):
         read_fleet_results(tmp_path)
+
+
+def test_legends_name_the_inputs_each_method_was_given():
+    """An RGB-D method (2d-transfer) beside RGB ones: every legend entry, zero-shot lines included, ends with the
+    inputs its results' protocol records; a result without a protocol adds no tag."""
+    transfer = synthetic_result("scene_a", "2d-transfer", 4)
+    transfer["protocol"] = transfer["protocol"] | {"source_rule": "frustum-overlap v1", "n_source": 8, "inputs": "rgbd"}
+    results = [synthetic_result("scene_a", "sray", 4), synthetic_result("scene_a", "semantic-nerf", 4), transfer]
+    for fig in (curve_figure(results, "miou", "step", METHODS), size_figure(results, METHODS)):
+        legend = [t.get_text() for sub in fig.subfigs for lg in sub.legends for t in lg.get_texts()]
+        assert legend == ["S-Ray zero-shot (step 0, no per-scene steps) [RGB]",
+                          "2d-transfer zero-shot (pretrained segmenter) [RGB-D]", "S-Ray finetune [RGB]",
+                          "Semantic-NeRF from scratch [RGB]", "2d-transfer finetune [RGB-D]",
+                          "finetune stopped early (held-out score stopped improving)"]
+    texts = " ".join(t.get_text() for sub in curve_figure(results, "miou", "step", METHODS).subfigs for t in sub.texts)
+    assert "Protocol (2d-transfer): " in texts and "inputs: rgbd" in texts
+    bare = synthetic_result("scene_a", "sray", 4) | {"protocol": None}
+    legend = [t.get_text() for sub in curve_figure([bare], "miou", "step", METHODS).subfigs for lg in sub.legends
+              for t in lg.get_texts()]
+    assert legend[:2] == ["S-Ray zero-shot (step 0, no per-scene steps)", "S-Ray finetune"]

@@ -95,8 +95,8 @@ def test_results_table_has_a_row_per_result():
     rows = [_result("a", "sray", stopped_early=True, steps_used=4),
             _result("b", "sray", "failed", error="InjectedFailure: x | y", artifact_bytes=None, protocol=None)]
     table = results_table(rows)
-    assert "| a | sray | finished | 1 | 4 | 2.0 | 0.100 | 0.300 | 20.00 | 2.0 KiB | 1.00% | early stop" in table
-    assert "| b | sray | failed |" in table and "InjectedFailure: x / y" in table
+    assert "| a | sray | RGB | finished | 1 | 4 | 2.0 | 0.100 | 0.300 | 20.00 | 2.0 KiB | 1.00% | early stop" in table
+    assert "| b | sray | - | failed |" in table and "InjectedFailure: x / y" in table
     lines = table.splitlines()
     last_row = max(i for i, line in enumerate(lines) if line.startswith("|"))
     assert lines[last_row + 1] == ""  # a blank line ends the Markdown table, then its caption
@@ -109,4 +109,6 @@ def test_results_table_has_a_row_per_result():
     captions = [line for line in mixed.splitlines() if line.startswith("Protocol")]
     assert [c.split(": sources: ")[0] for c in captions] == ["Protocol (sray)", "Protocol (semantic-nerf)"]
     assert "sources: none (per-scene model)" in captions[1]
+    depth = results_table([_result("a", "sray"), _result("a", "2d-transfer", protocol=PROTOCOL | {"inputs": "rgbd"})])
+    assert "| a | sray | RGB | finished |" in depth and "| a | 2d-transfer | RGB-D | finished |" in depth
     assert [human_bytes(n) for n in (None, 512, 1536, 3 * 2**20)] == ["-", "512 B", "1.5 KiB", "3.0 MiB"]

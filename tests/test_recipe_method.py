@@ -157,7 +157,7 @@ def test_add_a_method_and_finetune_a_scene_with_it(prior_method, tiny_shards, ti
     assert result["miou_after"] == max(p["miou"] for p in result["curve"])
 
     # the new method appears in the results table and in the charts, in its own colour and label
-    assert f"| {SCENE} | class-prior | finished |" in results_table([result])
+    assert f"| {SCENE} | class-prior | RGB | finished |" in results_table([result])
     paths = write_fleet_charts([result], tmp_path / "charts", METHODS)
     assert [p.name for p in paths][-1] == "miou_vs_artifact_bytes.png"
     rgb = torch.from_numpy(cv2.cvtColor(cv2.imread(str(paths[0])), cv2.COLOR_BGR2RGB)).int()
@@ -165,7 +165,7 @@ def test_add_a_method_and_finetune_a_scene_with_it(prior_method, tiny_shards, ti
     assert int(((rgb - colour).abs().amax(-1) <= 12).sum()) > 20
     legend = [t.get_text() for sub in curve_figure([result], "miou", "step", METHODS).subfigs for lg in sub.legends
               for t in lg.get_texts()]
-    assert legend == ["class prior"]
+    assert legend == ["class prior [RGB]"]  # with the inputs its protocol records
 
     # the CLI offers it while it is registered
     parser = argparse.ArgumentParser(prog="sray")

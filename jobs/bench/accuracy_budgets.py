@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from sray.platform.common.eval_protocol import EvalProtocol, inputs_name
+from sray.platform.common.eval_protocol import results_inputs
 from sray.platform.finetune.methods.registry import get_method, method_names
 from sray.platform.viz.curves import step_hold
 
@@ -56,20 +56,13 @@ def budget_means(results: list[dict[str, Any]], budgets: tuple[float, ...]) -> d
     return means
 
 
-def method_inputs(results: list[dict[str, Any]], method: str) -> str:
-    """The inputs ``method``'s results record in their protocol (``RGB``, ``RGB-D``, several joined by ``/``), or
-    :data:`UNRECORDED`."""
-    found = {EvalProtocol.from_json(r["protocol"]).inputs for r in results
-             if r["method"] == method and r.get("protocol") is not None}
-    return "/".join(inputs_name(i) for i in sorted(found)) or UNRECORDED
-
-
 def budget_table(results: list[dict[str, Any]], budgets: tuple[float, ...],
                  percent: Callable[[float | None], str]) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the table: one row per budget (seconds), one column per method, its cells ``percent``
     of the mean held-out mIoU."""
     means = budget_means(results, budgets)
-    header = ["budget s", *(f"{get_method(m).style.label} mIoU % ({method_inputs(results, m)})" for m in means)]
+    header = ["budget s", *(f"{get_method(m).style.label} mIoU % ({results_inputs(results, m) or UNRECORDED})"
+                            for m in means)]
     rows = [[f"{b:.0f}", *(percent(column[i]) for column in means.values())] for i, b in enumerate(budgets)]
     return header, rows
 

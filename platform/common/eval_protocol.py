@@ -164,6 +164,14 @@ class EvalProtocol:
                 f"mIoU: {self.miou}; mIoU/img: {self.miou_per_image}")
 
 
+def results_inputs(results: Iterable[dict[str, Any]], method: str) -> str:
+    """The inputs ``method``'s results record in their ``protocol`` (``RGB``, ``RGB-D``, several joined by ``/``);
+    empty when none of them records a protocol. ``results``: dicts with ``method`` and ``protocol`` (fleet results)."""
+    found = {EvalProtocol.from_json(r["protocol"]).inputs for r in results
+             if r["method"] == method and r.get("protocol") is not None}
+    return "/".join(inputs_name(i) for i in sorted(found))
+
+
 def caption_lines(labelled: Iterable[tuple[str, dict[str, Any] | None]]) -> list[str]:
     """``Protocol: ...`` lines for a table whose rows carry ``protocol`` JSON objects.
 

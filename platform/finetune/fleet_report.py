@@ -5,11 +5,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from sray.platform.common.eval_protocol import caption_lines
+from sray.platform.common.eval_protocol import EvalProtocol, caption_lines, inputs_name
 
-COLUMNS = ("scene", "method", "status", "attempts", "steps used", "train time (s)", "mIoU before", "mIoU after",
-           "PSNR after (dB)", "artifact", "of full model", "note")
-"""Table columns, in order."""
+COLUMNS = ("scene", "method", "inputs", "status", "attempts", "steps used", "train time (s)", "mIoU before",
+           "mIoU after", "PSNR after (dB)", "artifact", "of full model", "note")
+"""Table columns, in order (``inputs``: what the row's method was given of the source views, from its protocol)."""
 
 
 def _num(value: Any, digits: int) -> str:
@@ -30,6 +30,10 @@ def human_bytes(n: int | None) -> str:
     return f"{int(size)} B" if unit == "B" else f"{size:.1f} {unit}"
 
 
+def _inputs(r: dict[str, Any]) -> str:
+    return inputs_name(EvalProtocol.from_json(r["protocol"]).inputs) if r.get("protocol") is not None else "-"
+
+
 def _note(r: dict[str, Any]) -> str:
     if r["status"] != "finished":
         return str(r.get("error") or "").replace("|", "/")[:120]
@@ -39,15 +43,16 @@ def _note(r: dict[str, Any]) -> str:
 
 
 def results_table(results: list[dict[str, Any]]) -> str:
-    """Markdown table of fleet results (one row per scene and method), the protocol line(s) below it
-    (one per distinct ``protocol`` of the results, naming its methods when they differ)."""
+    """Markdown table of fleet results (one row per scene and method, each with the inputs its protocol records:
+    ``RGB`` or ``RGB-D``, ``-`` without one), the protocol line(s) below it (one per distinct ``protocol`` of the
+    results, naming its methods when they differ)."""
     rows = [" | ".join(COLUMNS), " | ".join("---" for _ in COLUMNS)]
     for r in results:
         share = (f"{100 * r['artifact_bytes'] / r['full_checkpoint_bytes']:.2f}%"
                  if r.get("artifact_bytes") and r.get("full_checkpoint_bytes") else "-")
         rows.append(" | ".join([
-            r["scene"], r["method"], r["status"], str(r["attempts"]), str(r["steps_used"]), _num(r["wall_s"], 1),
-            _num(r["miou_before"], 3), _num(r["miou_after"], 3), _num(r["psnr_after"], 2),
+            r["scene"], r["method"], _inputs(r), r["status"], str(r["attempts"]), str(r["steps_used"]),
+            _num(r["wall_s"], 1), _num(r["miou_before"], 3), _num(r["miou_after"], 3), _num(r["psnr_after"], 2),
             human_bytes(r.get("artifact_bytes")), share, _note(r)]))
     lines = ["| " + row + " |" for row in rows]
     lines += ["", *caption_lines((r["method"], r.get("protocol")) for r in results),

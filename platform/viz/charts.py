@@ -14,8 +14,9 @@ From the fleet result dicts (docs/CONTRACTS.md, "Fleet results"), :func:`write_f
   stores nothing and sits on a separate "0 B" tick left of an axis break.
 
 Colours, markers and legend text are each method's :class:`~sray.platform.viz.chart_style.ChartStyle`
-(the method registry). Every chart's footnote carries the results' protocol line(s)
-(:func:`sray.platform.common.eval_protocol.caption_lines`).
+(the method registry); each legend entry ends with the inputs its results' protocol records (``[RGB]``,
+``[RGB-D]``), so a depth-using method never passes for an RGB one. Every chart's footnote carries the results'
+protocol line(s) (:func:`sray.platform.common.eval_protocol.caption_lines`).
 Failed results are left out and named in a footnote. Matplotlib's Agg canvas is used directly (no
 pyplot state), so this is safe in Ray workers and threads.
 """
@@ -38,7 +39,7 @@ from matplotlib.ticker import NullFormatter, NullLocator
 
 from sray.data_tools.atomic import save_png
 from sray.model.metrics import DATASET_PROTOCOL
-from sray.platform.common.eval_protocol import caption_lines
+from sray.platform.common.eval_protocol import caption_lines, results_inputs
 from sray.platform.viz.chart_style import ChartedMethods
 from sray.platform.viz.curves import average_curves, check_result, curve_xy, failure_note, is_chartable, zero_shot_value
 
@@ -119,16 +120,24 @@ def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str
     ax.tick_params(labelsize=8)
 
 
+def _with_inputs(label: str, ok: list[dict[str, Any]], method: str) -> str:
+    """``label`` tagged with the inputs ``method``'s results record in their protocol (``[RGB]``, ``[RGB-D]``)."""
+    inputs = results_inputs(ok, method)
+    return f"{label} [{inputs}]" if inputs else label
+
+
 def _legend_handles(ok: list[dict[str, Any]], methods: ChartedMethods) -> list[Any]:
     handles = []
     for method in methods.values():
         if any(r["method"] == method.name and zero_shot_value(r, "miou", methods) is not None for r in ok):
             z = method.zero_shot
-            handles.append(Line2D([], [], color=z.color, ls="--", marker=z.marker, ms=9, label=z.label))
+            handles.append(Line2D([], [], color=z.color, ls="--", marker=z.marker, ms=9,
+                                  label=_with_inputs(z.label, ok, method.name)))
     for method in methods.values():
         if any(r["method"] == method.name for r in ok):
             s = method.style
-            handles.append(Line2D([], [], color=s.color, marker=s.marker, ms=5, label=s.label))
+            handles.append(Line2D([], [], color=s.color, marker=s.marker, ms=5,
+                                  label=_with_inputs(s.label, ok, method.name)))
     if any(r.get("stopped_early") for r in ok):
         handles.append(Line2D([], [], color="#555555", ls="none", marker="|", ms=12, mew=2.0,
                               label="finetune stopped early (held-out score stopped improving)"))

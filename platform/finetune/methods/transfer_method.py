@@ -83,7 +83,7 @@ def checked_config(cfg: FleetConfig) -> FleetConfig:
 METHOD = Method(
     name=NAME, summary="2D segmenter labels carried by the source depth (RGB-D), segmenter finetuned", build=build,
     artifact_file="segmenter.safetensors", load=load,
-    style=ChartStyle(label="2d-transfer finetune (RGB-D)", color="#e08a1e", marker="D"), uses_sources=True,
-    zero_shot=ChartStyle(label="2d-transfer zero-shot (pretrained segmenter, RGB-D)", color="#f2c27b", marker="X"),
+    style=ChartStyle(label="2d-transfer finetune", color="#e08a1e", marker="D"), uses_sources=True,
+    zero_shot=ChartStyle(label="2d-transfer zero-shot (pretrained segmenter)", color="#f2c27b", marker="X"),
     eval_model=eval_model, eval_reads=("segmenter",), inputs="rgbd", checked_config=checked_config)
 """The 2D label-transfer per-scene method."""
