@@ -37,9 +37,10 @@ and the fraction of the ray's N samples that view i sees (how much of the ray it
 With ``SRayConfig.weight_inputs = "cross-view"`` (a departure from the paper, off by default) the net also
 reads two consensus statistics of the sample's valid views (``cross_view_stats``; 39 inputs at C = 32, the two
 between the direction difference and the seen fraction): the view's squared distance from their mean feature,
-||F''_i - mean||^2 / C, and their variance averaged over the channels. Seen from its own feature alone, a view occluded at the sample (whose feature describes the
-occluder) looks like any other; beside the others it is the one far from their mean, and a high variance
-says the views disagree at all (IBRNet's consensus signal). Invalid views enter neither statistic.
+||F''_i - mean||^2 / C, and their variance averaged over the channels. Seen from its own feature alone, a view
+occluded at the sample (whose feature describes the occluder) looks like any other; beside the others it is the
+one far from their mean, and a high variance says the views disagree at all (IBRNet's consensus signal).
+Invalid views enter neither statistic.
 """
 
 from __future__ import annotations
