@@ -3,6 +3,7 @@ traceback, with Ray never even imported (when Ray Train found them it took a min
 
 from __future__ import annotations
 
+import json
 import logging
 import subprocess
 import sys
@@ -13,8 +14,23 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from train_fixtures import tiny_shards  # noqa: E402,F401  (pytest fixture, used by name)
 
-WITHOUT_RAY = "import sys; sys.modules['ray'] = None; from sray.jobs.cli import main; sys.exit(main(sys.argv[1:]))"
-"""The CLI with ``ray`` made unimportable: any path that reaches Ray raises instead of refusing the input."""
+WITHOUT_RAY = """
+import contextlib, io, json, sys
+sys.modules["ray"] = None  # any path that reaches Ray raises instead of refusing the input
+from sray.jobs.cli import main
+results = []
+for argv in json.loads(sys.argv[1]):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as stop:  # argparse's own refusals
+            code = stop.code
+    results.append({"code": code, "stdout": out.getvalue(), "stderr": err.getvalue()})
+print(json.dumps(results))
+"""
+"""Runs the CLI once per argument list given as JSON, in one process with ``ray`` made unimportable, and prints
+each run's exit code and output as JSON (one interpreter start for every case instead of one per case)."""
 
 BAD = [
     (["--data", "/no/such/folder"], "/no/such/folder: no such shard folder"),
@@ -31,17 +47,28 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize(("flags", "message"), BAD, ids=[m[:24] for _, m in BAD])
-def test_bad_train_input_fails_fast_with_one_line(flags: list[str], message: str, tiny_shards: Path,
-                                                  tmp_path: Path) -> None:
-    data = [] if "--data" in flags else ["--data", str(tiny_shards)]
-    done = subprocess.run([sys.executable, "-c", WITHOUT_RAY, "train", *data, *flags,
-                           "--set", f"run.output_dir={tmp_path / 'jobs'}"],
-                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
-    lines = [line for line in done.stderr.splitlines() if line.strip()]
-    assert done.returncode == 2, done.stderr
-    assert len(lines) == 1 and message in lines[0] and "Traceback" not in done.stderr + done.stdout, lines
-    assert not (tmp_path / "jobs").exists() or not any((tmp_path / "jobs").iterdir())
+@pytest.fixture(scope="module")
+def refusals(tiny_shards: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict]]:  # noqa: F811
+    """(folder, one result per case of ``BAD``): every case run by ``sray train`` without Ray, each with its own
+    output folder ``folder/case<i>``."""
+    folder = tmp_path_factory.mktemp("refusals")
+    cases = [["train", *([] if "--data" in flags else ["--data", str(tiny_shards)]), *flags,
+              "--set", f"run.output_dir={folder / f'case{i}'}"] for i, (flags, _) in enumerate(BAD)]
+    done = subprocess.run([sys.executable, "-c", WITHOUT_RAY, json.dumps(cases)], capture_output=True, text=True,
+                          timeout=300, cwd=folder)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return folder, json.loads(done.stdout.splitlines()[-1])
+
+
+@pytest.mark.parametrize("case", range(len(BAD)), ids=[m[:24] for _, m in BAD])
+def test_bad_train_input_fails_fast_with_one_line(case: int, refusals: tuple[Path, list[dict]]) -> None:
+    folder, results = refusals
+    result, message = results[case], BAD[case][1]
+    lines = [line for line in result["stderr"].splitlines() if line.strip()]
+    assert result["code"] == 2, result
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in result["stderr"] + result["stdout"], lines
+    jobs = folder / f"case{case}"
+    assert not jobs.exists() or not any(jobs.iterdir())
 
 
 def test_submit_refuses_bad_input_before_contacting_the_cluster(tmp_path: Path) -> None:
