@@ -101,6 +101,23 @@ def test_a_field_a_result_lacks_is_named_in_a_note_and_a_result_not_given_is_not
     assert "(3) results/eval/metrics.json holds null for mean.dataset_level.miou" in readme
 
 
+def test_a_chosen_settings_run_gives_the_render_time_only_when_it_measured_the_default_render(tmp_path: Path) -> None:
+    """A speed-accuracy run on a chosen set of settings: its row of `sray eval`'s default render is read, with the
+    run's command; a chosen set without that row leaves the figure missing, with the file named."""
+    listing = _results(tmp_path / "results")
+    speed = tmp_path / "results" / "speed" / "tables.json"
+    chosen = {"title": "Chosen settings", "command": "sray bench speed-accuracy --settings full 'fast s8 c0.9'",
+              "blocks": [{"header": ["setting", "CPU s / view"], "rows": [["full", "40.2"], ["fast s8 c0.9", "0.71"]]}]}
+    _json(speed, {"tables": [chosen]})
+    assert _run(tmp_path, listing)[("synth-cpu-hour", "2-core CPU")][6] == "0.71"
+    assert "`sray bench speed-accuracy --settings full 'fast s8 c0.9'`" in (tmp_path / "README.md").read_text()
+    chosen["blocks"][0]["rows"] = [["full", "40.2"], ["fast s4 c0.9", "2.9"]]
+    _json(speed, {"tables": [chosen]})
+    assert _run(tmp_path, listing)[("synth-cpu-hour", "2-core CPU")][6] == "missing (1)"
+    assert ("(1) results/speed/tables.json lacks tables[title='Default settings'] (or a 'Chosen settings' table "
+            "with row 'fast s8 c0.9')") in (tmp_path / "README.md").read_text()
+
+
 @pytest.mark.parametrize(("damage", "message"), [
     (lambda root: (root / "eval" / "metrics.json").write_text('{"mean": {"dataset_level": {"miou": "high"}}}'),
      r"results/eval/metrics.json: mean\.dataset_level\.miou is 'high'; expected a finite number"),

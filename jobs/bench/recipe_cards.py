@@ -199,19 +199,20 @@ def run_recipe_cards(listing: Path, readme: Path, doc: Path = DEFAULT_DOC) -> st
         raise ValueError("sray eval's default render is none of the speed-accuracy settings; add it to "
                          "jobs/bench/speed_accuracy.py default_settings()")
     table, missing = cards_table(machines, runs, render_setting)
-    notes = "\n\n".join([*missing, sources(render_setting, _speed_commands(runs))])
+    notes = "\n\n".join([*missing, sources(render_setting, _speed_commands(runs, render_setting))])
     [readme_text] = portable([f"{table}\n\n{notes}"], Path(os.path.abspath(readme)).parent)
     replace_between(readme, readme_text)  # first: a README without the markers leaves both files as they were
     record(CARDS, CARDS.title, table, doc, notes, kind=KIND)
     return table
 
 
-def _speed_commands(runs: list[RunEntry]) -> list[str]:
-    """The commands that measured the runs' speed tables (a table without one is a note of the cards already)."""
+def _speed_commands(runs: list[RunEntry], render_setting: str) -> list[str]:
+    """The commands that measured the runs' speed tables read for ``render_setting`` (a table without one is a note
+    of the cards already)."""
     found = set()
     for run in (r for r in runs if r.speed is not None):
         try:
-            found.add(f"`{speed_command(run.speed)}`")
+            found.add(f"`{speed_command(run.speed, render_setting)}`")
         except MissingField:
             continue
     return sorted(found)

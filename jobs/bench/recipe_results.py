@@ -16,7 +16,7 @@ import pickle
 from pathlib import Path
 from typing import Any
 
-from sray.jobs.bench.speed_accuracy import DEFAULT_TABLE
+from sray.jobs.bench.speed_accuracy import CHOSEN_TABLE, DEFAULT_TABLE
 from sray.platform.checkpoints.folders import STATE_FILE, CheckpointManager, load_checkpoint
 from sray.platform.finetune.methods.sray_method import METHOD as SRAY_METHOD
 from sray.platform.finetune.scene_finetune import RESULT_FILE
@@ -115,34 +115,40 @@ def finetune_miou(fleet: Path, budget_s: float = FINETUNE_BUDGET_S) -> float:
     return sum(scores) / len(scores)
 
 
-def _speed_table(tables: Path) -> dict:
-    """The default-settings table stored in the speed-accuracy benchmark's ``tables.json``."""
-    found = [t for t in _json(tables).get("tables", []) if isinstance(t, dict) and t.get("title") == DEFAULT_TABLE]
-    if not found:
-        raise MissingField(tables, f"tables[title={DEFAULT_TABLE!r}]")
-    return found[0]
+def _speed_table(tables: Path, setting: str) -> dict:
+    """The table of the speed-accuracy benchmark's ``tables.json`` that ``setting``'s render time is read from: its
+    default-settings table, or when the run measured a chosen set of settings, that table if it holds ``setting``."""
+    found = {t.get("title"): t for t in _json(tables).get("tables", []) if isinstance(t, dict)}
+    if DEFAULT_TABLE in found:
+        return found[DEFAULT_TABLE]
+    chosen = found.get(CHOSEN_TABLE)
+    if chosen is not None and any(r and r[0] == setting for b in chosen.get("blocks", []) for r in b.get("rows", [])):
+        return chosen
+    raise MissingField(tables, f"tables[title={DEFAULT_TABLE!r}] (or a {CHOSEN_TABLE!r} table with row {setting!r})")
 
 
 def speed_cpu_s(tables: Path, setting: str) -> float:
     """CPU seconds per view of ``setting`` in the speed-accuracy benchmark's ``tables.json`` (its default-settings
-    table)."""
-    blocks = [b for b in _speed_table(tables).get("blocks", []) if "header" in b]
+    table, or the chosen-settings table of a run that measured ``setting`` among others)."""
+    table = _speed_table(tables, setting)
+    title = table["title"]
+    blocks = [b for b in table.get("blocks", []) if "header" in b]
     if not blocks or SPEED_COLUMN not in blocks[0]["header"]:
-        raise MissingField(tables, f"{DEFAULT_TABLE!r}: column {SPEED_COLUMN!r}")
+        raise MissingField(tables, f"{title!r}: column {SPEED_COLUMN!r}")
     column = blocks[0]["header"].index(SPEED_COLUMN)
     rows = [r for r in blocks[0]["rows"] if r and r[0] == setting]
     if not rows:
-        raise MissingField(tables, f"{DEFAULT_TABLE!r}: row {setting!r}")
+        raise MissingField(tables, f"{title!r}: row {setting!r}")
     try:
         return float(rows[0][column])
     except (ValueError, IndexError):
-        raise ResultError(f"{tables}: {DEFAULT_TABLE!r}, row {setting!r}, column {SPEED_COLUMN!r}: "
+        raise ResultError(f"{tables}: {title!r}, row {setting!r}, column {SPEED_COLUMN!r}: "
                           f"{rows[0][column:column + 1]} is no number") from None
 
 
-def speed_command(tables: Path) -> str:
-    """The command that measured the default-settings table of a speed-accuracy ``tables.json``."""
-    table = _speed_table(tables)
+def speed_command(tables: Path, setting: str) -> str:
+    """The command that measured the table ``setting``'s render time is read from (``speed_cpu_s``)."""
+    table = _speed_table(tables, setting)
     if not table.get("command"):
-        raise MissingField(tables, f"{DEFAULT_TABLE!r}: command")
+        raise MissingField(tables, f"{table['title']!r}: command")
     return str(table["command"])
