@@ -17,6 +17,7 @@ from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
+from sray.jobs.bench.accuracy_fleet import DONE_FILE
 from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, LONG, OCCL, OCCL_T5, PRESETS, ROOMS_198, ROOMS_498,
                                            VARIANT_SETTINGS, Cell, Preset, World)
 from sray.jobs.bench.accuracy_budgets import budget_means
@@ -228,6 +229,9 @@ def test_toy_benchmark_cells_are_trials_that_never_rerun_and_import_old_cells(ra
     text = doc.read_text()
     assert "Missing cells: none." in text and "Failed in their last run" not in text
     assert "Per-scene methods at equal wall-clock budgets" in text
+    # the toy plan holds no hour cell: its fleet finetuned from the long model, and its table says so
+    assert json.loads((out / "fleet" / DONE_FILE).read_text())["checkpoint"] == stored["long-s0"]["checkpoint"]
+    assert "Finetunes from checkpoint `bench-long-s0/step_000000004`" in text
     # the protocol under the tables: whole images, the preset's sources
     assert f"sources: {TOY.eval_sources} per query" in text and "pixels: whole images (stride 1)" in text
 

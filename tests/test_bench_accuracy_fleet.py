@@ -14,7 +14,7 @@ from sray.jobs.bench import accuracy_fleet
 from sray.jobs.bench.accuracy_budgets import BUDGET_TABLE, FORMER_TITLES, budget_table, step_zero
 from sray.jobs.bench.accuracy_cells import import_old_cells, stored_cells
 from sray.jobs.bench.accuracy_fleet import DONE_FILE, compared_methods, fleet_config, methods_done, run_comparison
-from sray.jobs.bench.accuracy_plan import LONG, Cell, Preset, World
+from sray.jobs.bench.accuracy_plan import HOUR, LONG, PRESETS, Cell, Preset, World, headline_variant
 from sray.jobs.bench.accuracy_tables import accuracy_bench, write_tables
 from sray.jobs.bench.doc import bench_dir, record
 from sray.platform.common.eval_protocol import EvalProtocol
@@ -84,7 +84,7 @@ def test_a_finished_fleet_runs_again_only_for_methods_it_lacks(tmp_path: Path,
     fleet, calls = tmp_path / "fleet", []
     for method in ("sray", "semantic-nerf"):
         _store(fleet, _result("s0", method, [(0.0, 0.2)], None))
-    (fleet / DONE_FILE).write_text(json.dumps({"checkpoint": "OUT/ckpt"}) + "\n")  # an old marker
+    (fleet / DONE_FILE).write_text(json.dumps({"checkpoint": "ckpt"}) + "\n")  # an old marker
     monkeypatch.setattr(accuracy_fleet, "run_fleet", lambda *args: calls.append(args[-1]) or [])
     monkeypatch.setattr(accuracy_fleet, "write_fleet_charts", lambda *args: [])
     cfg = fleet_config(PRESET)
@@ -94,6 +94,17 @@ def test_a_finished_fleet_runs_again_only_for_methods_it_lacks(tmp_path: Path,
     assert run_comparison(cfg, three, Path("ckpt"), tmp_path, ["s0"], fleet, "") and calls == [three]
     assert json.loads((fleet / DONE_FILE).read_text())["methods"] == three
     assert not run_comparison(cfg, ["sray"], Path("ckpt"), tmp_path, ["s0"], fleet, "") and len(calls) == 1
+    with pytest.raises(ValueError, match=r"fleet/done.json: checkpoint: this fleet finetuned from ckpt, not from "
+                                         r"other/ckpt; move .*fleet away"):
+        run_comparison(cfg, three, Path("other/ckpt"), tmp_path, ["s0"], fleet, "")
+    assert len(calls) == 1 and json.loads((fleet / DONE_FILE).read_text())["checkpoint"] == "ckpt"
+
+
+def test_the_fleet_finetunes_from_the_recipe_at_its_cpu_budget_where_the_plan_holds_it() -> None:
+    """``cpu-small`` plans the recipe at its own CPU-second budget (``hour``): its fleet and targets read that model;
+    the ``gpu`` preset and a plan without an hour cell keep the recipe's step-budget model (``long``)."""
+    assert headline_variant(PRESETS["cpu-small"]) == HOUR and headline_variant(PRESETS["gpu"]) == LONG
+    assert headline_variant(PRESET) == LONG
 
 
 def test_the_budget_table_has_a_column_per_registered_method_with_its_inputs(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -9,9 +9,10 @@
    its trial's record; a re-run runs only the cells without one (a failed cell again) and resumes an
    interrupted pretraining from its last checkpoint, so the tables can be completed over several runs
    (``--cells`` and ``--max-minutes`` pick the piece to run; no cell starts after the limit);
-3. a finetune fleet on the unseen scenes from the ``long`` model: every registered method whose requirements are
-   met (:mod:`sray.jobs.bench.accuracy_fleet`: S-Ray finetuning, Semantic-NeRF from scratch, and ``2d-transfer``
-   when a segmenter is given) under the same wall-clock budget, read off at equal budgets;
+3. a finetune fleet on the unseen scenes from the headline model (``headline_variant``: the recipe at its own CPU
+   budget, ``hour``, in ``cpu-small``; ``long`` in ``gpu``), its first stored seed: every registered method whose
+   requirements are met (:mod:`sray.jobs.bench.accuracy_fleet`: S-Ray finetuning, Semantic-NeRF from scratch,
+   and ``2d-transfer`` when a segmenter is given) under the same wall-clock budget, read off at equal budgets;
 4. tables (ablation with seed spread, per-class IoU, equal budgets, the targets) and a chart, written
    into docs/benchmarks.md with the exact command, each table with its protocol line(s)
    (:mod:`sray.jobs.bench.accuracy_tables`). The tables are rewritten after every run from whatever
@@ -30,7 +31,7 @@ from sray.data_tools.shards.manifest import unseen_scenes
 from sray.data_tools.synth.world import make_world
 from sray.jobs.bench.accuracy_cells import cell_errors, import_old_cells, run_cells, stored_cells
 from sray.jobs.bench.accuracy_fleet import compared_methods, fleet_config, run_comparison
-from sray.jobs.bench.accuracy_plan import LONG, PRESETS, Cell, Preset
+from sray.jobs.bench.accuracy_plan import PRESETS, Cell, Preset, headline_variant
 from sray.jobs.bench.accuracy_step_cost import measure_step_times, read_step_times, store_step_times
 from sray.jobs.bench.accuracy_tables import by_variant, write_tables
 from sray.jobs.bench.doc import machine_line
@@ -42,7 +43,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
                            presets: dict[str, Preset] | None = None, step_times: bool = False,
                            segmenter: Path | None = None) -> dict[str, dict]:
     """Run the missing cells (``cells``: a subset of the plan; default all; a cell that raises is recorded
-    and the next ones run) and, when the long model is stored, the fleet of every registered method whose
+    and the next ones run) and, when the headline model is stored, the fleet of every registered method whose
     requirements are met (``segmenter``: the 2D segmenter ``2d-transfer`` starts from; checked before any cell
     runs); with ``step_times``, time a pretraining step of every stored variant side by side; then rewrite the
     tables in ``doc`` from every stored cell, fleet result and the stored step times. No new cell starts after
@@ -67,9 +68,10 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
     if over and left:
         print(f"[bench] {max_minutes:g} min reached: cells {', '.join(left)} are left for the next run", flush=True)
     stored = stored_cells(out)
-    long_cell = next((c for c in p.plan if c.variant == LONG and c.key in stored), None)
-    if fleet and long_cell is not None and not over:
-        run_comparison(cfg, methods, Path(stored[long_cell.key]["checkpoint"]), shards, scenes, out / "fleet",
+    headline = headline_variant(p)
+    fleet_cell = next((c for c in p.plan if c.variant == headline and c.key in stored), None)
+    if fleet and fleet_cell is not None and not over:
+        run_comparison(cfg, methods, Path(stored[fleet_cell.key]["checkpoint"]), shards, scenes, out / "fleet",
                        tracking_uri)
     if step_times and stored:
         _time_steps(p, stored, out)

@@ -1,13 +1,13 @@
 """The fleet comparison of ``sray bench accuracy``: every registered per-scene method whose requirements the
-benchmark's settings meet finetunes every unseen scene from the ``long`` model under one equal wall-clock budget.
+benchmark's settings meet finetunes every unseen scene from the headline model under one equal wall-clock budget.
 
 The methods come from the method registry, in its order: a method is compared when its record's
 ``checked_config`` accepts the benchmark's fleet config (a record without one always is); a method whose check
 raises ValueError (a requirement not given: ``2d-transfer`` without ``--segmenter``) is left out and named, while a
 FileNotFoundError (a given file missing) stops the benchmark before any cell runs. The fleet's folder holds
 ``done.json`` once it finished, naming its checkpoint and methods; a later run with more methods (a segmenter given)
-runs the missing (scene, method) pairs only. A ``done.json`` written before it named its methods counts the methods
-of the results stored beside it.
+runs the missing (scene, method) pairs only; one that finetuned from another checkpoint is refused (move it away).
+A ``done.json`` written before it named its methods counts the methods of the results stored beside it.
 """
 
 from __future__ import annotations
@@ -71,11 +71,22 @@ def methods_done(fleet_dir: Path) -> set[str] | None:
     return {r["method"] for r in read_fleet_results(fleet_dir)}
 
 
+def fleet_checkpoint(fleet_dir: Path) -> str | None:
+    """The checkpoint the finished fleet in ``fleet_dir`` finetuned from (its ``done.json``); None when none finished
+    there."""
+    done = Path(fleet_dir) / DONE_FILE
+    return json.loads(done.read_text())["checkpoint"] if done.exists() else None
+
+
 def run_comparison(cfg: FleetConfig, methods: list[str], checkpoint: Path, shards: Path, scenes: list[str],
                    fleet_dir: Path, tracking_uri: str) -> bool:
     """Finetune every scene with each of ``methods`` (pairs already finished are skipped), chart the results and
-    mark the fleet done with every method it holds; nothing when a finished fleet holds them all already.
-    Returns whether a fleet ran."""
+    mark the fleet done with every method it holds; nothing when a finished fleet holds them all already; ValueError
+    when the finished fleet there finetuned from another checkpoint. Returns whether a fleet ran."""
+    source = fleet_checkpoint(fleet_dir)
+    if source is not None and Path(source) != Path(checkpoint):
+        raise ValueError(f"{Path(fleet_dir) / DONE_FILE}: checkpoint: this fleet finetuned from {source}, not from "
+                         f"{checkpoint}; move {fleet_dir} away to finetune from the new model (its results are kept)")
     done = methods_done(fleet_dir)
     if done is not None and set(methods) <= done:
         return False

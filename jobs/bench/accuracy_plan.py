@@ -185,3 +185,10 @@ PRESETS = {
 }
 """Benchmark presets: ``cpu-small`` fits this 2-core machine over a few runs of about an hour;
 ``gpu`` is the paper-size run for a GPU machine."""
+
+
+def headline_variant(p: Preset) -> str:
+    """The variant of ``p``'s headline model, the one its targets are read on and its fleet finetunes from: the
+    recipe as it is, at its own CPU-second budget (``hour``), when the plan holds it; else the recipe's first form at
+    its step budget (``long``)."""
+    return HOUR if any(c.variant == HOUR for c in p.plan) else LONG

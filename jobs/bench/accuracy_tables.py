@@ -16,9 +16,11 @@ import numpy as np
 
 from sray.jobs.bench.accuracy_budgets import BUDGET_TABLE, FORMER_TITLES, budget_means, budget_table, step_zero
 from sray.jobs.bench.accuracy_cpu_time import budget_points, cpu_time_chart, cpu_time_rows
-from sray.jobs.bench.accuracy_plan import CPU_BUDGETED, HOUR, LONG, VARIANT_SETTINGS, Cell, Preset
+from sray.jobs.bench.accuracy_fleet import fleet_checkpoint
+from sray.jobs.bench.accuracy_plan import CPU_BUDGETED, HOUR, LONG, VARIANT_SETTINGS, Cell, Preset, headline_variant
 from sray.jobs.bench.accuracy_step_cost import step_cost_chart
 from sray.jobs.bench.doc import Bench, bench_dir, markdown_table, record
+from sray.jobs.bench.speed_verdict import checkpoint_label
 from sray.platform.common.eval_protocol import caption_lines
 from sray.platform.finetune.methods.sray_method import NAME as SRAY
 from sray.platform.viz.curves import read_fleet_results
@@ -122,9 +124,8 @@ def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | No
     """One line per target of the benchmark: the measured value and whether it is met (or what is missing)."""
     groups = by_variant(p, stored)
     lines = []
-    # the headline model: the recipe as it is (hour cells), else its first form (the long cell)
-    planned = HOUR if any(c.variant == HOUR for c in p.plan) else LONG
-    headline = HOUR if groups.get(HOUR) else LONG if groups.get(LONG) else planned
+    # the recipe as it is (hour cells), else its first form (the long cell)
+    headline = HOUR if groups.get(HOUR) else LONG if groups.get(LONG) else headline_variant(p)
     headline_cells = groups.get(headline, [])
     if headline_cells:
         zero_shot = float(np.mean([c["miou"] for c in headline_cells]))
@@ -138,7 +139,7 @@ def targets(p: Preset, stored: dict[str, dict[str, Any]], sray_at_60: float | No
                          f"{_pct(sray_at_60)} = {ratio:.2f} against {FINETUNE_RATIO_TARGET:.2f}: "
                          f"{'met' if ratio >= FINETUNE_RATIO_TARGET else 'not met'}.")
     else:
-        lines.append(f"- Zero-shot mIoU of the {p.recipe} model: cell {Cell(planned, 0).key} not run yet.")
+        lines.append(f"- Zero-shot mIoU of the {p.recipe} model: cell {Cell(headline_variant(p), 0).key} not run yet.")
     full, none = groups.get("full", []), groups.get("none", [])
     if len(full) > 1 and len(none) > 1:
         f, n = [c["miou"] for c in full], [c["miou"] for c in none]
@@ -180,6 +181,12 @@ def _step_cost_link(preset: str, p: Preset, groups: dict[str, list[dict[str, Any
 def _table(header: list[str], rows: list[list[str]], captions: list[str]) -> str:
     """A Markdown table with its protocol caption lines under it."""
     return "\n".join([markdown_table(header, rows), "", *captions])
+
+
+def _fleet_source(fleet_dir: Path) -> str:
+    """What the fleet in ``fleet_dir`` finetuned from, for its table's caption."""
+    source = fleet_checkpoint(fleet_dir)
+    return "the headline model" if source is None else f"checkpoint `{checkpoint_label(Path(source))}`"
 
 
 def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], fleet_dir: Path, doc: Path,
@@ -246,8 +253,8 @@ def write_tables(preset: str, p: Preset, stored: dict[str, dict[str, Any]], flee
         header, rows = budget_table(results, (0.0, *p.budgets), _pct)
         record(bench, BUDGET_TABLE,
                _table(header, rows, caption_lines((r["method"], r.get("protocol")) for r in results)),
-               doc, f"Finetunes from the `{LONG}` model, {p.budget_s:.0f} s wall-clock budget each, equal for every "
-                    "method, read off at the last held-out evaluation before each budget (0 s = "
+               doc, f"Finetunes from {_fleet_source(fleet_dir)}, {p.budget_s:.0f} s wall-clock budget each, equal "
+                    "for every method, read off at the last held-out evaluation before each budget (0 s = "
                     f"{step_zero(results)}). Columns: every registered method with stored results, with the inputs "
                     "its results' protocol records; a method whose requirement a run did not meet (2d-transfer "
                     "without `--segmenter`) was left out of that run's fleet.\n\n" + "\n".join(fleet_links),
