@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 import scene_fixtures
 import torch
@@ -15,6 +16,8 @@ from label_reads import record_label_reads
 from train_fixtures import tiny_config
 
 from sray.data_tools.loader.augment import Augmentation
+from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
@@ -22,7 +25,10 @@ from sray.jobs.bench.ceilings import REPORT_FILE
 from sray.jobs.cli import main
 from sray.model.config import SRayConfig
 from sray.model.runtime import Runtime
-from sray.platform.eval.label_transfer import UNSEEN
+from sray.platform.eval import ceilings
+from sray.platform.eval.ceiling_rows import CeilingRow
+from sray.platform.eval.ceilings import source_ids
+from sray.platform.eval.label_transfer import UNSEEN, coverage_counts, transfer_labels
 from sray.platform.eval.linear_probe import fit_probe, random_encoder
 from sray.platform.eval.segmenter import load_segmenter
 from sray.platform.eval.segmenter_training import train_segmenter
@@ -62,12 +68,16 @@ def test_rows_run_end_to_end_and_the_oracle_transfer_is_near_perfect(shards: Pat
                  "--segmenter", str(segmenter), "--probe-steps", "10", "--probe-views", "8",
                  "--out", str(tmp_path / "out"), "--doc", str(doc)]) == 0
     rows = {r["key"]: r for r in json.loads((tmp_path / "out" / REPORT_FILE).read_text())["rows"]}
-    assert list(rows) == ["a", "b", "c", "d", "e", "e-seg", "e-rand"]
+    assert list(rows) == ["a", "b", "c", "c-rgb", "s", "d", "e", "e-seg", "e-rand"]
     assert {k for k, r in rows.items() if r["oracle"]} == {"a", "b", "d"}
     assert all(r["views"] == 2 and r["seconds_per_view"] > 0 and 0 <= r["miou"] <= 1 for r in rows.values())
-    assert all(rows[k]["coverage"] is None for k in ("e", "e-seg", "e-rand"))
+    assert all(rows[k]["coverage"] is None for k in ("s", "e", "e-seg", "e-rand"))
     assert 0.5 < rows["a"]["coverage"] <= 1 and rows["b"]["coverage"] == rows["a"]["coverage"]
-    assert 0 < rows["c"]["coverage"] <= 1
+    assert 0 < rows["c"]["coverage"] <= 1 and 0 < rows["c-rgb"]["coverage"] <= 1
+    # the RGB row reads S-Ray's rendered depth, never the query's ground truth or the sources' depth
+    assert rows["c-rgb"]["protocol"]["inputs"] == "cameras, source images, segmenter, S-Ray rendered query depth"
+    assert rows["s"]["protocol"]["inputs"] == "cameras, source images"
+    assert "depth: checkpoint step 0, fast (pixel stride 1" in rows["c-rgb"]["budget"]
     assert rows["a"]["acc_on_covered"] > 0.97, rows["a"]
     assert rows["a"]["total_acc"] >= 0.97 * rows["a"]["coverage"]
     assert rows["a"]["miou"] > 0.5
@@ -130,3 +140,40 @@ def test_the_field_is_read_at_the_ground_truth_depth(fine_samples: str) -> None:
     torch.testing.assert_close(pred, torch.where(depth > 0, depth.long(), torch.full_like(pred, UNSEEN)))
     z = torch.cat(seen_z)
     assert z.shape == (7, 6 + (4 if fine_samples == "union" else 0)) and bool((z.diff(dim=-1) >= 0).all())
+
+
+def test_row_s_scores_the_render_and_row_c_rgb_carries_the_segmenter_by_its_depth(
+        shards: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A stand-in S-Ray whose render returns the query's ground-truth labels as logits and a depth map, and a
+    stand-in segmenter that returns the sources' true labels: row s scores the render's argmax (mIoU 1); row c-rgb
+    is the backward transfer, without source depth, of the segmenter's labels by the rendered depth; given the true
+    depth it covers at least what the occlusion-tested oracle row a covers, and given a depth 0 nowhere it sees
+    nothing."""
+    sample = next(iter(make_eval_samples(shards, "t", split="test", n_source=3)))
+    views = read_scene_views(shards, read_manifest(shards).scenes["t"])
+    meta = SceneMeta.from_json(read_manifest(shards).scenes["t"].meta)
+    gt_sources = torch.from_numpy(np.stack([views[i].label() for i in source_ids(sample, views, meta, 3)]).astype(
+        np.int64))
+    cfg = SRayConfig(n_classes=int(sample.query_label.max()) + 1)
+    monkeypatch.setattr(ceilings, "encode_sources", lambda net, sample, device: None)
+    monkeypatch.setattr(ceilings, "field_at_surface", lambda *args: sample.query_label.clone())
+    gt = sample.query_label.long()
+    for depth, total in ((sample.query_depth, None), (torch.zeros_like(sample.query_depth), 0)):
+        logits = torch.nn.functional.one_hot(gt.clamp(0, cfg.n_classes - 1), cfg.n_classes).float()
+        net = SimpleNamespace(cfg=cfg, render_image=lambda *args, fast=None: {"fine": {"logits": logits,
+                                                                                        "depth": depth}})
+        segmenter = SimpleNamespace(predict=lambda rgb: gt_sources)
+        scorer = ceilings.ViewScorer(net, segmenter, {}, 0.05, ceilings.ZERO_SHOT_RENDER)
+        rows = {k: CeilingRow(k, t, p, geometric=p.geometry != "—")
+                for k, t, p in ceilings.row_descriptors(True, False) if not k.startswith("e")}
+        scorer.score(rows, sample, gt_sources)
+        expected = transfer_labels(gt_sources, sample.sources.K, sample.sources.c2w, None, sample.query.K,
+                                   sample.query.c2w, tuple(gt.shape), "backward", ignore_id=cfg.ignore_id,
+                                   query_depth=depth)
+        scored = rows["c-rgb"].summary(cfg.n_classes)
+        assert rows["c-rgb"].covered == coverage_counts(expected.seen, gt, cfg.ignore_id)[0]
+        assert rows["s"].summary(cfg.n_classes)["miou"] == 1.0
+        if total is None:
+            assert rows["c-rgb"].covered >= rows["a"].covered > 0 and scored["miou"] > 0.5
+        else:
+            assert rows["c-rgb"].covered == total and scored["total_acc"] == 0.0

@@ -92,6 +92,31 @@ def test_backward_transfer_reproduces_visible_labels_and_hides_occluded_pixels()
     assert (out.seen.numpy() == visible)[~edge].all()
 
 
+def test_backward_transfer_without_source_depth_carries_what_each_source_pixel_shows() -> None:
+    """The RGB protocol's transfer (no source depth, so no occlusion test), against OpenCV's projection: every query
+    point in front of the source and inside its frame takes the label of the source pixel it projects to, the
+    source pixels nearest to ``cv2.projectPoints``'s coordinates, occluded or not: the wall behind the card, hidden
+    from the source, is labelled card."""
+    q_depth, q_label, q_points = render(K_TOY, QUERY, H, W)
+    _, s_label, _ = render(K_TOY, SOURCE, H, W)
+    k_src, c2w_src, k_q, c2w_q, q_d = tensors(K_TOY[None], SOURCE[None], K_TOY, QUERY, q_depth)
+    out = transfer_labels(torch.from_numpy(s_label[None]), k_src, c2w_src, None, k_q, c2w_q, (H, W), "backward",
+                          query_depth=q_d, ignore_id=IGNORE)
+    w2c = np.linalg.inv(SOURCE)
+    uv, _ = cv2.projectPoints(q_points.reshape(-1, 3), cv2.Rodrigues(w2c[:3, :3])[0], w2c[:3, 3], K_TOY, None)
+    iu, iv = (np.floor(uv[:, 0, i] + 0.5).astype(int).reshape(H, W) for i in (0, 1))
+    inside = (iu >= 0) & (iu < W) & (iv >= 0) & (iv < H)  # every query point lies in front of the source here
+    seen_label = np.where(inside, s_label[iv.clip(0, H - 1), iu.clip(0, W - 1)], IGNORE)
+    expected = np.where(inside & (seen_label != IGNORE), seen_label, UNSEEN)
+    np.testing.assert_array_equal(out.seen.numpy(), inside)
+    np.testing.assert_array_equal(out.labels.numpy(), expected)
+    hidden = np.array([[inside[v, u] and not sees(SOURCE[:3, 3], K_TOY, SOURCE, (H, W), q_points[v, u])
+                        for u in range(W)] for v in range(H)])
+    assert (hidden & (q_label != CARD) & (out.labels.numpy() == CARD)).sum() > 20, "no occlusion test: card wins"
+    with pytest.raises(ValueError, match="forward splatting needs the source depth"):
+        transfer_labels(torch.from_numpy(s_label[None]), k_src, c2w_src, None, k_q, c2w_q, (H, W), "forward")
+
+
 def naive_splat(labels: np.ndarray, K: np.ndarray, c2w: np.ndarray, depth: np.ndarray, K_q: np.ndarray,
                 c2w_q: np.ndarray, hw: tuple[int, int], tol: float, ignore: int) -> np.ndarray:
     """Forward splatting written as plain loops over sources and pixels (the module doc's rules)."""

@@ -13,7 +13,8 @@ from typing import Any
 
 from sray.jobs.bench.doc import Bench, markdown_table, record
 from sray.platform.config.recipes import get_recipe
-from sray.platform.eval.ceilings import measure_ceilings
+from sray.model.fast_render import FastRender
+from sray.platform.eval.ceilings import ZERO_SHOT_RENDER, measure_ceilings
 from sray.platform.eval.segmenter import SegmenterRecord
 from sray.platform.eval.segmenter_training import train_segmenter
 from sray.platform.eval.zero_shot import write_json_atomic
@@ -48,7 +49,8 @@ def ceilings_notes(report: dict[str, Any]) -> str:
             f"{report['n_source']} fixed sources ({report['source_rule']}). mIoU: dataset-level per scene, "
             f"unweighted mean over scenes; {report['unseen_rule']}. Coverage: labelled query pixels some source "
             f"sees by the row's geometry (occlusion test: relative depth agreement {report['tolerance']}); "
-            f"{report['coverage_of_d']}. Votes: {report['tie_rule']}. Oracle rows read the query view's "
+            f"{report['coverage_of_d']}. Votes: {report['tie_rule']}. S-Ray's render (row s, and row c-rgb's "
+            f"depth): {report.get('render', 'full')}. Oracle rows read the query view's "
             "ground-truth depth and never sit in a comparison column; e rows read the query image, which S-Ray "
             "never sees. s/view: wall seconds of a row's prediction per view on this machine (probe fits and "
             "segmenter training are in the budget column).")
@@ -56,11 +58,12 @@ def ceilings_notes(report: dict[str, Any]) -> str:
 
 def run_ceilings(checkpoint: Path, shards: Path, out: Path, doc: Path, *, n_source: int = 8, views_per_scene: int = 0,
                  segmenter: Path | None = None, probe_steps: int = 300, probe_views: int = 64,
-                 tolerance: float = 0.05, progress: bool = True) -> dict[str, Any]:
+                 tolerance: float = 0.05, render: FastRender | None = ZERO_SHOT_RENDER,
+                 progress: bool = True) -> dict[str, Any]:
     """Measure, store ``out/ceilings.json``, print and record the table in ``doc``; returns the report."""
     report = measure_ceilings(checkpoint, shards, n_source=n_source, views_per_scene=views_per_scene,
                               segmenter=segmenter, probe_steps=probe_steps, probe_views=probe_views,
-                              tolerance=tolerance, progress=progress)
+                              tolerance=tolerance, render=render, progress=progress)
     path = write_json_atomic(report, Path(out) / REPORT_FILE)
     record(CEILINGS, TITLE, ceilings_table(report["rows"]), Path(doc), ceilings_notes(report))
     print(f"rows stored in {path}")

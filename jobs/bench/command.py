@@ -104,11 +104,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     ceilings.add_argument("--n-source", type=int, default=8, help="fixed source views per test view (as sray eval)")
     ceilings.add_argument("--views-per-scene", type=int, default=0, help="first test views per scene (0: all)")
     ceilings.add_argument("--segmenter", type=Path, default=None,
-                          help="2D segmenter folder (`sray bench segmenter`); without it rows b and c are left out")
+                          help="2D segmenter folder (`sray bench segmenter`); without it rows b, c and c-rgb are "
+                               "left out")
     ceilings.add_argument("--probe-steps", type=int, default=300, help="Adam steps of each linear probe's fit")
     ceilings.add_argument("--probe-views", type=int, default=64, help="train-scene views the probes are fitted on")
     ceilings.add_argument("--tolerance", type=float, default=0.05,
                           help="occlusion test: relative depth agreement of a source's depth with the point")
+    ceilings.add_argument("--render", choices=["full", "fast"], default="fast",
+                          help="S-Ray's render in rows s and c-rgb: fast (default), the accuracy benchmark's zero-shot "
+                               "render (every pixel, fine pass below 0.9 confidence); full: the whole renderer")
     ceilings.add_argument("--out", type=Path, default=Path("outputs/bench-ceilings"), help="folder of ceilings.json")
     ceilings.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     ceilings.set_defaults(func=_bench_ceilings)
@@ -149,10 +153,12 @@ def _bench_recipe_cards(args: argparse.Namespace) -> int:
 
 def _bench_ceilings(args: argparse.Namespace) -> int:
     from sray.jobs.bench.ceilings import run_ceilings
+    from sray.platform.eval.ceilings import ZERO_SHOT_RENDER
 
     run_ceilings(args.checkpoint, args.data, args.out, args.doc, n_source=args.n_source,
                  views_per_scene=args.views_per_scene, segmenter=args.segmenter, probe_steps=args.probe_steps,
-                 probe_views=args.probe_views, tolerance=args.tolerance)
+                 probe_views=args.probe_views, tolerance=args.tolerance,
+                 render=ZERO_SHOT_RENDER if args.render == "fast" else None)
     return 0
 
 

@@ -43,6 +43,8 @@ class RowProtocol:
     """Reads the source views' ground-truth labels."""
     segmenter: bool = False
     """Uses the 2D segmenter's predictions."""
+    rendered_depth: bool = False
+    """Reads S-Ray's rendered depth of the query view (made from the source views: not an oracle)."""
 
     @property
     def oracle(self) -> bool:
@@ -52,7 +54,8 @@ class RowProtocol:
     def inputs(self) -> str:
         """The inputs read, comma-separated."""
         names = {"query_depth": "query GT depth", "query_image": "query image", "source_images": "source images",
-                 "source_depth": "source depth", "source_labels": "source GT labels", "segmenter": "segmenter"}
+                 "source_depth": "source depth", "source_labels": "source GT labels", "segmenter": "segmenter",
+                 "rendered_depth": "S-Ray rendered query depth"}
         return ", ".join(["cameras", *(text for key, text in names.items() if getattr(self, key))])
 
 

@@ -12,12 +12,16 @@ Every row is scored on the same query views (each unseen test scene's ``test`` v
 * ``c`` the segmenter's predictions splatted forward with the source depth (the ``2d-transfer`` method's own
   transfer, :func:`~sray.platform.eval.transfer_view.source_depth_transfer`: the RGB-D protocol's inputs,
   nothing of the query but its camera);
+* ``c-rgb`` the segmenter's predictions carried backward by the depth S-Ray renders for the query from the
+  source images (the RGB protocol's inputs: without source depth there is no occlusion test);
+* ``s`` S-Ray's own rendering of the query (``render``: the accuracy benchmark's zero-shot render by default),
+  the row every other one is read against; its depth is row ``c-rgb``'s;
 * ``d`` S-Ray's fine field at the ground-truth surface (:mod:`~sray.platform.eval.surface_field`, an oracle);
 * ``e`` linear probes on frozen encoder features (:mod:`~sray.platform.eval.linear_probe`) of the
   checkpoint, of the segmenter and of a random initialisation: they read the query image itself, which
   S-Ray never sees.
 
-Rows b and c need a segmenter folder; without one they (and its probe) are left out.
+Rows b, c and c-rgb need a segmenter folder; without one they (and its probe) are left out.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.loader.views import StoredView, read_scene_views
 from sray.data_tools.scene import SceneMeta
 from sray.data_tools.shards.manifest import read_manifest
+from sray.model.fast_render import FastRender
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import read_meta
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
@@ -51,6 +56,10 @@ from sray.platform.eval.surface_field import field_at_surface
 from sray.platform.eval.transfer_view import source_depth_transfer
 from sray.platform.eval.view_scoring import encode_sources
 from sray.platform.eval.zero_shot import select_scenes
+
+ZERO_SHOT_RENDER = FastRender(pixel_stride=1, confidence=0.9)
+"""S-Ray's render in rows s and c-rgb by default: the accuracy benchmark's zero-shot render (every pixel, a fine
+pass where the coarse confidence is below 0.9)."""
 
 TIE_RULE = "majority of the sources that see a pixel; a tie goes to the label of the best-ranked source among them"
 
@@ -67,7 +76,13 @@ def row_descriptors(with_segmenter: bool, rgbd: bool) -> list[tuple[str, str, Ro
                               query_depth=True, source_images=True, source_depth=True, segmenter=True)),
                  ("c", "segmenter on sources, source-depth splatting (2d-transfer)",
                   RowProtocol("segmenter on source images", "forward splatting of source depth, z-buffered",
-                              source_images=True, source_depth=True, segmenter=True))]
+                              source_images=True, source_depth=True, segmenter=True)),
+                 ("c-rgb", "segmenter on sources, S-Ray's rendered depth (RGB)",
+                  RowProtocol("segmenter on source images", "backward from S-Ray's rendered query depth, no "
+                              "occlusion test", source_images=True, source_depth=rgbd, segmenter=True,
+                              rendered_depth=True))]
+    rows.append(("s", "S-Ray zero-shot render", RowProtocol("S-Ray render", "—", source_images=True,
+                                                            source_depth=rgbd)))
     rows.append(("d", "S-Ray fine field at the GT surface",
                  RowProtocol("S-Ray fine field", "one ray point at the query GT depth", query_depth=True,
                              source_images=True, source_depth=rgbd)))
@@ -111,13 +126,15 @@ class ViewScorer:
     """Fitted probes by row key."""
     tolerance: float
     """The occlusion test's relative depth agreement."""
+    render: FastRender | None
+    """S-Ray's render of row s (and of row c-rgb's depth): the fast mode's settings, None = the full render."""
 
     def score(self, rows: dict[str, CeilingRow], sample: EvalSample, gt_sources: Tensor) -> None:
         """Predict every row for ``sample`` and add it to ``rows``; gt_sources (m, H, W) int64 are the ground-truth
         labels of the sample's source views."""
         cfg = self.net.cfg
-        src, gt, scene = sample.sources, sample.query_label, sample.scene
-        geometry = (src.K, src.c2w, src.depth, sample.query.K, sample.query.c2w, tuple(gt.shape))
+        src, gt, scene, hw = sample.sources, sample.query_label, sample.scene, tuple(sample.query_label.shape)
+        geometry = (src.K, src.c2w, src.depth, sample.query.K, sample.query.c2w, hw)
 
         def backward(labels: Tensor) -> LabelTransfer:
             return transfer_labels(labels, *geometry, "backward", tolerance=self.tolerance, ignore_id=cfg.ignore_id,
@@ -125,6 +142,12 @@ class ViewScorer:
 
         oracle, seconds = timed(lambda: backward(gt_sources))
         rows["a"].add(scene, oracle.labels, gt, cfg.n_classes, cfg.ignore_id, seconds, oracle.seen)
+        encoded, encode_seconds = timed(lambda: encode_sources(self.net, sample, torch.device("cpu")))
+        rendered, render_seconds = timed(lambda: self.net.render_image(encoded, sample.query.K, sample.query.c2w, hw,
+                                                                       sample.near, sample.far,
+                                                                       fast=self.render)["fine"])
+        render_seconds += encode_seconds
+        rows["s"].add(scene, rendered["logits"].argmax(-1), gt, cfg.n_classes, cfg.ignore_id, render_seconds)
         if self.segmenter is not None:
             seg_labels, seg_seconds = timed(lambda: self.segmenter.predict(src.rgb))  # (m, H, W)
             guided, seconds = timed(lambda: backward(seg_labels))
@@ -132,10 +155,14 @@ class ViewScorer:
             splat, seconds = timed(lambda: source_depth_transfer(seg_labels, src, sample.query, self.tolerance,
                                                                  cfg.ignore_id))  # the 2d-transfer method's
             rows["c"].add(scene, splat.labels, gt, cfg.n_classes, cfg.ignore_id, seg_seconds + seconds, splat.seen)
-        pred, seconds = timed(lambda: field_at_surface(self.net, encode_sources(self.net, sample, torch.device("cpu")),
-                                                       sample.query.K, sample.query.c2w, sample.query_depth,
-                                                       sample.near, sample.far))
-        rows["d"].add(scene, pred, gt, cfg.n_classes, cfg.ignore_id, seconds, oracle.seen)
+            carried, seconds = timed(lambda: transfer_labels(seg_labels, src.K, src.c2w, None, sample.query.K,
+                                                             sample.query.c2w, hw, "backward", ignore_id=cfg.ignore_id,
+                                                             query_depth=rendered["depth"].double()))
+            rows["c-rgb"].add(scene, carried.labels, gt, cfg.n_classes, cfg.ignore_id,
+                              seg_seconds + render_seconds + seconds, carried.seen)
+        pred, seconds = timed(lambda: field_at_surface(self.net, encoded, sample.query.K, sample.query.c2w,
+                                                       sample.query_depth, sample.near, sample.far))
+        rows["d"].add(scene, pred, gt, cfg.n_classes, cfg.ignore_id, encode_seconds + seconds, oracle.seen)
         query_rgb = sample.query_rgb.permute(2, 0, 1)[None]  # (1, 3, H, W)
         for key, probe in self.probes.items():
             pred, seconds = timed(lambda: probe.predict(query_rgb)[0])  # noqa: B023 - called at once
@@ -154,13 +181,14 @@ def fit_probes(net: SRayModel, segmenter: Segmenter | None, shards: Path, steps:
 
 def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views_per_scene: int = 0,
                      segmenter: Path | None = None, probe_steps: int = 300, probe_views: int = 64,
-                     tolerance: float = 0.05, seed: int = 0, progress: bool = True) -> dict[str, Any]:
+                     tolerance: float = 0.05, seed: int = 0, render: FastRender | None = ZERO_SHOT_RENDER,
+                     progress: bool = True) -> dict[str, Any]:
     """Score every row (module doc) on the unseen test scenes of ``shards``; returns the JSON-ready report.
 
     ``views_per_scene``: the first test views of each scene (0 = all); ``segmenter``: a folder written by
     :func:`~sray.platform.eval.segmenter_training.train_segmenter`; ``probe_steps``/``probe_views``: the
-    probes' fit; ``tolerance``: the occlusion test's relative depth agreement; ``seed``: the random encoder's.
-    Runs on the CPU.
+    probes' fit; ``tolerance``: the occlusion test's relative depth agreement; ``seed``: the random encoder's;
+    ``render``: S-Ray's render of rows s and c-rgb (None = the full render). Runs on the CPU.
     """
     checkpoint, shards = Path(checkpoint).resolve(), Path(shards).resolve()
     net, cfg = model_from_checkpoint(checkpoint)
@@ -176,13 +204,15 @@ def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views
     if seg is not None and seg.cfg.n_classes != cfg.model.n_classes:
         raise ValueError(f"{segmenter}: the segmenter predicts {seg.cfg.n_classes} classes, the checkpoint "
                          f"{cfg.model.n_classes}; train both on the same label space")
-    scorer = ViewScorer(net, seg, fit_probes(net, seg, shards, probe_steps, probe_views, seed), tolerance)
+    scorer = ViewScorer(net, seg, fit_probes(net, seg, shards, probe_steps, probe_views, seed), tolerance, render)
     seg_budget = record.budget() if record else ""
-    budgets = {"b": seg_budget, "c": seg_budget, "d": f"checkpoint step {step}",
+    rendered = f"checkpoint step {step}, {'full' if render is None else render.describe()} render"
+    budgets = {"b": seg_budget, "c": seg_budget, "c-rgb": f"{seg_budget}; depth: {rendered}", "s": rendered,
+               "d": f"checkpoint step {step}",
                **{k: f"{p.budget()}; encoder: " + {"e": f"checkpoint step {step}", "e-seg": seg_budget,
                                                    "e-rand": f"random init, seed {seed}"}[k]
                   for k, p in scorer.probes.items()}}
-    rows = {k: CeilingRow(k, t, p, budgets.get(k, ""), geometric=not p.query_image)
+    rows = {k: CeilingRow(k, t, p, budgets.get(k, ""), geometric=p.geometry != "—")
             for k, t, p in row_descriptors(seg is not None, cfg.model.inputs == "rgbd")}
     bar = tqdm(desc="ceilings views", unit="view", disable=not progress)
     for scene in names:
@@ -196,6 +226,7 @@ def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views
     bar.close()
     return {"checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards), "scenes": names,
             "n_source": n_source, "views_per_scene": views_per_scene, "tolerance": tolerance,
+            "render": "full" if render is None else render.describe(),
             "source_rule": "make_eval_samples: each test view's top-ranked neighbours in its scene's source split",
             "unseen_rule": UNSEEN_RULE, "tie_rule": TIE_RULE,
             "coverage_of_d": "row d's coverage is row a's (the same geometry)",

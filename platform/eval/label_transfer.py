@@ -3,11 +3,12 @@
 One function, :func:`transfer_labels`, with two geometries and one vote (pixel (u, v) is centred at
 (u, v); cameras in OpenCV axes; depth is camera z in metres, 0 = unknown):
 
-* ``backward`` (an oracle: it reads the query view's ground-truth depth). Each query pixel with depth
-  d > 0 is placed at d K^-1 [u, v, 1] in the query camera, moved to the world, projected into every
-  source view and rounded to the nearest source pixel. Source j sees it when the point lies in front of
-  the camera, inside the image, and agrees with source j's own depth there: D_j > 0 and
-  |z_j - D_j| < ``tolerance`` * D_j (the occlusion test).
+* ``backward`` (from a depth map of the query: its ground truth, an oracle, or a depth a method rendered).
+  Each query pixel with depth d > 0 is placed at d K^-1 [u, v, 1] in the query camera, moved to the world,
+  projected into every source view and rounded to the nearest source pixel. Source j sees it when the point
+  lies in front of the camera, inside the image, and agrees with source j's own depth there: D_j > 0 and
+  |z_j - D_j| < ``tolerance`` * D_j (the occlusion test). Without source depth (the RGB protocol) there is
+  no occlusion test: every source the point projects into, in front of its camera, sees it.
 * ``forward`` (splatting: what a method given the source views' depth has; of the query it reads only
   the camera). Each source pixel with depth > 0 is unprojected, projected into the query camera and
   splatted to the nearest query pixel. Per source a z-buffer keeps the nearest point of each query pixel
@@ -44,7 +45,8 @@ UNSEEN_RULE = ("a pixel without prediction counts as an extra 'unseen' class tha
 """How every score counts an :data:`UNSEEN` pixel (:func:`unseen_as_class`)."""
 
 MODES = ("backward", "forward")
-"""Transfer geometries: ``backward`` (query depth, an oracle) or ``forward`` (source depth splatting)."""
+"""Transfer geometries: ``backward`` (from a depth of the query: its ground truth, an oracle, or a rendered one) or
+``forward`` (source depth splatting)."""
 
 
 @dataclass(frozen=True)
@@ -91,19 +93,22 @@ def nearest_pixel(uv: Tensor, hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
     return torch.where(inside, iv * w + iu, torch.zeros_like(iu)), inside
 
 
-def backward_hits(source_depth: Tensor, source_K: Tensor, source_c2w: Tensor, query_depth: Tensor,
-                  query_K: Tensor, query_c2w: Tensor, tolerance: float) -> tuple[Tensor, Tensor]:
-    """Which source pixel each query pixel reaches by its ground-truth depth (module doc, ``backward``).
+def backward_hits(source_depth: Tensor | None, source_K: Tensor, source_c2w: Tensor, query_depth: Tensor,
+                  query_K: Tensor, query_c2w: Tensor, tolerance: float,
+                  source_hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
+    """Which source pixel each query pixel reaches by the query's depth (module doc, ``backward``).
 
-    source_depth (m, H, W); query_depth (Hq, Wq). Returns source pixel index (m, Hq*Wq) int64 and
-    visible (m, Hq*Wq) bool.
+    source_depth (m, H, W), or None: no occlusion test; query_depth (Hq, Wq); ``source_hw`` the sources' (H, W).
+    Returns source pixel index (m, Hq*Wq) int64 and visible (m, Hq*Wq) bool.
     """
     points = unproject(query_depth[None], query_K[None], query_c2w[None])[0]  # (P, 3)
     uv, z = project_points(points, source_K, source_c2w)  # (m, P, 2), (m, P)
-    index, inside = nearest_pixel(uv, tuple(source_depth.shape[-2:]))  # (m, P)
+    index, inside = nearest_pixel(uv, source_hw)  # (m, P)
+    known = (query_depth.reshape(1, -1) > 0) & inside & (z > 0)
+    if source_depth is None:
+        return index, known
     seen_depth = source_depth.double().reshape(source_depth.shape[0], -1).gather(1, index)  # (m, P)
-    known = (query_depth.reshape(1, -1) > 0) & inside & (z > 0) & (seen_depth > 0)
-    return index, known & ((z - seen_depth).abs() < tolerance * seen_depth)
+    return index, known & (seen_depth > 0) & ((z - seen_depth).abs() < tolerance * seen_depth)
 
 
 def forward_hits(source_depth: Tensor, source_K: Tensor, source_c2w: Tensor, query_K: Tensor,
@@ -167,26 +172,30 @@ def carried_colours(source_rgb: Tensor, index: Tensor, visible: Tensor, hw: tupl
     return mean.T.reshape(*hw, 3)
 
 
-def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor, source_depth: Tensor,
+def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor, source_depth: Tensor | None,
                     query_K: Tensor, query_c2w: Tensor, hw: tuple[int, int], mode: str, *,
                     query_depth: Tensor | None = None, tolerance: float = 0.05, ignore_id: int = 255,
                     source_rgb: Tensor | None = None) -> LabelTransfer:
     """Carry source labels into a query view (see the module doc).
 
     source_labels (m, H, W) integer class ids (``ignore_id`` = unlabelled: never a vote); source_K (m, 3, 3);
-    source_c2w (m, 4, 4); source_depth (m, H, W) metres, 0 = unknown; query_K (3, 3); query_c2w (4, 4);
-    ``hw`` = the query's (Hq, Wq); ``mode``: one of :data:`MODES`; ``query_depth`` (Hq, Wq): required by
-    ``backward``, refused by ``forward`` (which must not read it); ``tolerance``: the relative depth
-    agreement of the occlusion test; ``source_rgb`` (m, 3, H, W) in [0, 1]: carry the colours too
-    (``LabelTransfer.rgb``).
+    source_c2w (m, 4, 4); source_depth (m, H, W) metres, 0 = unknown, or None (``backward`` only: no occlusion
+    test); query_K (3, 3); query_c2w (4, 4); ``hw`` = the query's (Hq, Wq); ``mode``: one of :data:`MODES`;
+    ``query_depth`` (Hq, Wq): required by ``backward``, refused by ``forward`` (which must not read it);
+    ``tolerance``: the relative depth agreement of the occlusion test; ``source_rgb`` (m, 3, H, W) in [0, 1]:
+    carry the colours too (``LabelTransfer.rgb``).
     """
     m = source_labels.shape[0]
-    if source_labels.shape != source_depth.shape or source_K.shape != (m, 3, 3) or source_c2w.shape != (m, 4, 4):
+    depth_shape = source_labels.shape if source_depth is None else source_depth.shape
+    if source_labels.shape != depth_shape or source_K.shape != (m, 3, 3) or source_c2w.shape != (m, 4, 4):
         raise ValueError(f"label_transfer: expected source_labels and source_depth (m, H, W), source_K (m, 3, 3), "
-                         f"source_c2w (m, 4, 4); got {tuple(source_labels.shape)}, {tuple(source_depth.shape)}, "
+                         f"source_c2w (m, 4, 4); got {tuple(source_labels.shape)}, {tuple(depth_shape)}, "
                          f"{tuple(source_K.shape)}, {tuple(source_c2w.shape)}")
     if mode not in MODES:
         raise ValueError(f"label_transfer: mode {mode!r}; use one of {MODES}")
+    if mode == "forward" and source_depth is None:
+        raise ValueError("label_transfer: forward splatting needs the source depth; without it use the backward "
+                         "transfer from a depth of the query")
     if (mode == "backward") != (query_depth is not None):
         raise ValueError(f"label_transfer: mode {mode!r} {'needs' if mode == 'backward' else 'must not read'} the "
                          "query depth; pass query_depth only to the backward (oracle) transfer")
@@ -196,7 +205,8 @@ def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor,
     if query_depth is not None and tuple(query_depth.shape) != tuple(hw):
         raise ValueError(f"label_transfer: query_depth is {tuple(query_depth.shape)}, the query image {tuple(hw)}")
     if mode == "backward":
-        index, visible = backward_hits(source_depth, source_K, source_c2w, query_depth, query_K, query_c2w, tolerance)
+        index, visible = backward_hits(source_depth, source_K, source_c2w, query_depth, query_K, query_c2w,
+                                       tolerance, tuple(source_labels.shape[-2:]))
     else:
         index, visible = forward_hits(source_depth, source_K, source_c2w, query_K, query_c2w, tuple(hw), tolerance)
     labels = source_labels.long().reshape(m, -1).gather(1, index)  # (m, Hq*Wq)
