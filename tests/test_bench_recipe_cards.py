@@ -118,6 +118,17 @@ def test_a_chosen_settings_run_gives_the_render_time_only_when_it_measured_the_d
             "with row 'fast s8 c0.9')") in (tmp_path / "README.md").read_text()
 
 
+def test_results_outside_the_repository_keep_their_path_below_the_listing(tmp_path: Path) -> None:
+    """Results stored outside the README's repository are named as OUT/ plus their path below the folder they
+    share with the listing, even when one file alone is named (not OUT/<file name>)."""
+    listing = _results(tmp_path / "out", counters={"cpu_seconds": 60.0})
+    (tmp_path / "repo").mkdir()
+    (tmp_path / "repo" / "README.md").write_text(README)
+    run_recipe_cards(listing, tmp_path / "repo" / "README.md", tmp_path / "repo" / "docs" / "benchmarks.md")
+    text = (tmp_path / "repo" / "README.md").read_text()
+    assert "(1) OUT/train/job/checkpoints/step_000002500/state.pt lacks counters.wall_seconds" in text
+
+
 @pytest.mark.parametrize(("damage", "message"), [
     (lambda root: (root / "eval" / "metrics.json").write_text('{"mean": {"dataset_level": {"miou": "high"}}}'),
      r"results/eval/metrics.json: mean\.dataset_level\.miou is 'high'; expected a finite number"),

@@ -200,7 +200,9 @@ def run_recipe_cards(listing: Path, readme: Path, doc: Path = DEFAULT_DOC) -> st
                          "jobs/bench/speed_accuracy.py default_settings()")
     table, missing = cards_table(machines, runs, render_setting)
     notes = "\n\n".join([*missing, sources(render_setting, _speed_commands(runs, render_setting))])
-    [readme_text] = portable([f"{table}\n\n{notes}"], Path(os.path.abspath(readme)).parent)
+    # the listing's own path joins the paths OUT is made of: a single result outside the repository keeps its path
+    # below the listing's folder instead of shrinking to OUT/<file name>
+    [readme_text, _] = portable([f"{table}\n\n{notes}", os.path.abspath(listing)], Path(os.path.abspath(readme)).parent)
     replace_between(readme, readme_text)  # first: a README without the markers leaves both files as they were
     record(CARDS, CARDS.title, table, doc, notes, kind=KIND)
     return table
