@@ -18,8 +18,8 @@ from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_fleet import DONE_FILE
-from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, LONG, OCCL, OCCL_T5, PRESETS, ROOMS_198, ROOMS_498,
-                                           VARIANT_SETTINGS, Cell, Preset, World)
+from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_DEPTH, HOUR_NONE, LONG, OCCL, OCCL_T5, PRESETS,
+                                           ROOMS_198, ROOMS_498, VARIANT_SETTINGS, Cell, Preset, World)
 from sray.jobs.bench.accuracy_budgets import budget_means
 from sray.jobs.bench.accuracy_tables import class_table, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir
@@ -74,7 +74,7 @@ def test_each_variant_sets_its_model_fields_and_nothing_else(tmp_path: Path) -> 
 def test_the_hour_cell_is_the_recipe_with_its_cpu_budget_and_the_others_count_steps(tmp_path: Path) -> None:
     """``hour`` trains synth-cpu-hour as it is (settings and CPU-second budget); ``long`` keeps its fixed step
     budget and ablation cells their short one, both without a CPU budget, so their stored cells stay valid; the
-    occlusion cells are ``hour`` with only the weight net's inputs (and tau) changed, at the same CPU budget,
+    occlusion, no-attention and depth-loss cells are ``hour`` with one model setting changed, at the same CPU budget,
     planned after the hour and room-count cells."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
     hour = accuracy_cells.cell_config(Cell(HOUR, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
@@ -90,13 +90,18 @@ def test_the_hour_cell_is_the_recipe_with_its_cpu_budget_and_the_others_count_st
     for variant in (ROOMS_198, ROOMS_498):  # the recipe as it is; only the world (shards) differs
         cfg = accuracy_cells.cell_config(Cell(variant, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
         assert dataclasses.replace(cfg, run=hour.run) == hour and cfg.run.name == f"bench-{variant}-s1"
-    for variant, tau in ((OCCL, recipe.model.tau), (OCCL_T5, 0.5)):
+    one_lever = ((OCCL, {"weight_inputs": "cross-view", "tau": recipe.model.tau}),
+                 (OCCL_T5, {"weight_inputs": "cross-view", "tau": 0.5}), (HOUR_NONE, {"attention": "none"}),
+                 (HOUR_DEPTH, {"lambda_depth": 0.1}))
+    for variant, change in one_lever:  # the recipe with one model setting changed, at the same CPU budget
         cfg = accuracy_cells.cell_config(Cell(variant, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
-        assert cfg.model == dataclasses.replace(recipe.model, weight_inputs="cross-view", tau=tau), variant
+        assert cfg.model == dataclasses.replace(recipe.model, **change), variant
         assert dataclasses.replace(cfg, run=hour.run, model=hour.model) == hour
         assert cfg.run.name == f"bench-{variant}-s1"
-    assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7
-    assert [c.variant for c in preset.plan][-2:] == [OCCL, OCCL_T5]  # after the hour and room-count cells
+    assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.attention == "full"
+    assert recipe.model.lambda_depth == 0.0
+    assert [c.variant for c in preset.plan][-6:] == [OCCL, OCCL_T5, *[HOUR_NONE] * 3, HOUR_DEPTH]  # after the hour
+    # and room-count cells
 
 
 def test_the_gpu_preset_augments_through_the_data_aug_section(tmp_path: Path) -> None:

@@ -99,6 +99,7 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
     if variant.tau is not None:
         cfg.model.tau = variant.tau
     cfg.model.lambda_src_sem, cfg.optim.warmup_2d_steps = variant.lambda_src_sem, variant.warmup_2d_steps
+    cfg.model.lambda_depth = variant.lambda_depth
     cfg.data.visit_samples, cfg.data.cache_scenes = variant.visit_samples, variant.cache_scenes
     if cell.variant not in CPU_BUDGETED:  # step-budgeted cells: the ablation budget, or the long one
         cfg.optim.cpu_seconds = 0.0

@@ -24,7 +24,11 @@ OCCL, OCCL_T5 = "hour-occl", "hour-occl-t5"
 """Variant names of the hour recipe with the occlusion-aware weight net inputs (``model.weight_inputs=cross-view``),
 at the model's tau (0.7) and at tau 0.5 (a wider weight range)."""
 
-CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5)
+HOUR_NONE, HOUR_DEPTH = "hour-none", "hour-depth"
+"""Variant names of the hour recipe without cross-reprojection attention (the attention question at the hour
+budget, and the no-CRA model of the stability suite) and with the training-time depth loss (weight 0.1)."""
+
+CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5, HOUR_NONE, HOUR_DEPTH)
 """Variants whose cells train for the preset recipe's own budget (its CPU seconds) instead of a step budget."""
 
 @dataclass(frozen=True)
@@ -51,6 +55,9 @@ class Variant:
     """``model.n_heads`` (None: the recipe's): fewer, wider heads do less softmax work per token."""
     lambda_src_sem: float = 0.0
     """``model.lambda_src_sem``: weight of the source views' per-pixel semantic loss on the encoder (0 = off)."""
+    lambda_depth: float = 0.0
+    """``model.lambda_depth``: weight of the training-time depth loss against the query's depth (0 = off; the test
+    protocol stays RGB, the descriptor says training read depth)."""
     warmup_2d_steps: int = 0
     """``optim.warmup_2d_steps``: first steps trained on the source views' labels alone (0 = none)."""
     visit_samples: int = 16
@@ -82,7 +89,11 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     OCCL: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
                                   weight_inputs="cross-view"),
                     OCCL_T5: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
-                                     weight_inputs="cross-view", tau=0.5)}
+                                     weight_inputs="cross-view", tau=0.5),
+                    HOUR_NONE: Variant("none", fine_samples="new", lambda_src_sem=1.0, visit_samples=1,
+                                       cache_scenes=4),
+                    HOUR_DEPTH: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
+                                        lambda_depth=0.1)}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
@@ -93,7 +104,8 @@ encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up
 ``synth-cpu-hour``'s own settings (a test keeps them equal); ``hour-198`` and ``hour-498`` are ``hour`` on 198
 and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget); ``hour-occl`` is
 ``hour`` whose weight net also reads the cross-view statistics, ``hour-occl-t5`` the same at tau 0.5 (the two
-occlusion levers, docs/model.md), both at the recipe's CPU budget."""
+occlusion levers, docs/model.md), both at the recipe's CPU budget; ``hour-none`` is ``hour`` without
+cross-reprojection attention and ``hour-depth`` ``hour`` with the training-time depth loss (weight 0.1)."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -168,7 +180,8 @@ PRESETS = {
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
               *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), *seeds(HOUR, 3), Cell(ROOMS_198, 0),
-              Cell(ROOMS_498, 0), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), Cell(OCCL, 0), Cell(OCCL_T5, 0)),
+              Cell(ROOMS_498, 0), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), Cell(OCCL, 0), Cell(OCCL_T5, 0),
+              *seeds(HOUR_NONE, 3), Cell(HOUR_DEPTH, 0)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0),
