@@ -180,7 +180,7 @@ PRESETS = {
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
               *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), *seeds(HOUR, 3), Cell(ROOMS_198, 0),
-              Cell(ROOMS_498, 0), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), Cell(OCCL, 0), Cell(OCCL_T5, 0),
+              *seeds(ROOMS_498, 3), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), Cell(OCCL, 0), Cell(OCCL_T5, 0),
               *seeds(HOUR_NONE, 3), Cell(HOUR_DEPTH, 0)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
