@@ -21,6 +21,7 @@ from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
+from sray.jobs.bench.accuracy_plan import PRESETS
 from sray.jobs.bench.ceilings import REPORT_FILE
 from sray.jobs.cli import main
 from sray.model.config import SRayConfig
@@ -78,6 +79,7 @@ def test_rows_run_end_to_end_and_the_oracle_transfer_is_near_perfect(shards: Pat
     assert rows["c-rgb"]["protocol"]["inputs"] == "cameras, source images, segmenter, S-Ray rendered query depth"
     assert rows["s"]["protocol"]["inputs"] == "cameras, source images"
     assert "depth: checkpoint step 0, fast (pixel stride 1" in rows["c-rgb"]["budget"]
+    assert ceilings.ZERO_SHOT_RENDER == PRESETS["cpu-small"].eval_fast  # rows s and c-rgb render as zero-shot cells
     assert rows["a"]["acc_on_covered"] > 0.97, rows["a"]
     assert rows["a"]["total_acc"] >= 0.97 * rows["a"]["coverage"]
     assert rows["a"]["miou"] > 0.5
