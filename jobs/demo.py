@@ -4,9 +4,10 @@ procedural scenes -> ``sray data check`` -> shards (+ verification) -> a picture
 sample -> a short S-Ray training run on local Ray with two CPU workers, tracked in MLflow -> the 2D
 segmenter of ``2d-transfer`` trained on the same train scenes for the CPU seconds that training spent (capped
 by ``--segmenter-cpu-seconds``) -> zero-shot evaluation on the unseen scenes -> a short fly-through video of
-one of them -> a finetune fleet (S-Ray, Semantic-NeRF and 2d-transfer, an RGB-D method) on them ->
-accuracy-against-time charts -> the results table and the ``sray ui`` command. Each printed table ends with
-its protocol line (sources, stride, render mode, inputs), and the fleet's table names each row's inputs.
+one of them -> a finetune fleet (S-Ray, Semantic-NeRF, and the RGB-D pair: S-Ray given the source depth beside
+2d-transfer) on them -> accuracy-against-time charts -> the results table and the ``sray ui`` command. Each
+printed table ends with its protocol line (sources, stride, render mode, inputs), and the fleet's table names each
+row's inputs.
 Everything goes under ``--out`` (default ``outputs/demo``); the MLflow store is the working
 directory's default SQLite store.
 """
@@ -45,7 +46,7 @@ from sray.platform.train.launcher import launch_training
 RECIPE = "synth-small"
 """The recipe S-Ray trains with; the 2D segmenter takes its data settings (sources per step, neighbours,
 augmentation, class balance) and feature width."""
-FLEET_METHODS = ["sray", "semantic-nerf", "2d-transfer"]
+FLEET_METHODS = ["sray", "semantic-nerf", "sray-rgbd", "2d-transfer"]
 """The per-scene methods of the demo's fleet, in table order."""
 
 
@@ -121,7 +122,8 @@ def run_demo(args: argparse.Namespace) -> int:
     fleet_cfg.finetune.eval_stride = 2 * args.eval_stride
     fleet_cfg.transfer.segmenter = str(segmenter_dir)
     _say(f"8/9 finetune fleet on {len(scenes_test)} unseen scenes: S-Ray (RGB, from the trained model), "
-         f"Semantic-NeRF (RGB, from scratch) and 2d-transfer (RGB-D, from the segmenter of stage 6: "
+         f"Semantic-NeRF (RGB, from scratch), S-Ray given the source depth (RGB-D, the same model) and 2d-transfer "
+         f"(RGB-D, from the segmenter of stage 6: "
          f"{segmenter.training['cpu_seconds_budget']:.0f} CPU s of pretraining against S-Ray's {sray_cpu_s:.0f}), "
          f"{args.finetune_seconds:.0f} s budget each, early stopping on held-out mIoU")
     results = run_fleet(fleet_cfg, checkpoint, shards, scenes_test, args.out / "fleet", "", FLEET_METHODS)

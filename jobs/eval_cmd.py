@@ -1,5 +1,6 @@
 """``sray eval``: zero-shot scores of a registered method's pretrained model on unseen scenes (the paper's
-generalization protocol): an S-Ray checkpoint (``--method sray``, the default) or ``2d-transfer``'s segmenter.
+generalization protocol): an S-Ray checkpoint (``--method sray``, the default; ``sray-rgbd``: given the source
+depth) or ``2d-transfer``'s segmenter.
 
 The ``--method`` choices come from the method registry (:mod:`sray.platform.finetune.methods.registry`): every
 method with an ``eval_model`` builder. A flag the chosen method does not read (its record's ``eval_reads``:
@@ -22,10 +23,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray eval``."""
     p = sub.add_parser("eval", help="score a pretrained model on unseen scenes: metrics.json, PNGs, a tracked run")
     p.add_argument("--method", default="sray", choices=eval_method_names(),
-                   help="registered method to score (default sray; 2d-transfer: a 2D segmenter's source labels "
-                        "carried by the source depth, RGB-D)")
+                   help="registered method to score (default sray; sray-rgbd: the checkpoint given the source depth, "
+                        "RGB-D; 2d-transfer: a 2D segmenter's source labels carried by the source depth, RGB-D)")
     p.add_argument("--checkpoint", type=Path, action=GivenFlag,
-                   help="checkpoint folder (…/checkpoints/step_XXXXXXXXX) written by `sray train` (method sray)")
+                   help="checkpoint folder (…/checkpoints/step_XXXXXXXXX) written by `sray train` (methods sray, "
+                        "sray-rgbd)")
     p.add_argument("--segmenter", type=Path, action=GivenFlag,
                    help="2D segmenter folder written by `sray bench segmenter` (method 2d-transfer)")
     p.add_argument("--data", type=Path, required=True, help="shard folder holding manifest.json")

@@ -71,7 +71,7 @@ def test_the_compared_methods_follow_the_registry(tmp_path: Path, monkeypatch: p
 
     segmenter = save_segmenter(Segmenter(SegmenterConfig(n_classes=3)), {}, tmp_path / "segmenter")
     cfg, compared, _ = compared_methods(fleet_config(PRESET, segmenter))
-    assert compared == ["sray", "semantic-nerf", "2d-transfer", "fake"]
+    assert compared == ["sray", "semantic-nerf", "sray-rgbd", "2d-transfer", "fake"]  # S-Ray given depth beside it
     assert cfg.transfer.segmenter == str(segmenter.resolve())
     with pytest.raises(FileNotFoundError, match="nowhere/segmenter.json: missing"):
         compared_methods(fleet_config(PRESET, tmp_path / "nowhere"))

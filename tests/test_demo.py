@@ -57,7 +57,7 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
     assert f"capped by --segmenter-cpu-seconds below the {sray_cpu_s:.0f} CPU s S-Ray's training spent" in out
     assert f"S-Ray 4 steps, {sray_cpu_s:.0f} CPU s; 2d-transfer's segmenter {training['cpu_seconds']:.0f} CPU s" in out
     fleet = tmp_path / "demo/fleet"
-    for method, inputs in (("sray", "rgb"), ("semantic-nerf", "rgb"), ("2d-transfer", "rgbd")):
+    for method, inputs in (("sray", "rgb"), ("semantic-nerf", "rgb"), ("sray-rgbd", "rgbd"), ("2d-transfer", "rgbd")):
         result = json.loads((fleet / f"scenes/synth_test_000/{method}/result.json").read_text())
         assert result["status"] == "finished" and result["steps_used"] > 0
         assert result["protocol"]["stride"] == 8 and result["protocol"]["inputs"] == inputs

@@ -58,7 +58,7 @@ def test_cli_flags_map_onto_the_config():
     assert cfg.transfer.segmenter == "seg" and FleetConfig().transfer.segmenter == ""
     assert _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test"]).methods == ["sray"]
     every = _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test", "--method", "all"]).methods
-    assert chosen_methods(every) == ["sray", "semantic-nerf", "2d-transfer"]
+    assert chosen_methods(every) == ["sray", "semantic-nerf", "sray-rgbd", "2d-transfer"]
     assert chosen_methods(["semantic-nerf", "sray", "semantic-nerf"]) == ["semantic-nerf", "sray"]
     with pytest.raises(SystemExit):  # not a registered method
         _parse(["finetune-fleet", "--checkpoint", "C", "--data", "D", "--all-test", "--methods", "nerf"])

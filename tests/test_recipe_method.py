@@ -125,7 +125,8 @@ def test_builtin_methods_and_an_unknown_name():
     assert method_names()[:2] == ["sray", "semantic-nerf"]
     assert get_method("sray").uses_sources and get_method("sray").zero_shot is not None
     assert not get_method("semantic-nerf").uses_sources and get_method("semantic-nerf").zero_shot is None
-    with pytest.raises(ValueError, match="unknown method 'nerf'; use one of sray, semantic-nerf, 2d-transfer"):
+    with pytest.raises(ValueError, match="unknown method 'nerf'; use one of sray, semantic-nerf, sray-rgbd, "
+                                         "2d-transfer"):
         get_method("nerf")
 
 

@@ -76,9 +76,9 @@ def test_every_rgbd_method_has_sray_given_the_depth_beside_it(monkeypatch) -> No
                                                                         ("2d-transfer", "rgbd", "")]
     monkeypatch.setitem(registry.METHODS, "fake-depth", _fake("fake-depth", inputs="rgbd"))
     assert _names(["sray", "fake-depth"], ["zero-shot"], None) == ["sray", "sray-rgbd", "fake-depth"]
-    rgbd = next(r for r in suite_rows(["sray", "fake-depth"], ["zero-shot"], RGB, None) if r.variant == "rgbd")
+    rgbd = next(r for r in suite_rows(["sray", "fake-depth"], ["zero-shot"], RGB, None) if r.name == "sray-rgbd")
     request = rgbd.request(SuiteModels(Path("c"), Path("c-none"), Path("s")), "cpu")
-    assert (request.checkpoint, request.inputs, rgbd.method) == (Path("c"), "rgbd", "sray")
+    assert (request.checkpoint, rgbd.method, rgbd.inputs) == (Path("c"), "sray-rgbd", "rgbd")  # its method reads depth
 
 
 @pytest.mark.parametrize("name, seen, inputs", [
@@ -93,5 +93,5 @@ def test_legends_and_headers_say_what_each_row_saw_and_was_given(name: str, seen
     label = row.style(protocol).label
     assert label.endswith(f"[{seen} · {inputs}]") and row.header == f"{name} ({seen}, {inputs})"
     assert ("without CRA" in label) == (row.variant == "no-cra")
-    assert ("with source depth" in label) == (row.variant == "rgbd")
+    assert ("with source depth" in label) == (row.method == "sray-rgbd")
     assert len({r.style(protocol).color for r in suite_rows(BUILTIN, list(MODES), RGB, RGB)}) == 8  # told apart

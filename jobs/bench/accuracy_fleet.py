@@ -3,7 +3,8 @@ benchmark's settings meet finetunes every unseen scene from the headline model u
 
 The methods come from the method registry, in its order: a method is compared when its record's
 ``checked_config`` accepts the benchmark's fleet config (a record without one always is); a method whose check
-raises ValueError (a requirement not given: ``2d-transfer`` without ``--segmenter``) is left out and named, while a
+raises ValueError (a requirement not given: ``2d-transfer`` without ``--segmenter``) is left out and named (and
+with it S-Ray given the source depth, which stands only beside a method that reads depth), while a
 FileNotFoundError (a given file missing) stops the benchmark before any cell runs. The fleet's folder holds
 ``done.json`` once it finished, naming its checkpoint and methods; a later run with more methods (a segmenter given)
 runs the missing (scene, method) pairs only; one that finetuned from another checkpoint is refused (move it away).
@@ -19,7 +20,7 @@ from sray.data_tools.atomic import atomic_write_json
 from sray.jobs.bench.accuracy_plan import EXPERIMENT, Preset
 from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.finetune.fleet import run_fleet
-from sray.platform.finetune.methods.registry import METHODS
+from sray.platform.finetune.methods.registry import METHODS, with_depth_twins
 from sray.platform.viz.charts import write_fleet_charts
 from sray.platform.viz.curves import read_fleet_results
 
@@ -44,9 +45,12 @@ def fleet_config(p: Preset, segmenter: Path | None = None) -> FleetConfig:
 
 def compared_methods(cfg: FleetConfig) -> tuple[FleetConfig, list[str], dict[str, str]]:
     """``cfg`` as the methods' checks return it, the registered methods it meets the requirements of (registry
-    order) and the others with the reason each was left out (its check's message)."""
+    order, a depth twin beside the methods that read depth: ``with_depth_twins``) and the others with the reason
+    each was left out (its check's message)."""
     compared, left_out = [], {}
     for name, method in METHODS.items():
+        if method.given_depth_of:
+            continue
         if method.checked_config is None:
             compared.append(name)
             continue
@@ -56,7 +60,7 @@ def compared_methods(cfg: FleetConfig) -> tuple[FleetConfig, list[str], dict[str
             left_out[name] = str(e)
             continue
         compared.append(name)
-    return cfg, compared, left_out
+    return cfg, with_depth_twins(compared), left_out
 
 
 def methods_done(fleet_dir: Path) -> set[str] | None:

@@ -1,5 +1,6 @@
 """The other registered methods ``sray bench speed-accuracy`` times beside S-Ray's render settings: every method with a
-zero-shot model (a registry record with an ``eval_model``) but S-Ray, whose rows are the settings themselves.
+zero-shot model (a registry record with an ``eval_model``) but S-Ray, whose rows are the settings themselves (its
+depth twin ``sray-rgbd`` too: those are the settings that render with ``inputs=rgbd``).
 
 A method's model is built from its record as ``sray eval --method NAME`` builds it, from the bench's flags
 (``--checkpoint``, ``--segmenter``), on the CPU and with its full render; a flag none of the chosen methods reads
@@ -25,7 +26,7 @@ SETTINGS_READ = ("checkpoint",)
 
 def other_methods() -> list[str]:
     """Registered methods the bench can time beside S-Ray's settings (``--methods`` choices), in registry order."""
-    return [name for name in eval_method_names() if name != SRAY]
+    return [name for name in eval_method_names() if name != SRAY and get_method(name).given_depth_of != SRAY]
 
 
 def method_models(names: list[str], checkpoint: Path, segmenter: Path | None) -> dict[str, EvalModel]:

@@ -39,7 +39,7 @@ from sray.platform.common.progress import progress_env
 from sray.platform.common.ray_address import check_ray_address
 from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
-from sray.platform.finetune.methods.registry import METHODS, get_method, method_names
+from sray.platform.finetune.methods.registry import METHODS, get_method, method_names, with_depth_twins
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256, model_bytes, state_file
 from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneTask, run_scene_task, write_result
 from sray.platform.tracking.fleet_parent_run import parent_run
@@ -205,13 +205,17 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     checkpoint, shards, out_dir = resolve_checkpoint(checkpoint), Path(shards).resolve(), Path(out_dir).resolve()
     scenes = list(dict.fromkeys(scenes))
     _validate(shards, scenes, list(methods))
+    base, train_cfg = model_from_checkpoint(checkpoint)
+    asked, methods = list(dict.fromkeys(methods)), with_depth_twins(list(methods), train_cfg.model.inputs)
+    if added := [m for m in methods if m not in asked]:
+        _say(f"also running {', '.join(added)}: S-Ray given the source depth stands beside every method that reads it")
     for name in dict.fromkeys(methods):  # each method's own settings (2d-transfer's segmenter), before anything starts
         if (check := get_method(name).checked_config) is not None:
             cfg = check(cfg)
     base_sha = checkpoint_sha256(checkpoint)
     out_dir.mkdir(parents=True, exist_ok=True)
     record = _fleet_record(out_dir, base_sha, tracker)
-    full_bytes = model_bytes(model_from_checkpoint(checkpoint)[0])
+    full_bytes = model_bytes(base)
     pairs = [(s, m) for s in scenes for m in methods]
     done = {p: r for p in pairs if (r := read_result(out_dir, *p)) is not None and r.get("status") == "finished"}
     if done:

@@ -9,13 +9,13 @@ Every registered method (:mod:`sray.platform.finetune.methods.registry`) gives u
   for the suite's one CPU-second budget, the same for every method (``Preset.scene_cpu_seconds``).
 
 A method that renders from source views and reads them as its checkpoint does (``uses_sources`` and an empty
-``inputs``: S-Ray) also gets
+``inputs``: S-Ray) also gets ``<name>-no-cra``, zero-shot, from the checkpoint trained with ``model.attention=none``,
+when one is given.
 
-* ``<name>-no-cra``, zero-shot, from the checkpoint trained with ``model.attention=none``, when one is given;
-* ``<name>-rgbd`` (``<name>-rgbd-scene``): its checkpoint rendered with the source views' depth
-  (``model.inputs=rgbd``, docs/model.md "RGB-D mode") in every mode where a method that reads depth
-  (``inputs == "rgbd"``, as ``2d-transfer``) has a row, placed just before that row, even when its own method was
-  not asked for: a depth-using method is always shown beside S-Ray given the same depth.
+The methods stressed are the asked ones with the registry's depth twins placed
+(:func:`~sray.platform.finetune.methods.registry.with_depth_twins`): wherever a method that reads the source depth
+(``2d-transfer``) has a row, ``sray-rgbd`` (the checkpoint given the source views' depth, docs/model.md "RGB-D
+mode") has one just before it, even when it was not asked for.
 
 Which axes stress a row follows from the row too (:meth:`sray.platform.stability.axes.Axis.applies`).
 """
@@ -28,7 +28,7 @@ from pathlib import Path
 from sray.model.config import SRayConfig
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.finetune.methods.method import EvalRequest
-from sray.platform.finetune.methods.registry import get_method, method_names
+from sray.platform.finetune.methods.registry import get_method, with_depth_twins
 from sray.platform.viz.chart_style import ChartStyle
 
 MODES = ("zero-shot", "scene")
@@ -37,10 +37,9 @@ INPUT_WORDS = {"rgb": "RGB", "rgbd": "RGB-D"}
 """How legends and headers name a protocol's ``inputs``."""
 SEEN_WORDS = {False: "never saw the scene", True: "trained on the scene"}
 """How legends and headers say whether a row saw the scene it is scored on."""
-VARIANT_WORDS = {"": "", "no-cra": ", without CRA", "rgbd": ", with source depth"}
+VARIANT_WORDS = {"": "", "no-cra": ", without CRA"}
 """Variant -> the words added to the method's label."""
-VARIANT_LOOKS = {("no-cra", False): ChartStyle("", "#2ca02c", "^"), ("rgbd", False): ChartStyle("", "#8c564b", "v"),
-                 ("rgbd", True): ChartStyle("", "#9467bd", "P")}
+VARIANT_LOOKS = {("no-cra", False): ChartStyle("", "#2ca02c", "^")}
 """(variant, trained) -> the colour and marker its row is drawn with (the method's own where none is listed)."""
 
 
@@ -63,13 +62,13 @@ class Row:
     """One line of the suite's charts and one column pair of its tables."""
 
     name: str
-    """Its key (points, tables, tracked metrics): ``<method>[-no-cra|-rgbd][-scene]``."""
+    """Its key (points, tables, tracked metrics): ``<method>[-no-cra][-scene]``."""
     method: str
     """The registered method it runs."""
     trained: bool
     """Trained on the test scene (else zero-shot)."""
     variant: str
-    """``""``, ``no-cra`` (the no-CRA checkpoint) or ``rgbd`` (the checkpoint given the source depth)."""
+    """``""`` or ``no-cra`` (the no-CRA checkpoint)."""
     inputs: str
     """What it is given of the source views (``EvalProtocol.inputs``): ``rgb`` or ``rgbd``."""
     uses_sources: bool
@@ -96,8 +95,7 @@ class Row:
     def request(self, models: SuiteModels, device: str) -> EvalRequest:
         """What the method's ``eval_model`` builds this zero-shot row's model from (the full render)."""
         checkpoint = models.checkpoint_no_cra if self.variant == "no-cra" else models.checkpoint
-        return EvalRequest(checkpoint=checkpoint, segmenter=models.segmenter, device=device, fast=None,
-                           inputs="rgbd" if self.variant == "rgbd" else "")
+        return EvalRequest(checkpoint=checkpoint, segmenter=models.segmenter, device=device, fast=None)
 
     def style(self, protocol: EvalProtocol) -> ChartStyle:
         """Legend and look: the method's own label for the mode, the variant, whether it saw the scene and the
@@ -122,31 +120,22 @@ def _row(method: str, trained: bool, variant: str, inputs: str, train_inputs: st
     return Row(f"{method}{suffix}", method, trained, variant, inputs, get_method(method).uses_sources, train_inputs)
 
 
-def _given_depth(method: str, trained: bool, checkpoint: SRayConfig) -> Row:
-    """``method`` (which follows its checkpoint) given the source depth: the checkpoint's own row when it reads depth
-    already, else its ``rgbd`` variant (whose training read depth only when it is trained on the scene with it)."""
-    if checkpoint.inputs == "rgbd":
-        return _row(method, trained, "", "rgbd", checkpoint.train_inputs)
-    return _row(method, trained, "rgbd", "rgbd", "rgbd" if trained else checkpoint.train_inputs)
-
-
 def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
-    """The rows of one mode (see the module doc), in registry order with the variants placed."""
+    """The rows of one mode (see the module doc), in the order of ``methods`` with the depth twins and the no-CRA
+    row placed."""
     rows = []
-    for name in methods:
+    for name in with_depth_twins(methods, checkpoint.inputs):
         record = get_method(name)
         if not trained and record.eval_model is None:
             continue
-        if not follows_checkpoint(name):
+        if record.given_depth_of:  # its training read the depth only when it was trained on the scene with it
+            rows.append(_row(name, trained, "", record.inputs, "rgbd" if trained else checkpoint.train_inputs))
+        elif not follows_checkpoint(name):
             rows.append(_row(name, trained, "", record.inputs or "rgb"))
-            continue
-        rows.append(_row(name, trained, "", checkpoint.inputs, checkpoint.train_inputs))
-        if not trained and no_cra is not None:
-            rows.append(_row(name, trained, "no-cra", no_cra.inputs, no_cra.train_inputs))
-    depth_rows = [i for i, r in enumerate(rows) if not follows_checkpoint(r.method) and r.inputs == "rgbd"]
-    if depth_rows:  # every registered checkpoint method given the depth, even when not asked for
-        given_depth = [_given_depth(name, trained, checkpoint) for name in method_names() if follows_checkpoint(name)]
-        rows[depth_rows[0]:depth_rows[0]] = [r for r in given_depth if r not in rows]
+        else:
+            rows.append(_row(name, trained, "", checkpoint.inputs, checkpoint.train_inputs))
+            if not trained and no_cra is not None:
+                rows.append(_row(name, trained, "no-cra", no_cra.inputs, no_cra.train_inputs))
     return rows
 
 

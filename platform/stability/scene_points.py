@@ -88,11 +88,9 @@ def training_views(pool: list[str], n: int) -> list[str]:
 
 
 def scene_setup(training: SceneTraining, row: Row, scene: str, seed: int) -> SceneSetup:
-    """The row's method built for ``scene`` by its registry record, on a copy of the shared model (given the source
-    depth for an ``rgbd`` variant), with ``finetune.seed`` = ``seed``."""
+    """The row's method built for ``scene`` by its registry record, on a copy of the shared model, with
+    ``finetune.seed`` = ``seed``."""
     base = copy.deepcopy(training.base)
-    if row.variant == "rgbd":
-        base.cfg = dataclasses.replace(base.cfg, inputs="rgbd")
     cfg = dataclasses.replace(training.cfg, finetune=dataclasses.replace(training.cfg.finetune, seed=seed))
     return get_method(row.method).build(SceneContext(
         scene=scene, shards=training.shards, base=base, base_sha256=training.base_sha256, train_cfg=training.train_cfg,

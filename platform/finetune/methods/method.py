@@ -117,6 +117,9 @@ class Method:
     inputs: str = ""
     """Source-view inputs its held-out protocol names (``rgb`` or ``rgbd``); empty: the shared checkpoint's
     ``model.inputs`` (S-Ray reads what its checkpoint reads)."""
+    given_depth_of: str = ""
+    """Set on a depth twin: the registered method it is, given the source views' depth (``sray-rgbd``: ``sray``);
+    the registry stands it beside every method that reads the source depth (``with_depth_twins``)."""
     checked_config: Callable[[FleetConfig], FleetConfig] | None = None
     """Checks a fleet's config before any task starts and returns it as the tasks get it (e.g. a path made
     absolute); ValueError or FileNotFoundError naming the field and the fix. None: nothing to check."""

@@ -12,11 +12,11 @@ workers know them too (a method registered at run time serves fleet tasks in tha
 
 from __future__ import annotations
 
-from sray.platform.finetune.methods import semantic_nerf_method, sray_method, transfer_method
+from sray.platform.finetune.methods import semantic_nerf_method, sray_method, sray_rgbd_method, transfer_method
 from sray.platform.finetune.methods.method import Method
 
 METHODS: dict[str, Method] = {m.name: m for m in (sray_method.METHOD, semantic_nerf_method.METHOD,
-                                                  transfer_method.METHOD)}
+                                                  sray_rgbd_method.METHOD, transfer_method.METHOD)}
 """Every known per-scene method by name, in chart and table order."""
 
 
@@ -42,3 +42,25 @@ def method_names() -> list[str]:
 def eval_method_names() -> list[str]:
     """Names of the registered methods ``sray eval`` can score (those with an ``eval_model`` builder)."""
     return [name for name, m in METHODS.items() if m.eval_model is not None]
+
+
+def reads_depth(name: str) -> bool:
+    """Whether the registered method ``name`` reads the source views' depth and is not a depth twin (``2d-transfer``):
+    one that S-Ray given the same depth must stand beside."""
+    method = get_method(name)
+    return method.inputs == "rgbd" and not method.given_depth_of
+
+
+def with_depth_twins(methods: list[str], checkpoint_inputs: str = "rgb") -> list[str]:
+    """``methods`` (registered names, each once, in order) with every registered depth twin (``given_depth_of``)
+    placed just before the first method that reads depth (:func:`reads_depth`), when one is listed. A checkpoint that
+    reads the depth already (``checkpoint_inputs == "rgbd"``) makes each twin its own method (``sray-rgbd`` ->
+    ``sray``, listed once)."""
+    names = list(dict.fromkeys(methods))
+    first = next((i for i, name in enumerate(names) if reads_depth(name)), None)
+    if first is not None:
+        twins = [name for name, m in METHODS.items() if m.given_depth_of and name not in names]
+        names[first:first] = twins
+    if checkpoint_inputs == "rgbd":
+        names = list(dict.fromkeys(METHODS[n].given_depth_of or n for n in names))
+    return names
