@@ -6,10 +6,13 @@ import argparse
 from pathlib import Path
 
 
-SEGMENTER_CPU_CAP = 120.0
+SEGMENTER_CPU_CAP = 60.0
 """Default of ``--segmenter-cpu-seconds``. Uncapped, the segmenter would get the CPU seconds of S-Ray's 300 demo
-steps (480 and 518 CPU s in two runs on the 2-core machine): 4 more minutes of wall time on a demo of about 8;
-120 CPU s is about a minute."""
+steps (480 to 562 CPU s in runs on the 2-core machine): 4 more minutes of wall time on a demo of about 10; 60 CPU s
+is about half a minute."""
+FLEET_SCENES = 1
+"""Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (2 minutes of wall time on the
+2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of them."""
 
 
 def _cpu_cap(text: str) -> float:
@@ -35,10 +38,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, default=300, help="training steps (0 = data only)")
     p.add_argument("--segmenter-cpu-seconds", type=_cpu_cap, default=SEGMENTER_CPU_CAP, metavar="S",
                    help="2d-transfer's 2D segmenter trains for the CPU seconds S-Ray's training spent, but at most S "
-                        f"(default {SEGMENTER_CPU_CAP:.0f}: about a minute on 2 cores, so the demo stays near 10 "
+                        f"(default {SEGMENTER_CPU_CAP:.0f}: about half a minute on 2 cores, so the demo stays near 10 "
                         "minutes); 0 = no cap, equal CPU")
     p.add_argument("--finetune-seconds", type=float, default=60.0,
                    help="wall-clock budget of each per-scene finetune (every method)")
+    p.add_argument("--fleet-scenes", type=int, default=FLEET_SCENES,
+                   help=f"the fleet finetunes the first N unseen scenes (default {FLEET_SCENES}; 0 = every one); the "
+                        "zero-shot evaluation scores them all")
     p.add_argument("--eval-stride", type=int, default=2,
                    help="score every n-th pixel in each direction in the zero-shot evaluation "
                         "(the fleet's held-out curves use twice this); 1 = full images, the only stride "

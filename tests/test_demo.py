@@ -32,7 +32,7 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
     from mlflow import MlflowClient
 
     monkeypatch.chdir(tmp_path)
-    code = main(["demo", "--out", "demo", "--train-scenes", "2", "--test-scenes", "1", "--views", "20",
+    code = main(["demo", "--out", "demo", "--train-scenes", "2", "--test-scenes", "2", "--views", "20",
                  "--height", "48", "--width", "64", "--steps", "4", "--finetune-seconds", "2", "--eval-stride", "4",
                  "--clip-frames", "3", "--segmenter-cpu-seconds", "1"])
     assert code == 0
@@ -43,7 +43,7 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
     [speed] = [ln for ln in out.splitlines() if ln.startswith("[demo] speed vs accuracy")]
     assert "full render" in speed and "fast render" in speed and "points)" in speed
     eval_metrics = json.loads((tmp_path / "demo/eval/metrics.json").read_text())
-    assert "synth_test_000" in json.dumps(eval_metrics)
+    assert "synth_test_000" in json.dumps(eval_metrics) and "synth_test_001" in json.dumps(eval_metrics)
     # --eval-stride 4: the evaluation is strided, so it has no SSIM; the fleet scores every 8th pixel
     assert eval_metrics["protocol"]["stride"] == 4 and eval_metrics["mean"]["colour"]["ssim"] is None
     # stage 6: the segmenter trained on the train scenes for S-Ray's CPU seconds, capped here at 1 CPU s
@@ -62,6 +62,8 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
         assert result["status"] == "finished" and result["steps_used"] > 0
         assert result["protocol"]["stride"] == 8 and result["protocol"]["inputs"] == inputs
         assert f"| synth_test_000 | {method} | {'RGB-D' if inputs == 'rgbd' else 'RGB'} | finished |" in out
+    assert not (fleet / "scenes/synth_test_001").exists()  # the fleet finetunes --fleet-scenes (default 1) of them
+    assert "8/9 finetune fleet on 1 of the 2 unseen scenes (synth_test_000)" in out
     assert "(stride 4), so no SSIM" in out and "Protocol (semantic-nerf): sources: none (per-scene model)" in out
     assert "Protocol (2d-transfer): sources: 4 per query" in out
     [webm] = (tmp_path / "demo/render").rglob("*.webm")
