@@ -207,7 +207,7 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     _validate(shards, scenes, list(methods))
     base, train_cfg = model_from_checkpoint(checkpoint)
     asked, methods = list(dict.fromkeys(methods)), with_depth_twins(list(methods), train_cfg.model.inputs)
-    if added := [m for m in methods if m not in asked]:
+    if added := [m for m in methods if m not in asked and get_method(m).given_depth_of]:
         _say(f"also running {', '.join(added)}: S-Ray given the source depth stands beside every method that reads it")
     for name in dict.fromkeys(methods):  # each method's own settings (2d-transfer's segmenter), before anything starts
         if (check := get_method(name).checked_config) is not None:
