@@ -46,8 +46,9 @@ from sray.platform.train.launcher import launch_training
 RECIPE = "synth-small"
 """The recipe S-Ray trains with; the 2D segmenter takes its data settings (sources per step, neighbours,
 augmentation, class balance) and feature width."""
-FLEET_METHODS = ["sray", "semantic-nerf", "sray-rgbd", "2d-transfer"]
-"""The per-scene methods of the demo's fleet, in table order."""
+FLEET_METHODS = ["sray", "semantic-nerf", "2d-transfer"]
+"""The per-scene methods the demo asks its fleet for; the fleet adds ``sray-rgbd`` beside the RGB-D 2d-transfer
+(``registry.with_depth_twins``)."""
 
 
 def _say(msg: str) -> None:

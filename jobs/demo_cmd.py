@@ -11,8 +11,9 @@ SEGMENTER_CPU_CAP = 60.0
 steps (480 to 562 CPU s in runs on the 2-core machine): 4 more minutes of wall time on a demo of about 10; 60 CPU s
 is about half a minute."""
 FLEET_SCENES = 1
-"""Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (2 minutes of wall time on the
-2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of them."""
+"""Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (about 3 minutes of wall time on
+the 2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of
+them."""
 
 
 def _cpu_cap(text: str) -> float:

@@ -62,6 +62,7 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
         assert result["status"] == "finished" and result["steps_used"] > 0
         assert result["protocol"]["stride"] == 8 and result["protocol"]["inputs"] == inputs
         assert f"| synth_test_000 | {method} | {'RGB-D' if inputs == 'rgbd' else 'RGB'} | finished |" in out
+    assert "also running sray-rgbd" in out  # the demo asks for 2d-transfer; the fleet adds S-Ray given the depth
     assert not (fleet / "scenes/synth_test_001").exists()  # the fleet finetunes --fleet-scenes (default 1) of them
     assert "8/9 finetune fleet on 1 of the 2 unseen scenes (synth_test_000)" in out
     assert "(stride 4), so no SSIM" in out and "Protocol (semantic-nerf): sources: none (per-scene model)" in out

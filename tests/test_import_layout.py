@@ -20,6 +20,8 @@ LAZY_IMPORTS_ALLOWED = {
         "method plug-ins: as sray_method.py",
     "platform/finetune/methods/transfer_method.py":
         "method plug-ins: as sray_method.py",
+    "platform/finetune/methods/sray_rgbd_method.py":
+        "method plug-ins: as sray_method.py",
     "platform/common/ray_address.py":
         "the GCS request imports Ray only once a TCP connection to the address succeeded: `sray train` refuses a "
         "bad input with Ray never imported (tests/test_train_inputs.py)",

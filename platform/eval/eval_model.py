@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from torch import nn
 
 from sray.data_tools.loader.sample_types import EvalSample
 from sray.model.fast_render import FastRender
@@ -65,6 +66,13 @@ def torch_device(device: str | None) -> torch.device:
     return torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
 
 
+def with_source_inputs(net: nn.Module, inputs: str) -> nn.Module:
+    """``net`` (an S-Ray model) set to read the source ``inputs`` (``rgb`` or ``rgbd``, checked like any model
+    config) with the same parameters: both modes share them (docs/model.md "RGB-D mode")."""
+    net.cfg = dataclasses.replace(net.cfg, inputs=inputs)
+    return net
+
+
 def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRender | None = None,
                      runtime: Runtime = Runtime(), inputs: str = "") -> EvalModel:
     """The S-Ray model of a training checkpoint folder, rendering with ``fast`` (None: the full render) and
@@ -74,7 +82,7 @@ def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRend
     checkpoint = Path(checkpoint).resolve()
     net, cfg = model_from_checkpoint(checkpoint)
     if inputs:
-        net.cfg = dataclasses.replace(net.cfg, inputs=inputs)  # checked like any model config
+        with_source_inputs(net, inputs)
     step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
     where = torch_device(device)
     net = net.to(where).eval()

@@ -29,20 +29,18 @@ INPUTS = "rgbd"
 """What it reads of the source views (``model.inputs``)."""
 
 
-def _given_depth(net: nn.Module) -> nn.Module:
-    """``net`` (an S-Ray model) set to read the source depth; the same parameters."""
-    net.cfg = dataclasses.replace(net.cfg, inputs=INPUTS)
-    return net
-
-
 def build(ctx: SceneContext) -> SceneSetup:
     """``sray``'s learner on the shared model in RGB-D mode (the training samples carry the source depth)."""
-    return sray_method.build(dataclasses.replace(ctx, base=_given_depth(ctx.base)))
+    from sray.platform.eval.eval_model import with_source_inputs
+
+    return sray_method.build(dataclasses.replace(ctx, base=with_source_inputs(ctx.base, INPUTS)))
 
 
 def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
     """The finetuned model (``sray``'s loader) in RGB-D mode."""
-    return _given_depth(sray_method.load(artifact, base_checkpoint))
+    from sray.platform.eval.eval_model import with_source_inputs
+
+    return with_source_inputs(sray_method.load(artifact, base_checkpoint), INPUTS)
 
 
 def eval_model(request: EvalRequest) -> EvalModel:
