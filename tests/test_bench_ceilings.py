@@ -32,7 +32,8 @@ from sray.platform.eval.ceilings import source_ids
 from sray.platform.eval.label_transfer import UNSEEN, coverage_counts, transfer_labels
 from sray.platform.eval.linear_probe import fit_probe, random_encoder
 from sray.platform.eval.segmenter import load_segmenter
-from sray.platform.eval.segmenter_training import train_segmenter
+from sray.platform.eval import segmenter_training
+from sray.platform.eval.segmenter_training import STATE_FILE, train_segmenter
 from sray.platform.eval.surface_field import field_at_surface
 from sray.platform.train.state import write_initial_checkpoint
 
@@ -100,6 +101,40 @@ def test_cli_trains_a_segmenter_and_loads_it(shards: Path, tmp_path: Path, one_t
     labels = model.predict(torch.rand(1, 3, 32, 40))
     n_classes = len(next(iter(read_manifest(shards).scenes.values())).meta["class_names"])
     assert labels.shape == (1, 32, 40) and int(labels.min()) >= 0 and int(labels.max()) < n_classes
+
+
+def test_an_interrupted_segmenter_training_resumes_to_the_same_weights(shards: Path, tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch,
+                                                                      one_thread: None) -> None:  # noqa: F811
+    """Killed right after its state at step 6 (epochs of 3 steps) and started again, a training ends at step 7 with
+    exactly the weights of an uninterrupted one, its CPU seconds summed over both runs; a state from other
+    settings is refused by name."""
+    monkeypatch.setattr(segmenter_training, "EPOCH_STEPS", 3)
+    kwargs = {"augment": Augmentation(min_source=2, colour_ev=0.3), "n_source": 3, "top_k": 8, "max_steps": 7,
+              "progress": False}
+    whole = train_segmenter(shards, 1e6, tmp_path / "whole", **kwargs)
+    write = segmenter_training._write_state
+
+    def write_then_die(out: Path, state: dict) -> None:
+        write(out, state)
+        if state["steps"] == 6:
+            raise KeyboardInterrupt("killed")
+
+    monkeypatch.setattr(segmenter_training, "_write_state", write_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        train_segmenter(shards, 1e6, tmp_path / "cut", **kwargs)
+    monkeypatch.setattr(segmenter_training, "_write_state", write)
+    first_run = torch.load(tmp_path / "cut" / STATE_FILE, weights_only=True)["cpu_seconds"]
+    with pytest.raises(ValueError, match=f"{STATE_FILE}: an unfinished segmenter training with other settings \\(seed"):
+        train_segmenter(shards, 1e6, tmp_path / "cut", seed=1, **kwargs)
+    resumed = train_segmenter(shards, 1e6, tmp_path / "cut", **kwargs)
+    assert (resumed.training["steps"], whole.training["steps"]) == (7, 7)
+    assert resumed.training["images"] == whole.training["images"] and resumed.training["cpu_seconds"] > first_run
+    assert not (tmp_path / "cut" / STATE_FILE).exists()
+    cut, _ = load_segmenter(tmp_path / "cut")
+    reference, _ = load_segmenter(tmp_path / "whole")
+    for (name, a), b in zip(reference.state_dict().items(), cut.state_dict().values(), strict=True):
+        torch.testing.assert_close(b, a, rtol=0, atol=0, msg=name)
 
 
 def test_segmenter_and_probe_read_only_train_scene_source_pools(shards: Path, tmp_path: Path,

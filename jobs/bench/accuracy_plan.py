@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from sray.data_tools.synth.world import World
 from sray.model.fast_render import FastRender
@@ -14,19 +14,23 @@ LONG = "long"
 settings (full CRA, union fine pass, 16 samples per scene visit, no source-view loss, no CPU budget)."""
 
 HOUR = "hour"
-"""Variant name of the cell that pretrains with the preset recipe exactly as it is: its settings and its own
-budget (``synth-cpu-hour``: CPU seconds)."""
+"""Variant name of the cell that pretrains with the preset recipe's settings and its own budget (``synth-cpu-hour``:
+CPU seconds) on the preset's world (48 rooms for ``cpu-small``, the recipe's first world)."""
 
 ROOMS_198, ROOMS_498 = "hour-198", "hour-498"
-"""Variant names of the hour recipe trained on 198 and 498 procedural rooms instead of the preset world's."""
+"""Variant names of the hour recipe trained on 198 and 498 procedural rooms instead of the preset world's;
+``hour-498`` is ``synth-cpu-hour`` exactly as it is: its settings, its budget and its world."""
+
+RECIPE_ROOMS = 498
+"""Training rooms of ``synth-cpu-hour``'s world (the preset world's other sizes and its test scenes)."""
 
 OCCL, OCCL_T5 = "hour-occl", "hour-occl-t5"
-"""Variant names of the hour recipe with the occlusion-aware weight net inputs (``model.weight_inputs=cross-view``),
-at the model's tau (0.7) and at tau 0.5 (a wider weight range)."""
+"""Variant names of the hour recipe (498 rooms) with the occlusion-aware weight net inputs
+(``model.weight_inputs=cross-view``), at the model's tau (0.7) and at tau 0.5 (a wider weight range)."""
 
 HOUR_NONE, HOUR_DEPTH = "hour-none", "hour-depth"
-"""Variant names of the hour recipe without cross-reprojection attention (the attention question at the hour
-budget, and the no-CRA model of the stability suite) and with the training-time depth loss (weight 0.1)."""
+"""Variant names of the hour recipe (498 rooms) without cross-reprojection attention (the attention question at the
+hour budget, and the no-CRA model of the stability suite) and with the training-time depth loss (weight 0.1)."""
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5, HOUR_NONE, HOUR_DEPTH)
 """Variants whose cells train for the preset recipe's own budget (its CPU seconds) instead of a step budget."""
@@ -72,6 +76,9 @@ class Variant:
     the cell checks before it trains."""
 
 
+_HOUR_SETTINGS = Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4)
+_RECIPE_SETTINGS = replace(_HOUR_SETTINGS, train_scenes=RECIPE_ROOMS)
+
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
                     "full-affine": Variant(weight_map="affine"), "full-rgbd": Variant(inputs="rgbd"),
                     "full-new": Variant(fine_samples="new"), "full-new-h2": Variant(fine_samples="new", n_heads=2),
@@ -81,19 +88,13 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     "full-new-src-mix": Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1,
                                                 cache_scenes=4),
                     LONG: Variant(),
-                    HOUR: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4),
-                    ROOMS_198: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
-                                       train_scenes=198),
-                    ROOMS_498: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
-                                       train_scenes=498),
-                    OCCL: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
-                                  weight_inputs="cross-view"),
-                    OCCL_T5: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
-                                     weight_inputs="cross-view", tau=0.5),
-                    HOUR_NONE: Variant("none", fine_samples="new", lambda_src_sem=1.0, visit_samples=1,
-                                       cache_scenes=4),
-                    HOUR_DEPTH: Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4,
-                                        lambda_depth=0.1)}
+                    HOUR: _HOUR_SETTINGS,
+                    ROOMS_198: replace(_HOUR_SETTINGS, train_scenes=198),
+                    ROOMS_498: _RECIPE_SETTINGS,
+                    OCCL: replace(_RECIPE_SETTINGS, weight_inputs="cross-view"),
+                    OCCL_T5: replace(_RECIPE_SETTINGS, weight_inputs="cross-view", tau=0.5),
+                    HOUR_NONE: replace(_RECIPE_SETTINGS, attention="none"),
+                    HOUR_DEPTH: replace(_RECIPE_SETTINGS, lambda_depth=0.1)}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
@@ -101,11 +102,12 @@ channels instead of 4 of 8; ``full-new-src`` full-new with the source views' per
 encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget;
 ``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
 (one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds
-``synth-cpu-hour``'s own settings (a test keeps them equal); ``hour-198`` and ``hour-498`` are ``hour`` on 198
-and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget); ``hour-occl`` is
-``hour`` whose weight net also reads the cross-view statistics, ``hour-occl-t5`` the same at tau 0.5 (the two
-occlusion levers, docs/model.md), both at the recipe's CPU budget; ``hour-none`` is ``hour`` without
-cross-reprojection attention and ``hour-depth`` ``hour`` with the training-time depth loss (weight 0.1)."""
+``synth-cpu-hour``'s own settings on the preset's 48 rooms; ``hour-198`` and ``hour-498`` are ``hour`` on 198
+and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget), ``hour-498`` the
+recipe exactly (a test keeps them equal); ``hour-occl`` is ``hour-498`` whose weight net also reads the cross-view
+statistics, ``hour-occl-t5`` the same at tau 0.5 (the two occlusion levers, docs/model.md), both at the recipe's CPU
+budget; ``hour-none`` is ``hour-498`` without cross-reprojection attention and ``hour-depth`` ``hour-498`` with the
+training-time depth loss (weight 0.1)."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -170,6 +172,9 @@ class Preset:
     """Finetune curves score every n-th pixel in each direction of the held-out views."""
     fleet_gpus_per_task: float
     """GPUs each finetune task takes (0 on a CPU machine)."""
+    headline: str = LONG
+    """Variant of the headline model: the preset's recipe exactly as it is (settings, budget and world), the model
+    its targets are read on and its fleet finetunes from."""
 
 
 PRESETS = {
@@ -179,12 +184,12 @@ PRESETS = {
         plan=(Cell(LONG, 0), *seeds("full", 1), *seeds("none", 1), Cell("full", 1), Cell("none", 1),
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
-              *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), *seeds(HOUR, 3), Cell(ROOMS_198, 0),
-              *seeds(ROOMS_498, 3), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), Cell(OCCL, 0), Cell(OCCL_T5, 0),
-              *seeds(HOUR_NONE, 3), Cell(HOUR_DEPTH, 0)),
+              *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), Cell(HOUR, 0), Cell(ROOMS_198, 0),
+              *seeds(ROOMS_498, 3), *seeds(HOUR_NONE, 3), Cell(HOUR_DEPTH, 0), Cell(OCCL, 0), Cell(OCCL_T5, 0),
+              Cell(HOUR, 1), Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
-        fleet_gpus_per_task=0.0),
+        fleet_gpus_per_task=0.0, headline=ROOMS_498),
     "gpu": Preset(
         world=World(train_scenes=96, test_scenes=8, views=100, height=240, width=320),
         recipe="synth-paper", overrides=("data.aug.min_source=2", "data.class_balance=inverse-sqrt",
@@ -202,6 +207,6 @@ PRESETS = {
 
 def headline_variant(p: Preset) -> str:
     """The variant of ``p``'s headline model, the one its targets are read on and its fleet finetunes from: the
-    recipe as it is, at its own CPU-second budget (``hour``), when the plan holds it; else the recipe's first form at
-    its step budget (``long``)."""
-    return HOUR if any(c.variant == HOUR for c in p.plan) else LONG
+    recipe as it is (``Preset.headline``: ``hour-498`` for ``cpu-small``) when the plan holds it; else the recipe's
+    first form at its step budget (``long``)."""
+    return p.headline if any(c.variant == p.headline for c in p.plan) else LONG

@@ -136,6 +136,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     segmenter.add_argument("--recipe", default="synth-cpu-hour",
                            help="recipe whose augmentation, class balance and source counts the training uses")
     segmenter.add_argument("--seed", type=int, default=0)
+    segmenter.add_argument("--max-steps", type=int, default=None,
+                           help="stop after this many steps even within the budget (default: the budget alone)")
     segmenter.set_defaults(func=_bench_segmenter)
 
 
@@ -165,7 +167,7 @@ def _bench_ceilings(args: argparse.Namespace) -> int:
 def _bench_segmenter(args: argparse.Namespace) -> int:
     from sray.jobs.bench.ceilings import run_segmenter
 
-    run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed)
+    run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed, args.max_steps)
     return 0
 
 
