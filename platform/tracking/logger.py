@@ -69,7 +69,7 @@ class MlflowRunLogger(RunLogger):
         self._params: dict[str, str] = {}
         self._metrics: deque = deque(maxlen=max_buffered_metrics)
         self._ops: deque[tuple[str, Callable[[Any], None]]] = deque(maxlen=1000)
-        self._staging = Path(tempfile.mkdtemp(prefix="sray-mlflow-"))
+        self._staging: Path | None = None  # made by the first log_dict: a logger that writes none leaves nothing
         self._last_flush_step: int | None = None
         self._last_flush_time = time.monotonic()
         self._next_attempt = 0.0
@@ -112,6 +112,8 @@ class MlflowRunLogger(RunLogger):
 
     def log_dict(self, obj: Any, artifact_file: str) -> None:
         """Write ``obj`` as JSON to ``artifact_file`` (e.g. ``config.json``) in the run's artifacts."""
+        if self._staging is None:
+            self._staging = Path(tempfile.mkdtemp(prefix="sray-mlflow-"))
         target = self._staging / artifact_file
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_text(json.dumps(obj, indent=1, default=str) + "\n")
@@ -189,7 +191,8 @@ class MlflowRunLogger(RunLogger):
             log.warning("MLflow run %s closed with undelivered items %s (tracking store %s unreachable)",
                         self.handle.run_id, self.pending(), self.handle.store)
         self._closed = True
-        shutil.rmtree(self._staging, ignore_errors=True)
+        if self._staging is not None:
+            shutil.rmtree(self._staging, ignore_errors=True)
 
     def watch_system(self, node: str, interval_s: float) -> Callable[[], None]:
         """MLflow's system-metrics monitor on this run (metrics ``system/<node>/...``, continuing the run's system
