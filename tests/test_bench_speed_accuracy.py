@@ -65,6 +65,31 @@ def test_measure_pairs_the_settings_and_the_fast_path_is_lossless(tiny_shards: P
     assert by["rgb again"]["psnr"] == by["fast impl"]["psnr"]  # and the next setting renders rgb again
 
 
+def test_a_store_keeps_each_measured_setting_and_a_rerun_measures_only_the_rest(
+        tiny_shards: Path, tiny_checkpoint: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rows measured with a store come back unchanged from a later run, which renders only the settings (or view
+    counts) the store does not hold."""
+    from sray.jobs.bench import speed_accuracy
+    from sray.jobs.bench.speed_accuracy import Setting, measure
+    from sray.model.fast_render import FastRender
+
+    a, b = Setting("full", n_source=3), Setting("fast s2", n_source=3, fast=FastRender(pixel_stride=2, confidence=0.9))
+    first = measure(tiny_checkpoint, tiny_shards, [a, b], 1, progress=False, store=tmp_path / "rows")
+    rendered: list[int] = []
+    timed = speed_accuracy.timed_scores
+
+    def counted(*args, **kwargs):
+        rendered.append(1)
+        return timed(*args, **kwargs)
+
+    monkeypatch.setattr(speed_accuracy, "timed_scores", counted)
+    c = Setting("half", n_source=3, sample_scale=0.5)
+    again = measure(tiny_checkpoint, tiny_shards, [a, b, c], 1, progress=False, store=tmp_path / "rows")
+    assert again[:2] == first and again[2]["name"] == "half" and len(rendered) == 1
+    more_views = measure(tiny_checkpoint, tiny_shards, [a], 2, progress=False, store=tmp_path / "rows")
+    assert len(rendered) == 2 and more_views[0]["views"] == 2 * first[0]["views"]
+
+
 def test_full_settings_render_with_the_checkpoints_own_fine_samples(tiny_shards: Path,
                                                                      tiny_checkpoint: Path) -> None:
     """A setting that names no fine-sample choice renders as the checkpoint was trained (as ``sray eval --render

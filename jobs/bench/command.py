@@ -70,6 +70,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--segmenter", type=Path, default=None,
                        help="2D segmenter folder (`sray bench segmenter`) for a method of --methods that reads one "
                             "(2d-transfer)")
+    speed.add_argument("--store", type=Path, default=None, metavar="FOLDER",
+                       help="keep every measured row here (per checkpoint and setting); a re-run with the same folder "
+                            "reads the rows it holds instead of measuring them again, so a long run resumes")
     speed.add_argument("--tracker", default="mlflow")
     speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
     speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
@@ -215,7 +218,8 @@ def _bench_speed_accuracy(args: argparse.Namespace) -> int:
 
     try:
         run_speed_accuracy(args.checkpoint, args.data, args.views_per_scene, args.doc, args.tracker,
-                           args.tracking_uri, args.checkpoint_rgbd, args.settings, args.methods, args.segmenter)
+                           args.tracking_uri, args.checkpoint_rgbd, args.settings, args.methods, args.segmenter,
+                           args.store)
     except (FileNotFoundError, ValueError) as e:
         print(f"sray bench speed-accuracy: {e}", file=sys.stderr)
         return 2

@@ -30,6 +30,7 @@ from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.jobs.bench.doc import Bench
 from sray.jobs.bench.render_default import DefaultChoice
 from sray.jobs.bench.speed_classes import class_scores
+from sray.jobs.bench.speed_store import row_key, store_rows, stored_rows
 from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
@@ -178,14 +179,15 @@ def timed_scores(renderer: Callable[[EvalSample], RayRenderer], scenes: list[str
 
 def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_scene: int,
             progress: bool = True, checkpoint_rgbd: Path | None = None,
-            others: dict[str, EvalModel] | None = None) -> list[dict]:
+            others: dict[str, EvalModel] | None = None, store: Path | None = None) -> list[dict]:
     """Score every setting on the first ``views_per_scene`` test views of each unseen scene (<= 0: every one).
 
     ``checkpoint_rgbd``: the model that renders the ``inputs="rgbd"`` settings (None: ``checkpoint``'s).
     ``others``: registered methods' zero-shot models by method name; each is scored on the views and sources of its
-    :func:`twin` and listed right after it. Returns one row per setting or method: name, method, inputs,
-    :func:`timed_scores`' values, class_names, and for S-Ray's rows the setting and its fine_samples (None for
-    another method's row).
+    :func:`twin` and listed right after it. ``store``: a folder keeping each setting's rows as they are measured
+    (``speed_store``); rows it holds for the same measurement are read instead of measured again. Returns one row per
+    setting or method: name, method, inputs, :func:`timed_scores`' values, class_names, and for S-Ray's rows the
+    setting and its fine_samples (None for another method's row).
     """
     loaded = {}
     for key, path in (("main", checkpoint), ("rgbd", checkpoint_rgbd)):
@@ -201,6 +203,15 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     after = {name: twin(settings, model.inputs).name for name, model in (others or {}).items()}
     rows = []
     for st in settings:
+        listed = {n: others[n].subject for n, t in after.items() if t == st.name}
+        key = row_key(checkpoint, checkpoint_rgbd if st.inputs == "rgbd" else None, shards, views_per_scene, st,
+                      listed)
+        kept = stored_rows(store, key) if store is not None else None
+        if kept is not None:
+            rows.extend(kept)
+            if progress:
+                print(f"[speed-accuracy] {st.name}: read from {store} (measured by an earlier run)", flush=True)
+            continue
         net, cfg, own = loaded["rgbd" if st.inputs == "rgbd" and "rgbd" in loaded else "main"]
         _apply(net, st, own)
         runtime, views = st.runtime(), _views(shards, st.n_source, views_per_scene)
@@ -216,6 +227,8 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
             new.append({"name": name, "method": name, "inputs": model.inputs, **scores, "class_names": class_names,
                         "fine_samples": None, "setting": None})
         rows.extend(new)
+        if store is not None:
+            store_rows(store, key, new)
         if progress:
             for row in new:
                 print(f"[speed-accuracy] {row['name']} ({inputs_name(row['inputs'])}): mIoU {row['miou']:.2f}  "

@@ -41,17 +41,19 @@ def report(rows: list[dict], choice: DefaultChoice | None) -> str:
 
 def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: int, doc: Path, tracker: str,
                        tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None,
-                       methods: list[str] | None = None, segmenter: Path | None = None) -> str:
+                       methods: list[str] | None = None, segmenter: Path | None = None,
+                       store: Path | None = None) -> str:
     """Measure the default settings, or those ``names`` chooses (the ``rgbd`` ones by ``checkpoint_rgbd`` when
     given), and the zero-shot models of the registered ``methods`` (built with ``segmenter`` where one reads it;
     S-Ray's setting of each one's inputs is added when missing) on each of ``checkpoints``; apply the default-render
     rule to each and to their mean; write the chart and the table section, log both; returns the section.
+    ``store``: a folder keeping every measured row (``speed_store``), so a run stopped part-way resumes.
     ValueError or FileNotFoundError (before anything is measured) for a method that cannot be built."""
     shards, methods = Path(shards), list(methods or [])
     others = [method_models(methods, Path(c), segmenter) for c in checkpoints]
     settings = paired_settings(select_settings(names), (m.inputs for m in others[0].values()))
     rgbd = Path(checkpoint_rgbd) if checkpoint_rgbd else None
-    runs = [measure(Path(c), shards, settings, views_per_scene, checkpoint_rgbd=rgbd, others=o)
+    runs = [measure(Path(c), shards, settings, views_per_scene, checkpoint_rgbd=rgbd, others=o, store=store)
             for c, o in zip(checkpoints, others, strict=True)]
     rows = runs[0] if len(runs) == 1 else mean_rows(runs)
     labels = [checkpoint_label(c) for c in checkpoints] + ([f"mean of {len(runs)}"] if len(runs) > 1 else [])

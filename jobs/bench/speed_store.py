@@ -1,0 +1,51 @@
+"""Rows of ``sray bench speed-accuracy`` kept per checkpoint and setting (``--store``), so that a run over several
+checkpoints and slow settings, longer than one sitting, resumes where it stopped: a row is measured once and read
+back by every later run that asks for the same measurement.
+
+A stored row stands for exactly one measurement: the key is the checkpoint (and the RGB-D checkpoint where the
+setting renders with depth), the shard folder, the test views per scene, every field of the setting, and each other
+method's model listed beside it. Its times are CPU seconds of the process that measured it (the speed measure on a
+shared machine), so rows measured in different runs compare as well as rows of one run do on a quiet machine.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+from sray.data_tools.atomic import atomic_write_json
+
+
+def row_key(checkpoint: Path, checkpoint_rgbd: Path | None, shards: Path, views_per_scene: int, setting: Any,
+            methods: dict[str, str]) -> dict[str, Any]:
+    """What one setting's rows measured: resolved paths, views, the setting's fields and ``methods`` (name -> the
+    model each other method listed beside it scored, its ``EvalModel.subject``)."""
+    key = {"checkpoint": str(Path(checkpoint).resolve()),
+           "checkpoint_rgbd": str(Path(checkpoint_rgbd).resolve()) if checkpoint_rgbd else None,
+           "shards": str(Path(shards).resolve()), "views_per_scene": views_per_scene,
+           "setting": dataclasses.asdict(setting), "methods": dict(sorted(methods.items()))}
+    return json.loads(json.dumps(key))  # as it reads back (tuples as lists)
+
+
+def _path(store: Path, key: dict[str, Any]) -> Path:
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+    return Path(store) / f"{key['setting']['name'].replace(' ', '_').replace('/', '_')}-{digest}.json"
+
+
+def stored_rows(store: Path, key: dict[str, Any]) -> list[dict[str, Any]] | None:
+    """The rows stored under ``key`` in folder ``store`` (None when that measurement is not stored)."""
+    path = _path(store, key)
+    if not path.exists():
+        return None
+    saved = json.loads(path.read_text())
+    return saved["rows"] if saved["key"] == key else None
+
+
+def store_rows(store: Path, key: dict[str, Any], rows: list[dict[str, Any]]) -> Path:
+    """Write one setting's ``rows`` under ``key`` (atomically); returns the file."""
+    path = _path(store, key)
+    atomic_write_json(path, {"key": key, "rows": rows})
+    return path
