@@ -19,9 +19,9 @@ from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_fleet import DONE_FILE
-from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_DEPTH, HOUR_NONE, LONG, OCCL, OCCL_T5, PRESETS,
-                                           RECIPE_ROOMS, ROOMS_198, ROOMS_498, VARIANT_SETTINGS, Cell, Preset, World,
-                                           headline_variant)
+from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_DEPTH, HOUR_NONE, HOUR_WARM, LONG, OCCL, OCCL_T5,
+                                           PRESETS, RECIPE_ROOMS, ROOMS_198, ROOMS_498, VARIANT_SETTINGS, WARM_2D_STEPS,
+                                           Cell, Preset, World, headline_variant)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.jobs.bench.accuracy_budgets import budget_means
 from sray.jobs.bench.accuracy_tables import class_table, fleet_from_headline, seed_table, targets, write_tables
@@ -107,11 +107,14 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
         assert cfg.model == dataclasses.replace(recipe.model, **change), variant
         assert dataclasses.replace(cfg, run=head.run, model=head.model) == head
         assert cfg.run.name == f"bench-{variant}-s1" and VARIANT_SETTINGS[variant].train_scenes == RECIPE_ROOMS
+    warm = accuracy_cells.cell_config(Cell(HOUR_WARM, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    assert warm.optim.warmup_2d_steps == WARM_2D_STEPS > 0 and recipe.optim.warmup_2d_steps == 0
+    assert dataclasses.replace(warm, run=head.run, optim=head.optim) == head and warm.optim.cpu_seconds > 0
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.attention == "full"
     assert recipe.model.lambda_depth == 0.0
     planned = [c.variant for c in preset.plan]
-    after = planned[planned.index(ROOMS_498):][:8]
-    assert after == [*[ROOMS_498] * 3, *[HOUR_NONE] * 3, HOUR_DEPTH, OCCL]
+    after = planned[planned.index(ROOMS_498):][:9]
+    assert after == [*[ROOMS_498] * 3, *[HOUR_NONE] * 3, HOUR_WARM, HOUR_DEPTH, OCCL]
 
 
 def test_the_gpu_preset_augments_through_the_data_aug_section(tmp_path: Path) -> None:
