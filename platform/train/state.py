@@ -29,6 +29,17 @@ def lr_lambda(opt: OptimSettings) -> Any:
     return factor
 
 
+def budget_lr_factor(opt: OptimSettings, step: int, cpu_seconds: float) -> float:
+    """Multiplier of the base lr at ``step`` of a job budgeted by ``opt.cpu_seconds`` (> 0), after ``cpu_seconds``
+    spent: the warm-up counts steps, as without a budget; the decay then follows whichever is further along, the
+    step count or the spent share of the budget (as a share of ``opt.steps``), so it reaches ``lr_final`` at the
+    budget however many steps a machine makes of it, and at the cap ``opt.steps`` if that comes first."""
+    factor = lr_lambda(opt)
+    if step < opt.warmup_steps:
+        return factor(step)
+    return factor(max(step, cpu_seconds / opt.cpu_seconds * opt.steps))
+
+
 def build_training(cfg: TrainConfig) -> tuple[RayBatchLoss, torch.optim.Optimizer, torch.optim.lr_scheduler.LambdaLR]:
     """Model (seeded from ``cfg.run.seed``, identical on every rank; its loss run with ``cfg.runtime``), Adam and
     its schedule."""

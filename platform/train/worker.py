@@ -26,7 +26,7 @@ from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle
 from sray.platform.train.cpu_clock import CpuClock
 from sray.platform.train.job_loader import job_loader
-from sray.platform.train.state import build_training, lr_lambda, restore_training, training_state
+from sray.platform.train.state import budget_lr_factor, build_training, restore_training, training_state
 from sray.platform.train.step import TrainStep, step_seed
 from sray.platform.train.validation import validate
 
@@ -104,7 +104,6 @@ def train_worker(payload: dict[str, Any]) -> None:
     # rank 0's wall seconds since the set-up, across resumes; unknown (never stored) for a job resumed from a
     # checkpoint written before sray counted them
     wall_start, wall_before = time.perf_counter(), counters.get("wall_seconds", 0.0 if start == 0 else None)
-    lr_factor = lr_lambda(cfg.optim)
     manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
     logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
     # the first worker of each node records that node's system metrics into the job's run
@@ -154,12 +153,11 @@ def train_worker(payload: dict[str, Any]) -> None:
     budget = cfg.optim.cpu_seconds
 
     def follow_cpu_budget(next_step: int) -> None:
-        """With a CPU budget, the next step's learning rate follows whichever is further along: the steps or
-        the CPU seconds (as a share of ``steps``)."""
+        """With a CPU budget, the next step's learning rate from ``budget_lr_factor``."""
         if budget > 0:
-            progress = max(next_step, cpu_total / budget * cfg.optim.steps)
+            factor = budget_lr_factor(cfg.optim, next_step, cpu_total)
             for group in optimizer.param_groups:
-                group["lr"] = group["initial_lr"] * lr_factor(progress)
+                group["lr"] = group["initial_lr"] * factor
 
     window_terms, term_names = [], None
     throughput = ThroughputWindow(cfg.data.rays_per_batch, world, device)
