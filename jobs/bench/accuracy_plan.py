@@ -195,7 +195,7 @@ PRESETS = {
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
               *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), Cell(HOUR, 0), Cell(ROOMS_198, 0),
-              *seeds(ROOMS_498, 3), *seeds(HOUR_NONE, 3), Cell(HOUR_WARM, 0), Cell(HOUR_DEPTH, 0), Cell(OCCL, 0),
+              *seeds(ROOMS_498, 3), *seeds(HOUR_WARM, 3), *seeds(HOUR_NONE, 3), Cell(HOUR_DEPTH, 0), Cell(OCCL, 0),
               Cell(OCCL_T5, 0),
               Cell(HOUR, 1), Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
