@@ -36,8 +36,8 @@ CPU_HOUR_STEP_CAP = 5000
 """Step cap of ``synth-cpu-hour``; the job ends at the cap or at the CPU budget, whichever comes first. One
 ray-training step costs 1.3 to 2.5 CPU s on the 2-core development machines (a 2D-only step of
 ``optim.warmup_2d_steps`` about 0.4): on the slower ones the budget stops it (about 3,000 steps), on the faster
-the cap can (``hour-warm2d`` there reached it after 5,437 CPU s). Every measured cell of the recipe ran under this cap; a cell without it is a
-separate arm."""
+the cap can (``hour-warm2d`` there reached it after 5,437 CPU s). Every measured cell of the recipe ran under
+this cap; a cell without it is a separate arm."""
 
 
 CPU_HOUR_SHARDS = "outputs/bench-accuracy/cpu-small/worlds/train498/shards"
