@@ -3,12 +3,14 @@ result, a machine without CUDA is told so in one line, and the checkout's tests 
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
+import torch
 
 from sray.jobs.cli import main
-from sray.jobs.gpu_check import context, runner
+from sray.jobs.gpu_check import context, runner, stage_recipe
 from sray.jobs.gpu_check.report import REPORT_FILE, STAGE_NAMES, StageResult, load_report
 
 REPO = Path(__file__).resolve().parents[1]
@@ -25,6 +27,11 @@ def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Pat
     assert set(precision) == {("bf16", c) for c in ("projection", "render argmax", "step loss", "step gradient")}
     assert all(r[-1] == "ok" for r in precision.values())
     assert {r[0] for r in report["stages"]["training"].rows} == {"fp32", "bf16"}
+    assert [r[0] for r in report["stages"]["recipe"].rows] == [
+        f"{p} {phase}" for p in ("fp32", "bf16") for phase in ("2D warm-up", "ray steps")]
+    curve = json.loads((tmp_path / "recipe_curve.json").read_text())["curves"]["bf16"]
+    assert [p["phase"] for p in curve] == [0.0] * 3 + [1.0] * 3  # 3 warm-up steps render nothing, then ray steps
+    assert curve[2]["sem_src"] < curve[0]["sem_src"] and curve[3]["loss"] > curve[3]["sem_src"]
     assert report["stages"]["ray"].rows[0][2] == "2"  # steps of the training job
     assert "refuses two ranks on one GPU" in report["stages"]["ray"].rows[1][4]  # 2 workers, 0.5 GPU each
     alone, shared = report["stages"]["fleet"].rows
@@ -43,6 +50,19 @@ def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Pat
     printed = capsys.readouterr().out
     assert printed.count("already in the report") == 2
     assert (tmp_path / REPORT_FILE).read_text() == before
+
+
+def test_recipe_stage_fails_when_the_warm_up_does_not_learn(tmp_path: Path, monkeypatch) -> None:
+    flat = [{"phase": float(i >= 3), "seconds": 0.1, "loss": 3.0, "sem_src": 3.0, "skipped": 0.0} for i in range(6)]
+    monkeypatch.setattr(stage_recipe, "phase_curve", lambda ctx, precision, steps: flat)
+    ctx = context.CheckContext(torch.device("cpu"), True, tmp_path, REPO)
+    result = stage_recipe.run(ctx)
+    assert result.status == "failed" and "did not fall over the warm-up" in result.summary
+
+
+def test_brightness_labels_cut_the_mean_channel_into_bands() -> None:
+    rgb = torch.tensor([0.0, 0.049, 0.05, 0.5, 0.999, 1.0]).view(1, 1, 1, 6).expand(1, 3, 1, 6)
+    assert stage_recipe.brightness_labels(rgb, 20).flatten().tolist() == [0, 0, 1, 10, 19, 19]
 
 
 def test_a_failing_stage_is_recorded_and_the_next_stage_runs(tmp_path: Path, monkeypatch) -> None:

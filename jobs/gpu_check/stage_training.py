@@ -18,7 +18,8 @@ from .report import StageResult
 from .synthetic import training_sample
 
 
-def _peak_mb(device: torch.device) -> float:
+def peak_mb(device: torch.device) -> float:
+    """Peak memory in MiB: the CUDA allocator's peak since its last reset, else this process's peak resident set."""
     if device.type == "cuda":
         return torch.cuda.max_memory_allocated(device) / 2**20
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -54,7 +55,7 @@ def timed_steps(ctx: CheckContext, precision: str, steps: int) -> dict[str, floa
         torch.cuda.synchronize(ctx.device)
     seconds = time.perf_counter() - start
     return {"steps_per_s": steps / seconds, "rays_per_s": steps * ctx.rays / seconds,
-            "peak_mb": _peak_mb(ctx.device), "skipped": float(step.skipped_total)}
+            "peak_mb": peak_mb(ctx.device), "skipped": float(step.skipped_total)}
 
 
 def run(ctx: CheckContext) -> StageResult:

@@ -1,0 +1,105 @@
+"""Stage ``recipe``: the hour recipe's model and losses (``synth-cpu-hour``: the source-view semantic head at
+weight ``model.lambda_src_sem``, the 2D-only warm-up, then ray steps) at GPU size through the same Accelerate
+``TrainStep`` as training: steps/s and rays/s of each phase and a short loss curve on one fixed batch.
+
+The batch is synthetic but learnable: each source pixel's label is its colour's brightness band, so a working
+2D warm-up must lower the source-view loss; a phase whose loss does not fall, or any skipped (non-finite)
+step, fails the stage. The curve is written to ``<out>/recipe_curve.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import replace
+
+import torch
+
+from sray.model.ray_batch import RayBatchLoss
+from sray.platform.common.model_input import ray_batch
+from sray.platform.config.recipes import synth_cpu_hour
+from sray.platform.train.step import TrainStep, fused_adam
+
+from .context import CheckContext, has_module
+from .report import StageResult
+from .stage_training import peak_mb
+from .synthetic import training_sample
+
+
+def brightness_labels(rgb: torch.Tensor, n_classes: int) -> torch.Tensor:
+    """int64 (m, H, W) labels of float (m, 3, H, W) colours in [0, 1]: the mean channel cut into n_classes bands."""
+    return (rgb.mean(1) * n_classes).long().clamp(0, n_classes - 1)
+
+
+def phase_curve(ctx: CheckContext, precision: str, steps: tuple[int, int]) -> list[dict[str, float]]:
+    """Train the recipe's model for ``steps`` = (2D warm-up steps, ray steps) on one batch; per step: phase
+    (0 = warm-up, 1 = ray), seconds (synchronised), loss, ``sem_src`` and the skipped-step count so far."""
+    from accelerate import Accelerator
+
+    recipe = synth_cpu_hour()
+    cfg = replace(recipe.model, n_coarse=ctx.samples[0], n_fine=ctx.samples[1], n_source=ctx.views)
+    accelerator = Accelerator(mixed_precision="no", cpu=ctx.device.type != "cuda")
+    torch.manual_seed(0)
+    model = RayBatchLoss(cfg)
+    model, optimizer = accelerator.prepare(model, fused_adam(list(model.parameters()), recipe.optim.lr))
+    step = TrainStep(list(model.parameters()), optimizer, recipe.optim.grad_clip, precision, accelerator.device,
+                     sum(steps) + 1)
+    sample = training_sample(ctx.views, ctx.image_hw, ctx.rays, cfg.n_classes, accelerator.device)
+    sources = replace(sample.sources, label=brightness_labels(sample.sources.rgb, cfg.n_classes))
+    batch = ray_batch(replace(sample, sources=sources))
+    if ctx.device.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(ctx.device)
+    curve = []
+    for i in range(sum(steps)):
+        render = i >= steps[0]
+        if ctx.device.type == "cuda":
+            torch.cuda.synchronize(ctx.device)
+        start = time.perf_counter()
+        with step.autocast():
+            loss, terms = model(batch, sample.target_label, sample.target_rgb, render=render)
+        step(loss)
+        if ctx.device.type == "cuda":
+            torch.cuda.synchronize(ctx.device)
+        curve.append({"phase": float(render), "seconds": time.perf_counter() - start, "loss": float(loss.detach()),
+                      "sem_src": float(terms["sem_src"]), "skipped": float(step.skipped_total)})
+    return curve
+
+
+def _phase_row(label: str, points: list[dict[str, float]], rays: int, renders: bool) -> list[str]:
+    timed = points[1:] or points  # the first step of a phase holds its warm-up (allocation, kernel choice)
+    per_step = sorted(p["seconds"] for p in timed)[len(timed) // 2]
+    return [label, f"{1 / per_step:.2f}", f"{rays / per_step:.0f}" if renders else "-",
+            f"{points[0]['loss']:.3f} -> {points[-1]['loss']:.3f}",
+            f"{points[0]['sem_src']:.3f} -> {points[-1]['sem_src']:.3f}"]
+
+
+def run(ctx: CheckContext) -> StageResult:
+    """fp32 and bf16: the warm-up phase and the ray phase of the recipe, each a row; fails on a non-finite
+    step or a source-view loss that does not fall over the warm-up."""
+    if not has_module("accelerate"):
+        return StageResult("skipped", "accelerate is not installed here")
+    steps = (3, 3) if ctx.dry_run else (20, 40)
+    rows, bad, curves = [], [], {}
+    for precision in ("no", "bf16"):
+        label = "fp32" if precision == "no" else precision
+        curve = phase_curve(ctx, precision, steps)
+        curves[label] = curve
+        warm, ray = curve[:steps[0]], curve[steps[0]:]
+        rows.append([f"{label} 2D warm-up", *_phase_row(label, warm, ctx.rays, False)[1:]])
+        rows.append([f"{label} ray steps", *_phase_row(label, ray, ctx.rays, True)[1:]])
+        rows[-1].append(f"{peak_mb(ctx.device):.0f}")
+        rows[-2].append(rows[-1][-1])
+        if curve[-1]["skipped"]:
+            bad.append(f"{label}: {curve[-1]['skipped']:.0f} non-finite steps")
+        if warm[-1]["sem_src"] >= warm[0]["sem_src"]:
+            bad.append(f"{label}: the source-view loss did not fall over the warm-up")
+    (ctx.out / "recipe_curve.json").write_text(json.dumps({"steps": steps, "curves": curves}, indent=1) + "\n")
+    hw = f"{ctx.image_hw[1]}x{ctx.image_hw[0]}"
+    summary = (f"synth-cpu-hour model, {ctx.rays} rays, {ctx.samples[0]}+{ctx.samples[1]} samples, {ctx.views} "
+               f"views, {hw}, {steps[0]} warm-up + {steps[1]} ray steps: "
+               + ", ".join(f"{r[0]} {r[2]} rays/s" for r in rows if r[2] != "-"))
+    if bad:
+        summary = "; ".join(bad) + "; " + summary
+    return StageResult("failed" if bad else "passed", summary,
+                       header=["phase", "steps/s", "rays/s", "loss first -> last", "sem_src first -> last",
+                               "peak MiB"], rows=rows)
