@@ -1,5 +1,5 @@
-"""``sray bench accuracy``'s plan against the recipe: the headline cell trains ``synth-cpu-hour`` exactly as it is
-(settings, CPU budget and world), the other CPU-budgeted cells change one thing each."""
+"""``sray bench accuracy``'s plan against the recipe: the headline cell (``hour-warm2d``) trains ``synth-cpu-hour``
+exactly as it is (settings, CPU budget and world), the other CPU-budgeted cells change one thing each."""
 
 from __future__ import annotations
 
@@ -17,29 +17,36 @@ from sray.platform.config.recipes import get_recipe
 
 def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_others_count_steps(
         tmp_path: Path) -> None:
-    """``hour-498``, the headline, trains synth-cpu-hour as it is (settings, CPU-second budget and the world its
-    shards default to, which the benchmark generates in its default folder); ``hour`` and ``hour-198`` are the same
-    on other worlds; ``long`` keeps its fixed step budget and ablation cells their short one, both without a CPU
-    budget, so their stored cells stay valid; the occlusion, no-attention and depth-loss cells are the headline with
-    one model setting changed, at the same CPU budget and world, planned right after the headline's seeds."""
+    """``hour-warm2d``, the headline, trains synth-cpu-hour as it is (settings, 2D warm-up, CPU-second budget and
+    the world its shards default to, which the benchmark generates in its default folder); ``hour-498`` is the same
+    without the warm-up and ``hour``, ``hour-198`` that on other worlds, so their stored cells stay valid; ``long``
+    keeps its fixed step budget and ablation cells their short one, both without a CPU budget; the occlusion,
+    no-attention and depth-loss cells are the headline with one model setting changed, at the same CPU budget and
+    world, planned right after the headline's seeds."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
-    assert headline_variant(preset) == ROOMS_498 and VARIANT_SETTINGS[ROOMS_498].train_scenes == RECIPE_ROOMS
+    assert headline_variant(preset) == HOUR_WARM and VARIANT_SETTINGS[HOUR_WARM].train_scenes == RECIPE_ROOMS
+    assert recipe.optim.warmup_2d_steps == WARM_2D_STEPS > 0
     default_out = Path("outputs/bench-accuracy/cpu-small")  # `sray bench accuracy`'s folder for the preset
     assert Path(recipe.data.shards) == default_out / WORLDS_DIR / f"train{RECIPE_ROOMS}" / SHARDS
-    head = accuracy_cells.cell_config(Cell(ROOMS_498, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    head = accuracy_cells.cell_config(Cell(HOUR_WARM, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
     assert head.model == recipe.model and head.optim == recipe.optim and head.run.seed == 1
     assert dataclasses.replace(head.data, shards=recipe.data.shards) == recipe.data
     assert head.optim.cpu_seconds > 0 and head.run.val_every == recipe.run.val_every
     long = accuracy_cells.cell_config(Cell(LONG, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
     assert (long.optim.steps, long.optim.cpu_seconds, long.run.val_every) == (2500, 0.0, 2500 // preset.validations)
     assert long.model.fine_samples == "union" and long.model.lambda_src_sem == 0.0 and long.data.visit_samples == 16
+    assert long.optim.warmup_2d_steps == 0
     for variant in VARIANT_SETTINGS.keys() - {*CPU_BUDGETED, LONG}:
         cfg = accuracy_cells.cell_config(Cell(variant, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
         assert (cfg.optim.steps, cfg.optim.cpu_seconds) == (preset.ablation_steps, 0.0), variant
-    for variant, rooms in ((HOUR, None), (ROOMS_198, 198)):  # the recipe's settings on another world
+        assert cfg.optim.warmup_2d_steps == VARIANT_SETTINGS[variant].warmup_2d_steps, variant
+    unwarmed = dataclasses.replace(head.optim, warmup_2d_steps=0)
+    for variant, rooms in ((HOUR, None), (ROOMS_198, 198), (ROOMS_498, RECIPE_ROOMS)):  # the recipe before its warm-up
         cfg = accuracy_cells.cell_config(Cell(variant, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
-        assert dataclasses.replace(cfg, run=head.run) == head and cfg.run.name == f"bench-{variant}-s1"
-        assert VARIANT_SETTINGS[variant] == dataclasses.replace(VARIANT_SETTINGS[ROOMS_498], train_scenes=rooms)
+        assert dataclasses.replace(cfg, run=head.run) == dataclasses.replace(head, optim=unwarmed)
+        assert cfg.run.name == f"bench-{variant}-s1"
+        assert VARIANT_SETTINGS[variant] == dataclasses.replace(VARIANT_SETTINGS[HOUR_WARM], train_scenes=rooms,
+                                                                warmup_2d_steps=0)
     one_lever = ((OCCL, {"weight_inputs": "cross-view", "tau": recipe.model.tau}),
                  (OCCL_T5, {"weight_inputs": "cross-view", "tau": 0.5}), (HOUR_NONE, {"attention": "none"}),
                  (HOUR_DEPTH, {"lambda_depth": 0.1}))
@@ -48,9 +55,6 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
         assert cfg.model == dataclasses.replace(recipe.model, **change), variant
         assert dataclasses.replace(cfg, run=head.run, model=head.model) == head
         assert cfg.run.name == f"bench-{variant}-s1" and VARIANT_SETTINGS[variant].train_scenes == RECIPE_ROOMS
-    warm = accuracy_cells.cell_config(Cell(HOUR_WARM, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
-    assert warm.optim.warmup_2d_steps == WARM_2D_STEPS > 0 and recipe.optim.warmup_2d_steps == 0
-    assert dataclasses.replace(warm, run=head.run, optim=head.optim) == head and warm.optim.cpu_seconds > 0
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.attention == "full"
     assert recipe.model.lambda_depth == 0.0
     planned = [c.variant for c in preset.plan]

@@ -8,37 +8,40 @@ from dataclasses import dataclass, replace
 
 from sray.data_tools.synth.world import World
 from sray.model.fast_render import FastRender
+from sray.platform.config.recipes import CPU_HOUR_WARMUP_2D
 
 LONG = "long"
 """Variant name of the cell that pretrains for the preset's ``long_steps`` with the first hour recipe's
 settings (full CRA, union fine pass, 16 samples per scene visit, no source-view loss, no CPU budget)."""
 
 HOUR = "hour"
-"""Variant name of the cell that pretrains with the preset recipe's settings and its own budget (``synth-cpu-hour``:
-CPU seconds) on the preset's world (48 rooms for ``cpu-small``, the recipe's first world)."""
+"""Variant name of the cell that pretrains with the preset recipe's settings before its 2D warm-up and its own budget
+(``synth-cpu-hour``: CPU seconds) on the preset's world (48 rooms for ``cpu-small``, the recipe's first world)."""
 
 ROOMS_198, ROOMS_498 = "hour-198", "hour-498"
-"""Variant names of the hour recipe trained on 198 and 498 procedural rooms instead of the preset world's;
-``hour-498`` is ``synth-cpu-hour`` exactly as it is: its settings, its budget and its world."""
+"""Variant names of ``hour`` trained on 198 and 498 procedural rooms instead of the preset world's; ``hour-498`` is
+``synth-cpu-hour`` without its 2D warm-up (its settings, budget and world otherwise)."""
 
 RECIPE_ROOMS = 498
 """Training rooms of ``synth-cpu-hour``'s world (the preset world's other sizes and its test scenes)."""
 
 OCCL, OCCL_T5 = "hour-occl", "hour-occl-t5"
-"""Variant names of the hour recipe (498 rooms) with the occlusion-aware weight net inputs
+"""Variant names of the hour recipe (498 rooms, 2D warm-up) with the occlusion-aware weight net inputs
 (``model.weight_inputs=cross-view``), at the model's tau (0.7) and at tau 0.5 (a wider weight range)."""
 
 HOUR_NONE, HOUR_DEPTH = "hour-none", "hour-depth"
-"""Variant names of the hour recipe (498 rooms) without cross-reprojection attention (the attention question at the
-hour budget, and the no-CRA model of the stability suite) and with the training-time depth loss (weight 0.1)."""
+"""Variant names of the hour recipe (498 rooms, 2D warm-up) without cross-reprojection attention (the attention
+question at the hour budget, and the no-CRA model of the stability suite) and with the training-time depth loss
+(weight 0.1)."""
 
 HOUR_WARM = "hour-warm2d"
-"""Variant name of the hour recipe (498 rooms) whose first 1,500 steps train the encoder on the source views' labels
-alone (``optim.warmup_2d_steps``), within the same CPU budget: at equal CPU a plain 2D segmenter's encoder carries
-13 points more category information than S-Ray's (docs/benchmarks.md, "On the 498-room recipe model")."""
+"""Variant name of ``synth-cpu-hour`` exactly as it is (its settings, budget and world): ``hour-498`` whose first
+1,500 steps train the encoder on the source views' labels alone (``optim.warmup_2d_steps``), within the same CPU
+budget; measured because at equal CPU a plain 2D segmenter's encoder carried 13 points more category information
+than ``hour-498``'s (docs/benchmarks.md, "On the 498-room recipe model")."""
 
-WARM_2D_STEPS = 1500
-"""``optim.warmup_2d_steps`` of ``hour-warm2d``."""
+WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
+"""``optim.warmup_2d_steps`` of ``hour-warm2d`` (the recipe's)."""
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5, HOUR_NONE, HOUR_DEPTH, HOUR_WARM)
 """Variants whose cells train for the preset recipe's own budget (its CPU seconds) instead of a step budget."""
@@ -85,7 +88,8 @@ class Variant:
 
 
 _HOUR_SETTINGS = Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4)
-_RECIPE_SETTINGS = replace(_HOUR_SETTINGS, train_scenes=RECIPE_ROOMS)
+_UNWARMED_RECIPE = replace(_HOUR_SETTINGS, train_scenes=RECIPE_ROOMS)
+_RECIPE_SETTINGS = replace(_UNWARMED_RECIPE, warmup_2d_steps=WARM_2D_STEPS)
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
                     "full-affine": Variant(weight_map="affine"), "full-rgbd": Variant(inputs="rgbd"),
@@ -98,12 +102,12 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     LONG: Variant(),
                     HOUR: _HOUR_SETTINGS,
                     ROOMS_198: replace(_HOUR_SETTINGS, train_scenes=198),
-                    ROOMS_498: _RECIPE_SETTINGS,
+                    ROOMS_498: _UNWARMED_RECIPE,
                     OCCL: replace(_RECIPE_SETTINGS, weight_inputs="cross-view"),
                     OCCL_T5: replace(_RECIPE_SETTINGS, weight_inputs="cross-view", tau=0.5),
                     HOUR_NONE: replace(_RECIPE_SETTINGS, attention="none"),
                     HOUR_DEPTH: replace(_RECIPE_SETTINGS, lambda_depth=0.1),
-                    HOUR_WARM: replace(_RECIPE_SETTINGS, warmup_2d_steps=WARM_2D_STEPS)}
+                    HOUR_WARM: _RECIPE_SETTINGS}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
@@ -111,13 +115,13 @@ channels instead of 4 of 8; ``full-new-src`` full-new with the source views' per
 encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget;
 ``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
 (one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds
-``synth-cpu-hour``'s own settings on the preset's 48 rooms; ``hour-198`` and ``hour-498`` are ``hour`` on 198
-and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget), ``hour-498`` the
-recipe exactly (a test keeps them equal); ``hour-occl`` is ``hour-498`` whose weight net also reads the cross-view
-statistics, ``hour-occl-t5`` the same at tau 0.5 (the two occlusion levers, docs/model.md), both at the recipe's CPU
-budget; ``hour-none`` is ``hour-498`` without cross-reprojection attention and ``hour-depth`` ``hour-498`` with the
-training-time depth loss (weight 0.1); ``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only
-warm-up."""
+``synth-cpu-hour``'s settings without its 2D warm-up on the preset's 48 rooms; ``hour-198`` and ``hour-498`` are
+``hour`` on 198 and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget);
+``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only warm-up: the recipe exactly (a test keeps
+them equal); ``hour-occl`` is ``hour-warm2d`` whose weight net also reads the cross-view statistics,
+``hour-occl-t5`` the same at tau 0.5 (the two occlusion levers, docs/model.md), both at the recipe's CPU budget;
+``hour-none`` is ``hour-warm2d`` without cross-reprojection attention and ``hour-depth`` ``hour-warm2d`` with the
+training-time depth loss (weight 0.1)."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -200,7 +204,7 @@ PRESETS = {
               Cell(HOUR, 1), Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
-        fleet_gpus_per_task=0.0, headline=ROOMS_498),
+        fleet_gpus_per_task=0.0, headline=HOUR_WARM),
     "gpu": Preset(
         world=World(train_scenes=96, test_scenes=8, views=100, height=240, width=320),
         recipe="synth-paper", overrides=("data.aug.min_source=2", "data.class_balance=inverse-sqrt",
@@ -218,6 +222,6 @@ PRESETS = {
 
 def headline_variant(p: Preset) -> str:
     """The variant of ``p``'s headline model, the one its targets are read on and its fleet finetunes from: the
-    recipe as it is (``Preset.headline``: ``hour-498`` for ``cpu-small``) when the plan holds it; else the recipe's
+    recipe as it is (``Preset.headline``: ``hour-warm2d`` for ``cpu-small``) when the plan holds it; else the recipe's
     first form at its step budget (``long``)."""
     return p.headline if any(c.variant == p.headline for c in p.plan) else LONG
