@@ -26,7 +26,7 @@ def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Pat
     precision = {(r[0], r[1]): r for r in report["stages"]["precision"].rows}
     assert set(precision) == {("bf16", c) for c in ("projection", "render argmax", "step loss", "step gradient")}
     assert all(r[-1] == "ok" for r in precision.values())
-    assert {r[0] for r in report["stages"]["training"].rows} == {"fp32", "bf16"}
+    assert [r[:2] for r in report["stages"]["training"].rows] == [["fp32", "32"], ["bf16", "32"], ["bf16", "128"]]
     assert [r[0] for r in report["stages"]["recipe"].rows] == [
         f"{p} {phase}" for p in ("fp32", "bf16") for phase in ("2D warm-up", "ray steps")]
     curve = json.loads((tmp_path / "recipe_curve.json").read_text())["curves"]["bf16"]

@@ -25,8 +25,10 @@ def peak_mb(device: torch.device) -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def timed_steps(ctx: CheckContext, precision: str, steps: int) -> dict[str, float]:
-    """Run ``steps`` training steps after one warm-up; returns steps/s, rays/s, peak MiB and skipped steps."""
+def timed_steps(ctx: CheckContext, precision: str, steps: int, rays: int | None = None) -> dict[str, float]:
+    """Run ``steps`` training steps of ``rays`` rays (default ``ctx.rays``) after one warm-up; returns steps/s, rays/s,
+    peak MiB and skipped steps."""
+    rays = rays or ctx.rays
     from accelerate import Accelerator
 
     accelerator = Accelerator(mixed_precision="no", cpu=ctx.device.type != "cuda")
@@ -35,7 +37,7 @@ def timed_steps(ctx: CheckContext, precision: str, steps: int) -> dict[str, floa
     params = list(model.parameters())
     model, optimizer = accelerator.prepare(model, fused_adam(params, 1e-4))
     step = TrainStep(list(model.parameters()), optimizer, 1.0, precision, accelerator.device, steps + 1)
-    sample = training_sample(ctx.views, ctx.image_hw, ctx.rays, 20, accelerator.device)
+    sample = training_sample(ctx.views, ctx.image_hw, rays, 20, accelerator.device)
     batch = ray_batch(sample)
     if ctx.device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(ctx.device)
@@ -54,27 +56,35 @@ def timed_steps(ctx: CheckContext, precision: str, steps: int) -> dict[str, floa
     if ctx.device.type == "cuda":
         torch.cuda.synchronize(ctx.device)
     seconds = time.perf_counter() - start
-    return {"steps_per_s": steps / seconds, "rays_per_s": steps * ctx.rays / seconds,
+    return {"steps_per_s": steps / seconds, "rays_per_s": steps * rays / seconds,
             "peak_mb": peak_mb(ctx.device), "skipped": float(step.skipped_total)}
 
 
+LARGE_BATCH = 4
+"""The larger batch of the stage, in multiples of ``ctx.rays``: on one H100 a 1,024-ray step leaves the GPU idle
+(bf16 slower than fp32 there), 4,096 rays nearly double the rays/s (docs/benchmarks.md, "GPU check")."""
+
+
 def run(ctx: CheckContext) -> StageResult:
-    """fp32 and each low precision; fails on a skipped (non-finite) step."""
+    """fp32 and each low precision at ``ctx.rays``, then the first low precision (bf16) at ``LARGE_BATCH`` times the
+    rays; fails on a skipped (non-finite) step."""
     if not has_module("accelerate"):
         return StageResult("skipped", "accelerate is not installed here")
     steps = 2 if ctx.dry_run else 20
     rows, bad = [], []
-    for precision in ["no", *ctx.low_precisions()]:
-        m = timed_steps(ctx, precision, steps)
+    runs = [(p, ctx.rays) for p in ["no", *ctx.low_precisions()]] + [(ctx.low_precisions()[0], LARGE_BATCH * ctx.rays)]
+    for precision, rays in runs:
+        m = timed_steps(ctx, precision, steps, rays)
         label = "fp32" if precision == "no" else precision
-        rows.append([label, f"{m['steps_per_s']:.2f}", f"{m['rays_per_s']:.0f}", f"{m['peak_mb']:.0f}",
+        rows.append([label, str(rays), f"{m['steps_per_s']:.2f}", f"{m['rays_per_s']:.0f}", f"{m['peak_mb']:.0f}",
                      f"{m['skipped']:.0f}"])
         if m["skipped"]:
-            bad.append(label)
+            bad.append(f"{label} at {rays} rays")
     hw = f"{ctx.image_hw[1]}x{ctx.image_hw[0]}"
-    summary = (f"{ctx.rays} rays, {ctx.samples[0]}+{ctx.samples[1]} samples, {ctx.views} views, {hw}: "
-               + ", ".join(f"{r[0]} {r[2]} rays/s" for r in rows))
+    summary = (f"{ctx.samples[0]}+{ctx.samples[1]} samples, {ctx.views} views, {hw}: "
+               + ", ".join(f"{r[0]} {r[3]} rays/s at {r[1]} rays" for r in rows))
     if bad:
         summary = f"non-finite steps in {', '.join(bad)}; " + summary
     return StageResult("failed" if bad else "passed", summary,
-                       header=["precision", "steps/s", "rays/s", "peak MiB", "skipped steps"], rows=rows)
+                       header=["precision", "rays per step", "steps/s", "rays/s", "peak MiB", "skipped steps"],
+                       rows=rows)
