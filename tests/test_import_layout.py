@@ -39,8 +39,6 @@ LAZY_IMPORTS_ALLOWED = {
         "the finetune fleet needs Ray, MLflow and webdataset: as stage_ray.py",
     "jobs/gpu_check/stage_training.py":
         "accelerate: the stage skips where it is not installed",
-    "jobs/gpu_check/stage_recipe.py":
-        "accelerate: as stage_training.py",
 }
 """Files (under the repository root) allowed imports inside functions, each with the reason. Anywhere else an
 import inside a function fails :func:`test_imports_sit_at_the_top_of_their_module`, except in the entry function of

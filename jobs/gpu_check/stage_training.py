@@ -25,19 +25,27 @@ def peak_mb(device: torch.device) -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def timed_steps(ctx: CheckContext, precision: str, steps: int, rays: int | None = None) -> dict[str, float]:
-    """Run ``steps`` training steps of ``rays`` rays (default ``ctx.rays``) after one warm-up; returns steps/s, rays/s,
-    peak MiB and skipped steps."""
-    rays = rays or ctx.rays
+def prepared_training(ctx: CheckContext, cfg: SRayConfig, precision: str, lr: float, grad_clip: float,
+                      steps: int) -> tuple[torch.nn.Module, TrainStep, torch.device]:
+    """A seeded ``RayBatchLoss`` of ``cfg`` and its fused Adam through Accelerate on ``ctx.device``, with the
+    ``TrainStep`` of ``precision`` that training uses (up to ``steps`` non-finite steps in a row tolerated)."""
     from accelerate import Accelerator
 
     accelerator = Accelerator(mixed_precision="no", cpu=ctx.device.type != "cuda")
     torch.manual_seed(0)
-    model = RayBatchLoss(SRayConfig(n_coarse=ctx.samples[0], n_fine=ctx.samples[1], n_source=ctx.views))
-    params = list(model.parameters())
-    model, optimizer = accelerator.prepare(model, fused_adam(params, 1e-4))
-    step = TrainStep(list(model.parameters()), optimizer, 1.0, precision, accelerator.device, steps + 1)
-    sample = training_sample(ctx.views, ctx.image_hw, rays, 20, accelerator.device)
+    model = RayBatchLoss(cfg)
+    model, optimizer = accelerator.prepare(model, fused_adam(list(model.parameters()), lr))
+    step = TrainStep(list(model.parameters()), optimizer, grad_clip, precision, accelerator.device, steps)
+    return model, step, accelerator.device
+
+
+def timed_steps(ctx: CheckContext, precision: str, steps: int, rays: int | None = None) -> dict[str, float]:
+    """Run ``steps`` training steps of ``rays`` rays (default ``ctx.rays``) after one warm-up; returns steps/s, rays/s,
+    peak MiB and skipped steps."""
+    rays = rays or ctx.rays
+    cfg = SRayConfig(n_coarse=ctx.samples[0], n_fine=ctx.samples[1], n_source=ctx.views)
+    model, step, device = prepared_training(ctx, cfg, precision, 1e-4, 1.0, steps + 1)
+    sample = training_sample(ctx.views, ctx.image_hw, rays, 20, device)
     batch = ray_batch(sample)
     if ctx.device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(ctx.device)
@@ -61,8 +69,8 @@ def timed_steps(ctx: CheckContext, precision: str, steps: int, rays: int | None 
 
 
 LARGE_BATCH = 4
-"""The larger batch of the stage, in multiples of ``ctx.rays``: on one H100 a 1,024-ray step leaves the GPU idle
-(bf16 slower than fp32 there), 4,096 rays nearly double the rays/s (docs/benchmarks.md, "GPU check")."""
+"""The larger batch of the stage, in multiples of ``ctx.rays``: on one H100 a 1,024-ray step leaves the GPU partly
+idle (bf16 slower than fp32 there), 4,096 rays give 1.7 times the bf16 rays/s (docs/benchmarks.md, "GPU check")."""
 
 
 def run(ctx: CheckContext) -> StageResult:

@@ -64,8 +64,8 @@ def synth_cpu_hour() -> TrainConfig:
     together +7 points of zero-shot mIoU and +11 on held-out views of the training rooms at 600 steps,
     seed 0 (docs/benchmarks.md, "Dense 2D supervision of the encoder"). Its first ``CPU_HOUR_WARMUP_2D`` steps
     train the encoder and that head on the source labels alone, before any ray is rendered: about 9 points of
-    zero-shot mIoU above the same budget without the warm-up, every class higher (docs/benchmarks.md, "The hour
-    recipe at its CPU budget"). Evaluation uses 8 sources.
+    zero-shot mIoU above the same budget without the warm-up over three seeds each, every class but chair higher
+    (docs/benchmarks.md, "The hour recipe at its CPU budget"). Evaluation uses 8 sources.
     """
     return TrainConfig(
         recipe="synth-cpu-hour",
