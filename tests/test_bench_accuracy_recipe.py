@@ -8,9 +8,9 @@ from pathlib import Path
 
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
-from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_DEPTH, HOUR_NONE, HOUR_WARM, LONG, OCCL, OCCL_T5,
-                                           PRESETS, RECIPE_ROOMS, ROOMS_198, ROOMS_498, VARIANT_SETTINGS, WARM_2D_STEPS,
-                                           Cell, headline_variant)
+from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_DEPTH, HOUR_INTRA, HOUR_NONE,
+                                           HOUR_WARM, LONG, OCCL, OCCL_T5, PRESETS, RECIPE_ROOMS, ROOMS_198, ROOMS_498,
+                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -49,6 +49,7 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
                                                                 warmup_2d_steps=0)
     one_lever = ((OCCL, {"weight_inputs": "cross-view", "tau": recipe.model.tau}),
                  (OCCL_T5, {"weight_inputs": "cross-view", "tau": 0.5}), (HOUR_NONE, {"attention": "none"}),
+                 (HOUR_CROSS, {"attention": "cross"}), (HOUR_INTRA, {"attention": "intra"}),
                  (HOUR_DEPTH, {"lambda_depth": 0.1}))
     for variant, change in one_lever:  # the recipe with one model setting changed, at the same CPU budget
         cfg = accuracy_cells.cell_config(Cell(variant, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")

@@ -34,6 +34,9 @@ HOUR_NONE, HOUR_DEPTH = "hour-none", "hour-depth"
 question at the hour budget, and the no-CRA model of the stability suite) and with the training-time depth loss
 (weight 0.1)."""
 
+HOUR_CROSS, HOUR_INTRA = "hour-cross", "hour-intra"
+"""Variant names of the hour recipe (498 rooms, 2D warm-up) with only the cross-view or only the intra-view
+attention stage of CRA (the paper's Table 4 ablation, asked on the model that labels objects)."""
 HOUR_WARM = "hour-warm2d"
 """Variant name of ``synth-cpu-hour`` exactly as it is (its settings, budget and world): ``hour-498`` whose first
 1,500 steps train the encoder on the source views' labels alone (``optim.warmup_2d_steps``), within the same CPU
@@ -43,7 +46,7 @@ than ``hour-498``'s (docs/benchmarks.md, "On the 498-room recipe model")."""
 WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 """``optim.warmup_2d_steps`` of ``hour-warm2d`` (the recipe's)."""
 
-CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5, HOUR_NONE, HOUR_DEPTH, HOUR_WARM)
+CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_DEPTH, HOUR_WARM)
 """Variants whose cells train for the preset recipe's own budget (its CPU seconds) instead of a step budget."""
 
 @dataclass(frozen=True)
@@ -106,6 +109,8 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     OCCL: replace(_RECIPE_SETTINGS, weight_inputs="cross-view"),
                     OCCL_T5: replace(_RECIPE_SETTINGS, weight_inputs="cross-view", tau=0.5),
                     HOUR_NONE: replace(_RECIPE_SETTINGS, attention="none"),
+                    HOUR_CROSS: replace(_RECIPE_SETTINGS, attention="cross"),
+                    HOUR_INTRA: replace(_RECIPE_SETTINGS, attention="intra"),
                     HOUR_DEPTH: replace(_RECIPE_SETTINGS, lambda_depth=0.1),
                     HOUR_WARM: _RECIPE_SETTINGS}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
@@ -120,7 +125,8 @@ encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up
 ``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only warm-up: the recipe exactly (a test keeps
 them equal); ``hour-occl`` is ``hour-warm2d`` whose weight net also reads the cross-view statistics,
 ``hour-occl-t5`` the same at tau 0.5 (the two occlusion levers, docs/model.md), both at the recipe's CPU budget;
-``hour-none`` is ``hour-warm2d`` without cross-reprojection attention and ``hour-depth`` ``hour-warm2d`` with the
+``hour-none`` is ``hour-warm2d`` without cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only
+its cross-view or only its intra-view stage, and ``hour-depth`` ``hour-warm2d`` with the
 training-time depth loss (weight 0.1)."""
 
 
@@ -200,7 +206,7 @@ PRESETS = {
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
               *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), Cell(HOUR, 0), Cell(ROOMS_198, 0),
               *seeds(ROOMS_498, 3), *seeds(HOUR_WARM, 3), *seeds(HOUR_NONE, 3), Cell(HOUR_DEPTH, 0), Cell(OCCL, 0),
-              Cell(OCCL_T5, 0),
+              Cell(OCCL_T5, 0), Cell(HOUR_CROSS, 0), Cell(HOUR_INTRA, 0),
               Cell(HOUR, 1), Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
