@@ -43,7 +43,7 @@ from sray.platform.render.tracked import tracked_flythrough
 from sray.platform.train.launcher import launch_training
 
 
-RECIPE = "synth-small"
+RECIPE = "synth-demo"
 """The recipe S-Ray trains with; the 2D segmenter takes its data settings (sources per step, neighbours,
 augmentation, class balance) and feature width."""
 FLEET_METHODS = ["sray", "semantic-nerf", "2d-transfer"]
@@ -94,12 +94,15 @@ def run_demo(args: argparse.Namespace) -> int:
         return 0
     cfg = get_recipe(RECIPE)
     cfg.data.shards = str(shards)
+    # --steps keeps the recipe's share of 2D-only warm-up steps
+    cfg.optim.warmup_2d_steps = round(args.steps * cfg.optim.warmup_2d_steps / cfg.optim.steps)
     cfg.optim.steps = args.steps
     cfg.run.output_dir = str(args.out / "train")
     cfg.run.seed = args.seed
     cfg.run.ckpt_every = max(args.steps // 2, 1)
     cfg.run.val_every = args.steps  # one validation, at the end: it costs about a minute on 2 cores
-    _say(f"5/9 training S-Ray for {args.steps} steps on local Ray with {cfg.run.workers} CPU workers")
+    _say(f"5/9 training S-Ray ({RECIPE}) for {args.steps} steps on local Ray with {cfg.run.workers} CPU workers, the "
+         f"first {cfg.optim.warmup_2d_steps} on the source views' labels alone")
     outcome = launch_training(cfg)
     checkpoint = outcome.best_checkpoint or outcome.latest_checkpoint
     sray_cpu_s = float(load_checkpoint(outcome.latest_checkpoint)["counters"]["cpu_seconds"])

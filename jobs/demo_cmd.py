@@ -5,11 +5,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sray.platform.config.recipes import DEMO_STEPS
+
 
 SEGMENTER_CPU_CAP = 60.0
-"""Default of ``--segmenter-cpu-seconds``. Uncapped, the segmenter would get the CPU seconds of S-Ray's 300 demo
-steps (480 to 562 CPU s in runs on the 2-core machine): 4 more minutes of wall time on a demo of about 10; 60 CPU s
+"""Default of ``--segmenter-cpu-seconds``. Uncapped, the segmenter would get the CPU seconds of S-Ray's demo
+training (about 460 CPU s on the 2-core machine): 4 more minutes of wall time on a demo of about 10; 60 CPU s
 is about half a minute."""
+TRAIN_SCENES = 19
+"""Default of ``--train-scenes``. The generator cycles room types over the scene index, so 4 + 5k training rooms keep
+the two test rooms of the 4-room world file for file; 19 rooms cost about 20 s more to generate than 4 and lift
+zero-shot mIoU with the synth-demo recipe (docs/benchmarks.md, "On the demo's scale")."""
 FLEET_SCENES = 1
 """Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (about 3 minutes of wall time on
 the 2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of
@@ -31,12 +37,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray demo``."""
     p = sub.add_parser("demo", help="the main job: scenes -> shards -> a short training run (local Ray)")
     p.add_argument("--out", type=Path, default=Path("outputs/demo"), help="output folder")
-    p.add_argument("--train-scenes", type=int, default=4)
+    p.add_argument("--train-scenes", type=int, default=TRAIN_SCENES)
     p.add_argument("--test-scenes", type=int, default=2)
     p.add_argument("--views", type=int, default=40, help="views per scene")
     p.add_argument("--height", type=int, default=120)
     p.add_argument("--width", type=int, default=160)
-    p.add_argument("--steps", type=int, default=300, help="training steps (0 = data only)")
+    p.add_argument("--steps", type=int, default=DEMO_STEPS,
+                   help="training steps of the synth-demo recipe, its first third on source-view labels alone "
+                        "(0 = data only)")
     p.add_argument("--segmenter-cpu-seconds", type=_cpu_cap, default=SEGMENTER_CPU_CAP, metavar="S",
                    help="2d-transfer's 2D segmenter trains for the CPU seconds S-Ray's training spent, but at most S "
                         f"(default {SEGMENTER_CPU_CAP:.0f}: about half a minute on 2 cores, so the demo stays near 10 "

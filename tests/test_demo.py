@@ -47,8 +47,11 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
     # --eval-stride 4: the evaluation is strided, so it has no SSIM; the fleet scores every 8th pixel
     assert eval_metrics["protocol"]["stride"] == 4 and eval_metrics["mean"]["colour"]["ssim"] is None
     # stage 6: the segmenter trained on the train scenes for S-Ray's CPU seconds, capped here at 1 CPU s
-    sray_cpu_s = load_checkpoint(CheckpointManager(next((tmp_path / "demo/train").iterdir()) / "checkpoints")
-                                 .latest())["counters"]["cpu_seconds"]
+    state = load_checkpoint(CheckpointManager(next((tmp_path / "demo/train").iterdir()) / "checkpoints").latest())
+    sray_cpu_s = state["counters"]["cpu_seconds"]
+    # the demo's recipe with 4 of its 600 steps keeps its 2D-only warm-up at a third: round(4 * 200 / 600) = 1 step
+    assert state["config"]["recipe"] == "synth-demo" and state["config"]["optim"]["warmup_2d_steps"] == 1
+    assert "first 1 on the source views' labels alone" in out
     assert sray_cpu_s > 1.0  # so the cap is what set the budget
     training = json.loads((tmp_path / "demo/segmenter/segmenter.json").read_text())["training"]
     assert training["cpu_seconds_budget"] == 1.0 and training["steps"] >= 1
