@@ -14,8 +14,9 @@ training (about 460 CPU s on the 2-core machine): 4 more minutes of wall time on
 is about half a minute."""
 TRAIN_SCENES = 19
 """Default of ``--train-scenes``. The generator cycles room types over the scene index, so 4 + 5k training rooms keep
-the two test rooms of the 4-room world file for file; 19 rooms cost about 20 s more to generate than 4 and lift
-zero-shot mIoU with the synth-demo recipe (docs/benchmarks.md, "On the demo's scale")."""
+the two test rooms of the 4-room world file for file; 19 rooms take about half a minute to generate, check and shard
+on the 2-core machine, and with the synth-demo recipe lift zero-shot mIoU where 4 rooms do not (docs/benchmarks.md,
+"On the demo's scale")."""
 FLEET_SCENES = 1
 """Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (about 3 minutes of wall time on
 the 2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of
