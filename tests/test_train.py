@@ -82,13 +82,17 @@ def test_mlflow_store_holds_everything(uninterrupted) -> None:
 
 
 def test_resume_equals_uninterrupted(uninterrupted, tiny_shards, tmp_path_factory) -> None:  # noqa: F811
-    """Stopped after its second checkpoint and resumed to step 20: same parameters as uninterrupted."""
+    """Checkpointed every 4 steps instead of 5 but with the reference's 5-step loader epochs, stopped mid-epoch
+    after step 7 and resumed to step 20: the same parameters as uninterrupted (the data order follows
+    ``data.epoch_steps``, not the checkpoint interval; the resume replays epoch 1 to its offset 2)."""
     ref_cfg, ref = uninterrupted
+    assert ref_cfg.data.epoch_steps == 0 and ref_cfg.run.ckpt_every == 5  # the reference's epochs are 5 steps
     out = tmp_path_factory.mktemp("r")
-    cfg = tiny_config(tiny_shards, out, name="stopped")
-    with injected_faults("train.nan_at_step=7;train.stop_after_step=10"):
+    cfg = tiny_config(tiny_shards, out, name="stopped", ckpt_every=4)
+    cfg.data.epoch_steps = 5
+    with injected_faults("train.nan_at_step=7;train.stop_after_step=7"):
         first = launch_training(cfg)
-    assert first.status == "KILLED" and load_checkpoint(first.latest_checkpoint)["step"] == 10
+    assert first.status == "KILLED" and load_checkpoint(first.latest_checkpoint)["step"] == 7
     with injected_faults("train.nan_at_step=7"):
         second = launch_training(cfg, resume=True)
     assert second.status == "FINISHED"

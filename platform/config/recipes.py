@@ -40,7 +40,8 @@ def synth_demo() -> TrainConfig:
 
     ``synth-small``'s model, rays and sources, trained the hour recipe's way: class-balanced semantic loss, scenes
     interleaved step by step, the encoder also learning from its source views' labels, and a 2D-only warm-up of
-    ``DEMO_WARMUP_2D`` of its ``DEMO_STEPS`` steps; no view augmentation (not measured at this length). On the
+    ``DEMO_WARMUP_2D`` of its ``DEMO_STEPS`` steps; no view augmentation (not measured at this length); one loader
+    epoch over the whole run (``data.epoch_steps``), the data order it was first measured with. On the
     demo's two unseen rooms (8 sources, full render) it scores 31.8 ± 3.8% zero-shot mIoU over four seeds and
     checkpoint intervals, against 18.4 ± 4.3% for ``synth-small``'s 300 steps on the demo's earlier 4-room world
     over two seeds; on 4 rooms the same losses and warm-up gain nothing (docs/benchmarks.md, "On the demo's scale").
@@ -49,6 +50,7 @@ def synth_demo() -> TrainConfig:
     cfg.recipe = "synth-demo"
     cfg.model.lambda_src_sem = 1.0
     cfg.data.visit_samples, cfg.data.cache_scenes, cfg.data.class_balance = 1, 4, "inverse-sqrt"
+    cfg.data.epoch_steps = DEMO_STEPS
     cfg.optim.steps, cfg.optim.warmup_2d_steps = DEMO_STEPS, DEMO_WARMUP_2D
     cfg.run.experiment = "sray-synth-demo"
     cfg.run.val_every = cfg.run.ckpt_every = DEMO_STEPS // 2

@@ -37,6 +37,10 @@ class DataSettings:
     (1 = scenes interleaved step by step; larger reuses a decoded scene more, ``shard_loader``)."""
     cache_scenes: int = 2
     """Scenes each loader worker keeps decoded-ready in memory (encoded views; least recently used dropped)."""
+    epoch_steps: int = 0
+    """Steps per loader epoch. Epoch e's samples are drawn from ``(run.seed, e, rank)``, so this, not how often the
+    job checkpoints, sets the data order when it is > 0; 0 = one epoch per ``run.ckpt_every`` steps. A job resumed
+    mid-epoch regenerates the epoch's samples up to its step, so a long epoch makes a resume slower."""
     val_views_per_scene: int = 2
     """Held-out views rendered per scene at each validation (whole images, in chunks)."""
     val_downscale: int = 2
@@ -63,6 +67,9 @@ class DataSettings:
         if self.visit_samples < 1 or self.cache_scenes < 1:
             raise ValueError(f"train config: data.visit_samples ({self.visit_samples}) and data.cache_scenes "
                              f"({self.cache_scenes}) must be >= 1")
+        if self.epoch_steps < 0:
+            raise ValueError(f"train config: data.epoch_steps is {self.epoch_steps}; give a number of steps, or 0 for "
+                             "one loader epoch per run.ckpt_every steps")
         self.val_fast()
 
     def val_fast(self) -> FastRender | None:

@@ -115,10 +115,9 @@ def train_worker(payload: dict[str, Any]) -> None:
     if logger is not None and state is not None:
         for key, value, logged_at in state.get(UNSENT_METRICS, []):
             logger.log_metrics({key: value}, logged_at)  # the store missed them before the checkpoint
-    # One loader epoch per checkpoint interval: epoch e's stream depends only on (seed, e, rank), so a
-    # job resumed at step s re-enters epoch s // E at offset s % E and sees exactly the batches an
-    # uninterrupted job would have seen.
-    epoch_len = cfg.run.ckpt_every
+    # Epoch e's stream depends only on (seed, e, rank), so a job resumed at step s re-enters epoch s // E at
+    # offset s % E and sees exactly the batches an uninterrupted job would have seen.
+    epoch_len = cfg.data.epoch_steps or cfg.run.ckpt_every
     loader = job_loader(cfg, rank, world, epoch_len)
 
     def batches_from(step_at: int) -> Any:
