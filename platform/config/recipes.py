@@ -42,9 +42,10 @@ def synth_demo() -> TrainConfig:
     interleaved step by step, the encoder also learning from its source views' labels, and a 2D-only warm-up of
     ``DEMO_WARMUP_2D`` of its ``DEMO_STEPS`` steps; no view augmentation (not measured at this length); one loader
     epoch over the whole run (``data.epoch_steps``), the data order it was first measured with. On the
-    demo's two unseen rooms (8 sources, full render) it scores 31.8 ± 3.8% zero-shot mIoU over four seeds and
-    checkpoint intervals, against 18.4 ± 4.3% for ``synth-small``'s 300 steps on the demo's earlier 4-room world
-    over two seeds; on 4 rooms the same losses and warm-up gain nothing (docs/benchmarks.md, "On the demo's scale").
+    demo's two unseen rooms (8 sources, full render) it scores 35.2 and 34.8% zero-shot mIoU on seeds 0 and 1, and
+    31.8 ± 3.8% over four data orders (those two and 300-step epochs), against 18.4 ± 4.3% for ``synth-small``'s 300
+    steps on the demo's earlier 4-room world over two seeds; on 4 rooms the same losses and warm-up gain nothing
+    (docs/benchmarks.md, "On the demo's scale").
     """
     cfg = synth_small()
     cfg.recipe = "synth-demo"
