@@ -10,7 +10,7 @@ from sray.platform.config.recipes import DEMO_STEPS
 
 SEGMENTER_CPU_CAP = 60.0
 """Default of ``--segmenter-cpu-seconds``. Uncapped, the segmenter would get the CPU seconds of S-Ray's demo
-training (about 460 CPU s on the 2-core machine): 4 more minutes of wall time on a demo of about 10; 60 CPU s
+training (464 to 530 CPU s in runs on the 2-core machine): 4 more minutes of wall time on a demo of about 10; 60 CPU s
 is about half a minute."""
 TRAIN_SCENES = 19
 """Default of ``--train-scenes``. The generator cycles room types over the scene index, so 4 + 5k training rooms keep
