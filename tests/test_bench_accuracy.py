@@ -18,7 +18,8 @@ from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_fleet import DONE_FILE
-from sray.jobs.bench.accuracy_plan import HOUR, HOUR_WARM, LONG, PRESETS, ROOMS_198, ROOMS_498, Cell, Preset, World
+from sray.jobs.bench.accuracy_plan import (HOUR, HOUR_INTRA, HOUR_WARM, LONG, PRESETS, ROOMS_198, ROOMS_498, Cell, Preset,
+                                           World)
 from sray.jobs.bench.accuracy_budgets import budget_means
 from sray.jobs.bench.accuracy_tables import class_table, fleet_from_headline, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir
@@ -121,15 +122,19 @@ def test_zero_shot_and_finetune_ratio_targets() -> None:
 
 
 def test_targets_read_the_recipe_as_it_is_and_a_fleet_only_from_its_model(tmp_path: Path) -> None:
-    """The cpu-small targets read the recipe's cells (498 rooms with the 2D warm-up) once one is stored, else its
-    earlier forms: 498 rooms without the warm-up, then the 48-room hour cell; the zero-shot ratio's fleet must have
-    finetuned from one of the read cells' checkpoints."""
+    """The cpu-small targets read the recipe's cells (498 rooms, 2D warm-up, intra-only attention) once one is stored,
+    else its earlier forms: full CRA, then 498 rooms without the warm-up, then the 48-room hour cell; the zero-shot
+    ratio's fleet must have finetuned from one of the read cells' checkpoints."""
     preset = PRESETS["cpu-small"]
     stored = {c["cell"]: c | {"checkpoint": f"ck/{c['cell']}"}
               for c in [_cell(HOUR, 0, 0.31), _cell(ROOMS_498, 0, 0.40), _cell(HOUR_WARM, 0, 0.50),
-                        _cell(HOUR_WARM, 1, 0.54)]}
+                        _cell(HOUR_WARM, 1, 0.54), _cell(HOUR_INTRA, 0, 0.47)]}
     assert targets(preset, stored, None)[0].startswith(
-        "- Zero-shot mIoU of the synth-cpu-hour, 498 rooms model (2 seeds): 52.00% against the 50% target: met")
+        "- Zero-shot mIoU of the synth-cpu-hour, 498 rooms model (1 seed): 47.00% against the 50% target: not met")
+    full_cra = {k: v for k, v in stored.items() if k != "hour-intra-s0"}
+    assert targets(preset, full_cra, None)[0].startswith(
+        "- Zero-shot mIoU of the hour-warm2d: synth-cpu-hour, 498 rooms model (2 seeds): 52.00% against the 50% "
+        "target: met")
     unwarmed = {k: stored[k] for k in ("hour-s0", "hour-498-s0")}
     assert "hour-498: synth-cpu-hour, 498 rooms model (1 seed): 40.00%" in targets(preset, unwarmed, None)[0]
     only_48 = {"hour-s0": stored["hour-s0"]}
@@ -140,6 +145,8 @@ def test_targets_read_the_recipe_as_it_is_and_a_fleet_only_from_its_model(tmp_pa
     (fleet / DONE_FILE).write_text(json.dumps({"checkpoint": "ck/hour-s0", "methods": ["sray"]}))
     assert fleet_from_headline(preset, only_48, fleet) and not fleet_from_headline(preset, stored, fleet)
     (fleet / DONE_FILE).write_text(json.dumps({"checkpoint": "ck/hour-warm2d-s1", "methods": ["sray"]}))
+    assert fleet_from_headline(preset, full_cra, fleet) and not fleet_from_headline(preset, stored, fleet)
+    (fleet / DONE_FILE).write_text(json.dumps({"checkpoint": "ck/hour-intra-s0", "methods": ["sray"]}))
     assert fleet_from_headline(preset, stored, fleet) and not fleet_from_headline(preset, unwarmed, fleet)
 
 

@@ -1,4 +1,4 @@
-"""``sray bench accuracy``'s plan against the recipe: the headline cell (``hour-warm2d``) trains ``synth-cpu-hour``
+"""``sray bench accuracy``'s plan against the recipe: the headline cell (``hour-intra``) trains ``synth-cpu-hour``
 exactly as it is (settings, CPU budget and world), the other CPU-budgeted cells change one thing each."""
 
 from __future__ import annotations
@@ -9,27 +9,32 @@ from pathlib import Path
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_DEPTH, HOUR_INTRA, HOUR_NONE,
-                                           HOUR_WARM, LONG, OCCL, OCCL_T5, PRESETS, RECIPE_ROOMS, ROOMS_198, ROOMS_498,
-                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant)
+                                           HOUR_WARM, LONG, OCCL, OCCL_T5, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
+                                           ROOMS_198, ROOMS_498, VARIANT_SETTINGS, WARM_2D_STEPS, Cell,
+                                           headline_variant)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
 
 def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_others_count_steps(
         tmp_path: Path) -> None:
-    """``hour-warm2d``, the headline, trains synth-cpu-hour as it is (settings, 2D warm-up, CPU-second budget and
-    the world its shards default to, which the benchmark generates in its default folder); ``hour-498`` is the same
-    without the warm-up and ``hour``, ``hour-198`` that on other worlds, so their stored cells stay valid; ``long``
-    keeps its fixed step budget and ablation cells their short one, both without a CPU budget; the occlusion,
-    no-attention and depth-loss cells are the headline with one model setting changed, at the same CPU budget and
-    world, planned right after the headline's seeds."""
+    """``hour-intra``, the headline, trains synth-cpu-hour as it is (settings, intra-only attention, 2D warm-up,
+    CPU-second budget and the world its shards default to, which the benchmark generates in its default folder);
+    ``hour-warm2d`` is the same with full CRA, ``hour-498`` that without the warm-up and ``hour``, ``hour-198`` that
+    on other worlds, so their stored cells stay valid; ``long`` keeps its fixed step budget and ablation cells their
+    short one, both without a CPU budget; the occlusion, attention and depth-loss cells are ``hour-warm2d`` with one
+    model setting changed, at the same CPU budget and world."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
-    assert headline_variant(preset) == HOUR_WARM and VARIANT_SETTINGS[HOUR_WARM].train_scenes == RECIPE_ROOMS
+    assert headline_variant(preset) == RECIPE_VARIANT == HOUR_INTRA
+    assert VARIANT_SETTINGS[HOUR_INTRA].train_scenes == RECIPE_ROOMS
     assert recipe.optim.warmup_2d_steps == WARM_2D_STEPS > 0
     default_out = Path("outputs/bench-accuracy/cpu-small")  # `sray bench accuracy`'s folder for the preset
     assert Path(recipe.data.shards) == default_out / WORLDS_DIR / f"train{RECIPE_ROOMS}" / SHARDS
-    head = accuracy_cells.cell_config(Cell(HOUR_WARM, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    head = accuracy_cells.cell_config(Cell(HOUR_INTRA, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
     assert head.model == recipe.model and head.optim == recipe.optim and head.run.seed == 1
+    full_cra = dataclasses.replace(recipe.model, attention="full")
+    warm = accuracy_cells.cell_config(Cell(HOUR_WARM, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    assert dataclasses.replace(warm, run=head.run) == dataclasses.replace(head, model=full_cra)
     assert dataclasses.replace(head.data, shards=recipe.data.shards) == recipe.data
     assert head.optim.cpu_seconds > 0 and head.run.val_every == recipe.run.val_every
     long = accuracy_cells.cell_config(Cell(LONG, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
@@ -43,7 +48,7 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
     unwarmed = dataclasses.replace(head.optim, warmup_2d_steps=0)
     for variant, rooms in ((HOUR, None), (ROOMS_198, 198), (ROOMS_498, RECIPE_ROOMS)):  # the recipe before its warm-up
         cfg = accuracy_cells.cell_config(Cell(variant, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
-        assert dataclasses.replace(cfg, run=head.run) == dataclasses.replace(head, optim=unwarmed)
+        assert dataclasses.replace(cfg, run=head.run) == dataclasses.replace(head, optim=unwarmed, model=full_cra)
         assert cfg.run.name == f"bench-{variant}-s1"
         assert VARIANT_SETTINGS[variant] == dataclasses.replace(VARIANT_SETTINGS[HOUR_WARM], train_scenes=rooms,
                                                                 warmup_2d_steps=0)
@@ -51,12 +56,12 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
                  (OCCL_T5, {"weight_inputs": "cross-view", "tau": 0.5}), (HOUR_NONE, {"attention": "none"}),
                  (HOUR_CROSS, {"attention": "cross"}), (HOUR_INTRA, {"attention": "intra"}),
                  (HOUR_DEPTH, {"lambda_depth": 0.1}))
-    for variant, change in one_lever:  # the recipe with one model setting changed, at the same CPU budget
+    for variant, change in one_lever:  # hour-warm2d with one model setting changed, at the same CPU budget
         cfg = accuracy_cells.cell_config(Cell(variant, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
-        assert cfg.model == dataclasses.replace(recipe.model, **change), variant
+        assert cfg.model == dataclasses.replace(full_cra, **change), variant
         assert dataclasses.replace(cfg, run=head.run, model=head.model) == head
         assert cfg.run.name == f"bench-{variant}-s1" and VARIANT_SETTINGS[variant].train_scenes == RECIPE_ROOMS
-    assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.attention == "full"
+    assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.attention == "intra"
     assert recipe.model.lambda_depth == 0.0
     planned = [c.variant for c in preset.plan]
     after = planned[planned.index(ROOMS_498):][:11]

@@ -10,7 +10,7 @@
    interrupted pretraining from its last checkpoint, so the tables can be completed over several runs
    (``--cells`` and ``--max-minutes`` pick the piece to run; no cell starts after the limit);
 3. a finetune fleet on the unseen scenes from the headline model (``headline_variant``: the recipe at its own CPU
-   budget, ``hour``, in ``cpu-small``; ``long`` in ``gpu``), its first stored seed: every registered method whose
+   budget, ``hour-intra``, in ``cpu-small``; ``long`` in ``gpu``), its first stored seed: every registered method whose
    requirements are met (:mod:`sray.jobs.bench.accuracy_fleet`: S-Ray finetuning, Semantic-NeRF from scratch,
    and ``2d-transfer`` when a segmenter is given) under the same wall-clock budget, read off at equal budgets;
 4. tables (ablation with seed spread, per-class IoU, equal budgets, the targets) and a chart, written

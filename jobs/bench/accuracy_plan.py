@@ -15,12 +15,13 @@ LONG = "long"
 settings (full CRA, union fine pass, 16 samples per scene visit, no source-view loss, no CPU budget)."""
 
 HOUR = "hour"
-"""Variant name of the cell that pretrains with the preset recipe's settings before its 2D warm-up and its own budget
-(``synth-cpu-hour``: CPU seconds) on the preset's world (48 rooms for ``cpu-small``, the recipe's first world)."""
+"""Variant name of the cell that pretrains with the preset recipe's settings before its 2D warm-up and intra-only
+attention (full CRA), at its own budget (``synth-cpu-hour``: CPU seconds), on the preset's world (48 rooms for
+``cpu-small``, the recipe's first world)."""
 
 ROOMS_198, ROOMS_498 = "hour-198", "hour-498"
 """Variant names of ``hour`` trained on 198 and 498 procedural rooms instead of the preset world's; ``hour-498`` is
-``synth-cpu-hour`` without its 2D warm-up (its settings, budget and world otherwise)."""
+``hour-warm2d`` without its 2D warm-up (``synth-cpu-hour``'s settings, budget and world otherwise, with full CRA)."""
 
 RECIPE_ROOMS = 498
 """Training rooms of ``synth-cpu-hour``'s world (the preset world's other sizes and its test scenes)."""
@@ -35,16 +36,22 @@ question at the hour budget, and the no-CRA model of the stability suite) and wi
 (weight 0.1)."""
 
 HOUR_CROSS, HOUR_INTRA = "hour-cross", "hour-intra"
-"""Variant names of the hour recipe (498 rooms, 2D warm-up) with only the cross-view or only the intra-view
-attention stage of CRA (the paper's Table 4 ablation, asked on the model that labels objects)."""
+"""Variant names of ``hour-warm2d`` with only the cross-view or only the intra-view attention stage of CRA (the
+paper's Table 4 ablation, asked on the model that labels objects); ``hour-intra`` is ``synth-cpu-hour`` exactly as
+it is (its settings, attention, budget and world: ``RECIPE_VARIANT``)."""
 HOUR_WARM = "hour-warm2d"
-"""Variant name of ``synth-cpu-hour`` exactly as it is (its settings, budget and world): ``hour-498`` whose first
-1,500 steps train the encoder on the source views' labels alone (``optim.warmup_2d_steps``), within the same CPU
-budget; measured because at equal CPU a plain 2D segmenter's encoder carried 13 points more category information
-than ``hour-498``'s (docs/benchmarks.md, "On the 498-room recipe model")."""
+"""Variant name of ``hour-498`` whose first 1,500 steps train the encoder on the source views' labels alone
+(``optim.warmup_2d_steps``), within the same CPU budget, with full CRA: ``synth-cpu-hour`` but for its attention;
+measured because at equal CPU a plain 2D segmenter's encoder carried 13 points more category information than
+``hour-498``'s (docs/benchmarks.md, "On the 498-room recipe model")."""
+
+RECIPE_VARIANT = HOUR_INTRA
+"""The variant that is ``synth-cpu-hour`` exactly as it is: the ``cpu-small`` preset's headline (a test keeps them
+equal). Intra-only attention replaced full CRA in the recipe after three paired seeds each at the recipe's budget
+(docs/benchmarks.md, "One stage of the attention each")."""
 
 WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
-"""``optim.warmup_2d_steps`` of ``hour-warm2d`` (the recipe's)."""
+"""``optim.warmup_2d_steps`` of ``hour-warm2d`` and the recipe."""
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_DEPTH, HOUR_WARM)
 """Variants whose cells train for the preset recipe's own budget (its CPU seconds) instead of a step budget."""
@@ -92,7 +99,7 @@ class Variant:
 
 _HOUR_SETTINGS = Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4)
 _UNWARMED_RECIPE = replace(_HOUR_SETTINGS, train_scenes=RECIPE_ROOMS)
-_RECIPE_SETTINGS = replace(_UNWARMED_RECIPE, warmup_2d_steps=WARM_2D_STEPS)
+_WARM_SETTINGS = replace(_UNWARMED_RECIPE, warmup_2d_steps=WARM_2D_STEPS)
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
                     "full-affine": Variant(weight_map="affine"), "full-rgbd": Variant(inputs="rgbd"),
@@ -106,13 +113,13 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     HOUR: _HOUR_SETTINGS,
                     ROOMS_198: replace(_HOUR_SETTINGS, train_scenes=198),
                     ROOMS_498: _UNWARMED_RECIPE,
-                    OCCL: replace(_RECIPE_SETTINGS, weight_inputs="cross-view"),
-                    OCCL_T5: replace(_RECIPE_SETTINGS, weight_inputs="cross-view", tau=0.5),
-                    HOUR_NONE: replace(_RECIPE_SETTINGS, attention="none"),
-                    HOUR_CROSS: replace(_RECIPE_SETTINGS, attention="cross"),
-                    HOUR_INTRA: replace(_RECIPE_SETTINGS, attention="intra"),
-                    HOUR_DEPTH: replace(_RECIPE_SETTINGS, lambda_depth=0.1),
-                    HOUR_WARM: _RECIPE_SETTINGS}
+                    OCCL: replace(_WARM_SETTINGS, weight_inputs="cross-view"),
+                    OCCL_T5: replace(_WARM_SETTINGS, weight_inputs="cross-view", tau=0.5),
+                    HOUR_NONE: replace(_WARM_SETTINGS, attention="none"),
+                    HOUR_CROSS: replace(_WARM_SETTINGS, attention="cross"),
+                    HOUR_INTRA: replace(_WARM_SETTINGS, attention="intra"),
+                    HOUR_DEPTH: replace(_WARM_SETTINGS, lambda_depth=0.1),
+                    HOUR_WARM: _WARM_SETTINGS}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
@@ -120,13 +127,12 @@ channels instead of 4 of 8; ``full-new-src`` full-new with the source views' per
 encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget;
 ``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
 (one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds
-``synth-cpu-hour``'s settings without its 2D warm-up on the preset's 48 rooms; ``hour-198`` and ``hour-498`` are
+``synth-cpu-hour``'s settings without its 2D warm-up, with full CRA, on the preset's 48 rooms; ``hour-198`` and ``hour-498`` are
 ``hour`` on 198 and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget);
-``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only warm-up: the recipe exactly (a test keeps
-them equal); ``hour-occl`` is ``hour-warm2d`` whose weight net also reads the cross-view statistics,
+``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only warm-up (full CRA); ``hour-occl`` is ``hour-warm2d`` whose weight net also reads the cross-view statistics,
 ``hour-occl-t5`` the same at tau 0.5 (the two occlusion levers, docs/model.md), both at the recipe's CPU budget;
 ``hour-none`` is ``hour-warm2d`` without cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only
-its cross-view or only its intra-view stage, and ``hour-depth`` ``hour-warm2d`` with the
+its cross-view or only its intra-view stage (``hour-intra``: the recipe exactly), and ``hour-depth`` ``hour-warm2d`` with the
 training-time depth loss (weight 0.1)."""
 
 
@@ -210,7 +216,7 @@ PRESETS = {
               Cell(HOUR, 1), Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
-        fleet_gpus_per_task=0.0, headline=HOUR_WARM),
+        fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
     "gpu": Preset(
         world=World(train_scenes=96, test_scenes=8, views=100, height=240, width=320),
         recipe="synth-paper", overrides=("data.aug.min_source=2", "data.class_balance=inverse-sqrt",
@@ -228,6 +234,6 @@ PRESETS = {
 
 def headline_variant(p: Preset) -> str:
     """The variant of ``p``'s headline model, the one its targets are read on and its fleet finetunes from: the
-    recipe as it is (``Preset.headline``: ``hour-warm2d`` for ``cpu-small``) when the plan holds it; else the recipe's
+    recipe as it is (``Preset.headline``: ``hour-intra`` for ``cpu-small``) when the plan holds it; else the recipe's
     first form at its step budget (``long``)."""
     return p.headline if any(c.variant == p.headline for c in p.plan) else LONG
