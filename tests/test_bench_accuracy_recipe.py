@@ -8,10 +8,10 @@ from pathlib import Path
 
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
-from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_DEPTH, HOUR_INTRA, HOUR_NONE,
-                                           HOUR_WARM, LONG, OCCL, OCCL_T5, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
-                                           ROOMS_198, ROOMS_498, VARIANT_SETTINGS, WARM_2D_STEPS, Cell,
-                                           headline_variant)
+from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_DEPTH, HOUR_INTRA,
+                                           HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, OCCL, OCCL_T5, PRESETS,
+                                           RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, UNCAPPED_STEPS,
+                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -35,6 +35,11 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
     full_cra = dataclasses.replace(recipe.model, attention="full")
     warm = accuracy_cells.cell_config(Cell(HOUR_WARM, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
     assert dataclasses.replace(warm, run=head.run) == dataclasses.replace(head, model=full_cra)
+    uncapped = accuracy_cells.cell_config(Cell(HOUR_INTRA_UNCAPPED, 1), preset, tmp_path / "shards", tmp_path,
+                                          "sqlite:///x.db")  # the recipe stopped by its CPU budget alone
+    steps = dataclasses.replace(head.optim, steps=UNCAPPED_STEPS)
+    assert dataclasses.replace(uncapped, run=head.run) == dataclasses.replace(head, optim=steps)
+    assert UNCAPPED_STEPS > recipe.optim.steps and uncapped.run.ckpt_every == head.run.ckpt_every
     assert dataclasses.replace(head.data, shards=recipe.data.shards) == recipe.data
     assert head.optim.cpu_seconds > 0 and head.run.val_every == recipe.run.val_every
     long = accuracy_cells.cell_config(Cell(LONG, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
