@@ -69,8 +69,9 @@ CPU_HOUR_STEP_CAP = 5000
 """Step cap of ``synth-cpu-hour``; the job ends at the cap or at the CPU budget, whichever comes first. One
 ray-training step costs 1.3 to 2.5 CPU s on the 2-core development machines (a 2D-only step of
 ``optim.warmup_2d_steps`` about 0.4): on the slower ones the budget stops it (about 3,000 steps), on the faster
-the cap can (the recipe there reached it after 5,183 and 5,437 CPU s). Every measured cell of the recipe ran
-under this cap; a cell without it is a separate arm."""
+the cap can (the recipe there reached it after 4,448-4,735 CPU s; with full CRA after 5,183-5,469). Every measured
+cell of the recipe ran under this cap; a cell without it is a separate arm (``hour-intra-uncapped`` in ``sray bench
+accuracy``)."""
 
 CPU_HOUR_WARMUP_2D = 1500
 """``optim.warmup_2d_steps`` of ``synth-cpu-hour``: its first steps train the encoder and its source-view head on
