@@ -67,3 +67,13 @@ def tiny_fleet_config(**finetune: object) -> FleetConfig:
     for key, value in finetune.items():
         setattr(ft, key, value)
     return cfg
+
+
+def kept_point(curve: list[dict], min_delta: float) -> dict:
+    """The evaluation a finetune keeps as its best, replayed over its ``curve`` by a plain loop: the first point,
+    then each later one that beats the kept score by more than ``min_delta`` (``finetune.min_delta``)."""
+    kept = curve[0]
+    for point in curve[1:]:
+        if point["miou"] > kept["miou"] + min_delta:
+            kept = point
+    return kept

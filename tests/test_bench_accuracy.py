@@ -18,8 +18,8 @@ from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_fleet import DONE_FILE
-from sray.jobs.bench.accuracy_plan import (HOUR, HOUR_INTRA, HOUR_WARM, LONG, PRESETS, ROOMS_198, ROOMS_498, Cell, Preset,
-                                           World)
+from sray.jobs.bench.accuracy_plan import (HOUR, HOUR_INTRA, HOUR_WARM, LONG, PRESETS, ROOMS_198, ROOMS_498, Cell,
+                                           Preset, World)
 from sray.jobs.bench.accuracy_budgets import budget_means
 from sray.jobs.bench.accuracy_tables import class_table, fleet_from_headline, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir

@@ -141,14 +141,14 @@ channels instead of 4 of 8; ``full-new-src`` full-new with the source views' per
 encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget;
 ``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
 (one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds
-``synth-cpu-hour``'s settings without its 2D warm-up, with full CRA, on the preset's 48 rooms; ``hour-198`` and ``hour-498`` are
-``hour`` on 198 and 498 training rooms (the same test rooms; generating them is not counted in the CPU budget);
-``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only warm-up (full CRA); ``hour-occl`` is ``hour-warm2d`` whose weight net also reads the cross-view statistics,
-``hour-occl-t5`` the same at tau 0.5 (the two occlusion levers, docs/model.md), both at the recipe's CPU budget;
-``hour-none`` is ``hour-warm2d`` without cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only
-its cross-view or only its intra-view stage (``hour-intra``: the recipe exactly; ``hour-intra-uncapped`` the recipe
-stopped by its CPU budget alone), and ``hour-depth`` ``hour-warm2d`` with the
-training-time depth loss (weight 0.1)."""
+``synth-cpu-hour``'s settings without its 2D warm-up, with full CRA, on the preset's 48 rooms; ``hour-198`` and
+``hour-498`` are ``hour`` on 198 and 498 training rooms (the same test rooms; generating them is not counted in the
+CPU budget); ``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only warm-up (full CRA);
+``hour-occl`` is ``hour-warm2d`` whose weight net also reads the cross-view statistics, ``hour-occl-t5`` the same
+at tau 0.5 (the two occlusion levers, docs/model.md), both at the recipe's CPU budget; ``hour-none`` is
+``hour-warm2d`` without cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only its cross-view or
+only its intra-view stage (``hour-intra``: the recipe exactly; ``hour-intra-uncapped`` the recipe stopped by its
+CPU budget alone), and ``hour-depth`` ``hour-warm2d`` with the training-time depth loss (weight 0.1)."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
