@@ -15,8 +15,8 @@ LONG = "long"
 settings (full CRA, union fine pass, 16 samples per scene visit, no source-view loss, no CPU budget)."""
 
 HOUR = "hour"
-"""Variant name of the cell that pretrains with the preset recipe's settings before its 2D warm-up and intra-only
-attention (full CRA), at its own budget (``synth-cpu-hour``: CPU seconds), on the preset's world (48 rooms for
+"""Variant name of the cell that pretrains with the preset recipe's settings but its 2D warm-up and its attention
+(full CRA here), at its own budget (``synth-cpu-hour``: CPU seconds), on the preset's world (48 rooms for
 ``cpu-small``, the recipe's first world)."""
 
 ROOMS_198, ROOMS_498 = "hour-198", "hour-498"
@@ -57,8 +57,7 @@ decays over the budget."""
 
 RECIPE_VARIANT = HOUR_INTRA
 """The variant that is ``synth-cpu-hour`` exactly as it is: the ``cpu-small`` preset's headline (a test keeps them
-equal). Intra-only attention replaced full CRA in the recipe after three paired seeds each at the recipe's budget
-(docs/benchmarks.md, "One stage of the attention each")."""
+equal); the three-seed comparison with ``hour-warm2d`` is in docs/benchmarks.md, "One stage of the attention each"."""
 
 WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 """``optim.warmup_2d_steps`` of ``hour-warm2d`` and the recipe."""
