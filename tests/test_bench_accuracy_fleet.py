@@ -15,7 +15,7 @@ from sray.jobs.bench import accuracy_fleet
 from sray.jobs.bench.accuracy_budgets import BUDGET_TABLE, FORMER_TITLES, budget_table, step_zero
 from sray.jobs.bench.accuracy_cells import import_old_cells, stored_cells
 from sray.jobs.bench.accuracy_fleet import DONE_FILE, compared_methods, fleet_config, methods_done, run_comparison
-from sray.jobs.bench.accuracy_plan import HOUR_INTRA, LONG, PRESETS, Cell, Preset, World, headline_variant
+from sray.jobs.bench.accuracy_plan import HOUR_INTRA_UNCAPPED, LONG, PRESETS, Cell, Preset, World, headline_variant
 from sray.jobs.bench.accuracy_tables import accuracy_bench, write_tables
 from sray.jobs.bench.doc import bench_dir, record
 from sray.platform.common.eval_protocol import EvalProtocol
@@ -102,12 +102,12 @@ def test_a_finished_fleet_runs_again_only_for_methods_it_lacks(tmp_path: Path,
 
 
 def test_the_fleet_finetunes_from_the_recipe_at_its_cpu_budget_where_the_plan_holds_it() -> None:
-    """``cpu-small`` plans the recipe as it is, at its own CPU-second budget and world (``hour-intra``): its fleet and
-    targets read that model; the ``gpu`` preset and a plan without the headline's cell keep the recipe's step-budget
-    model (``long``)."""
-    assert headline_variant(PRESETS["cpu-small"]) == HOUR_INTRA and headline_variant(PRESETS["gpu"]) == LONG
+    """``cpu-small`` plans the recipe as it is, at its own CPU-second budget and world (``hour-intra-uncapped``): its
+    fleet and targets read that model; the ``gpu`` preset and a plan without the headline's cell keep the recipe's
+    step-budget model (``long``)."""
+    assert headline_variant(PRESETS["cpu-small"]) == HOUR_INTRA_UNCAPPED and headline_variant(PRESETS["gpu"]) == LONG
     assert headline_variant(PRESET) == LONG
-    assert headline_variant(dataclasses.replace(PRESET, headline=HOUR_INTRA)) == LONG  # not in its plan
+    assert headline_variant(dataclasses.replace(PRESET, headline=HOUR_INTRA_UNCAPPED)) == LONG  # not in its plan
 
 
 def test_the_budget_table_has_a_column_per_registered_method_with_its_inputs(monkeypatch: pytest.MonkeyPatch) -> None:

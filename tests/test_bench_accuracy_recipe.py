@@ -1,5 +1,6 @@
-"""``sray bench accuracy``'s plan against the recipe: the headline cell (``hour-intra``) trains ``synth-cpu-hour``
-exactly as it is (settings, CPU budget and world), the other CPU-budgeted cells change one thing each."""
+"""``sray bench accuracy``'s plan against the recipe: the headline cell (``hour-intra-uncapped``) trains
+``synth-cpu-hour`` exactly as it is (settings, CPU budget and world), the other CPU-budgeted cells change one thing
+each."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_DEPTH, HOUR_INTRA,
                                            HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, OCCL, OCCL_T5, PRESETS,
-                                           RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, UNCAPPED_STEPS,
+                                           RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, CAPPED_STEPS,
                                            VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
@@ -18,28 +19,29 @@ from sray.platform.config.recipes import get_recipe
 
 def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_others_count_steps(
         tmp_path: Path) -> None:
-    """``hour-intra``, the headline, trains synth-cpu-hour as it is (settings, intra-only attention, 2D warm-up,
-    CPU-second budget and the world its shards default to, which the benchmark generates in its default folder);
-    ``hour-warm2d`` is the same with full CRA, ``hour-498`` that without the warm-up and ``hour``, ``hour-198`` that
+    """``hour-intra-uncapped``, the headline, trains synth-cpu-hour as it is (settings, intra-only attention, 2D
+    warm-up, CPU-second budget with a step cap beyond it, and the world its shards default to, which the benchmark
+    generates in its default folder); ``hour-intra`` is the same capped at 5,000 steps, as every other CPU-budgeted
+    cell, ``hour-warm2d`` that with full CRA, ``hour-498`` that without the warm-up and ``hour``, ``hour-198`` that
     on other worlds, so their stored cells stay valid; ``long`` keeps its fixed step budget and ablation cells their
     short one, both without a CPU budget; the occlusion, attention and depth-loss cells are ``hour-warm2d`` with one
     model setting changed, at the same CPU budget and world."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
-    assert headline_variant(preset) == RECIPE_VARIANT == HOUR_INTRA
-    assert VARIANT_SETTINGS[HOUR_INTRA].train_scenes == RECIPE_ROOMS
+    assert headline_variant(preset) == RECIPE_VARIANT == HOUR_INTRA_UNCAPPED
+    assert VARIANT_SETTINGS[HOUR_INTRA_UNCAPPED].train_scenes == RECIPE_ROOMS
     assert recipe.optim.warmup_2d_steps == WARM_2D_STEPS > 0
     default_out = Path("outputs/bench-accuracy/cpu-small")  # `sray bench accuracy`'s folder for the preset
     assert Path(recipe.data.shards) == default_out / WORLDS_DIR / f"train{RECIPE_ROOMS}" / SHARDS
+    recipe_cell = accuracy_cells.cell_config(Cell(HOUR_INTRA_UNCAPPED, 1), preset, tmp_path / "shards", tmp_path,
+                                             "sqlite:///x.db")
+    assert recipe_cell.model == recipe.model and recipe_cell.optim == recipe.optim and recipe_cell.run.seed == 1
     head = accuracy_cells.cell_config(Cell(HOUR_INTRA, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
-    assert head.model == recipe.model and head.optim == recipe.optim and head.run.seed == 1
+    capped = dataclasses.replace(recipe.optim, steps=CAPPED_STEPS)  # the other cells' cap, below the recipe's
+    assert dataclasses.replace(head, run=recipe_cell.run) == dataclasses.replace(recipe_cell, optim=capped)
+    assert CAPPED_STEPS < recipe.optim.steps and head.run.ckpt_every == recipe_cell.run.ckpt_every
     full_cra = dataclasses.replace(recipe.model, attention="full")
     warm = accuracy_cells.cell_config(Cell(HOUR_WARM, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
     assert dataclasses.replace(warm, run=head.run) == dataclasses.replace(head, model=full_cra)
-    uncapped = accuracy_cells.cell_config(Cell(HOUR_INTRA_UNCAPPED, 1), preset, tmp_path / "shards", tmp_path,
-                                          "sqlite:///x.db")  # the recipe stopped by its CPU budget alone
-    steps = dataclasses.replace(head.optim, steps=UNCAPPED_STEPS)
-    assert dataclasses.replace(uncapped, run=head.run) == dataclasses.replace(head, optim=steps)
-    assert UNCAPPED_STEPS > recipe.optim.steps and uncapped.run.ckpt_every == head.run.ckpt_every
     assert dataclasses.replace(head.data, shards=recipe.data.shards) == recipe.data
     assert head.optim.cpu_seconds > 0 and head.run.val_every == recipe.run.val_every
     long = accuracy_cells.cell_config(Cell(LONG, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")

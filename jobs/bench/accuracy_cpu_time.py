@@ -5,7 +5,7 @@ table and a chart of zero-shot and held-out training-scene mIoU against CPU hour
 from __future__ import annotations
 
 import textwrap
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -14,17 +14,20 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from sray.data_tools.atomic import save_png
-from sray.jobs.bench.accuracy_plan import HOUR, LONG, VARIANT_SETTINGS, Preset
+from sray.jobs.bench.accuracy_plan import HOUR, HOUR_INTRA_UNCAPPED, LONG, VARIANT_SETTINGS, Preset, Variant
 
-BUDGET_VARIANTS = (LONG, HOUR)
+BUDGET_VARIANTS = (LONG, HOUR, HOUR_INTRA_UNCAPPED)
 """Variants that only change the budget of another variant's settings (they join that variant's arm)."""
 
 
 def arm_of(variant: str) -> str:
-    """The arm of ``variant``: the first variant (budget variants last) with the same settings."""
-    settings = VARIANT_SETTINGS[variant]
+    """The arm of ``variant``: the first variant (budget variants last) with the same settings, its step cap aside
+    (a budget: ``hour-intra-uncapped`` joins ``hour-intra``)."""
+    def uncapped(name: str) -> Variant:
+        return replace(VARIANT_SETTINGS[name], step_cap=None)
+
     ordered = [v for v in VARIANT_SETTINGS if v not in BUDGET_VARIANTS] + list(BUDGET_VARIANTS)
-    return next(v for v in ordered if VARIANT_SETTINGS[v] == settings)
+    return next(v for v in ordered if uncapped(v) == uncapped(variant))
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ import numpy as np
 from sray.jobs.bench.accuracy_budgets import BUDGET_TABLE, FORMER_TITLES, budget_means, budget_table, step_zero
 from sray.jobs.bench.accuracy_cpu_time import budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_fleet import fleet_checkpoint
-from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_WARM, LONG, RECIPE_VARIANT, ROOMS_498,
+from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_INTRA, HOUR_WARM, LONG, RECIPE_VARIANT, ROOMS_498,
                                            VARIANT_SETTINGS, Cell, Preset, headline_variant)
 from sray.jobs.bench.accuracy_step_cost import step_cost_chart
 from sray.jobs.bench.doc import Bench, bench_dir, markdown_table, record
@@ -127,10 +127,10 @@ def class_table(p: Preset, stored: dict[str, dict[str, Any]]) -> tuple[list[str]
 
 def shown_headline(p: Preset, stored: dict[str, dict[str, Any]]) -> str:
     """The variant the targets read: the headline model's (the recipe as it is) when a cell of it is stored, else
-    the recipe's earlier forms (``hour-warm2d`` with full CRA, ``hour-498`` before its 2D warm-up, ``hour`` on the
-    preset world, then ``long``), else the headline's (not run yet)."""
+    the recipe's earlier forms (``hour-intra`` at its 5,000-step cap, ``hour-warm2d`` with full CRA, ``hour-498``
+    before its 2D warm-up, ``hour`` on the preset world, then ``long``), else the headline's (not run yet)."""
     groups = by_variant(p, stored)
-    earlier = (headline_variant(p), HOUR_WARM, ROOMS_498, HOUR, LONG)
+    earlier = (headline_variant(p), HOUR_INTRA, HOUR_WARM, ROOMS_498, HOUR, LONG)
     return next((v for v in earlier if groups.get(v)), headline_variant(p))
 
 
