@@ -70,7 +70,7 @@ CPU_HOUR_STEP_CAP = 20_000
 """Step cap of ``synth-cpu-hour``: beyond what its CPU budget reaches, so the budget ends the job. A 2D-only step of
 ``optim.warmup_2d_steps`` costs about 0.4 CPU s and a ray-training step of the recipe about 1.2 on the 2-core
 development machine the recipe was measured on, where it stops after 6,250-6,950 steps (1,500 2D + 4,750-5,450
-ray); on a slower 2-core machine (about 1.7 CPU s per ray step) after 5,047. The cap only bounds the
+ray); on a slower 2-core machine (about 1.8 CPU s per ray step) after 5,047. The cap only bounds the
 learning-rate schedule on a much faster machine (``budget_lr_factor`` follows the larger of the step and CPU-budget
 fractions). Stopped by its budget, the recipe scores 53.94 ± 4.14% zero-shot and 50.86 ± 3.42% on held-out views of
 its training rooms over three seeds, against 51.39 ± 2.86 and 45.37 ± 1.40% for the same recipe capped at 5,000 steps
