@@ -11,8 +11,9 @@ from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_DEPTH, HOUR_INTRA,
                                            HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, OCCL, OCCL_T5, PRESETS,
-                                           RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, CAPPED_STEPS,
-                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant)
+                                           RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, CAPPED_STEPS, SCREEN,
+                                           SCREEN_SECONDS, SCREEN_WARM, VARIANT_SETTINGS, WARM_2D_STEPS, Cell,
+                                           headline_variant)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -73,3 +74,22 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
     planned = [c.variant for c in preset.plan]
     after = planned[planned.index(ROOMS_498):][:11]
     assert after == [*[ROOMS_498] * 3, *[HOUR_WARM] * 3, *[HOUR_NONE] * 3, HOUR_DEPTH, OCCL]
+
+
+def test_the_screening_pair_is_the_recipe_at_half_its_budget_with_and_without_a_doubled_warm_up(
+        tmp_path: Path) -> None:
+    """``screen`` trains synth-cpu-hour exactly as it is but for its CPU budget (``SCREEN_SECONDS``, half the
+    recipe's), ``screen-warm3k`` the same with twice the 2D warm-up steps; both are planned, paired on seed 0."""
+    recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
+    assert SCREEN_SECONDS == recipe.optim.cpu_seconds / 2
+
+    def config(variant: str):
+        return accuracy_cells.cell_config(Cell(variant, 0), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+
+    head, screen, warm = config(HOUR_INTRA_UNCAPPED), config(SCREEN), config(SCREEN_WARM)
+    assert dataclasses.replace(screen, run=head.run) == dataclasses.replace(
+        head, optim=dataclasses.replace(recipe.optim, cpu_seconds=SCREEN_SECONDS))
+    assert dataclasses.replace(warm, run=screen.run) == dataclasses.replace(
+        screen, optim=dataclasses.replace(screen.optim, warmup_2d_steps=2 * WARM_2D_STEPS))
+    assert {SCREEN, SCREEN_WARM} <= set(CPU_BUDGETED)
+    assert {Cell(SCREEN, 0), Cell(SCREEN_WARM, 0)} <= set(preset.plan)

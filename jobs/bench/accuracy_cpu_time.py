@@ -14,17 +14,17 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from sray.data_tools.atomic import save_png
-from sray.jobs.bench.accuracy_plan import HOUR, HOUR_INTRA_UNCAPPED, LONG, VARIANT_SETTINGS, Preset, Variant
+from sray.jobs.bench.accuracy_plan import HOUR, HOUR_INTRA_UNCAPPED, LONG, SCREEN, VARIANT_SETTINGS, Preset, Variant
 
-BUDGET_VARIANTS = (LONG, HOUR, HOUR_INTRA_UNCAPPED)
+BUDGET_VARIANTS = (LONG, HOUR, HOUR_INTRA_UNCAPPED, SCREEN)
 """Variants that only change the budget of another variant's settings (they join that variant's arm)."""
 
 
 def arm_of(variant: str) -> str:
-    """The arm of ``variant``: the first variant (budget variants last) with the same settings, its step cap aside
-    (a budget: ``hour-intra-uncapped`` joins ``hour-intra``)."""
+    """The arm of ``variant``: the first variant (budget variants last) with the same settings, its step cap and CPU
+    budget aside (budgets: ``hour-intra-uncapped`` and ``screen`` join ``hour-intra``)."""
     def uncapped(name: str) -> Variant:
-        return replace(VARIANT_SETTINGS[name], step_cap=None)
+        return replace(VARIANT_SETTINGS[name], step_cap=None, cpu_seconds=None)
 
     ordered = [v for v in VARIANT_SETTINGS if v not in BUDGET_VARIANTS] + list(BUDGET_VARIANTS)
     return next(v for v in ordered if uncapped(v) == uncapped(variant))
