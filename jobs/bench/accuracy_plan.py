@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 from sray.data_tools.synth.world import World
 from sray.model.fast_render import FastRender
-from sray.platform.config.recipes import CPU_HOUR_WARMUP_2D
+from sray.platform.config.recipes import CPU_HOUR_SECONDS, CPU_HOUR_WARMUP_2D
 
 LONG = "long"
 """Variant name of the cell that pretrains for the preset's ``long_steps`` with the first hour recipe's
@@ -55,10 +55,10 @@ SCREEN, SCREEN_WARM = "screen", "screen-warm3k"
 its budget, and the same with its 2D warm-up doubled to 3,000 steps (``optim.warmup_2d_steps``). Measured because
 on the recipe's models a linear probe still reads 6.7 points less from S-Ray's encoder than from a 2D segmenter's
 trained for the same CPU, while the field read at the true surface scores no better than the render (the ceilings
-of docs/benchmarks.md): recognition, not geometry, is where zero-shot accuracy is lost, and a 2D step costs about a
-third of a ray step."""
+of docs/benchmarks.md): recognition, not geometry, is where zero-shot accuracy is lost, and a 2D step costs under half
+a ray step."""
 
-SCREEN_SECONDS = 3600.0
+SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
 2-core machine."""
 
