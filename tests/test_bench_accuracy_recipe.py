@@ -9,10 +9,11 @@ from pathlib import Path
 
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
-from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_DEPTH, HOUR_INTRA,
-                                           HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, OCCL, OCCL_T5, PRESETS,
+from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
+                                           HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, PRESETS,
                                            RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, CAPPED_STEPS, SCREEN,
-                                           SCREEN_SECONDS, SCREEN_WARM, VARIANT_SETTINGS, WARM_2D_STEPS, Cell,
+                                           SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_SECONDS, SCREEN_WARM,
+                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell,
                                            headline_variant)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
@@ -60,20 +61,17 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
         assert cfg.run.name == f"bench-{variant}-s1"
         assert VARIANT_SETTINGS[variant] == dataclasses.replace(VARIANT_SETTINGS[HOUR_WARM], train_scenes=rooms,
                                                                 warmup_2d_steps=0)
-    one_lever = ((OCCL, {"weight_inputs": "cross-view", "tau": recipe.model.tau}),
-                 (OCCL_T5, {"weight_inputs": "cross-view", "tau": 0.5}), (HOUR_NONE, {"attention": "none"}),
-                 (HOUR_CROSS, {"attention": "cross"}), (HOUR_INTRA, {"attention": "intra"}),
-                 (HOUR_DEPTH, {"lambda_depth": 0.1}))
+    one_lever = ((HOUR_NONE, {"attention": "none"}), (HOUR_CROSS, {"attention": "cross"}),
+                 (HOUR_INTRA, {"attention": "intra"}))
     for variant, change in one_lever:  # hour-warm2d with one model setting changed, at the same CPU budget
         cfg = accuracy_cells.cell_config(Cell(variant, 1), preset, tmp_path / "shards", tmp_path, "sqlite:///x.db")
         assert cfg.model == dataclasses.replace(full_cra, **change), variant
         assert dataclasses.replace(cfg, run=head.run, model=head.model) == head
         assert cfg.run.name == f"bench-{variant}-s1" and VARIANT_SETTINGS[variant].train_scenes == RECIPE_ROOMS
-    assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.attention == "intra"
-    assert recipe.model.lambda_depth == 0.0
+    assert recipe.model.attention == "intra"
     planned = [c.variant for c in preset.plan]
-    after = planned[planned.index(ROOMS_498):][:11]
-    assert after == [*[ROOMS_498] * 3, *[HOUR_WARM] * 3, *[HOUR_NONE] * 3, HOUR_DEPTH, OCCL]
+    after = planned[planned.index(ROOMS_498):][:10]
+    assert after == [*[ROOMS_498] * 3, *[HOUR_WARM] * 3, *[HOUR_NONE] * 3, HOUR_CROSS]
 
 
 def test_the_screening_pair_is_the_recipe_at_half_its_budget_with_and_without_a_doubled_warm_up(
@@ -91,5 +89,13 @@ def test_the_screening_pair_is_the_recipe_at_half_its_budget_with_and_without_a_
         head, optim=dataclasses.replace(recipe.optim, cpu_seconds=SCREEN_SECONDS))
     assert dataclasses.replace(warm, run=screen.run) == dataclasses.replace(
         screen, optim=dataclasses.replace(screen.optim, warmup_2d_steps=2 * WARM_2D_STEPS))
-    assert {SCREEN, SCREEN_WARM} <= set(CPU_BUDGETED)
-    assert {Cell(SCREEN, 0), Cell(SCREEN_WARM, 0)} <= set(preset.plan)
+    one_lever = ((SCREEN_DEPTH, {"lambda_depth": 0.1}), (SCREEN_OCCL, {"weight_inputs": "cross-view"}),
+                 (SCREEN_OCCL_T5, {"weight_inputs": "cross-view", "tau": 0.5}))
+    for variant, change in one_lever:  # the screening baseline with one model setting changed, at its budget
+        cfg = config(variant)
+        assert cfg.model == dataclasses.replace(screen.model, **change), variant
+        assert dataclasses.replace(cfg, run=screen.run, model=screen.model) == screen, variant
+    assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
+    screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5)
+    assert set(screening) <= set(CPU_BUDGETED)
+    assert {Cell(v, 0) for v in screening} <= set(preset.plan)

@@ -26,14 +26,9 @@ ROOMS_198, ROOMS_498 = "hour-198", "hour-498"
 RECIPE_ROOMS = 498
 """Training rooms of ``synth-cpu-hour``'s world (the preset world's other sizes and its test scenes)."""
 
-OCCL, OCCL_T5 = "hour-occl", "hour-occl-t5"
-"""Variant names of the hour recipe (498 rooms, 2D warm-up) with the occlusion-aware weight net inputs
-(``model.weight_inputs=cross-view``), at the model's tau (0.7) and at tau 0.5 (a wider weight range)."""
-
-HOUR_NONE, HOUR_DEPTH = "hour-none", "hour-depth"
-"""Variant names of the hour recipe (498 rooms, 2D warm-up) without cross-reprojection attention (the attention
-question at the hour budget, and the no-CRA model of the stability suite) and with the training-time depth loss
-(weight 0.1)."""
+HOUR_NONE = "hour-none"
+"""Variant name of the hour recipe (498 rooms, 2D warm-up) without cross-reprojection attention (the attention
+question at the hour budget, and the no-CRA model of the stability suite)."""
 
 HOUR_CROSS, HOUR_INTRA = "hour-cross", "hour-intra"
 """Variant names of ``hour-warm2d`` with only the cross-view or only the intra-view attention stage of CRA (the
@@ -58,6 +53,12 @@ trained for the same CPU, while the field read at the true surface scores no bet
 of docs/benchmarks.md): recognition, not geometry, is where zero-shot accuracy is lost, and a 2D step costs under half
 a ray step."""
 
+SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5 = "screen-depth", "screen-occl", "screen-occl-t5"
+"""Variant names of ``screen`` with one lever of the issue's "compute where it pays" each, screened against it at the
+same budget: the training-time depth loss on the rendered depth (``model.lambda_depth`` 0.1; the test protocol stays
+RGB), and the occlusion-aware weight net inputs (``model.weight_inputs=cross-view``) at the model's tau (0.7) and at
+tau 0.5 (a wider weight range)."""
+
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
 2-core machine."""
@@ -75,8 +76,8 @@ budget"."""
 WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 """``optim.warmup_2d_steps`` of ``hour-warm2d`` and the recipe."""
 
-CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, OCCL, OCCL_T5, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_DEPTH, HOUR_WARM,
-                HOUR_INTRA_UNCAPPED, SCREEN, SCREEN_WARM)
+CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_WARM, HOUR_INTRA_UNCAPPED, SCREEN,
+                SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
 
@@ -130,6 +131,7 @@ _HOUR_SETTINGS = Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1
 _UNWARMED_RECIPE = replace(_HOUR_SETTINGS, train_scenes=RECIPE_ROOMS)
 _WARM_SETTINGS = replace(_UNWARMED_RECIPE, warmup_2d_steps=WARM_2D_STEPS)
 _RECIPE = replace(_WARM_SETTINGS, attention="intra", step_cap=None)
+_SCREEN = replace(_RECIPE, cpu_seconds=SCREEN_SECONDS)
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
                     "full-affine": Variant(weight_map="affine"), "full-rgbd": Variant(inputs="rgbd"),
@@ -143,16 +145,16 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     HOUR: _HOUR_SETTINGS,
                     ROOMS_198: replace(_HOUR_SETTINGS, train_scenes=198),
                     ROOMS_498: _UNWARMED_RECIPE,
-                    OCCL: replace(_WARM_SETTINGS, weight_inputs="cross-view"),
-                    OCCL_T5: replace(_WARM_SETTINGS, weight_inputs="cross-view", tau=0.5),
                     HOUR_NONE: replace(_WARM_SETTINGS, attention="none"),
                     HOUR_CROSS: replace(_WARM_SETTINGS, attention="cross"),
                     HOUR_INTRA: replace(_WARM_SETTINGS, attention="intra"),
-                    HOUR_DEPTH: replace(_WARM_SETTINGS, lambda_depth=0.1),
                     HOUR_WARM: _WARM_SETTINGS,
                     HOUR_INTRA_UNCAPPED: _RECIPE,
-                    SCREEN: replace(_RECIPE, cpu_seconds=SCREEN_SECONDS),
-                    SCREEN_WARM: replace(_RECIPE, cpu_seconds=SCREEN_SECONDS, warmup_2d_steps=2 * WARM_2D_STEPS)}
+                    SCREEN: _SCREEN,
+                    SCREEN_WARM: replace(_SCREEN, warmup_2d_steps=2 * WARM_2D_STEPS),
+                    SCREEN_DEPTH: replace(_SCREEN, lambda_depth=0.1),
+                    SCREEN_OCCL: replace(_SCREEN, weight_inputs="cross-view"),
+                    SCREEN_OCCL_T5: replace(_SCREEN, weight_inputs="cross-view", tau=0.5)}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
@@ -163,13 +165,13 @@ encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up
 ``synth-cpu-hour``'s settings without its 2D warm-up, with full CRA, on the preset's 48 rooms; ``hour-198`` and
 ``hour-498`` are ``hour`` on 198 and 498 training rooms (the same test rooms; generating them is not counted in the
 CPU budget); ``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only warm-up (full CRA);
-``hour-occl`` is ``hour-warm2d`` whose weight net also reads the cross-view statistics, ``hour-occl-t5`` the same
-at tau 0.5 (the two occlusion levers, docs/model.md), both at the recipe's CPU budget; ``hour-none`` is
-``hour-warm2d`` without cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only its cross-view or
-only its intra-view stage (``hour-intra-uncapped``: the recipe exactly, stopped by its CPU budget; every other
-CPU-budgeted cell also stops at ``CAPPED_STEPS``), and ``hour-depth`` ``hour-warm2d`` with the training-time depth
-loss (weight 0.1); ``screen`` and ``screen-warm3k`` are the recipe and the recipe with a 3,000-step warm-up, both at
-the screening budget ``SCREEN_SECONDS``."""
+``hour-none`` is ``hour-warm2d`` without cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only
+its cross-view or only its intra-view stage (``hour-intra-uncapped``: the recipe exactly, stopped by its CPU
+budget; every other CPU-budgeted cell also stops at ``CAPPED_STEPS``); ``screen`` and ``screen-warm3k`` are the
+recipe and the recipe with a 3,000-step warm-up, both at the screening budget ``SCREEN_SECONDS``;
+``screen-depth`` is ``screen`` with the training-time depth loss (weight 0.1), ``screen-occl`` with the weight net
+also reading the cross-view statistics, ``screen-occl-t5`` the same at tau 0.5 (the two occlusion levers,
+docs/model.md)."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -247,10 +249,10 @@ PRESETS = {
               Cell("full", 2), Cell("none", 2), Cell("cross", 0), Cell("intra", 0), Cell("full-rgbd", 0),
               *seeds("full-new", 3), *seeds("full-new-h2", 3), *seeds("full-new-src", 3), Cell("full-new-src-w", 0),
               *seeds("full-new-src-mix", 3), *seeds("full-new-mix", 3), Cell(HOUR, 0), Cell(ROOMS_198, 0),
-              *seeds(ROOMS_498, 3), *seeds(HOUR_WARM, 3), *seeds(HOUR_NONE, 3), Cell(HOUR_DEPTH, 0), Cell(OCCL, 0),
-              Cell(OCCL_T5, 0), Cell(HOUR_CROSS, 0), *seeds(HOUR_INTRA, 3), *seeds(HOUR_INTRA_UNCAPPED, 3),
-              Cell(SCREEN, 0), Cell(SCREEN_WARM, 0), Cell(HOUR, 1), Cell(HOUR, 2), Cell(ROOMS_198, 1),
-              Cell(ROOMS_198, 2)),
+              *seeds(ROOMS_498, 3), *seeds(HOUR_WARM, 3), *seeds(HOUR_NONE, 3), Cell(HOUR_CROSS, 0),
+              *seeds(HOUR_INTRA, 3), *seeds(HOUR_INTRA_UNCAPPED, 3), Cell(SCREEN, 0), Cell(SCREEN_WARM, 0),
+              Cell(SCREEN_DEPTH, 0), Cell(SCREEN_OCCL, 0), Cell(SCREEN_OCCL_T5, 0), Cell(HOUR, 1), Cell(HOUR, 2),
+              Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
