@@ -9,12 +9,11 @@ from pathlib import Path
 
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
-from sray.jobs.bench.accuracy_plan import (CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
-                                           HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, PRESETS,
-                                           RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, CAPPED_STEPS, SCREEN,
-                                           SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_SECONDS, SCREEN_WARM,
-                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell,
-                                           headline_variant)
+from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
+                                           HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_OCCL, HOUR_WARM, LONG, PRESETS,
+                                           RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH,
+                                           SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_SECONDS, SCREEN_WARM, VARIANT_SETTINGS,
+                                           WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -99,3 +98,7 @@ def test_the_screening_pair_is_the_recipe_at_half_its_budget_with_and_without_a_
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5)
     assert set(screening) <= set(CPU_BUDGETED)
     assert {Cell(v, 0) for v in screening} <= set(preset.plan)
+    hour_occl = config(HOUR_OCCL)  # the occlusion lever confirmed at the hour: the recipe exactly, cross-view inputs
+    assert dataclasses.replace(hour_occl, run=head.run) == dataclasses.replace(
+        head, model=dataclasses.replace(head.model, weight_inputs="cross-view"))
+    assert {*seeds(HOUR_OCCL, 3), *seeds(SCREEN_OCCL, 3), *seeds(SCREEN, 3)} <= set(preset.plan)
