@@ -73,10 +73,11 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
     assert after == [*[ROOMS_498] * 3, *[HOUR_WARM] * 3, *[HOUR_NONE] * 3, HOUR_CROSS]
 
 
-def test_the_screening_pair_is_the_recipe_at_half_its_budget_with_and_without_a_doubled_warm_up(
-        tmp_path: Path) -> None:
+def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_each(tmp_path: Path) -> None:
     """``screen`` trains synth-cpu-hour exactly as it is but for its CPU budget (``SCREEN_SECONDS``, half the
-    recipe's), ``screen-warm3k`` the same with twice the 2D warm-up steps; both are planned, paired on seed 0."""
+    recipe's); ``screen-warm3k`` doubles its 2D warm-up, ``screen-depth`` / ``screen-occl`` / ``screen-occl-t5``
+    change one model setting each; ``hour-occl`` is the recipe at its full budget with the cross-view inputs. All are
+    planned, the screening cells paired on seed 0."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
     assert SCREEN_SECONDS == recipe.optim.cpu_seconds / 2
 

@@ -54,15 +54,15 @@ of docs/benchmarks.md): recognition, not geometry, is where zero-shot accuracy i
 a ray step."""
 
 SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5 = "screen-depth", "screen-occl", "screen-occl-t5"
-"""Variant names of ``screen`` with one lever of the issue's "compute where it pays" each, screened against it at the
-same budget: the training-time depth loss on the rendered depth (``model.lambda_depth`` 0.1; the test protocol stays
+"""Variant names of ``screen`` with one model setting changed each, screened against it at the same budget: the
+training-time depth loss on the rendered depth (``model.lambda_depth`` 0.1; the test protocol stays
 RGB), and the occlusion-aware weight net inputs (``model.weight_inputs=cross-view``) at the model's tau (0.7) and at
 tau 0.5 (a wider weight range)."""
 
 HOUR_OCCL = "hour-occl"
 """Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) with the occlusion-aware weight net
-inputs (``model.weight_inputs=cross-view``): the hour confirmation of ``screen-occl``, the one screened lever that
-gained (docs/benchmarks.md, "The hour recipe at its CPU budget")."""
+inputs (``model.weight_inputs=cross-view``): ``screen-occl`` at the recipe's full budget, the arm that confirms a
+screened lever at the hour."""
 
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
