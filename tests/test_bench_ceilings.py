@@ -22,6 +22,7 @@ from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
 from sray.jobs.bench.accuracy_plan import PRESETS
+from sray.jobs.bench import view_weights
 from sray.jobs.bench.ceilings import REPORT_FILE
 from sray.jobs.cli import main
 from sray.model.config import SRayConfig
@@ -214,3 +215,31 @@ def test_row_s_scores_the_render_and_row_c_rgb_carries_the_segmenter_by_its_dept
             assert rows["c-rgb"].covered >= rows["a"].covered > 0 and scored["miou"] > 0.5
         else:
             assert rows["c-rgb"].covered == total and scored["total_acc"] == 0.0
+
+
+def test_view_weights_rows_run_end_to_end_and_plain_mean_weights_read_as_blind(shards: Path, tmp_path: Path,
+                                                                               one_thread: None) -> None:  # noqa: F811
+    """``sray bench view-weights`` on two untrained checkpoints of the fixture scenes (whose box hides the wall
+    from some sources): with tau = 1 every valid view weighs exactly the plain mean (n w = 1, ranking 0.5, the
+    occluded mass the plain mean's, nothing removable); with tau = 0.7 and cross-view inputs the weights stay in
+    C(tau) and the occluded mass at or above its floor; both rows count the same points; the JSON and the table in
+    the document's Ceilings section are written."""
+    paths = []
+    for name, tau, inputs in (("mean", 1.0, "view"), ("occl", 0.7, "cross-view")):
+        cfg = tiny_config(shards, tmp_path)
+        cfg.model.tau, cfg.model.weight_inputs = tau, inputs
+        paths.append(str(write_initial_checkpoint(cfg, tmp_path / name / "checkpoints" / "step_000000000")))
+    doc = tmp_path / "benchmarks.md"
+    assert main(["bench", "view-weights", "--checkpoint", *paths, "--data", str(shards), "--n-source", "4",
+                 "--views-per-scene", "2", "--stride", "2", "--out", str(tmp_path / "out"), "--doc", str(doc)]) == 0
+    mean, occl = json.loads((tmp_path / "out" / view_weights.REPORT_FILE).read_text())
+    assert mean["points"] == occl["points"] > 0 and mean["pairs"] > 0, "the fixture's box occludes some sources"
+    assert mean["visible_relative_weight"] == pytest.approx(1.0) == mean["occluded_relative_weight"]
+    assert mean["ranking"] == 0.5 and mean["removed_share"] is None
+    assert mean["occluded_mass"] == pytest.approx(mean["occluded_mass_plain"])
+    assert occl["weight_inputs"] == "cross-view" and occl["tau"] == 0.7
+    assert 0.7 < occl["occluded_relative_weight"] < 1 / 0.7 and 0.7 < occl["visible_relative_weight"] < 1 / 0.7
+    assert occl["occluded_mass"] >= occl["occluded_mass_floor"] - 1e-6
+    assert 0 <= occl["acc_occluded"] <= 1 and 0 <= occl["acc_clear"] <= 1
+    text = doc.read_text()
+    assert text.count("## Ceilings") == 1 and f"### {view_weights.TITLE}" in text and "`occl/step_000000000`" in text

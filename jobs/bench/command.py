@@ -1,6 +1,6 @@
-"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|segmenter|recipe-cards``: measured tables,
-printed, stored as data beside their charts and rendered into docs/benchmarks.md (one section per benchmark and
-device); ``recipe-cards`` reads stored results into the README's cards as well."""
+"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|view-weights|segmenter|recipe-cards``:
+measured tables, printed, stored as data beside their charts and rendered into docs/benchmarks.md (one section per
+benchmark and device); ``recipe-cards`` reads stored results into the README's cards as well."""
 
 from __future__ import annotations
 
@@ -120,6 +120,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     ceilings.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     ceilings.set_defaults(func=_bench_ceilings)
 
+    weights = kinds.add_parser("view-weights", help="what the weight net gives source views occluded at the true "
+                               "surface, one row per checkpoint, on zero-shot's views and sources")
+    weights.add_argument("--checkpoint", type=Path, nargs="+", required=True,
+                         help="checkpoint folders written by `sray train` (one table row each)")
+    weights.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
+    weights.add_argument("--n-source", type=int, default=8, help="fixed source views per test view (as sray eval)")
+    weights.add_argument("--views-per-scene", type=int, default=0, help="first test views per scene (0: all)")
+    weights.add_argument("--stride", type=int, default=2, help="every STRIDE-th pixel in each direction")
+    weights.add_argument("--tolerance", type=float, default=0.05,
+                         help="visibility test: relative depth agreement of a source's depth with the point")
+    weights.add_argument("--out", type=Path, default=Path("outputs/bench-ceilings"), help="folder of view-weights.json")
+    weights.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
+    weights.set_defaults(func=_bench_view_weights)
+
     cards = kinds.add_parser("recipe-cards", help="regenerate the recipe cards (README and docs/benchmarks.md) from "
                              "stored results: time, memory and accuracy of every recipe on every machine")
     cards.add_argument("--results", type=Path, required=True, metavar="LIST_JSON",
@@ -164,6 +178,18 @@ def _bench_ceilings(args: argparse.Namespace) -> int:
                  views_per_scene=args.views_per_scene, segmenter=args.segmenter, probe_steps=args.probe_steps,
                  probe_views=args.probe_views, tolerance=args.tolerance,
                  render=ZERO_SHOT_RENDER if args.render == "fast" else None)
+    return 0
+
+
+def _bench_view_weights(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.view_weights import run_view_weights
+
+    try:
+        run_view_weights(args.checkpoint, args.data, args.out, args.doc, n_source=args.n_source,
+                         views_per_scene=args.views_per_scene, stride=args.stride, tolerance=args.tolerance)
+    except ValueError as e:
+        print(f"sray bench view-weights: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -12,6 +12,8 @@ Pixels without ground-truth depth get no prediction (:data:`~sray.platform.eval.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import torch
 from torch import Tensor
 
@@ -37,24 +39,37 @@ def surface_brackets(depth: Tensor, near: Tensor, far: Tensor, n_coarse: int, n_
 
 
 @torch.no_grad()
+def surface_passes(net: SRayModel, src: SourceSet, K: Tensor, c2w: Tensor, depth: Tensor, pixels: Tensor, near: float,
+                   far: float, runtime: Runtime = Runtime()) -> Iterator[tuple[Tensor, dict[str, Tensor], Tensor]]:
+    """The fine field run on the rays of ``pixels`` (P,) int64 (flat indices into ``depth`` (H, W), each with a
+    known depth) of the query camera K (3, 3), c2w (4, 4), bracketing their ground-truth depths (module doc).
+
+    Yields, per chunk of ``runtime.chunk`` rays (0: by device) run through the field's ``runtime.impl``, the chunk's
+    pixel indices (r,), the field's outputs on those rays (``SRayField.forward``: samples along dim 1) and the index
+    (r,) of the sample that is the surface."""
+    h, w = depth.shape
+    device = src.feats.device
+    origins, dirs = pixel_rays(K.to(device).float(), c2w.to(device).float(), image_pixels(h, w, device))
+    surface = depth.to(device).float().reshape(-1)  # (H*W,)
+    chunk = render_chunk_rays(runtime.chunk, device)
+    cfg = net.cfg
+    pixels = pixels.to(device)
+    for start in range(0, pixels.numel(), chunk):
+        rays = pixels[start:start + chunk]
+        lo = torch.full((rays.numel(),), near, device=device)
+        hi = torch.full((rays.numel(),), far, device=device)
+        z, at = surface_brackets(surface[rays], lo, hi, cfg.n_coarse, cfg.n_fine, cfg.fine_samples == "union")
+        yield rays, net.fine(src, origins[rays], dirs[rays], z, lo, hi, runtime.impl), at
+
+
 def field_at_surface(net: SRayModel, src: SourceSet, K: Tensor, c2w: Tensor, depth: Tensor, near: float,
                      far: float, runtime: Runtime = Runtime()) -> Tensor:
     """Class ids (H, W) int64 of the fine field at the ground-truth depth (H, W) of the query camera K (3, 3),
     c2w (4, 4) against the encoded sources ``src``; :data:`UNSEEN` where the depth is unknown. Rays run in
     chunks of ``runtime.chunk`` (0: by device) through the field's ``runtime.impl``."""
     h, w = depth.shape
-    device = src.feats.device
-    origins, dirs = pixel_rays(K.to(device).float(), c2w.to(device).float(), image_pixels(h, w, device))
-    surface = depth.to(device).float().reshape(-1)  # (H*W,)
-    known = (surface > 0).nonzero().squeeze(1)
-    pred = torch.full((h * w,), UNSEEN, dtype=torch.int64, device=device)
-    chunk = render_chunk_rays(runtime.chunk, device)
-    cfg = net.cfg
-    for start in range(0, known.numel(), chunk):
-        rays = known[start:start + chunk]
-        lo = torch.full((rays.numel(),), near, device=device)
-        hi = torch.full((rays.numel(),), far, device=device)
-        z, at = surface_brackets(surface[rays], lo, hi, cfg.n_coarse, cfg.n_fine, cfg.fine_samples == "union")
-        logits = net.fine(src, origins[rays], dirs[rays], z, lo, hi, runtime.impl)["logits"]  # (r, N, L)
-        pred[rays] = logits[torch.arange(rays.numel(), device=device), at].argmax(-1)
+    known = (depth.reshape(-1) > 0).nonzero().squeeze(1)
+    pred = torch.full((h * w,), UNSEEN, dtype=torch.int64, device=src.feats.device)
+    for rays, out, at in surface_passes(net, src, K, c2w, depth, known, near, far, runtime):
+        pred[rays] = out["logits"][torch.arange(rays.numel(), device=rays.device), at].argmax(-1)  # (r, N, L) -> (r,)
     return pred.reshape(h, w).cpu()
