@@ -64,7 +64,7 @@ def _random_case(seed: int, points: int = 40, m: int = 5) -> tuple[torch.Tensor,
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_the_tally_matches_a_naive_loop_over_points_and_views(seed: int) -> None:
-    """Shares, mean relative weights n w, the ranking score (ties one half), occluded masses on mixed points and
+    """The spread of n w, shares, mean relative weights n w, the ranking score (ties one half), occluded masses on mixed points and
     the surface accuracies, summed over two batches, equal a point-by-point loop; flags on invalid views are
     ignored."""
     weights, visible, occluded = _random_case(seed)
@@ -74,7 +74,7 @@ def test_the_tally_matches_a_naive_loop_over_points_and_views(seed: int) -> None
     tally.add(weights[17:], visible[17:], occluded[17:], correct[17:])
     got = tally.summary()
 
-    rel = {"vis": [], "occ": []}
+    rel = {"vis": [], "occ": [], "all": []}
     lower = pairs = 0.0
     mass, plain, floor, mixed, acc = [], [], [], 0, {"occ": [], "clear": []}
     for p in range(weights.shape[0]):
@@ -83,6 +83,7 @@ def test_the_tally_matches_a_naive_loop_over_points_and_views(seed: int) -> None
         n = len(valid)
         vis = [i for i in valid if visible[p, i]]
         occ = [i for i in valid if occluded[p, i]]
+        rel["all"] += [n * w[i] for i in valid]
         rel["vis"] += [n * w[i] for i in vis]
         rel["occ"] += [n * w[i] for i in occ]
         for i, j in itertools.product(occ, vis):
@@ -99,6 +100,8 @@ def test_the_tally_matches_a_naive_loop_over_points_and_views(seed: int) -> None
             acc["clear"].append(bool(correct[p]))
     n_valid = int((weights > 0).sum())
     assert got["points"] == weights.shape[0] and got["valid_views"] == n_valid
+    spread = torch.tensor(rel["all"]).double().std(correction=0).item()
+    assert got["relative_weight_sd"] == pytest.approx(spread)
     assert got["visible_share"] == pytest.approx(len(rel["vis"]) / n_valid)
     assert got["occluded_share"] == pytest.approx(len(rel["occ"]) / n_valid)
     assert got["visible_relative_weight"] == pytest.approx(sum(rel["vis"]) / len(rel["vis"]))

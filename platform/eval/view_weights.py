@@ -86,6 +86,8 @@ class WeightTally:
     """The checkpoint's ``model.tau``."""
     points: int = 0
     valid_views: int = 0
+    relative_sum: float = 0.0
+    relative_squares: float = 0.0
     visible_views: int = 0
     occluded_views: int = 0
     visible_relative: float = 0.0
@@ -111,6 +113,8 @@ class WeightTally:
         relative = weights.double() * n_valid[:, None].double()  # (P, m) n w_i
         self.points += weights.shape[0]
         self.valid_views += int(n_valid.sum())
+        self.relative_sum += float(relative[valid].sum())
+        self.relative_squares += float(relative[valid].square().sum())
         self.visible_views += int(visible.sum())
         self.occluded_views += int(occluded.sum())
         self.visible_relative += float(relative[visible].sum())
@@ -132,13 +136,16 @@ class WeightTally:
         self.correct_clear += int((correct & ~blocked & (n_valid > 0)).sum())
 
     def summary(self) -> dict[str, float | int | None]:
-        """The JSON-ready figures: shares of views, mean relative weights, ranking score, occluded mass (actual,
-        plain mean, floor) on mixed points and the share of the removable mass removed, surface accuracy split by
-        occlusion. None where nothing was counted."""
+        """The JSON-ready figures: the spread (standard deviation) of n w over all valid views, shares of views,
+        mean relative weights, ranking score, occluded mass (actual, plain mean, floor) on mixed points and the share
+        of the removable mass removed, surface accuracy split by occlusion. None where nothing was counted."""
         def ratio(a: float, b: float) -> float | None:
             return a / b if b else None
         removable = self.mass_plain - self.mass_floor
+        mean = ratio(self.relative_sum, self.valid_views)
+        spread = None if mean is None else max(self.relative_squares / self.valid_views - mean * mean, 0.0) ** 0.5
         return {"tau": self.tau, "points": self.points, "valid_views": self.valid_views,
+                "relative_weight_sd": spread,
                 "visible_share": ratio(self.visible_views, self.valid_views),
                 "occluded_share": ratio(self.occluded_views, self.valid_views),
                 "visible_relative_weight": ratio(self.visible_relative, self.visible_views),
