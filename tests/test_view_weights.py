@@ -64,9 +64,9 @@ def _random_case(seed: int, points: int = 40, m: int = 5) -> tuple[torch.Tensor,
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_the_tally_matches_a_naive_loop_over_points_and_views(seed: int) -> None:
-    """The spread of n w, shares, mean relative weights n w, the ranking score (ties one half), occluded masses on mixed points and
-    the surface accuracies, summed over two batches, equal a point-by-point loop; flags on invalid views are
-    ignored."""
+    """The spread of n w, shares, mean relative weights n w, the ranking score (ties one half), occluded masses on
+    mixed points and the surface accuracies, summed over two batches, equal a point-by-point loop; flags on invalid
+    views are ignored."""
     weights, visible, occluded = _random_case(seed)
     correct = torch.rand(weights.shape[0], generator=torch.Generator().manual_seed(seed + 10)) < 0.5
     tally = WeightTally(0.7)
