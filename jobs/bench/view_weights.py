@@ -45,7 +45,7 @@ def view_weights_notes(rows: list[dict[str, Any]]) -> str:
     r = rows[0]
     views = f"the first {r['views_per_scene']} test view(s)" if r["views_per_scene"] else "every test view"
     return (f"Shards `{r['shards']}`: {len(r['scenes'])} unseen test scene(s), {views} of each, {r['n_source']} "
-            f"fixed sources (as zero-shot evaluation), every {r['stride']}th labelled pixel with known depth in each "
+            f"fixed sources (as zero-shot evaluation), one labelled pixel with known depth in {r['stride']} in each "
             "direction; each checkpoint's fine field read at the ground-truth surface (an oracle placement, as "
             "ceiling row d). A valid view is visible at the point when its depth agrees within "
             f"{r['tolerance']:g} (relative), occluded when the point lies behind its surface by more. n·w: a view's "
