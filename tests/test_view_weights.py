@@ -9,11 +9,11 @@ import pytest
 import torch
 
 from sray.model.semantic_weights import radial_weights
+from sray.platform.eval.label_transfer import point_hits
 from sray.platform.eval.view_weights import (
     WeightTally,
     occluded_mass_bounds,
     surface_pixels,
-    visibility_classes,
 )
 
 F, C = 10.0, 4.5  # focal length and principal point of a 10x10 source image
@@ -39,13 +39,19 @@ def test_visibility_is_read_from_each_sources_depth_at_the_pixel_the_point_lands
     eye = torch.eye(4)
     points = torch.stack([
         _world_point(7.0, 7.0, 2.0, eye),   # behind source 0's box; in source 1 at u = 2, on the wall
-        _world_point(2.0, 3.0, 2.0, eye),   # wall, visible to both (u = -3 in source 1: outside)
+        _world_point(2.0, 3.0, 2.0, eye),   # wall, visible to source 0 (u = -3 in source 1: outside)
         _world_point(8.0, 2.0, 1.5, eye),   # in front of the wall
         _world_point(30.0, 2.0, 2.0, eye),  # outside source 0's image
         torch.tensor([0.0, 0.0, -1.0], dtype=torch.float64),  # behind both cameras
         _world_point(0.0, 0.0, 2.0, c2w[1]),  # source 1's pixel (0, 0) has no depth; source 0 sees it at u = 5
     ])
-    visible, occluded = visibility_classes(points, K, c2w, depth, tolerance=0.05)
+    index, visible, occluded = point_hits(points, K, c2w, (10, 10), depth, tolerance=0.05)
+    assert index[:, 0].tolist() == [7 * 10 + 7, 7 * 10 + 2]  # row-major v * W + u in each source
+    _, seen, hidden = point_hits(points, K, c2w, (10, 10), None, tolerance=0.05)  # no depth: no occlusion test
+    assert seen.T.tolist() == [[True, True], [True, False], [True, True], [False, False], [False, False],
+                               [True, True]]
+    assert not hidden.any()
+    visible, occluded = visible.T, occluded.T
     assert visible.tolist() == [[False, True], [True, False], [False, False], [False, False], [False, False],
                                 [True, False]]
     assert occluded.tolist() == [[True, False], [False, False], [False, False], [False, False], [False, False],

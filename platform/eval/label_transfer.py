@@ -93,6 +93,27 @@ def nearest_pixel(uv: Tensor, hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
     return torch.where(inside, iv * w + iu, torch.zeros_like(iu)), inside
 
 
+def point_hits(points: Tensor, source_K: Tensor, source_c2w: Tensor, source_hw: tuple[int, int],
+               source_depth: Tensor | None, tolerance: float) -> tuple[Tensor, Tensor, Tensor]:
+    """Which source pixel world points (P, 3) land on, whether each source sees them and whether a nearer surface
+    hides them (module doc, ``backward``). Sources K (m, 3, 3), c2w (m, 4, 4), image (H, W) = ``source_hw``; their
+    depth (m, H, W) in metres (0 = unknown), or None: no occlusion test, every source a point projects into, in
+    front of its camera, sees it.
+
+    Returns source pixel index (m, P) int64, visible (m, P) bool and occluded (m, P) bool: the point lies behind
+    the source's own surface, z >= (1 + ``tolerance``) D (never both; all False without source depth).
+    """
+    uv, z = project_points(points, source_K, source_c2w)  # (m, P, 2), (m, P)
+    index, inside = nearest_pixel(uv, source_hw)  # (m, P)
+    known = inside & (z > 0)
+    if source_depth is None:
+        return index, known, torch.zeros_like(known)
+    seen_depth = source_depth.double().reshape(source_depth.shape[0], -1).gather(1, index)  # (m, P)
+    known = known & (seen_depth > 0)
+    visible = known & ((z - seen_depth).abs() < tolerance * seen_depth)
+    return index, visible, known & (z >= (1.0 + tolerance) * seen_depth)
+
+
 def backward_hits(source_depth: Tensor | None, source_K: Tensor, source_c2w: Tensor, query_depth: Tensor,
                   query_K: Tensor, query_c2w: Tensor, tolerance: float,
                   source_hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
@@ -102,13 +123,8 @@ def backward_hits(source_depth: Tensor | None, source_K: Tensor, source_c2w: Ten
     Returns source pixel index (m, Hq*Wq) int64 and visible (m, Hq*Wq) bool.
     """
     points = unproject(query_depth[None], query_K[None], query_c2w[None])[0]  # (P, 3)
-    uv, z = project_points(points, source_K, source_c2w)  # (m, P, 2), (m, P)
-    index, inside = nearest_pixel(uv, source_hw)  # (m, P)
-    known = (query_depth.reshape(1, -1) > 0) & inside & (z > 0)
-    if source_depth is None:
-        return index, known
-    seen_depth = source_depth.double().reshape(source_depth.shape[0], -1).gather(1, index)  # (m, P)
-    return index, known & (seen_depth > 0) & ((z - seen_depth).abs() < tolerance * seen_depth)
+    index, visible, _ = point_hits(points, source_K, source_c2w, source_hw, source_depth, tolerance)
+    return index, visible & (query_depth.reshape(1, -1) > 0)
 
 
 def forward_hits(source_depth: Tensor, source_K: Tensor, source_c2w: Tensor, query_K: Tensor,

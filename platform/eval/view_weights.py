@@ -5,7 +5,7 @@ S-Ray's semantic ray at a point is s = sum_i w_i F''_i over the views that valid
 occluder's feature, so every share of weight it keeps mixes a wrong class into s. This module reads the weights the
 checkpoint's fine field gives at ground-truth surface points of unseen test views (the samples of
 :func:`~sray.platform.eval.surface_field.surface_passes`, an oracle placement) and sorts each valid view by the
-sources' ground-truth depth (the geometry of ``label_transfer``'s backward test):
+sources' ground-truth depth (``label_transfer.point_hits``, the geometry of its backward test):
 
 * *visible*: the point projects inside the source image, in front of its camera, and its camera depth z agrees
   with the source's depth D there: |z - D| < ``tolerance`` D;
@@ -37,27 +37,10 @@ from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SRayModel
-from sray.platform.eval.label_transfer import nearest_pixel, project_points, unproject
+from sray.platform.eval.label_transfer import point_hits, unproject
 from sray.platform.eval.surface_field import surface_passes
 from sray.platform.eval.view_scoring import encode_sources
 from sray.platform.eval.zero_shot import select_scenes
-
-
-def visibility_classes(points: Tensor, source_K: Tensor, source_c2w: Tensor, source_depth: Tensor,
-                       tolerance: float) -> tuple[Tensor, Tensor]:
-    """Which sources see world points (P, 3) and which are occluded at them (module doc), with source cameras
-    K (m, 3, 3), c2w (m, 4, 4) and their depth (m, H, W) in metres (0 = unknown).
-
-    Returns visible (P, m) bool and occluded (P, m) bool (never both; a point outside a source's image, behind
-    its camera, or where its depth is unknown is neither)."""
-    m, h, w = source_depth.shape
-    uv, z = project_points(points, source_K, source_c2w)  # (m, P, 2), (m, P) float64
-    index, inside = nearest_pixel(uv, (h, w))  # (m, P)
-    seen = source_depth.double().reshape(m, -1).gather(1, index)  # (m, P) the source's depth where the point lands
-    known = inside & (z > 0) & (seen > 0)
-    visible = known & ((z - seen).abs() < tolerance * seen)
-    occluded = known & (z >= (1.0 + tolerance) * seen)
-    return visible.T.contiguous(), occluded.T.contiguous()
 
 
 def ranking_pairs(weights: Tensor, occluded: Tensor, visible: Tensor) -> tuple[Tensor, Tensor]:
@@ -105,8 +88,8 @@ class WeightTally:
 
     def add(self, weights: Tensor, visible: Tensor, occluded: Tensor, correct: Tensor) -> None:
         """Add surface points: weights (P, m) float (0 for invalid views), visible/occluded (P, m) bool
-        (:func:`visibility_classes`), correct (P,) bool (the field's argmax is the point's label; only labelled
-        points are given)."""
+        (:func:`~sray.platform.eval.label_transfer.point_hits`, transposed), correct (P,) bool (the field's
+        argmax is the point's label; only labelled points are given)."""
         valid = weights > 0
         visible, occluded = visible & valid, occluded & valid
         n_valid = valid.sum(1)
@@ -183,8 +166,9 @@ def tally_view(tally: WeightTally, net: SRayModel, sample: EvalSample, stride: i
         row = torch.arange(rays.numel())
         weights = out["view_weights"][row, :, at]  # (R, m, N) -> (r, m) at the surface sample
         correct = out["logits"][row, at].argmax(-1) == flat_label[rays]  # (r,)
-        visible, occluded = visibility_classes(points[rays], src.K, src.c2w, src.depth, tolerance)
-        tally.add(weights, visible, occluded, correct)
+        _, visible, occluded = point_hits(points[rays], src.K, src.c2w, tuple(src.depth.shape[-2:]),
+                                          src.depth, tolerance)
+        tally.add(weights, visible.T, occluded.T, correct)
 
 
 def measure_view_weights(net: SRayModel, shards: Path, *, n_source: int = 8, views_per_scene: int = 0, stride: int = 2,
