@@ -10,7 +10,7 @@ from pathlib import Path
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
-                                           HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_OCCL, HOUR_WARM, LONG, PRESETS,
+                                           HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, PRESETS,
                                            RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH,
                                            SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_SECONDS, SCREEN_WARM, VARIANT_SETTINGS,
                                            WARM_2D_STEPS, Cell, headline_variant, seeds)
@@ -76,8 +76,8 @@ def test_the_headline_cell_is_the_recipe_with_its_cpu_budget_and_world_and_the_o
 def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_each(tmp_path: Path) -> None:
     """``screen`` trains synth-cpu-hour exactly as it is but for its CPU budget (``SCREEN_SECONDS``, half the
     recipe's); ``screen-warm3k`` doubles its 2D warm-up, ``screen-depth`` / ``screen-occl`` / ``screen-occl-t5``
-    change one model setting each; ``hour-occl`` is the recipe at its full budget with the cross-view inputs. All are
-    planned, the screening cells paired on seed 0."""
+    change one model setting each. All are planned, paired on seed 0; the occlusion lever and its baseline on seeds
+    0-2, with no hour arm (level with its baseline over those seeds, docs/benchmarks.md)."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
     assert SCREEN_SECONDS == recipe.optim.cpu_seconds / 2
 
@@ -99,7 +99,6 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5)
     assert set(screening) <= set(CPU_BUDGETED)
     assert {Cell(v, 0) for v in screening} <= set(preset.plan)
-    hour_occl = config(HOUR_OCCL)  # the occlusion lever confirmed at the hour: the recipe exactly, cross-view inputs
-    assert dataclasses.replace(hour_occl, run=head.run) == dataclasses.replace(
-        head, model=dataclasses.replace(head.model, weight_inputs="cross-view"))
-    assert {*seeds(HOUR_OCCL, 3), *seeds(SCREEN_OCCL, 3), *seeds(SCREEN, 3)} <= set(preset.plan)
+    assert {*seeds(SCREEN_OCCL, 3), *seeds(SCREEN, 3)} <= set(preset.plan)
+    cross_view = [v for v, settings in VARIANT_SETTINGS.items() if settings.weight_inputs == "cross-view"]
+    assert cross_view == [SCREEN_OCCL, SCREEN_OCCL_T5]  # screened only

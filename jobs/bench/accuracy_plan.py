@@ -59,11 +59,6 @@ training-time depth loss on the rendered depth (``model.lambda_depth`` 0.1; the 
 RGB), and the occlusion-aware weight net inputs (``model.weight_inputs=cross-view``) at the model's tau (0.7) and at
 tau 0.5 (a wider weight range)."""
 
-HOUR_OCCL = "hour-occl"
-"""Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) with the occlusion-aware weight net
-inputs (``model.weight_inputs=cross-view``): ``screen-occl`` at the recipe's full budget, the arm that confirms a
-screened lever at the hour."""
-
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
 2-core machine."""
@@ -82,7 +77,7 @@ WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 """``optim.warmup_2d_steps`` of ``hour-warm2d`` and the recipe."""
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_WARM, HOUR_INTRA_UNCAPPED,
-                HOUR_OCCL, SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5)
+                SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
 
@@ -155,7 +150,6 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     HOUR_INTRA: replace(_WARM_SETTINGS, attention="intra"),
                     HOUR_WARM: _WARM_SETTINGS,
                     HOUR_INTRA_UNCAPPED: _RECIPE,
-                    HOUR_OCCL: replace(_RECIPE, weight_inputs="cross-view"),
                     SCREEN: _SCREEN,
                     SCREEN_WARM: replace(_SCREEN, warmup_2d_steps=2 * WARM_2D_STEPS),
                     SCREEN_DEPTH: replace(_SCREEN, lambda_depth=0.1),
@@ -177,7 +171,7 @@ budget; every other CPU-budgeted cell also stops at ``CAPPED_STEPS``); ``screen`
 recipe and the recipe with a 3,000-step warm-up, both at the screening budget ``SCREEN_SECONDS``;
 ``screen-depth`` is ``screen`` with the training-time depth loss (weight 0.1), ``screen-occl`` with the weight net
 also reading the cross-view statistics, ``screen-occl-t5`` the same at tau 0.5 (the two occlusion levers,
-docs/model.md); ``hour-occl`` is the recipe exactly with the cross-view inputs, at its full budget."""
+docs/model.md)."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -258,7 +252,7 @@ PRESETS = {
               *seeds(ROOMS_498, 3), *seeds(HOUR_WARM, 3), *seeds(HOUR_NONE, 3), Cell(HOUR_CROSS, 0),
               *seeds(HOUR_INTRA, 3), *seeds(HOUR_INTRA_UNCAPPED, 3), Cell(SCREEN, 0), Cell(SCREEN_WARM, 0),
               Cell(SCREEN_DEPTH, 0), Cell(SCREEN_OCCL, 0), Cell(SCREEN_OCCL_T5, 0), Cell(SCREEN, 1),
-              Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), *seeds(HOUR_OCCL, 3), Cell(HOUR, 1),
+              Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), Cell(HOUR, 1),
               Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
