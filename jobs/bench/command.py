@@ -1,4 +1,4 @@
-"""``sray bench loader|model|profile|speed-accuracy|accuracy|ceilings|view-weights|segmenter|recipe-cards``:
+"""``sray bench loader|model|profile|recipe-step|speed-accuracy|accuracy|ceilings|view-weights|segmenter|recipe-cards``:
 measured tables, printed, stored as data beside their charts and rendered into docs/benchmarks.md (one section per
 benchmark and device); ``recipe-cards`` reads stored results into the README's cards as well."""
 
@@ -134,6 +134,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     weights.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     weights.set_defaults(func=_bench_view_weights)
 
+    step = kinds.add_parser("recipe-step", help="where one ray-training step of a recipe spends its CPU (loading, "
+                            "encoder, fields, backward, Adam) on real shards, beside its step-cost levers")
+    step.add_argument("--recipe", default="synth-cpu-hour", help="the recipe whose step is measured")
+    step.add_argument("--data", type=Path, required=True, help="shard folder with the recipe's training scenes")
+    step.add_argument("--lever", nargs="+", action="append", default=[], metavar=("NAME", "SECTION.FIELD=VALUE"),
+                      help="a variant of the recipe: its name, then the overrides that make it (repeatable), e.g. "
+                           "--lever rays-128 data.rays_per_batch=128")
+    step.add_argument("--steps", type=int, default=20, help="measured ray steps per variant and round")
+    step.add_argument("--rounds", type=int, default=3, help="rounds, the variants alternating")
+    step.add_argument("--warm-up", type=int, default=3, help="unmeasured ray steps per variant first")
+    step.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
+    step.set_defaults(func=_bench_recipe_step)
+
     cards = kinds.add_parser("recipe-cards", help="regenerate the recipe cards (README and docs/benchmarks.md) from "
                              "stored results: time, memory and accuracy of every recipe on every machine")
     cards.add_argument("--results", type=Path, required=True, metavar="LIST_JSON",
@@ -189,6 +202,17 @@ def _bench_view_weights(args: argparse.Namespace) -> int:
                          views_per_scene=args.views_per_scene, stride=args.stride, tolerance=args.tolerance)
     except ValueError as e:
         print(f"sray bench view-weights: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _bench_recipe_step(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.recipe_step import run_recipe_step
+
+    try:
+        run_recipe_step(args.recipe, args.data, args.lever, args.steps, args.rounds, args.warm_up, args.doc)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"sray bench recipe-step: {e}", file=sys.stderr)
         return 2
     return 0
 
