@@ -87,8 +87,8 @@ def import_old_cells(out: Path) -> list[str]:
 def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
     """The training config of ``cell``: the preset's recipe and overrides, the variant's model settings
     (attention, the weight net's map, inputs and tau, the source inputs, fine samples, heads, source-view loss,
-    2D warm-up, scene interleaving, step cap and CPU budget), the cell's seed and budget, and the benchmark's
-    folders."""
+    2D warm-up, scene interleaving, step cap and CPU budget, then its overrides), the cell's seed and budget, and the
+    benchmark's folders."""
     cfg = get_recipe(p.recipe)
     for assignment in p.overrides:
         apply_override(cfg, assignment)
@@ -106,6 +106,8 @@ def cell_config(cell: Cell, p: Preset, shards: Path, out: Path, tracking_uri: st
         cfg.optim.steps = variant.step_cap
     if variant.cpu_seconds is not None:
         cfg.optim.cpu_seconds = variant.cpu_seconds
+    for assignment in variant.overrides:
+        apply_override(cfg, assignment)
     if cell.variant not in CPU_BUDGETED:  # step-budgeted cells: the ablation budget, or the long one
         cfg.optim.cpu_seconds = 0.0
         cfg.optim.steps = p.ablation_steps if cell.variant != LONG else (p.long_steps or cfg.optim.steps)

@@ -59,6 +59,11 @@ training-time depth loss on the rendered depth (``model.lambda_depth`` 0.1; the 
 RGB), and the occlusion-aware weight net inputs (``model.weight_inputs=cross-view``) at the model's tau (0.7) and at
 tau 0.5 (a wider weight range)."""
 
+SCREEN_RAYS_128 = "screen-rays128"
+"""Variant name of ``screen`` rendering 128 query rays per rank-step instead of 256 (``data.rays_per_batch``, a
+step-cost lever: ``sray bench recipe-step`` measures its ray step at 0.79x the recipe's CPU, so the same budget buys
+about a quarter more ray steps, each with half the rendered labels; the source views' labels are unchanged)."""
+
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
 2-core machine."""
@@ -77,7 +82,7 @@ WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 """``optim.warmup_2d_steps`` of ``hour-warm2d`` and the recipe."""
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_WARM, HOUR_INTRA_UNCAPPED,
-                SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5)
+                SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
 
@@ -125,6 +130,9 @@ class Variant:
     that differ only here form one arm of the accuracy-against-CPU-time chart."""
     cpu_seconds: float | None = None
     """``optim.cpu_seconds`` of a CPU-budgeted cell (None: the recipe's budget). A budget too, like ``step_cap``."""
+    overrides: tuple[str, ...] = ()
+    """``section.field=value`` assignments applied after every other setting: the step-cost levers, in the form
+    ``sray bench recipe-step --lever`` measures them."""
 
 
 _HOUR_SETTINGS = Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4, step_cap=CAPPED_STEPS)
@@ -154,7 +162,8 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     SCREEN_WARM: replace(_SCREEN, warmup_2d_steps=2 * WARM_2D_STEPS),
                     SCREEN_DEPTH: replace(_SCREEN, lambda_depth=0.1),
                     SCREEN_OCCL: replace(_SCREEN, weight_inputs="cross-view"),
-                    SCREEN_OCCL_T5: replace(_SCREEN, weight_inputs="cross-view", tau=0.5)}
+                    SCREEN_OCCL_T5: replace(_SCREEN, weight_inputs="cross-view", tau=0.5),
+                    SCREEN_RAYS_128: replace(_SCREEN, overrides=("data.rays_per_batch=128",))}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
 map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
 full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
@@ -171,7 +180,7 @@ budget; every other CPU-budgeted cell also stops at ``CAPPED_STEPS``); ``screen`
 recipe and the recipe with a 3,000-step warm-up, both at the screening budget ``SCREEN_SECONDS``;
 ``screen-depth`` is ``screen`` with the training-time depth loss (weight 0.1), ``screen-occl`` with the weight net
 also reading the cross-view statistics, ``screen-occl-t5`` the same at tau 0.5 (the two occlusion levers,
-docs/model.md)."""
+docs/model.md); ``screen-rays128`` is ``screen`` with 128 query rays per rank-step (a step-cost lever)."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -252,7 +261,7 @@ PRESETS = {
               *seeds(ROOMS_498, 3), *seeds(HOUR_WARM, 3), *seeds(HOUR_NONE, 3), Cell(HOUR_CROSS, 0),
               *seeds(HOUR_INTRA, 3), *seeds(HOUR_INTRA_UNCAPPED, 3), Cell(SCREEN, 0), Cell(SCREEN_WARM, 0),
               Cell(SCREEN_DEPTH, 0), Cell(SCREEN_OCCL, 0), Cell(SCREEN_OCCL_T5, 0), Cell(SCREEN, 1),
-              Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), Cell(HOUR, 1),
+              Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), *seeds(SCREEN_RAYS_128, 3), Cell(HOUR, 1),
               Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
