@@ -100,7 +100,6 @@ def test_recipe_step_measures_every_variant_and_its_overrides_reach_the_step(tmp
     assert list(costs) == ["recipe", "no-head", "two-sources"]
     for c in costs.values():
         assert c.steps == 2 and set(c.seconds) == set(PHASES)
-        assert c.total_ms() == pytest.approx(1e3 * sum(t for _, t in c.per_step) / 2)
     assert costs["recipe"].seconds["source head"] > 0 and costs["no-head"].seconds["source head"] == 0
     assert costs["two-sources"].sources == 4  # two steps of exactly two views
     assert 2 * 2 <= costs["recipe"].sources <= 2 * 8  # the recipe draws 2-8 per sample

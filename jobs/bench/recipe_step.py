@@ -10,8 +10,9 @@ fine fields) and step hooks on the optimizer. What one rank of a multi-rank job 
 is not in these figures.
 
 Variants (the recipe and each lever) run in the same process, alternating round by round, each with its own
-model and loader built from the same seed (the same scenes and query pixels in the same order, so the levers
-compare paired steps); a load change on the machine hits all of them alike.
+model and loader built from the same seed (a lever that changes what the loader draws, such as the rays per
+sample, also changes its later draws, the source counts among them; the table compares the variants at their
+expected source count); a load change on the machine hits all of them alike.
 """
 
 from __future__ import annotations
@@ -48,13 +49,21 @@ class StepCosts:
     """CPU seconds per phase summed over the measured steps of one variant, and what those steps held."""
 
     seconds: dict[str, float] = dataclasses.field(default_factory=lambda: dict.fromkeys(PHASES, 0.0))
-    steps: int = 0
-    sources: int = 0
-    """Source views summed over the steps (the recipe's loader may draw a different count per sample)."""
     source_pixels: int = 0
     """Source-view pixels summed over the steps."""
     per_step: list[tuple[int, float]] = dataclasses.field(default_factory=list)
-    """(source views, CPU seconds) of each measured step."""
+    """(source views, CPU seconds) of each measured step (the recipe's loader may draw a different count per
+    sample)."""
+
+    @property
+    def steps(self) -> int:
+        """Measured steps."""
+        return len(self.per_step)
+
+    @property
+    def sources(self) -> int:
+        """Source views summed over the measured steps."""
+        return sum(m for m, _ in self.per_step)
 
     def per_step_ms(self) -> dict[str, float]:
         """Mean CPU milliseconds per step of each phase."""
@@ -157,8 +166,6 @@ class VariantRunner:
             c.seconds["forward rest"] += (t2 - t1) - sum(forward.values())
             c.seconds["optimizer"] += after.get("optimizer", 0.0)
             c.seconds["backward"] += (t3 - t2) - after.get("optimizer", 0.0)
-            c.steps += 1
-            c.sources += int(sample.sources.rgb.shape[0])
             c.source_pixels += int(sample.sources.rgb[:, 0].numel())
             c.per_step.append((int(sample.sources.rgb.shape[0]), t3 - t0))
 
