@@ -12,7 +12,8 @@ from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
                                            HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, PRESETS,
                                            RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH,
-                                           SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SECONDS, SCREEN_WARM, VARIANT_SETTINGS,
+                                           SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SECONDS, SCREEN_WARM,
+                                           VARIANT_SETTINGS,
                                            WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe

@@ -104,4 +104,5 @@ def test_recipe_step_measures_every_variant_and_its_overrides_reach_the_step(tmp
     assert costs["two-sources"].sources == 4  # two steps of exactly two views
     assert 2 * 2 <= costs["recipe"].sources <= 2 * 8  # the recipe draws 2-8 per sample
     text = doc.read_text()
-    assert "Ray step of synth-cpu-hour, by phase" in text and "`no-head`: `optim.warmup_2d_steps=0` `model.lambda_src_sem=0`" in text
+    assert "Ray step of synth-cpu-hour, by phase" in text
+    assert "`no-head`: `optim.warmup_2d_steps=0` `model.lambda_src_sem=0`" in text

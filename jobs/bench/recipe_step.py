@@ -271,7 +271,8 @@ def run_recipe_step(recipe: str, shards: Path, lever_specs: list[list[str]], ste
                     doc: Path) -> dict[str, StepCosts]:
     """``sray bench recipe-step``: measure the recipe's ray step and its levers on ``shards``, record the table."""
     if not (shards / "manifest.json").is_file():
-        raise FileNotFoundError(f"{shards}: no manifest.json; pass --data a shard folder (`sray data shard` writes one)")
+        raise FileNotFoundError(
+            f"{shards}: no manifest.json; pass --data a shard folder (`sray data shard` writes one)")
     if steps < 1 or rounds < 1 or warm_up < 0:
         raise ValueError(f"--steps {steps}, --rounds {rounds}, --warm-up {warm_up}: steps and rounds must be at least "
                          "1, the warm-up at least 0")
