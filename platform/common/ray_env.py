@@ -42,11 +42,15 @@ def _ray_file_logger(relative: str) -> str:
 QUIET = {"ray.train.v2._internal.execution.controller.placement_group_cleaner":
          ("Failed to query Ray Train Controller actor state",),
          "ray.train.v2._internal.execution.storage": ("Checkpoint successfully created at",),
-         _ray_file_logger("train/v2/_internal/execution/context.py"): ("Reporting training result",)}
+         _ray_file_logger("train/v2/_internal/execution/context.py"): ("Reporting training result",),
+         "ray.train.v2._internal.execution.scaling_policy.autoscaling_coordinator_client":
+         ("Failed to send resource request for",)}
 """Logger name -> message prefixes dropped from it. Besides the cleaner's flood: at every checkpoint each
 worker announced its report ("Reporting training result 3: TrainingReport(checkpoint=..., metrics=...)
 from rank 1") and rank 0 the copy in Ray's own storage folder, 3 lines of Ray's internals per checkpoint
-beside sray's own progress line."""
+beside sray's own progress line; and when the cores are busy the controller's resource request to Ray's
+autoscaling coordinator can time out, which Ray logs as a warning with a full traceback that its own message
+calls safe to ignore (the request is sent again at the next poll; a job of fixed size does not depend on it)."""
 
 TRAIN_WORKER_ENV = {"RAY_TRAIN_ENABLE_PRINT_PATCH": "0"}
 """Environment of Ray Train workers. Ray Train V2 replaces ``print`` in its workers with a function that
