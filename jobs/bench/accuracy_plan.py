@@ -60,14 +60,16 @@ RGB), and the occlusion-aware weight net inputs (``model.weight_inputs=cross-vie
 tau 0.5 (a wider weight range)."""
 
 SCREEN_RAYS_128 = "screen-rays128"
-"""Variant name of ``screen`` rendering 128 query rays per rank-step instead of 256 (``data.rays_per_batch``, a
-step-cost lever: ``sray bench recipe-step`` measures its ray step at 0.79x the recipe's CPU, so the same budget buys
-about a quarter more ray steps, each with half the rendered labels; the source views' labels are unchanged)."""
+"""Variant name of ``screen`` rendering 128 query rays per rank-step instead of 256 (``data.rays_per_batch``; a
+step-cost lever: its ray step costs 0.79x the recipe's in ``sray bench recipe-step``, each with half the labels)."""
 
 SCREEN_SAMPLES_16 = "screen-samples16"
-"""Variant name of ``screen`` with 16 coarse and 16 fine samples per ray instead of the recipe's 24 and 24
-(``model.n_coarse``, ``model.n_fine``; a step-cost lever: ``sray bench recipe-step`` measures its ray step at 0.83x
-the recipe's CPU; every step keeps its query rays and their labels, each ray is sampled more coarsely)."""
+"""Variant name of ``screen`` with 16 coarse and 16 fine samples per ray instead of 24 and 24 (``model.n_coarse``,
+``model.n_fine``; a step-cost lever: 0.83x the recipe's ray-step CPU in ``sray bench recipe-step``, the same labels)."""
+
+SCREEN_ROOMS_998, ROOMS_998 = "screen-998", 998
+"""Variant name of ``screen`` on 998 training rooms instead of 498 (the same test rooms; generating them is not counted
+in the budget), and that count: zero-shot rose with every room count measured (48 -> 198 -> 498, docs/benchmarks.md)."""
 
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
@@ -88,7 +90,7 @@ WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_WARM, HOUR_INTRA_UNCAPPED,
                 SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
-                SCREEN_SAMPLES_16)
+                SCREEN_SAMPLES_16, SCREEN_ROOMS_998)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
 
@@ -170,25 +172,26 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     SCREEN_OCCL: replace(_SCREEN, weight_inputs="cross-view"),
                     SCREEN_OCCL_T5: replace(_SCREEN, weight_inputs="cross-view", tau=0.5),
                     SCREEN_RAYS_128: replace(_SCREEN, overrides=("data.rays_per_batch=128",)),
-                    SCREEN_SAMPLES_16: replace(_SCREEN, overrides=("model.n_coarse=16", "model.n_fine=16"))}
-"""Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight
-map instead of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new``
-full CRA whose fine pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16
-channels instead of 4 of 8; ``full-new-src`` full-new with the source views' per-pixel semantic loss on the
-encoder (weight 1), ``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget;
-``full-new-mix`` and ``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step
-(one sample per scene visit, 4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds
-``synth-cpu-hour``'s settings without its 2D warm-up, with full CRA, on the preset's 48 rooms; ``hour-198`` and
-``hour-498`` are ``hour`` on 198 and 498 training rooms (the same test rooms; generating them is not counted in the
-CPU budget); ``hour-warm2d`` is ``hour-498`` whose first 1,500 steps are the 2D-only warm-up (full CRA);
-``hour-none`` is ``hour-warm2d`` without cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only
-its cross-view or only its intra-view stage (``hour-intra-uncapped``: the recipe exactly, stopped by its CPU
-budget; every other CPU-budgeted cell also stops at ``CAPPED_STEPS``); ``screen`` and ``screen-warm3k`` are the
-recipe and the recipe with a 3,000-step warm-up, both at the screening budget ``SCREEN_SECONDS``;
-``screen-depth`` is ``screen`` with the training-time depth loss (weight 0.1), ``screen-occl`` with the weight net
-also reading the cross-view statistics, ``screen-occl-t5`` the same at tau 0.5 (the two occlusion levers,
-docs/model.md); ``screen-rays128`` is ``screen`` with 128 query rays per rank-step, ``screen-samples16`` with
-16+16 samples per ray (two step-cost levers)."""
+                    SCREEN_SAMPLES_16: replace(_SCREEN, overrides=("model.n_coarse=16", "model.n_fine=16")),
+                    SCREEN_ROOMS_998: replace(_SCREEN, train_scenes=ROOMS_998)}
+"""Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight map instead
+of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new`` full CRA whose fine
+pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16 channels instead of 4 of 8;
+``full-new-src`` full-new with the source views' per-pixel semantic loss on the encoder (weight 1),
+``full-new-src-w`` the same after a 100-step 2D-only warm-up within the budget; ``full-new-mix`` and
+``full-new-src-mix`` are full-new and full-new-src with scenes interleaved step by step (one sample per scene visit,
+4 scenes cached) instead of 16 consecutive samples per scene; ``hour`` holds ``synth-cpu-hour``'s settings without
+its 2D warm-up, with full CRA, on the preset's 48 rooms; ``hour-198`` and ``hour-498`` are ``hour`` on 198 and 498
+training rooms (the same test rooms; generating them is not counted in the CPU budget); ``hour-warm2d`` is
+``hour-498`` whose first 1,500 steps are the 2D-only warm-up (full CRA); ``hour-none`` is ``hour-warm2d`` without
+cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only its cross-view or only its intra-view stage
+(``hour-intra-uncapped``: the recipe exactly, stopped by its CPU budget; every other CPU-budgeted cell also stops at
+``CAPPED_STEPS``); ``screen`` and ``screen-warm3k`` are the recipe and the recipe with a 3,000-step warm-up, both at
+the screening budget ``SCREEN_SECONDS``; ``screen-depth`` is ``screen`` with the training-time depth loss (weight
+0.1), ``screen-occl`` with the weight net also reading the cross-view statistics, ``screen-occl-t5`` the same at tau
+0.5 (the two occlusion levers, docs/model.md); ``screen-rays128`` is ``screen`` with 128 query rays per rank-step,
+``screen-samples16`` with 16+16 samples per ray (two step-cost levers); ``screen-998`` is ``screen`` on 998 training
+rooms."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -270,7 +273,8 @@ PRESETS = {
               *seeds(HOUR_INTRA, 3), *seeds(HOUR_INTRA_UNCAPPED, 3), Cell(SCREEN, 0), Cell(SCREEN_WARM, 0),
               Cell(SCREEN_DEPTH, 0), Cell(SCREEN_OCCL, 0), Cell(SCREEN_OCCL_T5, 0), Cell(SCREEN, 1),
               Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), *seeds(SCREEN_RAYS_128, 3), Cell(HOUR, 1),
-              Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), *seeds(SCREEN_SAMPLES_16, 3)),
+              Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), *seeds(SCREEN_SAMPLES_16, 3),
+              *seeds(SCREEN_ROOMS_998, 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
