@@ -12,9 +12,9 @@ from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
                                            HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, PRESETS,
                                            RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH,
-                                           SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_ROOMS_998,
-                                           SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM, VARIANT_SETTINGS,
-                                           WARM_2D_STEPS, Cell, headline_variant, seeds)
+                                           SCREEN_LR_RAYS, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
+                                           SCREEN_ROOMS_998, SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM,
+                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -78,8 +78,9 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     """``screen`` trains synth-cpu-hour exactly as it is but for its CPU budget (``SCREEN_SECONDS``, half the
     recipe's); ``screen-warm3k`` doubles its 2D warm-up, ``screen-depth`` / ``screen-occl`` / ``screen-occl-t5``
     change one model setting each, ``screen-rays128`` the query rays per step, ``screen-samples16`` the samples
-    per ray and ``screen-998`` the training rooms (998, a world with the same test rooms). All are planned, paired on
-    seed 0; the occlusion lever, the two step-cost levers, the rooms lever and their baseline on seeds 0-2, with no
+    per ray, ``screen-998`` the training rooms (998, a world with the same test rooms) and ``screen-lr-rays`` where
+    the lr decay starts. All are planned, paired on seed 0; the occlusion lever, the two step-cost levers, the rooms
+    and the lr lever and their baseline on seeds 0-2, with no
     hour arm for the occlusion or the rays lever (neither clear of the seed spread over those seeds,
     docs/benchmarks.md)."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
@@ -112,12 +113,16 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert rooms == dataclasses.replace(VARIANT_SETTINGS[SCREEN], train_scenes=998)
     assert (998 - preset.world.train_scenes) % 5 == 0  # the generator's 5 room types: the test rooms stay the same
     assert dataclasses.replace(config(SCREEN_ROOMS_998), run=screen.run) == screen
+    phase = config(SCREEN_LR_RAYS)  # the lr lever: the decay counted over the ray phase, nothing else changed
+    assert (screen.optim.lr_decay_start, phase.optim.lr_decay_start) == ("run", "rays")
+    assert dataclasses.replace(phase, run=screen.run, optim=dataclasses.replace(phase.optim, lr_decay_start="run")) \
+        == screen
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
-                 SCREEN_ROOMS_998)
+                 SCREEN_ROOMS_998, SCREEN_LR_RAYS)
     assert set(screening) <= set(CPU_BUDGETED)
     assert {Cell(v, 0) for v in screening} <= set(preset.plan)
     assert {*seeds(SCREEN_OCCL, 3), *seeds(SCREEN, 3), *seeds(SCREEN_RAYS_128, 3),
-            *seeds(SCREEN_SAMPLES_16, 3), *seeds(SCREEN_ROOMS_998, 3)} <= set(preset.plan)
+            *seeds(SCREEN_SAMPLES_16, 3), *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3)} <= set(preset.plan)
     cross_view = [v for v, settings in VARIANT_SETTINGS.items() if settings.weight_inputs == "cross-view"]
     assert cross_view == [SCREEN_OCCL, SCREEN_OCCL_T5]  # screened only

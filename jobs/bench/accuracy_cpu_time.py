@@ -14,7 +14,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from sray.data_tools.atomic import save_png
-from sray.jobs.bench.accuracy_plan import HOUR, HOUR_INTRA_UNCAPPED, LONG, SCREEN, VARIANT_SETTINGS, Preset, Variant
+from sray.jobs.bench.accuracy_plan import HOUR, HOUR_INTRA_UNCAPPED, LONG, SCREEN, VARIANT_SETTINGS, Preset
+from sray.jobs.bench.accuracy_variant import Variant
 
 BUDGET_VARIANTS = (LONG, HOUR, HOUR_INTRA_UNCAPPED, SCREEN)
 """Variants that only change the budget of another variant's settings (they join that variant's arm)."""

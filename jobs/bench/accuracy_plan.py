@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from sray.data_tools.synth.world import World
+from sray.jobs.bench.accuracy_variant import Variant
 from sray.model.fast_render import FastRender
 from sray.platform.config.recipes import CPU_HOUR_SECONDS, CPU_HOUR_WARMUP_2D
 
@@ -71,6 +72,11 @@ SCREEN_ROOMS_998, ROOMS_998 = "screen-998", 998
 """Variant name of ``screen`` on 998 training rooms instead of 498 (the same test rooms; generating them is not counted
 in the budget), and that count: zero-shot rose with every room count measured (48 -> 198 -> 498, docs/benchmarks.md)."""
 
+SCREEN_LR_RAYS = "screen-lr-rays"
+"""Variant name of ``screen`` whose lr decay starts at the first ray step (``optim.lr_decay_start=rays``): the 2D
+warm-up trains at the base lr and the ray phase decays over its own share of the budget, instead of starting at
+~0.6x the hour's lr (the decay follows the spent budget share, docs/benchmarks.md)."""
+
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
 2-core machine."""
@@ -90,58 +96,9 @@ WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_WARM, HOUR_INTRA_UNCAPPED,
                 SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
-                SCREEN_SAMPLES_16, SCREEN_ROOMS_998)
+                SCREEN_SAMPLES_16, SCREEN_ROOMS_998, SCREEN_LR_RAYS)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
-
-@dataclass(frozen=True)
-class Variant:
-    """The model settings a row of the benchmark changes."""
-
-    attention: str = "full"
-    """``model.attention``."""
-    weight_map: str = "radial"
-    """``model.weight_map``."""
-    weight_inputs: str = "view"
-    """``model.weight_inputs`` (``cross-view``: the weight net also reads each view's distance from the valid
-    views' mean feature and their variance)."""
-    tau: float | None = None
-    """``model.tau`` (None: the recipe's): the bound of the semantic-aware weights, tau/m < w_i < 1/(tau m)."""
-    inputs: str = "rgb"
-    """``model.inputs`` (``rgbd``: the source views' depth guides the samples)."""
-    fine_samples: str = "union"
-    """``model.fine_samples`` (``new``: the fine pass evaluates only the resampled depths, as the official
-    code; half the training step on a CPU, docs/performance.md). ``union`` for every variant but
-    ``full-new``, as when their cells were trained, although the model default is ``new`` since the
-    ``full``/``full-new`` comparison."""
-    n_heads: int | None = None
-    """``model.n_heads`` (None: the recipe's): fewer, wider heads do less softmax work per token."""
-    lambda_src_sem: float = 0.0
-    """``model.lambda_src_sem``: weight of the source views' per-pixel semantic loss on the encoder (0 = off)."""
-    lambda_depth: float = 0.0
-    """``model.lambda_depth``: weight of the training-time depth loss against the query's depth (0 = off; the test
-    protocol stays RGB, the descriptor says training read depth)."""
-    warmup_2d_steps: int = 0
-    """``optim.warmup_2d_steps``: first steps trained on the source views' labels alone (0 = none)."""
-    visit_samples: int = 16
-    """``data.visit_samples``: consecutive samples drawn from one scene before the loader picks the next
-    (1 = scenes interleaved step by step)."""
-    cache_scenes: int = 2
-    """``data.cache_scenes``: decoded scenes the loader keeps."""
-    train_scenes: int | None = None
-    """Training rooms of the cell's world (None: the preset world's). The world keeps the preset's seed, views,
-    image size and test scenes: the generator cycles its 5 room types over the train scenes first, so a count
-    that differs from the preset's by a multiple of 5 (48 -> 198, 498) leaves every test scene unchanged, which
-    the cell checks before it trains."""
-    step_cap: int | None = None
-    """``optim.steps`` of a CPU-budgeted cell (None: the recipe's cap). A budget, not a model or data setting: cells
-    that differ only here form one arm of the accuracy-against-CPU-time chart."""
-    cpu_seconds: float | None = None
-    """``optim.cpu_seconds`` of a CPU-budgeted cell (None: the recipe's budget). A budget too, like ``step_cap``."""
-    overrides: tuple[str, ...] = ()
-    """``section.field=value`` assignments applied after every other setting: the step-cost levers, in the form
-    ``sray bench recipe-step --lever`` measures them."""
-
 
 _HOUR_SETTINGS = Variant(fine_samples="new", lambda_src_sem=1.0, visit_samples=1, cache_scenes=4, step_cap=CAPPED_STEPS)
 _UNWARMED_RECIPE = replace(_HOUR_SETTINGS, train_scenes=RECIPE_ROOMS)
@@ -173,7 +130,8 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     SCREEN_OCCL_T5: replace(_SCREEN, weight_inputs="cross-view", tau=0.5),
                     SCREEN_RAYS_128: replace(_SCREEN, overrides=("data.rays_per_batch=128",)),
                     SCREEN_SAMPLES_16: replace(_SCREEN, overrides=("model.n_coarse=16", "model.n_fine=16")),
-                    SCREEN_ROOMS_998: replace(_SCREEN, train_scenes=ROOMS_998)}
+                    SCREEN_ROOMS_998: replace(_SCREEN, train_scenes=ROOMS_998),
+                    SCREEN_LR_RAYS: replace(_SCREEN, overrides=("optim.lr_decay_start=rays",))}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight map instead
 of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new`` full CRA whose fine
 pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16 channels instead of 4 of 8;
@@ -191,7 +149,7 @@ the screening budget ``SCREEN_SECONDS``; ``screen-depth`` is ``screen`` with the
 0.1), ``screen-occl`` with the weight net also reading the cross-view statistics, ``screen-occl-t5`` the same at tau
 0.5 (the two occlusion levers, docs/model.md); ``screen-rays128`` is ``screen`` with 128 query rays per rank-step,
 ``screen-samples16`` with 16+16 samples per ray (two step-cost levers); ``screen-998`` is ``screen`` on 998 training
-rooms."""
+rooms, ``screen-lr-rays`` with the lr decay started at the first ray step."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -274,7 +232,7 @@ PRESETS = {
               Cell(SCREEN_DEPTH, 0), Cell(SCREEN_OCCL, 0), Cell(SCREEN_OCCL_T5, 0), Cell(SCREEN, 1),
               Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), *seeds(SCREEN_RAYS_128, 3), Cell(HOUR, 1),
               Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), *seeds(SCREEN_SAMPLES_16, 3),
-              *seeds(SCREEN_ROOMS_998, 3)),
+              *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),

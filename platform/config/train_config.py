@@ -99,6 +99,10 @@ class OptimSettings:
     """The first this many steps train the encoder and its source-view head on the source views' labels
     alone (nothing rendered; a departure from the paper, docs/model.md); they count toward ``steps``. Needs
     ``model.lambda_src_sem`` > 0; 0 = off."""
+    lr_decay_start: str = "run"
+    """Where the exponential decay to ``lr_final`` starts: ``run`` = after the linear warm-up, over the whole run
+    (the paper); ``rays`` = at the first ray step after the 2D warm-up (``warmup_2d_steps`` > 0), the 2D steps
+    training at the base lr, so the decay spans the ray phase's own steps, or its own share of the CPU budget."""
     max_nonfinite_in_row: int = 20
     """A non-finite loss or gradient skips the step; this many in a row stop the job."""
 
@@ -221,8 +225,8 @@ class TrainConfig:
 def check_sections(cfg: TrainConfig) -> None:
     """ValueError for settings of different sections that cannot train together: fp16 with a loss in pieces
     smaller than the batch (a piece's gradients are taken before the loss scaler scales them,
-    ``sray.model.piecewise_loss``, so small ones could underflow), and a 2D warm-up without the source-view
-    head it trains."""
+    ``sray.model.piecewise_loss``, so small ones could underflow), a 2D warm-up without the source-view
+    head it trains, and a decay started at the ray phase without a 2D warm-up before it."""
     if cfg.optim.cpu_seconds < 0:
         raise ValueError(f"train config: optim.cpu_seconds is {cfg.optim.cpu_seconds}; use 0 (steps only) or a "
                          "positive CPU-second budget")
@@ -230,6 +234,11 @@ def check_sections(cfg: TrainConfig) -> None:
         raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
                          "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "
                          f"(is {cfg.model.lambda_src_sem}). Set model.lambda_src_sem=1 or optim.warmup_2d_steps=0.")
+    if cfg.optim.lr_decay_start not in ("run", "rays") or (cfg.optim.lr_decay_start == "rays"
+                                                            and cfg.optim.warmup_2d_steps <= 0):
+        raise ValueError(f"train config: optim.lr_decay_start is {cfg.optim.lr_decay_start!r} with "
+                         f"optim.warmup_2d_steps={cfg.optim.warmup_2d_steps}; use 'run', or 'rays' with a 2D "
+                         "warm-up (optim.warmup_2d_steps > 0), whose end starts the decay.")
     if cfg.run.precision == "fp16" and 0 < cfg.runtime.train_piece < cfg.data.rays_per_batch:
         raise ValueError(f"train config: runtime.train_piece is {cfg.runtime.train_piece} (< data.rays_per_batch "
                          f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not "
