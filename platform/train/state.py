@@ -44,7 +44,7 @@ def budget_lr_factor(opt: OptimSettings, step: int, cpu_seconds: float, ray_phas
     decay started at the ray phase (``opt.lr_decay_start`` ``rays``), the share is that of the budget left when the
     ray phase began, ``ray_phase_cpu`` CPU seconds in, spread over the steps from the first ray step to the cap."""
     factor = lr_lambda(opt)
-    if step < opt.warmup_steps or step < decay_start_step(opt):
+    if step < decay_start_step(opt):  # the warm-up, or a 2D warm-up at the base lr before a ray-phase decay
         return factor(step)
     if opt.lr_decay_start == "rays":
         first = decay_start_step(opt)

@@ -155,7 +155,8 @@ def train_worker(payload: dict[str, Any]) -> None:
     ray_phase_cpu = counters.get("ray_phase_cpu_seconds", 0.0)  # CPU spent when the ray phase began
 
     def follow_cpu_budget(next_step: int) -> None:
-        """With a CPU budget, the next step's learning rate from ``budget_lr_factor``."""
+        """With a CPU budget, the next step's learning rate from ``budget_lr_factor``; before the first ray step,
+        records the CPU spent so far (where a decay started at the ray phase counts from)."""
         nonlocal ray_phase_cpu
         if next_step == cfg.optim.warmup_2d_steps:
             ray_phase_cpu = cpu_total
