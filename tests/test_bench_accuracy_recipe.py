@@ -80,9 +80,8 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     change one model setting each, ``screen-rays128`` the query rays per step, ``screen-samples16`` the samples
     per ray, ``screen-998`` the training rooms (998, a world with the same test rooms) and ``screen-lr-rays`` where
     the lr decay starts. All are planned, paired on seed 0; the occlusion lever, the two step-cost levers, the rooms
-    and the lr lever and their baseline on seeds 0-2, with no
-    hour arm for the occlusion or the rays lever (neither clear of the seed spread over those seeds,
-    docs/benchmarks.md)."""
+    and the lr lever and their baseline on seeds 0-2, with no hour arm for the occlusion, the rays or the rooms lever
+    (none clear of the seed spread over those seeds, docs/benchmarks.md)."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
     assert SCREEN_SECONDS == recipe.optim.cpu_seconds / 2
 

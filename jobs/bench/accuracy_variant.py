@@ -52,4 +52,4 @@ class Variant:
     """``optim.cpu_seconds`` of a CPU-budgeted cell (None: the recipe's budget). A budget too, like ``step_cap``."""
     overrides: tuple[str, ...] = ()
     """``section.field=value`` assignments applied after every other setting: the step-cost levers, in the form
-    ``sray bench recipe-step --lever`` measures them."""
+    ``sray bench recipe-step --lever`` measures them, and settings no other field names (the lr decay's start)."""
