@@ -10,7 +10,7 @@ from pathlib import Path
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
-                                           HOUR_INTRA_UNCAPPED, HOUR_NONE, HOUR_WARM, LONG, PRESETS,
+                                           HOUR_INTRA_UNCAPPED, HOUR_LR_RAYS, HOUR_NONE, HOUR_WARM, LONG, PRESETS,
                                            RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH,
                                            SCREEN_LR_RAYS, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
                                            SCREEN_ROOMS_998, SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM,
@@ -81,7 +81,8 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     per ray, ``screen-998`` the training rooms (998, a world with the same test rooms) and ``screen-lr-rays`` where
     the lr decay starts. All are planned, paired on seed 0; the occlusion lever, the two step-cost levers, the rooms
     and the lr lever and their baseline on seeds 0-2, with no hour arm for the occlusion, the rays or the rooms lever
-    (none clear of the seed spread over those seeds, docs/benchmarks.md)."""
+    (none clear of the seed spread over those seeds, docs/benchmarks.md); the lr lever's hour arm, ``hour-lr-rays``,
+    is the recipe with the same decay start, on seeds 0-2."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
     assert SCREEN_SECONDS == recipe.optim.cpu_seconds / 2
 
@@ -116,6 +117,10 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert (screen.optim.lr_decay_start, phase.optim.lr_decay_start) == ("run", "rays")
     assert dataclasses.replace(phase, run=screen.run, optim=dataclasses.replace(phase.optim, lr_decay_start="run")) \
         == screen
+    hour_phase = config(HOUR_LR_RAYS)  # its hour arm: the recipe exactly, but for the same decay start
+    assert dataclasses.replace(hour_phase, run=head.run,
+                               optim=dataclasses.replace(hour_phase.optim, lr_decay_start="run")) == head
+    assert hour_phase.optim.lr_decay_start == "rays" and set(seeds(HOUR_LR_RAYS, 3)) <= set(preset.plan)
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

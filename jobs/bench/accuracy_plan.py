@@ -77,6 +77,10 @@ SCREEN_LR_RAYS = "screen-lr-rays"
 warm-up trains at the base lr and the ray phase decays over its own share of the budget, instead of starting at
 ~0.6x the hour's lr (the decay follows the spent budget share, docs/benchmarks.md)."""
 
+HOUR_LR_RAYS = "hour-lr-rays"
+"""Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) but for its lr decay starting at the
+first ray step: the hour arm of ``screen-lr-rays``, which gained over ``screen`` on each of its three paired seeds."""
+
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
 2-core machine."""
@@ -96,7 +100,7 @@ WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_WARM, HOUR_INTRA_UNCAPPED,
                 SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
-                SCREEN_SAMPLES_16, SCREEN_ROOMS_998, SCREEN_LR_RAYS)
+                SCREEN_SAMPLES_16, SCREEN_ROOMS_998, SCREEN_LR_RAYS, HOUR_LR_RAYS)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
 
@@ -131,7 +135,8 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     SCREEN_RAYS_128: replace(_SCREEN, overrides=("data.rays_per_batch=128",)),
                     SCREEN_SAMPLES_16: replace(_SCREEN, overrides=("model.n_coarse=16", "model.n_fine=16")),
                     SCREEN_ROOMS_998: replace(_SCREEN, train_scenes=ROOMS_998),
-                    SCREEN_LR_RAYS: replace(_SCREEN, overrides=("optim.lr_decay_start=rays",))}
+                    SCREEN_LR_RAYS: replace(_SCREEN, overrides=("optim.lr_decay_start=rays",)),
+                    HOUR_LR_RAYS: replace(_RECIPE, overrides=("optim.lr_decay_start=rays",))}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight map instead
 of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new`` full CRA whose fine
 pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16 channels instead of 4 of 8;
@@ -149,7 +154,8 @@ the screening budget ``SCREEN_SECONDS``; ``screen-depth`` is ``screen`` with the
 0.1), ``screen-occl`` with the weight net also reading the cross-view statistics, ``screen-occl-t5`` the same at tau
 0.5 (the two occlusion levers, docs/model.md); ``screen-rays128`` is ``screen`` with 128 query rays per rank-step,
 ``screen-samples16`` with 16+16 samples per ray (two step-cost levers); ``screen-998`` is ``screen`` on 998 training
-rooms, ``screen-lr-rays`` with the lr decay started at the first ray step."""
+rooms, ``screen-lr-rays`` with the lr decay started at the first ray step, and ``hour-lr-rays`` the recipe with
+that decay, at the recipe's budget."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -232,7 +238,7 @@ PRESETS = {
               Cell(SCREEN_DEPTH, 0), Cell(SCREEN_OCCL, 0), Cell(SCREEN_OCCL_T5, 0), Cell(SCREEN, 1),
               Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), *seeds(SCREEN_RAYS_128, 3), Cell(HOUR, 1),
               Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), *seeds(SCREEN_SAMPLES_16, 3),
-              *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3)),
+              *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3), *seeds(HOUR_LR_RAYS, 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
