@@ -42,7 +42,7 @@ def test_more_rooms_keep_the_test_scenes_and_a_broken_cycle_is_refused(tmp_path:
     def refuse(*args, **kwargs):
         raise AssertionError("an existing world was generated again")
 
-    monkeypatch.setattr(accuracy_worlds, "make_world", lambda world, root, progress: root / "shards")
+    monkeypatch.setattr(accuracy_worlds, "make_world", lambda world, root, **kw: root / "shards")
     monkeypatch.setattr("sray.data_tools.synth.world.generate_dataset", refuse)
     assert rooms_shards(6, TINY, base, tmp_path) == (shards, cpu_s)  # reused, its recorded CPU time
     monkeypatch.undo()

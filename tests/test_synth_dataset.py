@@ -30,9 +30,9 @@ def test_same_seed_gives_identical_scenes_and_another_seed_differs() -> None:
     assert any(not np.array_equal(va.rgb, vc.rgb) for va, vc in zip(a.views(), c.views()))
 
 
-def test_dataset_files_are_byte_identical_per_seed(tmp_path: Path) -> None:
+def test_dataset_files_are_byte_identical_per_seed_in_one_process_or_several(tmp_path: Path) -> None:
     first = generate_dataset(tmp_path / "a", 1, 1, 20, 24, 32, seed=5, progress=False)
-    generate_dataset(tmp_path / "b", 1, 1, 20, 24, 32, seed=5, progress=False)
+    generate_dataset(tmp_path / "b", 1, 1, 20, 24, 32, seed=5, progress=False, workers=2)
     assert [p.name for p in first] == ["synth_train_000", "synth_test_000"]
     files_a, files_b = _files(tmp_path / "a"), _files(tmp_path / "b")
     assert files_a.keys() == files_b.keys() and files_a == files_b

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -176,7 +177,9 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
     ``ROOM_TYPES`` from a seed-dependent offset so a small dataset covers every type. A scene whose
     scene.json already records the same parameters is skipped (scene.json is written last, so its
     presence means the scene is complete). ``workers`` > 1 renders that many scenes at once in
-    separate processes; every scene depends only on its own seed, so the files are the same.
+    separate processes; every scene depends only on its own seed, so the files are the same. The
+    processes are spawned, not forked, so a caller that already runs threads (torch, a Ray worker)
+    can ask for them safely.
     """
     if n_train < 0 or n_test < 0 or n_train + n_test == 0:
         raise ValueError(f"need at least one scene, got n_train={n_train}, n_test={n_test}")
@@ -201,7 +204,7 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
             bar.set_postfix_str(f"{args[1]} ({args[7]})")
             _write_scene(*args, on_view=lambda: bar.update(1))
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             for future in [pool.submit(_write_scene, *args) for args in todo]:
                 future.result()
                 bar.update(n_views)

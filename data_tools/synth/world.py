@@ -76,13 +76,14 @@ def _one(values: set[int]) -> int | list[int]:
     return next(iter(values)) if len(values) == 1 else sorted(values)
 
 
-def make_world(world: World, root: Path, progress: bool = True) -> Path:
+def make_world(world: World, root: Path, progress: bool = True, workers: int = 1) -> Path:
     """The verified shard folder of ``world`` under ``root`` (``root/scenes``, ``root/shards``): generated,
     checked by ``sray data check`` and sharded when ``root`` holds no complete world, reused when it holds this one.
 
     Raises :class:`WorldFolderError` when ``root`` holds another world or damaged shards (naming the folder, the
     problem and the fix), and :class:`~sray.data_tools.shards.writer.DatasetRejected` when the generated scenes
-    fail ``sray data check``. ``progress`` shows the generator's and the shard writer's progress bars.
+    fail ``sray data check``. ``progress`` shows the generator's and the shard writer's progress bars;
+    ``workers`` scenes are rendered at once (:func:`~sray.data_tools.synth.dataset.generate_dataset`: same files).
     """
     root = Path(root)
     shards = root / SHARDS
@@ -94,7 +95,8 @@ def make_world(world: World, root: Path, progress: bool = True) -> Path:
                                    "there, or choose another output folder")
     else:
         generate_dataset(root / SCENES, n_train=world.train_scenes, n_test=world.test_scenes, n_views=world.views,
-                         height=world.height, width=world.width, seed=world.seed, progress=progress)
+                         height=world.height, width=world.width, seed=world.seed, progress=progress,
+                         workers=workers)
         write_shards(root / SCENES, shards, neighbours=world.neighbours, progress=progress)
     damaged = verify_shards(shards)
     if damaged:

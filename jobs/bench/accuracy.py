@@ -24,6 +24,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -56,7 +57,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
     if fleet:
         for name, why in left_out.items():
             print(f"[bench] fleet: method {name} left out: {why}", flush=True)
-    shards = make_world(p.world, out)
+    shards = make_world(p.world, out, workers=len(os.sched_getaffinity(0)))
     scenes = unseen_scenes(shards)
     imported = import_old_cells(out)
     if imported:

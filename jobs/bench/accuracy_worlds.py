@@ -6,19 +6,21 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import time
+import os
 from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.shards.manifest import MANIFEST_NAME, read_manifest
 from sray.data_tools.synth.world import make_world
 from sray.jobs.bench.accuracy_plan import VARIANT_SETTINGS, Preset
+from sray.platform.train.cpu_clock import process_tree_cpu_seconds
 
 WORLDS_DIR = "worlds"
 """Sub-folder of the benchmark's output holding the worlds of variants with their own room count."""
 
 GENERATION_FILE = "generation.json"
-"""File of a world folder recording the CPU seconds its generation and sharding took (``cpu_s``)."""
+"""File of a world folder recording the CPU seconds its generation and sharding took (``cpu_s``), summed over
+the processes that rendered its scenes."""
 
 
 class OtherTestScenes(ValueError):
@@ -50,15 +52,17 @@ def cell_shards(variant: str, p: Preset, base: Path, out: Path) -> tuple[Path, f
 
 def rooms_shards(rooms: int, p: Preset, base: Path, out: Path) -> tuple[Path, float | None]:
     """(shards, CPU seconds their generation took) of the preset world with ``rooms`` training rooms:
-    ``out/worlds/train<rooms>/shards``, generated and sharded on first use (its CPU seconds recorded in the
-    folder; None for a world an interrupted run had begun, whose whole cost no run saw), reused after;
+    ``out/worlds/train<rooms>/shards``, generated on first use by one process per CPU this process may run on
+    and sharded (its CPU seconds, summed over those processes, recorded in the folder; None for a world an
+    interrupted run had begun, whose whole cost no run saw), reused after;
     :class:`OtherTestScenes` unless its test scenes are those of ``base``."""
     root = out / WORLDS_DIR / f"train{rooms}"
     record = root / GENERATION_FILE
     fresh = not (root / "scenes").exists()  # generated from nothing by this call: its CPU time is the whole cost
-    start = time.process_time()
-    shards = make_world(dataclasses.replace(p.world, train_scenes=rooms), root, progress=False)
+    start = process_tree_cpu_seconds()
+    shards = make_world(dataclasses.replace(p.world, train_scenes=rooms), root, progress=False,
+                        workers=len(os.sched_getaffinity(0)))
     if fresh:
-        atomic_write_json(record, {"cpu_s": time.process_time() - start})
+        atomic_write_json(record, {"cpu_s": process_tree_cpu_seconds() - start})
     check_same_test_scenes(base, shards)
     return shards, (float(json.loads(record.read_text())["cpu_s"]) if record.exists() else None)
