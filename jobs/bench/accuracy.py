@@ -24,17 +24,16 @@
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
 from sray.data_tools.shards.manifest import unseen_scenes
-from sray.data_tools.synth.world import make_world
 from sray.jobs.bench.accuracy_cells import cell_errors, import_old_cells, run_cells, stored_cells
 from sray.jobs.bench.accuracy_fleet import compared_methods, fleet_config, run_comparison
 from sray.jobs.bench.accuracy_plan import PRESETS, Cell, Preset, headline_variant
 from sray.jobs.bench.accuracy_step_cost import measure_step_times, read_step_times, store_step_times
 from sray.jobs.bench.accuracy_tables import by_variant, write_tables
+from sray.jobs.bench.accuracy_worlds import make_bench_world
 from sray.jobs.bench.doc import machine_line
 from sray.jobs.bench.probes import resolve_device
 
@@ -57,7 +56,7 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
     if fleet:
         for name, why in left_out.items():
             print(f"[bench] fleet: method {name} left out: {why}", flush=True)
-    shards = make_world(p.world, out, workers=len(os.sched_getaffinity(0)))
+    shards = make_bench_world(p.world, out, progress=True)
     scenes = unseen_scenes(shards)
     imported = import_old_cells(out)
     if imported:

@@ -80,7 +80,7 @@ warm-up trains at the base lr and the ray phase decays over its own share of the
 HOUR_LR_RAYS = "hour-lr-rays"
 """Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) but for its lr decay starting at the
 first ray step: the hour arm of ``screen-lr-rays``, which gained over ``screen`` on each of its three paired seeds.
-Planned on seed 0 only: that pair lost to the recipe, so the lever cannot gain on every seed."""
+Planned on seed 0 only (why: docs/benchmarks.md, "The hour arm's seed-0 pair")."""
 
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.shards.manifest import MANIFEST_NAME, read_manifest
-from sray.data_tools.synth.world import make_world
+from sray.data_tools.synth.world import World, make_world
 from sray.jobs.bench.accuracy_plan import VARIANT_SETTINGS, Preset
 from sray.platform.train.cpu_clock import process_tree_cpu_seconds
 
@@ -41,6 +41,11 @@ def check_same_test_scenes(base: Path, shards: Path) -> None:
                                "such a count)")
 
 
+def make_bench_world(world: World, root: Path, progress: bool) -> Path:
+    """:func:`make_world` with one scene-rendering process per CPU this process may run on (same files)."""
+    return make_world(world, root, progress=progress, workers=len(os.sched_getaffinity(0)))
+
+
 def cell_shards(variant: str, p: Preset, base: Path, out: Path) -> tuple[Path, float | None]:
     """(shards, CPU seconds spent generating them) of a cell of ``variant``: the preset world's shards ``base``
     (None seconds), or :func:`rooms_shards` of the variant's own room count."""
@@ -60,8 +65,7 @@ def rooms_shards(rooms: int, p: Preset, base: Path, out: Path) -> tuple[Path, fl
     record = root / GENERATION_FILE
     fresh = not (root / "scenes").exists()  # generated from nothing by this call: its CPU time is the whole cost
     start = process_tree_cpu_seconds()
-    shards = make_world(dataclasses.replace(p.world, train_scenes=rooms), root, progress=False,
-                        workers=len(os.sched_getaffinity(0)))
+    shards = make_bench_world(dataclasses.replace(p.world, train_scenes=rooms), root, progress=False)
     if fresh:
         atomic_write_json(record, {"cpu_s": process_tree_cpu_seconds() - start})
     check_same_test_scenes(base, shards)
