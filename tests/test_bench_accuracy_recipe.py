@@ -82,7 +82,7 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     the lr decay starts. All are planned, paired on seed 0; the occlusion lever, the two step-cost levers, the rooms
     and the lr lever and their baseline on seeds 0-2, with no hour arm for the occlusion, the rays or the rooms lever
     (none clear of the seed spread over those seeds, docs/benchmarks.md); the lr lever's hour arm, ``hour-lr-rays``,
-    is the recipe with the same decay start, on seeds 0-2."""
+    is the recipe with the same decay start, on seed 0 (its loss there ended the lever)."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
     assert SCREEN_SECONDS == recipe.optim.cpu_seconds / 2
 
