@@ -18,9 +18,9 @@ from sray.jobs.bench.accuracy import run_accuracy_benchmark
 from sray.jobs.bench.accuracy_cells import STUDY_DIR, TRAIN_SECONDS_FILE, cell_errors, class_iou, stored_cells
 from sray.jobs.bench.accuracy_cpu_time import arm_of, budget_points, cpu_time_chart, cpu_time_rows
 from sray.jobs.bench.accuracy_fleet import DONE_FILE
-from sray.jobs.bench.accuracy_plan import (HOUR, HOUR_INTRA, HOUR_INTRA_UNCAPPED, HOUR_LR_RAYS, HOUR_WARM, LONG,
-                                           PRESETS, ROOMS_198, ROOMS_498, SCREEN, SCREEN_LR_RAYS, SCREEN_OCCL,
-                                           SCREEN_WARM, Cell, Preset, World)
+from sray.jobs.bench.accuracy_plan import (HOUR, HOUR_INTRA, HOUR_INTRA_UNCAPPED, HOUR_LR_RAYS, HOUR_SAMPLES_16,
+                                           HOUR_WARM, LONG, PRESETS, ROOMS_198, ROOMS_498, SCREEN, SCREEN_LR_RAYS,
+                                           SCREEN_OCCL, SCREEN_SAMPLES_16, SCREEN_WARM, Cell, Preset, World)
 from sray.jobs.bench.accuracy_budgets import budget_means
 from sray.jobs.bench.accuracy_tables import class_table, fleet_from_headline, seed_table, targets, write_tables
 from sray.jobs.bench.doc import Bench, bench_dir
@@ -263,6 +263,7 @@ def test_cpu_time_arms_join_budgets_of_equal_settings_and_chart_them(tmp_path: P
     assert arm_of(SCREEN) == HOUR_INTRA and arm_of(SCREEN_WARM) == SCREEN_WARM  # so is the CPU budget
     assert arm_of(SCREEN_OCCL) == SCREEN_OCCL  # a screened lever without an hour arm is its own
     assert arm_of(SCREEN_LR_RAYS) == arm_of(HOUR_LR_RAYS) == HOUR_LR_RAYS  # a screened lever joins its hour arm
+    assert arm_of(SCREEN_SAMPLES_16) == arm_of(HOUR_SAMPLES_16) == HOUR_SAMPLES_16
     stored = {"long-s0": _cell(LONG, 0, 0.24), "full-s0": _cell("full", 0, 0.20) | {"train_cpu_s": 1800.0},
               "full-new-src-mix-s0": _cell("full-new-src-mix", 0, 0.26) | {"train_cpu_s": 1440.0,
                                                                              "heldout_miou": 0.30},

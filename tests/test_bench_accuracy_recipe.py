@@ -10,7 +10,8 @@ from pathlib import Path
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
-                                           HOUR_INTRA_UNCAPPED, HOUR_LR_RAYS, HOUR_NONE, HOUR_WARM, LONG, PRESETS,
+                                           HOUR_INTRA_UNCAPPED, HOUR_LR_RAYS, HOUR_NONE, HOUR_SAMPLES_16, HOUR_WARM,
+                                           LONG, PRESETS,
                                            RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH,
                                            SCREEN_LR_RAYS, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
                                            SCREEN_ROOMS_998, SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM,
@@ -82,7 +83,8 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     the lr decay starts. All are planned, paired on seed 0; the occlusion lever, the two step-cost levers, the rooms
     and the lr lever and their baseline on seeds 0-2, with no hour arm for the occlusion, the rays or the rooms lever
     (none clear of the seed spread over those seeds, docs/benchmarks.md); the lr lever's hour arm, ``hour-lr-rays``,
-    is the recipe with the same decay start, on seed 0 (its loss there ended the lever)."""
+    is the recipe with the same decay start, on seed 0 (its loss there ended the lever); the samples lever's,
+    ``hour-samples16``, is the recipe with 16+16 samples per ray, on seeds 0-2 (it gained on all three screened)."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
     assert SCREEN_SECONDS == recipe.optim.cpu_seconds / 2
 
@@ -121,6 +123,12 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert dataclasses.replace(hour_phase, run=head.run,
                                optim=dataclasses.replace(hour_phase.optim, lr_decay_start="run")) == head
     assert hour_phase.optim.lr_decay_start == "rays" and Cell(HOUR_LR_RAYS, 0) in preset.plan
+    hour_samples = config(HOUR_SAMPLES_16)  # the samples lever's hour arm: the recipe exactly, but for 16+16 samples
+    assert (hour_samples.model.n_coarse, hour_samples.model.n_fine) == (16, 16) != (head.model.n_coarse,
+                                                                                   head.model.n_fine)
+    assert dataclasses.replace(hour_samples, run=head.run, model=dataclasses.replace(
+        hour_samples.model, n_coarse=head.model.n_coarse, n_fine=head.model.n_fine)) == head
+    assert set(seeds(HOUR_SAMPLES_16, 3)) <= set(preset.plan) and HOUR_SAMPLES_16 in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

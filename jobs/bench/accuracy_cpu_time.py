@@ -14,18 +14,19 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from sray.data_tools.atomic import save_png
-from sray.jobs.bench.accuracy_plan import (HOUR, HOUR_INTRA_UNCAPPED, LONG, SCREEN, SCREEN_LR_RAYS, VARIANT_SETTINGS,
-                                           Preset)
+from sray.jobs.bench.accuracy_plan import (HOUR, HOUR_INTRA_UNCAPPED, LONG, SCREEN, SCREEN_LR_RAYS, SCREEN_SAMPLES_16,
+                                           VARIANT_SETTINGS, Preset)
 from sray.jobs.bench.accuracy_variant import Variant
 
-BUDGET_VARIANTS = (LONG, HOUR, HOUR_INTRA_UNCAPPED, SCREEN, SCREEN_LR_RAYS)
+BUDGET_VARIANTS = (LONG, HOUR, HOUR_INTRA_UNCAPPED, SCREEN, SCREEN_LR_RAYS, SCREEN_SAMPLES_16)
 """Variants that only change the budget of another variant's settings (they join that variant's arm)."""
 
 
 def arm_of(variant: str) -> str:
     """The arm of ``variant``: the first variant (budget variants last) with the same settings, its step cap and CPU
     budget aside (budgets: ``hour-intra-uncapped`` and ``screen`` join ``hour-intra``, ``screen-lr-rays`` joins
-    ``hour-lr-rays``; a screened lever without an hour arm, such as ``screen-occl``, is its own arm)."""
+    ``hour-lr-rays`` and ``screen-samples16`` ``hour-samples16``; a screened lever without an hour arm, such as
+    ``screen-occl``, is its own arm)."""
     def uncapped(name: str) -> Variant:
         return replace(VARIANT_SETTINGS[name], step_cap=None, cpu_seconds=None)
 

@@ -82,6 +82,11 @@ HOUR_LR_RAYS = "hour-lr-rays"
 first ray step: the hour arm of ``screen-lr-rays``, which gained over ``screen`` on each of its three paired seeds.
 Planned on seed 0 only (why: docs/benchmarks.md, "The hour arm's seed-0 pair")."""
 
+HOUR_SAMPLES_16 = "hour-samples16"
+"""Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) but for 16 coarse and 16 fine samples
+per ray: the hour arm of ``screen-samples16``, which gained over ``screen`` on each of its three paired seeds
+(docs/benchmarks.md, "Samples per ray, screened on the third and fourth machines")."""
+
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
 2-core machine."""
@@ -101,7 +106,7 @@ WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_WARM, HOUR_INTRA_UNCAPPED,
                 SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
-                SCREEN_SAMPLES_16, SCREEN_ROOMS_998, SCREEN_LR_RAYS, HOUR_LR_RAYS)
+                SCREEN_SAMPLES_16, SCREEN_ROOMS_998, SCREEN_LR_RAYS, HOUR_LR_RAYS, HOUR_SAMPLES_16)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
 
@@ -137,7 +142,8 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     SCREEN_SAMPLES_16: replace(_SCREEN, overrides=("model.n_coarse=16", "model.n_fine=16")),
                     SCREEN_ROOMS_998: replace(_SCREEN, train_scenes=ROOMS_998),
                     SCREEN_LR_RAYS: replace(_SCREEN, overrides=("optim.lr_decay_start=rays",)),
-                    HOUR_LR_RAYS: replace(_RECIPE, overrides=("optim.lr_decay_start=rays",))}
+                    HOUR_LR_RAYS: replace(_RECIPE, overrides=("optim.lr_decay_start=rays",)),
+                    HOUR_SAMPLES_16: replace(_RECIPE, overrides=("model.n_coarse=16", "model.n_fine=16"))}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight map instead
 of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new`` full CRA whose fine
 pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16 channels instead of 4 of 8;
@@ -156,7 +162,7 @@ the screening budget ``SCREEN_SECONDS``; ``screen-depth`` is ``screen`` with the
 0.5 (the two occlusion levers, docs/model.md); ``screen-rays128`` is ``screen`` with 128 query rays per rank-step,
 ``screen-samples16`` with 16+16 samples per ray (two step-cost levers); ``screen-998`` is ``screen`` on 998 training
 rooms, ``screen-lr-rays`` with the lr decay started at the first ray step, and ``hour-lr-rays`` the recipe with
-that decay, at the recipe's budget."""
+that decay, at the recipe's budget; ``hour-samples16`` is the recipe with 16+16 samples per ray."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -239,7 +245,8 @@ PRESETS = {
               Cell(SCREEN_DEPTH, 0), Cell(SCREEN_OCCL, 0), Cell(SCREEN_OCCL_T5, 0), Cell(SCREEN, 1),
               Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), *seeds(SCREEN_RAYS_128, 3), Cell(HOUR, 1),
               Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), *seeds(SCREEN_SAMPLES_16, 3),
-              *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3), Cell(HOUR_LR_RAYS, 0)),
+              *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3), Cell(HOUR_LR_RAYS, 0),
+              *seeds(HOUR_SAMPLES_16, 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
