@@ -14,23 +14,27 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from sray.data_tools.atomic import save_png
-from sray.jobs.bench.accuracy_plan import (HOUR, HOUR_INTRA_UNCAPPED, LONG, SCREEN, SCREEN_LR_RAYS, SCREEN_SAMPLES_16,
-                                           VARIANT_SETTINGS, Preset)
+from sray.jobs.bench.accuracy_plan import HOUR, HOUR_INTRA_UNCAPPED, LONG, VARIANT_SETTINGS, Preset
 from sray.jobs.bench.accuracy_variant import Variant
 
-BUDGET_VARIANTS = (LONG, HOUR, HOUR_INTRA_UNCAPPED, SCREEN, SCREEN_LR_RAYS, SCREEN_SAMPLES_16)
-"""Variants that only change the budget of another variant's settings (they join that variant's arm)."""
+BUDGET_VARIANTS = (LONG, HOUR, HOUR_INTRA_UNCAPPED)
+"""Variants that only change the budget of another variant's settings (they join that variant's arm); a variant with
+its own CPU budget (``Variant.cpu_seconds``: the screening cells) also joins an arm of equal settings when there is
+one."""
 
 
 def arm_of(variant: str) -> str:
-    """The arm of ``variant``: the first variant (budget variants last) with the same settings, its step cap and CPU
-    budget aside (budgets: ``hour-intra-uncapped`` and ``screen`` join ``hour-intra``, ``screen-lr-rays`` joins
-    ``hour-lr-rays`` and ``screen-samples16`` ``hour-samples16``; a screened lever without an hour arm, such as
-    ``screen-occl``, is its own arm)."""
+    """The arm of ``variant``: the first variant with the same settings, its step cap and CPU budget aside, variants
+    with their own CPU budget next to last and budget variants last (``hour-intra-uncapped`` and ``screen`` join
+    ``hour-intra``, a screened lever its hour arm: ``screen-lr-rays`` joins ``hour-lr-rays``; a screened lever without
+    an hour arm, such as ``screen-occl``, is its own arm)."""
     def uncapped(name: str) -> Variant:
         return replace(VARIANT_SETTINGS[name], step_cap=None, cpu_seconds=None)
 
-    ordered = [v for v in VARIANT_SETTINGS if v not in BUDGET_VARIANTS] + list(BUDGET_VARIANTS)
+    def rank(name: str) -> tuple[bool, bool]:
+        return name in BUDGET_VARIANTS, VARIANT_SETTINGS[name].cpu_seconds is not None
+
+    ordered = sorted(VARIANT_SETTINGS, key=rank)  # stable: VARIANT_SETTINGS order within a rank
     return next(v for v in ordered if uncapped(v) == uncapped(variant))
 
 

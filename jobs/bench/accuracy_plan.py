@@ -115,6 +115,8 @@ _UNWARMED_RECIPE = replace(_HOUR_SETTINGS, train_scenes=RECIPE_ROOMS)
 _WARM_SETTINGS = replace(_UNWARMED_RECIPE, warmup_2d_steps=WARM_2D_STEPS)
 _RECIPE = replace(_WARM_SETTINGS, attention="intra", step_cap=None)
 _SCREEN = replace(_RECIPE, cpu_seconds=SCREEN_SECONDS)
+_SAMPLES_16 = ("model.n_coarse=16", "model.n_fine=16")
+_LR_RAYS = ("optim.lr_decay_start=rays",)
 
 VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Variant("intra"), "none": Variant("none"),
                     "full-affine": Variant(weight_map="affine"), "full-rgbd": Variant(inputs="rgbd"),
@@ -139,11 +141,11 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     SCREEN_OCCL: replace(_SCREEN, weight_inputs="cross-view"),
                     SCREEN_OCCL_T5: replace(_SCREEN, weight_inputs="cross-view", tau=0.5),
                     SCREEN_RAYS_128: replace(_SCREEN, overrides=("data.rays_per_batch=128",)),
-                    SCREEN_SAMPLES_16: replace(_SCREEN, overrides=("model.n_coarse=16", "model.n_fine=16")),
+                    SCREEN_SAMPLES_16: replace(_SCREEN, overrides=_SAMPLES_16),
                     SCREEN_ROOMS_998: replace(_SCREEN, train_scenes=ROOMS_998),
-                    SCREEN_LR_RAYS: replace(_SCREEN, overrides=("optim.lr_decay_start=rays",)),
-                    HOUR_LR_RAYS: replace(_RECIPE, overrides=("optim.lr_decay_start=rays",)),
-                    HOUR_SAMPLES_16: replace(_RECIPE, overrides=("model.n_coarse=16", "model.n_fine=16"))}
+                    SCREEN_LR_RAYS: replace(_SCREEN, overrides=_LR_RAYS),
+                    HOUR_LR_RAYS: replace(_RECIPE, overrides=_LR_RAYS),
+                    HOUR_SAMPLES_16: replace(_RECIPE, overrides=_SAMPLES_16)}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight map instead
 of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new`` full CRA whose fine
 pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16 channels instead of 4 of 8;
