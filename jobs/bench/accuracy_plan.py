@@ -248,7 +248,7 @@ PRESETS = {
               Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), *seeds(SCREEN_RAYS_128, 3), Cell(HOUR, 1),
               Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), *seeds(SCREEN_SAMPLES_16, 3),
               *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3), Cell(HOUR_LR_RAYS, 0),
-              *seeds(HOUR_SAMPLES_16, 3)),
+              Cell(HOUR_SAMPLES_16, 0)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
