@@ -85,7 +85,8 @@ Planned on seed 0 only (why: docs/benchmarks.md, "The hour arm's seed-0 pair")."
 HOUR_SAMPLES_16 = "hour-samples16"
 """Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) but for 16 coarse and 16 fine samples
 per ray: the hour arm of ``screen-samples16``, which gained over ``screen`` on each of its three paired seeds
-(docs/benchmarks.md, "Samples per ray, screened on the third and fourth machines")."""
+(docs/benchmarks.md, "Samples per ray, screened on the third and fourth machines"). Planned on seed 0 only (why:
+docs/benchmarks.md, "The samples lever's hour arm, seed 0")."""
 
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
