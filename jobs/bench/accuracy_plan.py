@@ -64,6 +64,11 @@ SCREEN_RAYS_128 = "screen-rays128"
 """Variant name of ``screen`` rendering 128 query rays per rank-step instead of 256 (``data.rays_per_batch``; a
 step-cost lever: its ray step costs 0.79x the recipe's in ``sray bench recipe-step``, each with half the labels)."""
 
+SCREEN_RAYS_512 = "screen-rays512"
+"""Variant name of ``screen`` rendering 512 query rays per rank-step instead of 256 (``data.rays_per_batch``): the
+other side of ``screen-rays128``, which lost on every seed with half the labels per step for 1.27x the steps; twice
+the labels per step for fewer steps."""
+
 SCREEN_SAMPLES_16 = "screen-samples16"
 """Variant name of ``screen`` with 16 coarse and 16 fine samples per ray instead of 24 and 24 (``model.n_coarse``,
 ``model.n_fine``; a step-cost lever: 0.83x the recipe's ray-step CPU in ``sray bench recipe-step``, the same labels)."""
@@ -106,7 +111,7 @@ WARM_2D_STEPS = CPU_HOUR_WARMUP_2D
 """``optim.warmup_2d_steps`` of ``hour-warm2d`` and the recipe."""
 
 CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, HOUR_WARM, HOUR_INTRA_UNCAPPED,
-                SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
+                SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512,
                 SCREEN_SAMPLES_16, SCREEN_ROOMS_998, SCREEN_LR_RAYS, HOUR_LR_RAYS, HOUR_SAMPLES_16)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
@@ -142,6 +147,7 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     SCREEN_OCCL: replace(_SCREEN, weight_inputs="cross-view"),
                     SCREEN_OCCL_T5: replace(_SCREEN, weight_inputs="cross-view", tau=0.5),
                     SCREEN_RAYS_128: replace(_SCREEN, overrides=("data.rays_per_batch=128",)),
+                    SCREEN_RAYS_512: replace(_SCREEN, overrides=("data.rays_per_batch=512",)),
                     SCREEN_SAMPLES_16: replace(_SCREEN, overrides=_SAMPLES_16),
                     SCREEN_ROOMS_998: replace(_SCREEN, train_scenes=ROOMS_998),
                     SCREEN_LR_RAYS: replace(_SCREEN, overrides=_LR_RAYS),
@@ -162,10 +168,11 @@ cross-reprojection attention, ``hour-cross`` and ``hour-intra`` with only its cr
 ``CAPPED_STEPS``); ``screen`` and ``screen-warm3k`` are the recipe and the recipe with a 3,000-step warm-up, both at
 the screening budget ``SCREEN_SECONDS``; ``screen-depth`` is ``screen`` with the training-time depth loss (weight
 0.1), ``screen-occl`` with the weight net also reading the cross-view statistics, ``screen-occl-t5`` the same at tau
-0.5 (the two occlusion levers, docs/model.md); ``screen-rays128`` is ``screen`` with 128 query rays per rank-step,
-``screen-samples16`` with 16+16 samples per ray (two step-cost levers); ``screen-998`` is ``screen`` on 998 training
-rooms, ``screen-lr-rays`` with the lr decay started at the first ray step, and ``hour-lr-rays`` the recipe with
-that decay, at the recipe's budget; ``hour-samples16`` is the recipe with 16+16 samples per ray."""
+0.5 (the two occlusion levers, docs/model.md); ``screen-rays128`` and ``screen-rays512`` are ``screen`` with 128
+and 512 query rays per rank-step, ``screen-samples16`` with 16+16 samples per ray (step-cost levers); ``screen-998``
+is ``screen`` on 998 training rooms, ``screen-lr-rays`` with the lr decay started at the first ray step, and
+``hour-lr-rays`` the recipe with that decay, at the recipe's budget; ``hour-samples16`` is the recipe with 16+16
+samples per ray."""
 
 
 EXPERIMENT = "sray-bench-accuracy"
@@ -249,7 +256,7 @@ PRESETS = {
               Cell(SCREEN_OCCL, 1), Cell(SCREEN, 2), Cell(SCREEN_OCCL, 2), *seeds(SCREEN_RAYS_128, 3), Cell(HOUR, 1),
               Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), *seeds(SCREEN_SAMPLES_16, 3),
               *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3), Cell(HOUR_LR_RAYS, 0),
-              Cell(HOUR_SAMPLES_16, 0)),
+              Cell(HOUR_SAMPLES_16, 0), *seeds(SCREEN_RAYS_512, 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
