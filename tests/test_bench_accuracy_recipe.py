@@ -10,12 +10,12 @@ from pathlib import Path
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
-                                           HOUR_INTRA_UNCAPPED, HOUR_LR_RAYS, HOUR_NONE, HOUR_SAMPLES_16, HOUR_WARM,
-                                           LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT, ROOMS_198, ROOMS_498, SCREEN,
-                                           SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
-                                           SCREEN_RAYS_512, SCREEN_ROOMS_998, SCREEN_SAMPLES_16, SCREEN_SECONDS,
-                                           SCREEN_WARM,
-                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant, seeds)
+                                           HOUR_INTRA_UNCAPPED, HOUR_INVERSE, HOUR_LR_RAYS, HOUR_NONE,
+                                           HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
+                                           ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_OCCL,
+                                           SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512, SCREEN_ROOMS_998,
+                                           SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM, VARIANT_SETTINGS,
+                                           WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -134,6 +134,11 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert dataclasses.replace(hour_samples, run=head.run, model=dataclasses.replace(
         hour_samples.model, n_coarse=head.model.n_coarse, n_fine=head.model.n_fine)) == head
     assert Cell(HOUR_SAMPLES_16, 0) in preset.plan and HOUR_SAMPLES_16 in CPU_BUDGETED
+    inverse = config(HOUR_INVERSE)  # the class-weight lever: the recipe exactly, but for inverse-frequency weights
+    assert (head.data.class_balance, inverse.data.class_balance) == ("inverse-sqrt", "inverse")
+    assert dataclasses.replace(inverse, run=head.run, data=dataclasses.replace(inverse.data,
+                                                                               class_balance="inverse-sqrt")) == head
+    assert Cell(HOUR_INVERSE, 0) in preset.plan and HOUR_INVERSE in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)
