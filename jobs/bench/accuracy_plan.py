@@ -101,8 +101,9 @@ smallest weight. On the 498-room world the clip flattens every class under 4.3% 
 weight from wall and floor (63% of the pixels) to the objects that hold mIoU down: wall 0.23, floor 0.50, cabinet
 1.52, door 2.26 and every other class 2.33, against the recipe's 0.43, 0.63, 1.10, 1.35 and 1.53-4.32. It goes
 to the hour without a screen: the two levers that gained at the screening budget on every seed (``screen-lr-rays``,
-``screen-samples16``) did not at the hour (docs/benchmarks.md, "The samples lever's hour arm"). Planned on seed 0,
-paired with the recipe's seed 0 on one machine."""
+``screen-samples16``) did not at the hour (docs/benchmarks.md, "The samples lever's hour arm"). Planned on seed 0
+only, paired with the recipe's seed 0 on one machine (why: docs/benchmarks.md, "Inverse-frequency class weights at
+the hour")."""
 
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
