@@ -23,7 +23,7 @@ demo: setup
 	$(BIN)/sray demo
 
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
 
 bench: setup
 	$(BIN)/sray bench loader

@@ -1,4 +1,5 @@
-"""Shared pytest set-up: CPU by default; tests marked ``gpu`` skip cleanly without CUDA."""
+"""Shared pytest set-up: CPU by default; tests marked ``gpu`` skip cleanly without CUDA; under pytest-xdist
+(``make test``) one torch thread per worker and one worker per test module (one for all cluster tests)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,10 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("SRAY_HYPOTHESIS", "ci"))
 
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+if os.environ.get("PYTEST_XDIST_WORKER"):  # two test processes share the two cores: one torch thread each
+    import torch
+
+    torch.set_num_threads(1)
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # shared fixture modules beside the tests
 
 from cluster_fixtures import cluster_inputs, local_cluster  # noqa: E402,F401  (one local cluster per session)
@@ -23,9 +28,14 @@ from ray_fixtures import ray_session  # noqa: E402,F401  (session-wide local Ray
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Skip ``@pytest.mark.gpu`` tests when no CUDA device is visible."""
+    """Keep each module on one xdist worker (every module with a cluster test on one), and skip
+    ``@pytest.mark.gpu`` tests when no CUDA device is visible."""
     import torch
 
+    on_cluster = {item.path for item in items if "local_cluster" in getattr(item, "fixturenames", ())}
+    for item in items:
+        group = "cluster" if item.path in on_cluster else item.path.stem
+        item.add_marker(pytest.mark.xdist_group(group))
     if torch.cuda.is_available():
         return
     skip = pytest.mark.skip(reason="needs a CUDA device (none visible on this machine)")
