@@ -7,6 +7,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from sray.data_tools.synth.world import World
+from sray.jobs.bench.accuracy_levers import (HOUR_INVERSE, HOUR_LR_RAYS, HOUR_SAMPLES_16, ROOMS_998, SCREEN_DEPTH,
+                                              SCREEN_LR_RAYS, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
+                                              SCREEN_RAYS_512, SCREEN_ROOMS_998, SCREEN_SAMPLES_16)
 from sray.jobs.bench.accuracy_variant import Variant
 from sray.model.fast_render import FastRender
 from sray.platform.config.recipes import CPU_HOUR_SECONDS, CPU_HOUR_WARMUP_2D
@@ -53,57 +56,6 @@ on the recipe's models a linear probe still reads 6.7 points less from S-Ray's e
 trained for the same CPU, while the field read at the true surface scores no better than the render (the ceilings
 of docs/benchmarks.md): recognition, not geometry, is where zero-shot accuracy is lost, and a 2D step costs under half
 a ray step."""
-
-SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5 = "screen-depth", "screen-occl", "screen-occl-t5"
-"""Variant names of ``screen`` with one model setting changed each, screened against it at the same budget: the
-training-time depth loss on the rendered depth (``model.lambda_depth`` 0.1; the test protocol stays
-RGB), and the occlusion-aware weight net inputs (``model.weight_inputs=cross-view``) at the model's tau (0.7) and at
-tau 0.5 (a wider weight range)."""
-
-SCREEN_RAYS_128 = "screen-rays128"
-"""Variant name of ``screen`` rendering 128 query rays per rank-step instead of 256 (``data.rays_per_batch``; a
-step-cost lever: its ray step costs 0.79x the recipe's in ``sray bench recipe-step``, each with half the labels)."""
-
-SCREEN_RAYS_512 = "screen-rays512"
-"""Variant name of ``screen`` rendering 512 query rays per rank-step instead of 256 (``data.rays_per_batch``): the
-other side of ``screen-rays128`` (half the labels per step for more steps: +3.70 ± 5.78 points zero-shot over three
-paired seeds, one of them lost), twice the labels per step for fewer steps. Planned on seed 2 only, paired with
-``screen`` of that seed on one machine (why: docs/benchmarks.md, "Twice the query rays per step")."""
-
-SCREEN_SAMPLES_16 = "screen-samples16"
-"""Variant name of ``screen`` with 16 coarse and 16 fine samples per ray instead of 24 and 24 (``model.n_coarse``,
-``model.n_fine``; a step-cost lever: 0.83x the recipe's ray-step CPU in ``sray bench recipe-step``, the same labels)."""
-
-SCREEN_ROOMS_998, ROOMS_998 = "screen-998", 998
-"""Variant name of ``screen`` on 998 training rooms instead of 498 (the same test rooms; generating them is not counted
-in the budget), and that count: zero-shot rose with every room count measured (48 -> 198 -> 498, docs/benchmarks.md)."""
-
-SCREEN_LR_RAYS = "screen-lr-rays"
-"""Variant name of ``screen`` whose lr decay starts at the first ray step (``optim.lr_decay_start=rays``): the 2D
-warm-up trains at the base lr and the ray phase decays over its own share of the budget, instead of starting at
-~0.6x the hour's lr (the decay follows the spent budget share, docs/benchmarks.md)."""
-
-HOUR_LR_RAYS = "hour-lr-rays"
-"""Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) but for its lr decay starting at the
-first ray step: the hour arm of ``screen-lr-rays``, which gained over ``screen`` on each of its three paired seeds.
-Planned on seed 0 only (why: docs/benchmarks.md, "The hour arm's seed-0 pair")."""
-
-HOUR_SAMPLES_16 = "hour-samples16"
-"""Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) but for 16 coarse and 16 fine samples
-per ray: the hour arm of ``screen-samples16``, which gained over ``screen`` on each of its three paired seeds
-(docs/benchmarks.md, "Samples per ray, screened on the third and fourth machines"). Planned on seed 0 only (why:
-docs/benchmarks.md, "The samples lever's hour arm, seed 0")."""
-
-HOUR_INVERSE = "hour-inverse"
-"""Variant name of ``synth-cpu-hour`` exactly as it is (``hour-intra-uncapped``) but for its class weights following
-the inverse class frequency instead of its square root (``data.class_balance=inverse``), both clipped at 10x the
-smallest weight. On the 498-room world the clip flattens every class under 4.3% of the pixels, so the lever moves
-weight from wall and floor (63% of the pixels) to the objects that hold mIoU down: wall 0.23, floor 0.50, cabinet
-1.52, door 2.26 and every other class 2.33, against the recipe's 0.43, 0.63, 1.10, 1.35 and 1.53-4.32. It goes
-to the hour without a screen: the two levers that gained at the screening budget on every seed (``screen-lr-rays``,
-``screen-samples16``) did not at the hour (docs/benchmarks.md, "The samples lever's hour arm"). Planned on seed 0
-only, paired with the recipe's seed 0 on one machine (why: docs/benchmarks.md, "Inverse-frequency class weights at
-the hour")."""
 
 SCREEN_SECONDS = CPU_HOUR_SECONDS / 2
 """CPU budget of the screening cells: half the recipe's, so a paired arm and its baseline fit one session of the
