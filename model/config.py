@@ -45,6 +45,9 @@ class SRayConfig:
     """Number of semantic classes L the classifier predicts (ScanNet benchmark: 20)."""
     feat_dim: int = 32
     """Channels C of the image features and of the contextual space M (paper: 32)."""
+    encoder_width: int = 16
+    """Channels of the image encoder's first layer; every later layer scales with it (16 = the appendix table:
+    16/32/64/128 channels on the way down, 64/32 on the way up; ``encoder.ResUNetEncoder``)."""
     n_source: int = 8
     """Number of source views m a training sample carries (paper: 8); the network itself accepts
     any m >= 1 at run time."""
@@ -149,7 +152,8 @@ class SRayConfig:
         if self.density_activation not in DENSITY_ACTIVATIONS:
             raise bad("density_activation",
                       f"is {self.density_activation!r}; use one of {DENSITY_ACTIVATIONS}")
-        for name in ("n_classes", "feat_dim", "n_source", "n_coarse", "n_fine", "n_heads", "dir_hidden"):
+        for name in ("n_classes", "feat_dim", "encoder_width", "n_source", "n_coarse", "n_fine", "n_heads",
+                     "dir_hidden"):
             if int(getattr(self, name)) < 1:
                 raise bad(name, f"is {getattr(self, name)}; it must be a positive integer")
         if self.feat_dim % self.n_heads or self.geo_hidden[-1] % self.n_heads:

@@ -22,6 +22,9 @@ L18    conv 3x3, IN, ReLU                     64 -> 32     1/4
 L19    conv 1x1, IN                           32 -> 32     1/4
 =====  =====================================  ===========  ===========
 
+Every channel count scales with the first layer's width ``w`` (``SRayConfig.encoder_width``; the table is
+``w`` = 16): L1 has ``w`` channels, L2 ``2w``, L3-L4 ``4w``, L5-L10 ``8w``, L11 and L14 ``4w``, L15 and L18 ``2w``.
+
 The table's strides are consistent with its 1/4-resolution output: four stride-2 stages
 (L1, L2, L3, L5) reach 1/16 and the two up-sampling stages return to 1/4, where the skips (L4 at
 1/8, L2 at 1/4) have matching shapes. Two reconciliations, both documented here:
@@ -101,17 +104,22 @@ def _conv_norm(c_in: int, c_out: int, k: int, relu: bool) -> nn.Sequential:
 class ResUNetEncoder(nn.Module):
     """Shared per-view encoder: RGB (B, 3, H, W) in [0, 1] -> features (B, C, ceil(H/4), ceil(W/4))."""
 
-    def __init__(self, out_dim: int = 32) -> None:
+    def __init__(self, out_dim: int = 32, width: int = 16) -> None:
+        """``out_dim`` feature channels (L19); ``width`` channels of L1, every other layer scaled with it (module
+        doc; 16 = the appendix table)."""
         super().__init__()
-        self.stem = nn.Sequential(nn.Conv2d(3, 16, 7, 2, 3, bias=False), _norm(16), nn.ReLU())  # L1
-        self.down2 = ResBlock(16, 32, 2)  # L2
-        self.down3 = nn.Sequential(ResBlock(32, 64, 2), ResBlock(64, 64, 1))  # L3, L4
-        self.down4 = nn.Sequential(ResBlock(64, 128, 2), *[ResBlock(128, 128, 1) for _ in range(5)])
-        self.reduce4 = _conv_norm(128, 64, 3, relu=True)  # L11
-        self.merge3 = nn.Sequential(_conv_norm(128, 64, 3, relu=True),  # L14
-                                    _conv_norm(64, 32, 3, relu=True))  # L15
-        self.merge2 = _conv_norm(64, 32, 3, relu=True)  # L18
-        self.head = _conv_norm(32, out_dim, 1, relu=False)  # L19
+        if width < 1:
+            raise ValueError(f"sray.model.encoder: width is {width}; give the first layer at least one channel")
+        w1, w2, w4, w8 = width, 2 * width, 4 * width, 8 * width
+        self.stem = nn.Sequential(nn.Conv2d(3, w1, 7, 2, 3, bias=False), _norm(w1), nn.ReLU())  # L1
+        self.down2 = ResBlock(w1, w2, 2)  # L2
+        self.down3 = nn.Sequential(ResBlock(w2, w4, 2), ResBlock(w4, w4, 1))  # L3, L4
+        self.down4 = nn.Sequential(ResBlock(w4, w8, 2), *[ResBlock(w8, w8, 1) for _ in range(5)])  # L5-L10
+        self.reduce4 = _conv_norm(w8, w4, 3, relu=True)  # L11
+        self.merge3 = nn.Sequential(_conv_norm(2 * w4, w4, 3, relu=True),  # L14
+                                    _conv_norm(w4, w2, 3, relu=True))  # L15
+        self.merge2 = _conv_norm(2 * w2, w2, 3, relu=True)  # L18
+        self.head = _conv_norm(w2, out_dim, 1, relu=False)  # L19
 
     def forward(self, rgb: Tensor) -> Tensor:
         """rgb: (B, 3, H, W) in [0, 1]; returns (B, C, ceil(ceil(H/2)/2), ceil(ceil(W/2)/2))."""
@@ -120,10 +128,10 @@ class ResUNetEncoder(nn.Module):
         if min(rgb.shape[-2:]) < MIN_IMAGE_SIZE:
             raise ValueError(f"sray.model.encoder: source images are {tuple(rgb.shape[-2:])}; both sides "
                              f"must be at least {MIN_IMAGE_SIZE} pixels (resize the scene up).")
-        x1 = self.stem(rgb * 2.0 - 1.0)  # (B, 16, H/2, W/2)
-        x2 = self.down2(x1)  # (B, 32, H/4, W/4)
-        x3 = self.down3(x2)  # (B, 64, H/8, W/8)
-        x4 = self.reduce4(self.down4(x3))  # (B, 64, H/16, W/16)
-        y3 = self.merge3(torch.cat([upsample_to(x4, x3.shape[-2:]), x3], 1))  # (B, 32, H/8, W/8)
-        y2 = self.merge2(torch.cat([upsample_to(y3, x2.shape[-2:]), x2], 1))  # (B, 32, H/4, W/4)
+        x1 = self.stem(rgb * 2.0 - 1.0)  # (B, w, H/2, W/2)
+        x2 = self.down2(x1)  # (B, 2w, H/4, W/4)
+        x3 = self.down3(x2)  # (B, 4w, H/8, W/8)
+        x4 = self.reduce4(self.down4(x3))  # (B, 4w, H/16, W/16)
+        y3 = self.merge3(torch.cat([upsample_to(x4, x3.shape[-2:]), x3], 1))  # (B, 2w, H/8, W/8)
+        y2 = self.merge2(torch.cat([upsample_to(y3, x2.shape[-2:]), x2], 1))  # (B, 2w, H/4, W/4)
         return self.head(y2)  # (B, C, H/4, W/4)

@@ -91,10 +91,11 @@ def test_rows_run_end_to_end_and_the_oracle_transfer_is_near_perfect(shards: Pat
 
 
 def test_cli_trains_a_segmenter_and_loads_it(shards: Path, tmp_path: Path, one_thread: None) -> None:  # noqa: F811
-    """``sray bench segmenter`` saves a folder that loads back with its budget recorded."""
+    """``sray bench segmenter`` saves a folder that loads back with its budget and its encoder width recorded."""
     assert main(["bench", "segmenter", "--data", str(shards), "--cpu-seconds", "0.2", "--out", str(tmp_path / "seg"),
-                 "--recipe", "synth-small"]) == 0
+                 "--recipe", "synth-small", "--encoder-width", "8"]) == 0
     model, record = load_segmenter(tmp_path / "seg")
+    assert model.cfg.encoder_width == 8 == model.encoder.stem[0].out_channels == record.training["encoder_width"]
     t = record.training
     assert t["steps"] >= 1 and t["cpu_seconds_budget"] == 0.2
     assert t["cpu_seconds"] >= 0.2, "training stopped before its CPU budget"

@@ -1,11 +1,15 @@
-"""The ResUNet encoder follows the appendix table's shapes and keeps pixel centres aligned."""
+"""The ResUNet encoder follows the appendix table's shapes at any first-layer width and keeps pixel centres
+aligned."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
+from sray.model.config import SRayConfig
 from sray.model.encoder import ResUNetEncoder, upsample_to
+from sray.model.semantic_ray import SRayModel
+from sray.platform.eval.segmenter import Segmenter, SegmenterConfig
 
 
 @pytest.mark.parametrize("hw", [(48, 64), (120, 160), (33, 47)])
@@ -46,3 +50,41 @@ def test_encoder_is_per_image_and_rejects_tiny_images() -> None:
     torch.testing.assert_close(enc(imgs)[1:2], enc(imgs[1:2]), rtol=1e-5, atol=1e-5)
     with pytest.raises(ValueError, match="at least 32"):
         enc(torch.rand(1, 3, 24, 64))
+
+
+def _table_parameters(w: int, out_dim: int) -> int:
+    """Learned parameters of the appendix table's layers with L1 ``w`` channels wide, counted from the table:
+    bias-free convolutions, an affine instance norm (2 per channel) after each, 1x1 projections on the ResBlocks
+    whose shape changes."""
+    def conv(c_in: int, c_out: int, k: int) -> int:
+        return c_in * c_out * k * k + 2 * c_out
+
+    def res(c_in: int, c_out: int) -> int:
+        return conv(c_in, c_out, 3) + conv(c_out, c_out, 3) + (conv(c_in, c_out, 1) if c_in != c_out else 0)
+
+    down = conv(3, w, 7) + res(w, 2 * w) + res(2 * w, 4 * w) + res(4 * w, 4 * w) + res(4 * w, 8 * w) \
+        + 5 * res(8 * w, 8 * w)
+    up = conv(8 * w, 4 * w, 3) + conv(8 * w, 4 * w, 3) + conv(4 * w, 2 * w, 3) + conv(4 * w, 2 * w, 3) \
+        + conv(2 * w, out_dim, 1)
+    return down + up
+
+
+@pytest.mark.parametrize("width", [8, 16, 24])
+def test_every_layer_scales_with_the_first_layers_width(width: int) -> None:
+    enc = ResUNetEncoder(32, width)
+    seen = {}
+    for name in ("stem", "down2", "down3", "down4", "reduce4", "merge3", "merge2"):
+        getattr(enc, name).register_forward_hook(lambda _m, _i, out, name=name: seen.__setitem__(name, out.shape[1]))
+    assert enc(torch.rand(1, 3, 48, 64)).shape == (1, 32, 12, 16)
+    assert seen == {"stem": width, "down2": 2 * width, "down3": 4 * width, "down4": 8 * width, "reduce4": 4 * width,
+                    "merge3": 2 * width, "merge2": 2 * width}
+    assert sum(p.numel() for p in enc.parameters()) == _table_parameters(width, 32)
+    model_encoder = SRayModel(SRayConfig(n_classes=5, encoder_width=width)).encoder
+    segmenter_encoder = Segmenter(SegmenterConfig(n_classes=5, encoder_width=width)).encoder
+    for built in (model_encoder, segmenter_encoder):
+        assert [p.shape for p in built.parameters()] == [p.shape for p in enc.parameters()]
+
+
+def test_a_width_below_one_is_refused_by_the_config() -> None:
+    with pytest.raises(ValueError, match="encoder_width"):
+        SRayConfig(encoder_width=0)

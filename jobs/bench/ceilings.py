@@ -71,13 +71,14 @@ def run_ceilings(checkpoint: Path, shards: Path, out: Path, doc: Path, *, n_sour
 
 
 def run_segmenter(shards: Path, cpu_seconds: float, out: Path, recipe: str = "synth-cpu-hour",
-                  seed: int = 0, max_steps: int | None = None) -> SegmenterRecord:
-    """Train the 2D segmenter with ``recipe``'s augmentation, class balance and source counts for
+                  seed: int = 0, max_steps: int | None = None, encoder_width: int | None = None) -> SegmenterRecord:
+    """Train the 2D segmenter with ``recipe``'s augmentation, class balance, source counts and encoder for
     ``cpu_seconds`` (or ``max_steps``, when sooner), resuming an interrupted training left in ``out``; saved in
-    ``out``."""
+    ``out``. ``encoder_width``: the encoder's first-layer width instead of the recipe's ``model.encoder_width``."""
     cfg = get_recipe(recipe)
     result = train_segmenter(shards, cpu_seconds, out, seed, augment=cfg.data.aug,
                              class_balance=cfg.data.class_balance, n_source=cfg.model.n_source,
-                             top_k=cfg.data.top_k, feat_dim=cfg.model.feat_dim, max_steps=max_steps)
+                             top_k=cfg.data.top_k, feat_dim=cfg.model.feat_dim, max_steps=max_steps,
+                             encoder_width=encoder_width or cfg.model.encoder_width)
     print(f"segmenter saved in {out}: {result.budget()}, final loss {result.training['final_loss']:.3f}")
     return result

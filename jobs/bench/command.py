@@ -168,6 +168,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     segmenter.add_argument("--seed", type=int, default=0)
     segmenter.add_argument("--max-steps", type=int, default=None,
                            help="stop after this many steps even within the budget (default: the budget alone)")
+    segmenter.add_argument("--encoder-width", type=int, default=None, help="channels of the encoder's first layer, "
+                           "every later layer scaled with it (default: the recipe's model.encoder_width)")
     segmenter.set_defaults(func=_bench_segmenter)
 
 
@@ -220,7 +222,7 @@ def _bench_recipe_step(args: argparse.Namespace) -> int:
 def _bench_segmenter(args: argparse.Namespace) -> int:
     from sray.jobs.bench.ceilings import run_segmenter
 
-    run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed, args.max_steps)
+    run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed, args.max_steps, args.encoder_width)
     return 0
 
 

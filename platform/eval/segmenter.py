@@ -38,6 +38,8 @@ class SegmenterConfig:
     """Classes L of the label space it predicts."""
     feat_dim: int = 32
     """Channels of the encoder's features (S-Ray's ``model.feat_dim``)."""
+    encoder_width: int = 16
+    """Channels of the encoder's first layer (S-Ray's ``model.encoder_width``)."""
     ignore_id: int = 255
     """Label id of unlabelled pixels (never a target)."""
     class_weights: tuple[float, ...] = ()
@@ -56,7 +58,7 @@ class Segmenter(nn.Module):
         """Build the encoder and head of ``cfg`` (no device work)."""
         super().__init__()
         self.cfg = cfg
-        self.encoder = ResUNetEncoder(cfg.feat_dim)
+        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width)
         self.head = SourceSemanticHead(cfg.head_config())
 
     def forward(self, rgb: Tensor) -> Tensor:
