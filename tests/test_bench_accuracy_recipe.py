@@ -14,7 +14,8 @@ from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOU
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
                                            ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_OCCL,
                                            SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512, SCREEN_ROOMS_998,
-                                           SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM, VARIANT_SETTINGS,
+                                           SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM, SCREEN_WIDE_24,
+                                           VARIANT_SETTINGS,
                                            WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
@@ -139,6 +140,12 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert dataclasses.replace(inverse, run=head.run, data=dataclasses.replace(inverse.data,
                                                                                class_balance="inverse-sqrt")) == head
     assert Cell(HOUR_INVERSE, 0) in preset.plan and HOUR_INVERSE in CPU_BUDGETED
+    wide = config(SCREEN_WIDE_24)  # the capacity lever: a wider encoder, its 2D warm-up cut to the same CPU
+    assert (wide.model.encoder_width, wide.optim.warmup_2d_steps) == (24, 680) != (16, screen.optim.warmup_2d_steps)
+    assert dataclasses.replace(wide, run=screen.run, model=dataclasses.replace(wide.model, encoder_width=16),
+                               optim=dataclasses.replace(wide.optim, warmup_2d_steps=WARM_2D_STEPS)) == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_WIDE_24] == [Cell(SCREEN_WIDE_24, 2)]
+    assert SCREEN_WIDE_24 in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

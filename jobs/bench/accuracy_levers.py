@@ -54,3 +54,11 @@ to the hour without a screen: the two levers that gained at the screening budget
 ``screen-samples16``) did not at the hour (docs/benchmarks.md, "The samples lever's hour arm"). Planned on seed 0
 only, paired with the recipe's seed 0 on one machine (why: docs/benchmarks.md, "Inverse-frequency class weights at
 the hour")."""
+
+SCREEN_WIDE_24, WIDE_24_WARMUP_2D = "screen-w24", 680
+"""Variant name of ``screen`` with an encoder 24 channels wide at its first layer instead of 16
+(``model.encoder_width``: 2.25x its parameters, 2.21x its multiply-adds on a 120x160 image), and its 2D warm-up's
+steps, cut from 1,500 so the warm-up spends about the same CPU (1,500 / 2.21; a 2D step is almost all encoder). The
+capacity lever: on the recipe's world, held-out views of the training rooms score no higher than unseen rooms, and
+every lever that changed what a step trains on (rays, samples, weights, rooms) left held-out fitting where it was.
+Planned on seed 2 only, paired with ``screen`` of that seed on one machine."""
