@@ -60,6 +60,6 @@ SCREEN_WIDE_24, WIDE_24_WARMUP_2D = "screen-w24", 680
 (``model.encoder_width``: 2.25x its parameters, 2.21x its multiply-adds on a 120x160 image), and its 2D warm-up's
 steps, cut from 1,500 so the warm-up spends about the same CPU (1,500 / 2.21; a 2D step is almost all encoder). The
 capacity lever: on the recipe's world, held-out views of the training rooms score no higher than unseen rooms, and
-every lever that changed what a step trains on (rays, samples, weights, rooms) left held-out fitting where it was.
+no lever that changed what a step trains on (rays, samples, weights, rooms, lr) raised held-out fitting at the hour.
 Planned on seed 2 only, paired with ``screen`` of that seed on one machine; that pair lost (docs/benchmarks.md, "A
 wider encoder, screened on seed 2")."""

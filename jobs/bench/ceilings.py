@@ -79,6 +79,6 @@ def run_segmenter(shards: Path, cpu_seconds: float, out: Path, recipe: str = "sy
     result = train_segmenter(shards, cpu_seconds, out, seed, augment=cfg.data.aug,
                              class_balance=cfg.data.class_balance, n_source=cfg.model.n_source,
                              top_k=cfg.data.top_k, feat_dim=cfg.model.feat_dim, max_steps=max_steps,
-                             encoder_width=encoder_width or cfg.model.encoder_width)
+                             encoder_width=cfg.model.encoder_width if encoder_width is None else encoder_width)
     print(f"segmenter saved in {out}: {result.budget()}, final loss {result.training['final_loss']:.3f}")
     return result
