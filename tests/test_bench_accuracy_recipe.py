@@ -12,7 +12,8 @@ from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
                                            HOUR_INTRA_UNCAPPED, HOUR_INVERSE, HOUR_LR_RAYS, HOUR_NONE,
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
-                                           ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_OCCL,
+                                           ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_NARROW_12,
+                                           SCREEN_OCCL,
                                            SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512, SCREEN_ROOMS_998,
                                            SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM, SCREEN_WIDE_24,
                                            VARIANT_SETTINGS,
@@ -146,6 +147,12 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
                                optim=dataclasses.replace(wide.optim, warmup_2d_steps=WARM_2D_STEPS)) == screen
     assert [c for c in preset.plan if c.variant == SCREEN_WIDE_24] == [Cell(SCREEN_WIDE_24, 2)]
     assert SCREEN_WIDE_24 in CPU_BUDGETED
+    narrow = config(SCREEN_NARROW_12)  # its other side: a narrower encoder, its 2D warm-up lengthened to the same CPU
+    assert (narrow.model.encoder_width, narrow.optim.warmup_2d_steps) == (12, 1875)
+    assert dataclasses.replace(narrow, run=screen.run, model=dataclasses.replace(narrow.model, encoder_width=16),
+                               optim=dataclasses.replace(narrow.optim, warmup_2d_steps=WARM_2D_STEPS)) == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_NARROW_12] == [Cell(SCREEN_NARROW_12, 2)]
+    assert SCREEN_NARROW_12 in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

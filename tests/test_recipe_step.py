@@ -1,5 +1,5 @@
 """``sray bench recipe-step``: the phase clock's attribution, the source-count normalisation, the lever arguments,
-and one end-to-end run on tiny shards whose levers reach the measured step."""
+and end-to-end runs on tiny shards whose levers reach the measured step, of a ray step and of a 2D step."""
 
 from __future__ import annotations
 
@@ -106,3 +106,10 @@ def test_recipe_step_measures_every_variant_and_its_overrides_reach_the_step(tmp
     text = doc.read_text()
     assert "Ray step of synth-cpu-hour, by phase" in text
     assert "`no-head`: `optim.warmup_2d_steps=0` `model.lambda_src_sem=0`" in text
+    flat = run_recipe_step("synth-cpu-hour", shards, [], steps=1, rounds=1, warm_up=0, doc=doc, phase="2d")
+    assert flat["recipe"].seconds["encoder"] > 0 and flat["recipe"].seconds["source head"] > 0
+    assert flat["recipe"].seconds["coarse field"] == flat["recipe"].seconds["fine field"] == 0  # nothing rendered
+    text = doc.read_text()
+    assert "2D warm-up step of synth-cpu-hour, by phase" in text and "Ray step of synth-cpu-hour, by phase" in text
+    with pytest.raises(ValueError, match="--phase"):
+        run_recipe_step("synth-cpu-hour", shards, [], steps=1, rounds=1, warm_up=0, doc=doc, phase="3d")

@@ -63,3 +63,11 @@ capacity lever: on the recipe's world, held-out views of the training rooms scor
 no lever that changed what a step trains on (rays, samples, weights, rooms, lr) raised held-out fitting at the hour.
 Planned on seed 2 only, paired with ``screen`` of that seed on one machine; that pair lost (docs/benchmarks.md, "A
 wider encoder, screened on seed 2")."""
+
+SCREEN_NARROW_12, NARROW_12_WARMUP_2D = "screen-w12", 1875
+"""Variant name of ``screen`` with an encoder 12 channels wide at its first layer instead of 16
+(``model.encoder_width``: 0.56x its parameters), and its 2D warm-up's steps, raised from 1,500 so the warm-up spends
+about the same CPU: its 2D step costs 0.80x the recipe's and its ray step 0.90x in ``sray bench recipe-step`` (tables
+in docs/benchmarks.md, "Recipe step"). The other side of ``screen-w24``: whether a smaller encoder, with more steps
+in the same CPU seconds, fits and transfers as well. Planned on seed 2 only, paired with ``screen`` of that seed on
+one machine."""

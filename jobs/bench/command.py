@@ -134,16 +134,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     weights.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     weights.set_defaults(func=_bench_view_weights)
 
-    step = kinds.add_parser("recipe-step", help="where one ray-training step of a recipe spends its CPU (loading, "
+    step = kinds.add_parser("recipe-step", help="where a recipe's ray step or 2D warm-up step spends its CPU (loading, "
                             "encoder, fields, backward, Adam) on real shards, beside its step-cost levers")
     step.add_argument("--recipe", default="synth-cpu-hour", help="the recipe whose step is measured")
     step.add_argument("--data", type=Path, required=True, help="shard folder with the recipe's training scenes")
     step.add_argument("--lever", nargs="+", action="append", default=[], metavar=("NAME", "SECTION.FIELD=VALUE"),
-                      help="a variant of the recipe: its name, then the overrides that make it (repeatable), e.g. "
-                           "--lever rays-128 data.rays_per_batch=128")
-    step.add_argument("--steps", type=int, default=20, help="measured ray steps per variant and round")
+                      help="a variant: its name, then its overrides (repeatable): --lever r128 data.rays_per_batch=128")
+    step.add_argument("--phase", choices=("rays", "2d"), default="rays", help="a ray step, or a 2D warm-up step")
+    step.add_argument("--steps", type=int, default=20, help="measured steps per variant and round")
     step.add_argument("--rounds", type=int, default=3, help="rounds, the variants alternating")
-    step.add_argument("--warm-up", type=int, default=3, help="unmeasured ray steps per variant first")
+    step.add_argument("--warm-up", type=int, default=3, help="unmeasured steps per variant first")
     step.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     step.set_defaults(func=_bench_recipe_step)
 
@@ -212,7 +212,7 @@ def _bench_recipe_step(args: argparse.Namespace) -> int:
     from sray.jobs.bench.recipe_step import run_recipe_step
 
     try:
-        run_recipe_step(args.recipe, args.data, args.lever, args.steps, args.rounds, args.warm_up, args.doc)
+        run_recipe_step(args.recipe, args.data, args.lever, args.steps, args.rounds, args.warm_up, args.doc, args.phase)
     except (FileNotFoundError, ValueError) as e:
         print(f"sray bench recipe-step: {e}", file=sys.stderr)
         return 2

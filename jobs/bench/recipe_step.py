@@ -1,13 +1,14 @@
-"""``sray bench recipe-step``: where one ray-training step of a recipe spends its CPU, measured on real shards,
-and what each step-cost lever (a set of ``--set`` overrides) saves.
+"""``sray bench recipe-step``: where one training step of a recipe spends its CPU, measured on real shards, and what
+each step-cost lever (a set of ``--set`` overrides) saves; the step is a ray step (``--phase rays``) or a step of the
+2D warm-up (``--phase 2d``: the encoder and its source-view head on the source labels, nothing rendered).
 
 One process plays one training rank of the recipe: its loader runs in this process (so reading, decoding and
 augmenting a sample are counted on the same clock), torch gets the rank's ``run.cpus_per_worker`` threads (what a
 Ray worker of the recipe is given), and each step is the worker's own: ``RayBatchLoss`` forward with rendering on,
-then ``TrainStep`` (backward, clipping, Adam). The CPU seconds of each phase are read with ``time.process_time``
-around the step's parts and from forward hooks on the network's modules (encoder, source-view head, coarse and
-fine fields) and step hooks on the optimizer. What one rank of a multi-rank job adds (the gradient all-reduce)
-is not in these figures.
+then ``TrainStep`` (backward, clipping, Adam); a 2D step runs the same forward with rendering off. The CPU seconds
+of each phase are read with ``time.process_time`` around the step's parts and from forward hooks on the network's
+modules (encoder, source-view head, coarse and fine fields) and step hooks on the optimizer. What one rank of a
+multi-rank job adds (the gradient all-reduce) is not in these figures.
 
 Variants (the recipe and each lever) run in the same process, alternating round by round, each with its own
 model and loader built from the same seed (a lever that changes what the loader draws, such as the rays per
@@ -128,8 +129,8 @@ class PhaseClock:
 class VariantRunner:
     """One variant's rank: its model, optimizer, step and loader stream, and the costs of its measured steps."""
 
-    def __init__(self, cfg: TrainConfig, epoch_steps: int) -> None:
-        self.cfg = cfg
+    def __init__(self, cfg: TrainConfig, epoch_steps: int, render: bool = True) -> None:
+        self.cfg, self.render = cfg, render
         model, optimizer, _ = build_training(cfg)
         self.model, self.device = model, torch.device("cpu")
         self.train_step = TrainStep(list(model.parameters()), optimizer, cfg.optim.grad_clip, cfg.run.precision,
@@ -140,7 +141,7 @@ class VariantRunner:
         self.step = 0
 
     def run(self, steps: int, measure: bool) -> None:
-        """Run ``steps`` ray steps; add their phase costs when ``measure``."""
+        """Run ``steps`` steps (ray steps, or 2D steps unless ``render``); add their phase costs when ``measure``."""
         for _ in range(steps):
             t0 = time.process_time()
             sample = next(self.stream)
@@ -149,7 +150,7 @@ class VariantRunner:
             torch.manual_seed(step_seed(self.cfg.run.seed, 0, self.step))
             self.model.train()
             with self.train_step.autocast():
-                loss, _ = self.model(ray_batch(sample), sample.target_label, sample.target_rgb, render=True,
+                loss, _ = self.model(ray_batch(sample), sample.target_label, sample.target_rgb, render=self.render,
                                      target_depth=sample.target_depth)
             t2 = time.process_time()
             forward = self.clock.take()
@@ -185,15 +186,15 @@ def variant_config(recipe: TrainConfig, shards: Path, assignments: list[str]) ->
 
 
 def measure_recipe_step(recipe: TrainConfig, shards: Path, levers: dict[str, list[str]], steps: int = 20,
-                        rounds: int = 3, warm_up: int = 3) -> dict[str, StepCosts]:
-    """Phase costs of the recipe's ray step (variant ``"recipe"``) and of each lever (name -> overrides) on
-    ``shards``: ``warm_up`` unmeasured steps per variant, then ``rounds`` rounds of ``steps`` steps, the
-    variants alternating."""
+                        rounds: int = 3, warm_up: int = 3, phase: str = "rays") -> dict[str, StepCosts]:
+    """Phase costs of the recipe's step of ``phase`` (a ``STEP_TITLES`` key; variant ``"recipe"``) and of each lever
+    (name -> overrides) on ``shards``: ``warm_up`` unmeasured steps per variant, then ``rounds`` rounds of ``steps``
+    steps, the variants alternating."""
     torch.set_num_threads(max(1, int(recipe.run.cpus_per_worker)))
     configs = {"recipe": variant_config(recipe, shards, [])}
     configs |= {name: variant_config(recipe, shards, sets) for name, sets in levers.items()}
     epoch_steps = warm_up + steps * rounds
-    runners = {name: VariantRunner(cfg, epoch_steps) for name, cfg in configs.items()}
+    runners = {name: VariantRunner(cfg, epoch_steps, render=phase == "rays") for name, cfg in configs.items()}
     try:
         for name, runner in runners.items():
             runner.run(warm_up, measure=False)
@@ -209,7 +210,10 @@ def measure_recipe_step(recipe: TrainConfig, shards: Path, levers: dict[str, lis
 
 
 RECIPE_STEP = Bench("recipe-step", "Recipe step")
-"""The section of ``sray bench recipe-step``'s tables: a recipe's ray step by phase, and its step-cost levers."""
+"""The section of ``sray bench recipe-step``'s tables: a recipe's step by phase, and its step-cost levers."""
+
+STEP_TITLES = {"rays": "Ray step of {recipe}, by phase", "2d": "2D warm-up step of {recipe}, by phase"}
+"""The step kinds ``--phase`` measures, and the title of each one's table (one table per recipe and kind)."""
 
 
 def expected_sources(cfg: TrainConfig) -> float:
@@ -219,10 +223,10 @@ def expected_sources(cfg: TrainConfig) -> float:
     return (min(low, n) + n) / 2 if low > 0 else float(n)
 
 
-def recipe_step_table(costs: dict[str, StepCosts], sources: dict[str, float]) -> str:
-    """Markdown table: CPU milliseconds per ray step by phase (rows) for each variant (columns), the whole step, the
-    whole step at the variant's expected source count ``sources[variant]`` and its ratio to the recipe's, and the mean
-    sources and source pixels per step."""
+def recipe_step_table(costs: dict[str, StepCosts], sources: dict[str, float], phase: str = "rays") -> str:
+    """Markdown table: CPU milliseconds per step of ``phase`` by part (rows) for each variant (columns), the whole
+    step, the whole step at the variant's expected source count ``sources[variant]`` and its ratio to the recipe's,
+    and the mean sources and source pixels per step."""
     names = list(costs)
     at = {n: costs[n].total_ms_at(sources[n]) for n in names}
     rows = [[phase, *(f"{costs[n].per_step_ms()[phase]:.0f}" for n in names)] for phase in PHASES]
@@ -233,23 +237,24 @@ def recipe_step_table(costs: dict[str, StepCosts], sources: dict[str, float]) ->
                                                   f"({sources[n]:.1f})" for n in names)])
     rows.append(["source kpixels per step", *(f"{costs[n].source_pixels / max(costs[n].steps, 1) / 1e3:.1f}"
                                               for n in names)])
-    return markdown_table(["CPU ms per ray step", *names], rows)
+    return markdown_table([f"CPU ms per {'ray' if phase == 'rays' else '2D'} step", *names], rows)
 
 
 def write_recipe_step(recipe: str, costs: dict[str, StepCosts], sources: dict[str, float],
-                      levers: dict[str, list[str]], steps: int, rounds: int, doc: Path) -> str:
-    """Record the table of ``recipe``'s step in ``doc``'s "Recipe step" section (same-recipe table replaced);
-    returns the table."""
-    table = recipe_step_table(costs, sources)
+                      levers: dict[str, list[str]], steps: int, rounds: int, doc: Path, phase: str = "rays") -> str:
+    """Record the table of ``recipe``'s step of ``phase`` in ``doc``'s "Recipe step" section (the same recipe and
+    phase's table replaced); returns the table."""
+    table = recipe_step_table(costs, sources, phase)
     lever_lines = "; ".join(f"`{name}`: {' '.join(f'`{a}`' for a in sets)}" for name, sets in levers.items())
     notes = (f"One rank of `{recipe}` on real shards, its loader in the same process, "
-             f"{steps} x {rounds} measured ray steps per variant after a warm-up, the variants alternating round by "
-             "round from the same seed; CPU seconds from `time.process_time` (forward hooks on the modules, step "
-             "hooks on Adam); the gradient all-reduce of a multi-rank job is not included. The loaders draw a source "
-             "count per sample, and a lever's stream may draw other counts than the recipe's: the bold row reads "
-             "each variant's least-squares line of step CPU against source count at its draw's expected count. "
+             f"{steps} x {rounds} measured {'ray' if phase == 'rays' else '2D'} steps per variant after a warm-up, "
+             "the variants alternating round by round from the same seed; CPU seconds from `time.process_time` "
+             "(forward hooks on the modules, step hooks on Adam); the gradient all-reduce of a multi-rank job is not "
+             "included. The loaders draw a source count per sample, and a lever's stream may draw other counts than "
+             "the recipe's: the bold row reads each variant's least-squares line of step CPU against source count at "
+             "its draw's expected count. "
              + (f"Levers: {lever_lines}." if levers else "No levers."))
-    record(RECIPE_STEP, f"Ray step of {recipe}, by phase", table, doc, notes)
+    record(RECIPE_STEP, STEP_TITLES[phase].format(recipe=recipe), table, doc, notes)
     return table
 
 
@@ -268,8 +273,11 @@ def parse_levers(specs: list[list[str]]) -> dict[str, list[str]]:
 
 
 def run_recipe_step(recipe: str, shards: Path, lever_specs: list[list[str]], steps: int, rounds: int, warm_up: int,
-                    doc: Path) -> dict[str, StepCosts]:
-    """``sray bench recipe-step``: measure the recipe's ray step and its levers on ``shards``, record the table."""
+                    doc: Path, phase: str = "rays") -> dict[str, StepCosts]:
+    """``sray bench recipe-step``: measure the recipe's step of ``phase`` and its levers on ``shards``, record the
+    table."""
+    if phase not in STEP_TITLES:
+        raise ValueError(f"--phase {phase}: measure one of {', '.join(STEP_TITLES)}")
     if not (shards / "manifest.json").is_file():
         raise FileNotFoundError(
             f"{shards}: no manifest.json; pass --data a shard folder (`sray data shard` writes one)")
@@ -278,8 +286,8 @@ def run_recipe_step(recipe: str, shards: Path, lever_specs: list[list[str]], ste
                          "1, the warm-up at least 0")
     levers = parse_levers(lever_specs)
     base = get_recipe(recipe)
-    costs = measure_recipe_step(base, shards, levers, steps, rounds, warm_up)
+    costs = measure_recipe_step(base, shards, levers, steps, rounds, warm_up, phase)
     sources = {"recipe": expected_sources(base)}
     sources |= {name: expected_sources(variant_config(base, shards, sets)) for name, sets in levers.items()}
-    write_recipe_step(recipe, costs, sources, levers, steps, rounds, doc)
+    write_recipe_step(recipe, costs, sources, levers, steps, rounds, doc, phase)
     return costs
