@@ -231,7 +231,7 @@ PRESETS = {
               Cell(HOUR, 2), Cell(ROOMS_198, 1), Cell(ROOMS_198, 2), *seeds(SCREEN_SAMPLES_16, 3),
               *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3), Cell(HOUR_LR_RAYS, 0),
               Cell(HOUR_SAMPLES_16, 0), Cell(SCREEN_RAYS_512, 2),
-              Cell(HOUR_INVERSE, 0), Cell(SCREEN_WIDE_24, 2), Cell(SCREEN_NARROW_12, 2)),
+              Cell(HOUR_INVERSE, 0), Cell(SCREEN_WIDE_24, 2), *seeds(SCREEN_NARROW_12, 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
