@@ -229,7 +229,7 @@ def recipe_step_table(costs: dict[str, StepCosts], sources: dict[str, float], ph
     and the mean sources and source pixels per step."""
     names = list(costs)
     at = {n: costs[n].total_ms_at(sources[n]) for n in names}
-    rows = [[phase, *(f"{costs[n].per_step_ms()[phase]:.0f}" for n in names)] for phase in PHASES]
+    rows = [[part, *(f"{costs[n].per_step_ms()[part]:.0f}" for n in names)] for part in PHASES]
     rows.append(["whole step", *(f"{costs[n].total_ms():.0f}" for n in names)])
     rows.append(["**whole step at the expected sources**", *(f"**{at[n]:.0f}**" for n in names)])
     rows.append(["step CPU vs the recipe", *(f"{at[n] / at['recipe']:.2f}x" for n in names)])
