@@ -69,5 +69,7 @@ SCREEN_NARROW_12, NARROW_12_WARMUP_2D = "screen-w12", 1875
 (``model.encoder_width``: 0.56x its parameters), and its 2D warm-up's steps, raised from 1,500 so the warm-up spends
 about the same CPU: its 2D step costs 0.80x the recipe's and its ray step 0.90x in ``sray bench recipe-step`` (tables
 in docs/benchmarks.md, "Recipe step"). The other side of ``screen-w24``: whether a smaller encoder, with more steps
-in the same CPU seconds, fits and transfers as well. Planned on seeds 2 and 0, each paired with ``screen`` of that
-seed on one machine: seed 2 gained, seed 0 lost on both scores (docs/benchmarks.md, "A narrower encoder")."""
+in the same CPU seconds, fits and transfers as well (in the two-rank cells its ray step cost 1.02x the recipe's, so
+it made no more ray steps: the all-reduce, loaders and Ray do not shrink with it). Planned on seeds 2 and 0, each
+paired with ``screen`` of that seed on one machine: seed 2 gained, seed 0 lost on both scores (docs/benchmarks.md, "A
+narrower encoder")."""
