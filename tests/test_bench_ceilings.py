@@ -23,7 +23,7 @@ from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.shards.writer import write_shards
 from sray.jobs.bench.accuracy_plan import PRESETS
 from sray.jobs.bench import view_weights
-from sray.jobs.bench.ceilings import REPORT_FILE
+from sray.jobs.bench.ceilings import HELD_OUT_TITLE, REPORT_FILE, TITLE
 from sray.jobs.cli import main
 from sray.model.config import SRayConfig
 from sray.model.runtime import Runtime
@@ -36,6 +36,7 @@ from sray.platform.eval.segmenter import load_segmenter
 from sray.platform.eval import segmenter_training
 from sray.platform.eval.segmenter_training import STATE_FILE, train_segmenter
 from sray.platform.eval.surface_field import field_at_surface
+from sray.platform.eval.zero_shot import training_scenes
 from sray.platform.train.state import write_initial_checkpoint
 
 
@@ -88,6 +89,31 @@ def test_rows_run_end_to_end_and_the_oracle_transfer_is_near_perfect(shards: Pat
     assert "segmenter" in rows["b"]["budget"] and "steps" in rows["c"]["budget"]
     text = doc.read_text()
     assert text.count("## Ceilings") == 1 and "**oracle**" in text and "reads the query image" in text
+
+
+def test_held_out_rows_score_the_first_training_scenes_held_out_views(shards: Path, tmp_path: Path,
+                                                                      one_thread: None) -> None:  # noqa: F811
+    """``--held-out 1`` scores every held-out (``test``-split) view of the first training scene by name instead of
+    the unseen test scene, the oracle transfer near perfect there too; its table gets its own title, so the
+    zero-shot table stays beside it; a held-out count below 1 is refused with exit code 2."""
+    assert training_scenes(shards, 5) == ["a", "b"] and training_scenes(shards, 1) == ["a"]
+    checkpoint = write_initial_checkpoint(tiny_config(shards, tmp_path), tmp_path / "job" / "step_000000000")
+    doc = tmp_path / "benchmarks.md"
+    common = ["bench", "ceilings", "--checkpoint", str(checkpoint), "--data", str(shards), "--n-source", "4",
+              "--probe-steps", "2", "--probe-views", "4", "--doc", str(doc)]
+    assert main([*common, "--views-per-scene", "1", "--out", str(tmp_path / "zero-shot")]) == 0
+    assert main([*common, "--held-out", "1", "--out", str(tmp_path / "held")]) == 0
+    report = json.loads((tmp_path / "held" / REPORT_FILE).read_text())
+    held_views = read_manifest(shards).scenes["a"].meta["splits"]["test"]
+    assert report["scenes"] == ["a"] and report["held_out"] == 1 and "train split" in report["source_rule"]
+    rows = {r["key"]: r for r in report["rows"]}
+    assert all(r["views"] == len(held_views) == 2 for r in rows.values())
+    assert rows["a"]["acc_on_covered"] > 0.97 and rows["a"]["coverage"] > 0.5
+    text = doc.read_text()
+    assert f"### {HELD_OUT_TITLE}" in text and f"### {TITLE}" in text and "1 training scene(s)" in text
+    assert main([*common, "--held-out", "-1", "--out", str(tmp_path / "bad")]) == 2
+    with pytest.raises(ValueError, match="held-out training scenes"):
+        training_scenes(shards, 0)
 
 
 def test_cli_trains_a_segmenter_and_loads_it(shards: Path, tmp_path: Path, one_thread: None) -> None:  # noqa: F811

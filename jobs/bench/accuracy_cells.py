@@ -34,7 +34,7 @@ from sray.jobs.bench.accuracy_worlds import cell_shards
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import apply_override, load_job_config
-from sray.platform.eval.zero_shot import evaluate_checkpoint
+from sray.platform.eval.zero_shot import evaluate_checkpoint, training_scenes
 from sray.platform.sweep.capacity import TRIAL_RESOURCES
 from sray.platform.sweep.incremental import import_result, missing, run_missing, stored_results
 from sray.platform.sweep.outcomes import TrialOutcome
@@ -181,7 +181,7 @@ def run_cell(cell: Cell, p: Preset, base: Path, scenes: list[str], out: Path, tr
     first = manifest.scenes[scenes[0]].meta
     # fitting against transfer: every held-out view of the first HELD_OUT_SCENES training scenes, with the
     # zero-shot protocol (the same sources rule, render and whole images)
-    seen = sorted(s for s, e in manifest.scenes.items() if e.meta.get("role", "train") == "train")[:HELD_OUT_SCENES]
+    seen = training_scenes(shards, HELD_OUT_SCENES)
     held_out = evaluate_checkpoint(checkpoint, shards, seen, out / "eval-heldout" / cell.key, n_source=p.eval_sources,
                                    stride=1, tracking_uri=tracking_uri, experiment=EXPERIMENT, progress=True,
                                    fast=p.eval_fast)

@@ -1,8 +1,9 @@
 """``sray bench ceilings`` and ``sray bench segmenter``: where zero-shot accuracy is lost, as a table.
 
-``ceilings`` scores the rows of :mod:`sray.platform.eval.ceilings` on a checkpoint's unseen test scenes,
-stores them as ``ceilings.json`` in ``--out``, prints the Markdown table and writes it into the benchmark
-document's section "Ceilings" of this device (replaced on a rerun on the same kind of device). ``segmenter`` trains
+``ceilings`` scores the rows of :mod:`sray.platform.eval.ceilings` on a checkpoint's unseen test scenes (or on
+held-out views of its training scenes), stores them as ``ceilings.json`` in ``--out``, prints the Markdown table and
+writes it into the benchmark document's section "Ceilings" of this device (replaced on a rerun on the same kind of
+device and views). ``segmenter`` trains
 the 2D segmenter those rows use for a CPU-second budget, with a recipe's images and augmentation.
 """
 
@@ -22,6 +23,8 @@ from sray.platform.eval.zero_shot import write_json_atomic
 CEILINGS = Bench("ceilings", "Ceilings")
 """The benchmark's section in docs/benchmarks.md."""
 TITLE = "Where zero-shot accuracy is lost"
+HELD_OUT_TITLE = "Where held-out accuracy is lost"
+"""The table's title when the query views are held-out views of training scenes."""
 REPORT_FILE = "ceilings.json"
 
 
@@ -43,9 +46,12 @@ def ceilings_table(rows: list[dict[str, Any]]) -> str:
 
 def ceilings_notes(report: dict[str, Any]) -> str:
     """The protocol lines printed under the table."""
-    views = f"the first {report['views_per_scene']} test view(s)" if report["views_per_scene"] else "every test view"
+    kind = "held-out" if report.get("held_out") else "test"
+    views = (f"the first {report['views_per_scene']} {kind} view(s)" if report["views_per_scene"]
+             else f"every {kind} view")
+    scenes = "training scene(s) (the first by name)" if report.get("held_out") else "unseen test scene(s)"
     return (f"Checkpoint `{report['checkpoint']}` (step {report['checkpoint_step']}), shards `{report['shards']}`: "
-            f"{len(report['scenes'])} unseen test scene(s), {views} of each, "
+            f"{len(report['scenes'])} {scenes}, {views} of each, "
             f"{report['n_source']} fixed sources ({report['source_rule']}). mIoU: dataset-level per scene, "
             f"unweighted mean over scenes; {report['unseen_rule']}. Coverage: labelled query pixels some source "
             f"sees by the row's geometry (occlusion test: relative depth agreement {report['tolerance']}); "
@@ -58,14 +64,17 @@ def ceilings_notes(report: dict[str, Any]) -> str:
 
 def run_ceilings(checkpoint: Path, shards: Path, out: Path, doc: Path, *, n_source: int = 8, views_per_scene: int = 0,
                  segmenter: Path | None = None, probe_steps: int = 300, probe_views: int = 64,
-                 tolerance: float = 0.05, render: FastRender | None = ZERO_SHOT_RENDER,
+                 tolerance: float = 0.05, render: FastRender | None = ZERO_SHOT_RENDER, held_out: int = 0,
                  progress: bool = True) -> dict[str, Any]:
-    """Measure, store ``out/ceilings.json``, print and record the table in ``doc``; returns the report."""
+    """Measure, store ``out/ceilings.json``, print and record the table in ``doc``; returns the report.
+    ``held_out`` > 0: the query views are the held-out views of that many training scenes (table
+    :data:`HELD_OUT_TITLE`)."""
     report = measure_ceilings(checkpoint, shards, n_source=n_source, views_per_scene=views_per_scene,
                               segmenter=segmenter, probe_steps=probe_steps, probe_views=probe_views,
-                              tolerance=tolerance, render=render, progress=progress)
+                              tolerance=tolerance, render=render, held_out=held_out, progress=progress)
     path = write_json_atomic(report, Path(out) / REPORT_FILE)
-    record(CEILINGS, TITLE, ceilings_table(report["rows"]), Path(doc), ceilings_notes(report))
+    title = HELD_OUT_TITLE if held_out else TITLE
+    record(CEILINGS, title, ceilings_table(report["rows"]), Path(doc), ceilings_notes(report))
     print(f"rows stored in {path}")
     return report
 

@@ -5,10 +5,14 @@ benchmark and device); ``recipe-cards`` reads stored results into the README's c
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from pathlib import Path
 
 from sray.jobs.bench.speed_methods import other_methods
+
+BENCH_SUBCOMMAND_MODULES = ("sray.jobs.bench.ceilings_command",)
+"""Modules that register more sub-benchmarks (each exposes ``register(kinds)``), listed after ``accuracy``."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -100,39 +104,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     accuracy.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     accuracy.set_defaults(func=_bench_accuracy)
 
-    ceilings = kinds.add_parser("ceilings", help="where zero-shot accuracy is lost: label-transfer ceilings, the "
-                                "field at the true surface and linear probes, on zero-shot's views and sources")
-    ceilings.add_argument("--checkpoint", type=Path, required=True, help="checkpoint folder written by `sray train`")
-    ceilings.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
-    ceilings.add_argument("--n-source", type=int, default=8, help="fixed source views per test view (as sray eval)")
-    ceilings.add_argument("--views-per-scene", type=int, default=0, help="first test views per scene (0: all)")
-    ceilings.add_argument("--segmenter", type=Path, default=None,
-                          help="2D segmenter folder (`sray bench segmenter`); without it rows b, c and c-rgb are "
-                               "left out")
-    ceilings.add_argument("--probe-steps", type=int, default=300, help="Adam steps of each linear probe's fit")
-    ceilings.add_argument("--probe-views", type=int, default=64, help="train-scene views the probes are fitted on")
-    ceilings.add_argument("--tolerance", type=float, default=0.05,
-                          help="occlusion test: relative depth agreement of a source's depth with the point")
-    ceilings.add_argument("--render", choices=["full", "fast"], default="fast",
-                          help="S-Ray's render in rows s and c-rgb: fast (default), the accuracy benchmark's zero-shot "
-                               "render (every pixel, fine pass below 0.9 confidence); full: the whole renderer")
-    ceilings.add_argument("--out", type=Path, default=Path("outputs/bench-ceilings"), help="folder of ceilings.json")
-    ceilings.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
-    ceilings.set_defaults(func=_bench_ceilings)
-
-    weights = kinds.add_parser("view-weights", help="what the weight net gives source views occluded at the true "
-                               "surface, one row per checkpoint, on zero-shot's views and sources")
-    weights.add_argument("--checkpoint", type=Path, nargs="+", required=True,
-                         help="checkpoint folders written by `sray train` (one table row each)")
-    weights.add_argument("--data", type=Path, required=True, help="shard folder with unseen test scenes")
-    weights.add_argument("--n-source", type=int, default=8, help="fixed source views per test view (as sray eval)")
-    weights.add_argument("--views-per-scene", type=int, default=0, help="first test views per scene (0: all)")
-    weights.add_argument("--stride", type=int, default=2, help="every STRIDE-th pixel in each direction")
-    weights.add_argument("--tolerance", type=float, default=0.05,
-                         help="visibility test: relative depth agreement of a source's depth with the point")
-    weights.add_argument("--out", type=Path, default=Path("outputs/bench-ceilings"), help="folder of view-weights.json")
-    weights.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
-    weights.set_defaults(func=_bench_view_weights)
+    for name in BENCH_SUBCOMMAND_MODULES:
+        importlib.import_module(name).register(kinds)
 
     step = kinds.add_parser("recipe-step", help="where a recipe's ray step or 2D warm-up step spends its CPU (loading, "
                             "encoder, fields, backward, Adam) on real shards, beside its step-cost levers")
@@ -157,21 +130,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     cards.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     cards.set_defaults(func=_bench_recipe_cards)
 
-    segmenter = kinds.add_parser("segmenter", help="train the 2D segmenter (encoder + linear head) of the ceilings "
-                                 "rows for a CPU-second budget on the train scenes' source views")
-    segmenter.add_argument("--data", type=Path, required=True, help="shard folder with train scenes")
-    segmenter.add_argument("--cpu-seconds", type=float, required=True,
-                           help="training budget in CPU seconds of this process (time.process_time)")
-    segmenter.add_argument("--out", type=Path, required=True, help="folder the segmenter is saved in")
-    segmenter.add_argument("--recipe", default="synth-cpu-hour",
-                           help="recipe whose augmentation, class balance and source counts the training uses")
-    segmenter.add_argument("--seed", type=int, default=0)
-    segmenter.add_argument("--max-steps", type=int, default=None,
-                           help="stop after this many steps even within the budget (default: the budget alone)")
-    segmenter.add_argument("--encoder-width", type=int, default=None, help="channels of the encoder's first layer, "
-                           "every later layer scaled with it (default: the recipe's model.encoder_width)")
-    segmenter.set_defaults(func=_bench_segmenter)
-
 
 def _bench_recipe_cards(args: argparse.Namespace) -> int:
     from sray.jobs.bench.recipe_cards import run_recipe_cards
@@ -185,29 +143,6 @@ def _bench_recipe_cards(args: argparse.Namespace) -> int:
     return 0
 
 
-def _bench_ceilings(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.ceilings import run_ceilings
-    from sray.platform.eval.ceilings import ZERO_SHOT_RENDER
-
-    run_ceilings(args.checkpoint, args.data, args.out, args.doc, n_source=args.n_source,
-                 views_per_scene=args.views_per_scene, segmenter=args.segmenter, probe_steps=args.probe_steps,
-                 probe_views=args.probe_views, tolerance=args.tolerance,
-                 render=ZERO_SHOT_RENDER if args.render == "fast" else None)
-    return 0
-
-
-def _bench_view_weights(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.view_weights import run_view_weights
-
-    try:
-        run_view_weights(args.checkpoint, args.data, args.out, args.doc, n_source=args.n_source,
-                         views_per_scene=args.views_per_scene, stride=args.stride, tolerance=args.tolerance)
-    except ValueError as e:
-        print(f"sray bench view-weights: {e}", file=sys.stderr)
-        return 2
-    return 0
-
-
 def _bench_recipe_step(args: argparse.Namespace) -> int:
     from sray.jobs.bench.recipe_step import run_recipe_step
 
@@ -216,13 +151,6 @@ def _bench_recipe_step(args: argparse.Namespace) -> int:
     except (FileNotFoundError, ValueError) as e:
         print(f"sray bench recipe-step: {e}", file=sys.stderr)
         return 2
-    return 0
-
-
-def _bench_segmenter(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.ceilings import run_segmenter
-
-    run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed, args.max_steps, args.encoder_width)
     return 0
 
 

@@ -3,7 +3,9 @@
 Every row is scored on the same query views (each unseen test scene's ``test`` views, the first
 ``views_per_scene`` of them) with the same fixed source views (``make_eval_samples``: each query's
 ``n_source`` top-ranked neighbours in the scene's ``source`` split) and the same metric as ``sray eval``
-(:mod:`sray.platform.eval.ceiling_rows`). The rows (:func:`row_descriptors`):
+(:mod:`sray.platform.eval.ceiling_rows`). Asked for ``held_out`` scenes, the query views are instead the held-out
+views of the first training scenes (the accuracy benchmark's held-out rule, sources from their ``train`` split):
+where fitting, not transfer, is lost. The rows (:func:`row_descriptors`):
 
 * ``a`` ground-truth source labels carried by ground-truth geometry (backward transfer with the query's
   depth and the occlusion test, :mod:`~sray.platform.eval.label_transfer`): the ceiling of any method that
@@ -55,7 +57,7 @@ from sray.platform.eval.segmenter import Segmenter, load_segmenter
 from sray.platform.eval.surface_field import field_at_surface
 from sray.platform.eval.transfer_view import source_depth_transfer
 from sray.platform.eval.view_scoring import encode_sources
-from sray.platform.eval.zero_shot import select_scenes
+from sray.platform.eval.zero_shot import select_scenes, training_scenes
 
 ZERO_SHOT_RENDER = FastRender(pixel_stride=1, confidence=0.9)
 """S-Ray's render in rows s and c-rgb by default: the accuracy benchmark's zero-shot render (every pixel, a fine
@@ -182,8 +184,9 @@ def fit_probes(net: SRayModel, segmenter: Segmenter | None, shards: Path, steps:
 def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views_per_scene: int = 0,
                      segmenter: Path | None = None, probe_steps: int = 300, probe_views: int = 64,
                      tolerance: float = 0.05, seed: int = 0, render: FastRender | None = ZERO_SHOT_RENDER,
-                     progress: bool = True) -> dict[str, Any]:
-    """Score every row (module doc) on the unseen test scenes of ``shards``; returns the JSON-ready report.
+                     held_out: int = 0, progress: bool = True) -> dict[str, Any]:
+    """Score every row (module doc) on the unseen test scenes of ``shards`` (or, ``held_out`` > 0, on the held-out
+    views of its first ``held_out`` training scenes); returns the JSON-ready report.
 
     ``views_per_scene``: the first test views of each scene (0 = all); ``segmenter``: a folder written by
     :func:`~sray.platform.eval.segmenter_training.train_segmenter`; ``probe_steps``/``probe_views``: the
@@ -193,7 +196,7 @@ def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views
     checkpoint, shards = Path(checkpoint).resolve(), Path(shards).resolve()
     net, cfg = model_from_checkpoint(checkpoint)
     step = int(read_meta(checkpoint if checkpoint.is_dir() else checkpoint.parent)["step"])
-    names, metas = select_scenes(shards, None)
+    names, metas = select_scenes(shards, training_scenes(shards, held_out) if held_out else None)
     wrong = [s for s in names if len(metas[s]["class_names"]) != cfg.model.n_classes]
     if wrong:
         raise ValueError(f"{shards / 'manifest.json'}: scenes {wrong} have {len(metas[wrong[0]]['class_names'])} "
@@ -225,9 +228,10 @@ def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views
             bar.update(1)
     bar.close()
     return {"checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards), "scenes": names,
-            "n_source": n_source, "views_per_scene": views_per_scene, "tolerance": tolerance,
+            "held_out": held_out, "n_source": n_source, "views_per_scene": views_per_scene, "tolerance": tolerance,
             "render": "full" if render is None else render.describe(),
-            "source_rule": "make_eval_samples: each test view's top-ranked neighbours in its scene's source split",
+            "source_rule": "make_eval_samples: each query view's top-ranked neighbours in its scene's "
+                           + ("train split" if held_out else "source split"),
             "unseen_rule": UNSEEN_RULE, "tie_rule": TIE_RULE,
             "coverage_of_d": "row d's coverage is row a's (the same geometry)",
             "segmenter": None if record is None else {"folder": str(segmenter), **record.training},

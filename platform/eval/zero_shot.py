@@ -83,6 +83,16 @@ def write_png_atomic(rgb: np.ndarray, path: Path) -> Path:
     return Path(path)
 
 
+def training_scenes(shards: Path, count: int) -> list[str]:
+    """The first ``count`` training scenes of ``shards`` by name (``role`` "train", or none given): the scenes whose
+    held-out (``test``) views measure fitting with the zero-shot protocol. ValueError when ``count`` < 1."""
+    if count < 1:
+        raise ValueError(f"{Path(shards) / 'manifest.json'}: {count} held-out training scenes asked for; ask for 1 "
+                         "or more")
+    manifest = read_manifest(Path(shards))
+    return sorted(s for s, e in manifest.scenes.items() if e.meta.get("role", "train") == "train")[:count]
+
+
 def select_scenes(shards: Path, scenes: list[str] | None) -> tuple[list[str], dict[str, dict]]:
     """The scenes to evaluate (default: every ``role == "test"`` scene) and their metadata.
 
