@@ -5,7 +5,7 @@ Every row is scored on the same query views (each unseen test scene's ``test`` v
 ``n_source`` top-ranked neighbours in the scene's ``source`` split) and the same metric as ``sray eval``
 (:mod:`sray.platform.eval.ceiling_rows`). Asked for ``held_out`` scenes, the query views are instead the held-out
 views of the first training scenes (the accuracy benchmark's held-out rule, sources from their ``train`` split):
-where fitting, not transfer, is lost. The rows (:func:`row_descriptors`):
+the same question on rooms the model was trained on. The rows (:func:`row_descriptors`):
 
 * ``a`` ground-truth source labels carried by ground-truth geometry (backward transfer with the query's
   depth and the occlusion test, :mod:`~sray.platform.eval.label_transfer`): the ceiling of any method that
