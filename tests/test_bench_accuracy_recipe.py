@@ -13,11 +13,10 @@ from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOU
                                            HOUR_INTRA_UNCAPPED, HOUR_INVERSE, HOUR_LR_RAYS, HOUR_NONE,
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
                                            ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_NARROW_12,
-                                           SCREEN_OCCL,
-                                           SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512, SCREEN_ROOMS_998,
-                                           SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_WARM, SCREEN_WIDE_24,
-                                           VARIANT_SETTINGS,
-                                           WARM_2D_STEPS, Cell, headline_variant, seeds)
+                                           SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512,
+                                           SCREEN_ROOMS_998, SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_SRC_3,
+                                           SCREEN_WARM, SCREEN_WIDE_24, VARIANT_SETTINGS, WARM_2D_STEPS, Cell,
+                                           headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -154,6 +153,12 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert [c for c in preset.plan if c.variant == SCREEN_NARROW_12] == [Cell(SCREEN_NARROW_12, 2),
                                                                          Cell(SCREEN_NARROW_12, 0)]
     assert SCREEN_NARROW_12 in CPU_BUDGETED
+    heavier = config(SCREEN_SRC_3)  # the source-view loss weighted 3 instead of 1, nothing else changed
+    assert (screen.model.lambda_src_sem, heavier.model.lambda_src_sem) == (1.0, 3.0)
+    assert dataclasses.replace(heavier, run=screen.run, model=dataclasses.replace(heavier.model, lambda_src_sem=1.0)) \
+        == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_SRC_3] == [Cell(SCREEN_SRC_3, 2), Cell(SCREEN_SRC_3, 0)]
+    assert SCREEN_SRC_3 in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)
