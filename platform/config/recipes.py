@@ -75,7 +75,8 @@ learning-rate schedule on a much faster machine (``budget_lr_factor`` follows th
 fractions). Stopped by its budget, the recipe scores 53.94 ± 4.14% zero-shot and 50.86 ± 3.42% on held-out views of
 its training rooms over three seeds, against 51.39 ± 2.86 and 45.37 ± 1.40% for the same recipe capped at 5,000 steps
 (``hour-intra`` in ``sray bench accuracy``; held-out higher on every paired seed, docs/benchmarks.md, "The hour recipe
-at its CPU budget")."""
+at its CPU budget"); on a machine where the budget bought 6,575-8,236 ray steps, 56.96 ± 2.04% and 54.51 ± 2.92%
+(docs/benchmarks.md, "The recipe's three seeds on the fifth machine")."""
 
 CPU_HOUR_WARMUP_2D = 1500
 """``optim.warmup_2d_steps`` of ``synth-cpu-hour``: its first steps train the encoder and its source-view head on
