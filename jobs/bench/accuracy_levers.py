@@ -77,8 +77,9 @@ narrower encoder")."""
 SCREEN_SRC_3 = "screen-src3"
 """Variant name of ``screen`` with the source views' per-pixel semantic loss weighted 3 instead of 1
 (``model.lambda_src_sem``): more of the encoder's gradient from the dense 2D labels during the ray phase, at no
-extra step CPU. Measured because on the recipe's model that loss (class-weighted) still stands near 1.1 late in training,
-above the ray semantic loss (about 0.9 per pass), and a linear probe reads less category information from the encoder
-than S-Ray's render scores (the ceilings of docs/benchmarks.md), while longer 2D-only warm-ups and a wider encoder,
-which buy 2D fitting with ray steps or CPU, lost. Planned on seeds 2 and 0, each paired with ``screen`` of that seed
-on one machine; seed 2 gained on both scores (docs/benchmarks.md, "A heavier source-view loss")."""
+extra step CPU. Measured because on the recipe's model that loss (class-weighted) still stands near 1.1 late in
+training, above the ray semantic loss (about 0.9 per pass), and a linear probe reads less category information from
+the encoder than S-Ray's render scores (the ceilings of docs/benchmarks.md), while longer 2D-only warm-ups and a
+wider encoder, which buy 2D fitting with ray steps or CPU, lost. Planned on seeds 2 and 0, each paired with
+``screen`` of that seed on one machine; seed 2 gained on both scores (docs/benchmarks.md, "A heavier source-view
+loss")."""
