@@ -14,9 +14,9 @@ from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOU
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
                                            ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_NARROW_12,
                                            SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512,
-                                           SCREEN_ROOMS_998, SCREEN_SAMPLES_16, SCREEN_SECONDS, SCREEN_SRC_3,
-                                           SCREEN_WARM, SCREEN_WIDE_24, VARIANT_SETTINGS, WARM_2D_STEPS, Cell,
-                                           headline_variant, seeds)
+                                           SCREEN_RAY_BALANCE, SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
+                                           SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_WARM, SCREEN_WIDE_24, VARIANT_SETTINGS,
+                                           WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -159,6 +159,13 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
         == screen
     assert [c for c in preset.plan if c.variant == SCREEN_SRC_3] == [Cell(SCREEN_SRC_3, 2), Cell(SCREEN_SRC_3, 0)]
     assert SCREEN_SRC_3 in CPU_BUDGETED
+    balanced = config(SCREEN_RAY_BALANCE)  # query pixels favouring small classes, the same class-weighted loss
+    assert (screen.data.ray_balance, balanced.data.ray_balance) == (0.0, 0.5)
+    assert balanced.data.class_balance == screen.data.class_balance == "inverse-sqrt"
+    assert dataclasses.replace(balanced, run=screen.run, data=dataclasses.replace(balanced.data, ray_balance=0.0)) \
+        == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_RAY_BALANCE] == [Cell(SCREEN_RAY_BALANCE, 0)]
+    assert SCREEN_RAY_BALANCE in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)
