@@ -90,4 +90,5 @@ a pixel whose class covers n pixels of the image is drawn with probability propo
 class-weighted loss. Why: on the recipe's model most of the held-out views' gap to the 60% target is in the classes
 that only a few training rooms hold (desk, refrigerator, sink, counter, toilet: 10-44% IoU), and a uniform draw of
 256 query pixels gives an object covering 2% of an image about 5 of them; the lever spends more of the same rays on
-small objects at no extra step CPU (docs/benchmarks.md, "Class-balanced query pixels")."""
+small objects at no extra step CPU. Planned on seed 0, paired with ``screen`` of that seed on one machine; that pair
+did not gain (docs/benchmarks.md, "Class-balanced query pixels")."""
