@@ -14,7 +14,8 @@ from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOU
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
                                            ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_NARROW_12,
                                            SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512,
-                                           SCREEN_RAY_BALANCE, SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
+                                           SCREEN_LR_2X, SCREEN_RAY_BALANCE,
+                                           SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
                                            SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_WARM, SCREEN_WIDE_24, VARIANT_SETTINGS,
                                            WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
@@ -166,6 +167,13 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
         == screen
     assert [c for c in preset.plan if c.variant == SCREEN_RAY_BALANCE] == [Cell(SCREEN_RAY_BALANCE, 0)]
     assert SCREEN_RAY_BALANCE in CPU_BUDGETED
+    doubled = config(SCREEN_LR_2X)  # the whole lr schedule twice as high, nothing else changed
+    assert (screen.optim.lr, screen.optim.lr_final) == (1e-3, 1e-4)
+    assert (doubled.optim.lr, doubled.optim.lr_final) == (2e-3, 2e-4)
+    assert dataclasses.replace(doubled, run=screen.run, optim=dataclasses.replace(doubled.optim, lr=1e-3,
+                                                                                  lr_final=1e-4)) == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_LR_2X] == [Cell(SCREEN_LR_2X, 0)]
+    assert SCREEN_LR_2X in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

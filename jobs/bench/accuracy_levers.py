@@ -92,3 +92,11 @@ that only a few training rooms hold (desk, refrigerator, sink, counter, toilet: 
 256 query pixels gives an object covering 2% of an image about 5 of them; the lever spends more of the same rays on
 small objects at no extra step CPU. Planned on seed 0, paired with ``screen`` of that seed on one machine; that pair
 did not gain (docs/benchmarks.md, "Class-balanced query pixels")."""
+
+SCREEN_LR_2X = "screen-lr2x"
+"""Variant name of ``screen`` whose whole learning-rate schedule is doubled (``optim.lr=2e-3``,
+``optim.lr_final=2e-4``: the same linear warm-up and exponential decay, twice as high at every step). Why: at the
+screening budget the ray phase gained on all three paired seeds when it started at the base lr instead of the decayed
+one (``screen-lr-rays``: +4.25 ± 2.04 points zero-shot, +3.35 ± 1.49 held-out), a sign that the recipe's model is
+still under-trained at its lr; doubling the base lr asks the same question of both phases at no extra step CPU.
+Planned on seed 0, paired with ``screen`` of that seed on one machine."""
