@@ -16,7 +16,8 @@ from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOU
                                            SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512,
                                            SCREEN_LR_2X, SCREEN_RAY_BALANCE,
                                            SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
-                                           SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_WARM, SCREEN_WIDE_24, VARIANT_SETTINGS,
+                                           SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_WARM, SCREEN_WARM_750, SCREEN_WIDE_24,
+                                           VARIANT_SETTINGS,
                                            WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
@@ -174,6 +175,12 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
                                                                                   lr_final=1e-4)) == screen
     assert [c for c in preset.plan if c.variant == SCREEN_LR_2X] == [Cell(SCREEN_LR_2X, 0)]
     assert SCREEN_LR_2X in CPU_BUDGETED
+    shorter = config(SCREEN_WARM_750)  # the 2D warm-up halved, nothing else changed
+    assert (screen.optim.warmup_2d_steps, shorter.optim.warmup_2d_steps) == (1500, 750)
+    assert dataclasses.replace(shorter, run=screen.run,
+                               optim=dataclasses.replace(shorter.optim, warmup_2d_steps=1500)) == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_WARM_750] == [Cell(SCREEN_WARM_750, 0)]
+    assert SCREEN_WARM_750 in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

@@ -100,3 +100,11 @@ screening budget the ray phase gained on all three paired seeds when it started 
 one (``screen-lr-rays``: +4.25 ± 2.04 points zero-shot, +3.35 ± 1.49 held-out), a sign that the recipe's model is
 still under-trained at its lr; doubling the base lr asks the same question of both phases at no extra step CPU.
 Planned on seed 0, paired with ``screen`` of that seed on one machine."""
+
+SCREEN_WARM_750 = "screen-warm750"
+"""Variant name of ``screen`` whose 2D-only warm-up lasts 750 steps instead of 1,500 (``optim.warmup_2d_steps``): the
+other side of ``screen-warm3k`` (twice the warm-up lost 2.71 points zero-shot and 5.00 held-out at this budget, the
+ray steps it displaced being worth more than its 2D steps). Half the warm-up frees about 375 of the 3,600 CPU s for
+about 290 more ray steps (+13%); measured because held-out accuracy rises with ray steps (+1.6 points per thousand
+over seven recipe cells) and the ceilings put the model's loss in recognition, which both phases train. Planned on
+seed 0, paired with ``screen`` of that seed on one machine."""
