@@ -99,7 +99,8 @@ SCREEN_LR_2X = "screen-lr2x"
 screening budget the ray phase gained on all three paired seeds when it started at the base lr instead of the decayed
 one (``screen-lr-rays``: +4.25 ± 2.04 points zero-shot, +3.35 ± 1.49 held-out), a sign that the recipe's model is
 still under-trained at its lr; doubling the base lr asks the same question of both phases at no extra step CPU.
-Planned on seed 0, paired with ``screen`` of that seed on one machine."""
+Planned on seed 0, paired with ``screen`` of that seed on one machine: that pair lost 6.04 points zero-shot for 1.32
+held-out, so the recipe keeps its lr (docs/benchmarks.md, "Twice the learning rate")."""
 
 SCREEN_WARM_750 = "screen-warm750"
 """Variant name of ``screen`` whose 2D-only warm-up lasts 750 steps instead of 1,500 (``optim.warmup_2d_steps``): the
