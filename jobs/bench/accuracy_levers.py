@@ -108,4 +108,5 @@ other side of ``screen-warm3k`` (twice the warm-up lost 2.71 points zero-shot an
 ray steps it displaced being worth more than its 2D steps). Half the warm-up frees about 375 of the 3,600 CPU s for
 about 290 more ray steps (+13%); measured because held-out accuracy rises with ray steps (+1.6 points per thousand
 over seven recipe cells) and the ceilings put the model's loss in recognition, which both phases train. Planned on
-seed 0, paired with ``screen`` of that seed on one machine."""
+seed 0, paired with ``screen`` of that seed on one machine: that pair lost 2.45 points zero-shot and 2.27 held-out,
+so the recipe keeps its 1,500 steps (docs/benchmarks.md, "Half the 2D warm-up")."""
