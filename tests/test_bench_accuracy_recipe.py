@@ -14,11 +14,9 @@ from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOU
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
                                            ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_NARROW_12,
                                            SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512,
-                                           SCREEN_LR_2X, SCREEN_RAY_BALANCE,
-                                           SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
+                                           SCREEN_LR_2X, SCREEN_RAY_BALANCE, SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
                                            SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_WARM, SCREEN_WARM_750, SCREEN_WIDE_24,
-                                           VARIANT_SETTINGS,
-                                           WARM_2D_STEPS, Cell, headline_variant, seeds)
+                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 

@@ -105,8 +105,8 @@ held-out, so the recipe keeps its lr (docs/benchmarks.md, "Twice the learning ra
 SCREEN_WARM_750 = "screen-warm750"
 """Variant name of ``screen`` whose 2D-only warm-up lasts 750 steps instead of 1,500 (``optim.warmup_2d_steps``): the
 other side of ``screen-warm3k`` (twice the warm-up lost 2.71 points zero-shot and 5.00 held-out at this budget, the
-ray steps it displaced being worth more than its 2D steps). Half the warm-up frees about 375 of the 3,600 CPU s for
-about 290 more ray steps (+13%); measured because held-out accuracy rises with ray steps (+1.6 points per thousand
-over seven recipe cells) and the ceilings put the model's loss in recognition, which both phases train. Planned on
-seed 0, paired with ``screen`` of that seed on one machine: that pair lost 2.45 points zero-shot and 2.27 held-out,
-so the recipe keeps its 1,500 steps (docs/benchmarks.md, "Half the 2D warm-up")."""
+ray steps it displaced being worth more than its 2D steps). Half the warm-up frees about 320 of the 3,600 CPU s for
+ray steps (its seed-0 cell made 335 more than ``screen``'s, +15%); measured because held-out accuracy rises with ray
+steps (+1.6 points per thousand over seven recipe cells) and the ceilings put the model's loss in recognition, which
+both phases train. Planned on seed 0, paired with ``screen`` of that seed on one machine: that pair lost 2.45 points
+zero-shot and 2.27 held-out, so the recipe keeps its 1,500 steps (docs/benchmarks.md, "Half the 2D warm-up")."""

@@ -10,9 +10,9 @@ from sray.data_tools.synth.world import World
 from sray.jobs.bench.accuracy_levers import (HOUR_INVERSE, HOUR_LR_RAYS, HOUR_SAMPLES_16, ROOMS_998,
                                               NARROW_12_WARMUP_2D, SCREEN_DEPTH, SCREEN_LR_RAYS,
                                               SCREEN_NARROW_12, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
-                                              SCREEN_LR_2X, SCREEN_RAY_BALANCE, SCREEN_RAYS_512,
-                                              SCREEN_ROOMS_998, SCREEN_WARM_750,
-                                              SCREEN_SAMPLES_16, SCREEN_SRC_3, SCREEN_WIDE_24, WIDE_24_WARMUP_2D)
+                                              SCREEN_LR_2X, SCREEN_RAY_BALANCE, SCREEN_RAYS_512, SCREEN_ROOMS_998,
+                                              SCREEN_SAMPLES_16, SCREEN_SRC_3, SCREEN_WARM_750, SCREEN_WIDE_24,
+                                              WIDE_24_WARMUP_2D)
 from sray.jobs.bench.accuracy_variant import Variant
 from sray.model.fast_render import FastRender
 from sray.platform.config.recipes import CPU_HOUR_SECONDS, CPU_HOUR_WARMUP_2D
