@@ -12,8 +12,9 @@ from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
                                            HOUR_INTRA_UNCAPPED, HOUR_INVERSE, HOUR_LR_RAYS, HOUR_NONE,
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
-                                           ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_LR_RAYS, SCREEN_NARROW_12,
-                                           SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512,
+                                           ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_GROUP_NORM,
+                                           SCREEN_LR_RAYS, SCREEN_NARROW_12, SCREEN_OCCL, SCREEN_OCCL_T5,
+                                           SCREEN_RAYS_128, SCREEN_RAYS_512,
                                            SCREEN_LR_2X, SCREEN_RAY_BALANCE, SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
                                            SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_WARM, SCREEN_WARM_750, SCREEN_WIDE_24,
                                            VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant, seeds)
@@ -179,6 +180,12 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
                                optim=dataclasses.replace(shorter.optim, warmup_2d_steps=1500)) == screen
     assert [c for c in preset.plan if c.variant == SCREEN_WARM_750] == [Cell(SCREEN_WARM_750, 0)]
     assert SCREEN_WARM_750 in CPU_BUDGETED
+    grouped = config(SCREEN_GROUP_NORM)  # group norm in the encoder instead of instance norm, nothing else changed
+    assert (screen.model.encoder_norm, grouped.model.encoder_norm) == ("instance", "group")
+    assert dataclasses.replace(grouped, run=screen.run,
+                               model=dataclasses.replace(grouped.model, encoder_norm="instance")) == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_GROUP_NORM] == [Cell(SCREEN_GROUP_NORM, 0)]
+    assert SCREEN_GROUP_NORM in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

@@ -110,3 +110,12 @@ ray steps (its seed-0 cell made 335 more than ``screen``'s, +15%); measured beca
 steps (+1.6 points per thousand over seven recipe cells) and the ceilings put the model's loss in recognition, which
 both phases train. Planned on seed 0, paired with ``screen`` of that seed on one machine: that pair lost 2.45 points
 zero-shot and 2.27 held-out, so the recipe keeps its 1,500 steps (docs/benchmarks.md, "Half the 2D warm-up")."""
+
+SCREEN_GROUP_NORM = "screen-gn"
+"""Variant name of ``screen`` whose encoder layers use group norm over groups of 8 channels instead of instance norm
+(``model.encoder_norm=group``; the same parameters). Why: instance norm at every layer, down to the 8x10-pixel 1/16
+stage and the 1/4 features the ray field reads, gives each channel of each image unit spread on its own, so a channel
+that fires on a category keeps no trace of how much of the image holds it or of how it fires against its neighbours;
+group norm keeps that within each group of 8 channels. Held-out views of the training rooms lose most in the furniture
+that sets kitchens and offices apart (desk, refrigerator, sink, counter), where such context counts. Planned on seed 0,
+paired with ``screen`` of that seed on one machine."""

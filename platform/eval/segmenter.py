@@ -40,6 +40,8 @@ class SegmenterConfig:
     """Channels of the encoder's features (S-Ray's ``model.feat_dim``)."""
     encoder_width: int = 16
     """Channels of the encoder's first layer (S-Ray's ``model.encoder_width``)."""
+    encoder_norm: str = "instance"
+    """Normalisation of the encoder's layers (S-Ray's ``model.encoder_norm``)."""
     ignore_id: int = 255
     """Label id of unlabelled pixels (never a target)."""
     class_weights: tuple[float, ...] = ()
@@ -58,7 +60,7 @@ class Segmenter(nn.Module):
         """Build the encoder and head of ``cfg`` (no device work)."""
         super().__init__()
         self.cfg = cfg
-        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width)
+        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width, cfg.encoder_norm)
         self.head = SourceSemanticHead(cfg.head_config())
 
     def forward(self, rgb: Tensor) -> Tensor:
