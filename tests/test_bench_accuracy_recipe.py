@@ -17,7 +17,8 @@ from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOU
                                            SCREEN_RAYS_128, SCREEN_RAYS_512,
                                            SCREEN_LR_2X, SCREEN_RAY_BALANCE, SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
                                            SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_WARM, SCREEN_WARM_750, SCREEN_WIDE_24,
-                                           VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant, seeds)
+                                           SCREEN_WEIGHT_DECAY, VARIANT_SETTINGS, WARM_2D_STEPS, Cell, headline_variant,
+                                           seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
 
@@ -186,6 +187,12 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
                                model=dataclasses.replace(grouped.model, encoder_norm="instance")) == screen
     assert [c for c in preset.plan if c.variant == SCREEN_GROUP_NORM] == [Cell(SCREEN_GROUP_NORM, 0)]
     assert SCREEN_GROUP_NORM in CPU_BUDGETED
+    decayed = config(SCREEN_WEIGHT_DECAY)  # AdamW's decoupled weight decay, nothing else changed
+    assert (screen.optim.weight_decay, decayed.optim.weight_decay) == (0.0, 0.3)
+    assert dataclasses.replace(decayed, run=screen.run,
+                               optim=dataclasses.replace(decayed.optim, weight_decay=0.0)) == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_WEIGHT_DECAY] == [Cell(SCREEN_WEIGHT_DECAY, 0)]
+    assert SCREEN_WEIGHT_DECAY in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

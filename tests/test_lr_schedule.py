@@ -77,3 +77,10 @@ def test_a_ray_phase_decay_without_a_2d_warm_up_is_refused_with_the_fix() -> Non
         check_sections(cfg)
     with pytest.raises(ValueError, match="optim.lr_decay_start"):
         apply_override(TrainConfig(), "optim.lr_decay_start=ray")
+
+
+def test_a_negative_weight_decay_is_refused_with_the_fix() -> None:
+    cfg = TrainConfig()
+    cfg.optim.weight_decay = -0.1
+    with pytest.raises(ValueError, match=r"optim\.weight_decay is -0\.1.*optim\.weight_decay=0\.1"):
+        check_sections(cfg)

@@ -136,3 +136,50 @@ def test_the_update_equals_plain_adam_after_clipping() -> None:
         torch.testing.assert_close(outcome.grad_norm, ref_norm, rtol=1e-5, atol=1e-6, msg=f"step {seed}")
     for (name, got), want in zip(model.state_dict().items(), reference.state_dict().values()):
         torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-6, msg=name)
+
+
+def _naive_adamw(params: list[torch.Tensor], grads: list[list[torch.Tensor]], lr: float,
+                 weight_decay: float) -> list[torch.Tensor]:
+    """AdamW written out (Loshchilov & Hutter, decoupled decay): only tensors of 2+ dimensions decay."""
+    betas, eps = (0.9, 0.999), 1e-8
+    out = [p.clone() for p in params]
+    m = [torch.zeros_like(p) for p in params]
+    v = [torch.zeros_like(p) for p in params]
+    for t, step_grads in enumerate(grads, start=1):
+        for i, g in enumerate(step_grads):
+            if out[i].dim() >= 2:
+                out[i] = out[i] * (1 - lr * weight_decay)
+            m[i] = betas[0] * m[i] + (1 - betas[0]) * g
+            v[i] = betas[1] * v[i] + (1 - betas[1]) * g * g
+            m_hat, v_hat = m[i] / (1 - betas[0] ** t), v[i] / (1 - betas[1] ** t)
+            out[i] = out[i] - lr * m_hat / (v_hat.sqrt() + eps)
+    return out
+
+
+def test_weight_decay_is_decoupled_and_spares_biases_and_norm_scales() -> None:
+    """Against AdamW written out on random gradients; with zero gradients a weight shrinks by (1 - lr wd)^n
+    exactly and a bias or norm scale does not move; 0 keeps plain Adam's single group."""
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 3), torch.nn.InstanceNorm2d(4, affine=True),
+                              torch.nn.Flatten(), torch.nn.Linear(4 * 4 * 4, 2))
+    params = list(net.parameters())
+    start = [p.detach().clone() for p in params]
+    g = torch.Generator().manual_seed(1)
+    grads = [[torch.randn(p.shape, generator=g) for p in params] for _ in range(4)]
+    opt = fused_adam(params, lr=1e-2, weight_decay=0.3)
+    for step_grads in grads:
+        for p, grad in zip(params, step_grads):
+            p.grad = grad.clone()
+        opt.step()
+    for got, want in zip(params, _naive_adamw(start, grads, 1e-2, 0.3)):
+        torch.testing.assert_close(got.detach(), want, rtol=1e-5, atol=1e-6)
+    before = [p.detach().clone() for p in params]
+    for p in params:
+        p.grad = torch.zeros_like(p)
+    opt = fused_adam(params, lr=1e-2, weight_decay=0.3)
+    for _ in range(5):
+        opt.step()
+    for got, was in zip(params, before):
+        factor = (1 - 1e-2 * 0.3) ** 5 if was.dim() >= 2 else 1.0
+        torch.testing.assert_close(got.detach(), was * factor, rtol=1e-6, atol=1e-7)
+    assert len(fused_adam(params, lr=1e-2).param_groups) == 1

@@ -121,3 +121,13 @@ that sets kitchens and offices apart (desk, refrigerator, sink, counter), where 
 paired with ``screen`` of that seed on one machine: that pair lost 3.58 points zero-shot and 1.10 held-out, and the
 furniture it was aimed at did not rise, so the recipe keeps instance norm (docs/benchmarks.md, "Group-normalised
 encoder layers")."""
+
+SCREEN_WEIGHT_DECAY = "screen-wd"
+"""Variant name of ``screen`` trained with AdamW's decoupled weight decay 0.3 on its convolution and linear weights
+(``optim.weight_decay=0.3``; biases and norm scales do not decay). Why: every encoder convolution feeds an instance
+norm, so its output ignores the scale of its weights; Adam's steps grow those weights, and a step of fixed size then
+turns them less, so the encoder's effective learning rate falls as it trains, on top of the scheduled decay, in a
+model that is still under-trained when its budget ends. Decay holds the weights' scale down and their effective rate
+up. The screening schedule's learning rates sum to about 1.5 over its steps, so 0.3 would shrink a weight no gradient
+touched to about 63% by the end: enough to matter in a run this short, where the usual 0.01-0.1 would not. Planned on
+seed 0, paired with ``screen`` of that seed on one machine."""

@@ -111,6 +111,9 @@ class OptimSettings:
     """Where the exponential decay to ``lr_final`` starts: ``run`` = after the linear warm-up, over the whole run
     (the paper); ``rays`` = at the first ray step after the 2D warm-up (``warmup_2d_steps`` > 0), the 2D steps
     training at the base lr, so the decay spans the ray phase's own steps, or its own share of the CPU budget."""
+    weight_decay: float = 0.0
+    """Decoupled weight decay (AdamW) of the convolution and linear weights: each step shrinks them by ``lr *
+    weight_decay`` of themselves; biases and norm scales never decay. 0 = plain Adam (the paper)."""
     max_nonfinite_in_row: int = 20
     """A non-finite loss or gradient skips the step; this many in a row stop the job."""
 
@@ -234,10 +237,14 @@ def check_sections(cfg: TrainConfig) -> None:
     """ValueError for settings of different sections that cannot train together: fp16 with a loss in pieces
     smaller than the batch (a piece's gradients are taken before the loss scaler scales them,
     ``sray.model.piecewise_loss``, so small ones could underflow), a 2D warm-up without the source-view
-    head it trains, and a decay started at the ray phase without a 2D warm-up before it."""
+    head it trains, a decay started at the ray phase without a 2D warm-up before it, and a negative CPU budget
+    or weight decay."""
     if cfg.optim.cpu_seconds < 0:
         raise ValueError(f"train config: optim.cpu_seconds is {cfg.optim.cpu_seconds}; use 0 (steps only) or a "
                          "positive CPU-second budget")
+    if cfg.optim.weight_decay < 0:
+        raise ValueError(f"train config: optim.weight_decay is {cfg.optim.weight_decay}; use 0 (plain Adam) or a "
+                         "positive decoupled weight decay, e.g. optim.weight_decay=0.1")
     if cfg.optim.warmup_2d_steps < 0 or (cfg.optim.warmup_2d_steps > 0 and cfg.model.lambda_src_sem <= 0):
         raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
                          "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "

@@ -54,11 +54,11 @@ def budget_lr_factor(opt: OptimSettings, step: int, cpu_seconds: float, ray_phas
 
 
 def build_training(cfg: TrainConfig) -> tuple[RayBatchLoss, torch.optim.Optimizer, torch.optim.lr_scheduler.LambdaLR]:
-    """Model (seeded from ``cfg.run.seed``, identical on every rank; its loss run with ``cfg.runtime``), Adam and
-    its schedule."""
+    """Model (seeded from ``cfg.run.seed``, identical on every rank; its loss run with ``cfg.runtime``), Adam (AdamW
+    with ``cfg.optim.weight_decay`` > 0) and its schedule."""
     torch.manual_seed(cfg.run.seed)
     model = RayBatchLoss(cfg.model, cfg.runtime)
-    optimizer = fused_adam(list(model.parameters()), cfg.optim.lr)
+    optimizer = fused_adam(list(model.parameters()), cfg.optim.lr, cfg.optim.weight_decay)
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
     return model, optimizer, scheduler
 
