@@ -191,7 +191,7 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert (screen.optim.weight_decay, decayed.optim.weight_decay) == (0.0, 0.3)
     assert dataclasses.replace(decayed, run=screen.run,
                                optim=dataclasses.replace(decayed.optim, weight_decay=0.0)) == screen
-    assert [c for c in preset.plan if c.variant == SCREEN_WEIGHT_DECAY] == [Cell(SCREEN_WEIGHT_DECAY, 0)]
+    assert [c for c in preset.plan if c.variant == SCREEN_WEIGHT_DECAY] == list(seeds(SCREEN_WEIGHT_DECAY, 3))
     assert SCREEN_WEIGHT_DECAY in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
