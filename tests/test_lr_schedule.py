@@ -11,7 +11,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sray.platform.config.train_config import OptimSettings, TrainConfig, apply_override, check_sections
+from sray.platform.config.optim_settings import OptimSettings
+from sray.platform.config.train_config import TrainConfig, apply_override, check_sections
 from sray.platform.train.state import budget_lr_factor, lr_lambda
 
 OPT = OptimSettings(steps=20000, cpu_seconds=7200.0, lr=1e-3, lr_final=1e-4, warmup_steps=100)
@@ -84,3 +85,11 @@ def test_a_negative_weight_decay_is_refused_with_the_fix() -> None:
     cfg.optim.weight_decay = -0.1
     with pytest.raises(ValueError, match=r"optim\.weight_decay is -0\.1.*optim\.weight_decay=0\.1"):
         check_sections(cfg)
+
+
+def test_a_weight_average_decay_outside_zero_to_one_is_refused_with_the_fix() -> None:
+    cfg = TrainConfig()
+    for decay in (-0.5, 1.0):
+        cfg.optim.ema_decay = decay
+        with pytest.raises(ValueError, match=r"optim\.ema_decay is .*optim\.ema_decay=0\.998"):
+            check_sections(cfg)

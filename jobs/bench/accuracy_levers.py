@@ -133,3 +133,11 @@ touched to about 63% by the end: enough to matter in a run this short, where the
 seeds 0-2, each paired with ``screen`` of that seed on one machine: the seed-0 pair gained 3.98 points zero-shot and
 2.61 held-out with the encoder's weights ending 28% smaller and the training losses level (docs/benchmarks.md,
 "Decoupled weight decay"); the seed-1 pair lost 2.45 and 0.77, so seed 2 decides it."""
+
+SCREEN_WEIGHT_AVERAGE = "screen-ema"
+"""Variant name of ``screen`` that keeps an exponential moving average of its weights with decay 0.998 (a horizon of
+500 steps; ``optim.ema_decay=0.998``) and is scored, like every reader of its checkpoints, on the average. Why: each
+rank-step's gradient comes from 256 query rays of one room and 8 source views, so the weights at the budget's end
+carry the last few rooms' noise; an average over the last ~500 steps (about a quarter of the screening cell's ray
+phase) spreads it over a few hundred rooms at no extra forward pass. Planned on seeds 0-2, each paired with
+``screen`` of that seed on one machine."""

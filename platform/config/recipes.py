@@ -11,7 +11,8 @@ from collections.abc import Callable
 
 from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
-from sray.platform.config.train_config import DataSettings, OptimSettings, RunSettings, TrainConfig
+from sray.platform.config.optim_settings import OptimSettings
+from sray.platform.config.train_config import DataSettings, RunSettings, TrainConfig
 
 
 def synth_small() -> TrainConfig:

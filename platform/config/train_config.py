@@ -13,6 +13,7 @@ from sray.model.config import SRayConfig
 from sray.model.fast_render import FastRender
 from sray.model.runtime import Runtime
 from sray.platform.config.held_out_render import held_out_fast
+from sray.platform.config.optim_settings import OptimSettings
 from sray.platform.config.overrides import set_field
 
 PRECISIONS = ("no", "bf16", "fp16")
@@ -83,39 +84,6 @@ class DataSettings:
     def val_fast(self) -> FastRender | None:
         """Validation's fast render mode (``val_render``), None for the full render; ValueError on a bad value."""
         return held_out_fast(self.val_render, self.val_fast_confidence, "train config: data.val_render")
-
-
-@dataclass
-class OptimSettings:
-    """Optimiser, schedule and stability guards."""
-
-    steps: int = 250_000
-    """Total optimiser steps (paper: 250k)."""
-    lr: float = 1e-3
-    """Initial Adam learning rate (paper: 1e-3)."""
-    lr_final: float = 5e-5
-    """Learning rate reached at the last step by exponential decay (paper: 5e-5)."""
-    warmup_steps: int = 0
-    """Linear warm-up steps before the decay starts."""
-    grad_clip: float = 1.0
-    """Global gradient-norm clipping threshold (0 disables clipping)."""
-    cpu_seconds: float = 0.0
-    """Stop once the job has spent this many CPU seconds, summed over its ranks and their loader processes
-    (``sray.platform.train.cpu_clock``), or at ``steps``, whichever comes first; the learning-rate decay then
-    follows the larger of the step and the CPU fraction (set ``steps`` as a cap). 0 = steps only."""
-    warmup_2d_steps: int = 0
-    """The first this many steps train the encoder and its source-view head on the source views' labels
-    alone (nothing rendered; a departure from the paper, docs/model.md); they count toward ``steps``. Needs
-    ``model.lambda_src_sem`` > 0; 0 = off."""
-    lr_decay_start: str = "run"
-    """Where the exponential decay to ``lr_final`` starts: ``run`` = after the linear warm-up, over the whole run
-    (the paper); ``rays`` = at the first ray step after the 2D warm-up (``warmup_2d_steps`` > 0), the 2D steps
-    training at the base lr, so the decay spans the ray phase's own steps, or its own share of the CPU budget."""
-    weight_decay: float = 0.0
-    """Decoupled weight decay (AdamW) of the convolution and linear weights: each step shrinks them by ``lr *
-    weight_decay`` of themselves; biases and norm scales never decay. 0 = plain Adam (the paper)."""
-    max_nonfinite_in_row: int = 20
-    """A non-finite loss or gradient skips the step; this many in a row stop the job."""
 
 
 @dataclass
@@ -237,14 +205,17 @@ def check_sections(cfg: TrainConfig) -> None:
     """ValueError for settings of different sections that cannot train together: fp16 with a loss in pieces
     smaller than the batch (a piece's gradients are taken before the loss scaler scales them,
     ``sray.model.piecewise_loss``, so small ones could underflow), a 2D warm-up without the source-view
-    head it trains, a decay started at the ray phase without a 2D warm-up before it, and a negative CPU budget
-    or weight decay."""
+    head it trains, a decay started at the ray phase without a 2D warm-up before it, a negative CPU budget
+    or weight decay, and a weight average's decay outside [0, 1)."""
     if cfg.optim.cpu_seconds < 0:
         raise ValueError(f"train config: optim.cpu_seconds is {cfg.optim.cpu_seconds}; use 0 (steps only) or a "
                          "positive CPU-second budget")
     if cfg.optim.weight_decay < 0:
         raise ValueError(f"train config: optim.weight_decay is {cfg.optim.weight_decay}; use 0 (plain Adam) or a "
                          "positive decoupled weight decay, e.g. optim.weight_decay=0.1")
+    if not 0 <= cfg.optim.ema_decay < 1:
+        raise ValueError(f"train config: optim.ema_decay is {cfg.optim.ema_decay}; use 0 (no weight average) or a "
+                         "decay in (0, 1), e.g. optim.ema_decay=0.998 (a horizon of 500 steps)")
     if cfg.optim.warmup_2d_steps < 0 or (cfg.optim.warmup_2d_steps > 0 and cfg.model.lambda_src_sem <= 0):
         raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
                          "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "
