@@ -131,8 +131,9 @@ model that is still under-trained when its budget ends. Decay holds the weights'
 up. The screening schedule's learning rates sum to about 1.5 over its steps, so 0.3 would shrink a weight no gradient
 touched to about 63% by the end: enough to matter in a run this short, where the usual 0.01-0.1 would not. Planned on
 seeds 0-2, each paired with ``screen`` of that seed on one machine: the seed-0 pair gained 3.98 points zero-shot and
-2.61 held-out with the encoder's weights ending 28% smaller and the training losses level (docs/benchmarks.md,
-"Decoupled weight decay"); the seed-1 pair lost 2.45 and 0.77, so seed 2 decides it."""
+2.61 held-out with the encoder's weights ending 28% smaller and the training losses level, the seed-1 pair lost 2.45
+and 0.77, the seed-2 pair gained 0.76 and lost 4.28: +0.76 ± 3.22 zero-shot and −0.81 ± 3.45 held-out over the three,
+so the recipe keeps plain Adam (docs/benchmarks.md, "Decoupled weight decay")."""
 
 SCREEN_WEIGHT_AVERAGE = "screen-ema"
 """Variant name of ``screen`` that keeps an exponential moving average of its weights with decay 0.998 (a horizon of
