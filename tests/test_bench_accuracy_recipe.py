@@ -16,7 +16,8 @@ from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOU
                                            SCREEN_LR_RAYS, SCREEN_NARROW_12, SCREEN_OCCL, SCREEN_OCCL_T5,
                                            SCREEN_RAYS_128, SCREEN_RAYS_512,
                                            SCREEN_LR_2X, SCREEN_RAY_BALANCE, SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
-                                           SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_WARM, SCREEN_WARM_750, SCREEN_WIDE_24,
+                                           SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_VIEWS_8, SCREEN_WARM, SCREEN_WARM_750,
+                                           SCREEN_WIDE_24,
                                            SCREEN_WEIGHT_AVERAGE, SCREEN_WEIGHT_DECAY, VARIANT_SETTINGS, WARM_2D_STEPS,
                                            Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
@@ -199,6 +200,13 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
                                optim=dataclasses.replace(averaged.optim, ema_decay=0.0)) == screen
     assert [c for c in preset.plan if c.variant == SCREEN_WEIGHT_AVERAGE] == list(seeds(SCREEN_WEIGHT_AVERAGE, 3))
     assert SCREEN_WEIGHT_AVERAGE in CPU_BUDGETED
+    viewed = config(SCREEN_VIEWS_8)  # every training sample gets all 8 source views, nothing else changed
+    assert (screen.data.aug.min_source, viewed.data.aug.min_source) == (2, 0)
+    assert viewed.model.n_source == 8 and viewed.data.top_k == 12
+    assert dataclasses.replace(viewed, run=screen.run, data=dataclasses.replace(
+        viewed.data, aug=dataclasses.replace(viewed.data.aug, min_source=2))) == screen
+    assert [c for c in preset.plan if c.variant == SCREEN_VIEWS_8] == [Cell(SCREEN_VIEWS_8, 0)]
+    assert SCREEN_VIEWS_8 in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)
