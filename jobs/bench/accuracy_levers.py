@@ -141,8 +141,10 @@ SCREEN_WEIGHT_AVERAGE = "screen-ema"
 rank-step's gradient comes from 256 query rays of one room and 8 source views, so the weights at the budget's end
 carry the last few rooms' noise; an average over the last ~500 steps (about a quarter of the screening cell's ray
 phase) spreads it over a few hundred rooms at no extra forward pass. Planned on seeds 0-2, each paired with
-``screen`` of that seed on one machine: the seed-0 pair gained 4.61 points zero-shot and 2.13 held-out with a third
-more ray steps than its control (docs/benchmarks.md, "A moving average of the weights"); seeds 1 and 2 decide it."""
+``screen`` of that seed on one machine: +0.79 ± 3.43 points zero-shot and −1.02 ± 3.55 held-out over the three, and
+on the same checkpoints the average scored 0.82 zero-shot and 0.25 held-out below the live weights it averages (the
+weights barely move once the learning rate has decayed, so the average only lags them), so the recipe keeps no
+average (docs/benchmarks.md, "A moving average of the weights")."""
 
 SCREEN_VIEWS_8 = "screen-views8"
 """Variant name of ``screen`` whose every training sample gets 8 source views (``data.aug.min_source=0``: 8 drawn
