@@ -205,7 +205,7 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert viewed.model.n_source == 8 and viewed.data.top_k == 12
     assert dataclasses.replace(viewed, run=screen.run, data=dataclasses.replace(
         viewed.data, aug=dataclasses.replace(viewed.data.aug, min_source=2))) == screen
-    assert [c for c in preset.plan if c.variant == SCREEN_VIEWS_8] == [Cell(SCREEN_VIEWS_8, 0)]
+    assert [c for c in preset.plan if c.variant == SCREEN_VIEWS_8] == list(seeds(SCREEN_VIEWS_8, 3))
     assert SCREEN_VIEWS_8 in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
