@@ -151,7 +151,7 @@ SCREEN_VIEWS_8 = "screen-views8"
 from the 12 nearest candidates) instead of 2 to 8 (5 on average, drawn from a random number of the nearest). Why:
 evaluation always gives the model its 8 nearest views, so the recipe trains the weight network and the attention on
 fewer views than it is scored on, and its encoder and source-view head see 5 labelled views per sample instead of 8;
-the price is about 1.6x the source encoding per step, so fewer steps fit the budget. Planned on seeds 0-2, each
-paired with ``screen`` of that seed on one machine: the seed-0 pair gained 5.18 points zero-shot and lost 1.93
+the price is the encoding of those 3 extra views per sample, so fewer steps fit the budget. Planned on seeds 0-2,
+each paired with ``screen`` of that seed on one machine: the seed-0 pair gained 5.18 points zero-shot and lost 1.93
 held-out with 328 fewer steps (docs/benchmarks.md, "Eight source views in every training sample"); seeds 1 and 2
 decide it."""
