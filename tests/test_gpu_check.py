@@ -27,8 +27,9 @@ def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Pat
     assert set(precision) == {("bf16", c) for c in ("projection", "render argmax", "step loss", "step gradient")}
     assert all(r[-1] == "ok" for r in precision.values())
     assert [r[:2] for r in report["stages"]["training"].rows] == [["fp32", "32"], ["bf16", "32"], ["bf16", "128"]]
-    assert [r[0] for r in report["stages"]["recipe"].rows] == [
-        f"{p} {phase}" for p in ("fp32", "bf16") for phase in ("2D warm-up", "ray steps")]
+    assert [r[:2] for r in report["stages"]["recipe"].rows] == [
+        [f"{p} {phase}", rays] for p, rays in (("fp32", "32"), ("bf16", "32"), ("bf16", "128"))
+        for phase in ("2D warm-up", "ray steps")]
     curve = json.loads((tmp_path / "recipe_curve.json").read_text())["curves"]["bf16"]
     assert [p["phase"] for p in curve] == [0.0] * 3 + [1.0] * 3  # 3 warm-up steps render nothing, then ray steps
     assert curve[2]["sem_src"] < curve[0]["sem_src"] and curve[3]["loss"] > curve[3]["sem_src"]
@@ -54,7 +55,7 @@ def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Pat
 
 def test_recipe_stage_fails_when_the_warm_up_does_not_learn(tmp_path: Path, monkeypatch) -> None:
     flat = [{"phase": float(i >= 3), "seconds": 0.1, "loss": 3.0, "sem_src": 3.0, "skipped": 0.0} for i in range(6)]
-    monkeypatch.setattr(stage_recipe, "phase_curve", lambda ctx, precision, steps: flat)
+    monkeypatch.setattr(stage_recipe, "phase_curve", lambda ctx, precision, steps, rays: flat)
     ctx = context.CheckContext(torch.device("cpu"), True, tmp_path, REPO)
     result = stage_recipe.run(ctx)
     assert result.status == "failed" and "did not fall over the warm-up" in result.summary

@@ -20,7 +20,7 @@ from sray.platform.config.recipes import synth_cpu_hour
 
 from .context import CheckContext, has_module
 from .report import StageResult
-from .stage_training import peak_mb, prepared_training
+from .stage_training import LARGE_BATCH, peak_mb, prepared_training
 from .synthetic import training_sample
 
 
@@ -29,14 +29,15 @@ def brightness_labels(rgb: torch.Tensor, n_classes: int) -> torch.Tensor:
     return (rgb.mean(1) * n_classes).long().clamp(0, n_classes - 1)
 
 
-def phase_curve(ctx: CheckContext, precision: str, steps: tuple[int, int]) -> list[dict[str, float]]:
-    """Train the recipe's model for ``steps`` = (2D warm-up steps, ray steps) on one batch; per step: phase
-    (0 = warm-up, 1 = ray), seconds (synchronised), loss, ``sem_src`` and the skipped-step count so far."""
+def phase_curve(ctx: CheckContext, precision: str, steps: tuple[int, int], rays: int) -> list[dict[str, float]]:
+    """Train the recipe's model for ``steps`` = (2D warm-up steps, ray steps) on one batch of ``rays`` query rays;
+    per step: phase (0 = warm-up, 1 = ray), seconds (synchronised), loss, ``sem_src`` and the skipped-step count
+    so far."""
     recipe = synth_cpu_hour()
     cfg = replace(recipe.model, n_coarse=ctx.samples[0], n_fine=ctx.samples[1], n_source=ctx.views)
     model, step, device = prepared_training(ctx, cfg, precision, recipe.optim.lr, recipe.optim.grad_clip,
                                             sum(steps) + 1)
-    sample = training_sample(ctx.views, ctx.image_hw, ctx.rays, cfg.n_classes, device)
+    sample = training_sample(ctx.views, ctx.image_hw, rays, cfg.n_classes, device)
     sources = replace(sample.sources, label=brightness_labels(sample.sources.rgb, cfg.n_classes))
     batch = ray_batch(replace(sample, sources=sources))
     if ctx.device.type == "cuda":
@@ -68,31 +69,32 @@ def _phase_cells(points: list[dict[str, float]], rays: int, renders: bool) -> li
 
 
 def run(ctx: CheckContext) -> StageResult:
-    """fp32 and bf16: the warm-up phase and the ray phase of the recipe, each a row; fails on a non-finite
-    step or a source-view loss that does not fall over the warm-up."""
+    """fp32 and bf16 at ``ctx.rays``, then bf16 at ``LARGE_BATCH`` times the rays (the size that fills a GPU): the
+    warm-up phase and the ray phase of the recipe, each a row; fails on a non-finite step or a source-view loss
+    that does not fall over the warm-up."""
     if not has_module("accelerate"):
         return StageResult("skipped", "accelerate is not installed here")
     steps = (3, 3) if ctx.dry_run else (20, 40)
     rows, bad, curves = [], [], {}
-    for precision in ("no", "bf16"):
+    for precision, rays in (("no", ctx.rays), ("bf16", ctx.rays), ("bf16", LARGE_BATCH * ctx.rays)):
         label = "fp32" if precision == "no" else precision
-        curve = phase_curve(ctx, precision, steps)
-        curves[label] = curve
+        curve = phase_curve(ctx, precision, steps, rays)
+        curves[label if rays == ctx.rays else f"{label} at {rays} rays"] = curve
         warm, ray = curve[:steps[0]], curve[steps[0]:]
         peak = f"{peak_mb(ctx.device):.0f}"
-        rows.append([f"{label} 2D warm-up", *_phase_cells(warm, ctx.rays, False), peak])
-        rows.append([f"{label} ray steps", *_phase_cells(ray, ctx.rays, True), peak])
+        rows.append([f"{label} 2D warm-up", str(rays), *_phase_cells(warm, rays, False), peak])
+        rows.append([f"{label} ray steps", str(rays), *_phase_cells(ray, rays, True), peak])
         if curve[-1]["skipped"]:
-            bad.append(f"{label}: {curve[-1]['skipped']:.0f} non-finite steps")
+            bad.append(f"{label} at {rays} rays: {curve[-1]['skipped']:.0f} non-finite steps")
         if warm[-1]["sem_src"] >= warm[0]["sem_src"]:
-            bad.append(f"{label}: the source-view loss did not fall over the warm-up")
+            bad.append(f"{label} at {rays} rays: the source-view loss did not fall over the warm-up")
     (ctx.out / "recipe_curve.json").write_text(json.dumps({"steps": steps, "curves": curves}, indent=1) + "\n")
     hw = f"{ctx.image_hw[1]}x{ctx.image_hw[0]}"
-    summary = (f"synth-cpu-hour model, {ctx.rays} rays, {ctx.samples[0]}+{ctx.samples[1]} samples, {ctx.views} "
-               f"views, {hw}, {steps[0]} warm-up + {steps[1]} ray steps: "
-               + ", ".join(f"{r[0]} {r[2]} rays/s" for r in rows if r[2] != "-"))
+    summary = (f"synth-cpu-hour model, {ctx.samples[0]}+{ctx.samples[1]} samples, {ctx.views} views, {hw}, "
+               f"{steps[0]} warm-up + {steps[1]} ray steps: "
+               + ", ".join(f"{r[0]} {r[3]} rays/s at {r[1]} rays" for r in rows if r[3] != "-"))
     if bad:
         summary = "; ".join(bad) + "; " + summary
     return StageResult("failed" if bad else "passed", summary,
-                       header=["phase", "steps/s", "rays/s", "loss first -> last", "sem_src first -> last",
-                               "peak MiB (both phases)"], rows=rows)
+                       header=["phase", "rays per step", "steps/s", "rays/s", "loss first -> last",
+                               "sem_src first -> last", "peak MiB (both phases)"], rows=rows)

@@ -69,8 +69,9 @@ def timed_steps(ctx: CheckContext, precision: str, steps: int, rays: int | None 
 
 
 LARGE_BATCH = 4
-"""The larger batch of the stage, in multiples of ``ctx.rays``: on one H100 a 1,024-ray step leaves the GPU partly
-idle (bf16 slower than fp32 there), 4,096 rays give 1.7 times the bf16 rays/s (docs/benchmarks.md, "GPU check")."""
+"""The larger batch of this stage and of the ``recipe`` stage, in multiples of ``ctx.rays``: on one H100 or H200 a
+1,024-ray step leaves the GPU partly idle (bf16 slower than fp32 there), 4,096 rays give 1.7-2.4 times the bf16
+rays/s (docs/benchmarks.md, "GPU check")."""
 
 
 def run(ctx: CheckContext) -> StageResult:
