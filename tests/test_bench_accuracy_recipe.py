@@ -10,7 +10,7 @@ from pathlib import Path
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
-                                           HOUR_INTRA_UNCAPPED, HOUR_INVERSE, HOUR_LR_RAYS, HOUR_NONE,
+                                           HOUR_INTRA_UNCAPPED, HOUR_INVERSE, HOUR_LR_RAYS, HOUR_NONE, HOUR_TWICE,
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
                                            ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_GROUP_NORM,
                                            SCREEN_LR_RAYS, SCREEN_NARROW_12, SCREEN_OCCL, SCREEN_OCCL_T5,
@@ -88,7 +88,8 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     and the lr lever and their baseline on seeds 0-2, with no hour arm for the occlusion, the rays or the rooms lever
     (none clear of the seed spread over those seeds, docs/benchmarks.md); the lr lever's hour arm, ``hour-lr-rays``,
     is the recipe with the same decay start, on seed 0 (its loss there ended the lever); the samples lever's,
-    ``hour-samples16``, is the recipe with 16+16 samples per ray, on seeds 0-2 (it gained on all three screened)."""
+    ``hour-samples16``, is the recipe with 16+16 samples per ray, on seeds 0-2 (it gained on all three screened);
+    ``hour-2x`` is the recipe at twice its CPU budget, on seed 0."""
     recipe, preset = get_recipe("synth-cpu-hour"), PRESETS["cpu-small"]
     assert SCREEN_SECONDS == recipe.optim.cpu_seconds / 2
 
@@ -207,6 +208,11 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
         viewed.data, aug=dataclasses.replace(viewed.data.aug, min_source=2))) == screen
     assert [c for c in preset.plan if c.variant == SCREEN_VIEWS_8] == list(seeds(SCREEN_VIEWS_8, 3))
     assert SCREEN_VIEWS_8 in CPU_BUDGETED
+    twice = config(HOUR_TWICE)  # the recipe at twice its CPU budget, nothing else changed
+    assert twice.optim.cpu_seconds == 2 * recipe.optim.cpu_seconds == 2 * head.optim.cpu_seconds
+    assert dataclasses.replace(twice, run=head.run, optim=dataclasses.replace(
+        twice.optim, cpu_seconds=recipe.optim.cpu_seconds)) == head
+    assert [c for c in preset.plan if c.variant == HOUR_TWICE] == [Cell(HOUR_TWICE, 0)] and HOUR_TWICE in CPU_BUDGETED
     assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)

@@ -155,3 +155,11 @@ the price is the encoding of those 3 extra views per sample, so fewer steps fit 
 each paired with ``screen`` of that seed on one machine: the seed-0 pair gained 5.18 points zero-shot and lost 1.93
 held-out with 328 fewer steps (docs/benchmarks.md, "Eight source views in every training sample"); seeds 1 and 2
 decide it."""
+
+HOUR_TWICE = "hour-2x"
+"""Variant name of ``synth-cpu-hour`` exactly as it is but for its CPU budget, doubled (14,400 CPU s; its learning
+rate decays over the budget, so over twice the steps). Why: over seven cells of the recipe on five machines, its
+zero-shot and held-out mIoU rose with the ray steps the hour bought (+2.4 and +1.6 points per thousand), a line that
+reaches the 60% held-out target at about 10,200 ray steps, where the fastest machine bought 6,575-8,236
+(docs/benchmarks.md, "The recipe's three seeds on the fifth machine"). The cell asks whether the target is a matter of
+compute: one seed, a ~2-hour cell run in two pieces of about an hour, resumed from its last checkpoint."""

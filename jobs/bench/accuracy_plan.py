@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from sray.data_tools.synth.world import World
-from sray.jobs.bench.accuracy_levers import (HOUR_INVERSE, HOUR_LR_RAYS, HOUR_SAMPLES_16, ROOMS_998,
+from sray.jobs.bench.accuracy_levers import (HOUR_INVERSE, HOUR_LR_RAYS, HOUR_SAMPLES_16, HOUR_TWICE, ROOMS_998,
                                               NARROW_12_WARMUP_2D, SCREEN_DEPTH, SCREEN_GROUP_NORM, SCREEN_LR_RAYS,
                                               SCREEN_NARROW_12, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128,
                                               SCREEN_LR_2X, SCREEN_RAY_BALANCE, SCREEN_RAYS_512, SCREEN_ROOMS_998,
@@ -82,7 +82,8 @@ CPU_BUDGETED = (HOUR, ROOMS_198, ROOMS_498, HOUR_NONE, HOUR_CROSS, HOUR_INTRA, H
                 SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_RAYS_512,
                 SCREEN_SAMPLES_16, SCREEN_ROOMS_998, SCREEN_LR_RAYS, HOUR_LR_RAYS, HOUR_SAMPLES_16, HOUR_INVERSE,
                 SCREEN_WIDE_24, SCREEN_NARROW_12, SCREEN_SRC_3, SCREEN_RAY_BALANCE, SCREEN_LR_2X,
-                SCREEN_WARM_750, SCREEN_GROUP_NORM, SCREEN_WEIGHT_DECAY, SCREEN_WEIGHT_AVERAGE, SCREEN_VIEWS_8)
+                SCREEN_WARM_750, SCREEN_GROUP_NORM, SCREEN_WEIGHT_DECAY, SCREEN_WEIGHT_AVERAGE, SCREEN_VIEWS_8,
+                HOUR_TWICE)
 """Variants whose cells train for a CPU budget (the preset recipe's own, or ``Variant.cpu_seconds``) instead of a
 step budget."""
 
@@ -135,7 +136,8 @@ VARIANT_SETTINGS = {"full": Variant(), "cross": Variant("cross"), "intra": Varia
                     SCREEN_GROUP_NORM: replace(_SCREEN, overrides=("model.encoder_norm=group",)),
                     SCREEN_WEIGHT_DECAY: replace(_SCREEN, overrides=("optim.weight_decay=0.3",)),
                     SCREEN_WEIGHT_AVERAGE: replace(_SCREEN, overrides=("optim.ema_decay=0.998",)),
-                    SCREEN_VIEWS_8: replace(_SCREEN, overrides=("data.aug.min_source=0",))}
+                    SCREEN_VIEWS_8: replace(_SCREEN, overrides=("data.aug.min_source=0",)),
+                    HOUR_TWICE: replace(_RECIPE, cpu_seconds=2 * CPU_HOUR_SECONDS)}
 """Variant name -> its settings; ``full-affine`` is full CRA with the first (affine) semantic-aware weight map instead
 of the default radial one, ``full-rgbd`` full CRA given the source views' depth, ``full-new`` full CRA whose fine
 pass evaluates the resampled depths only, ``full-new-h2`` the same with 2 heads of 16 channels instead of 4 of 8;
@@ -253,7 +255,7 @@ PRESETS = {
               Cell(SCREEN_NARROW_12, 0), Cell(SCREEN_SRC_3, 2), Cell(SCREEN_SRC_3, 0),
               Cell(SCREEN_RAY_BALANCE, 0), Cell(SCREEN_LR_2X, 0), Cell(SCREEN_WARM_750, 0),
               Cell(SCREEN_GROUP_NORM, 0), *seeds(SCREEN_WEIGHT_DECAY, 3), *seeds(SCREEN_WEIGHT_AVERAGE, 3),
-              *seeds(SCREEN_VIEWS_8, 3)),
+              *seeds(SCREEN_VIEWS_8, 3), Cell(HOUR_TWICE, 0)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
