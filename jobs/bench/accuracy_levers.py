@@ -152,9 +152,9 @@ from the 12 nearest candidates) instead of 2 to 8 (5 on average, drawn from a ra
 evaluation always gives the model its 8 nearest views, so the recipe trains the weight network and the attention on
 fewer views than it is scored on, and its encoder and source-view head see 5 labelled views per sample instead of 8;
 the price is the encoding of those 3 extra views per sample, so fewer steps fit the budget. Planned on seeds 0-2,
-each paired with ``screen`` of that seed on one machine: the seed-0 pair gained 5.18 points zero-shot and lost 1.93
-held-out with 328 fewer steps (docs/benchmarks.md, "Eight source views in every training sample"); seeds 1 and 2
-decide it."""
+each paired with ``screen`` of that seed on one machine: +0.30 ± 4.46 points zero-shot and −6.13 ± 4.31 held-out
+over the three (a held-out loss on every seed, larger than its 328-1,337 fewer ray steps account for), so the recipe
+keeps 2 to 8 source views per sample (docs/benchmarks.md, "Eight source views in every training sample")."""
 
 HOUR_TWICE = "hour-2x"
 """Variant name of ``synth-cpu-hour`` exactly as it is but for its CPU budget, doubled (14,400 CPU s; its learning
