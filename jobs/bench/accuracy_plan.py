@@ -255,7 +255,7 @@ PRESETS = {
               Cell(SCREEN_NARROW_12, 0), Cell(SCREEN_SRC_3, 2), Cell(SCREEN_SRC_3, 0),
               Cell(SCREEN_RAY_BALANCE, 0), Cell(SCREEN_LR_2X, 0), Cell(SCREEN_WARM_750, 0),
               Cell(SCREEN_GROUP_NORM, 0), *seeds(SCREEN_WEIGHT_DECAY, 3), *seeds(SCREEN_WEIGHT_AVERAGE, 3),
-              *seeds(SCREEN_VIEWS_8, 3), Cell(HOUR_TWICE, 0)),
+              *seeds(SCREEN_VIEWS_8, 3), *seeds(HOUR_TWICE, 3)),
         eval_sources=8, eval_fast=FastRender(pixel_stride=1, confidence=0.9),
         budget_s=120.0, budgets=(30.0, 60.0, 120.0), fleet_eval_stride=4,
         fleet_gpus_per_task=0.0, headline=RECIPE_VARIANT),
