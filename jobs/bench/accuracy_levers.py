@@ -162,8 +162,6 @@ rate decays over the budget, so over twice the steps). Why: over seven cells of 
 zero-shot and held-out mIoU rose with the ray steps the hour bought (+2.4 and +1.6 points per thousand), a line that
 reaches the 60% held-out target at about 10,200 ray steps, where the fastest machine bought 6,575-8,236
 (docs/benchmarks.md, "The recipe's three seeds on the fifth machine"). The cell asks whether the target is a matter of
-compute: about 2.5 hours a seed on a 2-core machine, run in pieces resumed from its last checkpoint. Seeds 0 and 1
-made 9,023 and 9,047 ray steps and scored 58.68 and 57.27% held-out (the line's 58.0-58.1) but 55.76 and 60.16%
-zero-shot (the line's 61.4-61.5): fitting the training rooms rises with compute at the line's rate, transfer to unseen
-rooms more slowly (docs/benchmarks.md, "The recipe at twice its CPU budget"). Three seeds are planned because one
-seed moves held-out by about three points."""
+compute: about 2.5 hours a seed on a 2-core machine, run in pieces resumed from its last checkpoint. Its seeds' scores
+are in docs/benchmarks.md, "The recipe at twice its CPU budget"; three seeds are planned because one seed moves
+held-out by about three points."""
