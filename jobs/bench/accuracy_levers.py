@@ -163,5 +163,5 @@ zero-shot and held-out mIoU rose with the ray steps the hour bought (+2.4 and +1
 reaches the 60% held-out target at about 10,200 ray steps, where the fastest machine bought 6,575-8,236
 (docs/benchmarks.md, "The recipe's three seeds on the fifth machine"). The cell asks whether the target is a matter of
 compute: about 2.5 hours a seed on a 2-core machine, run in pieces resumed from its last checkpoint. Its seeds' scores
-are in docs/benchmarks.md, "The recipe at twice its CPU budget"; three seeds are planned because one seed moves
+are in docs/benchmarks.md, "The recipe at twice its CPU budget"; it runs three seeds because one seed moves
 held-out by about three points."""
