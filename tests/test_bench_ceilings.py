@@ -32,6 +32,7 @@ from sray.platform.eval.ceiling_rows import CeilingRow
 from sray.platform.eval.ceilings import source_ids
 from sray.platform.eval.label_transfer import UNSEEN, coverage_counts, transfer_labels
 from sray.platform.eval.linear_probe import fit_probe, random_encoder
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.eval.segmenter import load_segmenter
 from sray.platform.eval import segmenter_training
 from sray.platform.eval.segmenter_training import STATE_FILE, train_segmenter
@@ -72,10 +73,14 @@ def test_rows_run_end_to_end_and_the_oracle_transfer_is_near_perfect(shards: Pat
                  "--segmenter", str(segmenter), "--probe-steps", "10", "--probe-views", "8",
                  "--out", str(tmp_path / "out"), "--doc", str(doc)]) == 0
     rows = {r["key"]: r for r in json.loads((tmp_path / "out" / REPORT_FILE).read_text())["rows"]}
-    assert list(rows) == ["a", "b", "c", "c-rgb", "s", "d", "e", "e-seg", "e-rand"]
+    assert list(rows) == ["a", "b", "c", "c-rgb", "s", "d", "e", "e-seg", "e-rand", "f", "f-src"]
     assert {k for k, r in rows.items() if r["oracle"]} == {"a", "b", "d"}
-    assert all(r["views"] == 2 and r["seconds_per_view"] > 0 and 0 <= r["miou"] <= 1 for r in rows.values())
-    assert all(rows[k]["coverage"] is None for k in ("s", "e", "e-seg", "e-rand"))
+    assert all(r["views"] == 2 and r["seconds_per_view"] > 0 and 0 <= r["miou"] <= 1
+               for k, r in rows.items() if k != "f-src")
+    # f-src scores each source view of the test scene once: the 2 queries' 4 sources each, some shared
+    assert 4 <= rows["f-src"]["views"] <= 8 and 0 <= rows["f-src"]["miou"] <= 1
+    assert all(rows[k]["coverage"] is None for k in ("s", "e", "e-seg", "e-rand", "f", "f-src"))
+    assert rows["f"]["protocol"]["inputs"] == "cameras, query image, segmenter"
     assert 0.5 < rows["a"]["coverage"] <= 1 and rows["b"]["coverage"] == rows["a"]["coverage"]
     assert 0 < rows["c"]["coverage"] <= 1 and 0 < rows["c-rgb"]["coverage"] <= 1
     # the RGB row reads S-Ray's rendered depth, never the query's ground truth or the sources' depth
@@ -129,6 +134,29 @@ def test_cli_trains_a_segmenter_and_loads_it(shards: Path, tmp_path: Path, one_t
     labels = model.predict(torch.rand(1, 3, 32, 40))
     n_classes = len(next(iter(read_manifest(shards).scenes.values())).meta["class_names"])
     assert labels.shape == (1, 32, 40) and int(labels.min()) >= 0 and int(labels.max()) < n_classes
+
+
+def test_a_checkpoints_encoder_and_source_head_are_written_as_a_segmenter(shards: Path, tmp_path: Path,
+                                                                          one_thread: None) -> None:  # noqa: F811
+    """``sray bench segmenter --from-checkpoint`` writes the checkpoint's encoder and source-view head: the loaded
+    segmenter's logits equal the S-Ray network's own source-view read-out; a checkpoint without a source-view head,
+    or the flag mixed with a training budget, is refused with exit code 2 and nothing written."""
+    cfg = tiny_config(shards, tmp_path)
+    cfg.model.lambda_src_sem = 1.0
+    checkpoint = write_initial_checkpoint(cfg, tmp_path / "job" / "checkpoints" / "step_000000000")
+    assert main(["bench", "segmenter", "--from-checkpoint", str(checkpoint), "--out", str(tmp_path / "seg")]) == 0
+    seg, record = load_segmenter(tmp_path / "seg")
+    net, _ = model_from_checkpoint(checkpoint)
+    rgb = torch.rand(2, 3, 32, 40, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        torch.testing.assert_close(seg(rgb), net.src_head(net.encoder(rgb), (32, 40)), rtol=0, atol=0)
+    assert record.training["steps"] == 0 and "checkpoint step 0" in record.budget()
+    bare = write_initial_checkpoint(tiny_config(shards, tmp_path / "bare"), tmp_path / "bare" / "step_000000000")
+    assert main(["bench", "segmenter", "--from-checkpoint", str(bare), "--out", str(tmp_path / "no-head")]) == 2
+    assert main(["bench", "segmenter", "--from-checkpoint", str(checkpoint), "--data", str(shards),
+                 "--out", str(tmp_path / "mixed")]) == 2
+    assert main(["bench", "segmenter", "--out", str(tmp_path / "nothing")]) == 2
+    assert not any((tmp_path / name).exists() for name in ("no-head", "mixed", "nothing"))
 
 
 def test_an_interrupted_segmenter_training_resumes_to_the_same_weights(shards: Path, tmp_path: Path,
@@ -217,8 +245,8 @@ def test_row_s_scores_the_render_and_row_c_rgb_carries_the_segmenter_by_its_dept
     sample = next(iter(make_eval_samples(shards, "t", split="test", n_source=3)))
     views = read_scene_views(shards, read_manifest(shards).scenes["t"])
     meta = SceneMeta.from_json(read_manifest(shards).scenes["t"].meta)
-    gt_sources = torch.from_numpy(np.stack([views[i].label() for i in source_ids(sample, views, meta, 3)]).astype(
-        np.int64))
+    ids = source_ids(sample, views, meta, 3)
+    gt_sources = torch.from_numpy(np.stack([views[i].label() for i in ids]).astype(np.int64))
     cfg = SRayConfig(n_classes=int(sample.query_label.max()) + 1)
     monkeypatch.setattr(ceilings, "encode_sources", lambda net, sample, device: None)
     monkeypatch.setattr(ceilings, "field_at_surface", lambda *args: sample.query_label.clone())
@@ -227,11 +255,16 @@ def test_row_s_scores_the_render_and_row_c_rgb_carries_the_segmenter_by_its_dept
         logits = torch.nn.functional.one_hot(gt.clamp(0, cfg.n_classes - 1), cfg.n_classes).float()
         net = SimpleNamespace(cfg=cfg, render_image=lambda *args, fast=None: {"fine": {"logits": logits,
                                                                                         "depth": depth}})
-        segmenter = SimpleNamespace(predict=lambda rgb: gt_sources)
+        # the true labels of whichever images it is given: the sources, or the query alone
+        segmenter = SimpleNamespace(predict=lambda rgb: gt_sources if rgb.shape[0] == len(ids) else gt[None])
         scorer = ceilings.ViewScorer(net, segmenter, {}, 0.05, ceilings.ZERO_SHOT_RENDER)
         rows = {k: CeilingRow(k, t, p, geometric=p.geometry != "—")
                 for k, t, p in ceilings.row_descriptors(True, False) if not k.startswith("e")}
-        scorer.score(rows, sample, gt_sources)
+        scorer.score(rows, sample, gt_sources, ids)
+        scorer.score({**rows, **{k: CeilingRow(k, "", r.protocol, geometric=r.geometric) for k, r in rows.items()
+                                 if k != "f-src"}}, sample, gt_sources, ids)  # the same sources: none scored twice
+        assert rows["f"].summary(cfg.n_classes)["miou"] == 1.0 and rows["f"].views == 1
+        assert rows["f-src"].views == len(ids) and rows["f-src"].summary(cfg.n_classes)["total_acc"] == 1.0
         expected = transfer_labels(gt_sources, sample.sources.K, sample.sources.c2w, None, sample.query.K,
                                    sample.query.c2w, tuple(gt.shape), "backward", ignore_id=cfg.ignore_id,
                                    query_depth=depth)
@@ -242,6 +275,19 @@ def test_row_s_scores_the_render_and_row_c_rgb_carries_the_segmenter_by_its_dept
             assert rows["c-rgb"].covered >= rows["a"].covered > 0 and scored["miou"] > 0.5
         else:
             assert rows["c-rgb"].covered == total and scored["total_acc"] == 0.0
+    # a segmenter that says one class everywhere: f-src's scores against a hand count of the sources' labels
+    labelled = gt_sources[gt_sources != cfg.ignore_id]
+    const = int(torch.mode(labelled).values)
+    scorer = ceilings.ViewScorer(net, SimpleNamespace(predict=lambda rgb: torch.full((rgb.shape[0], *rgb.shape[-2:]),
+                                                                                     const)),
+                                 {}, 0.05, ceilings.ZERO_SHOT_RENDER)
+    rows = {k: CeilingRow(k, t, p, geometric=p.geometry != "—") for k, t, p in ceilings.row_descriptors(True, False)
+            if not k.startswith("e")}
+    scorer.score(rows, sample, gt_sources, ids)
+    share = float((labelled == const).double().mean())
+    f_src = rows["f-src"].summary(cfg.n_classes)
+    assert f_src["total_acc"] == pytest.approx(share)
+    assert f_src["miou"] == pytest.approx(share / len(torch.unique(labelled)))  # IoU of `const`, 0 for the rest
 
 
 def test_view_weights_rows_run_end_to_end_and_plain_mean_weights_read_as_blind(shards: Path, tmp_path: Path,

@@ -4,7 +4,8 @@
 held-out views of its training scenes), stores them as ``ceilings.json`` in ``--out``, prints the Markdown table and
 writes it into the benchmark document's section "Ceilings" of this device (replaced on a rerun on the same kind of
 device and views). ``segmenter`` trains
-the 2D segmenter those rows use for a CPU-second budget, with a recipe's images and augmentation.
+the 2D segmenter those rows use for a CPU-second budget, with a recipe's images and augmentation, or writes an S-Ray
+checkpoint's own encoder and source-view head as one (``--from-checkpoint``).
 """
 
 from __future__ import annotations
@@ -57,9 +58,10 @@ def ceilings_notes(report: dict[str, Any]) -> str:
             f"sees by the row's geometry (occlusion test: relative depth agreement {report['tolerance']}); "
             f"{report['coverage_of_d']}. Votes: {report['tie_rule']}. S-Ray's render (row s, and row c-rgb's "
             f"depth): {report.get('render', 'full')}. Oracle rows read the query view's "
-            "ground-truth depth and never sit in a comparison column; e rows read the query image, which S-Ray "
-            "never sees. s/view: wall seconds of a row's prediction per view on this machine (probe fits and "
-            "segmenter training are in the budget column).")
+            "ground-truth depth and never sit in a comparison column; e and f rows read the query image, which "
+            "S-Ray never sees; row f-src scores the segmenter on the source images themselves (each source view of "
+            "a scene once), not on the query. s/view: wall seconds of a row's prediction per view on this machine "
+            "(probe fits and segmenter training are in the budget column).")
 
 
 def run_ceilings(checkpoint: Path, shards: Path, out: Path, doc: Path, *, n_source: int = 8, views_per_scene: int = 0,

@@ -21,16 +21,20 @@ the same question on rooms the model was trained on. The rows (:func:`row_descri
 * ``d`` S-Ray's fine field at the ground-truth surface (:mod:`~sray.platform.eval.surface_field`, an oracle);
 * ``e`` linear probes on frozen encoder features (:mod:`~sray.platform.eval.linear_probe`) of the
   checkpoint, of the segmenter and of a random initialisation: they read the query image itself, which
-  S-Ray never sees.
+  S-Ray never sees;
+* ``f`` the segmenter labelling the query image itself (it reads the query image, like the probes);
+* ``f-src`` the segmenter labelling the source images, scored against their own labels, each source view of a
+  scene once: with ``held_out`` these are the training scenes' ``train`` views, the images it was trained on, so
+  the row beside ``f`` tells fitting from transfer within the same rooms.
 
-Rows b, c and c-rgb need a segmenter folder; without one they (and its probe) are left out.
+Rows b, c, c-rgb, f and f-src need a segmenter folder; without one they (and its probe) are left out.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
 from typing import Any
@@ -92,8 +96,14 @@ def row_descriptors(with_segmenter: bool, rgbd: bool) -> list[tuple[str, str, Ro
     if with_segmenter:
         probes.append(("e-seg", "linear probe, segmenter encoder (reads the query image)"))
     probes.append(("e-rand", "linear probe, random encoder (reads the query image)"))
-    return rows + [(k, t, RowProtocol("linear probe on the query image's features", "—", query_image=True))
-                   for k, t in probes]
+    rows += [(k, t, RowProtocol("linear probe on the query image's features", "—", query_image=True))
+             for k, t in probes]
+    if with_segmenter:
+        rows += [("f", "segmenter on the query image (reads the query image)",
+                  RowProtocol("segmenter on the query image", "—", query_image=True, segmenter=True)),
+                 ("f-src", "segmenter on the source images, scored on their own labels (not the query)",
+                  RowProtocol("segmenter on the source images", "—", source_images=True, segmenter=True))]
+    return rows
 
 
 def source_ids(sample: EvalSample, views: dict[str, StoredView], meta: SceneMeta, n_source: int) -> list[str]:
@@ -130,10 +140,14 @@ class ViewScorer:
     """The occlusion test's relative depth agreement."""
     render: FastRender | None
     """S-Ray's render of row s (and of row c-rgb's depth): the fast mode's settings, None = the full render."""
+    scored_sources: set[tuple[str, str]] = field(default_factory=set)
+    """(scene, view id) of the source views row f-src has scored (each once)."""
 
-    def score(self, rows: dict[str, CeilingRow], sample: EvalSample, gt_sources: Tensor) -> None:
+    def score(self, rows: dict[str, CeilingRow], sample: EvalSample, gt_sources: Tensor,
+              ids: list[str] | None = None) -> None:
         """Predict every row for ``sample`` and add it to ``rows``; gt_sources (m, H, W) int64 are the ground-truth
-        labels of the sample's source views."""
+        labels of the sample's source views, ``ids`` their view ids (required with a segmenter: row f-src scores
+        each source view of a scene once)."""
         cfg = self.net.cfg
         src, gt, scene, hw = sample.sources, sample.query_label, sample.scene, tuple(sample.query_label.shape)
         geometry = (src.K, src.c2w, src.depth, sample.query.K, sample.query.c2w, hw)
@@ -162,6 +176,16 @@ class ViewScorer:
                                                              query_depth=rendered["depth"].double()))
             rows["c-rgb"].add(scene, carried.labels, gt, cfg.n_classes, cfg.ignore_id,
                               seg_seconds + render_seconds + seconds, carried.seen)
+            direct, seconds = timed(lambda: self.segmenter.predict(sample.query_rgb.permute(2, 0, 1)[None])[0])
+            rows["f"].add(scene, direct, gt, cfg.n_classes, cfg.ignore_id, seconds)
+            if ids is None or len(ids) != seg_labels.shape[0]:
+                raise ValueError(f"ceilings: scene {scene!r}, view {sample.query_id!r}: row f-src needs the ids of "
+                                 f"the {seg_labels.shape[0]} source views")
+            for j, view_id in enumerate(ids):
+                if (scene, view_id) not in self.scored_sources:
+                    self.scored_sources.add((scene, view_id))
+                    rows["f-src"].add(scene, seg_labels[j], gt_sources[j], cfg.n_classes, cfg.ignore_id,
+                                      seg_seconds / len(ids))
         pred, seconds = timed(lambda: field_at_surface(self.net, encoded, sample.query.K, sample.query.c2w,
                                                        sample.query_depth, sample.near, sample.far))
         rows["d"].add(scene, pred, gt, cfg.n_classes, cfg.ignore_id, encode_seconds + seconds, oracle.seen)
@@ -212,6 +236,7 @@ def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views
     seg_budget = record.budget() if record else ""
     rendered = f"checkpoint step {step}, {'full' if render is None else render.describe()} render"
     budgets = {"b": seg_budget, "c": seg_budget, "c-rgb": f"{seg_budget}; depth: {rendered}", "s": rendered,
+               "f": seg_budget, "f-src": seg_budget,
                "d": f"checkpoint step {step}",
                **{k: f"{p.budget()}; encoder: " + {"e": f"checkpoint step {step}", "e-seg": seg_budget,
                                                    "e-rand": f"random init, seed {seed}"}[k]
@@ -225,7 +250,8 @@ def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views
         samples = make_eval_samples(shards, scene, split="test", n_source=n_source, manifest=manifest)
         for sample in islice(samples, views_per_scene or None):
             ids = source_ids(sample, views, meta, n_source)
-            scorer.score(rows, sample, torch.from_numpy(np.stack([views[i].label() for i in ids]).astype(np.int64)))
+            scorer.score(rows, sample, torch.from_numpy(np.stack([views[i].label() for i in ids]).astype(np.int64)),
+                         ids)
             bar.update(1)
     bar.close()
     return {"checkpoint": str(checkpoint), "checkpoint_step": step, "shards": str(shards), "scenes": names,

@@ -7,7 +7,10 @@ pixels): the same read-out S-Ray's auxiliary source-view loss uses, trained alon
 views for the label-transfer rows of ``sray bench ceilings`` and the ``2d-transfer`` method.
 
 A trained segmenter is a folder: ``segmenter.pt`` (the state dict, ``torch.load(weights_only=True)``-safe)
-and ``segmenter.json`` (:class:`SegmenterConfig` plus what its training spent and read).
+and ``segmenter.json`` (:class:`SegmenterConfig` plus what its training spent and read). An S-Ray checkpoint
+trained with the source-view loss holds the same network (its encoder and source-view head):
+:func:`segmenter_from_checkpoint` writes it as a segmenter folder, so the ceilings rows can ask how well S-Ray's own
+2D read-out labels the source and query images.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ import torch
 from torch import Tensor, nn
 
 from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
+from sray.platform.checkpoints.folders import load_checkpoint, read_meta
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.model.config import SRayConfig
 from sray.model.encoder import ResUNetEncoder
 from sray.model.source_semantics import SourceSemanticHead, source_semantic_loss
@@ -88,8 +93,12 @@ class SegmenterRecord:
     split rule, augmentation), seed and optimiser."""
 
     def budget(self) -> str:
-        """One line for a table: the CPU seconds and steps the segmenter trained for."""
+        """One line for a table: the CPU seconds and steps the segmenter trained for (for one taken from an S-Ray
+        checkpoint, that checkpoint's step and training CPU)."""
         t = self.training
+        if "checkpoint" in t:
+            return (f"S-Ray's encoder + source-view head, checkpoint step {t['steps']} "
+                    f"({t['cpu_seconds']:.0f} CPU s of pretraining)")
         spent, steps, images = t.get("cpu_seconds", 0.0), t.get("steps", 0), t.get("images", 0)
         return f"segmenter {spent:.0f} CPU s, {steps} steps of {images} images"
 
@@ -119,3 +128,26 @@ def load_segmenter(folder: Path, map_location: str | torch.device = "cpu") -> tu
     model = Segmenter(record.config)
     model.load_state_dict(torch.load(folder / WEIGHTS_FILE, map_location=map_location, weights_only=True))
     return model.eval(), record
+
+
+def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, SegmenterRecord]:
+    """Write the encoder and source-view head of an S-Ray training checkpoint (its weight average where the job
+    kept one) as a segmenter folder ``out``; returns the segmenter (eval mode) and its record. ValueError when the
+    checkpoint's model has no source-view head (``model.lambda_src_sem`` was 0)."""
+    checkpoint = Path(checkpoint)
+    net, cfg = model_from_checkpoint(checkpoint)
+    if net.src_head is None:
+        raise ValueError(f"{checkpoint}: its model has no source-view head (model.lambda_src_sem = 0 in its config); "
+                         "export a checkpoint trained with the source-view loss, or train a segmenter with "
+                         "`sray bench segmenter --data SHARDS --cpu-seconds S --out DIR`")
+    m = cfg.model
+    seg = Segmenter(SegmenterConfig(n_classes=m.n_classes, feat_dim=m.feat_dim, encoder_width=m.encoder_width,
+                                    encoder_norm=m.encoder_norm, ignore_id=m.ignore_id,
+                                    class_weights=tuple(m.class_weights)))
+    seg.encoder.load_state_dict(net.encoder.state_dict())
+    seg.head.load_state_dict(net.src_head.state_dict())
+    counters = load_checkpoint(checkpoint).get("counters", {})
+    training = {"checkpoint": str(checkpoint.resolve()), "steps": int(read_meta(checkpoint)["step"]),
+                "cpu_seconds": float(counters.get("cpu_seconds", 0.0)), "recipe": cfg.recipe}
+    save_segmenter(seg, training, out)
+    return seg.eval(), SegmenterRecord(seg.cfg, training)
