@@ -3,8 +3,10 @@ the split rule of the segmenter and the probe: they read labels of train scenes'
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -33,6 +35,7 @@ from sray.platform.eval.ceilings import source_ids
 from sray.platform.eval.label_transfer import UNSEEN, coverage_counts, transfer_labels
 from sray.platform.eval.linear_probe import fit_probe, random_encoder
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.config.recipes import get_recipe
 from sray.platform.eval.segmenter import load_segmenter
 from sray.platform.eval import segmenter_training
 from sray.platform.eval.segmenter_training import STATE_FILE, train_segmenter
@@ -122,11 +125,19 @@ def test_held_out_rows_score_the_first_training_scenes_held_out_views(shards: Pa
 
 
 def test_cli_trains_a_segmenter_and_loads_it(shards: Path, tmp_path: Path, one_thread: None) -> None:  # noqa: F811
-    """``sray bench segmenter`` saves a folder that loads back with its budget and its encoder width recorded."""
+    """``sray bench segmenter`` saves a folder that loads back with its budget, its encoder width and the
+    augmentation a ``--set`` gave it recorded; a ``--set`` of a field that does not exist is refused with exit code
+    2 before anything is written."""
     assert main(["bench", "segmenter", "--data", str(shards), "--cpu-seconds", "0.2", "--out", str(tmp_path / "seg"),
-                 "--recipe", "synth-small", "--encoder-width", "8"]) == 0
+                 "--recipe", "synth-small", "--encoder-width", "8", "--set", "data.aug.colour_ev=0.2",
+                 "--set", "data.aug.noise_sigma=1.5"]) == 0
     model, record = load_segmenter(tmp_path / "seg")
     assert model.cfg.encoder_width == 8 == model.encoder.stem[0].out_channels == record.training["encoder_width"]
+    aug = record.training["augmentation"]
+    assert aug == dataclasses.asdict(replace(get_recipe("synth-small").data.aug, colour_ev=0.2, noise_sigma=1.5))
+    assert main(["bench", "segmenter", "--data", str(shards), "--cpu-seconds", "0.2", "--out", str(tmp_path / "bad"),
+                 "--set", "data.aug.colour=0"]) == 2
+    assert not (tmp_path / "bad").exists()
     t = record.training
     assert t["steps"] >= 1 and t["cpu_seconds_budget"] == 0.2
     assert t["cpu_seconds"] >= 0.2, "training stopped before its CPU budget"

@@ -15,6 +15,7 @@ from typing import Any
 
 from sray.jobs.bench.doc import Bench, markdown_table, record
 from sray.platform.config.recipes import get_recipe
+from sray.platform.config.train_config import apply_override
 from sray.model.fast_render import FastRender
 from sray.platform.eval.ceilings import ZERO_SHOT_RENDER, measure_ceilings
 from sray.platform.eval.segmenter import SegmenterRecord
@@ -82,12 +83,17 @@ def run_ceilings(checkpoint: Path, shards: Path, out: Path, doc: Path, *, n_sour
 
 
 def run_segmenter(shards: Path, cpu_seconds: float, out: Path, recipe: str = "synth-cpu-hour",
-                  seed: int = 0, max_steps: int | None = None, encoder_width: int | None = None) -> SegmenterRecord:
+                  seed: int = 0, max_steps: int | None = None, encoder_width: int | None = None,
+                  overrides: tuple[str, ...] = ()) -> SegmenterRecord:
     """Train the 2D segmenter with ``recipe``'s augmentation, class balance, source counts and encoder for
     ``cpu_seconds`` (or ``max_steps``, when sooner), resuming an interrupted training left in ``out``; saved in
     ``out``. ``encoder_width``: the encoder's first-layer width instead of the recipe's ``model.encoder_width``; the
-    encoder's layer normalisation is the recipe's ``model.encoder_norm``."""
+    encoder's layer normalisation is the recipe's ``model.encoder_norm``. ``overrides``: ``section.field=value``
+    assignments applied to the recipe first (``data.aug.colour_ev=0``: the same training without exposure jitter);
+    ValueError names a field that does not exist."""
     cfg = get_recipe(recipe)
+    for assignment in overrides:
+        apply_override(cfg, assignment)
     result = train_segmenter(shards, cpu_seconds, out, seed, augment=cfg.data.aug,
                              class_balance=cfg.data.class_balance, n_source=cfg.model.n_source,
                              top_k=cfg.data.top_k, feat_dim=cfg.model.feat_dim, max_steps=max_steps,

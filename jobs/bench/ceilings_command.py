@@ -65,6 +65,9 @@ def register(kinds: argparse._SubParsersAction) -> None:
                            help="stop after this many steps even within the budget (default: the budget alone)")
     segmenter.add_argument("--encoder-width", type=int, default=None, help="channels of the encoder's first layer, "
                            "every later layer scaled with it (default: the recipe's model.encoder_width)")
+    segmenter.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                           help="override a field of the recipe the training reads (repeatable), e.g. "
+                           "--set data.aug.colour_ev=0")
     segmenter.set_defaults(func=_bench_segmenter)
 
 
@@ -100,9 +103,9 @@ def _bench_segmenter(args: argparse.Namespace) -> int:
     from sray.platform.eval.segmenter import segmenter_from_checkpoint
 
     if args.from_checkpoint is not None:
-        if args.data is not None or args.cpu_seconds is not None:
-            print("sray bench segmenter: --from-checkpoint takes the trained network of a checkpoint; drop --data "
-                  "and --cpu-seconds, or drop --from-checkpoint to train one", file=sys.stderr)
+        if args.data is not None or args.cpu_seconds is not None or args.overrides:
+            print("sray bench segmenter: --from-checkpoint takes the trained network of a checkpoint; drop --data, "
+                  "--cpu-seconds and --set, or drop --from-checkpoint to train one", file=sys.stderr)
             return 2
         try:
             _, record = segmenter_from_checkpoint(args.from_checkpoint, args.out)
@@ -115,5 +118,10 @@ def _bench_segmenter(args: argparse.Namespace) -> int:
         print("sray bench segmenter: give --data SHARDS and --cpu-seconds S to train a segmenter, or "
               "--from-checkpoint CHECKPOINT to take S-Ray's own", file=sys.stderr)
         return 2
-    run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed, args.max_steps, args.encoder_width)
+    try:
+        run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed, args.max_steps,
+                      args.encoder_width, tuple(args.overrides))
+    except ValueError as e:
+        print(f"sray bench segmenter: {e}", file=sys.stderr)
+        return 2
     return 0
