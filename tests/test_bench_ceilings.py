@@ -299,6 +299,11 @@ def test_row_s_scores_the_render_and_row_c_rgb_carries_the_segmenter_by_its_dept
     f_src = rows["f-src"].summary(cfg.n_classes)
     assert f_src["total_acc"] == pytest.approx(share)
     assert f_src["miou"] == pytest.approx(share / len(torch.unique(labelled)))  # IoU of `const`, 0 for the rest
+    fresh = {k: CeilingRow(k, t, p, geometric=p.geometry != "—") for k, t, p in ceilings.row_descriptors(True, False)
+             if not k.startswith("e")}
+    with pytest.raises(ValueError, match="needs the ids"):  # refused before any row is scored
+        scorer.score(fresh, sample, gt_sources)
+    assert all(row.views == 0 for row in fresh.values())
 
 
 def test_view_weights_rows_run_end_to_end_and_plain_mean_weights_read_as_blind(shards: Path, tmp_path: Path,

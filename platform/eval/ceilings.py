@@ -156,6 +156,9 @@ class ViewScorer:
             return transfer_labels(labels, *geometry, "backward", tolerance=self.tolerance, ignore_id=cfg.ignore_id,
                                    query_depth=sample.query_depth)
 
+        if self.segmenter is not None and (ids is None or len(ids) != gt_sources.shape[0]):
+            raise ValueError(f"ceilings: scene {scene!r}, view {sample.query_id!r}: row f-src needs the ids of the "
+                             f"{gt_sources.shape[0]} source views")
         oracle, seconds = timed(lambda: backward(gt_sources))
         rows["a"].add(scene, oracle.labels, gt, cfg.n_classes, cfg.ignore_id, seconds, oracle.seen)
         encoded, encode_seconds = timed(lambda: encode_sources(self.net, sample, torch.device("cpu")))
@@ -178,9 +181,6 @@ class ViewScorer:
                               seg_seconds + render_seconds + seconds, carried.seen)
             direct, seconds = timed(lambda: self.segmenter.predict(sample.query_rgb.permute(2, 0, 1)[None])[0])
             rows["f"].add(scene, direct, gt, cfg.n_classes, cfg.ignore_id, seconds)
-            if ids is None or len(ids) != seg_labels.shape[0]:
-                raise ValueError(f"ceilings: scene {scene!r}, view {sample.query_id!r}: row f-src needs the ids of "
-                                 f"the {seg_labels.shape[0]} source views")
             for j, view_id in enumerate(ids):
                 if (scene, view_id) not in self.scored_sources:
                     self.scored_sources.add((scene, view_id))
