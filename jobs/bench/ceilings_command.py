@@ -56,7 +56,7 @@ def register(kinds: argparse._SubParsersAction) -> None:
                            help="training budget in CPU seconds of this process (time.process_time)")
     segmenter.add_argument("--from-checkpoint", type=Path, default=None, metavar="CHECKPOINT",
                            help="instead of training: write this S-Ray checkpoint's encoder and source-view head "
-                           "as the segmenter (no --data or --cpu-seconds)")
+                           "as the segmenter (no --data, --cpu-seconds or --set)")
     segmenter.add_argument("--out", type=Path, required=True, help="folder the segmenter is saved in")
     segmenter.add_argument("--recipe", default="synth-cpu-hour",
                            help="recipe whose augmentation, class balance and source counts the training uses")

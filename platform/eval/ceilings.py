@@ -133,7 +133,7 @@ class ViewScorer:
     net: SRayModel
     """The checkpoint's S-Ray network (eval mode, CPU)."""
     segmenter: Segmenter | None
-    """The 2D segmenter of rows b and c, or None."""
+    """The 2D segmenter of rows b, c, c-rgb, f and f-src, or None."""
     probes: dict[str, LinearProbe]
     """Fitted probes by row key."""
     tolerance: float
