@@ -184,8 +184,8 @@ def test_row_s_scores_the_render_and_row_c_rgb_carries_the_segmenter_by_its_dept
     assert f_src["miou"] == pytest.approx(share / len(torch.unique(labelled)))  # IoU of `const`, 0 for the rest
     fresh = {k: CeilingRow(k, t, p, geometric=p.geometry != "—") for k, t, p in ceilings.row_descriptors(True, False)
              if not k.startswith("e")}
-    with pytest.raises(ValueError, match="needs the ids"):  # refused before any row is scored
-        scorer.score(fresh, sample, gt_sources)
+    with pytest.raises(ValueError, match="source view ids for"):  # refused before any row is scored
+        scorer.score(fresh, sample, gt_sources, ids[:-1])
     assert all(row.views == 0 for row in fresh.values())
 
 

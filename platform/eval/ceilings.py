@@ -143,11 +143,10 @@ class ViewScorer:
     scored_sources: set[tuple[str, str]] = field(default_factory=set)
     """(scene, view id) of the source views row f-src has scored (each once)."""
 
-    def score(self, rows: dict[str, CeilingRow], sample: EvalSample, gt_sources: Tensor,
-              ids: list[str] | None = None) -> None:
+    def score(self, rows: dict[str, CeilingRow], sample: EvalSample, gt_sources: Tensor, ids: list[str]) -> None:
         """Predict every row for ``sample`` and add it to ``rows``; gt_sources (m, H, W) int64 are the ground-truth
-        labels of the sample's source views, ``ids`` their view ids (required with a segmenter: row f-src scores
-        each source view of a scene once)."""
+        labels of the sample's source views, ``ids`` their m view ids (row f-src scores each source view of a scene
+        once)."""
         cfg = self.net.cfg
         src, gt, scene, hw = sample.sources, sample.query_label, sample.scene, tuple(sample.query_label.shape)
         geometry = (src.K, src.c2w, src.depth, sample.query.K, sample.query.c2w, hw)
@@ -156,9 +155,9 @@ class ViewScorer:
             return transfer_labels(labels, *geometry, "backward", tolerance=self.tolerance, ignore_id=cfg.ignore_id,
                                    query_depth=sample.query_depth)
 
-        if self.segmenter is not None and (ids is None or len(ids) != gt_sources.shape[0]):
-            raise ValueError(f"ceilings: scene {scene!r}, view {sample.query_id!r}: row f-src needs the ids of the "
-                             f"{gt_sources.shape[0]} source views")
+        if len(ids) != gt_sources.shape[0]:
+            raise ValueError(f"ceilings: scene {scene!r}, view {sample.query_id!r}: {len(ids)} source view ids for "
+                             f"{gt_sources.shape[0]} source label maps; give one id per source view")
         oracle, seconds = timed(lambda: backward(gt_sources))
         rows["a"].add(scene, oracle.labels, gt, cfg.n_classes, cfg.ignore_id, seconds, oracle.seen)
         encoded, encode_seconds = timed(lambda: encode_sources(self.net, sample, torch.device("cpu")))
