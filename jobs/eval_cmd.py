@@ -51,6 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fast mode: render every N-th pixel and upsample (default %(default)s, FastRender's)")
     p.add_argument("--fast-confidence", type=float, default=0.9, action=GivenFlag,  # FastRender's default
                    help="fast mode: rays whose coarse confidence reaches this skip the fine pass")
+    p.add_argument("--split", action="append", default=[], metavar="NAME=DIR",
+                   help="also score the same model on another shard folder, e.g. appearance-shift=worlds/app/shards "
+                        "(repeatable; `sray data synth --split`); the splits are printed side by side with the gap "
+                        "from --data's mIoU and written to OUT/splits.json, each split's files under OUT/NAME")
     p.set_defaults(func=run, given=())
 
 
@@ -58,23 +62,36 @@ def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table and where everything went; exit 2 on bad input (a flag the method does not read
     included)."""
     from sray.model.fast_render import FastRender
-    from sray.platform.eval.zero_shot import evaluate_model, format_table
+    from sray.platform.eval.split_gap import SPLITS_FILE, format_splits, split_summary
+    from sray.platform.eval.zero_shot import evaluate_model, format_table, write_json_atomic
 
     method = get_method(args.method)
     unread = unread_flags(args.given, method.eval_reads)
     if unread:
         print(f"sray eval: {refusal(unread, f'--method {method.name}', method.eval_reads)}", file=sys.stderr)
         return 2
+    splits = dict(item.split("=", 1) for item in args.split if "=" in item)
+    if len(splits) != len(args.split) or "" in splits:
+        print(f"sray eval: --split takes NAME=DIR with distinct names, got {args.split}", file=sys.stderr)
+        return 2
     fast = FastRender(args.fast_stride, args.fast_confidence) if args.render == "fast" else None
     request = EvalRequest(checkpoint=args.checkpoint, segmenter=args.segmenter, device=args.device, fast=fast)
     try:
         model = method.eval_model(request)
-        report = evaluate_model(model, args.data, args.scenes, args.out, n_source=args.n_source, stride=args.stride,
-                                tracking_uri=args.tracking_uri, experiment=args.experiment, tracker=args.tracker)
+        kwargs = dict(n_source=args.n_source, stride=args.stride, tracking_uri=args.tracking_uri,
+                      experiment=args.experiment, tracker=args.tracker)
+        report = evaluate_model(model, args.data, args.scenes, args.out, **kwargs)
+        others = {name: evaluate_model(model, Path(folder), None, args.out / name, **kwargs)
+                  for name, folder in splits.items()}
     except (FileNotFoundError, ValueError) as e:
         print(f"sray eval: {e}", file=sys.stderr)
         return 2
     print(format_table(report))
+    if others:
+        summary = split_summary({"data": report, **others})
+        write_json_atomic(summary, args.out / SPLITS_FILE)
+        print(format_splits(summary))
+        print(f"[sray] splits: {args.out / SPLITS_FILE}")
     print(f"[sray] metrics: {report['metrics_path']}")
     print(f"[sray] renders: {Path(report['out_dir']) / 'renders'}")
     run = report["run"]

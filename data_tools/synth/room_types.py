@@ -13,6 +13,7 @@ import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import catalog as cat
+from sray.data_tools.synth import domains
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import furniture as fu
 from sray.data_tools.synth import materials as mat
@@ -26,10 +27,12 @@ Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Mate
 def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
           h: tuple[float, float]) -> FloorPlan:
     """An empty floor plan (maybe L-shaped or with a column) of a size drawn from the ranges, which one
-    scale factor per room widens (0.9-1.2)."""
-    scale = float(rng.uniform(0.9, 1.2))
+    scale factor per room widens (``domains.TRAIN_SCALE``); a geometry-shifted room is scaled by
+    ``domains.HELD_OUT_SCALE`` and has a ceiling in ``domains.HELD_OUT_CEILING``."""
+    shifted = domains.current().geometry_shift
+    scale = float(rng.uniform(*(domains.HELD_OUT_SCALE if shifted else domains.TRAIN_SCALE)))
     return shaped_plan(rng, (scale * float(rng.uniform(*lx)), scale * float(rng.uniform(*ly)),
-                             float(rng.uniform(*h))))
+                             float(rng.uniform(*(domains.HELD_OUT_CEILING if shifted else h)))))
 
 
 def _walls(rng: np.random.Generator) -> list[int]:
@@ -38,9 +41,11 @@ def _walls(rng: np.random.Generator) -> list[int]:
 
 def _anywhere_on_walls(rng: np.random.Generator, plan: FloorPlan, piece: fu.Piece,
                        z_range: tuple[float, float] | None = None) -> tuple[int, float] | None:
-    """Try every wall in random order; returns (wall, s) of the placement or None."""
+    """Try every wall in random order; returns (wall, s) of the placement or None. In a geometry-shifted room the
+    piece stands ``domains.HELD_OUT_WALL_GAP`` off the wall."""
+    gap = float(rng.uniform(*domains.HELD_OUT_WALL_GAP)) if domains.current().geometry_shift else 0.015
     for wall in _walls(rng):
-        s = plan.try_wall(rng, piece, wall, z_range=z_range)
+        s = plan.try_wall(rng, piece, wall, z_range=z_range, gap=gap)
         if s is not None:
             return wall, s
     return None
@@ -71,6 +76,8 @@ def _dining_set(rng: np.random.Generator, plan: FloorPlan, chairs: int) -> None:
     tw, td = float(rng.uniform(0.9, 1.6)), float(rng.uniform(0.7, 0.95))
     table = cat.table(rng, tw, td)
     yaw = 0.0 if rng.random() < 0.5 else math.pi / 2
+    if domains.current().geometry_shift:
+        yaw = float(rng.uniform(math.pi / 8, 3 * math.pi / 8))
     for _ in range(10):
         x, y = lx / 2 + float(rng.uniform(-0.5, 0.5)), ly / 2 + float(rng.uniform(-0.5, 0.5))
         if plan.try_floor(table, x, y, yaw, clearance=0.6):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.shards.manifest import MANIFEST_NAME, read_manifest
-from sray.data_tools.synth.world import World, make_world
+from sray.data_tools.synth.world import World, evaluation_worlds, make_world
 from sray.jobs.bench.accuracy_plan import VARIANT_SETTINGS, Preset
 from sray.platform.train.cpu_clock import process_tree_cpu_seconds
 
@@ -70,3 +70,15 @@ def rooms_shards(rooms: int, p: Preset, base: Path, out: Path) -> tuple[Path, fl
         atomic_write_json(record, {"cpu_s": process_tree_cpu_seconds() - start})
     check_same_test_scenes(base, shards)
     return shards, (float(json.loads(record.read_text())["cpu_s"]) if record.exists() else None)
+
+
+SPLITS_DIR = "splits"
+"""Sub-folder of the benchmark's output holding the preset world's evaluation splits (``OUT/splits/<name>``)."""
+
+
+def split_shards(p: Preset, out: Path, rooms: int = 16) -> dict[str, Path]:
+    """Shards of the preset world's evaluation splits by result name (``evaluation_worlds``: in-distribution,
+    validation, appearance- and geometry-shifted test rooms, ``rooms`` each), generated on first use under
+    ``out/splits/<name>`` and reused after; what ``sray eval --split`` and the study specs score."""
+    return {name: make_bench_world(world, out / SPLITS_DIR / name, progress=False)
+            for name, world in evaluation_worlds(p.world, rooms).items()}
