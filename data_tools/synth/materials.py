@@ -160,11 +160,15 @@ def wall_paint(rng: np.random.Generator) -> Material:
 
 
 def floor_surface(rng: np.random.Generator, wet_room: bool = False) -> Material:
-    """Floors: planks, tiles (plain or checker) or carpet; wet rooms get tiles. In an appearance-shifted room most
-    floors get a held-out covering (:func:`held_out_floor`)."""
+    """Floors: parquet, planks, concrete-like paint, carpet or tiles (plain or checker); wet rooms get tiles. In an
+    appearance-shifted room most floors get a held-out covering (:func:`held_out_floor`)."""
     if domains.current().appearance_shift and rng.random() < 0.6:
         return held_out_floor(rng)
     pick = 1.0 if wet_room else rng.random()
+    if pick < 0.1:  # parquet: squares of two wood tones
+        a = hsv(rng, (0.04, 0.11), (0.35, 0.75), (0.3, 0.85))
+        return Material(TILES, a, _shade(a, float(rng.uniform(0.6, 0.8))), scale=float(rng.uniform(2.5, 5.0)),
+                        contrast=float(rng.uniform(0.1, 0.3)), variant=1, seed=_seed(rng))
     if pick < 0.45:
         a = hsv(rng, (0.03, 0.12), (0.25, 0.75), (0.25, 0.85))
         return Material(PLANKS, a, _shade(a, rng.uniform(0.6, 0.85)), scale=float(rng.uniform(4, 9)),
