@@ -201,3 +201,34 @@ def test_set_data_ray_balance_reaches_the_training_loader_and_bad_values_name_th
     with pytest.raises(ValueError, match="ray_balance"):
         make_train_loader(shards, n_source=3, top_k=6, rays_per_batch=8, batches_per_epoch=1, rank=0, world_size=1,
                           num_workers=0, seed=0, ray_balance=-0.1)
+
+
+def test_tone_and_saturation_differ_per_source_and_leave_labels_and_geometry_alone(views: dict) -> None:
+    """Each source of one sample gets its own tone-curve exponent (read back as log b / log a) and its own
+    saturation factor (read back from the distance to the grey level); labels, cameras and targets stay."""
+    ids = sorted(views)
+
+    def draw(augment: Augmentation | None):
+        return train_sample(views, ids[0], ids[1:5], 50, np.random.default_rng(3), "a", 0.5, 6.0, 20, augment,
+                            source_labels=True)
+
+    plain, toned, vivid = draw(None), draw(Augmentation(gamma_ev=0.5)), draw(Augmentation(saturation_ev=0.6))
+    for other in (toned, vivid):
+        for x, y in ((plain.pixels, other.pixels), (plain.target_rgb, other.target_rgb),
+                     (plain.target_label, other.target_label), (plain.sources.K, other.sources.K),
+                     (plain.sources.c2w, other.sources.c2w), (plain.sources.depth, other.sources.depth),
+                     (plain.sources.label, other.sources.label)):
+            assert torch.equal(x, y)
+    powers, factors = [], []
+    for i in range(4):
+        a, b = plain.sources.rgb[i], toned.sources.rgb[i]
+        ok = (a > 0.1) & (a < 0.8) & (b > 0.05)
+        power = float(torch.median(torch.log(b[ok]) / torch.log(a[ok])))
+        assert 2 ** -0.55 < power < 2 ** 0.55
+        powers.append(power)
+        a, c = plain.sources.rgb[i], vivid.sources.rgb[i]
+        grey_a, grey_c = a.mean(0, keepdim=True), c.mean(0, keepdim=True)
+        spread = (a - grey_a).abs() > 0.05
+        factors.append(float(torch.median((c - grey_c)[spread] / (a - grey_a)[spread])))
+    assert len({round(p, 2) for p in powers}) == 4 and len({round(f, 2) for f in factors}) == 4
+    assert all(2 ** -0.65 < f < 2 ** 0.65 for f in factors)

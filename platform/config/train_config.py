@@ -154,7 +154,7 @@ before it was a section hold them in the model section; :func:`model_and_runtime
 def model_and_runtime(d: dict[str, Any]) -> tuple[SRayConfig, Runtime]:
     """The model and runtime sections of a stored config ``d`` (a :meth:`TrainConfig.to_dict`), the runtime
     fields a model section holds (:data:`RUNTIME_FIELDS`) read into the runtime section."""
-    model = {k: tuple(v) if k in ("weight_hidden", "geo_hidden", "class_weights") else v
+    model = {k: tuple(v) if k in ("weight_hidden", "geo_hidden", "class_weights", "semantic_cues") else v
              for k, v in d.get("model", {}).items() if k not in RUNTIME_FIELDS}
     moved = {k: v for k, v in d.get("model", {}).items() if k in RUNTIME_FIELDS}
     return SRayConfig(**model), Runtime(**moved, **d.get("runtime", {}))
