@@ -13,8 +13,9 @@ import pytest
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import domains
 from sray.data_tools.synth import materials as mat
-from sray.data_tools.synth.dataset import generate_scene, plan_scene, scene_seed
+from sray.data_tools.synth.dataset import generate_scene, intrinsics, plan_scene, scene_seed
 from sray.data_tools.synth.furniture import CLS
+from sray.data_tools.synth.render import render_view
 from sray.data_tools.synth.world import World, recorded_differences
 
 EXEMPT_KINDS = (mat.SKY, mat.LAMP, mat.BOOKS)
@@ -138,3 +139,26 @@ def test_evaluation_worlds_share_the_world_s_settings_and_hold_no_training_room(
     training = {scene_seed(2, "train", i) for i in range(48)}
     tested = {scene_seed(2, "test", i, w.split) for w in worlds.values() for i in range(16)}
     assert not training & tested and len(tested) == 64
+
+
+def test_appearance_randomisation_varies_surfaces_rooms_and_views_inside_the_training_region() -> None:
+    with domains.drawing(domains.Domain(randomise=1.0)):
+        rng = np.random.default_rng(0)
+        hues = {round(_hsv(mat.hsv(rng, (0.2, 0.2), (0.5, 0.5), (0.5, 0.5)))[0], 3) for _ in range(20)}
+    assert len(hues) > 10 and all(0.09 < h < 0.31 for h in hues)  # per surface: around the box, up to ±0.1
+    plans = [plan_scene(scene_seed(4, "train", i), 20, randomise=1.0) for i in range(12)]
+    for plan in plans:
+        assert _held_out_colours(plan) == 0 and not any(mat.held_out_texture(m) for m in _materials(plan))
+        assert abs(math.log2(plan.render_scene.exposure)) <= domains.TRAIN_EXPOSURE_EV
+    tints = {plan.render_scene.tint for plan in plans}
+    assert len(tints) == 12 and all(2 ** -0.2 <= g <= 2 ** 0.2 for t in tints for g in t)  # per room
+    scene, pose = plans[0].render_scene, plans[0].poses[0]
+    K = intrinsics(18, 24)
+    a = render_view(scene, K, pose, (18, 24), view_index=0)[0].astype(np.float64)
+    b = render_view(scene, K, pose, (18, 24), view_index=1)[0].astype(np.float64)
+    ok = (a > 20) & (a < 235) & (b > 20) & (b < 235)
+    assert not np.array_equal(a, b) and ok.sum() > 100  # per view: same pose, another exposure
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        World(1, 1, 20, 24, 32, randomise=1.5)
+    with pytest.raises(ValueError, match="training rooms"):
+        plan_scene(1, 20, split="appearance-shift", randomise=0.5)

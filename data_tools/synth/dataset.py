@@ -65,17 +65,20 @@ class ScenePlan:
     """float64 (n_views, 4, 4) camera-to-world, OpenCV axes."""
 
 
-def plan_scene(seed: int, n_views: int, room_type: str | None = None, split: str = "in-distribution") -> ScenePlan:
+def plan_scene(seed: int, n_views: int, room_type: str | None = None, split: str = "in-distribution",
+               randomise: float = 0.0) -> ScenePlan:
     """Room and camera path of a scene (deterministic in ``seed``), drawn from the region of ``split``
-    (:mod:`~sray.data_tools.synth.domains`); retries cluttered rooms."""
+    (:mod:`~sray.data_tools.synth.domains`) with appearance randomisation of strength ``randomise``; retries
+    cluttered rooms."""
     rng = np.random.default_rng(seed)
     kind = room_type if room_type is not None else ROOM_TYPES[int(rng.integers(len(ROOM_TYPES)))]
-    with domains.drawing(domains.domain_of(split)):
+    with domains.drawing(domains.domain_of(split, randomise)):
         for _ in range(10):
             room = build_room(rng, kind)
             exposure = domains.exposure(rng)
             k, gamma, noise = domains.sensor(rng)
-            prepared = RenderScene.prepare(room, exposure=exposure, tone=(k, gamma), noise_sigma=noise, noise_seed=seed)
+            prepared = RenderScene.prepare(room, exposure=exposure, tone=(k, gamma), noise_sigma=noise, noise_seed=seed,
+                                           tint=domains.room_tint(rng), randomise=randomise)
             try:
                 return ScenePlan(room, prepared, scan_path(rng, room.size, prepared.boxes, n_views))
             except RuntimeError:
@@ -98,28 +101,29 @@ def split_views(view_ids: list[str], role: str, seed: int) -> dict[str, list[str
 
 
 def scene_params(seed: int, n_views: int, height: int, width: int, role: str, room_type: str,
-                 split: str = "in-distribution") -> dict:
+                 split: str = "in-distribution", randomise: float = 0.0) -> dict:
     """The parameters that fully determine a scene's files (stored in ``extra``, compared on rerun)."""
     return {"generator": GENERATOR, "generator_version": GENERATOR_VERSION, "seed": int(seed),
             "n_views": int(n_views), "height": int(height), "width": int(width), "role": role,
-            "room_type": room_type, "hfov_deg": HFOV_DEG, "split": split}
+            "room_type": room_type, "hfov_deg": HFOV_DEG, "split": split, "randomise": float(randomise)}
 
 
 def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, role: str,
                    room_type: str | None = None, on_view: Callable[[], None] | None = None,
-                   split: str = "in-distribution") -> Scene:
+                   split: str = "in-distribution", randomise: float = 0.0) -> Scene:
     """Render a procedural scene in memory (deterministic: same arguments, identical arrays).
 
     ``room_type`` picks one of ``ROOM_TYPES`` (default: drawn from the seed); ``on_view`` is
     called after each rendered view (progress bars); ``split`` is the region the room is drawn from
-    (``domains.SPLITS``; a training scene must be ``in-distribution``).
+    (``domains.SPLITS``; a training scene must be ``in-distribution``); ``randomise`` the strength of the appearance
+    randomisation of a training scene (``domains``; 0 = off).
     """
     if role == "train" and split != "in-distribution":
         raise ValueError(f"a training scene is always drawn in-distribution, got split {split!r}")
     if height < 8 or width < 8:
         raise ValueError(f"image size {height}x{width} is too small; use at least 8x8")
     split_views([f"{i:05d}" for i in range(n_views)], role, seed)  # validates role and view count early
-    plan = plan_scene(seed, n_views, room_type, split)
+    plan = plan_scene(seed, n_views, room_type, split, randomise)
     K = intrinsics(height, width)
     views = []
     for i, c2w in enumerate(plan.poses):
@@ -128,7 +132,7 @@ def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, 
         if on_view is not None:
             on_view()
     view_ids = [v.view_id for v in views]
-    extra = {**scene_params(seed, n_views, height, width, role, plan.room.room_type, split),
+    extra = {**scene_params(seed, n_views, height, width, role, plan.room.room_type, split, randomise),
              "room_size_m": [float(v) for v in plan.room.size], "n_boxes": len(plan.room.boxes),
              "ceiling_label": "ignore (ScanNet-20 has no ceiling class)"}
     meta = SceneMeta(name=name, label_space="scannet20", class_names=list(SCANNET20), view_ids=view_ids,
@@ -172,10 +176,11 @@ def _prune_stale_views(scene_dir: Path, view_ids: list[str]) -> None:
 
 
 def _write_scene(out: Path, name: str, own_seed: int, n_views: int, height: int, width: int, role: str,
-                 room_type: str, split: str, on_view: Callable[[], None] | None = None) -> Path:
+                 room_type: str, split: str, randomise: float, on_view: Callable[[], None] | None = None) -> Path:
     """Generate one scene and write it under ``out`` (scene.json last); returns its folder."""
     scene_dir = out / name
-    scene = generate_scene(name, own_seed, n_views, height, width, role, room_type, on_view=on_view, split=split)
+    scene = generate_scene(name, own_seed, n_views, height, width, role, room_type, on_view=on_view, split=split,
+                           randomise=randomise)
     if (scene_dir / "scene.json").exists():
         (scene_dir / "scene.json").unlink()
     write_scene(scene, out)
@@ -184,11 +189,13 @@ def _write_scene(out: Path, name: str, own_seed: int, n_views: int, height: int,
 
 
 def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height: int, width: int, seed: int,
-                     progress: bool = True, workers: int = 1, split: str = "in-distribution") -> list[Path]:
+                     progress: bool = True, workers: int = 1, split: str = "in-distribution",
+                     randomise: float = 0.0) -> list[Path]:
     """Write ``n_train`` train and ``n_test`` test scenes under ``out`` (sray layout); returns scene dirs.
 
     Training scenes are always in-distribution; the test scenes come from ``split`` (``domains.SPLITS``), each
-    split from its own seed stream (:func:`scene_seed`).
+    split from its own seed stream (:func:`scene_seed`); ``randomise`` is the appearance randomisation of the training
+    scenes (test scenes never get it, so worlds with and without it share their test rooms).
 
     Scene names are ``synth_train_000``, ``synth_test_000``, ...; room types cycle through
     ``ROOM_TYPES`` from a seed-dependent offset so a small dataset covers every type. A scene whose
@@ -203,6 +210,7 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     domains.domain_of(split)  # validates the split's name
+    domains.domain_of("in-distribution", randomise)  # and the randomisation's range
     out = Path(out)
     jobs = [("train", i) for i in range(n_train)] + [("test", i) for i in range(n_test)]
     offset = seed % len(ROOM_TYPES)
@@ -211,13 +219,14 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
     todo: list[tuple] = []
     for k, (role, i) in enumerate(jobs):
         name = scene_name(role, i)
-        own_split = split if role == "test" else "in-distribution"
+        own_split, own_random = (split, 0.0) if role == "test" else ("in-distribution", randomise)
         own_seed, room_type = scene_seed(seed, role, i, own_split), ROOM_TYPES[(offset + k) % len(ROOM_TYPES)]
         written.append(out / name)
-        if _is_current(out / name, scene_params(own_seed, n_views, height, width, role, room_type, own_split)):
+        if _is_current(out / name, scene_params(own_seed, n_views, height, width, role, room_type, own_split,
+                                                own_random)):
             bar.update(n_views)
         else:
-            todo.append((out, name, own_seed, n_views, height, width, role, room_type, own_split))
+            todo.append((out, name, own_seed, n_views, height, width, role, room_type, own_split, own_random))
     if workers == 1:
         for args in todo:
             bar.set_postfix_str(f"{args[1]} ({args[7]})")

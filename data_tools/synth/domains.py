@@ -22,6 +22,10 @@ geometry: rooms scaled by :data:`HELD_OUT_SCALE` (training :data:`TRAIN_SCALE`) 
 :data:`HELD_OUT_WALL_GAP` off the walls and dining tables turned diagonally; cameras carried at
 :data:`HELD_OUT_CAMERA` (training ``trajectory.HEIGHT_RANGE``) and looking up.
 
+**Appearance randomisation** (``World.randomise``, training rooms only, off by default): each surface colour is
+perturbed, each room gets a white-balance error and each view its own exposure and channel gains, all inside the
+training region (the constants ``RANDOM_*``).
+
 Generation code asks :func:`current` which region it draws from; :func:`drawing` sets it for one scene (a context
 variable, so the answer is per thread and per process, and generation stays deterministic in the scene's seed).
 """
@@ -82,6 +86,9 @@ class Domain:
     """Appearance drawn inside the held-out appearance region."""
     geometry_shift: bool = False
     """Geometry drawn inside the held-out geometry region."""
+    randomise: float = 0.0
+    """Strength (0-1) of the appearance randomisation of training rooms (:func:`jitter_colour`, :func:`room_tint`,
+    :func:`view_gains`); 0 = off. It never leaves the training region."""
 
 
 TRAINING = Domain()
@@ -90,11 +97,17 @@ TRAINING = Domain()
 _CURRENT: ContextVar[Domain] = ContextVar("sray_synth_domain", default=TRAINING)
 
 
-def domain_of(split: str) -> Domain:
-    """The region a split's test rooms are drawn from; ValueError naming the valid splits."""
+def domain_of(split: str, randomise: float = 0.0) -> Domain:
+    """The region a split's rooms are drawn from, with appearance randomisation of strength ``randomise`` (0-1;
+    training rooms only); ValueError naming the valid splits or the range."""
     if split not in SPLITS:
         raise ValueError(f"split {split!r} is not one of {SPLITS}")
-    return Domain(appearance_shift=split == "appearance-shift", geometry_shift=split == "geometry-shift")
+    if not 0.0 <= randomise <= 1.0:
+        raise ValueError(f"randomise {randomise} must lie in [0, 1] (0 = off)")
+    if randomise > 0 and split != "in-distribution":
+        raise ValueError(f"appearance randomisation is for training rooms; split {split!r} must be drawn without it")
+    return Domain(appearance_shift=split == "appearance-shift", geometry_shift=split == "geometry-shift",
+                  randomise=randomise)
 
 
 def current() -> Domain:
@@ -128,6 +141,43 @@ def surface_colour(rng: np.random.Generator, hue: float, sat: float) -> tuple[fl
     if held_out_colour(hue, sat):
         return hue, sat * (HELD_OUT_SAT - 0.01)
     return hue, sat
+
+
+RANDOM_HUE, RANDOM_SAT_EV, RANDOM_VAL_EV = 0.1, 0.5, 0.4
+"""Per-surface randomisation at strength 1: hue shift up to ±0.1, saturation and value scaled by up to 2 ** ±0.5 and
+2 ** ±0.4 (then kept out of the held-out colours like any training colour)."""
+RANDOM_TINT_EV = 0.2
+"""Per-room randomisation at strength 1: a white-balance error, each channel scaled by up to 2 ** ±0.2."""
+RANDOM_VIEW_EV, RANDOM_VIEW_CHANNEL_EV = 0.25, 0.08
+"""Per-view randomisation at strength 1: the view's exposure changes by up to ±0.25 stops (with the room's ±0.6,
+at most 0.85: still short of the held-out 0.9) and each channel by up to ±0.08 stops more."""
+
+
+def jitter_colour(rng: np.random.Generator, hue: float, sat: float, val: float) -> tuple[float, float, float]:
+    """A drawn surface colour perturbed by the current randomisation (unchanged, nothing drawn, when off)."""
+    r = current().randomise
+    if r <= 0:
+        return hue, sat, val
+    hue = (hue + float(rng.uniform(-RANDOM_HUE, RANDOM_HUE)) * r) % 1.0
+    sat = float(np.clip(sat * 2.0 ** (float(rng.uniform(-RANDOM_SAT_EV, RANDOM_SAT_EV)) * r), 0.0, 1.0))
+    val = float(np.clip(val * 2.0 ** (float(rng.uniform(-RANDOM_VAL_EV, RANDOM_VAL_EV)) * r), 0.0, 1.0))
+    return hue, sat, val
+
+
+def room_tint(rng: np.random.Generator) -> tuple[float, float, float]:
+    """A room's per-channel white-balance gains ((1, 1, 1), nothing drawn, when randomisation is off)."""
+    r = current().randomise
+    if r <= 0:
+        return 1.0, 1.0, 1.0
+    return tuple(float(2.0 ** (g * r)) for g in rng.uniform(-RANDOM_TINT_EV, RANDOM_TINT_EV, 3))  # type: ignore
+
+
+def view_gains(randomise: float, rng: np.random.Generator) -> np.ndarray:
+    """float (3,) per-channel gains of one view at randomisation strength ``randomise`` (ones when 0)."""
+    if randomise <= 0:
+        return np.ones(3)
+    ev = float(rng.uniform(-RANDOM_VIEW_EV, RANDOM_VIEW_EV)) * randomise
+    return 2.0 ** (ev + rng.uniform(-RANDOM_VIEW_CHANNEL_EV, RANDOM_VIEW_CHANNEL_EV, 3) * randomise)
 
 
 def exposure(rng: np.random.Generator) -> float:

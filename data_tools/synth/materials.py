@@ -55,9 +55,11 @@ def _linear(rgb: tuple[float, float, float]) -> tuple[float, float, float]:
 def hsv(rng: np.random.Generator, h: tuple[float, float], s: tuple[float, float],
         v: tuple[float, float], emissive: bool = False) -> tuple[float, float, float]:
     """A linear RGB colour drawn uniformly from an HSV box (hue wraps around); a surface colour (not
-    ``emissive``) is then kept out of, or moved into, the held-out colour region (``domains.surface_colour``)."""
+    ``emissive``) is then randomised when asked (``domains.jitter_colour``) and kept out of, or moved into, the
+    held-out colour region (``domains.surface_colour``)."""
     hue, sat, val = float(rng.uniform(*h)) % 1.0, float(rng.uniform(*s)), float(rng.uniform(*v))
     if not emissive:
+        hue, sat, val = domains.jitter_colour(rng, hue, sat, val)
         hue, sat = domains.surface_colour(rng, hue, sat)
     return _linear(colorsys.hsv_to_rgb(hue, sat, val))
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
+from sray.data_tools.synth.domains import view_gains
 from sray.data_tools.synth.furniture import CLS
 from sray.data_tools.synth.geometry import PackedBoxes, box_normals, cast_rays, cast_shell
 from sray.data_tools.synth.materials import UNLIT_KINDS
@@ -44,11 +45,16 @@ class RenderScene:
     noise_sigma: float = 0.0
     """Sensor noise sigma in 8-bit levels (0 = none)."""
     noise_seed: int = 0
-    """Seed of the sensor noise (with the view's index)."""
+    """Seed of the sensor noise and of the per-view gains (with the view's index)."""
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """Per-channel white-balance gains of the room (``domains.room_tint``)."""
+    randomise: float = 0.0
+    """Strength of the per-view exposure and channel gains (``domains.view_gains``; 0 = none)."""
 
     @classmethod
     def prepare(cls, room: Room, exposure: float = 1.0, tone: tuple[float, float] = (1.6, 2.2),
-                noise_sigma: float = 0.0, noise_seed: int = 0) -> RenderScene:
+                noise_sigma: float = 0.0, noise_seed: int = 0, tint: tuple[float, float, float] = (1.0, 1.0, 1.0),
+                randomise: float = 0.0) -> RenderScene:
         """Pack a room's boxes and materials; the camera's exposure, tone curve and noise as the fields say."""
         boxes = PackedBoxes.from_boxes(room.boxes)
         shell_half = np.tile(np.array(room.size) / 2, (3, 1))
@@ -56,7 +62,7 @@ class RenderScene:
                                     np.concatenate([boxes.half, shell_half]),
                                     np.concatenate([boxes.quarter, [0, 0, 0]]))
         return cls(room=room, boxes=boxes, materials=table, exposure=exposure, tone=tone, noise_sigma=noise_sigma,
-                   noise_seed=noise_seed)
+                   noise_seed=noise_seed, tint=tint, randomise=randomise)
 
 
 def pixel_directions(K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
@@ -159,6 +165,10 @@ def render_view(scene: RenderScene, K: np.ndarray, c2w: np.ndarray, hw: tuple[in
     colour = albedo(scene.materials, surface, q, n_axis)
     lit = ~np.isin(scene.materials.kind[surface], UNLIT_KINDS)
     colour[lit] *= _lighting(scene, points[lit], normals[lit]) * scene.exposure
+    if scene.randomise > 0 or scene.tint != (1.0, 1.0, 1.0):
+        gains = np.asarray(scene.tint) * view_gains(scene.randomise, np.random.default_rng([scene.noise_seed,
+                                                                                            view_index, 1]))
+        colour *= gains.astype(np.float32)[None, :]
     k, gamma = scene.tone
     encoded = 255.0 * np.clip(1.0 - np.exp(-k * colour), 0, 1) ** (1 / gamma)
     if scene.noise_sigma > 0:

@@ -52,9 +52,14 @@ class World:
     training distribution, rooms of their own), ``appearance-shift`` or ``geometry-shift`` (held-out regions no
     training room samples; docs/data.md, "Shifted test splits"). Training scenes are always in-distribution."""
 
+    randomise: float = 0.0
+    """Strength (0-1) of the appearance randomisation of the training scenes (per surface, per room, per view;
+    ``domains``, docs/data.md); 0 = off. Test scenes never get it: worlds that differ only here share their tests."""
+
     def __post_init__(self) -> None:
-        """ValueError naming the valid splits."""
+        """ValueError naming the valid splits or the randomisation's range."""
         domains.domain_of(self.split)
+        domains.domain_of("in-distribution", self.randomise)
 
 
 SPLIT_RESULTS = {"zero_shot": "in-distribution", "validation": "validation",
@@ -83,7 +88,9 @@ def recorded_differences(world: World, manifest: Manifest) -> list[str]:
                 "views": _one({s.n_views for s in scenes}), "height": _one({s.image_size[0] for s in scenes}),
                 "width": _one({s.image_size[1] for s in scenes}), "neighbours": manifest.neighbours.get("k"),
                 "split": _one({s.meta.get("extra", {}).get("split", "in-distribution") for s in scenes
-                               if s.meta.get("role") == "test"} or {"in-distribution"})}
+                               if s.meta.get("role") == "test"} or {"in-distribution"}),
+                "randomise": _one({float(s.meta.get("extra", {}).get("randomise", 0.0)) for s in scenes
+                                   if s.meta.get("role") == "train"} or {world.randomise})}
     asked = asdict(world)
     problems = [f"{name} {value} (asked {asked[name]})" for name, value in recorded.items() if value != asked[name]]
     if recorded["train_scenes"] == world.train_scenes and recorded["test_scenes"] == world.test_scenes:
@@ -121,7 +128,7 @@ def make_world(world: World, root: Path, progress: bool = True, workers: int = 1
     else:
         generate_dataset(root / SCENES, n_train=world.train_scenes, n_test=world.test_scenes, n_views=world.views,
                          height=world.height, width=world.width, seed=world.seed, progress=progress,
-                         workers=workers, split=world.split)
+                         workers=workers, split=world.split, randomise=world.randomise)
         write_shards(root / SCENES, shards, neighbours=world.neighbours, progress=progress)
     damaged = verify_shards(shards)
     if damaged:

@@ -27,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    choices=SPLITS,
                    help="region the test scenes are drawn from (default in-distribution; training scenes always are): "
                         "validation rooms, or appearance/geometry held out from every training room (docs/data.md)")
+    p.add_argument("--randomise", type=float, default=0.0,
+                   help="appearance randomisation of the training scenes, 0-1 (default 0 = off): per-surface colours, "
+                        "per-room white balance, per-view exposure, all inside the training region (docs/data.md)")
     p.set_defaults(func=_run)
 
 
@@ -35,7 +38,7 @@ def _run(args: argparse.Namespace) -> int:
 
     scenes = generate_dataset(args.out, n_train=args.train_scenes, n_test=args.test_scenes, n_views=args.views,
                               height=args.height, width=args.width, seed=args.seed, progress=True,
-                              workers=args.workers, split=args.split)
+                              workers=args.workers, split=args.split, randomise=args.randomise)
     print(f"wrote {len(scenes)} procedural scenes ({args.train_scenes} train, {args.test_scenes} {args.split} test, "
           f"{args.views} views of {args.height}x{args.width}) to {Path(args.out).resolve()}")
     print(f"index: {Path(args.out).resolve() / 'dataset.json'}")
