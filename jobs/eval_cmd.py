@@ -11,6 +11,7 @@ status 2, never ignored.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -51,6 +52,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fast mode: render every N-th pixel and upsample (default %(default)s, FastRender's)")
     p.add_argument("--fast-confidence", type=float, default=0.9, action=GivenFlag,  # FastRender's default
                    help="fast mode: rays whose coarse confidence reaches this skip the fine pass")
+    p.add_argument("--fast-temperature", type=float, default=1.0, action=GivenFlag,
+                   help="fast mode: divide the coarse logits by this before the confidence rule (default 1)")
+    p.add_argument("--calibrate", type=Path, action=GivenFlag, metavar="VAL_SHARDS",
+                   help="fast mode: fit the temperature on these validation rooms' test views first (coarse pass, "
+                        "NLL; `sray data synth --split validation`), use it, and write OUT/calibration.json")
     p.add_argument("--split", action="append", default=[], metavar="NAME=DIR",
                    help="also score the same model on another shard folder, e.g. appearance-shift=worlds/app/shards "
                         "(repeatable; `sray data synth --split`); the splits are printed side by side with the gap "
@@ -62,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table and where everything went; exit 2 on bad input (a flag the method does not read
     included)."""
     from sray.model.fast_render import FastRender
+    from sray.platform.eval.calibration import CALIBRATION_FILE, calibrate
     from sray.platform.eval.split_gap import SPLITS_FILE, format_splits, split_summary
     from sray.platform.eval.zero_shot import evaluate_model, format_table, write_json_atomic
 
@@ -74,10 +81,17 @@ def run(args: argparse.Namespace) -> int:
     if len(splits) != len(args.split) or "" in splits:
         print(f"sray eval: --split takes NAME=DIR with distinct names, got {args.split}", file=sys.stderr)
         return 2
-    fast = FastRender(args.fast_stride, args.fast_confidence) if args.render == "fast" else None
+    fast = FastRender(args.fast_stride, args.fast_confidence, args.fast_temperature) if args.render == "fast" else None
     request = EvalRequest(checkpoint=args.checkpoint, segmenter=args.segmenter, device=args.device, fast=fast)
     try:
         model = method.eval_model(request)
+        if args.calibrate is not None:
+            fitted = calibrate(model, args.calibrate, n_source=args.n_source)
+            write_json_atomic(fitted, args.out / CALIBRATION_FILE)
+            print(f"[sray] coarse confidence temperature {fitted['temperature']:.3f} (NLL {fitted['nll_at_1']:.3f} -> "
+                  f"{fitted['nll_fitted']:.3f} on {fitted['rays']} rays of {fitted['rooms']} validation rooms)")
+            fast = dataclasses.replace(fast, temperature=fitted["temperature"])
+            model = method.eval_model(dataclasses.replace(request, fast=fast))
         kwargs = dict(n_source=args.n_source, stride=args.stride, tracking_uri=args.tracking_uri,
                       experiment=args.experiment, tracker=args.tracker)
         report = evaluate_model(model, args.data, args.scenes, args.out, **kwargs)

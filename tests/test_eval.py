@@ -218,7 +218,8 @@ def test_eval_refuses_bad_input(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_pa
      "--fast-stride, --fast-confidence do not apply to --method 2d-transfer"),  # their default values: still given
     (["--method", "2d-transfer", "--segmenter", "seg", "--checkpoint", "ckpt"], "--checkpoint does not apply"),
     (["--checkpoint", "ckpt", "--segmenter", "seg"], "--segmenter does not apply to --method sray (it reads "
-                                                     "--checkpoint, --render, --fast-stride, --fast-confidence)"),
+                                                     "--checkpoint, --render, --fast-stride, --fast-confidence, "
+                                                     "--fast-temperature, --calibrate)"),
 ])
 def test_eval_refuses_flags_the_method_does_not_read(extra, refused, tmp_path, capsys):
     """A flag the chosen method's record does not read is refused (exit 2, the flag and the method named) before

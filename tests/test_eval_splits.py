@@ -1,4 +1,5 @@
-"""``sray eval --split``: zero-shot scores on several splits side by side with the gap from the first split."""
+"""``sray eval --split``: zero-shot scores on several splits side by side with the gap from the first split;
+``--calibrate``: the fast rule's temperature fitted on validation rooms and used for every split."""
 
 from __future__ import annotations
 
@@ -45,7 +46,7 @@ def test_eval_scores_each_split_and_the_same_data_has_no_gap(tiny_checkpoint, ti
     args = ["eval", "--checkpoint", str(tiny_checkpoint), "--data", str(tiny_shards), "--n-source", "3",
             "--stride", "4", "--out", str(out), "--tracking-uri", mlflow_uri]
     assert main([*args, "--split", "again"]) == 2 and "NAME=DIR" in capsys.readouterr().err
-    assert main([*args, "--split", f"again={tiny_shards}"]) == 0
+    assert main([*args, "--split", f"again={tiny_shards}", "--calibrate", str(tiny_shards)]) == 0
     printed = capsys.readouterr().out
     summary = json.loads((out / "splits.json").read_text())
     main_report = json.loads((out / "metrics.json").read_text())
@@ -54,3 +55,7 @@ def test_eval_scores_each_split_and_the_same_data_has_no_gap(tiny_checkpoint, ti
     assert summary["splits"]["again"]["miou"] == pytest.approx(100 * main_report["mean"]["dataset_level"]["miou"])
     assert summary["splits"]["again"]["gap_miou"] == pytest.approx(0.0, abs=1e-9)
     assert "largest gap: 0.0 mIoU points (data -> again)" in printed
+    calibration = json.loads((out / "calibration.json").read_text())
+    assert calibration["rays"] > 0 and calibration["nll_fitted"] <= calibration["nll_at_1"] + 1e-9
+    for report in (main_report, again):  # both splits scored with the fitted temperature
+        assert f"at temperature {calibration['temperature']:.3g}" in report["protocol"]["render"]
