@@ -14,11 +14,11 @@ from sray.model.fast_render import FastRender, needs_fine, render_rays_fast
 def test_calibration_recovers_a_known_temperature(true_t: float) -> None:
     """Labels drawn from softmax(z / T): the fitted temperature of z is T, and it beats T = 1 on NLL."""
     g = torch.Generator().manual_seed(0)
-    z = 3.0 * torch.randn(20000, 6, generator=g)
+    z = 3.0 * torch.randn(6000, 6, generator=g)
     labels = torch.multinomial(torch.softmax(z / true_t, dim=-1), 1, generator=g).squeeze(-1)
-    labels[:500] = 255  # ignored
+    labels[:200] = 255  # ignored
     fitted = fit_temperature(z, labels)
-    assert fitted == pytest.approx(true_t, rel=0.05)
+    assert fitted == pytest.approx(true_t, rel=0.08)
     keep = labels != 255
     assert nll(z[keep], labels[keep], fitted) <= nll(z[keep], labels[keep], 1.0) + 1e-6
 

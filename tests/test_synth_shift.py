@@ -50,7 +50,7 @@ def _corner_blocks(plan) -> int:
 
 @pytest.fixture(scope="module")
 def training_plans() -> list:
-    return [plan_scene(scene_seed(3, "train", i), 20) for i in range(40)]
+    return [plan_scene(scene_seed(3, "train", i), 20) for i in range(24)]
 
 
 def test_training_rooms_never_sample_a_held_out_region(training_plans: list) -> None:
@@ -93,11 +93,12 @@ def _blue_share(split: str) -> float:
     OpenCV hue 90-135 (of 180) and saturation >= 64 (of 255)."""
     hits = []
     for i in range(4):
-        scene = generate_scene("s", scene_seed(9, "test", i, split), 20, 18, 24, "test", split=split)
-        for view in list(scene.views())[::5]:
-            hsv = cv2.cvtColor(view.rgb, cv2.COLOR_RGB2HSV)
+        plan = plan_scene(scene_seed(9, "test", i, split), 20, split=split)
+        for k in range(0, 20, 5):
+            rgb, _, label = render_view(plan.render_scene, intrinsics(18, 24), plan.poses[k], (18, 24), view_index=k)
+            hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
             blue = (hsv[..., 0] >= 90) & (hsv[..., 0] < 135) & (hsv[..., 1] >= 64)
-            hits.append(blue[view.label != IGNORE_ID])
+            hits.append(blue[label != IGNORE_ID])
     return float(np.concatenate(hits).mean())
 
 
@@ -146,12 +147,12 @@ def test_appearance_randomisation_varies_surfaces_rooms_and_views_inside_the_tra
         rng = np.random.default_rng(0)
         hues = {round(_hsv(mat.hsv(rng, (0.2, 0.2), (0.5, 0.5), (0.5, 0.5)))[0], 3) for _ in range(20)}
     assert len(hues) > 10 and all(0.09 < h < 0.31 for h in hues)  # per surface: around the box, up to ±0.1
-    plans = [plan_scene(scene_seed(4, "train", i), 20, randomise=1.0) for i in range(12)]
+    plans = [plan_scene(scene_seed(4, "train", i), 20, randomise=1.0) for i in range(8)]
     for plan in plans:
         assert _held_out_colours(plan) == 0 and not any(mat.held_out_texture(m) for m in _materials(plan))
         assert abs(math.log2(plan.render_scene.exposure)) <= domains.TRAIN_EXPOSURE_EV
     tints = {plan.render_scene.tint for plan in plans}
-    assert len(tints) == 12 and all(2 ** -0.2 <= g <= 2 ** 0.2 for t in tints for g in t)  # per room
+    assert len(tints) == 8 and all(2 ** -0.2 <= g <= 2 ** 0.2 for t in tints for g in t)  # per room
     scene, pose = plans[0].render_scene, plans[0].poses[0]
     K = intrinsics(18, 24)
     a = render_view(scene, K, pose, (18, 24), view_index=0)[0].astype(np.float64)
