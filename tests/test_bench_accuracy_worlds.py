@@ -55,3 +55,29 @@ def test_cells_without_their_own_room_count_train_on_the_preset_world(tmp_path: 
     assert cell_shards(HOUR, TINY, tmp_path / "shards", tmp_path) == (tmp_path / "shards", None)
     same = dataclasses.replace(TINY, world=dataclasses.replace(TINY.world, train_scenes=198))
     assert cell_shards(ROOMS_198, same, tmp_path / "shards", tmp_path) == (tmp_path / "shards", None)
+
+
+def test_split_scores_evaluate_each_split_world_and_store_them_side_by_side(tmp_path: Path, monkeypatch) -> None:
+    """``score_splits`` scores the checkpoint on one world per split (its test rooms drawn from that split) with the
+    preset's protocol and stores the side-by-side summary, in-distribution first (the evaluation is stubbed: what is
+    checked is which shards it is given)."""
+    import json
+
+    seen: dict[str, str] = {}
+
+    def fake_eval(checkpoint, shards, scenes, out_dir, n_source, tracking_uri, fast):
+        splits = {e.meta["extra"]["split"] for e in read_manifest(shards).scenes.values()}
+        assert len(splits) == 1 and n_source == TINY.eval_sources and fast is TINY.eval_fast
+        seen[out_dir.name] = splits.pop()
+        miou = {"in-distribution": 0.5, "validation": 0.5, "appearance-shift": 0.3, "geometry-shift": 0.4}[
+            seen[out_dir.name]]
+        level = {"miou": miou, "total_acc": 0.8, "class_avg_acc": 0.6}
+        return {"scenes": {"s": {}}, "wall_s": 1.0, "mean": {"n_views": 4, "dataset_level": level}}
+
+    monkeypatch.setattr(accuracy_worlds, "evaluate_checkpoint", fake_eval)
+    summary = accuracy_worlds.score_splits(TINY, tmp_path / "ckpt", tmp_path, "sqlite:///x.db", rooms=1)
+    assert seen == {"zero_shot": "in-distribution", "validation": "validation",
+                    "zero_shot_appearance": "appearance-shift", "zero_shot_geometry": "geometry-shift"}
+    assert json.loads((tmp_path / "splits" / "summary.json").read_text())["reference"] == "zero_shot"
+    assert summary["largest_gap"]["split"] == "zero_shot_appearance"
+    assert summary["largest_gap"]["points"] == pytest.approx(20.0)

@@ -33,21 +33,23 @@ from sray.jobs.bench.accuracy_fleet import compared_methods, fleet_config, run_c
 from sray.jobs.bench.accuracy_plan import PRESETS, Cell, Preset, headline_variant
 from sray.jobs.bench.accuracy_step_cost import measure_step_times, read_step_times, store_step_times
 from sray.jobs.bench.accuracy_tables import by_variant, write_tables
-from sray.jobs.bench.accuracy_worlds import make_bench_world
+from sray.jobs.bench.accuracy_worlds import make_bench_world, score_splits
 from sray.jobs.bench.doc import machine_line
 from sray.jobs.bench.probes import resolve_device
+from sray.platform.eval.split_gap import format_splits
 
 
 def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] | None = None,
                            max_minutes: float | None = None, fleet: bool = True,
                            presets: dict[str, Preset] | None = None, step_times: bool = False,
-                           segmenter: Path | None = None) -> dict[str, dict]:
+                           segmenter: Path | None = None, splits: bool = False) -> dict[str, dict]:
     """Run the missing cells (``cells``: a subset of the plan; default all; a cell that raises is recorded
     and the next ones run) and, when the headline model is stored, the fleet of every registered method whose
     requirements are met (``segmenter``: the 2D segmenter ``2d-transfer`` starts from; checked before any cell
     runs); with ``step_times``, time a pretraining step of every stored variant side by side; then rewrite the
-    tables in ``doc`` from every stored cell, fleet result and the stored step times. No new cell starts after
-    ``max_minutes``. Returns the stored cells by key."""
+    tables in ``doc`` from every stored cell, fleet result and the stored step times; with ``splits``, score the
+    headline model on the preset world's evaluation splits side by side (``accuracy_worlds.score_splits``). No new
+    cell starts after ``max_minutes``. Returns the stored cells by key."""
     p = (presets or PRESETS)[preset]
     out = out.resolve()
     tracking_uri = f"sqlite:///{out / 'mlflow.db'}"
@@ -73,6 +75,8 @@ def run_accuracy_benchmark(preset: str, out: Path, doc: Path, cells: list[Cell] 
     if fleet and fleet_cell is not None and not over:
         run_comparison(cfg, methods, Path(stored[fleet_cell.key]["checkpoint"]), shards, scenes, out / "fleet",
                        tracking_uri)
+    if splits and fleet_cell is not None:
+        print(format_splits(score_splits(p, Path(stored[fleet_cell.key]["checkpoint"]), out, tracking_uri)), flush=True)
     if step_times and stored:
         _time_steps(p, stored, out)
     write_tables(preset, p, stored, out / "fleet", doc, read_step_times(out), cell_errors(out))

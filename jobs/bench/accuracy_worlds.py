@@ -13,6 +13,8 @@ from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.shards.manifest import MANIFEST_NAME, read_manifest
 from sray.data_tools.synth.world import World, evaluation_worlds, make_world
 from sray.jobs.bench.accuracy_plan import VARIANT_SETTINGS, Preset
+from sray.platform.eval.split_gap import split_summary
+from sray.platform.eval.zero_shot import evaluate_checkpoint
 from sray.platform.train.cpu_clock import process_tree_cpu_seconds
 
 WORLDS_DIR = "worlds"
@@ -82,3 +84,15 @@ def split_shards(p: Preset, out: Path, rooms: int = 16) -> dict[str, Path]:
     ``out/splits/<name>`` and reused after; what ``sray eval --split`` and the study specs score."""
     return {name: make_bench_world(world, out / SPLITS_DIR / name, progress=False)
             for name, world in evaluation_worlds(p.world, rooms).items()}
+
+
+def score_splits(p: Preset, checkpoint: Path, out: Path, tracking_uri: str, rooms: int = 16) -> dict:
+    """Zero-shot scores of ``checkpoint`` on the preset world's evaluation splits (:func:`split_shards`), with the
+    preset's evaluation protocol, side by side (``split_gap.split_summary``, in-distribution first), written to
+    ``out/splits/summary.json``; each split's reports under ``out/splits/eval/<name>``."""
+    reports = {name: evaluate_checkpoint(checkpoint, shards, None, out / SPLITS_DIR / "eval" / name,
+                                         n_source=p.eval_sources, tracking_uri=tracking_uri, fast=p.eval_fast)
+               for name, shards in split_shards(p, out, rooms).items()}
+    summary = split_summary(reports)
+    atomic_write_json(out / SPLITS_DIR / "summary.json", summary)
+    return summary

@@ -92,6 +92,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     accuracy.add_argument("--max-minutes", type=float, default=None,
                           help="start no new cell after this many minutes (the tables are written either way)")
     accuracy.add_argument("--no-fleet", action="store_true", help="skip the finetune comparison")
+    accuracy.add_argument("--splits", action="store_true",
+                          help="also score the headline model zero-shot on 16 in-distribution, validation, appearance- "
+                               "and geometry-shifted rooms side by side (OUT/splits/summary.json, docs/data.md)")
     accuracy.add_argument("--segmenter", type=Path, default=None,
                           help="2D segmenter folder (`sray bench segmenter`): the fleet comparison then includes "
                                "2d-transfer, whose requirement it is (every registered method whose requirements are "
@@ -176,7 +179,7 @@ def _bench_accuracy(args: argparse.Namespace) -> int:
         return 2
     out = args.out or Path("outputs/bench-accuracy") / args.preset
     run_accuracy_benchmark(args.preset, out, args.doc, cells, args.max_minutes, fleet=not args.no_fleet,
-                           step_times=args.step_times, segmenter=args.segmenter)
+                           step_times=args.step_times, segmenter=args.segmenter, splits=args.splits)
     failed = cell_errors(out)
     if failed:
         print(f"sray bench accuracy: cells {', '.join(failed)} failed (errors in the tables); a re-run runs them "
