@@ -25,6 +25,7 @@ from pathlib import Path
 import torch
 
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
+from sray.platform.common.machine import describe_machine
 from sray.jobs.bench.doc_blocks import (  # noqa: F401  (markdown_table: for the benches' own tables)
     markdown_table,
     parse_blocks,
@@ -57,6 +58,9 @@ class TableRecord:
     blocks: list[dict]
     """``doc_blocks.parse_blocks`` of the table's Markdown: tables as header/align/rows, text between them."""
     notes: str = ""
+    machine_descriptor: dict | None = None
+    """``describe_machine()`` of the machine that measured it (CPU model, cores, device, the probe's steps per CPU
+    second); None for a table stored before machines were described."""
 
 
 def device_kind() -> str:
@@ -116,7 +120,8 @@ def record(bench: Bench, title: str, table_markdown: str, doc: Path = DEFAULT_DO
     command, table_markdown, notes = portable([command, table_markdown, notes], _repo_root(doc))
     entry = TableRecord(title=title, command=command, machine=machine_line(),
                         measured_utc=_dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%MZ"),
-                        blocks=parse_blocks(table_markdown), notes=notes.strip())
+                        blocks=parse_blocks(table_markdown), notes=notes.strip(),
+                        machine_descriptor=describe_machine())
     print(f"\n### {title}\n\n{render_blocks(entry.blocks)}\n\n{entry.notes}\n".rstrip() + "\n")
     return store_table(bench, entry, doc, kind, replaces)
 
