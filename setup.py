@@ -7,7 +7,7 @@ sub-folder) is installed as ``sray.<folder>``. Metadata and dependencies live in
 
 from setuptools import find_namespace_packages, setup
 
-FOLDERS = ("model", "data_tools", "platform", "jobs")
+FOLDERS = ("model", "data_tools", "platform", "jobs", "lab")
 
 packages: list[str] = []
 package_dir: dict[str, str] = {}

@@ -1,13 +1,15 @@
-"""Benchmark results: each benchmark stores its tables as data beside its charts and renders one section of
-``docs/benchmarks.md`` per (benchmark, device) from that data.
+"""Benchmark results: each benchmark stores its tables as data beside its charts and renders one section per
+(benchmark, device) from that data, on the benchmark's own page.
 
 A benchmark's folder on one kind of device is ``<doc folder>/benchmarks/<bench>/<device>/``: its charts and
 ``tables.json``, which holds every table it measured there (header, alignment and rows as cell strings,
 the text around them, the notes, the command that made it, the machine and when). :func:`record` replaces
 the table of the same title in that file (the benchmark's other tables stay), then rewrites the section
-``## <benchmark> (<device>)`` of the document from the file: in place when it is there, else at the end.
-The document's other sections, generated or written by hand, are kept as they are. Commands and notes
-name paths relative to the repository, or ``OUT/…`` for folders outside it.
+``## <benchmark> (<device>)`` from the file: in place when it is there, else at the end. The section goes into
+the document ``doc``, or, when ``doc`` is an index (it holds :data:`INDEX_MARKER`, as docs/benchmarks.md does),
+into the benchmark's page ``benchmarks/<bench>.md`` beside it. A page's other sections, generated or written by
+hand, are kept as they are. Commands and notes name paths relative to the repository, or ``OUT/…`` for folders
+outside it; links in the notes are written relative to ``doc``'s folder and rebased onto the page's.
 """
 
 from __future__ import annotations
@@ -30,11 +32,14 @@ from sray.jobs.bench.doc_blocks import (  # noqa: F401  (markdown_table: for the
     markdown_table,
     parse_blocks,
     portable,
+    rebase_links,
     render_blocks,
 )
 
 DEFAULT_DOC = Path("docs/benchmarks.md")
 DATA_FILE = "tables.json"
+INDEX_MARKER = "<!-- benchmarks index: each benchmark's sections are on its page benchmarks/<benchmark>.md -->"
+"""The line that makes a document an index: :func:`record` writes a benchmark's section to its page, not there."""
 
 
 @dataclass(frozen=True)
@@ -76,6 +81,22 @@ def device_slug(kind: str | None = None) -> str:
 def bench_dir(doc: Path, bench: Bench, kind: str | None = None) -> Path:
     """The folder of ``bench``'s data and charts on this (or ``kind``) device, beside ``doc``."""
     return Path(doc).parent / "benchmarks" / bench.slug / device_slug(kind)
+
+
+def bench_page(doc: Path, bench: Bench) -> Path:
+    """The document ``bench``'s section goes into: ``doc`` itself, or its page ``benchmarks/<slug>.md`` beside
+    ``doc`` when ``doc`` is an index (holds :data:`INDEX_MARKER`)."""
+    doc = Path(doc)
+    if doc.exists() and INDEX_MARKER in doc.read_text():
+        return doc.parent / "benchmarks" / f"{bench.slug}.md"
+    return doc
+
+
+def page_header(bench: Bench, page: Path, doc: Path) -> str:
+    """The first lines of a new page of ``bench``: its title and a link back to the index ``doc``."""
+    index = os.path.relpath(doc, page.parent)
+    return (f"# {bench.title}\n\nGenerated from the data beside its charts by the command each table names; listed in "
+            f"[the benchmarks index]({index}).\n")
 
 
 def machine_line() -> str:
@@ -139,8 +160,9 @@ def store_table(bench: Bench, entry: TableRecord, doc: Path = DEFAULT_DOC, kind:
     slot = next((i for i, t in enumerate(tables) if t["title"] in titles), len(tables))
     tables = data["tables"] = [*tables[:slot], asdict(entry), *(t for t in tables[slot:] if t["title"] not in titles)]
     atomic_write_json(data_path, data)
-    section = render_section(bench, kind, [TableRecord(**t) for t in tables], doc)
-    replace_section(doc, section_title(bench, kind), section)
+    page = bench_page(doc, bench)
+    section = render_section(bench, kind, [TableRecord(**t) for t in tables], doc, page)
+    replace_section(page, section_title(bench, kind), section, page_header(bench, page, doc) if page != doc else _HEADER)
     return section
 
 
@@ -149,21 +171,32 @@ def section_title(bench: Bench, kind: str) -> str:
     return f"{bench.title} ({kind})"
 
 
-def render_section(bench: Bench, kind: str, tables: list[TableRecord], doc: Path) -> str:
-    """The section's Markdown: a link to its data, then per table its heading, command and machine (once
-    for consecutive tables of one run), its tables and text, and its notes (once after the last of
-    consecutive tables sharing them)."""
-    data_link = os.path.relpath(bench_dir(doc, bench, kind) / DATA_FILE, Path(doc).parent)
-    parts = [f"## {section_title(bench, kind)}", f"Its data: [`{data_link}`]({data_link})."]
+def render_section(bench: Bench, kind: str, tables: list[TableRecord], doc: Path, page: Path | None = None,
+                   data_file: str = DATA_FILE, title: str | None = None) -> str:
+    """The section's Markdown on ``page`` (default ``doc``): a link to its data (``data_file`` in the benchmark's
+    folder), then per table its heading, command and machine (once for consecutive tables of one run), its tables
+    and text, and its notes (once after the last of consecutive tables sharing them), their links rebased from
+    ``doc``'s folder onto ``page``'s. ``title``: the section's heading (default :func:`section_title`)."""
+    page = Path(page or doc)
+    data_link = os.path.relpath(bench_dir(doc, bench, kind) / data_file, page.parent)
+    parts = [f"## {title or section_title(bench, kind)}", f"Its data: [`{data_link}`]({data_link})."]
     for i, t in enumerate(tables):
         parts.append(f"### {t.title}")
         if i == 0 or (t.command, t.machine) != (tables[i - 1].command, tables[i - 1].machine):
-            parts.append(f"Command: `{t.command}` — {t.machine}")
+            parts.append(f"Command: `{t.command}` — {t.machine}{described(t.machine_descriptor)}")
         if t.blocks:
-            parts.append(render_blocks(t.blocks))
+            parts.append(rebase_links(render_blocks(t.blocks), Path(doc).parent, page.parent))
         if t.notes and (i == len(tables) - 1 or tables[i + 1].notes != t.notes):
-            parts.append(t.notes)
+            parts.append(rebase_links(t.notes, Path(doc).parent, page.parent))
     return "\n\n".join(parts) + "\n"
+
+
+def described(descriptor: dict | None) -> str:
+    """The machine descriptor as a clause of the command line ('' for a table stored without one)."""
+    if not descriptor:
+        return ""
+    return (f"; {descriptor['cpu_model']}, {descriptor['cores']} cores, {descriptor['device']}, "
+            f"{descriptor['ray_steps_per_cpu_second']} probe steps per CPU second")
 
 
 def _split_sections(text: str) -> tuple[str, list[str]]:

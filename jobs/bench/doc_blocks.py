@@ -73,6 +73,18 @@ def render_blocks(blocks: list[dict]) -> str:
     return "\n\n".join(parts)
 
 
+_LINK = re.compile(r"(\]\()([^)\s#:]+)(\))")
+
+
+def rebase_links(markdown: str, from_dir: Path, to_dir: Path) -> str:
+    """``markdown`` with each relative link target (``](path)``: no scheme, no bare anchor) written relative to
+    ``from_dir`` rewritten relative to ``to_dir``; unchanged when the two folders are one."""
+    if os.path.abspath(from_dir) == os.path.abspath(to_dir):
+        return markdown
+    return _LINK.sub(lambda m: m.group(1) + os.path.relpath(os.path.join(from_dir, m.group(2)), to_dir) + m.group(3),
+                     markdown)
+
+
 _ABSOLUTE = re.compile(r"(?:(?<=^)|(?<=[\s`'\"(=,])|(?<=:///))(/[\w.@+~-]+(?:/[\w.@+~-]*)+)")
 
 
