@@ -120,13 +120,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     step.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     step.set_defaults(func=_bench_recipe_step)
 
-    cards = kinds.add_parser("recipe-cards", help="regenerate the recipe cards (README and docs/benchmarks.md) from "
+    cards = kinds.add_parser("recipe-cards", help="regenerate the recipe cards (their benchmark page) from "
                              "stored results: time, memory and accuracy of every recipe on every machine")
     cards.add_argument("--results", type=Path, required=True, metavar="LIST_JSON",
                        help="JSON list of each recipe's stored results per machine (format: docs/benchmarks.md, "
                             "'Recipe cards'); paths relative to its folder")
-    cards.add_argument("--readme", type=Path, default=Path("README.md"),
-                       help="file whose recipe-cards markers enclose the table")
+    cards.add_argument("--readme", type=Path, default=None,
+                       help="also write the table between this file's recipe-cards markers (the repository's README "
+                            "publishes its cards with `python -m sray.lab.publish` instead)")
     cards.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     cards.set_defaults(func=_bench_recipe_cards)
 

@@ -162,7 +162,8 @@ def store_table(bench: Bench, entry: TableRecord, doc: Path = DEFAULT_DOC, kind:
     atomic_write_json(data_path, data)
     page = bench_page(doc, bench)
     section = render_section(bench, kind, [TableRecord(**t) for t in tables], doc, page)
-    replace_section(page, section_title(bench, kind), section, page_header(bench, page, doc) if page != doc else _HEADER)
+    header = page_header(bench, page, doc) if page != doc else _HEADER
+    replace_section(page, section_title(bench, kind), section, header)
     return section
 
 

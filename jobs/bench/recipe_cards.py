@@ -1,6 +1,7 @@
 """``sray bench recipe-cards``: one table of every recipe of ``RECIPES`` on every machine, read from stored results,
-written into the README between :data:`README_START` and :data:`README_END` and into docs/benchmarks.md (section
-"Recipe cards (all machines)", stored as data like every benchmark table).
+stored as data like every benchmark table and written into its page (section "Recipe cards (all machines)"), and with
+``--readme`` between :data:`README_START` and :data:`README_END` of that file. The repository's README publishes its
+cards from the stored table with ``python -m sray.lab.publish``.
 
 The results are named in a JSON list (paths relative to the list's folder)::
 
@@ -190,9 +191,9 @@ def replace_between(path: Path, block: str, start: str = README_START, end: str 
     atomic_write_text(Path(path), f"{head}{start}\n{block.strip()}\n{end}{tail}")
 
 
-def run_recipe_cards(listing: Path, readme: Path, doc: Path = DEFAULT_DOC) -> str:
-    """Read the results ``listing`` names, write the cards into ``readme`` (between the markers) and into ``doc``'s
-    section; returns the table. ValueError (ResultError included) names the file and field at fault."""
+def run_recipe_cards(listing: Path, readme: Path | None, doc: Path = DEFAULT_DOC) -> str:
+    """Read the results ``listing`` names, write the cards into ``readme`` (between the markers; None: no README) and
+    into ``doc``'s section; returns the table. ValueError (ResultError included) names the file and field at fault."""
     machines, runs = read_listing(listing)
     render_setting = todays_settings(default_settings())["sray eval"]
     if render_setting is None:
@@ -202,8 +203,10 @@ def run_recipe_cards(listing: Path, readme: Path, doc: Path = DEFAULT_DOC) -> st
     notes = "\n\n".join([*missing, sources(render_setting, _speed_commands(runs, render_setting))])
     # the listing's own path joins the paths OUT is made of: a single result outside the repository keeps its path
     # below the listing's folder instead of shrinking to OUT/<file name>
-    [readme_text, _] = portable([f"{table}\n\n{notes}", os.path.abspath(listing)], Path(os.path.abspath(readme)).parent)
-    replace_between(readme, readme_text)  # first: a README without the markers leaves both files as they were
+    if readme is not None:
+        [readme_text, _] = portable([f"{table}\n\n{notes}", os.path.abspath(listing)],
+                                    Path(os.path.abspath(readme)).parent)
+        replace_between(readme, readme_text)  # first: a README without the markers leaves both files as they were
     record(CARDS, CARDS.title, table, doc, notes, kind=KIND)
     return table
 
