@@ -4,7 +4,6 @@ and the text of a Markdown file that lies outside them."""
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 MEASURED = [
     re.compile(r"\d+\.\d+\s?%"),                                   # a decimal percentage: 53.94%
@@ -31,10 +30,10 @@ def generated_spans(text: str) -> list[tuple[int, int]]:
     return spans
 
 
-def hand_written_lines(path: Path, text: str) -> list[tuple[int, str]]:
-    """(line number, line) of ``text`` written by hand: outside generated blocks; on a generated benchmark page
-    (``docs/benchmarks/<name>.md``) only its ``## Reading`` section."""
-    if path.parent.name == "benchmarks" and path.parent.parent.name == "docs":
+def hand_written_lines(text: str, generated_page: bool = False) -> list[tuple[int, str]]:
+    """(line number, line) of ``text`` written by hand: outside generated blocks; on a ``generated_page`` (a
+    benchmark's page, ``docs/benchmarks/<name>.md``) only its ``## Reading`` section."""
+    if generated_page:
         start = text.find("\n## Reading\n")
         spans = [(0, len(text))] if start < 0 else [(0, start)]
     else:
