@@ -12,7 +12,8 @@ from number_scan import hand_written_lines, measured_figures
 
 from sray.lab.publish.blocks import BlockError, blocks, fill
 from sray.lab.publish.figures import CARDS_DATA, H100_REPORT, H200_REPORT, RENDERERS
-from sray.lab.publish.pages import slugs
+from sray.jobs.bench import doc as bench_doc
+from sray.lab.publish.pages import render_page, slugs
 from sray.lab.publish.publish import documents, publish, published
 from sray.lab.publish.results import RESULTS, mean_sd
 
@@ -114,6 +115,21 @@ def test_a_readme_figure_edited_by_hand_fails(tmp_path: Path) -> None:
     assert _stale(repo) == []  # outside every block: only the scan can see it
     lines = hand_written_lines(readme.read_text())
     assert [f for _, line in lines for f in measured_figures(line)] == ["57.10%"]
+
+
+def test_a_page_renders_as_the_benchmark_wrote_it(tmp_path: Path, monkeypatch) -> None:
+    """``sray bench`` writing through the index and the publisher rendering the page from the stored data agree
+    byte for byte, so a rerun of a benchmark never leaves its page out of date."""
+    monkeypatch.setattr(bench_doc, "describe_machine", lambda: {"cpu_model": "X", "cores": 2, "device": "cpu",
+                                                                 "ray_steps_per_cpu_second": 1.0})
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    (docs / "benchmarks.md").write_text(f"# Benchmarks\n\n{bench_doc.INDEX_MARKER}\n")
+    bench = bench_doc.Bench("loader", "Shard loader")
+    bench_doc.record(bench, "Throughput", "| workers | samples/s |\n|---:|---:|\n| 0 | 1 |", docs / "benchmarks.md",
+                     "![c](benchmarks/loader/cpu-only/c.png)")
+    bench_doc.record(bench, "Bytes", "| view | bytes |\n|---|---:|\n| a | 2 |", docs / "benchmarks.md")
+    assert render_page(docs, "loader") == (docs / "benchmarks" / "loader.md").read_text()
 
 
 def test_headline_statistics_are_mean_and_sample_sd() -> None:

@@ -28,6 +28,8 @@ def data_files(docs: Path, slug: str) -> list[Path]:
 def slugs(docs: Path) -> list[str]:
     """Every benchmark with stored tables under ``docs/benchmarks/``."""
     root = Path(docs) / "benchmarks"
+    if not root.is_dir():
+        return []
     return sorted(p.name for p in root.iterdir() if p.is_dir() and data_files(docs, p.name))
 
 
