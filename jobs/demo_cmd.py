@@ -15,7 +15,8 @@ budgets; the demo's stored runs are in study ``demo-recipe``, listed in docs/ben
 TRAIN_SCENES = 19
 """Default of ``--train-scenes``. The generator cycles room types over the scene index, so 4 + 5k training rooms keep
 the two test rooms of the 4-room world file for file; 19 rooms are quick to generate, check and shard, and with the
-synth-demo recipe they lift zero-shot mIoU where 4 rooms do not (study ``demo-recipe``, listed in docs/benchmarks.md)."""
+synth-demo recipe they lift zero-shot mIoU where 4 rooms do not (study ``demo-recipe``, listed in
+docs/benchmarks.md)."""
 FLEET_SCENES = 1
 """Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (minutes of wall time on a
 2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of
