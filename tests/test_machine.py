@@ -3,12 +3,14 @@ probe's training steps per CPU second (its content and arithmetic; never its spe
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
 import pytest
 import torch
 
+from sray.jobs.bench import speed_store
 from sray.platform.common import machine
 
 
@@ -63,3 +65,14 @@ def test_describe_machine_names_this_machine(monkeypatch: pytest.MonkeyPatch) ->
     assert first == {"cpu_model": machine.cpu_model(), "cores": len(os.sched_getaffinity(0)),
                      "device": torch.cuda.get_device_name(0) if torch.cuda.is_available() else "cpu",
                      "ray_steps_per_cpu_second": 0.123}
+
+
+def test_a_stored_speed_row_carries_the_machine(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``sray bench speed-accuracy --store`` keeps each row with the descriptor of the machine that measured it, and
+    reads the rows back unchanged."""
+    described = {"cpu_model": "Some CPU", "cores": 4, "device": "cpu", "ray_steps_per_cpu_second": 2.5}
+    monkeypatch.setattr(speed_store, "describe_machine", lambda: described)
+    key = {"checkpoint": "c", "setting": {"name": "fast s8 c0.9"}}
+    path = speed_store.store_rows(tmp_path, key, [{"miou": 0.5}])
+    assert json.loads(path.read_text())["machine"] == described
+    assert speed_store.stored_rows(tmp_path, key) == [{"miou": 0.5}]

@@ -27,7 +27,6 @@ from pathlib import Path
 import torch
 
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
-from sray.platform.common.machine import describe_machine
 from sray.jobs.bench.doc_blocks import (  # noqa: F401  (markdown_table: for the benches' own tables)
     markdown_table,
     parse_blocks,
@@ -35,6 +34,7 @@ from sray.jobs.bench.doc_blocks import (  # noqa: F401  (markdown_table: for the
     rebase_links,
     render_blocks,
 )
+from sray.platform.common.machine import describe_machine
 
 DEFAULT_DOC = Path("docs/benchmarks.md")
 DATA_FILE = "tables.json"
