@@ -25,14 +25,14 @@ def test_cpu_model_reads_the_first_model_name(tmp_path: Path) -> None:
 
 
 def test_probe_counts_steps_per_cpu_second_and_keeps_the_rng(monkeypatch: pytest.MonkeyPatch) -> None:
-    """With a CPU clock that advances 0.25 s per read, 4 timed steps are 4 / 0.25 steps per CPU second; the
-    caller's random stream is untouched by the probe."""
+    """With a CPU clock that advances 0.25 s between its two reads, 2 timed steps are 2 / 0.25 steps per CPU second;
+    the caller's random stream is untouched by the probe."""
     clock = iter([10.0, 10.25])
     monkeypatch.setattr(machine.time, "process_time", lambda: next(clock))
     torch.manual_seed(123)
     expected_next = torch.rand(3)
     torch.manual_seed(123)
-    assert machine.probe_steps_per_cpu_second(steps=4) == pytest.approx(16.0)
+    assert machine.probe_steps_per_cpu_second(steps=2) == pytest.approx(8.0)
     torch.testing.assert_close(torch.rand(3), expected_next, rtol=0, atol=0)
 
 
@@ -51,11 +51,21 @@ def test_probe_batch_is_fixed_and_inside_the_images() -> None:
     assert int(a["label"].max()) < machine.PROBE_MODEL.n_classes
 
 
+def test_the_probe_runs_in_a_fresh_single_threaded_process_or_says_it_failed(monkeypatch, capsys) -> None:
+    """The fresh process returns a positive, finite rate; a process that cannot run the probe gives None and a
+    warning naming the field that will be null."""
+    rate = machine.probe_in_fresh_process(steps=1)
+    assert rate is not None and 0 < rate < float("inf")
+    monkeypatch.setattr(machine.sys, "executable", "/nonexistent/python")
+    assert machine.probe_in_fresh_process(steps=1) is None
+    assert "ray_steps_per_cpu_second as null" in capsys.readouterr().err
+
+
 def test_describe_machine_names_this_machine(monkeypatch: pytest.MonkeyPatch) -> None:
     """The descriptor holds exactly the four agreed fields: this CPU's model, the cores this process may use, the
     device, and the probe's figure rounded to 3 significant digits; it probes once per process."""
     calls = []
-    monkeypatch.setattr(machine, "probe_steps_per_cpu_second", lambda: calls.append(1) or 0.123456)
+    monkeypatch.setattr(machine, "probe_in_fresh_process", lambda: calls.append(1) or 0.123456)
     machine.describe_machine.cache_clear()
     try:
         first, second = machine.describe_machine(), machine.describe_machine()

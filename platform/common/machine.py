@@ -4,8 +4,10 @@ of a fixed probe one CPU second buys on it.
 Results measured on two machines compare only once the machines are described by what they are. The throughput
 comes from :func:`probe_steps_per_cpu_second`: the ``synth-cpu-hour`` recipe's network (:data:`PROBE_MODEL`) doing its
 ray-training step (encode the sources, render the rays, loss, backward, Adam) on one fixed, seeded tiny batch
-(:data:`PROBE_RAYS` rays, :data:`PROBE_VIEWS` source views of :data:`PROBE_HW`), timed in CPU seconds of this process
-(all its threads), on the CPU, after one untimed warm-up step. A recipe's steps per CPU second on real data scale with
+(:data:`PROBE_RAYS` rays, :data:`PROBE_VIEWS` source views of :data:`PROBE_HW`), timed in CPU seconds after one
+untimed warm-up step, on the CPU. :func:`describe_machine` runs it in a fresh process on one thread
+(:func:`probe_in_fresh_process`): on a loaded machine the idle threads of a multi-threaded run spin and count as CPU
+time, and the caller's own torch settings stay as they were. A recipe's steps per CPU second on real data scale with
 it; the probe is fixed so that its figure from any two machines compares, whatever the recipes become.
 """
 
@@ -14,6 +16,8 @@ from __future__ import annotations
 import functools
 import os
 import platform as _stdlib_platform
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -102,9 +106,26 @@ def probe_steps_per_cpu_second(steps: int = PROBE_STEPS) -> float:
         torch.random.set_rng_state(state)
 
 
+def probe_in_fresh_process(steps: int = PROBE_STEPS, timeout_s: float = 300.0) -> float | None:
+    """:func:`probe_steps_per_cpu_second` in a fresh Python process with one torch thread; None (with a warning on
+    stderr) when that process fails, so a result is stored with an unknown throughput rather than not at all."""
+    code = f"from sray.platform.common.machine import probe_steps_per_cpu_second as p; print(p({int(steps)}))"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    try:
+        done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                              timeout=timeout_s, check=True)
+        return float(done.stdout.strip().splitlines()[-1])
+    except (subprocess.SubprocessError, OSError, ValueError, IndexError) as error:
+        print(f"sray.platform.common.machine: the throughput probe failed ({error}); the machine descriptor stores "
+              "ray_steps_per_cpu_second as null", file=sys.stderr)
+        return None
+
+
 @functools.lru_cache(maxsize=1)
-def describe_machine() -> dict[str, str | int | float]:
+def describe_machine() -> dict[str, str | int | float | None]:
     """This machine for a stored result: ``{"cpu_model", "cores", "device", "ray_steps_per_cpu_second"}`` (the
-    probe's figure rounded to 3 significant digits). Measured once per process."""
+    probe's figure, one thread, rounded to 3 significant digits; null when the probe could not run). Measured once
+    per process."""
+    rate = probe_in_fresh_process()
     return {"cpu_model": cpu_model(), "cores": usable_cores(), "device": device_name(),
-            "ray_steps_per_cpu_second": float(f"{probe_steps_per_cpu_second():.3g}")}
+            "ray_steps_per_cpu_second": None if rate is None else float(f"{rate:.3g}")}
