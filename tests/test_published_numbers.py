@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from number_scan import hand_written_lines, measured_figures
 
+from sray.lab.publish.__main__ import main as publish_main
 from sray.lab.publish.blocks import BlockError, blocks, fill
 from sray.lab.publish.figures import CARDS_DATA, H100_REPORT, H200_REPORT, RENDERERS
 from sray.jobs.bench import doc as bench_doc
@@ -146,6 +147,22 @@ def test_blocks_refuse_unpaired_markers_and_keep_the_rest() -> None:
     text = "head\n<!-- published: a -->\nold\n<!-- /published: a -->\ntail 1.5%\n"
     assert fill(text, lambda name: f"new {name}", "x.md") == (
         "head\n<!-- published: a -->\nnew a\n<!-- /published: a -->\ntail 1.5%\n")
+
+
+def test_a_bad_stored_result_or_block_stops_the_publisher_naming_it(tmp_path: Path, capsys) -> None:
+    """A trial without the figure a block reads, or a block no renderer knows, stops ``python -m sray.lab.publish``
+    with exit 2 and the file and field (or block) named; nothing is written."""
+    repo = _copy_inputs(tmp_path)
+    trial = repo / RESULTS / "hour-recipe" / "recipe--s1.json"
+    trial.write_text(trial.read_text().replace('"held_out"', '"held_out_views"'))
+    before = (repo / "README.md").read_text()
+    assert publish_main(["--repo", str(repo)]) == 2
+    assert "recipe--s1.json: no field metrics.held_out.miou" in capsys.readouterr().err
+    shutil.copy(REPO / RESULTS / "hour-recipe" / "recipe--s1.json", trial)
+    (repo / "README.md").write_text(before + "\n<!-- published: nobody -->\n<!-- /published: nobody -->\n")
+    assert publish_main(["--repo", str(repo), "--check"]) == 2
+    assert "README.md: no renderer named 'nobody'" in capsys.readouterr().err
+    assert (repo / "README.md").read_text().startswith(before)
 
 
 def test_every_renderer_fills_a_block() -> None:
