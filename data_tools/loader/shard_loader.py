@@ -161,8 +161,8 @@ def _open(shards_dir: Path, scenes: list[str] | None,
     unlabelled = [s for s in names if not manifest.scenes[s].meta.get("labelled", True)]
     if unlabelled:
         raise ValueError(f"{shards_dir}/manifest.json: scenes {unlabelled} have no labels (field 'labelled' is "
-                         "false: captures for inference only); training, finetuning and evaluation need labels: shard them "
-                         "apart from the training scenes and label them with `sray label`")
+                         "false: captures for inference only); training, finetuning and evaluation need labels: "
+                         "shard them apart from the training scenes and label them with `sray label`")
     return manifest, names
 
 

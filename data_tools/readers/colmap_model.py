@@ -137,7 +137,8 @@ def _data_lines(path: Path) -> list[str]:
     try:
         return [line.strip() for line in path.read_text().splitlines() if not line.lstrip().startswith("#")]
     except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing; a COLMAP text model has cameras.txt, images.txt, points3D.txt") from None
+        raise FileNotFoundError(f"{path}: missing; a COLMAP text model has cameras.txt, images.txt, "
+                                "points3D.txt") from None
 
 
 def _read_txt(folder: Path) -> tuple[dict, dict, dict]:
@@ -194,7 +195,8 @@ def read_model(folder: Path) -> ColmapModel:
     try:
         cameras, images, points = _read_bin(folder) if (folder / "cameras.bin").is_file() else _read_txt(folder)
     except FileNotFoundError as e:
-        raise FileNotFoundError(f"{e.filename or e}: missing; a COLMAP model holds cameras, images and points3D") from None
+        raise FileNotFoundError(f"{e.filename or e}: missing; a COLMAP model holds cameras, images and "
+                                "points3D") from None
     for image in images.values():
         if image.camera_id not in cameras:
             raise ValueError(f"{folder}: image {image.image_id} ({image.name}) uses camera {image.camera_id}, which "

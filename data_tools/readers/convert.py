@@ -12,8 +12,8 @@ Splits (see docs/data.md, "Readers and validation"):
 
 Nothing partial is published: the scene is written into a hidden staging folder, near/far are
 measured from its depth (``scene.scene_depth_bounds``: a test scene's source and finetune views
-only, a train scene's every view; a capture without depth maps brings them from its 3D points), it must pass ``check_scene``, and only then is it renamed into
-place and added to ``dataset.json``.
+only, a train scene's every view; a capture without depth maps brings them from its 3D points),
+it must pass ``check_scene``, and only then is it renamed into place and added to ``dataset.json``.
 """
 
 from __future__ import annotations
