@@ -3,8 +3,8 @@
 Each writer stores the scene's colour losslessly (PNG) at its own size, its cameras in the format's conventions
 (nerfstudio: OpenGL camera-to-world, principal point +0.5; COLMAP: world-to-camera quaternion and translation,
 principal point +0.5) and positions in capture units (metres / ``scale``), so that importing the folder with
-``--scale scale`` gives back the scene's cameras. ``points_of`` makes the 3D points a capture holds: every view's
-depth back-projected on a sparse pixel grid. ``mistake`` plants one convention error for the tests that prove
+``--scale scale`` gives back the scene's cameras. ``points_of`` makes the 3D points a capture holds: exact surface
+points each view sees (scenes of ``scene_fixtures.make_scene``), with optional noise. ``mistake`` plants one convention error for the tests that prove
 the comparison catches it: ``"opencv-axes"`` (nerfstudio matrices left in OpenCV axes), ``"transposed"`` (COLMAP
 rotation stored camera-to-world), ``"pixel-centre"`` (principal point without the +0.5).
 """
@@ -16,6 +16,8 @@ import struct
 from pathlib import Path
 
 import numpy as np
+
+from scene_fixtures import render
 
 from sray.data_tools.atomic import atomic_write_bytes
 from sray.data_tools.png import depth_to_png16, encode_png
@@ -44,15 +46,23 @@ def rotation_to_qvec(R: np.ndarray) -> np.ndarray:
     return q * np.sign(q[0]) if q[0] != 0 else q
 
 
-def points_of(scene: Scene, step: int = 4) -> list[np.ndarray]:
-    """Per view, the world points (n, 3) in metres of its depth back-projected at every ``step``-th pixel."""
+def points_of(scene: Scene, noise: float = 0.0, seed: int = 0) -> list[np.ndarray]:
+    """Per view, world points (n, 3) in metres on the surfaces it sees, as structure-from-motion finds them: the
+    exact ray-cast depth of ``scene_fixtures.render`` at the pixel centres of a 3x finer grid (so no point sits on
+    a stored pixel centre or carries the stored depth's millimetre rounding), every 4th row and column, each
+    point's distance from the camera multiplied by 1 + N(0, ``noise``)."""
+    rng = np.random.default_rng(seed)
     out = []
     for view in scene.views():
-        v, u = np.mgrid[step // 2:view.hw[0]:step, step // 2:view.hw[1]:step]
-        z = view.depth[v, u].astype(np.float64)
-        keep = z > 0
-        pix = np.stack([u[keep], v[keep], np.ones(int(keep.sum()))], axis=1)
-        cam = pix @ np.linalg.inv(view.K).T * z[keep][:, None]
+        fine = (3 * view.hw[0], 3 * view.hw[1])
+        K = view.K.copy()
+        K[:2] *= 3.0
+        K[:2, 2] += 1.0  # c' = 3 (c + 0.5) - 0.5: the pixel-centre rule
+        _, depth, _ = render(K, view.c2w, *fine)
+        v, u = np.mgrid[1:fine[0]:4, 1:fine[1]:4]
+        z = depth[v, u].astype(np.float64) * (1.0 + noise * rng.standard_normal(v.shape))
+        pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
+        cam = pix @ np.linalg.inv(K).T * z.ravel()[:, None]
         out.append(cam @ view.c2w[:3, :3].T + view.c2w[:3, 3])
     return out
 
@@ -74,9 +84,9 @@ def write_ply(path: Path, points: np.ndarray, binary: bool = True) -> None:
 
 
 def write_nerfstudio(scene: Scene, dst: Path, scale: float = 1.0, depth: bool = False, ply: bool = False,
-                     mistake: str = "") -> Path:
+                     mistake: str = "", point_noise: float = 0.0) -> Path:
     """``scene`` as a nerfstudio capture under ``dst`` (shared intrinsics of the first view; depth as 16-bit mm PNGs
-    and the points as ``sparse_pc.ply`` on request)."""
+    and the points (:func:`points_of` with ``point_noise``) as ``sparse_pc.ply`` on request)."""
     dst = Path(dst)
     frames, K = [], None
     for i, view in enumerate(scene.views()):
@@ -94,7 +104,7 @@ def write_nerfstudio(scene: Scene, dst: Path, scale: float = 1.0, depth: bool = 
     data = {"camera_model": "OPENCV", "fl_x": K[0, 0], "fl_y": K[1, 1], "cx": K[0, 2] + shift, "cy": K[1, 2] + shift,
             "w": w, "h": h, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "frames": frames}
     if ply:
-        write_ply(dst / "sparse_pc.ply", np.concatenate(points_of(scene)) / scale)
+        write_ply(dst / "sparse_pc.ply", np.concatenate(points_of(scene, point_noise)) / scale)
         data["ply_file_path"] = "sparse_pc.ply"
     atomic_write_bytes(dst / "transforms.json", json.dumps(data, indent=1).encode())
     return dst

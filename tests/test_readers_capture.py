@@ -144,8 +144,9 @@ def test_models_opencv_cannot_invert_are_refused_naming_the_camera():
                           "frames[2]")
 
 
-def test_scale_is_measured_from_depth_maps_against_the_points(original, tmp_path):
-    src = write_nerfstudio(original, tmp_path / "src", SCALE, depth=True, ply=True)
+@pytest.mark.parametrize("point_noise", [0.0, 0.05])
+def test_scale_is_measured_from_depth_maps_against_the_points(point_noise, original, tmp_path):
+    src = write_nerfstudio(original, tmp_path / "src", SCALE, depth=True, ply=True, point_noise=point_noise)
     scene = convert("nerfstudio", src, tmp_path / "ds")
     measured = scene.meta.extra["scale_m_per_unit"]
     assert measured == pytest.approx(SCALE, rel=0.05)
