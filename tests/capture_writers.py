@@ -4,9 +4,10 @@ Each writer stores the scene's colour losslessly (PNG) at its own size, its came
 (nerfstudio: OpenGL camera-to-world, principal point +0.5; COLMAP: world-to-camera quaternion and translation,
 principal point +0.5) and positions in capture units (metres / ``scale``), so that importing the folder with
 ``--scale scale`` gives back the scene's cameras. ``points_of`` makes the 3D points a capture holds: exact surface
-points each view sees (scenes of ``scene_fixtures.make_scene``), with optional noise. ``mistake`` plants one convention error for the tests that prove
-the comparison catches it: ``"opencv-axes"`` (nerfstudio matrices left in OpenCV axes), ``"transposed"`` (COLMAP
-rotation stored camera-to-world), ``"pixel-centre"`` (principal point without the +0.5).
+points each view sees (scenes of ``scene_fixtures.make_scene``), with optional noise. ``mistake`` plants one
+convention error for the tests that prove the comparison catches it: ``"opencv-axes"`` (nerfstudio matrices left in
+OpenCV axes), ``"transposed"`` (COLMAP rotation stored camera-to-world), ``"pixel-centre"`` (principal point
+without the +0.5).
 """
 
 from __future__ import annotations
