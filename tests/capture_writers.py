@@ -16,8 +16,8 @@ import json
 import struct
 from pathlib import Path
 
+import cv2
 import numpy as np
-
 from scene_fixtures import render
 
 from sray.data_tools.atomic import atomic_write_bytes
@@ -84,15 +84,28 @@ def write_ply(path: Path, points: np.ndarray, binary: bool = True) -> None:
     atomic_write_bytes(path, header + body)
 
 
+def distort_image(rgb: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """What a lens with OpenCV radial-tangential ``dist`` (k1, k2, p1, p2, k3) records of the pinhole image ``rgb``
+    (H, W, 3) of K: each distorted pixel samples (bilinear) the pinhole image where ``cv2.undistortPoints`` sends it."""
+    h, w = rgb.shape[:2]
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    pts = np.stack([u.ravel(), v.ravel()], axis=1)[:, None, :]
+    ideal = cv2.undistortPoints(pts, K, dist, P=K).reshape(h, w, 2).astype(np.float32)
+    return cv2.remap(rgb, ideal[..., 0], ideal[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+
+
 def write_nerfstudio(scene: Scene, dst: Path, scale: float = 1.0, depth: bool = False, ply: bool = False,
-                     mistake: str = "", point_noise: float = 0.0) -> Path:
+                     mistake: str = "", point_noise: float = 0.0, distortion: tuple[float, ...] = ()) -> Path:
     """``scene`` as a nerfstudio capture under ``dst`` (shared intrinsics of the first view; depth as 16-bit mm PNGs
-    and the points (:func:`points_of` with ``point_noise``) as ``sparse_pc.ply`` on request)."""
+    and the points (:func:`points_of` with ``point_noise``) as ``sparse_pc.ply`` on request; ``distortion`` (k1, k2,
+    p1, p2, k3): images recorded through that OPENCV lens, :func:`distort_image`)."""
     dst = Path(dst)
     frames, K = [], None
+    dist = np.array(distortion or (0.0,) * 5, np.float64)
     for i, view in enumerate(scene.views()):
         K = view.K if K is None else K
-        atomic_write_bytes(dst / "images" / f"frame_{i:05d}.png", encode_png(view.rgb))
+        rgb = distort_image(view.rgb, view.K, dist) if distortion else view.rgb
+        atomic_write_bytes(dst / "images" / f"frame_{i:05d}.png", encode_png(rgb))
         c2w = _units(view.c2w, scale)
         frame = {"file_path": f"images/frame_{i:05d}.png",
                  "transform_matrix": (c2w if mistake == "opencv-axes" else c2w @ OPENGL_FLIP).tolist()}
@@ -103,7 +116,8 @@ def write_nerfstudio(scene: Scene, dst: Path, scale: float = 1.0, depth: bool = 
     shift = 0.0 if mistake == "pixel-centre" else 0.5
     h, w = scene.read_view(scene.meta.view_ids[0]).hw
     data = {"camera_model": "OPENCV", "fl_x": K[0, 0], "fl_y": K[1, 1], "cx": K[0, 2] + shift, "cy": K[1, 2] + shift,
-            "w": w, "h": h, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "frames": frames}
+            "w": w, "h": h, "k1": dist[0], "k2": dist[1], "p1": dist[2], "p2": dist[3], "k3": dist[4],
+            "frames": frames}
     if ply:
         write_ply(dst / "sparse_pc.ply", np.concatenate(points_of(scene, point_noise)) / scale)
         data["ply_file_path"] = "sparse_pc.ply"

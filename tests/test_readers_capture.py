@@ -5,6 +5,7 @@ from the capture's points and depth (within 5%), and without either the conversi
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -18,6 +19,7 @@ from sray.data_tools.readers.camera_models import colmap_camera, nerfstudio_came
 from sray.data_tools.readers.convert import ConvertConfig, convert_scene
 from sray.data_tools.scene import IGNORE_ID, Scene
 from sray.data_tools.scene_folder import read_scene
+from sray.jobs.cli import main
 
 SCALE = 2.5
 """Metres per capture unit of the written captures."""
@@ -84,10 +86,7 @@ def test_a_planted_convention_error_is_caught(kind, mistake, original, tmp_path)
 
 def test_a_flipped_axis_is_refused(original, tmp_path):
     src = write_nerfstudio(original, tmp_path / "src", SCALE)
-    text = (src / "transforms.json").read_text()
-    import json
-
-    data = json.loads(text)
+    data = json.loads((src / "transforms.json").read_text())
     m = np.array(data["frames"][3]["transform_matrix"])
     m[:3, 1] *= -1  # y axis flipped: a reflection
     data["frames"][3]["transform_matrix"] = m.tolist()
@@ -136,6 +135,25 @@ def test_distortion_terms_round_trip_through_opencv(source):
     assert np.abs(lens - pixels).max() > 1.0  # the distortion is not negligible: the test would see a wrong order
 
 
+def test_a_capture_through_a_distorting_lens_imports_as_the_pinhole_images(tmp_path):
+    room = make_scene("room", n_views=4, height=60, width=80, seed=1)
+    lens = (-0.25, 0.08, 0.004, -0.003, 0.0)
+    src = write_nerfstudio(room, tmp_path / "src", 1.0, ply=True, distortion=lens)
+    cfg = ConvertConfig(format="nerfstudio", src=src, out=tmp_path / "ds", name="cap", size_hw=(60, 80),
+                        holdout_every=0, options={"scale": 1.0})
+    scene = read_scene(convert_scene(cfg).scene_dir)
+    inner = (slice(8, 52), slice(10, 70))  # away from the borders the lens never saw
+
+    def blur(rgb: np.ndarray) -> np.ndarray:  # two bilinear resamplings soften the checker edges: compare shapes
+        return cv2.GaussianBlur(rgb.astype(np.float32), (0, 0), 1.5)[inner]
+
+    for got, want, frame in zip(scene.views(), room.views(), sorted((src / "images").iterdir())):
+        recorded = cv2.cvtColor(cv2.imread(str(frame)), cv2.COLOR_BGR2RGB)
+        error = np.abs(blur(got.rgb) - blur(want.rgb)).mean()
+        ignored = np.abs(blur(recorded) - blur(want.rgb)).mean()  # the lens left in: grey levels off by ~3
+        assert error < 1.0 and ignored > 3 * error, (error, ignored)
+
+
 def test_models_opencv_cannot_invert_are_refused_naming_the_camera():
     with pytest.raises(ValueError, match="camera 3 \\(FOV\\): camera model FOV cannot be undistorted with OpenCV"):
         colmap_camera("FOV", np.array([300.0, 300.0, 160.0, 120.0, 0.9]), (240, 320), "camera 3 (FOV)")
@@ -162,3 +180,15 @@ def test_without_scale_or_metric_depth_the_conversion_stops_naming_both(kind, or
     with pytest.raises(ValueError, match="pass --scale METRES_PER_UNIT, or give metric depth maps") as error:
         convert(kind, src, tmp_path / "ds")
     assert "\n" not in str(error.value) and not (tmp_path / "ds" / "cap").exists()
+
+
+def test_the_cli_converts_a_capture_and_check_counts_it_as_unlabelled(original, tmp_path, capsys):
+    src = write_colmap(original, tmp_path / "src", SCALE, binary=True)
+    base = ["data", "convert", str(src), "--format", "colmap", "--out", str(tmp_path / "ds"), "--size", f"{W}x{H}",
+            "--holdout-every", "0", "--name", "cap"]
+    assert main(base) == 1
+    assert "pass --scale METRES_PER_UNIT" in capsys.readouterr().err
+    assert main([*base, "--scale", str(SCALE)]) == 0
+    assert "wrote " in capsys.readouterr().out
+    assert main(["data", "check", str(tmp_path / "ds")]) == 0
+    assert "1 scene (1 without labels: inference only" in capsys.readouterr().out
