@@ -15,6 +15,7 @@ from capture_writers import write_colmap, write_nerfstudio
 from scene_fixtures import make_scene
 
 from sray.data_tools.check.scenes import check_dataset
+from sray.data_tools.png import encode_png
 from sray.data_tools.readers.camera_models import colmap_camera, nerfstudio_camera, undistort_maps
 from sray.data_tools.readers.convert import ConvertConfig, convert_scene
 from sray.data_tools.scene import IGNORE_ID, Scene
@@ -192,3 +193,7 @@ def test_the_cli_converts_a_capture_and_check_counts_it_as_unlabelled(original, 
     assert "wrote " in capsys.readouterr().out
     assert main(["data", "check", str(tmp_path / "ds")]) == 0
     assert "1 scene (1 without labels: inference only" in capsys.readouterr().out
+    label = tmp_path / "ds" / "cap" / "label" / "000003.png"
+    label.write_bytes(encode_png(np.full((H, W), 3, np.uint16)))  # a class id in a scene that says it has none
+    assert main(["data", "check", str(tmp_path / "ds")]) == 1
+    assert "scene.json says 'labelled': false, but this label image holds ids" in capsys.readouterr().out

@@ -2,8 +2,8 @@
 
 For each scene: ``scene_labels.label_scene`` writes ``OUT/<scene>/{label,overlay,confidence,depth}/`` and
 ``labels.json``; then ``sray render``'s fly-through (``render/flythrough.py``: a spline through the scene's
-cameras, the same model and render mode) goes to ``OUT/<scene>/flythrough/``. One progress bar counts the frames
-of every scene. The run (experiment ``sray-label`` by default, tag ``sray.kind = label``) gets the request as
+cameras, the same model and render mode) goes to ``OUT/<scene>/flythrough/``. One progress bar counts the labelled
+frames of every scene; each fly-through shows its own. The run (experiment ``sray-label`` by default, tag ``sray.kind = label``) gets the request as
 params, each labelled scene's scores as metrics (``<scene>/miou``, ...) and every labels.json and fly-through
 file as artifacts under ``<scene>/``.
 """
@@ -54,7 +54,7 @@ def label_scenes(labeller: Labeller, shards: Path, scenes: list[str], out: Path,
             plan = plan_flythrough(shards, scene, path="spline", n_frames=fly_frames)
             fly = Flythrough(labeller.net, plan, min(labeller.n_source, len(pool)), labeller.fast, labeller.runtime)
             record["flythrough"] = fly.render(out / scene / "flythrough", labeller.device, about=labeller.about,
-                                              label="sray label", progress=False)["files"]
+                                              label="sray label", progress=progress)["files"]
         if logger is not None:
             if "scores" in record:
                 logger.log_metrics({f"{scene}/{k}": record["scores"][k]
