@@ -117,8 +117,8 @@ READERS: dict[str, Reader] = {r.name: r for r in (
            load=_load_nerfstudio, size_hw=(240, 320), frame_skip=1, options=(SCALE_OPTION,)),
     Reader(name="colmap", summary="COLMAP capture: sparse/0/{cameras,images,points3D}.{bin,txt} + images/, no labels",
            load=_load_colmap, size_hw=(240, 320), frame_skip=1,
-           options=(SCALE_OPTION, ReaderOption("images", "colmap: image folder (default: SRC/images)"),
-                    ReaderOption("sparse", "colmap: model folder (default: SRC, SRC/sparse/0, SRC/sparse or "
+           options=(SCALE_OPTION, ReaderOption("images", "image folder (default: SRC/images)"),
+                    ReaderOption("sparse", "model folder (default: SRC, SRC/sparse/0, SRC/sparse or "
                                            "SRC/colmap/sparse/0, the first holding cameras.bin/.txt)"))),
 )}
 """Every known source format by name."""
