@@ -8,7 +8,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 PRODUCT = ("model", "data_tools", "platform", "jobs")
-"""The four top-level folders installed as ``sray.<folder>``."""
+"""The four top-level folders of the product, installed as ``sray.<folder>``."""
+LAB = "lab"
+"""The studies and diagnostics (``sray.lab``): may import the product; nothing in the product imports it."""
 
 
 def imported_modules(path: Path, root: Path = REPO) -> list[str]:
