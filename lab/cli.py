@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-LAB_COMMAND_MODULES = ("sray.lab.accuracy.command", "sray.lab.ceilings.command",
+LAB_COMMAND_MODULES = ("sray.lab.studies.command", "sray.lab.accuracy.command", "sray.lab.ceilings.command",
                        "sray.lab.view_weights.command", "sray.lab.recipe.command")
 """Modules that register ``sray lab``'s commands (each exposes ``register(kinds)``), in the order help lists them."""
 
