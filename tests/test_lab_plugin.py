@@ -33,7 +33,8 @@ def test_the_parser_calls_each_plug_in_and_only_through_its_entry_point(monkeypa
         def load(self):  # noqa: ANN202 - the entry point's loader
             return lambda sub: seen.append(sub.add_parser("toy").prog)
 
-    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group: [Entry()] if group == cli.PLUGIN_GROUP else [])
+    monkeypatch.setattr(importlib.metadata, "entry_points",
+                        lambda group: [Entry()] if group == cli.PLUGIN_GROUP else [])
     for name in [m for m in sys.modules if m.startswith("sray.lab")]:
         monkeypatch.delitem(sys.modules, name)
     parser = cli.build_parser()
