@@ -20,12 +20,12 @@ from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.scene import SceneMeta
 from sray.data_tools.shards.manifest import read_manifest
 from sray.jobs.cli import main
-from sray.lab.accuracy.plan import PRESETS
 from sray.lab.ceilings import measure as ceilings
 from sray.lab.ceilings.measure import source_ids
 from sray.lab.ceilings.report import HELD_OUT_TITLE, REPORT_FILE, TITLE
 from sray.lab.ceilings.rows import CeilingRow
 from sray.lab.ceilings.surface_field import field_at_surface
+from sray.lab.studies.spec import load_study
 from sray.lab.view_weights import report as view_weights
 from sray.model.config import SRayConfig
 from sray.model.runtime import Runtime
@@ -33,6 +33,8 @@ from sray.platform.eval.label_transfer import UNSEEN, coverage_counts, transfer_
 from sray.platform.eval.segmenter_training import train_segmenter
 from sray.platform.eval.zero_shot import training_scenes
 from sray.platform.train.state import write_initial_checkpoint
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +72,8 @@ def test_rows_run_end_to_end_and_the_oracle_transfer_is_near_perfect(shards: Pat
     assert rows["c-rgb"]["protocol"]["inputs"] == "cameras, source images, segmenter, S-Ray rendered query depth"
     assert rows["s"]["protocol"]["inputs"] == "cameras, source images"
     assert "depth: checkpoint step 0, fast (pixel stride 1" in rows["c-rgb"]["budget"]
-    assert ceilings.ZERO_SHOT_RENDER == PRESETS["cpu-small"].eval_fast  # rows s and c-rgb render as zero-shot cells
+    hour = load_study(REPO / "jobs" / "studies" / "hour-recipe.yaml")  # rows s and c-rgb render as the studies score
+    assert (ceilings.ZERO_SHOT_RENDER.pixel_stride, ceilings.ZERO_SHOT_RENDER.confidence) == hour.eval_fast
     assert rows["a"]["acc_on_covered"] > 0.97, rows["a"]
     assert rows["a"]["total_acc"] >= 0.97 * rows["a"]["coverage"]
     assert rows["a"]["miou"] > 0.5

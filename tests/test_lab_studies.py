@@ -21,6 +21,8 @@ from sray.platform.sweep.engine import _run_trial, _TrialJob
 from sray.platform.sweep.outcomes import collect_outcomes
 from sray.platform.sweep.study import StudySettings, TrialContext
 
+REPO = Path(__file__).resolve().parents[1]
+
 SPEC = """study: toy
 description: Does a larger learning rate help the toy recipe?
 recipe: synth-small
@@ -173,3 +175,30 @@ def test_a_resumed_study_runs_only_its_missing_trials(tmp_path: Path, monkeypatc
     assert main(args) == 0 and ran[3:] == [("lr-2x", 0)], "deleting a result file runs its trial again"
     assert main(args) == 0 and len(ran) == 4
     assert json.loads((spec.results_dir / "ema--s0.json").read_text())["metrics"]["zero_shot"]["miou"] == 53.0
+
+
+def test_the_hour_recipe_study_names_the_recipe_and_its_default_world(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """``synth-cpu-hour``'s default shards are the world ``sray lab study --worlds`` makes for its study's recipe arm;
+    ``--worlds`` asks for each distinct world once (the arms' and the validation rooms') and trains nothing."""
+    from sray.platform.config.recipes import CPU_HOUR_SHARDS
+
+    spec = load_study(REPO / "jobs" / "studies" / "hour-recipe.yaml")
+    recipe = spec.arms["hour-intra-uncapped"]
+    assert recipe.sets == {} and spec.recipe == "synth-cpu-hour" and spec.budget.cpu_seconds == 7200
+    assert trial.world_folder(Path("outputs/studies"), spec.arm_world(recipe)) / "shards" == Path(CPU_HOUR_SHARDS)
+    asked: list = []
+    monkeypatch.setattr(runner, "make_world", lambda world, root, progress: asked.append(world) or root / "shards")
+    assert main(["lab", "study", "--worlds", str(spec.path), "--out", str(tmp_path)]) == 0
+    assert [w.train_scenes for w in asked] == [498, 198, 48, 0] and asked[-1].seed == 1
+    assert str(tmp_path / "worlds" / "train498-test4-v40-120x160-s0" / "shards") in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("spec", sorted((REPO / "jobs" / "studies").glob("*.yaml")), ids=lambda p: p.stem)
+def test_every_study_file_parses_and_its_stored_results_belong_to_it(spec: Path) -> None:
+    """The shipped study files are valid and each stored result is a trial the file names, with a known source."""
+    study = load_study(spec)
+    results = read_results(study.results_dir)
+    assert results and set(results) <= set(study.trial_keys())
+    assert all(r["study"] == study.name and r["source"].startswith(("run", "imported: ", "transcribed: "))
+               for r in results.values())

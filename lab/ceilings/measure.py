@@ -64,7 +64,7 @@ from sray.platform.eval.view_scoring import encode_sources
 from sray.platform.eval.zero_shot import select_scenes, training_scenes
 
 ZERO_SHOT_RENDER = FastRender(pixel_stride=1, confidence=0.9)
-"""S-Ray's render in rows s and c-rgb by default: the accuracy benchmark's zero-shot render (every pixel, a fine
+"""S-Ray's render in rows s and c-rgb by default: the studies' zero-shot render (every pixel, a fine
 pass where the coarse confidence is below 0.9)."""
 
 TIE_RULE = "majority of the sources that see a pixel; a tie goes to the label of the best-ranked source among them"

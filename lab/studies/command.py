@@ -19,6 +19,8 @@ def register(kinds: argparse._SubParsersAction) -> None:
     study.add_argument("--page", action="store_true",
                        help="train nothing: regenerate the study's page and chart from its stored results (the "
                             "page's Reading is kept)")
+    study.add_argument("--worlds", action="store_true",
+                       help="train nothing: generate the shards of every world the study names under OUT/worlds/")
     study.add_argument("--docs", type=Path, default=Path("docs"), help="docs folder the page goes under (studies/)")
     study.add_argument("--out", type=Path, default=Path(DEFAULT_OUT), help=f"work folder (default {DEFAULT_OUT})")
     study.add_argument("--max-minutes", type=float, default=None, help="start no trial after this many minutes")
@@ -31,13 +33,16 @@ def register(kinds: argparse._SubParsersAction) -> None:
 
 def _lab_study(args: argparse.Namespace) -> int:
     from sray.lab.studies.page import write_page
-    from sray.lab.studies.runner import missing_trials, run_study_spec
+    from sray.lab.studies.runner import make_worlds, missing_trials, run_study_spec
     from sray.lab.studies.spec import StudyError, load_study
 
     try:
         spec = load_study(args.spec)
         if args.page:
             print(f"[study] page written: {write_page(spec, args.docs)}")
+            return 0
+        if args.worlds:
+            print("[study] worlds: " + ", ".join(str(p) for p in make_worlds(spec, args.out)))
             return 0
         todo = missing_trials(spec)
         print(f"[study] {spec.name}: {len(todo)} of {len(spec.trial_keys())} trials to run: "

@@ -84,8 +84,10 @@ def arms_table(spec: StudySpec, results: dict[str, dict[str, Any]], splits: list
 def paired_table(spec: StudySpec, results: dict[str, dict[str, Any]], splits: list[str]) -> str:
     """Per arm and split: the seeds it shares with the baseline, each seed's difference and their mean ± std."""
     rows = []
+    order = list(spec.arms)
     for split in splits:
-        for p in paired_differences(results, spec.baseline, split):
+        pairs = paired_differences(results, spec.baseline, split)
+        for p in sorted(pairs, key=lambda p: order.index(p.arm) if p.arm in order else len(order)):
             if p.seeds:
                 rows.append([p.arm, SPLIT_LABELS[split], ", ".join(map(str, p.seeds)),
                              ", ".join(f"{d:+.2f}" for d in p.differences),

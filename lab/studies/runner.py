@@ -12,9 +12,10 @@ import time
 from functools import partial
 from pathlib import Path
 
+from sray.data_tools.synth.world import make_world
 from sray.lab.studies.results import read_results
 from sray.lab.studies.spec import StudySpec
-from sray.lab.studies.trial import study_trial
+from sray.lab.studies.trial import study_trial, world_folder
 from sray.platform.sweep.capacity import TRIAL_RESOURCES
 from sray.platform.sweep.incremental import missing, run_missing
 from sray.platform.sweep.outcomes import TrialOutcome
@@ -35,6 +36,13 @@ def missing_trials(spec: StudySpec) -> dict[str, dict[str, object]]:
     """The trials of the study without a stored result, in plan order."""
     stored = read_results(spec.results_dir)
     return {key: point for key, point in study_plan(spec).items() if key not in stored}
+
+
+def make_worlds(spec: StudySpec, out: Path) -> list[Path]:
+    """Generate (or verify) the shards of every world the study trains or scores on, under ``<out>/worlds/``, in
+    the order first named: each arm's world, then the validation world. Nothing is trained."""
+    worlds = list(dict.fromkeys([*(spec.arm_world(arm) for arm in spec.arms.values()), spec.validation_world()]))
+    return [make_world(world, world_folder(out, world), progress=True) for world in worlds]
 
 
 def run_study_spec(spec: StudySpec, out: Path, tracking_uri: str, address: str | None = None,

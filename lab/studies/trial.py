@@ -35,10 +35,12 @@ EXPERIMENT = "sray-studies"
 """Tracking experiment of every study's training jobs and evaluations."""
 
 
-def world_folder(out: Path, world: World) -> Path:
-    """Where a world's scenes and shards live under the study's work folder (one folder per distinct world)."""
-    return Path(out) / "worlds" / (f"train{world.train_scenes}-test{world.test_scenes}-v{world.views}-"
-                                   f"{world.height}x{world.width}-s{world.seed}")
+def world_folder(studies: Path, world: World) -> Path:
+    """Where a world's scenes and shards live: ``<studies work folder>/worlds/<its settings>``, one folder per distinct
+    world, shared by every study that trains or scores on it (``synth-cpu-hour``'s default shards are the one of
+    ``jobs/studies/hour-recipe.yaml``)."""
+    return Path(studies) / "worlds" / (f"train{world.train_scenes}-test{world.test_scenes}-v{world.views}-"
+                                       f"{world.height}x{world.width}-s{world.seed}")
 
 
 def trial_config(spec: StudySpec, arm: Arm, seed: int, shards: Path, out: Path, tracking_uri: str) -> TrainConfig:
@@ -116,9 +118,10 @@ def current_commit(repo: Path) -> str | None:
 
 
 def run_trial(spec: StudySpec, arm_name: str, seed: int, out: Path, tracking_uri: str) -> dict[str, Any]:
-    """Train and score (``arm_name``, ``seed``) of ``spec``; store and return its result."""
+    """Train and score (``arm_name``, ``seed``) of ``spec`` in the study's work folder ``out`` (its worlds one level up,
+    shared by the studies); store and return its result."""
     arm = spec.arms[arm_name]
-    shards = make_world(spec.arm_world(arm), world_folder(out, spec.arm_world(arm)), progress=False)
+    shards = make_world(spec.arm_world(arm), world_folder(Path(out).parent, spec.arm_world(arm)), progress=False)
     cfg = trial_config(spec, arm, seed, shards, out, tracking_uri)
     checkpoint = train(cfg)
     fast = None if spec.eval_fast is None else FastRender(pixel_stride=spec.eval_fast[0], confidence=spec.eval_fast[1])
@@ -126,7 +129,8 @@ def run_trial(spec: StudySpec, arm_name: str, seed: int, out: Path, tracking_uri
     if "held_out" in spec.evaluations:
         rooms["held_out"] = (shards, training_scenes(shards, spec.held_out_rooms))
     if "validation" in spec.evaluations:
-        val = make_world(spec.validation_world(), world_folder(out, spec.validation_world()), progress=False)
+        val = make_world(spec.validation_world(), world_folder(Path(out).parent, spec.validation_world()),
+                         progress=False)
         rooms["validation"] = (val, select_scenes(val, None)[0])
     metrics = {}
     for split, (folder, scenes) in rooms.items():
