@@ -98,6 +98,11 @@ def split_metrics(report: dict[str, Any], shards: Path, scenes: list[str]) -> di
             "protocol": EvalProtocol.from_json(report["protocol"]).describe()}
 
 
+def _rounded(seconds: float | None) -> float | None:
+    """Seconds to a tenth (None stays None)."""
+    return None if seconds is None else round(float(seconds), 1)
+
+
 def describe_machine() -> dict[str, Any]:
     """The CPU model, the cores this process may use and the device; the fixed throughput probe is not run here
     (null)."""
@@ -145,7 +150,8 @@ def run_trial(spec: StudySpec, arm_name: str, seed: int, out: Path, tracking_uri
               "overrides": {**spec.sets, **arm.sets},
               "budget": {"cpu_seconds": budget.cpu_seconds, "steps": budget.steps},
               "trained": {"ray_steps": max(steps - cfg.optim.warmup_2d_steps, 0),
-                          "cpu_seconds": counters.get("cpu_seconds"), "wall_seconds": counters.get("wall_seconds"),
+                          "cpu_seconds": _rounded(counters.get("cpu_seconds")),
+                          "wall_seconds": _rounded(counters.get("wall_seconds")),
                           "peak_memory_gib": None if counters.get("peak_memory_mb") is None else
                           round(counters["peak_memory_mb"] / 1024, 3)},
               "metrics": metrics, "machine": describe_machine(), "commit": current_commit(spec.path.parent),
