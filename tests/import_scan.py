@@ -28,6 +28,13 @@ def imported_modules(path: Path, root: Path = REPO) -> list[str]:
     return names
 
 
+def plant(root: Path, files: dict[str, str]) -> None:
+    """Write each ``relative path -> text`` under ``root`` (a copy of the layout a scan's own test reads)."""
+    for name, text in files.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
+
+
 def cycles(graph: dict[str, set[str]]) -> list[str]:
     """Each cycle of ``graph`` found by a depth-first walk, as ``a -> b -> a``."""
     found: list[str] = []

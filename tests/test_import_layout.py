@@ -7,7 +7,7 @@ import ast
 from pathlib import Path
 
 import pytest
-from import_scan import LAB, PRODUCT, REPO, cycles, imported_modules
+from import_scan import LAB, PRODUCT, REPO, cycles, imported_modules, plant
 
 LAZY_IMPORTS_ALLOWED = {
     "data_tools/readers/registry.py":
@@ -127,9 +127,7 @@ def test_the_lazy_import_scan_finds_violations(tmp_path: Path) -> None:
                "platform/b.py": "def f():\n    import webdataset\n",
                "model/c.py": "from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    import torch\n\n\n"
                              "class C:\n    def m(self):\n        import torch\n"}
-    for name, text in planted.items():
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_text(text)
+    plant(tmp_path, planted)
     assert lazy_import_violations(tmp_path, {"platform/b.py": "optional"}) == [
         "jobs/x_cmd.py:10 imports mlflow inside helper()", "model/c.py:9 imports torch inside m()",
         "platform/a.py:5 imports ray inside f()", "platform/a.py:8 imports .b inside f.g()"]
@@ -173,7 +171,5 @@ def test_the_folder_scan_finds_a_loop(tmp_path: Path) -> None:
     """A top-level module and a sub-folder importing each other (absolutely or relatively) make a loop."""
     planted = {"jobs/a_cmd.py": "from sray.jobs.bench.report import record\n",
                "jobs/bench/report.py": "from ..recipes import get_recipe\n", "jobs/recipes.py": "import json\n"}
-    for name, text in planted.items():
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_text(text)
+    plant(tmp_path, planted)
     assert cycles(folder_graph(tmp_path, "jobs")) == [". -> bench -> ."]

@@ -9,7 +9,7 @@ import ast
 from pathlib import Path
 
 import pytest
-from import_scan import LAB, PRODUCT, REPO, cycles, imported_modules
+from import_scan import LAB, PRODUCT, REPO, cycles, imported_modules, plant
 
 FORBIDDEN = {
     "model": ("sray.data_tools", "sray.platform", "sray.jobs", "sray.lab"),
@@ -77,9 +77,7 @@ def test_the_wall_scan_finds_a_breach(tmp_path: Path) -> None:
                "platform/eval/b.py": "def f():\n    import sray.lab.ceilings.measure\n",
                "jobs/bench/c.py": "from ...lab.cli import register\n",
                "lab/studies/d.py": "from sray.platform.sweep.engine import run_study\n", "model/e.py": "import sray\n"}
-    for name, text in planted.items():
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_text(text)
+    plant(tmp_path, planted)
     assert sorted(wall_violations(tmp_path)) == [
         "jobs/a.py imports sray.lab.studies.spec", "jobs/a.py imports sray.lab.studies.spec.load_spec",
         "jobs/bench/c.py imports sray.lab.cli", "jobs/bench/c.py imports sray.lab.cli.register",
@@ -200,9 +198,7 @@ def test_the_tracking_scan_finds_violations(tmp_path: Path) -> None:
                "model/c.py": "from sray.platform.tracking import logger\n",
                "platform/train/d.py": "from sray.platform.tracking.registry import get_tracker\n",
                "platform/tracking/e.py": "import mlflow\n", "data_tools/f.py": "import mlflowish\n"}
-    for name, text in planted.items():
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_text(text)
+    plant(tmp_path, planted)
     assert sorted(tracking_violations(tmp_path)) == [
         "jobs/a.py imports mlflow.pytorch",
         "model/c.py imports sray.platform.tracking.logger (use the tracker interface)",

@@ -9,6 +9,7 @@ import statistics
 from pathlib import Path
 
 import pytest
+from engine_here import run_study_here
 
 from sray.jobs.cli import main
 from sray.lab.studies import runner, trial
@@ -17,9 +18,7 @@ from sray.lab.studies.paired import paired_differences
 from sray.lab.studies.results import FORMAT, read_results, write_result
 from sray.lab.studies.spec import StudyError, load_study
 from sray.platform.sweep import incremental
-from sray.platform.sweep.engine import _run_trial, _TrialJob
-from sray.platform.sweep.outcomes import collect_outcomes
-from sray.platform.sweep.study import StudySettings, TrialContext
+from sray.platform.sweep.study import TrialContext
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -150,17 +149,8 @@ def test_a_resumed_study_runs_only_its_missing_trials(tmp_path: Path, monkeypatc
         write_result(spec.results_dir, result)
         return result
 
-    def run_here(plan: dict, point_fn, settings: StudySettings, resume: bool = False) -> list:
-        job = _TrialJob(point_fn, plan, str(settings.folder), {}, settings.start_by)
-        for key in plan:
-            try:
-                _run_trial({"key": key}, job)
-            except RuntimeError:
-                pass
-        return collect_outcomes(settings.folder, plan, {}, settings.time_attr)
-
     monkeypatch.setattr(trial, "run_trial", fake_trial)
-    monkeypatch.setattr(incremental, "run_study", run_here)
+    monkeypatch.setattr(incremental, "run_study", run_study_here)
     monkeypatch.setattr(runner, "init_ray", lambda address: None)
     monkeypatch.setattr(TrialContext, "report", lambda self, metrics: None)
     imported = _result("base", 0, {"zero_shot": 48.0}, source="imported: docs/x/tables.json@7734061")

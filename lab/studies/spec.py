@@ -30,10 +30,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from sray.data_tools.synth.world import World
 from sray.platform.config.recipes import RECIPES
+from sray.platform.sweep.options import read_yaml_keys
+from sray.platform.sweep.spec import SpecError
 
 KEYS = ("study", "description", "recipe", "world", "validation", "set", "baseline", "arms", "seeds", "budget",
         "evaluations", "select_on", "eval", "held_out_rooms")
@@ -211,16 +211,9 @@ def load_study(path: Path) -> StudySpec:
     """Parse the study file ``path``; :class:`StudyError` naming the file, the field and the fix."""
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text())
-    except OSError as e:
-        raise StudyError(f"{path}: cannot read the study file ({e.strerror})") from None
-    except yaml.YAMLError as e:
-        raise StudyError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
-    if not isinstance(raw, dict):
-        raise StudyError(f"{path}: a study file is a mapping of keys ({', '.join(KEYS)})")
-    unknown = sorted(set(raw) - set(KEYS))
-    if unknown:
-        raise _fail(path, unknown[0], "unknown key", f"keys: {', '.join(KEYS)}")
+        raw = read_yaml_keys(path, "study file", KEYS)
+    except SpecError as e:
+        raise StudyError(str(e)) from None
     absent = [k for k in REQUIRED if k not in raw]
     if absent:
         raise _fail(path, absent[0], "missing", f"a study names {', '.join(REQUIRED)}")
