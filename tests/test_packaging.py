@@ -32,8 +32,8 @@ def test_import_sray_platform_then_torch_from_repo_root() -> None:
 
 
 def test_no_init_in_top_level_folders() -> None:
-    """No ``__init__.py`` in the four mapped folders (ARCHITECTURE §1)."""
-    for folder in ("platform", "model", "jobs", "data_tools"):
+    """No ``__init__.py`` in the mapped folders (ARCHITECTURE §1): the product's four and the lab."""
+    for folder in ("platform", "model", "jobs", "data_tools", "lab"):
         assert not (REPO / folder / "__init__.py").exists(), folder
 
 

@@ -75,26 +75,25 @@ ray); on a slower 2-core machine (about 1.8 CPU s per ray step) after 5,047. The
 learning-rate schedule on a much faster machine (``budget_lr_factor`` follows the larger of the step and CPU-budget
 fractions). Stopped by its budget, the recipe scores 53.94 ± 4.14% zero-shot and 50.86 ± 3.42% on held-out views of
 its training rooms over three seeds, against 51.39 ± 2.86 and 45.37 ± 1.40% for the same recipe capped at 5,000 steps
-(``hour-intra`` in ``sray bench accuracy``; held-out higher on every paired seed, docs/benchmarks.md, "The hour recipe
-at its CPU budget"); on a machine where the budget bought 6,575-8,236 ray steps, 56.96 ± 2.04% and 54.51 ± 2.92%
-(docs/benchmarks.md, "The recipe's three seeds on the fifth machine")."""
+(``hour-intra``; held-out higher on every paired seed: docs/studies/hour-recipe.md); on a machine where the budget
+bought 6,575-8,236 ray steps, 56.96 ± 2.04% and 54.51 ± 2.92% (docs/studies/hour-budget.md)."""
 
 CPU_HOUR_WARMUP_2D = 1500
 """``optim.warmup_2d_steps`` of ``synth-cpu-hour``: its first steps train the encoder and its source-view head on
 the source views' labels alone, before any ray is rendered (about 650 CPU s of its budget)."""
 
 
-CPU_HOUR_SHARDS = "outputs/bench-accuracy/cpu-small/worlds/train498/shards"
-"""Default shards of ``synth-cpu-hour``: the 498-room world ``sray bench accuracy`` (preset ``cpu-small``, its
-default folder) generates for its cells on 498 rooms (``hour-intra-uncapped``, the recipe as it is)."""
+CPU_HOUR_SHARDS = "outputs/studies/worlds/train498-test4-v40-120x160-s0/shards"
+"""Default shards of ``synth-cpu-hour``: the 498-room world of its study (jobs/studies/hour-recipe.yaml), which
+``sray lab study --worlds jobs/studies/hour-recipe.yaml`` generates in the studies' default work folder."""
 
 
 def synth_cpu_hour() -> TrainConfig:
     """One hour of pretraining on 2 CPU cores (a budget of CPU seconds, not steps), built to generalize rather
     than to memorize its rooms.
 
-    498 procedural rooms at 160x120, 40 views each, at ``CPU_HOUR_SHARDS`` (``sray bench accuracy --cells
-    hour-intra-uncapped:0`` generates them there before it trains this recipe; ``--set data.shards=DIR`` trains on
+    498 procedural rooms at 160x120, 40 views each, at ``CPU_HOUR_SHARDS`` (``sray lab study --worlds
+    jobs/studies/hour-recipe.yaml`` generates them there; ``--set data.shards=DIR`` trains on
     any other world): at the same CPU budget they score about 11 points of zero-shot mIoU above the preset's 48 rooms
     (docs/benchmarks.md, "The hour recipe at its CPU budget"); generating them is not counted in the budget.
     Each sample has 2-8 source views drawn from its 12 top-ranked neighbours and rendered at 75-100% of their
