@@ -7,7 +7,7 @@ import re
 
 MEASURED = [
     re.compile(r"\d+\.\d+\s?%"),                                   # a decimal percentage: 53.94%
-    re.compile(r"±"),                                               # a spread over seeds
+    re.compile(r"\d\s?±|±\s?\d"),                                    # a spread over seeds (not the word "mean ± sd")
     re.compile(r"\d[\d,.]*\s?(?:rays|views|samples|steps|it)/s\b"),  # a throughput
     re.compile(r"\bs\s?/\s?view\b|\bs per (?:rendered )?view\b|CPU s per\b"),  # a time per view or step
     re.compile(r"\d+(?:\.\d+)?\s?(?:GiB|MiB|GB|MB)\b"),             # a memory footprint

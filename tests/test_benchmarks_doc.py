@@ -7,9 +7,9 @@ import json
 import sys
 from pathlib import Path
 
-from sray.jobs.bench import doc as bench_doc
-from sray.jobs.bench.doc import Bench, TableRecord, bench_dir, device_kind, record, store_table
-from sray.jobs.bench.doc_blocks import markdown_table, parse_blocks, portable, render_blocks
+from sray.platform.common import bench_doc
+from sray.platform.common.bench_doc import Bench, TableRecord, bench_dir, device_kind, record, store_table
+from sray.platform.common.doc_blocks import markdown_table, parse_blocks, portable, render_blocks
 
 LOADER, MODEL = Bench("loader", "Loader"), Bench("model", "Model")
 HAND_WRITTEN = "## Written by hand\n\nA paragraph nobody generates.\n\n### Its own table\n\n| x |\n|---|\n| 9 |\n"

@@ -1,9 +1,11 @@
-"""Every published number regenerates: each generated block of README.md and docs/**/*.md (and each benchmark page)
+"""Every published number regenerates: each generated block of README.md and docs/**/*.md (and each benchmark and
+study page)
 equals what ``python -m sray.lab.publish`` renders from the stored data it names, and no measured figure stands in
 hand-written prose. Proven to fail: a README figure edited by hand, inside a block or outside one, is caught."""
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -13,16 +15,17 @@ from number_scan import hand_written_lines, measured_figures
 from sray.lab.publish.__main__ import main as publish_main
 from sray.lab.publish.blocks import BlockError, blocks, fill
 from sray.lab.publish.figures import CARDS_DATA, H100_REPORT, H200_REPORT, RENDERERS
-from sray.jobs.bench import doc as bench_doc
+from sray.platform.common import bench_doc
 from sray.lab.publish.pages import render_page, slugs
 from sray.lab.publish.publish import documents, publish, published
 from sray.lab.publish.results import RESULTS, mean_sd
 
 REPO = Path(__file__).resolve().parents[1]
+DECIMAL = re.compile(r"\d+\.\d+")
 SCANNED = [REPO / "README.md", REPO / "CONTRIBUTING.md", *sorted((REPO / "docs").rglob("*.md"))]
 
 ALLOWED = {
-    ("docs/data.md", "±"): "the generator's colour-temperature jitter per lamp (a specification of the procedural "
+    ("docs/data.md", "±3"): "the generator's colour-temperature jitter per lamp (a specification of the procedural "
                            "scenes, data_tools/synth/lighting.py)",
     ("docs/fleet.md", "5%"): "`transfer.tolerance`, a setting's value",
     ("docs/gpu.md", "30 views/s"): "the GPU check's target, a requirement rather than a measurement",
@@ -40,7 +43,7 @@ def _stale(repo: Path) -> list[str]:
 
 
 def test_every_generated_block_and_page_matches_its_stored_data() -> None:
-    """Re-render every generated block and benchmark page from the stored data; each equals the file."""
+    """Re-render every generated block, benchmark page and study page from the stored data; each equals the file."""
     stale = _stale(REPO)
     assert not stale, f"out of date with their stored data: {stale}; run `python -m sray.lab.publish`"
 
@@ -53,11 +56,20 @@ def test_the_readme_publishes_its_headline_figures() -> None:
 
 
 def test_no_measured_figure_outside_a_generated_block() -> None:
-    """README, CONTRIBUTING and docs/: hand-written lines hold no measured figure but the allowed specifications."""
-    found, pages = [], {REPO / "docs" / "benchmarks" / f"{slug}.md" for slug in slugs(REPO / "docs")}
+    """README, CONTRIBUTING and docs/: hand-written lines hold no measured figure but the allowed specifications; the
+    Reading of a generated benchmark or study page quotes only numbers its own generated part shows."""
+    found = []
+    pages = {REPO / "docs" / "benchmarks" / f"{slug}.md" for slug in slugs(REPO / "docs")}
+    pages |= {REPO / "docs" / "studies" / f"{spec.stem}.md" for spec in (REPO / "jobs" / "studies").glob("*.yaml")}
     for path in SCANNED:
-        rel = str(path.relative_to(REPO))
-        for number, line in hand_written_lines(path.read_text(), generated_page=path in pages):
+        rel, text = str(path.relative_to(REPO)), path.read_text()
+        if path in pages:  # a generated page: its Reading may quote only figures the page's generated part shows
+            generated = text.split("\n## Reading\n")[0]
+            found += [f"{rel}:{number}: {n!r} is not in the page's generated tables"
+                      for number, line in hand_written_lines(text, generated_page=True)
+                      for n in DECIMAL.findall(line) if n not in generated]
+            continue
+        for number, line in hand_written_lines(text):
             found += [f"{rel}:{number}: {f!r} in {line.strip()[:100]!r}" for f in measured_figures(line)
                       if (rel, f) not in ALLOWED]
     assert not found, "measured figures outside generated blocks (store them and publish a block):\n" + "\n".join(found)
@@ -153,12 +165,12 @@ def test_a_bad_stored_result_or_block_stops_the_publisher_naming_it(tmp_path: Pa
     """A trial without the figure a block reads, or a block no renderer knows, stops ``python -m sray.lab.publish``
     with exit 2 and the file and field (or block) named; nothing is written."""
     repo = _copy_inputs(tmp_path)
-    trial = repo / RESULTS / "hour-recipe" / "recipe--s1.json"
+    trial = repo / RESULTS / "hour-recipe" / "hour-intra-uncapped--s1.json"
     trial.write_text(trial.read_text().replace('"held_out"', '"held_out_views"'))
     before = (repo / "README.md").read_text()
     assert publish_main(["--repo", str(repo)]) == 2
-    assert "recipe--s1.json: no field metrics.held_out.miou" in capsys.readouterr().err
-    shutil.copy(REPO / RESULTS / "hour-recipe" / "recipe--s1.json", trial)
+    assert "hour-intra-uncapped--s1.json: no field metrics.held_out.miou" in capsys.readouterr().err
+    shutil.copy(REPO / RESULTS / "hour-recipe" / "hour-intra-uncapped--s1.json", trial)
     (repo / "README.md").write_text(before + "\n<!-- published: nobody -->\n<!-- /published: nobody -->\n")
     assert publish_main(["--repo", str(repo), "--check"]) == 2
     assert "README.md: no renderer named 'nobody'" in capsys.readouterr().err

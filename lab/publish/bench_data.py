@@ -1,9 +1,10 @@
 """The benchmarks' stored tables as the publisher reads them; the one module of the lab's publisher that imports the
-product's benchmark writer (``sray.jobs.bench.doc``), so a generated page renders exactly as ``record`` writes it."""
+product's benchmark writer (``sray.platform.common.bench_doc``), so a generated page renders exactly as
+``record`` writes it."""
 
 from __future__ import annotations
 
-from sray.jobs.bench.doc import (  # noqa: F401  (re-exported for the publisher's other modules)
+from sray.platform.common.bench_doc import (  # noqa: F401  (re-exported for the publisher's other modules)
     DATA_FILE,
     INDEX_MARKER,
     Bench,
@@ -13,4 +14,4 @@ from sray.jobs.bench.doc import (  # noqa: F401  (re-exported for the publisher'
     render_section,
     section_title,
 )
-from sray.jobs.bench.doc_blocks import markdown_table  # noqa: F401
+from sray.platform.common.doc_blocks import markdown_table  # noqa: F401

@@ -16,14 +16,17 @@ CARDS_DATA = Path("docs/benchmarks/recipe-cards/all-machines/tables.json")
 H100_REPORT = Path("docs/benchmarks/gpu-check/nvidia-h100-80gb-hbm3/tables.json")
 H200_REPORT = Path("docs/benchmarks/gpu-check/nvidia-h200/tables.json")
 """The GPU checks' stored reports (``sray gpu-check``)."""
-SHIPPED = ("hour-recipe", "recipe")
+SHIPPED = ("hour-recipe", "hour-intra-uncapped")
 """(study, arm) of ``synth-cpu-hour`` as it ships: trained until its CPU budget is spent, seeds 0-2."""
-REPEATED = ("hour-recipe", "recipe-repeat")
+REPEATED = ("hour-budget", "hour-intra-uncapped")
 """The same recipe and seeds repeated on a host where a CPU second bought more ray steps."""
-TWICE = ("hour-recipe-2x", "2x")
+TWICE = ("hour-budget", "hour-2x")
 """The recipe at twice its CPU budget."""
-FLEETS = ("from-recipe-repeat", "from-recipe-repeat-2", "from-recipe-repeat-3")
-"""Arms of study ``finetune-60s``: the 60 s S-Ray finetune of three seed-0 models of the shipped recipe."""
+FLEETS = ("from-hour-budget", "from-hour-recipe-hosts", "from-lr-decay-at-the-hour")
+"""Arms of study ``finetune-60s``: the 60 s S-Ray finetune of three seed-0 models of the shipped recipe (each named
+after the study holding the model's pretraining trial)."""
+STUDY_PAGES = Path("docs/studies")
+"""Where the studies' generated pages are (``sray lab study --page``)."""
 
 
 def _link(repo_path: Path | str) -> str:
@@ -56,10 +59,11 @@ def recipe_cards(repo: Path) -> str:
                    row[8]]
         rows.append(row)
     sources = ", ".join(_link(p) for p in [CARDS_DATA, RESULTS / SHIPPED[0], RESULTS / "finetune-60s"])
+    study = _link(STUDY_PAGES / f"{SHIPPED[0]}.md")
     return (markdown_table(table["header"], rows) + "\n\n"
             f"`synth-cpu-hour` on the 2-core CPU: mean ± sample sd over {seeds(shipped)} of the recipe as it ships "
-            "(trained until its CPU budget is spent); its render time is its network's, measured on the same network "
-            f"at a step cap. The other rows as `sray bench recipe-cards` stored them. Read from {sources}.")
+            f"(trained until its CPU budget is spent; {study}); its render time is its network's, measured on the same "
+            f"network at a step cap. The other rows as `sray lab recipe-cards` stored them. Read from {sources}.")
 
 
 def hour_recipe(repo: Path) -> str:
@@ -78,7 +82,8 @@ def hour_recipe(repo: Path) -> str:
     return (f"Trained until its CPU budget is spent, `synth-cpu-hour` scores {scores(shipped)} ({seeds(shipped)}, "
             f"{steps(shipped)} ray steps; mean ± sample sd). The same seeds on a host where the same CPU seconds "
             f"bought {steps(repeated)} ray steps score {scores(repeated)}. At twice its budget ({seeds(twice)}) it "
-            f"scores {scores(twice)}. Read from {_link(RESULTS / SHIPPED[0])} and {_link(RESULTS / TWICE[0])}.")
+            f"scores {scores(twice)}. Read from {_link(RESULTS / SHIPPED[0])} and {_link(RESULTS / TWICE[0])} "
+            f"(pages: {_link(STUDY_PAGES / f'{SHIPPED[0]}.md')}, {_link(STUDY_PAGES / f'{TWICE[0]}.md')}).")
 
 
 def gpu_training(repo: Path) -> str:
@@ -100,10 +105,33 @@ def demo_time(repo: Path) -> str:
             f"set-up (read from {_link(RESULTS / 'demo')}).")
 
 
+CAPTURE_SCALE = Path("docs/capture_scale.json")
+"""The capture readers' measured scale and bounds errors (``tests/capture_scale_check.py``)."""
+
+
+def capture_scale(repo: Path) -> str:
+    """The capture readers' scale error per point-noise level, and how much wider the bounds from points alone were
+    than those from the depth maps, as stored."""
+    rows = json.loads((repo / CAPTURE_SCALE).read_text())["rows"]
+    noises = sorted({r["point_noise"] for r in rows})
+
+    def span(values: list[float], digits: int) -> str:
+        return f"{min(values):.{digits}f} to {max(values):.{digits}f}"
+
+    below = [f"{span([-100 * r['relative_error'] for r in rows if r['point_noise'] == n], 2)}% below with "
+             f"{100 * n:g}% noise" for n in noises]
+    near = [100 * (1 - r["near_far_from_points"][0] / r["near_far_from_depth"][0]) for r in rows]
+    far = [100 * (r["near_far_from_points"][1] / r["near_far_from_depth"][1] - 1) for r in rows]
+    return (f"The measured scale was {'; '.join(below)} ({len(rows) // len(noises)} rooms per level). Bounds from the "
+            f"points alone were wider than those from the depth maps: near {span(near, 0)}% lower, far "
+            f"{span(far, 0)}% higher. Read from {_link(CAPTURE_SCALE)}.")
+
+
 RENDERERS: dict[str, Callable[[Path], str]] = {
     "recipe-cards": recipe_cards,
     "hour-recipe": hour_recipe,
     "gpu-training": gpu_training,
     "demo-time": demo_time,
+    "capture-scale": capture_scale,
 }
 """Block name -> its renderer (a function of the repository folder)."""

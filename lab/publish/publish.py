@@ -1,7 +1,7 @@
 """Every published number from stored results, in one pass: the generated blocks of README.md and docs/**/*.md
-(:mod:`sray.lab.publish.blocks`, renderers in :mod:`sray.lab.publish.figures`) and the benchmarks' pages
-(:mod:`sray.lab.publish.pages`). :func:`published` says what each file should hold; :func:`publish` writes the files
-that differ (atomically) or, checking, only lists them."""
+(:mod:`sray.lab.publish.blocks`, renderers in :mod:`sray.lab.publish.figures`), the benchmarks' pages
+(:mod:`sray.lab.publish.pages`) and the studies' pages (:mod:`sray.lab.publish.study_pages`). :func:`published` says
+what each file should hold; :func:`publish` writes the files that differ (atomically) or, checking, only lists them."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from sray.data_tools.atomic import atomic_write_text
 from sray.lab.publish.blocks import BlockError, blocks, fill
 from sray.lab.publish.figures import RENDERERS
 from sray.lab.publish.pages import render_page, slugs
+from sray.lab.publish.study_pages import expected_page, specs
 
 
 def documents(repo: Path) -> list[Path]:
@@ -28,10 +29,12 @@ def _render(repo: Path, where: str) -> Callable[[str], str]:
 
 
 def published(repo: Path) -> dict[Path, str]:
-    """Each generated file's expected text: the benchmarks' pages, then every document holding a generated block."""
+    """Each generated file's expected text: the benchmarks' and the studies' pages, then every document holding a
+    generated block."""
     repo = Path(repo)
     docs = repo / "docs"
     expected = {docs / "benchmarks" / f"{slug}.md": render_page(docs, slug) for slug in slugs(docs)}
+    expected.update(expected_page(spec, docs) for spec in specs(repo))
     for path in documents(repo):
         text = expected.get(path, path.read_text() if path.exists() else "")
         where = str(path.relative_to(repo))

@@ -46,8 +46,7 @@ def synth_demo() -> TrainConfig:
     world is what lets these losses and the warm-up lift zero-shot accuracy above ``synth-small``'s: on the earlier
     4-room world they gained nothing. Its attention stays full CRA, unlike the hour recipe's intra-only stage: at
     this scale the cross-view stage costs little next to the encoder, and intra-only scored lower on both seeds
-    tried and saved no training CPU. The demo's figures are published from the stored results listed in
-    docs/benchmarks.md (the recipe cards).
+    tried and saved no training CPU (study ``demo-recipe``, listed in docs/benchmarks.md).
     """
     cfg = synth_small()
     cfg.recipe = "synth-demo"
@@ -70,9 +69,8 @@ CPU_HOUR_STEP_CAP = 20_000
 job; the steps it stops after depend on what a CPU second buys on the host (each stored trial records its ray steps
 and its machine). The cap only bounds the learning-rate schedule on a much faster machine (``budget_lr_factor``
 follows the larger of the step and CPU-budget fractions). The recipe is trained until its budget is spent because
-the steps the budget buys beyond a lower cap raised held-out accuracy on every paired seed (study ``hour-recipe``
-against the capped ``hour-intra`` cells; the figures are published from jobs/studies/results/, listed in
-docs/benchmarks.md)."""
+the steps the budget buys beyond a lower cap raised held-out accuracy on every paired seed (docs/studies/hour-recipe.md:
+``hour-intra-uncapped`` against the capped ``hour-intra``; docs/studies/hour-budget.md for twice the budget)."""
 
 CPU_HOUR_WARMUP_2D = 1500
 """``optim.warmup_2d_steps`` of ``synth-cpu-hour``: its first steps train the encoder and its source-view head on
@@ -80,31 +78,32 @@ the source views' labels alone, before any ray is rendered (a small share of its
 nothing)."""
 
 
-CPU_HOUR_SHARDS = "outputs/bench-accuracy/cpu-small/worlds/train498/shards"
-"""Default shards of ``synth-cpu-hour``: the 498-room world ``sray bench accuracy`` (preset ``cpu-small``, its
-default folder) generates for its cells on 498 rooms (``hour-intra-uncapped``, the recipe as it is)."""
+CPU_HOUR_SHARDS = "outputs/studies/worlds/train498-test4-v40-120x160-s0/shards"
+"""Default shards of ``synth-cpu-hour``: the 498-room world of its study (jobs/studies/hour-recipe.yaml), which
+``sray lab study --worlds jobs/studies/hour-recipe.yaml`` generates in the studies' default work folder."""
 
 
 def synth_cpu_hour() -> TrainConfig:
     """One hour of pretraining on 2 CPU cores (a budget of CPU seconds, not steps), built to generalize rather
     than to memorize its rooms.
 
-    498 procedural rooms at 160x120, 40 views each, at ``CPU_HOUR_SHARDS`` (``sray bench accuracy --cells
-    hour-intra-uncapped:0`` generates them there before it trains this recipe; ``--set data.shards=DIR`` trains on
-    any other world): at the same CPU budget, more rooms transferred better to unseen rooms at every room count
-    tried, and the model stopped memorizing its training rooms; generating them is not counted in the budget.
+    498 procedural rooms at 160x120, 40 views each, at ``CPU_HOUR_SHARDS`` (``sray lab study --worlds
+    jobs/studies/hour-recipe.yaml`` generates them there; ``--set data.shards=DIR`` trains on any other world): at the
+    same CPU budget, more rooms transferred better to unseen rooms at every room count tried, and the model stopped
+    memorizing its training rooms (docs/studies/hour-recipe.md); generating them is not counted in the budget.
     Each sample has 2-8 source views drawn from its 12 top-ranked neighbours and rendered at a random share of their
     resolution, with per-view exposure, white-balance and sensor-noise jitter; the semantic loss is weighted by
     inverse-square-root class frequency so small classes count. Scenes are interleaved step by step (one sample
     per scene visit) and the encoder also learns from its source views' labels: together they let the model label
-    objects, where either alone gained nothing measurable. Its first ``CPU_HOUR_WARMUP_2D`` steps train the encoder
-    and that head on the source labels alone, before any ray is rendered: the encoder then carries the category
-    information the ray loss alone was too sparse to teach it, and nearly every class rose over three seeds. Its
-    cross-reprojection attention keeps only the intra-view stage (``model.attention=intra``): level with the full
-    block over three paired seeds for less training CPU, and above no attention. It trains until its CPU budget is
-    spent (``CPU_HOUR_STEP_CAP`` lies beyond it): the steps the cheaper attention saves are trained, not left
-    unspent. Evaluation uses 8 sources. The measurements behind each choice are the accuracy study's cells and the
-    ``hour-recipe`` study, listed in docs/benchmarks.md; its published figures are the README's recipe card.
+    objects, where either alone gained nothing measurable (one seed at 600 steps). Its first ``CPU_HOUR_WARMUP_2D``
+    steps train the encoder and that head on the source labels alone, before any ray is rendered: the encoder then
+    carries the category information the ray loss alone was too sparse to teach it, and nearly every class rose over
+    three seeds (docs/studies/hour-recipe.md: ``hour-warm2d`` against ``hour-498``). Its cross-reprojection attention
+    keeps only the intra-view stage (``model.attention=intra``): level with the full block over three paired seeds
+    for less training CPU, and above no attention (docs/studies/hour-recipe.md: ``hour-intra``, ``hour-warm2d``,
+    ``hour-none``). It trains until its CPU budget is spent (``CPU_HOUR_STEP_CAP`` lies beyond it): the steps the
+    cheaper attention saves are trained, not left unspent. Evaluation uses 8 sources. Its published figures are the
+    README's recipe card and headline, generated from the stored trials by ``python -m sray.lab.publish``.
     """
     return TrainConfig(
         recipe="synth-cpu-hour",
