@@ -95,7 +95,7 @@ def synth_cpu_hour() -> TrainConfig:
     resolution, with per-view exposure, white-balance and sensor-noise jitter; the semantic loss is weighted by
     inverse-square-root class frequency so small classes count. Scenes are interleaved step by step (one sample
     per scene visit) and the encoder also learns from its source views' labels: together they let the model label
-    objects, where either alone gained nothing measurable (one seed at 600 steps). Its first ``CPU_HOUR_WARMUP_2D``
+    objects, where either alone gained nothing measurable (trials ``source-loss-600``). Its first ``CPU_HOUR_WARMUP_2D``
     steps train the encoder and that head on the source labels alone, before any ray is rendered: the encoder then
     carries the category information the ray loss alone was too sparse to teach it, and nearly every class rose over
     three seeds (docs/studies/hour-recipe.md: ``hour-warm2d`` against ``hour-498``). Its cross-reprojection attention
