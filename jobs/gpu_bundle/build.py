@@ -44,8 +44,8 @@ def download(pins: list[Pin], dest: Path, python_version: str, find_links: Path 
                           done.stderr)
         name = found.group(1) if found else "one of the pins"
         source = f"in {find_links}" if find_links else "on the registry"
-        raise BundleError(f"no wheel of {name} for CPython {python_version} on manylinux x86-64 {source}: pin a version "
-                          "that has one in constraints.txt, or add its platform tag (manylinux_2_N_x86_64) to "
+        raise BundleError(f"no wheel of {name} for CPython {python_version} on manylinux x86-64 {source}: pin a "
+                          "version that has one in constraints.txt, or add its platform tag (manylinux_2_N_x86_64) to "
                           "MANYLINUX_TAGS in jobs/gpu_bundle/resolve.py, and build again")
 
 
