@@ -21,9 +21,7 @@ ROOTS = ("ray[train]", "mlflow-skinny", "sqlalchemy", "alembic", "webdataset")
 Alembic, which the full ``mlflow`` package adds beside its server) and the shard loader."""
 PIN_FROM = {"mlflow-skinny": "mlflow"}
 """Roots pinned to another constraint's version (mlflow-skinny is released with mlflow, at the same version)."""
-LEFT_OUT = {"databricks-sdk": "mlflow-skinny's Databricks client, used only for databricks:// tracking URIs",
-            "google-auth": "needed only by databricks-sdk", "cryptography": "needed only by google-auth",
-            "cffi": "needed only by cryptography", "pycparser": "needed only by cffi",
+LEFT_OUT = {"google-auth": "databricks-sdk's Google Cloud credentials, loaded only for Databricks on Google Cloud",
             "pyasn1": "needed only by google-auth", "pyasn1-modules": "needed only by google-auth"}
 """Declared dependencies sray never loads, left out for size (the bundle check proves the stages run without)."""
 MANYLINUX_TAGS = ("manylinux_2_28_x86_64", "manylinux_2_27_x86_64", "manylinux_2_24_x86_64", "manylinux_2_17_x86_64",

@@ -1,5 +1,7 @@
 """Repack a wheel without some of its files: the ``RECORD`` rewritten with each kept file's hash and size, the
-console scripts of dropped modules removed from ``entry_points.txt``, file modes (the executables) kept.
+console scripts of dropped modules removed from ``entry_points.txt``, file modes (the executables) kept, and
+the symbol tables of named native binaries removed (``strip --strip-unneeded``: what the dynamic linker and
+Python need stays; only crash backtraces lose function names).
 
 The result installs with pip like the original (same name, version and tags); only the dropped paths are absent.
 """
@@ -9,6 +11,9 @@ from __future__ import annotations
 import base64
 import hashlib
 import io
+import shutil
+import subprocess
+import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +30,7 @@ class Stripped:
     dropped_files: int
     """Files left out."""
     dropped_bytes: int
-    """Their uncompressed size."""
+    """Bytes saved, uncompressed: the files left out and the symbol tables stripped."""
 
 
 def record_hash(data: bytes) -> str:
@@ -54,10 +59,25 @@ def filter_entry_points(text: str, drop: tuple[str, ...]) -> str:
     return "\n".join(kept) + "\n"
 
 
-def strip_wheel(src: Path, dest_dir: Path, drop: tuple[str, ...]) -> Stripped:
+def strip_symbols(data: bytes) -> bytes:
+    """``data`` (an ELF binary) without its symbol tables (``strip --strip-unneeded``); raises ``ValueError``
+    where binutils' ``strip`` is not installed or refuses the file."""
+    if shutil.which("strip") is None:
+        raise ValueError("binutils' strip is not installed: apt-get install binutils, then build again")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "binary"
+        path.write_bytes(data)
+        done = subprocess.run(["strip", "--strip-unneeded", str(path)], capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise ValueError(f"strip refused a binary: {done.stderr.strip()}")
+        return path.read_bytes()
+
+
+def strip_wheel(src: Path, dest_dir: Path, drop: tuple[str, ...], binaries: tuple[str, ...] = ()) -> Stripped:
     """Write ``src`` into ``dest_dir`` (same file name) without the files under the ``drop`` folders (paths inside
-    the wheel, each ending in ``/``). Raises ``ValueError`` when a folder to drop is not in the wheel (a stale
-    list) or names the ``.dist-info`` folder."""
+    the wheel, each ending in ``/``) and with the ``binaries`` (paths of native files) stripped of their symbol
+    tables. Raises ``ValueError`` when a folder or binary named is not in the wheel (a stale list) or a folder
+    names the ``.dist-info`` folder."""
     bad = [p for p in drop if not p.endswith("/") or ".dist-info/" in p]
     if bad:
         raise ValueError(f"folders to drop must end in '/' and stay out of .dist-info: {bad}")
@@ -67,8 +87,9 @@ def strip_wheel(src: Path, dest_dir: Path, drop: tuple[str, ...]) -> Stripped:
         infos = zin.infolist()
         info_dir = dist_info_dir([i.filename for i in infos], src)
         missing = [p for p in drop if not any(i.filename.startswith(p) for i in infos)]
+        missing += [b for b in binaries if b not in {i.filename for i in infos}]
         if missing:
-            raise ValueError(f"{src.name} has no {', '.join(missing)}: update the folders to drop")
+            raise ValueError(f"{src.name} has no {', '.join(missing)}: update the lists of what to drop")
         record_name, records, buffer = info_dir + "RECORD", [], io.BytesIO()
         with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as zout:
             for info in infos:
@@ -80,6 +101,10 @@ def strip_wheel(src: Path, dest_dir: Path, drop: tuple[str, ...]) -> Stripped:
                 data = zin.read(info)
                 if info.filename == info_dir + "entry_points.txt":
                     data = filter_entry_points(data.decode(), drop).encode()
+                elif info.filename in binaries:
+                    dropped_bytes += len(data)
+                    data = strip_symbols(data)
+                    dropped_bytes -= len(data)
                 zout.writestr(_copy_info(info), data)
                 records.append(f"{info.filename},{record_hash(data)},{len(data)}")
             records.append(f"{record_name},,")
