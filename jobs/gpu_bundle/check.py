@@ -80,7 +80,7 @@ def run_bundle_check(work: Path, python_version: str, constraints_file: Path, li
                            "fleet", "--out", str(work / "gpu-check")], env=stage_env, check=False).returncode
     result = {"python_version": python_version, "bundle_mib": round(folder_bytes(work / "bundle") / 2**20, 1),
               "wheels": len(manifest["wheels"]), "gpu_check_exit": code,
-              "seconds": round(time.perf_counter() - start), "report": str(work / "gpu-check" / "gpu_check.md")}
+              "seconds": round(time.perf_counter() - start), "report": "gpu-check/gpu_check.md"}
     atomic_write_json(work / RESULT, result)
     print(f"[gpu-bundle check] {'passed' if code == 0 else 'FAILED'}: {result}", flush=True)
     return code

@@ -23,14 +23,24 @@ echo "gpu-bundle: {count} wheels installed into $target; now: export PYTHONPATH=
 """
 
 
+def bundle_table(manifest: dict) -> str:
+    """The bundle's wheels as a Markdown table: name, version, MiB and what the repack changed, then the total."""
+    rows = []
+    for w in manifest["wheels"]:
+        changes = ([f"without {' '.join(w['dropped'])}"] if w["dropped"] else []) + (
+            [f"symbols stripped from {' '.join(w['symbols_stripped'])}"] if w["symbols_stripped"] else [])
+        rows.append(f"| {w['name']} | {w['version']} | {w['bytes'] / 2**20:.2f} | {'; '.join(changes)} |")
+    total = sum(w["bytes"] for w in manifest["wheels"]) / 2**20
+    return ("| distribution | version | MiB | repacked |\n|---|---|---:|---|\n" + "\n".join(rows)
+            + f"\n| **{len(rows)} wheels** | | **{total:.1f}** | |")
+
+
 def write_install_files(folder: Path, manifest: dict) -> None:
     """Write ``install.sh`` (executable) and ``README.md`` into the bundle ``folder``."""
     wheels = manifest["wheels"]
     script = folder / "install.sh"
     atomic_write_text(script, INSTALL_SH.format(target=DEFAULT_TARGET, count=len(wheels)))
     os.chmod(script, 0o755)
-    rows = "\n".join(f"| {w['name']} | {w['version']} | {w['bytes'] / 2**20:.2f} | {' '.join(w['dropped'])} |"
-                     for w in wheels)
     left_out = "\n".join(f"- {name}: {why}" for name, why in manifest["left_out"].items())
     atomic_write_text(folder / "README.md", f"""# sray GPU bundle (CPython {manifest['python_version']}, \
 {manifest['platform']})
@@ -46,9 +56,7 @@ sh install.sh {DEFAULT_TARGET} && export PYTHONPATH={DEFAULT_TARGET}
 (that is `python3 -m pip install --no-index --no-deps --no-compile --target {DEFAULT_TARGET} *.whl`). Built by
 `sray gpu-bundle` (`make gpu-bundle`); `bundle.json` lists the same in data.
 
-| distribution | version | MiB | folders left out of the wheel |
-|---|---|---:|---|
-{rows}
+{bundle_table(manifest)}
 
 Left out (declared dependencies sray never loads):
 

@@ -28,7 +28,7 @@ EVAL_FAST = FastRender(pixel_stride=1, confidence=0.9)
 def world(ctx: CheckContext) -> World:
     """The hour recipe's world (``cpu-small``'s with ``RECIPE_ROOMS`` training rooms); a toy world in a dry run."""
     if ctx.dry_run:
-        return World(train_scenes=2, test_scenes=1, views=20, height=32, width=40, seed=0, neighbours=8)
+        return World(train_scenes=2, test_scenes=1, views=20, height=48, width=64, seed=0, neighbours=8)
     return dataclasses.replace(PRESETS["cpu-small"].world, train_scenes=RECIPE_ROOMS)
 
 
