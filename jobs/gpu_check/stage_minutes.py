@@ -36,7 +36,8 @@ def run(ctx: CheckContext) -> StageResult:
     """Generate the world, train the recipe, score it; one row of minutes and mIoU."""
     missing = [m for m in NEEDS if not has_module(m)]
     if missing:
-        return StageResult("skipped", f"{', '.join(missing)} not installed here: the minutes stage needs the full stack")
+        return StageResult("skipped", f"{', '.join(missing)} not installed here: the minutes stage needs the full "
+                                      "stack")
     from sray.jobs.bench.accuracy_cells import HELD_OUT_SCENES
     from sray.platform.eval.zero_shot import evaluate_checkpoint, training_scenes
     from sray.platform.train.launcher import launch_training

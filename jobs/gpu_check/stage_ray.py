@@ -117,7 +117,8 @@ def run(ctx: CheckContext) -> StageResult:
                         "--size", RENDER_SIZE, "--frames", str(4 if ctx.dry_run else RENDER_FRAMES), *FAST,
                         "--n-source", n_source, "--out", str(render_out), "--device", device, "--no-track"])
     frames = json.loads(next(render_out.rglob("frames.json")).read_text())
-    rows.append([f"sray render {RENDER_SIZE} fly-through (fast s1 c0.9, trained weights)", "fp32", f"{frames['n_frames']} frames",
+    rows.append([f"sray render {RENDER_SIZE} fly-through (fast s1 c0.9, trained weights)", "fp32",
+                 f"{frames['n_frames']} frames",
                  f"{frames['n_frames'] / frames['frames_per_s']:.1f}", f"{frames['frames_per_s']:.2f} frames/s"])
     refused, shared_row = shared_gpu_request(_config(shards, root, name, precision))
     rows.append(shared_row)
