@@ -75,8 +75,9 @@ def run_bundle_check(work: Path, python_version: str, constraints_file: Path, li
     path = sray_path_dir(work / "sray-path", checkout_root())
     stage_env = {**os.environ, "PYTHONPATH": f"{site}:{path}", "RAY_USAGE_STATS_ENABLED": "0"}
     stage_env.pop("PIP_CONSTRAINT", None)
+    shutil.rmtree(work / "gpu-check", ignore_errors=True)  # a check starts from nothing: no earlier world or report
     print("[gpu-bundle check] gpu-check --dry-run --stages ray fleet", flush=True)
-    code = subprocess.run([python, "-m", "sray.jobs.cli", "gpu-check", "--dry-run", "--fresh", "--stages", "ray",
+    code = subprocess.run([python, "-m", "sray.jobs.cli", "gpu-check", "--dry-run", "--stages", "ray",
                            "fleet", "--out", str(work / "gpu-check")], env=stage_env, check=False).returncode
     result = {"python_version": python_version, "bundle_mib": round(folder_bytes(work / "bundle") / 2**20, 1),
               "wheels": len(manifest["wheels"]), "gpu_check_exit": code,

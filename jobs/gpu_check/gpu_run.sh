@@ -6,7 +6,7 @@
 #   OUT      where the results go (the device's $OUT)                               required
 #   BUNDLE   the wheel folder `make gpu-bundle` wrote                               default outputs/gpu-bundle
 #   RESUME   a folder holding an earlier call's returned files (gpu-run.tar)        default .gpu-resume
-#   BUDGET_S seconds this call may spend on stages (a stage is started only when    default 510
+#   BUDGET_S seconds this call may spend on stages (a stage is started only when    default 540
 #            its estimate below fits in what is left; the next call resumes)
 #   STAGES   the stages, in order                                                   default the plan below
 #   DRY_RUN  1: every stage on the CPU at toy sizes (how the suite tests this)      default 0
@@ -17,7 +17,7 @@ repo=$(cd "$(dirname "$0")/../.." && pwd)
 out=${OUT:?set OUT to the folder the results go to}
 bundle=${BUNDLE:-$repo/outputs/gpu-bundle}
 resume=${RESUME:-$repo/.gpu-resume}
-budget=${BUDGET_S:-510}
+budget=${BUDGET_S:-540}
 stages=${STAGES:-"environment ray fleet minutes"}
 python=${PYTHON:-python3}
 work=${WORK:-/tmp/sray-gpu-run}

@@ -38,7 +38,7 @@ RECIPE = "synth-gpu-minutes"
 GPU_STEPS = 300
 """Training steps on a GPU (4 in a dry run); rank 0 dies at half of them."""
 RENDER_SIZE = "320x240"
-"""Fly-through size (width x height)."""
+"""Fly-through size (width x height); 80x60 in a dry run."""
 RENDER_FRAMES = 60
 FAST = ("--render", "fast", "--fast-stride", "1", "--fast-confidence", "0.9")
 """The hour recipe's evaluation render (``fast s1 c0.9``), for ``sray eval`` and ``sray render`` alike."""
@@ -113,13 +113,14 @@ def run(ctx: CheckContext) -> StageResult:
     views = sum(len(s["views"]) for s in metrics["scenes"].values())
     rows.append(["sray eval (fast s1 c0.9, trained weights)", "fp32", f"{views} views", f"{metrics['wall_s']:.1f}",
                  f"{views / metrics['wall_s']:.2f} views/s"])
+    size, n_frames = ("80x60", 4) if ctx.dry_run else (RENDER_SIZE, RENDER_FRAMES)
     render_code = main(["render", "--checkpoint", str(checkpoint), "--data", str(shards), "--scene", scene,
-                        "--size", RENDER_SIZE, "--frames", str(4 if ctx.dry_run else RENDER_FRAMES), *FAST,
+                        "--size", size, "--frames", str(n_frames), *FAST,
                         "--n-source", n_source, "--out", str(render_out), "--device", device, "--no-track"])
     frames = json.loads(next(render_out.rglob("frames.json")).read_text())
-    rows.append([f"sray render {RENDER_SIZE} fly-through (fast s1 c0.9, trained weights)", "fp32",
-                 f"{frames['n_frames']} frames",
-                 f"{frames['n_frames'] / frames['frames_per_s']:.1f}", f"{frames['frames_per_s']:.2f} frames/s"])
+    rows.append([f"sray render {size} fly-through (fast s1 c0.9, trained weights)",
+                 "fp32", f"{frames['n_frames']} frames", f"{frames['n_frames'] / frames['frames_per_s']:.1f}",
+                 f"{frames['frames_per_s']:.2f} frames/s"])
     refused, shared_row = shared_gpu_request(_config(shards, root, name, precision))
     rows.append(shared_row)
     ok = code == 0 and eval_code == 0 and render_code == 0 and killed and step == _steps(ctx) and refused
