@@ -15,6 +15,7 @@ from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
 from sray.jobs.gpu_check.context import checkout_root
+from sray.jobs.gpu_check.report import load_report
 
 from .build import build_bundle, folder_bytes
 from .image import IMAGE_PACKAGES, IMAGE_SIDE_NEEDS
@@ -79,8 +80,10 @@ def run_bundle_check(work: Path, python_version: str, constraints_file: Path, li
     print("[gpu-bundle check] gpu-check --dry-run --stages ray fleet", flush=True)
     code = subprocess.run([python, "-m", "sray.jobs.cli", "gpu-check", "--dry-run", "--stages", "ray",
                            "fleet", "--out", str(work / "gpu-check")], env=stage_env, check=False).returncode
+    stages = load_report(work / "gpu-check")["stages"]
     result = {"python_version": python_version, "bundle_mib": round(folder_bytes(work / "bundle") / 2**20, 1),
               "wheels": len(manifest["wheels"]), "gpu_check_exit": code,
+              "stages": {name: f"{r.status}: {r.summary}" for name, r in stages.items()},
               "seconds": round(time.perf_counter() - start), "report": "gpu-check/gpu_check.md"}
     atomic_write_json(work / RESULT, result)
     print(f"[gpu-bundle check] {'passed' if code == 0 else 'FAILED'}: {result}", flush=True)
