@@ -30,7 +30,7 @@ bench: setup
 	$(BIN)/sray bench model
 
 # The wheels a bare GPU machine needs beyond its image (docs/gpu.md), and the slow proof that such a bundle,
-# built for this machine's Python, installs offline beside the CPU torch and runs gpu-check's ray and fleet stages.
+# built for this machine's Python, installs offline beside the CPU torch and runs the prepared GPU call's stages.
 gpu-bundle: setup
 	$(BIN)/sray gpu-bundle --out outputs/gpu-bundle
 

@@ -1,7 +1,9 @@
-"""``sray gpu-bundle --check``: the bundle, built for this machine's Python, installed offline into a clean venv
-that stands in for the GPU image (the CPU torch, and the image's packages at this environment's versions), then
-gpu-check's ``ray`` and ``fleet`` stages run there on the CPU. A wheel missing from the bundle fails here, not on
-the GPU. Slow (a few minutes: a venv, two installs and the stages); the suite tests the builder's parts instead.
+"""``sray gpu-bundle --check``: the bundle, built for this machine's Python, and a clean venv that stands in for the
+GPU image (the CPU torch, and the image's packages at this environment's versions); then the prepared GPU call
+(``jobs/gpu_check/gpu_run.sh``) runs there as on a bare GPU machine, in a dry run: it installs the bundle offline,
+links the checkout and runs gpu-check's ``ray``, ``fleet`` and ``minutes`` stages on the CPU. A wheel missing from
+the bundle fails here, not on the GPU. Slow (minutes: a venv, two installs and the stages); the suite tests the
+builder's parts and the script's mechanics instead.
 """
 
 from __future__ import annotations
@@ -25,17 +27,12 @@ TORCH_PIN = "torch"
 """The one package the stand-in takes from ``constraints.txt`` first (its CPU build, as this machine has)."""
 RESULT = "check.json"
 """What the check found: bundle size, the stages' status, seconds."""
-
-
-def sray_path_dir(folder: Path, repo: Path) -> Path:
-    """A folder holding ``sray/<part>`` links to the checkout's four top-level folders: on ``PYTHONPATH`` it makes
-    ``sray`` importable without pip (how the GPU image runs sray, docs/gpu.md); returns ``folder``."""
-    package = folder / "sray"
-    shutil.rmtree(folder, ignore_errors=True)
-    package.mkdir(parents=True)
-    for part in ("model", "data_tools", "platform", "jobs"):
-        (package / part).symlink_to(repo / part, target_is_directory=True)
-    return folder
+SCRIPT = "jobs/gpu_check/gpu_run.sh"
+"""The prepared GPU call, run here as on a bare GPU machine (it installs the bundle and links the checkout)."""
+STAGES = "ray fleet minutes"
+"""The stages that need the bundle."""
+CPU_BUDGET_S = 3600
+"""The script's time budget here (its default is sized for a GPU call; a loaded CPU runs the toy stages slower)."""
 
 
 def _run(step: str, command: list[str], env: dict[str, str] | None = None) -> None:
@@ -70,21 +67,20 @@ def run_bundle_check(work: Path, python_version: str, constraints_file: Path, li
          [python, "-m", "pip", "install", "-q", f"{TORCH_PIN}=={constraints[TORCH_PIN]}"], env)
     _run(f"the image's {len(image_side)} other packages", [python, "-m", "pip", "install", "-q", "-c", str(frozen),
                                                              *image_side], env)
-    site = work / "site"
-    shutil.rmtree(site, ignore_errors=True)
-    _run("the bundle, offline", ["sh", str(work / "bundle" / "install.sh"), str(site)], {**env, "PYTHON": python})
-    path = sray_path_dir(work / "sray-path", checkout_root())
-    stage_env = {**os.environ, "PYTHONPATH": f"{site}:{path}", "RAY_USAGE_STATS_ENABLED": "0"}
-    stage_env.pop("PIP_CONSTRAINT", None)
-    shutil.rmtree(work / "gpu-check", ignore_errors=True)  # a check starts from nothing: no earlier world or report
-    print("[gpu-bundle check] gpu-check --dry-run --stages ray fleet", flush=True)
-    code = subprocess.run([python, "-m", "sray.jobs.cli", "gpu-check", "--dry-run", "--stages", "ray",
-                           "fleet", "--out", str(work / "gpu-check")], env=stage_env, check=False).returncode
-    stages = load_report(work / "gpu-check")["stages"]
+    run_dir = work / "gpu-run"
+    shutil.rmtree(run_dir, ignore_errors=True)  # a check starts from nothing: no earlier world or report
+    print(f"[gpu-bundle check] {SCRIPT} with DRY_RUN=1, stages {STAGES}", flush=True)
+    run_env = {**os.environ, "OUT": str(run_dir / "out"), "WORK": str(run_dir / "work"), "BUNDLE": str(work / "bundle"),
+               "RESUME": str(run_dir / "no-earlier-call"), "PYTHON": python, "DRY_RUN": "1", "STAGES": STAGES,
+               "BUDGET_S": str(CPU_BUDGET_S)}
+    for name in ("PIP_CONSTRAINT", "PYTHONPATH"):  # the venv sees the bundle and the checkout, nothing of this one
+        run_env.pop(name, None)
+    code = subprocess.run(["sh", str(checkout_root() / SCRIPT)], env=run_env, check=False).returncode
+    stages = load_report(run_dir / "work" / "check")["stages"]
     result = {"python_version": python_version, "bundle_mib": round(folder_bytes(work / "bundle") / 2**20, 1),
-              "wheels": len(manifest["wheels"]), "gpu_check_exit": code,
+              "wheels": len(manifest["wheels"]), "script_exit": code,
               "stages": {name: f"{r.status}: {r.summary}" for name, r in stages.items()},
-              "seconds": round(time.perf_counter() - start), "report": "gpu-check/gpu_check.md"}
+              "seconds": round(time.perf_counter() - start), "report": "gpu-run/out/gpu_check.md"}
     atomic_write_json(work / RESULT, result)
     print(f"[gpu-bundle check] {'passed' if code == 0 else 'FAILED'}: {result}", flush=True)
     return code

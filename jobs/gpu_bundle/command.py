@@ -1,7 +1,7 @@
 """``sray gpu-bundle [--python-version 3.12] [--out DIR] [--find-links DIR] [--check]``: the wheels a bare GPU
 machine needs beyond its image (Ray without its Java jar, MLflow's client with its SQL store, webdataset), as
 one folder with its install script; ``--check`` proves a bundle for this machine's Python installs offline beside
-the CPU torch and runs gpu-check's ``ray`` and ``fleet`` stages (docs/gpu.md)."""
+the CPU torch and runs the prepared GPU call's stages there in a dry run (docs/gpu.md)."""
 
 from __future__ import annotations
 
@@ -26,8 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--find-links", type=Path, default=None, help="take the wheels from this folder, offline")
     p.add_argument("--limit-mib", type=float, default=LIMIT_MIB, help="refuse a bundle heavier than this")
     p.add_argument("--check", action="store_true",
-                   help="build for this machine's Python, install it offline into a clean venv beside the CPU torch "
-                        "and run gpu-check's ray and fleet stages there (slow: minutes)")
+                   help="build for this machine's Python, make a clean venv with the CPU torch, and run the prepared "
+                        "GPU call there in a dry run: the bundle installed offline, then the ray, fleet and minutes "
+                        "stages (slow: minutes)")
     p.set_defaults(func=_gpu_bundle)
 
 
