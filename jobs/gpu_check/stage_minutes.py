@@ -1,5 +1,5 @@
 """Stage ``minutes``: the GPU-minutes recipe (``synth-gpu-minutes``) end to end on one GPU, as the hour recipe is
-measured on the CPU: the hour recipe's world (498 training rooms and the preset's unseen rooms, generated here by
+measured on the CPU: the hour recipe's world (498 training rooms and its 4 unseen rooms, generated here by
 one process per CPU), training through ``sray train``'s launcher, then the hour's protocol: zero-shot mIoU on the
 unseen rooms and mIoU on held-out views of the first training rooms, 8 fixed sources, whole images, fast render
 s1 c0.9. Its row gives the minutes of each part and mIoU per GPU-minute of training. A dry run does all of it on
@@ -7,12 +7,10 @@ the CPU with a toy world and a few steps."""
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import time
 
 from sray.data_tools.synth.world import World, make_world
-from sray.jobs.bench.accuracy_plan import PRESETS, RECIPE_ROOMS
 from sray.model.fast_render import FastRender
 from sray.platform.config.recipes import get_recipe
 
@@ -23,13 +21,17 @@ NEEDS = ("ray", "mlflow", "webdataset")
 RECIPE = "synth-gpu-minutes"
 EVAL_FAST = FastRender(pixel_stride=1, confidence=0.9)
 """The hour recipe's evaluation render (``fast s1 c0.9``)."""
+HOUR_WORLD = World(train_scenes=498, test_scenes=4, views=40, height=120, width=160, seed=0)
+"""The hour recipe's world: its study's (``jobs/studies/hour-recipe.yaml``), at ``CPU_HOUR_SHARDS``."""
+HELD_OUT_ROOMS = 8
+"""Training rooms whose held-out views are scored (the studies' ``held_out_rooms``)."""
 
 
 def world(ctx: CheckContext) -> World:
-    """The hour recipe's world (``cpu-small``'s with ``RECIPE_ROOMS`` training rooms); a toy world in a dry run."""
+    """The hour recipe's world (:data:`HOUR_WORLD`); a toy world in a dry run."""
     if ctx.dry_run:
         return World(train_scenes=2, test_scenes=1, views=20, height=48, width=64, seed=0, neighbours=8)
-    return dataclasses.replace(PRESETS["cpu-small"].world, train_scenes=RECIPE_ROOMS)
+    return HOUR_WORLD
 
 
 def run(ctx: CheckContext) -> StageResult:
@@ -38,7 +40,6 @@ def run(ctx: CheckContext) -> StageResult:
     if missing:
         return StageResult("skipped", f"{', '.join(missing)} not installed here: the minutes stage needs the full "
                                       "stack")
-    from sray.jobs.bench.accuracy_cells import HELD_OUT_SCENES
     from sray.platform.eval.zero_shot import evaluate_checkpoint, training_scenes
     from sray.platform.train.launcher import launch_training
 
@@ -64,7 +65,7 @@ def run(ctx: CheckContext) -> StageResult:
         return StageResult("failed", f"{RECIPE}: training wrote no checkpoint ({outcome.status})")
     start = time.perf_counter()
     scores = {}
-    for name, scenes in (("zero-shot", None), ("held-out", training_scenes(shards, HELD_OUT_SCENES))):
+    for name, scenes in (("zero-shot", None), ("held-out", training_scenes(shards, HELD_OUT_ROOMS))):
         report = evaluate_checkpoint(outcome.latest_checkpoint, shards, scenes, root / f"eval-{name}",
                                      n_source=n_source, stride=1, tracking_uri=cfg.run.tracking_uri,
                                      experiment=cfg.run.experiment, progress=False, fast=EVAL_FAST)
