@@ -47,8 +47,11 @@ def test_a_call_installs_the_bundle_and_a_second_resumes_within_its_budget(tmp_p
         assert "./gpu_check.json" in tar.getnames()
     assert "environment: passed" in log
 
-    # a fresh machine, the first call's files carried as RESUME, a budget too short for another stage
-    code, second, log = call(tmp_path, "second", bundle, first, STAGES="environment precision", BUDGET_S="0",
+    # a fresh machine, the first call's report carried as RESUME, a budget too short for another stage
+    carried = tmp_path / "carried"
+    carried.mkdir()
+    (carried / "gpu_check.json").write_bytes((first / "gpu_check.json").read_bytes())
+    code, second, log = call(tmp_path, "second", bundle, carried, STAGES="environment precision", BUDGET_S="0",
                              DRY_RUN="0")
     assert code == 0, log
     assert "resuming: environment already done" in log and "environment: already in the report" in log

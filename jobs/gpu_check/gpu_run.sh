@@ -5,7 +5,7 @@
 #
 #   OUT      where the results go (the device's $OUT)                               required
 #   BUNDLE   the wheel folder `make gpu-bundle` wrote                               default outputs/gpu-bundle
-#   RESUME   a folder holding an earlier call's returned files (gpu-run.tar)        default .gpu-resume
+#   RESUME   a folder holding an earlier call's gpu_check.json (and gpu-run.tar)    default .gpu-resume
 #   BUDGET_S seconds this call may spend on stages (a stage is started only when    default 540
 #            its estimate below fits in what is left; the next call resumes)
 #   STAGES   the stages, in order                                                   default the plan below
@@ -40,8 +40,9 @@ PYTHON=$python sh "$bundle/install.sh" "$work/site" >>"$log" 2>&1 || { say "bund
 mkdir -p "$work/path/sray"
 for part in model data_tools platform jobs; do ln -sfn "$repo/$part" "$work/path/sray/$part"; done
 export PYTHONPATH="$work/site:$work/path" RAY_USAGE_STATS_ENABLED=0 PYTHONUNBUFFERED=1
-if [ -f "$resume/gpu-run.tar" ]; then
-    tar -xf "$resume/gpu-run.tar" -C "$work/check"
+if [ -f "$resume/gpu_check.json" ] || [ -f "$resume/gpu-run.tar" ]; then
+    if [ -f "$resume/gpu-run.tar" ]; then tar -xf "$resume/gpu-run.tar" -C "$work/check"; fi
+    if [ -f "$resume/gpu_check.json" ]; then cp "$resume/gpu_check.json" "$work/check/"; fi
     say "resuming: $(cd "$work/check" && "$python" -c 'import json; print(", ".join(json.load(open("gpu_check.json"))["stages"]) or "nothing")') already done"
 fi
 say "bundle installed; stages: $stages; budget $budget s"
