@@ -6,7 +6,7 @@ export PIP_CONSTRAINT := $(CURDIR)/constraints.txt
 export RAY_USAGE_STATS_ENABLED := 0
 export MLFLOW_SUPPRESS_PRINTING_URL_TO_STDOUT := 1
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench gpu-bundle gpu-bundle-check clean
 
 # The venv is (re)built when pyproject.toml or the constraints change; torch comes first so
 # that nothing later can pull a CUDA build.
@@ -28,6 +28,14 @@ test: setup
 bench: setup
 	$(BIN)/sray bench loader
 	$(BIN)/sray bench model
+
+# The wheels a bare GPU machine needs beyond its image (docs/gpu.md), and the slow proof that such a bundle,
+# built for this machine's Python, installs offline beside the CPU torch and runs the prepared GPU call's stages.
+gpu-bundle: setup
+	$(BIN)/sray gpu-bundle --out outputs/gpu-bundle
+
+gpu-bundle-check: setup
+	$(BIN)/sray gpu-bundle --check --out outputs/gpu-bundle-check
 
 clean:
 	rm -rf $(VENV) outputs build *.egg-info

@@ -19,7 +19,8 @@ import sys
 SUBCOMMAND_MODULES = ("sray.jobs.data.command", "sray.jobs.train_cmd", "sray.jobs.submit_cmd", "sray.jobs.eval_cmd",
                       "sray.jobs.render_cmd", "sray.jobs.label_cmd", "sray.jobs.fleet_cmd", "sray.jobs.sweep_cmd",
                       "sray.jobs.bench.command",
-                      "sray.jobs.gpu_check.command", "sray.jobs.stability.command", "sray.jobs.demo_cmd",
+                      "sray.jobs.gpu_check.command", "sray.jobs.gpu_bundle.command", "sray.jobs.stability.command",
+                      "sray.jobs.demo_cmd",
                       "sray.jobs.ui_cmd", "sray.jobs.cluster_cmd")
 """Modules that register subcommands, in the order `sray --help` lists them."""
 PLUGIN_GROUP = "sray.commands"

@@ -33,10 +33,14 @@ def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Pat
     curve = json.loads((tmp_path / "recipe_curve.json").read_text())["curves"]["bf16"]
     assert [p["phase"] for p in curve] == [0.0] * 3 + [1.0] * 3  # 3 warm-up steps render nothing, then ray steps
     assert curve[2]["sem_src"] < curve[0]["sem_src"] and curve[3]["loss"] > curve[3]["sem_src"]
-    assert report["stages"]["ray"].rows[0][2] == "2"  # steps of the training job
-    assert "refuses two ranks on one GPU" in report["stages"]["ray"].rows[1][4]  # 2 workers, 0.5 GPU each
-    alone, shared = report["stages"]["fleet"].rows
-    assert (alone[1], shared[1]) == ("1", "2") and float(alone[5]) > 0 and float(shared[5]) > 0  # 2 in a dry run
+    train, evaluation, render, refusal = report["stages"]["ray"].rows
+    assert train[0] == "sray train, rank 0 killed at step 2, resumed" and train[2] == "4 steps"  # ran to its end
+    assert evaluation[4].endswith("views/s") and render[2] == "4 frames" and render[0].startswith("sray render 80x60")
+    assert "refuses two ranks on one GPU" in refusal[4]  # 2 workers, 0.5 GPU each
+    alone, *shared = report["stages"]["fleet"].rows
+    assert {"sray", "semantic-nerf", "2d-transfer"} <= {r[0].split(",")[0] for r in shared}
+    assert alone[1] == "1" and all(r[1] == "2" and float(r[5]) > 0 for r in shared)  # 2 scenes in a dry run
+    assert report["stages"]["minutes"].rows[0][:2] == ["synth-gpu-minutes", "4"]
     profiled = {r[0] for r in report["stages"]["profile"].rows}
     assert profiled == {"training step, impl=fast", "training step, impl=fast, bf16", "whole-image render, impl=fast"}
     renders = [r[1] for r in report["stages"]["bench"].rows if r[0] == "whole-view render"]

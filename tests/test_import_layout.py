@@ -37,6 +37,8 @@ LAZY_IMPORTS_ALLOWED = {
         "`sray gpu-check` starts with torch and accelerate alone (docs/gpu.md)",
     "jobs/gpu_check/stage_fleet.py":
         "the finetune fleet needs Ray, MLflow and webdataset: as stage_ray.py",
+    "jobs/gpu_check/stage_minutes.py":
+        "the GPU-minutes recipe's training and scoring need Ray, MLflow and webdataset: as stage_ray.py",
     "jobs/gpu_check/stage_training.py":
         "accelerate: the stage skips where it is not installed",
 }

@@ -16,7 +16,8 @@ from sray.platform.common.bench_doc import markdown_table
 
 REPORT_FILE = "gpu_check.json"
 STATUSES = ("passed", "failed", "skipped")
-STAGE_NAMES = ("environment", "tests", "precision", "training", "recipe", "bench", "profile", "ray", "fleet")
+STAGE_NAMES = ("environment", "tests", "precision", "training", "recipe", "bench", "profile", "ray", "fleet",
+               "minutes")
 """The stages in run order: the choices of ``sray gpu-check --stages`` and the order of the report's table."""
 
 

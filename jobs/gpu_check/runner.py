@@ -18,14 +18,14 @@ import torch
 
 from sray.platform.common.bench_doc import Bench, record
 
-from . import (stage_bench, stage_env, stage_fleet, stage_precision, stage_profile, stage_ray, stage_recipe,
-               stage_training)
+from . import (stage_bench, stage_env, stage_fleet, stage_minutes, stage_precision, stage_profile, stage_ray,
+               stage_recipe, stage_training)
 from .context import CheckContext
 from .report import STAGE_NAMES, StageResult, load_report, markdown, save_report
 
 STAGES: dict[str, Callable[[CheckContext], StageResult]] = dict(zip(STAGE_NAMES, (
     stage_env.environment, stage_env.tests, stage_precision.run, stage_training.run, stage_recipe.run,
-    stage_bench.run, stage_profile.run, stage_ray.run, stage_fleet.run), strict=True))
+    stage_bench.run, stage_profile.run, stage_ray.run, stage_fleet.run, stage_minutes.run), strict=True))
 """Every stage, in the order they run (each at most a few minutes on a GPU)."""
 REPORT_TITLE = "Stages"
 

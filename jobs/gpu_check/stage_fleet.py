@@ -1,7 +1,9 @@
-"""Stage ``fleet``: the finetune fleet with fractional GPUs. One S-Ray scene task alone on the GPU, then
-``SHARING`` scene tasks at once on it (``1 / SHARING`` GPU each): training seconds per scene against the task
-alone, the fleet's wall time and each task's peak GPU memory. A dry run shares the CPUs between
-``DRY_RUN_SHARING`` tasks instead. Skipped, with the reason, where Ray, MLflow or webdataset are not installed."""
+"""Stage ``fleet``: the finetune fleet with fractional GPUs, as ``sray finetune-fleet`` runs it. One S-Ray scene task
+alone on the GPU, then ``SHARING`` scenes with each of ``METHODS`` (S-Ray finetuned, Semantic-NeRF from scratch,
+2D label transfer), ``SHARING`` tasks at once on the GPU (``1 / SHARING`` of it each): training seconds per scene
+and method against the task alone, the fleet's wall time and each task's peak GPU memory. A dry run shares the
+CPUs between ``DRY_RUN_SHARING`` tasks instead. Skipped, with the reason, where Ray, MLflow or webdataset are not
+installed."""
 
 from __future__ import annotations
 
@@ -20,6 +22,8 @@ from .report import StageResult
 NEEDS = ("ray", "mlflow", "webdataset")
 SHARING = 4
 """Scene tasks sharing the one GPU in the shared run."""
+METHODS = ("sray", "semantic-nerf", "2d-transfer")
+"""Methods run per scene in the shared run."""
 DRY_RUN_SHARING = 2
 """Scene tasks sharing the CPUs in a dry run (one CPU each, as on a 2-core machine: the dry run stays within a
 minute)."""
@@ -27,32 +31,37 @@ minute)."""
 
 def _shards(ctx: CheckContext, root: Path) -> Path:
     """``SHARING`` unseen procedural scenes (and one train scene), sharded with their neighbours."""
-    hw = (32, 40) if ctx.dry_run else (120, 160)
+    hw = (48, 64) if ctx.dry_run else (120, 160)
     world = World(train_scenes=1, test_scenes=SHARING, views=20, height=hw[0], width=hw[1], seed=0, neighbours=8)
     return make_world(world, root, progress=False)
 
 
 def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
-    """A step-0 shared checkpoint of the ``synth-small`` network at this run's sizes (timing needs no
-    pretraining; the fleet reads it as any other checkpoint)."""
-    cfg = get_recipe("synth-small")
+    """A step-0 shared checkpoint of the GPU recipe's network (``synth-gpu-minutes``, with its source-view head) at
+    this run's sizes (timing needs no pretraining; the fleet reads it as any other checkpoint)."""
+    cfg = get_recipe("synth-gpu-minutes")
     cfg.model.n_source, (cfg.model.n_coarse, cfg.model.n_fine) = min(ctx.views, 4), ctx.samples
     cfg.data.shards, cfg.data.top_k = str(shards), 6
     return write_initial_checkpoint(cfg, root / "checkpoint" / "checkpoints" / "step_000000000")
 
 
-def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes: list[str]) -> tuple[float, list]:
-    """Run the fleet on ``scenes`` at once, each task with ``1 / len(scenes)`` of the device; (wall s, results)."""
+def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes: list[str],
+           methods: list[str], segmenter: Path) -> tuple[float, list]:
+    """Run the fleet's ``methods`` on ``scenes``, ``len(scenes)`` tasks at once, each with ``1 / len(scenes)`` of the
+    device; (wall s, results)."""
     from sray.platform.finetune.fleet import run_fleet
 
     share = 1.0 / len(scenes)
     cuda = ctx.device.type == "cuda"
     cfg = FleetConfig(max_parallel=len(scenes), retries=0, cpus_per_task=1.0, gpus_per_task=share if cuda else 0.0)
+    cfg.transfer.segmenter = str(segmenter)
     ft = cfg.finetune
-    ft.max_steps, ft.eval_every, ft.patience = (2, 2, 1) if ctx.dry_run else (200, 100, 2)
+    ft.max_steps, ft.eval_every, ft.patience = (2, 2, 1) if ctx.dry_run else (100, 50, 2)
+    if ctx.dry_run:  # a toy Semantic-NeRF: the paper's 8 x 256 MLP takes most of a CPU dry run's time
+        cfg.nerf.depth, cfg.nerf.width, cfg.nerf.skip_layer = 2, 32, None
     ft.eval_n_source, ft.eval_stride, ft.precision = min(ctx.views, 4), 4, "bf16" if cuda else "no"
     start = time.perf_counter()
-    results = run_fleet(cfg, checkpoint, shards, scenes, out, f"sqlite:///{out / 'mlflow.db'}", ["sray"])
+    results = run_fleet(cfg, checkpoint, shards, scenes, out, f"sqlite:///{out / 'mlflow.db'}", methods)
     return time.perf_counter() - start, results
 
 
@@ -61,11 +70,11 @@ def _mean(results: list, key: str) -> float:
     return sum(r[key] for r in results) / len(results)
 
 
-def _row(name: str, wall: float, results: list) -> list[str]:
-    """One table row: tasks, share of the device, fleet wall s, mean training s per scene, peak GPU MiB."""
+def _row(name: str, share: int, wall: float, results: list) -> list[str]:
+    """One table row: tasks, share of the device, fleet wall s, mean steps and training s per scene, peak GPU MiB."""
     peaks = [r["gpu_peak_bytes"] for r in results if r["gpu_peak_bytes"]]
     peak = f"{max(peaks) / 2**20:.0f}" if peaks else "- (CPU)"
-    return [name, str(len(results)), f"1/{len(results)}", f"{wall:.1f}", f"{_mean(results, 'steps_used'):.0f}",
+    return [name, str(len(results)), f"1/{share}", f"{wall:.1f}", f"{_mean(results, 'steps_used'):.0f}",
             f"{_mean(results, 'wall_s'):.2f}", peak]
 
 
@@ -74,22 +83,30 @@ def run(ctx: CheckContext) -> StageResult:
     missing = [m for m in NEEDS if not has_module(m)]
     if missing:
         return StageResult("skipped", f"{', '.join(missing)} not installed here: the fleet stage needs the full stack")
+    from sray.platform.eval.segmenter import segmenter_from_checkpoint
+
     root = ctx.out / "fleet"
     shards = _shards(ctx, root)
     checkpoint = _checkpoint(ctx, root, shards)
+    segmenter = root / "segmenter"
+    segmenter_from_checkpoint(checkpoint, segmenter)  # 2d-transfer starts from the checkpoint's encoder and head
     scenes = unseen_scenes(shards)[:DRY_RUN_SHARING if ctx.dry_run else SHARING]
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    alone_wall, alone = _fleet(ctx, root / f"alone-{stamp}", checkpoint, shards, scenes[:1])
-    shared_wall, shared = _fleet(ctx, root / f"shared-{stamp}", checkpoint, shards, scenes)
-    failed = [f"{r['scene']}: {r['error']}" for r in alone + shared if r["status"] != "finished"]
+    alone_wall, alone = _fleet(ctx, root / f"alone-{stamp}", checkpoint, shards, scenes[:1], ["sray"], segmenter)
+    shared_wall, shared = _fleet(ctx, root / f"shared-{stamp}", checkpoint, shards, scenes, list(METHODS), segmenter)
+    failed = [f"{r['scene']}/{r['method']}: {r['error']}" for r in alone + shared if r["status"] != "finished"]
     if failed:
         return StageResult("failed", "; ".join(failed)[:300])
-    rows = [_row("one task alone", alone_wall, alone), _row(f"{len(scenes)} tasks sharing", shared_wall, shared)]
-    alone_s, shared_s = _mean(alone, "wall_s"), _mean(shared, "wall_s")
-    summary = (f"{len(scenes)} tasks on one {'GPU' if ctx.device.type == 'cuda' else 'CPU set'}: "
-               f"{shared_s:.2f} s training per scene against {alone_s:.2f} s alone "
-               f"({shared_s / max(alone_s, 1e-9):.2f}x); fleet wall {shared_wall:.0f} s against "
-               f"{alone_wall:.0f} s for one task")
+    rows = [_row("S-Ray, one task alone", 1, alone_wall, alone)]
+    ran = dict.fromkeys(r["method"] for r in shared)  # METHODS, and the fleet's RGB-D twin of S-Ray beside them
+    rows += [_row(f"{method}, {len(scenes)} scenes sharing", len(scenes), shared_wall,
+                  [r for r in shared if r["method"] == method]) for method in ran]
+    alone_s = _mean(alone, "wall_s")
+    shared_s = _mean([r for r in shared if r["method"] == "sray"], "wall_s")
+    summary = (f"{len(scenes)} scenes x {len(ran)} methods, {len(scenes)} tasks at once on one "
+               f"{'GPU' if ctx.device.type == 'cuda' else 'CPU set'}: S-Ray {shared_s:.2f} s training per scene "
+               f"against {alone_s:.2f} s alone ({shared_s / max(alone_s, 1e-9):.2f}x); fleet wall {shared_wall:.0f} s "
+               f"against {alone_wall:.0f} s for one task")
     return StageResult("passed", summary, rows=rows,
-                       header=["run", "tasks", "device share each", "fleet wall s", "steps per scene",
+                       header=["method, run", "tasks", "device share each", "fleet wall s", "steps per scene",
                                "training s per scene", "peak GPU MiB per task"])

@@ -1,14 +1,28 @@
-"""Stage ``ray``: ``sray train`` with one (GPU) worker through Ray Train, Accelerate and MLflow, on
-procedural shards, and two Train workers asking for one GPU between them (refused before Ray starts: NCCL
-refuses two ranks on one GPU). Skipped, with the reason, where Ray, MLflow or webdataset are not installed."""
+"""Stage ``ray``: what a user does first on a GPU, through the ``sray`` commands themselves, on procedural shards.
+
+1. ``sray train`` of the GPU recipe (``synth-gpu-minutes``, shortened to a few hundred steps) with one worker
+   through Ray Train and Accelerate (bf16 on CUDA, fp32 on the CPU), tracked in MLflow on SQLite; rank 0 is
+   killed half-way (the fault hook's ``train.kill_at_step``), Ray Train restarts the worker and the job resumes
+   from its last checkpoint to the last step.
+2. ``sray eval`` of the trained checkpoint on the unseen scene (views per second, end to end).
+3. ``sray render`` of a 320x240 fly-through with the trained checkpoint (frames per second).
+4. Two Train workers asking for one GPU between them (0.5 each): refused before Ray starts, since NCCL refuses two
+   ranks on one GPU.
+
+Skipped, with the reason, where Ray, MLflow or webdataset are not installed."""
 
 from __future__ import annotations
 
 import copy
+import json
+import os
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING
 
+from sray.data_tools.shards.manifest import unseen_scenes
 from sray.data_tools.synth.world import World, make_world
+from sray.platform.common.fault_hook import ENV_VAR, KILL_MARKER
 from sray.platform.config.recipes import get_recipe
 from sray.platform.train.inputs import InputError
 
@@ -19,44 +33,111 @@ if TYPE_CHECKING:
     from sray.platform.config.train_config import TrainConfig
 
 NEEDS = ("ray", "mlflow", "webdataset")
+RECIPE = "synth-gpu-minutes"
+"""The GPU recipe the stage trains (its model, losses and data settings; steps and world shortened)."""
+GPU_STEPS = 300
+"""Training steps on a GPU (4 in a dry run); rank 0 dies at half of them."""
+RENDER_SIZE = "320x240"
+"""Fly-through size (width x height); 80x60 in a dry run."""
+RENDER_FRAMES = 60
+FAST = ("--render", "fast", "--fast-stride", "1", "--fast-confidence", "0.9")
+"""The hour recipe's evaluation render (``fast s1 c0.9``), for ``sray eval`` and ``sray render`` alike."""
+"""Fly-through frames on a GPU (4 in a dry run)."""
+
+
+def _steps(ctx: CheckContext) -> int:
+    return 4 if ctx.dry_run else GPU_STEPS
+
+
+def train_arguments(ctx: CheckContext, shards: Path, root: Path, name: str) -> list[str]:
+    """``sray train`` arguments: the recipe on ``shards``, one worker on the device, checkpoints every quarter."""
+    steps, cuda = _steps(ctx), ctx.device.type == "cuda"
+    sets = {"optim.steps": steps, "optim.warmup_2d_steps": steps // 4, "optim.warmup_steps": 0,
+            "run.output_dir": root / "jobs", "run.ckpt_every": max(1, steps // 4), "run.val_every": steps,
+            "run.log_every": max(1, steps // 10), "data.val_scenes": 1, "data.top_k": 6}
+    if ctx.dry_run:
+        sets |= {"model.n_source": ctx.views, "model.n_coarse": ctx.samples[0], "model.n_fine": ctx.samples[1],
+                 "data.rays_per_batch": ctx.rays, "data.loader_workers": 0, "run.cpus_per_worker": 1}
+    return ["train", "--recipe", RECIPE, "--data", str(shards), "--name", name, "--workers", "1",
+            "--gpus-per-worker", "1" if cuda else "0", "--precision", "bf16" if cuda else "no",
+            "--tracking-uri", f"sqlite:///{root / 'mlflow.db'}",
+            *(a for key, value in sets.items() for a in ("--set", f"{key}={value}"))]
+
+
+def _killed_and_resumed(ctx: CheckContext, arguments: list[str]) -> tuple[int, float]:
+    """Run ``sray train`` with rank 0 killed at half the steps; (exit code, seconds)."""
+    from sray.jobs.cli import main
+
+    before = os.environ.get(ENV_VAR)
+    os.environ[ENV_VAR] = f"train.kill_at_step={max(2, _steps(ctx) // 2)}"
+    start = time.perf_counter()
+    try:
+        code = main(arguments)
+    finally:
+        if before is None:
+            os.environ.pop(ENV_VAR, None)
+        else:
+            os.environ[ENV_VAR] = before
+    return code, time.perf_counter() - start
 
 
 def run(ctx: CheckContext) -> StageResult:
-    """A short training job on one worker (the GPU on CUDA); its steps, rays/s and checkpoint."""
+    """Train (killed and resumed), evaluate and render with the trained weights; refuse a shared GPU."""
     missing = [m for m in NEEDS if not has_module(m)]
     if missing:
         return StageResult("skipped", f"{', '.join(missing)} not installed here: the Ray stage needs the full stack")
-    from sray.platform.train.launcher import launch_training
+    from sray.jobs.cli import main
+    from sray.platform.checkpoints.folders import read_meta, resolve_checkpoint
 
     root = ctx.out / "ray"
-    hw = (32, 40) if ctx.dry_run else (120, 160)
+    hw = (48, 64) if ctx.dry_run else (120, 160)  # the recipe draws sources down to 75% size: 32 pixels at least
     world = World(train_scenes=2, test_scenes=1, views=20, height=hw[0], width=hw[1], seed=0, neighbours=8)
     shards = make_world(world, root, progress=False)
-    cfg = get_recipe("synth-small")
-    steps = 2 if ctx.dry_run else 100
-    cfg.model.n_source, (cfg.model.n_coarse, cfg.model.n_fine) = min(ctx.views, 4), ctx.samples
-    cfg.data.shards, cfg.data.top_k, cfg.data.rays_per_batch = str(shards), 6, ctx.rays
-    cfg.data.loader_workers, cfg.data.val_views_per_scene = 0, 1
-    cfg.optim.steps = steps
-    cfg.run.workers, cfg.run.gpus_per_worker = 1, (1.0 if ctx.device.type == "cuda" else 0.0)
-    cfg.run.precision = "bf16" if ctx.device.type == "cuda" else "no"
-    cfg.run.output_dir, cfg.run.tracking_uri = str(root / "jobs"), f"sqlite:///{root / 'mlflow.db'}"
-    cfg.run.val_every = cfg.run.ckpt_every = steps
-    cfg.run.register_model, cfg.run.name = "", f"gpu-check-{time.strftime('%Y%m%d-%H%M%S')}"
-    start = time.perf_counter()
-    outcome = launch_training(cfg)
-    seconds = time.perf_counter() - start
-    ok = outcome.latest_checkpoint is not None
-    row = [f"{cfg.run.workers} x {'GPU' if cfg.run.gpus_per_worker else 'CPU'}", cfg.run.precision, str(steps),
-           f"{seconds:.0f}", str(outcome.latest_checkpoint)]
-    refused, shared_row = shared_gpu_request(cfg)
-    summary = (f"sray train: {steps} steps in {seconds:.0f} s (Ray start-up included)"
-               + ("" if ok else ", no checkpoint written")
-               + ("; 2 workers on one GPU refused in " + shared_row[3] + " s" if refused else
-                  "; 2 workers on one GPU were NOT refused"))
-    return StageResult("passed" if ok and refused else "failed", summary,
-                       header=["workers", "precision", "steps", "seconds", "checkpoint or message"],
-                       rows=[row, shared_row])
+    name = f"gpu-check-{time.strftime('%Y%m%d-%H%M%S')}"
+    arguments = train_arguments(ctx, shards, root, name)
+    code, train_s = _killed_and_resumed(ctx, arguments)
+    job = root / "jobs" / name
+    checkpoint = resolve_checkpoint(job)
+    step, killed = int(read_meta(checkpoint)["step"]), (job / KILL_MARKER).exists()
+    precision = arguments[arguments.index("--precision") + 1]
+    rows = [[f"sray train, rank 0 killed at step {max(2, _steps(ctx) // 2)}, resumed",
+             precision, f"{step} steps", f"{train_s:.0f}", str(checkpoint)]]
+    device = ctx.device.type
+    n_source = str(ctx.views)
+    scene = unseen_scenes(shards)[0]
+    eval_out, render_out = root / "eval", root / "render"
+    eval_code = main(["eval", "--checkpoint", str(checkpoint), "--data", str(shards), "--n-source", n_source,
+                      *FAST, "--out", str(eval_out), "--device", device,
+                      "--tracking-uri", f"sqlite:///{root / 'mlflow.db'}"])
+    metrics = json.loads((eval_out / "metrics.json").read_text())
+    views = sum(len(s["views"]) for s in metrics["scenes"].values())
+    rows.append(["sray eval (fast s1 c0.9, trained weights)", "fp32", f"{views} views", f"{metrics['wall_s']:.1f}",
+                 f"{views / metrics['wall_s']:.2f} views/s"])
+    size, n_frames = ("80x60", 4) if ctx.dry_run else (RENDER_SIZE, RENDER_FRAMES)
+    render_code = main(["render", "--checkpoint", str(checkpoint), "--data", str(shards), "--scene", scene,
+                        "--size", size, "--frames", str(n_frames), *FAST,
+                        "--n-source", n_source, "--out", str(render_out), "--device", device, "--no-track"])
+    frames = json.loads(next(render_out.rglob("frames.json")).read_text())
+    rows.append([f"sray render {size} fly-through (fast s1 c0.9, trained weights)",
+                 "fp32", f"{frames['n_frames']} frames", f"{frames['n_frames'] / frames['frames_per_s']:.1f}",
+                 f"{frames['frames_per_s']:.2f} frames/s"])
+    refused, shared_row = shared_gpu_request(_config(shards, root, name, precision))
+    rows.append(shared_row)
+    ok = code == 0 and eval_code == 0 and render_code == 0 and killed and step == _steps(ctx) and refused
+    summary = (f"sray train: {step} of {_steps(ctx)} steps in {train_s:.0f} s, "
+               + ("killed and resumed" if killed else "NOT killed") + f"; sray eval {rows[1][4]}; "
+               f"sray render {rows[2][4]}; 2 workers on one GPU " + ("refused" if refused else "NOT refused"))
+    return StageResult("passed" if ok else "failed", summary, rows=rows,
+                       header=["command", "precision", "work", "seconds", "result"])
+
+
+def _config(shards: Path, root: Path, name: str, precision: str) -> TrainConfig:
+    """The recipe's config for the shared-GPU request (its sizes do not matter: it is refused first)."""
+    cfg = get_recipe(RECIPE)
+    cfg.run.precision = precision
+    cfg.data.shards, cfg.run.output_dir, cfg.run.name = str(shards), str(root / "jobs"), name
+    cfg.run.tracking_uri = f"sqlite:///{root / 'mlflow.db'}"
+    return cfg
 
 
 def shared_gpu_request(cfg: TrainConfig) -> tuple[bool, list[str]]:
@@ -73,4 +154,4 @@ def shared_gpu_request(cfg: TrainConfig) -> tuple[bool, list[str]]:
         refused, message = False, "ran: not refused"
     except InputError as err:
         refused, message = True, str(err)
-    return refused, ["2 x 0.5 GPU", cfg.run.precision, "0", f"{time.perf_counter() - start:.1f}", message]
+    return refused, ["2 x 0.5 GPU", cfg.run.precision, "0 steps", f"{time.perf_counter() - start:.1f}", message]

@@ -121,6 +121,32 @@ def synth_cpu_hour() -> TrainConfig:
     )
 
 
+GPU_MINUTES_STEPS = 3600
+"""``optim.steps`` of ``synth-gpu-minutes``: about six minutes at the bf16 training rate at 4,096 rays that
+``sray gpu-check``'s ``recipe`` stage measured for this model family on an H200 at 64+64 samples (its GPU check,
+docs/gpu.md); the recipe's 24+24 samples cost less per ray, so six minutes is the upper end until the ``minutes``
+stage records its own."""
+
+GPU_MINUTES_WARMUP_2D = 400
+"""``optim.warmup_2d_steps`` of ``synth-gpu-minutes``: the hour recipe's 2D-only warm-up, scaled with its step count
+(1,500 of about 6,500 steps there)."""
+
+
+def synth_gpu_minutes() -> TrainConfig:
+    """Minutes of pretraining on one GPU: ``synth-cpu-hour``'s model, losses, augmentation and world (the 498
+    rooms at ``CPU_HOUR_SHARDS``), scored with its protocol (8 fixed sources, whole images, fast render s1 c0.9,
+    the same unseen and held-out rooms), at 4,096 rays per step in bf16 on one GPU worker, for a step count
+    (``GPU_MINUTES_STEPS``) instead of a CPU budget. ``sray gpu-check``'s ``minutes`` stage generates the world,
+    trains it and records its training minutes and its zero-shot and held-out mIoU (docs/gpu.md)."""
+    cfg = synth_cpu_hour()
+    cfg.recipe = "synth-gpu-minutes"
+    cfg.data.rays_per_batch, cfg.data.loader_workers = 4096, 6
+    cfg.optim.steps, cfg.optim.cpu_seconds, cfg.optim.warmup_2d_steps = GPU_MINUTES_STEPS, 0.0, GPU_MINUTES_WARMUP_2D
+    cfg.run = RunSettings(experiment="sray-synth-gpu-minutes", workers=1, cpus_per_worker=8.0, gpus_per_worker=1.0,
+                          precision="bf16", log_every=100, val_every=GPU_MINUTES_STEPS, ckpt_every=600)
+    return cfg
+
+
 def synth_paper() -> TrainConfig:
     """The paper's settings on procedural scenes (a GPU job)."""
     return TrainConfig(
@@ -158,6 +184,7 @@ RECIPES: dict[str, Callable[[], TrainConfig]] = {
     "synth-small": synth_small,
     "synth-demo": synth_demo,
     "synth-cpu-hour": synth_cpu_hour,
+    "synth-gpu-minutes": synth_gpu_minutes,
     "synth-paper": synth_paper,
     "scannet-paper": scannet_paper,
     "replica-paper": replica_paper,

@@ -1,0 +1,136 @@
+"""Build the GPU bundle: resolve (:mod:`.resolve`), download the wheels, repack Ray without what sray never
+loads, refuse a bundle over the size a GPU call carries, and write the folder with its install script.
+
+The folder is assembled beside ``out`` and renamed into place whole: a refused or failed build leaves the
+previous bundle as it was.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from sray.data_tools.atomic import atomic_write_json, replace_dir
+
+from .image import normalise
+from .install_files import write_install_files
+from .resolve import LEFT_OUT, BundleError, Pin, bundle_pins, check_pins, read_constraints, resolve, target_options
+from .wheel_strip import strip_wheel
+
+DROP = {"ray": ("ray/jars/", "ray/dashboard/client/build/", "ray/rllib/", "ray/serve/", "ray/llm/")}
+"""Folders left out of a wheel, per distribution: Ray's Java workers (the 32 MB ``ray_dist.jar``), its dashboard's
+web page (sray starts Ray without the dashboard) and its RLlib, Serve and LLM libraries (sray imports none)."""
+STRIP = {"ray": ("ray/_raylet.so", "ray/core/src/ray/gcs/gcs_server", "ray/core/src/ray/raylet/raylet")}
+"""Native binaries stripped of their symbol tables, per distribution: Ray's three largest (about 4.5 MB of the
+wheel), which leaves the bundle room beside the checkout in a 64 MiB call."""
+LIMIT_MIB = 60.0
+"""Most a bundle may weigh: a GPU call carries 64 MiB, the checkout included."""
+MANIFEST = "bundle.json"
+"""The bundle's table of contents: target, wheels (name, version, file, bytes, dropped folders), what was left out."""
+
+
+def download(pins: list[Pin], dest: Path, python_version: str, find_links: Path | None = None) -> None:
+    """Download one wheel per pin (no dependencies: the set is already resolved) for CPython ``python_version``
+    on manylinux x86-64 into ``dest``; from ``find_links`` alone, offline, when given.
+
+    Raises :class:`BundleError` naming the package pip found no wheel for, and the fix."""
+    where = ["--no-index", "--find-links", str(find_links)] if find_links else []
+    done = subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--no-deps", *where, "-d", str(dest),
+                           *target_options(python_version), *(p.spec() for p in pins)],
+                          capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        found = re.search(r"(?:No matching distribution found for|version that satisfies the requirement) (\S+)",
+                          done.stderr)
+        name = found.group(1) if found else "one of the pins"
+        source = f"in {find_links}" if find_links else "on the registry"
+        raise BundleError(f"no wheel of {name} for CPython {python_version} on manylinux x86-64 {source}: pin a "
+                          "version that has one in constraints.txt, or add its platform tag (manylinux_2_N_x86_64) to "
+                          "MANYLINUX_TAGS in jobs/gpu_bundle/resolve.py, and build again")
+
+
+def wheel_name(path: Path) -> str:
+    """Normalised distribution name of a wheel file (the part of its name before the first ``-``)."""
+    return normalise(path.name.split("-", 1)[0])
+
+
+def match_wheels(pins: list[Pin], folder: Path) -> dict[str, Path]:
+    """``name -> wheel`` for every pin, from the ``*.whl`` files in ``folder``.
+
+    Raises :class:`BundleError` naming each pinned package without exactly one wheel there, and the fix."""
+    wheels: dict[str, list[Path]] = {}
+    for path in sorted(folder.glob("*.whl")):
+        wheels.setdefault(wheel_name(path), []).append(path)
+    missing = [p.spec() for p in pins if len(wheels.get(p.name, [])) == 0]
+    doubled = [p.spec() for p in pins if len(wheels.get(p.name, [])) > 1]
+    if missing or doubled:
+        raise BundleError(("no wheel for " + ", ".join(missing) if missing else "")
+                          + ("; " if missing and doubled else "")
+                          + ("several wheels for " + ", ".join(doubled) if doubled else "")
+                          + f" in {folder}: run `sray gpu-bundle` again (it downloads exactly one of each)")
+    return {p.name: wheels[p.name][0] for p in pins}
+
+
+def folder_bytes(folder: Path) -> int:
+    """Total size of the files in ``folder`` (not recursive)."""
+    return sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
+
+
+def assemble(pins: list[Pin], wheels: Path, out: Path, python_version: str, limit_mib: float = LIMIT_MIB) -> dict:
+    """Write the bundle folder ``out`` from the downloaded ``wheels``: repacked wheels, ``install.sh``,
+    ``README.md`` and ``bundle.json``; returns the manifest.
+
+    Raises :class:`BundleError` (``out`` untouched) when a wheel is missing or the bundle weighs more than
+    ``limit_mib``."""
+    found = match_wheels(pins, wheels)
+    work = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    try:
+        entries = []
+        for pin in pins:
+            drop, binaries = DROP.get(pin.name, ()), STRIP.get(pin.name, ())
+            if drop or binaries:
+                try:
+                    path = strip_wheel(found[pin.name], work, drop, binaries).path
+                except ValueError as err:
+                    raise BundleError(str(err)) from None
+            else:
+                path = work / found[pin.name].name
+                shutil.copyfile(found[pin.name], path)
+            entries.append({"name": pin.name, "version": pin.version, "file": path.name,
+                            "bytes": path.stat().st_size, "dropped": list(drop), "symbols_stripped": list(binaries)})
+        manifest = {"python_version": python_version, "platform": "manylinux x86-64", "wheels": entries,
+                    "left_out": LEFT_OUT}
+        write_install_files(work, manifest)
+        atomic_write_json(work / MANIFEST, manifest)
+        total = folder_bytes(work)
+        if total > limit_mib * 2**20:
+            largest = ", ".join("{file} {mib:.1f} MiB".format(file=e["file"], mib=e["bytes"] / 2**20)
+                                for e in sorted(entries, key=lambda e: -e["bytes"])[:3])
+            raise BundleError(f"the bundle would weigh {total / 2**20:.1f} MiB, over its {limit_mib:g} MiB limit "
+                              f"(largest: {largest}): "
+                              "leave out more of what sray never loads (DROP in jobs/gpu_bundle/build.py, LEFT_OUT "
+                              "in jobs/gpu_bundle/resolve.py)")
+        replace_dir(work, out, out.with_name(f".{out.name}.old{os.getpid()}"))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return manifest
+
+
+def build_bundle(out: Path, python_version: str, constraints_file: Path, limit_mib: float = LIMIT_MIB,
+                 find_links: Path | None = None) -> dict:
+    """Resolve, check the pins against ``constraints_file``, download and assemble the bundle; returns its
+    manifest. Raises :class:`BundleError` with the package and the fix when any step cannot be done."""
+    pins = bundle_pins(resolve(python_version, constraints_file))
+    check_pins(pins, read_constraints(constraints_file))
+    downloads = out.with_name(f".{out.name}.downloads{os.getpid()}")
+    shutil.rmtree(downloads, ignore_errors=True)
+    try:
+        download(pins, downloads, python_version, find_links)
+        return assemble(pins, downloads, out, python_version, limit_mib)
+    finally:
+        shutil.rmtree(downloads, ignore_errors=True)

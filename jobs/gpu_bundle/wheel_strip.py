@@ -1,0 +1,120 @@
+"""Repack a wheel without some of its files: the ``RECORD`` rewritten with each kept file's hash and size, the
+console scripts of dropped modules removed from ``entry_points.txt``, file modes (the executables) kept, and
+the symbol tables of named native binaries removed (``strip --strip-unneeded``: what the dynamic linker and
+Python need stays; only crash backtraces lose function names).
+
+The result installs with pip like the original (same name, version and tags); only the dropped paths are absent.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import io
+import shutil
+import subprocess
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from sray.data_tools.atomic import atomic_write_bytes
+
+
+@dataclass(frozen=True)
+class Stripped:
+    """What one repack did."""
+
+    path: Path
+    """The new wheel."""
+    dropped_files: int
+    """Files left out."""
+    dropped_bytes: int
+    """Bytes saved, uncompressed: the files left out and the symbol tables stripped."""
+
+
+def record_hash(data: bytes) -> str:
+    """The ``RECORD`` hash field of ``data``: ``sha256=`` and the URL-safe base64 digest without padding."""
+    return "sha256=" + base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
+
+
+def dist_info_dir(names: list[str], wheel: Path) -> str:
+    """The wheel's one ``*.dist-info`` folder (with a trailing ``/``); raises ``ValueError`` without one."""
+    folders = {n.split("/", 1)[0] + "/" for n in names if n.split("/", 1)[0].endswith(".dist-info")}
+    if len(folders) != 1:
+        raise ValueError(f"{wheel}: expected one .dist-info folder, found {sorted(folders) or 'none'}")
+    return folders.pop()
+
+
+def _module_dropped(reference: str, drop: tuple[str, ...]) -> bool:
+    """Whether an entry point's ``module:attr`` lives under one of the dropped folders."""
+    module_path = reference.split(":", 1)[0].strip().replace(".", "/")
+    return any((module_path + "/").startswith(prefix) for prefix in drop)
+
+
+def filter_entry_points(text: str, drop: tuple[str, ...]) -> str:
+    """``entry_points.txt`` without the entries whose module is under a dropped folder."""
+    kept = [line for line in text.splitlines()
+            if "=" not in line or line.lstrip().startswith("[") or not _module_dropped(line.split("=", 1)[1], drop)]
+    return "\n".join(kept) + "\n"
+
+
+def strip_symbols(data: bytes) -> bytes:
+    """``data`` (an ELF binary) without its symbol tables (``strip --strip-unneeded``); raises ``ValueError``
+    where binutils' ``strip`` is not installed or refuses the file."""
+    if shutil.which("strip") is None:
+        raise ValueError("binutils' strip is not installed: apt-get install binutils, then build again")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "binary"
+        path.write_bytes(data)
+        done = subprocess.run(["strip", "--strip-unneeded", str(path)], capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise ValueError(f"strip refused a binary: {done.stderr.strip()}")
+        return path.read_bytes()
+
+
+def strip_wheel(src: Path, dest_dir: Path, drop: tuple[str, ...], binaries: tuple[str, ...] = ()) -> Stripped:
+    """Write ``src`` into ``dest_dir`` (same file name) without the files under the ``drop`` folders (paths inside
+    the wheel, each ending in ``/``) and with the ``binaries`` (paths of native files) stripped of their symbol
+    tables. Raises ``ValueError`` when a folder or binary named is not in the wheel (a stale list) or a folder
+    names the ``.dist-info`` folder."""
+    bad = [p for p in drop if not p.endswith("/") or ".dist-info/" in p]
+    if bad:
+        raise ValueError(f"folders to drop must end in '/' and stay out of .dist-info: {bad}")
+    dest = dest_dir / src.name
+    dropped_files = dropped_bytes = 0
+    with zipfile.ZipFile(src) as zin:
+        infos = zin.infolist()
+        info_dir = dist_info_dir([i.filename for i in infos], src)
+        missing = [p for p in drop if not any(i.filename.startswith(p) for i in infos)]
+        missing += [b for b in binaries if b not in {i.filename for i in infos}]
+        if missing:
+            raise ValueError(f"{src.name} has no {', '.join(missing)}: update the lists of what to drop")
+        record_name, records, buffer = info_dir + "RECORD", [], io.BytesIO()
+        with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as zout:
+            for info in infos:
+                if info.filename == record_name or info.is_dir():
+                    continue
+                if any(info.filename.startswith(p) for p in drop):
+                    dropped_files, dropped_bytes = dropped_files + 1, dropped_bytes + info.file_size
+                    continue
+                data = zin.read(info)
+                if info.filename == info_dir + "entry_points.txt":
+                    data = filter_entry_points(data.decode(), drop).encode()
+                elif info.filename in binaries:
+                    dropped_bytes += len(data)
+                    data = strip_symbols(data)
+                    dropped_bytes -= len(data)
+                zout.writestr(_copy_info(info), data)
+                records.append(f"{info.filename},{record_hash(data)},{len(data)}")
+            records.append(f"{record_name},,")
+            zout.writestr(_copy_info(zin.getinfo(record_name)), "\n".join(records) + "\n")
+    atomic_write_bytes(dest, buffer.getvalue())
+    return Stripped(dest, dropped_files, dropped_bytes)
+
+
+def _copy_info(info: zipfile.ZipInfo) -> zipfile.ZipInfo:
+    """A new entry with the original's name, time and permission bits, deflated."""
+    copy = zipfile.ZipInfo(info.filename, date_time=info.date_time)
+    copy.external_attr, copy.compress_type = info.external_attr, zipfile.ZIP_DEFLATED
+    return copy
