@@ -87,7 +87,15 @@ def test_sray_load_exists_from_the_editable_install_and_from_the_repo_root(tmp_p
 def test_sray_load_exists_in_a_wheel_and_in_a_ray_working_dir_copy(tmp_path: Path) -> None:
     """A wheel holds the folders inside ``sray/``; a Ray ``working_dir`` copy of the checkout (its root first on
     sys.path, no install) finds them beside it. Neither reads the checkout."""
-    built = subprocess.run([sys.executable, "-m", "pip", "wheel", str(REPO), "--no-deps", "--no-build-isolation",
+    # Built from a copy: pip writes build/ and sray.egg-info beside the sources, and an egg-info in the checkout's
+    # root is read as sray's metadata (its entry points too) by every process started there while it exists.
+    source = tmp_path / "source"
+    source.mkdir()
+    for name in ("pyproject.toml", "setup.py", "README.md"):
+        shutil.copy2(REPO / name, source / name)
+    for folder in ("sray", "model", "data_tools", "platform", "jobs", "lab"):
+        shutil.copytree(REPO / folder, source / folder, ignore=shutil.ignore_patterns("__pycache__"))
+    built = subprocess.run([sys.executable, "-m", "pip", "wheel", str(source), "--no-deps", "--no-build-isolation",
                             "-q", "-w", str(tmp_path / "dist")], capture_output=True, text=True, timeout=300)
     assert built.returncode == 0, built.stderr
     (wheel,) = (tmp_path / "dist").glob("sray-*.whl")
