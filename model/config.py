@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .attention_variants import ATTENTION_VARIANTS
-from .encoder import ENCODER_NORMS
 
 WEIGHT_MAPS = ("radial", "affine")
 """How the semantic-aware weight net's per-view outputs become weights in C(tau) (``semantic_weights``):
@@ -49,9 +48,6 @@ class SRayConfig:
     encoder_width: int = 16
     """Channels of the image encoder's first layer; every later layer scales with it (16 = the appendix table:
     16/32/64/128 channels on the way down, 64/32 on the way up; ``encoder.ResUNetEncoder``)."""
-    encoder_norm: str = "instance"
-    """Normalisation of every encoder layer, one of ``encoder.ENCODER_NORMS``: ``instance`` (the appendix table)
-    or ``group`` (group norm over groups of ``encoder.GROUP_CHANNELS`` channels)."""
     n_source: int = 8
     """Number of source views m a training sample carries (paper: 8); the network itself accepts
     any m >= 1 at run time."""
@@ -153,8 +149,6 @@ class SRayConfig:
             raise bad("lambda_depth", f"is {self.lambda_depth}; use 0 (no depth loss) or a positive weight")
         if self.depth_freqs < 0:
             raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
-        if self.encoder_norm not in ENCODER_NORMS:
-            raise bad("encoder_norm", f"is {self.encoder_norm!r}; use one of {ENCODER_NORMS}")
         if self.density_activation not in DENSITY_ACTIVATIONS:
             raise bad("density_activation",
                       f"is {self.density_activation!r}; use one of {DENSITY_ACTIVATIONS}")

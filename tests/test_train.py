@@ -31,9 +31,8 @@ def _history(cfg, key: str) -> list[tuple[int, float]]:
 
 @pytest.fixture(scope="module")
 def uninterrupted(ray_session, tiny_shards, tmp_path_factory):  # noqa: F811
-    """20 steps on 2 workers with a NaN injected at step 7, keeping a weight average."""
+    """20 steps on 2 workers with a NaN injected at step 7."""
     cfg = tiny_config(tiny_shards, tmp_path_factory.mktemp("u"), name="uninterrupted")
-    cfg.optim.ema_decay = 0.8
     with injected_faults("train.nan_at_step=7"):
         outcome = launch_training(cfg)
     return cfg, outcome
@@ -51,13 +50,12 @@ def test_two_workers_learn_and_stay_in_sync(uninterrupted) -> None:
 
 
 def test_nonfinite_loss_is_skipped_and_counted(uninterrupted) -> None:
-    """The NaN at step 7 skipped exactly one step, which the weight average did not take in either; training went
-    on to the end."""
+    """The NaN at step 7 skipped exactly one step; training went on to the end."""
     cfg, outcome = uninterrupted
     skipped = dict(_history(cfg, "train/skipped_steps"))
     assert skipped[max(skipped)] == 1.0
     state = load_checkpoint(outcome.latest_checkpoint)
-    assert state["step"] == cfg.optim.steps and state["averaged_steps"] == cfg.optim.steps - 1
+    assert state["step"] == cfg.optim.steps
 
 
 def test_mlflow_store_holds_everything(uninterrupted) -> None:
@@ -87,13 +85,12 @@ def test_mlflow_store_holds_everything(uninterrupted) -> None:
 def test_resume_equals_uninterrupted(uninterrupted, tiny_shards, tmp_path_factory) -> None:  # noqa: F811
     """Checkpointed every 4 steps instead of 5 but with the reference's 5-step loader epochs, stopped mid-epoch
     after step 7 and resumed to step 20: the same parameters as uninterrupted (the data order follows
-    ``data.epoch_steps``, not the checkpoint interval; the resume replays epoch 1 to its offset 2), and the same
-    weight average."""
+    ``data.epoch_steps``, not the checkpoint interval; the resume replays epoch 1 to its offset 2)."""
     ref_cfg, ref = uninterrupted
     assert ref_cfg.data.epoch_steps == 0 and ref_cfg.run.ckpt_every == 5  # the reference's epochs are 5 steps
     out = tmp_path_factory.mktemp("r")
     cfg = tiny_config(tiny_shards, out, name="stopped", ckpt_every=4)
-    cfg.data.epoch_steps, cfg.optim.ema_decay = 5, ref_cfg.optim.ema_decay
+    cfg.data.epoch_steps = 5
     with injected_faults("train.nan_at_step=7;train.stop_after_step=7"):
         first = launch_training(cfg)
     assert first.status == "KILLED" and load_checkpoint(first.latest_checkpoint)["step"] == 7
@@ -101,9 +98,8 @@ def test_resume_equals_uninterrupted(uninterrupted, tiny_shards, tmp_path_factor
         second = launch_training(cfg, resume=True)
     assert second.status == "FINISHED"
     got, want = load_checkpoint(second.latest_checkpoint), load_checkpoint(ref.latest_checkpoint)
-    for entry in ("model", "averaged_model"):  # the live weights and their average
-        for key in want[entry]:
-            torch.testing.assert_close(got[entry][key], want[entry][key], rtol=1e-5, atol=1e-6, msg=f"{entry} {key}")
+    for key in want["model"]:
+        torch.testing.assert_close(got["model"][key], want["model"][key], rtol=1e-5, atol=1e-6, msg=key)
 
 
 def test_killed_worker_resumes_without_metric_gaps(ray_session, tiny_shards, tmp_path) -> None:  # noqa: F811

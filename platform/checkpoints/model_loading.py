@@ -14,12 +14,6 @@ from sray.platform.config.train_config import TrainConfig
 LEGACY_PREFIX = "net."
 """Older checkpoints stored the training module's keys (``net.`` + the model's:
 ``sray.model.ray_batch.RayBatchLoss`` holds the network as ``net``)."""
-AVERAGED_WEIGHTS = "averaged_model"
-"""Checkpoint entry of a job trained with a weight average (``optim.ema_decay`` > 0): the averaged bare
-``SRayModel`` weights, which evaluation, finetuning and serving load instead of ``model`` (the live weights a
-resumed job continues from)."""
-AVERAGED_STEPS = "averaged_steps"
-"""Checkpoint entry beside :data:`AVERAGED_WEIGHTS`: how many optimiser steps the average has taken in."""
 
 
 def bare_model_keys(weights: dict[str, Tensor]) -> dict[str, Tensor]:
@@ -30,10 +24,9 @@ def bare_model_keys(weights: dict[str, Tensor]) -> dict[str, Tensor]:
 
 
 def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayModel, TrainConfig]:
-    """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder: its weight
-    average where the job kept one (:data:`AVERAGED_WEIGHTS`), else its trained weights."""
+    """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder."""
     state = load_checkpoint(Path(path), map_location)
-    weights = state.get(AVERAGED_WEIGHTS, state["model"])
+    weights = state["model"]
     if any(k.endswith("attention.pos") for k in weights):
         raise ValueError(f"{path}: this checkpoint embeds sample ranks (an sray version before the depth position "
                          "signal); it cannot be loaded into the current model. Retrain it with `sray train`.")

@@ -34,10 +34,5 @@ class OptimSettings:
     weight_decay: float = 0.0
     """Decoupled weight decay (AdamW) of the convolution and linear weights: each step shrinks them by ``lr *
     weight_decay`` of themselves; biases and norm scales never decay. 0 = plain Adam (the paper)."""
-    ema_decay: float = 0.0
-    """Keep an exponential moving average of the weights, ``average = ema_decay * average + (1 - ema_decay) *
-    weights`` after every applied step (``sray.platform.train.weight_average``): validation scores it and
-    checkpoints store it beside the live weights, for evaluation, finetuning and serving to load. In [0, 1);
-    ``1 / (1 - ema_decay)`` steps is its horizon. 0 = off (the paper)."""
     max_nonfinite_in_row: int = 20
     """A non-finite loss or gradient skips the step; this many in a row stop the job."""

@@ -206,16 +206,13 @@ def check_sections(cfg: TrainConfig) -> None:
     smaller than the batch (a piece's gradients are taken before the loss scaler scales them,
     ``sray.model.piecewise_loss``, so small ones could underflow), a 2D warm-up without the source-view
     head it trains, a decay started at the ray phase without a 2D warm-up before it, a negative CPU budget
-    or weight decay, and a weight average's decay outside [0, 1)."""
+    or weight decay."""
     if cfg.optim.cpu_seconds < 0:
         raise ValueError(f"train config: optim.cpu_seconds is {cfg.optim.cpu_seconds}; use 0 (steps only) or a "
                          "positive CPU-second budget")
     if cfg.optim.weight_decay < 0:
         raise ValueError(f"train config: optim.weight_decay is {cfg.optim.weight_decay}; use 0 (plain Adam) or a "
                          "positive decoupled weight decay, e.g. optim.weight_decay=0.1")
-    if not 0 <= cfg.optim.ema_decay < 1:
-        raise ValueError(f"train config: optim.ema_decay is {cfg.optim.ema_decay}; use 0 (no weight average) or a "
-                         "decay in (0, 1), e.g. optim.ema_decay=0.998 (a horizon of 500 steps)")
     if cfg.optim.warmup_2d_steps < 0 or (cfg.optim.warmup_2d_steps > 0 and cfg.model.lambda_src_sem <= 0):
         raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
                          "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "

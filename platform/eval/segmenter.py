@@ -45,8 +45,6 @@ class SegmenterConfig:
     """Channels of the encoder's features (S-Ray's ``model.feat_dim``)."""
     encoder_width: int = 16
     """Channels of the encoder's first layer (S-Ray's ``model.encoder_width``)."""
-    encoder_norm: str = "instance"
-    """Normalisation of the encoder's layers (S-Ray's ``model.encoder_norm``)."""
     ignore_id: int = 255
     """Label id of unlabelled pixels (never a target)."""
     class_weights: tuple[float, ...] = ()
@@ -65,7 +63,7 @@ class Segmenter(nn.Module):
         """Build the encoder and head of ``cfg`` (no device work)."""
         super().__init__()
         self.cfg = cfg
-        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width, cfg.encoder_norm)
+        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width)
         self.head = SourceSemanticHead(cfg.head_config())
 
     def forward(self, rgb: Tensor) -> Tensor:
@@ -131,9 +129,9 @@ def load_segmenter(folder: Path, map_location: str | torch.device = "cpu") -> tu
 
 
 def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, SegmenterRecord]:
-    """Write the encoder and source-view head of an S-Ray training checkpoint (its weight average where the job
-    kept one) as a segmenter folder ``out``; returns the segmenter (eval mode) and its record. ValueError when the
-    checkpoint's model has no source-view head (``model.lambda_src_sem`` was 0)."""
+    """Write the encoder and source-view head of an S-Ray training checkpoint as a segmenter folder ``out``; returns
+    the segmenter (eval mode) and its record. ValueError when the checkpoint's model has no source-view head
+    (``model.lambda_src_sem`` was 0)."""
     checkpoint = Path(checkpoint)
     net, cfg = model_from_checkpoint(checkpoint)
     if net.src_head is None:
@@ -142,7 +140,7 @@ def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, S
                          "`sray bench segmenter --data SHARDS --cpu-seconds S --out DIR`")
     m = cfg.model
     seg = Segmenter(SegmenterConfig(n_classes=m.n_classes, feat_dim=m.feat_dim, encoder_width=m.encoder_width,
-                                    encoder_norm=m.encoder_norm, ignore_id=m.ignore_id,
+                                    ignore_id=m.ignore_id,
                                     class_weights=tuple(m.class_weights)))
     seg.encoder.load_state_dict(net.encoder.state_dict())
     seg.head.load_state_dict(net.src_head.state_dict())

@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from torch.optim.swa_utils import AveragedModel
 
 from sray.model.ray_batch import RayBatchLoss
 from sray.model.semantic_ray import SRayModel
@@ -16,7 +15,6 @@ from sray.platform.checkpoints.model_loading import bare_model_keys
 from sray.platform.config.optim_settings import OptimSettings
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.train.step import fused_adam
-from sray.platform.train.weight_average import averaged_state
 
 
 def lr_lambda(opt: OptimSettings) -> Any:
@@ -68,9 +66,8 @@ def build_training(cfg: TrainConfig) -> tuple[RayBatchLoss, torch.optim.Optimize
 
 def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler: Any, scaler: Any,
                    step: int, cfg: TrainConfig, best_metric: float | None,
-                   counters: dict[str, int | float], average: AveragedModel | None = None) -> dict[str, Any]:
-    """Full checkpoint state (weights_only-safe) of the bare model and its weight ``average`` if the job keeps one
-    (``sray.platform.train.weight_average``): the step is the NEXT step to run."""
+                   counters: dict[str, int | float]) -> dict[str, Any]:
+    """Full checkpoint state (weights_only-safe) of the bare model: the step is the NEXT step to run."""
     state: dict[str, Any] = {
         "model": model.state_dict(),
         "optimizer": optimizer.state_dict(),
@@ -82,8 +79,6 @@ def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler
     }
     if scaler is not None:
         state["scaler"] = scaler.state_dict()
-    if average is not None:
-        state |= averaged_state(average)
     return state
 
 

@@ -29,7 +29,6 @@ from sray.platform.train.job_loader import job_loader
 from sray.platform.train.state import budget_lr_factor, build_training, restore_training, training_state
 from sray.platform.train.step import TrainStep, step_seed
 from sray.platform.train.validation import validate
-from sray.platform.train.weight_average import restore_average, weight_average
 
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
@@ -94,10 +93,6 @@ def train_worker(payload: dict[str, Any]) -> None:
             how = "a restarted worker group" if resumed is not None else "--resume"
             print(f"[sray] resumed at step {start} ({how})", flush=True)
     model, optimizer = accelerator.prepare(model, optimizer)
-    # rank 0 keeps the weight average (optim.ema_decay > 0) that it validates and checkpoints
-    average = weight_average(accelerator.unwrap_model(model).net, cfg.optim.ema_decay, device) if rank == 0 else None
-    if average is not None and state is not None:
-        restore_average(state, average)
     train_step = TrainStep(list(model.parameters()), optimizer, cfg.optim.grad_clip, cfg.run.precision, device,
                            cfg.optim.max_nonfinite_in_row, world)
     train_step.skipped_total = counters.get("skipped_steps", 0)
@@ -149,7 +144,7 @@ def train_worker(payload: dict[str, Any]) -> None:
             if cfg.optim.lr_decay_start == "rays":
                 counters["ray_phase_cpu_seconds"] = ray_phase_cpu
             state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
-                                   step_done, cfg, best, counters, average)
+                                   step_done, cfg, best, counters)
             state[UNSENT_METRICS] = [list(m) for m in logger.unsent_metrics()]  # store unreachable now
             path = manager.save(state, step_done, metrics.get("val/miou"))
             ray.train.report(metrics, checkpoint=to_ray_checkpoint(path))
@@ -196,8 +191,6 @@ def train_worker(payload: dict[str, Any]) -> None:
             follow_cpu_budget(step + 1)
             finished = step + 1 == cfg.optim.steps or (budget > 0 and cpu_total >= budget)
             if outcome.applied:
-                if average is not None:
-                    average.update_parameters(accelerator.unwrap_model(model).net)
                 if term_names != [*terms, "loss"]:  # a new set of terms (the 2D warm-up ended) opens a new window
                     term_names, window_terms = [*terms, "loss"], []
                 window_terms.append(torch.stack([*(terms[k].float() for k in term_names[:-1]), loss.detach().float()]))
@@ -219,8 +212,7 @@ def train_worker(payload: dict[str, Any]) -> None:
             metrics: dict[str, float] = {"step": step}
             if step % cfg.run.val_every == 0 or finished:
                 if rank == 0:
-                    scored = average.module if average is not None else accelerator.unwrap_model(model).net
-                    metrics |= validate(scored, cfg, step, logger, job_dir, device)
+                    metrics |= validate(accelerator.unwrap_model(model).net, cfg, step, logger, job_dir, device)
                     miou = metrics.get("val/miou")
                     if miou is not None and (best is None or miou > best):
                         best = miou
