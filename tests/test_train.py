@@ -125,12 +125,11 @@ def test_infeasible_request_fails_fast(ray_session, tiny_shards, tmp_path) -> No
 def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(ray_session, tiny_shards,  # noqa: F811
                                                                                  tmp_path) -> None:
     """``optim.cpu_seconds`` ends the job at the first step whose CPU seconds (both ranks, summed) reach the
-    budget, long before the step cap; the learning rate (``optim.lr_decay_start=rays``) holds through the 2D warm-up,
-    then decays with the ray phase's CPU fraction, counted from the CPU it began at; the 2D warm-up steps
+    budget, long before the step cap; the learning rate decays with the CPU fraction; the 2D warm-up steps
     (source labels only) and the source-view and depth terms after them keep the two DDP ranks identical; the
     depth term is logged on every rendering step and the run's protocol says its training read depth."""
     cfg = tiny_config(tiny_shards, tmp_path, name="budget")
-    cfg.optim.steps, cfg.optim.cpu_seconds, cfg.optim.warmup_2d_steps, cfg.optim.lr_decay_start = 400, 12.0, 3, "rays"
+    cfg.optim.steps, cfg.optim.cpu_seconds, cfg.optim.warmup_2d_steps = 400, 12.0, 3
     cfg.model.lambda_src_sem, cfg.model.lambda_depth = 0.5, 0.2
     cfg.run.val_every, cfg.run.ckpt_every, cfg.run.system_metrics_s = 1000, 1000, 0.0
     outcome = launch_training(cfg)
@@ -146,8 +145,7 @@ def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(r
     assert budget_spent(job_dir, cfg) and not budget_spent(job_dir, larger)  # what a resume or a bench cell reads
     lr = dict(_history(cfg, "train/lr"))
     assert lr[last_step] < 0.5 * cfg.optim.lr  # decayed by the CPU fraction, not by last_step / 400
-    assert [lr[s] for s in (1, 2, 3)] == [cfg.optim.lr] * 3 and lr[4] < cfg.optim.lr  # the decay starts with the rays
-    assert counters["ray_phase_cpu_seconds"] == pytest.approx(dict(cpu)[3])  # what a resume counts the decay from
+    assert all(lr[s] > lr[s + 1] for s in range(1, last_step - 1))  # decays from the first step, 2D ones included
     src_steps, ray_steps = ({s for s, _ in _history(cfg, key)} for key in ("train/sem_src", "train/sem_fine"))
     assert src_steps == set(range(1, last_step + 1))  # every step, warm-up included
     assert ray_steps == set(range(4, last_step + 1))  # rays rendered only after the 3 warm-up steps

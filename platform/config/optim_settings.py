@@ -27,12 +27,5 @@ class OptimSettings:
     """The first this many steps train the encoder and its source-view head on the source views' labels
     alone (nothing rendered; a departure from the paper, docs/model.md); they count toward ``steps``. Needs
     ``model.lambda_src_sem`` > 0; 0 = off."""
-    lr_decay_start: str = "run"
-    """Where the exponential decay to ``lr_final`` starts: ``run`` = after the linear warm-up, over the whole run
-    (the paper); ``rays`` = at the first ray step after the 2D warm-up (``warmup_2d_steps`` > 0), the 2D steps
-    training at the base lr, so the decay spans the ray phase's own steps, or its own share of the CPU budget."""
-    weight_decay: float = 0.0
-    """Decoupled weight decay (AdamW) of the convolution and linear weights: each step shrinks them by ``lr *
-    weight_decay`` of themselves; biases and norm scales never decay. 0 = plain Adam (the paper)."""
     max_nonfinite_in_row: int = 20
     """A non-finite loss or gradient skips the step; this many in a row stop the job."""

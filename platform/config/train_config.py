@@ -205,23 +205,14 @@ def check_sections(cfg: TrainConfig) -> None:
     """ValueError for settings of different sections that cannot train together: fp16 with a loss in pieces
     smaller than the batch (a piece's gradients are taken before the loss scaler scales them,
     ``sray.model.piecewise_loss``, so small ones could underflow), a 2D warm-up without the source-view
-    head it trains, a decay started at the ray phase without a 2D warm-up before it, a negative CPU budget
-    or weight decay."""
+    head it trains, and a negative CPU budget."""
     if cfg.optim.cpu_seconds < 0:
         raise ValueError(f"train config: optim.cpu_seconds is {cfg.optim.cpu_seconds}; use 0 (steps only) or a "
                          "positive CPU-second budget")
-    if cfg.optim.weight_decay < 0:
-        raise ValueError(f"train config: optim.weight_decay is {cfg.optim.weight_decay}; use 0 (plain Adam) or a "
-                         "positive decoupled weight decay, e.g. optim.weight_decay=0.1")
     if cfg.optim.warmup_2d_steps < 0 or (cfg.optim.warmup_2d_steps > 0 and cfg.model.lambda_src_sem <= 0):
         raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
                          "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "
                          f"(is {cfg.model.lambda_src_sem}). Set model.lambda_src_sem=1 or optim.warmup_2d_steps=0.")
-    if cfg.optim.lr_decay_start not in ("run", "rays") or (cfg.optim.lr_decay_start == "rays"
-                                                            and cfg.optim.warmup_2d_steps <= 0):
-        raise ValueError(f"train config: optim.lr_decay_start is {cfg.optim.lr_decay_start!r} with "
-                         f"optim.warmup_2d_steps={cfg.optim.warmup_2d_steps}; use 'run', or 'rays' with a 2D "
-                         "warm-up (optim.warmup_2d_steps > 0), whose end starts the decay.")
     if cfg.run.precision == "fp16" and 0 < cfg.runtime.train_piece < cfg.data.rays_per_batch:
         raise ValueError(f"train config: runtime.train_piece is {cfg.runtime.train_piece} (< data.rays_per_batch "
                          f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not "

@@ -18,10 +18,10 @@ from sray.platform.train.step import fused_adam
 
 
 def lr_lambda(opt: OptimSettings) -> Any:
-    """Multiplier of the base lr at a step: linear warm-up, then exponential decay to lr_final, from the end of the
-    warm-up (``opt.lr_decay_start`` ``run``) or of the 2D warm-up (``rays``: the base lr until then)."""
+    """Multiplier of the base lr at a step: linear warm-up, then exponential decay to lr_final over the rest of the
+    run."""
     ratio = opt.lr_final / opt.lr if opt.lr > 0 else 1.0  # a learning rate of 0 (a sweep's control arm) stays 0
-    first = decay_start_step(opt)
+    first = opt.warmup_steps
     decay_steps = max(opt.steps - first, 1)
 
     def factor(step: float) -> float:
@@ -32,34 +32,23 @@ def lr_lambda(opt: OptimSettings) -> Any:
     return factor
 
 
-def decay_start_step(opt: OptimSettings) -> int:
-    """The step the exponential decay starts at: after the linear warm-up, or at the first ray step."""
-    return opt.warmup_steps if opt.lr_decay_start == "run" else max(opt.warmup_steps, opt.warmup_2d_steps)
-
-
-def budget_lr_factor(opt: OptimSettings, step: int, cpu_seconds: float, ray_phase_cpu: float = 0.0) -> float:
+def budget_lr_factor(opt: OptimSettings, step: int, cpu_seconds: float) -> float:
     """Multiplier of the base lr at ``step`` of a job budgeted by ``opt.cpu_seconds`` (> 0), after ``cpu_seconds``
     spent: the warm-up counts steps, as without a budget; the decay then follows whichever is further along, the
     step count or the spent share of the budget (as a share of ``opt.steps``), so it reaches ``lr_final`` at the
-    budget however many steps a machine makes of it, and at the cap ``opt.steps`` if that comes first. With the
-    decay started at the ray phase (``opt.lr_decay_start`` ``rays``), the share is that of the budget left when the
-    ray phase began, ``ray_phase_cpu`` CPU seconds in, spread over the steps from the first ray step to the cap."""
+    budget however many steps a machine makes of it, and at the cap ``opt.steps`` if that comes first."""
     factor = lr_lambda(opt)
-    if step < decay_start_step(opt):  # the warm-up, or a 2D warm-up at the base lr before a ray-phase decay
+    if step < opt.warmup_steps:
         return factor(step)
-    if opt.lr_decay_start == "rays":
-        first = decay_start_step(opt)
-        share = (cpu_seconds - ray_phase_cpu) / max(opt.cpu_seconds - ray_phase_cpu, 1e-9)
-        return factor(max(step, first + share * (opt.steps - first)))
     return factor(max(step, cpu_seconds / opt.cpu_seconds * opt.steps))
 
 
 def build_training(cfg: TrainConfig) -> tuple[RayBatchLoss, torch.optim.Optimizer, torch.optim.lr_scheduler.LambdaLR]:
-    """Model (seeded from ``cfg.run.seed``, identical on every rank; its loss run with ``cfg.runtime``), Adam (AdamW
-    with ``cfg.optim.weight_decay`` > 0) and its schedule."""
+    """Model (seeded from ``cfg.run.seed``, identical on every rank; its loss run with ``cfg.runtime``), Adam and
+    its schedule."""
     torch.manual_seed(cfg.run.seed)
     model = RayBatchLoss(cfg.model, cfg.runtime)
-    optimizer = fused_adam(list(model.parameters()), cfg.optim.lr, cfg.optim.weight_decay)
+    optimizer = fused_adam(list(model.parameters()), cfg.optim.lr)
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
     return model, optimizer, scheduler
 

@@ -141,8 +141,6 @@ def train_worker(payload: dict[str, Any]) -> None:
             if wall_before is not None:
                 counters["wall_seconds"] = wall_before + time.perf_counter() - wall_start
             counters["peak_memory_mb"] = max(counters.get("peak_memory_mb", 0.0), peak_memory_mb(device))
-            if cfg.optim.lr_decay_start == "rays":
-                counters["ray_phase_cpu_seconds"] = ray_phase_cpu
             state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
                                    step_done, cfg, best, counters)
             state[UNSENT_METRICS] = [list(m) for m in logger.unsent_metrics()]  # store unreachable now
@@ -152,16 +150,11 @@ def train_worker(payload: dict[str, Any]) -> None:
             ray.train.report(metrics)
 
     budget = cfg.optim.cpu_seconds
-    ray_phase_cpu = counters.get("ray_phase_cpu_seconds", 0.0)  # CPU spent when the ray phase began
 
     def follow_cpu_budget(next_step: int) -> None:
-        """With a CPU budget, the next step's learning rate from ``budget_lr_factor``; before the first ray step,
-        records the CPU spent so far (where a decay started at the ray phase counts from)."""
-        nonlocal ray_phase_cpu
-        if next_step == cfg.optim.warmup_2d_steps:
-            ray_phase_cpu = cpu_total
+        """With a CPU budget, the next step's learning rate from ``budget_lr_factor``."""
         if budget > 0:
-            factor = budget_lr_factor(cfg.optim, next_step, cpu_total, ray_phase_cpu)
+            factor = budget_lr_factor(cfg.optim, next_step, cpu_total)
             for group in optimizer.param_groups:
                 group["lr"] = group["initial_lr"] * factor
 
