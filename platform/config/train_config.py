@@ -31,11 +31,6 @@ class DataSettings:
     of the query view."""
     rays_per_batch: int = 1024
     """Rays per training step and rank (paper: 1024)."""
-    ray_balance: float = 0.0
-    """How the query pixels of a step are drawn: 0 = uniformly (the paper), a in (0, 1] = a pixel whose class covers
-    n pixels of its query image with probability proportional to n^-a, so small objects get more of the rays
-    (1 = every class of the image the same expected share; ``sray.data_tools.loader.samples.query_pixels``). The
-    semantic loss's class weights (``class_balance``) apply on top."""
     loader_workers: int = 1
     """DataLoader worker processes per rank."""
     visit_samples: int = 16
@@ -73,9 +68,6 @@ class DataSettings:
         if self.visit_samples < 1 or self.cache_scenes < 1:
             raise ValueError(f"train config: data.visit_samples ({self.visit_samples}) and data.cache_scenes "
                              f"({self.cache_scenes}) must be >= 1")
-        if not 0.0 <= self.ray_balance <= 1.0:
-            raise ValueError(f"train config: data.ray_balance is {self.ray_balance}; use 0 (uniform query pixels) up "
-                             "to 1 (every class of a query image the same expected share of its rays)")
         if self.epoch_steps < 0:
             raise ValueError(f"train config: data.epoch_steps is {self.epoch_steps}; give a number of steps, or 0 for "
                              "one loader epoch per run.ckpt_every steps")
