@@ -6,11 +6,6 @@ from dataclasses import dataclass
 
 from .attention_variants import ATTENTION_VARIANTS
 
-WEIGHT_MAPS = ("radial", "affine")
-"""How the semantic-aware weight net's per-view outputs become weights in C(tau) (``semantic_weights``):
-``radial`` (default) can approach both bounds tau/m and 1/(tau m); ``affine`` (the first version)
-reaches only (2 - tau)/m from above."""
-
 FINE_SAMPLES = ("union", "new")
 """What the fine pass evaluates (``SRayConfig.fine_samples``): ``new`` (default) only the n_fine
 resampled depths (the paper's public code: 128 evaluations per ray at 64 + 64); ``union`` the sorted
@@ -77,8 +72,6 @@ class SRayConfig:
     """Widths of the geometry net's MLP on [mean, variance] (64 -> 32 -> 16, appendix L8)."""
     tau: float = 0.7
     """Bound of the semantic-aware weights: tau/m < w_i < 1/(tau m); tau = 1 is the plain mean."""
-    weight_map: str = "radial"
-    """Parametrisation of the semantic-aware weights, one of ``WEIGHT_MAPS``."""
     weight_inputs: str = "view"
     """Inputs of the semantic-aware weight net, one of ``WEIGHT_INPUTS``: ``view`` (default, the paper) or
     ``cross-view`` (adds each view's distance from the valid views' mean feature and their variance; only the
@@ -131,8 +124,6 @@ class SRayConfig:
 
         if self.attention not in ATTENTION_VARIANTS:
             raise bad("attention", f"is {self.attention!r}; use one of {tuple(ATTENTION_VARIANTS)}")
-        if self.weight_map not in WEIGHT_MAPS:
-            raise bad("weight_map", f"is {self.weight_map!r}; use one of {WEIGHT_MAPS}")
         if self.weight_inputs not in WEIGHT_INPUTS:
             raise bad("weight_inputs", f"is {self.weight_inputs!r}; use one of {WEIGHT_INPUTS}")
         if self.fine_samples not in FINE_SAMPLES:

@@ -28,7 +28,7 @@ from torch import Tensor
 
 from .cra import AttentionBlock, CrossReprojectionAttention
 from .geometry_net import GeometryNet, masked_mean_var, masked_softmax
-from .semantic_weights import SemanticWeightNet, bounded_weights, cross_view_stats, radial_weights
+from .semantic_weights import SemanticWeightNet, cross_view_stats, radial_weights
 from .sliced_attention import attention
 
 
@@ -91,9 +91,7 @@ def weights_forward(net: SemanticWeightNet, feats: Tensor, dirs: Tensor, valid: 
     hidden = (F.linear(feats, w[:, :c], first.bias) + F.linear(per_view, w[:, c:-1])
               + seen[..., None] * w[:, -1].to(feats.dtype))  # (R, N, m, h1)
     raw = net.mlp[1:](hidden).squeeze(-1).float()  # (R, N, m)
-    if net.weight_map == "radial":
-        return radial_weights(raw, valid, net.tau, net.margin)
-    return bounded_weights(torch.sigmoid(raw), valid, net.tau, net.margin)
+    return radial_weights(raw, valid, net.tau, net.margin)
 
 
 def geometry_forward(net: GeometryNet, space: Tensor, valid: Tensor, dirs: Tensor,

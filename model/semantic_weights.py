@@ -4,11 +4,9 @@ The paper asks for w in C(tau) = {tau/m < w_i < 1/(tau m), sum_i w_i = 1}. Here 
 of views that VALIDLY see the sample (``n`` below): an invalid view gets weight exactly 0, which is
 the only way a view that sees nothing can have no influence while the others stay bounded below.
 
-Two parametrisations (``SRayConfig.weight_map``); both give exactly 0 to invalid views, w = 1 for
-n = 1, all 0 for n = 0, and the plain mean 1/n for tau = 1.
-
-``radial`` (default, ``radial_weights``). The net's raw output a_i per valid view is centred,
-e_i = a_i - mean(a), and with p = 1/tau - 1 (room above 1/n, in units of 1/n) and q = 1 - tau (room
+The net's raw output a_i per valid view becomes a weight by the ``radial`` map (``radial_weights``), which gives
+exactly 0 to invalid views, w = 1 for n = 1, all 0 for n = 0, and the plain mean 1/n for tau = 1. Its raw outputs
+are centred, e_i = a_i - mean(a), and with p = 1/tau - 1 (room above 1/n, in units of 1/n) and q = 1 - tau (room
 below) its gauge g = max_i max(e_i / p, -e_i / q) >= 0 says how far e points towards the boundary:
 
     w_i = (1 + (1 - margin) e_i / (1 + g)) / n.
@@ -19,16 +17,6 @@ below) its gauge g = max_i max(e_i / p, -e_i / q) >= 0 says how far e points tow
 * range: near e = 0 the map is the identity to first order (w = (1 + e) / n); as one e_i grows (or falls) alone,
   g -> infinity and w_i -> (1 + (1 - margin) p) / n (or (1 - (1 - margin) q) / n): both bounds are
   approached to within a relative (margin p / (1 + p)) or (margin q / tau).
-
-``affine`` (the first version, ``bounded_weights``). Scores s_i = sigmoid(a_i) in [0, 1], centred,
-d_i = s_i - mean(s), and kappa = (1 - margin)(1 - tau) n / (n - 1):
-
-    w_i = (1 + kappa d_i) / n.
-
-|d_i| <= (n - 1) / n gives w_i in [(1 - (1-margin)(1-tau)) / n, (1 + (1-margin)(1-tau)) / n], strictly
-inside (tau / n, (2 - tau) / n), and (2 - tau) / n < 1 / (tau n) because tau (2 - tau) < 1. It
-reaches the lower bound but not the upper one (1.3 / n against 1.43 / n at tau = 0.7), which keeps
-trained weights near the mean.
 
 Input of the net (37 = 32 + 4 + 1 channels at the default C = 32): the refined feature F''_i of
 the token (C), the 4-d view-direction difference of ``reprojection.view_direction_difference``
@@ -52,24 +40,6 @@ from .config import SRayConfig
 
 CROSS_VIEW_STATS = 2
 """Inputs ``weight_inputs = "cross-view"`` adds to the weight net per view (``cross_view_stats``)."""
-
-
-def bounded_weights(score: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
-    """Scores (..., m) in [0, 1] and validity (..., m) -> float32 weights (..., m).
-
-    Over the valid entries of each row the weights sum to 1 and obey
-    tau/n < w_i < 1/(tau n) with n the row's number of valid entries (strict for tau < 1;
-    exactly 1/n for tau = 1); invalid entries get 0; a row without valid entries is all 0.
-    See the module docstring for the proof.
-    """
-    with torch.autocast(device_type=score.device.type, enabled=False):
-        keep = valid.float()
-        n = keep.sum(-1, keepdim=True)  # (..., 1)
-        n_safe = n.clamp_min(1.0)
-        s = score.float().clamp(0.0, 1.0) * keep
-        d = (s - s.sum(-1, keepdim=True) / n_safe) * keep  # (..., m), sums to 0 over valid views
-        kappa = (1.0 - margin) * (1.0 - tau) * n / (n - 1.0).clamp_min(1.0)  # 0 at n <= 1 (d = 0)
-        return keep * (1.0 + kappa * d) / n_safe
 
 
 def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
@@ -115,12 +85,12 @@ def cross_view_stats(feats: Tensor, valid: Tensor, view_dim: int) -> Tensor:
 
 class SemanticWeightNet(nn.Module):
     """MLP (C + 5 -> 16 -> 8 -> 1, ELU; C + 7 inputs with ``weight_inputs = "cross-view"``) scoring each view,
-    mapped into C(tau) by ``cfg.weight_map``."""
+    mapped into C(tau) by :func:`radial_weights`."""
 
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         h1, h2 = cfg.weight_hidden
-        self.tau, self.margin, self.weight_map = cfg.tau, cfg.weight_margin, cfg.weight_map
+        self.tau, self.margin = cfg.tau, cfg.weight_margin
         self.weight_inputs = cfg.weight_inputs
         extra = CROSS_VIEW_STATS if cfg.weight_inputs == "cross-view" else 0
         self.mlp = nn.Sequential(nn.Linear(cfg.feat_dim + 5 + extra, h1), nn.ELU(), nn.Linear(h1, h2), nn.ELU(),
@@ -137,8 +107,4 @@ class SemanticWeightNet(nn.Module):
             parts.append(cross_view_stats(feats, valid, view_dim=1).to(feats.dtype))  # (R, m, N, 2)
         x = torch.cat([*parts, seen[..., None]], dim=-1)  # (R, m, N, C + 5) or (R, m, N, C + 7)
         raw = self.mlp(x).squeeze(-1).float().transpose(1, 2)  # (R, N, m)
-        if self.weight_map == "radial":
-            w = radial_weights(raw, valid.transpose(1, 2), self.tau, self.margin)
-        else:
-            w = bounded_weights(torch.sigmoid(raw), valid.transpose(1, 2), self.tau, self.margin)
-        return w.transpose(1, 2)  # (R, m, N)
+        return radial_weights(raw, valid.transpose(1, 2), self.tau, self.margin).transpose(1, 2)  # (R, m, N)
