@@ -122,8 +122,8 @@ def run_demo(args: argparse.Namespace) -> int:
          f"--scene {scenes_test[0]} --out {args.out / 'render'}")
     fleet_cfg = FleetConfig()
     fleet_cfg.finetune.max_seconds = args.finetune_seconds
-    fleet_cfg.finetune.eval_n_source = cfg.model.n_source
-    fleet_cfg.finetune.eval_stride = 2 * args.eval_stride
+    fleet_cfg.finetune.held_out.n_source = cfg.model.n_source
+    fleet_cfg.finetune.held_out.stride = 2 * args.eval_stride
     fleet_cfg.transfer.segmenter = str(segmenter_dir)
     scenes_fleet = scenes_test[:args.fleet_scenes] if args.fleet_scenes > 0 else scenes_test
     _say(f"8/9 finetune fleet on {len(scenes_fleet)} of the {len(scenes_test)} unseen scenes "

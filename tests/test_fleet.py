@@ -43,7 +43,7 @@ def _on_disk(out: Path, scene: str, method: str) -> dict:
 
 
 SRAY_HELD_OUT_RENDER = "fast (pixel stride 1, fine pass where the coarse confidence < 0.9, resampled depths only)"
-"""S-Ray's default held-out render (``finetune.eval_render``); Semantic-NeRF renders in full."""
+"""S-Ray's default held-out render (``finetune.held_out``); Semantic-NeRF renders in full."""
 
 
 def _protocol(source_rule: str, n_source: int, stride: int, render: str = "full") -> dict:
@@ -75,7 +75,7 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
     for scene in ("synth_train_000", "synth_test_000"):
         r = by_scene[scene]
         assert r["status"] == "finished" and r["attempts"] == 1 and r["error"] is None
-        assert r["protocol"] == _protocol(source_rule, cfg.finetune.eval_n_source, cfg.finetune.eval_stride,
+        assert r["protocol"] == _protocol(source_rule, cfg.finetune.held_out.n_source, cfg.finetune.held_out.stride,
                                           SRAY_HELD_OUT_RENDER)
         assert r["steps_used"] == 6 and [p["step"] for p in r["curve"]] == [0, 3, 6]
         assert all(set(p) == CURVE_KEYS for p in r["curve"])
@@ -107,7 +107,7 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
         assert f"| {scene} | sray |" in table
     assert "| failed |" in table and "InjectedFailure" in table
     [caption] = [line for line in table.splitlines() if line.startswith("Protocol")]
-    assert caption.startswith(f"Protocol: sources: {cfg.finetune.eval_n_source} per query, fixed, top-ranked by "
+    assert caption.startswith(f"Protocol: sources: {cfg.finetune.held_out.n_source} per query, fixed, top-ranked by "
                               f"{source_rule}; pixels: every 4th in each direction (stride 4), so no SSIM")
     if importlib.util.find_spec("sray.platform.viz.charts") is not None:
         charts = [a.path for a in client.list_artifacts(parent_id, "charts")]

@@ -67,7 +67,7 @@ def test_mlflow_store_holds_everything(uninterrupted) -> None:
     assert {"train/loss", "train/lr", "val/miou", "zeroshot/miou", "train/rays_per_s", "train/data_wait_share",
             "train/memory_mb", "train/cpu_seconds", "system/node0/cpu_utilization_percentage",
             "system/node0/system_memory_usage_megabytes"} <= set(run.data.metrics)
-    # the validation protocol, logged once: strided renders (val_downscale 2), so no SSIM was logged
+    # the validation protocol, logged once: strided renders (data.held_out.stride 2), so no SSIM was logged
     rule = json.loads((Path(cfg.data.shards) / "manifest.json").read_text())["neighbours"]
     assert run.data.params["protocol.source_rule"] == f"{rule['rule']} v{rule['version']}"
     assert run.data.params["protocol.stride"] == "2" and run.data.params["protocol.n_source"] == "3"

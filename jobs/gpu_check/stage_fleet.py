@@ -50,7 +50,7 @@ def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes:
     cfg = FleetConfig(max_parallel=len(scenes), retries=0, cpus_per_task=1.0, gpus_per_task=share if cuda else 0.0)
     ft = cfg.finetune
     ft.max_steps, ft.eval_every, ft.patience = (2, 2, 1) if ctx.dry_run else (200, 100, 2)
-    ft.eval_n_source, ft.eval_stride, ft.precision = min(ctx.views, 4), 4, "bf16" if cuda else "no"
+    ft.held_out.n_source, ft.held_out.stride, ft.precision = min(ctx.views, 4), 4, "bf16" if cuda else "no"
     start = time.perf_counter()
     results = run_fleet(cfg, checkpoint, shards, scenes, out, f"sqlite:///{out / 'mlflow.db'}", ["sray"])
     return time.perf_counter() - start, results

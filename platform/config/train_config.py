@@ -10,11 +10,11 @@ from typing import Any
 
 from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
-from sray.model.fast_render import FastRender
 from sray.model.runtime import Runtime
-from sray.platform.config.held_out_render import held_out_fast
+from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.optim_settings import OptimSettings
 from sray.platform.config.overrides import set_field
+from sray.platform.config.stored_format import CONFIG_VERSION, VERSION_KEY, check_version, from_plain
 
 PRECISIONS = ("no", "bf16", "fp16")
 """Mixed-precision modes: fp32, bfloat16 autocast (CPU and CUDA), fp16 with loss scaling (CUDA)."""
@@ -43,14 +43,11 @@ class DataSettings:
     job checkpoints, sets the data order when it is > 0; 0 = one epoch per ``run.ckpt_every`` steps. A job resumed
     mid-epoch regenerates the epoch's samples up to its step, so a long epoch makes a resume slower."""
     val_views_per_scene: int = 2
-    """Held-out views rendered per scene at each validation (whole images, in chunks)."""
-    val_downscale: int = 2
-    """Validation renders at 1/val_downscale resolution to keep it cheap (1 = full)."""
-    val_render: str = "fast"
-    """Validation's render: ``fast`` (the fine pass only where the coarse pass is below
-    ``val_fast_confidence``; ``sray.platform.config.held_out_render``) or ``full``."""
-    val_fast_confidence: float = 0.9
-    """Coarse softmax maximum from which a validation ray keeps its coarse result (fast render)."""
+    """Held-out views rendered per scene at each validation (in chunks of ``runtime.chunk`` rays)."""
+    held_out: HeldOutRender = field(default_factory=lambda: HeldOutRender(n_source=0, stride=2, fast_stride=1))
+    """How validation renders and scores its views (``sray.platform.config.held_out_render``): the model's own
+    source count, every 2nd pixel to keep it cheap, the fast render on those pixels; set field by field:
+    ``--set data.held_out.render=full``."""
     val_scenes: int = 0
     """Scenes of each role (train, unseen test) validated, the first ones by name; 0 = all of them
     (a run over many scenes keeps its validations cheap with a few)."""
@@ -71,11 +68,7 @@ class DataSettings:
         if self.epoch_steps < 0:
             raise ValueError(f"train config: data.epoch_steps is {self.epoch_steps}; give a number of steps, or 0 for "
                              "one loader epoch per run.ckpt_every steps")
-        self.val_fast()
-
-    def val_fast(self) -> FastRender | None:
-        """Validation's fast render mode (``val_render``), None for the full render; ValueError on a bad value."""
-        return held_out_fast(self.val_render, self.val_fast_confidence, "train config: data.val_render")
+        self.held_out.check(lambda field: f"train config: data.held_out.{field}")
 
 
 @dataclass
@@ -121,37 +114,6 @@ class RunSettings:
     """Name the final checkpoint is registered under in the tracker's model registry ('' = do not register)."""
 
 
-RETIRED_RUN_KEYS = frozenset({"fail_at_step", "nan_at_step", "stop_after_step"})
-"""Run settings that configs written before the fault hook (``SRAY_FAULTS``) may still hold; ignored on load."""
-
-FLAT_AUG_PREFIX = "aug_"
-"""Configs and checkpoints written before ``data.aug`` was a section hold each of its fields flat in the data
-section as ``aug_<field>`` (``aug_colour_ev``, ...); :func:`data_settings` reads them into ``data.aug``."""
-
-
-def data_settings(d: dict[str, Any]) -> DataSettings:
-    """The data section of a stored config, its flat ``aug_<field>`` keys (:data:`FLAT_AUG_PREFIX`) read as
-    ``aug.<field>``."""
-    flat = {k.removeprefix(FLAT_AUG_PREFIX): v for k, v in d.items() if k.startswith(FLAT_AUG_PREFIX)}
-    rest = {k: v for k, v in d.items() if not k.startswith(FLAT_AUG_PREFIX) and k != "aug"}
-    return DataSettings(**rest, aug=Augmentation(**flat, **d.get("aug", {})))
-
-
-RUNTIME_FIELDS = tuple(f.name for f in dataclasses.fields(Runtime))
-"""Fields of the ``runtime`` section (``impl``, ``chunk``, ``train_piece``). Configs and checkpoints written
-before it was a section hold them in the model section; :func:`model_and_runtime` reads them as
-``runtime.<field>``."""
-
-
-def model_and_runtime(d: dict[str, Any]) -> tuple[SRayConfig, Runtime]:
-    """The model and runtime sections of a stored config ``d`` (a :meth:`TrainConfig.to_dict`), the runtime
-    fields a model section holds (:data:`RUNTIME_FIELDS`) read into the runtime section."""
-    model = {k: tuple(v) if k in ("weight_hidden", "geo_hidden", "class_weights") else v
-             for k, v in d.get("model", {}).items() if k not in RUNTIME_FIELDS}
-    moved = {k: v for k, v in d.get("model", {}).items() if k in RUNTIME_FIELDS}
-    return SRayConfig(**model), Runtime(**moved, **d.get("runtime", {}))
-
-
 @dataclass
 class TrainConfig:
     """Everything a training job needs; recipes return one, ``--set a.b=value`` overrides fields."""
@@ -175,18 +137,15 @@ class TrainConfig:
         check_sections(self)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict (JSON/YAML-safe; tuples become lists)."""
-        return dataclasses.asdict(self)
+        """Plain nested dict (JSON/YAML-safe; tuples become lists) with its ``format_version``."""
+        return {VERSION_KEY: CONFIG_VERSION, **dataclasses.asdict(self)}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; also reads the configs that earlier versions stored (flat ``data.aug_<field>``
-        keys, :data:`RETIRED_RUN_KEYS`, runtime fields in the model section: :data:`RUNTIME_FIELDS`)."""
-        model, runtime = model_and_runtime(d)
-        return cls(recipe=d.get("recipe", "custom"), model=model,
-                   data=data_settings(d.get("data", {})), optim=OptimSettings(**d.get("optim", {})),
-                   run=RunSettings(**{k: v for k, v in d.get("run", {}).items() if k not in RETIRED_RUN_KEYS}),
-                   runtime=runtime)
+        """Inverse of :meth:`to_dict`, today's format only: OutdatedFormat (naming ``sray migrate``) for a config an
+        earlier sray wrote, ValueError naming a field today's config does not have."""
+        check_version(d, "train config")
+        return from_plain(cls, {k: v for k, v in d.items() if k != VERSION_KEY}, "train config")
 
     def job_dir(self) -> Path:
         """Folder of this job's checkpoints and run state."""
@@ -215,20 +174,9 @@ def check_sections(cfg: TrainConfig) -> None:
 def apply_override(cfg: TrainConfig, assignment: str) -> None:
     """Apply one ``section.field=value`` override in place, parsing the value as the field's type.
 
-    Raises ValueError naming the unknown section or field and listing the valid ones (for a flat
-    ``data.aug_<field>``, its name in the ``data.aug`` section; for ``model.<field>`` of a runtime field, its
-    name in the ``runtime`` section), or a value the network cannot run with (the config keeps its previous
-    value then).
+    Raises ValueError naming the unknown section or field and listing the valid ones, or a value the network
+    cannot run with (the config keeps its previous value then).
     """
-    path, _, raw = assignment.partition("=")
-    flat = path.strip().removeprefix(f"data.{FLAT_AUG_PREFIX}")
-    if flat != path.strip() and flat in {f.name for f in dataclasses.fields(Augmentation)}:
-        raise ValueError(f"--set {assignment!r}: augmentation settings are the data.aug section; "
-                         f"use --set data.aug.{flat}={raw.strip()}")
-    moved = path.strip().removeprefix("model.")
-    if moved != path.strip() and moved in RUNTIME_FIELDS:
-        raise ValueError(f"--set {assignment!r}: how the network is run is the runtime section; "
-                         f"use --set runtime.{moved}={raw.strip()}")
 
     def check() -> None:
         cfg.model.__post_init__()
@@ -243,9 +191,13 @@ CONFIG_FILE = "config.json"
 
 
 def load_job_config(output_dir: str, name: str) -> TrainConfig:
-    """The saved config of an existing job (for ``--resume``); errors name the file and the fix."""
+    """The saved config of an existing job (for ``--resume``); errors name the file and the fix (for a config an
+    earlier sray wrote: ``sray migrate``)."""
     path = Path(output_dir) / name / CONFIG_FILE
     if not path.exists():
         raise FileNotFoundError(f"{path}: no job called {name!r} under {output_dir}; "
                                 "check --name/--resume and the output folder (run.output_dir)")
-    return TrainConfig.from_dict(json.loads(path.read_text()))
+    try:
+        return TrainConfig.from_dict(json.loads(path.read_text()))
+    except ValueError as e:
+        raise type(e)(f"{path}: {e}") from None

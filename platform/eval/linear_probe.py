@@ -57,7 +57,8 @@ class LinearProbe:
 
 
 def random_encoder(feat_dim: int, seed: int, width: int = 16) -> ResUNetEncoder:
-    """A freshly initialised encoder of ``feat_dim`` output channels and first-layer ``width`` (PyTorch's default initialisation under ``seed``; the global random state is left as it was)."""
+    """A freshly initialised encoder of ``feat_dim`` output channels and first-layer ``width`` (PyTorch's default
+    initialisation under ``seed``; the global random state is left as it was)."""
     with torch.random.fork_rng():
         torch.manual_seed(seed)
         return ResUNetEncoder(feat_dim, width).eval()

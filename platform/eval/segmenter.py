@@ -144,8 +144,8 @@ def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, S
                                     class_weights=tuple(m.class_weights)))
     seg.encoder.load_state_dict(net.encoder.state_dict())
     seg.head.load_state_dict(net.src_head.state_dict())
-    counters = load_checkpoint(checkpoint).get("counters", {})
+    counters = load_checkpoint(checkpoint)["counters"]
     training = {"checkpoint": str(checkpoint.resolve()), "steps": int(read_meta(checkpoint)["step"]),
-                "cpu_seconds": float(counters.get("cpu_seconds", 0.0)), "recipe": cfg.recipe}
+                "cpu_seconds": float(counters["cpu_seconds"]), "recipe": cfg.recipe}
     save_segmenter(seg, training, out)
     return seg.eval(), SegmenterRecord(seg.cfg, training)

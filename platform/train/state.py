@@ -11,10 +11,16 @@ import torch
 from sray.model.ray_batch import RayBatchLoss
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import write_checkpoint
-from sray.platform.checkpoints.model_loading import bare_model_keys
 from sray.platform.config.optim_settings import OptimSettings
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.train.step import fused_adam
+
+
+FIRST_COUNTERS: dict[str, int | float] = {"skipped_steps": 0, "cpu_seconds": 0.0, "wall_seconds": 0.0,
+                                          "peak_memory_mb": 0.0}
+"""The counters every checkpoint holds, at a job's start: steps skipped for a non-finite loss, CPU seconds of every
+rank and its loader processes, rank 0's wall seconds since its set-up (NaN: unknown, a job migrated from a
+checkpoint written before it was counted) and the peak device memory, all summed or maxed across resumes."""
 
 
 def lr_lambda(opt: OptimSettings) -> Any:
@@ -76,17 +82,17 @@ def write_initial_checkpoint(cfg: TrainConfig, directory: Path) -> Path:
     ``directory``: an untrained shared model that the fleet and evaluation read like any other (the GPU check's
     fleet timing, tests)."""
     model, optimizer, scheduler = build_training(cfg)
-    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
+    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, dict(FIRST_COUNTERS))
     return write_checkpoint(state, directory, 0)
 
 
 def restore_training(state: dict[str, Any], model: SRayModel, optimizer: torch.optim.Optimizer,
                      scheduler: Any, scaler: Any) -> tuple[int, float | None, dict[str, int]]:
-    """Load a :func:`training_state` dict (legacy keys too) into live objects; returns (next step, best
-    metric, counters). ``model`` is the bare network whose parameters the optimizer holds, in order."""
-    model.load_state_dict(bare_model_keys(state["model"]))
+    """Load a :func:`training_state` dict into live objects; returns (next step, best metric, counters). ``model``
+    is the bare network whose parameters the optimizer holds, in order."""
+    model.load_state_dict(state["model"])
     optimizer.load_state_dict(state["optimizer"])
     scheduler.load_state_dict(state["scheduler"])
     if scaler is not None and "scaler" in state:
         scaler.load_state_dict(state["scaler"])
-    return int(state["step"]), state.get("best_metric"), dict(state.get("counters", {}))
+    return int(state["step"]), state["best_metric"], dict(state["counters"])

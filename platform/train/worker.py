@@ -26,7 +26,8 @@ from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle
 from sray.platform.train.cpu_clock import CpuClock
 from sray.platform.train.job_loader import job_loader
-from sray.platform.train.state import budget_lr_factor, build_training, restore_training, training_state
+from sray.platform.train.state import (FIRST_COUNTERS, budget_lr_factor, build_training, restore_training,
+                                       training_state)
 from sray.platform.train.step import TrainStep, step_seed
 from sray.platform.train.validation import validate
 
@@ -81,7 +82,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     accelerator = Accelerator(mixed_precision="no", cpu=not use_cuda)
     device = accelerator.device
     model, optimizer, scheduler = build_training(cfg)
-    start, best, counters = 0, None, {"skipped_steps": 0}
+    start, best, counters = 0, None, dict(FIRST_COUNTERS)
     # A restarted worker group resumes from the last checkpoint Ray recorded; a resumed job
     # (`--resume NAME`, a fresh Ray run) from the job's latest checkpoint folder.
     resumed = ray.train.get_checkpoint()
@@ -95,15 +96,14 @@ def train_worker(payload: dict[str, Any]) -> None:
     model, optimizer = accelerator.prepare(model, optimizer)
     train_step = TrainStep(list(model.parameters()), optimizer, cfg.optim.grad_clip, cfg.run.precision, device,
                            cfg.optim.max_nonfinite_in_row, world)
-    train_step.skipped_total = counters.get("skipped_steps", 0)
+    train_step.skipped_total = counters["skipped_steps"]
     if state is not None and train_step.scaler is not None and "scaler" in state:
         train_step.scaler.load_state_dict(state["scaler"])
 
     # CPU seconds of every rank and its loader processes, across resumes (optim.cpu_seconds budgets them)
-    clock, cpu_total = CpuClock(counters.get("cpu_seconds", 0.0) / world), counters.get("cpu_seconds", 0.0)
-    # rank 0's wall seconds since the set-up, across resumes; unknown (never stored) for a job resumed from a
-    # checkpoint written before sray counted them
-    wall_start, wall_before = time.perf_counter(), counters.get("wall_seconds", 0.0 if start == 0 else None)
+    clock, cpu_total = CpuClock(counters["cpu_seconds"] / world), counters["cpu_seconds"]
+    # rank 0's wall seconds since the set-up, across resumes (NaN stays NaN: unknown, FIRST_COUNTERS)
+    wall_start, wall_before = time.perf_counter(), counters["wall_seconds"]
     manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
     logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
     # the first worker of each node records that node's system metrics into the job's run
@@ -138,9 +138,8 @@ def train_worker(payload: dict[str, Any]) -> None:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
             logger.flush(force=True)
             counters["skipped_steps"], counters["cpu_seconds"] = train_step.skipped_total, cpu_total
-            if wall_before is not None:
-                counters["wall_seconds"] = wall_before + time.perf_counter() - wall_start
-            counters["peak_memory_mb"] = max(counters.get("peak_memory_mb", 0.0), peak_memory_mb(device))
+            counters["wall_seconds"] = wall_before + time.perf_counter() - wall_start
+            counters["peak_memory_mb"] = max(counters["peak_memory_mb"], peak_memory_mb(device))
             state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
                                    step_done, cfg, best, counters)
             state[UNSENT_METRICS] = [list(m) for m in logger.unsent_metrics()]  # store unreachable now
