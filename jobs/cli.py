@@ -15,7 +15,7 @@ import sys
 SUBCOMMAND_MODULES = ("sray.jobs.data.command", "sray.jobs.train_cmd", "sray.jobs.submit_cmd", "sray.jobs.eval_cmd",
                       "sray.jobs.render_cmd", "sray.jobs.fleet_cmd", "sray.jobs.sweep_cmd", "sray.jobs.bench.command",
                       "sray.jobs.gpu_check.command", "sray.jobs.stability.command", "sray.jobs.demo_cmd",
-                      "sray.jobs.ui_cmd", "sray.jobs.cluster_cmd")
+                      "sray.jobs.ui_cmd", "sray.jobs.cluster_cmd", "sray.jobs.migrate_cmd")
 """Modules that register subcommands, in the order `sray --help` lists them."""
 
 

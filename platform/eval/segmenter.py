@@ -30,6 +30,7 @@ from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.model.config import SRayConfig
 from sray.model.encoder import ResUNetEncoder
 from sray.model.source_semantics import SourceSemanticHead, source_semantic_loss
+from sray.platform.config.stored_format import from_plain, outdated
 
 WEIGHTS_FILE = "segmenter.pt"
 CONFIG_FILE = "segmenter.json"
@@ -120,9 +121,10 @@ def load_segmenter(folder: Path, map_location: str | torch.device = "cpu") -> tu
             raise FileNotFoundError(f"{folder / name}: missing; train a segmenter with `sray bench segmenter "
                                     f"--data SHARDS --cpu-seconds S --out {folder}`")
     stored = json.loads((folder / CONFIG_FILE).read_text())
-    raw = dict(stored["config"])
-    raw["class_weights"] = tuple(raw.get("class_weights", ()))
-    record = SegmenterRecord(SegmenterConfig(**raw), stored.get("training", {}))
+    if "encoder_norm" in stored["config"]:
+        raise outdated(f"{folder / CONFIG_FILE}: this segmenter", "1 (with encoder_norm)", "2")
+    record = SegmenterRecord(from_plain(SegmenterConfig, stored["config"], f"{folder / CONFIG_FILE}: config"),
+                             stored.get("training", {}))
     model = Segmenter(record.config)
     model.load_state_dict(torch.load(folder / WEIGHTS_FILE, map_location=map_location, weights_only=True))
     return model.eval(), record
