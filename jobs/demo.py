@@ -94,9 +94,9 @@ def run_demo(args: argparse.Namespace) -> int:
         return 0
     cfg = get_recipe(RECIPE)
     cfg.data.shards = str(shards)
-    # --steps keeps the recipe's share of 2D-only warm-up steps and its one loader epoch over the run
+    # --steps keeps the recipe's share of 2D-only warm-up steps and its data order (a loader epoch per checkpoint)
     cfg.optim.warmup_2d_steps = round(args.steps * cfg.optim.warmup_2d_steps / cfg.optim.steps)
-    cfg.optim.steps = cfg.data.epoch_steps = args.steps
+    cfg.optim.steps = args.steps
     cfg.run.output_dir = str(args.out / "train")
     cfg.run.seed = args.seed
     cfg.run.ckpt_every = max(args.steps // 2, 1)
