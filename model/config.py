@@ -17,13 +17,6 @@ INPUTS = ("rgb", "rgbd")
 text) posed colour images only; ``rgbd`` also their depth maps, which place the coarse samples around
 the surfaces the sources saw (``depth_sampling``). The query view's depth is never an input."""
 
-WEIGHT_INPUTS = ("view", "cross-view")
-"""What the semantic-aware weight net scores each view from (``SRayConfig.weight_inputs``, ``semantic_weights``):
-``view`` (default, the paper's table) that view's own refined feature, direction difference and the fraction of
-the ray it sees; ``cross-view`` also two statistics over the sample's VALID views, the view's squared distance
-from their mean feature and their feature variance (a departure from the paper, docs/model.md: a view whose
-feature disagrees with the others' is likely occluded)."""
-
 DENSITY_ACTIVATIONS = ("softplus", "relu")
 """Non-negative activations allowed for the density output."""
 
@@ -66,16 +59,11 @@ class SRayConfig:
     dir_hidden: int = 16
     """Hidden width of the view-direction MLP (4 -> 16 -> C, appendix L21)."""
     weight_hidden: tuple[int, int] = (16, 8)
-    """Hidden widths of the semantic-aware weight net (37 -> 16 -> 8 -> 1, appendix; 39 inputs with
-    ``weight_inputs='cross-view'``)."""
+    """Hidden widths of the semantic-aware weight net (37 -> 16 -> 8 -> 1, appendix)."""
     geo_hidden: tuple[int, int] = (32, 16)
     """Widths of the geometry net's MLP on [mean, variance] (64 -> 32 -> 16, appendix L8)."""
     tau: float = 0.7
     """Bound of the semantic-aware weights: tau/m < w_i < 1/(tau m); tau = 1 is the plain mean."""
-    weight_inputs: str = "view"
-    """Inputs of the semantic-aware weight net, one of ``WEIGHT_INPUTS``: ``view`` (default, the paper) or
-    ``cross-view`` (adds each view's distance from the valid views' mean feature and their variance; only the
-    net's first layer widens, by 2 inputs)."""
     weight_margin: float = 1e-3
     """Fraction of the weight range kept unused so the bounds stay strict when the sigmoid
     scores saturate to exactly 0 or 1 in floating point (see ``semantic_weights``)."""
@@ -124,8 +112,6 @@ class SRayConfig:
 
         if self.attention not in ATTENTION_VARIANTS:
             raise bad("attention", f"is {self.attention!r}; use one of {tuple(ATTENTION_VARIANTS)}")
-        if self.weight_inputs not in WEIGHT_INPUTS:
-            raise bad("weight_inputs", f"is {self.weight_inputs!r}; use one of {WEIGHT_INPUTS}")
         if self.fine_samples not in FINE_SAMPLES:
             raise bad("fine_samples", f"is {self.fine_samples!r}; use one of {FINE_SAMPLES}")
         if self.inputs not in INPUTS:

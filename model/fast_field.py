@@ -28,7 +28,7 @@ from torch import Tensor
 
 from .cra import AttentionBlock, CrossReprojectionAttention
 from .geometry_net import GeometryNet, masked_mean_var, masked_softmax
-from .semantic_weights import SemanticWeightNet, cross_view_stats, radial_weights
+from .semantic_weights import SemanticWeightNet, radial_weights
 from .sliced_attention import attention
 
 
@@ -79,15 +79,12 @@ def cra_forward(cra: CrossReprojectionAttention, space: Tensor, valid: Tensor, d
 
 def weights_forward(net: SemanticWeightNet, feats: Tensor, dirs: Tensor, valid: Tensor) -> Tensor:
     """``SemanticWeightNet.forward`` in (R, N, m) order: feats (R, N, m, C), dirs (R, N, m, 4),
-    valid (R, N, m) -> float32 weights (R, N, m); the cross-view statistics (``weight_inputs = "cross-view"``)
-    are taken over the view axis of this order."""
+    valid (R, N, m) -> float32 weights (R, N, m)."""
     c = feats.shape[-1]
     first = net.mlp[0]
-    w = first.weight  # columns: feature (C), per-view inputs (4 or 6), seen fraction (1)
+    w = first.weight  # columns: feature (C), direction difference (4), seen fraction (1)
     seen = valid.to(feats.dtype).mean(dim=1, keepdim=True)  # (R, 1, m) fraction of the ray each view sees
     per_view = dirs.to(feats.dtype)  # (R, N, m, 4)
-    if net.weight_inputs == "cross-view":  # one small (R, N, m, 6) input instead of another (R, N, m, h1) sum
-        per_view = torch.cat([per_view, cross_view_stats(feats, valid, view_dim=2).to(feats.dtype)], dim=-1)
     hidden = (F.linear(feats, w[:, :c], first.bias) + F.linear(per_view, w[:, c:-1])
               + seen[..., None] * w[:, -1].to(feats.dtype))  # (R, N, m, h1)
     raw = net.mlp[1:](hidden).squeeze(-1).float()  # (R, N, m)

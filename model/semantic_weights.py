@@ -21,14 +21,6 @@ below) its gauge g = max_i max(e_i / p, -e_i / q) >= 0 says how far e points tow
 Input of the net (37 = 32 + 4 + 1 channels at the default C = 32): the refined feature F''_i of
 the token (C), the 4-d view-direction difference of ``reprojection.view_direction_difference``
 and the fraction of the ray's N samples that view i sees (how much of the ray it observes).
-
-With ``SRayConfig.weight_inputs = "cross-view"`` (a departure from the paper, off by default) the net also
-reads two consensus statistics of the sample's valid views (``cross_view_stats``; 39 inputs at C = 32, the two
-between the direction difference and the seen fraction): the view's squared distance from their mean feature,
-||F''_i - mean||^2 / C, and their variance averaged over the channels. Seen from its own feature alone, a view
-occluded at the sample (whose feature describes the occluder) looks like any other; beside the others it is the
-one far from their mean, and a high variance says the views disagree at all (IBRNet's consensus signal).
-Invalid views enter neither statistic.
 """
 
 from __future__ import annotations
@@ -37,9 +29,6 @@ import torch
 from torch import Tensor, nn
 
 from .config import SRayConfig
-
-CROSS_VIEW_STATS = 2
-"""Inputs ``weight_inputs = "cross-view"`` adds to the weight net per view (``cross_view_stats``)."""
 
 
 def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
@@ -62,38 +51,14 @@ def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> 
         return keep * (1.0 + (1.0 - margin) * e / (1.0 + gauge)) / n_safe
 
 
-def cross_view_stats(feats: Tensor, valid: Tensor, view_dim: int) -> Tensor:
-    """Consensus of each sample's valid views: feats (..., C) with the views along ``view_dim``, valid (feats'
-    shape without C) bool -> float32 (..., 2).
-
-    Channel 0 is the view's squared distance from the valid views' mean feature, ||f_i - mean||^2 / C (0 for
-    an invalid view); channel 1 the valid views' biased variance averaged over the C channels, the same for
-    every view of the sample (it is the mean of channel 0 over the valid views). An invalid view's feature is
-    replaced, not multiplied, by 0, so not even a non-finite one reaches a statistic; a sample with one valid
-    view gets 0 and 0, one without any gets 0 and 0.
-    """
-    with torch.autocast(device_type=feats.device.type, enabled=False):
-        keep = valid.unsqueeze(-1)  # (..., 1)
-        f = torch.where(keep, feats.float(), 0.0)  # (..., C)
-        n = keep.sum(view_dim, keepdim=True).clamp_min(1).float()  # valid views of the sample
-        mean = f.sum(view_dim, keepdim=True) / n
-        norm = torch.linalg.vector_norm(f - mean, dim=-1, keepdim=True)  # one pass, no squared copy; 0 -> grad 0
-        dist = torch.where(keep, norm.square() / f.shape[-1], 0.0)  # (..., 1)
-        var = dist.sum(view_dim, keepdim=True) / n
-        return torch.cat([dist, var.expand_as(dist)], dim=-1)
-
-
 class SemanticWeightNet(nn.Module):
-    """MLP (C + 5 -> 16 -> 8 -> 1, ELU; C + 7 inputs with ``weight_inputs = "cross-view"``) scoring each view,
-    mapped into C(tau) by :func:`radial_weights`."""
+    """MLP (C + 5 -> 16 -> 8 -> 1, ELU) scoring each view, mapped into C(tau) by :func:`radial_weights`."""
 
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         h1, h2 = cfg.weight_hidden
         self.tau, self.margin = cfg.tau, cfg.weight_margin
-        self.weight_inputs = cfg.weight_inputs
-        extra = CROSS_VIEW_STATS if cfg.weight_inputs == "cross-view" else 0
-        self.mlp = nn.Sequential(nn.Linear(cfg.feat_dim + 5 + extra, h1), nn.ELU(), nn.Linear(h1, h2), nn.ELU(),
+        self.mlp = nn.Sequential(nn.Linear(cfg.feat_dim + 5, h1), nn.ELU(), nn.Linear(h1, h2), nn.ELU(),
                                  nn.Linear(h2, 1))
 
     def forward(self, feats: Tensor, dirs: Tensor, valid: Tensor) -> Tensor:
@@ -102,9 +67,6 @@ class SemanticWeightNet(nn.Module):
         Returns float32 weights (R, m, N), summing to 1 over the valid views of each sample.
         """
         seen = valid.to(feats.dtype).mean(dim=2, keepdim=True).expand_as(valid)  # (R, m, N)
-        parts = [feats, dirs.to(feats.dtype)]
-        if self.weight_inputs == "cross-view":
-            parts.append(cross_view_stats(feats, valid, view_dim=1).to(feats.dtype))  # (R, m, N, 2)
-        x = torch.cat([*parts, seen[..., None]], dim=-1)  # (R, m, N, C + 5) or (R, m, N, C + 7)
+        x = torch.cat([feats, dirs.to(feats.dtype), seen[..., None]], dim=-1)  # (R, m, N, C + 5)
         raw = self.mlp(x).squeeze(-1).float().transpose(1, 2)  # (R, N, m)
         return radial_weights(raw, valid.transpose(1, 2), self.tau, self.margin).transpose(1, 2)  # (R, m, N)

@@ -24,6 +24,7 @@ from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import load_job_config
 from sray.platform.eval.segmenter import Segmenter, SegmenterConfig, load_segmenter, save_segmenter
+from sray.platform.migrate.config_v1 import REMOVED_FIELDS
 from sray.platform.sweep.prepare import reload_sweep
 from sray.platform.sweep.sweep_record import read_sweep_record
 from sray.platform.train.state import build_training, restore_training
@@ -75,7 +76,7 @@ def test_an_old_job_is_refused_by_name_then_migrates_to_the_same_outputs(old_job
     assert cfg.data.held_out == HeldOutRender(n_source=0, stride=2, render="fast", fast_stride=1, fast_confidence=0.9)
     assert (cfg.data.aug, cfg.optim, cfg.runtime) == (recipe.data.aug, recipe.optim, recipe.runtime)
     assert dataclasses.asdict(cfg.model) == {
-        k: v for k, v in old_state["config"]["model"].items() if k not in ("encoder_norm", "weight_map")}
+        k: v for k, v in old_state["config"]["model"].items() if f"model.{k}" not in REMOVED_FIELDS}
     assert load_job_config(str(old_job), "job") == cfg
     state = load_checkpoint(old_job / CKPT)
     assert state["counters"] == old_state["counters"] and state["best_metric"] == old_state["best_metric"]
