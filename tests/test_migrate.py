@@ -152,3 +152,18 @@ def test_a_sweep_record_and_a_segmenter_migrate(old_job: Path, tmp_path: Path) -
     assert [t.data.held_out.render for t in trials] == ["fast", "full"]
     assert load_segmenter(seg)[1].config == SegmenterConfig(n_classes=4, feat_dim=4, encoder_width=1)
     assert CheckpointManager(old_job / "job" / "checkpoints").latest() is not None  # the job under tmp_path too
+
+
+def test_a_fleet_record_without_a_tracker_name_is_refused_then_migrates(tmp_path: Path) -> None:
+    """``fleet.json`` written before trackers had names: a re-launch refuses it, naming ``sray migrate``, which
+    records the tracker its runs were made with (MLflow)."""
+    from sray.platform.finetune.fleet import _fleet_record
+    from sray.platform.tracking.mlflow_tracker import MlflowTracker
+
+    tracker = MlflowTracker(f"sqlite:///{tmp_path / 'mlflow.db'}")
+    (tmp_path / "fleet.json").write_text(json.dumps({"format": "sray-fleet", "base_sha256": "abc", "launches": 1,
+                                                     "tracking_uri": tracker.store, "parent_run_id": "r1"}))
+    with pytest.raises(ValueError, match="sray migrate"):
+        _fleet_record(tmp_path, "abc", tracker)
+    assert main(["migrate", str(tmp_path / "fleet.json")]) == 0
+    assert _fleet_record(tmp_path, "abc", tracker)["tracker"] == "mlflow"

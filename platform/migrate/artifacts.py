@@ -7,6 +7,7 @@ What it converts (format 1: everything sray wrote up to commit 7734061, ``config
   become 0, or NaN = unknown for the wall seconds of a checkpoint past step 0), ``meta.json`` version 2;
 * a job's ``config.json`` (``sray train --resume`` reads it);
 * a sweep's ``sweep.json``: its base config and the parameters it sweeps (moved paths renamed);
+* a fleet's ``fleet.json`` written before trackers had names (its tracker: MLflow);
 * a 2D segmenter folder (``segmenter.json`` and an unfinished training's ``training_state.pt``): the removed
   ``encoder_norm`` setting.
 
@@ -34,6 +35,7 @@ from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json, replac
 from sray.platform.checkpoints.folders import FORMAT, META_FILE, STATE_FILE, VERSION, check_weights_only_safe
 from sray.platform.config.stored_format import VERSION_KEY
 from sray.platform.config.train_config import CONFIG_FILE, TrainConfig
+from sray.platform.finetune.fleet import FLEET_FILE
 from sray.platform.migrate.config_v1 import MigrationRefused, removed_value, today_path, train_config_v2
 from sray.platform.sweep.sweep_record import FORMAT as SWEEP_FORMAT
 from sray.platform.sweep.sweep_record import RECORD_FILE as SWEEP_FILE
@@ -165,6 +167,17 @@ def segmenter(folder: Path) -> list[Conversion]:
     return out
 
 
+def fleet_record(path: Path) -> Conversion | None:
+    """The conversion of a fleet's ``fleet.json`` written before trackers had names (its runs are MLflow's)."""
+    record = _json(path)
+    if record.get("format") != "sray-fleet":
+        raise MigrationRefused(f"{path}: format {record.get('format')!r} is not an sray fleet record")
+    if "tracker" in record:
+        return None
+    record["tracker"] = "mlflow"
+    return Conversion(path, "fleet record", lambda: atomic_write_json(path, record))
+
+
 def find_conversions(root: Path) -> list[Conversion]:
     """Every conversion under ``root`` (a file or a folder, searched recursively); MigrationRefused (one line) for
     the first artifact that cannot be converted, or when ``root`` holds nothing ``sray migrate`` knows."""
@@ -186,11 +199,14 @@ def find_conversions(root: Path) -> list[Conversion]:
         if (folder / SEGMENTER_FILE).is_file():
             known = True
             found += segmenter(folder)
-        files += [folder / name for name in (CONFIG_FILE, SWEEP_FILE) if (folder / name).is_file()]
+        files += [folder / name for name in (CONFIG_FILE, SWEEP_FILE, FLEET_FILE) if (folder / name).is_file()]
     for file in files:
         if file.name == SWEEP_FILE:
             known = True
             found.append(sweep_record(file))
+        elif file.name == FLEET_FILE:
+            known = True
+            found.append(fleet_record(file))
         elif file.name == CONFIG_FILE:
             conversion = job_config(file)
             known = known or conversion is not None or VERSION_KEY in _json(file)
@@ -200,7 +216,8 @@ def find_conversions(root: Path) -> list[Conversion]:
             found += segmenter(file.parent)
         else:
             raise MigrationRefused(f"{file}: not an artifact sray migrate understands (a checkpoint folder, a job's "
-                                   f"{CONFIG_FILE}, a sweep's {SWEEP_FILE} or a segmenter folder)")
+                                   f"{CONFIG_FILE}, a sweep's {SWEEP_FILE}, a fleet's {FLEET_FILE} or a segmenter "
+                                   "folder)")
     if not known:
         raise MigrationRefused(f"{root}: holds no sray artifact (a checkpoint folder, a job's {CONFIG_FILE}, a sweep's "
                                f"{SWEEP_FILE} or a segmenter folder)")
