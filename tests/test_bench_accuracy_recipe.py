@@ -10,15 +10,15 @@ from pathlib import Path
 from sray.data_tools.synth.world import SHARDS
 from sray.jobs.bench import accuracy_cells
 from sray.jobs.bench.accuracy_plan import (CAPPED_STEPS, CPU_BUDGETED, HOUR, HOUR_CROSS, HOUR_INTRA,
-                                           HOUR_INTRA_UNCAPPED, HOUR_INVERSE, HOUR_LR_RAYS, HOUR_NONE, HOUR_TWICE,
+                                           HOUR_INTRA_UNCAPPED, HOUR_INVERSE, HOUR_NONE, HOUR_TWICE,
                                            HOUR_SAMPLES_16, HOUR_WARM, LONG, PRESETS, RECIPE_ROOMS, RECIPE_VARIANT,
-                                           ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH, SCREEN_GROUP_NORM,
+                                           ROOMS_198, ROOMS_498, SCREEN, SCREEN_DEPTH,
                                            SCREEN_LR_RAYS, SCREEN_NARROW_12, SCREEN_OCCL, SCREEN_OCCL_T5,
                                            SCREEN_RAYS_128, SCREEN_RAYS_512,
-                                           SCREEN_LR_2X, SCREEN_RAY_BALANCE, SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
+                                           SCREEN_LR_2X, SCREEN_ROOMS_998, SCREEN_SAMPLES_16,
                                            SCREEN_SECONDS, SCREEN_SRC_3, SCREEN_VIEWS_8, SCREEN_WARM, SCREEN_WARM_750,
                                            SCREEN_WIDE_24,
-                                           SCREEN_WEIGHT_AVERAGE, SCREEN_WEIGHT_DECAY, VARIANT_SETTINGS, WARM_2D_STEPS,
+                                           VARIANT_SETTINGS, WARM_2D_STEPS,
                                            Cell, headline_variant, seeds)
 from sray.jobs.bench.accuracy_worlds import WORLDS_DIR
 from sray.platform.config.recipes import get_recipe
@@ -101,8 +101,7 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
         head, optim=dataclasses.replace(recipe.optim, cpu_seconds=SCREEN_SECONDS))
     assert dataclasses.replace(warm, run=screen.run) == dataclasses.replace(
         screen, optim=dataclasses.replace(screen.optim, warmup_2d_steps=2 * WARM_2D_STEPS))
-    one_lever = ((SCREEN_DEPTH, {"lambda_depth": 0.1}), (SCREEN_OCCL, {"weight_inputs": "cross-view"}),
-                 (SCREEN_OCCL_T5, {"weight_inputs": "cross-view", "tau": 0.5}))
+    one_lever = ((SCREEN_DEPTH, {"lambda_depth": 0.1}),)
     for variant, change in one_lever:  # the screening baseline with one model setting changed, at its budget
         cfg = config(variant)
         assert cfg.model == dataclasses.replace(screen.model, **change), variant
@@ -125,14 +124,6 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
     assert rooms == dataclasses.replace(VARIANT_SETTINGS[SCREEN], train_scenes=998)
     assert (998 - preset.world.train_scenes) % 5 == 0  # the generator's 5 room types: the test rooms stay the same
     assert dataclasses.replace(config(SCREEN_ROOMS_998), run=screen.run) == screen
-    phase = config(SCREEN_LR_RAYS)  # the lr lever: the decay counted over the ray phase, nothing else changed
-    assert (screen.optim.lr_decay_start, phase.optim.lr_decay_start) == ("run", "rays")
-    assert dataclasses.replace(phase, run=screen.run, optim=dataclasses.replace(phase.optim, lr_decay_start="run")) \
-        == screen
-    hour_phase = config(HOUR_LR_RAYS)  # its hour arm: the recipe exactly, but for the same decay start
-    assert dataclasses.replace(hour_phase, run=head.run,
-                               optim=dataclasses.replace(hour_phase.optim, lr_decay_start="run")) == head
-    assert hour_phase.optim.lr_decay_start == "rays" and Cell(HOUR_LR_RAYS, 0) in preset.plan
     hour_samples = config(HOUR_SAMPLES_16)  # the samples lever's hour arm: the recipe exactly, but for 16+16 samples
     assert (hour_samples.model.n_coarse, hour_samples.model.n_fine) == (16, 16) != (head.model.n_coarse,
                                                                                    head.model.n_fine)
@@ -163,13 +154,6 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
         == screen
     assert [c for c in preset.plan if c.variant == SCREEN_SRC_3] == [Cell(SCREEN_SRC_3, 2), Cell(SCREEN_SRC_3, 0)]
     assert SCREEN_SRC_3 in CPU_BUDGETED
-    balanced = config(SCREEN_RAY_BALANCE)  # query pixels favouring small classes, the same class-weighted loss
-    assert (screen.data.ray_balance, balanced.data.ray_balance) == (0.0, 0.5)
-    assert balanced.data.class_balance == screen.data.class_balance == "inverse-sqrt"
-    assert dataclasses.replace(balanced, run=screen.run, data=dataclasses.replace(balanced.data, ray_balance=0.0)) \
-        == screen
-    assert [c for c in preset.plan if c.variant == SCREEN_RAY_BALANCE] == [Cell(SCREEN_RAY_BALANCE, 0)]
-    assert SCREEN_RAY_BALANCE in CPU_BUDGETED
     doubled = config(SCREEN_LR_2X)  # the whole lr schedule twice as high, nothing else changed
     assert (screen.optim.lr, screen.optim.lr_final) == (1e-3, 1e-4)
     assert (doubled.optim.lr, doubled.optim.lr_final) == (2e-3, 2e-4)
@@ -183,24 +167,6 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
                                optim=dataclasses.replace(shorter.optim, warmup_2d_steps=1500)) == screen
     assert [c for c in preset.plan if c.variant == SCREEN_WARM_750] == [Cell(SCREEN_WARM_750, 0)]
     assert SCREEN_WARM_750 in CPU_BUDGETED
-    grouped = config(SCREEN_GROUP_NORM)  # group norm in the encoder instead of instance norm, nothing else changed
-    assert (screen.model.encoder_norm, grouped.model.encoder_norm) == ("instance", "group")
-    assert dataclasses.replace(grouped, run=screen.run,
-                               model=dataclasses.replace(grouped.model, encoder_norm="instance")) == screen
-    assert [c for c in preset.plan if c.variant == SCREEN_GROUP_NORM] == [Cell(SCREEN_GROUP_NORM, 0)]
-    assert SCREEN_GROUP_NORM in CPU_BUDGETED
-    decayed = config(SCREEN_WEIGHT_DECAY)  # AdamW's decoupled weight decay, nothing else changed
-    assert (screen.optim.weight_decay, decayed.optim.weight_decay) == (0.0, 0.3)
-    assert dataclasses.replace(decayed, run=screen.run,
-                               optim=dataclasses.replace(decayed.optim, weight_decay=0.0)) == screen
-    assert [c for c in preset.plan if c.variant == SCREEN_WEIGHT_DECAY] == list(seeds(SCREEN_WEIGHT_DECAY, 3))
-    assert SCREEN_WEIGHT_DECAY in CPU_BUDGETED
-    averaged = config(SCREEN_WEIGHT_AVERAGE)  # scored on the weights' moving average, nothing else changed
-    assert (screen.optim.ema_decay, averaged.optim.ema_decay) == (0.0, 0.998)
-    assert dataclasses.replace(averaged, run=screen.run,
-                               optim=dataclasses.replace(averaged.optim, ema_decay=0.0)) == screen
-    assert [c for c in preset.plan if c.variant == SCREEN_WEIGHT_AVERAGE] == list(seeds(SCREEN_WEIGHT_AVERAGE, 3))
-    assert SCREEN_WEIGHT_AVERAGE in CPU_BUDGETED
     viewed = config(SCREEN_VIEWS_8)  # every training sample gets all 8 source views, nothing else changed
     assert (screen.data.aug.min_source, viewed.data.aug.min_source) == (2, 0)
     assert viewed.model.n_source == 8 and viewed.data.top_k == 12
@@ -214,12 +180,10 @@ def test_the_screening_cells_are_the_recipe_at_half_its_budget_with_one_change_e
         twice.optim, cpu_seconds=recipe.optim.cpu_seconds)) == head
     assert [c for c in preset.plan if c.variant == HOUR_TWICE] == list(seeds(HOUR_TWICE, 3))
     assert HOUR_TWICE in CPU_BUDGETED
-    assert recipe.model.weight_inputs == "view" and recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
+    assert recipe.model.tau == 0.7 and recipe.model.lambda_depth == 0.0
     screening = (SCREEN, SCREEN_WARM, SCREEN_DEPTH, SCREEN_OCCL, SCREEN_OCCL_T5, SCREEN_RAYS_128, SCREEN_SAMPLES_16,
                  SCREEN_ROOMS_998, SCREEN_LR_RAYS)
     assert set(screening) <= set(CPU_BUDGETED)
     assert {Cell(v, 0) for v in screening} <= set(preset.plan)
     assert {*seeds(SCREEN_OCCL, 3), *seeds(SCREEN, 3), *seeds(SCREEN_RAYS_128, 3),
             *seeds(SCREEN_SAMPLES_16, 3), *seeds(SCREEN_ROOMS_998, 3), *seeds(SCREEN_LR_RAYS, 3)} <= set(preset.plan)
-    cross_view = [v for v, settings in VARIANT_SETTINGS.items() if settings.weight_inputs == "cross-view"]
-    assert cross_view == [SCREEN_OCCL, SCREEN_OCCL_T5]  # screened only
