@@ -17,9 +17,6 @@ INPUTS = ("rgb", "rgbd")
 text) posed colour images only; ``rgbd`` also their depth maps, which place the coarse samples around
 the surfaces the sources saw (``depth_sampling``). The query view's depth is never an input."""
 
-DENSITY_ACTIVATIONS = ("softplus", "relu")
-"""Non-negative activations allowed for the density output."""
-
 
 @dataclass
 class SRayConfig:
@@ -49,10 +46,6 @@ class SRayConfig:
     (``full`` = the paper's CRA, ``intra``, ``cross``, ``none``, ``dense``)."""
     n_heads: int = 4
     """Heads of every multi-head attention (CRA and the geometry net's ray attention; paper: 4)."""
-    ffn_mult: int = 0
-    """Hidden width of an optional pre-norm ReLU feed-forward after each CRA attention, as a
-    multiple of feat_dim; 0 (default) leaves it out, as the appendix's CRA table lists attention
-    layers only. It costs two full passes of the largest tensors per attention."""
     depth_freqs: int = 6
     """Frequencies of the encoding of each sample's normalised depth (z - near) / (far - near)
     whose learned projection is added to M before intra-view attention (0 = the raw depth only)."""
@@ -67,8 +60,6 @@ class SRayConfig:
     weight_margin: float = 1e-3
     """Fraction of the weight range kept unused so the bounds stay strict when the sigmoid
     scores saturate to exactly 0 or 1 in floating point (see ``semantic_weights``)."""
-    density_activation: str = "softplus"
-    """``softplus`` (default: no dead units at start) or ``relu`` (the appendix's L11)."""
     min_source_depth: float = 1e-3
     """A projection is valid only if the point lies at least this far (camera z, scene units) in
     front of the source camera."""
@@ -126,9 +117,6 @@ class SRayConfig:
             raise bad("lambda_depth", f"is {self.lambda_depth}; use 0 (no depth loss) or a positive weight")
         if self.depth_freqs < 0:
             raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
-        if self.density_activation not in DENSITY_ACTIVATIONS:
-            raise bad("density_activation",
-                      f"is {self.density_activation!r}; use one of {DENSITY_ACTIVATIONS}")
         for name in ("n_classes", "feat_dim", "encoder_width", "n_source", "n_coarse", "n_fine", "n_heads",
                      "dir_hidden"):
             if int(getattr(self, name)) < 1:
@@ -136,8 +124,6 @@ class SRayConfig:
         if self.feat_dim % self.n_heads or self.geo_hidden[-1] % self.n_heads:
             raise bad("n_heads", f"is {self.n_heads}; it must divide feat_dim ({self.feat_dim}) "
                       f"and geo_hidden[-1] ({self.geo_hidden[-1]})")
-        if self.ffn_mult < 0:
-            raise bad("ffn_mult", f"is {self.ffn_mult}; use 0 (no feed-forward) or more")
         if not 0.0 < self.tau <= 1.0:
             raise bad("tau", f"is {self.tau}; it must lie in (0, 1] (1 = mean aggregation)")
         if not 0.0 < self.weight_margin < 1.0:

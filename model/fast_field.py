@@ -60,10 +60,7 @@ def block_forward(block: AttentionBlock, x: Tensor, valid: Tensor, stage: str) -
             return t.view(r, n * m, heads, d).transpose(1, 2)  # (R, heads, N * m, d)
         mask = _key_mask(valid.reshape(r, n * m), 1)[:, None, None, :]
     att = attention(split(q), split(k), split(v), mask)
-    x = x + block.proj(att.transpose(1, 2).reshape(r, n, m, c))
-    if block.ffn is not None:
-        x = x + block.ffn(x)
-    return x
+    return x + block.proj(att.transpose(1, 2).reshape(r, n, m, c))
 
 
 def cra_forward(cra: CrossReprojectionAttention, space: Tensor, valid: Tensor, depth01: Tensor) -> Tensor:
@@ -101,7 +98,7 @@ def geometry_forward(net: GeometryNet, space: Tensor, valid: Tensor, dirs: Tenso
     seen = valid.any(dim=2)  # (R, N)
     g = net.fuse(torch.cat([mean, var], dim=-1))  # (R, N, 16)
     g = net.ray_attention(g, seen)
-    sigma = net.activation(net.density(g).squeeze(-1).float()) * seen.float()
+    sigma = F.softplus(net.density(g).squeeze(-1).float()) * seen.float()
     c = space.shape[-1]
     first = net.colour_score[0]
     hidden = F.linear(gated, first.weight[:, :c], first.bias) + F.linear(dirs.to(gated.dtype), first.weight[:, c:])

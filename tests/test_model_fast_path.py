@@ -113,7 +113,7 @@ def test_fast_attention_block_equals_the_reference_block(stage: str, n: int, m: 
     intra-view stage (24 keys) and the dense one (30 and 32 keys) on the CPU's sliced kernel: the values
     are compared there too."""
     torch.manual_seed(1)
-    block = AttentionBlock(16, 4, 2)
+    block = AttentionBlock(16, 4)
     with torch.no_grad():
         block.qkv.bias.normal_(0.0, 3.0)
         block.proj.bias.normal_(0.0, 3.0)

@@ -21,7 +21,8 @@ LAST_COMMIT = "7734061"
 
 REMOVED_FIELDS: dict[str, Any] = {"optim.ema_decay": 0.0, "optim.weight_decay": 0.0, "optim.lr_decay_start": "run",
                                   "data.ray_balance": 0.0, "model.encoder_norm": "instance",
-                                  "model.weight_map": "radial", "model.weight_inputs": "view"}
+                                  "model.weight_map": "radial", "model.weight_inputs": "view",
+                                  "model.ffn_mult": 0, "model.density_activation": "softplus"}
 """Field removed after format 1 -> the value at which it changed nothing (its default)."""
 
 RETIRED_RUN_FIELDS = ("fail_at_step", "nan_at_step", "stop_after_step")
