@@ -128,7 +128,8 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
 def test_fleet_refuses_an_out_dir_of_another_checkpoint(tiny_shards, tiny_checkpoint, mlflow_uri, tmp_path):
     out = tmp_path / "fleet"
     out.mkdir()
-    (out / "fleet.json").write_text(json.dumps({"base_sha256": "0" * 64, "parent_run_id": None, "launches": 1}))
+    (out / "fleet.json").write_text(json.dumps({"format": "sray-fleet", "base_sha256": "0" * 64, "tracker": "mlflow",
+                                                "tracking_uri": mlflow_uri, "parent_run_id": None, "launches": 1}))
     with pytest.raises(ValueError, match="another checkpoint"):
         run_fleet(tiny_fleet_config(), tiny_checkpoint, tiny_shards, ["synth_test_000"], out, mlflow_uri, ["sray"])
 
