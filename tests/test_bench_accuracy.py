@@ -62,7 +62,7 @@ def test_each_variant_sets_its_model_fields_and_nothing_else(tmp_path: Path) -> 
     """A cell's config is the preset's recipe with only its variant's model settings changed."""
     base = accuracy_cells.cell_config(Cell("full", 0), TOY, tmp_path / "shards", tmp_path, "sqlite:///x.db").model
     changed = {"full-new": {"fine_samples": "new"}, "full-rgbd": {"inputs": "rgbd"}, "none": {"attention": "none"},
-               "full-affine": {"weight_map": "affine"}, "full-new-h2": {"fine_samples": "new", "n_heads": 2},
+               "full-new-h2": {"fine_samples": "new", "n_heads": 2},
                "full-new-src": {"fine_samples": "new", "lambda_src_sem": 1.0},
                "full-new-src-w": {"fine_samples": "new", "lambda_src_sem": 1.0}}
     for variant, fields in changed.items():

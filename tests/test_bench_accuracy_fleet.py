@@ -68,7 +68,7 @@ def test_the_compared_methods_follow_the_registry(tmp_path: Path, monkeypatch: p
     assert compared == ["sray", "semantic-nerf", "fake"]
     assert list(left_out) == ["2d-transfer", "fake-needy"] and "transfer.segmenter is empty" in left_out["2d-transfer"]
     assert left_out["fake-needy"] == "fleet config: fake.setting is empty; pass --fake"
-    assert (cfg.finetune.max_seconds, cfg.finetune.eval_n_source) == (PRESET.budget_s, PRESET.eval_sources)
+    assert (cfg.finetune.max_seconds, cfg.finetune.held_out.n_source) == (PRESET.budget_s, PRESET.eval_sources)
 
     segmenter = save_segmenter(Segmenter(SegmenterConfig(n_classes=3)), {}, tmp_path / "segmenter")
     cfg, compared, _ = compared_methods(fleet_config(PRESET, segmenter))
