@@ -72,6 +72,9 @@ class SceneMeta:
     """``train`` (seen in pretraining) or ``test`` (unseen scene, evaluated with the protocol)."""
     ignore_id: int = IGNORE_ID
     """Label id of unlabelled pixels."""
+    labelled: bool = True
+    """False: a capture without labels (every label pixel is ``ignore_id``), for inference only (``sray label``);
+    training refuses it."""
     extra: dict = field(default_factory=dict)
     """Free-form provenance (source format, dropped frames, generator seed, ...)."""
 
@@ -87,6 +90,7 @@ class SceneMeta:
             "far": float(self.far),
             "role": self.role,
             "ignore_id": int(self.ignore_id),
+            "labelled": bool(self.labelled),
             "extra": self.extra,
         }
 
@@ -103,6 +107,7 @@ class SceneMeta:
             far=float(d.get("far", 0.0)),
             role=d.get("role", "train"),
             ignore_id=int(d.get("ignore_id", IGNORE_ID)),
+            labelled=bool(d.get("labelled", True)),
             extra=dict(d.get("extra", {})),
         )
 

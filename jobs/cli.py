@@ -4,19 +4,26 @@ Each subcommand module exposes ``register(subparsers)``, which adds its parser a
 ``func`` to a callable taking the parsed namespace and returning an exit code. What only a running
 command needs (Ray, MLflow, the training stack) is imported inside that callable, its entry function,
 so that ``sray --help`` stays fast (docs/architecture.md, "Imports at the top of a module").
+
+Commands outside the product are plug-ins: every entry point of the group :data:`PLUGIN_GROUP` is a
+``register(subparsers)`` function, called after the product's own (the lab's ``sray lab``: ``sray.lab.cli``).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.metadata
 import sys
 
 SUBCOMMAND_MODULES = ("sray.jobs.data.command", "sray.jobs.train_cmd", "sray.jobs.submit_cmd", "sray.jobs.eval_cmd",
-                      "sray.jobs.render_cmd", "sray.jobs.fleet_cmd", "sray.jobs.sweep_cmd", "sray.jobs.bench.command",
+                      "sray.jobs.render_cmd", "sray.jobs.label_cmd", "sray.jobs.fleet_cmd", "sray.jobs.sweep_cmd",
+                      "sray.jobs.bench.command",
                       "sray.jobs.gpu_check.command", "sray.jobs.stability.command", "sray.jobs.demo_cmd",
                       "sray.jobs.ui_cmd", "sray.jobs.cluster_cmd", "sray.jobs.migrate_cmd")
 """Modules that register subcommands, in the order `sray --help` lists them."""
+PLUGIN_GROUP = "sray.commands"
+"""Entry-point group of the commands that installed plug-ins add (pyproject.toml: ``lab = "sray.lab.cli:register"``)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,6 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in SUBCOMMAND_MODULES:
         importlib.import_module(name).register(sub)
+    for entry in sorted(importlib.metadata.entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
+        entry.load()(sub)
     return parser
 
 

@@ -25,7 +25,7 @@ from sray.data_tools.loader.shard_loader import make_train_loader
 from sray.data_tools.shards.manifest import read_manifest, unseen_scenes
 from sray.data_tools.shards.writer import DatasetRejected
 from sray.data_tools.synth.world import SCENES, World, WorldFolderError, make_world
-from sray.jobs.bench.ceilings import run_segmenter
+from sray.jobs.bench.segmenter import run_segmenter
 from sray.jobs.bench.speed_accuracy import Setting, measure
 from sray.jobs.sample_picture import write_sample_picture
 from sray.model.fast_render import FastRender

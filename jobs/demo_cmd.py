@@ -10,16 +10,16 @@ from sray.platform.config.recipes import DEMO_STEPS
 
 SEGMENTER_CPU_CAP = 60.0
 """Default of ``--segmenter-cpu-seconds``. Uncapped, the segmenter would get the CPU seconds of S-Ray's demo
-training (464 to 530 CPU s in runs on the 2-core machine): 4 more minutes of wall time on a demo of about 10; 60 CPU s
-is about half a minute."""
+training, several more minutes of wall time on a 2-core machine; the cap keeps its stage short (the stage prints both
+budgets; the demo's stored runs are in study ``demo-recipe``, listed in docs/benchmarks.md)."""
 TRAIN_SCENES = 19
 """Default of ``--train-scenes``. The generator cycles room types over the scene index, so 4 + 5k training rooms keep
-the two test rooms of the 4-room world file for file; 19 rooms take about half a minute to generate, check and shard
-on the 2-core machine, and with the synth-demo recipe lift zero-shot mIoU where 4 rooms do not (docs/benchmarks.md,
-"On the demo's scale")."""
+the two test rooms of the 4-room world file for file; 19 rooms are quick to generate, check and shard, and with the
+synth-demo recipe they lift zero-shot mIoU where 4 rooms do not (study ``demo-recipe``, listed in
+docs/benchmarks.md)."""
 FLEET_SCENES = 1
-"""Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (about 3 minutes of wall time on
-the 2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of
+"""Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (minutes of wall time on a
+2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of
 them."""
 
 

@@ -11,6 +11,7 @@ status 2, never ignored.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -41,31 +42,58 @@ def register(sub: argparse._SubParsersAction) -> None:
                                           "in this folder)")
     p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--calibrate", type=Path, action=GivenFlag, metavar="VAL_SHARDS",
+                   help="fast mode: fit the temperature on these validation rooms' test views first (coarse pass, "
+                        "NLL; `sray data synth --split validation`), use it, and write OUT/calibration.json")
+    p.add_argument("--split", action="append", default=[], metavar="NAME=DIR",
+                   help="also score the same model on another shard folder, e.g. appearance-shift=worlds/app/shards "
+                        "(repeatable; `sray data synth --split`); the splits are printed side by side with the gap "
+                        "from --data's mIoU and written to OUT/splits.json, each split's files under OUT/NAME")
     p.set_defaults(func=run, given=())
 
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table and where everything went; exit 2 on bad input (a flag the method does not read
     included)."""
-    from sray.platform.eval.zero_shot import evaluate_model, format_table
+    from sray.platform.eval.calibration import CALIBRATION_FILE, calibrate
+    from sray.platform.eval.split_gap import SPLITS_FILE, format_splits, split_summary
+    from sray.platform.eval.zero_shot import evaluate_model, format_table, write_json_atomic
 
     method = get_method(args.method)
     unread = unread_flags(args.given, method.eval_reads)
     if unread:
         print(f"sray eval: {refusal(unread, f'--method {method.name}', method.eval_reads)}", file=sys.stderr)
         return 2
+    splits = dict(item.split("=", 1) for item in args.split if "=" in item)
+    if len(splits) != len(args.split) or "" in splits:
+        print(f"sray eval: --split takes NAME=DIR with distinct names, got {args.split}", file=sys.stderr)
+        return 2
     try:
         held_out = held_out_from_args(args)
         request = EvalRequest(checkpoint=args.checkpoint, segmenter=args.segmenter, device=args.device,
                               fast=held_out.fast())
         model = method.eval_model(request)
-        report = evaluate_model(model, args.data, args.scenes, args.out, n_source=held_out.n_source,
-                                stride=held_out.stride,
-                                tracking_uri=args.tracking_uri, experiment=args.experiment, tracker=args.tracker)
+        if args.calibrate is not None:
+            fitted = calibrate(model, args.calibrate, n_source=held_out.n_source)
+            write_json_atomic(fitted, args.out / CALIBRATION_FILE)
+            print(f"[sray] coarse confidence temperature {fitted['temperature']:.3f} (NLL {fitted['nll_at_1']:.3f} -> "
+                  f"{fitted['nll_fitted']:.3f} on {fitted['rays']} rays of {fitted['rooms']} validation rooms)")
+            held_out.fast_temperature = fitted["temperature"]
+            model = method.eval_model(dataclasses.replace(request, fast=held_out.fast()))
+        kwargs = dict(n_source=held_out.n_source, stride=held_out.stride, tracking_uri=args.tracking_uri,
+                      experiment=args.experiment, tracker=args.tracker)
+        report = evaluate_model(model, args.data, args.scenes, args.out, **kwargs)
+        others = {name: evaluate_model(model, Path(folder), None, args.out / name, **kwargs)
+                  for name, folder in splits.items()}
     except (FileNotFoundError, ValueError) as e:
         print(f"sray eval: {e}", file=sys.stderr)
         return 2
     print(format_table(report))
+    if others:
+        summary = split_summary({"data": report, **others})
+        write_json_atomic(summary, args.out / SPLITS_FILE)
+        print(format_splits(summary))
+        print(f"[sray] splits: {args.out / SPLITS_FILE}")
     print(f"[sray] metrics: {report['metrics_path']}")
     print(f"[sray] renders: {Path(report['out_dir']) / 'renders'}")
     run = report["run"]

@@ -18,8 +18,8 @@ DEFAULTS = HeldOutRender()
 
 
 def add_held_out_flags(p: argparse.ArgumentParser, scored_stride: bool) -> None:
-    """Add ``--n-source``, ``--render``, ``--fast-stride``, ``--fast-confidence`` and, with ``scored_stride`` (a
-    command that scores pixels, ``sray eval``), ``--stride``; defaults :data:`DEFAULTS`'."""
+    """Add ``--n-source``, ``--render``, ``--fast-stride``, ``--fast-confidence``, ``--fast-temperature`` and, with
+    ``scored_stride`` (a command that scores pixels, ``sray eval``), ``--stride``; defaults :data:`DEFAULTS`'."""
     p.add_argument("--n-source", type=int, default=DEFAULTS.n_source,
                    help="fixed source views per view, top-ranked (default %(default)s, the paper's protocol)")
     if scored_stride:
@@ -34,6 +34,8 @@ def add_held_out_flags(p: argparse.ArgumentParser, scored_stride: bool) -> None:
     p.add_argument("--fast-confidence", type=float, default=DEFAULTS.fast_confidence, action=GivenFlag,
                    help="fast mode: rays whose coarse confidence reaches this skip the fine pass (default "
                         "%(default)s)")
+    p.add_argument("--fast-temperature", type=float, default=DEFAULTS.fast_temperature, action=GivenFlag,
+                   help="fast mode: divide the coarse logits by this before the confidence rule (default %(default)s)")
 
 
 def held_out_from_args(args: argparse.Namespace) -> HeldOutRender:
@@ -42,6 +44,7 @@ def held_out_from_args(args: argparse.Namespace) -> HeldOutRender:
     if args.n_source < 1:
         raise ValueError(f"--n-source is {args.n_source}; give at least one source view")
     settings = HeldOutRender(n_source=args.n_source, stride=getattr(args, "stride", DEFAULTS.stride),
-                             render=args.render, fast_stride=args.fast_stride, fast_confidence=args.fast_confidence)
+                             render=args.render, fast_stride=args.fast_stride, fast_confidence=args.fast_confidence,
+                             fast_temperature=args.fast_temperature)
     settings.check(lambda field: "--" + field.replace("_", "-"))
     return settings

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .attention_variants import ATTENTION_VARIANTS
+from .semantic_cues import check_cues
 
 FINE_SAMPLES = ("union", "new")
 """What the fine pass evaluates (``SRayConfig.fine_samples``): ``new`` (default) only the n_fine
@@ -95,11 +96,21 @@ class SRayConfig:
     depth_band: float = 0.1
     """``rgbd`` only: half-width of that band in z-depth (scene units, metres), clipped to [near, far]."""
 
+    semantic_cues: tuple[str, ...] = ()
+    """Appearance-free inputs of the semantic head besides the semantic ray, names from ``semantic_cues.CUES``
+    (``density``, ``depth``, ``height``, ``elevation``); empty (default) is the paper's head. A departure from the
+    paper (docs/model.md): only the classifier's first layer widens, by one input per cue."""
+
     def __post_init__(self) -> None:
         """Reject settings the network cannot run with, naming the field and the fix."""
 
         def bad(field: str, why: str) -> ValueError:
             return ValueError(f"sray.model.config.SRayConfig: field `{field}` {why}.")
+
+        try:
+            check_cues(tuple(self.semantic_cues))
+        except ValueError as e:
+            raise bad("semantic_cues", f"is {self.semantic_cues!r}; {e}") from None
 
         if self.attention not in ATTENTION_VARIANTS:
             raise bad("attention", f"is {self.attention!r}; use one of {tuple(ATTENTION_VARIANTS)}")

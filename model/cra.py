@@ -11,7 +11,8 @@ M has shape (R, m, N, C): R rays, m source views, N samples per ray, C channels.
 
 Each attention is an ``AttentionBlock``: pre-norm residual multi-head attention (LayerNorm, then
 ``scaled_dot_product_attention``, then an output projection added to the input), with no feed-forward (the
-appendix's CRA table lists attention layers only). Pre-norm keeps the residual path an identity, which trains stably from scratch.
+appendix's CRA table lists attention layers only). Pre-norm keeps the residual path an identity, which trains
+stably from scratch.
 
 Masking: invalid projections are masked as KEYS. A sequence whose keys are all invalid (a view that
 sees no sample of the ray, a sample no view sees) attends over all its keys instead, which is

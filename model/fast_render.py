@@ -8,7 +8,9 @@ Three savings, each a setting of :class:`FastRender` (its accuracy cost is measu
   renderer ``view_render.render_view``); label maps are piecewise constant, so most of a view is interior
   to a region;
 * ``confidence``: a ray whose coarse pass already classifies it with probability >= ``confidence``
-  keeps its coarse result; only the uncertain rays (boundaries, thin structures) get a fine pass;
+  keeps its coarse result; only the uncertain rays (boundaries, thin structures) get a fine pass. The probability
+  is the softmax of the coarse logits divided by ``temperature`` (1 = as trained), which ``model.calibration``
+  fits on validation rooms so that the confidence means the same on unfamiliar rooms;
 * the fine pass evaluates only the resampled depths (``fine_samples="new"``), placed by inverse CDF
   where the coarse pass found density, instead of re-evaluating the coarse samples as well.
 """
@@ -40,6 +42,14 @@ class FastRender:
     (docs/benchmarks.md, "Speed against accuracy")."""
     confidence: float = 0.9
     """A ray whose coarse softmax maximum reaches this keeps its coarse result (> 1: every ray gets a fine pass)."""
+    temperature: float = 1.0
+    """The coarse logits are divided by this before the softmax of the confidence rule (1 = uncalibrated; > 1
+    lowers the confidence, so more rays get a fine pass); fitted by ``calibration.fit_temperature``."""
+
+    def __post_init__(self) -> None:
+        """ValueError for a temperature that is not positive."""
+        if not self.temperature > 0:
+            raise ValueError(f"FastRender: temperature is {self.temperature}; it must be > 0 (1 = uncalibrated)")
 
     def fitted_pixel_stride(self, stride: int, hw: tuple[int, int]) -> int:
         """The pixel stride of a render of an (h, w) image scored every ``stride``-th pixel: ``pixel_stride``, or
@@ -49,14 +59,23 @@ class FastRender:
 
     def describe(self) -> str:
         """One phrase for protocol descriptors: ``fast (pixel stride 4, fine pass below 0.9 confidence, ...)``."""
-        return (f"fast (pixel stride {self.pixel_stride}, fine pass where the coarse confidence < "
+        scaled = "" if self.temperature == 1.0 else f" at temperature {self.temperature:.3g}"
+        return (f"fast (pixel stride {self.pixel_stride}, fine pass where the coarse confidence{scaled} < "
                 f"{self.confidence:g}, resampled depths only)")
+
+
+def needs_fine(coarse_logits: Tensor, confidence: float, temperature: float = 1.0) -> Tensor:
+    """bool (R,): the rays whose coarse confidence, the softmax maximum of coarse_logits (R, L) / temperature,
+    is below ``confidence`` (the fast rule)."""
+    return torch.softmax(coarse_logits.float() / temperature, dim=-1).amax(-1) < confidence
 
 
 def render_rays_fast(field: Callable[..., dict[str, Tensor]], origins: Tensor, dirs: Tensor,
                      near: Tensor | float, far: Tensor | float, n_coarse: int, n_fine: int,
-                     confidence: float, coarse_sampler: CoarseSampler | None = None) -> dict[str, dict[str, Tensor]]:
-    """Deterministic coarse pass on every ray, fine pass (resampled depths only) on the uncertain ones.
+                     confidence: float, coarse_sampler: CoarseSampler | None = None,
+                     temperature: float = 1.0) -> dict[str, dict[str, Tensor]]:
+    """Deterministic coarse pass on every ray, fine pass (resampled depths only) on the uncertain ones
+    (:func:`needs_fine` at ``temperature``).
 
     field, origins (R, 3), dirs (R, 3), near, far, coarse_sampler as ``hierarchical.render_rays``. Returns
     ``{"coarse": pass, "fine": pass}`` with ``FAST_KEYS`` per pass; a confident ray's fine pass is
@@ -70,7 +89,7 @@ def render_rays_fast(field: Callable[..., dict[str, Tensor]], origins: Tensor, d
     z = coarse_depths(coarse_sampler, origins, dirs, near_r, far_r, n_coarse, stratified=False)
     coarse = _render_pass(field, "coarse", origins, dirs, z, near_r, far_r, ray_length)
     fine = {k: coarse[k].clone() for k in FAST_KEYS}
-    unsure = torch.softmax(coarse["logits"].float(), dim=-1).amax(-1) < confidence  # (R,)
+    unsure = needs_fine(coarse["logits"], confidence, temperature)  # (R,)
     idx = unsure.nonzero().squeeze(-1)
     if idx.numel() > 0:
         lo, hi = near_r[idx], far_r[idx]

@@ -2,12 +2,13 @@
 
 For samples z (R, N) along query rays it builds the contextual space M by reprojection, refines it
 with Cross-Reprojection Attention into M'', forms the semantic ray s = sum_i w_i F''_i with the
-bounded semantic-aware weights, classifies s into per-sample logits, and predicts density and
-colour with the geometry-aware net.
+bounded semantic-aware weights, classifies s into per-sample logits (with ``semantic_cues``, s and appearance-free
+cues: ``semantic_cues.py``), and predicts density and colour with the geometry-aware net.
 """
 
 from __future__ import annotations
 
+import torch
 from torch import Tensor, nn
 
 from .config import SRayConfig
@@ -15,6 +16,7 @@ from .cra import CrossReprojectionAttention
 from .fast_field import cra_forward, geometry_forward, weights_forward
 from .geometry_net import GeometryNet
 from .reprojection import ContextualSpace
+from .semantic_cues import semantic_cues
 from .semantic_weights import SemanticWeightNet
 from .source_set import SourceSet
 
@@ -33,8 +35,17 @@ class SRayField(nn.Module):
         self.context = ContextualSpace(c, cfg.dir_hidden, cfg.min_source_depth)
         self.attention = CrossReprojectionAttention(cfg)
         self.view_weights = SemanticWeightNet(cfg)
-        self.classifier = nn.Sequential(nn.Linear(c, c), nn.ELU(), nn.Linear(c, cfg.n_classes))
+        self.cues = tuple(cfg.semantic_cues)
+        self.classifier = nn.Sequential(nn.Linear(c + len(self.cues), c), nn.ELU(), nn.Linear(c, cfg.n_classes))
         self.geometry = GeometryNet(cfg)
+
+    def classify(self, semantic: Tensor, sigma: Tensor, depth01: Tensor, points: Tensor, dirs: Tensor) -> Tensor:
+        """Per-sample logits (R, N, L) of the semantic ray (R, N, C): the paper's head, or with
+        ``semantic_cues`` the head on the ray and the cues (``semantic_cues.semantic_cues``)."""
+        if not self.cues:
+            return self.classifier(semantic)
+        cues = semantic_cues(self.cues, sigma, depth01, points, dirs).to(semantic.dtype)
+        return self.classifier(torch.cat([semantic, cues], dim=-1))
 
     def forward(self, src: SourceSet, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
                 far: Tensor, impl: str) -> dict[str, Tensor]:
@@ -52,9 +63,11 @@ class SRayField(nn.Module):
             w = weights_forward(self.view_weights, refined, ctx["dir"], ctx["valid"])  # (R, N, m)
             semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=2)  # (R, N, C)
             sigma, rgb = geometry_forward(self.geometry, ctx["M"], ctx["valid"], ctx["dir"], ctx["rgb"])
-            return {"sigma": sigma, "logits": self.classifier(semantic), "rgb": rgb, "view_weights": w.transpose(1, 2)}
+            logits = self.classify(semantic, sigma, depth01, points, dirs)
+            return {"sigma": sigma, "logits": logits, "rgb": rgb, "view_weights": w.transpose(1, 2)}
         refined = self.attention(ctx["M"], ctx["valid"], depth01)  # (R, m, N, C)
         w = self.view_weights(refined, ctx["dir"], ctx["valid"])  # (R, m, N)
         semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=1)  # (R, N, C)
         sigma, rgb = self.geometry(ctx["M"], ctx["valid"], ctx["dir"], ctx["rgb"])
-        return {"sigma": sigma, "logits": self.classifier(semantic), "rgb": rgb, "view_weights": w}
+        logits = self.classify(semantic, sigma, depth01, points, dirs)
+        return {"sigma": sigma, "logits": logits, "rgb": rgb, "view_weights": w}

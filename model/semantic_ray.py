@@ -147,16 +147,17 @@ class SRayModel(nn.Module):
     @torch.no_grad()
     def render_rays_fast(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                          far: Tensor | float, confidence: float,
-                         runtime: Runtime = Runtime()) -> dict[str, dict[str, Tensor]]:
+                         runtime: Runtime = Runtime(), temperature: float = 1.0) -> dict[str, dict[str, Tensor]]:
         """The fast render mode's rays (``fast_render.render_rays_fast``): deterministic, no grad; a
-        fine pass only for rays whose coarse confidence is below ``confidence``; fields: ``runtime.impl``."""
+        fine pass only for rays whose coarse confidence (at ``temperature``) is below ``confidence``; fields:
+        ``runtime.impl``."""
         fields = {"coarse": self.coarse, "fine": self.fine}
 
         def field(name: str, o: Tensor, d: Tensor, z: Tensor, lo: Tensor, hi: Tensor) -> dict[str, Tensor]:
             return fields[name](src, o, d, z, lo, hi, runtime.impl)
 
         return render_rays_fast(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, confidence,
-                                self.coarse_sampler(src))
+                                self.coarse_sampler(src), temperature)
 
     def ray_renderer(self, src: SourceSet, fast: FastRender | None = None,
                      runtime: Runtime = Runtime()) -> RayRenderer:
@@ -164,7 +165,8 @@ class SRayModel(nn.Module):
         full render, or with ``fast`` the fast mode's rays (a fine pass only below ``fast.confidence``); fields:
         ``runtime.impl``."""
         if fast is not None:
-            return lambda o, d, near, far: self.render_rays_fast(src, o, d, near, far, fast.confidence, runtime)
+            return lambda o, d, near, far: self.render_rays_fast(src, o, d, near, far, fast.confidence, runtime,
+                                                                 fast.temperature)
         return lambda o, d, near, far: self.render_rays(src, o, d, near, far, stratified=False, runtime=runtime)
 
     def render_image(self, src: SourceSet, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,

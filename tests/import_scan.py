@@ -8,7 +8,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 PRODUCT = ("model", "data_tools", "platform", "jobs")
-"""The four top-level folders installed as ``sray.<folder>``."""
+"""The four top-level folders of the product, installed as ``sray.<folder>``."""
+LAB = "lab"
+"""The studies and diagnostics (``sray.lab``): may import the product; nothing in the product imports it."""
 
 
 def imported_modules(path: Path, root: Path = REPO) -> list[str]:
@@ -24,6 +26,13 @@ def imported_modules(path: Path, root: Path = REPO) -> list[str]:
                 if node.level else node.module
             names += [base, *(f"{base}.{alias.name}" for alias in node.names)]
     return names
+
+
+def plant(root: Path, files: dict[str, str]) -> None:
+    """Write each ``relative path -> text`` under ``root`` (a copy of the layout a scan's own test reads)."""
+    for name, text in files.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
 
 
 def cycles(graph: dict[str, set[str]]) -> list[str]:

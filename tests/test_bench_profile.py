@@ -6,8 +6,8 @@ from pathlib import Path
 
 import torch
 
-from sray.jobs.bench.doc import device_kind
 from sray.jobs.bench.profile import run_profiles, write_profiles
+from sray.platform.common.bench_doc import device_kind
 
 
 def _rows(table: str) -> list[list[str]]:

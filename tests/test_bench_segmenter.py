@@ -18,10 +18,10 @@ from sray.data_tools.loader.augment import Augmentation
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
 from sray.jobs.cli import main
+from sray.lab.probes.linear_probe import fit_probe, random_encoder
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.config.recipes import get_recipe
 from sray.platform.eval import segmenter_training
-from sray.platform.eval.linear_probe import fit_probe, random_encoder
 from sray.platform.eval.segmenter import load_segmenter
 from sray.platform.eval.segmenter_training import STATE_FILE, train_segmenter
 from sray.platform.train.state import write_initial_checkpoint

@@ -7,9 +7,9 @@ import json
 import sys
 from pathlib import Path
 
-from sray.jobs.bench import doc as bench_doc
-from sray.jobs.bench.doc import Bench, TableRecord, bench_dir, device_kind, record, store_table
-from sray.jobs.bench.doc_blocks import markdown_table, parse_blocks, portable, render_blocks
+from sray.platform.common import bench_doc
+from sray.platform.common.bench_doc import Bench, TableRecord, bench_dir, device_kind, record, store_table
+from sray.platform.common.doc_blocks import markdown_table, parse_blocks, portable, render_blocks
 
 LOADER, MODEL = Bench("loader", "Loader"), Bench("model", "Model")
 HAND_WRITTEN = "## Written by hand\n\nA paragraph nobody generates.\n\n### Its own table\n\n| x |\n|---|\n| 9 |\n"
@@ -121,3 +121,32 @@ def test_tables_parse_to_rows_and_render_back() -> None:
     assert blocks[0]["rows"] == [["a\\|b", "1"]] and blocks[0]["outer_pipes"] is False
     assert blocks[2]["align"] == ["---", "---:"] and blocks[2]["outer_pipes"] is True
     assert render_blocks(blocks) == md
+
+
+def test_an_index_sends_each_section_to_its_benchmarks_page(tmp_path: Path, monkeypatch) -> None:
+    """docs/benchmarks.md holding the index marker is left byte for byte; the section goes to
+    docs/benchmarks/<slug>.md beside it (a new page starts with its title and a link back), its data stays in
+    docs/benchmarks/<slug>/<device>/, the notes' links are rebased onto the page's folder, and the command line
+    describes the machine by the stored descriptor."""
+    machine = {"cpu_model": "Test CPU 9000", "cores": 3, "device": "cpu", "ray_steps_per_cpu_second": 4.25}
+    monkeypatch.setattr(bench_doc, "describe_machine", lambda: machine)
+    doc = tmp_path / "docs" / "benchmarks.md"
+    doc.parent.mkdir()
+    index = f"# Benchmarks\n\n{bench_doc.INDEX_MARKER}\n\n- [Loader](benchmarks/loader.md)\n"
+    doc.write_text(index)
+    chart = "![chart](benchmarks/loader/cpu-only/speed.png)"
+    record(LOADER, "Throughput", "| workers | samples/s |\n|---:|---:|\n| 0 | 1.5 |", doc, f"notes {chart}")
+    assert doc.read_text() == index
+    page = tmp_path / "docs" / "benchmarks" / "loader.md"
+    text = page.read_text()
+    assert text.startswith("# Loader\n") and "(../benchmarks.md)" in text
+    assert f"## Loader ({device_kind()})" in text and "| 0 | 1.5 |" in text
+    assert "![chart](loader/cpu-only/speed.png)" in text
+    assert "Test CPU 9000, 3 cores, cpu, 4.25 probe steps per CPU second" in text
+    stored = json.loads((bench_dir(doc, LOADER) / "tables.json").read_text())["tables"][0]
+    assert stored["machine_descriptor"] == machine
+    assert bench_dir(doc, LOADER) == tmp_path / "docs" / "benchmarks" / "loader" / bench_doc.device_slug()
+    record(MODEL, "Training step", "| a |\n|---|\n| 2 |", doc)
+    record(LOADER, "Throughput", "| workers | samples/s |\n|---:|---:|\n| 0 | 2.5 |", doc, f"notes {chart}")
+    assert "| 2.5 |" in page.read_text() and "| 1.5 |" not in page.read_text()
+    assert "## Model" in (tmp_path / "docs" / "benchmarks" / "model.md").read_text() and "## Model" not in text

@@ -9,10 +9,11 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-DOCS = sorted([REPO / "README.md", REPO / "CONTRIBUTING.md", *(REPO / "docs").glob("*.md")])
-FOLDERS = ("model", "data_tools", "platform", "jobs", "tests", "docker", "docs")
+DOCS = sorted([REPO / "README.md", REPO / "CONTRIBUTING.md", *(REPO / "docs").glob("*.md"),
+               *(REPO / "docs" / "studies").glob("*.md")])
+FOLDERS = ("model", "data_tools", "platform", "jobs", "lab", "tests", "docker", "docs")
 PATH = re.compile(r"(?<![\w/.-])((?:%s)/[\w/.-]*\w)" % "|".join(FOLDERS))
-DOTTED = re.compile(r"(?<![\w.])(sray\.(?:model|data_tools|platform|jobs)(?:\.\w+)*)")
+DOTTED = re.compile(r"(?<![\w.])(sray\.(?:model|data_tools|platform|jobs|lab)(?:\.\w+)*)")
 
 
 def _existing_module(dotted: str) -> bool:

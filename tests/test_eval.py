@@ -218,7 +218,8 @@ def test_eval_refuses_bad_input(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_pa
      "--fast-stride, --fast-confidence do not apply to --method 2d-transfer"),  # their default values: still given
     (["--method", "2d-transfer", "--segmenter", "seg", "--checkpoint", "ckpt"], "--checkpoint does not apply"),
     (["--checkpoint", "ckpt", "--segmenter", "seg"], "--segmenter does not apply to --method sray (it reads "
-                                                     "--checkpoint, --render, --fast-stride, --fast-confidence)"),
+                                                     "--checkpoint, --render, --fast-stride, --fast-confidence, "
+                                                     "--fast-temperature, --calibrate)"),
 ])
 def test_eval_refuses_flags_the_method_does_not_read(extra, refused, tmp_path, capsys):
     """A flag the chosen method's record does not read is refused (exit 2, the flag and the method named) before
@@ -238,3 +239,28 @@ def test_eval_records_the_flags_typed_whatever_their_value():
     assert parse(["eval", "--method", "2d-transfer", "--segmenter", "s", "--data", "d"]).given == ("--segmenter",)
     assert parse(["eval", "--checkpoint", "c", "--data", "d", "--render", "fast"]).given == ("--checkpoint",
                                                                                             "--render")
+
+
+def test_eval_scores_each_split_and_the_same_data_has_no_gap(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_path,
+                                                             capsys) -> None:
+    """``--split NAME=DIR`` scores the same model on another folder (here the same one: no gap) beside --data;
+    ``--calibrate`` fits the fast rule's temperature on validation shards and every split is scored with it."""
+    from sray.jobs.cli import main
+
+    out = tmp_path / "eval"
+    args = ["eval", "--checkpoint", str(tiny_checkpoint), "--data", str(tiny_shards), "--n-source", "3",
+            "--stride", "4", "--out", str(out), "--tracking-uri", mlflow_uri]
+    assert main([*args, "--split", "again"]) == 2 and "NAME=DIR" in capsys.readouterr().err
+    assert main([*args, "--split", f"again={tiny_shards}", "--calibrate", str(tiny_shards)]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "splits.json").read_text())
+    main_report = json.loads((out / "metrics.json").read_text())
+    again = json.loads((out / "again" / "metrics.json").read_text())
+    assert summary["splits"]["again"]["miou"] == pytest.approx(100 * again["mean"]["dataset_level"]["miou"])
+    assert summary["splits"]["again"]["miou"] == pytest.approx(100 * main_report["mean"]["dataset_level"]["miou"])
+    assert summary["splits"]["again"]["gap_miou"] == pytest.approx(0.0, abs=1e-9)
+    assert "largest gap: 0.0 mIoU points (data -> again)" in printed
+    calibration = json.loads((out / "calibration.json").read_text())
+    assert calibration["rays"] > 0 and calibration["nll_fitted"] <= calibration["nll_at_1"] + 1e-9
+    for report in (main_report, again):  # both splits scored with the fitted temperature
+        assert f"at temperature {calibration['temperature']:.3g}" in report["protocol"]["render"]

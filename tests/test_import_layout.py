@@ -7,7 +7,7 @@ import ast
 from pathlib import Path
 
 import pytest
-from import_scan import PRODUCT, REPO, cycles, imported_modules
+from import_scan import LAB, PRODUCT, REPO, cycles, imported_modules, plant
 
 LAZY_IMPORTS_ALLOWED = {
     "data_tools/readers/registry.py":
@@ -47,12 +47,12 @@ a command module (:func:`command_entry_points`)."""
 
 def command_entry_points(root: Path) -> dict[str, set[str]]:
     """File (relative to ``root``) -> names of its entry functions, for every command module: the modules
-    ``jobs/cli.py``, ``jobs/data/command.py`` and ``jobs/bench/command.py`` register, their functions passed as
-    ``set_defaults(func=...)``.
+    ``jobs/cli.py``, ``jobs/data/command.py``, ``jobs/bench/command.py`` and the lab's ``lab/cli.py`` register, their
+    functions passed as ``set_defaults(func=...)``.
     Their imports may wait for the command to run, so that ``sray --help`` stays fast."""
     modules = []
     for path, name in (("jobs/cli.py", "SUBCOMMAND_MODULES"), ("jobs/data/command.py", "DATA_SUBCOMMAND_MODULES"),
-                       ("jobs/bench/command.py", "BENCH_SUBCOMMAND_MODULES")):
+                       ("jobs/bench/command.py", "BENCH_SUBCOMMAND_MODULES"), ("lab/cli.py", "LAB_COMMAND_MODULES")):
         if (root / path).is_file():
             for node in ast.parse((root / path).read_text()).body:
                 if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name for t in node.targets):
@@ -87,11 +87,11 @@ def function_imports(path: Path) -> list[tuple[str, int, str]]:
 
 
 def lazy_import_violations(root: Path, allowed: dict[str, str]) -> list[str]:
-    """Imports inside functions of the product folders under ``root`` outside ``allowed`` files and command entry
-    functions."""
+    """Imports inside functions of the product folders and the lab under ``root`` outside ``allowed`` files and
+    command entry functions."""
     entries = command_entry_points(root)
     broken = []
-    for path in sorted(p for folder in PRODUCT for p in (root / folder).rglob("*.py")):
+    for path in sorted(p for folder in (*PRODUCT, LAB) for p in (root / folder).rglob("*.py")):
         rel = path.relative_to(root).as_posix()
         if rel in allowed:
             continue
@@ -127,15 +127,13 @@ def test_the_lazy_import_scan_finds_violations(tmp_path: Path) -> None:
                "platform/b.py": "def f():\n    import webdataset\n",
                "model/c.py": "from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    import torch\n\n\n"
                              "class C:\n    def m(self):\n        import torch\n"}
-    for name, text in planted.items():
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_text(text)
+    plant(tmp_path, planted)
     assert lazy_import_violations(tmp_path, {"platform/b.py": "optional"}) == [
         "jobs/x_cmd.py:10 imports mlflow inside helper()", "model/c.py:9 imports torch inside m()",
         "platform/a.py:5 imports ray inside f()", "platform/a.py:8 imports .b inside f.g()"]
 
 
-FOLDER_GRAPHS = ("data_tools", "jobs")
+FOLDER_GRAPHS = ("data_tools", "jobs", "lab")
 """Folders whose parts import one way: the modules directly in the folder count as one part, each sub-folder as
 another, and the graph of imports between the parts has no cycle."""
 
@@ -161,7 +159,9 @@ def folder_graph(root: Path, folder: str) -> dict[str, set[str]]:
 @pytest.mark.parametrize("folder", FOLDER_GRAPHS)
 def test_the_parts_of_a_folder_import_one_way(folder: str) -> None:
     """``data_tools``: its top-level modules import no sub-folder, the sub-folders import each other without a loop.
-    ``jobs``: the top-level command modules import the sub-packages (``bench`` and the rest), never the reverse."""
+    ``jobs``: the top-level command modules import the sub-packages (``bench`` and the rest), never the reverse.
+    ``lab``: its sub-folders by concern (``studies``, ``accuracy``, ``ceilings``, …) import each other without a loop,
+    and only ``cli.py`` at its top imports them."""
     graph = folder_graph(REPO, folder)
     assert len(graph) > 3, graph
     assert not cycles(graph), f"{folder}: " + "; ".join(cycles(graph))
@@ -169,9 +169,7 @@ def test_the_parts_of_a_folder_import_one_way(folder: str) -> None:
 
 def test_the_folder_scan_finds_a_loop(tmp_path: Path) -> None:
     """A top-level module and a sub-folder importing each other (absolutely or relatively) make a loop."""
-    planted = {"jobs/a_cmd.py": "from sray.jobs.bench.doc import record\n",
-               "jobs/bench/doc.py": "from ..recipes import get_recipe\n", "jobs/recipes.py": "import json\n"}
-    for name, text in planted.items():
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_text(text)
+    planted = {"jobs/a_cmd.py": "from sray.jobs.bench.report import record\n",
+               "jobs/bench/report.py": "from ..recipes import get_recipe\n", "jobs/recipes.py": "import json\n"}
+    plant(tmp_path, planted)
     assert cycles(folder_graph(tmp_path, "jobs")) == [". -> bench -> ."]

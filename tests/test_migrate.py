@@ -75,8 +75,9 @@ def test_an_old_job_is_refused_by_name_then_migrates_to_the_same_outputs(old_job
     recipe = get_recipe("synth-demo")
     assert cfg.data.held_out == HeldOutRender(n_source=0, stride=2, render="fast", fast_stride=1, fast_confidence=0.9)
     assert (cfg.data.aug, cfg.optim, cfg.runtime) == (recipe.data.aug, recipe.optim, recipe.runtime)
-    assert dataclasses.asdict(cfg.model) == {
-        k: v for k, v in old_state["config"]["model"].items() if f"model.{k}" not in REMOVED_FIELDS}
+    kept = {k: v for k, v in old_state["config"]["model"].items() if f"model.{k}" not in REMOVED_FIELDS}
+    added = {f.name: f.default for f in dataclasses.fields(cfg.model) if f.name not in kept}  # fields since: defaults
+    assert dataclasses.asdict(cfg.model) == kept | added
     assert load_job_config(str(old_job), "job") == cfg
     state = load_checkpoint(old_job / CKPT)
     assert state["counters"] == old_state["counters"] and state["best_metric"] == old_state["best_metric"]

@@ -28,8 +28,8 @@ def test_entry_matches_its_read_function(name: str) -> None:
 
 def test_unknown_format_and_foreign_option_are_refused(tmp_path: Path) -> None:
     """Errors name the known formats, and the options the chosen reader takes."""
-    with pytest.raises(ValueError, match="known: \\['replica', 'scannet', 'scannet-sens'\\]"):
-        get_reader("colmap")
+    with pytest.raises(ValueError, match="known: \\['colmap', 'nerfstudio', 'replica', 'scannet', 'scannet-sens'\\]"):
+        get_reader("polycam")
     cfg = ConvertConfig(format="replica", src=tmp_path / "seq", out=tmp_path / "ds", options={"tsv": tmp_path})
     with pytest.raises(ValueError, match="not inputs of the replica reader"):
         convert_scene(cfg)

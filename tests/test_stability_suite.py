@@ -19,8 +19,8 @@ from injected_faults import injected_faults  # noqa: E402
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
 from train_fixtures import tiny_shards  # noqa: E402,F401
 
-from sray.jobs.bench.doc import Bench, bench_dir  # noqa: E402
 from sray.jobs.cli import main  # noqa: E402
+from sray.platform.common.bench_doc import Bench, bench_dir  # noqa: E402
 from sray.platform.stability.axes import AXES  # noqa: E402
 from sray.platform.stability.presets import PRESETS  # noqa: E402
 

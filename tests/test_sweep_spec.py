@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
+from engine_here import run_study_here
 from injected_faults import injected_faults
 
 from sray.jobs.cli import main
@@ -71,16 +72,7 @@ def test_a_study_run_piece_by_piece_keeps_results_imports_old_ones_and_reruns_on
     from sray.platform.sweep import incremental
     from sray.platform.sweep.study import StudySettings
 
-    def run_here(plan: dict, point_fn, settings: StudySettings, resume: bool = False) -> list:
-        job = _TrialJob(point_fn, plan, str(settings.folder), {}, settings.start_by)
-        for key in plan:
-            try:
-                _run_trial({"key": key}, job)
-            except InjectedFailure:
-                pass
-        return collect_outcomes(settings.folder, plan, {}, settings.time_attr)
-
-    monkeypatch.setattr(incremental, "run_study", run_here)
+    monkeypatch.setattr(incremental, "run_study", run_study_here)
     calls: list[str] = []
 
     def square(point: dict, ctx: TrialContext) -> dict:

@@ -25,8 +25,8 @@ from sray.data_tools.loader.sample_types import EvalSample, QueryCamera, SourceV
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
 from sray.jobs.cli import main
+from sray.lab.ceilings.rows import CeilingRow, RowProtocol
 from sray.model.view_render import render_view
-from sray.platform.eval.ceiling_rows import CeilingRow, RowProtocol
 from sray.platform.eval.eval_model import segmenter_model
 from sray.platform.eval.label_transfer import UNSEEN, transfer_labels
 from sray.platform.eval.scene_scoring import score_scene

@@ -171,6 +171,8 @@ def meta_problems(meta: dict, file: str, dir_name: str, limits: CheckLimits) -> 
     ignore_id = meta.get("ignore_id", 255)
     if not isinstance(ignore_id, int) or (_id_list(classes) and 0 <= ignore_id < len(classes)):
         bad(f"field 'ignore_id' {ignore_id!r} must be an integer outside the class ids")
+    if not isinstance(meta.get("labelled", True), bool):
+        bad(f"field 'labelled' must be true or false, got {meta.get('labelled')!r}")
     size = meta.get("image_size")
     if "image_size" in meta and not (isinstance(size, list) and len(size) == 2
                                      and all(isinstance(s, int) and s > 0 for s in size)):

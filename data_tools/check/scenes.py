@@ -1,5 +1,8 @@
 """``sray data check``: validate a dataset in sray layout and list every problem; write nothing.
 
+A scene whose scene.json says ``"labelled": false`` (a capture for inference only) passes with label images
+that hold the ignore id everywhere; ``sray data shard`` keeps the flag and training refuses such a scene.
+
 :func:`check_dataset` walks a dataset folder (or a single scene folder), :func:`check_scene` one
 scene, :func:`check_scene_object` an in-memory :class:`Scene`. Each returns a list of
 :class:`Problem` (file, what, fix); an empty list means the data is fit for ``sray data shard``,
@@ -104,6 +107,10 @@ def check_scene(scene_dir: Path, limits: CheckLimits | None = None) -> list[Prob
                 out.append(_size_problem(path, kind, image.shape[:2], hw, ref))
             if kind == "label" and n_classes and isinstance(ignore_id, int):
                 out += label_problems(image, n_classes, ignore_id, str(path))
+                if meta.get("labelled") is False and (image != ignore_id).any():
+                    out.append(Problem(str(path), f"scene.json says 'labelled': false, but this label image holds "
+                                                  f"ids other than the ignore id {ignore_id}",
+                                       "set 'labelled' to true, or store the ignore id everywhere"))
         if cameras is None:
             continue
         cam = cameras.get(view)

@@ -3,7 +3,10 @@
 * **colour jitter per source view**: each source image independently gets an exposure change of
   ``colour_ev`` stops at most and a per-channel change of ``channel_ev`` stops at most (a white
   balance shift), through the stability suite's :func:`sray.data_tools.perturbations.exposure`,
-  and optionally Gaussian noise (:func:`~sray.data_tools.perturbations.gaussian_noise`); the
+  and optionally Gaussian noise (:func:`~sray.data_tools.perturbations.gaussian_noise`); for a stronger change,
+  a per-view tone curve (each channel raised to the power 2 ** g, g uniform in ±``gamma_ev``) and a per-view
+  saturation change (the colour's distance from its grey level scaled by 2 ** s, s uniform in ±``saturation_ev``),
+  so the sources of one sample disagree in contrast and colourfulness as well as brightness; the
   query's target colours are left alone, so the model must see through its inputs' photometry;
 * **random source-view count and neighbour subsets**: each sample carries m sources, m drawn
   uniformly in [``min_source``, n_source], chosen at random among the first k ranked neighbours,
@@ -40,6 +43,12 @@ class Augmentation:
     """Largest extra per-channel change, in EV stops (uniform in ±channel_ev per channel); 0 = off."""
     noise_sigma: float = 0.0
     """Largest Gaussian noise sigma of a source view, in 8-bit levels (uniform in [0, value]); 0 = off."""
+    gamma_ev: float = 0.0
+    """Largest per-view tone-curve change: each source's channels are raised to 2 ** g, g uniform in ±gamma_ev
+    (0.5 = exponents 0.71 to 1.41); 0 = off."""
+    saturation_ev: float = 0.0
+    """Largest per-view saturation change: each source's distance from its grey level is scaled by 2 ** s, s
+    uniform in ±saturation_ev; 0 = off."""
     min_source: int = 0
     """Fewest source views of a sample (m uniform in [min_source, n_source]); 0 = always n_source."""
     source_scale: float = 0.0
@@ -49,7 +58,7 @@ class Augmentation:
 
     def __post_init__(self) -> None:
         """ValueError naming the field that is out of range."""
-        for name in ("colour_ev", "channel_ev", "noise_sigma", "min_source"):
+        for name in ("colour_ev", "channel_ev", "noise_sigma", "gamma_ev", "saturation_ev", "min_source"):
             if getattr(self, name) < 0:
                 raise ValueError(f"augmentation: {name} is {getattr(self, name)}; it must be >= 0 (0 = off)")
         if not 0.0 <= self.source_scale < 1.0:
@@ -60,7 +69,8 @@ class Augmentation:
     @property
     def jitters_colour(self) -> bool:
         """Whether source images change photometrically."""
-        return self.colour_ev > 0 or self.channel_ev > 0 or self.noise_sigma > 0
+        return (self.colour_ev > 0 or self.channel_ev > 0 or self.noise_sigma > 0 or self.gamma_ev > 0
+                or self.saturation_ev > 0)
 
     def source_choice(self, rng: np.random.Generator, n_candidates: int, n_source: int) -> list[int]:
         """Indices into the ranked candidates of a sample's sources (random subset; see module doc)."""
@@ -81,9 +91,20 @@ class Augmentation:
         ev = float(rng.uniform(-self.colour_ev, self.colour_ev)) if self.colour_ev > 0 else 0.0
         gains = rng.uniform(-self.channel_ev, self.channel_ev, 3) if self.channel_ev > 0 else np.zeros(3)
         out = np.concatenate([exposure(rgb[..., c:c + 1], ev + float(gains[c])) for c in range(3)], axis=2)
+        if self.gamma_ev > 0 or self.saturation_ev > 0:
+            out = self._tone(out, rng)
         if self.noise_sigma > 0:
             out = gaussian_noise(out, float(rng.uniform(0.0, self.noise_sigma)), rng)
         return out
+
+    def _tone(self, rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """uint8 (H, W, 3) with this view's tone-curve exponent and saturation factor (each 1 when off)."""
+        power = 2.0 ** float(rng.uniform(-self.gamma_ev, self.gamma_ev)) if self.gamma_ev > 0 else 1.0
+        chroma = 2.0 ** float(rng.uniform(-self.saturation_ev, self.saturation_ev)) if self.saturation_ev > 0 else 1.0
+        x = (rgb.astype(np.float64) / 255.0) ** power
+        grey = x.mean(axis=2, keepdims=True)
+        x = grey + chroma * (x - grey)
+        return np.round(np.clip(x, 0.0, 1.0) * 255.0).astype(np.uint8)
 
     def crop_window(self, rng: np.random.Generator, h: int, w: int) -> tuple[int, int, int, int]:
         """(v0, u0, height, width) of the window rays are drawn from; the whole image when off."""

@@ -149,12 +149,17 @@ def _open(shards_dir: Path, scenes: list[str] | None,
         if not names:
             raise ValueError(f"{shards_dir}/manifest.json: no scene has role 'train'; pass scenes=[...] "
                              f"explicitly (known: {sorted(manifest.scenes)[:10]})")
-        return manifest, names
-    names = list(scenes)
-    unknown = [s for s in names if s not in manifest.scenes]
-    if unknown or not names:
-        raise ValueError(f"{shards_dir}/manifest.json: scenes {unknown or names} not found; "
-                         f"known: {sorted(manifest.scenes)[:10]}")
+    else:
+        names = list(scenes)
+        unknown = [s for s in names if s not in manifest.scenes]
+        if unknown or not names:
+            raise ValueError(f"{shards_dir}/manifest.json: scenes {unknown or names} not found; "
+                             f"known: {sorted(manifest.scenes)[:10]}")
+    unlabelled = [s for s in names if not manifest.scenes[s].meta.get("labelled", True)]
+    if unlabelled:
+        raise ValueError(f"{shards_dir}/manifest.json: scenes {unlabelled} have no labels (field 'labelled' is "
+                         "false: captures for inference only); training, finetuning and evaluation need labels: "
+                         "shard them apart from the training scenes and label them with `sray label`")
     return manifest, names
 
 

@@ -12,8 +12,8 @@ Splits (see docs/data.md, "Readers and validation"):
 
 Nothing partial is published: the scene is written into a hidden staging folder, near/far are
 measured from its depth (``scene.scene_depth_bounds``: a test scene's source and finetune views
-only, a train scene's every view), it must pass ``check_scene``, and only then is it renamed into
-place and added to ``dataset.json``.
+only, a train scene's every view; a capture without depth maps brings them from its 3D points),
+it must pass ``check_scene``, and only then is it renamed into place and added to ``dataset.json``.
 """
 
 from __future__ import annotations
@@ -58,10 +58,10 @@ class ConvertConfig:
     """Keep every n-th usable frame; None = the reader's default (its registry entry)."""
     depth_scale: float = 1000.0
     """Source depth PNG units per metre (1000 = millimetres, as both layouts store)."""
-    options: dict[str, Path] = field(default_factory=dict)
+    options: dict[str, object] = field(default_factory=dict)
     """Reader-specific side inputs by the reader's option names: ``{"tsv": ...}`` (ScanNet's
-    ``scannetv2-labels.combined.tsv``), ``{"classes": ...}`` (Replica's ``info_semantic.json``); one
-    left out is searched for next to the source."""
+    ``scannetv2-labels.combined.tsv``), ``{"classes": ...}`` (Replica's ``info_semantic.json``), ``{"scale":
+    metres per unit}`` (captures); a file left out is searched for next to the source."""
     holdout_every: int = 20
     """Train scenes: hold out every n-th view as ``test`` (0 = none)."""
     window_start: int | None = None
@@ -141,10 +141,11 @@ def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = No
     shutil.rmtree(staging, ignore_errors=True)
     try:
         write_scene(Scene(meta=meta, read_view=recording_read), staging)
-        try:
-            meta.near, meta.far = scene_depth_bounds(meta, depths.__getitem__)
-        except ValueError as e:
-            raise ValueError(f"{cfg.src}: {e}; check the depth images and --depth-scale") from None
+        if not 0 < meta.near < meta.far:  # a capture without depth maps brings bounds from its 3D points
+            try:
+                meta.near, meta.far = scene_depth_bounds(meta, depths.__getitem__)
+            except ValueError as e:
+                raise ValueError(f"{cfg.src}: {e}; check the depth images and --depth-scale") from None
         meta_path = staging / name / "scene.json"
         atomic_write_json(meta_path, {**json.loads(meta_path.read_text()), "near": meta.near, "far": meta.far})
         problems = check_scene(staging / name)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -35,6 +36,8 @@ class ReaderOption:
     the same file (both ScanNet readers take ``tsv``)."""
     help: str
     """What the file is and where the reader looks when it is not given (CLI help)."""
+    type: Callable[[str], object] = Path
+    """Parses the flag's text: a path, or ``float`` for a number (``--scale``)."""
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,24 @@ def _load_replica() -> ReadFunction:
     return read_replica
 
 
+def _load_nerfstudio() -> ReadFunction:
+    """The nerfstudio (transforms.json) capture reader, imported on use."""
+    from sray.data_tools.readers.nerfstudio import read_nerfstudio
+
+    return read_nerfstudio
+
+
+def _load_colmap() -> ReadFunction:
+    """The COLMAP (sparse model + images) capture reader, imported on use."""
+    from sray.data_tools.readers.colmap import read_colmap
+
+    return read_colmap
+
+
+SCALE_OPTION = ReaderOption("scale", "metres per capture unit (default: measured from metric depth maps against the "
+                                     "capture's 3D points; without both, conversion stops and asks for it)", float)
+"""Shared by the capture readers, whose units are arbitrary."""
+
 READERS: dict[str, Reader] = {r.name: r for r in (
     # 320x240 is the paper's size; every 10th frame of the 30 fps scan.
     Reader(name="scannet", summary="ScanNet SensReader export + label-filt", load=_load_scannet,
@@ -91,6 +112,14 @@ READERS: dict[str, Reader] = {r.name: r for r in (
            size_hw=None, frame_skip=5,
            options=(ReaderOption("classes", "class table, e.g. Replica/<scene>/habitat/info_semantic.json "
                                             "(default: SRC/info_semantic.json or SRC/../info_semantic.json)"),)),
+    # Captures without labels (inference only): 320x240 like the paper's scans; every frame (already sparse).
+    Reader(name="nerfstudio", summary="nerfstudio capture: transforms.json + images (+ depth), no labels",
+           load=_load_nerfstudio, size_hw=(240, 320), frame_skip=1, options=(SCALE_OPTION,)),
+    Reader(name="colmap", summary="COLMAP capture: sparse/0/{cameras,images,points3D}.{bin,txt} + images/, no labels",
+           load=_load_colmap, size_hw=(240, 320), frame_skip=1,
+           options=(SCALE_OPTION, ReaderOption("images", "image folder (default: SRC/images)"),
+                    ReaderOption("sparse", "model folder (default: SRC, SRC/sparse/0, SRC/sparse or "
+                                           "SRC/colmap/sparse/0, the first holding cameras.bin/.txt)"))),
 )}
 """Every known source format by name."""
 

@@ -6,7 +6,8 @@ Rule ``frustum-overlap`` (version 2), computed once at shard time when depth is 
    and back-project those with known depth to world points with the view's K and c2w. If fewer
    than ``MIN_POINTS`` grid pixels have depth, the whole grid is back-projected at the scene's
    median valid depth instead (so a view without depth still gets a sensible ranking); that
-   median comes from ``scene.depth_views`` (a test scene's source pool, a train scene's views).
+   median comes from ``scene.depth_views`` (a test scene's source pool, a train scene's views), and
+   in a scene with no depth at all (a capture without depth maps) it is sqrt(near * far).
 2. Query views whose depth may be used: a candidate's score is the fraction of the QUERY's points
    that land in front of the candidate camera (z > 0) and inside its image (-0.5 <= u < W - 0.5,
    -0.5 <= v < H - 0.5, the pixel-centre convention): "how much of what the query sees does this
@@ -83,12 +84,15 @@ def grid_samples(depth: np.ndarray, grid: tuple[int, int] = GRID) -> np.ndarray:
     return np.stack([u.ravel(), v.ravel(), depth[v, u].ravel()], axis=1).astype(np.float64)
 
 
-def fallback_depth(samples: list[np.ndarray]) -> float:
+def fallback_depth(samples: list[np.ndarray], bounds: tuple[float, float] | None = None) -> float:
     """Median valid depth over grid samples (each (P, 3), from :func:`grid_samples`; pass those of
-    ``scene.depth_views``), used where a view lacks depth."""
+    ``scene.depth_views``), used where a view lacks depth. A scene without any depth (a capture converted
+    without depth maps) falls back to the geometric mean of its ``bounds`` (near, far) when given."""
     z = np.concatenate([s[:, 2] for s in samples]) if samples else np.zeros(0)
     z = z[np.isfinite(z) & (z > 0)]
     if z.size == 0:
+        if bounds is not None and 0 < bounds[0] < bounds[1]:
+            return float(np.sqrt(bounds[0] * bounds[1]))
         raise ValueError("no view has a valid depth at any grid pixel: neighbours cannot be ranked")
     return float(np.median(z))
 

@@ -148,7 +148,7 @@ def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None) -> tuple[dic
             bar.update(1)
     if hw is None:
         raise ValueError(f"scene {meta.name!r}: field 'view_ids' is empty; a scene needs views")
-    fallback = fallback_depth([samples[v] for v in depth_views(meta)])
+    fallback = fallback_depth([samples[v] for v in depth_views(meta)], (meta.near, meta.far))
     index = {v: i for i, v in enumerate(meta.view_ids)}
     points = {v: grid_points(s, Ks[index[v]], c2ws[index[v]], fallback) for v, s in samples.items()}
     ranked = rank_neighbours(meta.view_ids, np.stack(Ks), np.stack(c2ws), hw, points, source_pool(meta), k)

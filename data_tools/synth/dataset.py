@@ -30,16 +30,19 @@ from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.scene import Scene, SceneMeta, View, scene_depth_bounds
 from sray.data_tools.scene_folder import write_dataset_index, write_scene
 from sray.data_tools.splits import PROTOCOL_WINDOW, protocol_splits, train_splits
+from sray.data_tools.synth import domains
 from sray.data_tools.synth.render import RenderScene, render_view
 from sray.data_tools.synth.rooms import ROOM_TYPES, Room, build_room
 from sray.data_tools.synth.trajectory import scan_path
 
 GENERATOR = "sray-synth"
 """Value of ``extra["generator"]`` in every procedural scene."""
-GENERATOR_VERSION = 3
+GENERATOR_VERSION = 4
 """Bumped whenever the same parameters would write different files (pixels, or metadata such as near/far:
 version 2 measures a test scene's bounds from its source and finetune views only; version 3 is the
-richer world: shape templates, clutter, L-shaped rooms, lighting and camera variety)."""
+richer world: shape templates, clutter, L-shaped rooms, lighting and camera variety; version 4 keeps training rooms
+out of the held-out regions of ``domains.py``, adds shifted splits and the new content: rugs, kitchen islands,
+open shelves, glazed and sliding doors)."""
 HFOV_DEG = 62.0
 """Horizontal field of view (ScanNet's colour camera is about 58 degrees, its depth camera 58-60)."""
 
@@ -62,17 +65,24 @@ class ScenePlan:
     """float64 (n_views, 4, 4) camera-to-world, OpenCV axes."""
 
 
-def plan_scene(seed: int, n_views: int, room_type: str | None = None) -> ScenePlan:
-    """Room and camera path of a scene (deterministic in ``seed``); retries cluttered rooms."""
+def plan_scene(seed: int, n_views: int, room_type: str | None = None, split: str = "in-distribution",
+               randomise: float = 0.0) -> ScenePlan:
+    """Room and camera path of a scene (deterministic in ``seed``), drawn from the region of ``split``
+    (:mod:`~sray.data_tools.synth.domains`) with appearance randomisation of strength ``randomise``; retries
+    cluttered rooms."""
     rng = np.random.default_rng(seed)
     kind = room_type if room_type is not None else ROOM_TYPES[int(rng.integers(len(ROOM_TYPES)))]
-    for _ in range(10):
-        room = build_room(rng, kind)
-        prepared = RenderScene.prepare(room, exposure=float(2.0 ** rng.uniform(-0.6, 0.6)))
-        try:
-            return ScenePlan(room, prepared, scan_path(rng, room.size, prepared.boxes, n_views))
-        except RuntimeError:
-            continue
+    with domains.drawing(domains.domain_of(split, randomise)):
+        for _ in range(10):
+            room = build_room(rng, kind)
+            exposure = domains.exposure(rng)
+            k, gamma, noise = domains.sensor(rng)
+            prepared = RenderScene.prepare(room, exposure=exposure, tone=(k, gamma), noise_sigma=noise, noise_seed=seed,
+                                           tint=domains.room_tint(rng), randomise=randomise)
+            try:
+                return ScenePlan(room, prepared, scan_path(rng, room.size, prepared.boxes, n_views))
+            except RuntimeError:
+                continue
     raise RuntimeError(f"seed {seed}: no {kind} room with a free camera path after 10 rooms")
 
 
@@ -90,33 +100,39 @@ def split_views(view_ids: list[str], role: str, seed: int) -> dict[str, list[str
     raise ValueError(f"role must be 'train' or 'test', got {role!r}")
 
 
-def scene_params(seed: int, n_views: int, height: int, width: int, role: str, room_type: str) -> dict:
+def scene_params(seed: int, n_views: int, height: int, width: int, role: str, room_type: str,
+                 split: str = "in-distribution", randomise: float = 0.0) -> dict:
     """The parameters that fully determine a scene's files (stored in ``extra``, compared on rerun)."""
     return {"generator": GENERATOR, "generator_version": GENERATOR_VERSION, "seed": int(seed),
             "n_views": int(n_views), "height": int(height), "width": int(width), "role": role,
-            "room_type": room_type, "hfov_deg": HFOV_DEG}
+            "room_type": room_type, "hfov_deg": HFOV_DEG, "split": split, "randomise": float(randomise)}
 
 
 def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, role: str,
-                   room_type: str | None = None, on_view: Callable[[], None] | None = None) -> Scene:
+                   room_type: str | None = None, on_view: Callable[[], None] | None = None,
+                   split: str = "in-distribution", randomise: float = 0.0) -> Scene:
     """Render a procedural scene in memory (deterministic: same arguments, identical arrays).
 
     ``room_type`` picks one of ``ROOM_TYPES`` (default: drawn from the seed); ``on_view`` is
-    called after each rendered view (progress bars).
+    called after each rendered view (progress bars); ``split`` is the region the room is drawn from
+    (``domains.SPLITS``; a training scene must be ``in-distribution``); ``randomise`` the strength of the appearance
+    randomisation of a training scene (``domains``; 0 = off).
     """
+    if role == "train" and split != "in-distribution":
+        raise ValueError(f"a training scene is always drawn in-distribution, got split {split!r}")
     if height < 8 or width < 8:
         raise ValueError(f"image size {height}x{width} is too small; use at least 8x8")
     split_views([f"{i:05d}" for i in range(n_views)], role, seed)  # validates role and view count early
-    plan = plan_scene(seed, n_views, room_type)
+    plan = plan_scene(seed, n_views, room_type, split, randomise)
     K = intrinsics(height, width)
     views = []
     for i, c2w in enumerate(plan.poses):
-        rgb, depth, label = render_view(plan.render_scene, K, c2w, (height, width))
+        rgb, depth, label = render_view(plan.render_scene, K, c2w, (height, width), view_index=i)
         views.append(View(view_id=f"{i:05d}", rgb=rgb, depth=depth, label=label, K=K.copy(), c2w=c2w))
         if on_view is not None:
             on_view()
     view_ids = [v.view_id for v in views]
-    extra = {**scene_params(seed, n_views, height, width, role, plan.room.room_type),
+    extra = {**scene_params(seed, n_views, height, width, role, plan.room.room_type, split, randomise),
              "room_size_m": [float(v) for v in plan.room.size], "n_boxes": len(plan.room.boxes),
              "ceiling_label": "ignore (ScanNet-20 has no ceiling class)"}
     meta = SceneMeta(name=name, label_space="scannet20", class_names=list(SCANNET20), view_ids=view_ids,
@@ -131,9 +147,11 @@ def scene_name(role: str, index: int) -> str:
     return f"synth_{role}_{index:03d}"
 
 
-def scene_seed(seed: int, role: str, index: int) -> int:
-    """Independent per-scene seed derived from the dataset seed (recorded as ``extra["seed"]`` of the scene)."""
-    return int(np.random.SeedSequence([seed, 0 if role == "train" else 1, index]).generate_state(1)[0])
+def scene_seed(seed: int, role: str, index: int, split: str = "in-distribution") -> int:
+    """Independent per-scene seed derived from the dataset seed (recorded as ``extra["seed"]`` of the scene): one
+    stream for training rooms and one per test split, so no validation or shifted room repeats another room."""
+    stream = 0 if role == "train" else 1 + domains.SPLITS.index(split)
+    return int(np.random.SeedSequence([seed, stream, index]).generate_state(1)[0])
 
 
 def _is_current(scene_dir: Path, params: dict) -> bool:
@@ -158,10 +176,11 @@ def _prune_stale_views(scene_dir: Path, view_ids: list[str]) -> None:
 
 
 def _write_scene(out: Path, name: str, own_seed: int, n_views: int, height: int, width: int, role: str,
-                 room_type: str, on_view: Callable[[], None] | None = None) -> Path:
+                 room_type: str, split: str, randomise: float, on_view: Callable[[], None] | None = None) -> Path:
     """Generate one scene and write it under ``out`` (scene.json last); returns its folder."""
     scene_dir = out / name
-    scene = generate_scene(name, own_seed, n_views, height, width, role, room_type, on_view=on_view)
+    scene = generate_scene(name, own_seed, n_views, height, width, role, room_type, on_view=on_view, split=split,
+                           randomise=randomise)
     if (scene_dir / "scene.json").exists():
         (scene_dir / "scene.json").unlink()
     write_scene(scene, out)
@@ -170,8 +189,13 @@ def _write_scene(out: Path, name: str, own_seed: int, n_views: int, height: int,
 
 
 def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height: int, width: int, seed: int,
-                     progress: bool = True, workers: int = 1) -> list[Path]:
+                     progress: bool = True, workers: int = 1, split: str = "in-distribution",
+                     randomise: float = 0.0) -> list[Path]:
     """Write ``n_train`` train and ``n_test`` test scenes under ``out`` (sray layout); returns scene dirs.
+
+    Training scenes are always in-distribution; the test scenes come from ``split`` (``domains.SPLITS``), each
+    split from its own seed stream (:func:`scene_seed`); ``randomise`` is the appearance randomisation of the training
+    scenes (test scenes never get it, so worlds with and without it share their test rooms).
 
     Scene names are ``synth_train_000``, ``synth_test_000``, ...; room types cycle through
     ``ROOM_TYPES`` from a seed-dependent offset so a small dataset covers every type. A scene whose
@@ -185,6 +209,8 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
         raise ValueError(f"need at least one scene, got n_train={n_train}, n_test={n_test}")
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    domains.domain_of(split)  # validates the split's name
+    domains.domain_of("in-distribution", randomise)  # and the randomisation's range
     out = Path(out)
     jobs = [("train", i) for i in range(n_train)] + [("test", i) for i in range(n_test)]
     offset = seed % len(ROOM_TYPES)
@@ -193,12 +219,14 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
     todo: list[tuple] = []
     for k, (role, i) in enumerate(jobs):
         name = scene_name(role, i)
-        own_seed, room_type = scene_seed(seed, role, i), ROOM_TYPES[(offset + k) % len(ROOM_TYPES)]
+        own_split, own_random = (split, 0.0) if role == "test" else ("in-distribution", randomise)
+        own_seed, room_type = scene_seed(seed, role, i, own_split), ROOM_TYPES[(offset + k) % len(ROOM_TYPES)]
         written.append(out / name)
-        if _is_current(out / name, scene_params(own_seed, n_views, height, width, role, room_type)):
+        if _is_current(out / name, scene_params(own_seed, n_views, height, width, role, room_type, own_split,
+                                                own_random)):
             bar.update(n_views)
         else:
-            todo.append((out, name, own_seed, n_views, height, width, role, room_type))
+            todo.append((out, name, own_seed, n_views, height, width, role, room_type, own_split, own_random))
     if workers == 1:
         for args in todo:
             bar.set_postfix_str(f"{args[1]} ({args[7]})")

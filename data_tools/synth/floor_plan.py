@@ -31,6 +31,8 @@ class Light:
     """Brightness at 1 m, in units of the ambient term."""
     color: tuple[float, float, float]
     """Linear RGB tint."""
+    kelvin: float
+    """Colour temperature the tint comes from (``lighting.kelvin_rgb``)."""
 
 
 @dataclass

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
+from sray.data_tools.synth import domains
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.floor_plan import FloorPlan, Light
@@ -47,11 +48,29 @@ def _floor_lamp(rng: np.random.Generator, height: float) -> Piece:
     return Piece(boxes, 2 * s, 2 * s, height)
 
 
+def _light(position: tuple[float, float, float], intensity: float, kelvin: float) -> Light:
+    """A point light of colour temperature ``kelvin``."""
+    return Light(position, intensity, kelvin_rgb(kelvin), kelvin)
+
+
+def _low_main_light(rng: np.random.Generator, plan: FloorPlan) -> None:
+    """The held-out main light of an appearance-shifted room: low (below ``domains.LOW_LIGHT_TOP``) near a wall,
+    so light grazes up the walls and furniture casts shadows upwards."""
+    wall = int(rng.integers(4))
+    x, y, _ = plan.wall_pose(wall, float(rng.uniform(0.3, plan.wall_length(wall) - 0.3)), 0.0, 0.25)
+    plan.lights.append(_light((x, y, float(rng.uniform(0.3, domains.LOW_LIGHT_TOP))), float(rng.uniform(1.5, 2.5)),
+                              float(rng.uniform(*domains.HELD_OUT_KELVIN))))
+
+
 def add_lights(rng: np.random.Generator, plan: FloorPlan) -> None:
     """Ceiling lamps (1-4 by floor area) with a point light under each (the first casts shadows), an
-    optional floor lamp and a daylight fill light in front of each of up to two windows."""
+    optional floor lamp and a daylight fill light in front of each of up to two windows. In an
+    appearance-shifted room the ceiling lamps take held-out colour temperatures and a low main light comes first."""
     lx, ly, h = plan.size
-    base_k = float(rng.uniform(2700.0, 6500.0))
+    shifted = domains.current().appearance_shift
+    if shifted:
+        _low_main_light(rng, plan)
+    base_k = float(rng.uniform(*domains.HELD_OUT_KELVIN)) if shifted else float(rng.uniform(2700.0, 6500.0))
     n = int(np.clip(round(lx * ly / 9.0 + rng.uniform(-0.5, 0.5)), 1, 4))
     cols = 1 if n == 1 else 2
     rows = math.ceil(n / cols)
@@ -61,17 +80,18 @@ def add_lights(rng: np.random.Generator, plan: FloorPlan) -> None:
         y = ly * fy_ + float(rng.uniform(-0.25, 0.25)) if lx >= ly else ly * fx_ + float(rng.uniform(-0.25, 0.25))
         x, y = float(np.clip(x, 0.4, lx - 0.4)), float(np.clip(y, 0.4, ly - 0.4))
         plan.add(fx.ceiling_lamp(rng, h), x, y, 0.0, occupies_floor=False)
-        tint = kelvin_rgb(base_k + float(rng.uniform(-300.0, 300.0)))
-        plan.lights.append(Light((x, y, h - 0.35), float(rng.uniform(1.6, 3.4)) / n ** 0.5, tint))
+        kelvin = base_k + float(rng.uniform(-300.0, 300.0))
+        if shifted:
+            kelvin = float(np.clip(kelvin, *domains.HELD_OUT_KELVIN))
+        plan.lights.append(_light((x, y, h - 0.35), float(rng.uniform(1.6, 3.4)) / n ** 0.5, kelvin))
     if rng.random() < 0.4:
         lamp = _floor_lamp(rng, float(rng.uniform(1.4, 1.75)))
         for wall in [int(w) for w in rng.permutation(4)]:
             s = plan.try_wall(rng, lamp, wall, gap=0.05, tries=8)
             if s is not None:
                 x, y, _ = plan.wall_pose(wall, s, lamp.depth, 0.05)
-                plan.lights.append(Light((x, y, lamp.height - 0.12), float(rng.uniform(0.5, 1.2)),
-                                         kelvin_rgb(float(rng.uniform(2400.0, 3200.0)))))
+                plan.lights.append(_light((x, y, lamp.height - 0.12), float(rng.uniform(0.5, 1.2)),
+                                          float(rng.uniform(2400.0, 3200.0))))
                 break
     for x, y, z in plan.windows[:2]:
-        plan.lights.append(Light((x, y, z), float(rng.uniform(0.3, 1.0)),
-                                 kelvin_rgb(float(rng.uniform(6500.0, 10000.0)))))
+        plan.lights.append(_light((x, y, z), float(rng.uniform(0.3, 1.0)), float(rng.uniform(6500.0, 10000.0))))

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sray.data_tools.synth import domains
+
 PAINT, WOOD, PLANKS, TILES, FABRIC, STRIPES, PANELS, SKY, PAINTING, BOOKS, LAMP, MARBLE = range(12)
 """Pattern kinds; SKY and LAMP are emissive (not shaded)."""
 
@@ -51,10 +53,15 @@ def _linear(rgb: tuple[float, float, float]) -> tuple[float, float, float]:
 
 
 def hsv(rng: np.random.Generator, h: tuple[float, float], s: tuple[float, float],
-        v: tuple[float, float]) -> tuple[float, float, float]:
-    """A linear RGB colour drawn uniformly from an HSV box (hue wraps around)."""
-    hue = float(rng.uniform(*h)) % 1.0
-    return _linear(colorsys.hsv_to_rgb(hue, float(rng.uniform(*s)), float(rng.uniform(*v))))
+        v: tuple[float, float], emissive: bool = False) -> tuple[float, float, float]:
+    """A linear RGB colour drawn uniformly from an HSV box (hue wraps around); a surface colour (not
+    ``emissive``) is then randomised when asked (``domains.jitter_colour``) and kept out of, or moved into, the
+    held-out colour region (``domains.surface_colour``)."""
+    hue, sat, val = float(rng.uniform(*h)) % 1.0, float(rng.uniform(*s)), float(rng.uniform(*v))
+    if not emissive:
+        hue, sat, val = domains.jitter_colour(rng, hue, sat, val)
+        hue, sat = domains.surface_colour(rng, hue, sat)
+    return _linear(colorsys.hsv_to_rgb(hue, sat, val))
 
 
 def _seed(rng: np.random.Generator) -> int:
@@ -81,7 +88,9 @@ def painted(rng: np.random.Generator, panels: bool = False, panel_width: float =
 
 
 def furniture_surface(rng: np.random.Generator, panels: bool = False, panel_width: float = 0.45) -> Material:
-    """Wood or paint, as cabinets, shelves and desks come."""
+    """Wood or paint, as cabinets, shelves and desks come; in an appearance-shifted room also stone (held out)."""
+    if domains.current().appearance_shift and rng.random() < 0.4:
+        return stone(rng)
     if rng.random() < 0.5:
         return wood(rng)
     return painted(rng, panels=panels, panel_width=panel_width)
@@ -153,8 +162,15 @@ def wall_paint(rng: np.random.Generator) -> Material:
 
 
 def floor_surface(rng: np.random.Generator, wet_room: bool = False) -> Material:
-    """Floors: planks, tiles (plain or checker) or carpet; wet rooms get tiles."""
+    """Floors: parquet, planks, concrete-like paint, carpet or tiles (plain or checker); wet rooms get tiles. In an
+    appearance-shifted room most floors get a held-out covering (:func:`held_out_floor`)."""
+    if domains.current().appearance_shift and rng.random() < 0.6:
+        return held_out_floor(rng)
     pick = 1.0 if wet_room else rng.random()
+    if pick < 0.1:  # parquet: squares of two wood tones
+        a = hsv(rng, (0.04, 0.11), (0.35, 0.75), (0.3, 0.85))
+        return Material(TILES, a, _shade(a, float(rng.uniform(0.6, 0.8))), scale=float(rng.uniform(2.5, 5.0)),
+                        contrast=float(rng.uniform(0.1, 0.3)), variant=1, seed=_seed(rng))
     if pick < 0.45:
         a = hsv(rng, (0.03, 0.12), (0.25, 0.75), (0.25, 0.85))
         return Material(PLANKS, a, _shade(a, rng.uniform(0.6, 0.85)), scale=float(rng.uniform(4, 9)),
@@ -171,6 +187,21 @@ def floor_surface(rng: np.random.Generator, wet_room: bool = False) -> Material:
     b = hsv(rng, (0, 1), (0.0, 0.35), (0.1, 0.95)) if checker else _shade(a, 0.55)
     return Material(TILES, a, b, scale=float(rng.uniform(1.6, 5.0)), contrast=float(rng.uniform(0.05, 0.2)),
                     variant=checker, seed=_seed(rng))
+
+
+def held_out_floor(rng: np.random.Generator) -> Material:
+    """A floor covering no training room has: a marble floor or a large-pattern plaid carpet (< 10 cycles/m)."""
+    if rng.random() < 0.5:
+        return stone(rng)
+    return Material(FABRIC, hsv(rng, (0, 1), (0.1, 0.7), (0.2, 0.8)), hsv(rng, (0, 1), (0.1, 0.7), (0.2, 0.8)),
+                    scale=float(rng.uniform(2.5, 8.0)), contrast=float(rng.uniform(0.3, 0.6)), variant=1,
+                    seed=_seed(rng))
+
+
+def held_out_texture(material: Material) -> bool:
+    """Whether a material's texture lies in the held-out appearance region: stone anywhere, or a plaid fabric
+    coarser than 10 cycles per metre."""
+    return material.kind == MARBLE or (material.kind == FABRIC and material.variant == 1 and material.scale < 10.0)
 
 
 def ceiling_paint(rng: np.random.Generator) -> Material:
@@ -201,8 +232,8 @@ def book_row(rng: np.random.Generator) -> Material:
 
 def window_glass(rng: np.random.Generator) -> Material:
     """Daylight through a window: a bright sky gradient (emissive)."""
-    top = hsv(rng, (0.52, 0.62), (0.15, 0.45), (0.85, 1.0))
-    low = hsv(rng, (0.0, 1.0), (0.0, 0.2), (0.75, 0.95))
+    top = hsv(rng, (0.52, 0.62), (0.15, 0.45), (0.85, 1.0), emissive=True)
+    low = hsv(rng, (0.0, 1.0), (0.0, 0.2), (0.75, 0.95), emissive=True)
     return Material(SKY, top, low, scale=1.0, contrast=float(rng.uniform(0.1, 0.3)), seed=_seed(rng))
 
 

@@ -4,7 +4,9 @@ One ray per pixel through the exact pixel centre (pixel (u, v) is centred at (u,
 coordinates), so depth is the z-depth of that ray's first hit. Shading depends only on the surface
 point and the lights (Lambertian point lights with a soft distance falloff, one shadow-casting
 light, ambient with darkening along room edges); nothing depends on the camera, so every surface
-point has the same colour in every view. Ceiling pixels are labelled IGNORE_ID (ScanNet-20 has
+point has the same colour in every view (up to sensor noise). A scene's camera has a tone curve
+rgb = (1 - exp(-k x)) ** (1 / gamma) and optional Gaussian sensor noise, drawn per view from the scene's noise seed
+and the view's index. Ceiling pixels are labelled IGNORE_ID (ScanNet-20 has
 no ceiling class).
 """
 
@@ -15,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
+from sray.data_tools.synth.domains import view_gains
 from sray.data_tools.synth.furniture import CLS
 from sray.data_tools.synth.geometry import PackedBoxes, box_normals, cast_rays, cast_shell
 from sray.data_tools.synth.materials import UNLIT_KINDS
@@ -37,16 +40,29 @@ class RenderScene:
     """Materials of the P boxes, then of the walls, floor and ceiling (indices P, P+1, P+2)."""
     exposure: float
     """Brightness scale applied before tone mapping."""
+    tone: tuple[float, float] = (1.6, 2.2)
+    """(k, gamma) of the tone curve (module docstring)."""
+    noise_sigma: float = 0.0
+    """Sensor noise sigma in 8-bit levels (0 = none)."""
+    noise_seed: int = 0
+    """Seed of the sensor noise and of the per-view gains (with the view's index)."""
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """Per-channel white-balance gains of the room (``domains.room_tint``)."""
+    randomise: float = 0.0
+    """Strength of the per-view exposure and channel gains (``domains.view_gains``; 0 = none)."""
 
     @classmethod
-    def prepare(cls, room: Room, exposure: float = 1.0) -> RenderScene:
-        """Pack a room's boxes and materials."""
+    def prepare(cls, room: Room, exposure: float = 1.0, tone: tuple[float, float] = (1.6, 2.2),
+                noise_sigma: float = 0.0, noise_seed: int = 0, tint: tuple[float, float, float] = (1.0, 1.0, 1.0),
+                randomise: float = 0.0) -> RenderScene:
+        """Pack a room's boxes and materials; the camera's exposure, tone curve and noise as the fields say."""
         boxes = PackedBoxes.from_boxes(room.boxes)
         shell_half = np.tile(np.array(room.size) / 2, (3, 1))
         table = MaterialTable.build(boxes.materials + [room.wall, room.floor, room.ceiling],
                                     np.concatenate([boxes.half, shell_half]),
                                     np.concatenate([boxes.quarter, [0, 0, 0]]))
-        return cls(room=room, boxes=boxes, materials=table, exposure=exposure)
+        return cls(room=room, boxes=boxes, materials=table, exposure=exposure, tone=tone, noise_sigma=noise_sigma,
+                   noise_seed=noise_seed, tint=tint, randomise=randomise)
 
 
 def pixel_directions(K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
@@ -122,9 +138,10 @@ def _lighting(scene: RenderScene, points: np.ndarray, normals: np.ndarray) -> np
     return light
 
 
-def render_view(scene: RenderScene, K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int]
+def render_view(scene: RenderScene, K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int], view_index: int = 0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Render (rgb uint8 (H, W, 3), depth float32 (H, W) z-depth in metres, label uint16 (H, W))."""
+    """Render (rgb uint8 (H, W, 3), depth float32 (H, W) z-depth in metres, label uint16 (H, W)); ``view_index``
+    seeds the view's sensor noise (with the scene's ``noise_seed``)."""
     h, w = hw
     origin = np.asarray(c2w, np.float64)[:3, 3]
     dirs = pixel_directions(np.asarray(K, np.float64), np.asarray(c2w, np.float64), hw)
@@ -148,6 +165,14 @@ def render_view(scene: RenderScene, K: np.ndarray, c2w: np.ndarray, hw: tuple[in
     colour = albedo(scene.materials, surface, q, n_axis)
     lit = ~np.isin(scene.materials.kind[surface], UNLIT_KINDS)
     colour[lit] *= _lighting(scene, points[lit], normals[lit]) * scene.exposure
-    tone = 1.0 - np.exp(-1.6 * colour)
-    rgb = np.round(255.0 * np.clip(tone, 0, 1) ** (1 / 2.2)).astype(np.uint8)
+    if scene.randomise > 0 or scene.tint != (1.0, 1.0, 1.0):
+        gains = np.asarray(scene.tint) * view_gains(scene.randomise, np.random.default_rng([scene.noise_seed,
+                                                                                            view_index, 1]))
+        colour *= gains.astype(np.float32)[None, :]
+    k, gamma = scene.tone
+    encoded = 255.0 * np.clip(1.0 - np.exp(-k * colour), 0, 1) ** (1 / gamma)
+    if scene.noise_sigma > 0:
+        encoded = encoded + np.random.default_rng([scene.noise_seed, view_index]).normal(0.0, scene.noise_sigma,
+                                                                                         encoded.shape)
+    rgb = np.round(np.clip(encoded, 0.0, 255.0)).astype(np.uint8)
     return rgb.reshape(h, w, 3), t.reshape(h, w).astype(np.float32), label.reshape(h, w).astype(np.uint16)

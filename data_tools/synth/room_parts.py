@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
+from sray.data_tools.synth import catalog as cat
+from sray.data_tools.synth import content as ct
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.floor_plan import FloorPlan
@@ -12,10 +14,13 @@ from sray.data_tools.synth.furniture import Piece, span
 
 
 def add_door(rng: np.random.Generator, plan: FloorPlan, width: tuple[float, float] = (0.8, 0.95)) -> bool:
-    """A closed door on a random wall, with a clear floor area in front; returns success."""
-    w = float(rng.uniform(*width))
+    """A closed door of a random style (``catalog.door``; a double door one time in eight, in rooms whose door may be
+    wide) on a random wall, with a clear floor area in front; returns success."""
     h = min(float(rng.uniform(2.0, 2.1)), plan.size[2] - 0.2)
-    piece = fx.door(rng, w, h)
+    if width[1] >= 0.9 and rng.random() < 0.125:
+        piece = ct.double_door(rng, float(rng.uniform(1.2, 1.5)), h)
+    else:
+        piece = cat.door(rng, float(rng.uniform(*width)), h)
     for wall in rng.permutation(4):
         s = plan.try_wall(rng, piece, int(wall), z_range=(0.0, plan.size[2]), gap=0.0, occupies_floor=False,
                           margin=0.12)
@@ -83,6 +88,23 @@ def add_pictures(rng: np.random.Generator, plan: FloorPlan, count: int) -> int:
                 placed += 1
                 break
     return placed
+
+
+def add_rug(rng: np.random.Generator, plan: FloorPlan, prob: float, size: tuple[float, float] = (1.0, 2.2)) -> bool:
+    """With probability ``prob``, a rug (labelled floor, ``content.rug``) on a free stretch of floor; returns
+    whether one was laid."""
+    if rng.random() >= prob:
+        return False
+    w, d = float(rng.uniform(*size)), float(rng.uniform(0.6, 0.75)) * float(rng.uniform(*size))
+    piece = ct.rug(rng, w, d)
+    lx, ly, _ = plan.size
+    for _ in range(12):
+        x, y = float(rng.uniform(w / 2, lx - w / 2)) if lx > w else lx / 2, float(rng.uniform(0, ly))
+        yaw = 0.0 if rng.random() < 0.5 else np.pi / 2
+        if plan.is_free(plan.footprint(piece, x, y, yaw), clearance=0.0):
+            plan.add(piece, x, y, yaw, occupies_floor=False)
+            return True
+    return False
 
 
 def add_floor_clutter(rng: np.random.Generator, plan: FloorPlan, count: int) -> int:

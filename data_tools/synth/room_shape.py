@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sray.data_tools.synth import domains
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.floor_plan import FloorPlan
 from sray.data_tools.synth.furniture import CLS, Piece, span
@@ -34,10 +35,10 @@ def _solid(rng: np.random.Generator, plan: FloorPlan, rect: tuple[float, float, 
     plan.add(block, (x0 + x1) / 2, (y0 + y1) / 2, 0.0)
 
 
-def add_corner_block(rng: np.random.Generator, plan: FloorPlan) -> None:
-    """Cut a block out of a random corner: the room becomes L-shaped."""
+def add_corner_block(rng: np.random.Generator, plan: FloorPlan, corner: int | None = None) -> None:
+    """Cut a block out of a corner (random unless given): the room becomes L-shaped."""
     lx, ly, h = plan.size
-    k = int(rng.integers(4))                       # corner k is where wall k starts and wall k-1 ends
+    k = int(rng.integers(4)) if corner is None else corner  # corner k is where wall k starts and wall k-1 ends
     start, tangent, normal = plan.wall_frame(k)
     along = float(rng.uniform(0.5, 0.3 * plan.wall_length(k)))
     across = float(rng.uniform(0.5, 0.3 * plan.wall_length((k - 1) % 4)))
@@ -66,9 +67,14 @@ def add_column(rng: np.random.Generator, plan: FloorPlan) -> None:
 
 
 def shaped_plan(rng: np.random.Generator, size: tuple[float, float, float]) -> FloorPlan:
-    """An empty floor plan of the given interior extents, sometimes L-shaped, sometimes with a column."""
+    """An empty floor plan of the given interior extents, sometimes L-shaped, sometimes with a column; a
+    geometry-shifted room always loses two opposite corners (a Z-shaped room, which no training room is)."""
     plan = FloorPlan(size)
-    if rng.random() < L_SHAPE_PROB:
+    if domains.current().geometry_shift:
+        first = int(rng.integers(4))
+        add_corner_block(rng, plan, first)
+        add_corner_block(rng, plan, (first + 2) % 4)
+    elif rng.random() < L_SHAPE_PROB:
         add_corner_block(rng, plan)
     if rng.random() < COLUMN_PROB:
         add_column(rng, plan)

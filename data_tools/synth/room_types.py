@@ -13,11 +13,13 @@ import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import catalog as cat
+from sray.data_tools.synth import content as ct
+from sray.data_tools.synth import domains
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import furniture as fu
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.floor_plan import FloorPlan
-from sray.data_tools.synth.room_parts import add_door, add_pictures, add_window
+from sray.data_tools.synth.room_parts import add_door, add_pictures, add_rug, add_window
 from sray.data_tools.synth.room_shape import shaped_plan
 
 Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Material]]
@@ -26,10 +28,12 @@ Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Mate
 def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
           h: tuple[float, float]) -> FloorPlan:
     """An empty floor plan (maybe L-shaped or with a column) of a size drawn from the ranges, which one
-    scale factor per room widens (0.9-1.2)."""
-    scale = float(rng.uniform(0.9, 1.2))
+    scale factor per room widens (``domains.TRAIN_SCALE``); a geometry-shifted room is scaled by
+    ``domains.HELD_OUT_SCALE`` and has a ceiling in ``domains.HELD_OUT_CEILING``."""
+    shifted = domains.current().geometry_shift
+    scale = float(rng.uniform(*(domains.HELD_OUT_SCALE if shifted else domains.TRAIN_SCALE)))
     return shaped_plan(rng, (scale * float(rng.uniform(*lx)), scale * float(rng.uniform(*ly)),
-                             float(rng.uniform(*h))))
+                             float(rng.uniform(*(domains.HELD_OUT_CEILING if shifted else h)))))
 
 
 def _walls(rng: np.random.Generator) -> list[int]:
@@ -38,9 +42,11 @@ def _walls(rng: np.random.Generator) -> list[int]:
 
 def _anywhere_on_walls(rng: np.random.Generator, plan: FloorPlan, piece: fu.Piece,
                        z_range: tuple[float, float] | None = None) -> tuple[int, float] | None:
-    """Try every wall in random order; returns (wall, s) of the placement or None."""
+    """Try every wall in random order; returns (wall, s) of the placement or None. In a geometry-shifted room the
+    piece stands ``domains.HELD_OUT_WALL_GAP`` off the wall."""
+    gap = float(rng.uniform(*domains.HELD_OUT_WALL_GAP)) if domains.current().geometry_shift else 0.015
     for wall in _walls(rng):
-        s = plan.try_wall(rng, piece, wall, z_range=z_range)
+        s = plan.try_wall(rng, piece, wall, z_range=z_range, gap=gap)
         if s is not None:
             return wall, s
     return None
@@ -71,6 +77,8 @@ def _dining_set(rng: np.random.Generator, plan: FloorPlan, chairs: int) -> None:
     tw, td = float(rng.uniform(0.9, 1.6)), float(rng.uniform(0.7, 0.95))
     table = cat.table(rng, tw, td)
     yaw = 0.0 if rng.random() < 0.5 else math.pi / 2
+    if domains.current().geometry_shift:
+        yaw = float(rng.uniform(math.pi / 8, 3 * math.pi / 8))
     for _ in range(10):
         x, y = lx / 2 + float(rng.uniform(-0.5, 0.5)), ly / 2 + float(rng.uniform(-0.5, 0.5))
         if plan.try_floor(table, x, y, yaw, clearance=0.6):
@@ -107,6 +115,7 @@ def bedroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
         _anywhere_on_walls(rng, plan, cat.bookshelf(rng, float(rng.uniform(0.6, 1.2))))
     _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     add_pictures(rng, plan, int(rng.integers(1, 4)))
+    add_rug(rng, plan, 0.5)
     return plan, mat.wall_paint(rng), mat.floor_surface(rng)
 
 
@@ -125,8 +134,7 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
         gap = sofa.depth / 2 + float(rng.uniform(0.35, 0.5)) + ctd / 2
         tx, ty = x + dx * gap, y + dy * gap
         if rng.random() < 0.5:
-            rug = fu.Piece([fu.span(IGNORE_ID, mat.fabric(rng), -ctw / 2 - 0.4, ctw / 2 + 0.4, -ctd / 2 - 0.5,
-                                    ctd / 2 + 0.5, 0.0, 0.008)], ctw + 0.8, ctd + 1.0, 0.008)
+            rug = ct.rug(rng, ctw + 0.8, ctd + 1.0)
             if plan.is_free(plan.footprint(rug, tx, ty, yaw), clearance=-0.02):
                 plan.add(rug, tx, ty, yaw, occupies_floor=False)
         if plan.try_floor(cat.table(rng, ctw, ctd, float(rng.uniform(0.38, 0.48))), tx, ty, yaw):
@@ -153,8 +161,23 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
     return plan, mat.wall_paint(rng), mat.floor_surface(rng)
 
 
+def _island(rng: np.random.Generator, plan: FloorPlan, wall: int) -> None:
+    """Half the time, a kitchen island parallel to the counter run on ``wall``, 1.0-1.3 m in front of it, with
+    stools (labelled chair) along its far side."""
+    if rng.random() >= 0.5:
+        return
+    w, d = float(rng.uniform(1.2, 2.0)), float(rng.uniform(0.6, 0.9))
+    s = plan.wall_length(wall) / 2 + float(rng.uniform(-0.3, 0.3))
+    x, y, yaw = plan.wall_pose(wall, s, d, 0.62 + float(rng.uniform(1.0, 1.3)))
+    if plan.try_floor(ct.kitchen_island(rng, w, d), x, y, yaw, clearance=0.5):
+        for k in range(int(rng.integers(0, 3))):
+            _chair_facing(rng, plan, x + (k - 0.5) * 0.5 * math.cos(yaw), y + (k - 0.5) * 0.5 * math.sin(yaw), yaw,
+                          d / 2 + 0.05)
+
+
 def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
-    """Counter run with base and wall cabinets and a sink, fridge, dining table and chairs, bin."""
+    """Counter run with base and wall cabinets and a sink, fridge, maybe an island, dining table and chairs, bin,
+    maybe a runner rug."""
     plan = _plan(rng, (3.4, 5.2), (3.0, 4.6), (2.4, 2.8))
     add_door(rng, plan)
     add_window(rng, plan, sill=(1.0, 1.15), curtain_prob=0.3)
@@ -170,6 +193,7 @@ def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
                 break
         else:
             _anywhere_on_walls(rng, plan, fridge)
+        _island(rng, plan, wall)
         z0 = float(rng.uniform(1.45, 1.6))
         z1 = min(plan.size[2] - 0.05, z0 + float(rng.uniform(0.6, 0.8)))
         for k in range(2):
@@ -184,6 +208,7 @@ def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
                                                  float(rng.uniform(1.8, min(2.1, plan.size[2] - 0.2)))))
     _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     add_pictures(rng, plan, int(rng.integers(1, 3)))
+    add_rug(rng, plan, 0.3, size=(0.8, 1.6))
     return plan, mat.wall_paint(rng), mat.floor_surface(rng, wet_room=rng.random() < 0.6)
 
 
@@ -232,7 +257,10 @@ def office(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mater
         _anywhere_on_walls(rng, plan, cat.sofa(rng, float(rng.uniform(1.4, 2.0))))
     if rng.random() < 0.7:
         _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
+    if rng.random() < 0.3:
+        _anywhere_on_walls(rng, plan, ct.mini_fridge(rng))
     add_pictures(rng, plan, int(rng.integers(1, 4)))
+    add_rug(rng, plan, 0.4)
     return plan, mat.wall_paint(rng), mat.floor_surface(rng)
 
 

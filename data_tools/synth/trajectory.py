@@ -14,10 +14,11 @@ import math
 
 import numpy as np
 
+from sray.data_tools.synth import domains
 from sray.data_tools.synth.geometry import PackedBoxes
 
 HEIGHT_RANGE = (1.0, 1.85)
-"""Camera height band in metres."""
+"""Camera height band of training scans in metres."""
 WALL_CLEARANCE = 0.35
 """Minimum distance of a camera centre from any wall, floor or ceiling (metres)."""
 BOX_MARGIN = 0.25
@@ -107,18 +108,21 @@ def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_vie
     """One random path: eyes (n, 3), look-at targets (n, 3) and roll angles (n,) in radians.
 
     Path style: an arc of an ellipse (70 %) or a straight walk (30 %); the camera's base height and
-    the height it looks at (its pitch) are drawn per path.
+    the height it looks at (its pitch) are drawn per path: in the training bands, or in a geometry-shifted
+    room in ``domains.HELD_OUT_CAMERA`` and ``domains.HELD_OUT_LOOK`` (low, looking level or up).
     """
     lx, ly, _ = size
+    shifted = domains.current().geometry_shift
+    heights = domains.HELD_OUT_CAMERA if shifted else HEIGHT_RANGE
+    look = domains.HELD_OUT_LOOK if shifted else (0.2, 1.3)
     s = np.linspace(0.0, 1.0, n_views)
     x, y, heading = (_arc if rng.random() < 0.7 else _walk)(rng, size, s)
-    z = np.clip(float(rng.uniform(HEIGHT_RANGE[0] + 0.05, HEIGHT_RANGE[1] - 0.1)) + _wobble(rng, s, 0.1, (1.0, 4.0)),
-                *HEIGHT_RANGE)
+    z = np.clip(float(rng.uniform(heights[0] + 0.05, heights[1] - 0.1)) + _wobble(rng, s, 0.1, (1.0, 4.0)), *heights)
     dx, dy = np.cos(heading), np.sin(heading)
     with np.errstate(divide="ignore"):
         to_wall = np.minimum(np.where(dx > 0, (lx - x) / dx, -x / dx), np.where(dy > 0, (ly - y) / dy, -y / dy))
     reach = np.maximum(0.6, (to_wall - 0.4) * float(rng.uniform(0.6, 1.0)))
-    tz = float(rng.uniform(0.2, 1.3)) + _wobble(rng, s, 0.25, (0.5, 3.0))
+    tz = float(rng.uniform(*look)) + _wobble(rng, s, 0.25, (0.5, 3.0))
     roll = np.radians(_wobble(rng, s, 2.5, (1.0, 4.0)))
     return np.stack([x, y, z], axis=1), np.stack([x + reach * dx, y + reach * dy, tz], axis=1), roll
 

@@ -17,11 +17,12 @@ Either way the shards are then verified against the manifest's sizes and sha256 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from sray.data_tools.shards.manifest import MANIFEST_NAME, Manifest, read_manifest, verify_shards
 from sray.data_tools.shards.writer import write_shards
+from sray.data_tools.synth import domains
 from sray.data_tools.synth.dataset import generate_dataset, scene_name, scene_seed
 
 SCENES, SHARDS = "scenes", "shards"
@@ -46,6 +47,32 @@ class World:
     """Dataset seed; each scene's own seed is derived from it."""
     neighbours: int = 32
     """Ranked source views kept per view in the shards (a loader's ``top_k`` must not exceed it)."""
+    split: str = "in-distribution"
+    """Region the test scenes are drawn from, one of ``domains.SPLITS``: ``in-distribution``, ``validation`` (the
+    training distribution, rooms of their own), ``appearance-shift`` or ``geometry-shift`` (held-out regions no
+    training room samples; docs/data.md, "Shifted test splits"). Training scenes are always in-distribution."""
+
+    randomise: float = 0.0
+    """Strength (0-1) of the appearance randomisation of the training scenes (per surface, per room, per view;
+    ``domains``, docs/data.md); 0 = off. Test scenes never get it: worlds that differ only here share their tests."""
+
+    def __post_init__(self) -> None:
+        """ValueError naming the valid splits or the randomisation's range."""
+        domains.domain_of(self.split)
+        domains.domain_of("in-distribution", self.randomise)
+
+
+SPLIT_RESULTS = {"zero_shot": "in-distribution", "validation": "validation",
+                 "zero_shot_appearance": "appearance-shift", "zero_shot_geometry": "geometry-shift"}
+"""Result names of the evaluation splits (docs/studies: ``metrics`` keys) and the split each world is drawn from."""
+
+
+def evaluation_worlds(world: World, rooms: int = 16) -> dict[str, World]:
+    """The evaluation worlds of a training world by result name (:data:`SPLIT_RESULTS`): ``rooms`` test rooms each
+    and no training room, at its views, image size, seed and neighbours, in-distribution, validation,
+    appearance-shifted and geometry-shifted. None of their rooms is one of ``world``'s training rooms."""
+    return {name: replace(world, train_scenes=0, test_scenes=rooms, split=split)
+            for name, split in SPLIT_RESULTS.items()}
 
 
 class WorldFolderError(ValueError):
@@ -59,14 +86,19 @@ def recorded_differences(world: World, manifest: Manifest) -> list[str]:
     roles = [s.meta.get("role") for s in scenes]
     recorded = {"train_scenes": roles.count("train"), "test_scenes": roles.count("test"),
                 "views": _one({s.n_views for s in scenes}), "height": _one({s.image_size[0] for s in scenes}),
-                "width": _one({s.image_size[1] for s in scenes}), "neighbours": manifest.neighbours.get("k")}
+                "width": _one({s.image_size[1] for s in scenes}), "neighbours": manifest.neighbours.get("k"),
+                "split": _one({s.meta.get("extra", {}).get("split", "in-distribution") for s in scenes
+                               if s.meta.get("role") == "test"} or {"in-distribution"}),
+                "randomise": _one({float(s.meta.get("extra", {}).get("randomise", 0.0)) for s in scenes
+                                   if s.meta.get("role") == "train"} or {world.randomise})}
     asked = asdict(world)
     problems = [f"{name} {value} (asked {asked[name]})" for name, value in recorded.items() if value != asked[name]]
     if recorded["train_scenes"] == world.train_scenes and recorded["test_scenes"] == world.test_scenes:
         for role, count in (("train", world.train_scenes), ("test", world.test_scenes)):
             for i in range(count):
                 entry = manifest.scenes.get(scene_name(role, i))
-                if entry is None or entry.meta.get("extra", {}).get("seed") != scene_seed(world.seed, role, i):
+                split = world.split if role == "test" else "in-distribution"
+                if entry is None or entry.meta.get("extra", {}).get("seed") != scene_seed(world.seed, role, i, split):
                     return [*problems, f"seed: scene {scene_name(role, i)} was not generated from seed {world.seed}"]
     return problems
 
@@ -96,7 +128,7 @@ def make_world(world: World, root: Path, progress: bool = True, workers: int = 1
     else:
         generate_dataset(root / SCENES, n_train=world.train_scenes, n_test=world.test_scenes, n_views=world.views,
                          height=world.height, width=world.width, seed=world.seed, progress=progress,
-                         workers=workers)
+                         workers=workers, split=world.split, randomise=world.randomise)
         write_shards(root / SCENES, shards, neighbours=world.neighbours, progress=progress)
     damaged = verify_shards(shards)
     if damaged:

@@ -1,6 +1,6 @@
-"""``sray bench loader|model|profile|recipe-step|speed-accuracy|accuracy|ceilings|view-weights|segmenter|recipe-cards``:
+"""``sray bench loader|model|profile|speed-accuracy|segmenter``: the benchmarks a user runs on their own setup;
 measured tables, printed, stored as data beside their charts and rendered into docs/benchmarks.md (one section per
-benchmark and device); ``recipe-cards`` reads stored results into the README's cards as well."""
+benchmark and device). The studies and diagnostics are the lab's (``sray lab``, lab/cli.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 from sray.jobs.bench.speed_methods import other_methods
 
-BENCH_SUBCOMMAND_MODULES = ("sray.jobs.bench.ceilings_command",)
+BENCH_SUBCOMMAND_MODULES = ("sray.jobs.bench.segmenter_command",)
 """Modules that register more sub-benchmarks (each exposes ``register(kinds)``), listed after ``accuracy``."""
 
 
@@ -82,106 +82,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     speed.set_defaults(func=_bench_speed_accuracy)
 
-    accuracy = kinds.add_parser("accuracy", help="zero-shot mIoU with seeds (resumable cells), the attention "
-                                "ablation, the registered per-scene methods at equal finetune budgets")
-    accuracy.add_argument("--preset", choices=["cpu-small", "gpu"], default="cpu-small",
-                          help="cpu-small: 2 CPU cores, over several runs of about an hour; gpu: for a GPU machine")
-    accuracy.add_argument("--cells", nargs="+", default=None, metavar="VARIANT:SEED",
-                          help="run only these cells of the preset's plan, e.g. long:0 full:1 (default: every "
-                               "missing one)")
-    accuracy.add_argument("--max-minutes", type=float, default=None,
-                          help="start no new cell after this many minutes (the tables are written either way)")
-    accuracy.add_argument("--no-fleet", action="store_true", help="skip the finetune comparison")
-    accuracy.add_argument("--segmenter", type=Path, default=None,
-                          help="2D segmenter folder (`sray bench segmenter`): the fleet comparison then includes "
-                               "2d-transfer, whose requirement it is (every registered method whose requirements are "
-                               "met is compared)")
-    accuracy.add_argument("--step-times", action="store_true",
-                          help="also time one pretraining step of every stored variant side by side (fresh "
-                               "processes, alternating) and chart zero-shot mIoU against it")
-    accuracy.add_argument("--out", type=Path, default=None,
-                          help="work folder, reused by later runs (default: outputs/bench-accuracy/<preset>)")
-    accuracy.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
-    accuracy.set_defaults(func=_bench_accuracy)
-
     for name in BENCH_SUBCOMMAND_MODULES:
         importlib.import_module(name).register(kinds)
 
-    step = kinds.add_parser("recipe-step", help="where a recipe's ray step or 2D warm-up step spends its CPU (loading, "
-                            "encoder, fields, backward, Adam) on real shards, beside its step-cost levers")
-    step.add_argument("--recipe", default="synth-cpu-hour", help="the recipe whose step is measured")
-    step.add_argument("--data", type=Path, required=True, help="shard folder with the recipe's training scenes")
-    step.add_argument("--lever", nargs="+", action="append", default=[], metavar=("NAME", "SECTION.FIELD=VALUE"),
-                      help="a variant: its name, then its overrides (repeatable): --lever r128 data.rays_per_batch=128")
-    step.add_argument("--phase", choices=("rays", "2d"), default="rays", help="a ray step, or a 2D warm-up step")
-    step.add_argument("--steps", type=int, default=20, help="measured steps per variant and round")
-    step.add_argument("--rounds", type=int, default=3, help="rounds, the variants alternating")
-    step.add_argument("--warm-up", type=int, default=3, help="unmeasured steps per variant first")
-    step.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
-    step.set_defaults(func=_bench_recipe_step)
-
-    cards = kinds.add_parser("recipe-cards", help="regenerate the recipe cards (README and docs/benchmarks.md) from "
-                             "stored results: time, memory and accuracy of every recipe on every machine")
-    cards.add_argument("--results", type=Path, required=True, metavar="LIST_JSON",
-                       help="JSON list of each recipe's stored results per machine (format: docs/benchmarks.md, "
-                            "'Recipe cards'); paths relative to its folder")
-    cards.add_argument("--readme", type=Path, default=Path("README.md"),
-                       help="file whose recipe-cards markers enclose the table")
-    cards.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
-    cards.set_defaults(func=_bench_recipe_cards)
-
-
-def _bench_recipe_cards(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.recipe_cards import run_recipe_cards
-
-    try:
-        run_recipe_cards(args.results, args.readme, args.doc)
-    except ValueError as e:
-        print(f"sray bench recipe-cards: {e}", file=sys.stderr)
-        return 2
-    print(f"[bench] recipe cards written into {args.readme} and {args.doc}")
-    return 0
-
-
-def _bench_recipe_step(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.recipe_step import run_recipe_step
-
-    try:
-        run_recipe_step(args.recipe, args.data, args.lever, args.steps, args.rounds, args.warm_up, args.doc, args.phase)
-    except (FileNotFoundError, ValueError) as e:
-        print(f"sray bench recipe-step: {e}", file=sys.stderr)
-        return 2
-    return 0
-
-
-def _bench_accuracy(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.accuracy import run_accuracy_benchmark
-    from sray.jobs.bench.accuracy_cells import cell_errors
-    from sray.jobs.bench.accuracy_fleet import compared_methods, fleet_config
-    from sray.jobs.bench.accuracy_plan import PRESETS, Cell
-
-    try:
-        cells = None if args.cells is None else [Cell.parse(c) for c in args.cells]
-        unplanned = [c.key for c in cells or [] if c not in PRESETS[args.preset].plan]
-        if unplanned:
-            raise ValueError(f"{', '.join(unplanned)} not in the {args.preset} plan "
-                             f"({', '.join(c.key for c in PRESETS[args.preset].plan)})")
-    except ValueError as e:
-        print(f"sray bench accuracy: --cells: {e}", file=sys.stderr)
-        return 2
-    try:  # a given segmenter that does not load stops the command before any cell runs
-        compared_methods(fleet_config(PRESETS[args.preset], args.segmenter))
-    except FileNotFoundError as e:
-        print(f"sray bench accuracy: --segmenter: {e}", file=sys.stderr)
-        return 2
-    out = args.out or Path("outputs/bench-accuracy") / args.preset
-    run_accuracy_benchmark(args.preset, out, args.doc, cells, args.max_minutes, fleet=not args.no_fleet,
-                           step_times=args.step_times, segmenter=args.segmenter)
-    failed = cell_errors(out)
-    if failed:
-        print(f"sray bench accuracy: cells {', '.join(failed)} failed (errors in the tables); a re-run runs them "
-              "again", file=sys.stderr)
-    return 1 if failed else 0
 
 
 def _bench_profile(args: argparse.Namespace) -> int:
@@ -207,7 +110,7 @@ def _bench_speed_accuracy(args: argparse.Namespace) -> int:
 
 
 def _bench_loader(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.doc import record
+    from sray.platform.common.bench_doc import record
     from sray.jobs.bench.loader_throughput import LOADER, run_loader_benchmark
 
     title, table, notes = run_loader_benchmark(args.data, batches=args.batches)
@@ -216,7 +119,7 @@ def _bench_loader(args: argparse.Namespace) -> int:
 
 
 def _bench_model(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.doc import record
+    from sray.platform.common.bench_doc import record
     from sray.jobs.bench.model_cost import MODEL, run_model_benchmark
     from sray.jobs.bench.official_code import official_side_by_side
 

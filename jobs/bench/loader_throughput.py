@@ -12,7 +12,7 @@ from sray.data_tools.loader.shard_loader import make_train_loader
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import read_manifest
 from sray.data_tools.synth.world import World, make_world
-from sray.jobs.bench.doc import Bench
+from sray.platform.common.bench_doc import Bench
 
 LOADER = Bench("loader", "Shard loader")
 """The benchmark's section in docs/benchmarks.md."""

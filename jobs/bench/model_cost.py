@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import torch
 from torch.nn.attention import SDPBackend
 
-from sray.jobs.bench.doc import Bench
+from sray.platform.common.bench_doc import Bench
 from sray.jobs.bench.probes import (
     attention_call,
     attention_case,

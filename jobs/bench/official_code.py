@@ -15,7 +15,7 @@ import json
 import statistics
 from pathlib import Path
 
-from sray.jobs.bench.doc_blocks import markdown_table
+from sray.platform.common.doc_blocks import markdown_table
 
 TITLE = "Official S-Ray code against sray, same run"
 SRAY_DEFAULT = "sray default (no THP)"

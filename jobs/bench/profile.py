@@ -20,10 +20,10 @@ import torch
 from torch.profiler import ProfilerActivity, profile
 
 from sray.jobs.bench.attention_keys import key_length_table
-from sray.jobs.bench.doc import Bench, record
 from sray.jobs.bench.render_levers import chunk_table, kernel_table
 from sray.jobs.bench.workloads import make_train_step, render_case
 from sray.model.ray_chunks import CUDA_RENDER_RAYS, render_chunk_rays, train_piece_rays
+from sray.platform.common.bench_doc import Bench, record
 
 TOP_OPS = 18
 """Operators listed per profile."""

@@ -27,7 +27,6 @@ import torch
 
 from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.shard_loader import make_eval_samples
-from sray.jobs.bench.doc import Bench
 from sray.jobs.bench.render_default import DefaultChoice
 from sray.jobs.bench.speed_classes import class_scores
 from sray.jobs.bench.speed_store import row_key, store_rows, stored_rows
@@ -37,6 +36,7 @@ from sray.model.ray_chunks import CUDA_RENDER_RAYS
 from sray.model.runtime import Runtime
 from sray.model.view_render import RayRenderer
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.common.bench_doc import Bench
 from sray.platform.common.eval_protocol import inputs_name
 from sray.platform.eval.eval_model import EvalModel
 from sray.platform.eval.scene_scoring import score_scene

@@ -18,7 +18,6 @@ import os
 import time
 from pathlib import Path
 
-from sray.jobs.bench.doc import bench_dir, record
 from sray.jobs.bench.render_default import MAX_CLASS_LOSS, MAX_MIOU_LOSS, MIN_CLASS_SHARE, DefaultChoice
 from sray.jobs.bench.speed_accuracy import SPEED, measure, paired_settings, select_settings, table, table_title
 from sray.jobs.bench.speed_chart import chart
@@ -27,6 +26,7 @@ from sray.jobs.bench.speed_methods import method_models
 from sray.jobs.bench.speed_verdict import checkpoint_label, rule_choice, todays_settings, verdict_table
 from sray.jobs.methods.flags import flags_reading
 from sray.model.ray_chunks import CUDA_RENDER_RAYS
+from sray.platform.common.bench_doc import bench_dir, record
 from sray.platform.common.eval_protocol import EvalProtocol, inputs_name
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.tracking.registry import get_tracker

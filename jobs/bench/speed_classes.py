@@ -13,9 +13,9 @@ import math
 
 from torch import Tensor
 
-from sray.jobs.bench.doc_blocks import markdown_table
 from sray.jobs.bench.render_default import Measured, counted_classes
 from sray.model.metrics import scene_metrics
+from sray.platform.common.doc_blocks import markdown_table
 
 MEAN_KEYS = ("miou", "psnr", "s_per_view", "wall_s_per_view")
 """Row values averaged over checkpoints by :func:`mean_rows`."""

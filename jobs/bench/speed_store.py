@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from sray.data_tools.atomic import atomic_write_json
+from sray.platform.common.machine import describe_machine
 
 
 def row_key(checkpoint: Path, checkpoint_rgbd: Path | None, shards: Path, views_per_scene: int, setting: Any,
@@ -45,7 +46,8 @@ def stored_rows(store: Path, key: dict[str, Any]) -> list[dict[str, Any]] | None
 
 
 def store_rows(store: Path, key: dict[str, Any], rows: list[dict[str, Any]]) -> Path:
-    """Write one setting's ``rows`` under ``key`` (atomically); returns the file."""
+    """Write one setting's ``rows`` under ``key`` (atomically) with the machine that measured them
+    (``describe_machine``); returns the file."""
     path = _path(store, key)
-    atomic_write_json(path, {"key": key, "rows": rows})
+    atomic_write_json(path, {"key": key, "rows": rows, "machine": describe_machine()})
     return path

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sray.jobs.bench.doc_blocks import markdown_table
 from sray.jobs.bench.render_default import DefaultChoice, choose_default, todays_defaults
 from sray.jobs.bench.speed_accuracy import Setting
 from sray.jobs.bench.speed_classes import measured
+from sray.platform.common.doc_blocks import markdown_table
 
 
 def rule_choice(rows: list[dict], settings: list[Setting]) -> DefaultChoice | None:

@@ -42,8 +42,12 @@ def run(args: argparse.Namespace) -> int:
         return 1
     scene_files = [args.path / "scene.json"] if (args.path / "scene.json").exists() else \
         [args.path / name / "scene.json" for name in _scene_names(args.path)]
-    n_views = sum(len(json.loads(f.read_text())["view_ids"]) for f in scene_files)
-    print(f"OK: {len(scene_files)} scene{'s' * (len(scene_files) != 1)}, {n_views} views in {args.path}, no problems")
+    metas = [json.loads(f.read_text()) for f in scene_files]
+    n_views = sum(len(m["view_ids"]) for m in metas)
+    unlabelled = sum(m.get("labelled", True) is False for m in metas)
+    note = f" ({unlabelled} without labels: inference only, `sray label`)" if unlabelled else ""
+    print(f"OK: {len(scene_files)} scene{'s' * (len(scene_files) != 1)}{note}, {n_views} views in {args.path}, "
+          "no problems")
     return 0
 
 

@@ -46,12 +46,15 @@ def register(verbs: argparse._SubParsersAction) -> None:
                         ", ".join(f"{r.frame_skip} for {r.name}" for r in READERS.values()) + ")")
     p.add_argument("--depth-scale", type=float, default=1000.0,
                    help="depth PNG units per metre in the source (default 1000: millimetres)")
-    shared: dict[str, list[str]] = {}
+    shared: dict[str, dict[str, list[str]]] = {}  # option -> its help -> the readers giving that help
+    types = {}
     for reader in READERS.values():
         for option in reader.options:
-            shared.setdefault(option.name, []).append(f"{reader.name}: {option.help}")
+            shared.setdefault(option.name, {}).setdefault(option.help, []).append(reader.name)
+            types[option.name] = option.type
     for name, helps in shared.items():
-        p.add_argument(f"--{name.replace('_', '-')}", dest=name, type=Path, default=None, help="; ".join(helps))
+        p.add_argument(f"--{name.replace('_', '-')}", dest=name, type=types[name], default=None,
+                       help="; ".join(f"{', '.join(readers)}: {text}" for text, readers in helps.items()))
     p.add_argument("--holdout-every", type=int, default=20, metavar="N",
                    help="train scenes: hold out every N-th view as 'test' (0: none)")
     p.add_argument("--window-start", type=int, default=None, metavar="I",

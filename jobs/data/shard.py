@@ -43,6 +43,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"{len(m.scenes)} scenes, {sum(s.n_views for s in m.scenes.values())} views, {len(m.shards)} shards "
               f"({sum(s.bytes for s in m.shards) / 1e6:.1f} MB) in {args.out}: {len(result.written)} written, "
               f"{len(result.unchanged)} unchanged, {len(result.removed)} stale removed")
+        unlabelled = sorted(n for n, e in m.scenes.items() if e.meta.get("labelled", True) is False)
+        if unlabelled:
+            print(f"without labels (inference only: `sray label`; training refuses them): {', '.join(unlabelled)}")
     if args.verify:
         problems = verify_shards(args.out)
         for line in problems:

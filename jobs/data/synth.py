@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sray.data_tools.synth.domains import SPLITS
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray data synth`` to the ``sray data`` verbs."""
@@ -21,6 +23,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="dataset seed; same seed, identical files (default 0)")
     p.add_argument("--workers", type=int, default=1,
                    help="scenes rendered at once in separate processes (default 1); files do not depend on it")
+    p.add_argument("--split", default="in-distribution",
+                   choices=SPLITS,
+                   help="region the test scenes are drawn from (default in-distribution; training scenes always are): "
+                        "validation rooms, or appearance/geometry held out from every training room (docs/data.md)")
+    p.add_argument("--randomise", type=float, default=0.0,
+                   help="appearance randomisation of the training scenes, 0-1 (default 0 = off): per-surface colours, "
+                        "per-room white balance, per-view exposure, all inside the training region (docs/data.md)")
     p.set_defaults(func=_run)
 
 
@@ -29,8 +38,8 @@ def _run(args: argparse.Namespace) -> int:
 
     scenes = generate_dataset(args.out, n_train=args.train_scenes, n_test=args.test_scenes, n_views=args.views,
                               height=args.height, width=args.width, seed=args.seed, progress=True,
-                              workers=args.workers)
-    print(f"wrote {len(scenes)} procedural scenes ({args.train_scenes} train, {args.test_scenes} test, "
+                              workers=args.workers, split=args.split, randomise=args.randomise)
+    print(f"wrote {len(scenes)} procedural scenes ({args.train_scenes} train, {args.test_scenes} {args.split} test, "
           f"{args.views} views of {args.height}x{args.width}) to {Path(args.out).resolve()}")
     print(f"index: {Path(args.out).resolve() / 'dataset.json'}")
     return 0

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import torch
 
-from sray.jobs.bench.doc import Bench, record
+from sray.platform.common.bench_doc import Bench, record
 
 from . import (stage_bench, stage_env, stage_fleet, stage_precision, stage_profile, stage_ray, stage_recipe,
                stage_training)

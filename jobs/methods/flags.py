@@ -13,7 +13,8 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 REQUEST_FLAGS: dict[str, str] = {"--checkpoint": "checkpoint", "--segmenter": "segmenter", "--render": "fast",
-                                 "--fast-stride": "fast", "--fast-confidence": "fast"}
+                                 "--fast-stride": "fast", "--fast-confidence": "fast", "--fast-temperature": "fast",
+                                 "--calibrate": "fast"}
 """Command-line flag -> the ``EvalRequest`` field it sets."""
 
 

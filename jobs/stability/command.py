@@ -16,7 +16,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from sray.jobs.bench.doc import Bench, bench_dir, record
+from sray.platform.common.bench_doc import Bench, bench_dir, record
 from sray.platform.finetune.methods.registry import method_names
 from sray.platform.stability.axes import AXES
 from sray.platform.stability.presets import PRESETS

@@ -39,6 +39,9 @@ class HeldOutRender:
     fast_confidence: float = 0.9
     """Fast render: a ray whose coarse softmax maximum reaches this keeps its coarse result (> 1: every ray gets a
     fine pass)."""
+    fast_temperature: float = 1.0
+    """Fast render: the coarse logits are divided by this before that softmax (1 = uncalibrated; ``sray eval
+    --calibrate`` fits it on validation rooms)."""
 
     def check(self, name: Callable[[str], str]) -> None:
         """ValueError naming the first bad setting as ``name(field)`` spells it (``data.held_out.render``,
@@ -49,6 +52,9 @@ class HeldOutRender:
         if not 0.0 < self.fast_confidence:
             raise ValueError(f"{name('fast_confidence')} is {self.fast_confidence}; it must be > 0 (a value > 1 "
                              "gives every ray a fine pass)")
+        if not 0.0 < self.fast_temperature:
+            raise ValueError(f"{name('fast_temperature')} is {self.fast_temperature}; it must be > 0 (1 = "
+                             "uncalibrated)")
         for field in ("stride", "fast_stride"):
             if int(getattr(self, field)) < 1:
                 raise ValueError(f"{name(field)} is {getattr(self, field)}; it must be a positive integer")
@@ -58,7 +64,8 @@ class HeldOutRender:
 
     def fast(self) -> FastRender | None:
         """The fast render mode of these settings, None for the full render."""
-        return FastRender(self.fast_stride, self.fast_confidence) if self.render == "fast" else None
+        return (FastRender(self.fast_stride, self.fast_confidence, self.fast_temperature) if self.render == "fast"
+                else None)
 
     def sources(self, model_sources: int) -> int:
         """Source views per held-out view: ``n_source``, or ``model_sources`` (the model's) when it is 0."""

@@ -30,7 +30,7 @@ def synth_small() -> TrainConfig:
 
 
 DEMO_STEPS = 600
-"""``optim.steps`` of ``synth-demo``: about 6 minutes of wall time on the 2-core machine."""
+"""``optim.steps`` of ``synth-demo``: a few minutes of wall time on a 2-core machine, about half of the demo."""
 
 DEMO_WARMUP_2D = 200
 """``optim.warmup_2d_steps`` of ``synth-demo``: its first third trains the encoder on the source views' labels alone."""
@@ -44,11 +44,11 @@ def synth_demo() -> TrainConfig:
     interleaved step by step, the encoder also learning from its source views' labels, and a 2D-only warm-up of
     ``DEMO_WARMUP_2D`` of its ``DEMO_STEPS`` steps; no view augmentation (not measured at this length). Its data
     order is the loader's default (``data.epoch_steps`` 0: one loader epoch per checkpoint interval), chosen without
-    scoring orders on any room: the demo's unseen rooms report its zero-shot score and choose nothing. The 19 training
-    rooms with these losses and the warm-up lift zero-shot mIoU well above ``synth-small``'s, where on the demo's
-    earlier 4-room world they gained nothing; its attention stays full CRA, unlike the hour recipe's intra-only stage,
-    which scored lower at this scale (4 sources, 400 ray steps) and saved no training CPU (docs/benchmarks.md, "On the
-    demo's scale").
+    scoring orders on any room: the demo's unseen rooms report its zero-shot score and choose nothing. The demo's
+    larger world is what lets these losses and the warm-up lift zero-shot accuracy above ``synth-small``'s: on the
+    earlier 4-room world they gained nothing. Its attention stays full CRA, unlike the hour recipe's intra-only stage:
+    at this scale the cross-view stage costs little next to the encoder, and intra-only scored lower on both seeds
+    tried and saved no training CPU (study ``demo-recipe``, listed in docs/benchmarks.md).
     """
     cfg = synth_small()
     cfg.recipe = "synth-demo"
@@ -61,55 +61,50 @@ def synth_demo() -> TrainConfig:
 
 
 CPU_HOUR_SECONDS = 7200.0
-"""CPU budget of ``synth-cpu-hour``: one hour of both cores of the 2-core development machine, counted over
-the training ranks and their loader processes (``optim.cpu_seconds``), so the job ends after about an hour
-of wall time on that machine and after the same CPU time wherever it runs; the steps that buys depend on the machine
-(``CPU_HOUR_STEP_CAP``)."""
+"""CPU budget of ``synth-cpu-hour``: one hour of both cores of a 2-core machine, counted over the training ranks and
+their loader processes (``optim.cpu_seconds``), so the job ends after about an hour of wall time on such a machine
+and after the same CPU time wherever it runs; the steps that buys depend on the machine (``CPU_HOUR_STEP_CAP``)."""
 
 CPU_HOUR_STEP_CAP = 20_000
-"""Step cap of ``synth-cpu-hour``: beyond what its CPU budget reaches, so the budget ends the job. A 2D-only step of
-``optim.warmup_2d_steps`` costs about 0.4 CPU s and a ray-training step of the recipe about 1.2 on the 2-core
-development machine the recipe was measured on, where it stops after 6,250-6,950 steps (1,500 2D + 4,750-5,450
-ray); on a slower 2-core machine (about 1.8 CPU s per ray step) after 5,047. The cap only bounds the
-learning-rate schedule on a much faster machine (``budget_lr_factor`` follows the larger of the step and CPU-budget
-fractions). Stopped by its budget, the recipe scores 53.94 ± 4.14% zero-shot and 50.86 ± 3.42% on held-out views of
-its training rooms over three seeds, against 51.39 ± 2.86 and 45.37 ± 1.40% for the same recipe capped at 5,000 steps
-(``hour-intra`` in ``sray bench accuracy``; held-out higher on every paired seed, docs/benchmarks.md, "The hour recipe
-at its CPU budget"); on a machine where the budget bought 6,575-8,236 ray steps, 56.96 ± 2.04% and 54.51 ± 2.92%
-(docs/benchmarks.md, "The recipe's three seeds on the fifth machine")."""
+"""Step cap of ``synth-cpu-hour``: beyond what its CPU budget reaches on a 2-core machine, so the budget ends the
+job; the steps it stops after depend on what a CPU second buys on the host (each stored trial records its ray steps
+and its machine). The cap only bounds the learning-rate schedule on a much faster machine (``budget_lr_factor``
+follows the larger of the step and CPU-budget fractions). The recipe is trained until its budget is spent because
+the steps the budget buys beyond a lower cap raised held-out accuracy on every paired seed (docs/studies/hour-recipe.md:
+``hour-intra-uncapped`` against the capped ``hour-intra``; docs/studies/hour-budget.md for twice the budget)."""
 
 CPU_HOUR_WARMUP_2D = 1500
 """``optim.warmup_2d_steps`` of ``synth-cpu-hour``: its first steps train the encoder and its source-view head on
-the source views' labels alone, before any ray is rendered (about 650 CPU s of its budget)."""
+the source views' labels alone, before any ray is rendered (a small share of its budget: a 2D step renders
+nothing)."""
 
 
-CPU_HOUR_SHARDS = "outputs/bench-accuracy/cpu-small/worlds/train498/shards"
-"""Default shards of ``synth-cpu-hour``: the 498-room world ``sray bench accuracy`` (preset ``cpu-small``, its
-default folder) generates for its cells on 498 rooms (``hour-intra-uncapped``, the recipe as it is)."""
+CPU_HOUR_SHARDS = "outputs/studies/worlds/train498-test4-v40-120x160-s0/shards"
+"""Default shards of ``synth-cpu-hour``: the 498-room world of its study (jobs/studies/hour-recipe.yaml), which
+``sray lab study --worlds jobs/studies/hour-recipe.yaml`` generates in the studies' default work folder."""
 
 
 def synth_cpu_hour() -> TrainConfig:
     """One hour of pretraining on 2 CPU cores (a budget of CPU seconds, not steps), built to generalize rather
     than to memorize its rooms.
 
-    498 procedural rooms at 160x120, 40 views each, at ``CPU_HOUR_SHARDS`` (``sray bench accuracy --cells
-    hour-intra-uncapped:0`` generates them there before it trains this recipe; ``--set data.shards=DIR`` trains on
-    any other world): at the same CPU budget they score about 11 points of zero-shot mIoU above the preset's 48 rooms
-    (docs/benchmarks.md, "The hour recipe at its CPU budget"); generating them is not counted in the budget.
-    Each sample has 2-8 source views drawn from its 12 top-ranked neighbours and rendered at 75-100% of their
-    resolution, with per-view exposure, white-balance and sensor-noise jitter; the semantic loss is
-    weighted by inverse-square-root class frequency so small classes count. Scenes are interleaved step by
-    step (one sample per scene visit) and the encoder also learns from its source views' labels (weight 1):
-    together +7 points of zero-shot mIoU and +11 on held-out views of the training rooms at 600 steps,
-    seed 0 (docs/benchmarks.md, "Dense 2D supervision of the encoder"). Its first ``CPU_HOUR_WARMUP_2D`` steps
-    train the encoder and that head on the source labels alone, before any ray is rendered: about 9 points of
-    zero-shot mIoU above the same budget without the warm-up over three seeds each, every class but chair higher
-    (docs/benchmarks.md, "The hour recipe at its CPU budget"). Its cross-reprojection attention keeps only the
-    intra-view stage (``model.attention=intra``): level with the full block over three paired seeds, both capped at
-    5,000 steps (51.39 ± 2.86 against 51.88 ± 1.67% zero-shot, paired -0.50 ± 1.21; held-out +1.37 ± 1.70) for
-    0.82-0.87x the training CPU, and 3.3 points above no attention (docs/benchmarks.md, "One stage of the attention
-    each"). It trains until its CPU budget is spent (``CPU_HOUR_STEP_CAP`` lies beyond it): the steps the cheaper
-    attention saves are trained, not left unspent. Evaluation uses 8 sources.
+    498 procedural rooms at 160x120, 40 views each, at ``CPU_HOUR_SHARDS`` (``sray lab study --worlds
+    jobs/studies/hour-recipe.yaml`` generates them there; ``--set data.shards=DIR`` trains on any other world): at the
+    same CPU budget, more rooms transferred better to unseen rooms at every room count tried, and the model stopped
+    memorizing its training rooms (docs/studies/hour-recipe.md); generating them is not counted in the budget.
+    Each sample has 2-8 source views drawn from its 12 top-ranked neighbours and rendered at a random share of their
+    resolution, with per-view exposure, white-balance and sensor-noise jitter; the semantic loss is weighted by
+    inverse-square-root class frequency so small classes count. Scenes are interleaved step by step (one sample
+    per scene visit) and the encoder also learns from its source views' labels: together they let the model label
+    objects, where either alone gained nothing measurable (trials ``source-loss-600``). Its first ``CPU_HOUR_WARMUP_2D``
+    steps train the encoder and that head on the source labels alone, before any ray is rendered: the encoder then
+    carries the category information the ray loss alone was too sparse to teach it, and nearly every class rose over
+    three seeds (docs/studies/hour-recipe.md: ``hour-warm2d`` against ``hour-498``). Its cross-reprojection attention
+    keeps only the intra-view stage (``model.attention=intra``): level with the full block over three paired seeds
+    for less training CPU, and above no attention (docs/studies/hour-recipe.md: ``hour-intra``, ``hour-warm2d``,
+    ``hour-none``). It trains until its CPU budget is spent (``CPU_HOUR_STEP_CAP`` lies beyond it): the steps the
+    cheaper attention saves are trained, not left unspent. Evaluation uses 8 sources. Its published figures are the
+    README's recipe card and headline, generated from the stored trials by ``python -m sray.lab.publish``.
     """
     return TrainConfig(
         recipe="synth-cpu-hour",

@@ -4,7 +4,7 @@ The head is :class:`sray.model.source_semantics.SourceSemanticHead` (a 1x1 convo
 features, brought to full resolution by centre-aligned up-sampling) and the loss is
 :func:`~sray.model.source_semantics.source_semantic_loss` (class-weighted cross-entropy over labelled
 pixels): the same read-out S-Ray's auxiliary source-view loss uses, trained alone. It labels the source
-views for the label-transfer rows of ``sray bench ceilings`` and the ``2d-transfer`` method.
+views for the label-transfer rows of ``sray lab ceilings`` and the ``2d-transfer`` method.
 
 A trained segmenter is a folder: ``segmenter.pt`` (the state dict, ``torch.load(weights_only=True)``-safe)
 and ``segmenter.json`` (:class:`SegmenterConfig` plus what its training spent and read). An S-Ray checkpoint

@@ -6,7 +6,7 @@ What it reads is fixed by its signatures: the source views (:class:`SourceViews`
 query's camera (:class:`QueryCamera`), never the query view's image, depth or labels. The query image has the
 sources' size (the views of a scene share one image size, ``manifest.json``'s ``image_size``).
 
-Ceilings row c (``sray bench ceilings``) is this transfer; the ``2d-transfer`` method (``sray eval --method
+Ceilings row c (``sray lab ceilings``) is this transfer; the ``2d-transfer`` method (``sray eval --method
 2d-transfer``, the fleet) is scored through :func:`transfer_renderer`, a ray renderer that reads each ray's pixel
 from the transferred maps. A pixel that no source sees, or sees only where the segmenter's label is the ignore
 id, gets no prediction: every logit is -inf, which held-out scoring

@@ -47,7 +47,7 @@ class SourcePicker:
             raise ValueError(f"scene {meta.name!r}: n_source is {n_source}, but it has {len(self.candidates)} "
                              "candidate source views; pass --n-source between 1 and that")
         samples = {v: grid_samples(views[v].depth()) for v in source_pool(meta)}
-        fallback = fallback_depth(list(samples.values()))
+        fallback = fallback_depth(list(samples.values()), (meta.near, meta.far))
         self.points = {v: grid_points(samples[v], views[v].K, views[v].c2w, fallback) for v in self.candidates}
         self.c2ws = np.stack([views[v].c2w for v in self.candidates])                    # (C, 4, 4)
         self._decoded: dict[str, tuple[Tensor, Tensor]] = {}

@@ -1,7 +1,7 @@
 """A study completed launch after launch: each launch runs only those of its trials that have no result yet.
 
-The benchmark harnesses are studies of this kind (``sray bench accuracy``'s cells, ``sray stability``'s
-points): a fixed plan of which one launch asks for a part (``--cells``, ``--axes``), for a limited time
+The harnesses are studies of this kind (``sray lab study``'s trials, ``sray stability``'s
+points): a fixed plan of which one launch asks for a part (``--axes``) or runs what is missing for a limited time
 (``--max-minutes``). Across launches the trials' own records (``trial_files``) are the store:
 
 * a finished trial (its result in its record) never runs again;

@@ -128,20 +128,27 @@ def _params(where: Path, value: Any) -> list[Param]:
     return params
 
 
-def load_spec_file(path: Path) -> SpecFile:
-    """Parse a YAML spec file; :class:`SpecError` naming the file and the key at fault."""
-    path = Path(path)
+def read_yaml_keys(path: Path, what: str, keys: tuple[str, ...]) -> dict[str, Any]:
+    """The YAML mapping in ``path`` (a ``what``, e.g. "sweep spec"); :class:`SpecError` naming the file when it
+    cannot be read, is not YAML, is not a mapping or holds a key outside ``keys``."""
     try:
-        raw = yaml.safe_load(path.read_text())
+        raw = yaml.safe_load(Path(path).read_text())
     except OSError as e:
-        raise SpecError(f"{path}: cannot read the sweep spec ({e.strerror})") from None
+        raise SpecError(f"{path}: cannot read the {what} ({e.strerror})") from None
     except yaml.YAMLError as e:
         raise SpecError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
     if not isinstance(raw, dict):
-        raise SpecError(f"{path}: a sweep spec is a mapping of keys ({', '.join(FILE_KEYS)})")
-    unknown = sorted(set(raw) - set(FILE_KEYS))
+        raise SpecError(f"{path}: a {what} is a mapping of keys ({', '.join(keys)})")
+    unknown = sorted(set(raw) - set(keys))
     if unknown:
-        raise SpecError(f"{path}: unknown key {unknown[0]!r}; keys: {', '.join(FILE_KEYS)}")
+        raise SpecError(f"{path}: unknown key {unknown[0]!r}; keys: {', '.join(keys)}")
+    return raw
+
+
+def load_spec_file(path: Path) -> SpecFile:
+    """Parse a YAML spec file; :class:`SpecError` naming the file and the key at fault."""
+    path = Path(path)
+    raw = read_yaml_keys(path, "sweep spec", FILE_KEYS)
     spec = SpecFile(recipe=raw.get("recipe"), data=raw.get("data"), sets=_sets(path, raw.get("set", {})),
                     params=_params(path, raw["params"]) if "params" in raw else [],
                     options={k: raw[k] for k in OPTION_NAMES if k in raw})

@@ -1,0 +1,34 @@
+"""sray: generalizable semantic radiance fields (S-Ray). The Python API is :func:`load`::
+
+    import sray
+    model = sray.load("outputs/jobs/<job>/checkpoints")          # a trained checkpoint
+    labels = model.label(images, poses, intrinsics)               # uint8 (N,H,W,3), (N,4,4) OpenCV c2w, (3,3) K
+
+Packaging: the product lives in four top-level folders (``model``, ``data_tools``, ``platform``, ``jobs``) that
+setup.py maps to ``sray.<folder>`` and that carry no ``__init__.py`` (a top-level ``platform`` package would
+shadow the standard library's). In a wheel they sit inside this package's folder. In an editable install, a
+source checkout on ``sys.path`` or a Ray ``working_dir`` they sit beside it, so the checkout's root is added to
+this package's search path: ``sray.model`` is then ``<root>/model``, and no top-level name changes.
+
+``load`` is imported on first use (PEP 562), so ``import sray.data_tools...`` stays free of torch.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+_HERE = Path(__file__).resolve().parent
+if not (_HERE / "model").is_dir():  # editable install / source checkout: the folders are siblings of sray/
+    __path__.append(str(_HERE.parent))  # type: ignore[name-defined]  # noqa: F821  (a package's __path__)
+
+__all__ = ["load"]
+
+
+def __getattr__(name: str) -> Any:
+    """``sray.load`` (:func:`sray.platform.label.labeller.load`), imported when first asked for."""
+    if name == "load":
+        from sray.platform.label.labeller import load
+
+        return load
+    raise AttributeError(f"module 'sray' has no attribute {name!r}")
