@@ -20,8 +20,7 @@ SUBCOMMAND_MODULES = ("sray.jobs.data.command", "sray.jobs.train_cmd", "sray.job
                       "sray.jobs.render_cmd", "sray.jobs.label_cmd", "sray.jobs.fleet_cmd", "sray.jobs.sweep_cmd",
                       "sray.jobs.bench.command",
                       "sray.jobs.gpu_check.command", "sray.jobs.gpu_bundle.command", "sray.jobs.stability.command",
-                      "sray.jobs.demo_cmd",
-                      "sray.jobs.ui_cmd", "sray.jobs.cluster_cmd")
+                      "sray.jobs.demo_cmd", "sray.jobs.ui_cmd", "sray.jobs.cluster_cmd", "sray.jobs.migrate_cmd")
 """Modules that register subcommands, in the order `sray --help` lists them."""
 PLUGIN_GROUP = "sray.commands"
 """Entry-point group of the commands that installed plug-ins add (pyproject.toml: ``lab = "sray.lab.cli:register"``)."""

@@ -94,9 +94,9 @@ def run_demo(args: argparse.Namespace) -> int:
         return 0
     cfg = get_recipe(RECIPE)
     cfg.data.shards = str(shards)
-    # --steps keeps the recipe's share of 2D-only warm-up steps and its one loader epoch over the run
+    # --steps keeps the recipe's share of 2D-only warm-up steps and its data order (a loader epoch per checkpoint)
     cfg.optim.warmup_2d_steps = round(args.steps * cfg.optim.warmup_2d_steps / cfg.optim.steps)
-    cfg.optim.steps = cfg.data.epoch_steps = args.steps
+    cfg.optim.steps = args.steps
     cfg.run.output_dir = str(args.out / "train")
     cfg.run.seed = args.seed
     cfg.run.ckpt_every = max(args.steps // 2, 1)
@@ -122,8 +122,8 @@ def run_demo(args: argparse.Namespace) -> int:
          f"--scene {scenes_test[0]} --out {args.out / 'render'}")
     fleet_cfg = FleetConfig()
     fleet_cfg.finetune.max_seconds = args.finetune_seconds
-    fleet_cfg.finetune.eval_n_source = cfg.model.n_source
-    fleet_cfg.finetune.eval_stride = 2 * args.eval_stride
+    fleet_cfg.finetune.held_out.n_source = cfg.model.n_source
+    fleet_cfg.finetune.held_out.stride = 2 * args.eval_stride
     fleet_cfg.transfer.segmenter = str(segmenter_dir)
     scenes_fleet = scenes_test[:args.fleet_scenes] if args.fleet_scenes > 0 else scenes_test
     _say(f"8/9 finetune fleet on {len(scenes_fleet)} of the {len(scenes_test)} unseen scenes "

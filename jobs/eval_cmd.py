@@ -15,6 +15,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from sray.jobs.held_out_flags import add_held_out_flags, held_out_from_args
 from sray.jobs.methods.flags import GivenFlag, refusal, unread_flags
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import eval_method_names, get_method
@@ -34,26 +35,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--data", type=Path, required=True, help="shard folder holding manifest.json")
     p.add_argument("--scenes", nargs="+", metavar="SCENE",
                    help="scenes to evaluate (default: every scene whose role is 'test')")
-    p.add_argument("--n-source", type=int, default=8, help="fixed source views per test view (paper: 8)")
-    p.add_argument("--stride", type=int, default=1,
-                   help="render every N-th pixel in each direction (1 = whole images; SSIM only then)")
+    add_held_out_flags(p, scored_stride=True)
     p.add_argument("--out", type=Path, default=Path("outputs/eval"), help="output folder")
     p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
     p.add_argument("--tracking-uri", help="the tracker's store, for MLflow its tracking URI (default: SQLite store "
                                           "in this folder)")
     p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
-    p.add_argument("--render", choices=["full", "fast"], default="fast", action=GivenFlag,
-                   help="S-Ray's render (2d-transfer has one and refuses the flag); fast (default): the fast "
-                        "render mode (sray.model.fast_render; its accuracy cost, measured paired against the full "
-                        "render by `sray bench speed-accuracy`, is in docs/benchmarks.md); full: the whole coarse + "
-                        "fine renderer at every pixel")
-    p.add_argument("--fast-stride", type=int, default=8, action=GivenFlag,
-                   help="fast mode: render every N-th pixel and upsample (default %(default)s, FastRender's)")
-    p.add_argument("--fast-confidence", type=float, default=0.9, action=GivenFlag,  # FastRender's default
-                   help="fast mode: rays whose coarse confidence reaches this skip the fine pass")
-    p.add_argument("--fast-temperature", type=float, default=1.0, action=GivenFlag,
-                   help="fast mode: divide the coarse logits by this before the confidence rule (default 1)")
     p.add_argument("--calibrate", type=Path, action=GivenFlag, metavar="VAL_SHARDS",
                    help="fast mode: fit the temperature on these validation rooms' test views first (coarse pass, "
                         "NLL; `sray data synth --split validation`), use it, and write OUT/calibration.json")
@@ -67,7 +55,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table and where everything went; exit 2 on bad input (a flag the method does not read
     included)."""
-    from sray.model.fast_render import FastRender
     from sray.platform.eval.calibration import CALIBRATION_FILE, calibrate
     from sray.platform.eval.split_gap import SPLITS_FILE, format_splits, split_summary
     from sray.platform.eval.zero_shot import evaluate_model, format_table, write_json_atomic
@@ -81,18 +68,19 @@ def run(args: argparse.Namespace) -> int:
     if len(splits) != len(args.split) or "" in splits:
         print(f"sray eval: --split takes NAME=DIR with distinct names, got {args.split}", file=sys.stderr)
         return 2
-    fast = FastRender(args.fast_stride, args.fast_confidence, args.fast_temperature) if args.render == "fast" else None
-    request = EvalRequest(checkpoint=args.checkpoint, segmenter=args.segmenter, device=args.device, fast=fast)
     try:
+        held_out = held_out_from_args(args)
+        request = EvalRequest(checkpoint=args.checkpoint, segmenter=args.segmenter, device=args.device,
+                              fast=held_out.fast())
         model = method.eval_model(request)
         if args.calibrate is not None:
-            fitted = calibrate(model, args.calibrate, n_source=args.n_source)
+            fitted = calibrate(model, args.calibrate, n_source=held_out.n_source)
             write_json_atomic(fitted, args.out / CALIBRATION_FILE)
             print(f"[sray] coarse confidence temperature {fitted['temperature']:.3f} (NLL {fitted['nll_at_1']:.3f} -> "
                   f"{fitted['nll_fitted']:.3f} on {fitted['rays']} rays of {fitted['rooms']} validation rooms)")
-            fast = dataclasses.replace(fast, temperature=fitted["temperature"])
-            model = method.eval_model(dataclasses.replace(request, fast=fast))
-        kwargs = dict(n_source=args.n_source, stride=args.stride, tracking_uri=args.tracking_uri,
+            held_out.fast_temperature = fitted["temperature"]
+            model = method.eval_model(dataclasses.replace(request, fast=held_out.fast()))
+        kwargs = dict(n_source=held_out.n_source, stride=held_out.stride, tracking_uri=args.tracking_uri,
                       experiment=args.experiment, tracker=args.tracker)
         report = evaluate_model(model, args.data, args.scenes, args.out, **kwargs)
         others = {name: evaluate_model(model, Path(folder), None, args.out / name, **kwargs)

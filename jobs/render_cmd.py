@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from sray.jobs.held_out_flags import add_held_out_flags, held_out_from_args
+
 DEFAULT_FRAMES = 60
 """Frames of a built path (``--path``) unless ``--frames`` says otherwise."""
 
@@ -45,12 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=size_arg, metavar="WxH",
                    help="render size (default: the scene's image size, or the camera-path file's)")
     p.add_argument("--fps", type=float, help="video frame rate (default: the camera-path file's, else 15)")
-    p.add_argument("--n-source", type=int, default=8, help="source views per frame, top-ranked (default 8, as eval)")
-    p.add_argument("--render", choices=["full", "fast"], default="fast",
-                   help="fast (default): the fast render mode of `sray eval`; full: coarse + fine at every pixel")
-    p.add_argument("--fast-stride", type=int, default=8, help="fast mode: render every N-th pixel and upsample")
-    p.add_argument("--fast-confidence", type=float, default=0.9,
-                   help="fast mode: rays whose coarse confidence reaches this skip the fine pass")
+    add_held_out_flags(p, scored_stride=False)
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
     p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
@@ -64,7 +61,6 @@ def run(args: argparse.Namespace) -> int:
     """Check the request, render, print where the videos went; exit 2 on bad input (nothing written)."""
     import torch
 
-    from sray.model.fast_render import FastRender
     from sray.platform.finetune.render_model import render_model
     from sray.platform.render.flythrough import Flythrough
     from sray.platform.render.plan import plan_flythrough
@@ -73,11 +69,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.camera_path is not None and args.frames is not None:
             raise ValueError(f"--frames: {args.camera_path} lists its own frames; --frames applies to --path only")
-        fast = FastRender(args.fast_stride, args.fast_confidence) if args.render == "fast" else None
+        held_out = held_out_from_args(args)
         plan = plan_flythrough(args.data, args.scene, path=args.path, camera_path=args.camera_path,
                                n_frames=args.frames or DEFAULT_FRAMES, size_hw=args.size, fps=args.fps)
         net, about = render_model(args.checkpoint, args.artifact, args.scene)
-        fly = Flythrough(net, plan, args.n_source, fast)
+        fly = Flythrough(net, plan, held_out.n_source, held_out.fast())
         try:
             device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
         except RuntimeError as e:

@@ -5,13 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .attention_variants import ATTENTION_VARIANTS
-from .encoder import ENCODER_NORMS
 from .semantic_cues import check_cues
-
-WEIGHT_MAPS = ("radial", "affine")
-"""How the semantic-aware weight net's per-view outputs become weights in C(tau) (``semantic_weights``):
-``radial`` (default) can approach both bounds tau/m and 1/(tau m); ``affine`` (the first version)
-reaches only (2 - tau)/m from above."""
 
 FINE_SAMPLES = ("union", "new")
 """What the fine pass evaluates (``SRayConfig.fine_samples``): ``new`` (default) only the n_fine
@@ -23,16 +17,6 @@ INPUTS = ("rgb", "rgbd")
 """What the network is given of its source views (``SRayConfig.inputs``): ``rgb`` (default, the paper's
 text) posed colour images only; ``rgbd`` also their depth maps, which place the coarse samples around
 the surfaces the sources saw (``depth_sampling``). The query view's depth is never an input."""
-
-WEIGHT_INPUTS = ("view", "cross-view")
-"""What the semantic-aware weight net scores each view from (``SRayConfig.weight_inputs``, ``semantic_weights``):
-``view`` (default, the paper's table) that view's own refined feature, direction difference and the fraction of
-the ray it sees; ``cross-view`` also two statistics over the sample's VALID views, the view's squared distance
-from their mean feature and their feature variance (a departure from the paper, docs/model.md: a view whose
-feature disagrees with the others' is likely occluded)."""
-
-DENSITY_ACTIVATIONS = ("softplus", "relu")
-"""Non-negative activations allowed for the density output."""
 
 
 @dataclass
@@ -50,9 +34,6 @@ class SRayConfig:
     encoder_width: int = 16
     """Channels of the image encoder's first layer; every later layer scales with it (16 = the appendix table:
     16/32/64/128 channels on the way down, 64/32 on the way up; ``encoder.ResUNetEncoder``)."""
-    encoder_norm: str = "instance"
-    """Normalisation of every encoder layer, one of ``encoder.ENCODER_NORMS``: ``instance`` (the appendix table)
-    or ``group`` (group norm over groups of ``encoder.GROUP_CHANNELS`` channels)."""
     n_source: int = 8
     """Number of source views m a training sample carries (paper: 8); the network itself accepts
     any m >= 1 at run time."""
@@ -66,33 +47,20 @@ class SRayConfig:
     (``full`` = the paper's CRA, ``intra``, ``cross``, ``none``, ``dense``)."""
     n_heads: int = 4
     """Heads of every multi-head attention (CRA and the geometry net's ray attention; paper: 4)."""
-    ffn_mult: int = 0
-    """Hidden width of an optional pre-norm ReLU feed-forward after each CRA attention, as a
-    multiple of feat_dim; 0 (default) leaves it out, as the appendix's CRA table lists attention
-    layers only. It costs two full passes of the largest tensors per attention."""
     depth_freqs: int = 6
     """Frequencies of the encoding of each sample's normalised depth (z - near) / (far - near)
     whose learned projection is added to M before intra-view attention (0 = the raw depth only)."""
     dir_hidden: int = 16
     """Hidden width of the view-direction MLP (4 -> 16 -> C, appendix L21)."""
     weight_hidden: tuple[int, int] = (16, 8)
-    """Hidden widths of the semantic-aware weight net (37 -> 16 -> 8 -> 1, appendix; 39 inputs with
-    ``weight_inputs='cross-view'``)."""
+    """Hidden widths of the semantic-aware weight net (37 -> 16 -> 8 -> 1, appendix)."""
     geo_hidden: tuple[int, int] = (32, 16)
     """Widths of the geometry net's MLP on [mean, variance] (64 -> 32 -> 16, appendix L8)."""
     tau: float = 0.7
     """Bound of the semantic-aware weights: tau/m < w_i < 1/(tau m); tau = 1 is the plain mean."""
-    weight_map: str = "radial"
-    """Parametrisation of the semantic-aware weights, one of ``WEIGHT_MAPS``."""
-    weight_inputs: str = "view"
-    """Inputs of the semantic-aware weight net, one of ``WEIGHT_INPUTS``: ``view`` (default, the paper) or
-    ``cross-view`` (adds each view's distance from the valid views' mean feature and their variance; only the
-    net's first layer widens, by 2 inputs)."""
     weight_margin: float = 1e-3
     """Fraction of the weight range kept unused so the bounds stay strict when the sigmoid
     scores saturate to exactly 0 or 1 in floating point (see ``semantic_weights``)."""
-    density_activation: str = "softplus"
-    """``softplus`` (default: no dead units at start) or ``relu`` (the appendix's L11)."""
     min_source_depth: float = 1e-3
     """A projection is valid only if the point lies at least this far (camera z, scene units) in
     front of the source camera."""
@@ -146,10 +114,6 @@ class SRayConfig:
 
         if self.attention not in ATTENTION_VARIANTS:
             raise bad("attention", f"is {self.attention!r}; use one of {tuple(ATTENTION_VARIANTS)}")
-        if self.weight_map not in WEIGHT_MAPS:
-            raise bad("weight_map", f"is {self.weight_map!r}; use one of {WEIGHT_MAPS}")
-        if self.weight_inputs not in WEIGHT_INPUTS:
-            raise bad("weight_inputs", f"is {self.weight_inputs!r}; use one of {WEIGHT_INPUTS}")
         if self.fine_samples not in FINE_SAMPLES:
             raise bad("fine_samples", f"is {self.fine_samples!r}; use one of {FINE_SAMPLES}")
         if self.inputs not in INPUTS:
@@ -164,11 +128,6 @@ class SRayConfig:
             raise bad("lambda_depth", f"is {self.lambda_depth}; use 0 (no depth loss) or a positive weight")
         if self.depth_freqs < 0:
             raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
-        if self.encoder_norm not in ENCODER_NORMS:
-            raise bad("encoder_norm", f"is {self.encoder_norm!r}; use one of {ENCODER_NORMS}")
-        if self.density_activation not in DENSITY_ACTIVATIONS:
-            raise bad("density_activation",
-                      f"is {self.density_activation!r}; use one of {DENSITY_ACTIVATIONS}")
         for name in ("n_classes", "feat_dim", "encoder_width", "n_source", "n_coarse", "n_fine", "n_heads",
                      "dir_hidden"):
             if int(getattr(self, name)) < 1:
@@ -176,8 +135,6 @@ class SRayConfig:
         if self.feat_dim % self.n_heads or self.geo_hidden[-1] % self.n_heads:
             raise bad("n_heads", f"is {self.n_heads}; it must divide feat_dim ({self.feat_dim}) "
                       f"and geo_hidden[-1] ({self.geo_hidden[-1]})")
-        if self.ffn_mult < 0:
-            raise bad("ffn_mult", f"is {self.ffn_mult}; use 0 (no feed-forward) or more")
         if not 0.0 < self.tau <= 1.0:
             raise bad("tau", f"is {self.tau}; it must lie in (0, 1] (1 = mean aggregation)")
         if not 0.0 < self.weight_margin < 1.0:

@@ -10,9 +10,9 @@ M has shape (R, m, N, C): R rays, m source views, N samples per ray, C channels.
 * ``dense``: the paper's costly baseline, one joint attention over all m * N tokens of a ray.
 
 Each attention is an ``AttentionBlock``: pre-norm residual multi-head attention (LayerNorm, then
-``scaled_dot_product_attention``, then an output projection added to the input), followed by an
-optional pre-norm ReLU feed-forward (``ffn_mult``; the appendix lists ReLU as these layers'
-activation). Pre-norm keeps the residual path an identity, which trains stably from scratch.
+``scaled_dot_product_attention``, then an output projection added to the input), with no feed-forward (the
+appendix's CRA table lists attention layers only). Pre-norm keeps the residual path an identity, which trains
+stably from scratch.
 
 Masking: invalid projections are masked as KEYS. A sequence whose keys are all invalid (a view that
 sees no sample of the ray, a sample no view sees) attends over all its keys instead, which is
@@ -34,9 +34,9 @@ from .positional_encoding import PositionalEncoding
 
 
 class AttentionBlock(nn.Module):
-    """Pre-norm multi-head self-attention with key masking (+ optional ReLU feed-forward)."""
+    """Pre-norm multi-head self-attention with key masking."""
 
-    def __init__(self, dim: int, heads: int, ffn_mult: int) -> None:
+    def __init__(self, dim: int, heads: int) -> None:
         super().__init__()
         if dim % heads:
             raise ValueError(f"sray.model.cra.AttentionBlock: heads ({heads}) must divide dim ({dim}).")
@@ -44,10 +44,6 @@ class AttentionBlock(nn.Module):
         self.norm = nn.LayerNorm(dim)
         self.qkv = nn.Linear(dim, 3 * dim)
         self.proj = nn.Linear(dim, dim)
-        self.ffn: nn.Module | None = None
-        if ffn_mult > 0:
-            self.ffn = nn.Sequential(nn.LayerNorm(dim), nn.Linear(dim, ffn_mult * dim), nn.ReLU(),
-                                     nn.Linear(ffn_mult * dim, dim))
 
     def forward(self, x: Tensor, valid: Tensor) -> Tensor:
         """x: (B, L, D) tokens; valid: (B, L) bool. Returns (B, L, D); finite at invalid tokens."""
@@ -56,10 +52,7 @@ class AttentionBlock(nn.Module):
         q, k, v = qkv.permute(2, 0, 3, 1, 4).unbind(0)  # 3 x (B, heads, L, d / heads)
         keys = valid | ~valid.any(-1, keepdim=True)  # (B, L): all keys where none is valid
         att = F.scaled_dot_product_attention(q, k, v, attn_mask=keys[:, None, None, :])
-        x = x + self.proj(att.transpose(1, 2).reshape(b, n, d))  # (B, L, D)
-        if self.ffn is not None:
-            x = x + self.ffn(x)
-        return x
+        return x + self.proj(att.transpose(1, 2).reshape(b, n, d))  # (B, L, D)
 
 
 def _over_samples(block: AttentionBlock, x: Tensor, valid: Tensor) -> Tensor:
@@ -98,13 +91,13 @@ class CrossReprojectionAttention(nn.Module):
         super().__init__()
         self.variant = cfg.attention
         self.stages = ATTENTION_VARIANTS[cfg.attention]
-        c, h, f = cfg.feat_dim, cfg.n_heads, cfg.ffn_mult
+        c, h = cfg.feat_dim, cfg.n_heads
         self.depth_embedding: nn.Module | None = None
         if POSITION_STAGES & set(self.stages):
             encoding = PositionalEncoding(1, cfg.depth_freqs)
             self.depth_embedding = nn.Sequential(encoding, nn.Linear(encoding.out_dim, c))
         for stage in dict.fromkeys(self.stages):
-            self.add_module(stage, AttentionBlock(c, h, f))
+            self.add_module(stage, AttentionBlock(c, h))
 
     def position_signal(self, depth01: Tensor) -> Tensor:
         """The embedding added to every view's token of a sample: depth01 (R, N) in [0, 1] -> (R, N, C)."""

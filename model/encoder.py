@@ -34,10 +34,8 @@ The table's strides are consistent with its 1/4-resolution output: four stride-2
 * Sizes not divisible by 16 (e.g. 120 rows) make the up-sampled grid one pixel larger than the
   skip; the up-sampling therefore targets the skip's exact size (see ``upsample_to``).
 
-Normalisation: the table's IN (instance norm, ``norm="instance"``, the default) standardises every channel of every
-image on its own. ``norm="group"`` swaps every IN for group norm over groups of ``GROUP_CHANNELS`` channels
-(``norm_groups``), which keeps how strongly one channel fires against its group's neighbours in an image
-(``SRayConfig.encoder_norm``). Both use per-image statistics only, so neither depends on the batch.
+Normalisation: the table's IN (instance norm) standardises every channel of every image on its own, with per-image
+statistics only, so it does not depend on the batch.
 
 Pixel geometry (relied on by ``reprojection.feature_grid``): a stride-2 convolution with
 padding k // 2 centres output pixel j on input pixel 2j, so feature pixel j of the 1/4 map is
@@ -57,30 +55,10 @@ FEATURE_STRIDE = 4
 MIN_IMAGE_SIZE = 32
 """Smallest image side the encoder accepts (instance norm needs > 1 pixel at 1/16 resolution)."""
 
-ENCODER_NORMS = ("instance", "group")
-"""Normalisations every encoder layer may use: the appendix table's instance norm, or group norm."""
-
-GROUP_CHANNELS = 8
-"""Channels per group of ``norm="group"`` (layers narrower than this form one group)."""
-
-
-def norm_groups(channels: int) -> int:
-    """Number of group-norm groups for a ``channels``-wide layer: groups of ``GROUP_CHANNELS`` channels, and
-    the largest divisor of ``channels`` not above ``channels // GROUP_CHANNELS`` when that does not divide."""
-    groups = max(1, channels // GROUP_CHANNELS)
-    while channels % groups:
-        groups -= 1
-    return groups
-
-
-def _norm(channels: int, kind: str) -> nn.Module:
-    """The ``kind`` normalisation (``ENCODER_NORMS``) of a ``channels``-wide layer, with a learned affine map
-    and per-image statistics only (no running stats)."""
-    if kind == "instance":
-        return nn.InstanceNorm2d(channels, affine=True, track_running_stats=False)
-    if kind == "group":
-        return nn.GroupNorm(norm_groups(channels), channels, affine=True)
-    raise ValueError(f"sray.model.encoder: norm is {kind!r}; choose one of {ENCODER_NORMS}.")
+def _norm(channels: int) -> nn.Module:
+    """The instance normalisation of a ``channels``-wide layer, with a learned affine map and per-image statistics
+    only (no running stats)."""
+    return nn.InstanceNorm2d(channels, affine=True, track_running_stats=False)
 
 
 def upsample_to(x: Tensor, size: tuple[int, int]) -> Tensor:
@@ -99,18 +77,18 @@ def upsample_to(x: Tensor, size: tuple[int, int]) -> Tensor:
 
 
 class ResBlock(nn.Module):
-    """Two 3x3 convs with normalisation (``norm``, one of ``ENCODER_NORMS``) and ReLU plus a (projected when
+    """Two 3x3 convs with instance normalisation and ReLU plus a (projected when
     needed) shortcut."""
 
-    def __init__(self, c_in: int, c_out: int, stride: int, norm: str = "instance") -> None:
+    def __init__(self, c_in: int, c_out: int, stride: int) -> None:
         super().__init__()
         self.conv1 = nn.Conv2d(c_in, c_out, 3, stride, 1, bias=False)
-        self.norm1 = _norm(c_out, norm)
+        self.norm1 = _norm(c_out)
         self.conv2 = nn.Conv2d(c_out, c_out, 3, 1, 1, bias=False)
-        self.norm2 = _norm(c_out, norm)
+        self.norm2 = _norm(c_out)
         self.shortcut: nn.Module = nn.Identity()
         if stride != 1 or c_in != c_out:
-            self.shortcut = nn.Sequential(nn.Conv2d(c_in, c_out, 1, stride, bias=False), _norm(c_out, norm))
+            self.shortcut = nn.Sequential(nn.Conv2d(c_in, c_out, 1, stride, bias=False), _norm(c_out))
 
     def forward(self, x: Tensor) -> Tensor:
         """(B, c_in, H, W) -> (B, c_out, ceil(H / stride), ceil(W / stride))."""
@@ -119,9 +97,9 @@ class ResBlock(nn.Module):
         return F.relu(y + self.shortcut(x))
 
 
-def _conv_norm(c_in: int, c_out: int, k: int, relu: bool, norm: str) -> nn.Sequential:
-    """Conv k x k (stride 1, same padding) + the ``norm`` normalisation (+ ReLU)."""
-    layers: list[nn.Module] = [nn.Conv2d(c_in, c_out, k, 1, k // 2, bias=False), _norm(c_out, norm)]
+def _conv_norm(c_in: int, c_out: int, k: int, relu: bool) -> nn.Sequential:
+    """Conv k x k (stride 1, same padding) + instance normalisation (+ ReLU)."""
+    layers: list[nn.Module] = [nn.Conv2d(c_in, c_out, k, 1, k // 2, bias=False), _norm(c_out)]
     if relu:
         layers.append(nn.ReLU())
     return nn.Sequential(*layers)
@@ -130,25 +108,23 @@ def _conv_norm(c_in: int, c_out: int, k: int, relu: bool, norm: str) -> nn.Seque
 class ResUNetEncoder(nn.Module):
     """Shared per-view encoder: RGB (B, 3, H, W) in [0, 1] -> features (B, C, ceil(H/4), ceil(W/4))."""
 
-    def __init__(self, out_dim: int = 32, width: int = 16, norm: str = "instance") -> None:
+    def __init__(self, out_dim: int = 32, width: int = 16) -> None:
         """``out_dim`` feature channels (L19); ``width`` channels of L1, every other layer scaled with it (module
-        doc; 16 = the appendix table); ``norm`` the normalisation of every layer (``ENCODER_NORMS``)."""
+        doc; 16 = the appendix table)."""
         super().__init__()
         if width < 1:
             raise ValueError(f"sray.model.encoder: width is {width}; give the first layer at least one channel")
-        if norm not in ENCODER_NORMS:
-            raise ValueError(f"sray.model.encoder: norm is {norm!r}; choose one of {ENCODER_NORMS}.")
         w1, w2, w4, w8 = width, 2 * width, 4 * width, 8 * width
-        self.stem = nn.Sequential(nn.Conv2d(3, w1, 7, 2, 3, bias=False), _norm(w1, norm), nn.ReLU())  # L1
-        self.down2 = ResBlock(w1, w2, 2, norm)  # L2
-        self.down3 = nn.Sequential(ResBlock(w2, w4, 2, norm), ResBlock(w4, w4, 1, norm))  # L3, L4
-        self.down4 = nn.Sequential(ResBlock(w4, w8, 2, norm),
-                                   *[ResBlock(w8, w8, 1, norm) for _ in range(5)])  # L5-L10
-        self.reduce4 = _conv_norm(w8, w4, 3, True, norm)  # L11
-        self.merge3 = nn.Sequential(_conv_norm(2 * w4, w4, 3, True, norm),  # L14
-                                    _conv_norm(w4, w2, 3, True, norm))  # L15
-        self.merge2 = _conv_norm(2 * w2, w2, 3, True, norm)  # L18
-        self.head = _conv_norm(w2, out_dim, 1, False, norm)  # L19
+        self.stem = nn.Sequential(nn.Conv2d(3, w1, 7, 2, 3, bias=False), _norm(w1), nn.ReLU())  # L1
+        self.down2 = ResBlock(w1, w2, 2)  # L2
+        self.down3 = nn.Sequential(ResBlock(w2, w4, 2), ResBlock(w4, w4, 1))  # L3, L4
+        self.down4 = nn.Sequential(ResBlock(w4, w8, 2),
+                                   *[ResBlock(w8, w8, 1) for _ in range(5)])  # L5-L10
+        self.reduce4 = _conv_norm(w8, w4, 3, True)  # L11
+        self.merge3 = nn.Sequential(_conv_norm(2 * w4, w4, 3, True),  # L14
+                                    _conv_norm(w4, w2, 3, True))  # L15
+        self.merge2 = _conv_norm(2 * w2, w2, 3, True)  # L18
+        self.head = _conv_norm(w2, out_dim, 1, False)  # L19
 
     def forward(self, rgb: Tensor) -> Tensor:
         """rgb: (B, 3, H, W) in [0, 1]; returns (B, C, ceil(ceil(H/2)/2), ceil(ceil(W/2)/2))."""

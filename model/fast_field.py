@@ -28,7 +28,7 @@ from torch import Tensor
 
 from .cra import AttentionBlock, CrossReprojectionAttention
 from .geometry_net import GeometryNet, masked_mean_var, masked_softmax
-from .semantic_weights import SemanticWeightNet, bounded_weights, cross_view_stats, radial_weights
+from .semantic_weights import SemanticWeightNet, radial_weights
 from .sliced_attention import attention
 
 
@@ -60,10 +60,7 @@ def block_forward(block: AttentionBlock, x: Tensor, valid: Tensor, stage: str) -
             return t.view(r, n * m, heads, d).transpose(1, 2)  # (R, heads, N * m, d)
         mask = _key_mask(valid.reshape(r, n * m), 1)[:, None, None, :]
     att = attention(split(q), split(k), split(v), mask)
-    x = x + block.proj(att.transpose(1, 2).reshape(r, n, m, c))
-    if block.ffn is not None:
-        x = x + block.ffn(x)
-    return x
+    return x + block.proj(att.transpose(1, 2).reshape(r, n, m, c))
 
 
 def cra_forward(cra: CrossReprojectionAttention, space: Tensor, valid: Tensor, depth01: Tensor) -> Tensor:
@@ -79,21 +76,16 @@ def cra_forward(cra: CrossReprojectionAttention, space: Tensor, valid: Tensor, d
 
 def weights_forward(net: SemanticWeightNet, feats: Tensor, dirs: Tensor, valid: Tensor) -> Tensor:
     """``SemanticWeightNet.forward`` in (R, N, m) order: feats (R, N, m, C), dirs (R, N, m, 4),
-    valid (R, N, m) -> float32 weights (R, N, m); the cross-view statistics (``weight_inputs = "cross-view"``)
-    are taken over the view axis of this order."""
+    valid (R, N, m) -> float32 weights (R, N, m)."""
     c = feats.shape[-1]
     first = net.mlp[0]
-    w = first.weight  # columns: feature (C), per-view inputs (4 or 6), seen fraction (1)
+    w = first.weight  # columns: feature (C), direction difference (4), seen fraction (1)
     seen = valid.to(feats.dtype).mean(dim=1, keepdim=True)  # (R, 1, m) fraction of the ray each view sees
     per_view = dirs.to(feats.dtype)  # (R, N, m, 4)
-    if net.weight_inputs == "cross-view":  # one small (R, N, m, 6) input instead of another (R, N, m, h1) sum
-        per_view = torch.cat([per_view, cross_view_stats(feats, valid, view_dim=2).to(feats.dtype)], dim=-1)
     hidden = (F.linear(feats, w[:, :c], first.bias) + F.linear(per_view, w[:, c:-1])
               + seen[..., None] * w[:, -1].to(feats.dtype))  # (R, N, m, h1)
     raw = net.mlp[1:](hidden).squeeze(-1).float()  # (R, N, m)
-    if net.weight_map == "radial":
-        return radial_weights(raw, valid, net.tau, net.margin)
-    return bounded_weights(torch.sigmoid(raw), valid, net.tau, net.margin)
+    return radial_weights(raw, valid, net.tau, net.margin)
 
 
 def geometry_forward(net: GeometryNet, space: Tensor, valid: Tensor, dirs: Tensor,
@@ -106,7 +98,7 @@ def geometry_forward(net: GeometryNet, space: Tensor, valid: Tensor, dirs: Tenso
     seen = valid.any(dim=2)  # (R, N)
     g = net.fuse(torch.cat([mean, var], dim=-1))  # (R, N, 16)
     g = net.ray_attention(g, seen)
-    sigma = net.activation(net.density(g).squeeze(-1).float()) * seen.float()
+    sigma = F.softplus(net.density(g).squeeze(-1).float()) * seen.float()
     c = space.shape[-1]
     first = net.colour_score[0]
     hidden = F.linear(gated, first.weight[:, :c], first.bias) + F.linear(dirs.to(gated.dtype), first.weight[:, c:])

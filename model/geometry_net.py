@@ -7,7 +7,8 @@ Density path, on the initial contextual space M (R, m, N, C) as the table states
 * L8: MLP 2C -> 32 -> 16 (ELU);
 * L9: 4-head attention along the ray over its N samples (an ``AttentionBlock`` without
   feed-forward; samples no view sees are masked as keys);
-* L10-L11: MLP 16 -> 16 (ELU) -> 1, made non-negative by softplus (default; ReLU on request).
+* L10-L11: MLP 16 -> 16 (ELU) -> 1, made non-negative by softplus (no dead units at the start; the appendix
+  lists ReLU).
 A sample that no source view sees gets density exactly 0.
 
 Colour head (the paper leaves it open): IBRNet-style blending. Each valid view scores its source
@@ -64,10 +65,9 @@ class GeometryNet(nn.Module):
         self.feature = nn.Sequential(nn.Linear(c, c), nn.ELU())  # L1
         self.gate = nn.Linear(c, 1)  # L2 (sigmoid: L3)
         self.fuse = nn.Sequential(nn.Linear(2 * c, g1), nn.ELU(), nn.Linear(g1, g2), nn.ELU())  # L8
-        self.ray_attention = AttentionBlock(g2, cfg.n_heads, ffn_mult=0)  # L9
+        self.ray_attention = AttentionBlock(g2, cfg.n_heads)  # L9
         self.density = nn.Sequential(nn.Linear(g2, g2), nn.ELU(), nn.Linear(g2, 1))  # L10, L11
         self.colour_score = nn.Sequential(nn.Linear(c + 4, 16), nn.ELU(), nn.Linear(16, 1))
-        self.activation = F.softplus if cfg.density_activation == "softplus" else F.relu
 
     def forward(self, space: Tensor, valid: Tensor, dirs: Tensor, src_rgb: Tensor) -> tuple[Tensor, Tensor]:
         """space: (R, m, N, C) (ignored where invalid); valid: (R, m, N); dirs: (R, m, N, 4);
@@ -79,7 +79,7 @@ class GeometryNet(nn.Module):
         g = self.fuse(torch.cat([mean, var], dim=-1))  # (R, N, 16)
         g = self.ray_attention(g, seen)  # (R, N, 16)
         raw = self.density(g).squeeze(-1).float()  # (R, N)
-        sigma = self.activation(raw) * seen.float()
+        sigma = F.softplus(raw) * seen.float()
 
         score = self.colour_score(torch.cat([gated, dirs.to(gated.dtype)], dim=-1)).squeeze(-1)  # (R, m, N)
         blend = masked_softmax(score, valid, dim=1)  # (R, m, N)

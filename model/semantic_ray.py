@@ -52,7 +52,7 @@ class SRayModel(nn.Module):
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         self.cfg = cfg
-        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width, cfg.encoder_norm)
+        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width)
         self.coarse = SRayField(cfg)
         self.fine = SRayField(cfg)
         self.src_head = SourceSemanticHead(cfg) if cfg.lambda_src_sem > 0 else None

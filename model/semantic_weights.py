@@ -4,11 +4,9 @@ The paper asks for w in C(tau) = {tau/m < w_i < 1/(tau m), sum_i w_i = 1}. Here 
 of views that VALIDLY see the sample (``n`` below): an invalid view gets weight exactly 0, which is
 the only way a view that sees nothing can have no influence while the others stay bounded below.
 
-Two parametrisations (``SRayConfig.weight_map``); both give exactly 0 to invalid views, w = 1 for
-n = 1, all 0 for n = 0, and the plain mean 1/n for tau = 1.
-
-``radial`` (default, ``radial_weights``). The net's raw output a_i per valid view is centred,
-e_i = a_i - mean(a), and with p = 1/tau - 1 (room above 1/n, in units of 1/n) and q = 1 - tau (room
+The net's raw output a_i per valid view becomes a weight by the ``radial`` map (``radial_weights``), which gives
+exactly 0 to invalid views, w = 1 for n = 1, all 0 for n = 0, and the plain mean 1/n for tau = 1. Its raw outputs
+are centred, e_i = a_i - mean(a), and with p = 1/tau - 1 (room above 1/n, in units of 1/n) and q = 1 - tau (room
 below) its gauge g = max_i max(e_i / p, -e_i / q) >= 0 says how far e points towards the boundary:
 
     w_i = (1 + (1 - margin) e_i / (1 + g)) / n.
@@ -20,27 +18,9 @@ below) its gauge g = max_i max(e_i / p, -e_i / q) >= 0 says how far e points tow
   g -> infinity and w_i -> (1 + (1 - margin) p) / n (or (1 - (1 - margin) q) / n): both bounds are
   approached to within a relative (margin p / (1 + p)) or (margin q / tau).
 
-``affine`` (the first version, ``bounded_weights``). Scores s_i = sigmoid(a_i) in [0, 1], centred,
-d_i = s_i - mean(s), and kappa = (1 - margin)(1 - tau) n / (n - 1):
-
-    w_i = (1 + kappa d_i) / n.
-
-|d_i| <= (n - 1) / n gives w_i in [(1 - (1-margin)(1-tau)) / n, (1 + (1-margin)(1-tau)) / n], strictly
-inside (tau / n, (2 - tau) / n), and (2 - tau) / n < 1 / (tau n) because tau (2 - tau) < 1. It
-reaches the lower bound but not the upper one (1.3 / n against 1.43 / n at tau = 0.7), which keeps
-trained weights near the mean.
-
 Input of the net (37 = 32 + 4 + 1 channels at the default C = 32): the refined feature F''_i of
 the token (C), the 4-d view-direction difference of ``reprojection.view_direction_difference``
 and the fraction of the ray's N samples that view i sees (how much of the ray it observes).
-
-With ``SRayConfig.weight_inputs = "cross-view"`` (a departure from the paper, off by default) the net also
-reads two consensus statistics of the sample's valid views (``cross_view_stats``; 39 inputs at C = 32, the two
-between the direction difference and the seen fraction): the view's squared distance from their mean feature,
-||F''_i - mean||^2 / C, and their variance averaged over the channels. Seen from its own feature alone, a view
-occluded at the sample (whose feature describes the occluder) looks like any other; beside the others it is the
-one far from their mean, and a high variance says the views disagree at all (IBRNet's consensus signal).
-Invalid views enter neither statistic.
 """
 
 from __future__ import annotations
@@ -49,27 +29,6 @@ import torch
 from torch import Tensor, nn
 
 from .config import SRayConfig
-
-CROSS_VIEW_STATS = 2
-"""Inputs ``weight_inputs = "cross-view"`` adds to the weight net per view (``cross_view_stats``)."""
-
-
-def bounded_weights(score: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
-    """Scores (..., m) in [0, 1] and validity (..., m) -> float32 weights (..., m).
-
-    Over the valid entries of each row the weights sum to 1 and obey
-    tau/n < w_i < 1/(tau n) with n the row's number of valid entries (strict for tau < 1;
-    exactly 1/n for tau = 1); invalid entries get 0; a row without valid entries is all 0.
-    See the module docstring for the proof.
-    """
-    with torch.autocast(device_type=score.device.type, enabled=False):
-        keep = valid.float()
-        n = keep.sum(-1, keepdim=True)  # (..., 1)
-        n_safe = n.clamp_min(1.0)
-        s = score.float().clamp(0.0, 1.0) * keep
-        d = (s - s.sum(-1, keepdim=True) / n_safe) * keep  # (..., m), sums to 0 over valid views
-        kappa = (1.0 - margin) * (1.0 - tau) * n / (n - 1.0).clamp_min(1.0)  # 0 at n <= 1 (d = 0)
-        return keep * (1.0 + kappa * d) / n_safe
 
 
 def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
@@ -92,38 +51,14 @@ def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> 
         return keep * (1.0 + (1.0 - margin) * e / (1.0 + gauge)) / n_safe
 
 
-def cross_view_stats(feats: Tensor, valid: Tensor, view_dim: int) -> Tensor:
-    """Consensus of each sample's valid views: feats (..., C) with the views along ``view_dim``, valid (feats'
-    shape without C) bool -> float32 (..., 2).
-
-    Channel 0 is the view's squared distance from the valid views' mean feature, ||f_i - mean||^2 / C (0 for
-    an invalid view); channel 1 the valid views' biased variance averaged over the C channels, the same for
-    every view of the sample (it is the mean of channel 0 over the valid views). An invalid view's feature is
-    replaced, not multiplied, by 0, so not even a non-finite one reaches a statistic; a sample with one valid
-    view gets 0 and 0, one without any gets 0 and 0.
-    """
-    with torch.autocast(device_type=feats.device.type, enabled=False):
-        keep = valid.unsqueeze(-1)  # (..., 1)
-        f = torch.where(keep, feats.float(), 0.0)  # (..., C)
-        n = keep.sum(view_dim, keepdim=True).clamp_min(1).float()  # valid views of the sample
-        mean = f.sum(view_dim, keepdim=True) / n
-        norm = torch.linalg.vector_norm(f - mean, dim=-1, keepdim=True)  # one pass, no squared copy; 0 -> grad 0
-        dist = torch.where(keep, norm.square() / f.shape[-1], 0.0)  # (..., 1)
-        var = dist.sum(view_dim, keepdim=True) / n
-        return torch.cat([dist, var.expand_as(dist)], dim=-1)
-
-
 class SemanticWeightNet(nn.Module):
-    """MLP (C + 5 -> 16 -> 8 -> 1, ELU; C + 7 inputs with ``weight_inputs = "cross-view"``) scoring each view,
-    mapped into C(tau) by ``cfg.weight_map``."""
+    """MLP (C + 5 -> 16 -> 8 -> 1, ELU) scoring each view, mapped into C(tau) by :func:`radial_weights`."""
 
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         h1, h2 = cfg.weight_hidden
-        self.tau, self.margin, self.weight_map = cfg.tau, cfg.weight_margin, cfg.weight_map
-        self.weight_inputs = cfg.weight_inputs
-        extra = CROSS_VIEW_STATS if cfg.weight_inputs == "cross-view" else 0
-        self.mlp = nn.Sequential(nn.Linear(cfg.feat_dim + 5 + extra, h1), nn.ELU(), nn.Linear(h1, h2), nn.ELU(),
+        self.tau, self.margin = cfg.tau, cfg.weight_margin
+        self.mlp = nn.Sequential(nn.Linear(cfg.feat_dim + 5, h1), nn.ELU(), nn.Linear(h1, h2), nn.ELU(),
                                  nn.Linear(h2, 1))
 
     def forward(self, feats: Tensor, dirs: Tensor, valid: Tensor) -> Tensor:
@@ -132,13 +67,6 @@ class SemanticWeightNet(nn.Module):
         Returns float32 weights (R, m, N), summing to 1 over the valid views of each sample.
         """
         seen = valid.to(feats.dtype).mean(dim=2, keepdim=True).expand_as(valid)  # (R, m, N)
-        parts = [feats, dirs.to(feats.dtype)]
-        if self.weight_inputs == "cross-view":
-            parts.append(cross_view_stats(feats, valid, view_dim=1).to(feats.dtype))  # (R, m, N, 2)
-        x = torch.cat([*parts, seen[..., None]], dim=-1)  # (R, m, N, C + 5) or (R, m, N, C + 7)
+        x = torch.cat([feats, dirs.to(feats.dtype), seen[..., None]], dim=-1)  # (R, m, N, C + 5)
         raw = self.mlp(x).squeeze(-1).float().transpose(1, 2)  # (R, N, m)
-        if self.weight_map == "radial":
-            w = radial_weights(raw, valid.transpose(1, 2), self.tau, self.margin)
-        else:
-            w = bounded_weights(torch.sigmoid(raw), valid.transpose(1, 2), self.tau, self.margin)
-        return w.transpose(1, 2)  # (R, m, N)
+        return radial_weights(raw, valid.transpose(1, 2), self.tau, self.margin).transpose(1, 2)  # (R, m, N)

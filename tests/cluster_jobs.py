@@ -22,7 +22,7 @@ from cluster_fixtures import SRAY, LocalCluster
 
 TINY_TRAIN = {"model.n_source": 3, "model.n_coarse": 8, "model.n_fine": 8, "runtime.chunk": 1024, "data.top_k": 4,
               "data.rays_per_batch": 64, "data.loader_workers": 0, "data.val_views_per_scene": 1,
-              "data.val_downscale": 2, "optim.steps": 10, "optim.lr": 3e-3, "optim.lr_final": 1e-3,
+              "data.held_out.stride": 2, "optim.steps": 10, "optim.lr": 3e-3, "optim.lr_final": 1e-3,
               "run.log_every": 1, "run.val_every": 10, "run.ckpt_every": 4, "run.register_model": ""}
 """``--set`` values of a seconds-long job (the network of ``train_fixtures.tiny_config``): 10 steps, every
 step logged, checkpoints at steps 4, 8 and 10, validation at the end, no model registration."""

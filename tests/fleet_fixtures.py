@@ -62,7 +62,7 @@ def tiny_fleet_config(**finetune: object) -> FleetConfig:
     """Seconds per scene: 3 held-out sources, stride-4 renders, tiny Semantic-NeRF, quick retries."""
     cfg = FleetConfig(max_parallel=2, cpus_per_task=1.0, retries=1, retry_backoff_s=0.1)
     ft = cfg.finetune
-    ft.max_steps, ft.eval_every, ft.patience, ft.lr, ft.eval_n_source, ft.eval_stride = 6, 3, 2, 1e-2, 3, 4
+    ft.max_steps, ft.eval_every, ft.patience, ft.lr, ft.held_out.n_source, ft.held_out.stride = 6, 3, 2, 1e-2, 3, 4
     cfg.nerf.depth, cfg.nerf.width, cfg.nerf.skip_layer, cfg.nerf.pos_freqs, cfg.nerf.dir_freqs = 2, 32, 1, 4, 2
     for key, value in finetune.items():
         setattr(ft, key, value)

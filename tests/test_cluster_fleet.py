@@ -20,7 +20,7 @@ from concurrent_loggers import KEYS
 pytestmark = pytest.mark.cluster
 
 TINY_FLEET = {"finetune.max_steps": 6, "finetune.eval_every": 3, "finetune.patience": 2, "finetune.lr": 1e-2,
-              "finetune.eval_n_source": 3, "finetune.eval_stride": 4, "retries": 1, "retry_backoff_s": 0.1}
+              "finetune.held_out.n_source": 3, "finetune.held_out.stride": 4, "retries": 1, "retry_backoff_s": 0.1}
 """``--set`` values of a seconds-long scene task (``fleet_fixtures.tiny_fleet_config``)."""
 SCENES = ["synth_train_000", "synth_test_000"]
 RUNS, STEPS = 16, 40

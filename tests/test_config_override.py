@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import dataclasses
-import json
 
 import pytest
 
 from sray.data_tools.loader.augment import Augmentation
 from sray.model.runtime import Runtime
 from sray.platform.config.recipes import get_recipe
-from sray.platform.config.train_config import TrainConfig, apply_override
+from sray.platform.config.train_config import apply_override
 
 
 def test_each_field_type_is_parsed_from_its_annotation() -> None:
@@ -68,50 +66,6 @@ def test_augmentation_is_set_field_by_field_in_the_data_aug_section() -> None:
         apply_override(cfg, "data.aug.colour=0.3")
 
 
-@pytest.mark.parametrize("field", [f.name for f in dataclasses.fields(Augmentation)])
-def test_a_flat_augmentation_key_names_its_place_in_the_section(field: str) -> None:
-    cfg = get_recipe("synth-cpu-hour")
-    before = cfg.to_dict()
-    with pytest.raises(ValueError) as caught:
-        apply_override(cfg, f"data.aug_{field}=0.5")
-    assert str(caught.value) == (f"--set 'data.aug_{field}=0.5': augmentation settings are the data.aug section; "
-                                 f"use --set data.aug.{field}=0.5")
-    assert cfg.to_dict() == before
-
-
-MAIN_FLAT_AUG = {"aug_colour_ev": 0.3, "aug_channel_ev": 0.1, "aug_noise_sigma": 3.0, "aug_min_source": 2,
-                 "aug_source_scale": 0.25, "aug_query_crop": 0.5}
-"""The data section's augmentation keys as configs and checkpoints stored them flat."""
-
-
-def test_a_stored_config_with_flat_augmentation_keys_loads_into_the_section() -> None:
-    stored = get_recipe("synth-small").to_dict()
-    del stored["data"]["aug"]
-    stored["data"].update(MAIN_FLAT_AUG)
-    cfg = TrainConfig.from_dict(json.loads(json.dumps(stored)))
-    assert cfg.data.aug == Augmentation(colour_ev=0.3, channel_ev=0.1, noise_sigma=3.0, min_source=2,
-                                        source_scale=0.25, query_crop=0.5)
-    assert cfg.data.top_k == stored["data"]["top_k"]
-    assert TrainConfig.from_dict(cfg.to_dict()).to_dict() == cfg.to_dict()
-    assert "aug_colour_ev" not in cfg.to_dict()["data"] and cfg.to_dict()["data"]["aug"]["colour_ev"] == 0.3
-
-
-MAIN_MODEL_RUNTIME = {"impl": "reference", "chunk": 512, "train_piece": 64}
-"""The runtime settings as configs and checkpoints stored them in the model section."""
-
-
-def test_a_stored_config_with_runtime_fields_in_the_model_section_loads_them_into_the_runtime_section() -> None:
-    stored = get_recipe("synth-small").to_dict()
-    del stored["runtime"]
-    stored["model"].update(MAIN_MODEL_RUNTIME)
-    cfg = TrainConfig.from_dict(json.loads(json.dumps(stored)))
-    assert cfg.runtime == Runtime(impl="reference", chunk=512, train_piece=64)
-    assert cfg.model == get_recipe("synth-small").model
-    saved = cfg.to_dict()
-    assert not set(MAIN_MODEL_RUNTIME) & set(saved["model"]) and saved["runtime"] == MAIN_MODEL_RUNTIME
-    assert TrainConfig.from_dict(saved) == cfg
-
-
 def test_runtime_settings_are_set_in_the_runtime_section_and_checked() -> None:
     cfg = get_recipe("synth-small")
     apply_override(cfg, "runtime.impl=reference")
@@ -121,8 +75,6 @@ def test_runtime_settings_are_set_in_the_runtime_section_and_checked() -> None:
         apply_override(cfg, "runtime.impl=slow")
     assert cfg.runtime == Runtime(impl="reference", chunk=4096)  # the rejected value left no trace
     before = cfg.to_dict()
-    with pytest.raises(ValueError) as caught:
+    with pytest.raises(ValueError, match="no field 'chunk' in SRayConfig"):
         apply_override(cfg, "model.chunk=256")
-    assert str(caught.value) == ("--set 'model.chunk=256': how the network is run is the runtime section; "
-                                 "use --set runtime.chunk=256")
     assert cfg.to_dict() == before

@@ -98,7 +98,8 @@ def _finished_fleet(uri: str, tmp_path: Path) -> dict:
     from sray.platform.viz.charts import write_fleet_charts
 
     tracker = MlflowTracker(uri)
-    parent, _ = parent_run(tracker, {}, "sray-fleet", tmp_path / "demo" / "fleet")
+    new_record = {"tracker": tracker.name, "tracking_uri": tracker.store, "parent_run_id": None}
+    parent, _ = parent_run(tracker, new_record, "sray-fleet", tmp_path / "demo" / "fleet")
     children, results = [], []
     for scene in SCENES:
         child = tracker.start_run("sray-fleet", f"{scene} · sray", parent=parent)

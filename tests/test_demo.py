@@ -51,7 +51,8 @@ def test_demo_runs_every_stage_and_tracks_them(ray_session, tmp_path: Path, monk
     sray_cpu_s = state["counters"]["cpu_seconds"]
     # the demo's recipe with 4 of its 600 steps keeps its 2D-only warm-up at a third: round(4 * 200 / 600) = 1 step
     assert state["config"]["recipe"] == "synth-demo" and state["config"]["optim"]["warmup_2d_steps"] == 1
-    assert state["config"]["data"]["epoch_steps"] == 4  # and one loader epoch over the run, as the recipe's
+    # and the recipe's data order, the loader's default: a loader epoch per checkpoint interval (here 2 steps)
+    assert state["config"]["data"]["epoch_steps"] == 0 and state["config"]["run"]["ckpt_every"] == 2
     assert "first 1 on the source views' labels alone" in out
     assert sray_cpu_s > 1.0  # so the cap is what set the budget
     training = json.loads((tmp_path / "demo/segmenter/segmenter.json").read_text())["training"]

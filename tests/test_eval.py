@@ -206,7 +206,7 @@ def test_eval_refuses_bad_input(tiny_checkpoint, tiny_shards, mlflow_uri, tmp_pa
     assert "scenes ['no_such_scene'] not found" in capsys.readouterr().err
     train_scene = next(s for s, e in read_manifest(tiny_shards).scenes.items() if e.meta["role"] == "train")
     assert main([*args, "--scenes", train_scene, "--stride", "0"]) == 2
-    assert "stride (0)" in capsys.readouterr().err
+    assert "--stride is 0" in capsys.readouterr().err
     assert main([*args[:2], str(tmp_path / "nowhere"), *args[3:]]) == 2
     assert "nowhere" in capsys.readouterr().err
 

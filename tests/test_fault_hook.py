@@ -26,7 +26,6 @@ from sray.platform.common.fault_hook import (
     parse_faults,
     propagated_env,
 )
-from sray.platform.config.train_config import TrainConfig
 
 
 def test_parse_reads_every_key_and_defaults_to_off() -> None:
@@ -109,10 +108,3 @@ def test_hold_pauses_rank_zero_once_until_released(tmp_path: Path) -> None:
     other = tmp_path / "other"
     other.mkdir()
     assert not hold_if_due(faults, 3, 1, other, dict, timeout_s=30) and not hold_paths(other, 3)[0].exists()
-
-
-def test_configs_written_before_the_hook_still_load() -> None:
-    """A job config that still holds the retired testing fields loads (they are ignored)."""
-    d = TrainConfig().to_dict()
-    d["run"].update(fail_at_step=3, nan_at_step=4, stop_after_step=5)
-    assert TrainConfig.from_dict(d).to_dict() == TrainConfig().to_dict()

@@ -43,7 +43,7 @@ def _on_disk(out: Path, scene: str, method: str) -> dict:
 
 
 SRAY_HELD_OUT_RENDER = "fast (pixel stride 1, fine pass where the coarse confidence < 0.9, resampled depths only)"
-"""S-Ray's default held-out render (``finetune.eval_render``); Semantic-NeRF renders in full."""
+"""S-Ray's default held-out render (``finetune.held_out``); Semantic-NeRF renders in full."""
 
 
 def _protocol(source_rule: str, n_source: int, stride: int, render: str = "full") -> dict:
@@ -75,7 +75,7 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
     for scene in ("synth_train_000", "synth_test_000"):
         r = by_scene[scene]
         assert r["status"] == "finished" and r["attempts"] == 1 and r["error"] is None
-        assert r["protocol"] == _protocol(source_rule, cfg.finetune.eval_n_source, cfg.finetune.eval_stride,
+        assert r["protocol"] == _protocol(source_rule, cfg.finetune.held_out.n_source, cfg.finetune.held_out.stride,
                                           SRAY_HELD_OUT_RENDER)
         assert r["steps_used"] == 6 and [p["step"] for p in r["curve"]] == [0, 3, 6]
         assert all(set(p) == CURVE_KEYS for p in r["curve"])
@@ -107,7 +107,7 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
         assert f"| {scene} | sray |" in table
     assert "| failed |" in table and "InjectedFailure" in table
     [caption] = [line for line in table.splitlines() if line.startswith("Protocol")]
-    assert caption.startswith(f"Protocol: sources: {cfg.finetune.eval_n_source} per query, fixed, top-ranked by "
+    assert caption.startswith(f"Protocol: sources: {cfg.finetune.held_out.n_source} per query, fixed, top-ranked by "
                               f"{source_rule}; pixels: every 4th in each direction (stride 4), so no SSIM")
     if importlib.util.find_spec("sray.platform.viz.charts") is not None:
         charts = [a.path for a in client.list_artifacts(parent_id, "charts")]
@@ -128,7 +128,8 @@ def test_fleet_retries_reports_failure_and_relaunch_skips_finished(ray_session, 
 def test_fleet_refuses_an_out_dir_of_another_checkpoint(tiny_shards, tiny_checkpoint, mlflow_uri, tmp_path):
     out = tmp_path / "fleet"
     out.mkdir()
-    (out / "fleet.json").write_text(json.dumps({"base_sha256": "0" * 64, "parent_run_id": None, "launches": 1}))
+    (out / "fleet.json").write_text(json.dumps({"format": "sray-fleet", "base_sha256": "0" * 64, "tracker": "mlflow",
+                                                "tracking_uri": mlflow_uri, "parent_run_id": None, "launches": 1}))
     with pytest.raises(ValueError, match="another checkpoint"):
         run_fleet(tiny_fleet_config(), tiny_checkpoint, tiny_shards, ["synth_test_000"], out, mlflow_uri, ["sray"])
 

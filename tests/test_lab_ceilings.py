@@ -196,13 +196,13 @@ def test_view_weights_rows_run_end_to_end_and_plain_mean_weights_read_as_blind(s
                                                                                one_thread: None) -> None:  # noqa: F811
     """``sray lab view-weights`` on two untrained checkpoints of the fixture scenes (whose box hides the wall
     from some sources): with tau = 1 every valid view weighs exactly the plain mean (n w = 1, ranking 0.5, the
-    occluded mass the plain mean's, nothing removable, no spread); with tau = 0.7 and cross-view inputs the weights
+    occluded mass the plain mean's, nothing removable, no spread); with tau = 0.7 the weights
     spread within C(tau) and the occluded mass stays at or above its floor; both rows count the same points; the JSON
     and the table in the document's Ceilings section are written."""
     paths = []
-    for name, tau, inputs in (("mean", 1.0, "view"), ("occl", 0.7, "cross-view")):
+    for name, tau in (("mean", 1.0), ("occl", 0.7)):
         cfg = tiny_config(shards, tmp_path)
-        cfg.model.tau, cfg.model.weight_inputs = tau, inputs
+        cfg.model.tau = tau
         paths.append(str(write_initial_checkpoint(cfg, tmp_path / name / "checkpoints" / "step_000000000")))
     doc = tmp_path / "benchmarks.md"
     assert main(["lab", "view-weights", "--checkpoint", *paths, "--data", str(shards), "--n-source", "4",
@@ -212,7 +212,7 @@ def test_view_weights_rows_run_end_to_end_and_plain_mean_weights_read_as_blind(s
     assert mean["visible_relative_weight"] == pytest.approx(1.0) == mean["occluded_relative_weight"]
     assert mean["ranking"] == 0.5 and mean["removed_share"] is None and mean["relative_weight_sd"] < 1e-6
     assert mean["occluded_mass"] == pytest.approx(mean["occluded_mass_plain"])
-    assert occl["weight_inputs"] == "cross-view" and occl["tau"] == 0.7 and occl["relative_weight_sd"] > 0
+    assert occl["tau"] == 0.7 and occl["relative_weight_sd"] > 0
     assert 0.7 < occl["occluded_relative_weight"] < 1 / 0.7 and 0.7 < occl["visible_relative_weight"] < 1 / 0.7
     assert occl["occluded_mass"] >= occl["occluded_mass_floor"] - 1e-6
     assert 0 <= occl["acc_occluded"] <= 1 and 0 <= occl["acc_clear"] <= 1

@@ -65,9 +65,11 @@ def test_a_study_file_parses_into_arms_seeds_budgets_and_a_separate_validation_w
     assert (val.seed, val.train_scenes, val.test_scenes, val.views) == (5, 0, 1, 20) and spec.world.seed == 0
     assert list(spec.trial_keys())[:3] == ["base--s0", "base--s1", "lr-2x--s0"] and len(spec.trial_keys()) == 6
     assert spec.results_dir == tmp_path / "studies" / "results" / "toy"
-    cfg = trial.trial_config(spec, spec.arms["ema"], 1, tmp_path / "shards", tmp_path, "sqlite:///x.db")
-    assert (cfg.optim.ema_decay, cfg.optim.steps, cfg.optim.cpu_seconds, cfg.run.seed) == (0.998, 8, 0.0, 1)
-    assert cfg.run.workers == 1 and cfg.run.name == "toy-ema-s1"
+    with pytest.raises(ValueError, match="ema_decay"):  # its field left the product: its results stay, it cannot rerun
+        trial.trial_config(spec, spec.arms["ema"], 1, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    cfg = trial.trial_config(spec, spec.arms["lr-2x"], 1, tmp_path / "shards", tmp_path, "sqlite:///x.db")
+    assert (cfg.optim.lr, cfg.optim.cpu_seconds, cfg.run.seed) == (0.002, 30.0, 1)
+    assert cfg.run.workers == 1 and cfg.run.name == "toy-lr-2x-s1"
 
 
 @pytest.mark.parametrize("change, field, fix", [

@@ -6,16 +6,16 @@ from __future__ import annotations
 import pytest
 import torch
 
-from sray.model.config import WEIGHT_INPUTS, SRayConfig
+from sray.model.config import SRayConfig
 from sray.model.rays import pixel_rays
 from sray.model.semantic_ray import SRayModel
 
 H, W = 32, 32
 
 
-def _setup(weight_inputs: str = "view") -> tuple[SRayModel, object, torch.Tensor, torch.Tensor, torch.Tensor]:
+def _setup() -> tuple[SRayModel, object, torch.Tensor, torch.Tensor, torch.Tensor]:
     torch.manual_seed(0)
-    net = SRayModel(SRayConfig(n_classes=4, n_coarse=6, n_fine=6, weight_inputs=weight_inputs))
+    net = SRayModel(SRayConfig(n_classes=4, n_coarse=6, n_fine=6))
     K = torch.tensor([[28.0, 0.0, (W - 1) / 2], [0.0, 28.0, (H - 1) / 2], [0.0, 0.0, 1.0]])
     c2w = torch.eye(4).repeat(2, 1, 1)
     c2w[:, 0, 3] = torch.tensor([-0.2, 0.2])
@@ -32,9 +32,8 @@ def _outputs_and_grads(fn, net: SRayModel, src, origins, dirs, z) -> tuple[dict,
     return out, [p.grad.clone() for p in net.coarse.parameters()]
 
 
-@pytest.mark.parametrize("weight_inputs", WEIGHT_INPUTS)
-def test_field_compiles_as_one_graph_forward_and_backward(weight_inputs: str) -> None:
-    net, src, origins, dirs, z = _setup(weight_inputs)
+def test_field_compiles_as_one_graph_forward_and_backward() -> None:
+    net, src, origins, dirs, z = _setup()
     compiled = torch.compile(net.coarse, fullgraph=True, backend="aot_eager")
     ref, ref_grads = _outputs_and_grads(net.coarse, net, src, origins, dirs, z)
     got, got_grads = _outputs_and_grads(compiled, net, src, origins, dirs, z)

@@ -1,5 +1,5 @@
 """The ResUNet encoder follows the appendix table's shapes at any first-layer width, keeps pixel centres aligned, and
-normalises every layer per image with instance or group norm as configured."""
+normalises every layer per image with instance norm."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from sray.model.config import SRayConfig
-from sray.model.encoder import GROUP_CHANNELS, ResUNetEncoder, norm_groups, upsample_to
+from sray.model.encoder import ResUNetEncoder, upsample_to
 from sray.model.semantic_ray import SRayModel
 from sray.platform.eval.segmenter import Segmenter, SegmenterConfig
 
@@ -103,11 +103,10 @@ def _normalised_by_hand(x: torch.Tensor, groups: int, weight: torch.Tensor, bias
     return out * weight.view(1, -1, 1, 1) + bias.view(1, -1, 1, 1)
 
 
-@pytest.mark.parametrize("norm", ["instance", "group"])
-def test_every_layer_normalises_per_image_over_its_configured_channel_groups(norm: str) -> None:
+def test_every_layer_normalises_each_channel_of_each_image() -> None:
     torch.manual_seed(2)
-    enc = ResUNetEncoder(32, 16, norm)
-    norms = [m for m in enc.modules() if isinstance(m, torch.nn.InstanceNorm2d | torch.nn.GroupNorm)]
+    enc = ResUNetEncoder(32, 16)
+    norms = [m for m in enc.modules() if isinstance(m, torch.nn.InstanceNorm2d)]
     assert len(norms) == 27  # L1, 16 convs and 4 projections of the 10 ResBlocks, L11, L14, L15, L18, L19
     seen = []
     for layer in norms:
@@ -120,46 +119,5 @@ def test_every_layer_normalises_per_image_over_its_configured_channel_groups(nor
     assert len(seen) == 27
     for layer, x, out in seen:
         channels = x.shape[1]
-        groups = channels if norm == "instance" else channels // GROUP_CHANNELS
-        torch.testing.assert_close(out, _normalised_by_hand(x, groups, layer.weight, layer.bias), rtol=1e-4,
+        torch.testing.assert_close(out, _normalised_by_hand(x, channels, layer.weight, layer.bias), rtol=1e-4,
                                    atol=1e-4)
-
-
-def test_norm_groups_hold_group_channels_channels_or_the_nearest_divisor() -> None:
-    for channels in range(1, 200):
-        groups = norm_groups(channels)
-        assert channels % groups == 0 and 1 <= groups <= max(1, channels // GROUP_CHANNELS)
-        if channels % GROUP_CHANNELS == 0:
-            assert groups == channels // GROUP_CHANNELS
-        assert not any(channels % g == 0 for g in range(groups + 1, max(1, channels // GROUP_CHANNELS) + 1))
-
-
-def test_group_norm_keeps_a_channels_strength_against_its_group_where_instance_norm_drops_it() -> None:
-    torch.manual_seed(3)
-    x = torch.randn(1, 16, 12, 12)
-    louder = x.clone()
-    louder[:, 0] *= 10.0  # one channel fires ten times as strongly in this image
-    instance, group = ResUNetEncoder(32, 16, "instance").stem[1], ResUNetEncoder(32, 16, "group").stem[1]
-    with torch.no_grad():
-        torch.testing.assert_close(instance(louder)[:, 0], instance(x)[:, 0], rtol=1e-4, atol=1e-4)
-        ratio = group(louder)[:, 0].std() / group(louder)[:, 1:8].std()
-    assert ratio > 3.0
-
-
-@pytest.mark.parametrize("width", [16, 12])
-def test_group_norm_has_the_instance_norms_parameters_in_every_built_encoder(width: int) -> None:
-    instance = ResUNetEncoder(32, width)
-    for built in (ResUNetEncoder(32, width, "group"),
-                  SRayModel(SRayConfig(n_classes=5, encoder_width=width, encoder_norm="group")).encoder,
-                  Segmenter(SegmenterConfig(n_classes=5, encoder_width=width, encoder_norm="group")).encoder):
-        assert [p.shape for p in built.parameters()] == [p.shape for p in instance.parameters()]
-        assert not any(isinstance(m, torch.nn.InstanceNorm2d) for m in built.modules())
-        assert [m.num_groups for m in built.modules() if isinstance(m, torch.nn.GroupNorm)][:2] == \
-            [norm_groups(width), norm_groups(2 * width)]
-
-
-def test_an_unknown_norm_is_refused() -> None:
-    with pytest.raises(ValueError, match="encoder_norm"):
-        SRayConfig(encoder_norm="batch")
-    with pytest.raises(ValueError, match="norm is 'batch'"):
-        ResUNetEncoder(32, 16, "batch")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from sray.model.config import WEIGHT_INPUTS, SRayConfig
+from sray.model.config import SRayConfig
 from sray.model.rays import pixel_rays
 from sray.model.semantic_ray import SRayModel
 
@@ -25,16 +25,15 @@ def _inputs(device: str) -> dict:
     return {k: v.to(device) for k, v in data.items()}
 
 
-def _net(device: str, weight_inputs: str = "view") -> SRayModel:
+def _net(device: str) -> SRayModel:
     torch.manual_seed(0)
-    return SRayModel(SRayConfig(n_classes=6, n_coarse=16, n_fine=16, weight_inputs=weight_inputs)).to(device)
+    return SRayModel(SRayConfig(n_classes=6, n_coarse=16, n_fine=16)).to(device)
 
 
-@pytest.mark.parametrize("weight_inputs", WEIGHT_INPUTS)
-def test_cuda_matches_cpu_in_fp32(weight_inputs: str) -> None:
+def test_cuda_matches_cpu_in_fp32() -> None:
     outs = []
     for device in ("cpu", "cuda"):
-        net, x = _net(device, weight_inputs).eval(), _inputs(device)
+        net, x = _net(device).eval(), _inputs(device)
         with torch.no_grad():
             src = net.encode(x["rgb"], x["K"], x["c2w"])
             outs.append(net.render_rays(src, x["origins"], x["dirs"], 1.0, 5.0, stratified=False))
@@ -43,10 +42,9 @@ def test_cuda_matches_cpu_in_fp32(weight_inputs: str) -> None:
             torch.testing.assert_close(outs[1][name][key].cpu(), outs[0][name][key], rtol=1e-3, atol=1e-3)
 
 
-@pytest.mark.parametrize("weight_inputs", WEIGHT_INPUTS)
 @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
-def test_autocast_training_step_is_finite_on_cuda(dtype: torch.dtype, weight_inputs: str) -> None:
-    net, x = _net("cuda", weight_inputs).train(), _inputs("cuda")
+def test_autocast_training_step_is_finite_on_cuda(dtype: torch.dtype) -> None:
+    net, x = _net("cuda").train(), _inputs("cuda")
     with torch.autocast("cuda", dtype=dtype):
         src = net.encode(x["rgb"], x["K"], x["c2w"])
         out = net.render_rays(src, x["origins"], x["dirs"], 1.0, 5.0, stratified=True)

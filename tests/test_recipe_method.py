@@ -151,7 +151,7 @@ def test_add_a_method_and_finetune_a_scene_with_it(prior_method, tiny_shards, ti
     # the stored artifact is the best evaluated state; its score has a closed form
     model = prior_method.load_artifact(tmp_path, tiny_checkpoint)
     assert result["artifact_bytes"] == (tmp_path / "class_prior.safetensors").stat().st_size
-    stride, ignore_id = cfg.finetune.eval_stride, 255
+    stride, ignore_id = cfg.finetune.held_out.stride, 255
     expected_after = constant_miou(tiny_shards, int(model.logits.argmax()), stride, ignore_id)
     assert result["miou_after"] == pytest.approx(expected_after, abs=1e-9)
     assert result["miou_before"] == pytest.approx(constant_miou(tiny_shards, 0, stride, ignore_id), abs=1e-9)

@@ -69,7 +69,7 @@ def test_clips_show_the_model_before_and_after_finetuning(tiny_shards, tiny_chec
                                                       "frames.json", "protocol.txt"}
         assert {(p.name, a) for p, a in logger.artifacts if a == f"flythrough/{stage}"} == {
             (p.name, f"flythrough/{stage}") for p in folder.iterdir()}
-        expected, _ = Flythrough(net, plan, cfg.eval_n_source, cfg.eval_fast()).picture(
+        expected, _ = Flythrough(net, plan, cfg.held_out.n_source, cfg.held_out.fast()).picture(
             0, torch.device("cpu"), f"{stage} finetuning")
         mse = np.mean((_first_frame(folder / "flythrough.webm") - expected) ** 2)
         assert 10 * np.log10(255.0**2 / max(mse, 1e-12)) >= 30.0, stage

@@ -62,8 +62,8 @@ def test_artifact_reproduces_the_finetuned_model_exactly(finetuned, tiny_shards,
     assert not torch.equal(tuned_out["fine"]["logits"], base_out["fine"]["logits"])  # the finetune changed it
     # The artifact holds the best evaluated state: re-scoring the reloaded model gives miou_after exactly.
     samples = list(make_eval_samples(tiny_shards, SCENE, "test", n_source=3))
-    ft = tiny_fleet_config().finetune  # the same held-out render as the finetune's (finetune.eval_render)
-    learner = SRayLearner(loaded, "-", DEFAULT_ADAPT, 0.0, 0.0, "no", torch.device("cpu"), 20, ft.eval_fast())
+    ft = tiny_fleet_config().finetune  # the same held-out render as the finetune's (finetune.held_out)
+    learner = SRayLearner(loaded, "-", DEFAULT_ADAPT, 0.0, 0.0, "no", torch.device("cpu"), 20, ft.held_out.fast())
     scores = evaluate(learner, samples, tiny_fleet_config(), n_classes=20, ignore_id=255)
     assert scores["miou"] == outcome.result["miou_after"] and scores["psnr"] == outcome.result["psnr_after"]
 

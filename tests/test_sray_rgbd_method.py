@@ -52,11 +52,11 @@ def test_a_fleet_task_finetunes_sray_given_the_source_depth(tiny_shards: Path, t
     assert (result["protocol"]["inputs"], result["protocol"]["n_source"]) == ("rgbd", 3)
 
     ft, n_classes = cfg.finetune, len(read_manifest(tiny_shards).scenes[SCENE].meta["class_names"])
-    samples = list(make_eval_samples(tiny_shards, SCENE, split="test", n_source=ft.eval_n_source))
+    samples = list(make_eval_samples(tiny_shards, SCENE, split="test", n_source=ft.held_out.n_source))
 
     def held_out(net: torch.nn.Module) -> dict[str, float]:
-        return score_scene(lambda s: sray_renderer(net, s, CPU, ft.eval_fast()), samples, n_classes, IGNORE,
-                           ft.eval_stride, ft.eval_chunk, CPU, ft.eval_fast()).scores
+        return score_scene(lambda s: sray_renderer(net, s, CPU, ft.held_out.fast()), samples, n_classes, IGNORE,
+                           ft.held_out.stride, ft.eval_chunk, CPU, ft.held_out.fast()).scores
 
     with torch.no_grad():
         rgb = model_from_checkpoint(tiny_checkpoint)[0].eval()

@@ -150,7 +150,7 @@ BAD_SPECS = {
     "no distribution": (["--param", "optim.lr"], "--param"),
     "range on an int field": (["--param", "optim.steps=uniform(10, 20)"], "optim.steps"),
     "value of the wrong type": (["--param", "run.workers=choice(two)"], "run.workers"),
-    "value the field refuses": (["--param", "data.val_render=grid(fast, sharp)"], "data.val_render"),
+    "value the field refuses": (["--param", "data.held_out.render=grid(fast, sharp)"], "data.held_out.render"),
     "seed twice": (["--param", "run.seed=grid(0, 1)", "--seeds", "2"], "run.seed"),
     "metric never reported": (["--param", "optim.lr=choice(1e-3)", "--metric", "val/accuracy"], "--metric"),
     "metric missing from reports": (["--param", "optim.lr=choice(1e-3)", "--set", "run.val_every=30"],

@@ -31,9 +31,8 @@ def _history(cfg, key: str) -> list[tuple[int, float]]:
 
 @pytest.fixture(scope="module")
 def uninterrupted(ray_session, tiny_shards, tmp_path_factory):  # noqa: F811
-    """20 steps on 2 workers with a NaN injected at step 7, keeping a weight average."""
+    """20 steps on 2 workers with a NaN injected at step 7."""
     cfg = tiny_config(tiny_shards, tmp_path_factory.mktemp("u"), name="uninterrupted")
-    cfg.optim.ema_decay = 0.8
     with injected_faults("train.nan_at_step=7"):
         outcome = launch_training(cfg)
     return cfg, outcome
@@ -51,13 +50,12 @@ def test_two_workers_learn_and_stay_in_sync(uninterrupted) -> None:
 
 
 def test_nonfinite_loss_is_skipped_and_counted(uninterrupted) -> None:
-    """The NaN at step 7 skipped exactly one step, which the weight average did not take in either; training went
-    on to the end."""
+    """The NaN at step 7 skipped exactly one step; training went on to the end."""
     cfg, outcome = uninterrupted
     skipped = dict(_history(cfg, "train/skipped_steps"))
     assert skipped[max(skipped)] == 1.0
     state = load_checkpoint(outcome.latest_checkpoint)
-    assert state["step"] == cfg.optim.steps and state["averaged_steps"] == cfg.optim.steps - 1
+    assert state["step"] == cfg.optim.steps
 
 
 def test_mlflow_store_holds_everything(uninterrupted) -> None:
@@ -69,7 +67,7 @@ def test_mlflow_store_holds_everything(uninterrupted) -> None:
     assert {"train/loss", "train/lr", "val/miou", "zeroshot/miou", "train/rays_per_s", "train/data_wait_share",
             "train/memory_mb", "train/cpu_seconds", "system/node0/cpu_utilization_percentage",
             "system/node0/system_memory_usage_megabytes"} <= set(run.data.metrics)
-    # the validation protocol, logged once: strided renders (val_downscale 2), so no SSIM was logged
+    # the validation protocol, logged once: strided renders (data.held_out.stride 2), so no SSIM was logged
     rule = json.loads((Path(cfg.data.shards) / "manifest.json").read_text())["neighbours"]
     assert run.data.params["protocol.source_rule"] == f"{rule['rule']} v{rule['version']}"
     assert run.data.params["protocol.stride"] == "2" and run.data.params["protocol.n_source"] == "3"
@@ -87,13 +85,12 @@ def test_mlflow_store_holds_everything(uninterrupted) -> None:
 def test_resume_equals_uninterrupted(uninterrupted, tiny_shards, tmp_path_factory) -> None:  # noqa: F811
     """Checkpointed every 4 steps instead of 5 but with the reference's 5-step loader epochs, stopped mid-epoch
     after step 7 and resumed to step 20: the same parameters as uninterrupted (the data order follows
-    ``data.epoch_steps``, not the checkpoint interval; the resume replays epoch 1 to its offset 2), and the same
-    weight average."""
+    ``data.epoch_steps``, not the checkpoint interval; the resume replays epoch 1 to its offset 2)."""
     ref_cfg, ref = uninterrupted
     assert ref_cfg.data.epoch_steps == 0 and ref_cfg.run.ckpt_every == 5  # the reference's epochs are 5 steps
     out = tmp_path_factory.mktemp("r")
     cfg = tiny_config(tiny_shards, out, name="stopped", ckpt_every=4)
-    cfg.data.epoch_steps, cfg.optim.ema_decay = 5, ref_cfg.optim.ema_decay
+    cfg.data.epoch_steps = 5
     with injected_faults("train.nan_at_step=7;train.stop_after_step=7"):
         first = launch_training(cfg)
     assert first.status == "KILLED" and load_checkpoint(first.latest_checkpoint)["step"] == 7
@@ -101,9 +98,8 @@ def test_resume_equals_uninterrupted(uninterrupted, tiny_shards, tmp_path_factor
         second = launch_training(cfg, resume=True)
     assert second.status == "FINISHED"
     got, want = load_checkpoint(second.latest_checkpoint), load_checkpoint(ref.latest_checkpoint)
-    for entry in ("model", "averaged_model"):  # the live weights and their average
-        for key in want[entry]:
-            torch.testing.assert_close(got[entry][key], want[entry][key], rtol=1e-5, atol=1e-6, msg=f"{entry} {key}")
+    for key in want["model"]:
+        torch.testing.assert_close(got["model"][key], want["model"][key], rtol=1e-5, atol=1e-6, msg=key)
 
 
 def test_killed_worker_resumes_without_metric_gaps(ray_session, tiny_shards, tmp_path) -> None:  # noqa: F811
@@ -129,12 +125,11 @@ def test_infeasible_request_fails_fast(ray_session, tiny_shards, tmp_path) -> No
 def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(ray_session, tiny_shards,  # noqa: F811
                                                                                  tmp_path) -> None:
     """``optim.cpu_seconds`` ends the job at the first step whose CPU seconds (both ranks, summed) reach the
-    budget, long before the step cap; the learning rate (``optim.lr_decay_start=rays``) holds through the 2D warm-up,
-    then decays with the ray phase's CPU fraction, counted from the CPU it began at; the 2D warm-up steps
+    budget, long before the step cap; the learning rate decays with the CPU fraction; the 2D warm-up steps
     (source labels only) and the source-view and depth terms after them keep the two DDP ranks identical; the
     depth term is logged on every rendering step and the run's protocol says its training read depth."""
     cfg = tiny_config(tiny_shards, tmp_path, name="budget")
-    cfg.optim.steps, cfg.optim.cpu_seconds, cfg.optim.warmup_2d_steps, cfg.optim.lr_decay_start = 400, 12.0, 3, "rays"
+    cfg.optim.steps, cfg.optim.cpu_seconds, cfg.optim.warmup_2d_steps = 400, 12.0, 3
     cfg.model.lambda_src_sem, cfg.model.lambda_depth = 0.5, 0.2
     cfg.run.val_every, cfg.run.ckpt_every, cfg.run.system_metrics_s = 1000, 1000, 0.0
     outcome = launch_training(cfg)
@@ -150,8 +145,7 @@ def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(r
     assert budget_spent(job_dir, cfg) and not budget_spent(job_dir, larger)  # what a resume or a bench cell reads
     lr = dict(_history(cfg, "train/lr"))
     assert lr[last_step] < 0.5 * cfg.optim.lr  # decayed by the CPU fraction, not by last_step / 400
-    assert [lr[s] for s in (1, 2, 3)] == [cfg.optim.lr] * 3 and lr[4] < cfg.optim.lr  # the decay starts with the rays
-    assert counters["ray_phase_cpu_seconds"] == pytest.approx(dict(cpu)[3])  # what a resume counts the decay from
+    assert all(lr[s] > lr[s + 1] for s in range(1, last_step - 1))  # decays from the first step, 2D ones included
     src_steps, ray_steps = ({s for s, _ in _history(cfg, key)} for key in ("train/sem_src", "train/sem_fine"))
     assert src_steps == set(range(1, last_step + 1))  # every step, warm-up included
     assert ray_steps == set(range(4, last_step + 1))  # rays rendered only after the 3 warm-up steps

@@ -176,11 +176,11 @@ def test_a_fleet_task_finetunes_the_segmenter_and_stores_it(tiny_shards: Path, t
     assert (protocol["inputs"], protocol["render"], protocol["n_source"]) == ("rgbd", "full", 3)
 
     ft, n_classes = cfg.finetune, len(read_manifest(tiny_shards).scenes[SCENE].meta["class_names"])
-    samples = list(make_eval_samples(tiny_shards, SCENE, split="test", n_source=ft.eval_n_source))
+    samples = list(make_eval_samples(tiny_shards, SCENE, split="test", n_source=ft.held_out.n_source))
 
     def held_out(segmenter: Segmenter) -> float:
         return score_scene(lambda s: transfer_renderer(segmenter, s, 0.05, CPU), samples, n_classes, IGNORE,
-                           ft.eval_stride, 0, CPU).scores["miou"]
+                           ft.held_out.stride, 0, CPU).scores["miou"]
 
     assert result["miou_before"] == pytest.approx(held_out(load_segmenter(tiny_segmenter)[0]), abs=1e-9)
     stored = method.load_artifact(tmp_path, tiny_checkpoint)

@@ -30,7 +30,7 @@ def tiny_config(shards: Path, out: Path, **run: object) -> TrainConfig:
     cfg.model.n_source, cfg.model.n_coarse, cfg.model.n_fine = 3, 8, 8
     cfg.runtime = Runtime(chunk=1024, train_piece=24)
     cfg.data.shards, cfg.data.top_k, cfg.data.rays_per_batch = str(shards), 4, 64
-    cfg.data.loader_workers, cfg.data.val_views_per_scene, cfg.data.val_downscale = 0, 1, 2
+    cfg.data.loader_workers, cfg.data.val_views_per_scene, cfg.data.held_out.stride = 0, 1, 2
     cfg.optim.steps, cfg.optim.lr, cfg.optim.lr_final = 20, 3e-3, 1e-3
     cfg.run.output_dir, cfg.run.tracking_uri = str(out / "jobs"), f"sqlite:///{out / 'mlflow.db'}"
     cfg.run.workers, cfg.run.log_every, cfg.run.val_every, cfg.run.ckpt_every = 2, 1, 10, 5

@@ -81,31 +81,14 @@ def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str
                          "scene.json or re-convert the scene")
 
 
-def query_pixels(label: np.ndarray, n_rays: int, rng: np.random.Generator, balance: float = 0.0) -> np.ndarray:
-    """int64 (R,) flat indices into ``label`` (h, w), the query pixels of one training sample.
-
-    ``balance`` = 0 draws uniformly; ``balance`` = a > 0 draws a pixel of a label value (a class, or the ignore
-    id) that covers n pixels of ``label`` with probability proportional to n^-a, so each label value's expected
-    share of the rays is proportional to n^(1-a): a = 1 gives every label value present the same share, a = 0.5
-    shares proportional to the square root of its area. Without replacement unless ``n_rays`` exceeds the pixels.
-    """
-    replace = n_rays > label.size
-    if balance <= 0:
-        return rng.choice(label.size, size=n_rays, replace=replace)
-    _, inverse, counts = np.unique(label.ravel(), return_inverse=True, return_counts=True)
-    p = counts.astype(np.float64)[inverse] ** -balance                                  # (h * w,)
-    return rng.choice(label.size, size=n_rays, replace=replace, p=p / p.sum())
-
-
 def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
                  rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int,
                  augment: Augmentation | None = None, source_labels: bool = False,
-                 query_depth: bool = False, ray_balance: float = 0.0) -> TrainSample:
+                 query_depth: bool = False) -> TrainSample:
     """A training sample: sources, query camera and ``n_rays`` random pixels of the query with targets.
 
     Pixels are drawn without replacement (with replacement only when ``n_rays`` exceeds the pixel
-    count) inside the augmentation's crop window (the whole image by default), uniformly or, with
-    ``ray_balance`` > 0, favouring the window's small classes (:func:`query_pixels`); ``pixels``
+    count), uniformly inside the augmentation's crop window (the whole image by default); ``pixels``
     (R, 2) holds integer (u, v) pixel centres as float32. Target label ids are checked against the
     scene's ``n_classes`` (:func:`check_label_ids`). ``augment`` (:mod:`.augment`) jitters and
     resizes the sources; None, or every option off, gives the plain sample. ``source_labels`` also
@@ -117,7 +100,7 @@ def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[s
     rgb, label = query.rgb(), query.label()                                           # (H, W, 3), (H, W)
     h, w = label.shape
     v0, u0, ch, cw = augment.crop_window(rng, h, w) if augment is not None else (0, 0, h, w)
-    flat = query_pixels(label[v0:v0 + ch, u0:u0 + cw], n_rays, rng, ray_balance)         # (R,)
+    flat = rng.choice(ch * cw, size=n_rays, replace=n_rays > ch * cw)                     # (R,)
     v, u = np.divmod(flat, cw)
     v, u = v + v0, u + u0
     targets = label[v, u].astype(np.int64)                                            # (R,)

@@ -74,7 +74,7 @@ class TrainTuples(IterableDataset):
     def __init__(self, shards_dir: Path, manifest: Manifest, scenes: list[str], *, n_source: int, top_k: int,
                  rays_per_batch: int, batches_per_epoch: int, rank: int, world_size: int, seed: int,
                  cache_scenes: int, visit_samples: int, augment: Augmentation | None = None,
-                 source_labels: bool = False, query_depth: bool = False, ray_balance: float = 0.0) -> None:
+                 source_labels: bool = False, query_depth: bool = False) -> None:
         self.shards_dir, self.manifest, self.scenes = Path(shards_dir), manifest, scenes
         self.metas = {s: SceneMeta.from_json(manifest.scenes[s].meta) for s in scenes}
         self.pools = {s: source_pool(m) for s, m in self.metas.items()}
@@ -86,8 +86,6 @@ class TrainTuples(IterableDataset):
         """Whether samples carry their source views' class ids (the source-view semantic loss)."""
         self.query_depth = query_depth
         """Whether samples carry their query pixels' depth (``target_depth``, the depth loss)."""
-        self.ray_balance = ray_balance
-        """Exponent of the query pixels' class balancing (``samples.query_pixels``; 0 = uniform)."""
         self.epoch = 0
         """Epoch whose random stream the next ``iter()`` produces."""
 
@@ -119,8 +117,7 @@ class TrainTuples(IterableDataset):
                                      f"n_source={self.n_source} needed; re-shard with a larger --neighbours")
                 sources = [candidates[i] for i in self.augment.source_choice(rng, len(candidates), self.n_source)]
                 yield train_sample(views, query_id, sources, self.rays, rng, scene, meta.near, meta.far,
-                                   len(meta.class_names), self.augment, self.source_labels, self.query_depth,
-                                   self.ray_balance)
+                                   len(meta.class_names), self.augment, self.source_labels, self.query_depth)
                 remaining -= 1
 
 
@@ -170,7 +167,7 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
                       rank: int, world_size: int, num_workers: int, seed: int, scenes: list[str] | None = None,
                       cache_scenes: int = 2, visit_samples: int = 16, pin_memory: bool = False,
                       augment: Augmentation | None = None, source_labels: bool = False,
-                      query_depth: bool = False, ray_balance: float = 0.0) -> EpochLoader:
+                      query_depth: bool = False) -> EpochLoader:
     """The training DataLoader of one rank: one :class:`TrainSample` per step (``batch_size=None``).
 
     ``scenes``: scene names to train on; None = every scene whose role is ``train`` (unseen test
@@ -182,9 +179,7 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
     also carry their source views' class ids; the sources come from the same pool as the queries (a train
     scene's ``train`` split minus its held-out views), so no held-out or test view's labels are read.
     ``query_depth``: samples also carry the query pixels' stored depth (``TrainSample.target_depth``, the
-    training-time depth loss), read from the same training query views as their labels. ``ray_balance``: 0 draws
-    the query pixels uniformly, a in (0, 1] favours each query's small classes (a label value covering n pixels is
-    drawn with probability proportional to n^-a, :func:`~sray.data_tools.loader.samples.query_pixels`).
+    training-time depth loss), read from the same training query views as their labels.
     """
     manifest, names = _open(shards_dir, scenes)
     if not 0 <= rank < world_size:
@@ -192,17 +187,13 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
     if not 1 <= n_source <= top_k <= int(manifest.neighbours["k"]):
         raise ValueError(f"need 1 <= n_source ({n_source}) <= top_k ({top_k}) <= the shards' neighbours per view "
                          f"({manifest.neighbours['k']}); re-shard with a larger --neighbours or lower top_k")
-    if not 0.0 <= ray_balance <= 1.0:
-        raise ValueError(f"ray_balance is {ray_balance}; use 0 (uniform query pixels) up to 1 (every class of a "
-                         "query the same expected share of its rays)")
     if rays_per_batch < 1 or batches_per_epoch < 1 or num_workers < 0:
         raise ValueError(f"rays_per_batch ({rays_per_batch}) and batches_per_epoch ({batches_per_epoch}) must be "
                          f">= 1, num_workers ({num_workers}) >= 0")
     dataset = TrainTuples(Path(shards_dir), manifest, names, n_source=n_source, top_k=top_k,
                           rays_per_batch=rays_per_batch, batches_per_epoch=batches_per_epoch, rank=rank,
                           world_size=world_size, seed=seed, cache_scenes=cache_scenes, visit_samples=visit_samples,
-                          augment=augment, source_labels=source_labels, query_depth=query_depth,
-                          ray_balance=ray_balance)
+                          augment=augment, source_labels=source_labels, query_depth=query_depth)
     for scene, pool in dataset.pools.items():
         if len(pool) < n_source + 1:
             raise ValueError(f"scene {scene!r}: {len(pool)} query/source views, n_source + 1 = {n_source + 1} "

@@ -8,10 +8,10 @@ time go to the higher mIoU, then to the setting listed first. The full render lo
 some setting always qualifies. The rule reads only the rows it is given: which settings may be a default at all
 is the caller's choice (``sray bench speed-accuracy`` offers the render modes the defaults can name).
 
-:func:`todays_defaults` names the render each user of the default renders with today: ``sray eval`` (its
-``--fast-stride``/``--fast-confidence`` defaults are ``FastRender()``'s), validation (``data.val_render``) and the
-fleet's S-Ray held-out scores (``finetune.eval_render``). Validation and the fleet score a strided pixel grid of
-their own and render each of its pixels (pixel stride 1), so per scored pixel they match the bench's ``fast s1``.
+:func:`todays_defaults` names the render each user of the default renders with today: ``sray eval`` (its flags'
+defaults are ``HeldOutRender()``'s), validation (``data.held_out``) and the fleet's S-Ray held-out scores
+(``finetune.held_out``). Validation and the fleet score a strided pixel grid of their own and render each of its
+pixels (fast stride 1), so per scored pixel they match the bench's ``fast s1``.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 from sray.model.fast_render import FastRender
 from sray.platform.config.fleet_config import FinetuneSettings
+from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.train_config import DataSettings
 
 MAX_MIOU_LOSS = 1.0
@@ -128,5 +129,5 @@ def choose_default(rows: list[Measured], reference: str) -> DefaultChoice:
 
 def todays_defaults() -> dict[str, FastRender | None]:
     """Who uses a default render today -> the fast render mode it uses (None: the full render)."""
-    return {"sray eval": FastRender(), "validation": DataSettings().val_fast(),
-            "fleet held-out": FinetuneSettings().eval_fast()}
+    return {"sray eval": HeldOutRender().fast(), "validation": DataSettings().held_out.fast(),
+            "fleet held-out": FinetuneSettings().held_out.fast()}

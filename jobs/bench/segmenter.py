@@ -16,8 +16,8 @@ def run_segmenter(shards: Path, cpu_seconds: float, out: Path, recipe: str = "sy
                   overrides: tuple[str, ...] = ()) -> SegmenterRecord:
     """Train the 2D segmenter with ``recipe``'s augmentation, class balance, source counts and encoder for
     ``cpu_seconds`` (or ``max_steps``, when sooner), resuming an interrupted training left in ``out``; saved in
-    ``out``. ``encoder_width``: the encoder's first-layer width instead of the recipe's ``model.encoder_width``; the
-    encoder's layer normalisation is the recipe's ``model.encoder_norm``. ``overrides``: ``section.field=value``
+    ``out``. ``encoder_width``: the encoder's first-layer width instead of the recipe's ``model.encoder_width``.
+    ``overrides``: ``section.field=value``
     assignments applied to the recipe first (``data.aug.colour_ev=0``: the same training without exposure jitter);
     ValueError names a field that does not exist."""
     cfg = get_recipe(recipe)
@@ -26,7 +26,6 @@ def run_segmenter(shards: Path, cpu_seconds: float, out: Path, recipe: str = "sy
     result = train_segmenter(shards, cpu_seconds, out, seed, augment=cfg.data.aug,
                              class_balance=cfg.data.class_balance, n_source=cfg.model.n_source,
                              top_k=cfg.data.top_k, feat_dim=cfg.model.feat_dim, max_steps=max_steps,
-                             encoder_norm=cfg.model.encoder_norm,
                              encoder_width=cfg.model.encoder_width if encoder_width is None else encoder_width)
     print(f"segmenter saved in {out}: {result.budget()}, final loss {result.training['final_loss']:.3f}")
     return result

@@ -59,7 +59,7 @@ def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes:
     ft.max_steps, ft.eval_every, ft.patience = (2, 2, 1) if ctx.dry_run else (100, 50, 2)
     if ctx.dry_run:  # a toy Semantic-NeRF: the paper's 8 x 256 MLP takes most of a CPU dry run's time
         cfg.nerf.depth, cfg.nerf.width, cfg.nerf.skip_layer = 2, 32, None
-    ft.eval_n_source, ft.eval_stride, ft.precision = min(ctx.views, 4), 4, "bf16" if cuda else "no"
+    ft.held_out.n_source, ft.held_out.stride, ft.precision = min(ctx.views, 4), 4, "bf16" if cuda else "no"
     start = time.perf_counter()
     results = run_fleet(cfg, checkpoint, shards, scenes, out, f"sqlite:///{out / 'mlflow.db'}", methods)
     return time.perf_counter() - start, results

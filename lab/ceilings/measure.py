@@ -199,8 +199,7 @@ def fit_probes(net: SRayModel, segmenter: Segmenter | None, shards: Path, steps:
     """Probes on the checkpoint's encoder (``e``), the segmenter's (``e-seg``, when given) and a random one
     (``e-rand``, initialised under ``seed``), all fitted alike."""
     encoders = {"e": net.encoder, "e-seg": None if segmenter is None else segmenter.encoder,
-                "e-rand": random_encoder(net.cfg.feat_dim, seed, net.cfg.encoder_width,
-                                         net.cfg.encoder_norm)}
+                "e-rand": random_encoder(net.cfg.feat_dim, seed, net.cfg.encoder_width)}
     return {key: fit_probe(encoder, shards, net.cfg, steps=steps, max_views=max_views)
             for key, encoder in encoders.items() if encoder is not None}
 

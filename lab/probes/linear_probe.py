@@ -56,12 +56,12 @@ class LinearProbe:
         return f"probe {self.steps} Adam steps on {self.n_pixels} feature pixels of {self.n_views} train-scene views"
 
 
-def random_encoder(feat_dim: int, seed: int, width: int = 16, norm: str = "instance") -> ResUNetEncoder:
-    """A freshly initialised encoder of ``feat_dim`` output channels, first-layer ``width`` and layer normalisation
-    ``norm`` (PyTorch's default initialisation under ``seed``; the global random state is left as it was)."""
+def random_encoder(feat_dim: int, seed: int, width: int = 16) -> ResUNetEncoder:
+    """A freshly initialised encoder of ``feat_dim`` output channels and first-layer ``width`` (PyTorch's default
+    initialisation under ``seed``; the global random state is left as it was)."""
     with torch.random.fork_rng():
         torch.manual_seed(seed)
-        return ResUNetEncoder(feat_dim, width, norm).eval()
+        return ResUNetEncoder(feat_dim, width).eval()
 
 
 def probe_views(manifest: Manifest, max_views: int) -> list[tuple[str, str]]:

@@ -191,4 +191,4 @@ def measure_view_weights(net: SRayModel, shards: Path, *, n_source: int = 8, vie
             bar.update(1)
     bar.close()
     return {"shards": str(shards), "scenes": names, "n_source": n_source, "views_per_scene": views_per_scene,
-            "stride": stride, "tolerance": tolerance, "weight_inputs": net.cfg.weight_inputs, **tally.summary()}
+            "stride": stride, "tolerance": tolerance, **tally.summary()}

@@ -28,10 +28,10 @@ def _num(value: float | None, scale: float = 1.0, digits: int = 3) -> str:
 
 def view_weights_table(rows: list[dict[str, Any]]) -> str:
     """The Markdown table of the measured rows, one per checkpoint."""
-    header = ["checkpoint", "weight inputs", "τ", "surface points", "n·w sd", "occluded views %", "n·w visible",
+    header = ["checkpoint", "τ", "surface points", "n·w sd", "occluded views %", "n·w visible",
               "n·w occluded", "ranking", "occluded mass (plain mean / floor)", "removable mass removed %",
               "surface acc, some view occluded %", "surface acc, all views see %"]
-    body = [[f"`{r['name']}`", r["weight_inputs"], f"{r['tau']:g}", f"{r['points']:,}", _num(r["relative_weight_sd"]),
+    body = [[f"`{r['name']}`", f"{r['tau']:g}", f"{r['points']:,}", _num(r["relative_weight_sd"]),
              _num(r["occluded_share"], 100, 1), _num(r["visible_relative_weight"]),
              _num(r["occluded_relative_weight"]), _num(r["ranking"]),
              f"{_num(r['occluded_mass'])} ({_num(r['occluded_mass_plain'])} / {_num(r['occluded_mass_floor'])})",

@@ -30,11 +30,14 @@ from typing import Any
 import torch
 
 from sray.data_tools.atomic import replace_dir
+from sray.platform.config.stored_format import outdated
 
 log = logging.getLogger(__name__)
 
 FORMAT = "sray-checkpoint"
-VERSION = 1
+VERSION = 2
+"""Checkpoint format: 1 up to commit 7734061 (its config in format 1, ``sray.platform.config.stored_format``), 2
+today; ``sray migrate`` converts a 1."""
 STATE_FILE = "state.pt"
 META_FILE = "meta.json"
 _STEP_DIR = re.compile(r"^step_(\d{9,})$")
@@ -104,6 +107,8 @@ def read_meta(directory: Path) -> dict[str, Any]:
         raise FileNotFoundError(f"{path}: missing; {directory} is not a complete sray checkpoint") from None
     if meta.get("format") != FORMAT:
         raise ValueError(f"{path}: field 'format' is {meta.get('format')!r}, expected {FORMAT!r}")
+    if meta.get("version") != VERSION:
+        raise outdated(f"{path}: this checkpoint", meta.get("version"), VERSION)
     return meta
 
 

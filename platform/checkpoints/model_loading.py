@@ -1,43 +1,23 @@
-"""The bare ``SRayModel`` of a training checkpoint: key migration and loading for eval, finetune and serving."""
+"""The bare ``SRayModel`` of a training checkpoint, for eval, finetune and serving."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
-from torch import Tensor
-
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.config.train_config import TrainConfig
 
-LEGACY_PREFIX = "net."
-"""Older checkpoints stored the training module's keys (``net.`` + the model's:
-``sray.model.ray_batch.RayBatchLoss`` holds the network as ``net``)."""
-AVERAGED_WEIGHTS = "averaged_model"
-"""Checkpoint entry of a job trained with a weight average (``optim.ema_decay`` > 0): the averaged bare
-``SRayModel`` weights, which evaluation, finetuning and serving load instead of ``model`` (the live weights a
-resumed job continues from)."""
-AVERAGED_STEPS = "averaged_steps"
-"""Checkpoint entry beside :data:`AVERAGED_WEIGHTS`: how many optimiser steps the average has taken in."""
-
-
-def bare_model_keys(weights: dict[str, Tensor]) -> dict[str, Tensor]:
-    """A checkpoint's model weights under the bare ``SRayModel`` keys (legacy ``net.`` keys stripped)."""
-    if weights and all(k.startswith(LEGACY_PREFIX) for k in weights):
-        return {k[len(LEGACY_PREFIX):]: v for k, v in weights.items()}
-    return dict(weights)
-
 
 def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayModel, TrainConfig]:
-    """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder: its weight
-    average where the job kept one (:data:`AVERAGED_WEIGHTS`), else its trained weights."""
+    """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder; ValueError
+    naming the folder for a checkpoint an earlier sray wrote (convert it with ``sray migrate``)."""
     state = load_checkpoint(Path(path), map_location)
-    weights = state.get(AVERAGED_WEIGHTS, state["model"])
-    if any(k.endswith("attention.pos") for k in weights):
-        raise ValueError(f"{path}: this checkpoint embeds sample ranks (an sray version before the depth position "
-                         "signal); it cannot be loaded into the current model. Retrain it with `sray train`.")
-    cfg = TrainConfig.from_dict(state["config"])
+    try:
+        cfg = TrainConfig.from_dict(state["config"])
+    except ValueError as e:
+        raise type(e)(f"{path}: {e}") from None
     net = SRayModel(cfg.model)
-    net.load_state_dict(bare_model_keys(weights))
+    net.load_state_dict(state["model"])
     return net.eval(), cfg

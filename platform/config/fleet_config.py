@@ -13,8 +13,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from sray.model.fast_render import FastRender
-from sray.platform.config.held_out_render import held_out_fast
+from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.overrides import apply_settings, set_field
 
 PRECISIONS = ("no", "bf16", "fp16")
@@ -62,30 +61,19 @@ class FinetuneSettings:
     top_k: int | None = None
     """Training sources are drawn from this many ranked neighbours; None = the checkpoint's
     ``data.top_k`` capped at the shards' stored neighbours."""
-    eval_n_source: int = 8
-    """Fixed source views per held-out view (the paper's protocol: 8)."""
-    eval_stride: int = 2
-    """Held-out views are scored on every ``eval_stride``-th pixel in each direction (speed)."""
+    held_out: HeldOutRender = field(default_factory=lambda: HeldOutRender(stride=2, fast_stride=1))
+    """How the held-out views are rendered and scored (``sray.platform.config.held_out_render``): 8 fixed sources
+    (the paper's protocol), every 2nd pixel (speed), S-Ray's fast render on those pixels (Semantic-NeRF always
+    renders in full); set field by field: ``--set finetune.held_out.render=full``."""
     eval_chunk: int = 0
     """Rays per forward pass when rendering held-out views; 0 (default) leaves it to the device (256 on a
     CPU, 4096 on a GPU: ``sray.model.ray_chunks``)."""
-    eval_render: str = "fast"
-    """S-Ray's held-out render: ``fast`` (the fine pass only where the coarse pass is below
-    ``eval_fast_confidence``; ``sray.platform.config.held_out_render``) or ``full``. Semantic-NeRF always
-    renders in full."""
-    eval_fast_confidence: float = 0.9
-    """Coarse softmax maximum from which a held-out ray keeps its coarse result (fast render)."""
     precision: str = "no"
     """One of ``PRECISIONS``; fp16 needs ``gpus_per_task > 0``."""
     adapt: tuple[str, ...] = DEFAULT_ADAPT
     """S-Ray module paths (prefixes of ``SRayModel.state_dict()`` keys) trained and stored per scene."""
     seed: int = 0
     """Seed of ray sampling, data order and Semantic-NeRF's initial weights."""
-
-    def eval_fast(self) -> FastRender | None:
-        """S-Ray's held-out fast render mode (``eval_render``), None for the full render; ValueError on a bad
-        value."""
-        return held_out_fast(self.eval_render, self.eval_fast_confidence, "fleet config: finetune.eval_render")
 
 
 @dataclass
@@ -166,8 +154,7 @@ def check_fleet_config(cfg: FleetConfig) -> None:
     """ValueError naming the first field that is out of range."""
     ft = cfg.finetune
     positive = {"finetune.max_steps": ft.max_steps, "finetune.eval_every": ft.eval_every,
-                "finetune.patience": ft.patience, "finetune.eval_n_source": ft.eval_n_source,
-                "finetune.eval_stride": ft.eval_stride,
+                "finetune.patience": ft.patience,
                 "finetune.max_nonfinite_in_row": ft.max_nonfinite_in_row, "max_parallel": cfg.max_parallel,
                 "nerf.depth": cfg.nerf.depth, "nerf.width": cfg.nerf.width,
                 "transfer.images_per_step": cfg.transfer.images_per_step}
@@ -195,7 +182,7 @@ def check_fleet_config(cfg: FleetConfig) -> None:
                          "depth agreement, e.g. 0.05)")
     if cfg.cpus_per_task == 0 and cfg.gpus_per_task == 0:
         raise ValueError("fleet config: cpus_per_task and gpus_per_task are both 0; a task needs some CPU or GPU")
-    ft.eval_fast()
+    ft.held_out.check(lambda field: f"fleet config: finetune.held_out.{field}")
     if ft.precision not in PRECISIONS:
         raise ValueError(f"fleet config: finetune.precision is {ft.precision!r}; use one of {PRECISIONS}")
     if ft.precision == "fp16" and cfg.gpus_per_task == 0:

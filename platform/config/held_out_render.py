@@ -1,28 +1,72 @@
-"""Which render a held-out evaluation inside a job uses: validation (``data.val_render``) and the finetune
-fleet's held-out scores (``finetune.eval_render``).
+"""How a held-out view is rendered and scored: one setting type for validation (``data.held_out``), the finetune
+fleet's held-out scores (``finetune.held_out``), ``sray eval`` and ``sray render`` (their ``--n-source``,
+``--stride``, ``--render``, ``--fast-stride`` and ``--fast-confidence`` flags, ``sray.jobs.held_out_flags``).
 
-Both already score a strided pixel grid of their own (``data.val_downscale``, ``finetune.eval_stride``),
-so their fast mode renders exactly those pixels (pixel stride 1, nothing upsampled) and saves only
-where the model is sure: a ray whose coarse pass reaches ``confidence`` keeps its coarse result, the
-others get a fine pass on the resampled depths (``sray.model.fast_render``). Its cost in mIoU is
-measured, paired against the full render, by ``sray bench speed-accuracy`` (docs/benchmarks.md).
+The fast render (``sray.model.fast_render``) renders every ``fast_stride``-th pixel of the scored pixel grid and
+upsamples, and gives a ray a fine pass only where its coarse pass is below ``fast_confidence``. Validation and the
+fleet already score a strided grid of their own (``stride`` 2), so their fast mode renders exactly those pixels
+(``fast_stride`` 1) and saves only where the model is sure; ``sray eval`` and ``sray render`` score whole images
+and render every 8th pixel. Its cost in mIoU is measured, paired against the full render, by ``sray bench
+speed-accuracy`` (docs/benchmarks.md).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 from sray.model.fast_render import FastRender
 
 HELD_OUT_RENDERS = ("fast", "full")
-"""``fast``: the fast render mode on the evaluation's own pixels; ``full``: the whole coarse + fine render."""
+"""``fast``: the fast render mode; ``full``: the whole coarse + fine render at every scored pixel."""
 
 
-def held_out_fast(render: str, confidence: float, field: str) -> FastRender | None:
-    """The fast mode of a held-out evaluation (None for the full render); ValueError naming ``field``
-    (the config field that holds ``render``) and the fix on a bad value."""
-    if render not in HELD_OUT_RENDERS:
-        raise ValueError(f"{field} is {render!r}; use one of {HELD_OUT_RENDERS} (fast: the fine pass only where "
-                         "the coarse pass is unsure; full: the whole render)")
-    if not 0.0 < confidence:
-        raise ValueError(f"{field.replace('render', 'fast_confidence')} is {confidence}; it must be > 0 "
-                         "(a value > 1 gives every ray a fine pass)")
-    return FastRender(pixel_stride=1, confidence=confidence) if render == "fast" else None
+@dataclass
+class HeldOutRender:
+    """Sources, pixels and render of a held-out evaluation; checked by the config that holds it (:meth:`check`) and by
+    the commands' flag parser."""
+
+    n_source: int = 8
+    """Fixed source views per held-out view, top-ranked by the shards' neighbour rule (the paper's protocol: 8);
+    0 = the model's own ``model.n_source`` (validation's default)."""
+    stride: int = 1
+    """Every ``stride``-th pixel of a held-out view is scored, in each direction (1 = whole images, the only stride
+    with SSIM)."""
+    render: str = "fast"
+    """One of ``HELD_OUT_RENDERS``: ``fast`` (``fast_stride`` and ``fast_confidence``) or ``full``."""
+    fast_stride: int = 8
+    """Fast render: rays every ``fast_stride``-th scored pixel, upsampled to the others (1 = every scored pixel)."""
+    fast_confidence: float = 0.9
+    """Fast render: a ray whose coarse softmax maximum reaches this keeps its coarse result (> 1: every ray gets a
+    fine pass)."""
+    fast_temperature: float = 1.0
+    """Fast render: the coarse logits are divided by this before that softmax (1 = uncalibrated; ``sray eval
+    --calibrate`` fits it on validation rooms)."""
+
+    def check(self, name: Callable[[str], str]) -> None:
+        """ValueError naming the first bad setting as ``name(field)`` spells it (``data.held_out.render``,
+        ``--render``) and the fix."""
+        if self.render not in HELD_OUT_RENDERS:
+            raise ValueError(f"{name('render')} is {self.render!r}; use one of {HELD_OUT_RENDERS} (fast: the fine "
+                             "pass only where the coarse pass is unsure; full: the whole render)")
+        if not 0.0 < self.fast_confidence:
+            raise ValueError(f"{name('fast_confidence')} is {self.fast_confidence}; it must be > 0 (a value > 1 "
+                             "gives every ray a fine pass)")
+        if not 0.0 < self.fast_temperature:
+            raise ValueError(f"{name('fast_temperature')} is {self.fast_temperature}; it must be > 0 (1 = "
+                             "uncalibrated)")
+        for field in ("stride", "fast_stride"):
+            if int(getattr(self, field)) < 1:
+                raise ValueError(f"{name(field)} is {getattr(self, field)}; it must be a positive integer")
+        if self.n_source < 0:
+            raise ValueError(f"{name('n_source')} is {self.n_source}; give a number of source views, or 0 for the "
+                             "model's own model.n_source")
+
+    def fast(self) -> FastRender | None:
+        """The fast render mode of these settings, None for the full render."""
+        return (FastRender(self.fast_stride, self.fast_confidence, self.fast_temperature) if self.render == "fast"
+                else None)
+
+    def sources(self, model_sources: int) -> int:
+        """Source views per held-out view: ``n_source``, or ``model_sources`` (the model's) when it is 0."""
+        return self.n_source or model_sources

@@ -27,17 +27,5 @@ class OptimSettings:
     """The first this many steps train the encoder and its source-view head on the source views' labels
     alone (nothing rendered; a departure from the paper, docs/model.md); they count toward ``steps``. Needs
     ``model.lambda_src_sem`` > 0; 0 = off."""
-    lr_decay_start: str = "run"
-    """Where the exponential decay to ``lr_final`` starts: ``run`` = after the linear warm-up, over the whole run
-    (the paper); ``rays`` = at the first ray step after the 2D warm-up (``warmup_2d_steps`` > 0), the 2D steps
-    training at the base lr, so the decay spans the ray phase's own steps, or its own share of the CPU budget."""
-    weight_decay: float = 0.0
-    """Decoupled weight decay (AdamW) of the convolution and linear weights: each step shrinks them by ``lr *
-    weight_decay`` of themselves; biases and norm scales never decay. 0 = plain Adam (the paper)."""
-    ema_decay: float = 0.0
-    """Keep an exponential moving average of the weights, ``average = ema_decay * average + (1 - ema_decay) *
-    weights`` after every applied step (``sray.platform.train.weight_average``): validation scores it and
-    checkpoints store it beside the live weights, for evaluation, finetuning and serving to load. In [0, 1);
-    ``1 / (1 - ema_decay)`` steps is its horizon. 0 = off (the paper)."""
     max_nonfinite_in_row: int = 20
     """A non-finite loss or gradient skips the step; this many in a row stop the job."""

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
+from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.optim_settings import OptimSettings
 from sray.platform.config.train_config import DataSettings, RunSettings, TrainConfig
 
@@ -21,7 +22,7 @@ def synth_small() -> TrainConfig:
         recipe="synth-small",
         model=SRayConfig(n_source=4, n_coarse=24, n_fine=24),
         data=DataSettings(shards="outputs/demo/shards", top_k=6, rays_per_batch=256,
-                          loader_workers=1, val_views_per_scene=2, val_downscale=2),
+                          loader_workers=1, val_views_per_scene=2),
         optim=OptimSettings(steps=300, lr=1e-3, lr_final=2e-4, grad_clip=1.0),
         run=RunSettings(experiment="sray-synth-small", workers=2, cpus_per_worker=1.0, log_every=10,
                         val_every=100, ckpt_every=100),
@@ -41,18 +42,18 @@ def synth_demo() -> TrainConfig:
 
     ``synth-small``'s model, rays and sources, trained the hour recipe's way: class-balanced semantic loss, scenes
     interleaved step by step, the encoder also learning from its source views' labels, and a 2D-only warm-up of
-    ``DEMO_WARMUP_2D`` of its ``DEMO_STEPS`` steps; no view augmentation (not measured at this length); one loader
-    epoch over the whole run (``data.epoch_steps``), the data order it was first measured with. The demo's larger
-    world is what lets these losses and the warm-up lift zero-shot accuracy above ``synth-small``'s: on the earlier
-    4-room world they gained nothing. Its attention stays full CRA, unlike the hour recipe's intra-only stage: at
-    this scale the cross-view stage costs little next to the encoder, and intra-only scored lower on both seeds
+    ``DEMO_WARMUP_2D`` of its ``DEMO_STEPS`` steps; no view augmentation (not measured at this length). Its data
+    order is the loader's default (``data.epoch_steps`` 0: one loader epoch per checkpoint interval), chosen without
+    scoring orders on any room: the demo's unseen rooms report its zero-shot score and choose nothing. The demo's
+    larger world is what lets these losses and the warm-up lift zero-shot accuracy above ``synth-small``'s: on the
+    earlier 4-room world they gained nothing. Its attention stays full CRA, unlike the hour recipe's intra-only stage:
+    at this scale the cross-view stage costs little next to the encoder, and intra-only scored lower on both seeds
     tried and saved no training CPU (study ``demo-recipe``, listed in docs/benchmarks.md).
     """
     cfg = synth_small()
     cfg.recipe = "synth-demo"
     cfg.model.lambda_src_sem = 1.0
     cfg.data.visit_samples, cfg.data.cache_scenes, cfg.data.class_balance = 1, 4, "inverse-sqrt"
-    cfg.data.epoch_steps = DEMO_STEPS
     cfg.optim.steps, cfg.optim.warmup_2d_steps = DEMO_STEPS, DEMO_WARMUP_2D
     cfg.run.experiment = "sray-synth-demo"
     cfg.run.val_every = cfg.run.ckpt_every = DEMO_STEPS // 2
@@ -110,7 +111,8 @@ def synth_cpu_hour() -> TrainConfig:
         model=SRayConfig(n_source=8, n_coarse=24, n_fine=24, attention="intra", lambda_src_sem=1.0),
         data=DataSettings(shards=CPU_HOUR_SHARDS, top_k=12, rays_per_batch=256,
                           loader_workers=1, visit_samples=1, cache_scenes=4,
-                          val_views_per_scene=1, val_downscale=4, val_scenes=4,
+                          val_views_per_scene=1, val_scenes=4,
+                          held_out=HeldOutRender(n_source=0, stride=4, fast_stride=1),
                           class_balance="inverse-sqrt",
                           aug=Augmentation(colour_ev=0.3, channel_ev=0.1, noise_sigma=3.0, min_source=2,
                                            source_scale=0.25)),

@@ -10,11 +10,11 @@ from typing import Any
 
 from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
-from sray.model.fast_render import FastRender
 from sray.model.runtime import Runtime
-from sray.platform.config.held_out_render import held_out_fast
+from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.optim_settings import OptimSettings
 from sray.platform.config.overrides import set_field
+from sray.platform.config.stored_format import CONFIG_VERSION, VERSION_KEY, check_version, from_plain
 
 PRECISIONS = ("no", "bf16", "fp16")
 """Mixed-precision modes: fp32, bfloat16 autocast (CPU and CUDA), fp16 with loss scaling (CUDA)."""
@@ -31,11 +31,6 @@ class DataSettings:
     of the query view."""
     rays_per_batch: int = 1024
     """Rays per training step and rank (paper: 1024)."""
-    ray_balance: float = 0.0
-    """How the query pixels of a step are drawn: 0 = uniformly (the paper), a in (0, 1] = a pixel whose class covers
-    n pixels of its query image with probability proportional to n^-a, so small objects get more of the rays
-    (1 = every class of the image the same expected share; ``sray.data_tools.loader.samples.query_pixels``). The
-    semantic loss's class weights (``class_balance``) apply on top."""
     loader_workers: int = 1
     """DataLoader worker processes per rank."""
     visit_samples: int = 16
@@ -48,14 +43,11 @@ class DataSettings:
     job checkpoints, sets the data order when it is > 0; 0 = one epoch per ``run.ckpt_every`` steps. A job resumed
     mid-epoch regenerates the epoch's samples up to its step, so a long epoch makes a resume slower."""
     val_views_per_scene: int = 2
-    """Held-out views rendered per scene at each validation (whole images, in chunks)."""
-    val_downscale: int = 2
-    """Validation renders at 1/val_downscale resolution to keep it cheap (1 = full)."""
-    val_render: str = "fast"
-    """Validation's render: ``fast`` (the fine pass only where the coarse pass is below
-    ``val_fast_confidence``; ``sray.platform.config.held_out_render``) or ``full``."""
-    val_fast_confidence: float = 0.9
-    """Coarse softmax maximum from which a validation ray keeps its coarse result (fast render)."""
+    """Held-out views rendered per scene at each validation (in chunks of ``runtime.chunk`` rays)."""
+    held_out: HeldOutRender = field(default_factory=lambda: HeldOutRender(n_source=0, stride=2, fast_stride=1))
+    """How validation renders and scores its views (``sray.platform.config.held_out_render``): the model's own
+    source count, every 2nd pixel to keep it cheap, the fast render on those pixels; set field by field:
+    ``--set data.held_out.render=full``."""
     val_scenes: int = 0
     """Scenes of each role (train, unseen test) validated, the first ones by name; 0 = all of them
     (a run over many scenes keeps its validations cheap with a few)."""
@@ -73,17 +65,10 @@ class DataSettings:
         if self.visit_samples < 1 or self.cache_scenes < 1:
             raise ValueError(f"train config: data.visit_samples ({self.visit_samples}) and data.cache_scenes "
                              f"({self.cache_scenes}) must be >= 1")
-        if not 0.0 <= self.ray_balance <= 1.0:
-            raise ValueError(f"train config: data.ray_balance is {self.ray_balance}; use 0 (uniform query pixels) up "
-                             "to 1 (every class of a query image the same expected share of its rays)")
         if self.epoch_steps < 0:
             raise ValueError(f"train config: data.epoch_steps is {self.epoch_steps}; give a number of steps, or 0 for "
                              "one loader epoch per run.ckpt_every steps")
-        self.val_fast()
-
-    def val_fast(self) -> FastRender | None:
-        """Validation's fast render mode (``val_render``), None for the full render; ValueError on a bad value."""
-        return held_out_fast(self.val_render, self.val_fast_confidence, "train config: data.val_render")
+        self.held_out.check(lambda field: f"train config: data.held_out.{field}")
 
 
 @dataclass
@@ -129,37 +114,6 @@ class RunSettings:
     """Name the final checkpoint is registered under in the tracker's model registry ('' = do not register)."""
 
 
-RETIRED_RUN_KEYS = frozenset({"fail_at_step", "nan_at_step", "stop_after_step"})
-"""Run settings that configs written before the fault hook (``SRAY_FAULTS``) may still hold; ignored on load."""
-
-FLAT_AUG_PREFIX = "aug_"
-"""Configs and checkpoints written before ``data.aug`` was a section hold each of its fields flat in the data
-section as ``aug_<field>`` (``aug_colour_ev``, ...); :func:`data_settings` reads them into ``data.aug``."""
-
-
-def data_settings(d: dict[str, Any]) -> DataSettings:
-    """The data section of a stored config, its flat ``aug_<field>`` keys (:data:`FLAT_AUG_PREFIX`) read as
-    ``aug.<field>``."""
-    flat = {k.removeprefix(FLAT_AUG_PREFIX): v for k, v in d.items() if k.startswith(FLAT_AUG_PREFIX)}
-    rest = {k: v for k, v in d.items() if not k.startswith(FLAT_AUG_PREFIX) and k != "aug"}
-    return DataSettings(**rest, aug=Augmentation(**flat, **d.get("aug", {})))
-
-
-RUNTIME_FIELDS = tuple(f.name for f in dataclasses.fields(Runtime))
-"""Fields of the ``runtime`` section (``impl``, ``chunk``, ``train_piece``). Configs and checkpoints written
-before it was a section hold them in the model section; :func:`model_and_runtime` reads them as
-``runtime.<field>``."""
-
-
-def model_and_runtime(d: dict[str, Any]) -> tuple[SRayConfig, Runtime]:
-    """The model and runtime sections of a stored config ``d`` (a :meth:`TrainConfig.to_dict`), the runtime
-    fields a model section holds (:data:`RUNTIME_FIELDS`) read into the runtime section."""
-    model = {k: tuple(v) if k in ("weight_hidden", "geo_hidden", "class_weights", "semantic_cues") else v
-             for k, v in d.get("model", {}).items() if k not in RUNTIME_FIELDS}
-    moved = {k: v for k, v in d.get("model", {}).items() if k in RUNTIME_FIELDS}
-    return SRayConfig(**model), Runtime(**moved, **d.get("runtime", {}))
-
-
 @dataclass
 class TrainConfig:
     """Everything a training job needs; recipes return one, ``--set a.b=value`` overrides fields."""
@@ -183,18 +137,15 @@ class TrainConfig:
         check_sections(self)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict (JSON/YAML-safe; tuples become lists)."""
-        return dataclasses.asdict(self)
+        """Plain nested dict (JSON/YAML-safe; tuples become lists) with its ``format_version``."""
+        return {VERSION_KEY: CONFIG_VERSION, **dataclasses.asdict(self)}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; also reads the configs that earlier versions stored (flat ``data.aug_<field>``
-        keys, :data:`RETIRED_RUN_KEYS`, runtime fields in the model section: :data:`RUNTIME_FIELDS`)."""
-        model, runtime = model_and_runtime(d)
-        return cls(recipe=d.get("recipe", "custom"), model=model,
-                   data=data_settings(d.get("data", {})), optim=OptimSettings(**d.get("optim", {})),
-                   run=RunSettings(**{k: v for k, v in d.get("run", {}).items() if k not in RETIRED_RUN_KEYS}),
-                   runtime=runtime)
+        """Inverse of :meth:`to_dict`, today's format only: OutdatedFormat (naming ``sray migrate``) for a config an
+        earlier sray wrote, ValueError naming a field today's config does not have."""
+        check_version(d, "train config")
+        return from_plain(cls, {k: v for k, v in d.items() if k != VERSION_KEY}, "train config")
 
     def job_dir(self) -> Path:
         """Folder of this job's checkpoints and run state."""
@@ -205,26 +156,14 @@ def check_sections(cfg: TrainConfig) -> None:
     """ValueError for settings of different sections that cannot train together: fp16 with a loss in pieces
     smaller than the batch (a piece's gradients are taken before the loss scaler scales them,
     ``sray.model.piecewise_loss``, so small ones could underflow), a 2D warm-up without the source-view
-    head it trains, a decay started at the ray phase without a 2D warm-up before it, a negative CPU budget
-    or weight decay, and a weight average's decay outside [0, 1)."""
+    head it trains, and a negative CPU budget."""
     if cfg.optim.cpu_seconds < 0:
         raise ValueError(f"train config: optim.cpu_seconds is {cfg.optim.cpu_seconds}; use 0 (steps only) or a "
                          "positive CPU-second budget")
-    if cfg.optim.weight_decay < 0:
-        raise ValueError(f"train config: optim.weight_decay is {cfg.optim.weight_decay}; use 0 (plain Adam) or a "
-                         "positive decoupled weight decay, e.g. optim.weight_decay=0.1")
-    if not 0 <= cfg.optim.ema_decay < 1:
-        raise ValueError(f"train config: optim.ema_decay is {cfg.optim.ema_decay}; use 0 (no weight average) or a "
-                         "decay in (0, 1), e.g. optim.ema_decay=0.998 (a horizon of 500 steps)")
     if cfg.optim.warmup_2d_steps < 0 or (cfg.optim.warmup_2d_steps > 0 and cfg.model.lambda_src_sem <= 0):
         raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
                          "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "
                          f"(is {cfg.model.lambda_src_sem}). Set model.lambda_src_sem=1 or optim.warmup_2d_steps=0.")
-    if cfg.optim.lr_decay_start not in ("run", "rays") or (cfg.optim.lr_decay_start == "rays"
-                                                            and cfg.optim.warmup_2d_steps <= 0):
-        raise ValueError(f"train config: optim.lr_decay_start is {cfg.optim.lr_decay_start!r} with "
-                         f"optim.warmup_2d_steps={cfg.optim.warmup_2d_steps}; use 'run', or 'rays' with a 2D "
-                         "warm-up (optim.warmup_2d_steps > 0), whose end starts the decay.")
     if cfg.run.precision == "fp16" and 0 < cfg.runtime.train_piece < cfg.data.rays_per_batch:
         raise ValueError(f"train config: runtime.train_piece is {cfg.runtime.train_piece} (< data.rays_per_batch "
                          f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not "
@@ -235,20 +174,9 @@ def check_sections(cfg: TrainConfig) -> None:
 def apply_override(cfg: TrainConfig, assignment: str) -> None:
     """Apply one ``section.field=value`` override in place, parsing the value as the field's type.
 
-    Raises ValueError naming the unknown section or field and listing the valid ones (for a flat
-    ``data.aug_<field>``, its name in the ``data.aug`` section; for ``model.<field>`` of a runtime field, its
-    name in the ``runtime`` section), or a value the network cannot run with (the config keeps its previous
-    value then).
+    Raises ValueError naming the unknown section or field and listing the valid ones, or a value the network
+    cannot run with (the config keeps its previous value then).
     """
-    path, _, raw = assignment.partition("=")
-    flat = path.strip().removeprefix(f"data.{FLAT_AUG_PREFIX}")
-    if flat != path.strip() and flat in {f.name for f in dataclasses.fields(Augmentation)}:
-        raise ValueError(f"--set {assignment!r}: augmentation settings are the data.aug section; "
-                         f"use --set data.aug.{flat}={raw.strip()}")
-    moved = path.strip().removeprefix("model.")
-    if moved != path.strip() and moved in RUNTIME_FIELDS:
-        raise ValueError(f"--set {assignment!r}: how the network is run is the runtime section; "
-                         f"use --set runtime.{moved}={raw.strip()}")
 
     def check() -> None:
         cfg.model.__post_init__()
@@ -263,9 +191,13 @@ CONFIG_FILE = "config.json"
 
 
 def load_job_config(output_dir: str, name: str) -> TrainConfig:
-    """The saved config of an existing job (for ``--resume``); errors name the file and the fix."""
+    """The saved config of an existing job (for ``--resume``); errors name the file and the fix (for a config an
+    earlier sray wrote: ``sray migrate``)."""
     path = Path(output_dir) / name / CONFIG_FILE
     if not path.exists():
         raise FileNotFoundError(f"{path}: no job called {name!r} under {output_dir}; "
                                 "check --name/--resume and the output folder (run.output_dir)")
-    return TrainConfig.from_dict(json.loads(path.read_text()))
+    try:
+        return TrainConfig.from_dict(json.loads(path.read_text()))
+    except ValueError as e:
+        raise type(e)(f"{path}: {e}") from None

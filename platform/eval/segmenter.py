@@ -30,6 +30,7 @@ from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.model.config import SRayConfig
 from sray.model.encoder import ResUNetEncoder
 from sray.model.source_semantics import SourceSemanticHead, source_semantic_loss
+from sray.platform.config.stored_format import from_plain, outdated
 
 WEIGHTS_FILE = "segmenter.pt"
 CONFIG_FILE = "segmenter.json"
@@ -45,8 +46,6 @@ class SegmenterConfig:
     """Channels of the encoder's features (S-Ray's ``model.feat_dim``)."""
     encoder_width: int = 16
     """Channels of the encoder's first layer (S-Ray's ``model.encoder_width``)."""
-    encoder_norm: str = "instance"
-    """Normalisation of the encoder's layers (S-Ray's ``model.encoder_norm``)."""
     ignore_id: int = 255
     """Label id of unlabelled pixels (never a target)."""
     class_weights: tuple[float, ...] = ()
@@ -65,7 +64,7 @@ class Segmenter(nn.Module):
         """Build the encoder and head of ``cfg`` (no device work)."""
         super().__init__()
         self.cfg = cfg
-        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width, cfg.encoder_norm)
+        self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width)
         self.head = SourceSemanticHead(cfg.head_config())
 
     def forward(self, rgb: Tensor) -> Tensor:
@@ -122,18 +121,19 @@ def load_segmenter(folder: Path, map_location: str | torch.device = "cpu") -> tu
             raise FileNotFoundError(f"{folder / name}: missing; train a segmenter with `sray bench segmenter "
                                     f"--data SHARDS --cpu-seconds S --out {folder}`")
     stored = json.loads((folder / CONFIG_FILE).read_text())
-    raw = dict(stored["config"])
-    raw["class_weights"] = tuple(raw.get("class_weights", ()))
-    record = SegmenterRecord(SegmenterConfig(**raw), stored.get("training", {}))
+    if "encoder_norm" in stored["config"]:
+        raise outdated(f"{folder / CONFIG_FILE}: this segmenter", "1 (with encoder_norm)", "2")
+    record = SegmenterRecord(from_plain(SegmenterConfig, stored["config"], f"{folder / CONFIG_FILE}: config"),
+                             stored.get("training", {}))
     model = Segmenter(record.config)
     model.load_state_dict(torch.load(folder / WEIGHTS_FILE, map_location=map_location, weights_only=True))
     return model.eval(), record
 
 
 def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, SegmenterRecord]:
-    """Write the encoder and source-view head of an S-Ray training checkpoint (its weight average where the job
-    kept one) as a segmenter folder ``out``; returns the segmenter (eval mode) and its record. ValueError when the
-    checkpoint's model has no source-view head (``model.lambda_src_sem`` was 0)."""
+    """Write the encoder and source-view head of an S-Ray training checkpoint as a segmenter folder ``out``; returns
+    the segmenter (eval mode) and its record. ValueError when the checkpoint's model has no source-view head
+    (``model.lambda_src_sem`` was 0)."""
     checkpoint = Path(checkpoint)
     net, cfg = model_from_checkpoint(checkpoint)
     if net.src_head is None:
@@ -142,12 +142,12 @@ def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, S
                          "`sray bench segmenter --data SHARDS --cpu-seconds S --out DIR`")
     m = cfg.model
     seg = Segmenter(SegmenterConfig(n_classes=m.n_classes, feat_dim=m.feat_dim, encoder_width=m.encoder_width,
-                                    encoder_norm=m.encoder_norm, ignore_id=m.ignore_id,
+                                    ignore_id=m.ignore_id,
                                     class_weights=tuple(m.class_weights)))
     seg.encoder.load_state_dict(net.encoder.state_dict())
     seg.head.load_state_dict(net.src_head.state_dict())
-    counters = load_checkpoint(checkpoint).get("counters", {})
+    counters = load_checkpoint(checkpoint)["counters"]
     training = {"checkpoint": str(checkpoint.resolve()), "steps": int(read_meta(checkpoint)["step"]),
-                "cpu_seconds": float(counters.get("cpu_seconds", 0.0)), "recipe": cfg.recipe}
+                "cpu_seconds": float(counters["cpu_seconds"]), "recipe": cfg.recipe}
     save_segmenter(seg, training, out)
     return seg.eval(), SegmenterRecord(seg.cfg, training)

@@ -100,14 +100,13 @@ def _write_state(out: Path, state: dict[str, Any]) -> None:
 def train_segmenter(shards: Path, cpu_seconds: float, out: Path, seed: int = 0, *,
                     augment: Augmentation | None = None, class_balance: str = "inverse-sqrt", n_source: int = 8,
                     top_k: int = 12, lr: float = 1e-3, feat_dim: int = 32, encoder_width: int = 16,
-                    encoder_norm: str = "instance", visit_samples: int = 1, cache_scenes: int = 4,
+                    visit_samples: int = 1, cache_scenes: int = 4,
                     max_steps: int | None = None, progress: bool = True) -> SegmenterRecord:
     """Train a segmenter on the train scenes of ``shards`` for ``cpu_seconds`` (see the module doc), save it in
     folder ``out`` and return its record. ``augment``: the training loader's augmentation (None = none);
     ``class_balance``: ``none``, ``inverse-sqrt`` or ``inverse``; ``n_source`` images per step drawn from
-    ``top_k`` ranked neighbours (the augmentation may draw fewer); ``feat_dim``, ``encoder_width`` and
-    ``encoder_norm``: the encoder's output channels, first-layer width and normalisation (S-Ray's fields of the same
-    names); ``visit_samples``:
+    ``top_k`` ranked neighbours (the augmentation may draw fewer); ``feat_dim`` and ``encoder_width``: the
+    encoder's output channels and first-layer width (S-Ray's fields of the same names); ``visit_samples``:
     consecutive steps on one scene before the loader picks the next (1 = scenes interleaved step by step: at an
     equal CPU budget its labels carried into unseen rooms score higher than with 16 consecutive samples per scene,
     docs/benchmarks.md "Ceilings"), ``cache_scenes`` decoded scenes kept; ``max_steps``: stop there even within the
@@ -123,10 +122,10 @@ def train_segmenter(shards: Path, cpu_seconds: float, out: Path, seed: int = 0, 
                 "augmentation": dataclasses.asdict(augment or Augmentation()), "class_balance": class_balance,
                 "class_names": class_names, "optimizer": f"Adam, constant lr {lr}", "n_source": n_source,
                 "top_k": top_k, "visit_samples": visit_samples, "cache_scenes": cache_scenes, "feat_dim": feat_dim,
-                "encoder_width": encoder_width, "encoder_norm": encoder_norm}
+                "encoder_width": encoder_width}
     torch.manual_seed(seed)
     model = Segmenter(SegmenterConfig(n_classes=len(class_names), feat_dim=feat_dim, encoder_width=encoder_width,
-                                      encoder_norm=encoder_norm, class_weights=tuple(weights)))
+                                      class_weights=tuple(weights)))
     model.train()
     optimizer = torch.optim.Adam(model.parameters(), lr=lr)
     loader = make_train_loader(shards, n_source=n_source, top_k=top_k, rays_per_batch=1,

@@ -38,6 +38,7 @@ from sray.platform.common.fault_hook import propagated_env
 from sray.platform.common.progress import progress_env
 from sray.platform.common.ray_address import check_ray_address
 from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
+from sray.platform.config.stored_format import outdated
 from sray.platform.finetune.fleet_report import results_table, summary_metrics
 from sray.platform.finetune.methods.registry import METHODS, get_method, method_names, with_depth_twins
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256, model_bytes, state_file
@@ -111,12 +112,15 @@ def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
 
 
 def _fleet_record(out_dir: Path, base_sha256: str, tracker: Tracker) -> dict[str, Any]:
-    """The fleet's record (new, or a re-launch's); ValueError if ``out_dir`` holds another checkpoint's fleet."""
+    """The fleet's record (new, or a re-launch's); ValueError if ``out_dir`` holds another checkpoint's fleet, or one an
+    earlier sray wrote (``sray migrate``)."""
     path = out_dir / FLEET_FILE
     if not path.exists():
         return {"format": "sray-fleet", "base_sha256": base_sha256, "tracker": tracker.name,
                 "tracking_uri": tracker.store, "parent_run_id": None, "launches": 0}
     record = json.loads(path.read_text())
+    if "tracker" not in record:  # written before trackers had names
+        raise outdated(f"{path}: this fleet record", "1 (no tracker name)", 2)
     if record.get("base_sha256") != base_sha256:
         raise ValueError(f"{path}: field 'base_sha256' is {record.get('base_sha256')}, but this checkpoint's is "
                          f"{base_sha256}; this folder holds a fleet of another checkpoint: pass another --out")

@@ -1,8 +1,8 @@
 """Short fly-throughs of a fleet's scene before and after its finetune (``sray finetune-fleet --clip-frames N``).
 
 For methods that render from source views (S-Ray): the same spline path through the scene's source and
-finetune cameras (``platform/render``), rendered with the fleet's held-out protocol (``finetune.eval_n_source``
-sources per frame, ``finetune.eval_render``), once with the shared model before the first step and once with
+finetune cameras (``platform/render``), rendered with the fleet's held-out protocol (``finetune.held_out``'s
+sources per frame and render), once with the shared model before the first step and once with
 the best finetuned state. Files go to ``<pair folder>/flythrough_before/`` and ``flythrough_after/`` and into
 the pair's child run under ``flythrough/before`` and ``flythrough/after``. Clip time is not training time.
 """
@@ -29,8 +29,8 @@ class SceneClips:
     def __init__(self, net: SRayModel, shards: Path, scene: str, frames: int, cfg: FleetConfig) -> None:
         """Plan ``frames`` frames of ``scene`` for ``net`` (ValueError before the finetune starts on bad input)."""
         ft = cfg.finetune
-        self.fly = Flythrough(net, plan_flythrough(Path(shards), scene, n_frames=frames), ft.eval_n_source,
-                              ft.eval_fast())
+        self.fly = Flythrough(net, plan_flythrough(Path(shards), scene, n_frames=frames),
+                              ft.held_out.sources(net.cfg.n_source), ft.held_out.fast())
 
     def render(self, stage: str, learner: Learner, out_dir: Path, logger: RunLogger | None) -> dict[str, str]:
         """Render the clip of ``stage`` (:data:`STAGES`) with the learner's current state, as its held-out views

@@ -120,7 +120,7 @@ def evaluate(learner: Learner, samples: list[EvalSample], cfg: FleetConfig, n_cl
     """Held-out scores (``score_views`` keys) of the learner's current state (``score_scene``)."""
     ft = cfg.finetune
     with learner.inference(), learner.step.autocast():
-        return score_scene(learner.renderer, samples, n_classes, ignore_id, ft.eval_stride, ft.eval_chunk,
+        return score_scene(learner.renderer, samples, n_classes, ignore_id, ft.held_out.stride, ft.eval_chunk,
                            learner.device, learner.fast).scores
 
 
@@ -132,15 +132,15 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
 
 
 def scene_protocol(task: SceneTask, shared: SRayConfig, fast: FastRender | None = None) -> EvalProtocol:
-    """How the job's held-out scores are made at ``finetune.eval_stride``: from ``finetune.eval_n_source``
-    fixed sources ranked by the shards' neighbour rule and given as the method's ``inputs`` (else the shared
-    checkpoint's ``model.inputs``, with what its training read, ``train_inputs``), rendered by the learner's
-    ``fast`` mode or in full (S-Ray, 2d-transfer), or from none, in full (per-scene models, as Semantic-NeRF)."""
+    """How the job's held-out scores are made (``finetune.held_out``: its stride, its fixed sources ranked by the
+    shards' neighbour rule, given as the method's ``inputs``, else the shared checkpoint's with ``train_inputs``;
+    rendered by the learner's ``fast`` mode or in full), or from no sources (per-scene models: Semantic-NeRF)."""
     ft, method = task.config.finetune, get_method(task.method)
     if method.uses_sources:
         inputs = (method.inputs, "") if method.inputs else (shared.inputs, shared.train_inputs)  # (test, training)
-        return EvalProtocol.from_shards(Path(task.shards), ft.eval_n_source, ft.eval_stride, *inputs).rendered_by(fast)
-    return EvalProtocol.without_sources(ft.eval_stride)
+        n_source = ft.held_out.sources(shared.n_source)
+        return EvalProtocol.from_shards(Path(task.shards), n_source, ft.held_out.stride, *inputs).rendered_by(fast)
+    return EvalProtocol.without_sources(ft.held_out.stride)
 
 
 def _prepare(task: SceneTask,
@@ -167,7 +167,7 @@ def _prepare(task: SceneTask,
                                rays_per_batch=ft.rays_per_batch or train_cfg.data.rays_per_batch,
                                batches_per_epoch=ft.eval_every, rank=0, world_size=1, num_workers=0, seed=ft.seed,
                                scenes=[task.scene], source_labels=setup.source_labels)
-    samples = list(make_eval_samples(shards, task.scene, split="test", n_source=ft.eval_n_source))
+    samples = list(make_eval_samples(shards, task.scene, n_source=ft.held_out.sources(train_cfg.model.n_source)))
     return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes, train_cfg.model)
 
 

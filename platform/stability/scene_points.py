@@ -31,6 +31,7 @@ from torch import nn
 from sray.data_tools.loader.samples import eval_sample, ranked_candidates, train_sample
 from sray.data_tools.loader.views import StoredView
 from sray.platform.config.fleet_config import FinetuneSettings, FleetConfig, TransferSettings
+from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.eval.scene_scoring import score_scene
 from sray.platform.finetune.methods.method import SceneContext, SceneSetup
@@ -52,7 +53,8 @@ def scene_settings(preset: Preset, segmenter: Path | None) -> FleetConfig:
     if preset.scene_cpu_seconds <= 0:
         raise ValueError(f"stability preset {preset.name!r}: scene_cpu_seconds is {preset.scene_cpu_seconds}; the rows "
                          "trained on the scene need a positive CPU budget")
-    return FleetConfig(finetune=FinetuneSettings(max_cpu_seconds=preset.scene_cpu_seconds, eval_render="full",
+    return FleetConfig(finetune=FinetuneSettings(max_cpu_seconds=preset.scene_cpu_seconds,
+                                                 held_out=HeldOutRender(stride=2, render="full"),
                                                  rays_per_batch=preset.scene_rays),
                        nerf=preset.nerf, transfer=TransferSettings(segmenter=str(segmenter or "")))
 

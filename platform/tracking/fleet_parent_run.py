@@ -10,7 +10,6 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from sray.platform.tracking.runs import NAME as MLFLOW
 from sray.platform.tracking.tracker import RunHandle, Tracker
 
 log = logging.getLogger(__name__)
@@ -21,10 +20,9 @@ def parent_run(tracker: Tracker, record: dict[str, Any], experiment: str, out_di
     tracker's store, else a new one named ``fleet · <folder's parent>/<folder>``. Returns (handle, whether
     it is new).
 
-    ``record``: the fleet's ``fleet.json`` (``parent_run_id``, ``tracking_uri`` = the store, and
-    ``tracker``, absent in records written before trackers had names: MLflow then).
+    ``record``: the fleet's ``fleet.json`` (``parent_run_id``, ``tracker`` and ``tracking_uri`` = the store).
     """
-    same_store = (record.get("tracker", MLFLOW) == tracker.name and record.get("tracking_uri") == tracker.store)
+    same_store = record["tracker"] == tracker.name and record["tracking_uri"] == tracker.store
     if record.get("parent_run_id") and same_store:
         try:
             handle = tracker.get_run(record["parent_run_id"])

@@ -206,7 +206,7 @@ def budget_spent(job_dir: Path, cfg: TrainConfig) -> bool:
     if read_meta(latest)["step"] >= cfg.optim.steps:
         return True
     budget = cfg.optim.cpu_seconds
-    return budget > 0 and load_checkpoint(latest)["counters"].get("cpu_seconds", 0.0) >= budget
+    return budget > 0 and load_checkpoint(latest)["counters"]["cpu_seconds"] >= budget
 
 
 def _log_run_start(tracker: Tracker, run: RunHandle, config_path: Path, protocol: dict[str, Any]) -> None:

@@ -7,23 +7,27 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from torch.optim.swa_utils import AveragedModel
 
 from sray.model.ray_batch import RayBatchLoss
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import write_checkpoint
-from sray.platform.checkpoints.model_loading import bare_model_keys
 from sray.platform.config.optim_settings import OptimSettings
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.train.step import fused_adam
-from sray.platform.train.weight_average import averaged_state
+
+
+FIRST_COUNTERS: dict[str, int | float] = {"skipped_steps": 0, "cpu_seconds": 0.0, "wall_seconds": 0.0,
+                                          "peak_memory_mb": 0.0}
+"""The counters every checkpoint holds, at a job's start: steps skipped for a non-finite loss, CPU seconds of every
+rank and its loader processes, rank 0's wall seconds since its set-up (NaN: unknown, a job migrated from a
+checkpoint written before it was counted) and the peak device memory, all summed or maxed across resumes."""
 
 
 def lr_lambda(opt: OptimSettings) -> Any:
-    """Multiplier of the base lr at a step: linear warm-up, then exponential decay to lr_final, from the end of the
-    warm-up (``opt.lr_decay_start`` ``run``) or of the 2D warm-up (``rays``: the base lr until then)."""
+    """Multiplier of the base lr at a step: linear warm-up, then exponential decay to lr_final over the rest of the
+    run."""
     ratio = opt.lr_final / opt.lr if opt.lr > 0 else 1.0  # a learning rate of 0 (a sweep's control arm) stays 0
-    first = decay_start_step(opt)
+    first = opt.warmup_steps
     decay_steps = max(opt.steps - first, 1)
 
     def factor(step: float) -> float:
@@ -34,43 +38,31 @@ def lr_lambda(opt: OptimSettings) -> Any:
     return factor
 
 
-def decay_start_step(opt: OptimSettings) -> int:
-    """The step the exponential decay starts at: after the linear warm-up, or at the first ray step."""
-    return opt.warmup_steps if opt.lr_decay_start == "run" else max(opt.warmup_steps, opt.warmup_2d_steps)
-
-
-def budget_lr_factor(opt: OptimSettings, step: int, cpu_seconds: float, ray_phase_cpu: float = 0.0) -> float:
+def budget_lr_factor(opt: OptimSettings, step: int, cpu_seconds: float) -> float:
     """Multiplier of the base lr at ``step`` of a job budgeted by ``opt.cpu_seconds`` (> 0), after ``cpu_seconds``
     spent: the warm-up counts steps, as without a budget; the decay then follows whichever is further along, the
     step count or the spent share of the budget (as a share of ``opt.steps``), so it reaches ``lr_final`` at the
-    budget however many steps a machine makes of it, and at the cap ``opt.steps`` if that comes first. With the
-    decay started at the ray phase (``opt.lr_decay_start`` ``rays``), the share is that of the budget left when the
-    ray phase began, ``ray_phase_cpu`` CPU seconds in, spread over the steps from the first ray step to the cap."""
+    budget however many steps a machine makes of it, and at the cap ``opt.steps`` if that comes first."""
     factor = lr_lambda(opt)
-    if step < decay_start_step(opt):  # the warm-up, or a 2D warm-up at the base lr before a ray-phase decay
+    if step < opt.warmup_steps:
         return factor(step)
-    if opt.lr_decay_start == "rays":
-        first = decay_start_step(opt)
-        share = (cpu_seconds - ray_phase_cpu) / max(opt.cpu_seconds - ray_phase_cpu, 1e-9)
-        return factor(max(step, first + share * (opt.steps - first)))
     return factor(max(step, cpu_seconds / opt.cpu_seconds * opt.steps))
 
 
 def build_training(cfg: TrainConfig) -> tuple[RayBatchLoss, torch.optim.Optimizer, torch.optim.lr_scheduler.LambdaLR]:
-    """Model (seeded from ``cfg.run.seed``, identical on every rank; its loss run with ``cfg.runtime``), Adam (AdamW
-    with ``cfg.optim.weight_decay`` > 0) and its schedule."""
+    """Model (seeded from ``cfg.run.seed``, identical on every rank; its loss run with ``cfg.runtime``), Adam and
+    its schedule."""
     torch.manual_seed(cfg.run.seed)
     model = RayBatchLoss(cfg.model, cfg.runtime)
-    optimizer = fused_adam(list(model.parameters()), cfg.optim.lr, cfg.optim.weight_decay)
+    optimizer = fused_adam(list(model.parameters()), cfg.optim.lr)
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lr_lambda(cfg.optim))
     return model, optimizer, scheduler
 
 
 def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler: Any, scaler: Any,
                    step: int, cfg: TrainConfig, best_metric: float | None,
-                   counters: dict[str, int | float], average: AveragedModel | None = None) -> dict[str, Any]:
-    """Full checkpoint state (weights_only-safe) of the bare model and its weight ``average`` if the job keeps one
-    (``sray.platform.train.weight_average``): the step is the NEXT step to run."""
+                   counters: dict[str, int | float]) -> dict[str, Any]:
+    """Full checkpoint state (weights_only-safe) of the bare model: the step is the NEXT step to run."""
     state: dict[str, Any] = {
         "model": model.state_dict(),
         "optimizer": optimizer.state_dict(),
@@ -82,8 +74,6 @@ def training_state(model: SRayModel, optimizer: torch.optim.Optimizer, scheduler
     }
     if scaler is not None:
         state["scaler"] = scaler.state_dict()
-    if average is not None:
-        state |= averaged_state(average)
     return state
 
 
@@ -92,17 +82,17 @@ def write_initial_checkpoint(cfg: TrainConfig, directory: Path) -> Path:
     ``directory``: an untrained shared model that the fleet and evaluation read like any other (the GPU check's
     fleet timing, tests)."""
     model, optimizer, scheduler = build_training(cfg)
-    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, {"skipped_steps": 0})
+    state = training_state(model.net, optimizer, scheduler, None, 0, cfg, None, dict(FIRST_COUNTERS))
     return write_checkpoint(state, directory, 0)
 
 
 def restore_training(state: dict[str, Any], model: SRayModel, optimizer: torch.optim.Optimizer,
                      scheduler: Any, scaler: Any) -> tuple[int, float | None, dict[str, int]]:
-    """Load a :func:`training_state` dict (legacy keys too) into live objects; returns (next step, best
-    metric, counters). ``model`` is the bare network whose parameters the optimizer holds, in order."""
-    model.load_state_dict(bare_model_keys(state["model"]))
+    """Load a :func:`training_state` dict into live objects; returns (next step, best metric, counters). ``model``
+    is the bare network whose parameters the optimizer holds, in order."""
+    model.load_state_dict(state["model"])
     optimizer.load_state_dict(state["optimizer"])
     scheduler.load_state_dict(state["scheduler"])
     if scaler is not None and "scaler" in state:
         scaler.load_state_dict(state["scaler"])
-    return int(state["step"]), state.get("best_metric"), dict(state.get("counters", {}))
+    return int(state["step"]), state["best_metric"], dict(state["counters"])

@@ -110,14 +110,7 @@ class TrainStep:
         return StepOutcome(applied=not nonfinite, stop=stop > 0, grad_norm=norm.detach(), cpu_seconds=cpu_total)
 
 
-def fused_adam(params: list[nn.Parameter], lr: float, weight_decay: float = 0.0) -> torch.optim.Optimizer:
-    """Adam with the fused kernel (CPU and CUDA): one kernel per step and no host reads of its step counters.
-
-    ``weight_decay`` > 0 makes it AdamW: the weights of convolutions and linear layers (parameters of two or more
-    dimensions) shrink by ``lr * weight_decay`` of themselves each step, apart from the gradient's update; biases and
-    norm scales never decay. 0 is plain Adam with one parameter group (the paper's optimiser)."""
-    if weight_decay <= 0:
-        return torch.optim.Adam(params, lr=lr, fused=True)
-    groups = [{"params": [p for p in params if p.dim() >= 2], "weight_decay": weight_decay},
-              {"params": [p for p in params if p.dim() < 2], "weight_decay": 0.0}]
-    return torch.optim.AdamW([g for g in groups if g["params"]], lr=lr, fused=True)
+def fused_adam(params: list[nn.Parameter], lr: float) -> torch.optim.Optimizer:
+    """Adam (the paper's optimiser) with the fused kernel (CPU and CUDA): one kernel per step and no host reads of
+    its step counters."""
+    return torch.optim.Adam(params, lr=lr, fused=True)

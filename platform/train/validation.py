@@ -5,8 +5,8 @@
 ``source`` views (the paper's generalization protocol). Logged against the step, they give the
 paper's table of metrics against iterations. Both groups are made the same way,
 :func:`validation_protocol` (logged once per run by the launcher: tag ``sray.protocol``, params
-``protocol.*``); validation renders are strided (``data.val_downscale``), so they carry no SSIM
-unless that is 1, and use the fast render mode on those pixels unless ``data.val_render`` is ``full``
+``protocol.*``); validation renders are strided (``data.held_out.stride``), so they carry no SSIM
+unless that is 1, and use the fast render mode on those pixels unless ``data.held_out.render`` is ``full``
 (:mod:`sray.platform.config.held_out_render`). One validation reads the shard manifest once and hands it down.
 """
 
@@ -32,11 +32,12 @@ GROUPS = {"val": "train", "zeroshot": "test"}
 
 
 def validation_protocol(cfg: TrainConfig) -> EvalProtocol:
-    """How ``val/*`` and ``zeroshot/*`` are made: ``model.n_source`` fixed sources ranked by the shards'
-    neighbour rule, every ``data.val_downscale``-th pixel, the model's ``model.inputs`` (and what its training read:
-    ``SRayConfig.train_inputs``, ``rgbd`` with the depth loss), the render of ``data.val_render``."""
-    return EvalProtocol.from_shards(Path(cfg.data.shards), cfg.model.n_source, cfg.data.val_downscale,
-                                    cfg.model.inputs, cfg.model.train_inputs).rendered_by(cfg.data.val_fast())
+    """How ``val/*`` and ``zeroshot/*`` are made (``data.held_out``): its fixed sources (0: ``model.n_source``) ranked
+    by the shards' neighbour rule, every ``stride``-th pixel, the model's ``model.inputs`` (and what its training
+    read: ``SRayConfig.train_inputs``, ``rgbd`` with the depth loss), its render."""
+    held_out = cfg.data.held_out
+    return EvalProtocol.from_shards(Path(cfg.data.shards), held_out.sources(cfg.model.n_source), held_out.stride,
+                                    cfg.model.inputs, cfg.model.train_inputs).rendered_by(held_out.fast())
 
 
 def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
@@ -53,13 +54,14 @@ def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: s
     per_scene, renders = [], []
     scenes = [(name, entry) for name, entry in sorted(manifest.scenes.items())
               if entry.meta.get("role") == role and entry.meta.get("splits", {}).get("test")]
-    fast = cfg.data.val_fast()
+    held_out = cfg.data.held_out
+    fast = held_out.fast()
     for name, entry in scenes[:cfg.data.val_scenes or None]:
         samples = itertools.islice(make_eval_samples(Path(cfg.data.shards), name, split="test",
-                                                     n_source=cfg.model.n_source, manifest=manifest),
+                                                     n_source=held_out.sources(cfg.model.n_source), manifest=manifest),
                                    cfg.data.val_views_per_scene)
         scored = score_scene(lambda s: sray_renderer(net, s, device, fast, cfg.runtime), samples, cfg.model.n_classes,
-                             cfg.model.ignore_id, cfg.data.val_downscale, cfg.runtime.chunk, device, fast)
+                             cfg.model.ignore_id, held_out.stride, cfg.runtime.chunk, device, fast)
         per_scene.append(scored.scores)
         renders += [(name, v) for v in scored.views]
     return (_mean(per_scene) if per_scene else {}), renders

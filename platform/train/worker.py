@@ -26,10 +26,10 @@ from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle
 from sray.platform.train.cpu_clock import CpuClock
 from sray.platform.train.job_loader import job_loader
-from sray.platform.train.state import budget_lr_factor, build_training, restore_training, training_state
+from sray.platform.train.state import (FIRST_COUNTERS, budget_lr_factor, build_training, restore_training,
+                                       training_state)
 from sray.platform.train.step import TrainStep, step_seed
 from sray.platform.train.validation import validate
-from sray.platform.train.weight_average import restore_average, weight_average
 
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
@@ -82,7 +82,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     accelerator = Accelerator(mixed_precision="no", cpu=not use_cuda)
     device = accelerator.device
     model, optimizer, scheduler = build_training(cfg)
-    start, best, counters = 0, None, {"skipped_steps": 0}
+    start, best, counters = 0, None, dict(FIRST_COUNTERS)
     # A restarted worker group resumes from the last checkpoint Ray recorded; a resumed job
     # (`--resume NAME`, a fresh Ray run) from the job's latest checkpoint folder.
     resumed = ray.train.get_checkpoint()
@@ -94,21 +94,16 @@ def train_worker(payload: dict[str, Any]) -> None:
             how = "a restarted worker group" if resumed is not None else "--resume"
             print(f"[sray] resumed at step {start} ({how})", flush=True)
     model, optimizer = accelerator.prepare(model, optimizer)
-    # rank 0 keeps the weight average (optim.ema_decay > 0) that it validates and checkpoints
-    average = weight_average(accelerator.unwrap_model(model).net, cfg.optim.ema_decay, device) if rank == 0 else None
-    if average is not None and state is not None:
-        restore_average(state, average)
     train_step = TrainStep(list(model.parameters()), optimizer, cfg.optim.grad_clip, cfg.run.precision, device,
                            cfg.optim.max_nonfinite_in_row, world)
-    train_step.skipped_total = counters.get("skipped_steps", 0)
+    train_step.skipped_total = counters["skipped_steps"]
     if state is not None and train_step.scaler is not None and "scaler" in state:
         train_step.scaler.load_state_dict(state["scaler"])
 
     # CPU seconds of every rank and its loader processes, across resumes (optim.cpu_seconds budgets them)
-    clock, cpu_total = CpuClock(counters.get("cpu_seconds", 0.0) / world), counters.get("cpu_seconds", 0.0)
-    # rank 0's wall seconds since the set-up, across resumes; unknown (never stored) for a job resumed from a
-    # checkpoint written before sray counted them
-    wall_start, wall_before = time.perf_counter(), counters.get("wall_seconds", 0.0 if start == 0 else None)
+    clock, cpu_total = CpuClock(counters["cpu_seconds"] / world), counters["cpu_seconds"]
+    # rank 0's wall seconds since the set-up, across resumes (NaN stays NaN: unknown, FIRST_COUNTERS)
+    wall_start, wall_before = time.perf_counter(), counters["wall_seconds"]
     manager = CheckpointManager(job_dir / "checkpoints", keep_last=cfg.run.keep_checkpoints)
     logger = open_logger(RunHandle(**payload["run"])) if rank == 0 else None
     # the first worker of each node records that node's system metrics into the job's run
@@ -143,13 +138,10 @@ def train_worker(payload: dict[str, Any]) -> None:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
             logger.flush(force=True)
             counters["skipped_steps"], counters["cpu_seconds"] = train_step.skipped_total, cpu_total
-            if wall_before is not None:
-                counters["wall_seconds"] = wall_before + time.perf_counter() - wall_start
-            counters["peak_memory_mb"] = max(counters.get("peak_memory_mb", 0.0), peak_memory_mb(device))
-            if cfg.optim.lr_decay_start == "rays":
-                counters["ray_phase_cpu_seconds"] = ray_phase_cpu
+            counters["wall_seconds"] = wall_before + time.perf_counter() - wall_start
+            counters["peak_memory_mb"] = max(counters["peak_memory_mb"], peak_memory_mb(device))
             state = training_state(accelerator.unwrap_model(model).net, optimizer, scheduler, train_step.scaler,
-                                   step_done, cfg, best, counters, average)
+                                   step_done, cfg, best, counters)
             state[UNSENT_METRICS] = [list(m) for m in logger.unsent_metrics()]  # store unreachable now
             path = manager.save(state, step_done, metrics.get("val/miou"))
             ray.train.report(metrics, checkpoint=to_ray_checkpoint(path))
@@ -157,16 +149,11 @@ def train_worker(payload: dict[str, Any]) -> None:
             ray.train.report(metrics)
 
     budget = cfg.optim.cpu_seconds
-    ray_phase_cpu = counters.get("ray_phase_cpu_seconds", 0.0)  # CPU spent when the ray phase began
 
     def follow_cpu_budget(next_step: int) -> None:
-        """With a CPU budget, the next step's learning rate from ``budget_lr_factor``; before the first ray step,
-        records the CPU spent so far (where a decay started at the ray phase counts from)."""
-        nonlocal ray_phase_cpu
-        if next_step == cfg.optim.warmup_2d_steps:
-            ray_phase_cpu = cpu_total
+        """With a CPU budget, the next step's learning rate from ``budget_lr_factor``."""
         if budget > 0:
-            factor = budget_lr_factor(cfg.optim, next_step, cpu_total, ray_phase_cpu)
+            factor = budget_lr_factor(cfg.optim, next_step, cpu_total)
             for group in optimizer.param_groups:
                 group["lr"] = group["initial_lr"] * factor
 
@@ -196,8 +183,6 @@ def train_worker(payload: dict[str, Any]) -> None:
             follow_cpu_budget(step + 1)
             finished = step + 1 == cfg.optim.steps or (budget > 0 and cpu_total >= budget)
             if outcome.applied:
-                if average is not None:
-                    average.update_parameters(accelerator.unwrap_model(model).net)
                 if term_names != [*terms, "loss"]:  # a new set of terms (the 2D warm-up ended) opens a new window
                     term_names, window_terms = [*terms, "loss"], []
                 window_terms.append(torch.stack([*(terms[k].float() for k in term_names[:-1]), loss.detach().float()]))
@@ -219,8 +204,7 @@ def train_worker(payload: dict[str, Any]) -> None:
             metrics: dict[str, float] = {"step": step}
             if step % cfg.run.val_every == 0 or finished:
                 if rank == 0:
-                    scored = average.module if average is not None else accelerator.unwrap_model(model).net
-                    metrics |= validate(scored, cfg, step, logger, job_dir, device)
+                    metrics |= validate(accelerator.unwrap_model(model).net, cfg, step, logger, job_dir, device)
                     miou = metrics.get("val/miou")
                     if miou is not None and (best is None or miou > best):
                         best = miou

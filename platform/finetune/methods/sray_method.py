@@ -30,7 +30,7 @@ def build(ctx: SceneContext) -> SceneSetup:
 
     ft = ctx.cfg.finetune
     learner = SRayLearner(ctx.base, ctx.base_sha256, ft.adapt, ft.lr, ft.grad_clip, ft.precision, ctx.device,
-                          ft.max_nonfinite_in_row, ft.eval_fast())
+                          ft.max_nonfinite_in_row, ft.held_out.fast())
     n_source = ft.n_source or ctx.train_cfg.model.n_source
     top_k = ft.top_k or min(ctx.train_cfg.data.top_k, ctx.stored_neighbours)
     return SceneSetup(learner=learner, n_source=n_source, top_k=top_k)

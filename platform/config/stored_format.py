@@ -1,0 +1,56 @@
+"""Reading a stored config (a job's ``config.json``, a checkpoint's ``config`` entry, a sweep's base config) back
+into its typed dataclass: today's format only.
+
+Every stored config carries ``format_version``. A dict of another version was written by an earlier sray and is
+refused in one line that names ``sray migrate`` (``sray.platform.migrate``), which converts it once; a dict of
+today's version must hold exactly the fields of today's dataclasses (an unknown field is refused by name).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from typing import Any
+
+CONFIG_VERSION = 2
+"""Format of stored configs. 1 (no ``format_version`` key): sray up to commit 7734061, with the flat ``data.val_*``
+and ``finetune.eval_*`` settings and the fields since removed; 2: the nested ``held_out`` sections."""
+VERSION_KEY = "format_version"
+"""Key of the format version in a stored config dict."""
+
+
+class OutdatedFormat(ValueError):
+    """A stored artifact written by an earlier sray: ``sray migrate PATH`` converts it."""
+
+
+def outdated(what: str, found: Any, expected: Any) -> OutdatedFormat:
+    """The one-line refusal of an artifact in format ``found`` where this sray reads ``expected``."""
+    return OutdatedFormat(f"{what} is in format {found}, written by an earlier sray (this one reads {expected}); "
+                          "convert it once with `sray migrate PATH`")
+
+
+def check_version(d: dict[str, Any], what: str) -> None:
+    """OutdatedFormat unless the stored config ``d`` is in today's format (``CONFIG_VERSION``)."""
+    version = d.get(VERSION_KEY, 1)
+    if version != CONFIG_VERSION:
+        raise outdated(what, version, CONFIG_VERSION)
+
+
+def from_plain(cls: type, d: dict[str, Any], where: str) -> Any:
+    """The dataclass ``cls`` built from its plain-dict form ``d`` (``dataclasses.asdict``): nested sections built
+    as their own dataclasses, lists read back as tuples where the field is a tuple; ValueError names a field of
+    ``d`` that ``cls`` does not have (``where``: the section's dotted name)."""
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(d) - names)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)}; fields: {', '.join(sorted(names))}")
+    values = {}
+    for name, value in d.items():
+        kind = hints[name]
+        if dataclasses.is_dataclass(kind) and isinstance(value, dict):
+            value = from_plain(kind, value, f"{where}.{name}")
+        elif typing.get_origin(kind) is tuple and isinstance(value, list):
+            value = tuple(value)
+        values[name] = value
+    return cls(**values)
