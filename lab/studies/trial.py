@@ -12,8 +12,6 @@ split is scored at it (the protocol names it).
 
 from __future__ import annotations
 
-import os
-import platform as stdlib_platform
 import shutil
 import subprocess
 import time
@@ -21,14 +19,13 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from sray.data_tools.synth.world import World, make_world
 from sray.lab.studies.results import FORMAT, write_result
 from sray.lab.studies.spec import Arm, StudySpec, assignments, load_study
 from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.common.eval_protocol import EvalProtocol
+from sray.platform.common.machine import describe_machine
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import CONFIG_FILE, TrainConfig, apply_override, load_job_config
 from sray.platform.eval.calibration import calibrate
@@ -109,19 +106,6 @@ def split_metrics(report: dict[str, Any], shards: Path, scenes: list[str]) -> di
 def _rounded(seconds: float | None) -> float | None:
     """Seconds to a tenth (None stays None)."""
     return None if seconds is None else round(float(seconds), 1)
-
-
-def describe_machine() -> dict[str, Any]:
-    """The CPU model, the cores this process may use and the device; the fixed throughput probe is not run here
-    (null)."""
-    model = stdlib_platform.processor() or ""
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.is_file():
-        model = next((line.split(":", 1)[1].strip() for line in cpuinfo.read_text().splitlines()
-                      if line.startswith("model name")), model)
-    device = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "cpu"
-    return {"cpu_model": model, "cores": len(os.sched_getaffinity(0)), "device": device,
-            "ray_steps_per_cpu_second": None}
 
 
 def current_commit(repo: Path) -> str | None:
