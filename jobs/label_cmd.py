@@ -8,6 +8,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from sray.jobs.tracked_run_flags import add_tracked_run_flags
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray label``."""
@@ -27,12 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fast (default): the fast render mode of `sray eval`; full: coarse + fine at every pixel")
     p.add_argument("--flythrough-frames", type=int, default=60,
                    help="frames of each scene's fly-through (default 60; 0: none)")
-    p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
-    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
-    p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
-                                                      "SQLite store in this folder)")
-    p.add_argument("--experiment", default="sray-label", help="experiment name (default %(default)s)")
-    p.add_argument("--no-track", action="store_true", help="write the files only, no tracked run")
+    add_tracked_run_flags(p, "sray-label")
     p.set_defaults(func=run)
 
 

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from sray.jobs.held_out_flags import add_held_out_flags, held_out_from_args
+from sray.jobs.tracked_run_flags import add_tracked_run_flags
 
 DEFAULT_FRAMES = 60
 """Frames of a built path (``--path``) unless ``--frames`` says otherwise."""
@@ -48,12 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="render size (default: the scene's image size, or the camera-path file's)")
     p.add_argument("--fps", type=float, help="video frame rate (default: the camera-path file's, else 15)")
     add_held_out_flags(p, scored_stride=False)
-    p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
-    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
-    p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
-                                                      "SQLite store in this folder)")
-    p.add_argument("--experiment", default="sray-render", help="experiment name (default %(default)s)")
-    p.add_argument("--no-track", action="store_true", help="write the files only, no tracked run")
+    add_tracked_run_flags(p, "sray-render")
     p.set_defaults(func=run)
 
 

@@ -1,0 +1,17 @@
+"""The flags of a command that renders with a checkpoint and logs what it wrote as one tracked run (``sray render``,
+``sray label``): the torch device, the tracker and its store, the experiment, and ``--no-track``."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_tracked_run_flags(p: argparse.ArgumentParser, experiment: str) -> None:
+    """Add ``--device``, ``--tracker``, ``--tracking-uri``, ``--experiment`` (default ``experiment``) and
+    ``--no-track`` to ``p``."""
+    p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
+    p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
+                                                      "SQLite store in this folder)")
+    p.add_argument("--experiment", default=experiment, help="experiment name (default %(default)s)")
+    p.add_argument("--no-track", action="store_true", help="write the files only, no tracked run")
