@@ -13,7 +13,7 @@ from sray.lab.publish.results import RESULTS, figure, mean_sd, present, seeds, s
 from sray.lab.publish.step_cost import appearance_step_cost
 
 CARDS_DATA = Path("docs/benchmarks/recipe-cards/all-machines/tables.json")
-"""The recipe cards' stored table (``sray bench recipe-cards``)."""
+"""The recipe cards' stored table (``sray lab recipe-cards``)."""
 H100_REPORT = Path("docs/benchmarks/gpu-check/nvidia-h100-80gb-hbm3/tables.json")
 H200_REPORT = Path("docs/benchmarks/gpu-check/nvidia-h200/tables.json")
 """The GPU checks' stored reports (``sray gpu-check``)."""
@@ -40,7 +40,7 @@ def _fleet_60s(repo: Path) -> list[float]:
 
 
 def recipe_cards(repo: Path) -> str:
-    """The recipe cards: the stored cards of ``sray bench recipe-cards``, with ``synth-cpu-hour`` on the 2-core CPU
+    """The recipe cards: the stored cards of ``sray lab recipe-cards``, with ``synth-cpu-hour`` on the 2-core CPU
     shown as it ships (its stored seeds trained until the budget is spent) instead of the capped cell stored there."""
     data = json.loads((repo / CARDS_DATA).read_text())
     table = next(b for b in data["tables"][0]["blocks"] if "header" in b)
