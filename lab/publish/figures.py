@@ -100,9 +100,10 @@ def gpu_training(repo: Path) -> str:
 
 def demo_time(repo: Path) -> str:
     """The demo's wall time on the 2-core CPU, as its runs stored it."""
-    runs = [t for arm in ("make-demo", "make-demo-rerun") for t in trials(repo, "demo", arm)]
+    runs = trials(repo, "demo", "make-demo")
     minutes = " and ".join(f"{figure(t, 'trained.wall_seconds') / 60:.1f}" for t in runs)
-    return (f"On the 2-core CPU the demo took {minutes} minutes in {len(runs)} runs on a fresh clone, plus the venv "
+    count = "1 run" if len(runs) == 1 else f"{len(runs)} runs"
+    return (f"On the 2-core CPU the demo took {minutes} minutes in {count} on a fresh clone, plus the venv "
             f"set-up (read from {_link(RESULTS / 'demo')}).")
 
 
