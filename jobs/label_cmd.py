@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sray.jobs.tracked_run_flags import add_tracked_run_flags
+from sray.jobs.tracked_run_flags import add_tracked_run_flags, print_tracked_run
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -57,8 +57,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"[sray] {scene}: {len(record['frames'])} frames -> {args.out / scene} ({line})")
         if "flythrough" in record:
             print(f"[sray]   fly-through: {record['flythrough']['mp4']}")
-    if "run" in result:
-        hint = result["run"]["ui_hint"]
-        print(f"[sray] {result['run']['tracker']} run: {result['run']['ui_url']}"
-              + (f"  (start the UI: {hint})" if hint else ""))
+    print_tracked_run(result)
     return 0

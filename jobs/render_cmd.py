@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from sray.jobs.held_out_flags import add_held_out_flags, held_out_from_args
-from sray.jobs.tracked_run_flags import add_tracked_run_flags
+from sray.jobs.tracked_run_flags import add_tracked_run_flags, print_tracked_run
 
 DEFAULT_FRAMES = 60
 """Frames of a built path (``--path``) unless ``--frames`` says otherwise."""
@@ -86,8 +86,5 @@ def run(args: argparse.Namespace) -> int:
     print(f"[sray] {result['n_frames']} frames at {result['frames_per_s']:.2f} frames/s; protocol: "
           f"{fly.protocol.describe()}")
     print(f"[sray] videos: {result['files']['webm']}  {result['files']['mp4']}  {result['files']['gif']}")
-    if "run" in result:
-        hint = result["run"]["ui_hint"]
-        print(f"[sray] {result['run']['tracker']} run: {result['run']['ui_url']}"
-              + (f"  (start the UI: {hint})" if hint else ""))
+    print_tracked_run(result)
     return 0

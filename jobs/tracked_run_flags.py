@@ -1,9 +1,11 @@
 """The flags of a command that renders with a checkpoint and logs what it wrote as one tracked run (``sray render``,
-``sray label``): the torch device, the tracker and its store, the experiment, and ``--no-track``."""
+``sray label``): the torch device, the tracker and its store, the experiment, and ``--no-track``; and the line
+that tells where the tracked run went."""
 
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 
 def add_tracked_run_flags(p: argparse.ArgumentParser, experiment: str) -> None:
@@ -15,3 +17,11 @@ def add_tracked_run_flags(p: argparse.ArgumentParser, experiment: str) -> None:
                                                       "SQLite store in this folder)")
     p.add_argument("--experiment", default=experiment, help="experiment name (default %(default)s)")
     p.add_argument("--no-track", action="store_true", help="write the files only, no tracked run")
+
+
+def print_tracked_run(result: dict[str, Any]) -> None:
+    """Print the tracked run's address (and how to start the UI) when ``result`` holds a ``run``."""
+    if "run" in result:
+        hint = result["run"]["ui_hint"]
+        print(f"[sray] {result['run']['tracker']} run: {result['run']['ui_url']}"
+              + (f"  (start the UI: {hint})" if hint else ""))
