@@ -197,10 +197,10 @@ class ViewScorer:
 def fit_probes(net: SRayModel, segmenter: Segmenter | None, shards: Path, steps: int, max_views: int,
                seed: int) -> dict[str, LinearProbe]:
     """Probes on the checkpoint's encoder (``e``), the segmenter's (``e-seg``, when given) and a random one
-    (``e-rand``, initialised under ``seed``), all fitted alike."""
+    (``e-rand``, initialised under ``seed``), all fitted alike, their heads initialised under ``seed``."""
     encoders = {"e": net.encoder, "e-seg": None if segmenter is None else segmenter.encoder,
                 "e-rand": random_encoder(net.cfg.feat_dim, seed, net.cfg.encoder_width)}
-    return {key: fit_probe(encoder, shards, net.cfg, steps=steps, max_views=max_views)
+    return {key: fit_probe(encoder, shards, net.cfg, steps=steps, max_views=max_views, seed=seed)
             for key, encoder in encoders.items() if encoder is not None}
 
 
@@ -213,8 +213,9 @@ def measure_ceilings(checkpoint: Path, shards: Path, *, n_source: int = 8, views
 
     ``views_per_scene``: the first test views of each scene (0 = all); ``segmenter``: a folder written by
     :func:`~sray.platform.eval.segmenter_training.train_segmenter`; ``probe_steps``/``probe_views``: the
-    probes' fit; ``tolerance``: the occlusion test's relative depth agreement; ``seed``: the random encoder's;
-    ``render``: S-Ray's render of rows s and c-rgb (None = the full render). Runs on the CPU.
+    probes' fit; ``tolerance``: the occlusion test's relative depth agreement; ``seed``: the random encoder's and
+    the probe heads' initialisation; ``render``: S-Ray's render of rows s and c-rgb (None = the full render). Runs on
+    the CPU.
     """
     checkpoint, shards = Path(checkpoint).resolve(), Path(shards).resolve()
     net, cfg = model_from_checkpoint(checkpoint)

@@ -93,9 +93,10 @@ def feature_pixels(encoder: ResUNetEncoder, shards: Path, manifest: Manifest, vi
 
 
 def fit_probe(encoder: ResUNetEncoder, shards: Path, model_cfg: SRayConfig, *, steps: int = 300,
-              max_views: int = 64, lr: float = 0.02) -> LinearProbe:
+              max_views: int = 64, lr: float = 0.02, seed: int = 0) -> LinearProbe:
     """Fit a linear probe on ``encoder``'s frozen features (see the module doc); ``model_cfg`` gives the
-    feature width, the classes and the ignore id (its class weights are not used: the fit is unweighted)."""
+    feature width, the classes and the ignore id (its class weights are not used: the fit is unweighted). The head
+    starts from PyTorch's initialisation under ``seed`` (the global random state left as it was): a fit repeats."""
     start = time.perf_counter()
     shards = Path(shards)
     manifest = read_manifest(shards)
@@ -107,7 +108,9 @@ def fit_probe(encoder: ResUNetEncoder, shards: Path, model_cfg: SRayConfig, *, s
     if int(y.max()) >= model_cfg.n_classes:
         raise ValueError(f"{shards}: labels up to {int(y.max())}, the model predicts {model_cfg.n_classes} classes; "
                          "probe on data of the checkpoint's label space")
-    head = SourceSemanticHead(dataclasses.replace(model_cfg, class_weights=()))
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        head = SourceSemanticHead(dataclasses.replace(model_cfg, class_weights=()))
     weight = head.classify.weight  # (L, C, 1, 1)
     optimizer = torch.optim.Adam(head.parameters(), lr=lr)
     for _ in range(steps):

@@ -13,7 +13,8 @@ from sray.lab.studies.paired import by_arm_and_seed, mean_and_std
 
 SPLIT_LABELS = {"zero_shot": "test rooms (zero-shot)", "zero_shot_appearance": "appearance-shifted test rooms",
                 "zero_shot_geometry": "geometry-shifted test rooms", "validation": "validation rooms",
-                "held_out": "held-out views of training rooms"}
+                "held_out": "held-out views of training rooms",
+                "fleet.sray": "test rooms after a per-room S-Ray finetune"}
 """How the chart and the page name each split."""
 
 

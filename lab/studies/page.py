@@ -10,6 +10,7 @@ from typing import Any
 
 from sray.data_tools.atomic import atomic_write_text
 from sray.lab.studies.chart import SPLIT_LABELS, miou_chart
+from sray.lab.studies.fleet_ceilings import CEILING_ROOMS
 from sray.lab.studies.gap import gap_section
 from sray.lab.studies.paired import by_arm_and_seed, mean_and_std, paired_differences
 from sray.lab.studies.results import metric, read_results
@@ -106,6 +107,26 @@ def trials_table(results: dict[str, dict[str, Any]], splits: list[str]) -> str:
                            "source"], rows)
 
 
+def ceilings_section(spec: StudySpec, results: dict[str, dict[str, Any]]) -> list[str]:
+    """The page's "Ceilings" lines: one row per ceiling row, per arm the mean ± std (seeds) of its mIoU; empty when no
+    trial holds ceilings."""
+    blocks = [(r["arm"], r["metrics"]["ceilings"]) for r in results.values() if r["metrics"].get("ceilings")]
+    if not blocks:
+        return []
+    titles, values = {}, {}
+    for arm, block in blocks:
+        for key, row in block["rows"].items():
+            titles.setdefault(key, row)
+            if row["miou"] is not None:
+                values.setdefault((arm, key), []).append(row["miou"])
+    rows = [[key, row["title"], "**oracle**" if row["oracle"] else "no",
+             *[_pm(values.get((arm, key), [])) for arm in spec.arms]] for key, row in titles.items()]
+    rooms = " and ".join(sorted({CEILING_ROOMS[b["scenes"]] for _, b in blocks}))
+    return ["## Ceilings", "", f"The rows of `sray lab ceilings` on each arm's own world, {rooms} (mIoU %, mean ± "
+            "sample std (seeds); oracle rows read the query view's ground truth): "
+            f"{blocks[0][1]['protocol']}.", "", markdown_table(["row", "what", "oracle", *spec.arms], rows), ""]
+
+
 def render_page(spec: StudySpec, results: dict[str, dict[str, Any]], reading: list[str], chart: str | None) -> str:
     """The page's Markdown."""
     splits = [s for s in SPLIT_LABELS if by_arm_and_seed(results, s)]
@@ -123,7 +144,10 @@ def render_page(spec: StudySpec, results: dict[str, dict[str, Any]], reading: li
                 f"Test splits: {spec.split_rooms} rooms each, in-distribution, appearance-shifted and geometry-shifted "
                 "(the world's seed and sizes, no training room; docs/data.md, \"Shifted test splits\"). ")
              + ("" if spec.calibration_stride is None else
-                "The fast render's confidence temperature is fitted per trial on the validation rooms. ") +
+                "The fast render's confidence temperature is fitted per trial on the validation rooms. ")
+             + ("" if spec.fleet is None else "Fleet: the last checkpoint finetuned with S-Ray on "
+                + (f"the first {spec.fleet.rooms} test room(s)" if spec.fleet.rooms else "every test room")
+                + f", {spec.fleet.describe()}, as `sray finetune-fleet` does. ") +
              f"Budget per trial: {spec.budget.describe()}. Seeds: {', '.join(map(str, spec.seeds))}. "
              f"{len(results)} of {len(spec.trial_keys())} trials stored.", "",
              f"**Selection split: {spec.select_on}.** Arms are chosen on the {SPLIT_LABELS[spec.select_on]} "
@@ -147,7 +171,8 @@ def render_page(spec: StudySpec, results: dict[str, dict[str, Any]], reading: li
                                  [[a.name, ", ".join(f"`{o}`" for o in a.overrides()),
                                    f"removed from the product after {a.removed_after}", a.note or "—"]
                                   for a in removed]), ""]
-    lines += ["## Trials", "", trials_table(results, splits), "", READING, "", READING_HINT, *reading]
+    lines += [*ceilings_section(spec, results), "## Trials", "", trials_table(results, splits), "", READING, "",
+              READING_HINT, *reading]
     return "\n".join(lines).rstrip() + "\n"
 
 

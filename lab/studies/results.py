@@ -85,7 +85,10 @@ def read_results(results_dir: Path) -> dict[str, dict[str, Any]]:
 
 
 def metric(result: dict[str, Any], split: str, name: str = "miou") -> float | None:
-    """``result``'s ``name`` on ``split`` (percent), None when it was not measured."""
-    block = result["metrics"].get(split) or {}
+    """``result``'s ``name`` on ``split`` (percent; a dotted split such as ``fleet.sray`` names a nested block), None
+    when it was not measured."""
+    block = result["metrics"]
+    for key in split.split("."):
+        block = block.get(key) or {}
     value = block.get(name)
     return None if value is None else float(value)

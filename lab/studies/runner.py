@@ -14,7 +14,7 @@ from pathlib import Path
 
 from sray.data_tools.synth.world import make_world
 from sray.lab.studies.results import read_results
-from sray.lab.studies.spec import StudySpec
+from sray.lab.studies.spec import ROOM_SPLITS, StudySpec
 from sray.lab.studies.trial import study_trial, world_folder
 from sray.platform.sweep.capacity import TRIAL_RESOURCES
 from sray.platform.sweep.incremental import missing, run_missing
@@ -42,7 +42,7 @@ def make_worlds(spec: StudySpec, out: Path) -> list[Path]:
     """Generate (or verify) the shards of every world the study trains or scores on, under ``<out>/worlds/``, in
     the order first named: each arm's world, then the worlds of the evaluations (test splits, validation). Nothing
     is trained."""
-    evaluated = [spec.evaluation_world(split) for split in spec.evaluations]
+    evaluated = [spec.evaluation_world(split) for split in spec.evaluations if split in ROOM_SPLITS]
     worlds = list(dict.fromkeys([*(spec.arm_world(arm) for arm in spec.arms.values()),
                                  *(w for w in evaluated if w is not None)]))
     return [make_world(world, world_folder(out, world), progress=True) for world in worlds]

@@ -19,7 +19,7 @@ arms:
   randomise: {set: {}, world: {randomise: 1.0}}   # appearance randomisation of the training rooms (0-1)
 seeds: [0, 1, 2]
 budget: {cpu_seconds: 3600}        # and/or steps
-evaluations: [zero_shot, held_out, validation]   # + zero_shot_appearance, zero_shot_geometry with splits
+evaluations: [zero_shot, held_out, validation]   # + zero_shot_appearance, zero_shot_geometry (splits), fleet, ceilings
 select_on: validation              # the split that chooses between arms: validation or held_out, never zero_shot
 ```
 
@@ -35,20 +35,22 @@ from pathlib import Path
 from typing import Any
 
 from sray.data_tools.synth.world import World
+from sray.lab.studies.fleet_ceilings import CeilingsEval, FleetEval, parse_ceilings, parse_fleet
 from sray.lab.studies.splits import SHIFTED, calibration_stride, split_rooms, split_world, validation_split
 from sray.platform.config.recipes import RECIPES
 from sray.platform.sweep.options import read_yaml_keys
 from sray.platform.sweep.spec import SpecError
 
 KEYS = ("study", "description", "recipe", "world", "validation", "set", "baseline", "arms", "seeds", "budget",
-        "evaluations", "select_on", "eval", "held_out_rooms", "splits", "calibration")
+        "evaluations", "select_on", "eval", "held_out_rooms", "splits", "calibration", "fleet", "ceilings")
 """Keys a study file may hold."""
 REQUIRED = ("study", "recipe", "world", "validation", "arms", "seeds", "budget", "evaluations")
 SELECTION_SPLITS = ("validation", "held_out")
 """Splits that may choose between arms: never the test rooms (``zero_shot``) the study reports on."""
-EVALUATIONS = ("zero_shot", *SHIFTED, "held_out", "validation")
-"""What a trial scores: the unseen in-distribution test rooms, the appearance- and geometry-shifted test rooms (with
-``splits``), held-out views of its training rooms, the validation rooms."""
+ROOM_SPLITS = ("zero_shot", *SHIFTED, "held_out", "validation")
+"""Rooms a trial scores as ``sray eval`` does: the unseen test rooms, the appearance- and geometry-shifted test rooms
+(with ``splits``), held-out views of its training rooms, the validation rooms."""
+EVALUATIONS = (*ROOM_SPLITS, "fleet", "ceilings")  # + a per-room finetune, the ceiling rows (fleet_ceilings.py)
 ARM_KEYS = ("set", "world", "budget", "removed_after", "note")
 """Keys of an arm's long form (the short form is a mapping of ``section.field: value`` overrides)."""
 _NAME = re.compile(r"^[a-z0-9][a-z0-9-]*$")
@@ -122,6 +124,8 @@ class StudySpec:
     """Region of the validation rooms: ``in-distribution`` (another seed) or the generator's ``validation`` stream."""
     calibration_stride: int | None = None
     """Pixel stride of the fast rule's temperature fit on the validation rooms (None: uncalibrated, temperature 1)."""
+    fleet: FleetEval | None = None
+    ceilings: CeilingsEval | None = None
 
     @property
     def results_dir(self) -> Path:
@@ -291,4 +295,6 @@ def load_study(path: Path) -> StudySpec:
                      eval_sources=_count(path, "eval.sources", eval_raw.get("sources", 8), 1), eval_fast=fast,
                      held_out_rooms=_count(path, "held_out_rooms", raw.get("held_out_rooms", 8), 1),
                      split_rooms=split_rooms(path, raw.get("splits"), evaluations, _fail),
-                     calibration_stride=calibration_stride(path, raw.get("calibration"), fast is not None, _fail))
+                     calibration_stride=calibration_stride(path, raw.get("calibration"), fast is not None, _fail),
+                     fleet=parse_fleet(path, raw.get("fleet"), evaluations, _fail),
+                     ceilings=parse_ceilings(path, raw.get("ceilings"), evaluations, _fail))

@@ -7,7 +7,8 @@ The trial evaluates the job's **last** checkpoint, never one picked on the rooms
 appearance- and geometry-shifted ones, ``zero_shot_appearance`` and ``zero_shot_geometry``), held-out views of the
 first training rooms (``held_out``) and the validation rooms (``validation``: rooms no result is reported on, where
 arms are chosen). With ``calibration`` the fast rule's temperature is first fitted on the validation rooms and every
-split is scored at it (the protocol names it).
+split is scored at it (the protocol names it). With ``fleet`` the checkpoint is also finetuned per test room, with
+``ceilings`` its ceiling rows are scored (:mod:`sray.lab.studies.fleet_ceilings`).
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from typing import Any
 
 from sray.data_tools.synth.world import World, make_world
 from sray.lab.studies.results import FORMAT, write_result
-from sray.lab.studies.spec import Arm, StudySpec, assignments, load_study
+from sray.lab.studies.fleet_ceilings import ceilings_metrics, fleet_metrics
+from sray.lab.studies.spec import ROOM_SPLITS, Arm, StudySpec, assignments, load_study
 from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.common.eval_protocol import EvalProtocol
@@ -118,7 +120,7 @@ def evaluation_rooms(spec: StudySpec, shards: Path, studies: Path) -> dict[str, 
     """Split -> (shard folder, scene names) of every evaluation of ``spec`` (``zero_shot`` always, first); each split
     with a world of its own is generated under ``<studies>/worlds/`` on first use, the others read ``shards``."""
     rooms = {}
-    for split in dict.fromkeys(["zero_shot", *spec.evaluations]):
+    for split in dict.fromkeys(["zero_shot", *(e for e in spec.evaluations if e in ROOM_SPLITS)]):
         world = spec.evaluation_world(split)
         folder = shards if world is None else make_world(world, world_folder(studies, world), progress=False)
         rooms[split] = (folder, training_scenes(folder, spec.held_out_rooms) if split == "held_out" else
@@ -146,6 +148,12 @@ def run_trial(spec: StudySpec, arm_name: str, seed: int, out: Path, tracking_uri
                                      n_source=spec.eval_sources, tracking_uri=tracking_uri, experiment=EXPERIMENT,
                                      progress=False, fast=fast)
         metrics[split] = split_metrics(report, folder, scenes)
+    if spec.fleet is not None:
+        metrics["fleet"] = fleet_metrics(spec.fleet, checkpoint, *rooms["zero_shot"], Path(out) / "eval" / "fleet" /
+                                         cfg.run.name, tracking_uri, EXPERIMENT, spec.eval_sources)
+    if spec.ceilings is not None:
+        metrics["ceilings"] = ceilings_metrics(spec.ceilings, checkpoint, shards, spec.held_out_rooms,
+                                               spec.eval_sources, fast, Path(out) / "eval" / "ceilings" / cfg.run.name)
     counters = load_checkpoint(checkpoint).get("counters", {})
     steps = int(read_meta(checkpoint)["step"])
     budget = arm.budget or spec.budget
