@@ -19,7 +19,7 @@ def test_the_installed_lab_is_an_entry_point_that_adds_sray_lab() -> None:
     assert entries.get("lab") == "sray.lab.cli:register", entries
     lab = next(a for a in cli.build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices["lab"]
     commands = next(a for a in lab._actions if isinstance(a, argparse._SubParsersAction)).choices
-    assert {"study", "ceilings", "view-weights", "recipe-step", "recipe-cards"} <= set(commands)
+    assert {"study", "ceilings", "view-weights", "recipe-step", "recipe-cards", "demo-result"} <= set(commands)
 
 
 def test_the_parser_calls_each_plug_in_and_only_through_its_entry_point(monkeypatch: pytest.MonkeyPatch) -> None:

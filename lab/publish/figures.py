@@ -26,6 +26,8 @@ TWICE = ("hour-budget", "hour-2x")
 FLEETS = ("from-hour-budget", "from-hour-recipe-hosts", "from-lr-decay-at-the-hour")
 """Arms of study ``finetune-60s``: the 60 s S-Ray finetune of three seed-0 models of the shipped recipe (each named
 after the study holding the model's pretraining trial)."""
+DEMO = ("demo", "make-demo")
+"""(study, arm) of ``make demo`` as it ships (``sray lab demo-result``): the ``synth-demo`` card and the demo's time."""
 STUDY_PAGES = Path("docs/studies")
 """Where the studies' generated pages are (``sray lab study --page``)."""
 
@@ -39,6 +41,42 @@ def _fleet_60s(repo: Path) -> list[float]:
                                                                                                    arm)]
 
 
+def machine_label(machine: dict) -> str:
+    """A stored machine descriptor as the cards name machines: ``2-core CPU``, else its device."""
+    return f"{machine['cores']}-core CPU" if machine.get("device") == "cpu" else str(machine.get("device"))
+
+
+def _cell(runs: list[dict], dotted: str, show: Callable[[list[float]], str]) -> str:
+    """``show`` of the runs' stored values of ``dotted``; ``not stored`` when none holds one."""
+    values = present(runs, dotted)
+    return show(values) if values else "not stored"
+
+
+def demo_row(machine: str, runs: list[dict]) -> list[str]:
+    """The ``synth-demo`` card on ``machine`` from its stored ``make demo`` runs (mean ± sample sd over seeds)."""
+    def minutes(seconds: list[float]) -> str:
+        return f"{spread([s / 60 for s in seconds], 1)} min"
+
+    return ["synth-demo", machine, _cell(runs, "trained.wall_seconds", minutes),
+            _cell(runs, "trained.cpu_seconds", minutes),
+            _cell(runs, "trained.peak_memory_gib", lambda v: f"{spread(v, 1)} GiB"),
+            _cell(runs, "metrics.zero_shot.miou", lambda v: f"{spread(v, 1)}% ({seeds(runs)})"), "not measured",
+            _cell(runs, "metrics.fleet.sray.miou", lambda v: f"{spread(v, 1)}%"),
+            _cell(runs, "metrics.render.seconds_per_frame", lambda v: f"{spread(v, 2)} wall s / frame (fly-through)")]
+
+
+def demo_note(machine: str, runs: list[dict]) -> str:
+    """What the ``synth-demo`` row on ``machine`` shows, with every method of the demo's fleet."""
+    fleet = runs[0]["metrics"]["fleet"]
+    methods = ", ".join(f"`{m}` " + _cell(runs, f"metrics.fleet.{m}.miou", lambda v: f"{spread(v, 1)}%")
+                        for m in fleet)
+    return (f"`synth-demo` on the {machine}: `make demo` as it ships ({seeds(runs)}, stored by `sray lab "
+            "demo-result`): pretraining from its training job's counters, zero-shot mIoU on its unseen rooms in the "
+            f"demo's protocol, the finetune column S-Ray's after the demo's fleet ({fleet['sray']['budget']} on "
+            f"{', '.join(fleet['sray']['rooms'])}: {methods}), the render column its fly-through's wall time per "
+            "frame.")
+
+
 def recipe_cards(repo: Path) -> str:
     """The recipe cards: the stored cards of ``sray lab recipe-cards``, with ``synth-cpu-hour`` on the 2-core CPU
     shown as it ships (its stored seeds trained until the budget is spent) instead of the capped cell stored there."""
@@ -49,8 +87,13 @@ def recipe_cards(repo: Path) -> str:
     walls, cpus = present(shipped, "trained.wall_seconds"), present(shipped, "trained.cpu_seconds")
     memory = present(shipped, "trained.peak_memory_gib")
     fleet = _fleet_60s(repo)
+    demos: dict[str, list[dict]] = {}
+    for run in trials(repo, *DEMO):
+        demos.setdefault(machine_label(run["machine"]), []).append(run)
     rows = []
     for row in table["rows"]:
+        if row[0] == "synth-demo" and row[1] in demos:
+            row = demo_row(row[1], demos[row[1]])
         if row[0] == "synth-cpu-hour" and row[1] == "2-core CPU":
             row = [row[0], row[1],
                    f"{mean_sd(walls)[0] / 60:.1f} min ({len(walls)} of {len(shipped)} seeds stored)" if walls
@@ -59,12 +102,14 @@ def recipe_cards(repo: Path) -> str:
                    f"{spread(zs, 1)}%", f"{spread(ho, 1)}%", f"{spread(fleet, 1)}% ({len(fleet)} seed-0 models)",
                    row[8]]
         rows.append(row)
-    sources = ", ".join(_link(p) for p in [CARDS_DATA, RESULTS / SHIPPED[0], RESULTS / "finetune-60s"])
+    sources = ", ".join(_link(p) for p in [CARDS_DATA, RESULTS / SHIPPED[0], RESULTS / "finetune-60s",
+                                           RESULTS / DEMO[0]])
     study = _link(STUDY_PAGES / f"{SHIPPED[0]}.md")
     return (markdown_table(table["header"], rows) + "\n\n"
             f"`synth-cpu-hour` on the 2-core CPU: mean ± sample sd over {seeds(shipped)} of the recipe as it ships "
             f"(trained until its CPU budget is spent; {study}); its render time is its network's, measured on the same "
-            f"network at a step cap. The other rows as `sray lab recipe-cards` stored them. Read from {sources}.")
+            f"network at a step cap. " + "".join(f"{demo_note(m, runs)} " for m, runs in demos.items()) +
+            f"The other rows as `sray lab recipe-cards` stored them. Read from {sources}.")
 
 
 def hour_recipe(repo: Path) -> str:
@@ -100,9 +145,9 @@ def gpu_training(repo: Path) -> str:
 
 def demo_time(repo: Path) -> str:
     """The demo's wall time on the 2-core CPU, as its runs stored it."""
-    runs = trials(repo, "demo", "make-demo")
-    minutes = " and ".join(f"{figure(t, 'trained.wall_seconds') / 60:.1f}" for t in runs)
-    count = "1 run" if len(runs) == 1 else f"{len(runs)} runs"
+    walls = present(trials(repo, *DEMO), "metrics.demo.wall_seconds")
+    minutes = " and ".join(f"{wall / 60:.1f}" for wall in walls)
+    count = "1 run" if len(walls) == 1 else f"{len(walls)} runs"
     return (f"On the 2-core CPU the demo took {minutes} minutes in {count} on a fresh clone, plus the venv "
             f"set-up (read from {_link(RESULTS / 'demo')}).")
 

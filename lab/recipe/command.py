@@ -1,5 +1,6 @@
-"""``sray lab recipe-step`` and ``sray lab recipe-cards``: where a recipe's step spends its CPU, and the recipe
-cards regenerated from stored results (README and docs/benchmarks.md)."""
+"""``sray lab recipe-step``, ``sray lab recipe-cards`` and ``sray lab demo-result``: where a recipe's step spends its
+CPU, the recipe cards regenerated from stored results (README and docs/benchmarks.md), and a finished demo stored as
+the run the README's ``synth-demo`` card is published from."""
 
 from __future__ import annotations
 
@@ -34,6 +35,16 @@ def register(kinds: argparse._SubParsersAction) -> None:
     cards.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     cards.set_defaults(func=_lab_recipe_cards)
 
+    demo = kinds.add_parser("demo-result", help="store a finished `sray demo` run, read from its output folder, as "
+                            "jobs/studies/results/demo/make-demo--s<seed>.json (the README's synth-demo card and the "
+                            "demo's time are published from it)")
+    demo.add_argument("out", type=Path, metavar="OUTPUTS_DIR", help="the demo's --out folder, e.g. outputs/demo")
+    demo.add_argument("--finetune-seconds", type=float, default=60.0,
+                      help="the demo's --finetune-seconds (its fleet's wall budget per room; default 60, the demo's)")
+    demo.add_argument("--results", type=Path, default=None,
+                      help="folder of the stored demo runs (default jobs/studies/results/demo)")
+    demo.set_defaults(func=_lab_demo_result)
+
 
 def _lab_recipe_cards(args: argparse.Namespace) -> int:
     from sray.lab.recipe.cards import run_recipe_cards
@@ -44,6 +55,19 @@ def _lab_recipe_cards(args: argparse.Namespace) -> int:
         print(f"sray lab recipe-cards: {e}", file=sys.stderr)
         return 2
     print(f"[bench] recipe cards written into {args.readme} and {args.doc}")
+    return 0
+
+
+def _lab_demo_result(args: argparse.Namespace) -> int:
+    from sray.lab.recipe.demo_result import RESULTS_DIR, write_demo_result
+    from sray.lab.recipe.results import MissingField
+
+    try:
+        path = write_demo_result(args.out, args.results or RESULTS_DIR, args.finetune_seconds)
+    except (ValueError, MissingField) as e:
+        print(f"sray lab demo-result: {e}", file=sys.stderr)
+        return 2
+    print(f"[demo] stored {path}; publish it with `python -m sray.lab.publish`")
     return 0
 
 
