@@ -11,6 +11,9 @@ What it reads under OUT (``sray.jobs.demo`` writes them):
   room checked against the fleet's time budget (``--finetune-seconds``, the demo's flag of that name);
 * ``render/frames.json``: the fly-through's render rate;
 * the modification times of every file under OUT: the demo's wall time, from its first output file to its last.
+
+The machine is this one (``describe_machine``) and the commit the checkout the command runs in: run it where the demo
+ran, right after it.
 """
 
 from __future__ import annotations
