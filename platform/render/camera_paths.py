@@ -1,15 +1,5 @@
-"""Camera paths for fly-throughs: a smooth path through a scene's cameras, or an orbit around them.
-
-Every pose is a 4x4 camera-to-world in OpenCV axes (x right, y down, z forward), float64.
-
-* :func:`spline_path`: positions by a cubic Hermite spline with Catmull-Rom tangents (non-uniform: each
-  key camera sits at a time proportional to the distance travelled to reach it, counting a turn of one
-  radian as :data:`TURN_METRES_PER_RADIAN` metres), rotations by SLERP between consecutive keys. Frames
-  are spread evenly in that time, so the first frame is the first key camera and the last frame the last.
-* :func:`orbit_path`: a circle around the cameras' mean position, at their mean height and mean distance
-  from the vertical through it, every frame looking at that centre. "Up" is the cameras' mean up
-  direction, so no world axis convention is assumed.
-"""
+"""Built fly-through paths (docs/render.md, "Camera paths"): a spline through a scene's cameras or an orbit
+around them. Poses are float64 (4, 4) camera-to-world in OpenCV axes (x right, y down, z forward)."""
 
 from __future__ import annotations
 
@@ -85,19 +75,18 @@ def hermite(p0: np.ndarray, p1: np.ndarray, v0: np.ndarray, v1: np.ndarray, dura
 
 
 def spline_path(c2ws: np.ndarray, n_frames: int) -> np.ndarray:
-    """``n_frames`` poses (n_frames, 4, 4) through the key cameras ``c2ws`` (K, 4, 4), in their order (module doc).
-
-    Consecutive duplicates count once; a single key camera gives a still path.
-    """
+    """``n_frames`` poses (n_frames, 4, 4) through the key cameras ``c2ws`` (K, 4, 4) in their order: a Hermite
+    spline with Catmull-Rom tangents for positions, SLERP for rotations, each key reached at its
+    :func:`key_times` and frames evenly spread in that time. Consecutive duplicates count once."""
     if n_frames < 1 or len(c2ws) < 1:
         raise ValueError(f"a spline path needs >= 1 frame and >= 1 key camera (got {n_frames} and {len(c2ws)})")
     keys = [np.asarray(c2ws[0], np.float64)]
     for pose in c2ws[1:]:
         if key_times(np.stack([keys[-1], pose]))[1] > SAME_POSE:
             keys.append(np.asarray(pose, np.float64))
+    if len(keys) == 1:
+        return np.repeat(keys[0][None], n_frames, axis=0)
     keys_arr = np.stack(keys)
-    if len(keys_arr) == 1:
-        return np.repeat(keys_arr, n_frames, axis=0)
     times = key_times(keys_arr)
     points, quats = keys_arr[:, :3, 3], [matrix_to_quaternion(k[:3, :3]) for k in keys_arr]
     velocity = _tangents(points, times)
@@ -110,15 +99,14 @@ def spline_path(c2ws: np.ndarray, n_frames: int) -> np.ndarray:
         s = (frame_t[idx] - times[i]) / duration
         out[idx, :3, 3] = hermite(points[i], points[i + 1], velocity[i], velocity[i + 1], duration, s)
         out[idx, :3, :3] = np.stack([quaternion_to_matrix(q) for q in slerp(quats[i], quats[i + 1], s)])
-    out[0] = keys_arr[0]                                                               # exact ends, no round trip
-    if n_frames > 1:
-        out[-1] = keys_arr[-1]
+    out[-1], out[0] = keys_arr[-1], keys_arr[0]                                        # exact ends, no round trip
     return out
 
 
 def orbit_path(c2ws: np.ndarray, n_frames: int) -> np.ndarray:
-    """``n_frames`` poses (n_frames, 4, 4) on one full circle around the cameras ``c2ws`` (K, 4, 4) (module doc),
-    starting on the side of the first camera, turning counter-clockwise seen from above."""
+    """``n_frames`` poses (n_frames, 4, 4) on one circle around the cameras ``c2ws`` (K, 4, 4): centred on their
+    mean position, at their mean height and mean distance from the vertical through it (up: their mean up),
+    looking at the centre, starting on the first camera's side, counter-clockwise seen from above."""
     centres = c2ws[:, :3, 3]
     centre = centres.mean(axis=0)
     up = -c2ws[:, :3, 1].mean(axis=0)                                                  # OpenCV y points down

@@ -1,20 +1,7 @@
-"""Camera paths drawn in nerfstudio's viewer: its ``camera_path.json`` layout, read and checked.
+"""Camera paths drawn in nerfstudio's viewer: its ``camera_path.json`` read and checked (layout: docs/render.md).
 
-The layout (nerfstudio's documented render input)::
-
-    {"render_height": 480, "render_width": 640, "fps": 24, "seconds": 4,
-     "camera_path": [{"camera_to_world": [16 numbers], "fov": 50, "aspect": 1.33}, ...]}
-
-* ``camera_to_world``: a 4x4 camera-to-world matrix flattened row by row, in OpenGL camera axes (x right,
-  y up, z backward). sray's cameras use OpenCV axes (y down, z forward), so the camera's y and z axes are
-  flipped once, here: ``c2w_cv = c2w_gl @ diag(1, -1, -1, 1)``. The world frame is taken as the scene's own
-  (the shards' world, in metres).
-* ``fov``: the vertical field of view in degrees; the focal length at a render height H is
-  ``f = (H / 2) / tan(fov / 2)`` for both axes, the principal point the image centre ((W-1)/2, (H-1)/2).
-* Optional: ``fps``, ``seconds`` (the listed frames are used as they are), ``aspect`` (the render size
-  decides), ``camera_type`` (only ``perspective`` is rendered).
-
-Every problem is refused in one line naming the file and the field, before anything is rendered.
+Its ``camera_to_world`` uses OpenGL camera axes (y up, z backward): the camera's y and z axes are flipped once,
+here. ``fov`` is vertical, in degrees. Every problem is refused in one line naming the file and the field.
 """
 
 from __future__ import annotations
@@ -84,11 +71,8 @@ def _frame_pose(frame: Any, i: int, path: Path) -> tuple[np.ndarray, float]:
 
 
 def read_camera_path(path: Path, size_hw: tuple[int, int] | None = None) -> tuple[CameraPath, float | None]:
-    """The cameras of a nerfstudio ``camera_path.json`` (module doc) and its ``fps`` (None when absent).
-
-    ``size_hw``: (H, W) to render at instead of the file's ``render_height`` x ``render_width``; the focal
-    length follows the height rendered. ValueError (one line, naming the file and the field) on any problem.
-    """
+    """The cameras of a nerfstudio ``camera_path.json`` and its ``fps`` (None when absent); ``size_hw``: (H, W)
+    to render at instead of the file's size (the focal length follows the height rendered)."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text())
@@ -109,8 +93,7 @@ def read_camera_path(path: Path, size_hw: tuple[int, int] | None = None) -> tupl
     if fps is not None and (not _number(fps) or fps <= 0):
         raise ValueError(f"{path}: field 'fps' is {fps!r}; it must be a positive number of frames per second")
     hw = size_hw or file_hw
-    poses = [_frame_pose(frame, i, path) for i, frame in enumerate(frames)]
-    c2w = np.stack([pose for pose, _ in poses])
-    K = np.stack([fov_intrinsics(fov, hw) for _, fov in poses])
-    cameras = CameraPath(c2w=c2w, K=K, hw=hw, describe=f"camera-path file {path.name}")
+    poses, fovs = zip(*(_frame_pose(frame, i, path) for i, frame in enumerate(frames)))
+    cameras = CameraPath(c2w=np.stack(poses), K=np.stack([fov_intrinsics(fov, hw) for fov in fovs]), hw=hw,
+                         describe=f"camera-path file {path.name}")
     return cameras, None if fps is None else float(fps)

@@ -1,9 +1,6 @@
-"""A fly-through as a tracked run (``sray render``), and logging a fly-through's files into any run.
-
-The run (experiment ``sray-render`` by default, tag ``sray.kind = render``) gets the request as params, the
-protocol as the ``sray.protocol`` tag and ``protocol.*`` params (as ``sray eval`` runs), the render rate as a
-metric and every output file as an artifact under ``flythrough/``, so the tracker's UI plays the WebM.
-"""
+"""A fly-through as a tracked run (``sray render``): the request and the protocol as params (as ``sray eval``), the
+protocol line as the ``sray.protocol`` tag, the render rate as metrics, every output file as an artifact under
+``flythrough/`` (the tracker's UI plays the WebM)."""
 
 from __future__ import annotations
 
