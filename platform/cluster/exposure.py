@@ -1,10 +1,7 @@
-"""Which of a local cluster's processes listen beyond the loopback interface.
+"""Which of a local cluster's processes listen beyond the loopback interface, from the kernel's socket table.
 
-``sray cluster`` binds what it can to 127.0.0.1 (PostgreSQL, the MLflow server, Ray's dashboard and Jobs
-API). Ray 2.60's GCS server and raylets listen on every interface whatever ``--node-ip-address`` says
-(``ss -ltnp`` shows ``*:<port>``), so those ports are reachable from the network and guarded only by
-the cluster's token. ``sray cluster status`` reports them from the kernel's socket table rather than
-claiming "loopback only".
+Ray 2.60's GCS server and raylets listen on every interface whatever ``--node-ip-address`` says, guarded only by
+the cluster's token (docs/cluster.md), so ``sray cluster status`` lists them rather than claim "loopback only".
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
-"""The record of a local cluster: ``<dir>/cluster.json`` (readable by its owner only).
-
-It holds what ``up`` chose and started (ports, the database password, process ids with their start
-times), so ``status`` can report and ``down`` can stop exactly those processes. It stays after
-``down``: the next ``up`` reuses the password and, where still free, the ports. Commands that may run
-at the same time (``restart`` of a node while the tracking server restarts) change it through
-:func:`update_state`, under a lock, so neither loses the other's process ids.
+"""The record of a local cluster, ``<dir>/cluster.json`` (owner-only): what ``up`` chose and started (ports, the
+database password, process ids with start times), so ``status`` reports and ``down`` stops exactly those. It stays
+after ``down`` for the next ``up``. Commands that may run at once change it under a lock (:func:`update_state`).
 """
 
 from __future__ import annotations
@@ -79,11 +75,11 @@ class ClusterState:
     def record(self, name: str) -> ProcessRecord | None:
         """The recorded process ``name``, or None."""
         entry = self.processes.get(name)
-        return ProcessRecord(entry["pid"], entry["started"]) if entry else None
+        return ProcessRecord(**entry) if entry else None
 
     def alive(self) -> dict[str, bool]:
         """Each recorded process -> whether it still runs."""
-        return {name: is_alive(ProcessRecord(e["pid"], e["started"])) for name, e in self.processes.items()}
+        return {name: is_alive(ProcessRecord(**entry)) for name, entry in self.processes.items()}
 
     def save(self) -> None:
         """Write the record (owner-only permissions: it holds the database password)."""
