@@ -1,16 +1,13 @@
-"""Fleet results as curves: reading ``result.json`` files, step-function resampling, averaging.
+"""Fleet results as curves: step-function resampling and averaging.
 
-A finetune is evaluated at a few points (``curve`` in the fleet result, docs/CONTRACTS.md); between
-two evaluations, and after the last one (early stop), the model is the one last evaluated. Its
-score is therefore a step function of time that holds its last value: averaging curves across
-scenes resamples every curve on the union of their evaluation points with that hold.
+A finetune is evaluated at a few points (``curve`` in the fleet result, docs/CONTRACTS.md); between two
+evaluations, and after the last one (early stop), the model is the one last evaluated, so its score is a step
+function that holds its last value: averaging across scenes resamples every curve on the union of their points.
 """
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -19,20 +16,6 @@ from sray.platform.viz.chart_style import ChartedMethods
 
 RESULT_FIELDS = ("scene", "method", "status", "curve")
 """Fields every result must have to be charted."""
-
-
-def read_fleet_results(fleet_dir: Path) -> list[dict[str, Any]]:
-    """Every ``<fleet_dir>/scenes/<scene>/<method>/result.json``, sorted by (scene, method).
-
-    ValueError names a file that is not valid JSON.
-    """
-    results = []
-    for path in sorted(Path(fleet_dir).glob("scenes/*/*/result.json")):
-        try:
-            results.append(json.loads(path.read_text()))
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}: not valid JSON ({e}); re-run the fleet for that scene") from None
-    return results
 
 
 def check_result(result: dict[str, Any], methods: ChartedMethods) -> None:
@@ -72,12 +55,8 @@ def step_hold(x: np.ndarray, y: np.ndarray, grid: np.ndarray) -> np.ndarray:
 
 
 def average_curves(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of step-function curves on the union of their x values.
-
-    A grid point counts only where every curve has started (no curve is extrapolated backwards);
-    after its last point a curve holds its final value. Returns (grid (k,), mean (k,)); empty
-    arrays when no curve has a point.
-    """
+    """(grid (k,), mean (k,)) of step-function curves on the union of their x values, from where every curve has
+    started (none is extrapolated backwards; each holds its last value after its end); empty when none has a point."""
     curves = [(x, y) for x, y in curves if len(x)]
     if not curves:
         return np.zeros(0), np.zeros(0)
