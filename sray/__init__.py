@@ -4,12 +4,8 @@
     model = sray.load("outputs/jobs/<job>/checkpoints")          # a trained checkpoint
     labels = model.label(images, poses, intrinsics)               # uint8 (N,H,W,3), (N,4,4) OpenCV c2w, (3,3) K
 
-Packaging: the product lives in four top-level folders (``model``, ``data_tools``, ``platform``, ``jobs``) that
-setup.py maps to ``sray.<folder>`` and that carry no ``__init__.py`` (a top-level ``platform`` package would
-shadow the standard library's). In a wheel they sit inside this package's folder. In an editable install, a
-source checkout on ``sys.path`` or a Ray ``working_dir`` they sit beside it, so the checkout's root is added to
-this package's search path: ``sray.model`` is then ``<root>/model``, and no top-level name changes.
-
+setup.py maps the folders ``model``, ``data_tools``, ``platform``, ``jobs`` to ``sray.<folder>`` (docs/architecture.md):
+inside this package's folder in a wheel, beside it in a checkout, whose root is then added to the search path.
 ``load`` is imported on first use (PEP 562), so ``import sray.data_tools...`` stays free of torch.
 """
 

@@ -1,11 +1,8 @@
-"""``sray label``'s whole job: label the chosen scenes of a shard folder and fly through each, as one tracked run.
+"""``sray label``'s whole job (docs/capture.md): label the chosen scenes of a shard folder and fly through each.
 
-For each scene: ``scene_labels.label_scene`` writes ``OUT/<scene>/{label,overlay,confidence,depth}/`` and
-``labels.json``; then ``sray render``'s fly-through (``render/flythrough.py``: a spline through the scene's
-cameras, the same model and render mode) goes to ``OUT/<scene>/flythrough/``. One progress bar counts the labelled
-frames of every scene; each fly-through shows its own. The run (experiment ``sray-label`` by default, tag
-``sray.kind = label``) gets the request as params, each labelled scene's scores as metrics (``<scene>/miou``, ...)
-and every labels.json and fly-through file as artifacts under ``<scene>/``.
+Per scene, ``OUT/<scene>/`` gets the label files (``scene_labels.py``) and a spline fly-through by the same model
+and render mode (``flythrough/``). As a tracked run: the request as params, each labelled scene's scores as
+metrics (``<scene>/miou``, ...), its labels.json and fly-through files as artifacts under ``<scene>/``.
 """
 
 from __future__ import annotations
