@@ -28,8 +28,7 @@ from sray.platform.config.stored_format import outdated
 log = logging.getLogger(__name__)
 
 FORMAT = "sray-checkpoint"
-VERSION = 2
-"""Checkpoint format version; ``sray migrate`` converts older ones."""
+VERSION = 2  # checkpoint format version; ``sray migrate`` converts older ones
 STATE_FILE = "state.pt"
 META_FILE = "meta.json"
 _STEP_DIR = re.compile(r"^step_(\d{9,})$")

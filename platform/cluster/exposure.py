@@ -14,16 +14,14 @@ import psutil
 
 @dataclass(frozen=True)
 class Listener:
-    """A listening TCP socket of one of the cluster's processes."""
+    """A listening TCP socket of one of the cluster's processes: the part whose process tree holds it (``ray-head``,
+    ``mlflow`` ...), the owning process's name (``raylet`` ...) and pid, the bound address (``127.0.0.1``, or
+    ``0.0.0.0`` / ``::`` for every interface) and the port."""
 
     part: str
-    """The cluster part whose process tree holds it (``ray-head``, ``mlflow`` ...)."""
     process: str
-    """The owning process's name (``gcs_server``, ``raylet``, ``postgres`` ...)."""
     pid: int
-    """The owning process's id."""
     address: str
-    """Bound address: ``127.0.0.1``, or ``0.0.0.0`` / ``::`` for every interface."""
     port: int
 
     @property

@@ -13,12 +13,9 @@ from pathlib import Path
 
 from sray.platform.cluster.processes import ClusterError, ProcessRecord, port_open, spawn, wait_until
 
-DB_USER = "sray"
-"""The database role MLflow logs in as (the superuser of the cluster's own database folder)."""
-DB_NAME = "mlflow"
-"""The database holding MLflow's tables."""
-SERVICE_USER = "postgres"
-"""The user PostgreSQL runs as when sray runs as root (created by Debian's package)."""
+DB_USER = "sray"  # the database role MLflow logs in as (the superuser of the cluster's own database folder)
+DB_NAME = "mlflow"  # the database holding MLflow's tables
+SERVICE_USER = "postgres"  # the user PostgreSQL runs as when sray runs as root (created by Debian's package)
 
 
 def bin_dir() -> Path | None:

@@ -25,12 +25,11 @@ class ClusterError(RuntimeError):
 
 @dataclass(frozen=True)
 class ProcessRecord:
-    """One process a cluster started."""
+    """One process a cluster started: its pid (also its process group id: it leads its own session) and its start
+    time in clock ticks since boot (``/proc/<pid>/stat``)."""
 
     pid: int
-    """Process id (also its process group id: it leads its own session)."""
     started: int
-    """Its start time in clock ticks since boot, from ``/proc/<pid>/stat``."""
 
 
 def free_port(host: str = "127.0.0.1") -> int:

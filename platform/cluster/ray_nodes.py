@@ -15,8 +15,7 @@ from sray.platform.common.ray_env import TRAIN_POLL_ENV
 
 NODE_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
 """Environment of every node: no usage stats, no drain wait on SIGTERM."""
-OBJECT_STORE_BYTES = 100 * 2**20
-"""Object store per node (the jobs move small tensors; Ray's minimum is 75 MiB)."""
+OBJECT_STORE_BYTES = 100 * 2**20  # object store per node (the jobs move small tensors; Ray's minimum is 75 MiB)
 WORKER_RESOURCE = "sray_worker_node"
 """Custom resource each worker node offers once, so a task can ask for a node of its own."""
 

@@ -15,32 +15,25 @@ from pathlib import Path
 from sray.data_tools.atomic import atomic_write_json
 from sray.platform.cluster.processes import ClusterError, ProcessRecord, is_alive
 
-STATE_FILE = "cluster.json"
-"""The record's file name inside the cluster folder."""
-LOCK_FILE = "cluster.lock"
-"""File locked (``flock``) while one command reads, changes and writes the record."""
-FORMAT = "sray-cluster/1"
-"""Format tag of the record."""
+STATE_FILE = "cluster.json"  # the record's file name inside the cluster folder
+LOCK_FILE = "cluster.lock"  # file locked (``flock``) while one command reads, changes and writes the record
+FORMAT = "sray-cluster/1"  # format tag of the record
 
 
 @dataclass
 class ClusterState:
-    """Everything ``sray cluster`` needs to know about one cluster folder."""
+    """Everything ``sray cluster`` knows of one cluster folder: the folder (absolute; database, artifacts, Ray temp
+    dirs, shared storage, logs), the PostgreSQL password of the ``sray`` role, the ``postgres``, ``mlflow``, ``gcs``
+    and ``dashboard`` ports (127.0.0.1), the worker nodes and CPUs per node of the last ``up``, each part's process
+    (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-1`` ... -> ``{pid, started}``) and its start-up seconds."""
 
     dir: str
-    """The cluster folder (absolute): database, artifacts, Ray temp dirs, shared storage, logs."""
     password: str
-    """The PostgreSQL password of the ``sray`` role."""
     ports: dict[str, int] = field(default_factory=dict)
-    """``postgres``, ``mlflow``, ``gcs`` and ``dashboard`` ports, all on 127.0.0.1."""
     workers: int = 2
-    """Ray worker nodes started by the last ``up``."""
     cpus_per_worker: int = 1
-    """Logical CPUs each worker node offers."""
     processes: dict[str, dict[str, int]] = field(default_factory=dict)
-    """Name (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-1`` ...) -> ``{pid, started}``."""
     startup_s: dict[str, float] = field(default_factory=dict)
-    """Seconds each part took to become ready at the last ``up``."""
 
     @property
     def root(self) -> Path:

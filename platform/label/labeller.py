@@ -24,8 +24,7 @@ from sray.platform.checkpoints.folders import resolve_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.render.frames import render_frame
 
-INDOOR_RANGE = (0.1, 10.0)
-"""Depth range (metres) used when ``label`` is given none: a room seen from inside it."""
+INDOOR_RANGE = (0.1, 10.0)  # depth range (metres) used when ``label`` is given none: a room seen from inside it
 
 
 @dataclass(frozen=True)

@@ -11,22 +11,19 @@ from sray.platform.render.rotations import matrix_to_quaternion, quaternion_to_m
 
 TURN_METRES_PER_RADIAN = 0.5
 """A turn of one radian takes as long as moving half a metre (a camera turning in place still moves on)."""
-SAME_POSE = 1e-9
-"""Consecutive key cameras closer than this (metres + weighted radians) count as one."""
+SAME_POSE = 1e-9  # consecutive key cameras closer than this (metres + weighted radians) count as one
 
 
 @dataclass(frozen=True)
 class CameraPath:
-    """The cameras of a fly-through, one per frame."""
+    """The cameras of a fly-through, one per frame: ``c2w`` float64 (N, 4, 4) camera-to-world (OpenCV axes), ``K``
+    float64 (N, 3, 3) intrinsics at ``hw`` = (height, width) in pixels, pixel (u, v) centred at (u, v), and
+    ``describe``, where the path came from in one phrase (``spline through 16 cameras``, a file name, ...)."""
 
     c2w: np.ndarray
-    """float64 (N, 4, 4) camera-to-world, OpenCV axes."""
     K: np.ndarray
-    """float64 (N, 3, 3) intrinsics at ``hw`` (pixel (u, v) centred at (u, v))."""
     hw: tuple[int, int]
-    """(height, width) of every frame in pixels."""
     describe: str
-    """Where the path came from, one phrase (``spline through 16 cameras``, a file name, ...)."""
 
     def __len__(self) -> int:
         """Number of frames."""
@@ -64,16 +61,6 @@ def _tangents(points: np.ndarray, times: np.ndarray) -> np.ndarray:
     return out
 
 
-def hermite(p0: np.ndarray, p1: np.ndarray, v0: np.ndarray, v1: np.ndarray, duration: float,
-            s: np.ndarray) -> np.ndarray:
-    """Points (S, 3) at fractions ``s`` (S,) of a cubic Hermite segment from ``p0`` to ``p1`` (3,) lasting
-    ``duration``, with velocities ``v0``, ``v1`` (3,) at its ends."""
-    s = np.asarray(s, np.float64)[:, None]
-    h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
-    h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
-    return h00 * p0 + h10 * duration * v0 + h01 * p1 + h11 * duration * v1
-
-
 def spline_path(c2ws: np.ndarray, n_frames: int) -> np.ndarray:
     """``n_frames`` poses (n_frames, 4, 4) through the key cameras ``c2ws`` (K, 4, 4) in their order: a Hermite
     spline with Catmull-Rom tangents for positions, SLERP for rotations, each key reached at its
@@ -97,7 +84,9 @@ def spline_path(c2ws: np.ndarray, n_frames: int) -> np.ndarray:
         idx = np.nonzero(segment == i)[0]
         duration = times[i + 1] - times[i]
         s = (frame_t[idx] - times[i]) / duration
-        out[idx, :3, 3] = hermite(points[i], points[i + 1], velocity[i], velocity[i + 1], duration, s)
+        h = s[:, None]                                                                 # cubic Hermite basis
+        out[idx, :3, 3] = ((2 * h**3 - 3 * h**2 + 1) * points[i] + (h**3 - 2 * h**2 + h) * duration * velocity[i]
+                           + (-2 * h**3 + 3 * h**2) * points[i + 1] + (h**3 - h**2) * duration * velocity[i + 1])
         out[idx, :3, :3] = np.stack([quaternion_to_matrix(q) for q in slerp(quats[i], quats[i + 1], s)])
     out[-1], out[0] = keys_arr[-1], keys_arr[0]                                        # exact ends, no round trip
     return out

@@ -28,12 +28,9 @@ from sray.platform.render.plan import FlythroughPlan
 from sray.platform.render.sources import SourcePicker
 from sray.platform.render.video import VideoSet
 
-STEM = "flythrough"
-"""File name stem of the videos."""
-FRAMES_FILE = "frames.json"
-"""Per-frame poses, intrinsics and sources, with the request and the protocol descriptor."""
-PROTOCOL_FILE = "protocol.txt"
-"""The protocol line beside the videos."""
+STEM = "flythrough"  # file name stem of the videos
+FRAMES_FILE = "frames.json"  # per-frame poses, intrinsics and sources, with the request and the protocol
+PROTOCOL_FILE = "protocol.txt"  # the protocol line beside the videos
 
 
 class Flythrough:

@@ -16,16 +16,14 @@ from sray.model.view_render import RayRenderer, render_view
 
 @dataclass(frozen=True)
 class FrameRender:
-    """What a frame shows, on CPU."""
+    """What a frame shows, on CPU: ``label`` int64 (H, W) argmax of the rendered logits, ``rgb`` float32 (H, W, 3)
+    colour in [0, 1], ``depth`` float32 (H, W) z-depth in metres (the fine pass), ``confidence`` float32 (H, W)
+    largest softmax probability of the logits, in [1/L, 1]."""
 
     label: Tensor
-    """int64 (H, W) argmax of the rendered logits."""
     rgb: Tensor
-    """float32 (H, W, 3) colour in [0, 1]."""
     depth: Tensor
-    """float32 (H, W) rendered z-depth in metres (the fine pass)."""
     confidence: Tensor
-    """float32 (H, W) largest softmax probability of the rendered logits, in [1/L, 1]."""
 
 
 @torch.no_grad()

@@ -1,16 +1,7 @@
-"""A fly-through frame as one picture: colour | semantic labels | depth | confidence, side by side.
-
-Layout (every frame of a video has the same size, so the legend keeps room for every class)::
-
-    title
-    colour        | semantic labels        | depth (m)              | confidence
-    [tile]        | [tile]                 | [tile]                 | [tile]
-                  |                        | [colour bar, metres]   | [colour bar, 0..1]
-    legend: the classes present in this frame (swatch, id, name), in columns
-
-Tiles are the rendered pixels enlarged by an integer factor (never resampled). Semantic colours are the
-project's palette; depth is mapped (turbo) over the scene's fixed near..far range, so a colour means the same
-distance in every frame; confidence (viridis) over 0..1. Drawn with OpenCV on a numpy array.
+"""A fly-through frame as one picture (docs/render.md): a title, then colour | semantic labels | depth | confidence
+tiles (the rendered pixels enlarged by an integer factor) with colour bars under depth (turbo over the scene's
+fixed near..far) and confidence (viridis over 0..1), then a legend of the classes present. Every frame of a video
+has the same size (the legend keeps room for every class). Drawn with OpenCV on a numpy array.
 """
 
 from __future__ import annotations
@@ -31,8 +22,7 @@ BAR_BAND = BAR + 22  # pixels under the tiles for the colour bars and their labe
 LEGEND_ROW = 16  # pixels per legend row
 LEGEND_COLUMN = 150  # width of a legend column
 SWATCH = 11  # side of a legend swatch
-MIN_TILE_HEIGHT = 120
-"""Small frames are enlarged by an integer factor until a tile is at least this tall."""
+MIN_TILE_HEIGHT = 120  # small frames are enlarged by an integer factor until a tile is at least this tall
 TILES = {"rgb": "colour", "semantics": "semantic labels", "depth": "depth (m)", "confidence": "confidence"}
 """Tile name -> caption, left to right."""
 BACKGROUND = (255, 255, 255)
@@ -52,16 +42,14 @@ CONFIDENCE_COLORS = _lut(cv2.COLORMAP_VIRIDIS)  # 0 (index 0) to 1 (255)
 
 @dataclass(frozen=True)
 class PanelLayout:
-    """Pixel geometry of a frame picture (x right, y down, origin top-left)."""
+    """Pixel geometry of a frame picture (x right, y down, origin top-left): its (height, width), both even (video
+    encoders subsample colour by 2), the integer enlargement of the rendered pixels, tile name (:data:`TILES`) ->
+    (x, y, width, height), and the legend block's (x, y, columns)."""
 
     size: tuple[int, int]
-    """(height, width) of the picture, both even (video encoders subsample colour by 2)."""
     scale: int
-    """Integer enlargement of the rendered pixels."""
     tiles: dict[str, tuple[int, int, int, int]]
-    """Tile name (:data:`TILES`) -> (x, y, width, height)."""
     legend: tuple[int, int, int]
-    """(x, y, columns) of the legend block."""
 
 
 def panel_layout(hw: tuple[int, int], n_classes: int) -> PanelLayout:

@@ -20,8 +20,7 @@ from sray.platform.render.nerfstudio_path import read_camera_path
 
 BUILT_PATHS = {"spline": (spline_path, "spline through"), "orbit": (orbit_path, "orbit around")}
 """``--path`` -> (the path of n frames through key cameras, the phrase describing it)."""
-DEFAULT_FPS = 15.0
-"""Frames per second of a video when neither the request nor the camera-path file sets it."""
+DEFAULT_FPS = 15.0  # frames per second of a video when neither the request nor the camera-path file sets it
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,7 @@ from sray.platform.render.flythrough import Flythrough
 from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.tracking.tracker import RunLogger
 
-ARTIFACT_PATH = "flythrough"
-"""Artifact folder of a fly-through's files in its run."""
+ARTIFACT_PATH = "flythrough"  # artifact folder of a fly-through's files in its run
 
 
 def log_flythrough(logger: RunLogger, files: dict[str, str], artifact_path: str = ARTIFACT_PATH) -> None:

@@ -18,12 +18,9 @@ import cv2
 import numpy as np
 from PIL import Image
 
-GIF_WIDTH = 480
-"""Widest GIF preview in pixels (larger frames are scaled down)."""
-GIF_FRAMES = 60
-"""Most frames in a GIF preview (longer videos keep every k-th frame)."""
-CODECS = {"webm": "VP80", "mp4": "mp4v"}
-"""Video file suffix -> OpenCV fourcc."""
+GIF_WIDTH = 480  # widest GIF preview in pixels (larger frames are scaled down)
+GIF_FRAMES = 60  # most frames in a GIF preview (longer videos keep every k-th frame)
+CODECS = {"webm": "VP80", "mp4": "mp4v"}  # video file suffix -> OpenCV fourcc
 
 
 class VideoSet:

@@ -14,8 +14,7 @@ import numpy as np
 
 from sray.platform.viz.chart_style import ChartedMethods
 
-RESULT_FIELDS = ("scene", "method", "status", "curve")
-"""Fields every result must have to be charted."""
+RESULT_FIELDS = ("scene", "method", "status", "curve")  # fields every result must have to be charted
 
 
 def check_result(result: dict[str, Any], methods: ChartedMethods) -> None:

@@ -24,8 +24,7 @@ from sray.platform.viz.palette import IGNORE_COLOR, colorize, palette
 MARGIN = 10  # pixels around and between tiles
 TITLE_BAND = 22  # pixels above each tile for its caption
 HEADER = 26  # pixels at the top for the panel's title
-MIN_TILE_HEIGHT = 200
-"""Small views are enlarged by an integer factor until a tile is at least this tall."""
+MIN_TILE_HEIGHT = 200  # small views are enlarged by an integer factor until a tile is at least this tall
 LEGEND_ROW = 18  # pixels per legend entry
 LEGEND_SWATCH = 14  # side of a legend colour swatch
 LEGEND_COLUMN = 190  # width of one legend column

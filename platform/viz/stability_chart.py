@@ -37,16 +37,15 @@ class LevelPoint:
 
 @dataclass
 class StabilityPanel:
-    """One axis: its title, x label and one list of points per method, in level order."""
+    """One axis: its title, x label and one list of points per method, in level order; ``log_x``: x on a log-2
+    scale (counts of views); ``harmless_high``: the harmless end is the largest value (views, JPEG quality), so x
+    is drawn decreasing and every panel reads from harmless (left) to broken (right)."""
 
     title: str
     x_label: str
     lines: dict[str, list[LevelPoint]] = field(default_factory=dict)
     log_x: bool = False
-    """Draw x on a log-2 scale (counts of views)."""
     harmless_high: bool = False
-    """The harmless end of the axis is its largest value (views, JPEG quality): x is drawn decreasing, so
-    every panel reads from harmless (left) to broken (right)."""
 
 
 def _positions(panel: StabilityPanel) -> tuple[dict[float | str, float], list[str] | None]:
