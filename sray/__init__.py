@@ -4,10 +4,9 @@
     model = sray.load("outputs/jobs/<job>/checkpoints")          # a trained checkpoint
     labels = model.label(images, poses, intrinsics)               # uint8 (N,H,W,3), (N,4,4) OpenCV c2w, (3,3) K
 
-setup.py maps the folders ``model``, ``data_tools``, ``platform``, ``jobs`` to ``sray.<folder>`` (docs/architecture.md):
-inside this package's folder in a wheel, beside it in a checkout, whose root is then added to the search path.
-``load`` is imported on first use (PEP 562), so ``import sray.data_tools...`` stays free of torch.
-"""
+The folders setup.py maps to ``sray.<folder>`` sit inside this package in a wheel and beside it in a checkout,
+whose root is then added to the search path (docs/architecture.md). ``load`` is imported on first use (PEP 562),
+so ``import sray.data_tools...`` stays free of torch."""
 
 from __future__ import annotations
 

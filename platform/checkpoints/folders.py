@@ -1,10 +1,6 @@
-"""Full-state training checkpoints: atomic, ``torch.load(weights_only=True)``-safe, latest + best.
-
-A checkpoint is a folder ``step_<step:09d>/`` holding ``state.pt`` (the caller's state dict of tensors, dicts,
-lists, tuples, strings, numbers, bools and None only) and ``meta.json`` (``{"format", "version", "step", "metric",
-"saved_at"}``), assembled under a hidden name and renamed into place, so a crash during a save leaves the previous
-checkpoints untouched. The same folder goes into a Ray Train checkpoint (``platform.train.worker``).
-"""
+"""Full-state training checkpoints: atomic, ``torch.load(weights_only=True)``-safe, latest + best. A checkpoint is a
+folder ``step_<step:09d>/`` holding ``state.pt`` (tensors, dicts, lists, tuples, strings, numbers, bools, None only)
+and ``meta.json``, assembled under a hidden name and renamed into place (a crash leaves the previous ones whole)."""
 
 from __future__ import annotations
 

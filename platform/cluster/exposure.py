@@ -1,8 +1,6 @@
-"""Which of a local cluster's processes listen beyond the loopback interface, from the kernel's socket table.
-
-Ray 2.60's GCS server and raylets listen on every interface whatever ``--node-ip-address`` says, guarded only by
-the cluster's token (docs/cluster.md), so ``sray cluster status`` lists them rather than claim "loopback only".
-"""
+"""Which of a local cluster's processes listen beyond loopback, from the kernel's socket table: Ray 2.60's GCS
+server and raylets listen on every interface whatever ``--node-ip-address`` says, guarded only by the token
+(docs/cluster.md)."""
 
 from __future__ import annotations
 

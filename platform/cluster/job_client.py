@@ -1,8 +1,5 @@
-"""Ray Jobs API client side of ``sray submit``: submit a driver command, follow its log, map its end.
-
-The client needs the cluster's token in its environment (``RAY_AUTH_MODE=token`` and
-``RAY_AUTH_TOKEN_PATH``/``RAY_AUTH_TOKEN``); Ray's client adds it to every request.
-"""
+"""Ray Jobs API client side of ``sray submit``: submit a driver command, follow its log, map its end. The client
+needs the cluster's token in its environment (``RAY_AUTH_MODE=token``, ``RAY_AUTH_TOKEN_PATH``/``RAY_AUTH_TOKEN``)."""
 
 from __future__ import annotations
 

@@ -1,10 +1,6 @@
-"""The cluster's MLflow tracking server: PostgreSQL backend store, proxied artifacts, loopback only.
-
-The database password reaches the server as ``PGPASSWORD`` (never on a command line ``ps`` shows).
-Artifacts are proxied (``--serve-artifacts``) into ``<dir>/artifacts``: clients upload through the
-server and need no access to the folder. Host-header validation stays on, with only the loopback
-names of this port allowed, so a request naming another host (DNS rebinding) gets 403.
-"""
+"""The cluster's MLflow tracking server on 127.0.0.1: PostgreSQL backend store (its password as ``PGPASSWORD``,
+never on a command line), artifacts proxied into ``<dir>/artifacts``, Host-header validation allowing only the
+loopback names of its port (a request naming another host, DNS rebinding, gets 403)."""
 
 from __future__ import annotations
 

@@ -1,10 +1,6 @@
-"""Background processes of a local cluster: free ports, start detached, check and stop by recorded id.
-
-A process is recorded as ``(pid, start time)``: the start time (``/proc/<pid>/stat`` field 22) tells
-a recorded process from an unrelated one that later got the same pid, so ``sray cluster down``
-never signals anything it did not start. Each process leads its own session (process group), and
-stopping it signals that whole group, which ends the helpers it spawned too.
-"""
+"""Background processes of a local cluster: free ports, start detached, check and stop by recorded id. A process is
+recorded with its start time (``/proc/<pid>/stat``), so a later process that got the same pid is never signalled;
+each leads its own process group, and stopping it signals the whole group (the helpers it spawned too)."""
 
 from __future__ import annotations
 
@@ -70,10 +66,8 @@ def is_alive(record: ProcessRecord) -> bool:
 
 def spawn(cmd: list[str], log_path: Path, env: Mapping[str, str] | None = None, user: str | None = None,
           cwd: Path | None = None) -> ProcessRecord:
-    """Start ``cmd`` detached (own session, stdin closed, output to ``log_path``) and record it.
-
-    ``user``: run it as that user (needs root), e.g. ``postgres``, which refuses to run as root.
-    """
+    """Start ``cmd`` detached (own session, stdin closed, output to ``log_path``) and record it; ``user``: run it
+    as that user (needs root), e.g. ``postgres``, which refuses to run as root."""
     log_path.parent.mkdir(parents=True, exist_ok=True)
     with open(log_path, "ab") as log:
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,

@@ -1,9 +1,6 @@
-"""``sray.load(checkpoint)``: a trained S-Ray model that labels posed photos given as NumPy arrays (docs/capture.md).
-
-Each frame is rendered from its ``n_source`` best other frames (never itself), ranked by the shards' rule for a
-camera without depth (``neighbours.rank_camera``, each candidate's sparse pixel grid placed at depth
-sqrt(near * far)). ``sray label`` calls this same method on a shard folder's views.
-"""
+"""``sray.load(checkpoint)``: a trained S-Ray model that labels posed photos given as NumPy arrays (docs/capture.md),
+each frame rendered from its ``n_source`` best other frames, ranked by the shards' rule for a camera without depth
+(``neighbours.rank_camera``, at depth sqrt(near * far)). ``sray label`` calls this on a shard folder's views."""
 
 from __future__ import annotations
 
@@ -107,10 +104,9 @@ class Labeller:
     def label(self, images: np.ndarray, poses: np.ndarray, intrinsics: np.ndarray,
               depth_range: tuple[float, float] | None = None,
               on_frame: Callable[[int], None] | None = None) -> Labels:
-        """Label every frame of a posed capture: images uint8 (N, H, W, 3) RGB; poses (N, 4, 4) camera-to-world in
-        OpenCV axes, metres; intrinsics (3, 3) or (N, 3, 3), pixel (u, v) centred at (u, v); depth_range (near,
-        far) metres (None: :data:`INDOOR_RANGE`). ``on_frame(i)`` is called after frame i; ValueError names the
-        argument on bad input."""
+        """Label a posed capture: images uint8 (N, H, W, 3) RGB; poses (N, 4, 4) OpenCV camera-to-world, metres;
+        intrinsics (3, 3) or (N, 3, 3), pixel (u, v) centred at (u, v); depth_range (near, far) metres (None:
+        :data:`INDOOR_RANGE`); ``on_frame(i)`` after frame i. ValueError names the argument on bad input."""
         near, far = depth_range or INDOOR_RANGE
         Ks = _check_inputs(images, poses, intrinsics, (near, far))
         poses = np.asarray(poses, np.float64)

@@ -1,10 +1,6 @@
-"""Render a planned fly-through (``plan.py``) into videos, ``frames.json`` and ``protocol.txt`` (docs/render.md).
-
-Per frame: rank its sources (``sources.py``), encode them (a frame choosing the same set of views as the last one
-reuses that encoding, reordered with ``SourceSet.select``: the encoder sees each view alone), render the whole
-frame (``frames.py``), compose the panels (``panels.py``) and append the picture to the videos (``video.py``),
-which rename every output into place only once all are complete.
-"""
+"""Render a planned fly-through into videos, ``frames.json`` and ``protocol.txt`` (docs/render.md): per frame, rank
+its sources, encode them (a frame choosing the same set of views as the last one reuses that encoding, reordered:
+the encoder sees each view alone), render the whole frame, compose the panels and append them to the videos."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""Camera paths drawn in nerfstudio's viewer: its ``camera_path.json`` read and checked (layout: docs/render.md).
-
-Its ``camera_to_world`` uses OpenGL camera axes (y up, z backward): the camera's y and z axes are flipped once,
-here. ``fov`` is vertical, in degrees. Every problem is refused in one line naming the file and the field.
-"""
+"""Camera paths drawn in nerfstudio's viewer: its ``camera_path.json`` read and checked (docs/render.md). Its
+``camera_to_world`` uses OpenGL camera axes, flipped here to OpenCV's; ``fov`` is vertical, in degrees. Every
+problem is refused in one line naming the file and the field."""
 
 from __future__ import annotations
 

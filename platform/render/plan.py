@@ -1,8 +1,5 @@
-"""What a fly-through will show, decided and checked before anything is rendered or written.
-
-Built paths go through or around the scene's own pool cameras (``scene.source_pool``: ``train`` minus ``test``
-for a train scene) with the first pool view's intrinsics scaled to the asked size (the pixel-centre rule).
-"""
+"""What a fly-through will show, decided and checked before anything is rendered or written. Built paths go through
+or around the scene's pool cameras (``scene.source_pool``) with the first one's intrinsics scaled to the asked size."""
 
 from __future__ import annotations
 
@@ -52,10 +49,9 @@ def built_path(kind: str, views: dict[str, StoredView], meta: SceneMeta, image_h
 def plan_flythrough(shards: Path, scene: str, *, path: str = "spline", camera_path: Path | None = None,
                     n_frames: int = 60, size_hw: tuple[int, int] | None = None,
                     fps: float | None = None) -> FlythroughPlan:
-    """Check the request and build its cameras; reads the scene's views, writes nothing. ``camera_path``: a
-    nerfstudio camera_path.json (its frames, size and fps; ``size_hw`` and ``fps`` override them), else a built
-    ``path`` of ``n_frames`` frames at ``size_hw`` (default: the scene's image size). Bad input: a one-line
-    ValueError (or FileNotFoundError) naming the file and field."""
+    """Check the request and build its cameras (reads the scene's views, writes nothing): a nerfstudio
+    ``camera_path`` file (``size_hw`` and ``fps`` override its own), else a built ``path`` of ``n_frames`` frames at
+    ``size_hw`` (default: the scene's image size). Bad input: a one-line error naming the file and field."""
     if camera_path is None and n_frames < 1:
         raise ValueError(f"frames is {n_frames}; a fly-through needs at least 1 frame")
     if size_hw is not None and min(size_hw) < 1:

@@ -9,11 +9,8 @@ RIGID_TOLERANCE = 1e-3
 
 
 def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
-    """Unit quaternion (4,) (w, x, y, z), w >= 0, of a rotation matrix (3, 3).
-
-    Row i of ``outer`` is 4 q_i q, written in the matrix's entries; the row of the largest component (read off the
-    trace or a diagonal entry) gives q without dividing by a small number.
-    """
+    """Unit quaternion (4,) (w, x, y, z), w >= 0, of a rotation matrix (3, 3). Row i of ``outer`` is 4 q_i q: that
+    of the largest component (read off the trace or a diagonal entry) gives q without dividing by a small number."""
     m = np.asarray(rotation, np.float64)
     tr = np.trace(m)
     outer = np.array([

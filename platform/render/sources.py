@@ -1,10 +1,6 @@
-"""Source views of a fly-through frame: zero-shot evaluation's rule, applied to cameras no shard has ranked.
-
-A frame is ranked as the shards rank a held-out test view (``neighbours.rank_camera``: how much of each
-candidate's back-projected grid lands in the camera's view, same tie-breaks), which needs only its pose and
-intrinsics. Candidates: a test scene's ``source`` split, a train scene's ``scene.source_pool``; depth is read
-only from the pool's views, so no ``test`` view's pixels, depth or labels are ever decoded.
-"""
+"""Source views of a fly-through frame: the shards' ranking of a held-out test view (``neighbours.rank_camera``),
+which needs only a camera's pose and intrinsics. Candidates: a test scene's ``source`` split, a train scene's
+``scene.source_pool``; depth is read only from the pool, so no ``test`` view is ever decoded."""
 
 from __future__ import annotations
 

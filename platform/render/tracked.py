@@ -27,9 +27,8 @@ def log_flythrough(logger: RunLogger, files: dict[str, str], artifact_path: str 
 def tracked_flythrough(fly: Flythrough, out_dir: Path, device: torch.device, *, about: dict[str, str], label: str,
                        tracker: str = DEFAULT_TRACKER, tracking_uri: str = "", experiment: str = "sray-render",
                        progress: bool = True) -> dict[str, Any]:
-    """Render ``fly`` into ``out_dir`` inside a new run of ``tracker`` (module doc); ``about``: what made the
-    model (``{"checkpoint", "artifact"?}``). Returns ``Flythrough.render``'s dict plus ``run`` (the handle's
-    fields: tracker, store, run id, experiment id, UI url and hint)."""
+    """Render ``fly`` into ``out_dir`` inside a new run of ``tracker``; ``about``: what made the model
+    (``{"checkpoint", "artifact"?}``). Returns ``Flythrough.render``'s dict plus ``run`` (the run handle's fields)."""
     tracking = get_tracker(tracker, tracking_uri)
     plan = fly.plan
     kind = "finetuned" if "artifact" in about else "zero-shot"

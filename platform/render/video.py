@@ -1,10 +1,6 @@
-"""A fly-through's frames as videos people open (docs/render.md, "Outputs"), never half-written under a final name.
-
-WebM is VP8 (OpenCV's bundled FFmpeg cannot encode H.264), MP4 is MPEG-4 part 2, the GIF a small preview. All
-are written into a staging folder ``.<stem>.tmp<pid>`` inside the output folder (FFmpeg picks the container from
-the file name, so staged files keep their final names) and renamed into place by :meth:`VideoSet.finish`; an
-error removes the staging folder, a killed process leaves only that hidden folder.
-"""
+"""A fly-through's frames as a VP8 WebM, an MPEG-4 part 2 MP4 and a GIF preview (docs/render.md), written into a
+staging folder ``.<stem>.tmp<pid>`` beside them (same names: FFmpeg picks the container from the name) and renamed
+into place by :meth:`VideoSet.finish`: an error or a kill never leaves a half-written file under a final name."""
 
 from __future__ import annotations
 

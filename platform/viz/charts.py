@@ -1,15 +1,7 @@
-"""Charts of a finetune fleet's results (docs/CONTRACTS.md, "Fleet results"), one PNG per :data:`FLEET_CHARTS` entry.
-
-* ``<score>_vs_<x>``: held-out mIoU or PSNR against training wall-clock time or steps, one panel per scene plus,
-  with two scenes or more, a first panel of their step-function mean; a zero-shot step-0 score (S-Ray) is a
-  dashed line, every method a step curve holding its value between evaluations;
-* ``miou_vs_artifact_bytes``: mIoU after per-scene optimisation against the bytes a scene stores besides the
-  shared model (log axis); zero-shot S-Ray stores nothing and sits on a "0 B" tick left of an axis break.
-
-Each method is drawn in its :class:`~sray.platform.viz.chart_style.ChartStyle`, its legend entry tagged with
-the inputs its results' protocol records (``[RGB]``, ``[RGB-D]``); footnotes carry the protocol lines and name
-the failed results left out. Matplotlib's Agg canvas is used directly (no pyplot state: safe in Ray workers).
-"""
+"""Charts of a finetune fleet's results (docs/CONTRACTS.md, docs/dashboard.md), one PNG per :data:`FLEET_CHARTS` entry:
+held-out scores against time and steps (a panel per scene, a first one of their step-function mean; a zero-shot
+step-0 score as a dashed line) and mIoU against per-scene artifact bytes (zero-shot S-Ray on a "0 B" tick). Legend
+entries carry each method's inputs, footnotes the protocol lines and the results left out. Agg canvas, no pyplot."""
 
 from __future__ import annotations
 
@@ -219,9 +211,8 @@ FLEET_CHARTS: dict[str, FleetChart] = {
 
 
 def write_fleet_charts(results: list[dict[str, Any]], out_dir: Path, methods: ChartedMethods) -> list[Path]:
-    """Write every chart of :data:`FLEET_CHARTS` as ``<out_dir>/<stem>.png`` (atomically); returns their paths.
-    ``methods``: what charts read of each method (the method registry, in legend order). With no finished
-    result at all nothing is written (a warning says so)."""
+    """Write every chart of :data:`FLEET_CHARTS` as ``<out_dir>/<stem>.png`` (atomically) and return the paths;
+    ``methods`` in legend order. With no finished result nothing is written (a warning says so)."""
     for r in results:
         check_result(r, methods)
     if not any(is_chartable(r) for r in results):

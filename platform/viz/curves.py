@@ -1,9 +1,6 @@
-"""Fleet results as curves: step-function resampling and averaging.
-
-A finetune is evaluated at a few points (``curve`` in the fleet result, docs/CONTRACTS.md); between two
-evaluations, and after the last one (early stop), the model is the one last evaluated, so its score is a step
-function that holds its last value: averaging across scenes resamples every curve on the union of their points.
-"""
+"""Fleet results as curves (``curve`` in a fleet result, docs/CONTRACTS.md). Between evaluations and after the last
+one (early stop) the model is the one last evaluated, so a score is a step function holding its last value:
+averaging across scenes resamples every curve on the union of their points."""
 
 from __future__ import annotations
 
@@ -33,8 +30,7 @@ def is_chartable(result: dict[str, Any]) -> bool:
 
 
 def curve_xy(curve: list[dict[str, Any]], x_key: str, y_key: str) -> tuple[np.ndarray, np.ndarray]:
-    """(x (n,), y (n,)) of a result's curve, sorted by x (stable), points with a missing or
-    non-finite value dropped."""
+    """(x (n,), y (n,)) of a result's curve, stably sorted by x, without points missing a finite value."""
     pts = [(float(p[x_key]), float(p[y_key])) for p in curve
            if p.get(x_key) is not None and p.get(y_key) is not None
            and math.isfinite(float(p[x_key])) and math.isfinite(float(p[y_key]))]
@@ -46,9 +42,8 @@ def curve_xy(curve: list[dict[str, Any]], x_key: str, y_key: str) -> tuple[np.nd
 
 
 def step_hold(x: np.ndarray, y: np.ndarray, grid: np.ndarray) -> np.ndarray:
-    """Values (len(grid),) of the step function through (x, y) (x sorted ascending) at ``grid``:
-    the y of the last point with x <= g; NaN before the first point; the last y after the end.
-    Of several points at the same x, the last one counts."""
+    """Values (len(grid),) at ``grid`` of the step function through (x, y) (x ascending): the y of the last point
+    with x <= g (the last of several at one x), NaN before the first point."""
     idx = np.searchsorted(x, grid, side="right") - 1
     return np.where(idx >= 0, y[np.clip(idx, 0, None)], np.nan) if len(x) else np.full(len(grid), np.nan)
 

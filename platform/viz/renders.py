@@ -1,12 +1,6 @@
-"""One PNG per evaluated view (tiles: the view's pixels enlarged by an integer factor, never resampled)::
-
-    title
-    predicted semantics | ground-truth semantics | error map
-    predicted colour    | ground-truth colour    | legend (classes present)
-
-Tiles sit at exact pixel offsets (:func:`panel_grid`, ``Figure.figimage``), so a test reads class colours back
-from the file. Matplotlib's Agg canvas is used directly (no pyplot state: safe in Ray workers).
-"""
+"""One PNG per evaluated view: predicted and ground-truth semantics and the error map above, predicted and
+ground-truth colour and the legend below. Tiles are the view's pixels enlarged by an integer factor at exact
+offsets (:func:`panel_grid`), so a test reads class colours back; Agg canvas, no pyplot state (safe in Ray workers)."""
 
 from __future__ import annotations
 
