@@ -6,7 +6,6 @@ saw (Semantic-NeRF's dataset-level protocol, one confusion matrix).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -14,7 +13,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from sray.data_tools.atomic import atomic_write_bytes
+from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.png import depth_to_png16, encode_png
 from sray.data_tools.scene import SceneMeta
@@ -65,5 +64,5 @@ def label_scene(labeller: Labeller, shards: Path, manifest: Manifest, scene: str
                                     torch.from_numpy(views[v].label().astype(np.int64)), labeller.n_classes,
                                     meta.ignore_id) for i, v in enumerate(ids))
         record["scores"] = {"protocol": DATASET_PROTOCOL, **scene_metrics(conf)}
-    atomic_write_bytes(Path(out_dir) / LABELS_FILE, (json.dumps(record, indent=1) + "\n").encode())
+    atomic_write_json(Path(out_dir) / LABELS_FILE, record)
     return record

@@ -4,11 +4,9 @@ into place by :meth:`VideoSet.finish`: an error or a kill never leaves a half-wr
 
 from __future__ import annotations
 
-import io
 import os
 import shutil
 from pathlib import Path
-from types import TracebackType
 
 import cv2
 import numpy as np
@@ -65,11 +63,9 @@ class VideoSet:
         if not self._gif:
             self.abort()
             raise ValueError(f"{self.out_dir}: no frame was written; a video needs at least one")
-        buf = io.BytesIO()
         duration_ms = max(20, int(round(1000.0 * self.gif_every / self.fps)))
-        self._gif[0].save(buf, format="GIF", save_all=True, append_images=self._gif[1:], duration=duration_ms,
-                          loop=0)
-        (self.staging / f"{self.stem}.gif").write_bytes(buf.getvalue())
+        self._gif[0].save(self.staging / f"{self.stem}.gif", format="GIF", save_all=True, append_images=self._gif[1:],
+                          duration=duration_ms, loop=0)
         for name, data in extra.items():
             (self.staging / name).write_bytes(data)
         names = {**{s: f"{self.stem}.{s}" for s in (*CODECS, "gif")}, **{name: name for name in extra}}
@@ -91,7 +87,6 @@ class VideoSet:
     def __enter__(self) -> VideoSet:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
         if exc_type is not None:
             self.abort()

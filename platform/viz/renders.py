@@ -100,7 +100,6 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
     captions = {"pred_sem": "predicted semantics", "gt_sem": "ground-truth semantics",
                 "error": f"errors (red): {wrong:.1f}% of {int(labelled.sum())} labelled px",
                 "pred_rgb": "predicted colour", "gt_rgb": "ground-truth colour", "legend": "classes present"}
-
     height, width = grid.size
     fig = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI, facecolor="white")
     FigureCanvasAgg(fig)
@@ -120,5 +119,4 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
     for (label, color), (sx, sy) in zip(legend, grid.swatches):
         place(np.broadcast_to(color, (LEGEND_SWATCH, LEGEND_SWATCH, 3)).copy(), sx, sy)
         text(sx + LEGEND_SWATCH + 6, sy, label)
-
     return save_png(fig, Path(path), _DPI)
