@@ -84,8 +84,7 @@ class Labeller:
         """Classes the model predicts."""
         return int(self.net.cfg.n_classes)
 
-    def rank_sources(self, Ks: np.ndarray, poses: np.ndarray, hw: tuple[int, int],
-                     depth: float) -> list[list[int]]:
+    def rank_sources(self, Ks: np.ndarray, poses: np.ndarray, hw: tuple[int, int], depth: float) -> list[list[int]]:
         """Per frame, the indices of its ``n_source`` best other frames (module doc), best first."""
         n = len(poses)
         if not 1 <= self.n_source <= n - 1:
