@@ -25,7 +25,7 @@ from sray.platform.config.recipes import get_recipe
 from sray.platform.sweep.driver import run_sweep
 from sray.platform.sweep.finish import SweepResult
 from sray.platform.sweep.options import SweepOptions
-from sray.platform.sweep.request import SweepRequest
+from sray.platform.sweep.options import SweepRequest
 from sray.platform.sweep.spec import parse_assignment
 from sray.platform.sweep.trial_files import read_history, read_record, read_stop_request, trial_folder
 from sray.platform.tracking.params import flatten_config

@@ -1,11 +1,8 @@
 """How many training trials the Ray cluster runs at once, checked before a sweep starts.
 
-Tune knows only what a trial's own process asks for (nothing: :data:`TRIAL_RESOURCES`); the trial's Ray Train
-workers reserve the CPUs and GPUs. More trials at once than the cluster can give workers would leave worker
-groups waiting for each other's resources, so the concurrency is derived from the cluster (or a requested
-one is refused) here, before anything is written: a node with ``c`` CPUs and ``g`` GPUs hosts
-``min(c // cpus_per_worker, g // gpus_per_worker)`` workers (``sray.platform.train.resources``), and each trial
-needs ``run.workers`` of them.
+Tune reserves nothing for a trial's own process (:data:`TRIAL_RESOURCES`); its Ray Train workers reserve the CPUs
+and GPUs, so more trials at once than the cluster has workers for would leave worker groups waiting for each other.
+A node hosts ``workers_per_node`` workers (``sray.platform.train.resources``); a trial needs ``run.workers``.
 """
 
 from __future__ import annotations
@@ -46,16 +43,14 @@ def plan_concurrency(requested: int, configs: list[TrainConfig], nodes: list[Nod
     size in ``configs``, as many as fit when ``requested`` is 0; :class:`InfeasibleRequest` naming the fix."""
     have = (f"{sum(n.cpus for n in nodes):g} CPUs and {sum(n.gpus for n in nodes):g} GPUs on {len(nodes)} "
             "node(s)")
-    fit, widest = None, configs[0]
-    for cfg in configs:
-        n = trials_at_once(cfg, nodes)
+    fits = [(trials_at_once(cfg, nodes), cfg) for cfg in configs]
+    for n, cfg in fits:
         if n == 0:
             raise InfeasibleRequest(
                 f"run.workers / run.cpus_per_worker / run.gpus_per_worker: a trial trains {_size(cfg)}, which the "
                 f"cluster ({have}) cannot host at once; lower --workers, --set run.cpus_per_worker or "
                 "--gpus-per-worker, or join a larger cluster with --address")
-        if fit is None or n < fit:
-            fit, widest = n, cfg
+    fit, widest = min(fits, key=lambda pair: pair[0])
     if requested == 0:
         return fit
     if requested > fit:

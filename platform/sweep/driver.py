@@ -1,9 +1,8 @@
 """``sray sweep``'s driver: check, start (or resume) and finish a training sweep on the study engine.
 
-Order matters: everything is checked first (:mod:`sray.platform.sweep.prepare`), then how many trials the
-cluster runs at once (``capacity``; for the local default before Ray even starts), and only then is anything
-written: the sweep's folder and record, the parent run. The study runs every trial as a real training job
-(``training_trial``) nested under that run; :mod:`sray.platform.sweep.finish` records how each ended.
+Everything is checked first (``prepare``), then how many trials the cluster runs at once (``capacity``; for the
+local default before Ray even starts), and only then is anything written: the sweep's folder and record, the
+parent run. Every trial is a real training job (``training_trial``) nested under that run.
 """
 
 from __future__ import annotations
@@ -14,11 +13,10 @@ from pathlib import Path
 from sray.platform.common.ray_address import check_ray_address
 from sray.platform.sweep.capacity import expected_nodes, plan_concurrency
 from sray.platform.sweep.engine import run_study
-from sray.platform.sweep.finish import SweepResult, finish_sweep
+from sray.platform.sweep.finish import SweepResult, finish_sweep, start_parent
+from sray.platform.sweep.options import SweepRequest
 from sray.platform.sweep.prepare import PreparedSweep, check_inputs, prepare_sweep, reload_sweep, study_settings
-from sray.platform.sweep.request import SweepRequest
 from sray.platform.sweep.sweep_record import RECORD_FILE, read_sweep_record, write_sweep_record
-from sray.platform.sweep.tracking import reopen_parent, start_parent
 from sray.platform.sweep.training_trial import run_training_trial
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import RunHandle, Tracker
@@ -26,24 +24,12 @@ from sray.platform.train.launcher import init_ray
 
 
 def _concurrency(prepared: PreparedSweep, address: str | None) -> int:
-    """Trials at once on the cluster at ``address`` (checked, then joined) or the local one (checked before it
-    starts)."""
+    """Trials at once on the cluster at ``address`` (checked, then joined) or the local one (before it starts)."""
     if address:
         check_ray_address(address)
         init_ray(address)
     requested = int(prepared.record.options["max_concurrent"])
     return plan_concurrency(requested, prepared.configs, expected_nodes())
-
-
-def _start_parent(prepared: PreparedSweep, tracker: Tracker) -> RunHandle:
-    """The sweep's parent run (options and distributions as params, the record as artifact), noted in the record."""
-    record = prepared.record
-    params = {"sweep": {"options": record.options, "params": dict(p.split("=", 1) for p in record.params)}}
-    parent = start_parent(tracker, prepared.configs[0].run.experiment, record.name, prepared.folder, params,
-                          prepared.folder / RECORD_FILE)
-    record.parent_run_id = parent.run_id
-    write_sweep_record(prepared.folder, record)
-    return parent
 
 
 def _run(prepared: PreparedSweep, tracker: Tracker, parent: RunHandle, concurrency: int, address: str | None,
@@ -67,7 +53,7 @@ def run_sweep(request: SweepRequest, address: str | None = None) -> SweepResult:
     tracker = get_tracker(prepared.record.tracker, prepared.record.store)
     prepared.folder.mkdir(parents=True)
     write_sweep_record(prepared.folder, prepared.record)
-    parent = _start_parent(prepared, tracker)
+    parent = start_parent(prepared, tracker)
     return _run(prepared, tracker, parent, concurrency, address, resume=False)
 
 
@@ -79,8 +65,9 @@ def resume_sweep(out: Path, name: str, address: str | None = None) -> SweepResul
     concurrency = _concurrency(prepared, address)
     tracker = get_tracker(prepared.record.tracker, prepared.record.store)
     if prepared.record.parent_run_id:
-        parent = reopen_parent(tracker, prepared.record.parent_run_id)
+        parent = tracker.get_run(prepared.record.parent_run_id)
+        tracker.set_status(parent, "RUNNING")
     else:  # the first driver died between its record and its parent run
-        parent = _start_parent(prepared, tracker)
+        parent = start_parent(prepared, tracker)
     print(f"[sweep] resuming {name} from {folder / RECORD_FILE}", flush=True)
     return _run(prepared, tracker, parent, concurrency, address, resume=True)

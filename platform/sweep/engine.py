@@ -1,26 +1,16 @@
-"""The study engine: a plan of trials and a point function, run on Ray Tune, resumable and fault-isolated.
+"""The study engine: a plan of trials (key -> point) and a point function, run on Ray Tune, resumable and
+fault-isolated.
 
-A study is a plan (trial key -> point, the values that make the trial) and a point function
-``fn(point, ctx)`` that runs one trial and reports its metrics to Tune: a training job
-(``sray.platform.sweep.training_trial``) or anything else a Ray worker can run. The engine
+* Tune gets the plan as a grid over its keys (the points were drawn before, so a resumed study runs the same
+  trials); the trial wrapper never runs a trial with an outcome again, records the error of one that raises
+  while the others go on (``fail_fast`` off), and keeps what the point function returns.
+* Early stops (ASHA on ``time_attr``, the wall-time budget) are requests the trial carries out itself
+  (:class:`GracefulASHA`).
+* ``resume`` restores Tune's state (finished and errored trials stay, unfinished ones start again; ASHA's rungs
+  start empty); without it a new experiment replaces any earlier one (the trials' own records stay). No trial
+  starts after ``StudySettings.start_by``.
 
-* hands Tune the plan as a grid over its keys (the points themselves were drawn before, so a resumed study
-  runs the same trials under the same keys) and wraps the point function so that a trial with an outcome
-  (``trial_files.TrialRecord``) never runs again, a trial that raises records its error and the others go
-  on (Tune's ``fail_fast`` is off; each trial gets its own process unless ``StudySettings.reuse_actors``),
-  and a trial asked to stop early is not started again;
-* stops trials early through the scheduler of ``sray.platform.sweep.schedulers`` (ASHA on ``time_attr``) or
-  at the wall-time budget (``sray.platform.sweep.trial_log``), each time by a request the trial carries out
-  itself;
-* restores Tune's own state on ``resume`` (``Tuner.restore``: the trials and their statuses), so finished and
-  errored trials stay as they were and unfinished ones start again (a training job from its last checkpoint).
-  Tune does not save a scheduler's state: ASHA's rungs start empty in a resumed study. Without ``resume`` a
-  new Tune experiment replaces any earlier one in the folder (the trials' own records stay);
-* keeps what the point function returns as the trial's result (``TrialRecord.result``), and starts no trial
-  after ``StudySettings.start_by``.
-
-Tune checks that every result carries the metric; a training job's last report after a stop request does
-not, so the check is off (``TUNE_DISABLE_STRICT_METRIC_CHECKING``) and the scheduler skips such results.
+A training job's last report after a stop request lacks the metric, so Tune's strict metric check is off.
 """
 
 from __future__ import annotations
@@ -33,19 +23,22 @@ from dataclasses import dataclass
 from typing import Any
 
 from ray import tune
+from ray.tune import Callback
+from ray.tune.result import AUTO_RESULT_KEYS, DEBUG_METRICS
+from ray.tune.schedulers import AsyncHyperBandScheduler, TrialScheduler
 
 from sray.platform.common.fault_hook import fail_trial_if_listed, propagated_env
 from sray.platform.sweep.outcomes import TrialOutcome, collect_outcomes
-from sray.platform.sweep.schedulers import build_scheduler
 from sray.platform.sweep.study import PointFunction, StudySettings, TrialContext
-from sray.platform.sweep.trial_files import (ERRORED, FINISHED, read_record, read_stop_request, trial_folder,
-                                             write_record)
-from sray.platform.sweep.trial_log import TrialLog
+from sray.platform.sweep.trial_files import (BY_BUDGET, BY_SCHEDULER, ERRORED, FINISHED, append_history, read_history,
+                                             read_record, read_stop_request, request_stop, trial_folder, write_record)
 
 TUNE_FOLDER = "tune"
 """The study's folder holding Tune's experiment state."""
 EXPERIMENT = "study"
 """Name of the Tune experiment inside :data:`TUNE_FOLDER`."""
+_SKIPPED = frozenset(AUTO_RESULT_KEYS) | frozenset(DEBUG_METRICS)
+"""Tune's own bookkeeping keys, left out of the history."""
 
 
 @dataclass(frozen=True)
@@ -57,7 +50,6 @@ class _TrialJob:
     study: str
     env: dict[str, str]
     start_by: float = 0.0
-    """Unix time after which no trial starts (0 = no limit)."""
 
 
 def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
@@ -87,8 +79,85 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
     write_record(folder, record)
 
 
+class GracefulASHA(AsyncHyperBandScheduler):
+    """ASHA whose STOP becomes the trial's own stop request (``trial_files.request_stop``), always CONTINUE for Tune.
+
+    Tune carries out a STOP by ending the trial's process; a training trial's placement group outlives it (Ray
+    Train's cleaner polls the state API, which a local Ray without the dashboard does not serve), so the next
+    trial would wait forever for its CPUs. Asked instead, the trial checkpoints, ends its job and returns.
+    """
+
+    def __init__(self, study: str, **asha: Any) -> None:
+        """``study``: the study's folder; ``asha``: ``AsyncHyperBandScheduler``'s arguments."""
+        super().__init__(**asha)
+        self.study = study
+
+    def on_trial_result(self, tune_controller: Any, trial: Any, result: dict[str, Any]) -> str:
+        """ASHA's decision on a result, as a stop request (none at the budget's end: nothing is left to stop)."""
+        folder = trial_folder(self.study, trial.config["key"])
+        if read_stop_request(folder) is not None:
+            return TrialScheduler.CONTINUE
+        at = result.get(self._time_attr)
+        if super().on_trial_result(tune_controller, trial, result) == TrialScheduler.STOP and \
+                at is not None and at < self._max_t:
+            request_stop(folder, BY_SCHEDULER, at)
+        return TrialScheduler.CONTINUE
+
+
+def _point_text(point: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in point.items())
+
+
+class TrialLog(Callback):
+    """The driver's record of results (``history.jsonl``, with the trial's running time across launches), a line
+    per result, and the wall-time budget's stop requests."""
+
+    def __init__(self, settings: StudySettings, plan: Mapping[str, Mapping[str, Any]]) -> None:
+        """``plan``: the study's points, printed when their trials start."""
+        self.settings = settings
+        self.plan = {k: dict(v) for k, v in plan.items()}
+        self._offsets: dict[tuple[str, int], float] = {}
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Tune saves its callbacks with the experiment; a restored one measures offsets afresh."""
+        return {k: v for k, v in self.__dict__.items() if k != "_offsets"} | {"_offsets": {}}
+
+    def on_trial_start(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
+        """Print which point a trial runs."""
+        key, s = trial.config["key"], self.settings
+        if s.start_by and time.time() >= s.start_by:
+            print(f"[{s.label}] {key} not started: no trial starts after the study's time limit", flush=True)
+            return
+        print(f"[{s.label}] {key} started: {_point_text(self.plan.get(key, {}))}", flush=True)
+
+    def on_trial_result(self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any],
+                        **info: Any) -> None:
+        """Append the result to the trial's history; ask the trial to stop once past the wall-time budget. Its
+        running time is this launch's ``time_total_s`` plus what its earlier launches reached."""
+        key, s = trial.config["key"], self.settings
+        folder = trial_folder(s.folder, key)
+        launch = max(len(read_record(folder).launches) - 1, 0)
+        if (key, launch) not in self._offsets:
+            earlier = [e["time_s"] for e in read_history(folder) if e.get("launch", 0) < launch]
+            self._offsets[(key, launch)] = max(earlier, default=0.0)
+        time_s = self._offsets[(key, launch)] + float(result.get("time_total_s", 0.0))
+        values = {k: v for k, v in result.items()
+                  if k not in _SKIPPED and isinstance(v, (int, float)) and not isinstance(v, bool)}
+        append_history(folder, {"launch": launch, "time_s": round(time_s, 3)} | values)
+        if s.metric in values:
+            print(f"[{s.label}] {key} {s.time_attr} {values.get(s.time_attr)}: {s.metric} "
+                  f"{values[s.metric]:.4g} ({time_s:.0f} s)", flush=True)
+        if 0 < s.wall_budget_s <= time_s and read_stop_request(folder) is None:
+            request_stop(folder, BY_BUDGET, values.get(s.time_attr))
+            print(f"[{s.label}] {key} reached its wall-time budget ({s.wall_budget_s:.0f} s): stopping it",
+                  flush=True)
+
+    def on_trial_error(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:
+        """Say that a trial failed (its error is in its record and in the results table)."""
+        print(f"[{self.settings.label}] {trial.config['key']} errored; the other trials go on", flush=True)
+
+
 def _trial_dirname(trial: Any) -> str:
-    """Tune's folder of a trial: its key."""
     return str(trial.config["key"])
 
 
@@ -96,8 +165,8 @@ def run_study(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction, se
               resume: bool = False) -> list[TrialOutcome]:
     """Run every trial of ``plan`` (Ray already initialised) and return their outcomes, in plan order.
 
-    ``resume``: continue the study in ``settings.folder`` (Tune's saved state when there is any; the trials'
-    own records in any case). ``point_fn`` must be picklable (a module-level function or a partial of one).
+    ``resume``: continue the study in ``settings.folder``. ``point_fn`` must be picklable (a module-level function
+    or a partial of one).
     """
     os.environ["TUNE_DISABLE_STRICT_METRIC_CHECKING"] = "1"
     job = _TrialJob(point_fn, {k: dict(v) for k, v in plan.items()}, str(settings.folder), propagated_env(),
@@ -110,10 +179,13 @@ def run_study(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction, se
         tuner = tune.Tuner.restore(str(state), trainable, resume_unfinished=True, resume_errored=False,
                                    restart_errored=False)
     else:
+        scheduler = None if settings.scheduler != "asha" else GracefulASHA(
+            str(settings.folder), time_attr=settings.time_attr, max_t=settings.max_t, grace_period=settings.grace,
+            reduction_factor=settings.reduction_factor, stop_last_trials=False)  # metric and mode: Tune's config
         tuner = tune.Tuner(
             trainable, param_space={"key": tune.grid_search(list(plan))},
-            tune_config=tune.TuneConfig(metric=settings.metric, mode=settings.mode,
-                                        scheduler=build_scheduler(settings), reuse_actors=settings.reuse_actors,
+            tune_config=tune.TuneConfig(metric=settings.metric, mode=settings.mode, scheduler=scheduler,
+                                        reuse_actors=settings.reuse_actors,
                                         max_concurrent_trials=settings.max_concurrent,
                                         trial_dirname_creator=_trial_dirname),
             run_config=tune.RunConfig(name=EXPERIMENT, storage_path=str(settings.folder / TUNE_FOLDER), verbose=0,

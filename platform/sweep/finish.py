@@ -1,11 +1,18 @@
-"""What a training sweep leaves when its study returns: finished child runs, the best model, table and chart.
+"""A training sweep's tracked runs, through the tracker interface, and what it leaves when its study returns.
 
-Idempotent across resumes: child runs already finished (``SweepRecord.finished_children``) are not touched
-again, and the best trial is registered once, when no trial is left unfinished.
+One parent run (options and distributions as params, ``sweep.json`` as artifact; at the end the table, the chart
+and summary metrics) and one child run per trial: the training job's own run, finished here with tags naming the
+sweep, the trial, why it ended (``sray.stop_reason``) and the error or who stopped it (``sray.stop_note``), its
+final checkpoint as the artifact ``checkpoint/`` and a status (FINISHED; KILLED for stopped or unfinished;
+FAILED). A trial that failed before its job started gets a child run made here. Once no trial is unfinished, the
+best trial's checkpoint is registered under the sweep's alias. Idempotent across resumes (``finished_children``,
+``registered``); tracking problems only warn.
 """
 
 from __future__ import annotations
 
+import logging
+import re
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,14 +23,17 @@ from sray.platform.sweep.options import SweepOptions
 from sray.platform.sweep.outcomes import REASONS, TrialOutcome
 from sray.platform.sweep.prepare import PreparedSweep
 from sray.platform.sweep.report import best_trial, write_tables
-from sray.platform.sweep.sweep_record import write_sweep_record
-from sray.platform.sweep.tracking import finish_child, finish_parent, register_best, sweep_alias
+from sray.platform.sweep.sweep_record import RECORD_FILE, write_sweep_record
 from sray.platform.sweep.training_trial import TIME_ATTR, job_name
 from sray.platform.tracking.tracker import RunHandle, Tracker
 from sray.platform.viz.sweep_chart import TrialCurve, write_sweep_chart
 
+log = logging.getLogger(__name__)
+
 CHART_FILE = "metric_vs_time.png"
 """The chart in a sweep's folder."""
+STATUS = {"finished": "FINISHED", "stopped": "KILLED", "errored": "FAILED", "unfinished": "KILLED"}
+"""Run status of a child run by the reason its trial ended."""
 
 
 @dataclass
@@ -31,7 +41,6 @@ class SweepResult:
     """Where a sweep stands after a run of its driver."""
 
     folder: Path
-    """The sweep's folder."""
     outcomes: list[TrialOutcome]
     """Every trial's outcome, in plan order."""
     best: TrialOutcome | None
@@ -39,9 +48,61 @@ class SweepResult:
     files: list[Path]
     """The results table's files and the chart."""
     parent: RunHandle
-    """The sweep's parent run."""
     complete: bool
     """False when some trial is unfinished (``--resume`` continues it)."""
+
+
+def sweep_alias(sweep: str) -> str:
+    """The registry alias of a sweep's best model: ``sweep-<name>``, characters other than letters, digits, ``_``
+    and ``-`` turned into ``-``."""
+    return "sweep-" + re.sub(r"[^A-Za-z0-9_-]+", "-", sweep).strip("-")
+
+
+def start_parent(prepared: PreparedSweep, tracker: Tracker) -> RunHandle:
+    """The sweep's parent run, noted in the sweep's record."""
+    record = prepared.record
+    run = tracker.start_run(prepared.configs[0].run.experiment, record.name,
+                            tags={"sray.kind": "sweep", "sray.sweep_dir": str(prepared.folder)})
+    logger = tracker.logger(run)
+    logger.log_params({"sweep": {"options": record.options, "params": dict(p.split("=", 1) for p in record.params)}})
+    logger.log_artifact(prepared.folder / RECORD_FILE)
+    logger.flush(force=True)
+    record.parent_run_id = run.run_id
+    write_sweep_record(prepared.folder, record)
+    return run
+
+
+def finish_child(tracker: Tracker, experiment: str, parent: RunHandle, sweep: str, outcome: TrialOutcome,
+                 checkpoint: Path | None) -> None:
+    """Tag, store the final checkpoint of and close the child run of one trial (made here when its job made none)."""
+    try:
+        name = job_name(sweep, outcome.key)
+        run = tracker.find_run(experiment, name)
+        if run is None:
+            run = tracker.start_run(experiment, name, parent=parent)
+            tracker.logger(run).log_params(outcome.point)
+        tracker.set_tags(run, {"sray.kind": "sweep-trial", "sray.sweep": sweep, "sray.trial": outcome.key,
+                               "sray.stop_reason": outcome.reason, "sray.stop_note": outcome.note[:4000]})
+        logger = tracker.logger(run)
+        if checkpoint is not None:
+            logger.log_artifact(checkpoint, "checkpoint")
+        logger.close(STATUS[outcome.reason])
+    except Exception as e:  # noqa: BLE001 - tracking problems never stop a sweep
+        log.warning("could not finish the %s run of trial %s: %s", tracker.label, outcome.key, e)
+
+
+def register_best(tracker: Tracker, experiment: str, name: str, checkpoint: Path, model: str, alias: str) -> None:
+    """Register the final checkpoint of the best trial's run ``name`` as a version of ``model`` at ``alias``."""
+    try:
+        run = tracker.find_run(experiment, name)
+        if run is None:
+            raise LookupError(f"no run named {name!r} in experiment {experiment!r}")
+        logger = tracker.logger(run)
+        version = logger.register_model(checkpoint, model, alias=alias)
+        logger.close("FINISHED")
+        print(f"[sweep] best trial's model registered as {model}@{alias} (version {version})", flush=True)
+    except Exception as e:  # noqa: BLE001 - tracking problems never stop a sweep
+        log.warning("could not register the best trial's model %s@%s: %s", model, alias, e)
 
 
 def final_checkpoint(cfg: TrainConfig) -> Path | None:
@@ -53,7 +114,6 @@ def final_checkpoint(cfg: TrainConfig) -> Path | None:
 def _chart(prepared: PreparedSweep, outcomes: list[TrialOutcome], options: SweepOptions,
            best: TrialOutcome | None) -> Path | None:
     def label(o: TrialOutcome) -> str:
-        """Legend text: the key and the values, by field name."""
         return o.key + ": " + ", ".join(f"{k.split('.')[-1]}={v:.3g}" if isinstance(v, float) else
                                         f"{k.split('.')[-1]}={v}" for k, v in o.point.items())
 
@@ -81,8 +141,7 @@ def finish_sweep(prepared: PreparedSweep, outcomes: list[TrialOutcome], tracker:
     for outcome, cfg in zip(outcomes, prepared.configs):
         if outcome.reason == "unfinished" or outcome.key in record.finished_children:
             continue
-        finish_child(tracker, experiment, parent, record.name, job_name(record.name, outcome.key), outcome,
-                     final_checkpoint(cfg))
+        finish_child(tracker, experiment, parent, record.name, outcome, final_checkpoint(cfg))
         record.finished_children.append(outcome.key)
         write_sweep_record(prepared.folder, record)
     complete = all(o.reason != "unfinished" for o in outcomes)
@@ -100,5 +159,9 @@ def finish_sweep(prepared: PreparedSweep, outcomes: list[TrialOutcome], tracker:
     metrics = {f"trials/{r}": float(counts[r]) for r in REASONS}
     if best is not None:
         metrics[f"best/{options.metric}"] = best.last_value(options.metric)
-    finish_parent(tracker, parent, files, metrics, "FINISHED" if complete else "KILLED")
+    logger = tracker.logger(parent)
+    for path in files:
+        logger.log_artifact(path, "results")
+    logger.log_metrics(metrics, step=0)
+    logger.close("FINISHED" if complete else "KILLED")
     return SweepResult(prepared.folder, outcomes, best, files, parent, complete)

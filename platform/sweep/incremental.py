@@ -1,17 +1,7 @@
-"""A study completed launch after launch: each launch runs only those of its trials that have no result yet.
-
-The harnesses are studies of this kind (``sray lab study``'s trials, ``sray stability``'s
-points): a fixed plan of which one launch asks for a part (``--axes``) or runs what is missing for a limited time
-(``--max-minutes``). Across launches the trials' own records (``trial_files``) are the store:
-
-* a finished trial (its result in its record) never runs again;
-* an errored trial runs again in the next launch that asks for it (its record is reopened, the error printed);
-  an unfinished one (a killed driver, a launch's time limit, a process that died) simply runs;
-* a result that an earlier harness stored in a file of its own is imported as a finished trial
-  (:func:`import_result`) and never computed again.
-
-Each launch is a new Tune experiment over the trials it runs (``run_study`` without ``resume``), so one launch's
-plan may differ from the last one's. Ray must be running when some trial is left to run (:func:`missing` says).
+"""A study completed launch after launch (``sray lab study``'s trials, ``sray stability``'s points): each launch
+runs only the trials of its plan without a result, each as a new Tune experiment, the trials' own records being
+the store. A finished trial never runs again; an errored one runs again in the next launch that asks for it (its
+error printed); a result an earlier harness stored elsewhere is imported as a finished trial (:func:`import_result`).
 """
 
 from __future__ import annotations
@@ -55,7 +45,7 @@ def stored_results(study: Path) -> dict[str, dict[str, Any]]:
 
 
 def missing(study: Path, plan: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
-    """The trials of ``plan`` without a finished outcome (errored, unfinished or never started), in plan order."""
+    """The trials of ``plan`` without a finished outcome, in plan order (Ray must be running to run any)."""
     return {k: dict(v) for k, v in plan.items() if read_record(trial_folder(study, k)).outcome != FINISHED}
 
 

@@ -1,4 +1,5 @@
-"""How a sweep runs, and its spec file: a small YAML file whose keys are ``sray sweep``'s own flags.
+"""A sweep as asked for: its options, its spec file (a YAML file whose keys are ``sray sweep``'s own flags) and
+the request built from both.
 
 A spec file (``jobs/sweeps/demo_lr_sem.yaml`` is one)::
 
@@ -7,7 +8,6 @@ A spec file (``jobs/sweeps/demo_lr_sem.yaml`` is one)::
     set: {optim.lr_final: 1.0e-4}       # fixed overrides, as `sray train --set`
     params:                             # section.field: SPEC (sray.platform.sweep.spec)
       optim.lr: loguniform(3e-4, 3e-3)
-      model.lambda_rgb: choice(0.5, 1.0)
     samples: 2
     steps: 60                           # and any other option of SweepOptions
 
@@ -24,6 +24,7 @@ from typing import Any
 
 import yaml
 
+from sray.platform.config.train_config import TrainConfig
 from sray.platform.sweep.spec import Param, SpecError, check_unique, parse_param
 
 MODES = ("max", "min")
@@ -49,8 +50,7 @@ class SweepOptions:
     scheduler: str = "asha"
     """One of :data:`SCHEDULERS`."""
     grace: int = 0
-    """ASHA: steps before a trial can be stopped (its first rung); 0 = the trials' checkpoint interval
-    (``run.ckpt_every``, where a training job first reports)."""
+    """ASHA: steps before a trial can be stopped; 0 = ``run.ckpt_every`` (where a training job first reports)."""
     reduction_factor: float = 3.0
     """ASHA: about 1 in this many trials continues at each rung (rungs at grace x factor^k steps)."""
     max_concurrent: int = 0
@@ -60,8 +60,7 @@ class SweepOptions:
     cpu_seconds: float = 0.0
     """Budget per trial in CPU seconds summed over its ranks (``optim.cpu_seconds``); 0 = the config's."""
     minutes: float = 0.0
-    """Budget per trial in wall-clock minutes of training (a trial asked to stop there checkpoints and
-    ends); 0 = none."""
+    """Budget per trial in wall-clock minutes of training (then it checkpoints and ends); 0 = none."""
 
 
 def check_options(options: SweepOptions) -> None:
@@ -86,6 +85,20 @@ def check_options(options: SweepOptions) -> None:
 
 
 @dataclass
+class SweepRequest:
+    """A new sweep, as the command line (or a test) asks for it, before any check."""
+
+    name: str
+    """Unique name: the sweep's folder under ``out`` and its parent run's name."""
+    out: Path
+    """Folder holding sweeps."""
+    base: TrainConfig
+    """The config every trial starts from (a recipe with the fixed overrides)."""
+    params: list[Param]
+    options: SweepOptions
+
+
+@dataclass
 class SpecFile:
     """What a spec file holds, parsed; option values are checked by :func:`merge_options`."""
 
@@ -96,7 +109,6 @@ class SpecFile:
     sets: list[str] = field(default_factory=list)
     """Fixed ``section.field=value`` overrides applied before the swept values."""
     params: list[Param] = field(default_factory=list)
-    """The swept fields."""
     options: dict[str, Any] = field(default_factory=dict)
     """Options of :class:`SweepOptions` the file gives."""
 
@@ -104,7 +116,6 @@ class SpecFile:
 OPTION_NAMES = tuple(f.name for f in dataclasses.fields(SweepOptions))
 """Keys of :class:`SweepOptions`, as spec-file keys (flags: ``--max-concurrent`` for ``max_concurrent``)."""
 FILE_KEYS = ("recipe", "data", "set", "params", *OPTION_NAMES)
-"""Every key a spec file may have."""
 
 
 def _sets(where: Path, value: Any) -> list[str]:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sray.platform.sweep.trial_files import (BY_SCHEDULER, ERRORED, FINISHED, read_history, read_record,
+from sray.platform.sweep.trial_files import (BY_SCHEDULER, ERRORED, FINISHED, TrialRecord, read_history, read_record,
                                              read_stop_request, trial_folder)
 
 REASONS = ("finished", "stopped", "errored", "unfinished")
@@ -36,7 +36,7 @@ class TrialOutcome:
     launches: int = 0
     """How many times the trial was started (more than one after a resumed study)."""
     result: dict[str, Any] | None = None
-    """What the trial's point function returned (or what was imported as its result); None when nothing."""
+    """What the point function returned (or what was imported as its result); None when nothing."""
 
     @property
     def last(self) -> dict[str, Any]:
@@ -49,21 +49,19 @@ class TrialOutcome:
         return float(values[-1]) if values else None
 
 
-def _reason(record_outcome: str | None, stop: dict[str, Any] | None, tune_error: str | None,
+def _reason(record: TrialRecord, stop: dict[str, Any] | None, tune_error: str | None,
             last_at: float | None) -> tuple[str, str]:
     """(reason, note). A stop request that came with the trial's own last report (``last_at``, the time attribute
     there) found nothing left to stop: the trial ended by itself."""
-    if record_outcome == ERRORED or tune_error is not None:
-        return "errored", ""
-    too_late = stop is not None and record_outcome == FINISHED and last_at is not None and \
+    if record.outcome == ERRORED or tune_error is not None:
+        return "errored", record.error or tune_error or ""
+    too_late = stop is not None and record.outcome == FINISHED and last_at is not None and \
         stop.get("at") is not None and last_at <= stop["at"]
-    if stop is not None and not too_late and stop.get("by") == BY_SCHEDULER:
-        return "stopped", f"stopped early by the scheduler at {stop.get('at')}"
     if stop is not None and not too_late:
+        if stop.get("by") == BY_SCHEDULER:
+            return "stopped", f"stopped early by the scheduler at {stop.get('at')}"
         return "finished", f"wall-time budget reached at {stop.get('at')}"
-    if record_outcome == FINISHED:
-        return "finished", ""
-    return "unfinished", ""
+    return ("finished" if record.outcome == FINISHED else "unfinished"), ""
 
 
 def collect_outcomes(study: Path, plan: Mapping[str, Mapping[str, Any]], tune_errors: Mapping[str, str],
@@ -75,9 +73,7 @@ def collect_outcomes(study: Path, plan: Mapping[str, Mapping[str, Any]], tune_er
         folder = trial_folder(study, key)
         record, history = read_record(folder), read_history(folder)
         reached = [e[time_attr] for e in history if time_attr in e]
-        reason, note = _reason(record.outcome, read_stop_request(folder), tune_errors.get(key),
+        reason, note = _reason(record, read_stop_request(folder), tune_errors.get(key),
                                reached[-1] if reached else None)
-        if reason == "errored":
-            note = record.error or tune_errors.get(key, "")
         outcomes.append(TrialOutcome(key, dict(point), reason, note, history, len(record.launches), record.result))
     return outcomes

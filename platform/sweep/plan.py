@@ -1,10 +1,6 @@
-"""A sweep's plan: the explicit, numbered list of its trials' parameter values, made once and stored.
-
-Random parameters are drawn here, from a seeded generator, not inside Ray Tune: the plan is written to the
-sweep's folder before anything runs, so a resumed sweep (``--resume``) runs exactly the trials of the first
-launch, each under the same key, whatever state Tune had managed to save when the driver died. Order: the
-samples in turn, each crossed with every grid combination (the first grid value first), as Tune orders
-``num_samples`` and ``grid_search``.
+"""A sweep's plan: every trial's parameter values, drawn once from a seeded generator and stored before anything
+runs, so a resumed sweep runs the same trials under the same keys. Order: the samples in turn, each crossed with
+every grid combination (first grid value first), as Tune orders ``num_samples`` and ``grid_search``.
 """
 
 from __future__ import annotations
@@ -26,8 +22,7 @@ def trial_keys(count: int) -> list[str]:
 
 
 def with_seeds(params: list[Param], seeds: int) -> list[Param]:
-    """``params`` plus ``run.seed=grid(0..seeds-1)`` (``seeds`` 0: unchanged); SpecError when run.seed is swept
-    already."""
+    """``params`` plus ``run.seed=grid(0..seeds-1)`` (``seeds`` 0: unchanged); SpecError when it is swept already."""
     if seeds <= 0:
         return list(params)
     if any(p.path == SEED_FIELD for p in params):
@@ -36,10 +31,8 @@ def with_seeds(params: list[Param], seeds: int) -> list[Param]:
 
 
 def build_plan(params: list[Param], samples: int, seed: int) -> dict[str, dict[str, Any]]:
-    """Trial key -> {field path: value}, ``samples`` x (product of the grid sizes) trials.
-
-    ``seed`` seeds the draws of the random parameters, so the same spec gives the same plan.
-    """
+    """Trial key -> {field path: value}, ``samples`` x (product of the grid sizes) trials; ``seed`` seeds the
+    draws, so the same spec gives the same plan."""
     if samples < 1:
         raise SpecError(f"--samples {samples}: at least 1 sample is needed")
     grids = [p for p in params if p.kind == "grid"]

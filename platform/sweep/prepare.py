@@ -1,9 +1,8 @@
 """Everything about a training sweep checked before anything starts or is written.
 
-:func:`prepare_sweep` turns a request (base config, parameters, options) into the sweep's record and every
-trial's config, refusing in one line what cannot run: a malformed or unknown parameter, a value a field
-rejects, a metric the trials do not report, a scheduler that could never stop anything, a name that is taken,
-a shard folder or tracking store that is missing. Neither Ray nor the tracker's store is touched beyond a check.
+:func:`prepare_sweep` turns a request into the sweep's record and every trial's config, refusing in one line what
+cannot run: a malformed or unknown parameter, a value a field rejects, a metric the trials do not report, a
+scheduler that could never stop anything, a taken name, a missing shard folder or tracking store.
 """
 
 from __future__ import annotations
@@ -18,7 +17,7 @@ from sray.platform.config.train_config import TrainConfig, apply_override
 from sray.platform.sweep.capacity import TRIAL_RESOURCES
 from sray.platform.sweep.study import StudySettings
 from sray.platform.sweep.options import SweepOptions
-from sray.platform.sweep.request import SweepRequest
+from sray.platform.sweep.options import SweepRequest
 from sray.platform.sweep.plan import build_plan, with_seeds
 from sray.platform.sweep.spec import SpecError, check_unique
 from sray.platform.sweep.sweep_record import SweepRecord
@@ -37,7 +36,6 @@ class PreparedSweep:
     """A checked sweep, ready to run (or to resume)."""
 
     folder: Path
-    """The sweep's folder."""
     record: SweepRecord
     """What ``sweep.json`` holds."""
     configs: list[TrainConfig]
@@ -58,23 +56,26 @@ def sweep_base(base: TrainConfig, options: SweepOptions, folder: Path, store: st
     return cfg
 
 
+def _asha_span(configs: list[TrainConfig], options: SweepOptions) -> tuple[int, int]:
+    return max(c.optim.steps for c in configs), options.grace or min(c.run.ckpt_every for c in configs)
+
+
 def study_settings(prepared: PreparedSweep, max_concurrent: int) -> StudySettings:
     """The engine's settings of a prepared sweep: ASHA on the step up to the largest step budget, first rung at
-    ``grace`` steps (default: the smallest checkpoint interval, where trials first report)."""
+    ``--grace`` (default: the smallest checkpoint interval, where trials first report)."""
     o = SweepOptions(**prepared.record.options)
+    max_t, grace = _asha_span(prepared.configs, o)
     return StudySettings(folder=prepared.folder, metric=o.metric, mode=o.mode, time_attr=TIME_ATTR,
                          max_concurrent=max_concurrent, trial_resources=TRIAL_RESOURCES, scheduler=o.scheduler,
-                         max_t=max(c.optim.steps for c in prepared.configs),
-                         grace=o.grace or min(c.run.ckpt_every for c in prepared.configs),
-                         reduction_factor=o.reduction_factor, wall_budget_s=60.0 * o.minutes)
+                         max_t=max_t, grace=grace, reduction_factor=o.reduction_factor,
+                         wall_budget_s=60.0 * o.minutes)
 
 
 def _check_trials(configs: list[TrainConfig], options: SweepOptions) -> None:
     check_metric(options.metric, configs)
     for cfg in configs:
         check_request(cfg.run.workers, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker, cfg.run.precision)
-    budget = max(c.optim.steps for c in configs)
-    grace = options.grace or min(c.run.ckpt_every for c in configs)
+    budget, grace = _asha_span(configs, options)
     if options.scheduler == "asha" and grace >= budget:
         raise SpecError(f"--grace {grace}: ASHA first compares trials at {grace} steps (default: run.ckpt_every), "
                         f"but the budget is {budget} steps; lower --grace or run.ckpt_every, raise --steps, or use "

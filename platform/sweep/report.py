@@ -1,9 +1,6 @@
-"""A study's results table, written to its folder as Markdown, CSV and JSON (with every trial's history).
-
-One row per trial, in plan order: its values, why it ended, how far it got (the time attribute and its
-running time), the metric at its last report and its best, how often it was launched, and the error or who
-stopped it. The best trial is the finished one whose last value of the metric is best (a stopped trial was
-judged worse by the scheduler; the last value is the model its final checkpoint holds).
+"""A study's results table (Markdown, CSV, JSON with every trial's history): a row per trial in plan order. The
+best trial is the finished one whose last value of the metric is best (a stopped trial was judged worse by the
+scheduler; the last value is the model its final checkpoint holds).
 """
 
 from __future__ import annotations

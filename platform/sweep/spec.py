@@ -1,15 +1,11 @@
 """The value grammar of a sweep parameter: ``section.field=SPEC``, SPEC one of four distributions.
 
-* ``choice(a, b, ...)``: each trial draws one of the values, uniformly;
-* ``uniform(lo, hi)``: a float drawn uniformly in [lo, hi];
-* ``loguniform(lo, hi)``: a float whose logarithm is uniform in [log lo, log hi] (0 < lo);
-* ``grid(a, b, ...)``: every value, crossed with every other grid parameter (each drawn sample of the
-  random parameters runs once per grid combination).
+* ``choice(a, b, ...)``: one of the values, uniformly; ``grid(a, b, ...)``: every value, crossed with every other
+  grid parameter (each drawn sample of the random parameters runs once per grid combination);
+* ``uniform(lo, hi)``: a float uniform in [lo, hi]; ``loguniform(lo, hi)``: its logarithm uniform (0 < lo).
 
-Values are kept as the text the user wrote (choice and grid) or as floats (ranges); the field's own type
-parses them when a trial's config is built (``sray.platform.config.overrides``), so a sweep takes any field
-``sray train --set`` takes. This module knows the grammar only; which fields exist is checked where the
-trial's config is made (``sray.platform.sweep.training_trial``).
+Listed values are kept as written: the field's own type parses them when a trial's config is built (the typed
+``--set`` path), so a sweep takes any field ``sray train --set`` takes.
 """
 
 from __future__ import annotations
@@ -46,15 +42,11 @@ class Param:
         """The distribution as the user writes it, e.g. ``loguniform(1e-4, 1e-2)``."""
         return f"{self.kind}({', '.join(self.values)})"
 
-    def bounds(self) -> tuple[float, float]:
-        """``(lo, hi)`` of a range parameter."""
-        return float(self.values[0]), float(self.values[1])
-
     def draw(self, rng: random.Random) -> str | float:
         """One random value (``choice``, ``uniform``, ``loguniform``; a grid parameter is not drawn)."""
         if self.kind == "choice":
             return rng.choice(self.values)
-        lo, hi = self.bounds()
+        lo, hi = map(float, self.values)
         if self.kind == "uniform":
             return rng.uniform(lo, hi)
         if self.kind == "loguniform":

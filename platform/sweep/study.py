@@ -47,11 +47,10 @@ class StudySettings:
     metric: str
     """Result key trials are compared by."""
     mode: str
-    """``max`` or ``min``: which values of the metric are better."""
+    """``max`` or ``min``."""
     time_attr: str = "training_iteration"
     """Result key measuring a trial's progress (a training job's ``step``): the scheduler's time axis."""
     max_concurrent: int = 1
-    """Trials running at once."""
     trial_resources: Mapping[str, float] = field(default_factory=lambda: {"CPU": 1.0})
     """What Tune reserves for one trial's process (a training trial's workers reserve their own)."""
     scheduler: str = "none"
@@ -65,11 +64,10 @@ class StudySettings:
     wall_budget_s: float = 0.0
     """A trial is asked to stop once it has run this long across its launches (0 = no limit)."""
     start_by: float = 0.0
-    """Unix time after which no trial starts (0 = no limit): a trial Tune hands over later returns at once,
-    without a launch or an outcome, and stays unfinished for the next launch of the study. Running trials go on."""
+    """Unix time after which no trial starts (0 = no limit): a later trial returns at once and stays unfinished
+    for the next launch. Running trials go on."""
     reuse_actors: bool = False
-    """Run the trials one after another in the same process (Tune's ``reuse_actors``): for short trials whose
-    point function keeps what it loaded between calls. Off: each trial gets a fresh process (a trial that
-    trains with Accelerate needs one)."""
+    """Run the trials in one process (Tune's ``reuse_actors``), for short trials that keep what they loaded. Off:
+    a fresh process per trial (a trial that trains with Accelerate needs one)."""
     label: str = "sweep"
     """Prefix of the study's progress lines (``[sweep] t001 started: ...``)."""

@@ -1,9 +1,5 @@
-"""``<sweep folder>/sweep.json``: everything needed to continue a sweep, written before its first trial.
-
-The options, the parameters' distributions, the plan (every trial's values, drawn once), the base training
-config (absolute paths, budgets applied), the tracker and its store, the parent run, and which trials have
-been finished in the tracker. ``sray sweep --resume NAME`` reads it instead of a spec.
-"""
+"""``<sweep folder>/sweep.json``: everything needed to continue a sweep (``sray sweep --resume NAME`` reads it
+instead of a spec), written before its first trial."""
 
 from __future__ import annotations
 
@@ -23,7 +19,6 @@ class SweepRecord:
     """A sweep's stored description and progress."""
 
     name: str
-    """The sweep's name (its folder's name)."""
     options: dict[str, Any]
     """``SweepOptions`` as a dict."""
     params: list[str]
@@ -45,7 +40,6 @@ class SweepRecord:
     registered: str = ""
     """Key of the trial registered as the best model ('' = none yet)."""
     format: str = FORMAT
-    """File format marker."""
 
 
 def write_sweep_record(folder: Path, record: SweepRecord) -> Path:

@@ -1,12 +1,9 @@
-"""The trial of a training sweep: one real training job (``launch_training``) with the point's values set.
+"""The trial of a training sweep: one real training job (``launch_training``) with the point's values set through
+the typed ``--set`` path of ``sray train`` (so any field it takes can be swept, each value checked the same way).
 
-Each trial's config is the sweep's base config with the point's ``section.field=value`` overrides applied
-through the same typed ``--set`` path as ``sray train`` (:func:`trial_config`), so every field ``sray train
---set`` takes can be swept and every value is checked the same way. The job is named ``<sweep>-<key>``,
-writes under the sweep's ``jobs/`` folder, logs into a tracked run nested under the sweep's run, and reports
-its validation metrics to Tune through Ray Train's ``TuneReportCallback`` (rank 0's report at each checkpoint
-step). A second launch of the trial (a resumed sweep) resumes the job from its last checkpoint; a stop request
-(scheduler, wall-time budget) becomes the job's own STOP file, so it checkpoints and ends cleanly.
+The job ``<sweep>-<key>`` writes under the sweep's ``jobs/`` folder, logs into a tracked run nested under the
+sweep's run and reports its validation metrics to Tune at each checkpoint (``TuneReportCallback``). A second launch
+resumes it from its last checkpoint; a stop request becomes the job's STOP file, so it checkpoints and ends.
 """
 
 from __future__ import annotations

@@ -1,22 +1,18 @@
-"""A study's files per trial, under ``<study>/trials/<key>/``, each with one writer.
+"""A study's files per trial, under ``<study>/trials/<key>/``, each with one writer; writes are atomic, and a
+history line cut by a killed driver is skipped on reading.
 
-* ``trial.json`` (:class:`TrialRecord`), written only by the trial's own process: when each launch began and,
-  once the point function has returned or raised, the outcome (``finished`` with what the function returned,
-  or ``errored`` with the error). A trial with an outcome never runs again, whatever state Tune saved. A
-  study completed launch after launch (``sray.platform.sweep.incremental``) also writes it, before any trial
-  runs: to import a result an earlier harness stored elsewhere, or to reopen an errored trial.
-* ``stop_request.json``, written only by the driver: a request to end the trial early, by the scheduler or
-  at the wall-time budget (``by``), at a value of the time attribute (``at``). The trial stops itself (a
-  training job checkpoints and ends), so its workers hand their resources back before the next trial starts.
-* ``history.jsonl``, appended only by the driver: every result the trial reported, with the trial's running
-  time across launches (``time_s``) and its launch number.
-
-Writes go through an atomic rename (a killed process leaves the old file or the new one); a history line
-cut by a killed driver is skipped on reading.
+* ``trial.json`` (:class:`TrialRecord`), by the trial's own process (or, before any trial runs, by
+  ``incremental``): each launch's start and, once the point function returned or raised, the outcome. A trial
+  with an outcome never runs again, whatever state Tune saved.
+* ``stop_request.json``, by the driver: end the trial early (``by`` the scheduler or the wall-time budget, ``at``
+  a value of the time attribute); the trial stops itself, so its workers hand their resources back.
+* ``history.jsonl``, appended by the driver: every reported result, with the running time across launches
+  (``time_s``) and the launch number.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -51,8 +47,7 @@ class TrialRecord:
     error: str = ""
     """``Type: message`` of the error of an errored trial."""
     result: dict[str, Any] | None = None
-    """What the point function returned (a JSON-able dict), recorded with the outcome; None when it returned
-    nothing."""
+    """What the point function returned (a JSON-able dict); None when nothing."""
     imported: str = ""
     """The file an imported result was read from ('' when the trial computed it)."""
 
@@ -99,8 +94,6 @@ def read_history(folder: Path) -> list[dict[str, Any]]:
         return []
     entries = []
     for line in path.read_text().splitlines():
-        try:
+        with contextlib.suppress(ValueError):
             entries.append(json.loads(line))
-        except ValueError:
-            continue
     return entries
