@@ -1,9 +1,6 @@
-"""Calibrating the fast render's coarse confidence on validation rooms (``sray eval --calibrate``).
-
-The coarse logits of every ``stride``-th pixel of the validation rooms' test views are rendered with the model's
-own ray renderer (fixed sources, as scored), the pixels' labels read at the same pixel centres, and the temperature
-fitted by :func:`sray.model.calibration.fit_temperature` (labelled pixels with finite logits only). The result names
-the rooms, the rays and the NLL before and after, so it can be stored beside the evaluation it was used for.
+"""Calibrating the fast render's coarse confidence on validation rooms (``sray eval --calibrate``): the coarse
+logits at every ``stride``-th pixel of their test views (fixed sources, as scored) against the labels there, the
+temperature fitted by ``sray.model.calibration.fit_temperature`` (labelled pixels with finite logits only).
 """
 
 from __future__ import annotations
@@ -43,8 +40,8 @@ def coarse_logits(model: EvalModel, shards: Path, n_source: int, stride: int) ->
 
 
 def calibrate(model: EvalModel, shards: Path, n_source: int = 8, stride: int = 4) -> dict[str, Any]:
-    """The fitted temperature of ``model``'s coarse confidence on the validation shards ``shards`` and what it was
-    fitted on: ``{"temperature", "nll_at_1", "nll_fitted", "rays", "rooms", "shards", "stride", "n_source"}``."""
+    """The fitted temperature of ``model``'s coarse confidence on the validation shards and what it was fitted on:
+    ``{"temperature", "nll_at_1", "nll_fitted", "rays", "rooms", "shards", "stride", "n_source"}``."""
     logits, labels, rooms = coarse_logits(model, shards, n_source, stride)
     temperature = fit_temperature(logits, labels, model.ignore_id)
     keep = labels != model.ignore_id

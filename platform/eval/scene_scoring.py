@@ -1,10 +1,6 @@
-"""Score these views of this scene: the one render-and-score loop of ``sray eval``, validation, the fleet's
-held-out scores, the stability suite and ``sray bench speed-accuracy``.
-
-Each evaluation sample is rendered by :func:`~sray.platform.eval.view_scoring.predict_view` (the model's one
-whole-view renderer) with the ray renderer the caller makes for it, then the scene's views are scored together
-(:func:`~sray.platform.eval.view_scoring.score_views`: one confusion matrix for the dataset-level scores).
-Rendering runs under whatever autocast the caller opened; scoring always runs in float32 with autocast off.
+"""The one render-and-score loop of ``sray eval``, validation, the fleet's held-out scores, the stability suite and
+``sray bench speed-accuracy``: each sample rendered by ``view_scoring.predict_view`` (under whatever autocast the
+caller opened), then the scene's views scored together in float32 with autocast off (``score_views``).
 """
 
 from __future__ import annotations
@@ -25,20 +21,16 @@ class ScoredScene:
     """A scene's rendered held-out views and their scores."""
 
     scores: dict[str, float]
-    """``score_views`` keys: dataset-level and per-image mIoU, accuracies, PSNR (SSIM on whole images)."""
+    """``score_views``'s."""
     views: list[ViewPrediction]
-    """The rendered views, in the order of the samples."""
+    """In the order of the samples."""
 
 
 def score_scene(renderer: Callable[[EvalSample], RayRenderer], samples: Iterable[EvalSample], n_classes: int,
                 ignore_id: int, stride: int, chunk: int, device: torch.device, fast: FastRender | None = None,
                 on_view: Callable[[ViewPrediction], None] | None = None) -> ScoredScene:
-    """Render every sample of one scene with ``renderer(sample)`` (every ``stride``-th pixel, ``chunk`` rays per
-    pass, 0: by device; the fast mode's pixels with ``fast``, which ``renderer`` must match) and score them.
-
-    ``on_view`` is called with each view as soon as it is rendered (writing PNGs, a progress bar).
-    ValueError when there is no sample.
-    """
+    """Render every sample of one scene with ``renderer(sample)`` (``predict_view``'s ``stride``, ``chunk`` and
+    ``fast``) and score them; ``on_view`` gets each view once rendered. ValueError when there is no sample."""
     views = []
     for sample in samples:
         views.append(predict_view(renderer(sample), sample, stride, chunk, device, fast))

@@ -1,16 +1,10 @@
-"""The plain 2D segmenter: the project's own encoder (``ResUNetEncoder``) plus a per-pixel linear head.
+"""The plain 2D segmenter: S-Ray's encoder (``ResUNetEncoder``) plus its per-pixel source-view head and loss
+(``sray.model.source_semantics``) trained alone. It labels the source views of ``2d-transfer`` and of the
+label-transfer rows of ``sray lab ceilings``.
 
-The head is :class:`sray.model.source_semantics.SourceSemanticHead` (a 1x1 convolution on the 1/4-resolution
-features, brought to full resolution by centre-aligned up-sampling) and the loss is
-:func:`~sray.model.source_semantics.source_semantic_loss` (class-weighted cross-entropy over labelled
-pixels): the same read-out S-Ray's auxiliary source-view loss uses, trained alone. It labels the source
-views for the label-transfer rows of ``sray lab ceilings`` and the ``2d-transfer`` method.
-
-A trained segmenter is a folder: ``segmenter.pt`` (the state dict, ``torch.load(weights_only=True)``-safe)
-and ``segmenter.json`` (:class:`SegmenterConfig` plus what its training spent and read). An S-Ray checkpoint
-trained with the source-view loss holds the same network (its encoder and source-view head):
-:func:`segmenter_from_checkpoint` writes it as a segmenter folder, so the ceilings rows can ask how well S-Ray's own
-2D read-out labels the source and query images.
+A segmenter is a folder: ``segmenter.pt`` (the state dict, ``weights_only``-safe) and ``segmenter.json``
+(:class:`SegmenterConfig`, what its training spent and read). An S-Ray checkpoint trained with the source-view
+loss holds the same network: :func:`segmenter_from_checkpoint` writes it as a segmenter folder.
 """
 
 from __future__ import annotations
@@ -88,8 +82,7 @@ class SegmenterRecord:
     config: SegmenterConfig
     """How to build the network."""
     training: dict[str, Any] = field(default_factory=dict)
-    """Budget and spend (``cpu_seconds_budget``, ``cpu_seconds``, ``steps``, ``images``), data (shards, scenes,
-    split rule, augmentation), seed and optimiser."""
+    """Budget and spend (``cpu_seconds_budget``, ``cpu_seconds``, ``steps``, ``images``), data, seed, optimiser."""
 
     def budget(self) -> str:
         """One line for a table: the CPU seconds and steps the segmenter trained for (for one taken from an S-Ray
@@ -131,9 +124,8 @@ def load_segmenter(folder: Path, map_location: str | torch.device = "cpu") -> tu
 
 
 def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, SegmenterRecord]:
-    """Write the encoder and source-view head of an S-Ray training checkpoint as a segmenter folder ``out``; returns
-    the segmenter (eval mode) and its record. ValueError when the checkpoint's model has no source-view head
-    (``model.lambda_src_sem`` was 0)."""
+    """Write the encoder and source-view head of an S-Ray training checkpoint as a segmenter folder ``out``; the
+    segmenter (eval mode) and its record. ValueError when its model has no source-view head."""
     checkpoint = Path(checkpoint)
     net, cfg = model_from_checkpoint(checkpoint)
     if net.src_head is None:
@@ -142,8 +134,7 @@ def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, S
                          "`sray bench segmenter --data SHARDS --cpu-seconds S --out DIR`")
     m = cfg.model
     seg = Segmenter(SegmenterConfig(n_classes=m.n_classes, feat_dim=m.feat_dim, encoder_width=m.encoder_width,
-                                    ignore_id=m.ignore_id,
-                                    class_weights=tuple(m.class_weights)))
+                                    ignore_id=m.ignore_id, class_weights=tuple(m.class_weights)))
     seg.encoder.load_state_dict(net.encoder.state_dict())
     seg.head.load_state_dict(net.src_head.state_dict())
     counters = load_checkpoint(checkpoint)["counters"]

@@ -1,17 +1,10 @@
 """The ``2d-transfer`` prediction of one query view: a 2D segmenter labels the source images, and their labels
-(and colours) are splatted into the query view by the SOURCE views' depth
-(:func:`~sray.platform.eval.label_transfer.transfer_labels`, ``forward``: z-buffered, occlusion-tested, voted).
+(and colours) are splatted into the query view by the SOURCE views' depth (``label_transfer``, ``forward``).
 
-What it reads is fixed by its signatures: the source views (:class:`SourceViews`: images, cameras, depth) and the
-query's camera (:class:`QueryCamera`), never the query view's image, depth or labels. The query image has the
-sources' size (the views of a scene share one image size, ``manifest.json``'s ``image_size``).
-
-Ceilings row c (``sray lab ceilings``) is this transfer; the ``2d-transfer`` method (``sray eval --method
-2d-transfer``, the fleet) is scored through :func:`transfer_renderer`, a ray renderer that reads each ray's pixel
-from the transferred maps. A pixel that no source sees, or sees only where the segmenter's label is the ignore
-id, gets no prediction: every logit is -inf, which held-out scoring
-(:func:`~sray.platform.eval.view_scoring.predict_view`) marks ``UNSEEN`` and counts as a miss of its true class,
-exactly as ceilings row c counts it (``label_transfer.UNSEEN_RULE``).
+It reads the source views (:class:`SourceViews`) and the query's camera (:class:`QueryCamera`), never the query's
+image, depth or labels; the query image has the sources' size. Ceilings row c (``sray lab ceilings``) is this
+transfer; the method (``sray eval --method 2d-transfer``, the fleet) is scored through :func:`transfer_renderer`.
+A pixel no source labels gets every logit -inf: ``UNSEEN``, a miss of its true class, as row c counts it.
 """
 
 from __future__ import annotations
@@ -27,9 +20,8 @@ from sray.platform.eval.segmenter import Segmenter
 
 def source_depth_transfer(labels: Tensor, sources: SourceViews, query: QueryCamera, tolerance: float,
                           ignore_id: int, source_rgb: Tensor | None = None) -> LabelTransfer:
-    """Per-source labels (m, H, W) int64 carried into the query camera's (H, W) image by forward splatting with
-    the sources' depth (m, H, W); ``source_rgb`` (m, 3, H, W): carry those colours too. ValueError when the
-    sources carry no depth."""
+    """Per-source labels (m, H, W) int64 splatted into the query camera's (H, W) image by the sources' depth;
+    ``source_rgb`` (m, 3, H, W): carry those colours too. ValueError when the sources carry no depth."""
     if sources.depth is None:
         raise ValueError("2d-transfer: the source views carry no depth; it carries labels by the source depth, "
                          "so evaluate shards written with depth (every sray shard holds it)")
@@ -41,20 +33,16 @@ def source_depth_transfer(labels: Tensor, sources: SourceViews, query: QueryCame
 @torch.no_grad()
 def segment_and_transfer(segmenter: Segmenter, sources: SourceViews, query: QueryCamera,
                          tolerance: float) -> LabelTransfer:
-    """The segmenter's labels of the source images (m, 3, H, W), with the images' colours, carried into the query
-    view (:func:`source_depth_transfer`); everything on the segmenter's and the views' device."""
+    """The segmenter's labels of the source images (m, 3, H, W), with their colours, carried into the query view
+    (:func:`source_depth_transfer`) on the segmenter's and the views' device."""
     labels = segmenter.predict(sources.rgb)  # (m, H, W)
     return source_depth_transfer(labels, sources, query, tolerance, segmenter.cfg.ignore_id, source_rgb=sources.rgb)
 
 
 def pixel_lookup_renderer(transfer: LabelTransfer, query: QueryCamera, n_classes: int) -> RayRenderer:
-    """A ray renderer over the transferred maps (which must carry colours) of the query camera ``query``.
-
-    Each ray (origins, dirs (R, 3)) is projected into the query camera and reads the nearest pixel: ``logits``
-    (R, L) are 0 at that pixel's label and -inf elsewhere, -inf everywhere where the pixel has no label or the
-    ray meets no pixel of the image (no prediction); ``rgb`` (R, 3) is the carried colour (0 there). The coarse
-    and fine passes are the same maps; ``near``/``far`` are not used.
-    """
+    """A ray renderer over the transferred maps (with colours) of the query camera: each ray (origins, dirs (R, 3))
+    reads the nearest pixel; ``logits`` (R, L) 0 at its label and -inf elsewhere (all -inf without a label or
+    off the image), ``rgb`` (R, 3) the carried colour (0 there). Both passes are the same maps; near/far unused."""
     if transfer.rgb is None:
         raise ValueError("2d-transfer: pass the source colours to the transfer; its renderer returns them")
     hw = (int(transfer.labels.shape[0]), int(transfer.labels.shape[1]))
@@ -77,9 +65,8 @@ def pixel_lookup_renderer(transfer: LabelTransfer, query: QueryCamera, n_classes
 
 def transfer_renderer(segmenter: Segmenter, sample: EvalSample, tolerance: float,
                       device: torch.device) -> RayRenderer:
-    """The ``2d-transfer`` ray renderer of one evaluation sample: its source views and its query camera moved to
-    ``device`` (the segmenter's), segmented and splatted once (:func:`segment_and_transfer`), then read per ray
-    (:func:`pixel_lookup_renderer`). Nothing of the sample's query view but its camera is read."""
+    """The ``2d-transfer`` ray renderer of one evaluation sample: its sources and query camera moved to ``device``
+    (the segmenter's), segmented and splatted once, then read per ray (:func:`pixel_lookup_renderer`)."""
     sources, query = sample.sources.to(device), sample.query.to(device)
     return pixel_lookup_renderer(segment_and_transfer(segmenter, sources, query, tolerance), query,
                                  segmenter.cfg.n_classes)

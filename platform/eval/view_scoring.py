@@ -1,14 +1,11 @@
 """Render held-out query views of one scene and score them (validation, ``sray eval``, the fleet).
 
-:func:`predict_view` renders one evaluation sample with the model's one whole-view renderer
-(``sray.model.view_render.render_view``) and reads its ground truth at the same pixels; :func:`score_views`
-scores a scene's views. Every score names its protocol (``sray.model.metrics``): semantic scores both from one
-confusion matrix per scene ("dataset-level") and per image ("per-image mean"); colour by PSNR, and by SSIM
-on whole images only (a strided render has no SSIM: its pixels are not neighbours in the image).
-A ray renderer may leave a pixel without prediction (every logit -inf: ``2d-transfer`` where no source sees
-the pixel); the view holds ``UNSEEN`` there and every score counts it as a miss of its true class, never a
-match (``label_transfer.UNSEEN_RULE``, as the ceilings rows count it). S-Ray and Semantic-NeRF always predict.
-LPIPS is not reported: its backbones are downloaded at run time, which this platform cannot do.
+:func:`predict_view` renders one evaluation sample with the model's one whole-view renderer and reads its ground
+truth at the same pixels; :func:`score_views` scores a scene's views: semantics from one confusion matrix per scene
+("dataset-level") and per image, colour by PSNR, and by SSIM on whole images only (strided pixels are not
+neighbours). A pixel without prediction (all logits -inf: ``2d-transfer`` where no source sees it) holds
+``UNSEEN`` and counts as a miss of its true class (``label_transfer.UNSEEN_RULE``). LPIPS is not reported: its
+backbones are downloaded at run time, which this platform cannot do.
 """
 
 from __future__ import annotations
@@ -49,11 +46,9 @@ class ViewPrediction:
 @torch.no_grad()
 def predict_view(render: RayRenderer, sample: EvalSample, stride: int, chunk: int, device: torch.device,
                  fast: FastRender | None = None) -> ViewPrediction:
-    """Render one evaluation sample (whole query image, fixed source views) with the ray renderer ``render``
-    (bound to the sample's sources) in chunks of at most ``chunk`` rays (0: by device), at every ``stride``-th
-    pixel in each direction: ``view_render.render_view``, the fast mode's rays and upsampling with ``fast``
-    (``render`` must then be the fast mode's, ``sray_renderer(..., fast)``). Predictions land on the host; a pixel
-    whose logits are all -inf has none (``UNSEEN``)."""
+    """Render one evaluation sample with the ray renderer ``render`` (bound to its fixed sources) in chunks of
+    ``chunk`` rays (0: by device) at every ``stride``-th pixel (``view_render.render_view``; the fast mode's rays
+    and upsampling with ``fast``, which ``render`` must match). Predictions land on the host."""
     gt_rgb, gt_label = sample.query_rgb, sample.query_label
     h, w = gt_label.shape
     fine = render_view(render, sample.query.K, sample.query.c2w, (h, w), sample.near, sample.far, chunk, device,
@@ -76,8 +71,8 @@ def encode_sources(net: nn.Module, sample: EvalSample, device: torch.device) -> 
 
 def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device, fast: FastRender | None = None,
                   runtime: Runtime = Runtime()) -> RayRenderer:
-    """Encode the sample's fixed source views once; return the S-Ray ray renderer bound to them (the full
-    render, or the fast mode's rays with ``fast``: ``SRayModel.ray_renderer``), its fields run ``runtime.impl``."""
+    """The S-Ray ray renderer bound to the sample's encoded sources (``SRayModel.ray_renderer``: the full render, or
+    the fast mode's with ``fast``), its fields run ``runtime.impl``."""
     return net.ray_renderer(encode_sources(net, sample, device), fast, runtime)
 
 
@@ -102,12 +97,8 @@ def class_ious(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> l
 
 
 def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> dict[str, float]:
-    """Scene scores: dataset-level and per-image semantic metrics, PSNR and SSIM (mean over views).
-
-    Keys: ``miou``, ``total_acc``, ``class_avg_acc`` (dataset-level protocol), ``miou_per_image``
-    (per-image protocol), ``psnr``, and ``ssim`` only when every view is a whole image (stride 1):
-    a strided render never gets an SSIM. Whole images smaller than the SSIM window score NaN.
-    """
+    """Scene scores: ``miou``, ``total_acc``, ``class_avg_acc`` (dataset-level), ``miou_per_image``, ``psnr`` and,
+    only when every view is a whole image, ``ssim`` (NaN for images smaller than its window); means over views."""
     dataset = scene_metrics(scene_confusion(views, n_classes, ignore_id))
     per_image = per_image_scores(views, n_classes, ignore_id)
     psnrs = [psnr(v.pred_rgb, v.gt_rgb) for v in views]

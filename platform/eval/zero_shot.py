@@ -1,29 +1,18 @@
 """``sray eval``: score a pretrained model on unseen scenes with the paper's generalization protocol.
 
-The model is any registered method's :class:`~sray.platform.eval.eval_model.EvalModel`: an S-Ray checkpoint
-(:func:`evaluate_checkpoint`), or ``2d-transfer``'s 2D segmenter. Every ``test`` view of a scene is rendered and
-scored by the shared loop, ``scene_scoring.score_scene`` (the model's whole-view renderer in ray chunks, every
-``stride``-th pixel in each direction; stride 1 = the whole image), from its ``n_source`` FIXED source views
-(its top-ranked neighbours inside the scene's ``source`` split), by the pretrained model as it is: no per-scene
-optimisation.
+The model is any registered method's :class:`~sray.platform.eval.eval_model.EvalModel` (an S-Ray checkpoint,
+``2d-transfer``'s segmenter) as it is, with no per-scene optimisation. Every ``test`` view of a scene is rendered
+and scored by ``scene_scoring.score_scene`` at every ``stride``-th pixel, from its ``n_source`` FIXED sources (its
+top-ranked neighbours in the scene's ``source`` split). Outputs under ``out_dir``:
 
-Outputs under ``out_dir``:
+* ``metrics.json``: ``EvalModel.record``, the ``protocol`` (``EvalProtocol``), then per scene and the unweighted
+  mean over scenes, in blocks that each name their protocol: ``dataset_level`` (one confusion matrix per scene;
+  per scene also ``iou_per_class``, null for an absent class), ``per_image``, ``colour`` (PSNR; SSIM only at
+  stride 1); per-view scores; the LPIPS note;
+* ``renders/<scene>/<view>_{pred,gt,error,panel}.png`` at the render's resolution (a pixel without prediction is
+  drawn unlabelled and counts as an error).
 
-* ``metrics.json`` (atomic): what the model is (``EvalModel.record``: S-Ray's ``checkpoint`` and
-  ``checkpoint_step``; 2d-transfer's ``method``, ``segmenter`` and ``tolerance``),
-  ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`: source
-  rule from the shard manifest, source views, stride, render mode, inputs), then per scene and the
-  mean over scenes, in blocks that each name their metric protocol: ``dataset_level`` (mIoU, total
-  and class-average accuracy from one confusion matrix per scene, and per scene each class's IoU,
-  ``iou_per_class``, null for a class absent from its ground truth), ``per_image`` (mIoU per view,
-  then averaged), ``colour`` (PSNR; SSIM with its window, null unless stride is 1); per-view scores;
-  the LPIPS note (not computable offline);
-* ``renders/<scene>/<view>_{pred,gt,error}.png`` at the render's own resolution (colours from
-  :mod:`sray.platform.viz.palette`; a pixel without prediction is drawn in the unlabelled colour and counts as
-  an error) and ``<view>_panel.png`` (:func:`sray.platform.viz.renders.render_panel`).
-
-All of it goes into a new run of the chosen tracker (metrics at the checkpoint's training step, 0 for a model
-without one; metrics.json and the PNGs as artifacts).
+All of it goes into a new tracked run (metrics at the checkpoint's step, 0 without one).
 """
 
 from __future__ import annotations
@@ -34,12 +23,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
 from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.data_tools.png import encode_png
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.fast_render import FastRender
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, psnr
@@ -55,6 +44,10 @@ from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
 
 METRICS_FILE = "metrics.json"
+SCORE_PATHS = {"miou": ("dataset_level", "miou"), "total_acc": ("dataset_level", "total_acc"),
+               "class_avg_acc": ("dataset_level", "class_avg_acc"), "miou_per_image": ("per_image", "miou"),
+               "psnr": ("colour", "psnr_db"), "ssim": ("colour", "ssim")}
+"""Score name (``score_views``) -> (block, key) in a metrics.json scene block."""
 
 
 def _finite_or_none(value: Any) -> Any:
@@ -71,15 +64,6 @@ def _finite_or_none(value: Any) -> Any:
 def write_json_atomic(obj: Any, path: Path) -> Path:
     """Write ``obj`` as indented JSON (NaN as null) through a temporary name; returns ``path``."""
     atomic_write_json(Path(path), _finite_or_none(obj))
-    return Path(path)
-
-
-def write_png_atomic(rgb: np.ndarray, path: Path) -> Path:
-    """Write a uint8 (H, W, 3) RGB image as PNG through a temporary name; returns ``path``."""
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]))
-    if not ok:
-        raise OSError(f"{path}: OpenCV could not encode a {rgb.shape} {rgb.dtype} image as PNG")
-    atomic_write_bytes(Path(path), data.tobytes())
     return Path(path)
 
 
@@ -117,21 +101,19 @@ def select_scenes(shards: Path, scenes: list[str] | None) -> tuple[list[str], di
 
 def save_view_pngs(view: ViewPrediction, scene: str, class_names: list[str], ignore_id: int,
                    out_dir: Path) -> dict[str, str]:
-    """Predicted / ground-truth semantics, error map and the combined panel of one view, written
-    under ``out_dir/renders/<scene>/``. Returns {kind: path relative to ``out_dir``}."""
-    gt = view.gt_label.numpy()
-    pred = np.where(view.pred_label.numpy() == UNSEEN, ignore_id, view.pred_label.numpy())  # no prediction: blank
-    n = len(class_names)
+    """Predicted and true semantics, error map and panel of one view, written under ``out_dir/renders/<scene>/``;
+    {kind: path relative to ``out_dir``}."""
+    gt, raw = view.gt_label.numpy(), view.pred_label.numpy()
+    pred = np.where(raw == UNSEEN, ignore_id, raw)  # no prediction: blank
     stem = out_dir / "renders" / scene / str(view.query_id)
-    files = {
-        "pred": write_png_atomic(colorize(pred, n, ignore_id), stem.with_name(f"{stem.name}_pred.png")),
-        "gt": write_png_atomic(colorize(gt, n, ignore_id), stem.with_name(f"{stem.name}_gt.png")),
-        "error": write_png_atomic(error_map(view.pred_label.numpy(), gt, ignore_id),
-                                  stem.with_name(f"{stem.name}_error.png")),
-        "panel": render_panel(pred, gt, view.pred_rgb.numpy(), view.gt_rgb.numpy(), class_names,
-                              stem.with_name(f"{stem.name}_panel.png"), ignore_id,
-                              title=f"zero-shot: {scene} view {view.query_id}"),
-    }
+    images = {"pred": colorize(pred, len(class_names), ignore_id), "gt": colorize(gt, len(class_names), ignore_id),
+              "error": error_map(raw, gt, ignore_id)}
+    files = {kind: stem.with_name(f"{stem.name}_{kind}.png") for kind in images}
+    for kind, image in images.items():
+        atomic_write_bytes(files[kind], encode_png(image))
+    files["panel"] = render_panel(pred, gt, view.pred_rgb.numpy(), view.gt_rgb.numpy(), class_names,
+                                  stem.with_name(f"{stem.name}_panel.png"), ignore_id,
+                                  title=f"zero-shot: {scene} view {view.query_id}")
     return {k: str(p.relative_to(out_dir)) for k, p in files.items()}
 
 
@@ -157,10 +139,7 @@ def flat_metrics(report: dict[str, Any]) -> dict[str, float]:
     """Tracked metric keys ``<scene or mean>/<metric>`` of a metrics.json report (finite values only)."""
     out = {}
     for name, block in [*report["scenes"].items(), ("mean", report["mean"])]:
-        values = {"miou": block["dataset_level"]["miou"], "total_acc": block["dataset_level"]["total_acc"],
-                  "class_avg_acc": block["dataset_level"]["class_avg_acc"],
-                  "miou_per_image": block["per_image"]["miou"], "psnr": block["colour"]["psnr_db"],
-                  "ssim": block["colour"]["ssim"]}
+        values = {k: block[where][key] for k, (where, key) in SCORE_PATHS.items()}
         out |= {f"{name}/{k}": float(v) for k, v in values.items() if v is not None and math.isfinite(v)}
     return out
 
@@ -169,12 +148,8 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
                         n_source: int = 8, stride: int = 1, tracking_uri: str | None = None,
                         experiment: str = "sray-eval", *, tracker: str = DEFAULT_TRACKER, device: str | None = None,
                         progress: bool = True, fast: FastRender | None = None, runtime: Runtime = Runtime()) -> dict:
-    """:func:`evaluate_model` of the S-Ray checkpoint ``checkpoint`` (``eval_model.checkpoint_model``).
-
-    ``fast``: render with the fast render mode (``sray.model.fast_render``) instead of the full
-    renderer; the protocol's ``render`` field names it with its settings. ``runtime``: the implementation and
-    rays per chunk the network runs with (default: the fast path, chunks by device).
-    """
+    """:func:`evaluate_model` of the S-Ray checkpoint ``checkpoint`` (``eval_model.checkpoint_model``), rendered by
+    the fast render mode with ``fast`` (the protocol names it), its network run by ``runtime``."""
     return evaluate_model(checkpoint_model(checkpoint, device, fast, runtime), shards, scenes, out_dir, n_source,
                           stride, tracking_uri, experiment, tracker=tracker, progress=progress)
 
@@ -182,12 +157,10 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
 def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out_dir: Path, n_source: int = 8,
                    stride: int = 1, tracking_uri: str | None = None, experiment: str = "sray-eval", *,
                    tracker: str = DEFAULT_TRACKER, progress: bool = True) -> dict:
-    """Evaluate ``model`` on ``scenes`` (default: the manifest's test scenes); see the module doc.
+    """Evaluate ``model`` on ``scenes`` (default: the manifest's test scenes); see the module doc. ``tracker``: a
+    registry name; ``tracking_uri``: its store (None: the tracker's default store in the working directory).
 
-    Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (the fields of the
-    run's :class:`~sray.platform.tracking.tracker.RunHandle`: tracker, store, run id, experiment id,
-    UI url and hint). ``tracker``: a registry name; ``tracking_uri``: its store (None = the tracker's
-    default store in the working directory).
+    Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (the run's ``RunHandle`` fields).
     """
     if stride < 1 or n_source < 1:
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")
@@ -230,7 +203,7 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
         report["mean"] = mean_blocks(scene_scores)
         report["wall_s"] = time.perf_counter() - t0
         metrics_path = write_json_atomic(report, out_dir / METRICS_FILE)
-        logger.log_metrics(flat_metrics(_finite_or_none(report)), model.step)
+        logger.log_metrics(flat_metrics(report), model.step)
         logger.log_artifact(metrics_path)
         for name in names:  # only this evaluation's scenes, whatever else the folder holds
             logger.log_artifact(out_dir / "renders" / name, f"renders/{name}")
@@ -239,42 +212,43 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
 
 
 def mean_blocks(blocks: list[dict[str, Any]]) -> dict[str, Any]:
-    """Unweighted mean over scenes of every score (each scene counts once, whatever its view count).
+    """Unweighted mean over scenes of every score (each scene counts once); None for a score some scene lacks."""
 
-    A score some scene lacks (SSIM of strided renders) has no mean: None.
-    """
-
-    def avg(path: tuple[str, str]) -> float | None:
-        values = [b[path[0]][path[1]] for b in blocks]
+    def avg(where: str, key: str) -> float | None:
+        values = [b[where][key] for b in blocks]
         return None if any(v is None for v in values) else float(np.mean(values))
 
-    scores = {"miou": avg(("dataset_level", "miou")), "total_acc": avg(("dataset_level", "total_acc")),
-              "class_avg_acc": avg(("dataset_level", "class_avg_acc")), "miou_per_image": avg(("per_image", "miou")),
-              "psnr": avg(("colour", "psnr_db")), "ssim": avg(("colour", "ssim"))}
+    scores = {k: avg(*path) for k, path in SCORE_PATHS.items()}
     return {**scene_blocks(scores, sum(b["n_views"] for b in blocks)), "n_scenes": len(blocks),
             "averaging": "unweighted mean over scenes"}
 
 
-def format_table(report: dict[str, Any]) -> str:
-    """A plain-text table of a report: one row per scene, then the mean, the protocol line below.
+def text_cell(value: Any, fmt: str) -> str:
+    """``value`` in format ``fmt``, a dash when None."""
+    return "—" if value is None else format(value, fmt)
 
-    The SSIM column is there only for whole-image evaluations (stride 1).
-    """
+
+def text_table(rows: list[tuple[str, ...]]) -> list[str]:
+    """Lines of a plain-text table of ``rows`` (the first the head, ruled off below): the first column left-aligned,
+    the others right-aligned."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(v.ljust(w) if i == 0 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths))) for r in rows]
+    lines.insert(1, "-" * len(lines[0]))
+    return lines
+
+
+def format_table(report: dict[str, Any]) -> str:
+    """A plain-text table of a report: a row per scene, then the mean, the protocol line below; the SSIM column only
+    for whole-image evaluations (stride 1)."""
     protocol = EvalProtocol.from_json(report["protocol"])
     head = ("scene", "views", "mIoU", "total acc", "class acc", "mIoU/img", "PSNR dB", "SSIM")
     columns = len(head) if protocol.scores_ssim else len(head) - 1
     rows = [head[:columns]]
-
-    def cell(v: Any, fmt: str) -> str:
-        return "—" if v is None else format(v, fmt)
-
     for name, b in [*report["scenes"].items(), ("mean", report["mean"])]:
         d, c = b["dataset_level"], b["colour"]
-        rows.append((name, str(b["n_views"]), cell(d["miou"], ".3f"), cell(d["total_acc"], ".3f"),
-                     cell(d["class_avg_acc"], ".3f"), cell(b["per_image"]["miou"], ".3f"),
-                     cell(c["psnr_db"], ".2f"), cell(c["ssim"], ".3f"))[:columns])
-    widths = [max(len(r[i]) for r in rows) for i in range(columns)]
-    lines = ["  ".join(v.ljust(w) if i == 0 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths))) for r in rows]
-    lines.insert(1, "-" * len(lines[0]))
+        rows.append((name, str(b["n_views"]), text_cell(d["miou"], ".3f"), text_cell(d["total_acc"], ".3f"),
+                     text_cell(d["class_avg_acc"], ".3f"), text_cell(b["per_image"]["miou"], ".3f"),
+                     text_cell(c["psnr_db"], ".2f"), text_cell(c["ssim"], ".3f"))[:columns])
+    lines = text_table(rows)
     lines.insert(len(lines) - 1, "-" * len(lines[0]))
     return "\n".join([*lines, f"Protocol: {protocol.describe()}"])
