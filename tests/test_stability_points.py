@@ -18,7 +18,7 @@ from train_fixtures import tiny_shards  # noqa: E402,F401
 from sray.data_tools.loader.shard_loader import make_eval_samples  # noqa: E402
 from sray.model.config import SRayConfig  # noqa: E402
 from sray.platform.common.eval_protocol import EvalProtocol  # noqa: E402
-from sray.platform.stability.point_spec import point_spec  # noqa: E402
+from sray.platform.stability.axes import point_spec  # noqa: E402
 from sray.platform.stability.presets import PRESETS  # noqa: E402
 from sray.platform.stability.report import panels, write_outputs  # noqa: E402
 from sray.platform.stability.rows import MODES, suite_rows  # noqa: E402
@@ -26,7 +26,7 @@ from sray.platform.stability.scene_points import training_views  # noqa: E402
 from sray.platform.stability.stress_scenes import load_scenes, perturbed_views  # noqa: E402
 from sray.platform.stability.suite import planned_points  # noqa: E402
 from sray.platform.stability.summary import level_stats  # noqa: E402
-from sray.platform.stability.view_choice import choose_sources, unseen_fraction  # noqa: E402
+from sray.platform.stability.stress_scenes import choose_sources, unseen_fraction  # noqa: E402
 
 TOY = PRESETS["toy"]
 SCENE = "synth_test_000"

@@ -1,18 +1,13 @@
-"""The axes ``sray stability`` sweeps, each with levels that go from harmless to broken.
+"""The axes ``sray stability`` sweeps, each with levels from harmless to broken, and what a point shows a row.
 
-An axis is one of three kinds:
+An axis is of kind ``perturb`` (source images or cameras perturbed, :func:`perturb_views`, in the units of
+``sray.data_tools.perturbations``), ``sources`` (how many source views, or the query's nearest ranked neighbours
+dropped so more samples are seen by none) or ``precision`` (inference autocast, categorical, fp32 first). Which rows
+an axis stresses: :meth:`Axis.applies`; a row without sources (Semantic-NeRF) has its training views perturbed and
+counts them on ``source_views``.
 
-* ``perturb``: the source images or cameras are perturbed (:func:`perturb_views`, built on
-  :mod:`sray.data_tools.perturbations`, whose units these levels use);
-* ``sources``: the choice of source views changes (how many; or the query's nearest ranked
-  neighbours are dropped, so more samples are seen by no source view);
-* ``precision``: the autocast precision of inference (a categorical axis, fp32 first).
-
-Which rows an axis stresses follows from the row (:meth:`Axis.applies`): every axis stresses every row, except
-``unseen_rays`` (rows that render from source views) and ``precision`` (zero-shot rows: a pretrained model run
-at another precision). A row that renders from no source view (Semantic-NeRF) has its training views perturbed on
-``perturb`` axes, and on ``source_views`` the level is its number of training views; a row trained on the scene
-that renders from sources is trained on the perturbed views and rendered from perturbed sources.
+Many points show a row the same thing (every clean level is the clean input; 8 source views is the clean point when
+the protocol uses 8), so a point becomes a :class:`PointSpec` and results are stored and reused per spec.
 """
 
 from __future__ import annotations
@@ -22,10 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from sray.data_tools.perturbations import exposure, gaussian_noise, jpeg, motion_blur, noisy_pose, occlude
+from sray.platform.stability.presets import Preset
 from sray.platform.stability.rows import Row
 
 POSE_CM_PER_DEG = 2.0
 """Pose-noise level L turns each camera by L degrees and moves it by ``POSE_CM_PER_DEG · L`` centimetres."""
+CLEAN_LEVELS = {"jpeg": 100, "blur": 1}
+"""Harmless level of the perturbation axes whose harmless level is not 0."""
 
 
 @dataclass(frozen=True)
@@ -41,7 +39,6 @@ class Axis:
     sources_only: bool = False
     """Stresses only rows that render from source views."""
     zero_shot_only: bool = False
-    """Stresses only zero-shot rows."""
 
     def applies(self, row: Row) -> bool:
         """Whether this axis stresses ``row``."""
@@ -65,11 +62,8 @@ AXES: dict[str, Axis] = {a.name: a for a in (
 
 def perturb_views(axis: str, level: float, rgb: np.ndarray, c2w: np.ndarray,
                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Perturb m views on a ``perturb`` axis: rgb (m, H, W, 3) uint8, c2w (m, 4, 4) -> new arrays.
-
-    Each view draws its own perturbation from ``rng`` (in view order), so a (seed, level) pair always
-    gives the same result; level 0 (or JPEG quality 100, or blur length 1) returns exact copies.
-    """
+    """Perturb m views on a ``perturb`` axis: rgb (m, H, W, 3) uint8, c2w (m, 4, 4) -> new arrays. Each view draws
+    from ``rng`` in view order; a harmless level returns exact copies."""
     if AXES[axis].kind != "perturb":
         raise ValueError(f"axis {axis!r} does not perturb views (its kind is {AXES[axis].kind!r})")
     rgb_out, c2w_out = rgb.copy(), np.array(c2w, dtype=np.float64, copy=True)
@@ -89,3 +83,52 @@ def perturb_views(axis: str, level: float, rgb: np.ndarray, c2w: np.ndarray,
         elif axis == "occlusion":
             rgb_out[i] = occlude(rgb[i], level, rng)[0]
     return rgb_out, c2w_out
+
+
+@dataclass(frozen=True)
+class PointSpec:
+    """The inputs of one row at one point (everything its score depends on)."""
+
+    method: str
+    """The row's name (``Row.name``)."""
+    n_views: int
+    """Rows with sources: source views per query; rows without: training views (0 = the whole source pool)."""
+    drop: int
+    """Rows with sources: nearest ranked neighbours skipped before the sources are taken (``unseen_rays``)."""
+    pool: str
+    """Rows with sources: where sources are ranked from, ``protocol`` (the ``source`` split; the whole source pool
+    when more views are asked than it has) or ``all`` (``source`` + ``finetune``); ``pool`` for rows without."""
+    perturbation: tuple[str, float] | None
+    """(axis, level) of the perturbation applied to what the row sees, or None."""
+    precision: str
+    """Inference autocast precision (``fp32``, ``bf16``, ``fp16``)."""
+    seed: int | None
+    """Perturbation (and training) seed; None when nothing is drawn at random."""
+
+    def key(self) -> str:
+        """A file-name-safe id, equal for equal specs."""
+        what = "clean" if self.perturbation is None else f"{self.perturbation[0]}-{self.perturbation[1]:g}"
+        seed = "det" if self.seed is None else f"s{self.seed}"
+        return f"{self.method}_{self.pool}-d{self.drop}-n{self.n_views}_{what}_{self.precision}_{seed}"
+
+
+def point_spec(axis: str, row: Row, level: float | str, seed: int, preset: Preset) -> PointSpec:
+    """The spec of (axis, row, level, seed) under ``preset``; ValueError when the axis does not stress the row. A
+    trained row's points are always seeded (its training draws), a zero-shot row's only when perturbed."""
+    if not AXES[axis].applies(row):
+        raise ValueError(f"axis {axis!r} does not stress row {row.name!r} (sources: {row.uses_sources}, trained on "
+                         f"the scene: {row.trained})")
+    n_views = preset.n_source if row.uses_sources else 0
+    drop, pool, perturbation, precision = 0, "protocol", None, "fp32"
+    if axis == "source_views":
+        n_views = int(level)
+    elif axis == "unseen_rays":
+        n_views, drop, pool = preset.unseen_n_source, int(level), "all"
+    elif AXES[axis].kind == "precision":
+        precision = str(level)
+    elif float(level) != CLEAN_LEVELS.get(axis, 0):
+        perturbation = (axis, float(level))
+    if not row.uses_sources:
+        pool = "pool"
+    random = perturbation is not None or row.trained
+    return PointSpec(row.name, n_views, drop, pool, perturbation, precision, seed if random else None)

@@ -1,11 +1,9 @@
-"""The sizes of ``sray stability --preset toy|cpu-small|gpu``: levels per axis, seeds, the procedural
-world and pretraining a preset builds when no checkpoint is given, the budgets of its evaluations and the one
-CPU-second budget of its trained-on-scene rows.
+"""The sizes of ``sray stability --preset toy|cpu-small|gpu``: levels per axis, seeds, the world and pretraining a
+preset builds when no checkpoint is given, the evaluation budgets and the one CPU-second budget of the trained rows.
 
-Points whose inputs draw nothing at random (a zero-shot row's clean point, fewer or farther source views, another
-precision) are deterministic: they are computed once per row and reported with one "seed". Every
-point that draws a perturbation, and every point of a row trained on the scene, is a mean over ``seeds`` seeds.
-A preset's own world pretrains each model once (one pretraining seed); its tables say so.
+Points that draw nothing at random (a zero-shot row's clean point, source-view choice, precision) are computed once;
+every perturbed point and every point of a trained row is a mean over ``seeds`` seeds. A preset's own world
+pretrains each model once (one pretraining seed).
 """
 
 from __future__ import annotations
@@ -48,23 +46,17 @@ class Preset:
     n_source: int
     """Fixed source views of the clean point and of every perturbation axis (the paper's protocol: 8)."""
     unseen_n_source: int
-    """Source views of the ``unseen_rays`` axis, picked from the whole source pool after dropping the
-    query's nearest ranked neighbours."""
+    """Source views of the ``unseen_rays`` axis (from the whole source pool, past the dropped neighbours)."""
     eval_stride: int
     """Every ``eval_stride``-th pixel of each held-out view in each direction is rendered and scored."""
     chunk: int
-    """Rays per forward pass of an evaluation."""
     trained_scenes: int
-    """Rows trained on the scene are trained and scored on the first this many test scenes (a training per
-    point); zero-shot rows are scored on every test scene."""
+    """Trained rows are trained and scored on the first this many test scenes; zero-shot rows on every one."""
     scene_cpu_seconds: float
-    """The training budget of every row trained on the scene, per point and scene: CPU seconds of its training
-    steps (the fleet's ``finetune.max_cpu_seconds``), the same for every method. CPU time, not steps or wall
-    time: methods whose steps cost differently compare at equal compute, and the load of a shared machine does
-    not change the budget."""
+    """The training budget of every trained row, per point and scene, the same for every method: CPU seconds of its
+    training steps (``finetune.max_cpu_seconds``), so methods compare at equal compute whatever the machine's load."""
     scene_rays: int | None
-    """Rays per training step of the rows trained on the scene (the fleet's ``finetune.rays_per_batch``); None:
-    the checkpoint's ``data.rays_per_batch``."""
+    """Rays per training step of the trained rows (``finetune.rays_per_batch``); None: the checkpoint's."""
     nerf: SemanticNeRFSettings
     """Semantic-NeRF's network and learning rate."""
 

@@ -1,10 +1,6 @@
-"""What a stability run leaves: ``stability.json``, the chart of each score, a table per axis, the
-breaking points, and the tracked runs (a parent run, a child run per axis).
-
-Scores are the dataset-level mIoU (%) and PSNR (dB) of the held-out views, averaged over scenes. Every legend
-entry and table header says whether its row saw the scene it is scored on (zero-shot, or trained on it) and which
-source inputs it was given (RGB or RGB-D, from the row's protocol descriptor); the footnotes carry each row's
-protocol (``eval_protocol.caption_lines``) and the one training budget of the trained rows.
+"""What a stability run leaves: ``stability.json``, the chart of each score, a table per axis, the breaking points,
+and the tracked runs (a parent run, a child run per axis). Every legend and header says whether its row saw the scene
+and which inputs it was given; the footnotes carry each row's protocol and the trained rows' one budget.
 """
 
 from __future__ import annotations
@@ -88,11 +84,8 @@ def precision_table(records: list[dict[str, Any]]) -> str:
 
 def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str], rows: list[Row],
                   protocols: dict[str, EvalProtocol], out_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
-    """Write ``stability.json``, the two charts and one Markdown table per axis under ``out_dir``; ``protocols``:
-    row name -> how its scores were made.
-
-    Returns ``{"tables": {axis: markdown}, "charts": [png paths], "breaking": [lines], "json": path, "notes": lines}``.
-    """
+    """Write ``stability.json``, the two charts and one Markdown table per axis under ``out_dir``; ``protocols``: row
+    name -> how its scores were made. ``{"tables": {axis: md}, "charts", "breaking", "json": path, "notes"}``."""
     stats = level_stats(records)
     styles = {r.name: r.style(protocols[r.name]) for r in rows}
     headers = {r.name: r.header for r in rows}

@@ -1,23 +1,11 @@
-"""The rows of the stability suite, read off the method registry: which model of which method is stressed, in
-which mode, and how its legend and table header name what it saw and what it was given.
+"""The rows of the stability suite, read off the method registry (docs/stability.md, "Rows"): which model of which
+method is stressed, in which mode, and how its legend and table header name what it saw and what it was given.
 
-Every registered method (:mod:`sray.platform.finetune.methods.registry`) gives up to two rows:
-
-* ``<name>``, **zero-shot**: its pretrained model with no per-scene step, built by its ``eval_model`` from the
-  suite's given models (a method without one, as Semantic-NeRF, has no zero-shot row);
-* ``<name>-scene``, **trained on the scene**: its fleet learner (``Method.build``) trained on the test scene's views
-  for the suite's one CPU-second budget, the same for every method (``Preset.scene_cpu_seconds``).
-
-A method that renders from source views and reads them as its checkpoint does (``uses_sources`` and an empty
-``inputs``: S-Ray) also gets ``<name>-no-cra``, zero-shot, from the checkpoint trained with ``model.attention=none``,
-when one is given.
-
-The methods stressed are the asked ones with the registry's depth twins placed
-(:func:`~sray.platform.finetune.methods.registry.with_depth_twins`): wherever a method that reads the source depth
-(``2d-transfer``) has a row, ``sray-rgbd`` (the checkpoint given the source views' depth, docs/model.md "RGB-D
-mode") has one just before it, even when it was not asked for.
-
-Which axes stress a row follows from the row too (:meth:`sray.platform.stability.axes.Axis.applies`).
+A registered method gives ``<name>`` (zero-shot: its ``eval_model``'s pretrained model, when it has one) and
+``<name>-scene`` (its fleet learner trained on the test scene for the suite's one CPU-second budget). A method that
+renders from source views and reads them as its checkpoint does (S-Ray) also gets ``<name>-no-cra``, zero-shot, when
+the no-CRA checkpoint is given. The registry's depth twins are placed (``with_depth_twins``): ``sray-rgbd`` stands
+just before a method that reads the source depth, even when not asked for.
 """
 
 from __future__ import annotations
@@ -49,8 +37,7 @@ class SuiteModels:
     pretrained by the preset's own world."""
 
     checkpoint: Path
-    """S-Ray training checkpoint folder: the zero-shot S-Ray rows, and the shared model every trained row's method
-    is built with (as a fleet's checkpoint)."""
+    """S-Ray checkpoint folder: the zero-shot S-Ray rows, and the shared model every trained row is built with."""
     checkpoint_no_cra: Path | None = None
     """S-Ray checkpoint trained with ``model.attention=none`` (None: no ``-no-cra`` row)."""
     segmenter: Path | None = None
@@ -121,8 +108,7 @@ def _row(method: str, trained: bool, variant: str, inputs: str, train_inputs: st
 
 
 def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
-    """The rows of one mode (see the module doc), in the order of ``methods`` with the depth twins and the no-CRA
-    row placed."""
+    """The rows of one mode, in the order of ``methods`` with the depth twins and the no-CRA row placed."""
     rows = []
     for name in with_depth_twins(methods, checkpoint.inputs):
         record = get_method(name)
@@ -140,9 +126,8 @@ def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra:
 
 
 def suite_rows(methods: list[str], modes: list[str], checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
-    """Every row of ``methods`` (registered names) in ``modes``, zero-shot rows first. ``checkpoint``: the S-Ray
-    checkpoint's model config (its ``inputs`` and ``train_inputs``); ``no_cra``: the no-CRA checkpoint's (None: none
-    given, no row)."""
+    """Every row of ``methods`` in ``modes``, zero-shot rows first. ``checkpoint``, ``no_cra``: the model configs of
+    the S-Ray and no-CRA checkpoints (None: no no-CRA row)."""
     unknown = [m for m in modes if m not in MODES]
     if unknown:
         raise ValueError(f"stability modes {unknown}: use {list(MODES)}")

@@ -1,18 +1,13 @@
 """What the stability suite computes: every (axis, row, level, seed) a run asks for, and one point's result.
 
-Points that show a row the same input share one :class:`~sray.platform.stability.point_spec.PointSpec`,
-computed once: :func:`point_key` names it (the spec's key), and the suite's study
-(:mod:`sray.platform.stability.points_study`) runs one trial per key on the study engine. A zero-shot row's point
-renders its pretrained model (:mod:`~sray.platform.stability.zero_shot_points`); a trained row's point trains its
-method on each of the first ``trained_scenes`` test scenes (:mod:`~sray.platform.stability.scene_points`). A method
-that raises, diverges or outputs non-finite values at a point is recorded there as ``failed`` with a one-line
-reason (:func:`compute_spec` never raises), and the suite goes on.
+Points that show a row the same input share one ``PointSpec``, computed once under its key (:func:`point_key`): a
+zero-shot row's renders its pretrained model (``zero_shot_points``), a trained row's trains its method on each of the
+first ``trained_scenes`` test scenes (``scene_points``). A method that raises, diverges or outputs non-finite values
+is recorded as ``failed`` with a one-line reason (:func:`compute_spec` never raises) and the suite goes on.
 
-A point record (what :mod:`sray.platform.stability.summary` reads): ``axis``, ``method`` (the row's name),
-``level``, ``seed`` (None for a deterministic point, computed once), ``status``, ``miou`` and ``psnr`` (dataset-
-level mIoU in %, PSNR in dB; None when failed), ``x`` (the chart's x: the level; the measured unseen
-fraction on ``unseen_rays``; None on the categorical ``precision``), ``error``, ``key`` and the
-spec's result (non-finite rays, fp32 agreement, unseen fraction, training steps and CPU seconds, per-scene scores).
+A point record: ``axis``, ``method`` (the row's name), ``level``, ``seed`` (None for a deterministic point),
+``status``, ``miou`` (%) and ``psnr`` (dB) (None when failed), ``x`` (the chart's x: the level, the measured unseen
+fraction on ``unseen_rays``, None on ``precision``), ``error``, ``key`` and the spec's result.
 """
 
 from __future__ import annotations
@@ -23,8 +18,7 @@ from typing import Any
 
 from sray.platform.common.fault_hook import poisoned_point
 from sray.platform.eval.eval_model import EvalModel
-from sray.platform.stability.axes import AXES
-from sray.platform.stability.point_spec import PointSpec, point_spec
+from sray.platform.stability.axes import AXES, PointSpec, point_spec
 from sray.platform.stability.presets import Preset
 from sray.platform.stability.rows import Row
 from sray.platform.stability.scene_points import SceneTraining, scene_point
@@ -42,7 +36,6 @@ class Suite:
     preset: Preset
     scenes: list[StressScene]
     rows: dict[str, Row]
-    """Row name -> row."""
     models: dict[str, EvalModel]
     """Zero-shot row name -> its pretrained model (on the run's device)."""
     training: SceneTraining | None
@@ -109,8 +102,8 @@ def compute_spec(suite: Suite, spec: PointSpec, poison: bool) -> dict[str, Any]:
 
 
 def point_key(preset: Preset, axis: str, row: Row, level: Any, seed: int | None) -> tuple[str, PointSpec, bool]:
-    """The key a point's result is stored under (its spec's key, ``_poisoned`` added when a fault drill poisons
-    it), its spec, and whether it is poisoned."""
+    """The key a point's result is stored under (its spec's, ``_poisoned`` when a fault drill poisons it), its spec,
+    and whether it is poisoned."""
     spec = point_spec(axis, row, level, 0 if seed is None else seed, preset)
     poison = poisoned_point(row.name, axis, level)
     return f"{spec.key()}{'_poisoned' if poison else ''}", spec, poison
@@ -118,6 +111,6 @@ def point_key(preset: Preset, axis: str, row: Row, level: Any, seed: int | None)
 
 def point_record(axis: str, row: Row, level: Any, seed: int | None, result: dict[str, Any],
                  key: str) -> dict[str, Any]:
-    """The record of one point (see the module docstring) from the result of its spec."""
+    """The record of one point (module doc) from the result of its spec."""
     return {**result, "axis": axis, "method": row.name, "level": level, "seed": seed,
             "x": _x(axis, level, result) if result["status"] == "ok" else None, "key": key}

@@ -1,9 +1,5 @@
-"""From the suite's point results to per-level statistics, breaking points and tables.
-
-A point result is a dict: ``axis``, ``method``, ``level``, ``seed``, ``status`` (``ok`` or ``failed``),
-``miou`` and ``psnr`` (None when failed), ``x`` (the chart's x value: the level, or the measured
-unseen fraction), ``error`` (None or one line). A failed point counts as mIoU 0 when a breaking
-point is found, and is drawn as a failure, never dropped.
+"""From the suite's point records to per-level statistics, breaking points and tables. A failed point counts as
+mIoU 0 when a breaking point is found, and is drawn as a failure, never dropped.
 """
 
 from __future__ import annotations
@@ -54,11 +50,8 @@ def level_stats(points: list[dict[str, Any]]) -> list[LevelStats]:
 
 
 def breaking_point(stats: list[LevelStats]) -> tuple[Any, str]:
-    """Where one method on one axis loses half its clean mIoU (stats in level order, the first clean).
-
-    Returns (the level, or None if it never does, and how it was found). Between two numeric levels
-    the crossing is interpolated linearly; a level whose seeds all failed counts as mIoU 0.
-    """
+    """(The level where one method on one axis loses half its clean mIoU, None if it never does; how it was found),
+    from stats in level order (the first clean); interpolated between numeric levels, all-failed levels count 0."""
     if not stats or stats[0].miou_mean is None:
         return None, "no clean score (the clean level failed)"
     clean = stats[0].miou_mean

@@ -1,12 +1,9 @@
-"""One point of the suite for a zero-shot row: a method's pretrained model, as its ``eval_model`` builds it for
-``sray eval`` (:class:`~sray.platform.eval.eval_model.EvalModel`), renders the held-out views of the unseen test
-scenes from the sources a spec picks, and is scored.
+"""One point of the suite for a zero-shot row, and the watch over every point's renders.
 
-With no perturbation, ``n_source`` protocol sources, fp32 and the same stride, a point reproduces
-``sray eval``'s dataset-level mIoU and PSNR exactly: the sources are the query's top-ranked
-neighbours in the ``source`` split, each view is rendered by the model's own renderer and the scene's views are
-scored by ``sray eval``'s loop (:func:`~sray.platform.eval.scene_scoring.score_scene`, ``chunk``-ray passes, one
-confusion matrix per scene) and scenes are averaged unweighted.
+A method's pretrained model, as its ``eval_model`` builds it for ``sray eval``, renders the held-out views of the
+test scenes from the sources a spec picks, scored by ``sray eval``'s loop (``score_scene``); scenes are averaged
+unweighted. With no perturbation, ``n_source`` protocol sources, fp32 and the same stride, a point reproduces
+``sray eval``'s dataset-level mIoU and PSNR exactly.
 """
 
 from __future__ import annotations
@@ -15,17 +12,44 @@ import contextlib
 from typing import Any
 
 import torch
+from torch import Tensor
 
+from sray.model.view_render import RayRenderer
 from sray.platform.eval.eval_model import EvalModel
 from sray.platform.eval.scene_scoring import score_scene
 from sray.platform.eval.view_scoring import predict_view
-from sray.platform.stability.output_watch import OutputWatch
-from sray.platform.stability.point_spec import PointSpec
-from sray.platform.stability.stress_scenes import StressScene, perturbed_views
-from sray.platform.stability.view_choice import choose_sources, source_samples, unseen_fraction
+from sray.platform.stability.axes import PointSpec
+from sray.platform.stability.stress_scenes import (StressScene, choose_sources, perturbed_views, source_samples,
+                                                   unseen_fraction)
 
 AUTOCAST_DTYPES = {"bf16": torch.bfloat16, "fp16": torch.float16}
 """Inference precisions other than fp32, as autocast dtypes."""
+
+
+class OutputWatch:
+    """Wraps renderers: counts rays whose fine outputs are not finite (a point with any is ``failed``), and can
+    poison them with NaN (the fault drill ``stability.nan_points``). A ray with every logit -inf (``2d-transfer``
+    where no source sees the pixel) is a miss, not a non-finite output: only NaN and +inf count."""
+
+    def __init__(self, poison: bool) -> None:
+        """``poison``: replace every rendered logit with NaN."""
+        self.nonfinite_rays, self.poison = 0, poison
+
+    def wrap(self, render: RayRenderer) -> RayRenderer:
+        """The renderer, watched."""
+
+        def watched(o: Tensor, d: Tensor, near: Tensor, far: Tensor) -> dict[str, dict[str, Tensor]]:
+            out = render(o, d, near, far)
+            fine = out["fine"]
+            if self.poison:
+                fine = {**fine, "logits": torch.full_like(fine["logits"], float("nan"))}
+                out = {**out, "fine": fine}
+            logits, rgb = fine["logits"], fine["rgb"]                                       # (R, L), (R, 3)
+            bad = (torch.isnan(logits) | torch.isposinf(logits)).any(-1) | ~torch.isfinite(rgb).all(-1)  # (R,)
+            self.nonfinite_rays += int(bad.sum())
+            return out
+
+        return watched
 
 
 def precision_context(precision: str, device: torch.device) -> contextlib.AbstractContextManager:
@@ -40,11 +64,9 @@ def precision_context(precision: str, device: torch.device) -> contextlib.Abstra
 def zero_shot_point(model: EvalModel, scenes: list[StressScene], spec: PointSpec, stride: int, chunk: int,
                     probe: tuple[int, float], poison: bool = False) -> dict[str, Any]:
     """Score ``model`` at ``spec`` on ``scenes``: mean dataset-level mIoU and PSNR, per-scene scores, the measured
-    unseen fraction (``probe``: coarse depths per ray and the nearest depth a source sees, ``unseen_fraction``),
-    non-finite rays and (below fp32) argmax agreement with the fp32 render.
-
-    A perturbation touches the sources the spec picks for the scene's queries, drawn once per scene in view order.
-    """
+    unseen fraction (``probe``: coarse depths per ray and the nearest depth a source sees), non-finite rays and
+    (below fp32) argmax agreement with the fp32 render. A perturbation touches the sources the spec picks for the
+    scene's queries, drawn once per scene in view order."""
     watch = OutputWatch(poison)
     device = model.device
     per_scene, unseen, agree, total = {}, [], 0, 0
