@@ -15,15 +15,12 @@ from injected_faults import injected_faults
 from sray.jobs.cli import main
 from sray.platform.common.fault_hook import InjectedFailure
 from sray.platform.config.recipes import get_recipe
-from sray.platform.sweep.capacity import plan_concurrency
+from sray.platform.sweep.prepare import plan_concurrency
 from sray.platform.sweep.engine import _run_trial, _TrialJob
-from sray.platform.sweep.outcomes import collect_outcomes
-from sray.platform.sweep.plan import build_plan, with_seeds
-from sray.platform.sweep.report import write_tables
-from sray.platform.sweep.spec import SpecError, parse_assignment, parse_param
-from sray.platform.sweep.study import TrialContext
-from sray.platform.sweep.trial_files import (BY_BUDGET, BY_SCHEDULER, append_history, read_record, request_stop,
-                                             trial_folder)
+from sray.platform.sweep.outcomes import collect_outcomes, write_tables
+from sray.platform.sweep.spec import SpecError, build_plan, parse_assignment, parse_param, with_seeds
+from sray.platform.sweep.study import (BY_BUDGET, BY_SCHEDULER, TrialContext, append_history, read_record,
+                                       request_stop, trial_folder)
 from sray.platform.train.resources import InfeasibleRequest, NodeResources
 from sray.platform.viz.sweep_chart import TrialCurve, write_sweep_chart
 

@@ -1,6 +1,5 @@
-"""Calibrating the fast render's coarse confidence on validation rooms (``sray eval --calibrate``): the coarse
-logits at every ``stride``-th pixel of their test views (fixed sources, as scored) against the labels there, the
-temperature fitted by ``sray.model.calibration.fit_temperature`` (labelled pixels with finite logits only).
+"""Calibrating the fast render's coarse confidence on validation rooms (``sray eval --calibrate``): a temperature
+fitted to the coarse logits of their test views, rendered as scored (docs/fleet.md, "Shifted splits").
 """
 
 from __future__ import annotations

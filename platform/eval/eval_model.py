@@ -1,6 +1,5 @@
-"""What ``sray eval`` scores: a method's pretrained model as one record, :class:`EvalModel`, whatever the method,
-made by the method's ``eval_model`` builder: S-Ray from a training checkpoint (:func:`checkpoint_model`),
-``2d-transfer`` from a 2D segmenter folder (:func:`segmenter_model`).
+"""What ``sray eval`` scores: any method's pretrained model as one record, :class:`EvalModel`, made by the method's
+``eval_model`` builder (S-Ray: :func:`checkpoint_model`; ``2d-transfer``: :func:`segmenter_model`).
 """
 
 from __future__ import annotations

@@ -1,22 +1,16 @@
-"""Label transfer between posed views: per-pixel labels of m source views carried into a query view.
-
-One function, :func:`transfer_labels`, with two geometries and one vote (pixel (u, v) centred at (u, v); OpenCV
-cameras; depth is camera z in metres, 0 = unknown; geometry in float64, so rounding never moves with float32 noise):
+"""Label transfer between posed views: per-pixel labels of m source views carried into a query view by one
+function, :func:`transfer_labels`, with two geometries and one vote (docs/fleet.md, "2D label transfer"). Pixel
+(u, v) is centred at (u, v), cameras are OpenCV's, depth is camera z in metres (0 = unknown); geometry runs in
+float64, so rounding never moves with float32 noise.
 
 * ``backward`` (from a depth of the query: its ground truth, an oracle, or a rendered one): each query pixel with
-  depth d > 0 goes to d K^-1 [u, v, 1], to the world, and to the nearest pixel of every source. Source j sees it
-  when it lies in front of the camera, inside the image, and agrees with j's own depth D_j > 0 there:
-  |z_j - D_j| < ``tolerance`` * D_j. Without source depth (the RGB protocol) every source it projects into sees it.
-* ``forward`` (splatting by the source depth; of the query only the camera is read): each source pixel with depth
-  > 0 is splatted to the nearest query pixel; per source a z-buffer keeps the nearest point (equal depths: the
-  lowest source pixel index). The nearest of the buffers, z*, is the surface; source j sees the pixel when its own
-  buffer holds a point within ``tolerance`` * z* of it.
-* the vote: every source that sees a pixel gives it the label it saw, unless that is ``ignore_id``; the most votes
-  win, a tie goes to the label whose first voter is the best-ranked source. A pixel with no vote gets
-  :data:`UNSEEN`. Colours (on request): the mean colour of the source pixels that see the pixel, black where none.
-
-A pixel without a label is scored as a miss (:data:`UNSEEN_RULE`, :func:`unseen_as_class`), by the ceilings rows
-and by every held-out score.
+  depth d > 0 goes to the nearest pixel of every source; source j sees it when it lies in front of the camera,
+  inside the image, and |z_j - D_j| < ``tolerance`` * D_j for j's own depth D_j > 0 (no test without source depth).
+* ``forward`` (splatting by the source depth, the query's camera only): per source a z-buffer keeps the nearest
+  point of each query pixel (equal depths: the lowest source pixel index); source j sees the pixel when its buffer
+  holds a point within ``tolerance`` * z* of the nearest buffer's z*.
+* the vote: the most votes win (labels ``ignore_id`` never vote), a tie goes to the label whose first voter is the
+  best-ranked source; no vote: :data:`UNSEEN`, scored as a miss (:data:`UNSEEN_RULE`).
 """
 
 from __future__ import annotations
@@ -174,13 +168,10 @@ def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor,
                     query_K: Tensor, query_c2w: Tensor, hw: tuple[int, int], mode: str, *,
                     query_depth: Tensor | None = None, tolerance: float = 0.05, ignore_id: int = 255,
                     source_rgb: Tensor | None = None) -> LabelTransfer:
-    """Carry source labels into a query view (module doc).
-
-    source_labels (m, H, W) class ids (``ignore_id``: never a vote); source_K (m, 3, 3); source_c2w (m, 4, 4);
+    """Carry source labels (m, H, W) into a query view (module doc): source_K (m, 3, 3); source_c2w (m, 4, 4);
     source_depth (m, H, W) metres, 0 = unknown, or None (``backward`` only); query_K (3, 3); query_c2w (4, 4);
     ``hw`` = the query's (Hq, Wq); ``query_depth`` (Hq, Wq): required by ``backward``, refused by ``forward``;
-    ``source_rgb`` (m, 3, H, W) in [0, 1]: carry the colours too (``LabelTransfer.rgb``).
-    """
+    ``source_rgb`` (m, 3, H, W) in [0, 1]: carry the colours too (``LabelTransfer.rgb``)."""
     m = source_labels.shape[0]
     depth_shape = source_labels.shape if source_depth is None else source_depth.shape
     if source_labels.shape != depth_shape or source_K.shape != (m, 3, 3) or source_c2w.shape != (m, 4, 4):

@@ -1,6 +1,5 @@
-"""The one render-and-score loop of ``sray eval``, validation, the fleet's held-out scores, the stability suite and
-``sray bench speed-accuracy``: each sample rendered by ``view_scoring.predict_view`` (under whatever autocast the
-caller opened), then the scene's views scored together in float32 with autocast off (``score_views``).
+"""The one render-and-score loop of every held-out score: each sample rendered by ``predict_view`` (under the
+caller's autocast), then the scene's views scored together in float32 with autocast off (``score_views``).
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
-"""The plain 2D segmenter: S-Ray's encoder (``ResUNetEncoder``) plus its per-pixel source-view head and loss
-(``sray.model.source_semantics``) trained alone. It labels the source views of ``2d-transfer`` and of the
-label-transfer rows of ``sray lab ceilings``.
-
-A segmenter is a folder: ``segmenter.pt`` (the state dict, ``weights_only``-safe) and ``segmenter.json``
-(:class:`SegmenterConfig`, what its training spent and read). An S-Ray checkpoint trained with the source-view
-loss holds the same network: :func:`segmenter_from_checkpoint` writes it as a segmenter folder.
+"""The plain 2D segmenter: S-Ray's encoder plus its source-view head and loss (``sray.model.source_semantics``)
+trained alone; it labels the sources of ``2d-transfer``. A segmenter is a folder: ``segmenter.pt`` (the state dict,
+``weights_only``-safe) and ``segmenter.json`` (its config and training record).
 """
 
 from __future__ import annotations

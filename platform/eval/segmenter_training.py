@@ -1,14 +1,7 @@
-"""Train the plain 2D segmenter (``segmenter``) for a budget of CPU seconds.
-
-Data: the training loader (``source_labels=True``, the recipe's augmentation) over the train scenes, each step
-fitting the m source images of one sample; sources come from each train scene's source pool, so no test-scene view
-and no held-out view is read, and the class weights are counted over the same pool. Budget: ``time.process_time()``
-of this process from the first sample to the last step, data loading included (no loader workers), summed over
-resumed runs; the loop stops at the first step past it (at least one) or at ``max_steps``. Adam, constant rate.
-
-Resume: at the end of each loader epoch (``EPOCH_STEPS`` steps) model, optimiser, counters and CPU seconds go to
-``STATE_FILE``; a training started again with the same settings and folder continues on the same data stream, so
-it ends with the weights of an uninterrupted one. The file is removed once the segmenter is saved.
+"""Train the plain 2D segmenter for a budget of CPU seconds (``time.process_time`` of the loop, data loading
+included, summed over resumed runs) on the train scenes' source pools only (class weights counted there too),
+resumable: each loader epoch (``EPOCH_STEPS`` steps) writes ``STATE_FILE``, from which the same settings continue on
+the same data stream to the weights of an uninterrupted run; the file goes once the segmenter is saved.
 """
 
 from __future__ import annotations

@@ -1,8 +1,5 @@
-"""Zero-shot scores on several test splits side by side (in-distribution, appearance-shifted, geometry-shifted, ...)
-and the gap from the first split, the headline number of a shift evaluation (``sray eval --split``).
-
-A split's row is read from the ``mean`` block of its ``evaluate_model`` report; scores in percent, the gap in points
-(first split minus this one).
+"""Zero-shot scores on several test splits side by side and the mIoU gap from the first split, the headline of a
+shift evaluation (``sray eval --split``): each row from the ``mean`` block of a report, in percent (gaps in points).
 """
 
 from __future__ import annotations

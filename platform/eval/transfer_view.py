@@ -1,10 +1,7 @@
-"""The ``2d-transfer`` prediction of one query view: a 2D segmenter labels the source images, and their labels
-(and colours) are splatted into the query view by the SOURCE views' depth (``label_transfer``, ``forward``).
-
-It reads the source views (:class:`SourceViews`) and the query's camera (:class:`QueryCamera`), never the query's
-image, depth or labels; the query image has the sources' size. Ceilings row c (``sray lab ceilings``) is this
-transfer; the method (``sray eval --method 2d-transfer``, the fleet) is scored through :func:`transfer_renderer`.
-A pixel no source labels gets every logit -inf: ``UNSEEN``, a miss of its true class, as row c counts it.
+"""The ``2d-transfer`` prediction of one query view: a 2D segmenter labels the source images, whose labels and
+colours are splatted into the query by the SOURCE depth (``label_transfer``, ``forward``), reading of the query only
+its camera (docs/fleet.md, "2D label transfer"). Ceilings row c is this transfer; the method is scored through
+:func:`transfer_renderer` (a pixel no source labels: all logits -inf, ``UNSEEN``).
 """
 
 from __future__ import annotations

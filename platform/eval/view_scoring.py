@@ -1,11 +1,6 @@
-"""Render held-out query views of one scene and score them (validation, ``sray eval``, the fleet).
-
-:func:`predict_view` renders one evaluation sample with the model's one whole-view renderer and reads its ground
-truth at the same pixels; :func:`score_views` scores a scene's views: semantics from one confusion matrix per scene
-("dataset-level") and per image, colour by PSNR, and by SSIM on whole images only (strided pixels are not
-neighbours). A pixel without prediction (all logits -inf: ``2d-transfer`` where no source sees it) holds
-``UNSEEN`` and counts as a miss of its true class (``label_transfer.UNSEEN_RULE``). LPIPS is not reported: its
-backbones are downloaded at run time, which this platform cannot do.
+"""Render held-out query views and score them: semantics from one confusion matrix per scene ("dataset-level") and
+per image, colour by PSNR, and by SSIM on whole images only. A pixel without prediction (all logits -inf) holds
+``UNSEEN``, a miss of its true class. LPIPS is not reported: its backbones are downloaded at run time.
 """
 
 from __future__ import annotations

@@ -1,18 +1,8 @@
-"""``sray eval``: score a pretrained model on unseen scenes with the paper's generalization protocol.
-
-The model is any registered method's :class:`~sray.platform.eval.eval_model.EvalModel` (an S-Ray checkpoint,
-``2d-transfer``'s segmenter) as it is, with no per-scene optimisation. Every ``test`` view of a scene is rendered
-and scored by ``scene_scoring.score_scene`` at every ``stride``-th pixel, from its ``n_source`` FIXED sources (its
-top-ranked neighbours in the scene's ``source`` split). Outputs under ``out_dir``:
-
-* ``metrics.json``: ``EvalModel.record``, the ``protocol`` (``EvalProtocol``), then per scene and the unweighted
-  mean over scenes, in blocks that each name their protocol: ``dataset_level`` (one confusion matrix per scene;
-  per scene also ``iou_per_class``, null for an absent class), ``per_image``, ``colour`` (PSNR; SSIM only at
-  stride 1); per-view scores; the LPIPS note;
-* ``renders/<scene>/<view>_{pred,gt,error,panel}.png`` at the render's resolution (a pixel without prediction is
-  drawn unlabelled and counts as an error).
-
-All of it goes into a new tracked run (metrics at the checkpoint's step, 0 without one).
+"""``sray eval``: score any method's pretrained model as it is on unseen scenes with the paper's generalization
+protocol (docs/fleet.md, "``sray eval``"): every ``test`` view from its ``n_source`` fixed sources, at every
+``stride``-th pixel. Writes ``metrics.json`` (the model's record, the protocol, per scene and the unweighted mean
+over scenes in blocks that name their protocol, per-view scores) and the PNGs of every view, all of it in a new
+tracked run (metrics at the checkpoint's step, 0 without one).
 """
 
 from __future__ import annotations
@@ -78,10 +68,8 @@ def training_scenes(shards: Path, count: int) -> list[str]:
 
 
 def select_scenes(shards: Path, scenes: list[str] | None) -> tuple[list[str], dict[str, dict]]:
-    """The scenes to evaluate (default: every ``role == "test"`` scene) and their metadata.
-
-    ValueError names the manifest and the fix for unknown scenes or scenes without ``test`` views.
-    """
+    """The scenes to evaluate (default: every ``role == "test"`` scene) and their metadata; ValueError naming the
+    manifest and the fix for unknown scenes or scenes without ``test`` views."""
     manifest = read_manifest(Path(shards))
     where = Path(shards) / "manifest.json"
     if scenes is None:
@@ -157,11 +145,8 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
 def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out_dir: Path, n_source: int = 8,
                    stride: int = 1, tracking_uri: str | None = None, experiment: str = "sray-eval", *,
                    tracker: str = DEFAULT_TRACKER, progress: bool = True) -> dict:
-    """Evaluate ``model`` on ``scenes`` (default: the manifest's test scenes); see the module doc. ``tracker``: a
-    registry name; ``tracking_uri``: its store (None: the tracker's default store in the working directory).
-
-    Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (the run's ``RunHandle`` fields).
-    """
+    """Evaluate ``model`` on ``scenes`` (default: the manifest's test scenes), tracked by ``tracker`` in its store
+    ``tracking_uri`` (None: its default); the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run``."""
     if stride < 1 or n_source < 1:
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")
     tracking = get_tracker(tracker, tracking_uri or "")
@@ -229,8 +214,7 @@ def text_cell(value: Any, fmt: str) -> str:
 
 
 def text_table(rows: list[tuple[str, ...]]) -> list[str]:
-    """Lines of a plain-text table of ``rows`` (the first the head, ruled off below): the first column left-aligned,
-    the others right-aligned."""
+    """Lines of a plain-text table of ``rows`` (the first, the head, ruled off), the first column left-aligned."""
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(v.ljust(w) if i == 0 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths))) for r in rows]
     lines.insert(1, "-" * len(lines[0]))

@@ -1,13 +1,6 @@
-"""The axes ``sray stability`` sweeps, each with levels from harmless to broken, and what a point shows a row.
-
-An axis is of kind ``perturb`` (source images or cameras perturbed, :func:`perturb_views`, in the units of
-``sray.data_tools.perturbations``), ``sources`` (how many source views, or the query's nearest ranked neighbours
-dropped so more samples are seen by none) or ``precision`` (inference autocast, categorical, fp32 first). Which rows
-an axis stresses: :meth:`Axis.applies`; a row without sources (Semantic-NeRF) has its training views perturbed and
-counts them on ``source_views``.
-
-Many points show a row the same thing (every clean level is the clean input; 8 source views is the clean point when
-the protocol uses 8), so a point becomes a :class:`PointSpec` and results are stored and reused per spec.
+"""The axes ``sray stability`` sweeps, from harmless to broken (docs/stability.md, "Axes and their units"), and
+what a point shows a row: many points show a row the same thing (every clean level is the clean input), so a point
+becomes a :class:`PointSpec` and results are stored and reused per spec.
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
-"""The stability suite's points as a study of the engine (``sray.platform.sweep``): plan, point function, run,
-stored results.
-
-One trial per point key (``suite.point_key``), under ``<out>/study/<preset>/``, completed launch after launch
-(``incremental``): a finished point never runs again, whatever axes or rows a later run asks for; an errored one
-counts as ``failed`` until a run that asks for it runs it again. The points run one after another in one process
-(``reuse_actors``): the first loads the scenes and models (:func:`suite_for`), the next reuse them.
-``definition.json`` records the preset and the models the points were made with: a run under another definition,
-or with another model in a role both runs name, is refused.
+"""The stability suite's points as a study of the engine, completed launch after launch (``incremental``): one
+trial per point key under ``<out>/study/<preset>/``, run one after another in one process that loads the scenes and
+models once (:func:`suite_for`), ``definition.json`` refusing a changed preset or model (docs/stability.md,
+"Outputs").
 """
 
 from __future__ import annotations
@@ -35,8 +30,7 @@ from sray.platform.stability.stress_scenes import load_scenes
 from sray.platform.stability.suite import Planned, Suite, compute_spec, point_key, point_record
 from sray.platform.sweep.incremental import missing, run_missing
 from sray.platform.sweep.outcomes import TrialOutcome
-from sray.platform.sweep.study import StudySettings, TrialContext
-from sray.platform.sweep.trial_files import ERRORED, FINISHED, read_record, trial_folder
+from sray.platform.sweep.study import ERRORED, FINISHED, StudySettings, TrialContext, read_record, trial_folder
 from sray.platform.train.launcher import init_ray
 
 STUDY_DIR = "study"
@@ -77,8 +71,7 @@ def scene_training(inputs: SuiteInputs) -> SceneTraining:
 
 
 def suite_for(inputs: SuiteInputs) -> Suite:
-    """The suite of ``inputs``: built (scenes read, models loaded onto the device) on the first call of a
-    process, reused while the inputs stay the same."""
+    """The suite of ``inputs``: built on a process's first call, reused while the inputs stay the same."""
     if not _loaded or _loaded[0][0] != inputs:
         _loaded.clear()
         models = {row.name: get_method(row.method).eval_model(row.request(inputs.models, inputs.device))
@@ -127,8 +120,7 @@ def check_definition(folder: Path, preset: Preset, models: SuiteModels) -> None:
 
 
 def study_plan(preset: Preset, planned: Planned) -> dict[str, dict[str, Any]]:
-    """Point key -> the plan's point (the spec's fields and whether a fault drill poisons it), each key once, in the
-    order of ``planned``."""
+    """Point key -> the plan's point (the spec's fields, ``poison``), each key once, in the order of ``planned``."""
     plan: dict[str, dict[str, Any]] = {}
     for axis, row, level, seed in planned:
         key, spec, poison = point_key(preset, axis, row, level, seed)
@@ -137,8 +129,8 @@ def study_plan(preset: Preset, planned: Planned) -> dict[str, dict[str, Any]]:
 
 
 def run_points(out: Path, planned: Planned, inputs: SuiteInputs) -> list[TrialOutcome]:
-    """Run the points of ``planned`` that have no result yet, one at a time (Ray started if needed), each reserving
-    every CPU of the local Ray (its torch threads) and one GPU on CUDA; the outcome of every point key."""
+    """Run the points of ``planned`` without a result, one at a time, each reserving every CPU of the local Ray (its
+    torch threads) and one GPU on CUDA; the outcome of every point key."""
     preset = inputs.preset
     study = study_folder(out, preset)
     check_definition(study, preset, inputs.models)

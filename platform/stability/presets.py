@@ -1,9 +1,6 @@
-"""The sizes of ``sray stability --preset toy|cpu-small|gpu``: levels per axis, seeds, the world and pretraining a
-preset builds when no checkpoint is given, the evaluation budgets and the one CPU-second budget of the trained rows.
-
-Points that draw nothing at random (a zero-shot row's clean point, source-view choice, precision) are computed once;
-every perturbed point and every point of a trained row is a mean over ``seeds`` seeds. A preset's own world
-pretrains each model once (one pretraining seed).
+"""The sizes of ``sray stability --preset toy|cpu-small|gpu`` (docs/stability.md, "Presets"): levels per axis,
+seeds, the world and pretraining used when no checkpoint is given, the evaluation budgets and the one CPU-second
+budget of the trained rows.
 """
 
 from __future__ import annotations

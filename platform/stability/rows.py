@@ -1,11 +1,6 @@
-"""The rows of the stability suite, read off the method registry (docs/stability.md, "Rows"): which model of which
-method is stressed, in which mode, and how its legend and table header name what it saw and what it was given.
-
-A registered method gives ``<name>`` (zero-shot: its ``eval_model``'s pretrained model, when it has one) and
-``<name>-scene`` (its fleet learner trained on the test scene for the suite's one CPU-second budget). A method that
-renders from source views and reads them as its checkpoint does (S-Ray) also gets ``<name>-no-cra``, zero-shot, when
-the no-CRA checkpoint is given. The registry's depth twins are placed (``with_depth_twins``): ``sray-rgbd`` stands
-just before a method that reads the source depth, even when not asked for.
+"""The rows of the stability suite, read off the method registry (docs/stability.md, "Rows"): ``<name>`` (zero-shot,
+when the method has an ``eval_model``), ``<name>-scene`` (trained on the scene), S-Ray's ``-no-cra``, the depth twins
+placed; how legends and headers name what a row saw and was given.
 """
 
 from __future__ import annotations
@@ -33,8 +28,7 @@ VARIANT_LOOKS = {("no-cra", False): ChartStyle("", "#2ca02c", "^")}
 
 @dataclass(frozen=True)
 class SuiteModels:
-    """The pretrained models a run stresses, given (``--checkpoint``, ``--checkpoint-no-cra``, ``--segmenter``) or
-    pretrained by the preset's own world."""
+    """The pretrained models a run stresses, given (``--checkpoint``, ...) or pretrained by the preset's world."""
 
     checkpoint: Path
     """S-Ray checkpoint folder: the zero-shot S-Ray rows, and the shared model every trained row is built with."""
@@ -85,8 +79,7 @@ class Row:
         return EvalRequest(checkpoint=checkpoint, segmenter=models.segmenter, device=device, fast=None)
 
     def style(self, protocol: EvalProtocol) -> ChartStyle:
-        """Legend and look: the method's own label for the mode, the variant, whether it saw the scene and the
-        inputs its ``protocol`` names."""
+        """Legend and look: the method's label for the mode, the variant, whether it saw the scene, its inputs."""
         method = get_method(self.method)
         base = method.style if self.trained else method.zero_shot or ChartStyle(
             f"{method.name} zero-shot", method.style.color, method.style.marker)

@@ -1,11 +1,6 @@
-"""One point of the suite for a row trained on the scene: the method's fleet learner (``Method.build``, as a fleet
-task builds it) trained on what the spec shows it of one test scene for the suite's CPU-second budget, then scored
-on the scene's held-out views (docs/stability.md, "Trained on the scene").
-
-A row with sources trains on the scene's whole source pool, one without (Semantic-NeRF) on ``n_views`` views spread
-over it; a perturbation touches every training view. Samples are drawn as the fleet's loader draws them, seeded by
-the spec's seed (which also seeds the method); training stops at the first step past ``finetune.max_cpu_seconds``.
-No held-out score is read before the end: no early stopping, no choice of a best state.
+"""One point of the suite for a row trained on the scene: the method's fleet learner trained on what the spec shows
+it of one test scene for the suite's CPU-second budget (samples drawn as the fleet's loader draws them, seeded), then
+scored on the scene's held-out views; no early stopping (docs/stability.md, "Trained on the scene").
 """
 
 from __future__ import annotations
@@ -38,8 +33,7 @@ from sray.platform.train.step import step_seed
 
 
 def scene_settings(preset: Preset, segmenter: Path | None) -> FleetConfig:
-    """The fleet settings every trained row is built and budgeted with: the fleet's defaults, the preset's
-    Semantic-NeRF network, rays per step and ``scene_cpu_seconds``, ``segmenter``, the full render held out."""
+    """The fleet settings of every trained row: the preset's network, rays and ``scene_cpu_seconds``, full renders."""
     if preset.scene_cpu_seconds <= 0:
         raise ValueError(f"stability preset {preset.name!r}: scene_cpu_seconds is {preset.scene_cpu_seconds}; the rows "
                          "trained on the scene need a positive CPU budget")
@@ -114,9 +108,8 @@ def train_for_budget(setup: SceneSetup, training: SceneTraining, scene: StressSc
 
 def scene_point(training: SceneTraining, row: Row, scene: StressScene, spec: PointSpec, stride: int, chunk: int,
                 probe: tuple[int, float], poison: bool = False) -> dict[str, Any]:
-    """Train ``row``'s method on ``scene`` at ``spec`` and score it: mIoU, PSNR, non-finite rays, steps, CPU and wall
-    seconds of training, training views and (rows with sources) the unseen fraction (``probe``: ``zero_shot_point``).
-    """
+    """Train ``row``'s method on ``scene`` at ``spec`` and score it: scores, non-finite rays, steps, CPU and wall
+    seconds, training views and (rows with sources) the unseen fraction (``probe``: ``zero_shot_point``)."""
     seed = 0 if spec.seed is None else spec.seed
     train_ids = scene.pool_ids if row.uses_sources else training_views(scene.pool_ids, spec.n_views)
     views = scene.views if spec.perturbation is None else perturbed_views(scene, train_ids, *spec.perturbation, seed)

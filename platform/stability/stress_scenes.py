@@ -1,10 +1,6 @@
-"""The unseen test scenes a stability suite stresses, read once; their perturbed copies; the sources a point
-renders each held-out query from, and how much of the query those see.
-
-A perturbation replaces the stored views it touches (colour re-encoded as lossless PNG, camera replaced); query
-views are never perturbed, so every level is scored against the same ground truth. The generator of a (seed, axis,
-scene) is the same at every level (common random numbers), so levels differ only by magnitude. With no
-perturbation, ``n_source`` protocol sources are exactly the ones ``sray eval`` takes.
+"""The unseen test scenes a stability suite stresses, read once; their perturbed copies (query views never, the
+generator of a (seed, axis, scene) the same at every level); the sources a point renders each query from (with no
+perturbation, ``sray eval``'s), and how much of the query they see.
 """
 
 from __future__ import annotations
@@ -112,9 +108,8 @@ def source_samples(scene: StressScene, views: dict[str, StoredView], spec: Point
 
 @torch.no_grad()
 def unseen_fraction(sample: EvalSample, stride: int, n_depths: int, min_depth: float) -> float:
-    """What the ``unseen_rays`` axis charts: the fraction of the query's deterministic coarse samples (``n_depths``
-    bin centres per ray, every ``stride``-th pixel) that project inside no source image (or lie behind every
-    source camera)."""
+    """The fraction of the query's coarse samples (``n_depths`` bin centres per ray, every ``stride``-th pixel) that
+    project inside no source image (or lie behind every source camera): the ``unseen_rays`` axis's x."""
     h, w = sample.query_label.shape
     uv, _, _ = strided_pixels(h, w, stride)
     origins, dirs, near, far = ray_batch(sample, uv).query.rays()                   # (R, 3), (R, 3), (R,), (R,)

@@ -1,13 +1,8 @@
-"""What the stability suite computes: every (axis, row, level, seed) a run asks for, and one point's result.
+"""What the stability suite computes: every (axis, row, level, seed) a run asks for, and the result of a spec (a
+method that raises, diverges or outputs non-finite values is ``failed`` there, and the suite goes on).
 
-Points that show a row the same input share one ``PointSpec``, computed once under its key (:func:`point_key`): a
-zero-shot row's renders its pretrained model (``zero_shot_points``), a trained row's trains its method on each of the
-first ``trained_scenes`` test scenes (``scene_points``). A method that raises, diverges or outputs non-finite values
-is recorded as ``failed`` with a one-line reason (:func:`compute_spec` never raises) and the suite goes on.
-
-A point record: ``axis``, ``method`` (the row's name), ``level``, ``seed`` (None for a deterministic point),
-``status``, ``miou`` (%) and ``psnr`` (dB) (None when failed), ``x`` (the chart's x: the level, the measured unseen
-fraction on ``unseen_rays``, None on ``precision``), ``error``, ``key`` and the spec's result.
+A point record: ``axis``, ``method`` (the row's name), ``level``, ``seed`` (None: deterministic), ``status``,
+``miou`` (%) and ``psnr`` (dB) (None when failed), ``x`` (the chart's x), ``error``, ``key`` and the spec's result.
 """
 
 from __future__ import annotations

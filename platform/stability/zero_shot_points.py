@@ -1,9 +1,5 @@
-"""One point of the suite for a zero-shot row, and the watch over every point's renders.
-
-A method's pretrained model, as its ``eval_model`` builds it for ``sray eval``, renders the held-out views of the
-test scenes from the sources a spec picks, scored by ``sray eval``'s loop (``score_scene``); scenes are averaged
-unweighted. With no perturbation, ``n_source`` protocol sources, fp32 and the same stride, a point reproduces
-``sray eval``'s dataset-level mIoU and PSNR exactly.
+"""One point of the suite for a zero-shot row (the method's ``eval_model``, rendered and scored as ``sray eval``
+does: at the clean point the same scores), and the watch over every point's renders.
 """
 
 from __future__ import annotations
@@ -63,10 +59,9 @@ def precision_context(precision: str, device: torch.device) -> contextlib.Abstra
 
 def zero_shot_point(model: EvalModel, scenes: list[StressScene], spec: PointSpec, stride: int, chunk: int,
                     probe: tuple[int, float], poison: bool = False) -> dict[str, Any]:
-    """Score ``model`` at ``spec`` on ``scenes``: mean dataset-level mIoU and PSNR, per-scene scores, the measured
-    unseen fraction (``probe``: coarse depths per ray and the nearest depth a source sees), non-finite rays and
-    (below fp32) argmax agreement with the fp32 render. A perturbation touches the sources the spec picks for the
-    scene's queries, drawn once per scene in view order."""
+    """Score ``model`` at ``spec`` on ``scenes``: mean mIoU and PSNR, per-scene scores, the unseen fraction
+    (``probe``: coarse depths per ray, nearest source depth), non-finite rays and (below fp32) argmax agreement with
+    the fp32 render. A perturbation touches the sources the spec picks, drawn once per scene in view order."""
     watch = OutputWatch(poison)
     device = model.device
     per_scene, unseen, agree, total = {}, [], 0, 0

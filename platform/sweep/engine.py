@@ -1,16 +1,7 @@
-"""The study engine: a plan of trials (key -> point) and a point function, run on Ray Tune, resumable and
-fault-isolated.
-
-* Tune gets the plan as a grid over its keys (the points were drawn before, so a resumed study runs the same
-  trials); the trial wrapper never runs a trial with an outcome again, records the error of one that raises
-  while the others go on (``fail_fast`` off), and keeps what the point function returns.
-* Early stops (ASHA on ``time_attr``, the wall-time budget) are requests the trial carries out itself
-  (:class:`GracefulASHA`).
-* ``resume`` restores Tune's state (finished and errored trials stay, unfinished ones start again; ASHA's rungs
-  start empty); without it a new experiment replaces any earlier one (the trials' own records stay). No trial
-  starts after ``StudySettings.start_by``.
-
-A training job's last report after a stop request lacks the metric, so Tune's strict metric check is off.
+"""The study engine: a plan of trials (key -> point) and a point function run on Ray Tune, resumable and
+fault-isolated. A trial with an outcome never runs again; one that raises records its error while the others go on;
+early stops (ASHA, the wall-time budget) are requests the trial carries out itself; ``resume`` restores Tune's state
+(ASHA's rungs start empty). A training job's last report after a stop lacks the metric: Tune's strict check is off.
 """
 
 from __future__ import annotations
@@ -29,9 +20,9 @@ from ray.tune.schedulers import AsyncHyperBandScheduler, TrialScheduler
 
 from sray.platform.common.fault_hook import fail_trial_if_listed, propagated_env
 from sray.platform.sweep.outcomes import TrialOutcome, collect_outcomes
-from sray.platform.sweep.study import PointFunction, StudySettings, TrialContext
-from sray.platform.sweep.trial_files import (BY_BUDGET, BY_SCHEDULER, ERRORED, FINISHED, append_history, read_history,
-                                             read_record, read_stop_request, request_stop, trial_folder, write_record)
+from sray.platform.sweep.study import (BY_BUDGET, BY_SCHEDULER, ERRORED, FINISHED, PointFunction, StudySettings,
+                                       TrialContext, append_history, read_history, read_record, read_stop_request,
+                                       request_stop, trial_folder, write_record)
 
 TUNE_FOLDER = "tune"
 """The study's folder holding Tune's experiment state."""
@@ -80,7 +71,7 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
 
 
 class GracefulASHA(AsyncHyperBandScheduler):
-    """ASHA whose STOP becomes the trial's own stop request (``trial_files.request_stop``), always CONTINUE for Tune.
+    """ASHA whose STOP becomes the trial's own stop request (``study.request_stop``), always CONTINUE for Tune.
 
     Tune carries out a STOP by ending the trial's process; a training trial's placement group outlives it (Ray
     Train's cleaner polls the state API, which a local Ray without the dashboard does not serve), so the next
@@ -109,8 +100,7 @@ def _point_text(point: Mapping[str, Any]) -> str:
 
 
 class TrialLog(Callback):
-    """The driver's record of results (``history.jsonl``, with the trial's running time across launches), a line
-    per result, and the wall-time budget's stop requests."""
+    """The driver's record of results (``history.jsonl``), a line per result, the wall-time budget's stop requests."""
 
     def __init__(self, settings: StudySettings, plan: Mapping[str, Mapping[str, Any]]) -> None:
         """``plan``: the study's points, printed when their trials start."""
@@ -132,8 +122,7 @@ class TrialLog(Callback):
 
     def on_trial_result(self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any],
                         **info: Any) -> None:
-        """Append the result to the trial's history; ask the trial to stop once past the wall-time budget. Its
-        running time is this launch's ``time_total_s`` plus what its earlier launches reached."""
+        """Append the result, with the running time across launches, to the history; enforce the wall-time budget."""
         key, s = trial.config["key"], self.settings
         folder = trial_folder(s.folder, key)
         launch = max(len(read_record(folder).launches) - 1, 0)
@@ -163,11 +152,8 @@ def _trial_dirname(trial: Any) -> str:
 
 def run_study(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction, settings: StudySettings,
               resume: bool = False) -> list[TrialOutcome]:
-    """Run every trial of ``plan`` (Ray already initialised) and return their outcomes, in plan order.
-
-    ``resume``: continue the study in ``settings.folder``. ``point_fn`` must be picklable (a module-level function
-    or a partial of one).
-    """
+    """Run every trial of ``plan`` (Ray already initialised; ``point_fn`` picklable) and return their outcomes, in
+    plan order. Without ``resume`` a new Tune experiment replaces any earlier one (the trials' records stay)."""
     os.environ["TUNE_DISABLE_STRICT_METRIC_CHECKING"] = "1"
     job = _TrialJob(point_fn, {k: dict(v) for k, v in plan.items()}, str(settings.folder), propagated_env(),
                     settings.start_by)

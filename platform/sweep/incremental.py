@@ -1,7 +1,6 @@
-"""A study completed launch after launch (``sray lab study``'s trials, ``sray stability``'s points): each launch
-runs only the trials of its plan without a result, each as a new Tune experiment, the trials' own records being
-the store. A finished trial never runs again; an errored one runs again in the next launch that asks for it (its
-error printed); a result an earlier harness stored elsewhere is imported as a finished trial (:func:`import_result`).
+"""A study completed launch after launch (``sray lab study``, ``sray stability``): each launch runs, as a new Tune
+experiment, only the trials without a result (errored ones again); the trials' records are the store, and a result
+an earlier harness stored elsewhere can be imported as a finished trial.
 """
 
 from __future__ import annotations
@@ -13,14 +12,12 @@ from typing import Any
 
 from sray.platform.sweep.engine import run_study
 from sray.platform.sweep.outcomes import TrialOutcome, collect_outcomes
-from sray.platform.sweep.study import PointFunction, StudySettings
-from sray.platform.sweep.trial_files import (ERRORED, FINISHED, TRIALS, TrialRecord, read_record, trial_folder,
-                                             write_record)
+from sray.platform.sweep.study import (ERRORED, FINISHED, TRIALS, PointFunction, StudySettings, TrialRecord,
+                                       read_record, trial_folder, write_record)
 
 
 def import_result(study: Path, key: str, result: dict[str, Any], source: Path) -> bool:
-    """Record ``result``, read from ``source``, as the finished trial ``key`` of ``study``, unless that trial has
-    finished already; True when it was imported."""
+    """Record ``result``, read from ``source``, as the finished trial ``key`` unless it finished; True if imported."""
     folder = trial_folder(study, key)
     record = read_record(folder)
     if record.outcome == FINISHED:
@@ -51,8 +48,7 @@ def missing(study: Path, plan: Mapping[str, Mapping[str, Any]]) -> dict[str, dic
 
 def run_missing(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction,
                 settings: StudySettings) -> list[TrialOutcome]:
-    """Run the trials of ``plan`` that have no result (errored ones again), none after ``settings.start_by``;
-    every trial's outcome in plan order (``TrialOutcome.result``: what it returned or what was imported)."""
+    """Run the trials of ``plan`` without a result (none after ``settings.start_by``); every outcome, in plan order."""
     todo = missing(settings.folder, plan)
     ran: dict[str, TrialOutcome] = {}
     if todo and not (settings.start_by and time.time() >= settings.start_by):

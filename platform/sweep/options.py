@@ -1,17 +1,6 @@
-"""A sweep as asked for: its options, its spec file (a YAML file whose keys are ``sray sweep``'s own flags) and
-the request built from both.
-
-A spec file (``jobs/sweeps/demo_lr_sem.yaml`` is one)::
-
-    recipe: synth-small                 # the starting training config
-    data: outputs/demo/shards           # data.shards
-    set: {optim.lr_final: 1.0e-4}       # fixed overrides, as `sray train --set`
-    params:                             # section.field: SPEC (sray.platform.sweep.spec)
-      optim.lr: loguniform(3e-4, 3e-3)
-    samples: 2
-    steps: 60                           # and any other option of SweepOptions
-
-Flags given on the command line win over the file's values; what neither gives keeps its default.
+"""A sweep as asked for: its options, its spec file and the request built from both. A spec file's keys are
+``sray sweep``'s own flags (``recipe``, ``data``, ``set``, ``params`` and every option; ``jobs/sweeps/demo_lr_sem.yaml``
+is one); flags given on the command line win over the file's values, and what neither gives keeps its default.
 """
 
 from __future__ import annotations

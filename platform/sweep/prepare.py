@@ -1,29 +1,127 @@
-"""Everything about a training sweep checked before anything starts or is written.
-
-:func:`prepare_sweep` turns a request into the sweep's record and every trial's config, refusing in one line what
-cannot run: a malformed or unknown parameter, a value a field rejects, a metric the trials do not report, a
-scheduler that could never stop anything, a taken name, a missing shard folder or tracking store.
+"""Everything about a training sweep checked before anything starts or is written, and its record ``sweep.json``
+(everything needed to continue it). A wrong parameter, value, metric, scheduler, name, shard folder or store, or
+more trials at once than the cluster has workers for, is refused in one line.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+import json
+import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
+import ray
+import torch
+
+from sray.data_tools.atomic import atomic_write_json
 from sray.platform.config.train_config import TrainConfig, apply_override
-from sray.platform.sweep.capacity import TRIAL_RESOURCES
+from sray.platform.sweep.options import SweepOptions, SweepRequest
+from sray.platform.sweep.spec import SpecError, build_plan, check_unique, with_seeds
 from sray.platform.sweep.study import StudySettings
-from sray.platform.sweep.options import SweepOptions
-from sray.platform.sweep.options import SweepRequest
-from sray.platform.sweep.plan import build_plan, with_seeds
-from sray.platform.sweep.spec import SpecError, check_unique
-from sray.platform.sweep.sweep_record import SweepRecord
 from sray.platform.sweep.training_trial import TIME_ATTR, check_metric, check_params, trial_job_config
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.train.inputs import check_request, check_shards, check_tracker
+from sray.platform.train.resources import InfeasibleRequest, NodeResources, live_nodes, workers_per_node
+
+RECORD_FILE = "sweep.json"
+FORMAT = "sray-sweep"
+
+
+@dataclass
+class SweepRecord:
+    """A sweep's stored description and progress."""
+
+    name: str
+    options: dict[str, Any]
+    """``SweepOptions`` as a dict."""
+    params: list[str]
+    """Each swept field as ``section.field=SPEC``."""
+    plan: dict[str, dict[str, Any]]
+    """Trial key -> field path -> value."""
+    base: dict[str, Any]
+    """The trials' common training config (``TrainConfig.to_dict``)."""
+    register_as: str
+    """Model name the best trial's checkpoint is registered under ('' = not registered)."""
+    tracker: str
+    """Registry name of the tracker."""
+    store: str
+    """The tracker's store (MLflow: the tracking URI)."""
+    parent_run_id: str = ""
+    """Id of the sweep's parent run ('' before it exists)."""
+    finished_children: list[str] = field(default_factory=list)
+    """Keys of the trials whose child runs have been finished (tags, checkpoint, status)."""
+    registered: str = ""
+    """Key of the trial registered as the best model ('' = none yet)."""
+    format: str = FORMAT
+
+
+def write_sweep_record(folder: Path, record: SweepRecord) -> Path:
+    """Write ``sweep.json`` atomically; returns its path."""
+    path = Path(folder) / RECORD_FILE
+    atomic_write_json(path, asdict(record))
+    return path
+
+
+def read_sweep_record(folder: Path) -> SweepRecord:
+    """The sweep recorded in ``folder``; FileNotFoundError or ValueError naming the file and the fix."""
+    path = Path(folder) / RECORD_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: missing, so there is no sweep {Path(folder).name!r} to resume; check "
+                                "--resume NAME and --out")
+    raw = json.loads(path.read_text())
+    if raw.get("format") != FORMAT:
+        raise ValueError(f"{path}: field 'format' is {raw.get('format')!r}, expected {FORMAT!r}")
+    return SweepRecord(**raw)
+
+
+TRIAL_RESOURCES = {"memory": 1.0}
+"""What Tune reserves for a training trial's own process, which only drives its job: one byte of memory (Tune
+refuses an empty request; any CPU would be taken from the trial's own workers)."""
+
+
+def expected_nodes() -> list[NodeResources]:
+    """The nodes of the connected Ray cluster, or else of the local Ray ``init_ray`` would start (before it does)."""
+    if ray.is_initialized():
+        return live_nodes()
+    return [NodeResources("this machine", float(os.cpu_count() or 1), float(torch.cuda.device_count()))]
+
+
+def trials_at_once(cfg: TrainConfig, nodes: list[NodeResources]) -> int:
+    """Trials of ``cfg``'s size the nodes host at once (0 when not even one fits)."""
+    workers = sum(workers_per_node(n, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker) for n in nodes)
+    return workers // cfg.run.workers
+
+
+def _size(cfg: TrainConfig) -> str:
+    return f"{cfg.run.workers} worker(s) of {cfg.run.cpus_per_worker:g} CPU + {cfg.run.gpus_per_worker:g} GPU"
+
+
+def plan_concurrency(requested: int, configs: list[TrainConfig], nodes: list[NodeResources]) -> int:
+    """The number of trials to run at once on ``nodes``: ``requested`` if they fit that many trials of every
+    size in ``configs``, as many as fit when ``requested`` is 0; :class:`InfeasibleRequest` naming the fix."""
+    have = (f"{sum(n.cpus for n in nodes):g} CPUs and {sum(n.gpus for n in nodes):g} GPUs on {len(nodes)} "
+            "node(s)")
+    fits = [(trials_at_once(cfg, nodes), cfg) for cfg in configs]
+    for n, cfg in fits:
+        if n == 0:
+            raise InfeasibleRequest(
+                f"run.workers / run.cpus_per_worker / run.gpus_per_worker: a trial trains {_size(cfg)}, which the "
+                f"cluster ({have}) cannot host at once; lower --workers, --set run.cpus_per_worker or "
+                "--gpus-per-worker, or join a larger cluster with --address")
+    fit, widest = min(fits, key=lambda pair: pair[0])
+    if requested == 0:
+        return fit
+    if requested > fit:
+        raise InfeasibleRequest(
+            f"--max-concurrent {requested}: each trial trains {_size(widest)} and the cluster ({have}) fits {fit} "
+            f"such trial(s) at once; use --max-concurrent {fit} (or 0 for as many as fit), fewer workers per trial "
+            "(--workers), or fractional CPUs (--set run.cpus_per_worker=0.5)")
+    return requested
+
 
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 """A sweep name: a folder name and a run-name prefix (letters, digits, ``. _ -``)."""
@@ -43,8 +141,7 @@ class PreparedSweep:
 
 
 def sweep_base(base: TrainConfig, options: SweepOptions, folder: Path, store: str) -> TrainConfig:
-    """The trials' common config: budgets applied, jobs under ``<folder>/jobs``, absolute shard folder, the
-    resolved tracking store, no per-trial model registration (the sweep registers its best trial)."""
+    """The trials' common config: budgets applied, jobs under ``<folder>/jobs``, absolute paths, no registration."""
     cfg = copy.deepcopy(base)
     for path, value in (("optim.steps", options.steps), ("optim.cpu_seconds", options.cpu_seconds)):
         if value:
@@ -83,8 +180,8 @@ def _check_trials(configs: list[TrainConfig], options: SweepOptions) -> None:
 
 
 def prepare_sweep(request: SweepRequest) -> PreparedSweep:
-    """Check a new sweep and build its record and trial configs (nothing is written, Ray is not started);
-    SpecError, InputError, FileExistsError. The data and the store are checked by :func:`check_inputs`."""
+    """Check a new sweep and build its record and trial configs (nothing written, Ray not started; data and store:
+    :func:`check_inputs`)."""
     if not NAME.match(request.name):
         raise SpecError(f"--name {request.name!r}: use letters, digits, '.', '_' and '-' (it names a folder)")
     folder = (Path(request.out) / request.name).resolve()
@@ -108,8 +205,7 @@ def prepare_sweep(request: SweepRequest) -> PreparedSweep:
 
 
 def check_inputs(prepared: PreparedSweep) -> None:
-    """The trials' shard folder and tracking store are usable (InputError naming the fix); the store's schema is
-    made now, before any trial fans out."""
+    """The trials' shard folder and tracking store are usable (the store's schema is made now, before any trial)."""
     base = prepared.configs[0]
     check_shards(Path(base.data.shards))
     check_tracker(base)

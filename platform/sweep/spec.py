@@ -1,19 +1,18 @@
-"""The value grammar of a sweep parameter: ``section.field=SPEC``, SPEC one of four distributions.
-
-* ``choice(a, b, ...)``: one of the values, uniformly; ``grid(a, b, ...)``: every value, crossed with every other
-  grid parameter (each drawn sample of the random parameters runs once per grid combination);
-* ``uniform(lo, hi)``: a float uniform in [lo, hi]; ``loguniform(lo, hi)``: its logarithm uniform (0 < lo).
-
-Listed values are kept as written: the field's own type parses them when a trial's config is built (the typed
-``--set`` path), so a sweep takes any field ``sray train --set`` takes.
+"""A sweep parameter, ``section.field=SPEC`` with SPEC one of ``choice(a, ...)``, ``grid(a, ...)`` (every value,
+crossed with the other grids), ``uniform(lo, hi)``, ``loguniform(lo, hi)``, and the plan: every trial's values, drawn
+once from a seeded generator before anything runs (so a resumed sweep runs the same trials under the same keys), in
+Tune's order (the samples in turn, each crossed with every grid combination). Listed values stay as written: the
+field's own type parses them through the typed ``--set`` path, so a sweep takes any field ``sray train --set`` takes.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
 import re
 from dataclasses import dataclass
+from typing import Any
 
 KINDS = ("choice", "uniform", "loguniform", "grid")
 """The distributions a parameter may have."""
@@ -127,3 +126,37 @@ def check_unique(params: list[Param]) -> None:
         if param.path in seen:
             raise SpecError(f"sweep parameter {param.path}: given twice; give each field one distribution")
         seen.add(param.path)
+
+
+SEED_FIELD = "run.seed"
+"""The training config's seed: ``--seeds N`` makes it a grid parameter over 0..N-1."""
+
+
+def trial_keys(count: int) -> list[str]:
+    """``t000``, ``t001``, ...: one key per trial, zero-padded to at least three digits."""
+    width = max(3, len(str(count - 1)))
+    return [f"t{i:0{width}d}" for i in range(count)]
+
+
+def with_seeds(params: list[Param], seeds: int) -> list[Param]:
+    """``params`` plus ``run.seed=grid(0..seeds-1)`` (``seeds`` 0: unchanged); SpecError when it is swept already."""
+    if seeds <= 0:
+        return list(params)
+    if any(p.path == SEED_FIELD for p in params):
+        raise SpecError(f"sweep parameter {SEED_FIELD}: given and --seeds {seeds} too; keep one of them")
+    return [*params, Param(SEED_FIELD, "grid", tuple(str(s) for s in range(seeds)))]
+
+
+def build_plan(params: list[Param], samples: int, seed: int) -> dict[str, dict[str, Any]]:
+    """Trial key -> {field path: value}, ``samples`` x (product of the grid sizes) trials, draws seeded by ``seed``."""
+    if samples < 1:
+        raise SpecError(f"--samples {samples}: at least 1 sample is needed")
+    grids = [p for p in params if p.kind == "grid"]
+    drawn = [p for p in params if p.kind != "grid"]
+    rng = random.Random(seed)
+    points: list[dict[str, Any]] = []
+    for _ in range(samples):
+        for combo in itertools.product(*(p.values for p in grids)):
+            values = {p.path: p.draw(rng) for p in drawn} | dict(zip((p.path for p in grids), combo))
+            points.append({p.path: values[p.path] for p in params})
+    return dict(zip(trial_keys(len(points)), points))

@@ -1,9 +1,6 @@
-"""The trial of a training sweep: one real training job (``launch_training``) with the point's values set through
-the typed ``--set`` path of ``sray train`` (so any field it takes can be swept, each value checked the same way).
-
-The job ``<sweep>-<key>`` writes under the sweep's ``jobs/`` folder, logs into a tracked run nested under the
-sweep's run and reports its validation metrics to Tune at each checkpoint (``TuneReportCallback``). A second launch
-resumes it from its last checkpoint; a stop request becomes the job's STOP file, so it checkpoints and ends.
+"""The trial of a training sweep: one real training job ``<sweep>-<key>`` with the point's values set through the
+typed ``--set`` path of ``sray train``, nested under the sweep's run, reporting its validation metrics to Tune at
+each checkpoint. A second launch resumes it; a stop request becomes its STOP file (it checkpoints and ends).
 """
 
 from __future__ import annotations
@@ -97,10 +94,7 @@ def _forward_stop(ctx: TrialContext, stop_file: Path, done: threading.Event) -> 
 
 def run_training_trial(point: dict[str, Any], ctx: TrialContext, base: dict[str, Any], sweep: str,
                        parent: RunHandle) -> None:
-    """The point function of a training sweep: train ``base`` with ``point`` set, nested under ``parent``.
-
-    ``base``: the sweep's base config as a dict (output folder, tracking store and shards absolute).
-    """
+    """The point function of a training sweep: train ``base`` (a config dict) with ``point`` set, under ``parent``."""
     cfg = trial_job_config(TrainConfig.from_dict(base), point, sweep, ctx.key)
     job_dir = cfg.job_dir()
     resume = (job_dir / CONFIG_FILE).is_file()
