@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sray.platform.stability.axes import AXES, POSE_CM_PER_DEG, perturb_views
-from sray.platform.stability.presets import PRESETS
+from sray.platform.stability.axes import AXES, POSE_CM_PER_DEG, PRESETS, perturb_views
 from sray.platform.stability.report import axis_table, breaking_point, breaking_summary, level_stats
 
 

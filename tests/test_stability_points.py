@@ -18,8 +18,7 @@ from train_fixtures import tiny_shards  # noqa: E402,F401
 from sray.data_tools.loader.shard_loader import make_eval_samples  # noqa: E402
 from sray.model.config import SRayConfig  # noqa: E402
 from sray.platform.common.eval_protocol import EvalProtocol  # noqa: E402
-from sray.platform.stability.axes import point_spec  # noqa: E402
-from sray.platform.stability.presets import PRESETS  # noqa: E402
+from sray.platform.stability.axes import PRESETS, point_spec  # noqa: E402
 from sray.platform.stability.report import level_stats, panels, write_outputs  # noqa: E402
 from sray.platform.stability.rows import MODES, suite_rows  # noqa: E402
 from sray.platform.stability.scene_points import training_views  # noqa: E402
@@ -211,7 +210,7 @@ def test_point_records_come_from_the_study_and_an_errored_trial_is_a_failed_poin
     """Each planned point reads its spec's trial: finished -> its result, errored -> failed with the error,
     missing -> no records (the axis is not complete)."""
     from sray.platform.stability.points_study import point_records, study_folder, study_plan
-    from sray.platform.sweep.incremental import import_result
+    from sray.platform.sweep.engine import import_result
     from sray.platform.sweep.study import TrialRecord, trial_folder, write_record
 
     planned = planned_points(TOY, ["exposure"], [SRAY])

@@ -1,11 +1,13 @@
-"""Render held-out query views and score them: semantics from one confusion matrix per scene ("dataset-level") and
-per image, colour by PSNR, and by SSIM on whole images only. A pixel without prediction (all logits -inf) holds
-``UNSEEN``, a miss of its true class. LPIPS is not reported: its backbones are downloaded at run time.
+"""Render held-out query views and score them, and the one render-and-score loop of every held-out score
+(:func:`score_scene`). Semantics from one confusion matrix per scene ("dataset-level") and per image, colour by PSNR,
+and by SSIM on whole images only. A pixel without prediction (all logits -inf) holds ``UNSEEN``, a miss of its true
+class. LPIPS is not reported: its backbones are downloaded at run time.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import torch
@@ -105,3 +107,31 @@ def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> 
         ssims = [ssim(v.pred_rgb, v.gt_rgb) for v in views] if big else [float("nan")]
         scores["ssim"] = sum(ssims) / len(ssims)
     return scores
+
+
+@dataclass(frozen=True)
+class ScoredScene:
+    """A scene's rendered held-out views and their scores."""
+
+    scores: dict[str, float]
+    """``score_views``'s."""
+    views: list[ViewPrediction]
+    """In the order of the samples."""
+
+
+def score_scene(renderer: Callable[[EvalSample], RayRenderer], samples: Iterable[EvalSample], n_classes: int,
+                ignore_id: int, stride: int, chunk: int, device: torch.device, fast: FastRender | None = None,
+                on_view: Callable[[ViewPrediction], None] | None = None) -> ScoredScene:
+    """Render every sample of one scene with ``renderer(sample)`` (``predict_view``'s ``stride``, ``chunk`` and
+    ``fast``; under the caller's autocast) and score them in float32, autocast off; ``on_view`` gets each view once
+    rendered. ValueError when there is no sample."""
+    views = []
+    for sample in samples:
+        views.append(predict_view(renderer(sample), sample, stride, chunk, device, fast))
+        if on_view is not None:
+            on_view(views[-1])
+    if not views:
+        raise ValueError("sray.platform.eval.view_scoring: no evaluation sample to score; the scene needs at "
+                         "least one held-out (test) view")
+    with torch.autocast("cpu", enabled=False):
+        return ScoredScene(score_views(views, n_classes, ignore_id), views)

@@ -27,8 +27,7 @@ from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.eval_model import EvalModel, checkpoint_model
 from sray.platform.eval.label_transfer import UNSEEN
-from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import ViewPrediction, class_ious, per_image_scores
+from sray.platform.eval.view_scoring import ViewPrediction, class_ious, per_image_scores, score_scene
 from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel

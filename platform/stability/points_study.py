@@ -1,4 +1,4 @@
-"""The stability suite's points as a study of the engine, completed launch after launch (``incremental``): one
+"""The stability suite's points as a study of the engine, completed launch after launch (``engine.run_missing``): one
 trial per point key under ``<out>/study/<preset>/``, run one after another in one process that loads the scenes and
 models once (:func:`suite_for`), ``definition.json`` refusing a changed preset or model (docs/stability.md,
 "Outputs").
@@ -22,13 +22,12 @@ from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256
-from sray.platform.stability.axes import PointSpec
-from sray.platform.stability.presets import Preset
+from sray.platform.stability.axes import PointSpec, Preset
 from sray.platform.stability.rows import Row, SuiteModels
 from sray.platform.stability.scene_points import SceneTraining, scene_settings
 from sray.platform.stability.stress_scenes import load_scenes
 from sray.platform.stability.suite import Planned, Suite, compute_spec, point_key, point_record
-from sray.platform.sweep.incremental import missing, run_missing
+from sray.platform.sweep.engine import missing, run_missing
 from sray.platform.sweep.outcomes import TrialOutcome
 from sray.platform.sweep.study import ERRORED, FINISHED, StudySettings, TrialContext, read_record, trial_folder
 from sray.platform.train.launcher import init_ray

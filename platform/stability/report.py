@@ -14,8 +14,7 @@ from typing import Any
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
 from sray.platform.common.eval_protocol import EvalProtocol, caption_lines
 from sray.platform.finetune.methods.registry import get_method
-from sray.platform.stability.axes import AXES
-from sray.platform.stability.presets import Preset
+from sray.platform.stability.axes import AXES, Preset
 from sray.platform.stability.rows import VARIANT_WORDS, Row
 from sray.platform.tracking.tracker import Tracker
 from sray.platform.viz.stability_chart import LevelPoint, StabilityPanel, write_stability_chart

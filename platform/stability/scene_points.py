@@ -20,12 +20,11 @@ from sray.data_tools.loader.views import StoredView
 from sray.platform.config.fleet_config import FinetuneSettings, FleetConfig, TransferSettings
 from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.train_config import TrainConfig
-from sray.platform.eval.scene_scoring import score_scene
+from sray.platform.eval.view_scoring import score_scene
 from sray.platform.finetune.methods.method import SceneContext, SceneSetup
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.step_budget import StepClock, time_limit_reached
-from sray.platform.stability.axes import PointSpec
-from sray.platform.stability.presets import Preset
+from sray.platform.stability.axes import PointSpec, Preset
 from sray.platform.stability.rows import Row
 from sray.platform.stability.stress_scenes import StressScene, perturbed_views, source_samples, unseen_fraction
 from sray.platform.stability.zero_shot_points import OutputWatch

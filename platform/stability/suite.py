@@ -13,8 +13,7 @@ from typing import Any
 
 from sray.platform.common.fault_hook import poisoned_point
 from sray.platform.eval.eval_model import EvalModel
-from sray.platform.stability.axes import AXES, PointSpec, point_spec
-from sray.platform.stability.presets import Preset
+from sray.platform.stability.axes import AXES, PointSpec, Preset, point_spec
 from sray.platform.stability.rows import Row
 from sray.platform.stability.scene_points import SceneTraining, scene_point
 from sray.platform.stability.stress_scenes import StressScene

@@ -12,8 +12,7 @@ from torch import Tensor
 
 from sray.model.view_render import RayRenderer
 from sray.platform.eval.eval_model import EvalModel
-from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import predict_view
+from sray.platform.eval.view_scoring import predict_view, score_scene
 from sray.platform.stability.axes import PointSpec
 from sray.platform.stability.stress_scenes import (StressScene, choose_sources, perturbed_views, source_samples,
                                                    unseen_fraction)

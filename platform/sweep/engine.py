@@ -2,6 +2,10 @@
 fault-isolated. A trial with an outcome never runs again; one that raises records its error while the others go on;
 early stops (ASHA, the wall-time budget) are requests the trial carries out itself; ``resume`` restores Tune's state
 (ASHA's rungs start empty). A training job's last report after a stop lacks the metric: Tune's strict check is off.
+
+A study completed launch after launch (``sray lab study``, ``sray stability``: :func:`run_missing`) runs, in each
+launch, only the trials without a result (errored ones again), as a new Tune experiment; the trials' records are the
+store, and a result an earlier harness stored elsewhere can be imported as a finished trial.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ import shutil
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from ray import tune
@@ -21,8 +26,8 @@ from ray.tune.schedulers import AsyncHyperBandScheduler, TrialScheduler
 from sray.platform.common.fault_hook import fail_trial_if_listed, propagated_env
 from sray.platform.sweep.outcomes import TrialOutcome, collect_outcomes
 from sray.platform.sweep.study import (BY_BUDGET, BY_SCHEDULER, ERRORED, FINISHED, PointFunction, StudySettings,
-                                       TrialContext, append_history, read_history, read_record, read_stop_request,
-                                       request_stop, trial_folder, write_record)
+                                       TrialContext, TrialRecord, append_history, read_history, read_record,
+                                       read_stop_request, request_stop, trial_folder, write_record)
 
 TUNE_FOLDER = "tune"
 """The study's folder holding Tune's experiment state."""
@@ -180,3 +185,37 @@ def run_study(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction, se
     grid = tuner.fit()
     errors = {r.config["key"]: f"{type(r.error).__name__}: {r.error}" for r in grid if r.error is not None}
     return collect_outcomes(settings.folder, plan, errors, settings.time_attr)
+
+
+def import_result(study: Path, key: str, result: dict[str, Any], source: Path) -> bool:
+    """Record ``result``, read from ``source``, as the finished trial ``key`` unless it finished; True if imported."""
+    folder = trial_folder(study, key)
+    record = read_record(folder)
+    if record.outcome == FINISHED:
+        return False
+    folder.mkdir(parents=True, exist_ok=True)
+    write_record(folder, TrialRecord(launches=record.launches, outcome=FINISHED, result=result,
+                                     imported=str(source)))
+    return True
+
+
+def missing(study: Path, plan: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
+    """The trials of ``plan`` without a finished outcome, in plan order (Ray must be running to run any)."""
+    return {k: dict(v) for k, v in plan.items() if read_record(trial_folder(study, k)).outcome != FINISHED}
+
+
+def run_missing(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction,
+                settings: StudySettings) -> list[TrialOutcome]:
+    """Run the trials of ``plan`` without a result (none after ``settings.start_by``); every outcome, in plan order."""
+    todo = missing(settings.folder, plan)
+    ran: dict[str, TrialOutcome] = {}
+    if todo and not (settings.start_by and time.time() >= settings.start_by):
+        for key in todo:
+            folder = trial_folder(settings.folder, key)
+            record = read_record(folder)
+            if record.outcome == ERRORED:
+                print(f"[{settings.label}] {key} errored in an earlier launch ({record.error}): running it again",
+                      flush=True)
+                write_record(folder, TrialRecord(launches=record.launches))
+        ran = {o.key: o for o in run_study(todo, point_fn, settings)}
+    return [ran.get(o.key, o) for o in collect_outcomes(settings.folder, plan, {}, settings.time_attr)]
