@@ -19,8 +19,7 @@ from sray.model.runtime import Runtime
 from sray.model.view_render import RayRenderer
 from sray.platform.checkpoints.folders import read_meta
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.eval.segmenter import load_segmenter
-from sray.platform.eval.transfer_view import transfer_renderer
+from sray.platform.eval.segmenter import load_segmenter, transfer_renderer
 from sray.platform.eval.view_scoring import sray_renderer
 
 
@@ -88,7 +87,7 @@ def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRend
 
 def segmenter_model(folder: Path, device: str | None = None, tolerance: float = 0.05) -> EvalModel:
     """The ``2d-transfer`` method with the 2D segmenter saved in ``folder``: source labels splatted by the source
-    depth (``transfer_view``, occlusion test ``tolerance``), an RGB-D method with one render."""
+    depth (``segmenter.transfer_renderer``, occlusion test ``tolerance``), an RGB-D method with one render."""
     folder = Path(folder).resolve()
     segmenter, record = load_segmenter(folder)
     where = torch_device(device)

@@ -200,10 +200,3 @@ def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor,
     candidates = torch.where(visible & (labels != ignore_id), labels, torch.full_like(labels, UNSEEN))
     rgb = None if source_rgb is None else carried_colours(source_rgb, index, visible, tuple(hw))
     return LabelTransfer(labels=vote(candidates).reshape(hw), seen=visible.any(0).reshape(hw), rgb=rgb)
-
-
-def coverage_counts(seen: Tensor, gt_label: Tensor, ignore_id: int) -> tuple[int, int]:
-    """(labelled query pixels some source sees, labelled query pixels) of seen (H, W) bool and the query's
-    ground truth gt_label (H, W) (``ignore_id`` = unlabelled, not counted)."""
-    labelled = gt_label != ignore_id
-    return int((seen & labelled).sum()), int(labelled.sum())

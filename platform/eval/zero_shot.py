@@ -2,7 +2,8 @@
 protocol (docs/fleet.md, "``sray eval``"): every ``test`` view from its ``n_source`` fixed sources, at every
 ``stride``-th pixel. Writes ``metrics.json`` (the model's record, the protocol, per scene and the unweighted mean
 over scenes in blocks that name their protocol, per-view scores) and the PNGs of every view, all of it in a new
-tracked run (metrics at the checkpoint's step, 0 without one).
+tracked run (metrics at the checkpoint's step, 0 without one). ``sray eval --calibrate`` first fits the fast
+render's coarse confidence on validation rooms (:func:`calibrate`, docs/fleet.md, "Shifted splits").
 """
 
 from __future__ import annotations
@@ -14,16 +15,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.png import encode_png
 from sray.data_tools.shards.manifest import read_manifest
+from sray.model.calibration import fit_temperature, nll
 from sray.model.fast_render import FastRender
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, psnr
 from sray.model.runtime import Runtime
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
+from sray.model.view_render import render_view, strided_pixels
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.eval_model import EvalModel, checkpoint_model
 from sray.platform.eval.label_transfer import UNSEEN
@@ -33,6 +37,8 @@ from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
 
 METRICS_FILE = "metrics.json"
+CALIBRATION_FILE = "calibration.json"
+"""File of an evaluation's output folder holding the calibration it used."""
 SCORE_PATHS = {"miou": ("dataset_level", "miou"), "total_acc": ("dataset_level", "total_acc"),
                "class_avg_acc": ("dataset_level", "class_avg_acc"), "miou_per_image": ("per_image", "miou"),
                "psnr": ("colour", "psnr_db"), "ssim": ("colour", "ssim")}
@@ -235,3 +241,33 @@ def format_table(report: dict[str, Any]) -> str:
     lines = text_table(rows)
     lines.insert(len(lines) - 1, "-" * len(lines[0]))
     return "\n".join([*lines, f"Protocol: {protocol.describe()}"])
+
+
+def coarse_logits(model: EvalModel, shards: Path, n_source: int, stride: int) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """(logits (N, L), labels (N,), rooms) of the coarse pass at every ``stride``-th pixel of the test views of
+    every test room of ``shards``, rays no source sees (all logits -inf) left out."""
+    names, _ = select_scenes(Path(shards), None)
+    logits, labels = [], []
+    for name in names:
+        for sample in make_eval_samples(Path(shards), name, split="test", n_source=n_source):
+            h, w = sample.query_label.shape
+            out = render_view(model.renderer(sample), sample.query.K, sample.query.c2w, (h, w), sample.near,
+                              sample.far, model.chunk, model.device, stride, None, passes=("coarse",),
+                              keys=("logits",))["coarse"]["logits"].reshape(-1, model.n_classes).cpu()
+            uv, _, _ = strided_pixels(h, w, stride)
+            logits.append(out)
+            labels.append(sample.query_label[uv[:, 1].long(), uv[:, 0].long()])
+    all_logits, all_labels = torch.cat(logits), torch.cat(labels)
+    seen = torch.isfinite(all_logits).all(-1)
+    return all_logits[seen], all_labels[seen], len(names)
+
+
+def calibrate(model: EvalModel, shards: Path, n_source: int = 8, stride: int = 4) -> dict[str, Any]:
+    """The fitted temperature of ``model``'s coarse confidence on the validation shards and what it was fitted on:
+    ``{"temperature", "nll_at_1", "nll_fitted", "rays", "rooms", "shards", "stride", "n_source"}``."""
+    logits, labels, rooms = coarse_logits(model, shards, n_source, stride)
+    temperature = fit_temperature(logits, labels, model.ignore_id)
+    keep = labels != model.ignore_id
+    return {"temperature": temperature, "nll_at_1": nll(logits[keep], labels[keep], 1.0),
+            "nll_fitted": nll(logits[keep], labels[keep], temperature), "rays": int(keep.sum()), "rooms": rooms,
+            "shards": str(Path(shards).resolve()), "stride": stride, "n_source": n_source}

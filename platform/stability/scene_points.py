@@ -26,8 +26,8 @@ from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.step_budget import StepClock, time_limit_reached
 from sray.platform.stability.axes import PointSpec, Preset
 from sray.platform.stability.rows import Row
-from sray.platform.stability.stress_scenes import StressScene, perturbed_views, source_samples, unseen_fraction
-from sray.platform.stability.zero_shot_points import OutputWatch
+from sray.platform.stability.stress_scenes import (OutputWatch, StressScene, perturbed_views, source_samples,
+                                                   unseen_fraction)
 from sray.platform.train.step import step_seed
 
 

@@ -1,6 +1,6 @@
 """The unseen test scenes a stability suite stresses, read once; their perturbed copies (query views never, the
 generator of a (seed, axis, scene) the same at every level); the sources a point renders each query from (with no
-perturbation, ``sray eval``'s), and how much of the query they see.
+perturbation, ``sray eval``'s), how much of the query they see, and the watch over every point's renders.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch import Tensor
 
 from sray.data_tools.loader.sample_types import EvalSample
 from sray.data_tools.loader.samples import eval_sample, ranked_candidates
@@ -22,7 +23,7 @@ from sray.data_tools.shards.manifest import read_manifest
 from sray.model.rendering import sample_uniform
 from sray.model.reprojection import project, valid_projection
 from sray.model.source_set import rigid_inverse
-from sray.model.view_render import strided_pixels
+from sray.model.view_render import RayRenderer, strided_pixels
 from sray.platform.common.model_input import ray_batch
 from sray.platform.stability.axes import PointSpec, perturb_views
 
@@ -119,3 +120,29 @@ def unseen_fraction(sample: EvalSample, stride: int, n_depths: int, min_depth: f
     uv_src, depth = project(points, src.K.double(), rigid_inverse(src.c2w.double()), min_depth)  # (m, R, N, 2)
     seen = valid_projection(uv_src, depth, tuple(src.rgb.shape[-2:]), min_depth).any(dim=0)     # (R, N)
     return float(1.0 - seen.double().mean())
+
+
+class OutputWatch:
+    """Wraps renderers: counts rays whose fine outputs are not finite (a point with any is ``failed``), and can
+    poison them with NaN (the fault drill ``stability.nan_points``). A ray with every logit -inf (``2d-transfer``
+    where no source sees the pixel) is a miss, not a non-finite output: only NaN and +inf count."""
+
+    def __init__(self, poison: bool) -> None:
+        """``poison``: replace every rendered logit with NaN."""
+        self.nonfinite_rays, self.poison = 0, poison
+
+    def wrap(self, render: RayRenderer) -> RayRenderer:
+        """The renderer, watched."""
+
+        def watched(o: Tensor, d: Tensor, near: Tensor, far: Tensor) -> dict[str, dict[str, Tensor]]:
+            out = render(o, d, near, far)
+            fine = out["fine"]
+            if self.poison:
+                fine = {**fine, "logits": torch.full_like(fine["logits"], float("nan"))}
+                out = {**out, "fine": fine}
+            logits, rgb = fine["logits"], fine["rgb"]                                       # (R, L), (R, 3)
+            bad = (torch.isnan(logits) | torch.isposinf(logits)).any(-1) | ~torch.isfinite(rgb).all(-1)  # (R,)
+            self.nonfinite_rays += int(bad.sum())
+            return out
+
+        return watched

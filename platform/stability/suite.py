@@ -1,5 +1,7 @@
 """What the stability suite computes: every (axis, row, level, seed) a run asks for, and the result of a spec (a
-method that raises, diverges or outputs non-finite values is ``failed`` there, and the suite goes on).
+method that raises, diverges or outputs non-finite values is ``failed`` there, and the suite goes on): a zero-shot
+row's renders its ``eval_model`` as ``sray eval`` does (at the clean point, the same scores), a trained row's trains
+its method (``scene_points``).
 
 A point record: ``axis``, ``method`` (the row's name), ``level``, ``seed`` (None: deterministic), ``status``,
 ``miou`` (%) and ``psnr`` (dB) (None when failed), ``x`` (the chart's x), ``error``, ``key`` and the spec's result.
@@ -7,20 +9,26 @@ A point record: ``axis``, ``method`` (the row's name), ``level``, ``seed`` (None
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 from typing import Any
 
+import torch
+
 from sray.platform.common.fault_hook import poisoned_point
 from sray.platform.eval.eval_model import EvalModel
+from sray.platform.eval.view_scoring import predict_view, score_scene
 from sray.platform.stability.axes import AXES, PointSpec, Preset, point_spec
 from sray.platform.stability.rows import Row
 from sray.platform.stability.scene_points import SceneTraining, scene_point
-from sray.platform.stability.stress_scenes import StressScene
-from sray.platform.stability.zero_shot_points import zero_shot_point
+from sray.platform.stability.stress_scenes import (OutputWatch, StressScene, choose_sources, perturbed_views,
+                                                   source_samples, unseen_fraction)
 
 Planned = list[tuple[str, Row, Any, int | None]]
 """(axis, row, level, seed) of points (:func:`planned_points`)."""
+AUTOCAST_DTYPES = {"bf16": torch.bfloat16, "fp16": torch.float16}
+"""Inference precisions other than fp32, as autocast dtypes."""
 
 
 @dataclass
@@ -49,6 +57,45 @@ def planned_points(preset: Preset, axes: list[str], rows: list[Row]) -> Planned:
                 else:
                     planned += [(axis, row, level, seed) for seed in range(preset.seeds)]
     return planned
+
+
+def precision_context(precision: str, device: torch.device) -> contextlib.AbstractContextManager:
+    """Autocast for ``precision`` (``fp32``: none); ValueError for fp16 off CUDA."""
+    if precision == "fp32":
+        return contextlib.nullcontext()
+    if precision == "fp16" and device.type != "cuda":
+        raise ValueError("precision fp16 needs a CUDA device (CPU autocast runs bf16)")
+    return torch.autocast(device.type, dtype=AUTOCAST_DTYPES[precision])
+
+
+def zero_shot_point(model: EvalModel, scenes: list[StressScene], spec: PointSpec, stride: int, chunk: int,
+                    probe: tuple[int, float], poison: bool = False) -> dict[str, Any]:
+    """Score ``model`` at ``spec`` on ``scenes``: mean mIoU and PSNR, per-scene scores, the unseen fraction
+    (``probe``: coarse depths per ray, nearest source depth), non-finite rays and (below fp32) argmax agreement with
+    the fp32 render. A perturbation touches the sources the spec picks, drawn once per scene in view order."""
+    watch = OutputWatch(poison)
+    device = model.device
+    per_scene, unseen, agree, total = {}, [], 0, 0
+    for scene in scenes:
+        views = scene.views
+        if spec.perturbation is not None:
+            ids = sorted({s for q in scene.test_ids for s in choose_sources(scene, q, spec)})
+            views = perturbed_views(scene, ids, *spec.perturbation, spec.seed)
+        samples = source_samples(scene, views, spec)
+        with precision_context(spec.precision, device):
+            scored = score_scene(lambda s: watch.wrap(model.renderer(s)), samples, model.n_classes, model.ignore_id,
+                                 stride, chunk, device, model.fast)
+        for sample, view in zip(samples, scored.views):
+            if spec.precision != "fp32":
+                fp32 = predict_view(model.renderer(sample), sample, stride, chunk, device, model.fast)
+                agree += int((fp32.pred_label == view.pred_label).sum())
+                total += fp32.pred_label.numel()
+            unseen.append(unseen_fraction(sample, stride, *probe))
+        per_scene[scene.name] = {"miou": scored.scores["miou"], "psnr": scored.scores["psnr"]}
+    return {"miou": sum(s["miou"] for s in per_scene.values()) / len(per_scene),
+            "psnr": sum(s["psnr"] for s in per_scene.values()) / len(per_scene),
+            "unseen_fraction": sum(unseen) / len(unseen), "nonfinite_rays": watch.nonfinite_rays,
+            "fp32_agreement": agree / total if total else None, "scenes": per_scene}
 
 
 def _x(axis: str, level: Any, result: dict[str, Any]) -> float | None:

@@ -56,7 +56,7 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
     record = read_record(folder)
     if record.outcome == ERRORED:
         raise RuntimeError(f"trial {key} errored in an earlier launch: {record.error}")
-    if record.done or read_stop_request(folder) is not None:
+    if record.outcome is not None or read_stop_request(folder) is not None:
         return
     if job.start_by and time.time() >= job.start_by:
         return  # stays unfinished: the next launch of the study runs it

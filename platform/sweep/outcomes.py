@@ -94,9 +94,7 @@ def best_trial(outcomes: list[TrialOutcome], metric: str, mode: str) -> TrialOut
 
 def _best_value(outcome: TrialOutcome, metric: str, mode: str) -> float | None:
     values = [float(e[metric]) for e in outcome.history if metric in e]
-    if not values:
-        return None
-    return max(values) if mode == "max" else min(values)
+    return (max if mode == "max" else min)(values, default=None)
 
 
 def result_rows(outcomes: list[TrialOutcome], metric: str, mode: str, time_attr: str) -> list[dict[str, Any]]:

@@ -41,18 +41,13 @@ class TrialRecord:
     launches: list[float] = field(default_factory=list)
     """Unix time at which each launch of the trial began, in order."""
     outcome: str | None = None
-    """:data:`FINISHED` or :data:`ERRORED` once the point function returned or raised; None before."""
+    """:data:`FINISHED` or :data:`ERRORED` once the point function returned or raised (it never runs again)."""
     error: str = ""
     """``Type: message`` of the error of an errored trial."""
     result: dict[str, Any] | None = None
     """What the point function returned (a JSON-able dict); None when nothing."""
     imported: str = ""
     """The file an imported result was read from ('' when the trial computed it)."""
-
-    @property
-    def done(self) -> bool:
-        """True once the trial has an outcome (it never runs again)."""
-        return self.outcome is not None
 
 
 def read_record(folder: Path) -> TrialRecord:
