@@ -59,8 +59,7 @@ def torch_device(device: str | None) -> torch.device:
 
 
 def with_source_inputs(net: nn.Module, inputs: str) -> nn.Module:
-    """``net`` (an S-Ray model) set to read the source ``inputs`` (``rgb`` or ``rgbd``, checked like any model
-    config) with the same parameters: both modes share them (docs/model.md "RGB-D mode")."""
+    """``net`` (S-Ray) reading the source ``inputs`` with the same parameters (docs/model.md "RGB-D mode")."""
     net.cfg = dataclasses.replace(net.cfg, inputs=inputs)
     return net
 
@@ -86,8 +85,7 @@ def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRend
 
 
 def segmenter_model(folder: Path, device: str | None = None, tolerance: float = 0.05) -> EvalModel:
-    """The ``2d-transfer`` method with the 2D segmenter saved in ``folder``: source labels splatted by the source
-    depth (``segmenter.transfer_renderer``, occlusion test ``tolerance``), an RGB-D method with one render."""
+    """``2d-transfer`` with the segmenter saved in ``folder`` (``transfer_renderer``, occlusion test ``tolerance``)."""
     folder = Path(folder).resolve()
     segmenter, record = load_segmenter(folder)
     where = torch_device(device)

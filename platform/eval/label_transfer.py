@@ -95,16 +95,6 @@ def point_hits(points: Tensor, source_K: Tensor, source_c2w: Tensor, source_hw: 
     return index, visible, known & (z >= (1.0 + tolerance) * seen_depth)
 
 
-def backward_hits(source_depth: Tensor | None, source_K: Tensor, source_c2w: Tensor, query_depth: Tensor,
-                  query_K: Tensor, query_c2w: Tensor, tolerance: float,
-                  source_hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
-    """Which source pixel each query pixel reaches by the query's depth (Hq, Wq) (module doc, ``backward``);
-    source_depth (m, H, W) or None. Returns source pixel index (m, Hq*Wq) int64 and visible (m, Hq*Wq) bool."""
-    points = unproject(query_depth[None], query_K[None], query_c2w[None])[0]  # (P, 3)
-    index, visible, _ = point_hits(points, source_K, source_c2w, source_hw, source_depth, tolerance)
-    return index, visible & (query_depth.reshape(1, -1) > 0)
-
-
 def forward_hits(source_depth: Tensor, source_K: Tensor, source_c2w: Tensor, query_K: Tensor,
                  query_c2w: Tensor, hw: tuple[int, int], tolerance: float) -> tuple[Tensor, Tensor]:
     """Which source pixel lands on each query pixel of ``hw`` by splatting with source_depth (m, H, W) (module
@@ -191,9 +181,11 @@ def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor,
                          f"{(m, 3, *source_labels.shape[1:])}")
     if query_depth is not None and tuple(query_depth.shape) != tuple(hw):
         raise ValueError(f"label_transfer: query_depth is {tuple(query_depth.shape)}, the query image {tuple(hw)}")
-    if mode == "backward":
-        index, visible = backward_hits(source_depth, source_K, source_c2w, query_depth, query_K, query_c2w,
-                                       tolerance, tuple(source_labels.shape[-2:]))
+    if mode == "backward":  # the source pixel each query pixel reaches by its depth: (m, Hq*Wq) each
+        points = unproject(query_depth[None], query_K[None], query_c2w[None])[0]  # (Hq*Wq, 3)
+        index, visible, _ = point_hits(points, source_K, source_c2w, tuple(source_labels.shape[-2:]), source_depth,
+                                       tolerance)
+        visible = visible & (query_depth.reshape(1, -1) > 0)
     else:
         index, visible = forward_hits(source_depth, source_K, source_c2w, query_K, query_c2w, tuple(hw), tolerance)
     labels = source_labels.long().reshape(m, -1).gather(1, index)  # (m, Hq*Wq)

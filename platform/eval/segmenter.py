@@ -56,7 +56,6 @@ class Segmenter(nn.Module):
     """RGB (B, 3, H, W) in [0, 1] -> class logits (B, L, H, W): ResUNet encoder + linear per-pixel head."""
 
     def __init__(self, cfg: SegmenterConfig) -> None:
-        """Build the encoder and head of ``cfg`` (no device work)."""
         super().__init__()
         self.cfg = cfg
         self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width)
@@ -81,13 +80,11 @@ class SegmenterRecord:
     """A saved segmenter: its network config and the account of its training."""
 
     config: SegmenterConfig
-    """How to build the network."""
     training: dict[str, Any] = field(default_factory=dict)
     """Budget and spend (``cpu_seconds_budget``, ``cpu_seconds``, ``steps``, ``images``), data, seed, optimiser."""
 
     def budget(self) -> str:
-        """One line for a table: the CPU seconds and steps the segmenter trained for (for one taken from an S-Ray
-        checkpoint, that checkpoint's step and training CPU)."""
+        """One line for a table: the CPU seconds and steps it trained for (or its S-Ray checkpoint's step and CPU)."""
         t = self.training
         if "checkpoint" in t:
             return (f"S-Ray's encoder + source-view head, checkpoint step {t['steps']} "
@@ -125,8 +122,7 @@ def load_segmenter(folder: Path, map_location: str | torch.device = "cpu") -> tu
 
 
 def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, SegmenterRecord]:
-    """Write the encoder and source-view head of an S-Ray training checkpoint as a segmenter folder ``out``; the
-    segmenter (eval mode) and its record. ValueError when its model has no source-view head."""
+    """Write an S-Ray checkpoint's encoder and source-view head as a segmenter folder ``out``; it and its record."""
     checkpoint = Path(checkpoint)
     net, cfg = model_from_checkpoint(checkpoint)
     if net.src_head is None:
@@ -160,8 +156,7 @@ def source_depth_transfer(labels: Tensor, sources: SourceViews, query: QueryCame
 @torch.no_grad()
 def segment_and_transfer(segmenter: Segmenter, sources: SourceViews, query: QueryCamera,
                          tolerance: float) -> LabelTransfer:
-    """The segmenter's labels of the source images (m, 3, H, W), with their colours, carried into the query view
-    (:func:`source_depth_transfer`) on the segmenter's and the views' device."""
+    """The segmenter's labels of the source images (m, 3, H, W), with their colours, carried into the query view."""
     labels = segmenter.predict(sources.rgb)  # (m, H, W)
     return source_depth_transfer(labels, sources, query, tolerance, segmenter.cfg.ignore_id, source_rgb=sources.rgb)
 
@@ -192,8 +187,7 @@ def pixel_lookup_renderer(transfer: LabelTransfer, query: QueryCamera, n_classes
 
 def transfer_renderer(segmenter: Segmenter, sample: EvalSample, tolerance: float,
                       device: torch.device) -> RayRenderer:
-    """The ``2d-transfer`` ray renderer of one evaluation sample: its sources and query camera moved to ``device``
-    (the segmenter's), segmented and splatted once, then read per ray (:func:`pixel_lookup_renderer`)."""
+    """The ``2d-transfer`` ray renderer of one sample: segmented and splatted once on ``device``, then read per ray."""
     sources, query = sample.sources.to(device), sample.query.to(device)
     return pixel_lookup_renderer(segment_and_transfer(segmenter, sources, query, tolerance), query,
                                  segmenter.cfg.n_classes)

@@ -36,8 +36,7 @@ EPOCH_STEPS = 1000
 
 
 def train_scene_names(manifest: Manifest, where: Path) -> tuple[list[str], list[str]]:
-    """(train scene names, their shared class names); ValueError naming the manifest when there is none or their
-    label spaces differ."""
+    """(train scene names, their one shared class list); ValueError naming the manifest otherwise."""
     names = sorted(s for s, e in manifest.scenes.items() if e.meta.get("role", "train") == "train")
     if not names:
         raise ValueError(f"{where}: no scene has role 'train'; the segmenter trains on train scenes only")
@@ -48,8 +47,7 @@ def train_scene_names(manifest: Manifest, where: Path) -> tuple[list[str], list[
 
 
 def pool_class_weights(shards: Path, manifest: Manifest, scenes: list[str], n_classes: int, mode: str) -> list[float]:
-    """Class weights (``balanced_weights`` of ``mode``) from the labelled pixels of the scenes' source pools
-    only; [] for ``none``."""
+    """Class weights (``balanced_weights`` of ``mode``; [] for ``none``) from the scenes' source pools only."""
     if mode == "none":
         return []
     counts = np.zeros(n_classes + 1, np.int64)
@@ -61,8 +59,7 @@ def pool_class_weights(shards: Path, manifest: Manifest, scenes: list[str], n_cl
 
 
 def _read_state(out: Path, settings: dict[str, Any]) -> dict[str, Any] | None:
-    """The resumable state in ``out`` (None when there is none); ValueError naming the file when it was written by
-    a training with other settings."""
+    """The resumable state in ``out`` or None; ValueError naming the file when its settings differ."""
     path = out / STATE_FILE
     if not path.exists():
         return None
@@ -116,9 +113,7 @@ def train_segmenter(shards: Path, cpu_seconds: float, out: Path, seed: int = 0, 
                                cache_scenes=cache_scenes)
     out = Path(out)
     state = _read_state(out, settings)
-    steps = images = 0
-    spent_before = 0.0
-    losses: list[float] = []
+    steps, images, spent_before, losses = 0, 0, 0.0, []
     if state is not None:
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])

@@ -13,9 +13,8 @@ SPLITS_FILE = "splits.json"
 
 
 def split_summary(reports: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """``{"reference": first split, "splits": {name: {rooms, views, miou, total_acc, class_avg_acc, gap_miou,
-    seconds_per_view}}, "largest_gap": {split, points}}`` from reports by split name (first = reference); scores
-    None where a report has none."""
+    """``{"reference", "splits": {name: {rooms, views, miou, total_acc, class_avg_acc, gap_miou, seconds_per_view}},
+    "largest_gap": {split, points}}`` from reports by split name (the first is the reference)."""
     if not reports:
         raise ValueError("split_summary needs at least one report")
     rows: dict[str, dict[str, Any]] = {}

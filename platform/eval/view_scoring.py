@@ -43,9 +43,8 @@ class ViewPrediction:
 @torch.no_grad()
 def predict_view(render: RayRenderer, sample: EvalSample, stride: int, chunk: int, device: torch.device,
                  fast: FastRender | None = None) -> ViewPrediction:
-    """Render one evaluation sample with the ray renderer ``render`` (bound to its fixed sources) in chunks of
-    ``chunk`` rays (0: by device) at every ``stride``-th pixel (``view_render.render_view``; the fast mode's rays
-    and upsampling with ``fast``, which ``render`` must match). Predictions land on the host."""
+    """Render one evaluation sample with ``render`` (bound to its sources) in ``chunk``-ray chunks (0: by device) at
+    every ``stride``-th pixel (``render_view``; the fast mode's with ``fast``, which ``render`` must match)."""
     gt_rgb, gt_label = sample.query_rgb, sample.query_label
     h, w = gt_label.shape
     fine = render_view(render, sample.query.K, sample.query.c2w, (h, w), sample.near, sample.far, chunk, device,
@@ -68,8 +67,7 @@ def encode_sources(net: nn.Module, sample: EvalSample, device: torch.device) -> 
 
 def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device, fast: FastRender | None = None,
                   runtime: Runtime = Runtime()) -> RayRenderer:
-    """The S-Ray ray renderer bound to the sample's encoded sources (``SRayModel.ray_renderer``: the full render, or
-    the fast mode's with ``fast``), its fields run ``runtime.impl``."""
+    """The S-Ray ray renderer bound to the sample's encoded sources (the fast mode's with ``fast``), run by runtime."""
     return net.ray_renderer(encode_sources(net, sample, device), fast, runtime)
 
 
@@ -87,8 +85,7 @@ def per_image_scores(views: list[ViewPrediction], n_classes: int, ignore_id: int
 
 
 def class_ious(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> list[float | None]:
-    """Dataset-level IoU of each of the L classes over ``views`` (one confusion matrix), None for a class absent
-    from their ground truth."""
+    """Dataset-level IoU of each of the L classes over ``views``, None for a class absent from their ground truth."""
     ious = scene_metrics(scene_confusion(views, n_classes, ignore_id))["iou_per_class"][:n_classes]
     return [None if math.isnan(v) else float(v) for v in ious]
 
@@ -114,17 +111,14 @@ class ScoredScene:
     """A scene's rendered held-out views and their scores."""
 
     scores: dict[str, float]
-    """``score_views``'s."""
     views: list[ViewPrediction]
-    """In the order of the samples."""
 
 
 def score_scene(renderer: Callable[[EvalSample], RayRenderer], samples: Iterable[EvalSample], n_classes: int,
                 ignore_id: int, stride: int, chunk: int, device: torch.device, fast: FastRender | None = None,
                 on_view: Callable[[ViewPrediction], None] | None = None) -> ScoredScene:
-    """Render every sample of one scene with ``renderer(sample)`` (``predict_view``'s ``stride``, ``chunk`` and
-    ``fast``; under the caller's autocast) and score them in float32, autocast off; ``on_view`` gets each view once
-    rendered. ValueError when there is no sample."""
+    """Render every sample of one scene with ``renderer(sample)`` (as ``predict_view``, under the caller's autocast),
+    then score them in float32; ``on_view`` gets each view once rendered. ValueError when there is no sample."""
     views = []
     for sample in samples:
         views.append(predict_view(renderer(sample), sample, stride, chunk, device, fast))

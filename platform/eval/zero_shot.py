@@ -51,9 +51,7 @@ def _finite_or_none(value: Any) -> Any:
         return {k: _finite_or_none(v) for k, v in value.items()}
     if isinstance(value, list):
         return [_finite_or_none(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+    return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
 def write_json_atomic(obj: Any, path: Path) -> Path:
@@ -63,8 +61,7 @@ def write_json_atomic(obj: Any, path: Path) -> Path:
 
 
 def training_scenes(shards: Path, count: int) -> list[str]:
-    """The first ``count`` training scenes of ``shards`` by name (``role`` "train", or none given): the scenes whose
-    held-out (``test``) views measure fitting with the zero-shot protocol. ValueError when ``count`` < 1."""
+    """The first ``count`` (at least 1) train scenes of ``shards`` by name: their held-out views measure fitting."""
     if count < 1:
         raise ValueError(f"{Path(shards) / 'manifest.json'}: {count} held-out training scenes asked for; ask for 1 "
                          "or more")
@@ -94,8 +91,7 @@ def select_scenes(shards: Path, scenes: list[str] | None) -> tuple[list[str], di
 
 def save_view_pngs(view: ViewPrediction, scene: str, class_names: list[str], ignore_id: int,
                    out_dir: Path) -> dict[str, str]:
-    """Predicted and true semantics, error map and panel of one view, written under ``out_dir/renders/<scene>/``;
-    {kind: path relative to ``out_dir``}."""
+    """Write one view's predicted and true semantics, error map and panel; {kind: path relative to ``out_dir``}."""
     gt, raw = view.gt_label.numpy(), view.pred_label.numpy()
     pred = np.where(raw == UNSEEN, ignore_id, raw)  # no prediction: blank
     stem = out_dir / "renders" / scene / str(view.query_id)
@@ -122,12 +118,6 @@ def scene_blocks(scores: dict[str, float | None], n_views: int) -> dict[str, Any
     }
 
 
-def view_scores(view: ViewPrediction, n_classes: int, ignore_id: int) -> dict[str, float]:
-    """Per-image mIoU and PSNR of one view."""
-    miou = per_image_scores([view], n_classes, ignore_id)["miou"]
-    return {"miou_per_image": float(miou), "psnr_db": psnr(view.pred_rgb, view.gt_rgb)}
-
-
 def flat_metrics(report: dict[str, Any]) -> dict[str, float]:
     """Tracked metric keys ``<scene or mean>/<metric>`` of a metrics.json report (finite values only)."""
     out = {}
@@ -141,8 +131,7 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
                         n_source: int = 8, stride: int = 1, tracking_uri: str | None = None,
                         experiment: str = "sray-eval", *, tracker: str = DEFAULT_TRACKER, device: str | None = None,
                         progress: bool = True, fast: FastRender | None = None, runtime: Runtime = Runtime()) -> dict:
-    """:func:`evaluate_model` of the S-Ray checkpoint ``checkpoint`` (``eval_model.checkpoint_model``), rendered by
-    the fast render mode with ``fast`` (the protocol names it), its network run by ``runtime``."""
+    """:func:`evaluate_model` of an S-Ray checkpoint (``checkpoint_model``: the fast mode with ``fast``, runtime)."""
     return evaluate_model(checkpoint_model(checkpoint, device, fast, runtime), shards, scenes, out_dir, n_source,
                           stride, tracking_uri, experiment, tracker=tracker, progress=progress)
 
@@ -179,7 +168,9 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
 
             def record_view(view: ViewPrediction, scene: str = name) -> None:
                 pngs = save_view_pngs(view, scene, metas[scene]["class_names"], ignore_id, out_dir)
-                per_view.append({"query_id": view.query_id, **view_scores(view, n_classes, ignore_id), "pngs": pngs})
+                per_view.append({"query_id": view.query_id,
+                                 "miou_per_image": float(per_image_scores([view], n_classes, ignore_id)["miou"]),
+                                 "psnr_db": psnr(view.pred_rgb, view.gt_rgb), "pngs": pngs})
                 bar.update(1)
 
             scored = score_scene(model.renderer, make_eval_samples(shards, name, split="test", n_source=n_source),
@@ -227,8 +218,7 @@ def text_table(rows: list[tuple[str, ...]]) -> list[str]:
 
 
 def format_table(report: dict[str, Any]) -> str:
-    """A plain-text table of a report: a row per scene, then the mean, the protocol line below; the SSIM column only
-    for whole-image evaluations (stride 1)."""
+    """A plain-text table of a report: a row per scene, the mean, the protocol (SSIM only for whole images)."""
     protocol = EvalProtocol.from_json(report["protocol"])
     head = ("scene", "views", "mIoU", "total acc", "class acc", "mIoU/img", "PSNR dB", "SSIM")
     columns = len(head) if protocol.scores_ssim else len(head) - 1

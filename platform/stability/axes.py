@@ -19,6 +19,12 @@ POSE_CM_PER_DEG = 2.0
 """Pose-noise level L turns each camera by L degrees and moves it by ``POSE_CM_PER_DEG · L`` centimetres."""
 CLEAN_LEVELS = {"jpeg": 100, "blur": 1}
 """Harmless level of the perturbation axes whose harmless level is not 0."""
+IMAGE_PERTURBATIONS = {"image_noise": lambda image, level, rng: gaussian_noise(image, level, rng),
+                       "blur": lambda image, level, rng: motion_blur(image, int(level), rng),
+                       "exposure": lambda image, level, rng: exposure(image, -level),
+                       "jpeg": lambda image, level, rng: jpeg(image, int(level)),
+                       "occlusion": lambda image, level, rng: occlude(image, level, rng)[0]}
+"""Image axis -> the perturbation of one uint8 (H, W, 3) image at a level, drawing from a generator."""
 
 
 @dataclass(frozen=True)
@@ -67,16 +73,8 @@ def perturb_views(axis: str, level: float, rgb: np.ndarray, c2w: np.ndarray,
     for i in range(len(rgb)):
         if axis == "pose_noise":
             c2w_out[i] = noisy_pose(c2w[i], level, POSE_CM_PER_DEG * level, rng)
-        elif axis == "image_noise":
-            rgb_out[i] = gaussian_noise(rgb[i], level, rng)
-        elif axis == "blur":
-            rgb_out[i] = motion_blur(rgb[i], int(level), rng)
-        elif axis == "exposure":
-            rgb_out[i] = exposure(rgb[i], -level)
-        elif axis == "jpeg":
-            rgb_out[i] = jpeg(rgb[i], int(level))
-        elif axis == "occlusion":
-            rgb_out[i] = occlude(rgb[i], level, rng)[0]
+        else:
+            rgb_out[i] = IMAGE_PERTURBATIONS[axis](rgb[i], level, rng)
     return rgb_out, c2w_out
 
 
@@ -154,7 +152,6 @@ PRESETS: dict[str, Preset] = {p.name: p for p in (
            n_source=8, unseen_n_source=8, eval_stride=1, chunk=8192, trained_scenes=4, scene_cpu_seconds=600.0,
            scene_rays=1024, nerf=SemanticNeRFSettings()),
 )}
-"""The suite sizes of ``sray stability --preset``."""
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,6 @@ class SuiteInputs:
     n_classes: int
     ignore_id: int
     device: str
-    """Torch device the points run on."""
 
 
 _loaded: list[tuple[SuiteInputs, Suite]] = []
@@ -128,8 +127,7 @@ def study_plan(preset: Preset, planned: Planned) -> dict[str, dict[str, Any]]:
 
 
 def run_points(out: Path, planned: Planned, inputs: SuiteInputs) -> list[TrialOutcome]:
-    """Run the points of ``planned`` without a result, one at a time, each reserving every CPU of the local Ray (its
-    torch threads) and one GPU on CUDA; the outcome of every point key."""
+    """Run the points of ``planned`` without a result, one at a time on all local CPUs (a GPU on CUDA); all outcomes."""
     preset = inputs.preset
     study = study_folder(out, preset)
     check_definition(study, preset, inputs.models)

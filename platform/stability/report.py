@@ -144,11 +144,9 @@ def panels(stats: list[LevelStats], axes: list[str], metric: str) -> list[Stabil
 
 def seen_line(preset: Preset, rows: list[Row]) -> str:
     """The chart's subtitle: which rows saw the scene, and the trained rows' one budget."""
-    line = "Zero-shot rows never saw the test scenes"
-    if any(r.trained for r in rows):
-        line += (f"; rows trained on the scene had {preset.scene_cpu_seconds:g} CPU seconds of training on each, the "
-                 "same for every method")
-    return line
+    trained = (f"; rows trained on the scene had {preset.scene_cpu_seconds:g} CPU seconds of training on each, the "
+               "same for every method") if any(r.trained for r in rows) else ""
+    return "Zero-shot rows never saw the test scenes" + trained
 
 
 def notes(preset: Preset, rows: list[Row], protocols: dict[str, EvalProtocol]) -> list[str]:
@@ -217,8 +215,8 @@ def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str]
 
 def track(tracker: Tracker, experiment: str, run_name: str, outputs: dict[str, Any],
           records: list[dict[str, Any]], axes: list[str], preset: Preset) -> str:
-    """Log the run: a parent run (the charts, stability.json, breaking points) and a child run per axis
-    (its table, and ``<method>/miou`` and ``<method>/psnr`` at step = level index). Returns the parent run id."""
+    """Log a parent run (charts, stability.json) and a child run per axis (its table, metrics at step = level index);
+    the parent's id."""
     parent = tracker.start_run(experiment, run_name, tags={"sray.kind": "stability", "sray.preset": preset.name})
     with tracker.logger(parent) as log:
         log.log_params({"preset": preset.name, "axes": axes, "seeds": preset.seeds, "levels": preset.levels,

@@ -45,7 +45,6 @@ class Row:
     name: str
     """Its key (points, tables, tracked metrics): ``<method>[-no-cra][-scene]``."""
     method: str
-    """The registered method it runs."""
     trained: bool
     """Trained on the test scene (else zero-shot)."""
     variant: str
@@ -56,11 +55,6 @@ class Row:
     """Held-out views are rendered from source views (else from none: a per-scene model)."""
     train_inputs: str = ""
     """What its training read besides colours and labels (``EvalProtocol.train_inputs``; empty: as ``inputs``)."""
-
-    @property
-    def mode(self) -> str:
-        """``scene`` or ``zero-shot`` (:data:`MODES`)."""
-        return MODES[1] if self.trained else MODES[0]
 
     def protocol(self, shards: Path, n_source: int, stride: int) -> EvalProtocol:
         """How its scores are made: ``n_source`` fixed sources given as its ``inputs``, or none."""
@@ -89,12 +83,6 @@ class Row:
         return ChartStyle(label, look.color, look.marker)
 
 
-def follows_checkpoint(method: str) -> bool:
-    """Whether the method renders from source views and reads them as its checkpoint does (S-Ray)."""
-    record = get_method(method)
-    return record.uses_sources and not record.inputs
-
-
 def _row(method: str, trained: bool, variant: str, inputs: str, train_inputs: str = "") -> Row:
     suffix = (f"-{variant}" if variant else "") + ("-scene" if trained else "")
     return Row(f"{method}{suffix}", method, trained, variant, inputs, get_method(method).uses_sources, train_inputs)
@@ -109,7 +97,7 @@ def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra:
             continue
         if record.given_depth_of:  # its training read the depth only when it was trained on the scene with it
             rows.append(_row(name, trained, "", record.inputs, "rgbd" if trained else checkpoint.train_inputs))
-        elif not follows_checkpoint(name):
+        elif record.inputs or not record.uses_sources:  # it does not read the sources as the checkpoint does
             rows.append(_row(name, trained, "", record.inputs or "rgb"))
         else:
             rows.append(_row(name, trained, "", checkpoint.inputs, checkpoint.train_inputs))
@@ -119,8 +107,7 @@ def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra:
 
 
 def suite_rows(methods: list[str], modes: list[str], checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
-    """Every row of ``methods`` in ``modes``, zero-shot rows first. ``checkpoint``, ``no_cra``: the model configs of
-    the S-Ray and no-CRA checkpoints (None: no no-CRA row)."""
+    """Every row of ``methods`` in ``modes``, zero-shot first, by the S-Ray and no-CRA (or None) checkpoint configs."""
     unknown = [m for m in modes if m not in MODES]
     if unknown:
         raise ValueError(f"stability modes {unknown}: use {list(MODES)}")

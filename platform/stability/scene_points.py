@@ -53,7 +53,6 @@ class SceneTraining:
     base_sha256: str
     """sha256 of the checkpoint's ``state.pt``."""
     cfg: FleetConfig
-    """:func:`scene_settings`."""
     shards: Path
     stored_neighbours: int
     """Ranked neighbours the shards store per view."""

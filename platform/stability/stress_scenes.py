@@ -128,7 +128,6 @@ class OutputWatch:
     where no source sees the pixel) is a miss, not a non-finite output: only NaN and +inf count."""
 
     def __init__(self, poison: bool) -> None:
-        """``poison``: replace every rendered logit with NaN."""
         self.nonfinite_rays, self.poison = 0, poison
 
     def wrap(self, render: RayRenderer) -> RayRenderer:

@@ -143,8 +143,7 @@ def compute_spec(suite: Suite, spec: PointSpec, poison: bool) -> dict[str, Any]:
 
 
 def point_key(preset: Preset, axis: str, row: Row, level: Any, seed: int | None) -> tuple[str, PointSpec, bool]:
-    """The key a point's result is stored under (its spec's, ``_poisoned`` when a fault drill poisons it), its spec,
-    and whether it is poisoned."""
+    """(The key a point's result is stored under, ``_poisoned`` when a fault drill poisons it; its spec; poisoned)."""
     spec = point_spec(axis, row, level, 0 if seed is None else seed, preset)
     poison = poisoned_point(row.name, axis, level)
     return f"{spec.key()}{'_poisoned' if poison else ''}", spec, poison

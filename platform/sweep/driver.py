@@ -7,11 +7,15 @@ trial's checkpoint is registered under the sweep's alias. Idempotent across resu
 from __future__ import annotations
 
 import logging
+import os
 import re
 from collections import Counter
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
+
+import ray
+import torch
 
 from sray.platform.checkpoints.folders import CheckpointManager
 from sray.platform.common.ray_address import check_ray_address
@@ -19,19 +23,18 @@ from sray.platform.config.train_config import TrainConfig
 from sray.platform.sweep.engine import run_study
 from sray.platform.sweep.options import SweepOptions, SweepRequest
 from sray.platform.sweep.outcomes import REASONS, TrialOutcome, best_trial, write_tables
-from sray.platform.sweep.prepare import (RECORD_FILE, PreparedSweep, check_inputs, expected_nodes, plan_concurrency,
-                                        prepare_sweep, read_sweep_record, reload_sweep, study_settings,
-                                        write_sweep_record)
+from sray.platform.sweep.prepare import (RECORD_FILE, PreparedSweep, check_inputs, plan_concurrency, prepare_sweep,
+                                        read_sweep_record, reload_sweep, study_settings, write_sweep_record)
 from sray.platform.sweep.training_trial import TIME_ATTR, job_name, run_training_trial
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.tracking.tracker import RunHandle, Tracker
 from sray.platform.train.launcher import init_ray
+from sray.platform.train.resources import NodeResources, live_nodes
 from sray.platform.viz.sweep_chart import TrialCurve, write_sweep_chart
 
 log = logging.getLogger(__name__)
 
 CHART_FILE = "metric_vs_time.png"
-"""The chart in a sweep's folder."""
 STATUS = {"finished": "FINISHED", "stopped": "KILLED", "errored": "FAILED", "unfinished": "KILLED"}
 """Run status of a child run by the reason its trial ended."""
 
@@ -44,17 +47,11 @@ class SweepResult:
     outcomes: list[TrialOutcome]
     """Every trial's outcome, in plan order."""
     best: TrialOutcome | None
-    """The best finished trial, if any."""
     files: list[Path]
     """The results table's files and the chart."""
     parent: RunHandle
     complete: bool
     """False when some trial is unfinished (``--resume`` continues it)."""
-
-
-def sweep_alias(sweep: str) -> str:
-    """The registry alias of a sweep's best model: ``sweep-<name>``, other than ``[A-Za-z0-9_-]`` turned into ``-``."""
-    return "sweep-" + re.sub(r"[^A-Za-z0-9_-]+", "-", sweep).strip("-")
 
 
 def start_parent(prepared: PreparedSweep, tracker: Tracker) -> RunHandle:
@@ -146,8 +143,8 @@ def finish_sweep(prepared: PreparedSweep, outcomes: list[TrialOutcome], tracker:
     best = best_trial(outcomes, options.metric, options.mode)
     checkpoint = final_checkpoint(prepared.configs[list(record.plan).index(best.key)]) if best else None
     if complete and checkpoint is not None and record.register_as and not record.registered:
-        register_best(tracker, experiment, job_name(record.name, best.key), checkpoint, record.register_as,
-                      sweep_alias(record.name))
+        alias = "sweep-" + re.sub(r"[^A-Za-z0-9_-]+", "-", record.name).strip("-")  # characters an alias takes
+        register_best(tracker, experiment, job_name(record.name, best.key), checkpoint, record.register_as, alias)
         record.registered = best.key
         write_sweep_record(prepared.folder, record)
     files = write_tables(prepared.folder, outcomes, options.metric, options.mode, TIME_ATTR, f"Sweep {record.name}")
@@ -166,12 +163,14 @@ def finish_sweep(prepared: PreparedSweep, outcomes: list[TrialOutcome], tracker:
 
 
 def _concurrency(prepared: PreparedSweep, address: str | None) -> int:
-    """Trials at once on the cluster at ``address`` (checked, then joined) or the local one (before it starts)."""
+    """Trials at once on the cluster at ``address`` (checked, then joined) or on the local Ray ``init_ray`` would
+    start (every CPU of this machine, its CUDA GPUs), known before it starts."""
     if address:
         check_ray_address(address)
         init_ray(address)
-    requested = int(prepared.record.options["max_concurrent"])
-    return plan_concurrency(requested, prepared.configs, expected_nodes())
+    nodes = live_nodes() if ray.is_initialized() else [
+        NodeResources("this machine", float(os.cpu_count() or 1), float(torch.cuda.device_count()))]
+    return plan_concurrency(int(prepared.record.options["max_concurrent"]), prepared.configs, nodes)
 
 
 def _run(prepared: PreparedSweep, tracker: Tracker, parent: RunHandle, concurrency: int, address: str | None,
@@ -188,8 +187,7 @@ def _run(prepared: PreparedSweep, tracker: Tracker, parent: RunHandle, concurren
 
 
 def run_sweep(request: SweepRequest, address: str | None = None) -> SweepResult:
-    """Check a new sweep (the cluster's room too, before anything is written), then run it to its end (or until
-    interrupted: then ``resume_sweep`` continues it)."""
+    """Check a new sweep (the cluster's room too) before anything is written, then run it (``resume_sweep`` goes on)."""
     prepared = prepare_sweep(request)
     concurrency = _concurrency(prepared, address)
     check_inputs(prepared)

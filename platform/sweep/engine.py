@@ -30,9 +30,7 @@ from sray.platform.sweep.study import (BY_BUDGET, BY_SCHEDULER, ERRORED, FINISHE
                                        read_stop_request, request_stop, trial_folder, write_record)
 
 TUNE_FOLDER = "tune"
-"""The study's folder holding Tune's experiment state."""
 EXPERIMENT = "study"
-"""Name of the Tune experiment inside :data:`TUNE_FOLDER`."""
 _SKIPPED = frozenset(AUTO_RESULT_KEYS) | frozenset(DEBUG_METRICS)
 """Tune's own bookkeeping keys, left out of the history."""
 
@@ -65,7 +63,7 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
     write_record(folder, record)
     try:
         fail_trial_if_listed(key)
-        result = job.point_fn(job.plan[key], TrialContext(key, folder, len(record.launches) - 1))
+        result = job.point_fn(job.plan[key], TrialContext(key, folder))
     except BaseException as e:
         lines = str(e).strip().splitlines()
         record.outcome, record.error = ERRORED, f"{type(e).__name__}: {lines[-1] if lines else ''}"[:2000]
@@ -84,7 +82,6 @@ class GracefulASHA(AsyncHyperBandScheduler):
     """
 
     def __init__(self, study: str, **asha: Any) -> None:
-        """``study``: the study's folder; ``asha``: ``AsyncHyperBandScheduler``'s arguments."""
         super().__init__(**asha)
         self.study = study
 
@@ -108,7 +105,6 @@ class TrialLog(Callback):
     """The driver's record of results (``history.jsonl``), a line per result, the wall-time budget's stop requests."""
 
     def __init__(self, settings: StudySettings, plan: Mapping[str, Mapping[str, Any]]) -> None:
-        """``plan``: the study's points, printed when their trials start."""
         self.settings = settings
         self.plan = {k: dict(v) for k, v in plan.items()}
         self._offsets: dict[tuple[str, int], float] = {}

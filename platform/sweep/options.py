@@ -35,9 +35,7 @@ class SweepOptions:
     metric: str = "val/miou"
     """The validation metric trials are compared by (``val/*`` or ``zeroshot/*``, as the training job logs it)."""
     mode: str = "max"
-    """One of :data:`MODES`."""
     scheduler: str = "asha"
-    """One of :data:`SCHEDULERS`."""
     grace: int = 0
     """ASHA: steps before a trial can be stopped; 0 = ``run.ckpt_every`` (where a training job first reports)."""
     reduction_factor: float = 3.0
@@ -80,7 +78,6 @@ class SweepRequest:
     name: str
     """Unique name: the sweep's folder under ``out`` and its parent run's name."""
     out: Path
-    """Folder holding sweeps."""
     base: TrainConfig
     """The config every trial starts from (a recipe with the fixed overrides)."""
     params: list[Param]
@@ -129,8 +126,7 @@ def _params(where: Path, value: Any) -> list[Param]:
 
 
 def read_yaml_keys(path: Path, what: str, keys: tuple[str, ...]) -> dict[str, Any]:
-    """The YAML mapping in ``path`` (a ``what``, e.g. "sweep spec"); :class:`SpecError` naming the file when it
-    cannot be read, is not YAML, is not a mapping or holds a key outside ``keys``."""
+    """The YAML mapping of ``keys`` in ``path`` (a ``what``); :class:`SpecError` naming the file and what is wrong."""
     try:
         raw = yaml.safe_load(Path(path).read_text())
     except OSError as e:

@@ -21,7 +21,6 @@ from sray.platform.sweep.study import (BY_SCHEDULER, ERRORED, FINISHED, TrialRec
 REASONS = ("finished", "stopped", "errored", "unfinished")
 """Why a trial ended, in the order tables list them."""
 TABLE_FILES = ("results.md", "results.csv", "results.json")
-"""The table's files in a study's folder."""
 
 
 @dataclass
@@ -29,11 +28,9 @@ class TrialOutcome:
     """One trial of a study: its point, why it ended, what it reported."""
 
     key: str
-    """The trial's key in the plan."""
     point: dict[str, Any]
     """Its values (field path -> value)."""
     reason: str
-    """One of :data:`REASONS`."""
     note: str = ""
     """The error of an errored trial; who stopped a stopped one and when; '' otherwise."""
     history: list[dict[str, Any]] = field(default_factory=list)

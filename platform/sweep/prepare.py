@@ -8,24 +8,20 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
-import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-import ray
-import torch
 
 from sray.data_tools.atomic import atomic_write_json
 from sray.platform.config.train_config import TrainConfig, apply_override
 from sray.platform.sweep.options import SweepOptions, SweepRequest
 from sray.platform.sweep.spec import SpecError, build_plan, check_unique, with_seeds
 from sray.platform.sweep.study import StudySettings
-from sray.platform.sweep.training_trial import TIME_ATTR, check_metric, check_params, trial_job_config
+from sray.platform.sweep.training_trial import TIME_ATTR, check_metric, check_params, job_name, trial_config
 from sray.platform.tracking.registry import get_tracker
 from sray.platform.train.inputs import check_request, check_shards, check_tracker
-from sray.platform.train.resources import InfeasibleRequest, NodeResources, live_nodes, workers_per_node
+from sray.platform.train.resources import InfeasibleRequest, NodeResources, workers_per_node
 
 RECORD_FILE = "sweep.json"
 FORMAT = "sray-sweep"
@@ -47,7 +43,6 @@ class SweepRecord:
     register_as: str
     """Model name the best trial's checkpoint is registered under ('' = not registered)."""
     tracker: str
-    """Registry name of the tracker."""
     store: str
     """The tracker's store (MLflow: the tracking URI)."""
     parent_run_id: str = ""
@@ -83,13 +78,6 @@ TRIAL_RESOURCES = {"memory": 1.0}
 refuses an empty request; any CPU would be taken from the trial's own workers)."""
 
 
-def expected_nodes() -> list[NodeResources]:
-    """The nodes of the connected Ray cluster, or else of the local Ray ``init_ray`` would start (before it does)."""
-    if ray.is_initialized():
-        return live_nodes()
-    return [NodeResources("this machine", float(os.cpu_count() or 1), float(torch.cuda.device_count()))]
-
-
 def trials_at_once(cfg: TrainConfig, nodes: list[NodeResources]) -> int:
     """Trials of ``cfg``'s size the nodes host at once (0 when not even one fits)."""
     workers = sum(workers_per_node(n, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker) for n in nodes)
@@ -101,8 +89,7 @@ def _size(cfg: TrainConfig) -> str:
 
 
 def plan_concurrency(requested: int, configs: list[TrainConfig], nodes: list[NodeResources]) -> int:
-    """The number of trials to run at once on ``nodes``: ``requested`` if they fit that many trials of every
-    size in ``configs``, as many as fit when ``requested`` is 0; :class:`InfeasibleRequest` naming the fix."""
+    """Trials at once on ``nodes``: ``requested`` if every size in ``configs`` fits that many (0: as many as fit)."""
     have = (f"{sum(n.cpus for n in nodes):g} CPUs and {sum(n.gpus for n in nodes):g} GPUs on {len(nodes)} "
             "node(s)")
     fits = [(trials_at_once(cfg, nodes), cfg) for cfg in configs]
@@ -135,7 +122,6 @@ class PreparedSweep:
 
     folder: Path
     record: SweepRecord
-    """What ``sweep.json`` holds."""
     configs: list[TrainConfig]
     """Every trial's training config, in plan order."""
 
@@ -158,8 +144,7 @@ def _asha_span(configs: list[TrainConfig], options: SweepOptions) -> tuple[int, 
 
 
 def study_settings(prepared: PreparedSweep, max_concurrent: int) -> StudySettings:
-    """The engine's settings of a prepared sweep: ASHA on the step up to the largest step budget, first rung at
-    ``--grace`` (default: the smallest checkpoint interval, where trials first report)."""
+    """The engine's settings of a prepared sweep: ASHA on the step, up to the largest budget, first rung at grace."""
     o = SweepOptions(**prepared.record.options)
     max_t, grace = _asha_span(prepared.configs, o)
     return StudySettings(folder=prepared.folder, metric=o.metric, mode=o.mode, time_attr=TIME_ATTR,
@@ -180,8 +165,7 @@ def _check_trials(configs: list[TrainConfig], options: SweepOptions) -> None:
 
 
 def prepare_sweep(request: SweepRequest) -> PreparedSweep:
-    """Check a new sweep and build its record and trial configs (nothing written, Ray not started; data and store:
-    :func:`check_inputs`)."""
+    """Check a new sweep; its record and trial configs (nothing written, Ray not started; see :func:`check_inputs`)."""
     if not NAME.match(request.name):
         raise SpecError(f"--name {request.name!r}: use letters, digits, '.', '_' and '-' (it names a folder)")
     folder = (Path(request.out) / request.name).resolve()
@@ -196,7 +180,7 @@ def prepare_sweep(request: SweepRequest) -> PreparedSweep:
     base = sweep_base(request.base, request.options, folder, tracker.store)
     check_params(base, params)
     plan = build_plan(params, request.options.samples, request.options.seed)
-    configs = [trial_job_config(base, point, request.name, key) for key, point in plan.items()]
+    configs = [trial_config(base, point, job_name(request.name, key)) for key, point in plan.items()]
     _check_trials(configs, request.options)
     record = SweepRecord(name=request.name, options=dataclasses.asdict(request.options),
                          params=[f"{p.path}={p.spec}" for p in params], plan=plan, base=base.to_dict(),
@@ -214,5 +198,5 @@ def check_inputs(prepared: PreparedSweep) -> None:
 def reload_sweep(record: SweepRecord, folder: Path) -> PreparedSweep:
     """A recorded sweep, ready to resume: its trial configs rebuilt from the record."""
     base = TrainConfig.from_dict(record.base)
-    return PreparedSweep(folder, record, [trial_job_config(base, point, record.name, key)
+    return PreparedSweep(folder, record, [trial_config(base, point, job_name(record.name, key))
                                           for key, point in record.plan.items()])

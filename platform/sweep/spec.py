@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from typing import Any
 
 KINDS = ("choice", "uniform", "loguniform", "grid")
-"""The distributions a parameter may have."""
 _CALL = re.compile(r"^\s*([A-Za-z_]+)\s*\((.*)\)\s*$", re.S)
 _PATH = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)+$")
 _BRACKETS = {"(": ")", "[": "]"}
@@ -32,7 +31,6 @@ class Param:
     path: str
     """``section.field`` of the trial config, as ``--set`` takes it."""
     kind: str
-    """One of :data:`KINDS`."""
     values: tuple[str, ...]
     """The listed values of ``choice`` and ``grid``, as written; the two bounds of a range, as written."""
 
@@ -121,11 +119,10 @@ def parse_assignment(assignment: str) -> Param:
 
 def check_unique(params: list[Param]) -> None:
     """:class:`SpecError` when two parameters name the same field."""
-    seen: set[str] = set()
-    for param in params:
-        if param.path in seen:
-            raise SpecError(f"sweep parameter {param.path}: given twice; give each field one distribution")
-        seen.add(param.path)
+    paths = [p.path for p in params]
+    for i, path in enumerate(paths):
+        if path in paths[:i]:
+            raise SpecError(f"sweep parameter {path}: given twice; give each field one distribution")
 
 
 SEED_FIELD = "run.seed"

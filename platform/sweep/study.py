@@ -19,7 +19,6 @@ import ray.tune
 from sray.data_tools.atomic import atomic_write_json
 
 TRIALS = "trials"
-"""Folder of the study holding one folder per trial key."""
 RECORD = "trial.json"
 HISTORY = "history.jsonl"
 STOP_REQUEST = "stop_request.json"
@@ -100,8 +99,6 @@ class TrialContext:
     """The trial's key in the plan (``t003``)."""
     folder: Path
     """The trial's own folder (``<study>/trials/<key>``), for anything it writes."""
-    launch: int
-    """0 on the trial's first launch; n on its (n+1)-th, after a study was resumed."""
 
     def stop_requested(self) -> bool:
         """True once the scheduler or the wall-time budget asked this trial to end now."""
@@ -126,7 +123,6 @@ class StudySettings:
     metric: str
     """Result key trials are compared by."""
     mode: str
-    """``max`` or ``min``."""
     time_attr: str = "training_iteration"
     """Result key measuring a trial's progress (a training job's ``step``): the scheduler's time axis."""
     max_concurrent: int = 1

@@ -38,21 +38,17 @@ def _text(value: Any) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
-def trial_config(base: TrainConfig, point: Mapping[str, Any]) -> TrainConfig:
-    """``base`` with the point's values set (a copy); :class:`SpecError` naming the parameter a value breaks."""
+def trial_config(base: TrainConfig, point: Mapping[str, Any], name: str = "") -> TrainConfig:
+    """``base`` with the point's values set (a copy), the job named ``name`` when given; :class:`SpecError` naming
+    the parameter a value breaks."""
     cfg = copy.deepcopy(base)
     for path, value in point.items():
         try:
             apply_override(cfg, f"{path}={_text(value)}")
         except ValueError as e:
             raise SpecError(f"sweep parameter {path}: {e}") from None
-    return cfg
-
-
-def trial_job_config(base: TrainConfig, point: Mapping[str, Any], sweep: str, key: str) -> TrainConfig:
-    """The config of trial ``key``'s training job: :func:`trial_config` named ``<sweep>-<key>``."""
-    cfg = trial_config(base, point)
-    cfg.run.name = job_name(sweep, key)
+    if name:
+        cfg.run.name = name
     return cfg
 
 
@@ -95,7 +91,7 @@ def _forward_stop(ctx: TrialContext, stop_file: Path, done: threading.Event) -> 
 def run_training_trial(point: dict[str, Any], ctx: TrialContext, base: dict[str, Any], sweep: str,
                        parent: RunHandle) -> None:
     """The point function of a training sweep: train ``base`` (a config dict) with ``point`` set, under ``parent``."""
-    cfg = trial_job_config(TrainConfig.from_dict(base), point, sweep, ctx.key)
+    cfg = trial_config(TrainConfig.from_dict(base), point, job_name(sweep, ctx.key))
     job_dir = cfg.job_dir()
     resume = (job_dir / CONFIG_FILE).is_file()
     if resume:
