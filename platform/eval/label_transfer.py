@@ -78,12 +78,9 @@ def nearest_pixel(uv: Tensor, hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
 
 def point_hits(points: Tensor, source_K: Tensor, source_c2w: Tensor, source_hw: tuple[int, int],
                source_depth: Tensor | None, tolerance: float) -> tuple[Tensor, Tensor, Tensor]:
-    """Where world points (P, 3) land in the sources (module doc, ``backward``): K (m, 3, 3), c2w (m, 4, 4), image
-    ``source_hw``, depth (m, H, W) or None (no occlusion test).
-
-    Returns source pixel index (m, P) int64, visible (m, P) bool and occluded (m, P) bool (behind the source's own
-    surface: z >= (1 + ``tolerance``) D; all False without source depth).
-    """
+    """Where world points (P, 3) land in the sources K (m, 3, 3), c2w (m, 4, 4), image ``source_hw``, depth
+    (m, H, W) or None (module doc, ``backward``): source pixel index (m, P) int64, visible (m, P) bool and occluded
+    (m, P) bool (behind the source's own surface, z >= (1 + ``tolerance``) D; all False without source depth)."""
     uv, z = project_points(points, source_K, source_c2w)  # (m, P, 2), (m, P)
     index, inside = nearest_pixel(uv, source_hw)  # (m, P)
     known = inside & (z > 0)

@@ -162,9 +162,8 @@ def segment_and_transfer(segmenter: Segmenter, sources: SourceViews, query: Quer
 
 
 def pixel_lookup_renderer(transfer: LabelTransfer, query: QueryCamera, n_classes: int) -> RayRenderer:
-    """A ray renderer over the transferred maps (with colours) of the query camera: each ray (origins, dirs (R, 3))
-    reads the nearest pixel; ``logits`` (R, L) 0 at its label and -inf elsewhere (all -inf without a label or
-    off the image), ``rgb`` (R, 3) the carried colour (0 there). Both passes are the same maps; near/far unused."""
+    """A ray renderer over the transferred maps of the query camera: each ray reads the nearest pixel, ``logits``
+    (R, L) 0 at its label and -inf elsewhere (all -inf without one), ``rgb`` (R, 3) its carried colour (0 there)."""
     if transfer.rgb is None:
         raise ValueError("2d-transfer: pass the source colours to the transfer; its renderer returns them")
     hw = (int(transfer.labels.shape[0]), int(transfer.labels.shape[1]))

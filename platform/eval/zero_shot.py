@@ -146,8 +146,8 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
     tracking = get_tracker(tracker, tracking_uri or "")
     shards, out_dir = Path(shards).resolve(), Path(out_dir).resolve()
     names, metas = select_scenes(shards, scenes)
-    protocol = EvalProtocol.from_shards(shards, n_source, stride, model.inputs, model.train_inputs)
-    protocol = protocol.rendered_by(model.fast)
+    protocol = EvalProtocol.from_shards(shards, n_source, stride, model.inputs,
+                                        model.train_inputs).rendered_by(model.fast)
     n_classes, ignore_id = model.n_classes, model.ignore_id
     for name in names:
         if len(metas[name]["class_names"]) != n_classes:
@@ -180,8 +180,7 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
             block["dataset_level"]["iou_per_class"] = class_ious(scored.views, n_classes, ignore_id)
             report["scenes"][name] = {**block, "views": per_view}
         bar.close()
-        scene_scores = [report["scenes"][n] for n in names]
-        report["mean"] = mean_blocks(scene_scores)
+        report["mean"] = mean_blocks(list(report["scenes"].values()))
         report["wall_s"] = time.perf_counter() - t0
         metrics_path = write_json_atomic(report, out_dir / METRICS_FILE)
         logger.log_metrics(flat_metrics(report), model.step)

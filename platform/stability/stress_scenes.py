@@ -34,8 +34,6 @@ class StressScene:
 
     meta: SceneMeta
     views: dict[str, StoredView]
-    image_size: tuple[int, int]
-    """(H, W) of its views."""
 
     @property
     def name(self) -> str:
@@ -70,7 +68,7 @@ def load_scenes(shards: Path, names: list[str]) -> list[StressScene]:
         if meta.role != "test" or not meta.splits.get("test") or not meta.splits.get("source"):
             raise ValueError(f"{shards}/manifest.json: scene {name!r} is not an unseen test scene with 'source' and "
                              "'test' splits; pass test scenes (role 'test') to the stability suite")
-        scenes.append(StressScene(meta, read_scene_views(Path(shards), entry), tuple(entry.image_size)))
+        scenes.append(StressScene(meta, read_scene_views(Path(shards), entry)))
     return scenes
 
 
@@ -123,9 +121,8 @@ def unseen_fraction(sample: EvalSample, stride: int, n_depths: int, min_depth: f
 
 
 class OutputWatch:
-    """Wraps renderers: counts rays whose fine outputs are not finite (a point with any is ``failed``), and can
-    poison them with NaN (the fault drill ``stability.nan_points``). A ray with every logit -inf (``2d-transfer``
-    where no source sees the pixel) is a miss, not a non-finite output: only NaN and +inf count."""
+    """Wraps renderers: counts rays whose fine outputs hold NaN or +inf (all -inf logits are a miss, not a failure),
+    and can poison them with NaN (the fault drill ``stability.nan_points``)."""
 
     def __init__(self, poison: bool) -> None:
         self.nonfinite_rays, self.poison = 0, poison

@@ -1,10 +1,8 @@
-"""What the stability suite computes: every (axis, row, level, seed) a run asks for, and the result of a spec (a
-method that raises, diverges or outputs non-finite values is ``failed`` there, and the suite goes on): a zero-shot
-row's renders its ``eval_model`` as ``sray eval`` does (at the clean point, the same scores), a trained row's trains
-its method (``scene_points``).
-
-A point record: ``axis``, ``method`` (the row's name), ``level``, ``seed`` (None: deterministic), ``status``,
-``miou`` (%) and ``psnr`` (dB) (None when failed), ``x`` (the chart's x), ``error``, ``key`` and the spec's result.
+"""What the stability suite computes: every (axis, row, level, seed) a run asks for, and the result of a spec: a
+zero-shot row's model rendered as ``sray eval`` does, a trained row's method trained (``scene_points``); a method that
+raises, diverges or outputs non-finite values is ``failed`` there. A point record: ``axis``, ``method`` (the row),
+``level``, ``seed`` (None: deterministic), ``status``, ``miou`` (%), ``psnr`` (dB), ``x`` (the chart's), ``error``,
+``key`` and the spec's result.
 """
 
 from __future__ import annotations

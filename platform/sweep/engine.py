@@ -74,12 +74,9 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
 
 
 class GracefulASHA(AsyncHyperBandScheduler):
-    """ASHA whose STOP becomes the trial's own stop request (``study.request_stop``), always CONTINUE for Tune.
-
-    Tune carries out a STOP by ending the trial's process; a training trial's placement group outlives it (Ray
-    Train's cleaner polls the state API, which a local Ray without the dashboard does not serve), so the next
-    trial would wait forever for its CPUs. Asked instead, the trial checkpoints, ends its job and returns.
-    """
+    """ASHA whose STOP becomes the trial's own stop request (``study.request_stop``), always CONTINUE for Tune: a
+    trial's process Tune ends leaves its placement group behind (Ray Train's cleaner polls the state API, which a
+    local Ray without the dashboard does not serve), holding its CPUs; asked, the trial checkpoints and returns."""
 
     def __init__(self, study: str, **asha: Any) -> None:
         super().__init__(**asha)
@@ -153,8 +150,8 @@ def _trial_dirname(trial: Any) -> str:
 
 def run_study(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction, settings: StudySettings,
               resume: bool = False) -> list[TrialOutcome]:
-    """Run every trial of ``plan`` (Ray already initialised; ``point_fn`` picklable) and return their outcomes, in
-    plan order. Without ``resume`` a new Tune experiment replaces any earlier one (the trials' records stay)."""
+    """Run every trial of ``plan`` (Ray up, ``point_fn`` picklable); their outcomes in plan order. Without ``resume``
+    a new Tune experiment replaces any earlier one (the trials' records stay)."""
     os.environ["TUNE_DISABLE_STRICT_METRIC_CHECKING"] = "1"
     job = _TrialJob(point_fn, {k: dict(v) for k, v in plan.items()}, str(settings.folder), propagated_env(),
                     settings.start_by)

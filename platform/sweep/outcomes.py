@@ -83,10 +83,8 @@ def collect_outcomes(study: Path, plan: Mapping[str, Mapping[str, Any]], tune_er
 def best_trial(outcomes: list[TrialOutcome], metric: str, mode: str) -> TrialOutcome | None:
     """The finished trial with the best last value of ``metric`` (``mode`` max or min), None when none has one."""
     scored = [o for o in outcomes if o.reason == "finished" and o.last_value(metric) is not None]
-    if not scored:
-        return None
     sign = 1.0 if mode == "max" else -1.0
-    return max(scored, key=lambda o: sign * o.last_value(metric))
+    return max(scored, key=lambda o: sign * o.last_value(metric), default=None)
 
 
 def _best_value(outcome: TrialOutcome, metric: str, mode: str) -> float | None:

@@ -52,9 +52,7 @@ class TrialRecord:
 def read_record(folder: Path) -> TrialRecord:
     """The trial's record (an empty one before its first launch)."""
     path = Path(folder) / RECORD
-    if not path.is_file():
-        return TrialRecord()
-    return TrialRecord(**json.loads(path.read_text()))
+    return TrialRecord(**json.loads(path.read_text())) if path.is_file() else TrialRecord()
 
 
 def write_record(folder: Path, record: TrialRecord) -> None:
@@ -110,8 +108,7 @@ class TrialContext:
 
 
 PointFunction = Callable[[dict[str, Any], TrialContext], "dict[str, Any] | None"]
-"""Runs the trial of one point; reports through Tune; may return its result (a JSON-able dict, kept in the
-trial's record); raises on failure."""
+"""Runs one point's trial, reports to Tune, may return a JSON-able result (kept in its record), raises on failure."""
 
 
 @dataclass(frozen=True)
