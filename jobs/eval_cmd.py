@@ -55,9 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table and where everything went; exit 2 on bad input (a flag the method does not read
     included)."""
-    from sray.platform.eval.calibration import CALIBRATION_FILE, calibrate
     from sray.platform.eval.split_gap import SPLITS_FILE, format_splits, split_summary
-    from sray.platform.eval.zero_shot import evaluate_model, format_table, write_json_atomic
+    from sray.platform.eval.zero_shot import (CALIBRATION_FILE, calibrate, evaluate_model, format_table,
+                                              write_json_atomic)
 
     method = get_method(args.method)
     unread = unread_flags(args.given, method.eval_reads)

@@ -11,8 +11,7 @@ from pathlib import Path
 from sray.platform.config.overrides import apply_settings
 from sray.platform.config.recipes import RECIPES, get_recipe
 from sray.platform.config.train_config import apply_override
-from sray.platform.sweep.options import SpecFile, load_spec_file, merge_options
-from sray.platform.sweep.request import SweepRequest
+from sray.platform.sweep.options import SpecFile, SweepRequest, load_spec_file, merge_options
 from sray.platform.sweep.spec import check_unique, parse_assignment
 from sray.platform.train.inputs import InputError
 

@@ -4,14 +4,9 @@
     model = sray.load("outputs/jobs/<job>/checkpoints")          # a trained checkpoint
     labels = model.label(images, poses, intrinsics)               # uint8 (N,H,W,3), (N,4,4) OpenCV c2w, (3,3) K
 
-Packaging: the product lives in four top-level folders (``model``, ``data_tools``, ``platform``, ``jobs``) that
-setup.py maps to ``sray.<folder>`` and that carry no ``__init__.py`` (a top-level ``platform`` package would
-shadow the standard library's). In a wheel they sit inside this package's folder. In an editable install, a
-source checkout on ``sys.path`` or a Ray ``working_dir`` they sit beside it, so the checkout's root is added to
-this package's search path: ``sray.model`` is then ``<root>/model``, and no top-level name changes.
-
-``load`` is imported on first use (PEP 562), so ``import sray.data_tools...`` stays free of torch.
-"""
+The folders setup.py maps to ``sray.<folder>`` sit inside this package in a wheel and beside it in a checkout,
+whose root is then added to the search path (docs/architecture.md). ``load`` is imported on first use (PEP 562),
+so ``import sray.data_tools...`` stays free of torch."""
 
 from __future__ import annotations
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 
 import cv2
@@ -13,7 +12,7 @@ from hypothesis import strategies as st
 
 from sray.platform.finetune.methods.registry import METHODS, get_method
 from sray.platform.viz.charts import curve_figure, size_figure, write_fleet_charts
-from sray.platform.viz.curves import average_curves, curve_xy, read_fleet_results, step_hold, zero_shot_value
+from sray.platform.viz.curves import average_curves, curve_xy, step_hold, zero_shot_value
 
 CHART_FILES = ["miou_vs_wall_s.png", "miou_vs_step.png", "psnr_vs_wall_s.png", "psnr_vs_step.png",
                "miou_vs_artifact_bytes.png"]
@@ -149,19 +148,6 @@ def test_single_method_fleet_and_degenerate_inputs(tmp_path):
                            METHODS)
     with pytest.raises(ValueError, match="field 'method' is 'nerf'"):
         write_fleet_charts([synthetic_result("x", "sray") | {"method": "nerf"}], tmp_path, METHODS)
-
-
-def test_read_fleet_results_from_the_contract_layout(tmp_path):
-    for r in mixed_fleet()[:3]:
-        folder = tmp_path / "scenes" / r["scene"] / r["method"]
-        folder.mkdir(parents=True)
-        (folder / "result.json").write_text(json.dumps(r))
-    got = read_fleet_results(tmp_path)
-    assert [(r["scene"], r["method"]) for r in got] == [("scene_a", "semantic-nerf"), ("scene_a", "sray"),
-                                                        ("scene_b", "sray")]
-    (tmp_path / "scenes" / "scene_b" / "sray" / "result.json").write_text("{broken")
-    with pytest.raises(ValueError, match=r"scene_b/sray/result.json: not valid JSON"):
-        read_fleet_results(tmp_path)
 
 
 def test_legends_name_the_inputs_each_method_was_given():

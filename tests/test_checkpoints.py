@@ -66,7 +66,7 @@ def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path):
     _seed_all(123)  # the restarted process starts from other RNG states and other weights
     resumed = _build(99)
     _step(*resumed)
-    state = manager.load()
+    state = load_checkpoint(manager.latest())
     resumed[0].load_state_dict(state["model"])
     resumed[1].load_state_dict(state["optimizer"])
     resumed[2].load_state_dict(state["scheduler"])
@@ -127,7 +127,7 @@ def test_crash_during_save_leaves_previous_latest_intact(tmp_path, monkeypatch):
         with pytest.raises(OSError, match="disk full"):
             manager.save({"w": torch.zeros(3), "step": step}, step=step)
         assert manager.latest() == tmp_path / "step_000000010"
-        torch.testing.assert_close(manager.load()["w"], torch.ones(3), rtol=0, atol=0)
+        torch.testing.assert_close(load_checkpoint(manager.latest())["w"], torch.ones(3), rtol=0, atol=0)
     assert [p.name for p in tmp_path.iterdir()] == ["step_000000010"]
 
 
@@ -142,27 +142,25 @@ def test_interrupted_replacement_is_recovered_on_restart(tmp_path):
 
 
 def test_latest_best_and_pruning(tmp_path):
-    manager = CheckpointManager(tmp_path, keep_last=2, mode="max")
+    manager = CheckpointManager(tmp_path, keep_last=2)
     metrics = {100: 0.30, 200: 0.55, 300: 0.41, 400: None, 500: 0.55, 600: 0.20}
     for step, metric in metrics.items():
         manager.save({"step": step}, step=step, metric=metric)
     assert manager.latest() == tmp_path / "step_000000600"
     assert manager.best() == tmp_path / "step_000000200"  # ties keep the earliest
     assert [s for s, _, _ in manager.entries()] == [200, 500, 600]
-    assert manager.load(manager.best())["step"] == 200
+    assert load_checkpoint(manager.best())["step"] == 200
 
-    lower = CheckpointManager(tmp_path / "loss", keep_last=1, mode="min")
-    for step, metric in ((1, 3.0), (2, 1.0), (3, float("nan")), (4, 2.0)):
-        lower.save({"step": step}, step=step, metric=metric)
-    assert lower.best() == tmp_path / "loss" / "step_000000002"
-    assert [s for s, _, _ in lower.entries()] == [2, 4]
+    scored = CheckpointManager(tmp_path / "nan", keep_last=1)  # a non-finite metric is stored as none
+    for step, metric in ((1, 1.0), (2, 3.0), (3, float("nan")), (4, 2.0)):
+        scored.save({"step": step}, step=step, metric=metric)
+    assert scored.best() == tmp_path / "nan" / "step_000000002"
+    assert [s for s, _, _ in scored.entries()] == [2, 4]
 
 
 def test_empty_manager_and_bad_folders_give_clear_errors(tmp_path):
     manager = CheckpointManager(tmp_path)
     assert manager.latest() is None and manager.best() is None
-    with pytest.raises(FileNotFoundError, match="no complete checkpoint"):
-        manager.load()
     with pytest.raises(FileNotFoundError, match="state.pt"):
         load_checkpoint(tmp_path)
     with pytest.raises(ValueError):

@@ -17,7 +17,7 @@ from sray.lab.studies.page import MAX_READING_LINES, READING, write_page
 from sray.lab.studies.paired import paired_differences
 from sray.lab.studies.results import FORMAT, read_results, write_result
 from sray.lab.studies.spec import StudyError, load_study
-from sray.platform.sweep import incremental
+from sray.platform.sweep import engine
 from sray.platform.sweep.study import TrialContext
 
 REPO = Path(__file__).resolve().parents[1]
@@ -152,7 +152,7 @@ def test_a_resumed_study_runs_only_its_missing_trials(tmp_path: Path, monkeypatc
         return result
 
     monkeypatch.setattr(trial, "run_trial", fake_trial)
-    monkeypatch.setattr(incremental, "run_study", run_study_here)
+    monkeypatch.setattr(engine, "run_study", run_study_here)
     monkeypatch.setattr(runner, "init_ray", lambda address: None)
     monkeypatch.setattr(TrialContext, "report", lambda self, metrics: None)
     imported = _result("base", 0, {"zero_shot": 48.0}, source="imported: docs/x/tables.json@7734061")

@@ -25,8 +25,7 @@ from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import load_job_config
 from sray.platform.eval.segmenter import Segmenter, SegmenterConfig, load_segmenter, save_segmenter
 from sray.platform.migrate.config_v1 import REMOVED_FIELDS
-from sray.platform.sweep.prepare import reload_sweep
-from sray.platform.sweep.sweep_record import read_sweep_record
+from sray.platform.sweep.prepare import read_sweep_record, reload_sweep
 from sray.platform.train.state import build_training, restore_training
 
 FIXTURE = Path(__file__).parent / "fixtures" / "sray_7734061"

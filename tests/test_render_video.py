@@ -23,11 +23,12 @@ from sray.data_tools.loader.samples import eval_sample
 from sray.data_tools.loader.views import StoredView
 from sray.data_tools.scene import source_pool
 from sray.model.fast_render import FastRender
+from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.view_scoring import predict_view, sray_renderer
 from sray.platform.finetune.render_model import render_model
 from sray.platform.finetune.scene_artifacts import adapted_state, checkpoint_sha256, save_sray_delta
 from sray.platform.render.camera_paths import CameraPath, spline_path
-from sray.platform.render.flythrough import Flythrough, flythrough_protocol
+from sray.platform.render.flythrough import Flythrough
 from sray.platform.render.frames import render_frame
 from sray.platform.render.panels import panel_layout
 from sray.platform.render.plan import plan_flythrough
@@ -145,7 +146,8 @@ def test_frames_json_records_poses_sources_and_the_protocol(rendered, tiny_shard
     assert all(len(f["source_ids"]) == 3 and set(f["source_ids"]) <= set(plan.meta.splits["source"])
                for f in record["frames"])
     assert record["model"] == {"checkpoint": str(Path(tiny_checkpoint).resolve())}
-    protocol = flythrough_protocol(plan, 3, "rgb", FastRender())
+    protocol = EvalProtocol.from_manifest(plan.manifest, 3, 1, str(tiny_shards / "manifest.json"), "rgb",
+                                          "").rendered_by(FastRender())
     assert record["protocol"] == protocol.to_json() and record["protocol_line"] == protocol.describe()
     assert (out / "protocol.txt").read_text() == protocol.describe() + "\n"
     assert decoded and not decoded & set(plan.meta.splits["test"])  # no test view's pixels, depth or labels

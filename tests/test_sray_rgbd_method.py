@@ -15,8 +15,7 @@ from train_fixtures import tiny_shards  # noqa: F401
 from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import sray_renderer
+from sray.platform.eval.view_scoring import score_scene, sray_renderer
 from sray.platform.finetune.methods.registry import get_method, reads_depth, with_depth_twins
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256
 from sray.platform.finetune.scene_finetune import SceneTask, finetune_scene

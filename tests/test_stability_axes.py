@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sray.platform.stability.axes import AXES, POSE_CM_PER_DEG, perturb_views
-from sray.platform.stability.presets import PRESETS
-from sray.platform.stability.summary import axis_table, breaking_point, breaking_summary, level_stats
+from sray.platform.stability.axes import AXES, POSE_CM_PER_DEG, PRESETS, perturb_views
+from sray.platform.stability.report import axis_table, breaking_point, breaking_summary, level_stats
 
 
 def _views(m: int = 3) -> tuple[np.ndarray, np.ndarray]:

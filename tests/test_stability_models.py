@@ -17,11 +17,10 @@ from sray.jobs.cli import build_parser, main
 from sray.jobs.stability import suite_job, world
 from sray.jobs.stability.suite_job import StabilityJob, prepare
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.eval.scene_scoring import score_scene
+from sray.platform.eval.view_scoring import score_scene
 from sray.platform.finetune.methods.registry import method_names
-from sray.platform.stability.point_spec import point_spec
-from sray.platform.stability.point_trial import SuiteInputs, suite_for
-from sray.platform.stability.presets import PRESETS
+from sray.platform.stability.axes import PRESETS, point_spec
+from sray.platform.stability.points_study import SuiteInputs, suite_for
 from sray.platform.stability.rows import SuiteModels, suite_rows
 from sray.platform.stability.suite import compute_spec
 

@@ -18,15 +18,13 @@ from train_fixtures import tiny_shards  # noqa: E402,F401
 from sray.data_tools.loader.shard_loader import make_eval_samples  # noqa: E402
 from sray.model.config import SRayConfig  # noqa: E402
 from sray.platform.common.eval_protocol import EvalProtocol  # noqa: E402
-from sray.platform.stability.point_spec import point_spec  # noqa: E402
-from sray.platform.stability.presets import PRESETS  # noqa: E402
-from sray.platform.stability.report import panels, write_outputs  # noqa: E402
+from sray.platform.stability.axes import PRESETS, point_spec  # noqa: E402
+from sray.platform.stability.report import level_stats, panels, write_outputs  # noqa: E402
 from sray.platform.stability.rows import MODES, suite_rows  # noqa: E402
 from sray.platform.stability.scene_points import training_views  # noqa: E402
-from sray.platform.stability.stress_scenes import load_scenes, perturbed_views  # noqa: E402
+from sray.platform.stability.stress_scenes import (choose_sources, load_scenes, perturbed_views,  # noqa: E402
+                                                   unseen_fraction)
 from sray.platform.stability.suite import planned_points  # noqa: E402
-from sray.platform.stability.summary import level_stats  # noqa: E402
-from sray.platform.stability.view_choice import choose_sources, unseen_fraction  # noqa: E402
 
 TOY = PRESETS["toy"]
 SCENE = "synth_test_000"
@@ -212,8 +210,8 @@ def test_point_records_come_from_the_study_and_an_errored_trial_is_a_failed_poin
     """Each planned point reads its spec's trial: finished -> its result, errored -> failed with the error,
     missing -> no records (the axis is not complete)."""
     from sray.platform.stability.points_study import point_records, study_folder, study_plan
-    from sray.platform.sweep.incremental import import_result
-    from sray.platform.sweep.trial_files import TrialRecord, trial_folder, write_record
+    from sray.platform.sweep.engine import import_result
+    from sray.platform.sweep.study import TrialRecord, trial_folder, write_record
 
     planned = planned_points(TOY, ["exposure"], [SRAY])
     plan = study_plan(TOY, planned)

@@ -21,8 +21,7 @@ from train_fixtures import tiny_shards  # noqa: E402,F401
 
 from sray.jobs.cli import main  # noqa: E402
 from sray.platform.common.bench_doc import Bench, bench_dir  # noqa: E402
-from sray.platform.stability.axes import AXES  # noqa: E402
-from sray.platform.stability.presets import PRESETS  # noqa: E402
+from sray.platform.stability.axes import AXES, PRESETS  # noqa: E402
 
 POISONED = "sray/image_noise/30"
 
@@ -74,12 +73,12 @@ def test_toy_suite_runs_every_axis_records_a_nan_as_failed_and_resumes(ray_sessi
         assert text.count("\n### ") == len(AXES) + 1
 
         # a re-run finds every point stored and starts no trial
-        from sray.platform.sweep import incremental
+        from sray.platform.sweep import engine
 
         def refuse(*args, **kwargs):
             raise AssertionError("a stored point was computed again")
 
-        monkeypatch.setattr(incremental, "run_study", refuse)
+        monkeypatch.setattr(engine, "run_study", refuse)
         assert _run(tiny_shards, toy_checkpoints, out, doc, mlflow_uri, "--axes", "blur") == 0
         again = json.loads((out / "stability.json").read_text())
         assert [(p["key"], p["miou"]) for p in again["points"]] == [(p["key"], p["miou"]) for p in points]

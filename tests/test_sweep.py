@@ -22,12 +22,10 @@ from train_fixtures import tiny_config, tiny_shards  # noqa: F401
 
 from sray.platform.common.fault_hook import ENV_VAR, hold_paths
 from sray.platform.config.recipes import get_recipe
-from sray.platform.sweep.driver import run_sweep
-from sray.platform.sweep.finish import SweepResult
-from sray.platform.sweep.options import SweepOptions
-from sray.platform.sweep.request import SweepRequest
+from sray.platform.sweep.driver import SweepResult, run_sweep
+from sray.platform.sweep.options import SweepOptions, SweepRequest
 from sray.platform.sweep.spec import parse_assignment
-from sray.platform.sweep.trial_files import read_history, read_record, read_stop_request, trial_folder
+from sray.platform.sweep.study import read_history, read_record, read_stop_request, trial_folder
 from sray.platform.tracking.params import flatten_config
 
 pytestmark = pytest.mark.slow

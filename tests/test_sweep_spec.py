@@ -15,15 +15,12 @@ from injected_faults import injected_faults
 from sray.jobs.cli import main
 from sray.platform.common.fault_hook import InjectedFailure
 from sray.platform.config.recipes import get_recipe
-from sray.platform.sweep.capacity import plan_concurrency
+from sray.platform.sweep.prepare import plan_concurrency
 from sray.platform.sweep.engine import _run_trial, _TrialJob
-from sray.platform.sweep.outcomes import collect_outcomes
-from sray.platform.sweep.plan import build_plan, with_seeds
-from sray.platform.sweep.report import write_tables
-from sray.platform.sweep.spec import SpecError, parse_assignment, parse_param
-from sray.platform.sweep.study import TrialContext
-from sray.platform.sweep.trial_files import (BY_BUDGET, BY_SCHEDULER, append_history, read_record, request_stop,
-                                             trial_folder)
+from sray.platform.sweep.outcomes import collect_outcomes, write_tables
+from sray.platform.sweep.spec import SpecError, build_plan, parse_assignment, parse_param, with_seeds
+from sray.platform.sweep.study import (BY_BUDGET, BY_SCHEDULER, TrialContext, append_history, read_record,
+                                       request_stop, trial_folder)
 from sray.platform.train.resources import InfeasibleRequest, NodeResources
 from sray.platform.viz.sweep_chart import TrialCurve, write_sweep_chart
 
@@ -66,13 +63,13 @@ def test_a_finished_trial_never_runs_again_and_an_errored_one_stays_errored(tmp_
 
 def test_a_study_run_piece_by_piece_keeps_results_imports_old_ones_and_reruns_only_errors(tmp_path: Path,
                                                                                         monkeypatch) -> None:
-    """The harnesses' way of running the engine (``incremental``), with Tune replaced by the trial wrapper run
+    """The harnesses' way of running the engine (``run_missing``), with Tune replaced by the trial wrapper run
     in this process: results kept in the records, an imported result never computed, an errored trial run again
     by the next launch, no trial started past the time limit."""
-    from sray.platform.sweep import incremental
+    from sray.platform.sweep import engine
     from sray.platform.sweep.study import StudySettings
 
-    monkeypatch.setattr(incremental, "run_study", run_study_here)
+    monkeypatch.setattr(engine, "run_study", run_study_here)
     calls: list[str] = []
 
     def square(point: dict, ctx: TrialContext) -> dict:
@@ -81,23 +78,23 @@ def test_a_study_run_piece_by_piece_keeps_results_imports_old_ones_and_reruns_on
 
     plan = {k: {"x": x} for k, x in (("a", 2), ("b", 3), ("c", 4), ("d", 5))}
     settings = StudySettings(folder=tmp_path, metric="y", mode="max", label="test")
-    assert incremental.import_result(tmp_path, "c", {"y": -1}, tmp_path / "old" / "c.json")
+    assert engine.import_result(tmp_path, "c", {"y": -1}, tmp_path / "old" / "c.json")
     with injected_faults("sweep.fail_trials=b"):
-        first = incremental.run_missing(plan, square, settings)
+        first = engine.run_missing(plan, square, settings)
     assert [(o.key, o.reason, o.result) for o in first] == [
         ("a", "finished", {"y": 4}), ("b", "errored", None), ("c", "finished", {"y": -1}), ("d", "finished", {"y": 25})]
     assert calls == ["a", "d"] and read_record(trial_folder(tmp_path, "c")).imported.endswith("c.json")
-    assert not incremental.import_result(tmp_path, "a", {"y": 0}, tmp_path / "old" / "a.json")  # finished stays
-    assert incremental.missing(tmp_path, plan) == {"b": {"x": 3}}
+    assert not engine.import_result(tmp_path, "a", {"y": 0}, tmp_path / "old" / "a.json")  # finished stays
+    assert engine.missing(tmp_path, plan) == {"b": {"x": 3}}
     late = dataclasses.replace(settings, start_by=time.time() - 1)
-    assert [o.reason for o in incremental.run_missing(plan, square, late)][1] == "errored" and len(calls) == 2
+    assert [o.reason for o in engine.run_missing(plan, square, late)][1] == "errored" and len(calls) == 2
     job = _TrialJob(square, plan, str(tmp_path), {}, time.time() - 1)  # the trial wrapper's own gate
     _run_trial({"key": "e"}, dataclasses.replace(job, plan={**plan, "e": {"x": 1}}))
     assert read_record(trial_folder(tmp_path, "e")).launches == [] and len(calls) == 2
-    second = incremental.run_missing(plan, square, settings)
+    second = engine.run_missing(plan, square, settings)
     assert calls == ["a", "d", "b"] and [o.reason for o in second] == ["finished"] * 4
     assert len(read_record(trial_folder(tmp_path, "b")).launches) == 2
-    assert incremental.stored_results(tmp_path) == {"a": {"y": 4}, "b": {"y": 9}, "c": {"y": -1}, "d": {"y": 25}}
+    assert {o.key: o.result for o in second} == {"a": {"y": 4}, "b": {"y": 9}, "c": {"y": -1}, "d": {"y": 25}}
 
 
 def test_outcomes_name_why_each_trial_ended(tmp_path: Path) -> None:

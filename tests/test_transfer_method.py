@@ -29,10 +29,9 @@ from sray.lab.ceilings.rows import CeilingRow, RowProtocol
 from sray.model.view_render import render_view
 from sray.platform.eval.eval_model import segmenter_model
 from sray.platform.eval.label_transfer import UNSEEN, transfer_labels
-from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.segmenter import Segmenter, SegmenterConfig, load_segmenter
-from sray.platform.eval.transfer_view import segment_and_transfer, transfer_renderer
-from sray.platform.eval.view_scoring import predict_view, score_views
+from sray.platform.eval.segmenter import (Segmenter, SegmenterConfig, load_segmenter, segment_and_transfer,
+                                          transfer_renderer)
+from sray.platform.eval.view_scoring import predict_view, score_scene, score_views
 from sray.platform.finetune.learners import TransferLearner
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256

@@ -39,8 +39,7 @@ from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.bench_doc import Bench
 from sray.platform.common.eval_protocol import inputs_name
 from sray.platform.eval.eval_model import EvalModel
-from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import scene_confusion, sray_renderer
+from sray.platform.eval.view_scoring import scene_confusion, score_scene, sray_renderer
 from sray.platform.eval.zero_shot import select_scenes
 from sray.platform.finetune.methods.sray_method import NAME as SRAY
 

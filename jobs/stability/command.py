@@ -18,8 +18,7 @@ from pathlib import Path
 
 from sray.platform.common.bench_doc import Bench, bench_dir, record
 from sray.platform.finetune.methods.registry import method_names
-from sray.platform.stability.axes import AXES
-from sray.platform.stability.presets import PRESETS
+from sray.platform.stability.axes import AXES, PRESETS
 from sray.platform.stability.rows import MODES
 
 

@@ -22,10 +22,8 @@ from sray.model.config import SRayConfig
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.eval.zero_shot import select_scenes
 from sray.platform.finetune.methods.registry import get_method
-from sray.platform.stability.axes import AXES
-from sray.platform.stability.point_trial import SuiteInputs
-from sray.platform.stability.points_study import point_records, run_points
-from sray.platform.stability.presets import PRESETS, Preset
+from sray.platform.stability.axes import AXES, PRESETS, Preset
+from sray.platform.stability.points_study import SuiteInputs, point_records, run_points
 from sray.platform.stability.report import track, write_outputs
 from sray.platform.stability.rows import Row, SuiteModels, suite_rows
 from sray.platform.stability.scene_points import scene_settings

@@ -17,7 +17,7 @@ from sray.data_tools.atomic import atomic_write_json
 from sray.data_tools.synth.world import make_world
 from sray.platform.config.recipes import get_recipe
 from sray.platform.eval.segmenter_training import train_segmenter
-from sray.platform.stability.presets import Preset
+from sray.platform.stability.axes import Preset
 from sray.platform.stability.rows import SuiteModels
 from sray.platform.train.launcher import launch_training
 

@@ -12,7 +12,7 @@ the same question on rooms the model was trained on. The rows (:func:`row_descri
   labels a query from its sources (an oracle);
 * ``b`` the same transfer of the 2D segmenter's predictions on the source images (an oracle);
 * ``c`` the segmenter's predictions splatted forward with the source depth (the ``2d-transfer`` method's own
-  transfer, :func:`~sray.platform.eval.transfer_view.source_depth_transfer`: the RGB-D protocol's inputs,
+  transfer, :func:`~sray.platform.eval.segmenter.source_depth_transfer`: the RGB-D protocol's inputs,
   nothing of the query but its camera);
 * ``c-rgb`` the segmenter's predictions carried backward by the depth S-Ray renders for the query from the
   source images (the RGB protocol's inputs: without source depth there is no occlusion test);
@@ -58,8 +58,7 @@ from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import read_meta
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.eval.label_transfer import UNSEEN_RULE, LabelTransfer, transfer_labels
-from sray.platform.eval.segmenter import Segmenter, load_segmenter
-from sray.platform.eval.transfer_view import source_depth_transfer
+from sray.platform.eval.segmenter import Segmenter, load_segmenter, source_depth_transfer
 from sray.platform.eval.view_scoring import encode_sources
 from sray.platform.eval.zero_shot import select_scenes, training_scenes
 

@@ -16,11 +16,10 @@ from sray.data_tools.synth.world import make_world
 from sray.lab.studies.results import read_results
 from sray.lab.studies.spec import ROOM_SPLITS, StudySpec
 from sray.lab.studies.trial import study_trial, world_folder
-from sray.platform.sweep.capacity import TRIAL_RESOURCES
-from sray.platform.sweep.incremental import missing, run_missing
+from sray.platform.sweep.prepare import TRIAL_RESOURCES
+from sray.platform.sweep.engine import missing, run_missing
 from sray.platform.sweep.outcomes import TrialOutcome
-from sray.platform.sweep.study import StudySettings
-from sray.platform.sweep.trial_files import FINISHED, TrialRecord, read_record, trial_folder, write_record
+from sray.platform.sweep.study import FINISHED, StudySettings, TrialRecord, read_record, trial_folder, write_record
 from sray.platform.train.launcher import init_ray
 
 STUDY_DIR = "study"

@@ -30,9 +30,9 @@ from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.machine import describe_machine
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import CONFIG_FILE, TrainConfig, apply_override, load_job_config
-from sray.platform.eval.calibration import calibrate
 from sray.platform.eval.eval_model import checkpoint_model
-from sray.platform.eval.zero_shot import evaluate_checkpoint, select_scenes, training_scenes, write_json_atomic
+from sray.platform.eval.zero_shot import (calibrate, evaluate_checkpoint, select_scenes, training_scenes,
+                                          write_json_atomic)
 from sray.platform.sweep.study import TrialContext
 from sray.platform.train.launcher import budget_spent, launch_training
 

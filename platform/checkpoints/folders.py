@@ -1,17 +1,6 @@
-"""Full-state training checkpoints: atomic, ``torch.load(weights_only=True)``-safe, latest + best.
-
-One checkpoint is a folder ``step_<step:09d>/`` holding
-
-* ``state.pt``: the caller's state dict (model, optimizer, scheduler, grad scaler, step, config as a
-  plain dict, best metric ...) made only of tensors, dicts, lists,
-  tuples, strings, numbers, bools and None, so it loads with ``weights_only=True``;
-* ``meta.json``: ``{"format", "version", "step", "metric", "saved_at"}``.
-
-A folder is assembled under a hidden temporary name and renamed into place, so a crash during a
-save leaves the previous checkpoints untouched; :class:`CheckpointManager` derives ``latest`` (the
-highest step) and ``best`` (by the validation metric) from the complete folders alone. The same
-folder is what goes into a Ray Train checkpoint (``sray.platform.train.worker.to_ray_checkpoint``).
-"""
+"""Full-state training checkpoints: atomic, ``torch.load(weights_only=True)``-safe, latest + best. A checkpoint is a
+folder ``step_<step:09d>/`` holding ``state.pt`` (tensors, dicts, lists, tuples, strings, numbers, bools, None only)
+and ``meta.json``, assembled under a hidden name and renamed into place (a crash leaves the previous ones whole)."""
 
 from __future__ import annotations
 
@@ -35,9 +24,7 @@ from sray.platform.config.stored_format import outdated
 log = logging.getLogger(__name__)
 
 FORMAT = "sray-checkpoint"
-VERSION = 2
-"""Checkpoint format: 1 up to commit 7734061 (its config in format 1, ``sray.platform.config.stored_format``), 2
-today; ``sray migrate`` converts a 1."""
+VERSION = 2  # checkpoint format version; ``sray migrate`` converts older ones
 STATE_FILE = "state.pt"
 META_FILE = "meta.json"
 _STEP_DIR = re.compile(r"^step_(\d{9,})$")
@@ -46,7 +33,6 @@ _EXACT_LEAVES = (str, int, float, bool, type(None))
 _TORCH_LEAVES = (torch.Tensor, torch.device, torch.dtype)
 
 
-# ------------------------------------------------------------------------------ single folder
 def check_weights_only_safe(obj: Any, where: str = "state") -> None:
     """TypeError naming the first entry ``torch.load(weights_only=True)`` would refuse."""
     if type(obj) in (dict, OrderedDict):
@@ -121,19 +107,16 @@ def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dic
     return torch.load(file, map_location=map_location, weights_only=True)
 
 
-# ------------------------------------------------------------------------------------ manager
 class CheckpointManager:
-    """Numbered checkpoints under ``root``: save, ``latest``, ``best`` and pruning to the last k."""
+    """Numbered checkpoints under ``root``: save, ``latest`` (highest step), ``best`` (highest validation metric),
+    pruning to the last k, all derived from the complete folders alone."""
 
-    def __init__(self, root: Path, keep_last: int = 3, mode: str = "max") -> None:
-        """``keep_last``: newest checkpoints kept besides the best; ``mode``: "max" (mIoU) or "min"."""
+    def __init__(self, root: Path, keep_last: int = 3) -> None:
+        """``keep_last``: newest checkpoints kept besides the best."""
         if keep_last < 1:
             raise ValueError(f"keep_last must be >= 1, got {keep_last}")
-        if mode not in ("max", "min"):
-            raise ValueError(f"mode must be 'max' or 'min', got {mode!r}")
         self.root = Path(root)
         self.keep_last = keep_last
-        self.mode = mode
         self.root.mkdir(parents=True, exist_ok=True)
         self._recover()
 
@@ -170,19 +153,9 @@ class CheckpointManager:
         return entries[-1][2] if entries else None
 
     def best(self) -> Path | None:
-        """Folder of the checkpoint with the best metric (earliest on ties), or None if none has one."""
-        scored = [(m, s, p) for s, m, p in self.entries() if m is not None]
-        if not scored:
-            return None
-        sign = -1.0 if self.mode == "max" else 1.0
-        return min(scored, key=lambda e: (sign * e[0], e[1]))[2]
-
-    def load(self, path: Path | None = None, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-        """Load ``path`` (default: the latest checkpoint); FileNotFoundError when there is none."""
-        path = path if path is not None else self.latest()
-        if path is None:
-            raise FileNotFoundError(f"{self.root}: no complete checkpoint to load")
-        return load_checkpoint(path, map_location)
+        """Folder of the checkpoint with the highest metric (earliest on ties), or None if none has one."""
+        scored = [(-m, s, p) for s, m, p in self.entries() if m is not None]
+        return min(scored)[2] if scored else None
 
     def _prune(self) -> None:
         entries = self.entries()
@@ -204,8 +177,7 @@ def resolve_checkpoint(path: Path) -> Path:
             return root
         if root.is_dir() and any(root.glob("step_*")):
             manager = CheckpointManager(root)
-            found = manager.best() or manager.latest()
-            if found is not None:
+            if found := manager.best() or manager.latest():
                 return found
     raise FileNotFoundError(f"{path}: no sray checkpoint here; pass a step_XXXXXXXXX folder (holding state.pt), "
                             "a job's checkpoints/ folder or the job folder")

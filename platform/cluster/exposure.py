@@ -1,11 +1,6 @@
-"""Which of a local cluster's processes listen beyond the loopback interface.
-
-``sray cluster`` binds what it can to 127.0.0.1 (PostgreSQL, the MLflow server, Ray's dashboard and Jobs
-API). Ray 2.60's GCS server and raylets listen on every interface whatever ``--node-ip-address`` says
-(``ss -ltnp`` shows ``*:<port>``), so those ports are reachable from the network and guarded only by
-the cluster's token. ``sray cluster status`` reports them from the kernel's socket table rather than
-claiming "loopback only".
-"""
+"""Which of a local cluster's processes listen beyond loopback, from the kernel's socket table: Ray 2.60's GCS
+server and raylets listen on every interface whatever ``--node-ip-address`` says, guarded only by the token
+(docs/cluster.md)."""
 
 from __future__ import annotations
 
@@ -17,16 +12,14 @@ import psutil
 
 @dataclass(frozen=True)
 class Listener:
-    """A listening TCP socket of one of the cluster's processes."""
+    """A listening TCP socket of one of the cluster's processes: the part whose process tree holds it (``ray-head``,
+    ``mlflow`` ...), the owning process's name (``raylet`` ...) and pid, the bound address (``127.0.0.1``, or
+    ``0.0.0.0`` / ``::`` for every interface) and the port."""
 
     part: str
-    """The cluster part whose process tree holds it (``ray-head``, ``mlflow`` ...)."""
     process: str
-    """The owning process's name (``gcs_server``, ``raylet``, ``postgres`` ...)."""
     pid: int
-    """The owning process's id."""
     address: str
-    """Bound address: ``127.0.0.1``, or ``0.0.0.0`` / ``::`` for every interface."""
     port: int
 
     @property

@@ -1,8 +1,5 @@
-"""Ray Jobs API client side of ``sray submit``: submit a driver command, follow its log, map its end.
-
-The client needs the cluster's token in its environment (``RAY_AUTH_MODE=token`` and
-``RAY_AUTH_TOKEN_PATH``/``RAY_AUTH_TOKEN``); Ray's client adds it to every request.
-"""
+"""Ray Jobs API client side of ``sray submit``: submit a driver command, follow its log, map its end. The client
+needs the cluster's token in its environment (``RAY_AUTH_MODE=token``, ``RAY_AUTH_TOKEN_PATH``/``RAY_AUTH_TOKEN``)."""
 
 from __future__ import annotations
 
@@ -13,23 +10,15 @@ from typing import Any, TextIO
 from ray.job_submission import JobSubmissionClient
 
 EXIT_CODES = {"SUCCEEDED": 0, "FAILED": 1, "STOPPED": 3}
-"""Exit status of ``sray submit --wait`` per final job status (anything else: 1)."""
-
-
-def client(address: str) -> Any:
-    """A ``JobSubmissionClient`` for the dashboard at ``address`` (http://host:port)."""
-    return JobSubmissionClient(address)
+"""Exit status of ``sray submit --wait`` per final job status (the job statuses that do not change any more)."""
 
 
 def submit(address: str, entrypoint: str, submission_id: str | None = None,
            runtime_env: dict[str, Any] | None = None) -> str:
-    """Submit ``entrypoint`` (a shell command run on the head) and return the job id."""
-    return client(address).submit_job(entrypoint=entrypoint, submission_id=submission_id,
-                                      runtime_env=runtime_env or None)
-
-
-TERMINAL = ("SUCCEEDED", "FAILED", "STOPPED")
-"""Job statuses that do not change any more."""
+    """Submit ``entrypoint`` (a shell command run on the head) to the dashboard at ``address`` (http://host:port);
+    returns the job id."""
+    return JobSubmissionClient(address).submit_job(entrypoint=entrypoint, submission_id=submission_id,
+                                                   runtime_env=runtime_env or None)
 
 
 async def _follow(jobs: Any, job_id: str, out: TextIO, poll_s: float) -> str:
@@ -55,7 +44,7 @@ async def _follow(jobs: Any, job_id: str, out: TextIO, poll_s: float) -> str:
                     print(f"[sray] log stream of {job_id} ended ({type(streaming.exception()).__name__}); waiting "
                           "for the job's status", file=out, flush=True)
             status = str((await asyncio.to_thread(jobs.get_job_status, job_id)).value)
-            if status in TERMINAL:
+            if status in EXIT_CODES:
                 break
     finally:
         streaming.cancel()
@@ -71,9 +60,4 @@ async def _follow(jobs: Any, job_id: str, out: TextIO, poll_s: float) -> str:
 
 def follow(address: str, job_id: str, out: TextIO = sys.stdout, poll_s: float = 1.0) -> str:
     """Stream the job's log to ``out`` until it ends; return its final status (SUCCEEDED, FAILED, STOPPED)."""
-    return asyncio.run(_follow(client(address), job_id, out, poll_s))
-
-
-def job_info(address: str, job_id: str) -> Any:
-    """The Jobs API's ``JobDetails`` of ``job_id`` (status, message, driver info)."""
-    return client(address).get_job_info(job_id)
+    return asyncio.run(_follow(JobSubmissionClient(address), job_id, out, poll_s))

@@ -1,14 +1,10 @@
-"""``sray cluster up|status|down``: PostgreSQL, an MLflow server on it and a multi-node Ray, as
-processes on this machine, all bound to 127.0.0.1.
-
-``up`` starts them in dependency order (database, tracking server, Ray head, worker nodes) and
-records each process (:mod:`sray.platform.cluster.state`); ``down`` stops the recorded processes in
-reverse order and keeps the data (database, artifacts, shared storage), so the next ``up`` finds the
-same runs. A part that fails to start stops what this ``up`` had started.
-"""
+"""``sray cluster up|status|restart|down``: PostgreSQL, an MLflow server on it and a multi-node Ray, as processes
+on this machine bound to 127.0.0.1 (docs/cluster.md). ``up`` starts and records them in dependency order (a part
+that fails stops what it had started); ``down`` stops them in reverse order and keeps the data."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import secrets
@@ -46,6 +42,7 @@ def alive_nodes(state: ClusterState) -> int:
 
 
 def _new_state(root: Path, workers: int, cpus_per_worker: int) -> ClusterState:
+    """A record for a new ``up``: the old password and, where still free, the old ports."""
     old = load_state(root)
     state = ClusterState(dir=str(root), password=old.password if old else secrets.token_urlsafe(24),
                          workers=workers, cpus_per_worker=cpus_per_worker)
@@ -60,8 +57,14 @@ def _timed(state: ClusterState, name: str, start: float) -> None:
 
 def _started(state: ClusterState, name: str, record: ProcessRecord) -> None:
     """Record process ``name`` on disk (under the record's lock) and in ``state``."""
-    entry = {"pid": record.pid, "started": record.started}
+    entry = dataclasses.asdict(record)
     state.processes = update_state(state.root, lambda on_disk: on_disk.processes.update({name: entry})).processes
+
+
+def _stop(name: str, record: ProcessRecord) -> bool:
+    """Stop part ``name``: PostgreSQL by SIGINT, its fast shutdown (SIGTERM waits for every client to leave)."""
+    sig = signal.SIGINT if name == "postgres" else signal.SIGTERM
+    return stop(record, sig=sig, supervisor=name.startswith("ray-"))
 
 
 def _start_part(state: ClusterState, name: str, wait: bool = True) -> None:
@@ -94,9 +97,9 @@ def _start_part(state: ClusterState, name: str, wait: bool = True) -> None:
 
 
 def _mlflow_ready(state: ClusterState) -> None:
-    """Wait for the recorded MLflow server to answer."""
-    record = ProcessRecord(**state.processes["mlflow"])
-    mlflow_server.wait_ready(record, state.ports["mlflow"], state.root / "logs" / "mlflow.log")
+    """Wait for the recorded MLflow server to answer ``/health``; ClusterError naming its log otherwise."""
+    wait_until(lambda: mlflow_server.healthy(state.tracking_uri), 120.0, "the MLflow server",
+               state.root / "logs" / "mlflow.log", state.record("mlflow"))
 
 
 def _wait_nodes(state: ClusterState, timeout_s: float = 120.0) -> None:
@@ -134,7 +137,7 @@ def up(root: Path, workers: int = 2, cpus_per_worker: int = 1) -> ClusterState:
         _timed(state, "mlflow", t_mlflow)
         t0 = time.monotonic()
         _wait_nodes(state)
-        state.startup_s["ray-workers-joined"] = round(time.monotonic() - t0, 1)
+        _timed(state, "ray-workers-joined", t0)
     except BaseException:
         down(root)
         raise
@@ -147,7 +150,7 @@ def restart(root: Path, name: str, outage_s: float = 0.0) -> ClusterState:
     state = status(root)
     record = state.record(name)
     if record is not None:
-        stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM, supervisor=name.startswith("ray-"))
+        _stop(name, record)
     time.sleep(outage_s)
     t0 = time.monotonic()
     _start_part(state, name)
@@ -174,18 +177,10 @@ def down(root: Path) -> list[str]:
     stopped = []
     for prefix in STOP_ORDER:
         for name in sorted(n for n in state.processes if n.startswith(prefix)):
-            record = state.record(name)
-            # PostgreSQL: SIGINT is its fast shutdown (SIGTERM would wait for every client to leave).
-            if record is not None and stop(record, sig=signal.SIGINT if name == "postgres" else signal.SIGTERM,
-                                           supervisor=name.startswith("ray-")):
+            if _stop(name, state.record(name)):
                 stopped.append(name)
     update_state(state.root, lambda on_disk: on_disk.processes.clear())
     return stopped
-
-
-def client_env(state: ClusterState) -> dict[str, str]:
-    """Environment a client of this cluster needs (the Ray token)."""
-    return ray_nodes.auth_env(state.token_path)
 
 
 def describe(state: ClusterState) -> str:
@@ -193,7 +188,7 @@ def describe(state: ClusterState) -> str:
     token clients need, and the ports open beyond loopback."""
     alive = state.alive()
     running = ", ".join(f"{n} {'up' if ok else 'DOWN'} (pid {state.processes[n]['pid']})" for n, ok in alive.items())
-    env = " ".join(f"{k}={v}" for k, v in client_env(state).items())
+    env = " ".join(f"{k}={v}" for k, v in ray_nodes.auth_env(state.token_path).items())
     return "\n".join([
         f"[cluster] processes: {running or 'none running'}",
         f"[cluster] Ray address:     --address {state.ray_address}   (sray train / finetune-fleet)",

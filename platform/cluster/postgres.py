@@ -1,11 +1,6 @@
-"""PostgreSQL for the MLflow server: Debian's package, a database folder of the cluster's own.
-
-``up`` installs Debian's ``postgresql`` package when it is missing and this process may
-(root and ``apt-get``), else says how. The server runs from the cluster folder (``initdb`` into
-``<dir>/pg``), listens on 127.0.0.1 only (its Unix socket inside that folder) and asks every client
-for a password (``scram-sha-256``, also for local connections). PostgreSQL refuses to run as root:
-as root, its processes run as the ``postgres`` user the package creates.
-"""
+"""PostgreSQL for the MLflow server: Debian's package (installed when missing and this process may), a database
+folder of the cluster's own (``<dir>/pg``, its Unix socket inside), listening on 127.0.0.1 only, a password
+(``scram-sha-256``) asked of every client. PostgreSQL refuses to run as root: as root, it runs as ``postgres``."""
 
 from __future__ import annotations
 
@@ -18,12 +13,9 @@ from pathlib import Path
 
 from sray.platform.cluster.processes import ClusterError, ProcessRecord, port_open, spawn, wait_until
 
-DB_USER = "sray"
-"""The database role MLflow logs in as (the superuser of the cluster's own database folder)."""
-DB_NAME = "mlflow"
-"""The database holding MLflow's tables."""
-SERVICE_USER = "postgres"
-"""The user PostgreSQL runs as when sray runs as root (created by Debian's package)."""
+DB_USER = "sray"  # the database role MLflow logs in as (the superuser of the cluster's own database folder)
+DB_NAME = "mlflow"  # the database holding MLflow's tables
+SERVICE_USER = "postgres"  # the user PostgreSQL runs as when sray runs as root (created by Debian's package)
 
 
 def bin_dir() -> Path | None:
@@ -65,35 +57,24 @@ def _service_user() -> str | None:
     return SERVICE_USER
 
 
-def _own(path: Path, user: str | None) -> None:
-    """Give ``path`` to ``user`` (no-op when running as ourselves)."""
-    if user is not None:
-        shutil.chown(path, user, user)
-
-
-def _check_reachable(data: Path, user: str | None) -> None:
-    """ClusterError naming the first folder above ``data`` that ``user`` cannot enter."""
-    if user is None:
-        return
+def init_db(bins: Path, data: Path, password: str, log_path: Path) -> None:
+    """``initdb`` into ``data`` (unless done) with role :data:`DB_USER` and scram password auth.
+    ClusterError naming the first folder above ``data`` that the service user cannot enter."""
+    user = _service_user()
     for folder in reversed(data.parent.parents):
-        if not folder.stat().st_mode & 0o001:
+        if user and not folder.stat().st_mode & 0o001:
             raise ClusterError(f"{folder}: the {user!r} user PostgreSQL runs as cannot enter this folder; "
                                f"`chmod o+x {folder}` or pass a --dir elsewhere")
-
-
-def init_db(bins: Path, data: Path, password: str, log_path: Path) -> bool:
-    """``initdb`` into ``data`` with role :data:`DB_USER` and scram password auth; False when it exists."""
-    user = _service_user()
-    _check_reachable(data, user)
     if (data / "PG_VERSION").exists():
-        return False
+        return
     data.mkdir(parents=True, exist_ok=True)
     data.chmod(0o700)
     pwfile = data.parent / "pg.pw"
     pwfile.write_text(password + "\n")
     pwfile.chmod(0o600)
-    _own(data, user)
-    _own(pwfile, user)
+    if user:
+        for path in (data, pwfile):
+            shutil.chown(path, user, user)
     try:
         with open(log_path, "ab") as log:
             done = subprocess.run([str(bins / "initdb"), "-D", str(data), "-U", DB_USER, f"--pwfile={pwfile}",
@@ -104,7 +85,6 @@ def init_db(bins: Path, data: Path, password: str, log_path: Path) -> bool:
         pwfile.unlink(missing_ok=True)
     if done.returncode != 0:
         raise ClusterError(f"initdb into {data} failed; see {log_path}")
-    return True
 
 
 def start(bins: Path, data: Path, port: int, log_path: Path) -> ProcessRecord:

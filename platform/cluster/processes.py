@@ -1,13 +1,10 @@
-"""Background processes of a local cluster: free ports, start detached, check and stop by recorded id.
-
-A process is recorded as ``(pid, start time)``: the start time (``/proc/<pid>/stat`` field 22) tells
-a recorded process from an unrelated one that later got the same pid, so ``sray cluster down``
-never signals anything it did not start. Each process leads its own session (process group), and
-stopping it signals that whole group, which ends the helpers it spawned too.
-"""
+"""Background processes of a local cluster: free ports, start detached, check and stop by recorded id. A process is
+recorded with its start time (``/proc/<pid>/stat``), so a later process that got the same pid is never signalled;
+each leads its own process group, and stopping it signals the whole group (the helpers it spawned too)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -24,12 +21,11 @@ class ClusterError(RuntimeError):
 
 @dataclass(frozen=True)
 class ProcessRecord:
-    """One process a cluster started."""
+    """One process a cluster started: its pid (also its process group id: it leads its own session) and its start
+    time in clock ticks since boot (``/proc/<pid>/stat``)."""
 
     pid: int
-    """Process id (also its process group id: it leads its own session)."""
     started: int
-    """Its start time in clock ticks since boot, from ``/proc/<pid>/stat``."""
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -48,14 +44,19 @@ def port_open(host: str, port: int) -> bool:
         return False
 
 
-def start_time(pid: int) -> int | None:
-    """The process's start time (clock ticks since boot), or None when there is no such live process."""
+def _stat(pid: int) -> list[str]:
+    """Fields of ``/proc/<pid>/stat`` after the command name (state, ppid, pgrp, ...); [] when it is gone."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
-        return None
-    fields = stat[stat.rindex(")") + 2:].split()
-    return None if fields[0] == "Z" else int(fields[19])
+        return []
+    return stat[stat.rindex(")") + 2:].split()
+
+
+def start_time(pid: int) -> int | None:
+    """The process's start time (clock ticks since boot), or None when there is no such live process."""
+    fields = _stat(pid)
+    return None if not fields or fields[0] == "Z" else int(fields[19])
 
 
 def is_alive(record: ProcessRecord) -> bool:
@@ -65,10 +66,8 @@ def is_alive(record: ProcessRecord) -> bool:
 
 def spawn(cmd: list[str], log_path: Path, env: Mapping[str, str] | None = None, user: str | None = None,
           cwd: Path | None = None) -> ProcessRecord:
-    """Start ``cmd`` detached (own session, stdin closed, output to ``log_path``) and record it.
-
-    ``user``: run it as that user (needs root), e.g. ``postgres``, which refuses to run as root.
-    """
+    """Start ``cmd`` detached (own session, stdin closed, output to ``log_path``) and record it; ``user``: run it
+    as that user (needs root), e.g. ``postgres``, which refuses to run as root."""
     log_path.parent.mkdir(parents=True, exist_ok=True)
     with open(log_path, "ab") as log:
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
@@ -81,26 +80,23 @@ def spawn(cmd: list[str], log_path: Path, env: Mapping[str, str] | None = None, 
 
 
 def wait_until(check: Callable[[], bool], timeout_s: float, what: str, log_path: Path | None = None,
-               alive: ProcessRecord | None = None) -> float:
-    """Poll ``check`` until True; returns the seconds it took. ClusterError after ``timeout_s`` or
-    when ``alive`` (the process that should answer) died, naming ``what`` and ``log_path``."""
+               alive: ProcessRecord | None = None) -> None:
+    """Poll ``check`` until True; ClusterError after ``timeout_s`` or when ``alive`` (the process that should
+    answer) died, naming ``what`` and ``log_path``."""
     t0 = time.monotonic()
+    where = f"; see {log_path}" if log_path else ""
     while not check():
-        where = f"; see {log_path}" if log_path else ""
         if alive is not None and not is_alive(alive):
             raise ClusterError(f"{what} exited before it was ready{where}")
         if time.monotonic() - t0 > timeout_s:
             raise ClusterError(f"{what} was not ready within {timeout_s:.0f} s{where}")
         time.sleep(0.25)
-    return time.monotonic() - t0
 
 
 def stop(record: ProcessRecord, timeout_s: float = 20.0, sig: int = signal.SIGTERM, supervisor: bool = False) -> bool:
     """Send ``sig`` to the recorded process's group, SIGKILL after ``timeout_s``; True when it ran.
-
-    ``supervisor``: the leader only watches the rest of its group (``ray start --block``), so once every
-    other process of the group has ended it gets SIGKILL instead of the wait. Ray's own exit path
-    sometimes sat for the whole 20 s after its raylet had ended (left a zombie, unreaped)."""
+    ``supervisor``: the leader only watches the rest of its group (``ray start --block``, whose own exit can sit
+    out the whole wait), so it gets SIGKILL as soon as the rest of the group has ended."""
     if not is_alive(record):
         return False
     for signum in (sig, signal.SIGKILL):
@@ -115,29 +111,12 @@ def stop(record: ProcessRecord, timeout_s: float = 20.0, sig: int = signal.SIGTE
             time.sleep(0.1)
         if not is_alive(record):
             break
-    _kill_group_leftovers(record.pid)
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(record.pid, signal.SIGKILL)  # helpers of the group that outlived its leader
     return True
 
 
 def group_members(pgid: int) -> list[int]:
     """Running (non-zombie) processes of group ``pgid`` other than its leader, from ``/proc``."""
-    members = []
-    for proc in Path("/proc").iterdir():
-        if not proc.name.isdigit() or int(proc.name) == pgid:
-            continue
-        try:
-            stat = (proc / "stat").read_text()
-        except OSError:
-            continue
-        state, _, group = stat[stat.rindex(")") + 2:].split()[:3]
-        if int(group) == pgid and state != "Z":
-            members.append(int(proc.name))
-    return members
-
-
-def _kill_group_leftovers(pgid: int) -> None:
-    """SIGKILL any process still in group ``pgid`` after its leader ended (helpers it spawned)."""
-    try:
-        os.killpg(pgid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
+    pids = [int(p.name) for p in Path("/proc").iterdir() if p.name.isdigit() and int(p.name) != pgid]
+    return [pid for pid in pids if (fields := _stat(pid)) and fields[0] != "Z" and int(fields[2]) == pgid]

@@ -1,11 +1,6 @@
-"""Ray nodes of a local cluster: one head (GCS, dashboard, Jobs API) and worker nodes, each a
-``ray start --block`` process with its own temp dir, ports and resources.
-
-Every node and every client uses the cluster's token (``RAY_AUTH_MODE=token`` with
-``RAY_AUTH_TOKEN_PATH`` pointing at ``<dir>/ray/auth_token``): a client without it is refused.
-``--block`` keeps one process per node whose SIGTERM stops that node's raylet, agents and
-workers (Ray ties them to it), so stopping a node never touches another Ray on the machine.
-The head has no CPUs: training workers and fleet tasks run on the worker nodes.
+"""Ray nodes of a local cluster: a head (GCS, dashboard, Jobs API; no CPUs) and worker nodes, each a ``ray start
+--block`` process with its own temp dir, ports and resources, whose SIGTERM stops that node only. Every node and
+client uses the cluster's token (``RAY_AUTH_MODE=token``, ``RAY_AUTH_TOKEN_PATH``): one without it is refused.
 """
 
 from __future__ import annotations
@@ -20,8 +15,7 @@ from sray.platform.common.ray_env import TRAIN_POLL_ENV
 
 NODE_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
 """Environment of every node: no usage stats, no drain wait on SIGTERM."""
-OBJECT_STORE_BYTES = 100 * 2**20
-"""Object store per node (the jobs move small tensors; Ray's minimum is 75 MiB)."""
+OBJECT_STORE_BYTES = 100 * 2**20  # object store per node (the jobs move small tensors; Ray's minimum is 75 MiB)
 WORKER_RESOURCE = "sray_worker_node"
 """Custom resource each worker node offers once, so a task can ask for a node of its own."""
 
@@ -38,14 +32,10 @@ def _ray() -> str:
 
 
 def _node_env(token_path: Path, gcs_address: str) -> dict[str, str]:
-    """A node's environment: ours, the token, this Python environment's scripts (``sray``) first on PATH (jobs
-    and workers run the same installation as the cluster), and ``RAY_ADDRESS`` naming this cluster.
-
-    Every process a node starts inherits ``RAY_ADDRESS``. Ray's own actors find "their" cluster with
-    ``address="auto"`` (Ray Train's placement-group cleaner, through the state API); with another Ray
-    running on the machine (a local ``sray train``, a test session) that lookup finds two and the
-    cleaner dies with "Found multiple active Ray instances". Jobs poll their workers every 0.5 s unless the
-    user's environment says otherwise (:mod:`sray.platform.common.ray_env`)."""
+    """A node's environment: ours, the token, this Python environment's scripts first on PATH (jobs run the
+    cluster's installation), jobs' worker polling (:mod:`sray.platform.common.ray_env`) unless ours sets it, and
+    ``RAY_ADDRESS`` naming this cluster: Ray's own actors look theirs up with ``address="auto"``, which fails
+    with "Found multiple active Ray instances" while another Ray runs on the machine."""
     env = {**TRAIN_POLL_ENV, **os.environ, **NODE_ENV, **auth_env(token_path), "RAY_ADDRESS": gcs_address}
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     return env

@@ -1,10 +1,6 @@
-"""The record of a local cluster: ``<dir>/cluster.json`` (readable by its owner only).
-
-It holds what ``up`` chose and started (ports, the database password, process ids with their start
-times), so ``status`` can report and ``down`` can stop exactly those processes. It stays after
-``down``: the next ``up`` reuses the password and, where still free, the ports. Commands that may run
-at the same time (``restart`` of a node while the tracking server restarts) change it through
-:func:`update_state`, under a lock, so neither loses the other's process ids.
+"""The record of a local cluster, ``<dir>/cluster.json`` (owner-only): what ``up`` chose and started (ports, the
+database password, process ids with start times), so ``status`` reports and ``down`` stops exactly those. It stays
+after ``down`` for the next ``up``. Commands that may run at once change it under a lock (:func:`update_state`).
 """
 
 from __future__ import annotations
@@ -19,32 +15,25 @@ from pathlib import Path
 from sray.data_tools.atomic import atomic_write_json
 from sray.platform.cluster.processes import ClusterError, ProcessRecord, is_alive
 
-STATE_FILE = "cluster.json"
-"""The record's file name inside the cluster folder."""
-LOCK_FILE = "cluster.lock"
-"""File locked (``flock``) while one command reads, changes and writes the record."""
-FORMAT = "sray-cluster/1"
-"""Format tag of the record."""
+STATE_FILE = "cluster.json"  # the record's file name inside the cluster folder
+LOCK_FILE = "cluster.lock"  # file locked (``flock``) while one command reads, changes and writes the record
+FORMAT = "sray-cluster/1"  # format tag of the record
 
 
 @dataclass
 class ClusterState:
-    """Everything ``sray cluster`` needs to know about one cluster folder."""
+    """Everything ``sray cluster`` knows of one cluster folder: the folder (absolute; database, artifacts, Ray temp
+    dirs, shared storage, logs), the PostgreSQL password of the ``sray`` role, the ``postgres``, ``mlflow``, ``gcs``
+    and ``dashboard`` ports (127.0.0.1), the worker nodes and CPUs per node of the last ``up``, each part's process
+    (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-1`` ... -> ``{pid, started}``) and its start-up seconds."""
 
     dir: str
-    """The cluster folder (absolute): database, artifacts, Ray temp dirs, shared storage, logs."""
     password: str
-    """The PostgreSQL password of the ``sray`` role."""
     ports: dict[str, int] = field(default_factory=dict)
-    """``postgres``, ``mlflow``, ``gcs`` and ``dashboard`` ports, all on 127.0.0.1."""
     workers: int = 2
-    """Ray worker nodes started by the last ``up``."""
     cpus_per_worker: int = 1
-    """Logical CPUs each worker node offers."""
     processes: dict[str, dict[str, int]] = field(default_factory=dict)
-    """Name (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-1`` ...) -> ``{pid, started}``."""
     startup_s: dict[str, float] = field(default_factory=dict)
-    """Seconds each part took to become ready at the last ``up``."""
 
     @property
     def root(self) -> Path:
@@ -79,11 +68,11 @@ class ClusterState:
     def record(self, name: str) -> ProcessRecord | None:
         """The recorded process ``name``, or None."""
         entry = self.processes.get(name)
-        return ProcessRecord(entry["pid"], entry["started"]) if entry else None
+        return ProcessRecord(**entry) if entry else None
 
     def alive(self) -> dict[str, bool]:
         """Each recorded process -> whether it still runs."""
-        return {name: is_alive(ProcessRecord(e["pid"], e["started"])) for name, e in self.processes.items()}
+        return {name: is_alive(ProcessRecord(**entry)) for name, entry in self.processes.items()}
 
     def save(self) -> None:
         """Write the record (owner-only permissions: it holds the database password)."""

@@ -1,9 +1,5 @@
-"""What ``sray eval`` scores: a method's pretrained model as one record, :class:`EvalModel`, whatever the method.
-
-A method's ``eval_model`` builder (``sray.platform.finetune.methods``) makes it: S-Ray from a training checkpoint
-(:func:`checkpoint_model`), ``2d-transfer`` from a 2D segmenter folder (:func:`segmenter_model`). The zero-shot
-loop (:func:`sray.platform.eval.zero_shot.evaluate_model`) renders and scores every test view with it and writes
-``record`` at the top of ``metrics.json`` and into the tracked run's params.
+"""What ``sray eval`` scores: any method's pretrained model as one record, :class:`EvalModel`, made by the method's
+``eval_model`` builder (S-Ray: :func:`checkpoint_model`; ``2d-transfer``: :func:`segmenter_model`).
 """
 
 from __future__ import annotations
@@ -23,8 +19,7 @@ from sray.model.runtime import Runtime
 from sray.model.view_render import RayRenderer
 from sray.platform.checkpoints.folders import read_meta
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.eval.segmenter import load_segmenter
-from sray.platform.eval.transfer_view import transfer_renderer
+from sray.platform.eval.segmenter import load_segmenter, transfer_renderer
 from sray.platform.eval.view_scoring import sray_renderer
 
 
@@ -37,7 +32,6 @@ class EvalModel:
     n_classes: int
     """Classes L it predicts (the scenes' label space must have as many)."""
     ignore_id: int
-    """Label id of unlabelled pixels."""
     inputs: str
     """Source-view inputs of its protocol (``rgb`` or ``rgbd``, ``EvalProtocol.inputs``)."""
     fast: FastRender | None
@@ -45,7 +39,6 @@ class EvalModel:
     chunk: int
     """Rays per forward pass (0: by device)."""
     device: torch.device
-    """Where it renders."""
     step: int
     """Step the tracked metrics are logged at (the checkpoint's training step; 0 for a model without one)."""
     record: dict[str, Any]
@@ -57,8 +50,7 @@ class EvalModel:
     subject: str
     """What predicts, in error messages ("the checkpoint's model")."""
     train_inputs: str = ""
-    """What its training read besides colours and labels (``EvalProtocol.train_inputs``; empty: the same as
-    ``inputs``)."""
+    """What its training read besides colours and labels (``EvalProtocol.train_inputs``; empty: ``inputs``)."""
 
 
 def torch_device(device: str | None) -> torch.device:
@@ -67,8 +59,7 @@ def torch_device(device: str | None) -> torch.device:
 
 
 def with_source_inputs(net: nn.Module, inputs: str) -> nn.Module:
-    """``net`` (an S-Ray model) set to read the source ``inputs`` (``rgb`` or ``rgbd``, checked like any model
-    config) with the same parameters: both modes share them (docs/model.md "RGB-D mode")."""
+    """``net`` (S-Ray) reading the source ``inputs`` with the same parameters (docs/model.md "RGB-D mode")."""
     net.cfg = dataclasses.replace(net.cfg, inputs=inputs)
     return net
 
@@ -76,9 +67,7 @@ def with_source_inputs(net: nn.Module, inputs: str) -> nn.Module:
 def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRender | None = None,
                      runtime: Runtime = Runtime(), inputs: str = "") -> EvalModel:
     """The S-Ray model of a training checkpoint folder, rendering with ``fast`` (None: the full render) and
-    ``runtime`` (implementation, rays per chunk) on ``device`` (default: CUDA if available), reading the source
-    ``inputs`` (``rgb`` or ``rgbd``; empty: the checkpoint's ``model.inputs``; both modes share their parameters,
-    docs/model.md "RGB-D mode")."""
+    ``runtime`` on ``device`` (default: CUDA if available), reading the source ``inputs`` (empty: the checkpoint's)."""
     checkpoint = Path(checkpoint).resolve()
     net, cfg = model_from_checkpoint(checkpoint)
     if inputs:
@@ -96,9 +85,7 @@ def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRend
 
 
 def segmenter_model(folder: Path, device: str | None = None, tolerance: float = 0.05) -> EvalModel:
-    """The ``2d-transfer`` method with the 2D segmenter saved in ``folder`` (``sray bench segmenter``): source
-    labels splatted by the source depth (``transfer_view``, occlusion test ``tolerance``), an RGB-D method with one
-    render (recorded as ``full``)."""
+    """``2d-transfer`` with the segmenter saved in ``folder`` (``transfer_renderer``, occlusion test ``tolerance``)."""
     folder = Path(folder).resolve()
     segmenter, record = load_segmenter(folder)
     where = torch_device(device)

@@ -1,30 +1,16 @@
-"""Label transfer between posed views: per-pixel labels of m source views carried into a query view.
+"""Label transfer between posed views: per-pixel labels of m source views carried into a query view by one
+function, :func:`transfer_labels`, with two geometries and one vote (docs/fleet.md, "2D label transfer"). Pixel
+(u, v) is centred at (u, v), cameras are OpenCV's, depth is camera z in metres (0 = unknown); geometry runs in
+float64, so rounding never moves with float32 noise.
 
-One function, :func:`transfer_labels`, with two geometries and one vote (pixel (u, v) is centred at
-(u, v); cameras in OpenCV axes; depth is camera z in metres, 0 = unknown):
-
-* ``backward`` (from a depth map of the query: its ground truth, an oracle, or a depth a method rendered).
-  Each query pixel with depth d > 0 is placed at d K^-1 [u, v, 1] in the query camera, moved to the world,
-  projected into every source view and rounded to the nearest source pixel. Source j sees it when the point
-  lies in front of the camera, inside the image, and agrees with source j's own depth there: D_j > 0 and
-  |z_j - D_j| < ``tolerance`` * D_j (the occlusion test). Without source depth (the RGB protocol) there is
-  no occlusion test: every source the point projects into, in front of its camera, sees it.
-* ``forward`` (splatting: what a method given the source views' depth has; of the query it reads only
-  the camera). Each source pixel with depth > 0 is unprojected, projected into the query camera and
-  splatted to the nearest query pixel. Per source a z-buffer keeps the nearest point of each query pixel
-  (equal depths: the lowest source pixel index). The nearest of the sources' buffers, z*, is the pixel's
-  surface; source j sees the pixel when its own buffer holds a point within ``tolerance`` * z* of it.
-* the vote: every source that sees a pixel gives it the label of the source pixel it saw, unless that
-  label is ``ignore_id``. The label with the most votes wins; a tie goes to the tied label whose first
-  voter comes earliest in the source order (the best-ranked source). A pixel no source sees, or seen only
-  by unlabelled source pixels, gets :data:`UNSEEN`.
-* colours (on request): a pixel's colour is the mean of the colours of the source pixels that see it (the
-  same geometry, labelled or not); black where no source sees it.
-
-A pixel without a label is scored as a miss (:data:`UNSEEN_RULE`, :func:`unseen_as_class`): the ceilings rows
-and every held-out score of ``sray.platform.eval.view_scoring`` count it the same way.
-
-Geometry runs in float64 whatever the inputs' dtype (pixel rounding must not move with float32 noise).
+* ``backward`` (from a depth of the query: its ground truth, an oracle, or a rendered one): each query pixel with
+  depth d > 0 goes to the nearest pixel of every source; source j sees it when it lies in front of the camera,
+  inside the image, and |z_j - D_j| < ``tolerance`` * D_j for j's own depth D_j > 0 (no test without source depth).
+* ``forward`` (splatting by the source depth, the query's camera only): per source a z-buffer keeps the nearest
+  point of each query pixel (equal depths: the lowest source pixel index); source j sees the pixel when its buffer
+  holds a point within ``tolerance`` * z* of the nearest buffer's z*.
+* the vote: the most votes win (labels ``ignore_id`` never vote), a tie goes to the label whose first voter is the
+  best-ranked source; no vote: :data:`UNSEEN`, scored as a miss (:data:`UNSEEN_RULE`).
 """
 
 from __future__ import annotations
@@ -63,12 +49,9 @@ class LabelTransfer:
 
 
 def project_points(points: Tensor, K: Tensor, c2w: Tensor) -> tuple[Tensor, Tensor]:
-    """Pinhole projection of world points (P, 3) into m cameras K (m, 3, 3), c2w (m, 4, 4).
-
-    Returns float64 uv (m, P, 2) pixel coordinates and z (m, P) camera depth (uv meaningless where z <= 0).
-    """
-    c2w64 = c2w.double()
-    return project(points.double(), K.double(), rigid_inverse(c2w64), min_depth=1e-12)
+    """Pinhole projection of world points (P, 3) into m cameras K (m, 3, 3), c2w (m, 4, 4): float64 uv (m, P, 2)
+    and camera depth z (m, P) (uv meaningless where z <= 0)."""
+    return project(points.double(), K.double(), rigid_inverse(c2w.double()), min_depth=1e-12)
 
 
 def unproject(depth: Tensor, K: Tensor, c2w: Tensor) -> Tensor:
@@ -95,14 +78,9 @@ def nearest_pixel(uv: Tensor, hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
 
 def point_hits(points: Tensor, source_K: Tensor, source_c2w: Tensor, source_hw: tuple[int, int],
                source_depth: Tensor | None, tolerance: float) -> tuple[Tensor, Tensor, Tensor]:
-    """Which source pixel world points (P, 3) land on, whether each source sees them and whether a nearer surface
-    hides them (module doc, ``backward``). Sources K (m, 3, 3), c2w (m, 4, 4), image (H, W) = ``source_hw``; their
-    depth (m, H, W) in metres (0 = unknown), or None: no occlusion test, every source a point projects into, in
-    front of its camera, sees it.
-
-    Returns source pixel index (m, P) int64, visible (m, P) bool and occluded (m, P) bool: the point lies behind
-    the source's own surface, z >= (1 + ``tolerance``) D (never both; all False without source depth).
-    """
+    """Where world points (P, 3) land in the sources K (m, 3, 3), c2w (m, 4, 4), image ``source_hw``, depth
+    (m, H, W) or None (module doc, ``backward``): source pixel index (m, P) int64, visible (m, P) bool and occluded
+    (m, P) bool (behind the source's own surface, z >= (1 + ``tolerance``) D; all False without source depth)."""
     uv, z = project_points(points, source_K, source_c2w)  # (m, P, 2), (m, P)
     index, inside = nearest_pixel(uv, source_hw)  # (m, P)
     known = inside & (z > 0)
@@ -114,24 +92,10 @@ def point_hits(points: Tensor, source_K: Tensor, source_c2w: Tensor, source_hw: 
     return index, visible, known & (z >= (1.0 + tolerance) * seen_depth)
 
 
-def backward_hits(source_depth: Tensor | None, source_K: Tensor, source_c2w: Tensor, query_depth: Tensor,
-                  query_K: Tensor, query_c2w: Tensor, tolerance: float,
-                  source_hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
-    """Which source pixel each query pixel reaches by the query's depth (module doc, ``backward``).
-
-    source_depth (m, H, W), or None: no occlusion test; query_depth (Hq, Wq); ``source_hw`` the sources' (H, W).
-    Returns source pixel index (m, Hq*Wq) int64 and visible (m, Hq*Wq) bool.
-    """
-    points = unproject(query_depth[None], query_K[None], query_c2w[None])[0]  # (P, 3)
-    index, visible, _ = point_hits(points, source_K, source_c2w, source_hw, source_depth, tolerance)
-    return index, visible & (query_depth.reshape(1, -1) > 0)
-
-
 def forward_hits(source_depth: Tensor, source_K: Tensor, source_c2w: Tensor, query_K: Tensor,
                  query_c2w: Tensor, hw: tuple[int, int], tolerance: float) -> tuple[Tensor, Tensor]:
-    """Which source pixel lands on each query pixel by splatting with the source depth (module doc,
-    ``forward``). source_depth (m, H, W); ``hw`` the query's (Hq, Wq). Returns source pixel index
-    (m, Hq*Wq) int64 and visible (m, Hq*Wq) bool."""
+    """Which source pixel lands on each query pixel of ``hw`` by splatting with source_depth (m, H, W) (module
+    doc, ``forward``). Returns source pixel index (m, Hq*Wq) int64 and visible (m, Hq*Wq) bool."""
     m, h, w = source_depth.shape
     n_query, n_src = hw[0] * hw[1], h * w
     points = unproject(source_depth, source_K, source_c2w).reshape(1, -1, 3)[0]  # (m*P, 3)
@@ -172,9 +136,8 @@ def vote(candidates: Tensor) -> Tensor:
 
 
 def unseen_as_class(pred: Tensor, n_classes: int) -> Tensor:
-    """Predictions (any shape) int64 as scored: :data:`UNSEEN` becomes the extra class ``n_classes`` (L), which no
-    ground truth holds, so in an (L+1, L+1) confusion matrix such a pixel is a miss of its true class and a
-    false positive of no class (:data:`UNSEEN_RULE`)."""
+    """Predictions (any shape) int64 as scored: :data:`UNSEEN` becomes the extra class L = ``n_classes``, which no
+    ground truth holds: in an (L+1, L+1) confusion matrix a miss of its true class (:data:`UNSEEN_RULE`)."""
     return torch.where(pred == UNSEEN, torch.full_like(pred, n_classes), pred)
 
 
@@ -192,15 +155,10 @@ def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor,
                     query_K: Tensor, query_c2w: Tensor, hw: tuple[int, int], mode: str, *,
                     query_depth: Tensor | None = None, tolerance: float = 0.05, ignore_id: int = 255,
                     source_rgb: Tensor | None = None) -> LabelTransfer:
-    """Carry source labels into a query view (see the module doc).
-
-    source_labels (m, H, W) integer class ids (``ignore_id`` = unlabelled: never a vote); source_K (m, 3, 3);
-    source_c2w (m, 4, 4); source_depth (m, H, W) metres, 0 = unknown, or None (``backward`` only: no occlusion
-    test); query_K (3, 3); query_c2w (4, 4); ``hw`` = the query's (Hq, Wq); ``mode``: one of :data:`MODES`;
-    ``query_depth`` (Hq, Wq): required by ``backward``, refused by ``forward`` (which must not read it);
-    ``tolerance``: the relative depth agreement of the occlusion test; ``source_rgb`` (m, 3, H, W) in [0, 1]:
-    carry the colours too (``LabelTransfer.rgb``).
-    """
+    """Carry source labels (m, H, W) into a query view (module doc): source_K (m, 3, 3); source_c2w (m, 4, 4);
+    source_depth (m, H, W) metres, 0 = unknown, or None (``backward`` only); query_K (3, 3); query_c2w (4, 4);
+    ``hw`` = the query's (Hq, Wq); ``query_depth`` (Hq, Wq): required by ``backward``, refused by ``forward``;
+    ``source_rgb`` (m, 3, H, W) in [0, 1]: carry the colours too (``LabelTransfer.rgb``)."""
     m = source_labels.shape[0]
     depth_shape = source_labels.shape if source_depth is None else source_depth.shape
     if source_labels.shape != depth_shape or source_K.shape != (m, 3, 3) or source_c2w.shape != (m, 4, 4):
@@ -220,19 +178,14 @@ def transfer_labels(source_labels: Tensor, source_K: Tensor, source_c2w: Tensor,
                          f"{(m, 3, *source_labels.shape[1:])}")
     if query_depth is not None and tuple(query_depth.shape) != tuple(hw):
         raise ValueError(f"label_transfer: query_depth is {tuple(query_depth.shape)}, the query image {tuple(hw)}")
-    if mode == "backward":
-        index, visible = backward_hits(source_depth, source_K, source_c2w, query_depth, query_K, query_c2w,
-                                       tolerance, tuple(source_labels.shape[-2:]))
+    if mode == "backward":  # the source pixel each query pixel reaches by its depth: (m, Hq*Wq) each
+        points = unproject(query_depth[None], query_K[None], query_c2w[None])[0]  # (Hq*Wq, 3)
+        index, visible, _ = point_hits(points, source_K, source_c2w, tuple(source_labels.shape[-2:]), source_depth,
+                                       tolerance)
+        visible = visible & (query_depth.reshape(1, -1) > 0)
     else:
         index, visible = forward_hits(source_depth, source_K, source_c2w, query_K, query_c2w, tuple(hw), tolerance)
     labels = source_labels.long().reshape(m, -1).gather(1, index)  # (m, Hq*Wq)
     candidates = torch.where(visible & (labels != ignore_id), labels, torch.full_like(labels, UNSEEN))
     rgb = None if source_rgb is None else carried_colours(source_rgb, index, visible, tuple(hw))
     return LabelTransfer(labels=vote(candidates).reshape(hw), seen=visible.any(0).reshape(hw), rgb=rgb)
-
-
-def coverage_counts(seen: Tensor, gt_label: Tensor, ignore_id: int) -> tuple[int, int]:
-    """(labelled query pixels some source sees, labelled query pixels) of seen (H, W) bool and the query's
-    ground truth gt_label (H, W) (``ignore_id`` = unlabelled, not counted)."""
-    labelled = gt_label != ignore_id
-    return int((seen & labelled).sum()), int(labelled.sum())

@@ -1,16 +1,8 @@
-"""The plain 2D segmenter: the project's own encoder (``ResUNetEncoder``) plus a per-pixel linear head.
-
-The head is :class:`sray.model.source_semantics.SourceSemanticHead` (a 1x1 convolution on the 1/4-resolution
-features, brought to full resolution by centre-aligned up-sampling) and the loss is
-:func:`~sray.model.source_semantics.source_semantic_loss` (class-weighted cross-entropy over labelled
-pixels): the same read-out S-Ray's auxiliary source-view loss uses, trained alone. It labels the source
-views for the label-transfer rows of ``sray lab ceilings`` and the ``2d-transfer`` method.
-
-A trained segmenter is a folder: ``segmenter.pt`` (the state dict, ``torch.load(weights_only=True)``-safe)
-and ``segmenter.json`` (:class:`SegmenterConfig` plus what its training spent and read). An S-Ray checkpoint
-trained with the source-view loss holds the same network (its encoder and source-view head):
-:func:`segmenter_from_checkpoint` writes it as a segmenter folder, so the ceilings rows can ask how well S-Ray's own
-2D read-out labels the source and query images.
+"""The plain 2D segmenter, S-Ray's encoder plus its source-view head and loss (``sray.model.source_semantics``)
+trained alone, and the ``2d-transfer`` prediction it makes: its labels of the source images, and their colours,
+splatted into the query by the SOURCE depth (``label_transfer``, ``forward``), reading of the query only its camera
+(docs/fleet.md, "2D label transfer"); ceilings row c is this transfer. A segmenter is a folder: ``segmenter.pt`` (the
+state dict, ``weights_only``-safe) and ``segmenter.json`` (its config and training record).
 """
 
 from __future__ import annotations
@@ -25,12 +17,15 @@ import torch
 from torch import Tensor, nn
 
 from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
-from sray.platform.checkpoints.folders import load_checkpoint, read_meta
-from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.data_tools.loader.sample_types import EvalSample, QueryCamera, SourceViews
 from sray.model.config import SRayConfig
 from sray.model.encoder import ResUNetEncoder
 from sray.model.source_semantics import SourceSemanticHead, source_semantic_loss
+from sray.model.view_render import RayRenderer
+from sray.platform.checkpoints.folders import load_checkpoint, read_meta
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.config.stored_format import from_plain, outdated
+from sray.platform.eval.label_transfer import UNSEEN, LabelTransfer, nearest_pixel, project_points, transfer_labels
 
 WEIGHTS_FILE = "segmenter.pt"
 CONFIG_FILE = "segmenter.json"
@@ -61,7 +56,6 @@ class Segmenter(nn.Module):
     """RGB (B, 3, H, W) in [0, 1] -> class logits (B, L, H, W): ResUNet encoder + linear per-pixel head."""
 
     def __init__(self, cfg: SegmenterConfig) -> None:
-        """Build the encoder and head of ``cfg`` (no device work)."""
         super().__init__()
         self.cfg = cfg
         self.encoder = ResUNetEncoder(cfg.feat_dim, cfg.encoder_width)
@@ -86,14 +80,11 @@ class SegmenterRecord:
     """A saved segmenter: its network config and the account of its training."""
 
     config: SegmenterConfig
-    """How to build the network."""
     training: dict[str, Any] = field(default_factory=dict)
-    """Budget and spend (``cpu_seconds_budget``, ``cpu_seconds``, ``steps``, ``images``), data (shards, scenes,
-    split rule, augmentation), seed and optimiser."""
+    """Budget and spend (``cpu_seconds_budget``, ``cpu_seconds``, ``steps``, ``images``), data, seed, optimiser."""
 
     def budget(self) -> str:
-        """One line for a table: the CPU seconds and steps the segmenter trained for (for one taken from an S-Ray
-        checkpoint, that checkpoint's step and training CPU)."""
+        """One line for a table: the CPU seconds and steps it trained for (or its S-Ray checkpoint's step and CPU)."""
         t = self.training
         if "checkpoint" in t:
             return (f"S-Ray's encoder + source-view head, checkpoint step {t['steps']} "
@@ -131,9 +122,7 @@ def load_segmenter(folder: Path, map_location: str | torch.device = "cpu") -> tu
 
 
 def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, SegmenterRecord]:
-    """Write the encoder and source-view head of an S-Ray training checkpoint as a segmenter folder ``out``; returns
-    the segmenter (eval mode) and its record. ValueError when the checkpoint's model has no source-view head
-    (``model.lambda_src_sem`` was 0)."""
+    """Write an S-Ray checkpoint's encoder and source-view head as a segmenter folder ``out``; it and its record."""
     checkpoint = Path(checkpoint)
     net, cfg = model_from_checkpoint(checkpoint)
     if net.src_head is None:
@@ -142,8 +131,7 @@ def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, S
                          "`sray bench segmenter --data SHARDS --cpu-seconds S --out DIR`")
     m = cfg.model
     seg = Segmenter(SegmenterConfig(n_classes=m.n_classes, feat_dim=m.feat_dim, encoder_width=m.encoder_width,
-                                    ignore_id=m.ignore_id,
-                                    class_weights=tuple(m.class_weights)))
+                                    ignore_id=m.ignore_id, class_weights=tuple(m.class_weights)))
     seg.encoder.load_state_dict(net.encoder.state_dict())
     seg.head.load_state_dict(net.src_head.state_dict())
     counters = load_checkpoint(checkpoint)["counters"]
@@ -151,3 +139,54 @@ def segmenter_from_checkpoint(checkpoint: Path, out: Path) -> tuple[Segmenter, S
                 "cpu_seconds": float(counters["cpu_seconds"]), "recipe": cfg.recipe}
     save_segmenter(seg, training, out)
     return seg.eval(), SegmenterRecord(seg.cfg, training)
+
+
+def source_depth_transfer(labels: Tensor, sources: SourceViews, query: QueryCamera, tolerance: float,
+                          ignore_id: int, source_rgb: Tensor | None = None) -> LabelTransfer:
+    """Per-source labels (m, H, W) int64 splatted into the query camera's (H, W) image by the sources' depth;
+    ``source_rgb`` (m, 3, H, W): carry those colours too. ValueError when the sources carry no depth."""
+    if sources.depth is None:
+        raise ValueError("2d-transfer: the source views carry no depth; it carries labels by the source depth, "
+                         "so evaluate shards written with depth (every sray shard holds it)")
+    return transfer_labels(labels, sources.K, sources.c2w, sources.depth, query.K, query.c2w,
+                           tuple(sources.depth.shape[-2:]), "forward", tolerance=tolerance, ignore_id=ignore_id,
+                           source_rgb=source_rgb)
+
+
+@torch.no_grad()
+def segment_and_transfer(segmenter: Segmenter, sources: SourceViews, query: QueryCamera,
+                         tolerance: float) -> LabelTransfer:
+    """The segmenter's labels of the source images (m, 3, H, W), with their colours, carried into the query view."""
+    labels = segmenter.predict(sources.rgb)  # (m, H, W)
+    return source_depth_transfer(labels, sources, query, tolerance, segmenter.cfg.ignore_id, source_rgb=sources.rgb)
+
+
+def pixel_lookup_renderer(transfer: LabelTransfer, query: QueryCamera, n_classes: int) -> RayRenderer:
+    """A ray renderer over the transferred maps of the query camera: each ray reads the nearest pixel, ``logits``
+    (R, L) 0 at its label and -inf elsewhere (all -inf without one), ``rgb`` (R, 3) its carried colour (0 there)."""
+    if transfer.rgb is None:
+        raise ValueError("2d-transfer: pass the source colours to the transfer; its renderer returns them")
+    hw = (int(transfer.labels.shape[0]), int(transfer.labels.shape[1]))
+    labels, colours = transfer.labels.reshape(-1), transfer.rgb.reshape(-1, 3)  # (Hq*Wq,), (Hq*Wq, 3)
+
+    def render(origins: Tensor, dirs: Tensor, near: Tensor, far: Tensor) -> dict[str, dict[str, Tensor]]:
+        uv, z = project_points(origins + dirs, query.K[None], query.c2w[None])  # (1, R, 2), (1, R)
+        index, inside = nearest_pixel(uv[0], hw)  # (R,)
+        hit = inside & (z[0] > 0)  # (R,) the ray meets a pixel of the image
+        label = torch.where(hit, labels[index], torch.full_like(index, UNSEEN))  # (R,)
+        known = label != UNSEEN
+        logits = torch.full((len(label), n_classes), float("-inf"), device=label.device)  # (R, L)
+        logits[known, label[known]] = 0.0
+        rgb = torch.where(hit[:, None], colours[index], torch.zeros_like(colours[index]))  # (R, 3)
+        out = {"logits": logits, "rgb": rgb}  # (R, L), (R, 3)
+        return {"coarse": out, "fine": out}
+
+    return render
+
+
+def transfer_renderer(segmenter: Segmenter, sample: EvalSample, tolerance: float,
+                      device: torch.device) -> RayRenderer:
+    """The ``2d-transfer`` ray renderer of one sample: segmented and splatted once on ``device``, then read per ray."""
+    sources, query = sample.sources.to(device), sample.query.to(device)
+    return pixel_lookup_renderer(segment_and_transfer(segmenter, sources, query, tolerance), query,
+                                 segmenter.cfg.n_classes)

@@ -1,20 +1,7 @@
-"""Train the plain 2D segmenter (:mod:`sray.platform.eval.segmenter`) for a budget of CPU seconds.
-
-Data: the training loader (``make_train_loader(..., source_labels=True)``) over the train scenes, with the
-recipe's augmentation; each step fits the m source images of one sample to their labels. Those sources
-come from each train scene's source pool (its ``train`` split minus its held-out ``test`` views), so no
-test-scene view and no held-out view is read; the class weights are counted over the same pool.
-
-Budget: ``time.process_time()`` of this process (every thread of it) from the first sample to the last
-step, data loading included (the loader runs in-process, no workers), summed over the runs of a resumed
-training; the class-weight count before it is not part of the budget. The loop stops at the first step that
-ends past the budget (at least one step) or at ``max_steps``. Adam at a constant learning rate.
-
-Resume: at the end of each loader epoch (``EPOCH_STEPS`` steps) the model, the optimizer, the counters and
-the CPU seconds spent are written to ``STATE_FILE`` in the output folder; a training started again with the
-same settings and folder continues from there, on the same data stream (the loader's next epoch), so an
-interrupted and resumed training ends with the weights an uninterrupted one has after the same steps. The
-file is removed once the segmenter is saved.
+"""Train the plain 2D segmenter for a budget of CPU seconds (``time.process_time`` of the loop, data loading
+included, summed over resumed runs) on the train scenes' source pools only (class weights counted there too),
+resumable: each loader epoch (``EPOCH_STEPS`` steps) writes ``STATE_FILE``, from which the same settings continue on
+the same data stream to the weights of an uninterrupted run; the file goes once the segmenter is saved.
 """
 
 from __future__ import annotations
@@ -49,8 +36,7 @@ EPOCH_STEPS = 1000
 
 
 def train_scene_names(manifest: Manifest, where: Path) -> tuple[list[str], list[str]]:
-    """(train scene names, their shared class names); ValueError naming the manifest when there is no train
-    scene or their label spaces differ."""
+    """(train scene names, their one shared class list); ValueError naming the manifest otherwise."""
     names = sorted(s for s, e in manifest.scenes.items() if e.meta.get("role", "train") == "train")
     if not names:
         raise ValueError(f"{where}: no scene has role 'train'; the segmenter trains on train scenes only")
@@ -61,8 +47,7 @@ def train_scene_names(manifest: Manifest, where: Path) -> tuple[list[str], list[
 
 
 def pool_class_weights(shards: Path, manifest: Manifest, scenes: list[str], n_classes: int, mode: str) -> list[float]:
-    """Class weights (``balanced_weights`` of ``mode``) from the labelled pixels of the scenes' source pools
-    only; [] for ``none``."""
+    """Class weights (``balanced_weights`` of ``mode``; [] for ``none``) from the scenes' source pools only."""
     if mode == "none":
         return []
     counts = np.zeros(n_classes + 1, np.int64)
@@ -74,8 +59,7 @@ def pool_class_weights(shards: Path, manifest: Manifest, scenes: list[str], n_cl
 
 
 def _read_state(out: Path, settings: dict[str, Any]) -> dict[str, Any] | None:
-    """The resumable state in ``out`` (None when there is none); ValueError naming the file when it was written by
-    a training with other settings."""
+    """The resumable state in ``out`` or None; ValueError naming the file when its settings differ."""
     path = out / STATE_FILE
     if not path.exists():
         return None
@@ -102,16 +86,11 @@ def train_segmenter(shards: Path, cpu_seconds: float, out: Path, seed: int = 0, 
                     top_k: int = 12, lr: float = 1e-3, feat_dim: int = 32, encoder_width: int = 16,
                     visit_samples: int = 1, cache_scenes: int = 4,
                     max_steps: int | None = None, progress: bool = True) -> SegmenterRecord:
-    """Train a segmenter on the train scenes of ``shards`` for ``cpu_seconds`` (see the module doc), save it in
-    folder ``out`` and return its record. ``augment``: the training loader's augmentation (None = none);
-    ``class_balance``: ``none``, ``inverse-sqrt`` or ``inverse``; ``n_source`` images per step drawn from
-    ``top_k`` ranked neighbours (the augmentation may draw fewer); ``feat_dim`` and ``encoder_width``: the
-    encoder's output channels and first-layer width (S-Ray's fields of the same names); ``visit_samples``:
-    consecutive steps on one scene before the loader picks the next (1 = scenes interleaved step by step: at an
-    equal CPU budget its labels carried into unseen rooms score higher than with 16 consecutive samples per scene,
-    docs/benchmarks.md "Ceilings"), ``cache_scenes`` decoded scenes kept; ``max_steps``: stop there even within the
-    budget (None = the budget alone). A state left in ``out`` by an interrupted training with the same settings is
-    resumed (module doc)."""
+    """Train a segmenter on the train scenes of ``shards`` for ``cpu_seconds`` (module doc), save it in ``out`` and
+    return its record. ``class_balance``: ``none``, ``inverse-sqrt`` or ``inverse``; ``n_source`` images per step
+    from ``top_k`` ranked neighbours; ``feat_dim``, ``encoder_width``: S-Ray's fields of those names;
+    ``visit_samples``: consecutive steps on one scene (1: interleaved, which transfers better at an equal budget,
+    docs/benchmarks.md "Ceilings"); ``cache_scenes``: decoded scenes kept; ``max_steps``: a cap within the budget."""
     if cpu_seconds <= 0:
         raise ValueError(f"cpu_seconds is {cpu_seconds}; give the segmenter a positive CPU budget")
     shards = Path(shards)
@@ -134,9 +113,7 @@ def train_segmenter(shards: Path, cpu_seconds: float, out: Path, seed: int = 0, 
                                cache_scenes=cache_scenes)
     out = Path(out)
     state = _read_state(out, settings)
-    steps = images = 0
-    spent_before = 0.0
-    losses: list[float] = []
+    steps, images, spent_before, losses = 0, 0, 0.0, []
     if state is not None:
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])

@@ -1,19 +1,13 @@
-"""Render held-out query views of one scene and score them (validation, ``sray eval``, the fleet).
-
-:func:`predict_view` renders one evaluation sample with the model's one whole-view renderer
-(``sray.model.view_render.render_view``) and reads its ground truth at the same pixels; :func:`score_views`
-scores a scene's views. Every score names its protocol (``sray.model.metrics``): semantic scores both from one
-confusion matrix per scene ("dataset-level") and per image ("per-image mean"); colour by PSNR, and by SSIM
-on whole images only (a strided render has no SSIM: its pixels are not neighbours in the image).
-A ray renderer may leave a pixel without prediction (every logit -inf: ``2d-transfer`` where no source sees
-the pixel); the view holds ``UNSEEN`` there and every score counts it as a miss of its true class, never a
-match (``label_transfer.UNSEEN_RULE``, as the ceilings rows count it). S-Ray and Semantic-NeRF always predict.
-LPIPS is not reported: its backbones are downloaded at run time, which this platform cannot do.
+"""Render held-out query views and score them, and the one render-and-score loop of every held-out score
+(:func:`score_scene`). Semantics from one confusion matrix per scene ("dataset-level") and per image, colour by PSNR,
+and by SSIM on whole images only. A pixel without prediction (all logits -inf) holds ``UNSEEN``, a miss of its true
+class. LPIPS is not reported: its backbones are downloaded at run time.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import torch
@@ -49,11 +43,8 @@ class ViewPrediction:
 @torch.no_grad()
 def predict_view(render: RayRenderer, sample: EvalSample, stride: int, chunk: int, device: torch.device,
                  fast: FastRender | None = None) -> ViewPrediction:
-    """Render one evaluation sample (whole query image, fixed source views) with the ray renderer ``render``
-    (bound to the sample's sources) in chunks of at most ``chunk`` rays (0: by device), at every ``stride``-th
-    pixel in each direction: ``view_render.render_view``, the fast mode's rays and upsampling with ``fast``
-    (``render`` must then be the fast mode's, ``sray_renderer(..., fast)``). Predictions land on the host; a pixel
-    whose logits are all -inf has none (``UNSEEN``)."""
+    """Render one evaluation sample with ``render`` (bound to its sources) in ``chunk``-ray chunks (0: by device) at
+    every ``stride``-th pixel (``render_view``; the fast mode's with ``fast``, which ``render`` must match)."""
     gt_rgb, gt_label = sample.query_rgb, sample.query_label
     h, w = gt_label.shape
     fine = render_view(render, sample.query.K, sample.query.c2w, (h, w), sample.near, sample.far, chunk, device,
@@ -76,8 +67,7 @@ def encode_sources(net: nn.Module, sample: EvalSample, device: torch.device) -> 
 
 def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device, fast: FastRender | None = None,
                   runtime: Runtime = Runtime()) -> RayRenderer:
-    """Encode the sample's fixed source views once; return the S-Ray ray renderer bound to them (the full
-    render, or the fast mode's rays with ``fast``: ``SRayModel.ray_renderer``), its fields run ``runtime.impl``."""
+    """The S-Ray ray renderer bound to the sample's encoded sources (the fast mode's with ``fast``), run by runtime."""
     return net.ray_renderer(encode_sources(net, sample, device), fast, runtime)
 
 
@@ -95,19 +85,14 @@ def per_image_scores(views: list[ViewPrediction], n_classes: int, ignore_id: int
 
 
 def class_ious(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> list[float | None]:
-    """Dataset-level IoU of each of the L classes over ``views`` (one confusion matrix), None for a class absent
-    from their ground truth."""
+    """Dataset-level IoU of each of the L classes over ``views``, None for a class absent from their ground truth."""
     ious = scene_metrics(scene_confusion(views, n_classes, ignore_id))["iou_per_class"][:n_classes]
     return [None if math.isnan(v) else float(v) for v in ious]
 
 
 def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> dict[str, float]:
-    """Scene scores: dataset-level and per-image semantic metrics, PSNR and SSIM (mean over views).
-
-    Keys: ``miou``, ``total_acc``, ``class_avg_acc`` (dataset-level protocol), ``miou_per_image``
-    (per-image protocol), ``psnr``, and ``ssim`` only when every view is a whole image (stride 1):
-    a strided render never gets an SSIM. Whole images smaller than the SSIM window score NaN.
-    """
+    """Scene scores: ``miou``, ``total_acc``, ``class_avg_acc`` (dataset-level), ``miou_per_image``, ``psnr`` and,
+    only when every view is a whole image, ``ssim`` (NaN for images smaller than its window); means over views."""
     dataset = scene_metrics(scene_confusion(views, n_classes, ignore_id))
     per_image = per_image_scores(views, n_classes, ignore_id)
     psnrs = [psnr(v.pred_rgb, v.gt_rgb) for v in views]
@@ -119,3 +104,28 @@ def score_views(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> 
         ssims = [ssim(v.pred_rgb, v.gt_rgb) for v in views] if big else [float("nan")]
         scores["ssim"] = sum(ssims) / len(ssims)
     return scores
+
+
+@dataclass(frozen=True)
+class ScoredScene:
+    """A scene's rendered held-out views and their scores."""
+
+    scores: dict[str, float]
+    views: list[ViewPrediction]
+
+
+def score_scene(renderer: Callable[[EvalSample], RayRenderer], samples: Iterable[EvalSample], n_classes: int,
+                ignore_id: int, stride: int, chunk: int, device: torch.device, fast: FastRender | None = None,
+                on_view: Callable[[ViewPrediction], None] | None = None) -> ScoredScene:
+    """Render every sample of one scene with ``renderer(sample)`` (as ``predict_view``, under the caller's autocast),
+    then score them in float32; ``on_view`` gets each view once rendered. ValueError when there is no sample."""
+    views = []
+    for sample in samples:
+        views.append(predict_view(renderer(sample), sample, stride, chunk, device, fast))
+        if on_view is not None:
+            on_view(views[-1])
+    if not views:
+        raise ValueError("sray.platform.eval.view_scoring: no evaluation sample to score; the scene needs at "
+                         "least one held-out (test) view")
+    with torch.autocast("cpu", enabled=False):
+        return ScoredScene(score_views(views, n_classes, ignore_id), views)

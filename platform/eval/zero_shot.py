@@ -1,29 +1,9 @@
-"""``sray eval``: score a pretrained model on unseen scenes with the paper's generalization protocol.
-
-The model is any registered method's :class:`~sray.platform.eval.eval_model.EvalModel`: an S-Ray checkpoint
-(:func:`evaluate_checkpoint`), or ``2d-transfer``'s 2D segmenter. Every ``test`` view of a scene is rendered and
-scored by the shared loop, ``scene_scoring.score_scene`` (the model's whole-view renderer in ray chunks, every
-``stride``-th pixel in each direction; stride 1 = the whole image), from its ``n_source`` FIXED source views
-(its top-ranked neighbours inside the scene's ``source`` split), by the pretrained model as it is: no per-scene
-optimisation.
-
-Outputs under ``out_dir``:
-
-* ``metrics.json`` (atomic): what the model is (``EvalModel.record``: S-Ray's ``checkpoint`` and
-  ``checkpoint_step``; 2d-transfer's ``method``, ``segmenter`` and ``tolerance``),
-  ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`: source
-  rule from the shard manifest, source views, stride, render mode, inputs), then per scene and the
-  mean over scenes, in blocks that each name their metric protocol: ``dataset_level`` (mIoU, total
-  and class-average accuracy from one confusion matrix per scene, and per scene each class's IoU,
-  ``iou_per_class``, null for a class absent from its ground truth), ``per_image`` (mIoU per view,
-  then averaged), ``colour`` (PSNR; SSIM with its window, null unless stride is 1); per-view scores;
-  the LPIPS note (not computable offline);
-* ``renders/<scene>/<view>_{pred,gt,error}.png`` at the render's own resolution (colours from
-  :mod:`sray.platform.viz.palette`; a pixel without prediction is drawn in the unlabelled colour and counts as
-  an error) and ``<view>_panel.png`` (:func:`sray.platform.viz.renders.render_panel`).
-
-All of it goes into a new run of the chosen tracker (metrics at the checkpoint's training step, 0 for a model
-without one; metrics.json and the PNGs as artifacts).
+"""``sray eval``: score any method's pretrained model as it is on unseen scenes with the paper's generalization
+protocol (docs/fleet.md, "``sray eval``"): every ``test`` view from its ``n_source`` fixed sources, at every
+``stride``-th pixel. Writes ``metrics.json`` (the model's record, the protocol, per scene and the unweighted mean
+over scenes in blocks that name their protocol, per-view scores) and the PNGs of every view, all of it in a new
+tracked run (metrics at the checkpoint's step, 0 without one). ``sray eval --calibrate`` first fits the fast
+render's coarse confidence on validation rooms (:func:`calibrate`, docs/fleet.md, "Shifted splits").
 """
 
 from __future__ import annotations
@@ -34,27 +14,35 @@ import time
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.shard_loader import make_eval_samples
+from sray.data_tools.png import encode_png
 from sray.data_tools.shards.manifest import read_manifest
+from sray.model.calibration import fit_temperature, nll
 from sray.model.fast_render import FastRender
 from sray.model.metrics import DATASET_PROTOCOL, LPIPS_NOTE, PER_IMAGE_PROTOCOL, psnr
 from sray.model.runtime import Runtime
 from sray.model.ssim import SSIM_PROTOCOL, SSIM_WINDOW
+from sray.model.view_render import render_view, strided_pixels
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.eval.eval_model import EvalModel, checkpoint_model
 from sray.platform.eval.label_transfer import UNSEEN
-from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import ViewPrediction, class_ious, per_image_scores
+from sray.platform.eval.view_scoring import ViewPrediction, class_ious, per_image_scores, score_scene
 from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.viz.palette import colorize
 from sray.platform.viz.renders import error_map, render_panel
 
 METRICS_FILE = "metrics.json"
+CALIBRATION_FILE = "calibration.json"
+"""File of an evaluation's output folder holding the calibration it used."""
+SCORE_PATHS = {"miou": ("dataset_level", "miou"), "total_acc": ("dataset_level", "total_acc"),
+               "class_avg_acc": ("dataset_level", "class_avg_acc"), "miou_per_image": ("per_image", "miou"),
+               "psnr": ("colour", "psnr_db"), "ssim": ("colour", "ssim")}
+"""Score name (``score_views``) -> (block, key) in a metrics.json scene block."""
 
 
 def _finite_or_none(value: Any) -> Any:
@@ -63,9 +51,7 @@ def _finite_or_none(value: Any) -> Any:
         return {k: _finite_or_none(v) for k, v in value.items()}
     if isinstance(value, list):
         return [_finite_or_none(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+    return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
 def write_json_atomic(obj: Any, path: Path) -> Path:
@@ -74,18 +60,8 @@ def write_json_atomic(obj: Any, path: Path) -> Path:
     return Path(path)
 
 
-def write_png_atomic(rgb: np.ndarray, path: Path) -> Path:
-    """Write a uint8 (H, W, 3) RGB image as PNG through a temporary name; returns ``path``."""
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]))
-    if not ok:
-        raise OSError(f"{path}: OpenCV could not encode a {rgb.shape} {rgb.dtype} image as PNG")
-    atomic_write_bytes(Path(path), data.tobytes())
-    return Path(path)
-
-
 def training_scenes(shards: Path, count: int) -> list[str]:
-    """The first ``count`` training scenes of ``shards`` by name (``role`` "train", or none given): the scenes whose
-    held-out (``test``) views measure fitting with the zero-shot protocol. ValueError when ``count`` < 1."""
+    """The first ``count`` (at least 1) train scenes of ``shards`` by name: their held-out views measure fitting."""
     if count < 1:
         raise ValueError(f"{Path(shards) / 'manifest.json'}: {count} held-out training scenes asked for; ask for 1 "
                          "or more")
@@ -94,10 +70,8 @@ def training_scenes(shards: Path, count: int) -> list[str]:
 
 
 def select_scenes(shards: Path, scenes: list[str] | None) -> tuple[list[str], dict[str, dict]]:
-    """The scenes to evaluate (default: every ``role == "test"`` scene) and their metadata.
-
-    ValueError names the manifest and the fix for unknown scenes or scenes without ``test`` views.
-    """
+    """The scenes to evaluate (default: every ``role == "test"`` scene) and their metadata; ValueError naming the
+    manifest and the fix for unknown scenes or scenes without ``test`` views."""
     manifest = read_manifest(Path(shards))
     where = Path(shards) / "manifest.json"
     if scenes is None:
@@ -117,21 +91,18 @@ def select_scenes(shards: Path, scenes: list[str] | None) -> tuple[list[str], di
 
 def save_view_pngs(view: ViewPrediction, scene: str, class_names: list[str], ignore_id: int,
                    out_dir: Path) -> dict[str, str]:
-    """Predicted / ground-truth semantics, error map and the combined panel of one view, written
-    under ``out_dir/renders/<scene>/``. Returns {kind: path relative to ``out_dir``}."""
-    gt = view.gt_label.numpy()
-    pred = np.where(view.pred_label.numpy() == UNSEEN, ignore_id, view.pred_label.numpy())  # no prediction: blank
-    n = len(class_names)
+    """Write one view's predicted and true semantics, error map and panel; {kind: path relative to ``out_dir``}."""
+    gt, raw = view.gt_label.numpy(), view.pred_label.numpy()
+    pred = np.where(raw == UNSEEN, ignore_id, raw)  # no prediction: blank
     stem = out_dir / "renders" / scene / str(view.query_id)
-    files = {
-        "pred": write_png_atomic(colorize(pred, n, ignore_id), stem.with_name(f"{stem.name}_pred.png")),
-        "gt": write_png_atomic(colorize(gt, n, ignore_id), stem.with_name(f"{stem.name}_gt.png")),
-        "error": write_png_atomic(error_map(view.pred_label.numpy(), gt, ignore_id),
-                                  stem.with_name(f"{stem.name}_error.png")),
-        "panel": render_panel(pred, gt, view.pred_rgb.numpy(), view.gt_rgb.numpy(), class_names,
-                              stem.with_name(f"{stem.name}_panel.png"), ignore_id,
-                              title=f"zero-shot: {scene} view {view.query_id}"),
-    }
+    images = {"pred": colorize(pred, len(class_names), ignore_id), "gt": colorize(gt, len(class_names), ignore_id),
+              "error": error_map(raw, gt, ignore_id)}
+    files = {kind: stem.with_name(f"{stem.name}_{kind}.png") for kind in images}
+    for kind, image in images.items():
+        atomic_write_bytes(files[kind], encode_png(image))
+    files["panel"] = render_panel(pred, gt, view.pred_rgb.numpy(), view.gt_rgb.numpy(), class_names,
+                                  stem.with_name(f"{stem.name}_panel.png"), ignore_id,
+                                  title=f"zero-shot: {scene} view {view.query_id}")
     return {k: str(p.relative_to(out_dir)) for k, p in files.items()}
 
 
@@ -147,20 +118,11 @@ def scene_blocks(scores: dict[str, float | None], n_views: int) -> dict[str, Any
     }
 
 
-def view_scores(view: ViewPrediction, n_classes: int, ignore_id: int) -> dict[str, float]:
-    """Per-image mIoU and PSNR of one view."""
-    miou = per_image_scores([view], n_classes, ignore_id)["miou"]
-    return {"miou_per_image": float(miou), "psnr_db": psnr(view.pred_rgb, view.gt_rgb)}
-
-
 def flat_metrics(report: dict[str, Any]) -> dict[str, float]:
     """Tracked metric keys ``<scene or mean>/<metric>`` of a metrics.json report (finite values only)."""
     out = {}
     for name, block in [*report["scenes"].items(), ("mean", report["mean"])]:
-        values = {"miou": block["dataset_level"]["miou"], "total_acc": block["dataset_level"]["total_acc"],
-                  "class_avg_acc": block["dataset_level"]["class_avg_acc"],
-                  "miou_per_image": block["per_image"]["miou"], "psnr": block["colour"]["psnr_db"],
-                  "ssim": block["colour"]["ssim"]}
+        values = {k: block[where][key] for k, (where, key) in SCORE_PATHS.items()}
         out |= {f"{name}/{k}": float(v) for k, v in values.items() if v is not None and math.isfinite(v)}
     return out
 
@@ -169,12 +131,7 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
                         n_source: int = 8, stride: int = 1, tracking_uri: str | None = None,
                         experiment: str = "sray-eval", *, tracker: str = DEFAULT_TRACKER, device: str | None = None,
                         progress: bool = True, fast: FastRender | None = None, runtime: Runtime = Runtime()) -> dict:
-    """:func:`evaluate_model` of the S-Ray checkpoint ``checkpoint`` (``eval_model.checkpoint_model``).
-
-    ``fast``: render with the fast render mode (``sray.model.fast_render``) instead of the full
-    renderer; the protocol's ``render`` field names it with its settings. ``runtime``: the implementation and
-    rays per chunk the network runs with (default: the fast path, chunks by device).
-    """
+    """:func:`evaluate_model` of an S-Ray checkpoint (``checkpoint_model``: the fast mode with ``fast``, runtime)."""
     return evaluate_model(checkpoint_model(checkpoint, device, fast, runtime), shards, scenes, out_dir, n_source,
                           stride, tracking_uri, experiment, tracker=tracker, progress=progress)
 
@@ -182,20 +139,15 @@ def evaluate_checkpoint(checkpoint: Path, shards: Path, scenes: list[str] | None
 def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out_dir: Path, n_source: int = 8,
                    stride: int = 1, tracking_uri: str | None = None, experiment: str = "sray-eval", *,
                    tracker: str = DEFAULT_TRACKER, progress: bool = True) -> dict:
-    """Evaluate ``model`` on ``scenes`` (default: the manifest's test scenes); see the module doc.
-
-    Returns the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run`` (the fields of the
-    run's :class:`~sray.platform.tracking.tracker.RunHandle`: tracker, store, run id, experiment id,
-    UI url and hint). ``tracker``: a registry name; ``tracking_uri``: its store (None = the tracker's
-    default store in the working directory).
-    """
+    """Evaluate ``model`` on ``scenes`` (default: the manifest's test scenes), tracked by ``tracker`` in its store
+    ``tracking_uri`` (None: its default); the metrics.json content plus ``metrics_path``, ``out_dir`` and ``run``."""
     if stride < 1 or n_source < 1:
         raise ValueError(f"stride ({stride}) and n_source ({n_source}) must be >= 1")
     tracking = get_tracker(tracker, tracking_uri or "")
     shards, out_dir = Path(shards).resolve(), Path(out_dir).resolve()
     names, metas = select_scenes(shards, scenes)
-    protocol = EvalProtocol.from_shards(shards, n_source, stride, model.inputs, model.train_inputs)
-    protocol = protocol.rendered_by(model.fast)
+    protocol = EvalProtocol.from_shards(shards, n_source, stride, model.inputs,
+                                        model.train_inputs).rendered_by(model.fast)
     n_classes, ignore_id = model.n_classes, model.ignore_id
     for name in names:
         if len(metas[name]["class_names"]) != n_classes:
@@ -216,7 +168,9 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
 
             def record_view(view: ViewPrediction, scene: str = name) -> None:
                 pngs = save_view_pngs(view, scene, metas[scene]["class_names"], ignore_id, out_dir)
-                per_view.append({"query_id": view.query_id, **view_scores(view, n_classes, ignore_id), "pngs": pngs})
+                per_view.append({"query_id": view.query_id,
+                                 "miou_per_image": float(per_image_scores([view], n_classes, ignore_id)["miou"]),
+                                 "psnr_db": psnr(view.pred_rgb, view.gt_rgb), "pngs": pngs})
                 bar.update(1)
 
             scored = score_scene(model.renderer, make_eval_samples(shards, name, split="test", n_source=n_source),
@@ -226,11 +180,10 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
             block["dataset_level"]["iou_per_class"] = class_ious(scored.views, n_classes, ignore_id)
             report["scenes"][name] = {**block, "views": per_view}
         bar.close()
-        scene_scores = [report["scenes"][n] for n in names]
-        report["mean"] = mean_blocks(scene_scores)
+        report["mean"] = mean_blocks(list(report["scenes"].values()))
         report["wall_s"] = time.perf_counter() - t0
         metrics_path = write_json_atomic(report, out_dir / METRICS_FILE)
-        logger.log_metrics(flat_metrics(_finite_or_none(report)), model.step)
+        logger.log_metrics(flat_metrics(report), model.step)
         logger.log_artifact(metrics_path)
         for name in names:  # only this evaluation's scenes, whatever else the folder holds
             logger.log_artifact(out_dir / "renders" / name, f"renders/{name}")
@@ -239,42 +192,71 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
 
 
 def mean_blocks(blocks: list[dict[str, Any]]) -> dict[str, Any]:
-    """Unweighted mean over scenes of every score (each scene counts once, whatever its view count).
+    """Unweighted mean over scenes of every score (each scene counts once); None for a score some scene lacks."""
 
-    A score some scene lacks (SSIM of strided renders) has no mean: None.
-    """
-
-    def avg(path: tuple[str, str]) -> float | None:
-        values = [b[path[0]][path[1]] for b in blocks]
+    def avg(where: str, key: str) -> float | None:
+        values = [b[where][key] for b in blocks]
         return None if any(v is None for v in values) else float(np.mean(values))
 
-    scores = {"miou": avg(("dataset_level", "miou")), "total_acc": avg(("dataset_level", "total_acc")),
-              "class_avg_acc": avg(("dataset_level", "class_avg_acc")), "miou_per_image": avg(("per_image", "miou")),
-              "psnr": avg(("colour", "psnr_db")), "ssim": avg(("colour", "ssim"))}
+    scores = {k: avg(*path) for k, path in SCORE_PATHS.items()}
     return {**scene_blocks(scores, sum(b["n_views"] for b in blocks)), "n_scenes": len(blocks),
             "averaging": "unweighted mean over scenes"}
 
 
-def format_table(report: dict[str, Any]) -> str:
-    """A plain-text table of a report: one row per scene, then the mean, the protocol line below.
+def text_cell(value: Any, fmt: str) -> str:
+    """``value`` in format ``fmt``, a dash when None."""
+    return "—" if value is None else format(value, fmt)
 
-    The SSIM column is there only for whole-image evaluations (stride 1).
-    """
+
+def text_table(rows: list[tuple[str, ...]]) -> list[str]:
+    """Lines of a plain-text table of ``rows`` (the first, the head, ruled off), the first column left-aligned."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(v.ljust(w) if i == 0 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths))) for r in rows]
+    lines.insert(1, "-" * len(lines[0]))
+    return lines
+
+
+def format_table(report: dict[str, Any]) -> str:
+    """A plain-text table of a report: a row per scene, the mean, the protocol (SSIM only for whole images)."""
     protocol = EvalProtocol.from_json(report["protocol"])
     head = ("scene", "views", "mIoU", "total acc", "class acc", "mIoU/img", "PSNR dB", "SSIM")
     columns = len(head) if protocol.scores_ssim else len(head) - 1
     rows = [head[:columns]]
-
-    def cell(v: Any, fmt: str) -> str:
-        return "—" if v is None else format(v, fmt)
-
     for name, b in [*report["scenes"].items(), ("mean", report["mean"])]:
         d, c = b["dataset_level"], b["colour"]
-        rows.append((name, str(b["n_views"]), cell(d["miou"], ".3f"), cell(d["total_acc"], ".3f"),
-                     cell(d["class_avg_acc"], ".3f"), cell(b["per_image"]["miou"], ".3f"),
-                     cell(c["psnr_db"], ".2f"), cell(c["ssim"], ".3f"))[:columns])
-    widths = [max(len(r[i]) for r in rows) for i in range(columns)]
-    lines = ["  ".join(v.ljust(w) if i == 0 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths))) for r in rows]
-    lines.insert(1, "-" * len(lines[0]))
+        rows.append((name, str(b["n_views"]), text_cell(d["miou"], ".3f"), text_cell(d["total_acc"], ".3f"),
+                     text_cell(d["class_avg_acc"], ".3f"), text_cell(b["per_image"]["miou"], ".3f"),
+                     text_cell(c["psnr_db"], ".2f"), text_cell(c["ssim"], ".3f"))[:columns])
+    lines = text_table(rows)
     lines.insert(len(lines) - 1, "-" * len(lines[0]))
     return "\n".join([*lines, f"Protocol: {protocol.describe()}"])
+
+
+def coarse_logits(model: EvalModel, shards: Path, n_source: int, stride: int) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """(logits (N, L), labels (N,), rooms) of the coarse pass at every ``stride``-th pixel of the test views of
+    every test room of ``shards``, rays no source sees (all logits -inf) left out."""
+    names, _ = select_scenes(Path(shards), None)
+    logits, labels = [], []
+    for name in names:
+        for sample in make_eval_samples(Path(shards), name, split="test", n_source=n_source):
+            h, w = sample.query_label.shape
+            out = render_view(model.renderer(sample), sample.query.K, sample.query.c2w, (h, w), sample.near,
+                              sample.far, model.chunk, model.device, stride, None, passes=("coarse",),
+                              keys=("logits",))["coarse"]["logits"].reshape(-1, model.n_classes).cpu()
+            uv, _, _ = strided_pixels(h, w, stride)
+            logits.append(out)
+            labels.append(sample.query_label[uv[:, 1].long(), uv[:, 0].long()])
+    all_logits, all_labels = torch.cat(logits), torch.cat(labels)
+    seen = torch.isfinite(all_logits).all(-1)
+    return all_logits[seen], all_labels[seen], len(names)
+
+
+def calibrate(model: EvalModel, shards: Path, n_source: int = 8, stride: int = 4) -> dict[str, Any]:
+    """The fitted temperature of ``model``'s coarse confidence on the validation shards and what it was fitted on:
+    ``{"temperature", "nll_at_1", "nll_fitted", "rays", "rooms", "shards", "stride", "n_source"}``."""
+    logits, labels, rooms = coarse_logits(model, shards, n_source, stride)
+    temperature = fit_temperature(logits, labels, model.ignore_id)
+    keep = labels != model.ignore_id
+    return {"temperature": temperature, "nll_at_1": nll(logits[keep], labels[keep], 1.0),
+            "nll_fitted": nll(logits[keep], labels[keep], temperature), "rays": int(keep.sum()), "rooms": rooms,
+            "shards": str(Path(shards).resolve()), "stride": stride, "n_source": n_source}

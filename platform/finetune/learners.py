@@ -39,8 +39,7 @@ from sray.model.semantic_ray import SourceSet, SRayModel
 from sray.model.view_render import RayRenderer
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.fleet_config import SemanticNeRFSettings
-from sray.platform.eval.segmenter import Segmenter
-from sray.platform.eval.transfer_view import transfer_renderer
+from sray.platform.eval.segmenter import Segmenter, transfer_renderer
 from sray.platform.eval.view_scoring import encode_sources, sray_renderer
 from sray.platform.finetune.scene_artifacts import (
     adapted_keys,
@@ -219,7 +218,7 @@ class TransferLearner(WholeNetLearner):
 
     def renderer(self, sample: EvalSample) -> RayRenderer:
         """The segmenter's labels of the sample's source views carried into its query view by their depth
-        (``transfer_view.transfer_renderer``: nothing of the query view but its camera is read)."""
+        (``segmenter.transfer_renderer``: nothing of the query view but its camera is read)."""
         return transfer_renderer(self.net, sample, self.tolerance, self.device)
 
     def save(self, path: Path, scene: str) -> None:

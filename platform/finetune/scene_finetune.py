@@ -39,7 +39,7 @@ from sray.platform.common.fault_hook import fail_if_listed
 from sray.platform.common.progress import make_progress
 from sray.platform.common.throughput import ThroughputWindow, progress_postfix
 from sray.platform.config.fleet_config import FleetConfig
-from sray.platform.eval.scene_scoring import score_scene
+from sray.platform.eval.view_scoring import score_scene
 from sray.platform.finetune.learners import Learner
 from sray.platform.finetune.methods.method import SceneContext
 from sray.platform.finetune.methods.registry import get_method

@@ -1,18 +1,6 @@
-"""``sray.load(checkpoint)``: a trained S-Ray model that labels posed photos given as NumPy arrays.
-
-Conventions of :meth:`Labeller.label` (sray's, ARCHITECTURE §2):
-
-* ``images``: uint8 (N, H, W, 3), RGB;
-* ``poses``: float (N, 4, 4) camera-to-world in OpenCV axes (x right, y down, z forward), metres;
-* ``intrinsics``: float (3, 3) shared by every frame, or (N, 3, 3); pixel (u, v) is centred at (u, v), so a
-  centred principal point is ((W - 1) / 2, (H - 1) / 2);
-* ``depth_range``: (near, far) in metres between which each ray is sampled; None: :data:`INDOOR_RANGE`.
-
-Each frame is rendered from its ``n_source`` best other frames (never itself), ranked by the shards' rule for
-a camera without depth (``neighbours.rank_camera``): how much of each candidate's sparse pixel grid, placed at
-depth sqrt(near * far), lands in front of and inside the frame's camera; ties by viewing direction, then
-distance. ``sray label`` calls this same method on a shard folder's views, so its files hold these outputs.
-"""
+"""``sray.load(checkpoint)``: a trained S-Ray model that labels posed photos given as NumPy arrays (docs/capture.md),
+each frame rendered from its ``n_source`` best other frames, ranked by the shards' rule for a camera without depth
+(``neighbours.rank_camera``, at depth sqrt(near * far)). ``sray label`` calls this on a shard folder's views."""
 
 from __future__ import annotations
 
@@ -33,24 +21,21 @@ from sray.platform.checkpoints.folders import resolve_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.render.frames import render_frame
 
-INDOOR_RANGE = (0.1, 10.0)
-"""Depth range (metres) used when ``label`` is given none: a room seen from inside it."""
+INDOOR_RANGE = (0.1, 10.0)  # depth range (metres) used when ``label`` is given none: a room seen from inside it
 
 
 @dataclass(frozen=True)
 class Labels:
-    """What :meth:`Labeller.label` returns, per frame."""
+    """What :meth:`Labeller.label` returns, per frame: ``label`` uint8 (N, H, W) class ids of the model's label
+    space, ``confidence`` float32 (N, H, W) largest softmax probability, ``depth`` float32 (N, H, W) rendered
+    z-depth in metres, ``rgb`` uint8 (N, H, W, 3) rendered colour, ``sources`` the indices of the frames each
+    was rendered from, best first."""
 
     label: np.ndarray
-    """uint8 (N, H, W) class ids of the model's label space (ScanNet-20 for the shipped recipes)."""
     confidence: np.ndarray
-    """float32 (N, H, W) largest softmax probability of the rendered logits."""
     depth: np.ndarray
-    """float32 (N, H, W) rendered z-depth in metres."""
     rgb: np.ndarray
-    """uint8 (N, H, W, 3) rendered colour."""
     sources: list[list[int]]
-    """Per frame, the indices of the frames it was rendered from, best first."""
 
 
 def _check_inputs(images: np.ndarray, poses: np.ndarray, intrinsics: np.ndarray,
@@ -99,8 +84,7 @@ class Labeller:
         """Classes the model predicts."""
         return int(self.net.cfg.n_classes)
 
-    def rank_sources(self, Ks: np.ndarray, poses: np.ndarray, hw: tuple[int, int],
-                     depth: float) -> list[list[int]]:
+    def rank_sources(self, Ks: np.ndarray, poses: np.ndarray, hw: tuple[int, int], depth: float) -> list[list[int]]:
         """Per frame, the indices of its ``n_source`` best other frames (module doc), best first."""
         n = len(poses)
         if not 1 <= self.n_source <= n - 1:
@@ -119,12 +103,9 @@ class Labeller:
     def label(self, images: np.ndarray, poses: np.ndarray, intrinsics: np.ndarray,
               depth_range: tuple[float, float] | None = None,
               on_frame: Callable[[int], None] | None = None) -> Labels:
-        """Label every frame of a posed capture, each rendered from its best other frames (module doc).
-
-        images uint8 (N, H, W, 3); poses (N, 4, 4) OpenCV camera-to-world in metres; intrinsics (3, 3) or
-        (N, 3, 3); depth_range (near, far) metres or None for :data:`INDOOR_RANGE`. ``on_frame(i)`` is called
-        after frame i (progress bars). ValueError names the argument on bad input.
-        """
+        """Label a posed capture: images uint8 (N, H, W, 3) RGB; poses (N, 4, 4) OpenCV camera-to-world, metres;
+        intrinsics (3, 3) or (N, 3, 3), pixel (u, v) centred at (u, v); depth_range (near, far) metres (None:
+        :data:`INDOOR_RANGE`); ``on_frame(i)`` after frame i. ValueError names the argument on bad input."""
         near, far = depth_range or INDOOR_RANGE
         Ks = _check_inputs(images, poses, intrinsics, (near, far))
         poses = np.asarray(poses, np.float64)
@@ -132,7 +113,7 @@ class Labeller:
         ranked = self.rank_sources(Ks, poses, hw, float(np.sqrt(near * far)))
         rgb_t = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)       # (N, 3, H, W)
         K_t, c2w_t = torch.from_numpy(Ks).float(), torch.from_numpy(poses).float()
-        out = {k: [] for k in ("label", "confidence", "depth", "rgb")}
+        frames = []
         for i, ids in enumerate(ranked):
             sources = SourceViews(rgb=rgb_t[ids], K=K_t[ids], c2w=c2w_t[ids])
             sample = SceneQuery(scene="capture", query_id=str(i), sources=sources,
@@ -140,13 +121,12 @@ class Labeller:
             src = sources.to(self.device)
             renderer = self.net.ray_renderer(self.net.encode(src.rgb, src.K, src.c2w), self.fast, self.runtime)
             frame = render_frame(renderer, sample, hw, self.runtime.chunk, self.device, self.fast)
-            out["label"].append(frame.label.numpy().astype(np.uint8))
-            out["confidence"].append(frame.confidence.numpy().astype(np.float32))
-            out["depth"].append(frame.depth.numpy().astype(np.float32))
-            out["rgb"].append((frame.rgb.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8))
+            frames.append((frame.label.numpy().astype(np.uint8), frame.confidence.numpy().astype(np.float32),
+                           frame.depth.numpy().astype(np.float32),
+                           (frame.rgb.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)))
             if on_frame is not None:
                 on_frame(i)
-        return Labels(**{k: np.stack(v) for k, v in out.items()}, sources=ranked)
+        return Labels(*(np.stack(parts) for parts in zip(*frames)), sources=ranked)
 
 
 def load(checkpoint: str | Path, n_source: int = 8, render: str = "fast", device: str | None = None) -> Labeller:

@@ -1,12 +1,6 @@
-"""``sray label``'s whole job: label the chosen scenes of a shard folder and fly through each, as one tracked run.
-
-For each scene: ``scene_labels.label_scene`` writes ``OUT/<scene>/{label,overlay,confidence,depth}/`` and
-``labels.json``; then ``sray render``'s fly-through (``render/flythrough.py``: a spline through the scene's
-cameras, the same model and render mode) goes to ``OUT/<scene>/flythrough/``. One progress bar counts the labelled
-frames of every scene; each fly-through shows its own. The run (experiment ``sray-label`` by default, tag
-``sray.kind = label``) gets the request as params, each labelled scene's scores as metrics (``<scene>/miou``, ...)
-and every labels.json and fly-through file as artifacts under ``<scene>/``.
-"""
+"""``sray label``'s whole job (docs/capture.md): per chosen scene of a shard folder, its label files and a spline
+fly-through by the same model and render mode under ``OUT/<scene>/``; tracked, with each labelled scene's scores as
+metrics (``<scene>/miou``, ...) and its labels.json and fly-through files as artifacts under ``<scene>/``."""
 
 from __future__ import annotations
 
@@ -22,6 +16,7 @@ from sray.platform.label.labeller import Labeller
 from sray.platform.label.scene_labels import LABELS_FILE, label_scene
 from sray.platform.render.flythrough import Flythrough
 from sray.platform.render.plan import plan_flythrough
+from sray.platform.render.tracked import log_flythrough
 from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.tracking.tracker import RunLogger
 
@@ -40,8 +35,8 @@ def chosen_scenes(shards: Path, scenes: list[str] | None) -> list[str]:
 
 def label_scenes(labeller: Labeller, shards: Path, scenes: list[str], out: Path, fly_frames: int,
                  logger: RunLogger | None = None, progress: bool = True) -> dict[str, Any]:
-    """Label and fly through every scene of ``scenes`` under ``out`` (module doc); returns per scene its
-    labels.json record plus ``flythrough`` (the fly-through's files). ``fly_frames`` 0: no fly-through."""
+    """Label and fly through (``fly_frames`` 0: not) every scene of ``scenes`` under ``out``; returns per scene its
+    labels.json record plus ``flythrough`` (the fly-through's files)."""
     manifest = read_manifest(Path(shards))
     total = sum(len(manifest.scenes[s].meta["view_ids"]) for s in scenes)
     bar = make_progress(progress, total=total, desc="sray label")
@@ -60,8 +55,7 @@ def label_scenes(labeller: Labeller, shards: Path, scenes: list[str], out: Path,
                 logger.log_metrics({f"{scene}/{k}": record["scores"][k]
                                     for k in ("miou", "total_acc", "class_avg_acc")}, step)
             logger.log_artifact(out / scene / LABELS_FILE, scene)
-            for path in record.get("flythrough", {}).values():
-                logger.log_artifact(Path(path), f"{scene}/flythrough")
+            log_flythrough(logger, record.get("flythrough", {}), f"{scene}/flythrough")
         results[scene] = record
     bar.close()
     return results
@@ -70,8 +64,7 @@ def label_scenes(labeller: Labeller, shards: Path, scenes: list[str], out: Path,
 def tracked_labels(labeller: Labeller, shards: Path, scenes: list[str], out: Path, fly_frames: int, *,
                    tracker: str = DEFAULT_TRACKER, tracking_uri: str = "", experiment: str = "sray-label",
                    progress: bool = True) -> dict[str, Any]:
-    """:func:`label_scenes` inside a new run of ``tracker``; returns its result plus ``run`` (the run handle's
-    fields: tracker, store, run id, experiment id, UI url and hint)."""
+    """:func:`label_scenes` inside a new run of ``tracker``; returns its result plus ``run`` (the handle's fields)."""
     tracking = get_tracker(tracker, tracking_uri)
     run = tracking.start_run(experiment, f"label-{time.strftime('%Y%m%d-%H%M%S')}",
                              tags={"sray.kind": "label", "sray.checkpoint": labeller.about.get("checkpoint", "")})

@@ -1,21 +1,11 @@
-"""``sray label`` for one scene of a shard folder: every frame labelled by :meth:`Labeller.label` and written out.
-
-Under ``out_dir`` (each file written atomically)::
-
-    label/<view>.png        uint8 class ids of the model's label space (ScanNet-20)
-    overlay/<view>.png      the frame with the label colours blended over it (half and half)
-    confidence/<view>.png   16-bit, confidence x 65535 (largest softmax probability)
-    depth/<view>.png        16-bit rendered depth in millimetres
-    labels.json             per frame its source views; the depth range, the model, and for a labelled scene
-                            the scores against its stored labels (which the model never reads)
-
-A frame is rendered from its best other frames, so on a labelled scene the scores compare each frame's
-prediction with labels nothing in its render saw (Semantic-NeRF's dataset-level protocol, one confusion matrix).
+"""``sray label`` for one scene of a shard folder: every frame labelled by :meth:`Labeller.label` and written
+(atomically) as ``label/``, ``overlay/``, ``confidence/``, ``depth/`` PNGs and ``labels.json`` (docs/capture.md).
+A frame is rendered from its other frames, so the scores compare each prediction with labels its render never
+saw (Semantic-NeRF's dataset-level protocol, one confusion matrix).
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -23,7 +13,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from sray.data_tools.atomic import atomic_write_bytes
+from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.png import depth_to_png16, encode_png
 from sray.data_tools.scene import SceneMeta
@@ -41,7 +31,8 @@ def overlay(rgb: np.ndarray, label: np.ndarray, n_classes: int) -> np.ndarray:
 
 
 def write_frame_files(out_dir: Path, view_id: str, rgb: np.ndarray, labels: Labels, i: int, n_classes: int) -> None:
-    """The four PNGs of frame ``i`` (module doc)."""
+    """The four PNGs of frame ``i``: uint8 class ids, the frame and the label colours half and half, 16-bit
+    confidence x 65535 and 16-bit depth in millimetres."""
     conf = np.round(np.clip(labels.confidence[i], 0, 1) * 65535).astype(np.uint16)
     for sub, image in (("label", labels.label[i]), ("overlay", overlay(rgb, labels.label[i], n_classes)),
                        ("confidence", conf), ("depth", depth_to_png16(labels.depth[i]))):
@@ -73,5 +64,5 @@ def label_scene(labeller: Labeller, shards: Path, manifest: Manifest, scene: str
                                     torch.from_numpy(views[v].label().astype(np.int64)), labeller.n_classes,
                                     meta.ignore_id) for i, v in enumerate(ids))
         record["scores"] = {"protocol": DATASET_PROTOCOL, **scene_metrics(conf)}
-    atomic_write_bytes(Path(out_dir) / LABELS_FILE, (json.dumps(record, indent=1) + "\n").encode())
+    atomic_write_json(Path(out_dir) / LABELS_FILE, record)
     return record

@@ -37,8 +37,7 @@ from sray.platform.config.stored_format import VERSION_KEY
 from sray.platform.config.train_config import CONFIG_FILE, TrainConfig
 from sray.platform.finetune.fleet import FLEET_FILE
 from sray.platform.migrate.config_v1 import MigrationRefused, removed_value, today_path, train_config_v2
-from sray.platform.sweep.sweep_record import FORMAT as SWEEP_FORMAT
-from sray.platform.sweep.sweep_record import RECORD_FILE as SWEEP_FILE
+from sray.platform.sweep.prepare import FORMAT as SWEEP_FORMAT, RECORD_FILE as SWEEP_FILE
 
 SEGMENTER_FILE, SEGMENTER_STATE = "segmenter.json", "training_state.pt"
 """A 2D segmenter folder's config and an unfinished training's state (``sray.platform.eval.segmenter*``)."""

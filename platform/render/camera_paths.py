@@ -1,15 +1,5 @@
-"""Camera paths for fly-throughs: a smooth path through a scene's cameras, or an orbit around them.
-
-Every pose is a 4x4 camera-to-world in OpenCV axes (x right, y down, z forward), float64.
-
-* :func:`spline_path`: positions by a cubic Hermite spline with Catmull-Rom tangents (non-uniform: each
-  key camera sits at a time proportional to the distance travelled to reach it, counting a turn of one
-  radian as :data:`TURN_METRES_PER_RADIAN` metres), rotations by SLERP between consecutive keys. Frames
-  are spread evenly in that time, so the first frame is the first key camera and the last frame the last.
-* :func:`orbit_path`: a circle around the cameras' mean position, at their mean height and mean distance
-  from the vertical through it, every frame looking at that centre. "Up" is the cameras' mean up
-  direction, so no world axis convention is assumed.
-"""
+"""Built fly-through paths (docs/render.md, "Camera paths"): a spline through a scene's cameras or an orbit
+around them. Poses are float64 (4, 4) camera-to-world in OpenCV axes (x right, y down, z forward)."""
 
 from __future__ import annotations
 
@@ -21,22 +11,19 @@ from sray.platform.render.rotations import matrix_to_quaternion, quaternion_to_m
 
 TURN_METRES_PER_RADIAN = 0.5
 """A turn of one radian takes as long as moving half a metre (a camera turning in place still moves on)."""
-SAME_POSE = 1e-9
-"""Consecutive key cameras closer than this (metres + weighted radians) count as one."""
+SAME_POSE = 1e-9  # consecutive key cameras closer than this (metres + weighted radians) count as one
 
 
 @dataclass(frozen=True)
 class CameraPath:
-    """The cameras of a fly-through, one per frame."""
+    """The cameras of a fly-through, one per frame: ``c2w`` float64 (N, 4, 4) camera-to-world (OpenCV axes), ``K``
+    float64 (N, 3, 3) intrinsics at ``hw`` = (height, width) in pixels, pixel (u, v) centred at (u, v), and
+    ``describe``, where the path came from in one phrase (``spline through 16 cameras``, a file name, ...)."""
 
     c2w: np.ndarray
-    """float64 (N, 4, 4) camera-to-world, OpenCV axes."""
     K: np.ndarray
-    """float64 (N, 3, 3) intrinsics at ``hw`` (pixel (u, v) centred at (u, v))."""
     hw: tuple[int, int]
-    """(height, width) of every frame in pixels."""
     describe: str
-    """Where the path came from, one phrase (``spline through 16 cameras``, a file name, ...)."""
 
     def __len__(self) -> int:
         """Number of frames."""
@@ -74,30 +61,19 @@ def _tangents(points: np.ndarray, times: np.ndarray) -> np.ndarray:
     return out
 
 
-def hermite(p0: np.ndarray, p1: np.ndarray, v0: np.ndarray, v1: np.ndarray, duration: float,
-            s: np.ndarray) -> np.ndarray:
-    """Points (S, 3) at fractions ``s`` (S,) of a cubic Hermite segment from ``p0`` to ``p1`` (3,) lasting
-    ``duration``, with velocities ``v0``, ``v1`` (3,) at its ends."""
-    s = np.asarray(s, np.float64)[:, None]
-    h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
-    h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
-    return h00 * p0 + h10 * duration * v0 + h01 * p1 + h11 * duration * v1
-
-
 def spline_path(c2ws: np.ndarray, n_frames: int) -> np.ndarray:
-    """``n_frames`` poses (n_frames, 4, 4) through the key cameras ``c2ws`` (K, 4, 4), in their order (module doc).
-
-    Consecutive duplicates count once; a single key camera gives a still path.
-    """
+    """``n_frames`` poses (n_frames, 4, 4) through the key cameras ``c2ws`` (K, 4, 4) in their order: a Hermite
+    spline with Catmull-Rom tangents for positions, SLERP for rotations, each key reached at its
+    :func:`key_times` and frames evenly spread in that time. Consecutive duplicates count once."""
     if n_frames < 1 or len(c2ws) < 1:
         raise ValueError(f"a spline path needs >= 1 frame and >= 1 key camera (got {n_frames} and {len(c2ws)})")
     keys = [np.asarray(c2ws[0], np.float64)]
     for pose in c2ws[1:]:
         if key_times(np.stack([keys[-1], pose]))[1] > SAME_POSE:
             keys.append(np.asarray(pose, np.float64))
+    if len(keys) == 1:
+        return np.repeat(keys[0][None], n_frames, axis=0)
     keys_arr = np.stack(keys)
-    if len(keys_arr) == 1:
-        return np.repeat(keys_arr, n_frames, axis=0)
     times = key_times(keys_arr)
     points, quats = keys_arr[:, :3, 3], [matrix_to_quaternion(k[:3, :3]) for k in keys_arr]
     velocity = _tangents(points, times)
@@ -108,17 +84,18 @@ def spline_path(c2ws: np.ndarray, n_frames: int) -> np.ndarray:
         idx = np.nonzero(segment == i)[0]
         duration = times[i + 1] - times[i]
         s = (frame_t[idx] - times[i]) / duration
-        out[idx, :3, 3] = hermite(points[i], points[i + 1], velocity[i], velocity[i + 1], duration, s)
+        h = s[:, None]                                                                 # cubic Hermite basis
+        out[idx, :3, 3] = ((2 * h**3 - 3 * h**2 + 1) * points[i] + (h**3 - 2 * h**2 + h) * duration * velocity[i]
+                           + (-2 * h**3 + 3 * h**2) * points[i + 1] + (h**3 - h**2) * duration * velocity[i + 1])
         out[idx, :3, :3] = np.stack([quaternion_to_matrix(q) for q in slerp(quats[i], quats[i + 1], s)])
-    out[0] = keys_arr[0]                                                               # exact ends, no round trip
-    if n_frames > 1:
-        out[-1] = keys_arr[-1]
+    out[-1], out[0] = keys_arr[-1], keys_arr[0]                                        # exact ends, no round trip
     return out
 
 
 def orbit_path(c2ws: np.ndarray, n_frames: int) -> np.ndarray:
-    """``n_frames`` poses (n_frames, 4, 4) on one full circle around the cameras ``c2ws`` (K, 4, 4) (module doc),
-    starting on the side of the first camera, turning counter-clockwise seen from above."""
+    """``n_frames`` poses (n_frames, 4, 4) on one circle around the cameras ``c2ws`` (K, 4, 4): centred on their
+    mean position, at their mean height and mean distance from the vertical through it (up: their mean up),
+    looking at the centre, starting on the first camera's side, counter-clockwise seen from above."""
     centres = c2ws[:, :3, 3]
     centre = centres.mean(axis=0)
     up = -c2ws[:, :3, 1].mean(axis=0)                                                  # OpenCV y points down

@@ -1,17 +1,6 @@
-"""Render a planned fly-through (``plan.py``) into videos, ``frames.json`` and the protocol line.
-
-For each frame: choose its sources (``sources.py``: evaluation's ranking rule, applied to the frame's
-camera), encode them (a frame choosing the same set of views as the last encoded one reuses its encoding, put
-in the frame's order with ``SourceSet.select``: the encoder sees each view alone), render the whole frame
-(``frames.py``: fast mode or the full renderer), compose the four panels (``panels.py``) and append the
-picture to the videos (``video.py``). Outputs under ``out_dir``, each renamed into place only when all are
-complete:
-
-* ``flythrough.webm``, ``flythrough.mp4``, ``flythrough.gif`` (preview);
-* ``frames.json``: the scene, the path, size, fps, the model, the protocol descriptor and, per frame, its
-  pose (OpenCV camera-to-world, 4x4), intrinsics (3x3) and source view ids, best first;
-* ``protocol.txt``: the protocol line (``EvalProtocol.describe``): sources, pixels, render mode, inputs.
-"""
+"""Render a planned fly-through into videos, ``frames.json`` and ``protocol.txt`` (docs/render.md): per frame, rank
+its sources, encode them (a frame choosing the same set of views as the last one reuses that encoding, reordered:
+the encoder sees each view alone), render the whole frame, compose the panels and append them to the videos."""
 
 from __future__ import annotations
 
@@ -23,7 +12,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from sray.data_tools.loader.sample_types import QueryCamera, SceneQuery
+from sray.data_tools.loader.sample_types import QueryCamera, SceneQuery, SourceViews
 from sray.model.fast_render import FastRender
 from sray.model.runtime import Runtime
 from sray.model.semantic_ray import SRayModel, SourceSet
@@ -35,29 +24,9 @@ from sray.platform.render.plan import FlythroughPlan
 from sray.platform.render.sources import SourcePicker
 from sray.platform.render.video import VideoSet
 
-STEM = "flythrough"
-"""File name stem of the videos."""
-FRAMES_FILE = "frames.json"
-"""Per-frame poses, intrinsics and sources, with the request and the protocol descriptor."""
-PROTOCOL_FILE = "protocol.txt"
-"""The protocol line beside the videos."""
-
-
-def flythrough_protocol(plan: FlythroughPlan, n_source: int, inputs: str, fast: FastRender | None,
-                        train_inputs: str = "") -> EvalProtocol:
-    """How the frames are made: ``n_source`` sources per frame, top-ranked by the shards' neighbour rule,
-    whole images, the render mode of ``fast`` (None: full), the model's ``inputs`` and what its training read
-    (``train_inputs``; empty: the same as ``inputs``)."""
-    where = str(plan.shards / "manifest.json")
-    return EvalProtocol.from_manifest(plan.manifest, n_source, 1, where, inputs, train_inputs).rendered_by(fast)
-
-
-def _sample(plan: FlythroughPlan, index: int, picker: SourcePicker, ids: list[str]) -> SceneQuery:
-    """The model input of frame ``index``: its camera and the sources ``ids``."""
-    K, c2w = torch.from_numpy(plan.path.K[index]).float(), torch.from_numpy(plan.path.c2w[index]).float()
-    query = QueryCamera(K=K, c2w=c2w)
-    return SceneQuery(scene=plan.meta.name, query_id=f"frame {index}", sources=picker.sources(ids), query=query,
-                      near=float(plan.meta.near), far=float(plan.meta.far))
+STEM = "flythrough"  # file name stem of the videos
+FRAMES_FILE = "frames.json"  # per-frame poses, intrinsics and sources, with the request and the protocol
+PROTOCOL_FILE = "protocol.txt"  # the protocol line beside the videos
 
 
 class Flythrough:
@@ -65,50 +34,51 @@ class Flythrough:
 
     def __init__(self, net: SRayModel, plan: FlythroughPlan, n_source: int, fast: FastRender | None = None,
                  runtime: Runtime = Runtime()) -> None:
-        """Check that ``plan``'s scene fits ``net`` and can give ``n_source`` sources per frame (ValueError naming
-        the manifest or the scene otherwise); nothing is rendered or written. ``fast``: the fast render mode
-        (None: the full renderer); the protocol's inputs are the model's (``net.cfg``); ``runtime``: the
-        implementation and rays per chunk the network runs with."""
+        """Check that ``plan``'s scene fits ``net`` and gives ``n_source`` sources per frame (ValueError naming the
+        manifest or the scene otherwise). ``fast``: the fast render mode (None: the full renderer); ``runtime``:
+        the implementation and rays per chunk the network runs with. The protocol's inputs are ``net.cfg``'s."""
+        manifest = plan.shards / "manifest.json"
         names = plan.meta.class_names
         if len(names) != net.cfg.n_classes:
-            raise ValueError(f"{plan.shards / 'manifest.json'}: scene {plan.meta.name!r} has {len(names)} classes, "
+            raise ValueError(f"{manifest}: scene {plan.meta.name!r} has {len(names)} classes, "
                              f"the model predicts {net.cfg.n_classes}; render data of the model's label space")
         self.net, self.plan, self.fast, self.runtime = net.eval(), plan, fast, runtime
         self.picker = SourcePicker(plan.views, plan.meta, n_source)
-        self.protocol = flythrough_protocol(plan, n_source, net.cfg.inputs, fast, net.cfg.train_inputs)
+        self.protocol = EvalProtocol.from_manifest(plan.manifest, n_source, 1, str(manifest), net.cfg.inputs,
+                                                   net.cfg.train_inputs).rendered_by(fast)
         self.layout = panel_layout(plan.path.hw, len(names))
         self._encoded: tuple[list[str], torch.device, SourceSet] | None = None
 
-    def _sources(self, ids: list[str], sample: SceneQuery, device: torch.device) -> SourceSet:
-        """The encoded sources ``ids`` in that order (module doc: an encoding of the same views is reused)."""
+    def _encode(self, ids: list[str], sources: SourceViews, device: torch.device) -> SourceSet:
+        """The encoding of ``sources`` (the views ``ids``, in that order); one of the same set of views is reused."""
         if self._encoded is None or set(self._encoded[0]) != set(ids) or self._encoded[1] != device:
-            src = sample.sources.to(device)
+            src = sources.to(device)
             self._encoded = ids, device, self.net.encode(src.rgb, src.K, src.c2w, src.depth)
         done, _, encoded = self._encoded
         return encoded if done == ids else encoded.select([done.index(v) for v in ids])
 
     @torch.no_grad()
     def picture(self, index: int, device: torch.device, label: str = "") -> tuple[np.ndarray, list[str]]:
-        """Frame ``index`` as its uint8 panel picture (``panels.compose_panels``) and its source ids, best first;
-        ``label`` goes into the title. ``net`` must be on ``device``; the last encoding is reused between calls
-        (:meth:`render` starts afresh, so change the weights only between renders)."""
-        plan, path = self.plan, self.plan.path
+        """Frame ``index`` as its uint8 panel picture and its source ids, best first; ``label`` goes into the
+        title. ``net`` must be on ``device``; the last encoding is reused between calls (:meth:`render` starts
+        afresh, so change the weights only between renders)."""
+        meta, path = self.plan.meta, self.plan.path
         ids = self.picker.choose(path.K[index], path.c2w[index], path.hw)
-        sample = _sample(plan, index, self.picker, ids)
-        renderer = self.net.ray_renderer(self._sources(ids, sample, device), self.fast, self.runtime)
+        query = QueryCamera(K=torch.from_numpy(path.K[index]).float(), c2w=torch.from_numpy(path.c2w[index]).float())
+        sample = SceneQuery(scene=meta.name, query_id=f"frame {index}", sources=self.picker.sources(ids),
+                            query=query, near=float(meta.near), far=float(meta.far))
+        renderer = self.net.ray_renderer(self._encode(ids, sample.sources, device), self.fast, self.runtime)
         frame = render_frame(renderer, sample, path.hw, self.runtime.chunk, device, self.fast)
-        title = " | ".join(filter(None, [plan.meta.name, label, path.describe, f"frame {index + 1}/{len(path)}"]))
+        title = " | ".join(filter(None, [meta.name, label, path.describe, f"frame {index + 1}/{len(path)}"]))
         picture = compose_panels(frame.rgb.numpy(), frame.label.numpy(), frame.depth.numpy(), frame.confidence.numpy(),
-                                 plan.meta.class_names, plan.meta.near, plan.meta.far, title, plan.meta.ignore_id)
+                                 meta.class_names, meta.near, meta.far, title, meta.ignore_id)
         return picture, ids
 
     def render(self, out_dir: Path, device: torch.device, *, about: dict[str, Any] | None = None, label: str = "",
                progress: bool = True) -> dict[str, Any]:
-        """Render every frame and write the outputs (module doc) under ``out_dir``.
-
-        ``about``: what made the model (checkpoint, artifact), copied into frames.json; ``label``: shown in every
-        frame's title. Returns ``{"files": {name: path}, "n_frames", "size", "frames_per_s", "protocol"}``.
-        """
+        """Render every frame and write the outputs under ``out_dir``. ``about``: what made the model
+        (checkpoint, artifact), copied into frames.json; ``label``: shown in every frame's title.
+        Returns ``{"files": {name: path}, "n_frames", "size", "frames_per_s", "protocol"}``."""
         plan, path, n = self.plan, self.plan.path, len(self.plan.path)
         self.net.to(device)
         self._encoded = None  # the weights may have changed since the last render (a fleet's clip after finetuning)

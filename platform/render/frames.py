@@ -1,11 +1,6 @@
-"""One fly-through frame rendered whole: colour, labels, depth and confidence at every pixel.
-
-The frame is rendered by the model's one whole-view renderer (``sray.model.view_render.render_view``, as
-``sray eval``'s views are at stride 1), so a frame at a view's pose with that view's sources carries the same
-labels and colours as ``sray eval``'s render of it; a frame also keeps the fine pass's depth and the per-pixel
-confidence (the largest softmax probability of the rendered logits). In the fast mode the logits, colours
-and depths of the strided grid are upsampled bilinearly, so a depth edge is blended over one grid cell.
-"""
+"""One frame rendered whole by the model's whole-view renderer (``model.view_render.render_view``, as ``sray
+eval``'s views at stride 1), so a frame at a view's pose with its sources shows ``sray eval``'s labels and colours.
+In the fast mode logits, colours and depths are upsampled bilinearly: a depth edge blends over one grid cell."""
 
 from __future__ import annotations
 
@@ -21,16 +16,14 @@ from sray.model.view_render import RayRenderer, render_view
 
 @dataclass(frozen=True)
 class FrameRender:
-    """What a frame shows, on CPU."""
+    """What a frame shows, on CPU: ``label`` int64 (H, W) argmax of the rendered logits, ``rgb`` float32 (H, W, 3)
+    colour in [0, 1], ``depth`` float32 (H, W) z-depth in metres (the fine pass), ``confidence`` float32 (H, W)
+    largest softmax probability of the logits, in [1/L, 1]."""
 
     label: Tensor
-    """int64 (H, W) argmax of the rendered logits."""
     rgb: Tensor
-    """float32 (H, W, 3) colour in [0, 1]."""
     depth: Tensor
-    """float32 (H, W) rendered z-depth in metres."""
     confidence: Tensor
-    """float32 (H, W) largest softmax probability of the rendered logits, in [1/L, 1]."""
 
 
 @torch.no_grad()
@@ -38,7 +31,7 @@ def render_frame(render: RayRenderer, sample: SceneQuery, hw: tuple[int, int], c
                  fast: FastRender | None = None) -> FrameRender:
     """Render every pixel of the ``hw`` = (H, W) image of ``sample``'s query camera with ``render`` (bound to
     ``sample``'s sources: ``SRayModel.ray_renderer``), in chunks of ``chunk`` rays (0: by device); with
-    ``fast``, every ``fast.pixel_stride``-th pixel, upsampled (module doc)."""
+    ``fast``, every ``fast.pixel_stride``-th pixel, upsampled."""
     fine = render_view(render, sample.query.K, sample.query.c2w, hw, sample.near, sample.far, chunk, device,
                        fast=fast, passes=("fine",), keys=("logits", "rgb", "depth"))["fine"]
     logits = fine["logits"].cpu()  # (H, W, L)

@@ -1,26 +1,12 @@
-"""Camera paths drawn in nerfstudio's viewer: its ``camera_path.json`` layout, read and checked.
-
-The layout (nerfstudio's documented render input)::
-
-    {"render_height": 480, "render_width": 640, "fps": 24, "seconds": 4,
-     "camera_path": [{"camera_to_world": [16 numbers], "fov": 50, "aspect": 1.33}, ...]}
-
-* ``camera_to_world``: a 4x4 camera-to-world matrix flattened row by row, in OpenGL camera axes (x right,
-  y up, z backward). sray's cameras use OpenCV axes (y down, z forward), so the camera's y and z axes are
-  flipped once, here: ``c2w_cv = c2w_gl @ diag(1, -1, -1, 1)``. The world frame is taken as the scene's own
-  (the shards' world, in metres).
-* ``fov``: the vertical field of view in degrees; the focal length at a render height H is
-  ``f = (H / 2) / tan(fov / 2)`` for both axes, the principal point the image centre ((W-1)/2, (H-1)/2).
-* Optional: ``fps``, ``seconds`` (the listed frames are used as they are), ``aspect`` (the render size
-  decides), ``camera_type`` (only ``perspective`` is rendered).
-
-Every problem is refused in one line naming the file and the field, before anything is rendered.
-"""
+"""Camera paths drawn in nerfstudio's viewer: its ``camera_path.json`` read and checked (docs/render.md). Its
+``camera_to_world`` uses OpenGL camera axes, flipped here to OpenCV's; ``fov`` is vertical, in degrees. Every
+problem is refused in one line naming the file and the field."""
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -47,19 +33,19 @@ def _number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _field(d: dict[str, Any], name: str, where: str, path: Path) -> Any:
-    """``d[name]``; ValueError naming ``path`` and ``where`` when it is missing."""
-    if name not in d:
+def _field(d: dict[str, Any], key: str, where: str, path: Path, valid: Callable[[Any], bool], must: str) -> Any:
+    """``d[key]``; ValueError naming ``path`` and the field ``where`` when it is missing or not ``valid``."""
+    if key not in d:
         raise ValueError(f"{path}: field '{where}' is missing; {LAYOUT_HINT}")
-    return d[name]
+    if not valid(d[key]):
+        raise ValueError(f"{path}: field '{where}' is {str(d[key])[:60]}; it must be {must}")
+    return d[key]
 
 
-def _positive_int(d: dict[str, Any], name: str, path: Path) -> int:
-    """A required positive integer field of the top level."""
-    value = _field(d, name, name, path)
-    if not _number(value) or value != int(value) or value < 1:
-        raise ValueError(f"{path}: field '{name}' is {value!r}; it must be a positive whole number of pixels")
-    return int(value)
+def _pixels(doc: dict[str, Any], key: str, path: Path) -> int:
+    """A required positive whole number of pixels of the top level."""
+    return int(_field(doc, key, key, path, lambda v: _number(v) and v == int(v) and v >= 1,
+                      "a positive whole number of pixels"))
 
 
 def _frame_pose(frame: Any, i: int, path: Path) -> tuple[np.ndarray, float]:
@@ -67,28 +53,22 @@ def _frame_pose(frame: Any, i: int, path: Path) -> tuple[np.ndarray, float]:
     where = f"camera_path[{i}]"
     if not isinstance(frame, dict):
         raise ValueError(f"{path}: field '{where}' is {type(frame).__name__}, not an object; {LAYOUT_HINT}")
-    flat = _field(frame, "camera_to_world", f"{where}.camera_to_world", path)
-    if not isinstance(flat, list) or len(flat) != 16 or not all(_number(v) for v in flat):
-        raise ValueError(f"{path}: field '{where}.camera_to_world' must be 16 numbers (a 4x4 matrix row by row), "
-                         f"got {str(flat)[:60]}")
+    flat = _field(frame, "camera_to_world", f"{where}.camera_to_world", path,
+                  lambda v: isinstance(v, list) and len(v) == 16 and all(_number(x) for x in v),
+                  "16 numbers (a 4x4 matrix row by row)")
     c2w_gl = np.asarray(flat, np.float64).reshape(4, 4)
     problem = rigid_problem(c2w_gl)
     if problem is not None:
         raise ValueError(f"{path}: field '{where}.camera_to_world' is not a rigid pose: {problem}; write a rotation "
                          "and a translation only")
-    fov = _field(frame, "fov", f"{where}.fov", path)
-    if not _number(fov) or not 0.0 < fov < 180.0:
-        raise ValueError(f"{path}: field '{where}.fov' is {fov!r}; it must be a vertical field of view in degrees, "
-                         "between 0 and 180")
+    fov = _field(frame, "fov", f"{where}.fov", path, lambda v: _number(v) and 0.0 < v < 180.0,
+                 "a vertical field of view in degrees, between 0 and 180")
     return c2w_gl @ OPENGL_TO_OPENCV, float(fov)
 
 
 def read_camera_path(path: Path, size_hw: tuple[int, int] | None = None) -> tuple[CameraPath, float | None]:
-    """The cameras of a nerfstudio ``camera_path.json`` (module doc) and its ``fps`` (None when absent).
-
-    ``size_hw``: (H, W) to render at instead of the file's ``render_height`` x ``render_width``; the focal
-    length follows the height rendered. ValueError (one line, naming the file and the field) on any problem.
-    """
+    """The cameras of a nerfstudio ``camera_path.json`` and its ``fps`` (None when absent); ``size_hw``: (H, W)
+    to render at instead of the file's size (the focal length follows the height rendered)."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text())
@@ -101,16 +81,14 @@ def read_camera_path(path: Path, size_hw: tuple[int, int] | None = None) -> tupl
     kind = doc.get("camera_type", "perspective")
     if kind != "perspective":
         raise ValueError(f"{path}: field 'camera_type' is {kind!r}; only 'perspective' cameras can be rendered")
-    file_hw = (_positive_int(doc, "render_height", path), _positive_int(doc, "render_width", path))
-    frames = _field(doc, "camera_path", "camera_path", path)
-    if not isinstance(frames, list) or not frames:
-        raise ValueError(f"{path}: field 'camera_path' must be a non-empty list of frames; {LAYOUT_HINT}")
+    file_hw = (_pixels(doc, "render_height", path), _pixels(doc, "render_width", path))
+    frames = _field(doc, "camera_path", "camera_path", path, lambda v: isinstance(v, list) and bool(v),
+                    f"a non-empty list of frames; {LAYOUT_HINT}")
     fps = doc.get("fps")
     if fps is not None and (not _number(fps) or fps <= 0):
         raise ValueError(f"{path}: field 'fps' is {fps!r}; it must be a positive number of frames per second")
     hw = size_hw or file_hw
-    poses = [_frame_pose(frame, i, path) for i, frame in enumerate(frames)]
-    c2w = np.stack([pose for pose, _ in poses])
-    K = np.stack([fov_intrinsics(fov, hw) for _, fov in poses])
-    cameras = CameraPath(c2w=c2w, K=K, hw=hw, describe=f"camera-path file {path.name}")
+    poses, fovs = zip(*(_frame_pose(frame, i, path) for i, frame in enumerate(frames)))
+    cameras = CameraPath(c2w=np.stack(poses), K=np.stack([fov_intrinsics(fov, hw) for fov in fovs]), hw=hw,
+                         describe=f"camera-path file {path.name}")
     return cameras, None if fps is None else float(fps)

@@ -1,17 +1,7 @@
-"""A fly-through frame as one picture: RGB | semantic labels | depth | confidence, side by side.
-
-Layout (pixels; every frame of a video has the same size, so the legend keeps room for every class)::
-
-    title
-    colour        | semantic labels        | depth (m)              | confidence
-    [tile]        | [tile]                 | [tile]                 | [tile]
-                  |                        | [colour bar, metres]   | [colour bar, 0..1]
-    legend: the classes present in this frame (swatch, id, name), in columns
-
-Tiles are the rendered pixels enlarged by an integer factor (never resampled) until a tile is at least
-:data:`MIN_TILE_HEIGHT` tall. Semantic colours are the project's palette (``platform/viz/palette.py``);
-depth is colour-mapped (turbo) over the scene's fixed near..far range, so a colour means the same distance
-in every frame; confidence (viridis) over 0..1. Drawn with OpenCV on a numpy array (no figure per frame).
+"""A fly-through frame as one picture (docs/render.md): a title, then colour | semantic labels | depth | confidence
+tiles (the rendered pixels enlarged by an integer factor) with colour bars under depth (turbo over the scene's
+fixed near..far) and confidence (viridis over 0..1), then a legend of the classes present. Every frame of a video
+has the same size (the legend keeps room for every class). Drawn with OpenCV on a numpy array.
 """
 
 from __future__ import annotations
@@ -24,26 +14,17 @@ import numpy as np
 
 from sray.platform.viz.palette import colorize, palette
 
-MARGIN = 8
-"""Pixels around and between tiles."""
-HEADER = 22
-"""Pixels at the top for the frame's title."""
-CAPTION = 18
-"""Pixels above the tiles for their captions."""
-BAR = 10
-"""Height of a colour bar."""
-BAR_BAND = BAR + 22
-"""Pixels under the tiles for the colour bars and their labels."""
-LEGEND_ROW = 16
-"""Pixels per legend row."""
-LEGEND_COLUMN = 150
-"""Width of one legend column."""
-SWATCH = 11
-"""Side of a legend swatch."""
-MIN_TILE_HEIGHT = 120
-"""Small frames are enlarged by an integer factor until a tile is at least this tall."""
-TILES = ("rgb", "semantics", "depth", "confidence")
-"""Tile names, left to right."""
+MARGIN = 8  # pixels around and between tiles
+HEADER = 22  # pixels at the top for the frame's title
+CAPTION = 18  # pixels above the tiles for their captions
+BAR = 10  # height of a colour bar
+BAR_BAND = BAR + 22  # pixels under the tiles for the colour bars and their labels
+LEGEND_ROW = 16  # pixels per legend row
+LEGEND_COLUMN = 150  # width of a legend column
+SWATCH = 11  # side of a legend swatch
+MIN_TILE_HEIGHT = 120  # small frames are enlarged by an integer factor until a tile is at least this tall
+TILES = {"rgb": "colour", "semantics": "semantic labels", "depth": "depth (m)", "confidence": "confidence"}
+"""Tile name -> caption, left to right."""
 BACKGROUND = (255, 255, 255)
 TEXT = (20, 20, 20)
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
@@ -55,24 +36,20 @@ def _lut(colormap: int) -> np.ndarray:
     return np.ascontiguousarray(bgr[:, 0, ::-1])
 
 
-DEPTH_COLORS = _lut(cv2.COLORMAP_TURBO)
-"""Depth colour map, near (index 0) to far (255)."""
-CONFIDENCE_COLORS = _lut(cv2.COLORMAP_VIRIDIS)
-"""Confidence colour map, 0 (index 0) to 1 (255)."""
+DEPTH_COLORS = _lut(cv2.COLORMAP_TURBO)  # near (index 0) to far (255)
+CONFIDENCE_COLORS = _lut(cv2.COLORMAP_VIRIDIS)  # 0 (index 0) to 1 (255)
 
 
 @dataclass(frozen=True)
 class PanelLayout:
-    """Pixel geometry of a frame picture (x right, y down, origin top-left)."""
+    """Pixel geometry of a frame picture (x right, y down, origin top-left): its (height, width), both even (video
+    encoders subsample colour by 2), the integer enlargement of the rendered pixels, tile name (:data:`TILES`) ->
+    (x, y, width, height), and the legend block's (x, y, columns)."""
 
     size: tuple[int, int]
-    """(height, width) of the picture, both even (video encoders subsample colour by 2)."""
     scale: int
-    """Integer enlargement of the rendered pixels."""
     tiles: dict[str, tuple[int, int, int, int]]
-    """Tile name (:data:`TILES`) -> (x, y, width, height)."""
     legend: tuple[int, int, int]
-    """(x, y, columns) of the legend block."""
 
 
 def panel_layout(hw: tuple[int, int], n_classes: int) -> PanelLayout:
@@ -84,9 +61,8 @@ def panel_layout(hw: tuple[int, int], n_classes: int) -> PanelLayout:
     tiles = {name: (MARGIN + i * (tw + MARGIN), y, tw, th) for i, name in enumerate(TILES)}
     width = MARGIN + len(TILES) * (tw + MARGIN)
     columns = max(1, (width - 2 * MARGIN) // LEGEND_COLUMN)
-    rows = math.ceil(n_classes / columns)
     legend_y = y + th + BAR_BAND
-    height = legend_y + rows * LEGEND_ROW + MARGIN
+    height = legend_y + math.ceil(n_classes / columns) * LEGEND_ROW + MARGIN
     return PanelLayout(size=(height + height % 2, width + width % 2), scale=scale, tiles=tiles,
                        legend=(MARGIN, legend_y, columns))
 
@@ -94,12 +70,6 @@ def panel_layout(hw: tuple[int, int], n_classes: int) -> PanelLayout:
 def _text(image: np.ndarray, s: str, x: int, y_top: int, scale: float = 0.4) -> None:
     """Draw ``s`` with its top-left corner near (x, y_top)."""
     cv2.putText(image, s, (x, y_top + int(round(25 * scale))), _FONT, scale, TEXT, 1, cv2.LINE_AA)
-
-
-def _place(image: np.ndarray, tile: np.ndarray, box: tuple[int, int, int, int], scale: int) -> None:
-    """Copy ``tile`` (h, w, 3) enlarged by ``scale`` into ``box`` of ``image``."""
-    x, y, w, h = box
-    image[y:y + h, x:x + w] = np.repeat(np.repeat(tile, scale, axis=0), scale, axis=1)
 
 
 def _bar(image: np.ndarray, box: tuple[int, int, int, int], colors: np.ndarray, ticks: list[str]) -> None:
@@ -113,44 +83,32 @@ def _bar(image: np.ndarray, box: tuple[int, int, int, int], colors: np.ndarray, 
         _text(image, tick, x + int(round(along * (w - width))), top + BAR + 1, 0.35)
 
 
-def depth_colors(depth: np.ndarray, near: float, far: float) -> np.ndarray:
-    """uint8 (H, W, 3) turbo colours of depth (H, W) in metres over [near, far] (clipped)."""
-    t = np.clip((np.asarray(depth, np.float64) - near) / max(far - near, 1e-9), 0.0, 1.0)
-    return DEPTH_COLORS[np.round(t * 255).astype(int)]
-
-
-def confidence_colors(confidence: np.ndarray) -> np.ndarray:
-    """uint8 (H, W, 3) viridis colours of confidences (H, W) in [0, 1]."""
-    return CONFIDENCE_COLORS[np.round(np.clip(confidence, 0.0, 1.0) * 255).astype(int)]
+def _mapped(t: np.ndarray, colors: np.ndarray) -> np.ndarray:
+    """uint8 (H, W, 3) colours of values ``t`` (H, W) over [0, 1] (clipped) on a colour map (256, 3)."""
+    return colors[np.round(np.clip(t, 0.0, 1.0) * 255).astype(int)]
 
 
 def compose_panels(rgb: np.ndarray, label: np.ndarray, depth: np.ndarray, confidence: np.ndarray,
                    class_names: list[str], near: float, far: float, title: str, ignore_id: int = 255) -> np.ndarray:
-    """uint8 (H', W', 3) picture of one frame (module doc; size :func:`panel_layout`).
-
-    rgb float (H, W, 3) in [0, 1]; label int (H, W) class ids; depth float (H, W) metres; confidence float (H, W);
-    ``near``, ``far``: the depth colour range in metres (the scene's bounds).
-    """
-    hw = (int(label.shape[0]), int(label.shape[1]))
+    """uint8 (H', W', 3) picture of one frame (size :func:`panel_layout`): rgb float (H, W, 3) in [0, 1]; label int
+    (H, W) class ids; depth float (H, W) metres, coloured over [``near``, ``far``]; confidence float (H, W)."""
     n = len(class_names)
-    layout = panel_layout(hw, n)
+    layout = panel_layout((int(label.shape[0]), int(label.shape[1])), n)
     image = np.full((*layout.size, 3), BACKGROUND, np.uint8)
+    depth_t = (np.asarray(depth, np.float64) - near) / max(far - near, 1e-9)
     tiles = {"rgb": (np.clip(rgb, 0.0, 1.0) * 255 + 0.5).astype(np.uint8), "semantics": colorize(label, n, ignore_id),
-             "depth": depth_colors(depth, near, far), "confidence": confidence_colors(confidence)}
-    captions = {"rgb": "colour", "semantics": "semantic labels", "depth": "depth (m)",
-                "confidence": "confidence"}
+             "depth": _mapped(depth_t, DEPTH_COLORS), "confidence": _mapped(confidence, CONFIDENCE_COLORS)}
     _text(image, title, MARGIN, 4, 0.45)
-    for name in TILES:
-        x, y, _, _ = layout.tiles[name]
-        _text(image, captions[name], x, y - CAPTION + 2)
-        _place(image, tiles[name], layout.tiles[name], layout.scale)
+    for name, caption in TILES.items():
+        x, y, w, h = layout.tiles[name]
+        _text(image, caption, x, y - CAPTION + 2)
+        image[y:y + h, x:x + w] = np.repeat(np.repeat(tiles[name], layout.scale, axis=0), layout.scale, axis=1)
     _bar(image, layout.tiles["depth"], DEPTH_COLORS, [f"{near:.2f}", f"{(near + far) / 2:.2f}", f"{far:.2f} m"])
     _bar(image, layout.tiles["confidence"], CONFIDENCE_COLORS, ["0", "0.5", "1"])
     colors = palette(n)
     x0, y0, columns = layout.legend
     rows = math.ceil(n / columns)
-    present = [int(c) for c in np.unique(label) if c != ignore_id]
-    for i, c in enumerate(present):
+    for i, c in enumerate(int(c) for c in np.unique(label) if c != ignore_id):
         x, y = x0 + (i // rows) * LEGEND_COLUMN, y0 + (i % rows) * LEGEND_ROW
         image[y + 2:y + 2 + SWATCH, x:x + SWATCH] = colors[c]
         _text(image, f"{c} {class_names[c]}", x + SWATCH + 5, y + 1)

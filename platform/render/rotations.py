@@ -1,9 +1,4 @@
-"""Rotations for camera paths: unit quaternions, spherical linear interpolation, rigidity checks.
-
-Quaternions are numpy float64 arrays (4,) ordered (w, x, y, z), unit length, with w >= 0 where a sign
-is chosen. SLERP moves along the shorter great arc at constant angular speed. A pose is rigid when its
-rotation block is orthonormal with determinant +1 and its last row is (0, 0, 0, 1).
-"""
+"""Rotations for camera paths: unit quaternions (numpy float64 (4,), ordered (w, x, y, z)), SLERP, rigidity."""
 
 from __future__ import annotations
 
@@ -14,29 +9,22 @@ RIGID_TOLERANCE = 1e-3
 
 
 def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
-    """Unit quaternion (4,) (w, x, y, z), w >= 0, of a rotation matrix (3, 3).
-
-    Reads the largest of the four quaternion components off the matrix first (the trace or a diagonal
-    entry), so no component is found by dividing by a small number.
-    """
+    """Unit quaternion (4,) (w, x, y, z), w >= 0, of a rotation matrix (3, 3). Row i of ``outer`` is 4 q_i q: that
+    of the largest component (read off the trace or a diagonal entry) gives q without dividing by a small number."""
     m = np.asarray(rotation, np.float64)
-    diagonal = (np.trace(m), m[0, 0], m[1, 1], m[2, 2])
-    largest = int(np.argmax(diagonal))
-    if largest == 0:
-        s = 2.0 * np.sqrt(max(1.0 + diagonal[0], 0.0))
-        q = (0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s)
-    elif largest == 1:
-        s = 2.0 * np.sqrt(max(1.0 + m[0, 0] - m[1, 1] - m[2, 2], 0.0))
-        q = ((m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s)
-    elif largest == 2:
-        s = 2.0 * np.sqrt(max(1.0 + m[1, 1] - m[0, 0] - m[2, 2], 0.0))
-        q = ((m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s)
-    else:
-        s = 2.0 * np.sqrt(max(1.0 + m[2, 2] - m[0, 0] - m[1, 1], 0.0))
-        q = ((m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s)
-    out = np.asarray(q, np.float64)
-    out /= np.linalg.norm(out)
-    return -out if out[0] < 0 else out
+    tr = np.trace(m)
+    outer = np.array([
+        [1.0 + tr, m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]],
+        [m[2, 1] - m[1, 2], 1.0 + m[0, 0] - m[1, 1] - m[2, 2], m[0, 1] + m[1, 0], m[0, 2] + m[2, 0]],
+        [m[0, 2] - m[2, 0], m[0, 1] + m[1, 0], 1.0 + m[1, 1] - m[0, 0] - m[2, 2], m[1, 2] + m[2, 1]],
+        [m[1, 0] - m[0, 1], m[0, 2] + m[2, 0], m[1, 2] + m[2, 1], 1.0 + m[2, 2] - m[0, 0] - m[1, 1]],
+    ])
+    i = int(np.argmax((tr, m[0, 0], m[1, 1], m[2, 2])))
+    s = 2.0 * np.sqrt(max(outer[i, i], 0.0))
+    q = outer[i] / s
+    q[i] = 0.25 * s
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
 
 
 def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
@@ -50,11 +38,8 @@ def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Quaternions (T, 4) at fractions ``t`` (T,) in [0, 1] of the shorter arc from ``q0`` (4,) to ``q1`` (4,).
-
-    The angle from ``q0`` grows linearly in ``t`` (constant angular speed); t = 0 gives ``q0``, t = 1 gives
-    ``q1`` or ``-q1`` (the same rotation). Nearly equal rotations are interpolated linearly and normalised.
-    """
+    """Quaternions (T, 4) at fractions ``t`` (T,) in [0, 1] of the shorter arc from ``q0`` (4,) to ``q1`` (4,),
+    at constant angular speed (t = 1 gives ``q1`` or ``-q1``); nearly equal ones are interpolated linearly."""
     a = np.asarray(q0, np.float64) / np.linalg.norm(q0)
     b = np.asarray(q1, np.float64) / np.linalg.norm(q1)
     t = np.asarray(t, np.float64)[:, None]
@@ -75,18 +60,14 @@ def rotation_angle(r0: np.ndarray, r1: np.ndarray) -> float:
 
 
 def rigid_problem(pose: np.ndarray, tolerance: float = RIGID_TOLERANCE) -> str | None:
-    """What keeps a 4x4 pose from being rigid (a phrase), or None when it is rigid within ``tolerance``.
-
-    Checks: every entry finite; last row (0, 0, 0, 1); rotation block orthonormal (max |R^T R - I|);
-    determinant +1 (a reflection has -1).
-    """
+    """What keeps a 4x4 pose from being rigid (finite, last row (0, 0, 0, 1), orthonormal rotation with
+    determinant +1) within ``tolerance``, as a phrase; None when it is rigid."""
     m = np.asarray(pose, np.float64)
     if m.shape != (4, 4):
         return f"shape is {m.shape}, not (4, 4)"
     if not np.isfinite(m).all():
         return "holds a non-finite number"
-    row = float(np.abs(m[3] - (0.0, 0.0, 0.0, 1.0)).max())
-    if row > tolerance:
+    if float(np.abs(m[3] - (0.0, 0.0, 0.0, 1.0)).max()) > tolerance:
         return f"last row is {m[3].tolist()}, not [0, 0, 0, 1]"
     r = m[:3, :3]
     ortho = float(np.abs(r.T @ r - np.eye(3)).max())

@@ -1,9 +1,6 @@
-"""A fly-through as a tracked run (``sray render``), and logging a fly-through's files into any run.
-
-The run (experiment ``sray-render`` by default, tag ``sray.kind = render``) gets the request as params, the
-protocol as the ``sray.protocol`` tag and ``protocol.*`` params (as ``sray eval`` runs), the render rate as a
-metric and every output file as an artifact under ``flythrough/``, so the tracker's UI plays the WebM.
-"""
+"""A fly-through as a tracked run (``sray render``): the request and the protocol as params (as ``sray eval``), the
+protocol line as the ``sray.protocol`` tag, the render rate as metrics, every output file as an artifact under
+``flythrough/`` (the tracker's UI plays the WebM)."""
 
 from __future__ import annotations
 
@@ -18,8 +15,7 @@ from sray.platform.render.flythrough import Flythrough
 from sray.platform.tracking.registry import DEFAULT_TRACKER, get_tracker
 from sray.platform.tracking.tracker import RunLogger
 
-ARTIFACT_PATH = "flythrough"
-"""Artifact folder of a fly-through's files in its run."""
+ARTIFACT_PATH = "flythrough"  # artifact folder of a fly-through's files in its run
 
 
 def log_flythrough(logger: RunLogger, files: dict[str, str], artifact_path: str = ARTIFACT_PATH) -> None:
@@ -31,9 +27,8 @@ def log_flythrough(logger: RunLogger, files: dict[str, str], artifact_path: str 
 def tracked_flythrough(fly: Flythrough, out_dir: Path, device: torch.device, *, about: dict[str, str], label: str,
                        tracker: str = DEFAULT_TRACKER, tracking_uri: str = "", experiment: str = "sray-render",
                        progress: bool = True) -> dict[str, Any]:
-    """Render ``fly`` into ``out_dir`` inside a new run of ``tracker`` (module doc); ``about``: what made the
-    model (``{"checkpoint", "artifact"?}``). Returns ``Flythrough.render``'s dict plus ``run`` (the handle's
-    fields: tracker, store, run id, experiment id, UI url and hint)."""
+    """Render ``fly`` into ``out_dir`` inside a new run of ``tracker``; ``about``: what made the model
+    (``{"checkpoint", "artifact"?}``). Returns ``Flythrough.render``'s dict plus ``run`` (the run handle's fields)."""
     tracking = get_tracker(tracker, tracking_uri)
     plan = fly.plan
     kind = "finetuned" if "artifact" in about else "zero-shot"

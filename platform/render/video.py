@@ -1,35 +1,20 @@
-"""Writing a fly-through's frames as videos people open, with no half-written file under a final name.
-
-* ``<stem>.webm``: VP8 (OpenCV's FFmpeg writer, fourcc ``VP80``); browsers and MLflow's artifact viewer
-  play it. OpenCV's bundled FFmpeg cannot encode H.264, so no H.264 MP4 is offered.
-* ``<stem>.mp4``: MPEG-4 part 2 (fourcc ``mp4v``), to download and open in a desktop player.
-* ``<stem>.gif``: a small preview (at most :data:`GIF_WIDTH` pixels wide, at most :data:`GIF_FRAMES` frames,
-  Pillow's adaptive palette), for pages that show images but no video.
-
-Everything is written into a staging folder ``.<name>.tmp<pid>`` inside the output folder (same file system)
-and renamed into place by :meth:`VideoSet.finish`; an error or an interrupt removes the staging folder, and a
-killed process leaves only that hidden folder, never a partial video under its final name. FFmpeg picks the
-container from the file name, so the staging files keep their final names inside the hidden folder.
-"""
+"""A fly-through's frames as a VP8 WebM, an MPEG-4 part 2 MP4 and a GIF preview (docs/render.md), written into a
+staging folder ``.<stem>.tmp<pid>`` beside them (same names: FFmpeg picks the container from the name) and renamed
+into place by :meth:`VideoSet.finish`: an error or a kill never leaves a half-written file under a final name."""
 
 from __future__ import annotations
 
-import io
 import os
 import shutil
 from pathlib import Path
-from types import TracebackType
 
 import cv2
 import numpy as np
 from PIL import Image
 
-GIF_WIDTH = 480
-"""Widest GIF preview in pixels (larger frames are scaled down)."""
-GIF_FRAMES = 60
-"""Most frames in a GIF preview (longer videos keep every k-th frame)."""
-CODECS = {"webm": "VP80", "mp4": "mp4v"}
-"""Video file suffix -> OpenCV fourcc."""
+GIF_WIDTH = 480  # widest GIF preview in pixels (larger frames are scaled down)
+GIF_FRAMES = 60  # most frames in a GIF preview (longer videos keep every k-th frame)
+CODECS = {"webm": "VP80", "mp4": "mp4v"}  # video file suffix -> OpenCV fourcc
 
 
 class VideoSet:
@@ -74,39 +59,34 @@ class VideoSet:
     def finish(self, extra: dict[str, bytes]) -> dict[str, Path]:
         """Close the videos, write the GIF and the ``extra`` files (name -> bytes), and rename everything into
         the output folder; returns {name: final path} (videos as ``webm``, ``mp4``, ``gif``)."""
-        for writer in self._writers.values():
-            writer.release()
-        self._writers = {}
+        self._release()
         if not self._gif:
             self.abort()
             raise ValueError(f"{self.out_dir}: no frame was written; a video needs at least one")
-        buf = io.BytesIO()
         duration_ms = max(20, int(round(1000.0 * self.gif_every / self.fps)))
-        self._gif[0].save(buf, format="GIF", save_all=True, append_images=self._gif[1:], duration=duration_ms,
-                          loop=0)
-        staged = {**{s: self.staging / f"{self.stem}.{s}" for s in (*CODECS, "gif")},
-                  **{name: self.staging / name for name in extra}}
-        staged["gif"].write_bytes(buf.getvalue())
+        self._gif[0].save(self.staging / f"{self.stem}.gif", format="GIF", save_all=True, append_images=self._gif[1:],
+                          duration=duration_ms, loop=0)
         for name, data in extra.items():
-            staged[name].write_bytes(data)
-        final = {}
-        for key, path in staged.items():
-            final[key] = self.out_dir / path.name
-            os.replace(path, final[key])
+            (self.staging / name).write_bytes(data)
+        names = {**{s: f"{self.stem}.{s}" for s in (*CODECS, "gif")}, **{name: name for name in extra}}
+        for name in names.values():
+            os.replace(self.staging / name, self.out_dir / name)
         shutil.rmtree(self.staging, ignore_errors=True)
-        return final
+        return {key: self.out_dir / name for key, name in names.items()}
 
-    def abort(self) -> None:
-        """Release the writers and remove the staging folder (nothing reaches the output folder)."""
+    def _release(self) -> None:
         for writer in self._writers.values():
             writer.release()
         self._writers = {}
+
+    def abort(self) -> None:
+        """Release the writers and remove the staging folder (nothing reaches the output folder)."""
+        self._release()
         shutil.rmtree(self.staging, ignore_errors=True)
 
     def __enter__(self) -> VideoSet:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
         if exc_type is not None:
             self.abort()

@@ -1,37 +1,97 @@
-"""The stability suite's points as a study of the engine (``sray.platform.sweep``): plan, stored results, run.
-
-One trial per point key (``suite.point_key``: a spec computed once whatever the axes that ask for it), under
-``<out>/study/<preset>/``, completed launch after launch (``sray.platform.sweep.incremental``): a finished
-point never runs again, whatever axes or rows a later run asks for; a point whose trial errored (its process died,
-say) counts as ``failed`` in the tables until a later run that asks for it runs it again. ``definition.json`` in the
-study folder records the preset definition and the models the points were made with: a run under a changed
-definition, or with another model in a role both runs name, is refused (a stored point is reused only for the
-same levels, budgets and models).
+"""The stability suite's points as a study of the engine, completed launch after launch (``engine.run_missing``): one
+trial per point key under ``<out>/study/<preset>/``, run one after another in one process that loads the scenes and
+models once (:func:`suite_for`), ``definition.json`` refusing a changed preset or model (docs/stability.md,
+"Outputs").
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import os
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any
 
+import ray
+import torch
+
 from sray.data_tools.atomic import atomic_write_json
-from sray.platform.stability.point_trial import SuiteInputs, spec_point, stability_point, trial_resources
-from sray.platform.stability.presets import Preset
-from sray.platform.stability.rows import SuiteModels
-from sray.platform.stability.suite import Planned, point_key, point_record
-from sray.platform.sweep.incremental import missing, run_missing
+from sray.data_tools.shards.manifest import read_manifest
+from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.finetune.methods.registry import get_method
+from sray.platform.finetune.scene_artifacts import checkpoint_sha256
+from sray.platform.stability.axes import PointSpec, Preset
+from sray.platform.stability.rows import Row, SuiteModels
+from sray.platform.stability.scene_points import SceneTraining, scene_settings
+from sray.platform.stability.stress_scenes import load_scenes
+from sray.platform.stability.suite import Planned, Suite, compute_spec, point_key, point_record
+from sray.platform.sweep.engine import missing, run_missing
 from sray.platform.sweep.outcomes import TrialOutcome
-from sray.platform.sweep.study import StudySettings
-from sray.platform.sweep.trial_files import ERRORED, FINISHED, read_record, trial_folder
+from sray.platform.sweep.study import ERRORED, FINISHED, StudySettings, TrialContext, read_record, trial_folder
 from sray.platform.train.launcher import init_ray
 
 STUDY_DIR = "study"
 """Folder of ``--out`` holding one study per preset name."""
 DEFINITION_FILE = "definition.json"
 """The preset definition and the models the points of a study folder were made with."""
+
+
+@dataclass(frozen=True)
+class SuiteInputs:
+    """What a point's process loads to build the suite (paths and names only: cheap to send to every trial)."""
+
+    preset: Preset
+    shards: str
+    """Shard folder holding the test scenes."""
+    scenes: tuple[str, ...]
+    rows: tuple[Row, ...]
+    """The rows of the run (``rows.suite_rows``)."""
+    models: SuiteModels
+    n_classes: int
+    ignore_id: int
+    device: str
+
+
+_loaded: list[tuple[SuiteInputs, Suite]] = []
+"""The suite this process built last, with its inputs (one at most)."""
+
+
+def scene_training(inputs: SuiteInputs) -> SceneTraining:
+    """What the trained rows start from: the checkpoint's model and config, its checksum, the suite's fleet settings."""
+    base, train_cfg = model_from_checkpoint(inputs.models.checkpoint)
+    shards = Path(inputs.shards)
+    return SceneTraining(base=base, train_cfg=train_cfg, base_sha256=checkpoint_sha256(inputs.models.checkpoint),
+                         cfg=scene_settings(inputs.preset, inputs.models.segmenter), shards=shards,
+                         stored_neighbours=int(read_manifest(shards).neighbours["k"]), n_classes=inputs.n_classes,
+                         ignore_id=inputs.ignore_id, device=torch.device(inputs.device))
+
+
+def suite_for(inputs: SuiteInputs) -> Suite:
+    """The suite of ``inputs``: built on a process's first call, reused while the inputs stay the same."""
+    if not _loaded or _loaded[0][0] != inputs:
+        _loaded.clear()
+        models = {row.name: get_method(row.method).eval_model(row.request(inputs.models, inputs.device))
+                  for row in inputs.rows if not row.trained}
+        training = scene_training(inputs) if any(row.trained for row in inputs.rows) else None
+        net_cfg = (training.base if training else model_from_checkpoint(inputs.models.checkpoint)[0]).cfg
+        suite = Suite(inputs.preset, load_scenes(Path(inputs.shards), list(inputs.scenes)),
+                      {row.name: row for row in inputs.rows}, models, training,
+                      (net_cfg.n_coarse, net_cfg.min_source_depth))
+        _loaded.append((inputs, suite))
+    return _loaded[0][1]
+
+
+def stability_point(point: dict[str, Any], ctx: TrialContext, inputs: SuiteInputs) -> dict[str, Any]:
+    """The point function of the suite's study: the result of one spec (a failing method is a result too)."""
+    fields = {k: v for k, v in point.items() if k != "poison"}
+    if fields["perturbation"] is not None:
+        fields["perturbation"] = (str(fields["perturbation"][0]), float(fields["perturbation"][1]))
+    result = compute_spec(suite_for(inputs), PointSpec(**fields), bool(point["poison"]))
+    if result["status"] == "ok":
+        ctx.report({"miou": float(result["miou"])})
+    return result
 
 
 def study_folder(out: Path, preset: Preset) -> Path:
@@ -58,26 +118,27 @@ def check_definition(folder: Path, preset: Preset, models: SuiteModels) -> None:
 
 
 def study_plan(preset: Preset, planned: Planned) -> dict[str, dict[str, Any]]:
-    """Point key -> the plan's point (the spec's fields), each key once, in the order of ``planned``."""
+    """Point key -> the plan's point (the spec's fields, ``poison``), each key once, in the order of ``planned``."""
     plan: dict[str, dict[str, Any]] = {}
     for axis, row, level, seed in planned:
         key, spec, poison = point_key(preset, axis, row, level, seed)
-        plan.setdefault(key, spec_point(spec, poison))
+        plan.setdefault(key, {**dataclasses.asdict(spec), "poison": poison})
     return plan
 
 
 def run_points(out: Path, planned: Planned, inputs: SuiteInputs) -> list[TrialOutcome]:
-    """Run the points of ``planned`` that have no result yet, one at a time (Ray started if needed); the
-    outcome of every point key."""
+    """Run the points of ``planned`` without a result, one at a time on all local CPUs (a GPU on CUDA); all outcomes."""
     preset = inputs.preset
     study = study_folder(out, preset)
     check_definition(study, preset, inputs.models)
     plan = study_plan(preset, planned)
-    todo = missing(study, plan)
-    if todo:
+    resources = {"CPU": 1.0}
+    if missing(study, plan):
         init_ray(None)
+        cpus = float(min(os.cpu_count() or 1, int(ray.cluster_resources().get("CPU", 1))))
+        resources = {"CPU": max(cpus, 1.0), **({"GPU": 1.0} if inputs.device.startswith("cuda") else {})}
     settings = StudySettings(folder=study, metric="miou", mode="max", reuse_actors=True, label="stability",
-                             trial_resources=trial_resources(inputs.device) if todo else {"CPU": 1.0})
+                             trial_resources=resources)
     return run_missing(plan, partial(stability_point, inputs=inputs), settings)
 
 

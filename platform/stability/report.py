@@ -1,30 +1,127 @@
-"""What a stability run leaves: ``stability.json``, the chart of each score, a table per axis, the
-breaking points, and the tracked runs (a parent run, a child run per axis).
-
-Scores are the dataset-level mIoU (%) and PSNR (dB) of the held-out views, averaged over scenes. Every legend
-entry and table header says whether its row saw the scene it is scored on (zero-shot, or trained on it) and which
-source inputs it was given (RGB or RGB-D, from the row's protocol descriptor); the footnotes carry each row's
-protocol (``eval_protocol.caption_lines``) and the one training budget of the trained rows.
+"""What a stability run leaves (docs/stability.md, "Outputs"): per-level statistics of its point records, breaking
+points, ``stability.json``, a chart per score, a table per axis and the tracked runs; every legend and header says
+whether its row saw the scene and what it was given.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
 from sray.platform.common.eval_protocol import EvalProtocol, caption_lines
 from sray.platform.finetune.methods.registry import get_method
-from sray.platform.stability.axes import AXES
-from sray.platform.stability.presets import Preset
+from sray.platform.stability.axes import AXES, Preset
 from sray.platform.stability.rows import VARIANT_WORDS, Row
-from sray.platform.stability.summary import LevelStats, axis_table, breaking_summary, level_stats
 from sray.platform.tracking.tracker import Tracker
 from sray.platform.viz.stability_chart import LevelPoint, StabilityPanel, write_stability_chart
 
 RESULTS_FILE = "stability.json"
 """Every point record of the run, its preset, protocols and breaking points, under the run's folder."""
+
+
+@dataclass(frozen=True)
+class LevelStats:
+    """One (axis, method, level) over its seeds."""
+
+    axis: str
+    method: str
+    level: Any
+    x: float | None
+    """Mean chart x over the ok seeds (None when every seed failed, or on a categorical axis)."""
+    miou_mean: float | None
+    miou_min: float | None
+    miou_max: float | None
+    psnr_mean: float | None
+    n_ok: int
+    n_failed: int
+    psnr_min: float | None = None
+    psnr_max: float | None = None
+
+
+def _mean(values: list[float]) -> float | None:
+    return sum(values) / len(values) if values else None
+
+
+def level_stats(points: list[dict[str, Any]]) -> list[LevelStats]:
+    """Group points by (axis, method, level), in first-seen order, with mean / min / max over seeds."""
+    groups: dict[tuple[str, str, Any], list[dict[str, Any]]] = {}
+    for p in points:
+        groups.setdefault((p["axis"], p["method"], p["level"]), []).append(p)
+    out = []
+    for (axis, method, level), group in groups.items():
+        ok = [p for p in group if p["status"] == "ok"]
+        mious = [float(p["miou"]) for p in ok]
+        psnrs = [float(p["psnr"]) for p in ok if p.get("psnr") is not None]
+        out.append(LevelStats(axis, method, level,
+                              _mean([float(p["x"]) for p in ok if isinstance(p.get("x"), (int, float))]),
+                              _mean(mious), min(mious, default=None), max(mious, default=None), _mean(psnrs),
+                              len(ok), len(group) - len(ok), min(psnrs, default=None), max(psnrs, default=None)))
+    return out
+
+
+def breaking_point(stats: list[LevelStats]) -> tuple[Any, str]:
+    """(The level where one method on one axis loses half its clean mIoU, None if it never does; how it was found),
+    from stats in level order (the first clean); interpolated between numeric levels, all-failed levels count 0."""
+    if not stats or stats[0].miou_mean is None:
+        return None, "no clean score (the clean level failed)"
+    clean = stats[0].miou_mean
+    half = clean / 2
+    prev_level, prev_value = stats[0].level, clean
+    for s in stats[1:]:
+        value = 0.0 if s.miou_mean is None else s.miou_mean
+        if value <= half:
+            if isinstance(s.level, str) or isinstance(prev_level, str) or math.isclose(prev_value, value):
+                return s.level, "first level at or below half"
+            t = (prev_value - half) / (prev_value - value)
+            return prev_level + t * (s.level - prev_level), "interpolated between levels"
+        prev_level, prev_value = s.level, value
+    return None, f"mIoU stays above {half:.1f}, half of the clean {clean:.1f}"
+
+
+def _fmt(v: float | None, digits: int = 2) -> str:
+    return "failed" if v is None else f"{v:.{digits}f}"
+
+
+def axis_table(stats: list[LevelStats], axis: str, unit: str, headers: dict[str, str] | None = None) -> str:
+    """Markdown table of one axis: a row per level, a column pair per method (``headers[method]``, default its name)."""
+    rows = [s for s in stats if s.axis == axis]
+    methods = list(dict.fromkeys(s.method for s in rows))
+    levels = list(dict.fromkeys(s.level for s in rows))
+    by = {(s.method, s.level): s for s in rows}
+    names = {m: (headers or {}).get(m, m) for m in methods}
+    head = f"| {unit} | " + " | ".join(f"{names[m]} mIoU % (min-max) | {names[m]} PSNR dB" for m in methods) + " |"
+    lines = [head, "|" + "---|" * (1 + 2 * len(methods))]
+    for level in levels:
+        cells = []
+        for m in methods:
+            s = by.get((m, level))
+            if s is None:
+                cells += ["-", "-"]
+                continue
+            spread = "" if s.miou_mean is None else f" ({_fmt(s.miou_min, 1)}-{_fmt(s.miou_max, 1)})"
+            failed = f", {s.n_failed} failed" if s.n_failed and s.n_ok else ""
+            cells += [f"{_fmt(s.miou_mean)}{spread}{failed}", _fmt(s.psnr_mean)]
+        lines.append(f"| {level} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def breaking_summary(stats: list[LevelStats], axes: list[str]) -> list[str]:
+    """One line per (axis, method): the level at which it loses half its clean mIoU."""
+    lines = []
+    for axis in axes:
+        rows = [s for s in stats if s.axis == axis]
+        for method in dict.fromkeys(s.method for s in rows):
+            level, how = breaking_point([s for s in rows if s.method == method])
+            if level is None:
+                lines.append(f"{axis} / {method}: keeps half its clean mIoU at every level tested ({how})")
+                continue
+            where = (f"{level:.3g}" if isinstance(level, float) else str(level)) + f" ({how})"
+            lines.append(f"{axis} / {method}: half the clean mIoU lost at {where}")
+    return lines
 
 
 def panels(stats: list[LevelStats], axes: list[str], metric: str) -> list[StabilityPanel]:
@@ -47,16 +144,13 @@ def panels(stats: list[LevelStats], axes: list[str], metric: str) -> list[Stabil
 
 def seen_line(preset: Preset, rows: list[Row]) -> str:
     """The chart's subtitle: which rows saw the scene, and the trained rows' one budget."""
-    line = "Zero-shot rows never saw the test scenes"
-    if any(r.trained for r in rows):
-        line += (f"; rows trained on the scene had {preset.scene_cpu_seconds:g} CPU seconds of training on each, the "
-                 "same for every method")
-    return line
+    trained = (f"; rows trained on the scene had {preset.scene_cpu_seconds:g} CPU seconds of training on each, the "
+               "same for every method") if any(r.trained for r in rows) else ""
+    return "Zero-shot rows never saw the test scenes" + trained
 
 
 def notes(preset: Preset, rows: list[Row], protocols: dict[str, EvalProtocol]) -> list[str]:
-    """The lines every table and chart of the run carries: each row's protocol, how the trained rows were trained,
-    and the seeds."""
+    """The lines every table and chart carries: each row's protocol, how the trained rows were trained, the seeds."""
     lines = caption_lines([(r.name, protocols[r.name].to_json()) for r in rows])
     trained = [r for r in rows if r.trained]
     if trained:
@@ -88,11 +182,8 @@ def precision_table(records: list[dict[str, Any]]) -> str:
 
 def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str], rows: list[Row],
                   protocols: dict[str, EvalProtocol], out_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
-    """Write ``stability.json``, the two charts and one Markdown table per axis under ``out_dir``; ``protocols``:
-    row name -> how its scores were made.
-
-    Returns ``{"tables": {axis: markdown}, "charts": [png paths], "breaking": [lines], "json": path, "notes": lines}``.
-    """
+    """Write ``stability.json``, the two charts and one Markdown table per axis under ``out_dir``; ``protocols``: row
+    name -> how its scores were made. ``{"tables": {axis: md}, "charts", "breaking", "json": path, "notes"}``."""
     stats = level_stats(records)
     styles = {r.name: r.style(protocols[r.name]) for r in rows}
     headers = {r.name: r.header for r in rows}
@@ -124,8 +215,8 @@ def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str]
 
 def track(tracker: Tracker, experiment: str, run_name: str, outputs: dict[str, Any],
           records: list[dict[str, Any]], axes: list[str], preset: Preset) -> str:
-    """Log the run: a parent run (the charts, stability.json, breaking points) and a child run per axis
-    (its table, and ``<method>/miou`` and ``<method>/psnr`` at step = level index). Returns the parent run id."""
+    """Log a parent run (charts, stability.json) and a child run per axis (its table, metrics at step = level index);
+    the parent's id."""
     parent = tracker.start_run(experiment, run_name, tags={"sray.kind": "stability", "sray.preset": preset.name})
     with tracker.logger(parent) as log:
         log.log_params({"preset": preset.name, "axes": axes, "seeds": preset.seeds, "levels": preset.levels,

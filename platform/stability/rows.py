@@ -1,23 +1,6 @@
-"""The rows of the stability suite, read off the method registry: which model of which method is stressed, in
-which mode, and how its legend and table header name what it saw and what it was given.
-
-Every registered method (:mod:`sray.platform.finetune.methods.registry`) gives up to two rows:
-
-* ``<name>``, **zero-shot**: its pretrained model with no per-scene step, built by its ``eval_model`` from the
-  suite's given models (a method without one, as Semantic-NeRF, has no zero-shot row);
-* ``<name>-scene``, **trained on the scene**: its fleet learner (``Method.build``) trained on the test scene's views
-  for the suite's one CPU-second budget, the same for every method (``Preset.scene_cpu_seconds``).
-
-A method that renders from source views and reads them as its checkpoint does (``uses_sources`` and an empty
-``inputs``: S-Ray) also gets ``<name>-no-cra``, zero-shot, from the checkpoint trained with ``model.attention=none``,
-when one is given.
-
-The methods stressed are the asked ones with the registry's depth twins placed
-(:func:`~sray.platform.finetune.methods.registry.with_depth_twins`): wherever a method that reads the source depth
-(``2d-transfer``) has a row, ``sray-rgbd`` (the checkpoint given the source views' depth, docs/model.md "RGB-D
-mode") has one just before it, even when it was not asked for.
-
-Which axes stress a row follows from the row too (:meth:`sray.platform.stability.axes.Axis.applies`).
+"""The rows of the stability suite, read off the method registry (docs/stability.md, "Rows"): ``<name>`` (zero-shot,
+when the method has an ``eval_model``), ``<name>-scene`` (trained on the scene), S-Ray's ``-no-cra``, the depth twins
+placed; how legends and headers name what a row saw and was given.
 """
 
 from __future__ import annotations
@@ -45,12 +28,10 @@ VARIANT_LOOKS = {("no-cra", False): ChartStyle("", "#2ca02c", "^")}
 
 @dataclass(frozen=True)
 class SuiteModels:
-    """The pretrained models a run stresses, given (``--checkpoint``, ``--checkpoint-no-cra``, ``--segmenter``) or
-    pretrained by the preset's own world."""
+    """The pretrained models a run stresses, given (``--checkpoint``, ...) or pretrained by the preset's world."""
 
     checkpoint: Path
-    """S-Ray training checkpoint folder: the zero-shot S-Ray rows, and the shared model every trained row's method
-    is built with (as a fleet's checkpoint)."""
+    """S-Ray checkpoint folder: the zero-shot S-Ray rows, and the shared model every trained row is built with."""
     checkpoint_no_cra: Path | None = None
     """S-Ray checkpoint trained with ``model.attention=none`` (None: no ``-no-cra`` row)."""
     segmenter: Path | None = None
@@ -64,7 +45,6 @@ class Row:
     name: str
     """Its key (points, tables, tracked metrics): ``<method>[-no-cra][-scene]``."""
     method: str
-    """The registered method it runs."""
     trained: bool
     """Trained on the test scene (else zero-shot)."""
     variant: str
@@ -75,11 +55,6 @@ class Row:
     """Held-out views are rendered from source views (else from none: a per-scene model)."""
     train_inputs: str = ""
     """What its training read besides colours and labels (``EvalProtocol.train_inputs``; empty: as ``inputs``)."""
-
-    @property
-    def mode(self) -> str:
-        """``scene`` or ``zero-shot`` (:data:`MODES`)."""
-        return MODES[1] if self.trained else MODES[0]
 
     def protocol(self, shards: Path, n_source: int, stride: int) -> EvalProtocol:
         """How its scores are made: ``n_source`` fixed sources given as its ``inputs``, or none."""
@@ -98,8 +73,7 @@ class Row:
         return EvalRequest(checkpoint=checkpoint, segmenter=models.segmenter, device=device, fast=None)
 
     def style(self, protocol: EvalProtocol) -> ChartStyle:
-        """Legend and look: the method's own label for the mode, the variant, whether it saw the scene and the
-        inputs its ``protocol`` names."""
+        """Legend and look: the method's label for the mode, the variant, whether it saw the scene, its inputs."""
         method = get_method(self.method)
         base = method.style if self.trained else method.zero_shot or ChartStyle(
             f"{method.name} zero-shot", method.style.color, method.style.marker)
@@ -109,20 +83,13 @@ class Row:
         return ChartStyle(label, look.color, look.marker)
 
 
-def follows_checkpoint(method: str) -> bool:
-    """Whether the method renders from source views and reads them as its checkpoint does (S-Ray)."""
-    record = get_method(method)
-    return record.uses_sources and not record.inputs
-
-
 def _row(method: str, trained: bool, variant: str, inputs: str, train_inputs: str = "") -> Row:
     suffix = (f"-{variant}" if variant else "") + ("-scene" if trained else "")
     return Row(f"{method}{suffix}", method, trained, variant, inputs, get_method(method).uses_sources, train_inputs)
 
 
 def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
-    """The rows of one mode (see the module doc), in the order of ``methods`` with the depth twins and the no-CRA
-    row placed."""
+    """The rows of one mode, in the order of ``methods`` with the depth twins and the no-CRA row placed."""
     rows = []
     for name in with_depth_twins(methods, checkpoint.inputs):
         record = get_method(name)
@@ -130,7 +97,7 @@ def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra:
             continue
         if record.given_depth_of:  # its training read the depth only when it was trained on the scene with it
             rows.append(_row(name, trained, "", record.inputs, "rgbd" if trained else checkpoint.train_inputs))
-        elif not follows_checkpoint(name):
+        elif record.inputs or not record.uses_sources:  # it does not read the sources as the checkpoint does
             rows.append(_row(name, trained, "", record.inputs or "rgb"))
         else:
             rows.append(_row(name, trained, "", checkpoint.inputs, checkpoint.train_inputs))
@@ -140,9 +107,7 @@ def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra:
 
 
 def suite_rows(methods: list[str], modes: list[str], checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
-    """Every row of ``methods`` (registered names) in ``modes``, zero-shot rows first. ``checkpoint``: the S-Ray
-    checkpoint's model config (its ``inputs`` and ``train_inputs``); ``no_cra``: the no-CRA checkpoint's (None: none
-    given, no row)."""
+    """Every row of ``methods`` in ``modes``, zero-shot first, by the S-Ray and no-CRA (or None) checkpoint configs."""
     unknown = [m for m in modes if m not in MODES]
     if unknown:
         raise ValueError(f"stability modes {unknown}: use {list(MODES)}")

@@ -1,19 +1,6 @@
-"""One point of the suite for a row trained on the scene: the method's fleet learner (``Method.build``, as a fleet
-task builds it) trained on what the spec shows it of one test scene for the suite's CPU-second budget, then scored
-on the scene's held-out views.
-
-What it trains on: a row that renders from source views (S-Ray finetune, 2d-transfer finetune) trains on the
-scene's whole source pool (``source`` + ``finetune``, the fleet's pool of a test scene); a row without (Semantic-NeRF)
-on ``n_views`` views spread over it (all of it at 0). A perturbation touches every training view. Held-out views
-are rendered from their true cameras and, by a row with sources, from the (perturbed) sources the spec picks.
-
-Training samples are drawn as the fleet's loader draws them (a random training view as the query, its sources at
-random among its ``top_k`` ranked neighbours in the training views, ``rays`` random pixels; a query with fewer
-neighbours than sources, only at Semantic-NeRF's few-view levels, whose learner ignores sources, takes itself),
-seeded by the spec's seed, which also seeds the method's initial state. Every step is timed
-(:class:`~sray.platform.finetune.step_budget.StepClock`) and training stops at the first step that ends past
-``finetune.max_cpu_seconds`` (:func:`scene_settings`: the preset's ``scene_cpu_seconds``, one budget for every
-method). No held-out score is read before the end: no early stopping, no choice of a best state.
+"""One point of the suite for a row trained on the scene: the method's fleet learner trained on what the spec shows
+it of one test scene for the suite's CPU-second budget (samples drawn as the fleet's loader draws them, seeded), then
+scored on the scene's held-out views; no early stopping (docs/stability.md, "Trained on the scene").
 """
 
 from __future__ import annotations
@@ -33,23 +20,19 @@ from sray.data_tools.loader.views import StoredView
 from sray.platform.config.fleet_config import FinetuneSettings, FleetConfig, TransferSettings
 from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.train_config import TrainConfig
-from sray.platform.eval.scene_scoring import score_scene
+from sray.platform.eval.view_scoring import score_scene
 from sray.platform.finetune.methods.method import SceneContext, SceneSetup
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.step_budget import StepClock, time_limit_reached
-from sray.platform.stability.output_watch import OutputWatch
-from sray.platform.stability.point_spec import PointSpec
-from sray.platform.stability.presets import Preset
+from sray.platform.stability.axes import PointSpec, Preset
 from sray.platform.stability.rows import Row
-from sray.platform.stability.stress_scenes import StressScene, perturbed_views
-from sray.platform.stability.view_choice import source_samples, unseen_fraction
+from sray.platform.stability.stress_scenes import (OutputWatch, StressScene, perturbed_views, source_samples,
+                                                   unseen_fraction)
 from sray.platform.train.step import step_seed
 
 
 def scene_settings(preset: Preset, segmenter: Path | None) -> FleetConfig:
-    """The fleet settings every trained row is built and budgeted with: the fleet's defaults, the preset's
-    Semantic-NeRF network and rays per step, ``segmenter`` as ``transfer.segmenter``, the full render for held-out
-    views (as the zero-shot rows render), and ``finetune.max_cpu_seconds`` = the preset's ``scene_cpu_seconds``."""
+    """The fleet settings of every trained row: the preset's network, rays and ``scene_cpu_seconds``, full renders."""
     if preset.scene_cpu_seconds <= 0:
         raise ValueError(f"stability preset {preset.name!r}: scene_cpu_seconds is {preset.scene_cpu_seconds}; the rows "
                          "trained on the scene need a positive CPU budget")
@@ -70,9 +53,7 @@ class SceneTraining:
     base_sha256: str
     """sha256 of the checkpoint's ``state.pt``."""
     cfg: FleetConfig
-    """:func:`scene_settings`."""
     shards: Path
-    """Shard folder of the test scenes."""
     stored_neighbours: int
     """Ranked neighbours the shards store per view."""
     n_classes: int
@@ -90,8 +71,7 @@ def training_views(pool: list[str], n: int) -> list[str]:
 
 
 def scene_setup(training: SceneTraining, row: Row, scene: str, seed: int) -> SceneSetup:
-    """The row's method built for ``scene`` by its registry record, on a copy of the shared model, with
-    ``finetune.seed`` = ``seed``."""
+    """The row's method built for ``scene`` by its registry record, on a copy of the shared model, seeded."""
     base = copy.deepcopy(training.base)
     cfg = dataclasses.replace(training.cfg, finetune=dataclasses.replace(training.cfg.finetune, seed=seed))
     return get_method(row.method).build(SceneContext(
@@ -102,8 +82,8 @@ def scene_setup(training: SceneTraining, row: Row, scene: str, seed: int) -> Sce
 
 def train_for_budget(setup: SceneSetup, training: SceneTraining, scene: StressScene, views: dict[str, StoredView],
                      train_ids: list[str], seed: int) -> tuple[int, StepClock]:
-    """Train ``setup.learner`` on samples of ``train_ids`` until ``finetune.max_cpu_seconds`` is spent (or the
-    wall budget, when one is set); (steps, the clock)."""
+    """Train ``setup.learner`` on samples of ``train_ids`` until ``finetune.max_cpu_seconds`` (or a wall budget) is
+    spent; (steps, the clock). A query with fewer neighbours than sources takes itself."""
     ft, learner = training.cfg.finetune, setup.learner
     rays = ft.rays_per_batch or training.train_cfg.data.rays_per_batch
     top_k, allowed = max(setup.top_k, setup.n_source), set(train_ids)
@@ -126,9 +106,8 @@ def train_for_budget(setup: SceneSetup, training: SceneTraining, scene: StressSc
 
 def scene_point(training: SceneTraining, row: Row, scene: StressScene, spec: PointSpec, stride: int, chunk: int,
                 probe: tuple[int, float], poison: bool = False) -> dict[str, Any]:
-    """Train ``row``'s method on ``scene`` at ``spec`` and score it: mIoU, PSNR, non-finite rays, steps, CPU and wall
-    seconds of training, training views and (rows with sources) the measured unseen fraction (``probe``:
-    ``zero_shot_points.zero_shot_point``)."""
+    """Train ``row``'s method on ``scene`` at ``spec`` and score it: scores, non-finite rays, steps, CPU and wall
+    seconds, training views and (rows with sources) the unseen fraction (``probe``: ``zero_shot_point``)."""
     seed = 0 if spec.seed is None else spec.seed
     train_ids = scene.pool_ids if row.uses_sources else training_views(scene.pool_ids, spec.n_views)
     views = scene.views if spec.perturbation is None else perturbed_views(scene, train_ids, *spec.perturbation, seed)

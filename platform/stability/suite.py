@@ -1,38 +1,32 @@
-"""What the stability suite computes: every (axis, row, level, seed) a run asks for, and one point's result.
-
-Points that show a row the same input share one :class:`~sray.platform.stability.point_spec.PointSpec`,
-computed once: :func:`point_key` names it (the spec's key), and the suite's study
-(:mod:`sray.platform.stability.points_study`) runs one trial per key on the study engine. A zero-shot row's point
-renders its pretrained model (:mod:`~sray.platform.stability.zero_shot_points`); a trained row's point trains its
-method on each of the first ``trained_scenes`` test scenes (:mod:`~sray.platform.stability.scene_points`). A method
-that raises, diverges or outputs non-finite values at a point is recorded there as ``failed`` with a one-line
-reason (:func:`compute_spec` never raises), and the suite goes on.
-
-A point record (what :mod:`sray.platform.stability.summary` reads): ``axis``, ``method`` (the row's name),
-``level``, ``seed`` (None for a deterministic point, computed once), ``status``, ``miou`` and ``psnr`` (dataset-
-level mIoU in %, PSNR in dB; None when failed), ``x`` (the chart's x: the level; the measured unseen
-fraction on ``unseen_rays``; None on the categorical ``precision``), ``error``, ``key`` and the
-spec's result (non-finite rays, fp32 agreement, unseen fraction, training steps and CPU seconds, per-scene scores).
+"""What the stability suite computes: every (axis, row, level, seed) a run asks for, and the result of a spec: a
+zero-shot row's model rendered as ``sray eval`` does, a trained row's method trained (``scene_points``); a method that
+raises, diverges or outputs non-finite values is ``failed`` there. A point record: ``axis``, ``method`` (the row),
+``level``, ``seed`` (None: deterministic), ``status``, ``miou`` (%), ``psnr`` (dB), ``x`` (the chart's), ``error``,
+``key`` and the spec's result.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 from typing import Any
 
+import torch
+
 from sray.platform.common.fault_hook import poisoned_point
 from sray.platform.eval.eval_model import EvalModel
-from sray.platform.stability.axes import AXES
-from sray.platform.stability.point_spec import PointSpec, point_spec
-from sray.platform.stability.presets import Preset
+from sray.platform.eval.view_scoring import predict_view, score_scene
+from sray.platform.stability.axes import AXES, PointSpec, Preset, point_spec
 from sray.platform.stability.rows import Row
 from sray.platform.stability.scene_points import SceneTraining, scene_point
-from sray.platform.stability.stress_scenes import StressScene
-from sray.platform.stability.zero_shot_points import zero_shot_point
+from sray.platform.stability.stress_scenes import (OutputWatch, StressScene, choose_sources, perturbed_views,
+                                                   source_samples, unseen_fraction)
 
 Planned = list[tuple[str, Row, Any, int | None]]
 """(axis, row, level, seed) of points (:func:`planned_points`)."""
+AUTOCAST_DTYPES = {"bf16": torch.bfloat16, "fp16": torch.float16}
+"""Inference precisions other than fp32, as autocast dtypes."""
 
 
 @dataclass
@@ -42,7 +36,6 @@ class Suite:
     preset: Preset
     scenes: list[StressScene]
     rows: dict[str, Row]
-    """Row name -> row."""
     models: dict[str, EvalModel]
     """Zero-shot row name -> its pretrained model (on the run's device)."""
     training: SceneTraining | None
@@ -62,6 +55,45 @@ def planned_points(preset: Preset, axes: list[str], rows: list[Row]) -> Planned:
                 else:
                     planned += [(axis, row, level, seed) for seed in range(preset.seeds)]
     return planned
+
+
+def precision_context(precision: str, device: torch.device) -> contextlib.AbstractContextManager:
+    """Autocast for ``precision`` (``fp32``: none); ValueError for fp16 off CUDA."""
+    if precision == "fp32":
+        return contextlib.nullcontext()
+    if precision == "fp16" and device.type != "cuda":
+        raise ValueError("precision fp16 needs a CUDA device (CPU autocast runs bf16)")
+    return torch.autocast(device.type, dtype=AUTOCAST_DTYPES[precision])
+
+
+def zero_shot_point(model: EvalModel, scenes: list[StressScene], spec: PointSpec, stride: int, chunk: int,
+                    probe: tuple[int, float], poison: bool = False) -> dict[str, Any]:
+    """Score ``model`` at ``spec`` on ``scenes``: mean mIoU and PSNR, per-scene scores, the unseen fraction
+    (``probe``: coarse depths per ray, nearest source depth), non-finite rays and (below fp32) argmax agreement with
+    the fp32 render. A perturbation touches the sources the spec picks, drawn once per scene in view order."""
+    watch = OutputWatch(poison)
+    device = model.device
+    per_scene, unseen, agree, total = {}, [], 0, 0
+    for scene in scenes:
+        views = scene.views
+        if spec.perturbation is not None:
+            ids = sorted({s for q in scene.test_ids for s in choose_sources(scene, q, spec)})
+            views = perturbed_views(scene, ids, *spec.perturbation, spec.seed)
+        samples = source_samples(scene, views, spec)
+        with precision_context(spec.precision, device):
+            scored = score_scene(lambda s: watch.wrap(model.renderer(s)), samples, model.n_classes, model.ignore_id,
+                                 stride, chunk, device, model.fast)
+        for sample, view in zip(samples, scored.views):
+            if spec.precision != "fp32":
+                fp32 = predict_view(model.renderer(sample), sample, stride, chunk, device, model.fast)
+                agree += int((fp32.pred_label == view.pred_label).sum())
+                total += fp32.pred_label.numel()
+            unseen.append(unseen_fraction(sample, stride, *probe))
+        per_scene[scene.name] = {"miou": scored.scores["miou"], "psnr": scored.scores["psnr"]}
+    return {"miou": sum(s["miou"] for s in per_scene.values()) / len(per_scene),
+            "psnr": sum(s["psnr"] for s in per_scene.values()) / len(per_scene),
+            "unseen_fraction": sum(unseen) / len(unseen), "nonfinite_rays": watch.nonfinite_rays,
+            "fp32_agreement": agree / total if total else None, "scenes": per_scene}
 
 
 def _x(axis: str, level: Any, result: dict[str, Any]) -> float | None:
@@ -109,8 +141,7 @@ def compute_spec(suite: Suite, spec: PointSpec, poison: bool) -> dict[str, Any]:
 
 
 def point_key(preset: Preset, axis: str, row: Row, level: Any, seed: int | None) -> tuple[str, PointSpec, bool]:
-    """The key a point's result is stored under (its spec's key, ``_poisoned`` added when a fault drill poisons
-    it), its spec, and whether it is poisoned."""
+    """(The key a point's result is stored under, ``_poisoned`` when a fault drill poisons it; its spec; poisoned)."""
     spec = point_spec(axis, row, level, 0 if seed is None else seed, preset)
     poison = poisoned_point(row.name, axis, level)
     return f"{spec.key()}{'_poisoned' if poison else ''}", spec, poison
@@ -118,6 +149,6 @@ def point_key(preset: Preset, axis: str, row: Row, level: Any, seed: int | None)
 
 def point_record(axis: str, row: Row, level: Any, seed: int | None, result: dict[str, Any],
                  key: str) -> dict[str, Any]:
-    """The record of one point (see the module docstring) from the result of its spec."""
+    """The record of one point (module doc) from the result of its spec."""
     return {**result, "axis": axis, "method": row.name, "level": level, "seed": seed,
             "x": _x(axis, level, result) if result["status"] == "ok" else None, "key": key}

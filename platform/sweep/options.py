@@ -1,17 +1,6 @@
-"""How a sweep runs, and its spec file: a small YAML file whose keys are ``sray sweep``'s own flags.
-
-A spec file (``jobs/sweeps/demo_lr_sem.yaml`` is one)::
-
-    recipe: synth-small                 # the starting training config
-    data: outputs/demo/shards           # data.shards
-    set: {optim.lr_final: 1.0e-4}       # fixed overrides, as `sray train --set`
-    params:                             # section.field: SPEC (sray.platform.sweep.spec)
-      optim.lr: loguniform(3e-4, 3e-3)
-      model.lambda_rgb: choice(0.5, 1.0)
-    samples: 2
-    steps: 60                           # and any other option of SweepOptions
-
-Flags given on the command line win over the file's values; what neither gives keeps its default.
+"""A sweep as asked for: its options, its spec file and the request built from both. A spec file's keys are
+``sray sweep``'s own flags (``recipe``, ``data``, ``set``, ``params`` and every option; ``jobs/sweeps/demo_lr_sem.yaml``
+is one); flags given on the command line win over the file's values, and what neither gives keeps its default.
 """
 
 from __future__ import annotations
@@ -24,6 +13,7 @@ from typing import Any
 
 import yaml
 
+from sray.platform.config.train_config import TrainConfig
 from sray.platform.sweep.spec import Param, SpecError, check_unique, parse_param
 
 MODES = ("max", "min")
@@ -45,12 +35,9 @@ class SweepOptions:
     metric: str = "val/miou"
     """The validation metric trials are compared by (``val/*`` or ``zeroshot/*``, as the training job logs it)."""
     mode: str = "max"
-    """One of :data:`MODES`."""
     scheduler: str = "asha"
-    """One of :data:`SCHEDULERS`."""
     grace: int = 0
-    """ASHA: steps before a trial can be stopped (its first rung); 0 = the trials' checkpoint interval
-    (``run.ckpt_every``, where a training job first reports)."""
+    """ASHA: steps before a trial can be stopped; 0 = ``run.ckpt_every`` (where a training job first reports)."""
     reduction_factor: float = 3.0
     """ASHA: about 1 in this many trials continues at each rung (rungs at grace x factor^k steps)."""
     max_concurrent: int = 0
@@ -60,8 +47,7 @@ class SweepOptions:
     cpu_seconds: float = 0.0
     """Budget per trial in CPU seconds summed over its ranks (``optim.cpu_seconds``); 0 = the config's."""
     minutes: float = 0.0
-    """Budget per trial in wall-clock minutes of training (a trial asked to stop there checkpoints and
-    ends); 0 = none."""
+    """Budget per trial in wall-clock minutes of training (then it checkpoints and ends); 0 = none."""
 
 
 def check_options(options: SweepOptions) -> None:
@@ -86,6 +72,19 @@ def check_options(options: SweepOptions) -> None:
 
 
 @dataclass
+class SweepRequest:
+    """A new sweep, as the command line (or a test) asks for it, before any check."""
+
+    name: str
+    """Unique name: the sweep's folder under ``out`` and its parent run's name."""
+    out: Path
+    base: TrainConfig
+    """The config every trial starts from (a recipe with the fixed overrides)."""
+    params: list[Param]
+    options: SweepOptions
+
+
+@dataclass
 class SpecFile:
     """What a spec file holds, parsed; option values are checked by :func:`merge_options`."""
 
@@ -96,7 +95,6 @@ class SpecFile:
     sets: list[str] = field(default_factory=list)
     """Fixed ``section.field=value`` overrides applied before the swept values."""
     params: list[Param] = field(default_factory=list)
-    """The swept fields."""
     options: dict[str, Any] = field(default_factory=dict)
     """Options of :class:`SweepOptions` the file gives."""
 
@@ -104,7 +102,6 @@ class SpecFile:
 OPTION_NAMES = tuple(f.name for f in dataclasses.fields(SweepOptions))
 """Keys of :class:`SweepOptions`, as spec-file keys (flags: ``--max-concurrent`` for ``max_concurrent``)."""
 FILE_KEYS = ("recipe", "data", "set", "params", *OPTION_NAMES)
-"""Every key a spec file may have."""
 
 
 def _sets(where: Path, value: Any) -> list[str]:
@@ -129,8 +126,7 @@ def _params(where: Path, value: Any) -> list[Param]:
 
 
 def read_yaml_keys(path: Path, what: str, keys: tuple[str, ...]) -> dict[str, Any]:
-    """The YAML mapping in ``path`` (a ``what``, e.g. "sweep spec"); :class:`SpecError` naming the file when it
-    cannot be read, is not YAML, is not a mapping or holds a key outside ``keys``."""
+    """The YAML mapping of ``keys`` in ``path`` (a ``what``); :class:`SpecError` naming the file and what is wrong."""
     try:
         raw = yaml.safe_load(Path(path).read_text())
     except OSError as e:

@@ -1,26 +1,20 @@
-"""The value grammar of a sweep parameter: ``section.field=SPEC``, SPEC one of four distributions.
-
-* ``choice(a, b, ...)``: each trial draws one of the values, uniformly;
-* ``uniform(lo, hi)``: a float drawn uniformly in [lo, hi];
-* ``loguniform(lo, hi)``: a float whose logarithm is uniform in [log lo, log hi] (0 < lo);
-* ``grid(a, b, ...)``: every value, crossed with every other grid parameter (each drawn sample of the
-  random parameters runs once per grid combination).
-
-Values are kept as the text the user wrote (choice and grid) or as floats (ranges); the field's own type
-parses them when a trial's config is built (``sray.platform.config.overrides``), so a sweep takes any field
-``sray train --set`` takes. This module knows the grammar only; which fields exist is checked where the
-trial's config is made (``sray.platform.sweep.training_trial``).
+"""A sweep parameter, ``section.field=SPEC`` with SPEC one of ``choice(a, ...)``, ``grid(a, ...)`` (every value,
+crossed with the other grids), ``uniform(lo, hi)``, ``loguniform(lo, hi)``, and the plan: every trial's values, drawn
+once from a seeded generator before anything runs (so a resumed sweep runs the same trials under the same keys), in
+Tune's order (the samples in turn, each crossed with every grid combination). Listed values stay as written: the
+field's own type parses them through the typed ``--set`` path, so a sweep takes any field ``sray train --set`` takes.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
 import re
 from dataclasses import dataclass
+from typing import Any
 
 KINDS = ("choice", "uniform", "loguniform", "grid")
-"""The distributions a parameter may have."""
 _CALL = re.compile(r"^\s*([A-Za-z_]+)\s*\((.*)\)\s*$", re.S)
 _PATH = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)+$")
 _BRACKETS = {"(": ")", "[": "]"}
@@ -37,7 +31,6 @@ class Param:
     path: str
     """``section.field`` of the trial config, as ``--set`` takes it."""
     kind: str
-    """One of :data:`KINDS`."""
     values: tuple[str, ...]
     """The listed values of ``choice`` and ``grid``, as written; the two bounds of a range, as written."""
 
@@ -46,15 +39,11 @@ class Param:
         """The distribution as the user writes it, e.g. ``loguniform(1e-4, 1e-2)``."""
         return f"{self.kind}({', '.join(self.values)})"
 
-    def bounds(self) -> tuple[float, float]:
-        """``(lo, hi)`` of a range parameter."""
-        return float(self.values[0]), float(self.values[1])
-
     def draw(self, rng: random.Random) -> str | float:
         """One random value (``choice``, ``uniform``, ``loguniform``; a grid parameter is not drawn)."""
         if self.kind == "choice":
             return rng.choice(self.values)
-        lo, hi = self.bounds()
+        lo, hi = map(float, self.values)
         if self.kind == "uniform":
             return rng.uniform(lo, hi)
         if self.kind == "loguniform":
@@ -130,8 +119,41 @@ def parse_assignment(assignment: str) -> Param:
 
 def check_unique(params: list[Param]) -> None:
     """:class:`SpecError` when two parameters name the same field."""
-    seen: set[str] = set()
-    for param in params:
-        if param.path in seen:
-            raise SpecError(f"sweep parameter {param.path}: given twice; give each field one distribution")
-        seen.add(param.path)
+    paths = [p.path for p in params]
+    for i, path in enumerate(paths):
+        if path in paths[:i]:
+            raise SpecError(f"sweep parameter {path}: given twice; give each field one distribution")
+
+
+SEED_FIELD = "run.seed"
+"""The training config's seed: ``--seeds N`` makes it a grid parameter over 0..N-1."""
+
+
+def trial_keys(count: int) -> list[str]:
+    """``t000``, ``t001``, ...: one key per trial, zero-padded to at least three digits."""
+    width = max(3, len(str(count - 1)))
+    return [f"t{i:0{width}d}" for i in range(count)]
+
+
+def with_seeds(params: list[Param], seeds: int) -> list[Param]:
+    """``params`` plus ``run.seed=grid(0..seeds-1)`` (``seeds`` 0: unchanged); SpecError when it is swept already."""
+    if seeds <= 0:
+        return list(params)
+    if any(p.path == SEED_FIELD for p in params):
+        raise SpecError(f"sweep parameter {SEED_FIELD}: given and --seeds {seeds} too; keep one of them")
+    return [*params, Param(SEED_FIELD, "grid", tuple(str(s) for s in range(seeds)))]
+
+
+def build_plan(params: list[Param], samples: int, seed: int) -> dict[str, dict[str, Any]]:
+    """Trial key -> {field path: value}, ``samples`` x (product of the grid sizes) trials, draws seeded by ``seed``."""
+    if samples < 1:
+        raise SpecError(f"--samples {samples}: at least 1 sample is needed")
+    grids = [p for p in params if p.kind == "grid"]
+    drawn = [p for p in params if p.kind != "grid"]
+    rng = random.Random(seed)
+    points: list[dict[str, Any]] = []
+    for _ in range(samples):
+        for combo in itertools.product(*(p.values for p in grids)):
+            values = {p.path: p.draw(rng) for p in drawn} | dict(zip((p.path for p in grids), combo))
+            points.append({p.path: values[p.path] for p in params})
+    return dict(zip(trial_keys(len(points)), points))

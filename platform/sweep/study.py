@@ -1,16 +1,92 @@
-"""What the study engine (``sray.platform.sweep.engine``) and a point function share: the study's settings
-and the trial's context."""
+"""What the study engine and a point function share: the study's settings, the trial's context, and the trial's
+files under ``<study>/trials/<key>/``, each with one writer, written atomically: ``trial.json`` (:class:`TrialRecord`,
+by the trial's process: its launches and outcome), ``stop_request.json`` (by the driver: end early, the trial stops
+itself so its workers hand their resources back), ``history.jsonl`` (by the driver: every result, with the running
+time across launches; a line cut by a killed driver is skipped on reading).
+"""
 
 from __future__ import annotations
 
+import contextlib
+import json
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import ray.tune
 
-from sray.platform.sweep.trial_files import read_stop_request
+from sray.data_tools.atomic import atomic_write_json
+
+TRIALS = "trials"
+RECORD = "trial.json"
+HISTORY = "history.jsonl"
+STOP_REQUEST = "stop_request.json"
+FINISHED, ERRORED = "finished", "errored"
+"""Outcomes a trial's own process records."""
+BY_SCHEDULER, BY_BUDGET = "scheduler", "budget"
+"""Who asked a trial to stop early."""
+
+
+def trial_folder(study: Path | str, key: str) -> Path:
+    """``<study>/trials/<key>``."""
+    return Path(study) / TRIALS / key
+
+
+@dataclass
+class TrialRecord:
+    """What the trial's own process recorded (``trial.json``)."""
+
+    launches: list[float] = field(default_factory=list)
+    """Unix time at which each launch of the trial began, in order."""
+    outcome: str | None = None
+    """:data:`FINISHED` or :data:`ERRORED` once the point function returned or raised (it never runs again)."""
+    error: str = ""
+    """``Type: message`` of the error of an errored trial."""
+    result: dict[str, Any] | None = None
+    """What the point function returned (a JSON-able dict); None when nothing."""
+    imported: str = ""
+    """The file an imported result was read from ('' when the trial computed it)."""
+
+
+def read_record(folder: Path) -> TrialRecord:
+    """The trial's record (an empty one before its first launch)."""
+    path = Path(folder) / RECORD
+    return TrialRecord(**json.loads(path.read_text())) if path.is_file() else TrialRecord()
+
+
+def write_record(folder: Path, record: TrialRecord) -> None:
+    """Replace the trial's record atomically."""
+    atomic_write_json(Path(folder) / RECORD, asdict(record))
+
+
+def request_stop(folder: Path, by: str, at: float | None) -> None:
+    """Ask the trial to stop early (``by`` :data:`BY_SCHEDULER` or :data:`BY_BUDGET`, at time attribute ``at``)."""
+    atomic_write_json(Path(folder) / STOP_REQUEST, {"by": by, "at": at})
+
+
+def read_stop_request(folder: Path) -> dict[str, Any] | None:
+    """The trial's stop request, or None when nobody asked it to stop."""
+    path = Path(folder) / STOP_REQUEST
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def append_history(folder: Path, entry: dict[str, Any]) -> None:
+    """Append one reported result (a JSON line) to the trial's history."""
+    with open(Path(folder) / HISTORY, "a") as f:
+        f.write(json.dumps(entry) + "\n")
+
+
+def read_history(folder: Path) -> list[dict[str, Any]]:
+    """The trial's reported results in order; a line cut short by a killed driver is skipped."""
+    path = Path(folder) / HISTORY
+    if not path.is_file():
+        return []
+    entries = []
+    for line in path.read_text().splitlines():
+        with contextlib.suppress(ValueError):
+            entries.append(json.loads(line))
+    return entries
 
 
 @dataclass(frozen=True)
@@ -21,8 +97,6 @@ class TrialContext:
     """The trial's key in the plan (``t003``)."""
     folder: Path
     """The trial's own folder (``<study>/trials/<key>``), for anything it writes."""
-    launch: int
-    """0 on the trial's first launch; n on its (n+1)-th, after a study was resumed."""
 
     def stop_requested(self) -> bool:
         """True once the scheduler or the wall-time budget asked this trial to end now."""
@@ -34,8 +108,7 @@ class TrialContext:
 
 
 PointFunction = Callable[[dict[str, Any], TrialContext], "dict[str, Any] | None"]
-"""Runs the trial of one point; reports through Tune; may return its result (a JSON-able dict, kept in the
-trial's record); raises on failure."""
+"""Runs one point's trial, reports to Tune, may return a JSON-able result (kept in its record), raises on failure."""
 
 
 @dataclass(frozen=True)
@@ -47,11 +120,9 @@ class StudySettings:
     metric: str
     """Result key trials are compared by."""
     mode: str
-    """``max`` or ``min``: which values of the metric are better."""
     time_attr: str = "training_iteration"
     """Result key measuring a trial's progress (a training job's ``step``): the scheduler's time axis."""
     max_concurrent: int = 1
-    """Trials running at once."""
     trial_resources: Mapping[str, float] = field(default_factory=lambda: {"CPU": 1.0})
     """What Tune reserves for one trial's process (a training trial's workers reserve their own)."""
     scheduler: str = "none"
@@ -65,11 +136,10 @@ class StudySettings:
     wall_budget_s: float = 0.0
     """A trial is asked to stop once it has run this long across its launches (0 = no limit)."""
     start_by: float = 0.0
-    """Unix time after which no trial starts (0 = no limit): a trial Tune hands over later returns at once,
-    without a launch or an outcome, and stays unfinished for the next launch of the study. Running trials go on."""
+    """Unix time after which no trial starts (0 = no limit): a later trial returns at once and stays unfinished
+    for the next launch. Running trials go on."""
     reuse_actors: bool = False
-    """Run the trials one after another in the same process (Tune's ``reuse_actors``): for short trials whose
-    point function keeps what it loaded between calls. Off: each trial gets a fresh process (a trial that
-    trains with Accelerate needs one)."""
+    """Run the trials in one process (Tune's ``reuse_actors``), for short trials that keep what they loaded. Off:
+    a fresh process per trial (a trial that trains with Accelerate needs one)."""
     label: str = "sweep"
     """Prefix of the study's progress lines (``[sweep] t001 started: ...``)."""

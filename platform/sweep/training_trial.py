@@ -1,12 +1,6 @@
-"""The trial of a training sweep: one real training job (``launch_training``) with the point's values set.
-
-Each trial's config is the sweep's base config with the point's ``section.field=value`` overrides applied
-through the same typed ``--set`` path as ``sray train`` (:func:`trial_config`), so every field ``sray train
---set`` takes can be swept and every value is checked the same way. The job is named ``<sweep>-<key>``,
-writes under the sweep's ``jobs/`` folder, logs into a tracked run nested under the sweep's run, and reports
-its validation metrics to Tune through Ray Train's ``TuneReportCallback`` (rank 0's report at each checkpoint
-step). A second launch of the trial (a resumed sweep) resumes the job from its last checkpoint; a stop request
-(scheduler, wall-time budget) becomes the job's own STOP file, so it checkpoints and ends cleanly.
+"""The trial of a training sweep: one real training job ``<sweep>-<key>`` with the point's values set through the
+typed ``--set`` path of ``sray train``, nested under the sweep's run, reporting its validation metrics to Tune at
+each checkpoint. A second launch resumes it; a stop request becomes its STOP file (it checkpoints and ends).
 """
 
 from __future__ import annotations
@@ -44,21 +38,17 @@ def _text(value: Any) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
-def trial_config(base: TrainConfig, point: Mapping[str, Any]) -> TrainConfig:
-    """``base`` with the point's values set (a copy); :class:`SpecError` naming the parameter a value breaks."""
+def trial_config(base: TrainConfig, point: Mapping[str, Any], name: str = "") -> TrainConfig:
+    """``base`` with the point's values set (a copy), the job named ``name`` when given; :class:`SpecError` naming
+    the parameter a value breaks."""
     cfg = copy.deepcopy(base)
     for path, value in point.items():
         try:
             apply_override(cfg, f"{path}={_text(value)}")
         except ValueError as e:
             raise SpecError(f"sweep parameter {path}: {e}") from None
-    return cfg
-
-
-def trial_job_config(base: TrainConfig, point: Mapping[str, Any], sweep: str, key: str) -> TrainConfig:
-    """The config of trial ``key``'s training job: :func:`trial_config` named ``<sweep>-<key>``."""
-    cfg = trial_config(base, point)
-    cfg.run.name = job_name(sweep, key)
+    if name:
+        cfg.run.name = name
     return cfg
 
 
@@ -100,11 +90,8 @@ def _forward_stop(ctx: TrialContext, stop_file: Path, done: threading.Event) -> 
 
 def run_training_trial(point: dict[str, Any], ctx: TrialContext, base: dict[str, Any], sweep: str,
                        parent: RunHandle) -> None:
-    """The point function of a training sweep: train ``base`` with ``point`` set, nested under ``parent``.
-
-    ``base``: the sweep's base config as a dict (output folder, tracking store and shards absolute).
-    """
-    cfg = trial_job_config(TrainConfig.from_dict(base), point, sweep, ctx.key)
+    """The point function of a training sweep: train ``base`` (a config dict) with ``point`` set, under ``parent``."""
+    cfg = trial_config(TrainConfig.from_dict(base), point, job_name(sweep, ctx.key))
     job_dir = cfg.job_dir()
     resume = (job_dir / CONFIG_FILE).is_file()
     if resume:

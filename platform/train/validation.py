@@ -23,8 +23,7 @@ from sray.data_tools.loader.shard_loader import make_eval_samples
 from sray.data_tools.shards.manifest import Manifest, read_manifest
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.config.train_config import TrainConfig
-from sray.platform.eval.scene_scoring import score_scene
-from sray.platform.eval.view_scoring import ViewPrediction, sray_renderer
+from sray.platform.eval.view_scoring import ViewPrediction, score_scene, sray_renderer
 from sray.platform.viz.renders import render_panel
 
 GROUPS = {"val": "train", "zeroshot": "test"}

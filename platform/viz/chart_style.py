@@ -1,9 +1,6 @@
-"""How charts draw a method: its :class:`ChartStyle`, and what a chart needs to know of a method.
-
-Charts sit below the method registry (``platform/finetune/methods``), so they never import it: the
-caller hands them a mapping of method name -> an object with ``name``, ``style`` and ``zero_shot``
-(a registered ``Method`` is one), in chart and legend order.
-"""
+"""How charts draw a method (:class:`ChartStyle`) and what they read of one (:class:`ChartedMethod`): charts sit
+below the method registry (``platform/finetune/methods``), so callers hand them the methods (a registered
+``Method`` is one)."""
 
 from __future__ import annotations
 
@@ -14,14 +11,11 @@ from typing import Protocol
 
 @dataclass(frozen=True)
 class ChartStyle:
-    """How charts draw one kind of curve."""
+    """How charts draw one kind of curve: legend text, matplotlib colour (``#rrggbb``), marker of its points."""
 
     label: str
-    """Legend text."""
     color: str
-    """Matplotlib colour (``#rrggbb``)."""
     marker: str
-    """Matplotlib marker of its evaluated points."""
 
 
 class ChartedMethod(Protocol):

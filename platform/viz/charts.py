@@ -1,25 +1,7 @@
-"""Charts of a finetune fleet (PNG): accuracy against time and steps, accuracy against artifact size.
-
-From the fleet result dicts (docs/CONTRACTS.md, "Fleet results"), :func:`write_fleet_charts` writes
-
-* ``miou_vs_wall_s.png``, ``miou_vs_step.png``, ``psnr_vs_wall_s.png``, ``psnr_vs_step.png``: held-out
-  score against training wall-clock time and against optimisation steps, one panel per scene plus
-  (with two scenes or more) a first panel averaging the scenes (curves resampled as step functions
-  on a common grid, :func:`sray.platform.viz.curves.average_curves`). A method that starts from a
-  zero-shot model (S-Ray) has its step-0 score drawn as a dashed horizontal line (it costs no
-  per-scene step); every method (S-Ray finetune, Semantic-NeRF from scratch, ...) is a step curve
-  that holds its value between evaluations;
-* ``miou_vs_artifact_bytes.png``: held-out mIoU after per-scene optimisation against the bytes a
-  scene stores besides the shared model (log axis), one point per (scene, method); zero-shot S-Ray
-  stores nothing and sits on a separate "0 B" tick left of an axis break.
-
-Colours, markers and legend text are each method's :class:`~sray.platform.viz.chart_style.ChartStyle`
-(the method registry); each legend entry ends with the inputs its results' protocol records (``[RGB]``,
-``[RGB-D]``), so a depth-using method never passes for an RGB one. Every chart's footnote carries the results'
-protocol line(s) (:func:`sray.platform.common.eval_protocol.caption_lines`).
-Failed results are left out and named in a footnote. Matplotlib's Agg canvas is used directly (no
-pyplot state), so this is safe in Ray workers and threads.
-"""
+"""Charts of a finetune fleet's results (docs/CONTRACTS.md, docs/dashboard.md), one PNG per :data:`FLEET_CHARTS` entry:
+held-out scores against time and steps (a panel per scene, a first one of their step-function mean; a zero-shot
+step-0 score as a dashed line) and mIoU against per-scene artifact bytes (zero-shot S-Ray on a "0 B" tick). Legend
+entries carry each method's inputs, footnotes the protocol lines and the results left out. Agg canvas, no pyplot."""
 
 from __future__ import annotations
 
@@ -51,10 +33,8 @@ METRICS = {"miou": ("held-out mIoU", f"held-out mIoU ({DATASET_PROTOCOL})"),
 X_AXES = {"wall_s": ("training wall-clock time (s, evaluation excluded)", "wall-clock time"),
           "step": ("optimisation steps", "steps")}
 """Curve key -> (axis label, title text)."""
-PANEL_SIZE = (4.8, 3.5)
-"""Inches per panel (width, height)."""
-MIN_WIDTH = 7.0
-"""Narrowest figure (inches), so that a one-panel chart still has room for its legend and footnote."""
+PANEL_SIZE = (4.8, 3.5)  # inches per panel (width, height)
+MIN_WIDTH = 7.0  # narrowest figure (inches), so that a one-panel chart still has room for its legend and footnote
 DPI = 110
 
 
@@ -72,10 +52,8 @@ def _footnote_parts(ok: list[dict[str, Any]], results: list[dict[str, Any]], ext
 
 def _framed_figure(width: float, body_height: float, title: str, handles: list[Any],
                    footnote: list[str]) -> tuple[Any, Any]:
-    """A figure with a header (title + legend), a body sub-figure for the axes, and a footnote.
-
-    Returns (figure, body sub-figure); sizes in inches.
-    """
+    """A figure with a header (title + legend), a body sub-figure for the axes, and a footnote; returns (figure,
+    body sub-figure); sizes in inches."""
     ncols = 4 if width >= 12 else 2
     head_h = 0.45 + 0.22 * math.ceil(len(handles) / ncols)
     lines = [line for part in footnote for line in textwrap.wrap(part, max(60, int(width * 17)))]
@@ -87,10 +65,6 @@ def _framed_figure(width: float, body_height: float, title: str, handles: list[A
     head.legend(handles=handles, loc="lower center", ncols=ncols, fontsize=8, frameon=False)
     foot.text(0.5, 0.5, "\n".join(lines), ha="center", va="center", fontsize=7, color="#444444")
     return fig, body
-
-
-def _save(fig: Any, path: Path) -> Path:
-    return save_png(fig, path, DPI)
 
 
 def _draw_panel(ax: Any, by_method: dict[str, list[dict[str, Any]]], metric: str, x_key: str, mean: bool,
@@ -237,16 +211,12 @@ FLEET_CHARTS: dict[str, FleetChart] = {
 
 
 def write_fleet_charts(results: list[dict[str, Any]], out_dir: Path, methods: ChartedMethods) -> list[Path]:
-    """Write every chart of :data:`FLEET_CHARTS` as a PNG in ``out_dir`` (atomically); returns their paths.
-
-    ``results``: fleet result dicts (docs/CONTRACTS.md); ``methods``: what charts read of each method
-    (the method registry, in legend order). Failed results are skipped and named in a footnote; with
-    no finished result at all nothing is written (a warning says so).
-    """
+    """Write every chart of :data:`FLEET_CHARTS` as ``<out_dir>/<stem>.png`` (atomically) and return the paths;
+    ``methods`` in legend order. With no finished result nothing is written (a warning says so)."""
     for r in results:
         check_result(r, methods)
     if not any(is_chartable(r) for r in results):
         log.warning("no finished fleet result with an evaluated point: no charts written to %s", out_dir)
         return []
     out_dir = Path(out_dir)
-    return [_save(chart(results, methods), out_dir / f"{stem}.png") for stem, chart in FLEET_CHARTS.items()]
+    return [save_png(chart(results, methods), out_dir / f"{stem}.png", DPI) for stem, chart in FLEET_CHARTS.items()]

@@ -1,38 +1,17 @@
-"""Fleet results as curves: reading ``result.json`` files, step-function resampling, averaging.
-
-A finetune is evaluated at a few points (``curve`` in the fleet result, docs/CONTRACTS.md); between
-two evaluations, and after the last one (early stop), the model is the one last evaluated. Its
-score is therefore a step function of time that holds its last value: averaging curves across
-scenes resamples every curve on the union of their evaluation points with that hold.
-"""
+"""Fleet results as curves (``curve`` in a fleet result, docs/CONTRACTS.md). Between evaluations and after the last
+one (early stop) the model is the one last evaluated, so a score is a step function holding its last value:
+averaging across scenes resamples every curve on the union of their points."""
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sray.platform.viz.chart_style import ChartedMethods
 
-RESULT_FIELDS = ("scene", "method", "status", "curve")
-"""Fields every result must have to be charted."""
-
-
-def read_fleet_results(fleet_dir: Path) -> list[dict[str, Any]]:
-    """Every ``<fleet_dir>/scenes/<scene>/<method>/result.json``, sorted by (scene, method).
-
-    ValueError names a file that is not valid JSON.
-    """
-    results = []
-    for path in sorted(Path(fleet_dir).glob("scenes/*/*/result.json")):
-        try:
-            results.append(json.loads(path.read_text()))
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}: not valid JSON ({e}); re-run the fleet for that scene") from None
-    return results
+RESULT_FIELDS = ("scene", "method", "status", "curve")  # fields every result must have to be charted
 
 
 def check_result(result: dict[str, Any], methods: ChartedMethods) -> None:
@@ -51,8 +30,7 @@ def is_chartable(result: dict[str, Any]) -> bool:
 
 
 def curve_xy(curve: list[dict[str, Any]], x_key: str, y_key: str) -> tuple[np.ndarray, np.ndarray]:
-    """(x (n,), y (n,)) of a result's curve, sorted by x (stable), points with a missing or
-    non-finite value dropped."""
+    """(x (n,), y (n,)) of a result's curve, stably sorted by x, without points missing a finite value."""
     pts = [(float(p[x_key]), float(p[y_key])) for p in curve
            if p.get(x_key) is not None and p.get(y_key) is not None
            and math.isfinite(float(p[x_key])) and math.isfinite(float(p[y_key]))]
@@ -64,20 +42,15 @@ def curve_xy(curve: list[dict[str, Any]], x_key: str, y_key: str) -> tuple[np.nd
 
 
 def step_hold(x: np.ndarray, y: np.ndarray, grid: np.ndarray) -> np.ndarray:
-    """Values (len(grid),) of the step function through (x, y) (x sorted ascending) at ``grid``:
-    the y of the last point with x <= g; NaN before the first point; the last y after the end.
-    Of several points at the same x, the last one counts."""
+    """Values (len(grid),) at ``grid`` of the step function through (x, y) (x ascending): the y of the last point
+    with x <= g (the last of several at one x), NaN before the first point."""
     idx = np.searchsorted(x, grid, side="right") - 1
     return np.where(idx >= 0, y[np.clip(idx, 0, None)], np.nan) if len(x) else np.full(len(grid), np.nan)
 
 
 def average_curves(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of step-function curves on the union of their x values.
-
-    A grid point counts only where every curve has started (no curve is extrapolated backwards);
-    after its last point a curve holds its final value. Returns (grid (k,), mean (k,)); empty
-    arrays when no curve has a point.
-    """
+    """(grid (k,), mean (k,)) of step-function curves on the union of their x values, from where every curve has
+    started (none is extrapolated backwards; each holds its last value after its end); empty when none has a point."""
     curves = [(x, y) for x, y in curves if len(x)]
     if not curves:
         return np.zeros(0), np.zeros(0)

@@ -1,15 +1,6 @@
-"""One PNG per evaluated view: semantics and colour, predicted next to ground truth, errors, legend.
-
-Grid (tiles are the view's pixels, enlarged by an integer factor, never resampled)::
-
-    title
-    predicted semantics | ground-truth semantics | error map
-    predicted colour    | ground-truth colour    | legend (classes present)
-
-Tiles are placed with ``Figure.figimage`` at exact pixel offsets (:func:`panel_grid` gives
-them), so a test can read class colours back from the file. Matplotlib's Agg canvas is used
-directly (no pyplot state), which is safe in Ray workers and threads.
-"""
+"""One PNG per evaluated view: predicted and ground-truth semantics and the error map above, predicted and
+ground-truth colour and the legend below. Tiles are the view's pixels enlarged by an integer factor at exact
+offsets (:func:`panel_grid`), so a test reads class colours back; Agg canvas, no pyplot state (safe in Ray workers)."""
 
 from __future__ import annotations
 
@@ -24,39 +15,28 @@ from matplotlib.figure import Figure
 from sray.data_tools.atomic import save_png
 from sray.platform.viz.palette import IGNORE_COLOR, colorize, palette
 
-MARGIN = 10
-"""Pixels around and between tiles."""
-TITLE_BAND = 22
-"""Pixels above each tile for its caption."""
-HEADER = 26
-"""Pixels at the top for the panel's title."""
-MIN_TILE_HEIGHT = 200
-"""Small views are enlarged by an integer factor until a tile is at least this tall."""
-LEGEND_ROW = 18
-"""Pixels per legend entry."""
-LEGEND_SWATCH = 14
-"""Side of a legend colour swatch."""
-LEGEND_COLUMN = 190
-"""Width of one legend column."""
-ERROR_COLOR = (255, 0, 0)
-"""Error map: labelled pixel predicted wrong."""
-CORRECT_COLOR = (225, 225, 225)
-"""Error map: labelled pixel predicted right (unlabelled pixels are black)."""
+MARGIN = 10  # pixels around and between tiles
+TITLE_BAND = 22  # pixels above each tile for its caption
+HEADER = 26  # pixels at the top for the panel's title
+MIN_TILE_HEIGHT = 200  # small views are enlarged by an integer factor until a tile is at least this tall
+LEGEND_ROW = 18  # pixels per legend entry
+LEGEND_SWATCH = 14  # side of a legend colour swatch
+LEGEND_COLUMN = 190  # width of one legend column
+ERROR_COLOR = (255, 0, 0)  # error map: labelled pixel predicted wrong
+CORRECT_COLOR = (225, 225, 225)  # error map: labelled pixel predicted right (unlabelled pixels are black)
 _DPI = 100
 
 
 @dataclass(frozen=True)
 class PanelGrid:
-    """Pixel geometry of a panel PNG (x right, y down, origin top-left)."""
+    """Pixel geometry of a panel PNG (x right, y down, origin top-left): its (height, width), the integer
+    enlargement of the view's pixels, tile name (pred_sem, gt_sem, error, pred_rgb, gt_rgb, legend) -> (x, y,
+    width, height), and the top-left (x, y) of each legend swatch (classes present by id, then the ignore label)."""
 
     size: tuple[int, int]
-    """(height, width) of the PNG."""
     scale: int
-    """Integer enlargement of the view's pixels."""
     tiles: dict[str, tuple[int, int, int, int]]
-    """Tile name -> (x, y, width, height): pred_sem, gt_sem, error, pred_rgb, gt_rgb, legend."""
     swatches: list[tuple[int, int]]
-    """Top-left (x, y) of each legend swatch: classes present by id, then the ignore label if present."""
 
 
 def panel_grid(hw: tuple[int, int], n_legend: int) -> PanelGrid:
@@ -99,11 +79,8 @@ def error_map(pred: np.ndarray, gt: np.ndarray, ignore_id: int = 255) -> np.ndar
 
 def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.ndarray, gt_rgb: np.ndarray,
                  class_names: list[str], path: Path, ignore_id: int = 255, title: str = "") -> Path:
-    """Write the panel PNG for one view to ``path`` (atomically); returns ``path``.
-
-    ``pred_labels``, ``gt_labels``: int (H, W) class ids (``ignore_id`` = unlabelled in gt);
-    ``pred_rgb``, ``gt_rgb``: (H, W, 3) floats in [0, 1] or uint8; ``class_names``: the label space.
-    """
+    """Write the panel PNG of one view to ``path`` (atomically); returns ``path``. Labels: int (H, W) class ids
+    (``ignore_id``: unlabelled in gt); colours: (H, W, 3) floats in [0, 1] or uint8."""
     pred, gt = np.asarray(pred_labels), np.asarray(gt_labels)
     if pred.shape != gt.shape or pred.ndim != 2:
         raise ValueError(f"pred_labels {pred.shape} and gt_labels {gt.shape} must be the same (H, W)")
@@ -123,7 +100,6 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
     captions = {"pred_sem": "predicted semantics", "gt_sem": "ground-truth semantics",
                 "error": f"errors (red): {wrong:.1f}% of {int(labelled.sum())} labelled px",
                 "pred_rgb": "predicted colour", "gt_rgb": "ground-truth colour", "legend": "classes present"}
-
     height, width = grid.size
     fig = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI, facecolor="white")
     FigureCanvasAgg(fig)
@@ -143,5 +119,4 @@ def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.nd
     for (label, color), (sx, sy) in zip(legend, grid.swatches):
         place(np.broadcast_to(color, (LEGEND_SWATCH, LEGEND_SWATCH, 3)).copy(), sx, sy)
         text(sx + LEGEND_SWATCH + 6, sy, label)
-
     return save_png(fig, Path(path), _DPI)

@@ -1,10 +1,5 @@
-"""The stability suite's chart (PNG): one panel per stress axis, a score against the axis's level, one
-line per method with its seed spread (min-max band) and its failed levels marked.
-
-The caller turns its results into :class:`StabilityPanel` objects (this module knows nothing of the
-suite), and hands the methods' :class:`~sray.platform.viz.chart_style.ChartStyle` with them.
-Matplotlib's Agg canvas is used directly (no pyplot state).
-"""
+"""The stability suite's chart (PNG): one panel per stress axis (:class:`StabilityPanel`, made by the caller), a
+score against the axis's level, one line per method with its seed spread (min-max band), failed levels marked."""
 
 from __future__ import annotations
 
@@ -20,43 +15,37 @@ from matplotlib.figure import Figure
 from sray.data_tools.atomic import save_png
 from sray.platform.viz.chart_style import ChartStyle
 
-PANEL_SIZE = (4.2, 3.2)
-"""Inches per panel (width, height)."""
-COLUMNS = 3
-"""Panels per row."""
-FAILED_COLOR = "#d62728"
-"""Colour of the marks of failed levels."""
+PANEL_SIZE = (4.2, 3.2)  # inches per panel (width, height)
+COLUMNS = 3  # panels per row
+FAILED_COLOR = "#d62728"  # colour of the marks of failed levels
 DPI = 110
 LEGEND_CHARS_PER_INCH = 15
 """About how many legend characters (9 pt) fit in an inch: legends of long labels get fewer columns."""
-LEGEND_ROW_INCHES = 0.22
-"""Height of one legend row."""
+LEGEND_ROW_INCHES = 0.22  # height of one legend row
 
 
 @dataclass(frozen=True)
 class LevelPoint:
-    """One method at one level: the mean over seeds and their spread, or a failure."""
+    """One method at one level: where it is drawn (a number, or a category name), the mean over seeds (None:
+    every seed failed) and their spread."""
 
     x: float | str
-    """Where it is drawn: a number, or a category name (a categorical axis)."""
     mean: float | None
-    """None when every seed failed at this level."""
     low: float | None = None
     high: float | None = None
 
 
 @dataclass
 class StabilityPanel:
-    """One axis: its title, x label and one list of points per method, in level order."""
+    """One axis: its title, x label and one list of points per method, in level order; ``log_x``: x on a log-2
+    scale (counts of views); ``harmless_high``: the harmless end is the largest value (views, JPEG quality), so x
+    is drawn decreasing and every panel reads from harmless (left) to broken (right)."""
 
     title: str
     x_label: str
     lines: dict[str, list[LevelPoint]] = field(default_factory=dict)
     log_x: bool = False
-    """Draw x on a log-2 scale (counts of views)."""
     harmless_high: bool = False
-    """The harmless end of the axis is its largest value (views, JPEG quality): x is drawn decreasing, so
-    every panel reads from harmless (left) to broken (right)."""
 
 
 def _positions(panel: StabilityPanel) -> tuple[dict[float | str, float], list[str] | None]:
@@ -69,10 +58,8 @@ def _positions(panel: StabilityPanel) -> tuple[dict[float | str, float], list[st
 
 def write_stability_chart(panels: list[StabilityPanel], styles: Mapping[str, ChartStyle], y_label: str, title: str,
                           footnote: list[str], path: Path) -> Path:
-    """Draw ``panels`` (a failed level: a red x at the bottom of its panel) and write the PNG to ``path``.
-
-    ``title`` may hold several lines (the first is drawn larger: the chart's name; then the protocol).
-    """
+    """Draw ``panels`` (a failed level: a red x at the bottom of its panel) and write the PNG to ``path``;
+    ``title``: the chart's name (drawn larger), then any further lines (the protocol)."""
     rows = math.ceil(len(panels) / COLUMNS)
     width = PANEL_SIZE[0] * min(COLUMNS, len(panels))
     lines = [ln for part in footnote for ln in textwrap.wrap(part, max(60, int(width * 17)))]

@@ -1,9 +1,5 @@
-"""A sweep's chart: the metric against each trial's running time, one line per trial.
-
-A finished trial's line ends in a dot; a trial stopped early by the scheduler ends in a large cross where it
-was cut, its line drawn up to there only; an errored or unfinished one is dotted. The best trial's line is
-the thickest. Matplotlib's Agg canvas is used directly (no pyplot state).
-"""
+"""A sweep's chart: the metric against each trial's running time, one line per trial, the best one thickest;
+its end marks how the trial ended (:data:`ENDS`: a large cross where the scheduler stopped it early)."""
 
 from __future__ import annotations
 
@@ -25,24 +21,19 @@ DPI = 110
 
 @dataclass(frozen=True)
 class TrialCurve:
-    """One trial's line."""
+    """One trial's line: legend text (the trial's key and values), its running time (s) and the metric at each
+    report, and why it ended (a key of :data:`ENDS`)."""
 
     label: str
-    """Legend text: the trial's key and values."""
     time_s: list[float]
-    """Its running time at each report, seconds."""
     values: list[float]
-    """The metric at each report."""
     reason: str
-    """Why it ended: a key of :data:`ENDS`."""
 
 
 def write_sweep_chart(curves: list[TrialCurve], metric: str, title: str, footnote: str, path: Path,
                       best: str | None = None) -> Path:
-    """Draw the curves (``best``: label of the best trial, drawn thickest) and write the PNG to ``path``.
-
-    ValueError when no curve has a point.
-    """
+    """Draw the curves (``best``: label of the best trial) and write the PNG to ``path``; ValueError when no curve
+    has a point."""
     drawn = [c for c in curves if c.values]
     if not drawn:
         raise ValueError(f"{path}: no trial reported {metric}; nothing to chart")

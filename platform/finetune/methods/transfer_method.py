@@ -1,5 +1,5 @@
 """2D label transfer (``2d-transfer``): a 2D segmenter labels the source views, and their labels are carried into
-the query view by the SOURCE views' depth (``sray.platform.eval.transfer_view``). An RGB-D method: it reads the
+the query view by the SOURCE views' depth (``sray.platform.eval.segmenter``). An RGB-D method: it reads the
 source images, cameras and depth, and of the query view only its camera.
 
 Zero-shot (step 0; ``sray eval --method 2d-transfer --segmenter FOLDER``) it uses the pretrained segmenter of
