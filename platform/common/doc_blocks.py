@@ -86,18 +86,15 @@ def rebase_links(markdown: str, from_dir: Path, to_dir: Path) -> str:
 
 
 _ABSOLUTE = re.compile(r"(?:(?<=^)|(?<=[\s`'\"(=,])|(?<=:///))(/[\w.@+~-]+(?:/[\w.@+~-]*)+)")
-
-
-def absolute_paths(text: str) -> list[str]:
-    """Absolute file paths in ``text`` (at a word start, after ``=`` or inside ``sqlite:///``), trailing dots cut."""
-    return [m.group(1).rstrip(".") for m in _ABSOLUTE.finditer(text)]
+"""An absolute file path at a word start, after ``=`` or inside ``sqlite:///``."""
 
 
 def portable(texts: list[str], root: Path) -> list[str]:
     """``texts`` with each absolute path rewritten: under ``root`` (the repository) relative to it, anywhere
     else as ``OUT/`` plus its path below the folder that all those other paths share."""
     root = Path(os.path.abspath(root))
-    outside = {p for t in texts for p in absolute_paths(t) if not _under(p, root)}
+    found = {m.group(1).rstrip(".") for t in texts for m in _ABSOLUTE.finditer(t)}
+    outside = {p for p in found if not _under(p, root)}
     base = os.path.commonpath([os.path.dirname(p) for p in outside]) if outside else "/"
 
     def rewrite(match: re.Match) -> str:

@@ -1,10 +1,8 @@
 """Rank-0 progress that reads cleanly on a terminal, in a log file and in a Ray job's log.
 
-On a terminal a bar redraws in place (plain tqdm, or inside a Ray worker Ray's driver-drawn
-``tqdm_ray``). Written to a file or a job log, every redraw of a bar stays in the text as one more copy
-of the line, so there progress is printed as plain lines instead, one every :data:`LINE_EVERY_S`
-seconds. The driver decides once, from its own standard output, and hands the choice to its Ray
-workers through :data:`PROGRESS_ENV` (:func:`progress_env`), since a worker's output is always a file.
+On a terminal a bar redraws in place (tqdm, or Ray's driver-drawn ``tqdm_ray`` in a worker); in a file every
+redraw would stay as one more line, so there progress is plain lines. The driver decides from its own standard
+output and hands the choice to its Ray workers (whose output is always a file) through :data:`PROGRESS_ENV`.
 """
 
 from __future__ import annotations
@@ -22,19 +20,6 @@ PROGRESS_ENV = "SRAY_PROGRESS"
 """Environment variable naming how progress is shown: ``bar`` or ``lines``."""
 LINE_EVERY_S = 30.0
 """Seconds between two progress lines (the last step always gets one)."""
-
-
-class _NoBar:
-    """The progress bar of ranks other than 0: does nothing."""
-
-    def update(self, n: int = 1) -> None:
-        """Ignore progress."""
-
-    def set_postfix(self, **values: Any) -> None:
-        """Ignore status text."""
-
-    def close(self) -> None:
-        """Nothing to close."""
 
 
 class _RayBar:
@@ -111,13 +96,10 @@ def progress_env() -> dict[str, str]:
 
 
 def make_progress(enabled: bool, total: int, initial: int = 0, desc: str = "") -> Any:
-    """Progress with ETA on rank 0 (``enabled``), a silent stand-in elsewhere.
-
-    :func:`progress_mode` ``lines``: :class:`LineProgress`. ``bar``: inside a Ray worker the bar is drawn
-    by the driver (``tqdm_ray``); elsewhere it is plain tqdm.
-    """
+    """Progress with ETA when ``enabled`` (rank 0), else a silent bar: :class:`LineProgress` in ``lines`` mode, else
+    Ray's driver-drawn bar inside a Ray worker, else tqdm."""
     if not enabled:
-        return _NoBar()
+        return tqdm(disable=True)
     if progress_mode() == "lines":
         return LineProgress(total, initial, desc)
     if ray.is_initialized() and ray.get_runtime_context().worker.mode == ray.WORKER_MODE:

@@ -1,14 +1,4 @@
-"""Live throughput of a training loop: rays per second, the share of the step spent waiting for data, peak memory.
-
-A :class:`ThroughputWindow` covers the steps between two progress reports. The loop fetches each batch through
-:meth:`ThroughputWindow.next_batch` (timed as data wait) and calls :meth:`ThroughputWindow.step_done` after each
-step; :meth:`ThroughputWindow.report` gives the window's figures and opens the next window:
-
-* ``rays_per_s`` = rays per batch x ranks x steps in the window / the window's wall seconds (every rank renders its
-  own batch in the same step);
-* ``data_wait_share`` = seconds spent waiting for batches / the window's wall seconds;
-* ``memory_mb`` = the peak so far: the CUDA allocator's peak on a GPU, the process's peak resident set on a CPU.
-"""
+"""Live throughput of a training loop: rays per second, the share of the step spent waiting for data, peak memory."""
 
 from __future__ import annotations
 
@@ -24,8 +14,8 @@ T = TypeVar("T")
 
 
 def peak_memory_mb(device: torch.device) -> float:
-    """Peak memory of this process in MiB: the CUDA allocator's peak on ``device`` when it is a GPU, else the peak
-    resident set size (``ru_maxrss``: KiB on Linux, bytes on macOS)."""
+    """Peak memory of this process in MiB: the CUDA allocator's on a GPU, else the peak resident set size
+    (``ru_maxrss``: KiB on Linux, bytes on macOS)."""
     if device.type == "cuda":
         return torch.cuda.max_memory_allocated(device) / 2**20
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -33,7 +23,8 @@ def peak_memory_mb(device: torch.device) -> float:
 
 
 class ThroughputWindow:
-    """Throughput figures over the steps since the last :meth:`report` (see the module docstring)."""
+    """Throughput over the steps since the last :meth:`report`; batches come through :meth:`next_batch` (timed as
+    data wait) and each step ends with :meth:`step_done`."""
 
     def __init__(self, rays_per_batch: int, world_size: int, device: torch.device) -> None:
         """Count ``rays_per_batch`` rays per step on each of ``world_size`` ranks; memory is read on ``device``."""
@@ -55,7 +46,8 @@ class ThroughputWindow:
         self.steps += 1
 
     def report(self) -> dict[str, float]:
-        """``rays_per_s``, ``data_wait_share`` and ``memory_mb`` of this window; the next window starts now."""
+        """``rays_per_s`` (rays per batch x ranks x steps / wall seconds), ``data_wait_share`` (of the wall seconds)
+        and ``memory_mb`` (the peak so far) of this window; the next window starts now."""
         elapsed = max(time.perf_counter() - self.start, 1e-9)
         figures = {"rays_per_s": self.rays_per_batch * self.world_size * self.steps / elapsed,
                    "data_wait_share": self.wait_s / elapsed, "memory_mb": peak_memory_mb(self.device)}
