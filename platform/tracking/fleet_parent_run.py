@@ -1,8 +1,4 @@
-"""The fleet's parent run, seen from the driver: reuse the recorded one or start one.
-
-Works with any :class:`~sray.platform.tracking.tracker.Tracker`. Tracking problems only warn: they
-never stop a fleet.
-"""
+"""The fleet's parent run, seen from the driver: reuse the recorded one or start one (problems only warn)."""
 
 from __future__ import annotations
 
@@ -16,12 +12,8 @@ log = logging.getLogger(__name__)
 
 
 def parent_run(tracker: Tracker, record: dict[str, Any], experiment: str, out_dir: Path) -> tuple[RunHandle, bool]:
-    """The parent run: the one ``record`` names (marked RUNNING again) if it still exists in this
-    tracker's store, else a new one named ``fleet · <folder's parent>/<folder>``. Returns (handle, whether
-    it is new).
-
-    ``record``: the fleet's ``fleet.json`` (``parent_run_id``, ``tracker`` and ``tracking_uri`` = the store).
-    """
+    """(handle, whether new) of the parent run: the one the fleet's ``fleet.json`` ``record`` names (marked RUNNING
+    again) if this tracker's store still has it, else a new one named ``fleet · <folder's parent>/<folder>``."""
     same_store = record["tracker"] == tracker.name and record["tracking_uri"] == tracker.store
     if record.get("parent_run_id") and same_store:
         try:

@@ -16,9 +16,7 @@ MAX_PARAM_VALUE = 6000
 MAX_KEY_LENGTH = 250
 """MLflow's limit on a param or metric key's length."""
 _BAD_KEY_CHARS = re.compile(r"[^A-Za-z0-9_\-./ ]")
-"""Characters MLflow rejects in keys (it allows alphanumerics, ``_ - . /`` and space)."""
-
-
+"""Characters MLflow rejects in keys."""
 TRUNCATION_MARKER = "...[truncated]"
 """Suffix of a param value cut to :data:`MAX_PARAM_VALUE` characters."""
 
@@ -43,11 +41,8 @@ def _items(value: Any) -> list[tuple[str, Any]]:
 
 
 def flatten_config(obj: Any, prefix: str = "") -> dict[str, Any]:
-    """Nested dataclasses/dicts -> {dotted key: leaf}; lists of containers get index keys.
-
-    ``flatten_config({"model": {"tau": 0.7}, "views": [1, 2]})`` gives
-    ``{"model.tau": 0.7, "views": [1, 2]}``: lists of scalars stay whole (one readable param).
-    """
+    """Nested dataclasses/dicts -> {dotted key: leaf}; lists of containers get index keys, lists of scalars stay
+    whole: ``{"model": {"tau": 0.7}, "views": [1, 2]}`` -> ``{"model.tau": 0.7, "views": [1, 2]}``."""
     if not _is_container(obj):
         return {prefix or "value": obj}
     out: dict[str, Any] = {}
@@ -72,10 +67,8 @@ def sanitize_key(key: str) -> str:
 
 
 def to_params(obj: Any) -> dict[str, str]:
-    """Flattened, MLflow-valid params: string values, over-long values truncated with a warning.
-
-    A truncated value ends in :data:`TRUNCATION_MARKER`; log the full config as an artifact too.
-    """
+    """Flattened, MLflow-valid params: string values, over-long ones cut to end in :data:`TRUNCATION_MARKER`, with a
+    warning."""
     params: dict[str, str] = {}
     for key, value in flatten_config(obj).items():
         text = _leaf_text(value)

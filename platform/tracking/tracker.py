@@ -1,14 +1,8 @@
 """The tracker interface: where runs, params, metrics, artifacts and registered models go.
 
-Everything outside ``platform/tracking/`` talks to a :class:`Tracker` (chosen by name through
-:mod:`sray.platform.tracking.registry`) and the :class:`RunLogger` it opens; MLflow is one
-implementation (:mod:`sray.platform.tracking.mlflow_tracker`).
-
-A driver (the launcher, the eval job, the fleet) prepares a run with :meth:`Tracker.start_run` and
-gets a :class:`RunHandle`: plain strings, picklable, handed to Ray workers as they are. A worker
-opens a logger on that handle (:func:`sray.platform.tracking.registry.open_logger`), so a worker
-group restarted by Ray keeps writing into the same run. Tracking never stops a job: loggers buffer
-and warn instead of raising, and :meth:`Tracker.end_run` / :meth:`Tracker.tag_run` only warn.
+A driver prepares a run with :meth:`Tracker.start_run` and hands its picklable :class:`RunHandle` to Ray workers,
+which open a logger on it (``registry.open_logger``): a worker group restarted by Ray keeps writing into the same
+run. Tracking never stops a job: loggers buffer and warn, :meth:`Tracker.end_run` and :meth:`Tracker.tag_run` warn.
 """
 
 from __future__ import annotations
@@ -26,7 +20,6 @@ log = logging.getLogger(__name__)
 DRAIN_TIMEOUT_S = 120.0
 """How long a logger keeps retrying what it still holds when its job ends (:meth:`RunLogger.drain`)."""
 RUN_STATUSES = ("RUNNING", "FINISHED", "FAILED", "KILLED")
-"""States a run can be put in (:meth:`Tracker.set_status`)."""
 
 
 @dataclass(frozen=True)
@@ -38,13 +31,11 @@ class RunHandle:
     store: str
     """Where the tracker keeps its runs (MLflow: the tracking URI)."""
     run_id: str
-    """The run's id in that store, fixed for the whole job (restarts included)."""
     experiment_id: str = ""
-    """Id of the run's experiment (group of runs) in the store."""
     ui_url: str = ""
     """Browser address of the run's page ('' when the tracker has no UI)."""
     ui_hint: str = ""
-    """How to start that UI when it is not running by itself ('' when nothing is needed)."""
+    """How to start that UI when it is not running by itself."""
 
 
 class RunLogger(ABC):
@@ -67,19 +58,15 @@ class RunLogger(ABC):
 
     @abstractmethod
     def register_model(self, checkpoint: Path, name: str, alias: str = "latest") -> str | None:
-        """Store a checkpoint and register it as a new version of model ``name`` reachable as ``name@alias``.
-
-        Returns the version, or None when it could not be made now.
-        """
+        """Store a checkpoint as a new version of model ``name`` (``name@alias``); the version, or None for now."""
 
     @abstractmethod
     def close(self, status: str = "FINISHED") -> None:
         """Deliver what is buffered and put the run in ``status`` (one of :data:`RUN_STATUSES`)."""
 
     def watch_system(self, node: str, interval_s: float) -> Callable[[], None]:
-        """Record this machine's system metrics (CPU, memory, disk, network, GPU where present) into the run every
-        ``interval_s`` seconds, named after ``node``, until the returned function is called. A tracker without
-        system metrics records nothing (and returns a function that does nothing)."""
+        """Record this machine's system metrics (named after ``node``) every ``interval_s`` seconds until the returned
+        function is called (default: nothing recorded)."""
         return lambda: None
 
     def log_image(self, png: Path, artifact_path: str = "renders") -> None:
@@ -91,15 +78,12 @@ class RunLogger(ABC):
         return True
 
     def unsent_metrics(self) -> list[tuple[str, float, int]]:
-        """Metrics logged but not delivered yet, as ``(key, value, step)`` (a logger without a buffer: none).
-
-        A training job stores them with each checkpoint: a worker restarted from it logs them again, so a
-        worker that dies while the store is unreachable leaves no gap in the history."""
+        """Metrics logged but not delivered yet, as ``(key, value, step)``: a training checkpoint stores them, so a
+        worker restarted from it logs them again and leaves no gap in the history."""
         return []
 
     def drain(self, timeout_s: float = DRAIN_TIMEOUT_S, poll_s: float = 2.0) -> bool:
-        """Flush until nothing is left or ``timeout_s`` passed (a store restarting meanwhile loses nothing);
-        True when everything was delivered."""
+        """Flush until nothing is left (True) or ``timeout_s`` passed (False)."""
         deadline = time.monotonic() + timeout_s
         while not self.flush(force=True):
             if time.monotonic() >= deadline:
@@ -135,10 +119,7 @@ class Tracker(ABC):
         """The store used when none is given: one inside ``workdir``."""
 
     def ensure_store(self) -> None:
-        """Make the store usable now, in this process, before workers fan out (default: nothing to do).
-
-        Raises ConnectionError naming the store when it cannot be used.
-        """
+        """Make the store usable now, before workers fan out; ConnectionError naming the store otherwise."""
 
     @abstractmethod
     def start_run(self, experiment: str, run_name: str, tags: Mapping[str, str] | None = None,
