@@ -1,10 +1,5 @@
-"""Benchmark results stored as data beside their charts, one rendered section per (benchmark, device).
-
-``<doc folder>/benchmarks/<bench>/<device>/tables.json`` holds every table the benchmark measured on that device;
-:func:`record` replaces the table of the same title there and rewrites the section ``## <benchmark> (<device>)``
-(in place, else at the end) of ``doc``, or of the page ``benchmarks/<bench>.md`` when ``doc`` is an index
-(:data:`INDEX_MARKER`). Other sections are kept. Paths are repository-relative or ``OUT/…``.
-"""
+"""Benchmark tables stored as data beside their charts (``benchmarks/<bench>/<device>/tables.json``), each (benchmark,
+device) rendered as a section of ``doc``, or of the benchmark's page when ``doc`` is an index (:data:`INDEX_MARKER`)."""
 
 from __future__ import annotations
 
@@ -44,7 +39,6 @@ class TableRecord:
 
     title: str
     command: str
-    """The ``sray …`` command line that measured it."""
     machine: str
     """``machine_line()`` when it was measured."""
     measured_utc: str
@@ -73,9 +67,7 @@ def bench_dir(doc: Path, bench: Bench, kind: str | None = None) -> Path:
 def bench_page(doc: Path, bench: Bench) -> Path:
     """``doc``, or the page ``benchmarks/<slug>.md`` beside it when ``doc`` is an index."""
     doc = Path(doc)
-    if doc.exists() and INDEX_MARKER in doc.read_text():
-        return doc.parent / "benchmarks" / f"{bench.slug}.md"
-    return doc
+    return doc.parent / "benchmarks" / f"{bench.slug}.md" if doc.exists() and INDEX_MARKER in doc.read_text() else doc
 
 
 def page_header(bench: Bench, page: Path, doc: Path) -> str:
@@ -108,30 +100,23 @@ _HEADER = ("# Benchmarks\n\nOne section per benchmark and kind of device, genera
            "kind of device replaces that table. Ratios are measured side by side in one run.\n")
 
 
-def _repo_root(doc: Path) -> Path:
-    """The repository a document belongs to: the folder above ``docs/``, else the working directory."""
-    folder = Path(os.path.abspath(doc)).parent
-    return folder.parent if folder.name == "docs" else Path.cwd()
-
-
 def record(bench: Bench, title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "",
            kind: str | None = None, replaces: tuple[str, ...] = ()) -> str:
-    """Print a measured table, store it as ``bench``'s table ``title`` on this device (or under ``kind``) with
-    this process's command line, and rewrite the section; returns it. ``replaces``: former titles of the table."""
+    """Print a measured table and :func:`store_table` it as ``title``, with this process's command line."""
     command = "sray " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    command, table_markdown, notes = portable([command, table_markdown, notes], _repo_root(doc))
-    entry = TableRecord(title=title, command=command, machine=machine_line(),
+    folder = Path(os.path.abspath(doc)).parent
+    repo = folder.parent if folder.name == "docs" else Path.cwd()  # the repository the document belongs to
+    command, table_markdown, notes = portable([command, table_markdown, notes], repo)
+    entry = TableRecord(title=title, command=command, machine=machine_line(), notes=notes.strip(),
                         measured_utc=_dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%MZ"),
-                        blocks=parse_blocks(table_markdown), notes=notes.strip(),
-                        machine_descriptor=describe_machine())
+                        blocks=parse_blocks(table_markdown), machine_descriptor=describe_machine())
     print(f"\n### {title}\n\n{render_blocks(entry.blocks)}\n\n{entry.notes}\n".rstrip() + "\n")
     return store_table(bench, entry, doc, kind, replaces)
 
 
 def store_table(bench: Bench, entry: TableRecord, doc: Path = DEFAULT_DOC, kind: str | None = None,
                 replaces: tuple[str, ...] = ()) -> str:
-    """Put ``entry`` into ``bench``'s ``tables.json`` in place of the table of its title (or a former title in
-    ``replaces``) and rewrite the benchmark's section of ``doc`` from the file; returns the section."""
+    """Put ``entry`` into ``tables.json`` in place of its title's (or a former title's) and rewrite the section."""
     kind = kind or device_kind()
     data_path = bench_dir(doc, bench, kind) / DATA_FILE
     data = (json.loads(data_path.read_text()) if data_path.exists()
@@ -154,9 +139,7 @@ def section_title(bench: Bench, kind: str) -> str:
 
 def render_section(bench: Bench, kind: str, tables: list[TableRecord], doc: Path, page: Path | None = None,
                    data_file: str = DATA_FILE, title: str | None = None) -> str:
-    """The section's Markdown on ``page`` (default ``doc``): a link to ``data_file``, then per table its heading,
-    command and machine (once per run), blocks and notes (once per run of equal notes), links rebased onto
-    ``page``'s folder. ``title``: the heading (default :func:`section_title`)."""
+    """The section's Markdown on ``page`` (default ``doc``): its data's link, then each table, command and notes."""
     page = Path(page or doc)
     data_link = os.path.relpath(bench_dir(doc, bench, kind) / data_file, page.parent)
     parts = [f"## {title or section_title(bench, kind)}", f"Its data: [`{data_link}`]({data_link})."]

@@ -1,6 +1,4 @@
-"""A benchmark table as data and back: Markdown pipe tables parsed into header, alignment and rows (the
-text between them kept as text blocks), rendered again from that data; and absolute paths in a recorded
-command or note rewritten to repository-relative paths or an ``OUT/`` placeholder."""
+"""Markdown pipe tables as data and back, and absolute paths rewritten repository-relative or as ``OUT/…``."""
 
 from __future__ import annotations
 
@@ -29,8 +27,7 @@ def _cells(line: str) -> list[str]:
 
 
 def parse_blocks(markdown: str) -> list[dict]:
-    """``markdown`` as blocks: ``{"header", "align", "rows", "outer_pipes"}`` for each pipe table (a line
-    with ``|`` followed by a rule line), ``{"text"}`` for what lies between (stripped; empty text dropped)."""
+    """``markdown`` as blocks: ``{"header", "align", "rows", "outer_pipes"}`` per pipe table, ``{"text"}`` between."""
     lines = markdown.strip("\n").splitlines()
     blocks: list[dict] = []
     text: list[str] = []
@@ -77,8 +74,7 @@ _LINK = re.compile(r"(\]\()([^)\s#:]+)(\))")
 
 
 def rebase_links(markdown: str, from_dir: Path, to_dir: Path) -> str:
-    """``markdown`` with each relative link target (``](path)``: no scheme, no bare anchor) written relative to
-    ``from_dir`` rewritten relative to ``to_dir``; unchanged when the two folders are one."""
+    """``markdown`` with each relative link target (``](path)``) rewritten from ``from_dir`` to ``to_dir``."""
     if os.path.abspath(from_dir) == os.path.abspath(to_dir):
         return markdown
     return _LINK.sub(lambda m: m.group(1) + os.path.relpath(os.path.join(from_dir, m.group(2)), to_dir) + m.group(3),
@@ -90,8 +86,7 @@ _ABSOLUTE = re.compile(r"(?:(?<=^)|(?<=[\s`'\"(=,])|(?<=:///))(/[\w.@+~-]+(?:/[\
 
 
 def portable(texts: list[str], root: Path) -> list[str]:
-    """``texts`` with each absolute path rewritten: under ``root`` (the repository) relative to it, anywhere
-    else as ``OUT/`` plus its path below the folder that all those other paths share."""
+    """``texts`` with absolute paths relative to ``root``, or ``OUT/`` + the path below the others' common folder."""
     root = Path(os.path.abspath(root))
     found = {m.group(1).rstrip(".") for t in texts for m in _ABSOLUTE.finditer(t)}
     outside = {p for p in found if not _under(p, root)}

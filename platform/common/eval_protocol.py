@@ -1,8 +1,5 @@
-"""How an evaluation number was made: :class:`EvalProtocol`.
-
-Every metrics JSON carries it as ``"protocol"`` (:meth:`EvalProtocol.to_json`); training logs it once per run (tag
-``sray.protocol``, params ``protocol.*``); every table prints :meth:`EvalProtocol.describe` under it.
-"""
+"""How an evaluation number was made: :class:`EvalProtocol`, in every metrics JSON (``"protocol"``), once per
+training run (tag ``sray.protocol``, params ``protocol.*``) and under every table (:meth:`~EvalProtocol.describe`)."""
 
 from __future__ import annotations
 
@@ -86,9 +83,7 @@ class EvalProtocol:
     @classmethod
     def from_manifest(cls, manifest: Manifest, n_source: int, stride: int,
                       where: str = "manifest.json", inputs: str = "rgb", train_inputs: str = "") -> EvalProtocol:
-        """The protocol of fixed sources ranked by ``manifest``'s neighbour rule (``where`` names it in errors);
-        ``inputs``: the model's ``model.inputs``; ``train_inputs``: its ``SRayConfig.train_inputs`` (empty: the
-        same as ``inputs``)."""
+        """The protocol of fixed sources ranked by ``manifest``'s neighbour rule (``where`` names it in errors)."""
         rule, version = manifest.neighbours.get("rule"), manifest.neighbours.get("version")
         if not rule or version is None:
             raise ValueError(f"{where}: field 'neighbours' has no 'rule' and 'version' ({manifest.neighbours}); "
@@ -110,8 +105,7 @@ class EvalProtocol:
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> EvalProtocol:
-        """Inverse of :meth:`to_json`; ValueError names missing or unknown fields (:data:`LATER_FIELDS` may be
-        missing: they take their defaults)."""
+        """Inverse of :meth:`to_json`; ValueError names missing (but :data:`LATER_FIELDS`) or unknown fields."""
         if not isinstance(d, dict):
             raise ValueError(f"eval protocol {d!r}: expected a JSON object (docs/CONTRACTS.md); a file written "
                              "before sray recorded protocol descriptors: evaluate again to replace it")
@@ -147,16 +141,14 @@ class EvalProtocol:
 
 
 def results_inputs(results: Iterable[dict[str, Any]], method: str) -> str:
-    """The inputs ``method``'s fleet results record in their ``protocol`` (``RGB``, ``RGB-D``, joined by ``/``);
-    empty when none records one."""
+    """The inputs ``method``'s fleet results record (``RGB``, ``RGB-D``, joined by ``/``; empty without any)."""
     found = {EvalProtocol.from_json(r["protocol"]).inputs for r in results
              if r["method"] == method and r.get("protocol") is not None}
     return "/".join(inputs_name(i) for i in sorted(found))
 
 
 def caption_lines(labelled: Iterable[tuple[str, dict[str, Any] | None]]) -> list[str]:
-    """``Protocol: ...`` lines under a table of (row label, protocol JSON or None) pairs: one line when every
-    row shares a protocol, else one per protocol naming its rows."""
+    """``Protocol: ...`` lines for (row label, protocol JSON or None) pairs: one per protocol, naming rows if many."""
     labels: dict[str, list[str]] = {}
     for label, protocol in labelled:
         if protocol is not None:

@@ -1,9 +1,4 @@
-"""The one fault-injection hook of sray: the ``SRAY_FAULTS`` environment variable, read only here.
-
-Tests and cluster drills break a run on purpose, e.g. ``SRAY_FAULTS="train.kill_at_step=12;fleet.fail_scenes=a,b"``:
-``key=value`` entries separated by ``;``, lists comma-separated, the keys of :data:`_KEYS` (see :class:`Faults`).
-The drivers forward the variable to every Ray worker and task of a run (:func:`propagated_env`).
-"""
+"""The one fault-injection hook, ``SRAY_FAULTS="train.kill_at_step=12;fleet.fail_scenes=a,b"`` (:class:`Faults`)."""
 
 from __future__ import annotations
 
@@ -19,7 +14,6 @@ ENV_VAR = "SRAY_FAULTS"
 KILL_MARKER = ".fault_kill_done"
 """File in a training job folder that records that the injected kill already happened."""
 KILL_EXIT_CODE = 17
-"""Exit status of a worker killed by ``train.kill_at_step``."""
 HOLD_TIMEOUT_S = 120.0
 """Longest pause at a ``train.hold_at_steps`` step when nobody releases it (then training goes on)."""
 
@@ -39,8 +33,7 @@ class Faults:
     stop_after_step: int = -1
     """Training stops cleanly with a checkpoint after this many steps, as after Ctrl-C."""
     hold_at_steps: tuple[int, ...] = ()
-    """Rank 0 pauses before each listed step, once per job (:func:`hold_if_due`): a drill kills a node, the
-    driver or the tracking server at a known step."""
+    """Rank 0 pauses before each listed step, once per job, so a drill can break something at a known step."""
     fail_scenes: tuple[str, ...] = ()
     """Every attempt of a fleet task for these scenes raises :class:`InjectedFailure`."""
     fail_trials: tuple[str, ...] = ()
@@ -89,15 +82,13 @@ def propagated_env() -> dict[str, str]:
     return {ENV_VAR: value} if value else {}
 
 
-def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path,
-                before_exit: Callable[[], None] | None = None) -> None:
+def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path, before_exit: Callable[[], None]) -> None:
     """Exit this process abruptly at ``faults.kill_at_step`` (rank 0, first attempt only), after ``before_exit``."""
     marker = job_dir / KILL_MARKER
     if rank != 0 or step != faults.kill_at_step or marker.exists():
         return
     marker.touch()
-    if before_exit is not None:
-        before_exit()
+    before_exit()
     os._exit(KILL_EXIT_CODE)
 
 
@@ -108,8 +99,7 @@ def hold_paths(job_dir: Path, step: int) -> tuple[Path, Path]:
 
 def hold_if_due(faults: Faults, step: int, rank: int, job_dir: Path, facts: Callable[[], dict[str, Any]],
                 timeout_s: float = HOLD_TIMEOUT_S, poll_s: float = 0.1) -> bool:
-    """Pause rank 0 before ``step`` when ``train.hold_at_steps`` lists it and this job has not paused there yet:
-    write the marker (``facts()``, pid and step) and wait for the release file, at most ``timeout_s``. True if so."""
+    """Pause rank 0 before a listed ``step`` once per job (marker: ``facts()``, pid, step); True when it paused."""
     marker, release = hold_paths(job_dir, step)
     if rank != 0 or step not in faults.hold_at_steps or marker.exists():
         return False

@@ -1,9 +1,5 @@
-"""What a machine is, for every stored result: CPU model, cores, accelerator, and the training steps of a fixed
-probe (:data:`PROBE_MODEL` on one seeded tiny batch, on the CPU) that one CPU second buys on it.
-
-The probe runs in a fresh one-thread process: on a loaded machine the idle threads of a multi-threaded run spin and
-count as CPU time. It is fixed so that its figures from any two machines compare, whatever the recipes become.
-"""
+"""What a machine is, for every stored result: CPU model, cores, accelerator, and the training steps of a fixed probe
+(:data:`PROBE_MODEL`, one seeded tiny batch) one CPU second buys on it, in a fresh one-thread process."""
 
 from __future__ import annotations
 
@@ -28,7 +24,6 @@ PROBE_VIEWS = 8
 PROBE_HW = (48, 64)
 """(H, W) of the probe's source images."""
 PROBE_STEPS = 8
-"""Timed steps (after one warm-up step)."""
 CPUINFO = Path("/proc/cpuinfo")
 
 
@@ -42,18 +37,6 @@ def cpu_model(cpuinfo: Path = CPUINFO) -> str:
     return _stdlib_platform.processor() or _stdlib_platform.machine()
 
 
-def usable_cores() -> int:
-    """The CPU cores this process may run on (its affinity where known, else all)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-
-def device_name() -> str:
-    """The accelerator results are measured on: the first CUDA device's name, else ``cpu``."""
-    return torch.cuda.get_device_name(0) if torch.cuda.is_available() else "cpu"
-
-
 def probe_batch() -> dict[str, torch.Tensor]:
     """The probe's fixed batch (seed 0): source images (V, 3, H, W) of cameras side by side looking along +z, their
     K (V, 3, 3) and c2w (V, 4, 4), and query rays (R, 3) with labels (R,) and colours (R, 3)."""
@@ -65,9 +48,8 @@ def probe_batch() -> dict[str, torch.Tensor]:
     uv = torch.rand(PROBE_RAYS, 2, generator=gen) * torch.tensor([w - 1.0, h - 1.0])
     origins, dirs = pixel_rays(K, torch.eye(4), uv)
     return {"src_rgb": torch.rand(PROBE_VIEWS, 3, h, w, generator=gen), "src_K": K.expand(PROBE_VIEWS, 3, 3).clone(),
-            "src_c2w": c2w, "origins": origins, "dirs": dirs,
-            "label": torch.randint(0, PROBE_MODEL.n_classes, (PROBE_RAYS,), generator=gen),
-            "rgb": torch.rand(PROBE_RAYS, 3, generator=gen)}
+            "src_c2w": c2w, "origins": origins, "dirs": dirs, "rgb": torch.rand(PROBE_RAYS, 3, generator=gen),
+            "label": torch.randint(0, PROBE_MODEL.n_classes, (PROBE_RAYS,), generator=gen)}
 
 
 def probe_steps_per_cpu_second(steps: int = PROBE_STEPS) -> float:
@@ -96,8 +78,7 @@ def probe_steps_per_cpu_second(steps: int = PROBE_STEPS) -> float:
 
 
 def probe_in_fresh_process(steps: int = PROBE_STEPS, timeout_s: float = 300.0) -> float | None:
-    """:func:`probe_steps_per_cpu_second` in a fresh one-thread process; None (with a warning) when it fails, so a
-    result is stored with an unknown throughput rather than not at all."""
+    """:func:`probe_steps_per_cpu_second` in a fresh one-thread process; None (with a warning) when it fails."""
     code = f"from sray.platform.common.machine import probe_steps_per_cpu_second as p; print(p({int(steps)}))"
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     try:
@@ -112,8 +93,9 @@ def probe_in_fresh_process(steps: int = PROBE_STEPS, timeout_s: float = 300.0) -
 
 @functools.lru_cache(maxsize=1)
 def describe_machine() -> dict[str, str | int | float | None]:
-    """``{"cpu_model", "cores", "device", "ray_steps_per_cpu_second"}`` (the probe's figure to 3 significant digits,
-    None when it could not run); measured once per process."""
+    """``{"cpu_model", "cores", "device", "ray_steps_per_cpu_second"}`` (the probe's to 3 digits; None if it failed)."""
     rate = probe_in_fresh_process()
-    return {"cpu_model": cpu_model(), "cores": usable_cores(), "device": device_name(),
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    device = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "cpu"
+    return {"cpu_model": cpu_model(), "cores": cores, "device": device,
             "ray_steps_per_cpu_second": None if rate is None else float(f"{rate:.3g}")}

@@ -1,5 +1,4 @@
-"""The one conversion from a loader sample (``sray.data_tools``) to the model's input (``sray.model``), which
-cannot import the loader's types. No tensor is copied."""
+"""The one conversion from a loader sample to the model's input (the model cannot import the loader's types)."""
 
 from __future__ import annotations
 
@@ -17,7 +16,6 @@ def ray_batch(sample: SceneQuery, pixels: Tensor | None = None) -> RayBatch:
             raise ValueError(f"scene {sample.scene!r}, view {sample.query_id!r}: a {type(sample).__name__} has no "
                              "pixels; pass the (R, 2) pixels to render")
         pixels = sample.pixels
-    return RayBatch(src_rgb=sample.sources.rgb, src_K=sample.sources.K, src_c2w=sample.sources.c2w,
-                    query=QueryRays(K=sample.query.K, c2w=sample.query.c2w, pixels=pixels,
-                                    near=sample.near, far=sample.far), src_depth=sample.sources.depth,
-                    src_label=sample.sources.label)
+    query = QueryRays(K=sample.query.K, c2w=sample.query.c2w, pixels=pixels, near=sample.near, far=sample.far)
+    return RayBatch(src_rgb=sample.sources.rgb, src_K=sample.sources.K, src_c2w=sample.sources.c2w, query=query,
+                    src_depth=sample.sources.depth, src_label=sample.sources.label)

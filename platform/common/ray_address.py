@@ -1,5 +1,4 @@
-"""Check a Ray cluster address before joining it: one clear line in about a second, where ``ray.init`` retries a
-refused token for 20 s and a silent address for minutes (a TCP connection, then one GCS request with the token)."""
+"""Check a Ray cluster address in a second, where ``ray.init`` retries a refused token for 20 s, silence for minutes."""
 
 from __future__ import annotations
 
@@ -39,8 +38,7 @@ def _quiet_stderr() -> Iterator[None]:
 
 
 def check_ray_address(address: str, timeout_s: float = 3.0) -> None:
-    """RayAddressError (the address, what went wrong, the fix) unless a Ray cluster answers at ``address`` and
-    accepts this process's token; ``auto`` and ``ray://`` addresses are left to Ray."""
+    """RayAddressError unless a Ray cluster at ``address`` accepts this process's token (``auto``, ``ray://``: skip)."""
     if address == "auto" or address.startswith("ray://"):
         return
     host, port = split_address(address)
@@ -61,8 +59,7 @@ def check_ray_address(address: str, timeout_s: float = 3.0) -> None:
 
 
 def _ask_gcs(address: str, timeout_s: float) -> bool | None:
-    """One GCS request with this process's token in a daemon thread (Ray's own wait is 40 s): False when accepted,
-    True when refused, None without an answer within ``timeout_s``."""
+    """One GCS request with this process's token: False if accepted, True if refused, None without an answer."""
     from ray._raylet import GcsClient
     from ray.exceptions import AuthenticationError
 

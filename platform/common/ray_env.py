@@ -1,12 +1,4 @@
-"""The Ray environment of an sray job: the controller's poll interval, the workers' environment, the filters
-that silence Ray's known log floods, and the hook every Ray worker process of a job runs first.
-
-Ray Train's controller sees a worker group start, report and finish only when it polls it (Ray's default every 2 s):
-on one machine a poll is a local call, so sray's local Ray polls every 0.5 s (:data:`TRAIN_POLL_ENV`), which made
-a short job start and end seconds sooner. The drivers pass :data:`SETUP_HOOK` in the job's runtime environment, so
-:func:`setup_worker` runs first in each process Ray starts for the job (controller, placement-group cleaner,
-training workers, fleet tasks).
-"""
+"""The Ray environment of an sray job: poll interval, workers' environment, log filters, the worker setup hook."""
 
 from __future__ import annotations
 
@@ -17,7 +9,7 @@ import os
 import ray
 
 TRAIN_POLL_ENV = {"RAY_TRAIN_HEALTH_CHECK_INTERVAL_S": "0.5"}
-"""Environment of a driver on one machine; Ray Train passes the variable on to its controller."""
+"""Environment of a driver on one machine: Ray Train's controller sees workers start, report and end only by polling."""
 
 
 def _ray_file_logger(relative: str) -> str:
@@ -33,14 +25,11 @@ QUIET = {"ray.train.v2._internal.execution.controller.placement_group_cleaner":
          _ray_file_logger("train/v2/_internal/execution/context.py"): ("Reporting training result",),
          "ray.train.v2._internal.execution.scaling_policy.autoscaling_coordinator_client":
          ("Failed to send resource request for",)}
-"""Logger name -> message prefixes dropped from it: the placement-group cleaner's failing poll of the state API
-(only a dashboard serves it; the local Ray has none) every few seconds, Ray's 3 lines per checkpoint beside sray's
-own progress line, and the autoscaler request that times out on busy cores, with a traceback Ray calls safe to
-ignore (a job of fixed size does not depend on it)."""
+"""Logger name -> message prefixes dropped: the placement-group cleaner's failing poll every few seconds (without a
+dashboard), Ray's 3 lines per checkpoint, and a timed-out autoscaler request's traceback Ray calls safe to ignore."""
 
 TRAIN_WORKER_ENV = {"RAY_TRAIN_ENABLE_PRINT_PATCH": "0"}
-"""Environment of Ray Train workers: without Ray Train's ``print`` patch each printed line reaches the driver once,
-not twice (through the root logger and Ray's log capture)."""
+"""Environment of Ray Train workers: without Ray's ``print`` patch a printed line reaches the driver once, not twice."""
 
 SETUP_HOOK = "sray.platform.common.ray_env.setup_worker"
 """Import path of :func:`setup_worker`, for ``runtime_env={"worker_process_setup_hook": ...}``."""
@@ -50,7 +39,6 @@ class DropPrefixes(logging.Filter):
     """Drops log records whose message starts with one of ``prefixes``."""
 
     def __init__(self, prefixes: tuple[str, ...]) -> None:
-        """``prefixes``: message beginnings to drop."""
         super().__init__()
         self.prefixes = prefixes
 
@@ -67,13 +55,8 @@ def quiet_ray_logs() -> None:
             logger.addFilter(DropPrefixes(prefixes))
 
 
-def pin_cluster_address() -> None:
-    """Set ``RAY_ADDRESS`` to this worker's own cluster (unless set): Ray code that looks up ``address="auto"``
-    (the placement-group cleaner) dies with "Found multiple active Ray instances" when a second Ray runs."""
-    os.environ.setdefault("RAY_ADDRESS", ray.get_runtime_context().gcs_address)
-
-
 def setup_worker() -> None:
-    """The hook: quiet Ray's known log floods (:func:`quiet_ray_logs`), pin the cluster address."""
+    """The hook: quiet Ray's log floods and pin ``RAY_ADDRESS`` to this cluster (Ray code that looks up ``"auto"``
+    dies with "Found multiple active Ray instances" when a second Ray runs on the host)."""
     quiet_ray_logs()
-    pin_cluster_address()
+    os.environ.setdefault("RAY_ADDRESS", ray.get_runtime_context().gcs_address)

@@ -36,8 +36,7 @@ from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
-from sray.platform.common.progress import make_progress
-from sray.platform.common.throughput import ThroughputWindow, progress_postfix
+from sray.platform.common.progress import ThroughputWindow, make_progress, progress_postfix
 from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.eval.scene_scoring import score_scene
 from sray.platform.finetune.learners import Learner

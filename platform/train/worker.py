@@ -19,8 +19,7 @@ from ray.train import Checkpoint
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_due
 from sray.platform.common.model_input import ray_batch
-from sray.platform.common.progress import make_progress
-from sray.platform.common.throughput import ThroughputWindow, peak_memory_mb, progress_postfix
+from sray.platform.common.progress import ThroughputWindow, make_progress, peak_memory_mb, progress_postfix
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle
