@@ -1,10 +1,4 @@
-"""The MLflow dashboard on a store (``sray ui``): a lean ``mlflow server`` bound to localhost.
-
-Lean: no job runner and one worker (2 processes and ~0.5 GiB instead of 15-27 and 2-3 GiB), no telemetry, no AI
-Gateway. Its app is :mod:`sray.platform.tracking.ui_app`. Experiments sray creates name their ``file://`` artifact
-location; those created in the UI store theirs through the server into the same ``mlartifacts`` folder. The server
-runs in its own process group, so that :meth:`DashboardHandle.stop` ends it and its worker, and nothing else.
-"""
+"""``sray ui``: a lean ``mlflow server`` on localhost (no job runner, one worker: 2 processes, ~0.5 GiB, not 15-27)."""
 
 from __future__ import annotations
 
@@ -34,8 +28,7 @@ SORT_BY_RUN_NAME = "orderByKey=tags.%60mlflow.runName%60&orderByAsc=true"
 
 
 def runs_view_url(base_url: str, experiment_id: str, flat: bool = False) -> str:
-    """Address of an experiment's classic runs table, whatever view a browser last chose; ``flat``: sorted by run
-    name, child runs beside their parents."""
+    """Address of an experiment's runs table; ``flat``: sorted by run name, child runs beside their parents."""
     url = f"{base_url.rstrip('/')}/#/experiments/{experiment_id}/runs?workflowType=machine_learning"
     return f"{url}&{SORT_BY_RUN_NAME}" if flat else url
 
@@ -56,8 +49,7 @@ def experiment_links(tracking_uri: str, base_url: str) -> dict[str, str]:
         runs = client.search_runs([exp.experiment_id], order_by=["attributes.start_time DESC"], max_results=1)
         if runs:
             newest.append((int(runs[0].info.start_time or 0), exp.name, exp.experiment_id))
-    newest.sort(reverse=True)
-    return {name: runs_view_url(base_url, exp_id) for _, name, exp_id in newest}
+    return {name: runs_view_url(base_url, exp_id) for _, name, exp_id in sorted(newest, reverse=True)}
 
 
 @dataclass
@@ -67,11 +59,9 @@ class DashboardHandle:
     process: subprocess.Popen
     """The ``mlflow server`` process (leader of its own process group)."""
     base_url: str
-    """``http://host:port``."""
     url: str
     """Runs view of the experiment with the newest run (``base_url`` when there is none)."""
     log_path: Path
-    """The server's stdout and stderr."""
     experiment_urls: dict[str, str] = field(default_factory=dict)
     """Experiment name -> runs-view address, newest activity first."""
 
@@ -84,17 +74,14 @@ class DashboardHandle:
 
     def stop(self, timeout_s: float = 15.0) -> int | None:
         """Stop the server and its worker (SIGTERM to its process group, SIGKILL after ``timeout_s``)."""
-        if self.process.poll() is None:
-            for sig in (signal.SIGTERM, signal.SIGKILL):
-                try:
-                    os.killpg(self.process.pid, sig)
-                except ProcessLookupError:
-                    break
-                try:
-                    self.process.wait(timeout_s)
-                    break
-                except subprocess.TimeoutExpired:
-                    continue
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            if self.process.poll() is not None:
+                break
+            try:
+                os.killpg(self.process.pid, sig)
+                self.process.wait(timeout_s)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                continue
         return self.process.poll()
 
     def __enter__(self) -> DashboardHandle:
@@ -105,8 +92,7 @@ class DashboardHandle:
 
 
 def _check_port_free(host: str, port: int) -> None:
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as s:
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind((host, port))
@@ -136,8 +122,7 @@ def _resolve_store(tracking_uri: str | None) -> str:
 
 
 def _ui_app_installed() -> bool:
-    """True when an installed distribution offers :data:`UI_APP` (every distribution is read: ``entry_points()``
-    keeps one per name, and a stale ``sray.egg-info`` in the working directory would hide the installed one)."""
+    """True when a distribution offers :data:`UI_APP` (read all: a stale ``sray.egg-info`` hides it from one)."""
     return any(ep.group == "mlflow.app" and ep.name == UI_APP for dist in distributions() for ep in dist.entry_points)
 
 
@@ -160,9 +145,8 @@ def _wait_ready(handle: DashboardHandle, timeout_s: float) -> None:
 
 def start_dashboard(tracking_uri: str | None = None, port: int = DEFAULT_UI_PORT, host: str = "127.0.0.1",
                     *, timeout_s: float = 120.0) -> DashboardHandle:
-    """Start the lean MLflow UI on ``tracking_uri`` (default: the working directory's SQLite store) and return its
-    handle once it answers (stop it with ``.stop()`` or a ``with`` block). FileNotFoundError (no store), ValueError
-    (a tracking server), OSError (port taken), RuntimeError/TimeoutError (the server failed; with its log)."""
+    """Start the dashboard on ``tracking_uri`` (default: the working directory's SQLite store); its handle once it
+    answers. FileNotFoundError (no store), ValueError (a server), OSError (port taken), RuntimeError/TimeoutError."""
     uri = _resolve_store(tracking_uri)  # absolute: the server runs outside the working directory (see below)
     _check_port_free(host, port)
     if not _ui_app_installed():
@@ -175,8 +159,7 @@ def start_dashboard(tracking_uri: str | None = None, port: int = DEFAULT_UI_PORT
         destination.mkdir(parents=True, exist_ok=True)
         cmd += ["--artifacts-destination", str(destination)]
     log_path = Path(tempfile.mkstemp(prefix=f"sray-ui-{port}-", suffix=".log")[1])
-    # In the log's folder: MLflow finds --app-name among entry points, which a stale sray.egg-info in the
-    # working directory (a repository checkout) would otherwise hide.
+    # run in the log's folder: a stale sray.egg-info in the working directory would hide the --app-name entry point
     with open(log_path, "wb") as log_file:
         proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                 env={**os.environ, **SERVER_ENV}, cwd=log_path.parent, start_new_session=True)

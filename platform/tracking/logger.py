@@ -1,10 +1,5 @@
-"""MLflow's :class:`~sray.platform.tracking.tracker.RunLogger`: logging into a prepared run, batched, never fatal.
-
-A transient failure (server down, network, a locked database) is warned about once; what was being sent stays in a
-bounded buffer, retried after an exponential back-off. A permanent refusal drops that item with a warning. Metrics
-go in ``log_batch`` calls every ``flush_every_steps`` steps or ``flush_every_s`` seconds (a SQLite write costs
-20-190 ms). Not thread-safe: one logger, one thread.
-"""
+"""MLflow's :class:`~sray.platform.tracking.tracker.RunLogger`: batched (a SQLite write costs 20-190 ms), retrying
+with back-off after a transient failure (warned once), dropping what the store refuses. Not thread-safe."""
 
 from __future__ import annotations
 
@@ -26,16 +21,13 @@ from sray.platform.tracking.tracker import DRAIN_TIMEOUT_S, RunHandle, RunLogger
 
 log = logging.getLogger(__name__)
 
-PARAMS_PER_BATCH = 100
-"""MLflow's limit on params per ``log_batch`` call."""
-METRICS_PER_BATCH = 1000
-"""MLflow's limit on metrics per ``log_batch`` call."""
+PARAMS_PER_BATCH, METRICS_PER_BATCH = 100, 1000
+"""MLflow's limits per ``log_batch`` call."""
 PERMANENT_ERROR_CODES = frozenset({"INVALID_PARAMETER_VALUE", "RESOURCE_DOES_NOT_EXIST",
                                    "RESOURCE_ALREADY_EXISTS", "BAD_REQUEST", "INVALID_STATE"})
 """MLflow error codes that retrying cannot fix: the item is dropped with a warning."""
 HTTP_DEFAULTS = {"MLFLOW_HTTP_REQUEST_MAX_RETRIES": "0", "MLFLOW_HTTP_REQUEST_TIMEOUT": "30"}
-"""Set (if unset) in the logging process: MLflow's own HTTP retries would stall training for minutes on a dead
-server; this logger retries later instead."""
+"""Set (if unset): MLflow's own HTTP retries would stall training for minutes; this logger retries later instead."""
 
 
 class MlflowRunLogger(RunLogger):
@@ -44,17 +36,12 @@ class MlflowRunLogger(RunLogger):
     def __init__(self, handle: RunHandle, *, flush_every_steps: int = 20, flush_every_s: float = 30.0,
                  max_buffered_metrics: int = 100_000, retry_initial_s: float = 2.0, retry_max_s: float = 300.0,
                  close_timeout_s: float = DRAIN_TIMEOUT_S, close_poll_s: float = 2.0, client: Any = None) -> None:
-        """``client``: an ``MlflowClient`` for ``handle.store`` (None: built here); :meth:`close` retries undelivered
-        items for ``close_timeout_s``, every ``close_poll_s`` seconds."""
+        """``client``: an ``MlflowClient`` for ``handle.store`` (None: built here)."""
         for key, value in HTTP_DEFAULTS.items():
             os.environ.setdefault(key, value)
-        self.handle = handle
-        self.flush_every_steps = flush_every_steps
-        self.flush_every_s = flush_every_s
-        self.retry_initial_s = retry_initial_s
-        self.retry_max_s = retry_max_s
-        self.close_timeout_s = close_timeout_s
-        self.close_poll_s = close_poll_s
+        self.handle, self.flush_every_steps, self.flush_every_s = handle, flush_every_steps, flush_every_s
+        self.retry_initial_s, self.retry_max_s = retry_initial_s, retry_max_s
+        self.close_timeout_s, self.close_poll_s = close_timeout_s, close_poll_s
         self.registered: dict[str, str] = {}
         """Registered model name -> version, filled once a registration went through."""
         self._client = client
@@ -62,12 +49,8 @@ class MlflowRunLogger(RunLogger):
         self._metrics: deque = deque(maxlen=max_buffered_metrics)
         self._ops: deque[tuple[str, Callable[[Any], None]]] = deque(maxlen=1000)
         self._last_flush_step: int | None = None
-        self._last_flush_time = time.monotonic()
-        self._next_attempt = 0.0
-        self._delay = retry_initial_s
-        self._unreachable = False
-        self._dropped = 0
-        self._closed = False
+        self._last_flush_time, self._next_attempt, self._delay = time.monotonic(), 0.0, retry_initial_s
+        self._unreachable, self._dropped, self._closed = False, 0, False
 
     def log_params(self, config: Any) -> None:
         """Flatten a (nested) config dataclass or dict into dotted params and send them now."""
@@ -84,8 +67,7 @@ class MlflowRunLogger(RunLogger):
                 if self._dropped == 1:
                     log.warning("MLflow metric buffer is full (%d); dropping the oldest buffered metrics until "
                                 "%s is reachable", self._metrics.maxlen, self.handle.store)
-            self._metrics.append(Metric(key=sanitize_key(key), value=number,
-                                        timestamp=timestamp, step=int(step)))
+            self._metrics.append(Metric(key=sanitize_key(key), value=number, timestamp=timestamp, step=int(step)))
         due_steps = self._last_flush_step is None or step - self._last_flush_step >= self.flush_every_steps
         if due_steps or time.monotonic() - self._last_flush_time >= self.flush_every_s:
             self._last_flush_step = step
@@ -101,8 +83,7 @@ class MlflowRunLogger(RunLogger):
         self.flush()
 
     def register_model(self, checkpoint: Path, name: str, alias: str = "latest") -> str | None:
-        """Upload a checkpoint as ``checkpoint/`` and register it as ``name@alias``; the new version, or None while the
-        store is unreachable (retried; :attr:`registered` holds the version once it went through)."""
+        """Upload a checkpoint and register it as ``name@alias``; its version, or None while the store is down."""
         self.log_artifact(checkpoint, "checkpoint")
         source = f"runs:/{self.handle.run_id}/checkpoint"
         created: list[str] = []  # the version, once made: a retry after a failed alias does not make another
@@ -183,8 +164,7 @@ class MlflowRunLogger(RunLogger):
     def _get_client(self) -> Any:
         if self._client is None:
             try:
-                self._client = MlflowClient(tracking_uri=self.handle.store,
-                                            registry_uri=self.handle.store)
+                self._client = MlflowClient(tracking_uri=self.handle.store, registry_uri=self.handle.store)
             except Exception as e:  # noqa: BLE001 - tracking never crashes training
                 self._transient_failure("connect", e)
         return self._client
@@ -202,8 +182,7 @@ class MlflowRunLogger(RunLogger):
         if self._unreachable:
             log.info("MLflow tracking store %s is reachable again; sending buffered items", self.handle.store)
             self._unreachable = False
-        self._delay = self.retry_initial_s
-        self._next_attempt = 0.0
+        self._delay, self._next_attempt = self.retry_initial_s, 0.0
         return True
 
     def _transient_failure(self, what: str, error: Exception) -> None:

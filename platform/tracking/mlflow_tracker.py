@@ -1,6 +1,4 @@
-"""MLflow as a :class:`~sray.platform.tracking.tracker.Tracker` (registry name ``mlflow``, the default): runs made by
-:mod:`~sray.platform.tracking.runs`, loggers :class:`~sray.platform.tracking.logger.MlflowRunLogger`. ``mlflow`` is
-imported only when a store is used, so choosing a tracker by name stays cheap."""
+"""MLflow as a :class:`~sray.platform.tracking.tracker.Tracker`; ``mlflow`` is imported only when a store is used."""
 
 from __future__ import annotations
 
@@ -12,7 +10,6 @@ from sray.platform.tracking import runs
 from sray.platform.tracking.tracker import RunHandle, RunLogger, Tracker
 
 TAG_VALUE_LIMIT = 5000
-"""MLflow's limit on a tag value's length."""
 
 
 class MlflowTracker(Tracker):

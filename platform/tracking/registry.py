@@ -1,6 +1,4 @@
-"""The tracker registry: every :class:`~sray.platform.tracking.tracker.Tracker` by name (``run.tracker``, a fleet's
-``tracker``, ``sray eval --tracker``). A handle names its tracker, so a Ray worker opens the same implementation
-(:func:`open_logger`) if it is registered there too: those registered here, at import, always are."""
+"""Every :class:`~sray.platform.tracking.tracker.Tracker` by name; a Ray worker opens the one its handle names."""
 
 from __future__ import annotations
 
@@ -12,7 +10,6 @@ from sray.platform.tracking.tracker import RunHandle, RunLogger, Tracker
 
 DEFAULT_TRACKER = MlflowTracker.name
 TRACKERS: dict[str, type[Tracker]] = {MlflowTracker.name: MlflowTracker}
-"""Every known tracker class by name."""
 
 
 def register_tracker(tracker: type[Tracker]) -> type[Tracker]:
@@ -22,8 +19,7 @@ def register_tracker(tracker: type[Tracker]) -> type[Tracker]:
 
 
 def get_tracker(name: str = DEFAULT_TRACKER, store: str = "") -> Tracker:
-    """Tracker ``name`` on ``store`` ('' = its default store in the working directory); ValueError names the known
-    trackers for an unknown name."""
+    """Tracker ``name`` on ``store`` ('' = its default store in the working directory); ValueError if unknown."""
     if name not in TRACKERS:
         raise ValueError(f"unknown tracker {name!r}; known: {sorted(TRACKERS)}")
     cls = TRACKERS[name]

@@ -1,10 +1,5 @@
-"""MLflow runs prepared by a driver before any Ray worker starts (the MLflow side of
-:class:`~sray.platform.tracking.mlflow_tracker.MlflowTracker`).
-
-Default store: ``<workdir>/mlflow.db`` with artifacts under ``<workdir>/mlartifacts`` (MLflow's file store raises,
-so URI and artifact location are always explicit). Processes creating one SQLite store at once corrupt it: the
-schema is made here, in one process, before any fan-out.
-"""
+"""MLflow runs prepared by a driver before any Ray worker starts (processes creating one SQLite store at once
+corrupt it). Default store: ``<workdir>/mlflow.db``, artifacts under ``<workdir>/mlartifacts`` (always explicit)."""
 
 from __future__ import annotations
 
@@ -20,7 +15,6 @@ from sray.platform.tracking.tracker import RunHandle
 log = logging.getLogger(__name__)
 
 NAME = "mlflow"
-"""Registry name of the MLflow tracker (``RunHandle.tracker`` of every run made here)."""
 DEFAULT_UI_PORT = 5000
 
 PARENT_RUN_TAG = "mlflow.parentRunId"
@@ -39,9 +33,7 @@ def default_tracking_uri(workdir: Path) -> str:
 def sqlite_path(tracking_uri: str) -> Path | None:
     """The database file of a ``sqlite:///`` URI (absolute), or None for any other URI."""
     prefix = "sqlite:///"
-    if not tracking_uri.startswith(prefix):
-        return None
-    return Path(tracking_uri[len(prefix):]).resolve()
+    return Path(tracking_uri[len(prefix):]).resolve() if tracking_uri.startswith(prefix) else None
 
 
 def is_server(tracking_uri: str) -> bool:
@@ -53,25 +45,6 @@ def artifact_root(tracking_uri: str) -> Path | None:
     """``mlartifacts`` beside a SQLite database, where its artifacts go; None for any other store."""
     db = sqlite_path(tracking_uri)
     return None if db is None else db.parent / "mlartifacts"
-
-
-def _experiment_artifact_location(tracking_uri: str, experiment: str) -> str | None:
-    """File URI ``<artifact root>/<experiment as a safe folder name>`` for a new experiment; None lets a tracking
-    server decide (``--artifacts-destination``)."""
-    root = artifact_root(tracking_uri)
-    if root is None:
-        return None
-    folder = re.sub(r"[^A-Za-z0-9._-]+", "_", experiment).strip("._") or "experiment"
-    return (root / folder).as_uri()
-
-
-def _ui_links(tracking_uri: str, experiment_id: str, run_id: str) -> tuple[str, str]:
-    page = f"#/experiments/{experiment_id}/runs/{run_id}"
-    if is_server(tracking_uri):
-        return f"{tracking_uri.rstrip('/')}/{page}", ""
-    hint = (f"sray ui --tracking-uri {tracking_uri}  (a lean MLflow server: --backend-store-uri {tracking_uri}, "
-            f"one worker, no job runner, port {DEFAULT_UI_PORT})")
-    return f"http://127.0.0.1:{DEFAULT_UI_PORT}/{page}", hint
 
 
 def mlflow_client(tracking_uri: str) -> Any:
@@ -95,8 +68,7 @@ def probe_server(tracking_uri: str, timeout_s: float = 3.0) -> None:
 
 
 def ensure_store(tracking_uri: str) -> None:
-    """Create the store's schema (SQLite: folder and tables) now, before workers start; ConnectionError names
-    the URI (an unreachable server, an unwritable folder)."""
+    """Create the store's schema now, before workers start; ConnectionError naming the URI otherwise."""
     db = sqlite_path(tracking_uri)
     if is_server(tracking_uri):
         probe_server(tracking_uri)
@@ -105,19 +77,18 @@ def ensure_store(tracking_uri: str) -> None:
             db.parent.mkdir(parents=True, exist_ok=True)
         mlflow_client(tracking_uri).search_experiments(max_results=1)
     except Exception as e:  # noqa: BLE001 - re-raised with the URI and the fix
-        raise ConnectionError(
-            f"MLflow tracking store {tracking_uri!r} is not usable ({e}); check --tracking-uri, or "
-            "leave it out to use the local SQLite store in the working directory") from e
+        raise ConnectionError(f"MLflow tracking store {tracking_uri!r} is not usable ({e}); check --tracking-uri, or "
+                              "leave it out to use the local SQLite store in the working directory") from e
 
 
 def _experiment_id(client: Any, tracking_uri: str, experiment: str) -> str:
-    """Id of ``experiment``, created (with an explicit artifact location) or restored if needed, with
-    :data:`EXPERIMENT_KIND` set."""
+    """Id of ``experiment``, created (artifacts under :func:`artifact_root`) or restored, of :data:`EXPERIMENT_KIND`."""
     from mlflow.exceptions import MlflowException
 
     found = client.get_experiment_by_name(experiment)
     if found is None:
-        location = _experiment_artifact_location(tracking_uri, experiment)
+        root, folder = artifact_root(tracking_uri), re.sub(r"[^A-Za-z0-9._-]+", "_", experiment).strip("._")
+        location = None if root is None else (root / (folder or "experiment")).as_uri()
         try:
             return client.create_experiment(experiment, artifact_location=location,
                                             tags={EXPERIMENT_KIND_TAG: EXPERIMENT_KIND})
@@ -139,16 +110,21 @@ def prepare_run(tracking_uri: str, experiment: str, run_name: str, tags: dict[st
     ensure_store(tracking_uri)
     client = mlflow_client(tracking_uri)
     experiment_id = _experiment_id(client, tracking_uri, experiment)
-    all_tags = {str(k): str(v) for k, v in (tags or {}).items()}
-    if parent_run_id:
-        all_tags[PARENT_RUN_TAG] = parent_run_id
+    nest = {PARENT_RUN_TAG: parent_run_id} if parent_run_id else {}
+    all_tags = {str(k): str(v) for k, v in (tags or {}).items()} | nest
     run = client.create_run(experiment_id, run_name=run_name, tags=all_tags)
     return run_handle(tracking_uri, experiment_id, run.info.run_id)
 
 
 def run_handle(tracking_uri: str, experiment_id: str, run_id: str) -> RunHandle:
-    """The handle of an existing run (with its UI links)."""
-    url, hint = _ui_links(tracking_uri, experiment_id, run_id)
+    """The handle of an existing run, with its page's address (and how to serve it for a local store)."""
+    page = f"#/experiments/{experiment_id}/runs/{run_id}"
+    if is_server(tracking_uri):
+        url, hint = f"{tracking_uri.rstrip('/')}/{page}", ""
+    else:
+        url = f"http://127.0.0.1:{DEFAULT_UI_PORT}/{page}"
+        hint = (f"sray ui --tracking-uri {tracking_uri}  (a lean MLflow server: --backend-store-uri {tracking_uri}, "
+                f"one worker, no job runner, port {DEFAULT_UI_PORT})")
     return RunHandle(tracker=NAME, store=tracking_uri, run_id=run_id, experiment_id=experiment_id, ui_url=url,
                      ui_hint=hint)
 
@@ -164,6 +140,4 @@ def find_run(tracking_uri: str, experiment: str, run_name: str) -> RunHandle | N
         return None
     runs = client.search_runs([found.experiment_id], filter_string=f"attributes.run_name = '{run_name}'",
                               order_by=["attributes.start_time DESC"], max_results=1)
-    if not runs:
-        return None
-    return run_handle(tracking_uri, found.experiment_id, runs[0].info.run_id)
+    return run_handle(tracking_uri, found.experiment_id, runs[0].info.run_id) if runs else None

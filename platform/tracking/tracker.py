@@ -1,9 +1,5 @@
-"""The tracker interface: where runs, params, metrics, artifacts and registered models go.
-
-A driver prepares a run with :meth:`Tracker.start_run` and hands its picklable :class:`RunHandle` to Ray workers,
-which open a logger on it (``registry.open_logger``): a worker group restarted by Ray keeps writing into the same
-run. Tracking never stops a job: loggers buffer and warn, :meth:`Tracker.end_run` and :meth:`Tracker.tag_run` warn.
-"""
+"""The tracker interface: a driver prepares a run and hands its picklable :class:`RunHandle` to Ray workers, which open
+loggers on it (so a restarted worker group writes into the same run). Tracking problems never stop a job: they warn."""
 
 from __future__ import annotations
 
@@ -19,7 +15,6 @@ log = logging.getLogger(__name__)
 
 DRAIN_TIMEOUT_S = 120.0
 """How long a logger keeps retrying what it still holds when its job ends (:meth:`RunLogger.drain`)."""
-RUN_STATUSES = ("RUNNING", "FINISHED", "FAILED", "KILLED")
 
 
 @dataclass(frozen=True)
@@ -42,7 +37,6 @@ class RunLogger(ABC):
     """Logs into one run; never raises because of the tracking store (it warns and buffers)."""
 
     handle: RunHandle
-    """The run this logger writes into."""
 
     @abstractmethod
     def log_params(self, config: Any) -> None:
@@ -62,11 +56,10 @@ class RunLogger(ABC):
 
     @abstractmethod
     def close(self, status: str = "FINISHED") -> None:
-        """Deliver what is buffered and put the run in ``status`` (one of :data:`RUN_STATUSES`)."""
+        """Deliver what is buffered and put the run in ``status`` (FINISHED, FAILED or KILLED)."""
 
     def watch_system(self, node: str, interval_s: float) -> Callable[[], None]:
-        """Record this machine's system metrics (named after ``node``) every ``interval_s`` seconds until the returned
-        function is called (default: nothing recorded)."""
+        """Record this machine's system metrics every ``interval_s`` s until the returned function is called."""
         return lambda: None
 
     def log_image(self, png: Path, artifact_path: str = "renders") -> None:
@@ -78,8 +71,7 @@ class RunLogger(ABC):
         return True
 
     def unsent_metrics(self) -> list[tuple[str, float, int]]:
-        """Metrics logged but not delivered yet, as ``(key, value, step)``: a training checkpoint stores them, so a
-        worker restarted from it logs them again and leaves no gap in the history."""
+        """Metrics logged but not delivered yet, ``(key, value, step)`` (a training checkpoint keeps them)."""
         return []
 
     def drain(self, timeout_s: float = DRAIN_TIMEOUT_S, poll_s: float = 2.0) -> bool:
@@ -95,10 +87,8 @@ class RunLogger(ABC):
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: Any) -> None:
-        if exc_type is None:
-            self.close("FINISHED")
-        else:
-            self.close("KILLED" if issubclass(exc_type, KeyboardInterrupt) else "FAILED")
+        killed = exc_type is not None and issubclass(exc_type, KeyboardInterrupt)
+        self.close("FINISHED" if exc_type is None else "KILLED" if killed else "FAILED")
 
 
 class Tracker(ABC):
@@ -110,7 +100,6 @@ class Tracker(ABC):
     """Name shown to people in messages (``MLflow``)."""
 
     def __init__(self, store: str) -> None:
-        """``store``: where the runs live (MLflow: a tracking URI); see :meth:`default_store`."""
         self.store = store
 
     @classmethod
@@ -136,7 +125,7 @@ class Tracker(ABC):
 
     @abstractmethod
     def set_status(self, handle: RunHandle, status: str) -> None:
-        """Put a run in ``status`` (one of :data:`RUN_STATUSES`); raises on failure."""
+        """Put a run in ``status`` (RUNNING, FINISHED, FAILED or KILLED); raises on failure."""
 
     @abstractmethod
     def set_tags(self, handle: RunHandle, tags: Mapping[str, str]) -> None:
