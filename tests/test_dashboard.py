@@ -92,8 +92,8 @@ def _browser(chromium: str, url: str, profile: Path, screenshot: Path | None = N
 def _finished_fleet(uri: str, tmp_path: Path) -> dict:
     """A parent fleet run (the fleet's own naming, folder ``demo/fleet``) with two finished child runs named
     as the fleet names them, and the fleet's charts as parent artifacts."""
+    from sray.platform.finetune.fleet import parent_run
     from sray.platform.finetune.methods.registry import METHODS
-    from sray.platform.tracking.fleet_parent_run import parent_run
     from sray.platform.tracking.mlflow_tracker import MlflowTracker
     from sray.platform.viz.charts import write_fleet_charts
 
