@@ -156,10 +156,8 @@ def render_section(bench: Bench, kind: str, tables: list[TableRecord], doc: Path
 
 def described(descriptor: dict | None) -> str:
     """The machine descriptor as a clause of the command line ('' for a table stored without one)."""
-    if not descriptor:
-        return ""
     return (f"; {descriptor['cpu_model']}, {descriptor['cores']} cores, {descriptor['device']}, "
-            f"{descriptor['ray_steps_per_cpu_second']} probe steps per CPU second")
+            f"{descriptor['ray_steps_per_cpu_second']} probe steps per CPU second") if descriptor else ""
 
 
 def replace_section(doc: Path, title: str, section: str, header: str = _HEADER) -> None:

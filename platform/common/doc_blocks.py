@@ -105,8 +105,4 @@ def portable(texts: list[str], root: Path) -> list[str]:
 
 def _under(path: str, root: Path) -> bool:
     """Whether ``path`` lies inside ``root`` (or is it)."""
-    try:
-        Path(os.path.abspath(path)).relative_to(root)
-        return True
-    except ValueError:
-        return False
+    return Path(os.path.abspath(path)).is_relative_to(root)

@@ -63,8 +63,9 @@ def failed_result(task: SceneTask, error: str, full_bytes: int | None) -> dict[s
     return {"scene": task.scene, "method": task.method, "status": "failed", "error": error, "attempts": task.attempt,
             "steps_used": 0, "max_steps": task.config.finetune.max_steps, "stopped_early": False, "stop_reason": None,
             "wall_s": 0.0, "cpu_s": 0.0, "miou_before": None, "miou_after": None, "psnr_after": None,
-            "artifact_bytes": None, "full_checkpoint_bytes": full_bytes, "gpu_peak_bytes": None, "node_id": None,
-            "child_run_id": task.run.run_id if task.run else None, "protocol": None, "curve": []}
+            "artifact_bytes": None, "full_checkpoint_bytes": full_bytes,
+            "child_run_id": task.run.run_id if task.run else None, "protocol": None, "curve": [], "node_id": None,
+            "gpu_peak_bytes": None}
 
 
 def _error_text(error: BaseException) -> str:
@@ -214,8 +215,9 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
 
     tracker.ensure_store()
     parent, is_new = parent_run(tracker, record, cfg.experiment, out_dir)
-    record.update(parent_run_id=parent.run_id, tracker=tracker.name, tracking_uri=tracker.store, shards=str(shards),
-                  launches=record["launches"] + 1, checkpoint=str(checkpoint), state_file=str(state_file(checkpoint)))
+    record.update(parent_run_id=parent.run_id, tracker=tracker.name, tracking_uri=tracker.store,
+                  launches=record["launches"] + 1, checkpoint=str(checkpoint), state_file=str(state_file(checkpoint)),
+                  shards=str(shards))
     atomic_write_json(out_dir / FLEET_FILE, record)
     _say(f"parent {tracker.label} run: {parent.ui_url}" + (f"  ({parent.ui_hint})" if parent.ui_hint else ""))
     if len(done) < len(pairs):

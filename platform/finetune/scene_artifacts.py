@@ -83,7 +83,8 @@ def _read(path: Path, method: str) -> tuple[dict[str, Tensor], dict[str, str]]:
                          "not an sray scene artifact")
     if metadata.get("method") != method:
         raise ValueError(f"{path}: field 'method' is {metadata.get('method')!r}, expected {method!r}"
-                         + ("; this is not an S-Ray scene artifact" if method == "sray" else ""))
+                         + ("; this is not an S-Ray scene artifact (a Semantic-NeRF one loads with load_semantic_nerf)"
+                            if method == "sray" else ""))
     return tensors, metadata
 
 

@@ -237,9 +237,10 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
         "scene": task.scene, "method": task.method, "status": "finished", "error": None, "attempts": task.attempt,
         "steps_used": step, "max_steps": ft.max_steps, "stopped_early": reason == "patience", "stop_reason": reason,
         "wall_s": clock.wall_s, "cpu_s": clock.cpu_s, "miou_before": curve[0]["miou"], "miou_after": best_point["miou"],
-        "psnr_after": best_point["psnr"], "artifact_bytes": artifact.stat().st_size, "curve": curve,
+        "psnr_after": best_point["psnr"], "artifact_bytes": artifact.stat().st_size,
         "full_checkpoint_bytes": full_bytes, "child_run_id": task.run.run_id if task.run else None,
-        "protocol": protocol.to_json(), "gpu_peak_bytes": torch.cuda.max_memory_allocated(device) if use_cuda else None}
+        "protocol": protocol.to_json(), "curve": curve,
+        "gpu_peak_bytes": torch.cuda.max_memory_allocated(device) if use_cuda else None}
     write_result(out_dir, result)
     if logger is not None:
         logged = ("steps_used", "miou_before", "miou_after", "psnr_after", "artifact_bytes")
