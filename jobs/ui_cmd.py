@@ -8,8 +8,7 @@ import signal
 import sys
 from typing import Any
 
-from sray.platform.tracking.dashboard import (DEFAULT_UI_PORT, is_tracking_server, server_links, start_dashboard,
-                                              tunnel_hint)
+from sray.platform.tracking.dashboard import DEFAULT_UI_PORT, is_server, server_links, start_dashboard, tunnel_hint
 
 
 class _Stop(Exception):
@@ -46,7 +45,7 @@ def _raise_stop(signum: int, frame: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Start the dashboard, print where to open it, serve until stopped; exit 1 if the server dies."""
-    if args.tracking_uri and is_tracking_server(args.tracking_uri):
+    if args.tracking_uri and is_server(args.tracking_uri):
         return _show_server(args.tracking_uri)
     previous = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
     handle = None

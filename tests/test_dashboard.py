@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: E402,F401  (pytest fixtures, used by name)
 from test_charts import synthetic_result  # noqa: E402
 
-from sray.platform.tracking.dashboard import run_artifacts_url, runs_view_url, start_dashboard  # noqa: E402
+from sray.platform.tracking.dashboard import runs_view_url, start_dashboard  # noqa: E402
 from sray.platform.tracking.runs import EXPERIMENT_KIND, EXPERIMENT_KIND_TAG, mlflow_client  # noqa: E402
 
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -92,8 +92,8 @@ def _browser(chromium: str, url: str, profile: Path, screenshot: Path | None = N
 def _finished_fleet(uri: str, tmp_path: Path) -> dict:
     """A parent fleet run (the fleet's own naming, folder ``demo/fleet``) with two finished child runs named
     as the fleet names them, and the fleet's charts as parent artifacts."""
+    from sray.platform.finetune.fleet import parent_run
     from sray.platform.finetune.methods.registry import METHODS
-    from sray.platform.tracking.fleet_parent_run import parent_run
     from sray.platform.tracking.mlflow_tracker import MlflowTracker
     from sray.platform.viz.charts import write_fleet_charts
 
@@ -113,6 +113,11 @@ def _finished_fleet(uri: str, tmp_path: Path) -> dict:
         for chart in charts:
             logger.log_artifact(chart, "charts")
     return {"parent": parent, "children": children, "chart": tmp_path / CHART}
+
+
+def run_artifacts_url(base_url: str, experiment_id: str, run_id: str, path: str) -> str:
+    """Address of a run's artifacts tab with the artifact at ``path`` selected and previewed."""
+    return f"{base_url}/#/experiments/{experiment_id}/runs/{run_id}/artifacts/{path}?workflowType=machine_learning"
 
 
 def _visible_text(dom: str) -> str:

@@ -153,9 +153,9 @@ def test_lines_stay_within_the_width() -> None:
 TRACKING = "platform/tracking"
 """The one folder whose modules may import mlflow (the MLflow tracker and its helpers)."""
 TRACKER_INTERFACE = ("sray.platform.tracking.tracker", "sray.platform.tracking.registry",
-                     "sray.platform.tracking.fleet_parent_run", "sray.platform.tracking.dashboard")
-"""What code outside ``platform/tracking/`` may import from it: the interface, the registry, the fleet's
-parent-run helper (written against the interface), and the dashboard behind ``sray ui``."""
+                     "sray.platform.tracking.dashboard")
+"""What code outside ``platform/tracking/`` may import from it: the interface, the registry, and the dashboard
+behind ``sray ui``."""
 
 
 def imported_names(path: Path) -> list[str]:

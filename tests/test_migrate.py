@@ -81,7 +81,7 @@ def test_an_old_job_is_refused_by_name_then_migrates_to_the_same_outputs(old_job
     state = load_checkpoint(old_job / CKPT)
     assert state["counters"] == old_state["counters"] and state["best_metric"] == old_state["best_metric"]
     model, optimizer, scheduler = build_training(cfg)  # a resume reads the migrated state like a new one
-    assert restore_training(state, model.net, optimizer, scheduler, None)[0] == 2
+    assert restore_training(state, model.net, optimizer, scheduler)[0] == 2
     assert main(["migrate", str(old_job)]) == 0  # once: a second run finds nothing to do
     assert "nothing to do" in capsys.readouterr().out
 

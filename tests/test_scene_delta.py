@@ -23,8 +23,8 @@ from sray.platform.finetune.scene_artifacts import (
     checkpoint_sha256,
     load_scene_model,
     load_semantic_nerf,
-    save_semantic_nerf,
     save_sray_delta,
+    save_whole,
 )
 from sray.platform.finetune.scene_finetune import SceneOutcome, SceneTask, evaluate, finetune_scene
 
@@ -107,7 +107,7 @@ def test_semantic_nerf_artifact_round_trip(tmp_path):
                              scene_center=(0.5, -0.2, 1.0), scene_scale=2.5)
     net = SemanticNeRF(cfg).eval()
     path = tmp_path / "nerf.safetensors"
-    save_semantic_nerf(path, net, "s")
+    save_whole(path, net, "s", "semantic-nerf")
     loaded = load_semantic_nerf(path)
     assert loaded.cfg == cfg
     origins, dirs = torch.randn(32, 3), torch.randn(32, 3)

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import numpy as np
 import torch
 
-from sray.platform.common.throughput import ThroughputWindow, peak_memory_mb, progress_postfix
+from sray.platform.common.progress import ThroughputWindow, peak_memory_mb, progress_postfix
 
 
 def _slow_batches(wait_s: float) -> Iterator[int]:

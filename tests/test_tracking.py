@@ -16,7 +16,7 @@ from sray.platform.tracking.mlflow_tracker import MlflowTracker
 from sray.platform.tracking.params import MAX_PARAM_VALUE, TRUNCATION_MARKER, flatten_config, to_params
 from sray.platform.tracking.runs import (
     PARENT_RUN_TAG,
-    default_artifact_root,
+    artifact_root,
     default_tracking_uri,
     find_run,
     prepare_run,
@@ -33,7 +33,7 @@ def test_default_store_lives_in_the_working_directory(tmp_path, monkeypatch, mlf
     uri = default_tracking_uri(Path("work"))
     assert uri == f"sqlite:///{tmp_path / 'work' / 'mlflow.db'}"
     assert sqlite_path(uri) == tmp_path / "work" / "mlflow.db"
-    assert default_artifact_root(Path("work")) == tmp_path / "work" / "mlartifacts"
+    assert artifact_root(uri) == tmp_path / "work" / "mlartifacts"
     assert sqlite_path("http://mlflow:5000") is None
     (tmp_path / "work").mkdir()
     (tmp_path / "work" / "mlflow.db").write_bytes(mlflow_template.read_bytes())

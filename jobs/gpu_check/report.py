@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from sray.data_tools.atomic import atomic_write_json
-from sray.platform.common.bench_doc import markdown_table
+from sray.platform.common.doc_blocks import markdown_table
 
 REPORT_FILE = "gpu_check.json"
 STATUSES = ("passed", "failed", "skipped")

@@ -13,7 +13,8 @@ from typing import Any
 
 from sray.lab.ceilings.measure import ZERO_SHOT_RENDER, measure_ceilings
 from sray.model.fast_render import FastRender
-from sray.platform.common.bench_doc import Bench, markdown_table, record
+from sray.platform.common.bench_doc import Bench, record
+from sray.platform.common.doc_blocks import markdown_table
 from sray.platform.eval.zero_shot import write_json_atomic
 
 CEILINGS = Bench("ceilings", "Ceilings")

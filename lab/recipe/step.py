@@ -29,7 +29,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from sray.platform.common.bench_doc import Bench, markdown_table, record
+from sray.platform.common.bench_doc import Bench, record
+from sray.platform.common.doc_blocks import markdown_table
 from sray.platform.common.model_input import ray_batch
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import TrainConfig, apply_override

@@ -14,7 +14,8 @@ from sray.lab.ceilings.report import CEILINGS
 from sray.lab.view_weights.measure import measure_view_weights
 from sray.platform.checkpoints.folders import read_meta
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.common.bench_doc import markdown_table, record
+from sray.platform.common.bench_doc import record
+from sray.platform.common.doc_blocks import markdown_table
 from sray.platform.eval.zero_shot import write_json_atomic
 
 TITLE = "Weights on occluded source views"

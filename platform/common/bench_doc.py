@@ -1,16 +1,5 @@
-"""Benchmark results: each benchmark stores its tables as data beside its charts and renders one section per
-(benchmark, device) from that data, on the benchmark's own page.
-
-A benchmark's folder on one kind of device is ``<doc folder>/benchmarks/<bench>/<device>/``: its charts and
-``tables.json``, which holds every table it measured there (header, alignment and rows as cell strings,
-the text around them, the notes, the command that made it, the machine and when). :func:`record` replaces
-the table of the same title in that file (the benchmark's other tables stay), then rewrites the section
-``## <benchmark> (<device>)`` from the file: in place when it is there, else at the end. The section goes into
-the document ``doc``, or, when ``doc`` is an index (it holds :data:`INDEX_MARKER`, as docs/benchmarks.md does),
-into the benchmark's page ``benchmarks/<bench>.md`` beside it. A page's other sections, generated or written by
-hand, are kept as they are. Commands and notes name paths relative to the repository, or ``OUT/…`` for folders
-outside it; links in the notes are written relative to ``doc``'s folder and rebased onto the page's.
-"""
+"""Benchmark tables stored as data beside their charts (``benchmarks/<bench>/<device>/tables.json``), each (benchmark,
+device) rendered as a section of ``doc``, or of the benchmark's page when ``doc`` is an index (:data:`INDEX_MARKER`)."""
 
 from __future__ import annotations
 
@@ -27,19 +16,13 @@ from pathlib import Path
 import torch
 
 from sray.data_tools.atomic import atomic_write_json, atomic_write_text
-from sray.platform.common.doc_blocks import (  # noqa: F401  (markdown_table: for the benches' own tables)
-    markdown_table,
-    parse_blocks,
-    portable,
-    rebase_links,
-    render_blocks,
-)
+from sray.platform.common.doc_blocks import parse_blocks, portable, rebase_links, render_blocks
 from sray.platform.common.machine import describe_machine
 
 DEFAULT_DOC = Path("docs/benchmarks.md")
 DATA_FILE = "tables.json"
 INDEX_MARKER = "<!-- benchmarks index: each benchmark's sections are on its page benchmarks/<benchmark>.md -->"
-"""The line that makes a document an index: :func:`record` writes a benchmark's section to its page, not there."""
+"""The line that makes a document an index: sections go to the benchmarks' pages."""
 
 
 @dataclass(frozen=True)
@@ -56,16 +39,14 @@ class TableRecord:
 
     title: str
     command: str
-    """The command line that measured it (``sray …``), paths repository-relative or ``OUT/…``."""
     machine: str
     """``machine_line()`` when it was measured."""
     measured_utc: str
     blocks: list[dict]
-    """``doc_blocks.parse_blocks`` of the table's Markdown: tables as header/align/rows, text between them."""
+    """``doc_blocks.parse_blocks`` of the table's Markdown."""
     notes: str = ""
     machine_descriptor: dict | None = None
-    """``describe_machine()`` of the machine that measured it (CPU model, cores, device, the probe's steps per CPU
-    second); None for a table stored before machines were described."""
+    """``describe_machine()`` of the machine that measured it (None: stored before machines were described)."""
 
 
 def device_kind() -> str:
@@ -84,12 +65,9 @@ def bench_dir(doc: Path, bench: Bench, kind: str | None = None) -> Path:
 
 
 def bench_page(doc: Path, bench: Bench) -> Path:
-    """The document ``bench``'s section goes into: ``doc`` itself, or its page ``benchmarks/<slug>.md`` beside
-    ``doc`` when ``doc`` is an index (holds :data:`INDEX_MARKER`)."""
+    """``doc``, or the page ``benchmarks/<slug>.md`` beside it when ``doc`` is an index."""
     doc = Path(doc)
-    if doc.exists() and INDEX_MARKER in doc.read_text():
-        return doc.parent / "benchmarks" / f"{bench.slug}.md"
-    return doc
+    return doc.parent / "benchmarks" / f"{bench.slug}.md" if doc.exists() and INDEX_MARKER in doc.read_text() else doc
 
 
 def page_header(bench: Bench, page: Path, doc: Path) -> str:
@@ -122,36 +100,23 @@ _HEADER = ("# Benchmarks\n\nOne section per benchmark and kind of device, genera
            "kind of device replaces that table. Ratios are measured side by side in one run.\n")
 
 
-def _repo_root(doc: Path) -> Path:
-    """The repository a document belongs to: the folder above ``docs/``, else the working directory."""
-    folder = Path(os.path.abspath(doc)).parent
-    return folder.parent if folder.name == "docs" else Path.cwd()
-
-
 def record(bench: Bench, title: str, table_markdown: str, doc: Path = DEFAULT_DOC, notes: str = "",
            kind: str | None = None, replaces: tuple[str, ...] = ()) -> str:
-    """Print a measured table, store it as ``bench``'s table ``title`` on this device (or under ``kind``: a table
-    whose rows name their machines) and rewrite the benchmark's section of ``doc``; returns the section's text.
-    ``replaces``: titles the table was stored under before (such a table is replaced, in its place).
-
-    The command is this process's (``sray`` + its arguments); it and the notes name absolute paths
-    relative to the repository, or as ``OUT/…``.
-    """
+    """Print a measured table and :func:`store_table` it as ``title``, with this process's command line."""
     command = "sray " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    command, table_markdown, notes = portable([command, table_markdown, notes], _repo_root(doc))
-    entry = TableRecord(title=title, command=command, machine=machine_line(),
+    folder = Path(os.path.abspath(doc)).parent
+    repo = folder.parent if folder.name == "docs" else Path.cwd()  # the repository the document belongs to
+    command, table_markdown, notes = portable([command, table_markdown, notes], repo)
+    entry = TableRecord(title=title, command=command, machine=machine_line(), notes=notes.strip(),
                         measured_utc=_dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%MZ"),
-                        blocks=parse_blocks(table_markdown), notes=notes.strip(),
-                        machine_descriptor=describe_machine())
+                        blocks=parse_blocks(table_markdown), machine_descriptor=describe_machine())
     print(f"\n### {title}\n\n{render_blocks(entry.blocks)}\n\n{entry.notes}\n".rstrip() + "\n")
     return store_table(bench, entry, doc, kind, replaces)
 
 
 def store_table(bench: Bench, entry: TableRecord, doc: Path = DEFAULT_DOC, kind: str | None = None,
                 replaces: tuple[str, ...] = ()) -> str:
-    """Put ``entry`` into ``bench``'s ``tables.json`` on this (or ``kind``) device, replacing the table of
-    the same title or of one of the former titles ``replaces`` (in the first one's place), and rewrite the
-    benchmark's section of ``doc`` from the file; returns the section."""
+    """Put ``entry`` into ``tables.json`` in place of its title's (or a former title's) and rewrite the section."""
     kind = kind or device_kind()
     data_path = bench_dir(doc, bench, kind) / DATA_FILE
     data = (json.loads(data_path.read_text()) if data_path.exists()
@@ -174,10 +139,7 @@ def section_title(bench: Bench, kind: str) -> str:
 
 def render_section(bench: Bench, kind: str, tables: list[TableRecord], doc: Path, page: Path | None = None,
                    data_file: str = DATA_FILE, title: str | None = None) -> str:
-    """The section's Markdown on ``page`` (default ``doc``): a link to its data (``data_file`` in the benchmark's
-    folder), then per table its heading, command and machine (once for consecutive tables of one run), its tables
-    and text, and its notes (once after the last of consecutive tables sharing them), their links rebased from
-    ``doc``'s folder onto ``page``'s. ``title``: the section's heading (default :func:`section_title`)."""
+    """The section's Markdown on ``page`` (default ``doc``): its data's link, then each table, command and notes."""
     page = Path(page or doc)
     data_link = os.path.relpath(bench_dir(doc, bench, kind) / data_file, page.parent)
     parts = [f"## {title or section_title(bench, kind)}", f"Its data: [`{data_link}`]({data_link})."]
@@ -194,22 +156,13 @@ def render_section(bench: Bench, kind: str, tables: list[TableRecord], doc: Path
 
 def described(descriptor: dict | None) -> str:
     """The machine descriptor as a clause of the command line ('' for a table stored without one)."""
-    if not descriptor:
-        return ""
     return (f"; {descriptor['cpu_model']}, {descriptor['cores']} cores, {descriptor['device']}, "
-            f"{descriptor['ray_steps_per_cpu_second']} probe steps per CPU second")
-
-
-def _split_sections(text: str) -> tuple[str, list[str]]:
-    """The document's preamble and its ``## `` sections, each with its trailing text."""
-    parts = re.split(r"(?m)^(?=## )", text)
-    return parts[0], parts[1:]
+            f"{descriptor['ray_steps_per_cpu_second']} probe steps per CPU second") if descriptor else ""
 
 
 def replace_section(doc: Path, title: str, section: str, header: str = _HEADER) -> None:
-    """Write ``section`` into ``doc`` in place of the section headed ``## title`` (else at the end), through a
-    temporary file and a rename; ``header`` starts a document that does not exist yet."""
-    preamble, sections = _split_sections(doc.read_text() if doc.exists() else header)
+    """Write ``section`` into ``doc`` in place of ``## title`` (else at the end); ``header`` starts a new doc."""
+    preamble, *sections = re.split(r"(?m)^(?=## )", doc.read_text() if doc.exists() else header)
     slot = next((i for i, old in enumerate(sections) if old.splitlines()[0].strip() == f"## {title}"),
                 len(sections))
     sections[slot:slot + 1] = [section]

@@ -1,6 +1,4 @@
-"""A benchmark table as data and back: Markdown pipe tables parsed into header, alignment and rows (the
-text between them kept as text blocks), rendered again from that data; and absolute paths in a recorded
-command or note rewritten to repository-relative paths or an ``OUT/`` placeholder."""
+"""Markdown pipe tables as data and back, and absolute paths rewritten repository-relative or as ``OUT/…``."""
 
 from __future__ import annotations
 
@@ -29,8 +27,7 @@ def _cells(line: str) -> list[str]:
 
 
 def parse_blocks(markdown: str) -> list[dict]:
-    """``markdown`` as blocks: ``{"header", "align", "rows", "outer_pipes"}`` for each pipe table (a line
-    with ``|`` followed by a rule line), ``{"text"}`` for what lies between (stripped; empty text dropped)."""
+    """``markdown`` as blocks: ``{"header", "align", "rows", "outer_pipes"}`` per pipe table, ``{"text"}`` between."""
     lines = markdown.strip("\n").splitlines()
     blocks: list[dict] = []
     text: list[str] = []
@@ -77,8 +74,7 @@ _LINK = re.compile(r"(\]\()([^)\s#:]+)(\))")
 
 
 def rebase_links(markdown: str, from_dir: Path, to_dir: Path) -> str:
-    """``markdown`` with each relative link target (``](path)``: no scheme, no bare anchor) written relative to
-    ``from_dir`` rewritten relative to ``to_dir``; unchanged when the two folders are one."""
+    """``markdown`` with each relative link target (``](path)``) rewritten from ``from_dir`` to ``to_dir``."""
     if os.path.abspath(from_dir) == os.path.abspath(to_dir):
         return markdown
     return _LINK.sub(lambda m: m.group(1) + os.path.relpath(os.path.join(from_dir, m.group(2)), to_dir) + m.group(3),
@@ -86,18 +82,14 @@ def rebase_links(markdown: str, from_dir: Path, to_dir: Path) -> str:
 
 
 _ABSOLUTE = re.compile(r"(?:(?<=^)|(?<=[\s`'\"(=,])|(?<=:///))(/[\w.@+~-]+(?:/[\w.@+~-]*)+)")
-
-
-def absolute_paths(text: str) -> list[str]:
-    """Absolute file paths in ``text`` (at a word start, after ``=`` or inside ``sqlite:///``), trailing dots cut."""
-    return [m.group(1).rstrip(".") for m in _ABSOLUTE.finditer(text)]
+"""An absolute file path at a word start, after ``=`` or inside ``sqlite:///``."""
 
 
 def portable(texts: list[str], root: Path) -> list[str]:
-    """``texts`` with each absolute path rewritten: under ``root`` (the repository) relative to it, anywhere
-    else as ``OUT/`` plus its path below the folder that all those other paths share."""
+    """``texts`` with absolute paths relative to ``root``, or ``OUT/`` + the path below the others' common folder."""
     root = Path(os.path.abspath(root))
-    outside = {p for t in texts for p in absolute_paths(t) if not _under(p, root)}
+    found = {m.group(1).rstrip(".") for t in texts for m in _ABSOLUTE.finditer(t)}
+    outside = {p for p in found if not _under(p, root)}
     base = os.path.commonpath([os.path.dirname(p) for p in outside]) if outside else "/"
 
     def rewrite(match: re.Match) -> str:
@@ -113,8 +105,4 @@ def portable(texts: list[str], root: Path) -> list[str]:
 
 def _under(path: str, root: Path) -> bool:
     """Whether ``path`` lies inside ``root`` (or is it)."""
-    try:
-        Path(os.path.abspath(path)).relative_to(root)
-        return True
-    except ValueError:
-        return False
+    return Path(os.path.abspath(path)).is_relative_to(root)

@@ -1,16 +1,5 @@
-"""One descriptor of how an evaluation number was made: :class:`EvalProtocol`.
-
-Every metrics JSON sray writes (``sray eval``'s metrics.json, a fleet's result.json) carries it as
-``"protocol": {...}`` (:meth:`EvalProtocol.to_json`); training logs it once per run (tag
-``sray.protocol`` and params ``protocol.*``, for ``val/*`` and ``zeroshot/*``); every table prints
-:meth:`EvalProtocol.describe` under it (:func:`caption_lines`).
-
-Fields: how the source views were chosen (the shard manifest's neighbour rule and its version, read
-from ``manifest.json``, never assumed), how many, whole or strided images, render mode and inputs, what the
-model's training read (``train_inputs``: ground-truth depth a model never gets at test time), and the names
-of the two mIoU protocols (:mod:`sray.model.metrics`). SSIM is a whole-image score: it is computed only when
-``stride == 1`` (:attr:`EvalProtocol.scores_ssim`).
-"""
+"""How an evaluation number was made: :class:`EvalProtocol`, in every metrics JSON (``"protocol"``), once per
+training run (tag ``sray.protocol``, params ``protocol.*``) and under every table (:meth:`~EvalProtocol.describe`)."""
 
 from __future__ import annotations
 
@@ -24,12 +13,9 @@ from sray.model.fast_render import FastRender
 from sray.model.metrics import DATASET_PROTOCOL, PER_IMAGE_PROTOCOL
 
 RENDER_MODES = ("full", "fast")
-"""Render modes an evaluation may use (``full``: the whole coarse + fine hierarchical renderer;
-``fast``: ``sray.model.fast_render``, whose settings follow in the field, e.g. ``fast (pixel stride 4, ...)``)."""
+"""``full``: the hierarchical renderer; ``fast``: ``sray.model.fast_render``, its settings following."""
 INPUTS = ("rgb", "rgbd")
-"""What the model is given of its source views: ``rgb`` posed colour images only; ``rgbd`` also their
-depth maps (``sray.model.config.SRayConfig.inputs``; never the query view's depth). Later papers list
-depth-using methods apart, so every number says which it is."""
+"""What the model is given of its source views: colour only, or also their depth (``SRayConfig.inputs``)."""
 INPUT_NAMES = {"rgb": "RGB", "rgbd": "RGB-D"}
 """How tables and legends name each of :data:`INPUTS`."""
 NO_SOURCES = "none (per-scene model)"
@@ -58,9 +44,7 @@ class EvalProtocol:
     """How a set of evaluation scores was made (JSON: :meth:`to_json`, one line: :meth:`describe`)."""
 
     source_rule: str
-    """How each query's source views were chosen: the shard manifest's neighbour rule and version,
-    ``"<rule> v<version>"`` (the top-ranked ``n_source`` inside the scene's source split, fixed), or
-    :data:`NO_SOURCES`."""
+    """``"<rule> v<version>"``: the manifest's neighbour rule ranking the fixed sources, or :data:`NO_SOURCES`."""
     n_source: int
     """Source views per query view (0 with :data:`NO_SOURCES`)."""
     stride: int
@@ -99,9 +83,7 @@ class EvalProtocol:
     @classmethod
     def from_manifest(cls, manifest: Manifest, n_source: int, stride: int,
                       where: str = "manifest.json", inputs: str = "rgb", train_inputs: str = "") -> EvalProtocol:
-        """The protocol of fixed sources ranked by ``manifest``'s neighbour rule (``where`` names it in errors);
-        ``inputs``: the model's ``model.inputs``; ``train_inputs``: its ``SRayConfig.train_inputs`` (empty: the
-        same as ``inputs``)."""
+        """The protocol of fixed sources ranked by ``manifest``'s neighbour rule (``where`` names it in errors)."""
         rule, version = manifest.neighbours.get("rule"), manifest.neighbours.get("version")
         if not rule or version is None:
             raise ValueError(f"{where}: field 'neighbours' has no 'rule' and 'version' ({manifest.neighbours}); "
@@ -123,8 +105,7 @@ class EvalProtocol:
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> EvalProtocol:
-        """Inverse of :meth:`to_json`; ValueError names missing or unknown fields (:data:`LATER_FIELDS` may be
-        missing: they take their defaults)."""
+        """Inverse of :meth:`to_json`; ValueError names missing (but :data:`LATER_FIELDS`) or unknown fields."""
         if not isinstance(d, dict):
             raise ValueError(f"eval protocol {d!r}: expected a JSON object (docs/CONTRACTS.md); a file written "
                              "before sray recorded protocol descriptors: evaluate again to replace it")
@@ -140,14 +121,9 @@ class EvalProtocol:
         return asdict(self)
 
     @property
-    def whole_images(self) -> bool:
-        """True when every pixel was rendered and scored (``stride == 1``)."""
-        return self.stride == 1
-
-    @property
     def scores_ssim(self) -> bool:
-        """SSIM is computed on whole images only; a strided render never gets one."""
-        return self.whole_images
+        """SSIM is computed on whole images (``stride == 1``) only."""
+        return self.stride == 1
 
     def rendered_by(self, fast: FastRender | None) -> EvalProtocol:
         """This protocol with the render that made the scores: ``fast``'s description, or unchanged (full)."""
@@ -157,7 +133,7 @@ class EvalProtocol:
         """One line for table captions and chart footnotes."""
         sources = (NO_SOURCES if self.n_source == 0 else
                    f"{self.n_source} per query, fixed, top-ranked by {self.source_rule}")
-        pixels = ("whole images (stride 1)" if self.whole_images else
+        pixels = ("whole images (stride 1)" if self.scores_ssim else
                   f"every {_ordinal(self.stride)} in each direction (stride {self.stride}), so no SSIM")
         trained = "" if self.train_inputs == self.inputs else f" (training read {self.train_inputs})"
         return (f"sources: {sources}; pixels: {pixels}; render: {self.render}; inputs: {self.inputs}{trained}; "
@@ -165,19 +141,14 @@ class EvalProtocol:
 
 
 def results_inputs(results: Iterable[dict[str, Any]], method: str) -> str:
-    """The inputs ``method``'s results record in their ``protocol`` (``RGB``, ``RGB-D``, several joined by ``/``);
-    empty when none of them records a protocol. ``results``: dicts with ``method`` and ``protocol`` (fleet results)."""
+    """The inputs ``method``'s fleet results record (``RGB``, ``RGB-D``, joined by ``/``; empty without any)."""
     found = {EvalProtocol.from_json(r["protocol"]).inputs for r in results
              if r["method"] == method and r.get("protocol") is not None}
     return "/".join(inputs_name(i) for i in sorted(found))
 
 
 def caption_lines(labelled: Iterable[tuple[str, dict[str, Any] | None]]) -> list[str]:
-    """``Protocol: ...`` lines for a table whose rows carry ``protocol`` JSON objects.
-
-    ``labelled``: (row label, the row's protocol JSON or None) pairs; rows without one are skipped.
-    One line when every row shares a protocol, else one line per protocol naming its rows.
-    """
+    """``Protocol: ...`` lines for (row label, protocol JSON or None) pairs: one per protocol, naming rows if many."""
     labels: dict[str, list[str]] = {}
     for label, protocol in labelled:
         if protocol is not None:

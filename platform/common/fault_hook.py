@@ -1,28 +1,4 @@
-"""The one fault-injection hook of sray: the ``SRAY_FAULTS`` environment variable, read only here.
-
-Tests (and cluster drills) break a run on purpose without touching user-facing configs::
-
-    SRAY_FAULTS="train.kill_at_step=12;train.nan_at_step=7;fleet.fail_scenes=scene_a,scene_b"
-
-Entries are ``key=value`` separated by ``;``; lists are comma-separated. Keys:
-
-* ``train.kill_at_step``: rank 0 of a training job exits abruptly (``os._exit``) at that step, on the
-  first attempt only (a marker file in the job folder remembers it), so Ray Train restarts the workers;
-* ``train.nan_at_step``: the training loss at that step becomes NaN (the non-finite guard must skip it);
-* ``train.stop_after_step``: the job stops cleanly with a checkpoint once that many steps are done, as
-  after Ctrl-C;
-* ``train.hold_at_steps``: rank 0 pauses before each listed step, once per job (a marker file in the job
-  folder remembers it): it writes ``.fault_hold_<step>.json`` (its pid and node) into the job folder and
-  waits until ``.fault_release_<step>`` appears there (at most :data:`HOLD_TIMEOUT_S`), so a drill can
-  kill a node, the driver or the tracking server at a known step instead of after a guessed sleep;
-* ``fleet.fail_scenes``: every attempt of a fleet task for these scenes raises :class:`InjectedFailure`;
-* ``sweep.fail_trials``: every launch of these sweep trials (keys such as ``t002``) raises :class:`InjectedFailure`;
-* ``stability.nan_points``: ``method/axis/level`` entries; the stability suite's renders of that method
-  at that point output NaN (the failure the suite must record and go past).
-
-The driver forwards the variable to Ray Train workers and fleet tasks (:func:`propagated_env`), so
-the hook reaches every process of a run, on one machine or a cluster.
-"""
+"""The one fault-injection hook, ``SRAY_FAULTS="train.kill_at_step=12;fleet.fail_scenes=a,b"`` (:class:`Faults`)."""
 
 from __future__ import annotations
 
@@ -35,14 +11,9 @@ from pathlib import Path
 from typing import Any
 
 ENV_VAR = "SRAY_FAULTS"
-"""Name of the environment variable that carries the faults."""
-
 KILL_MARKER = ".fault_kill_done"
 """File in a training job folder that records that the injected kill already happened."""
-
 KILL_EXIT_CODE = 17
-"""Exit status of a worker killed by ``train.kill_at_step``."""
-
 HOLD_TIMEOUT_S = 120.0
 """Longest pause at a ``train.hold_at_steps`` step when nobody releases it (then training goes on)."""
 
@@ -53,20 +24,20 @@ class InjectedFailure(RuntimeError):
 
 @dataclass(frozen=True)
 class Faults:
-    """The faults of this process's run (all off by default)."""
+    """The faults of this process's run (all off by default; -1 = never)."""
 
     kill_at_step: int = -1
-    """Training step at which rank 0 dies abruptly on the first attempt (-1 = never)."""
+    """Rank 0 exits abruptly (``os._exit``) at this step, on the first attempt only, so Ray Train restarts it."""
     nan_at_step: int = -1
-    """Training step whose loss becomes NaN (-1 = never)."""
+    """The training loss at this step becomes NaN (the non-finite guard must skip it)."""
     stop_after_step: int = -1
-    """Steps after which training stops cleanly with a checkpoint (-1 = never)."""
+    """Training stops cleanly with a checkpoint after this many steps, as after Ctrl-C."""
     hold_at_steps: tuple[int, ...] = ()
-    """Training steps before which rank 0 pauses until released (once per job)."""
+    """Rank 0 pauses before each listed step, once per job, so a drill can break something at a known step."""
     fail_scenes: tuple[str, ...] = ()
-    """Scenes whose fleet tasks raise on every attempt."""
+    """Every attempt of a fleet task for these scenes raises :class:`InjectedFailure`."""
     fail_trials: tuple[str, ...] = ()
-    """Sweep trial keys whose every launch raises."""
+    """Every launch of these sweep trials (keys such as ``t002``) raises :class:`InjectedFailure`."""
     nan_points: tuple[str, ...] = ()
     """Stability points (``method/axis/level``, level as the preset writes it) whose renders output NaN."""
 
@@ -111,18 +82,13 @@ def propagated_env() -> dict[str, str]:
     return {ENV_VAR: value} if value else {}
 
 
-def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path,
-                before_exit: Callable[[], None] | None = None) -> None:
-    """Exit this process abruptly at ``faults.kill_at_step`` (rank 0, first attempt only).
-
-    ``before_exit``: run just before the exit (e.g. flushing the tracker).
-    """
+def kill_if_due(faults: Faults, step: int, rank: int, job_dir: Path, before_exit: Callable[[], None]) -> None:
+    """Exit this process abruptly at ``faults.kill_at_step`` (rank 0, first attempt only), after ``before_exit``."""
     marker = job_dir / KILL_MARKER
     if rank != 0 or step != faults.kill_at_step or marker.exists():
         return
     marker.touch()
-    if before_exit is not None:
-        before_exit()
+    before_exit()
     os._exit(KILL_EXIT_CODE)
 
 
@@ -133,11 +99,7 @@ def hold_paths(job_dir: Path, step: int) -> tuple[Path, Path]:
 
 def hold_if_due(faults: Faults, step: int, rank: int, job_dir: Path, facts: Callable[[], dict[str, Any]],
                 timeout_s: float = HOLD_TIMEOUT_S, poll_s: float = 0.1) -> bool:
-    """Pause rank 0 before ``step`` when ``train.hold_at_steps`` lists it and this job has not paused there yet.
-
-    Writes the marker (``facts()`` plus pid and step, as JSON) and waits for the release file, at most
-    ``timeout_s``. Returns True when it paused.
-    """
+    """Pause rank 0 before a listed ``step`` once per job (marker: ``facts()``, pid, step); True when it paused."""
     marker, release = hold_paths(job_dir, step)
     if rank != 0 or step not in faults.hold_at_steps or marker.exists():
         return False

@@ -1,15 +1,5 @@
-"""What a machine is, for every stored result: its CPU model, its cores, its accelerator and how many training steps
-of a fixed probe one CPU second buys on it.
-
-Results measured on two machines compare only once the machines are described by what they are. The throughput
-comes from :func:`probe_steps_per_cpu_second`: the ``synth-cpu-hour`` recipe's network (:data:`PROBE_MODEL`) doing its
-ray-training step (encode the sources, render the rays, loss, backward, Adam) on one fixed, seeded tiny batch
-(:data:`PROBE_RAYS` rays, :data:`PROBE_VIEWS` source views of :data:`PROBE_HW`), timed in CPU seconds after one
-untimed warm-up step, on the CPU. :func:`describe_machine` runs it in a fresh process on one thread
-(:func:`probe_in_fresh_process`): on a loaded machine the idle threads of a multi-threaded run spin and count as CPU
-time, and the caller's own torch settings stay as they were. A recipe's steps per CPU second on real data scale with
-it; the probe is fixed so that its figure from any two machines compares, whatever the recipes become.
-"""
+"""What a machine is, for every stored result: CPU model, cores, accelerator, and the training steps of a fixed probe
+(:data:`PROBE_MODEL`, one seeded tiny batch) one CPU second buys on it, in a fresh one-thread process."""
 
 from __future__ import annotations
 
@@ -28,22 +18,17 @@ from sray.model.rays import pixel_rays
 from sray.model.semantic_ray import SRayModel
 
 PROBE_MODEL = SRayConfig(n_source=8, n_coarse=24, n_fine=24, attention="intra", lambda_src_sem=1.0)
-"""The probe's network: ``synth-cpu-hour``'s model section when the probe was fixed (kept fixed after)."""
+"""The probe's network: ``synth-cpu-hour``'s model section when the probe was fixed."""
 PROBE_RAYS = 64
-"""Rays of the probe's batch."""
 PROBE_VIEWS = 8
-"""Source views of the probe's batch (the recipe's evaluation sources)."""
 PROBE_HW = (48, 64)
 """(H, W) of the probe's source images."""
 PROBE_STEPS = 8
-"""Timed steps (after one warm-up step)."""
-
 CPUINFO = Path("/proc/cpuinfo")
 
 
 def cpu_model(cpuinfo: Path = CPUINFO) -> str:
-    """The CPU's model name: the first ``model name`` line of ``cpuinfo`` (Linux), else what the standard library's
-    ``platform.processor()`` names, else the architecture."""
+    """The first ``model name`` of ``cpuinfo`` (Linux), else ``platform.processor()``, else the architecture."""
     if cpuinfo.exists():
         for line in cpuinfo.read_text(errors="replace").splitlines():
             key, _, value = line.partition(":")
@@ -52,22 +37,9 @@ def cpu_model(cpuinfo: Path = CPUINFO) -> str:
     return _stdlib_platform.processor() or _stdlib_platform.machine()
 
 
-def usable_cores() -> int:
-    """The CPU cores this process may run on (its affinity where the system tells it, else all of them)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-
-def device_name() -> str:
-    """The accelerator results are measured on: the first CUDA device's name, else ``cpu``."""
-    return torch.cuda.get_device_name(0) if torch.cuda.is_available() else "cpu"
-
-
 def probe_batch() -> dict[str, torch.Tensor]:
-    """The probe's fixed batch (seed 0): source images (V, 3, H, W) on a rig of cameras side by side looking
-    along +z, their K (V, 3, 3) and c2w (V, 4, 4), and :data:`PROBE_RAYS` query rays (R, 3) with labels (R,) and
-    colours (R, 3)."""
+    """The probe's fixed batch (seed 0): source images (V, 3, H, W) of cameras side by side looking along +z, their
+    K (V, 3, 3) and c2w (V, 4, 4), and query rays (R, 3) with labels (R,) and colours (R, 3)."""
     h, w = PROBE_HW
     gen = torch.Generator().manual_seed(0)
     K = torch.tensor([[w / 2, 0.0, (w - 1) / 2], [0.0, w / 2, (h - 1) / 2], [0.0, 0.0, 1.0]])
@@ -76,13 +48,12 @@ def probe_batch() -> dict[str, torch.Tensor]:
     uv = torch.rand(PROBE_RAYS, 2, generator=gen) * torch.tensor([w - 1.0, h - 1.0])
     origins, dirs = pixel_rays(K, torch.eye(4), uv)
     return {"src_rgb": torch.rand(PROBE_VIEWS, 3, h, w, generator=gen), "src_K": K.expand(PROBE_VIEWS, 3, 3).clone(),
-            "src_c2w": c2w, "origins": origins, "dirs": dirs,
-            "label": torch.randint(0, PROBE_MODEL.n_classes, (PROBE_RAYS,), generator=gen),
-            "rgb": torch.rand(PROBE_RAYS, 3, generator=gen)}
+            "src_c2w": c2w, "origins": origins, "dirs": dirs, "rgb": torch.rand(PROBE_RAYS, 3, generator=gen),
+            "label": torch.randint(0, PROBE_MODEL.n_classes, (PROBE_RAYS,), generator=gen)}
 
 
 def probe_steps_per_cpu_second(steps: int = PROBE_STEPS) -> float:
-    """Training steps of the probe (module docstring) per CPU second of this process, on the CPU."""
+    """Training steps of the probe (encode, render, loss, backward, Adam) per CPU second of this process."""
     state = torch.random.get_rng_state()
     try:
         torch.manual_seed(0)
@@ -107,8 +78,7 @@ def probe_steps_per_cpu_second(steps: int = PROBE_STEPS) -> float:
 
 
 def probe_in_fresh_process(steps: int = PROBE_STEPS, timeout_s: float = 300.0) -> float | None:
-    """:func:`probe_steps_per_cpu_second` in a fresh Python process with one torch thread; None (with a warning on
-    stderr) when that process fails, so a result is stored with an unknown throughput rather than not at all."""
+    """:func:`probe_steps_per_cpu_second` in a fresh one-thread process; None (with a warning) when it fails."""
     code = f"from sray.platform.common.machine import probe_steps_per_cpu_second as p; print(p({int(steps)}))"
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     try:
@@ -123,9 +93,9 @@ def probe_in_fresh_process(steps: int = PROBE_STEPS, timeout_s: float = 300.0) -
 
 @functools.lru_cache(maxsize=1)
 def describe_machine() -> dict[str, str | int | float | None]:
-    """This machine for a stored result: ``{"cpu_model", "cores", "device", "ray_steps_per_cpu_second"}`` (the
-    probe's figure, one thread, rounded to 3 significant digits; null when the probe could not run). Measured once
-    per process."""
+    """``{"cpu_model", "cores", "device", "ray_steps_per_cpu_second"}`` (the probe's to 3 digits; None if it failed)."""
     rate = probe_in_fresh_process()
-    return {"cpu_model": cpu_model(), "cores": usable_cores(), "device": device_name(),
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    device = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "cpu"
+    return {"cpu_model": cpu_model(), "cores": cores, "device": device,
             "ray_steps_per_cpu_second": None if rate is None else float(f"{rate:.3g}")}

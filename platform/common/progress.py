@@ -1,67 +1,43 @@
-"""Rank-0 progress that reads cleanly on a terminal, in a log file and in a Ray job's log.
-
-On a terminal a bar redraws in place (plain tqdm, or inside a Ray worker Ray's driver-drawn
-``tqdm_ray``). Written to a file or a job log, every redraw of a bar stays in the text as one more copy
-of the line, so there progress is printed as plain lines instead, one every :data:`LINE_EVERY_S`
-seconds. The driver decides once, from its own standard output, and hands the choice to its Ray
-workers through :data:`PROGRESS_ENV` (:func:`progress_env`), since a worker's output is always a file.
-"""
+"""Rank-0 progress: a bar on a terminal, plain lines in a file, where every redraw would stay as one more line (the
+driver decides and tells its Ray workers by :data:`PROGRESS_ENV`), with a training loop's live throughput."""
 
 from __future__ import annotations
 
 import os
+import resource
 import sys
 import time
-from typing import Any
+from collections.abc import Iterator
+from typing import Any, TypeVar
 
 import ray
+import torch
 from ray.experimental import tqdm_ray
 from tqdm import tqdm
 
 PROGRESS_ENV = "SRAY_PROGRESS"
 """Environment variable naming how progress is shown: ``bar`` or ``lines``."""
 LINE_EVERY_S = 30.0
-"""Seconds between two progress lines (the last step always gets one)."""
+T = TypeVar("T")
 
 
-class _NoBar:
-    """The progress bar of ranks other than 0: does nothing."""
-
-    def update(self, n: int = 1) -> None:
-        """Ignore progress."""
-
-    def set_postfix(self, **values: Any) -> None:
-        """Ignore status text."""
-
-    def close(self) -> None:
-        """Nothing to close."""
-
-
-class _RayBar:
-    """Ray's driver-rendered bar (``ray.experimental.tqdm_ray``): ETA and rate, one line per bar."""
+class _RayBar(tqdm_ray.tqdm):
+    """Ray's driver-rendered bar (``tqdm_ray``: ETA and rate, one line per bar), with tqdm's ``set_postfix``."""
 
     def __init__(self, total: int, initial: int, desc: str) -> None:
+        super().__init__(total=total, desc=desc, unit="step")
         self.desc = desc
-        self._bar = tqdm_ray.tqdm(total=total, desc=desc, unit="step")
         if initial:
-            self._bar.update(initial)
-
-    def update(self, n: int = 1) -> None:
-        """Advance by ``n`` steps."""
-        self._bar.update(n)
+            self.update(initial)
 
     def set_postfix(self, **values: Any) -> None:
         """Show ``key=value`` pairs after the description."""
-        self._bar.set_description(f"{self.desc} " + " ".join(f"{k}={v}" for k, v in values.items()))
-
-    def close(self) -> None:
-        """Finish the bar."""
-        self._bar.close()
+        self.set_description(f"{self.desc} " + " ".join(f"{k}={v}" for k, v in values.items()))
 
 
 class LineProgress:
-    """Progress as plain lines: ``[sray] DESC: step N/TOTAL (P%), R s/step, ETA M:SS, key=value ...``,
-    at most one every ``every_s`` seconds and always one at the last step."""
+    """Progress lines ``[sray] DESC: step N/TOTAL (P%), R s/step, ETA M:SS, key=value ...``: at most one every
+    ``every_s`` seconds, and one at the last step."""
 
     def __init__(self, total: int, initial: int = 0, desc: str = "", every_s: float = LINE_EVERY_S) -> None:
         self.total, self.n, self.desc, self.every_s = total, initial, desc, every_s
@@ -100,9 +76,7 @@ class LineProgress:
 def progress_mode() -> str:
     """``bar`` or ``lines``: :data:`PROGRESS_ENV` when set, else ``bar`` only if standard output is a terminal."""
     mode = os.environ.get(PROGRESS_ENV, "")
-    if mode in ("bar", "lines"):
-        return mode
-    return "bar" if sys.stdout.isatty() else "lines"
+    return mode if mode in ("bar", "lines") else "bar" if sys.stdout.isatty() else "lines"
 
 
 def progress_env() -> dict[str, str]:
@@ -111,15 +85,56 @@ def progress_env() -> dict[str, str]:
 
 
 def make_progress(enabled: bool, total: int, initial: int = 0, desc: str = "") -> Any:
-    """Progress with ETA on rank 0 (``enabled``), a silent stand-in elsewhere.
-
-    :func:`progress_mode` ``lines``: :class:`LineProgress`. ``bar``: inside a Ray worker the bar is drawn
-    by the driver (``tqdm_ray``); elsewhere it is plain tqdm.
-    """
+    """Progress with ETA when ``enabled`` (rank 0): lines, Ray's bar in a Ray worker, else tqdm; else a silent bar."""
     if not enabled:
-        return _NoBar()
+        return tqdm(disable=True)
     if progress_mode() == "lines":
         return LineProgress(total, initial, desc)
     if ray.is_initialized() and ray.get_runtime_context().worker.mode == ray.WORKER_MODE:
         return _RayBar(total, initial, desc)
     return tqdm(total=total, initial=initial, desc=desc, unit="step", mininterval=1.0)
+
+
+def peak_memory_mb(device: torch.device) -> float:
+    """Peak memory of this process in MiB: the CUDA allocator's on a GPU, else the peak resident set size."""
+    if device.type == "cuda":
+        return torch.cuda.max_memory_allocated(device) / 2**20
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 2**10
+
+
+class ThroughputWindow:
+    """Throughput over the steps since the last :meth:`report` (batches through :meth:`next_batch`)."""
+
+    def __init__(self, rays_per_batch: int, world_size: int, device: torch.device) -> None:
+        """Count ``rays_per_batch`` rays per step on each of ``world_size`` ranks; memory is read on ``device``."""
+        self.rays_per_batch, self.world_size, self.device = rays_per_batch, world_size, device
+        self._open()
+
+    def _open(self) -> None:
+        self.start, self.steps, self.wait_s = time.perf_counter(), 0, 0.0
+
+    def next_batch(self, batches: Iterator[T]) -> T:
+        """``next(batches)``, its waiting time counted as data wait."""
+        start = time.perf_counter()
+        batch = next(batches)
+        self.wait_s += time.perf_counter() - start
+        return batch
+
+    def step_done(self) -> None:
+        """Count one finished step."""
+        self.steps += 1
+
+    def report(self) -> dict[str, float]:
+        """``rays_per_s`` (of all ranks), ``data_wait_share`` and peak ``memory_mb`` of this window; opens the next."""
+        elapsed = max(time.perf_counter() - self.start, 1e-9)
+        figures = {"rays_per_s": self.rays_per_batch * self.world_size * self.steps / elapsed,
+                   "data_wait_share": self.wait_s / elapsed, "memory_mb": peak_memory_mb(self.device)}
+        self._open()
+        return figures
+
+
+def progress_postfix(loss: float, figures: dict[str, float]) -> dict[str, str]:
+    """The ``key=value`` pairs of a progress line: loss, rays/s, data-wait share and peak memory."""
+    return {"loss": f"{loss:.3f}", "rays/s": f"{figures['rays_per_s']:.0f}",
+            "data_wait": f"{100 * figures['data_wait_share']:.0f}%", "peak_mem": f"{figures['memory_mb']:.0f}MiB"}

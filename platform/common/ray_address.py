@@ -1,9 +1,4 @@
-"""Check a Ray cluster address before joining it: one clear line in about a second, not a minute of retries.
-
-``ray.init(address=...)`` retries a cluster that refuses its token for 20 s (a warning line a second,
-then a traceback), and one that does not answer at all for minutes. :func:`check_ray_address` asks
-once: a TCP connection to the head's GCS port, then one GCS request carrying this process's token.
-"""
+"""Check a Ray cluster address in a second, where ``ray.init`` retries a refused token for 20 s, silence for minutes."""
 
 from __future__ import annotations
 
@@ -14,7 +9,6 @@ import threading
 from collections.abc import Iterator
 
 WHERE = "`sray cluster status` prints the address and the token variables"
-"""Where a user of the local cluster finds the right values."""
 
 
 class RayAddressError(ValueError):
@@ -44,9 +38,7 @@ def _quiet_stderr() -> Iterator[None]:
 
 
 def check_ray_address(address: str, timeout_s: float = 3.0) -> None:
-    """A Ray cluster answers at ``address`` and accepts this process's token (``RAY_AUTH_MODE`` /
-    ``RAY_AUTH_TOKEN_PATH`` / ``RAY_AUTH_TOKEN``). ``auto`` and Ray Client (``ray://``) addresses are left
-    to Ray. Raises RayAddressError with the address, what went wrong and the fix."""
+    """RayAddressError unless a Ray cluster at ``address`` accepts this process's token (``auto``, ``ray://``: skip)."""
     if address == "auto" or address.startswith("ray://"):
         return
     host, port = split_address(address)
@@ -67,8 +59,7 @@ def check_ray_address(address: str, timeout_s: float = 3.0) -> None:
 
 
 def _ask_gcs(address: str, timeout_s: float) -> bool | None:
-    """One GCS request with this process's token: False when accepted, True when the token was refused, None
-    when no answer came within ``timeout_s`` (the client runs in a daemon thread: Ray's own wait is 40 s)."""
+    """One GCS request with this process's token: False if accepted, True if refused, None without an answer."""
     from ray._raylet import GcsClient
     from ray.exceptions import AuthenticationError
 

@@ -1,23 +1,5 @@
-"""The finetune fleet driver (``sray finetune-fleet``): one Ray task per (scene, method), one parent tracked run.
-
-Order of events:
-
-1. validate the request (with each method's ``checked_config``: ``2d-transfer`` needs ``transfer.segmenter``);
-   pairs whose ``result.json`` already says ``finished`` are skipped (a re-launched fleet with the same
-   ``out_dir`` only runs what is missing or failed);
-2. in this process, before any task starts: the tracker's store (``FleetConfig.tracker``), the
-   parent run (reused on a re-launch) and one child run per pair to run (concurrent SQLite schema
-   creation corrupts stores);
-3. at most ``max_parallel`` tasks in flight (``ray.wait`` keeps the window), each with fractional
-   ``num_cpus`` / ``num_gpus``; a task that raises or whose worker dies is re-run after an
-   exponential back-off (the driver counts ``attempts``; Ray's own retries are off), and after
-   ``retries`` re-runs it is reported as failed, without stopping the others;
-4. the results table is printed and logged to the parent run (``fleet_results.md``,
-   ``fleet_results.json``, per-method summary metrics), with the charts of
-   ``sray.platform.viz.charts.write_fleet_charts`` when that module is installed.
-
-Paths handed to tasks are absolute: on a multi-node cluster they must be on shared storage.
-"""
+"""The finetune fleet driver (``sray finetune-fleet``): one Ray task per (scene, method), re-run after a back-off when
+it fails, one parent tracked run. Paths handed to tasks are absolute: on a cluster they must be on shared storage."""
 
 from __future__ import annotations
 
@@ -43,9 +25,8 @@ from sray.platform.finetune.fleet_report import results_table, summary_metrics
 from sray.platform.finetune.methods.registry import METHODS, get_method, method_names, with_depth_twins
 from sray.platform.finetune.scene_artifacts import checkpoint_sha256, model_bytes, state_file
 from sray.platform.finetune.scene_finetune import RESULT_FILE, SceneTask, run_scene_task, write_result
-from sray.platform.tracking.fleet_parent_run import parent_run
 from sray.platform.tracking.registry import get_tracker
-from sray.platform.tracking.tracker import Tracker
+from sray.platform.tracking.tracker import RunHandle, Tracker
 from sray.platform.train.launcher import init_ray
 from sray.platform.train.resources import check_feasible
 from sray.platform.viz.charts import write_fleet_charts
@@ -112,8 +93,7 @@ def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
 
 
 def _fleet_record(out_dir: Path, base_sha256: str, tracker: Tracker) -> dict[str, Any]:
-    """The fleet's record (new, or a re-launch's); ValueError if ``out_dir`` holds another checkpoint's fleet, or one an
-    earlier sray wrote (``sray migrate``)."""
+    """The fleet's record (new, or a re-launch's); ValueError for another checkpoint's or an outdated fleet."""
     path = out_dir / FLEET_FILE
     if not path.exists():
         return {"format": "sray-fleet", "base_sha256": base_sha256, "tracker": tracker.name,
@@ -125,6 +105,20 @@ def _fleet_record(out_dir: Path, base_sha256: str, tracker: Tracker) -> dict[str
         raise ValueError(f"{path}: field 'base_sha256' is {record.get('base_sha256')}, but this checkpoint's is "
                          f"{base_sha256}; this folder holds a fleet of another checkpoint: pass another --out")
     return record
+
+
+def parent_run(tracker: Tracker, record: dict[str, Any], experiment: str, out_dir: Path) -> tuple[RunHandle, bool]:
+    """(handle, whether new) of the parent run: the one ``record`` names (RUNNING again) if found, else a new one."""
+    if record.get("parent_run_id") and (record["tracker"], record["tracking_uri"]) == (tracker.name, tracker.store):
+        try:
+            handle = tracker.get_run(record["parent_run_id"])
+            tracker.set_status(handle, "RUNNING")
+            return handle, False
+        except Exception as e:  # noqa: BLE001 - deleted or unreachable: start a new parent
+            log.warning("parent run %s not usable (%s); starting a new one", record["parent_run_id"], e)
+    handle = tracker.start_run(experiment, f"fleet · {out_dir.parent.name}/{out_dir.name}",
+                               tags={"sray.kind": "fleet", "sray.fleet_dir": str(out_dir)})
+    return handle, True
 
 
 def _charts(results: list[dict[str, Any]], out_dir: Path) -> list[Path]:
@@ -194,14 +188,8 @@ def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
 
 def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str], out_dir: Path,
               tracking_uri: str, methods: list[str], clip_frames: int = 0) -> list[dict[str, Any]]:
-    """Finetune every (scene, method) pair; returns their result dicts (docs/CONTRACTS.md), scenes-major.
-
-    ``checkpoint``: a checkpoint folder, a job's ``checkpoints/`` or a job folder. ``tracking_uri``:
-    the store of the tracker ``cfg.tracker``; empty = its default store in the working directory.
-    ``clip_frames``: frames of a fly-through per S-Ray pair before and after its finetune (0: none).
-    Ray is started locally unless ``cfg.address`` names a cluster (or Ray is already running in this
-    process).
-    """
+    """Finetune every (scene, method) pair; their result dicts (docs/CONTRACTS.md), scenes-major. ``tracking_uri``:
+    the store of ``cfg.tracker`` (empty: its default); ``clip_frames``: fly-through frames per S-Ray pair (0: none)."""
     check_fleet_config(cfg)
     if cfg.address:
         check_ray_address(cfg.address)

@@ -9,13 +9,11 @@ from sray.platform.common.eval_protocol import EvalProtocol, caption_lines, inpu
 
 COLUMNS = ("scene", "method", "inputs", "status", "attempts", "steps used", "train time (s)", "mIoU before",
            "mIoU after", "PSNR after (dB)", "artifact", "of full model", "note")
-"""Table columns, in order (``inputs``: what the row's method was given of the source views, from its protocol)."""
+"""Table columns (``inputs``: what the row's method was given of the source views, from its protocol)."""
 
 
 def _num(value: Any, digits: int) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "-"
-    return f"{value:.{digits}f}"
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{digits}f}"
 
 
 def human_bytes(n: int | None) -> str:
@@ -43,9 +41,7 @@ def _note(r: dict[str, Any]) -> str:
 
 
 def results_table(results: list[dict[str, Any]]) -> str:
-    """Markdown table of fleet results (one row per scene and method, each with the inputs its protocol records:
-    ``RGB`` or ``RGB-D``, ``-`` without one), the protocol line(s) below it (one per distinct ``protocol`` of the
-    results, naming its methods when they differ)."""
+    """Markdown table of fleet results (one row per scene and method) and the protocol line(s) below it."""
     rows = [" | ".join(COLUMNS), " | ".join("---" for _ in COLUMNS)]
     for r in results:
         share = (f"{100 * r['artifact_bytes'] / r['full_checkpoint_bytes']:.2f}%"

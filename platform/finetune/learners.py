@@ -1,15 +1,6 @@
-"""The per-scene learners a fleet task trains, behind one small interface, :class:`Learner`
-(``loss``, ``step``, ``renderer``, ``snapshot``/``restore``, ``save``); the methods of
-:mod:`sray.platform.finetune.methods` build them:
-
-* :class:`SRayLearner`: the shared S-Ray model with only the modules ``adapt`` trainable (the rest,
-  by default the image encoder, attention and geometry, frozen; sources are encoded without
-  gradient while the encoder is frozen); its artifact holds the adapted tensors only;
-* :class:`NeRFLearner`: a Semantic-NeRF trained from scratch on the same rays (the training sample's
-  source views are ignored); its artifact is the whole network;
-* :class:`TransferLearner`: the 2D segmenter of ``2d-transfer``, finetuned whole on the training samples'
-  labelled source images (the scene's finetune pool); held-out views are its labels of their source views
-  carried by the source depth. Its artifact is the whole segmenter.
+"""The per-scene learners a fleet task trains, behind one interface, :class:`Learner`: :class:`SRayLearner` (the
+shared model with only the modules ``adapt`` trainable), :class:`NeRFLearner` (a Semantic-NeRF from scratch on the
+same rays) and :class:`TransferLearner` (the ``2d-transfer`` segmenter, finetuned whole on labelled source images).
 
 All update through the shared :class:`sray.platform.train.step.TrainStep` (autocast bf16 on CPU and
 CUDA or fp16 with a GradScaler on CUDA, clipping, the non-finite guard); the loss itself is computed in
@@ -29,7 +20,7 @@ import torch
 from torch import Tensor, nn
 
 from sray.data_tools.loader.sample_types import EvalSample, TrainSample
-from sray.data_tools.loader.views import StoredView, read_scene_views
+from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.scene import SceneMeta
 from sray.data_tools.shards.manifest import read_manifest
 from sray.model.fast_render import FastRender
@@ -41,23 +32,12 @@ from sray.platform.common.model_input import ray_batch
 from sray.platform.config.fleet_config import SemanticNeRFSettings
 from sray.platform.eval.segmenter import Segmenter, transfer_renderer
 from sray.platform.eval.view_scoring import encode_sources, sray_renderer
-from sray.platform.finetune.scene_artifacts import (
-    adapted_keys,
-    adapted_state,
-    apply_delta,
-    save_segmenter_artifact,
-    save_semantic_nerf,
-    save_sray_delta,
-)
+from sray.platform.finetune.scene_artifacts import adapted_keys, adapted_state, apply_delta, save_sray_delta, save_whole
 from sray.platform.train.step import TrainStep, fused_adam
 
 
 class Learner(ABC):
-    """One method's network on one scene, with its optimiser, precision and the shared training step.
-
-    A method subclasses it and implements the five abstract methods; ``step`` (a
-    :class:`~sray.platform.train.step.TrainStep` over ``params``) applies an update.
-    """
+    """One method's network on one scene, with the shared training step ``step`` (a ``TrainStep`` over ``params``)."""
 
     def __init__(self, net: nn.Module, params: list[nn.Parameter], lr: float, grad_clip: float, precision: str,
                  device: torch.device, max_nonfinite_in_row: int) -> None:
@@ -67,12 +47,8 @@ class Learner(ABC):
 
     @contextlib.contextmanager
     def inference(self) -> Iterator[None]:
-        """Evaluate with every parameter flagged as in a freshly loaded model (``requires_grad``).
-
-        CPU kernels (convolutions) choose their code path by these flags even under ``no_grad``, and
-        the paths differ in the last bit: with the flags of a loaded model, held-out scores are the
-        ones the stored artifact reproduces exactly.
-        """
+        """Evaluate with every parameter ``requires_grad`` as in a loaded model: CPU convolutions choose their code
+        path by these flags even under ``no_grad``, and the stored artifact then reproduces the scores exactly."""
         flags = [(p, p.requires_grad) for p in self.net.parameters()]
         self.net.requires_grad_(True)
         try:
@@ -81,21 +57,20 @@ class Learner(ABC):
             for p, flag in flags:
                 p.requires_grad_(flag)
 
-    @abstractmethod
-    def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
-        """(loss, terms) of one training sample, the forward pass under ``self.step.autocast()``;
-        ``terms`` holds at least ``psnr``."""
-
     fast: FastRender | None = None
     """The fast render mode of the held-out renderer (None: the full render; only S-Ray has one)."""
 
     @abstractmethod
+    def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
+        """(loss, terms with at least ``psnr``) of one training sample, forward under ``self.step.autocast()``."""
+
+    @abstractmethod
     def renderer(self, sample: EvalSample) -> RayRenderer:
-        """The ray renderer of one held-out evaluation sample (deterministic; the fast mode's with ``fast``)."""
+        """The deterministic ray renderer of one held-out evaluation sample."""
 
     @abstractmethod
     def snapshot(self) -> dict[str, Tensor]:
-        """CPU copy of the state the method trains (what :meth:`restore` puts back)."""
+        """CPU copy of the state the method trains."""
 
     @abstractmethod
     def restore(self, state: dict[str, Tensor]) -> None:
@@ -113,8 +88,7 @@ class SRayLearner(Learner):
                  precision: str, device: torch.device, max_nonfinite_in_row: int,
                  fast: FastRender | None = None) -> None:
         net = net.to(device).eval()
-        self.fast = fast
-        self.base_sha256, self.adapt = base_sha256, tuple(adapt)
+        self.fast, self.base_sha256, self.adapt = fast, base_sha256, tuple(adapt)
         keys = set(adapted_keys(net, adapt))
         params = [p for name, p in net.named_parameters() if name in keys]
         for name, p in net.named_parameters():
@@ -134,11 +108,7 @@ class SRayLearner(Learner):
             return self.net.training_loss(src, origins, dirs, near, far, sample.target_label, sample.target_rgb)
 
     def renderer(self, sample: EvalSample) -> RayRenderer:
-        """Ray renderer bound to the sample's fixed source views.
-
-        While the encoder is frozen the encoded sources of a held-out view never change: they are
-        computed at the first evaluation and reused by every later one.
-        """
+        """Ray renderer bound to the sample's fixed source views (encoded once while the encoder is frozen)."""
         if not self.encoder_frozen:
             return sray_renderer(self.net, sample, self.device, self.fast)
         key = (sample.scene, sample.query_id)
@@ -160,7 +130,9 @@ class SRayLearner(Learner):
 
 
 class WholeNetLearner(Learner):
-    """A learner that trains every parameter of its network (the whole state dict is its snapshot)."""
+    """A learner that trains every parameter of its network and stores it whole as a scene artifact."""
+
+    method: str
 
     def __init__(self, net: nn.Module, lr: float, grad_clip: float, precision: str, device: torch.device,
                  max_nonfinite_in_row: int) -> None:
@@ -175,29 +147,32 @@ class WholeNetLearner(Learner):
         """Put back a :meth:`snapshot`."""
         self.net.load_state_dict(state)
 
+    def save(self, path: Path, scene: str) -> None:
+        """Write the scene artifact: the whole network as it is now, with its config."""
+        save_whole(path, self.net, scene, self.method)
+
 
 class NeRFLearner(WholeNetLearner):
     """Trains a Semantic-NeRF of the scene from scratch (every parameter)."""
+
+    method = "semantic-nerf"
 
     def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
         """Loss of one training sample's rays (its source views are not used)."""
         origins, dirs, near, far = ray_batch(sample).query.to(self.device).rays()
         with self.step.autocast():
             out = self.net.render_rays(origins, dirs, near, far, stratified=True)
-        return render_loss(out, sample.target_label.to(self.device), sample.target_rgb.to(self.device),
-                           self.net.cfg)
+        return render_loss(out, sample.target_label.to(self.device), sample.target_rgb.to(self.device), self.net.cfg)
 
     def renderer(self, sample: EvalSample) -> RayRenderer:
         """Ray renderer (deterministic samples)."""
         return lambda o, d, near, far: self.net.render_rays(o, d, near, far, stratified=False)
 
-    def save(self, path: Path, scene: str) -> None:
-        """Write the scene artifact (the whole model as it is now: Semantic-NeRF shares nothing)."""
-        save_semantic_nerf(path, self.net, scene)
-
 
 class TransferLearner(WholeNetLearner):
     """Finetunes the 2D segmenter of ``2d-transfer`` (every parameter) on labelled images of the scene."""
+
+    method = "2d-transfer"
 
     def __init__(self, net: Segmenter, lr: float, grad_clip: float, precision: str, device: torch.device,
                  max_nonfinite_in_row: int, tolerance: float) -> None:
@@ -206,8 +181,7 @@ class TransferLearner(WholeNetLearner):
         self.tolerance = tolerance
 
     def loss(self, sample: TrainSample) -> tuple[Tensor, dict[str, Tensor]]:
-        """The segmenter's class-weighted cross-entropy on the sample's source images (m, 3, H, W) against their
-        labels (m, H, W) (the query's rays are not used). It predicts no colour: ``psnr`` is NaN."""
+        """Class-weighted cross-entropy on the source images (m, 3, H, W) and labels (m, H, W); ``psnr`` is NaN."""
         sources = sample.sources.to(self.device)
         if sources.label is None:
             raise ValueError("2d-transfer trains on labelled source images: build its loader with source_labels "
@@ -217,34 +191,19 @@ class TransferLearner(WholeNetLearner):
         return loss, {"ce": loss.detach(), "psnr": torch.full((), float("nan"), device=self.device)}
 
     def renderer(self, sample: EvalSample) -> RayRenderer:
-        """The segmenter's labels of the sample's source views carried into its query view by their depth
-        (``segmenter.transfer_renderer``: nothing of the query view but its camera is read)."""
+        """The segmenter's labels of the sample's source views carried into its query view by their depth."""
         return transfer_renderer(self.net, sample, self.tolerance, self.device)
-
-    def save(self, path: Path, scene: str) -> None:
-        """Write the scene artifact (the whole segmenter as it is now, with its config)."""
-        save_segmenter_artifact(path, self.net, scene)
 
 
 def build_semantic_nerf(shards: Path, scene: str, n_classes: int, ignore_id: int, n_coarse: int, n_fine: int,
-                        settings: SemanticNeRFSettings, seed: int, chunk: int) -> SemanticNeRF:
+                        nerf: SemanticNeRFSettings, seed: int, chunk: int) -> SemanticNeRF:
     """A fresh Semantic-NeRF (seeded) whose scene box covers the frusta of all the scene's split views."""
     entry = read_manifest(shards).scenes[scene]
-    return semantic_nerf_for_views(SceneMeta.from_json(entry.meta), read_scene_views(shards, entry),
-                                   tuple(entry.image_size), n_classes, ignore_id, n_coarse, n_fine, settings, seed,
-                                   chunk)
-
-
-def semantic_nerf_for_views(meta: SceneMeta, views: dict[str, StoredView], image_size: tuple[int, int],
-                            n_classes: int, ignore_id: int, n_coarse: int, n_fine: int, settings: SemanticNeRFSettings,
-                            seed: int, chunk: int) -> SemanticNeRF:
-    """A fresh Semantic-NeRF (seeded) whose scene box covers the frusta of the split views among ``views``
-    (cameras as given: perturbed cameras move the box as they would for a user)."""
+    meta, views = SceneMeta.from_json(entry.meta), read_scene_views(shards, entry)
     ids = [v for v in meta.view_ids if any(v in s for s in meta.splits.values())]
     K = torch.from_numpy(np.stack([views[v].K for v in ids]))  # (V, 3, 3)
     c2w = torch.from_numpy(np.stack([views[v].c2w for v in ids]))  # (V, 4, 4)
-    center, scale = scene_box_from_cameras(K, c2w, image_size, meta.near, meta.far)
-    nerf = settings
+    center, scale = scene_box_from_cameras(K, c2w, tuple(entry.image_size), meta.near, meta.far)
     torch.manual_seed(seed)
     return SemanticNeRF(SemanticNeRFConfig(
         n_classes=n_classes, pos_freqs=nerf.pos_freqs, dir_freqs=nerf.dir_freqs, depth=nerf.depth, width=nerf.width,

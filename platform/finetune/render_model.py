@@ -1,9 +1,4 @@
-"""The S-Ray model a fly-through renders: a shared checkpoint's, or one scene's finetuned model from a fleet.
-
-A fleet stores a scene's S-Ray finetune as a delta on the shared checkpoint (``scene_artifacts.py``); it is
-applied here as the fleet applies it (:func:`~sray.platform.finetune.scene_artifacts.load_scene_model`, which
-refuses a delta made from another checkpoint). A delta finetuned on another scene is refused too.
-"""
+"""The S-Ray model a fly-through renders: a shared checkpoint's, or one scene's finetuned model from a fleet."""
 
 from __future__ import annotations
 
@@ -17,19 +12,13 @@ from sray.platform.finetune.scene_artifacts import load_scene_model, read_sray_d
 
 
 def artifact_file(artifact: Path) -> Path:
-    """The delta file of ``artifact``: the file itself, or ``<folder>/sray_delta.safetensors`` for a fleet's
-    ``scenes/<scene>/sray`` folder."""
+    """The delta file of ``artifact``: the file itself, or the delta in a fleet's ``scenes/<scene>/sray`` folder."""
     artifact = Path(artifact)
     return artifact / METHOD.artifact_file if artifact.is_dir() else artifact
 
 
 def render_model(checkpoint: Path, artifact: Path | None, scene: str) -> tuple[SRayModel, dict[str, str]]:
-    """The model (eval mode, CPU) and what made it (``{"checkpoint", "artifact"?}``, absolute paths).
-
-    ``checkpoint``: a checkpoint folder, a job's ``checkpoints/`` folder or a job folder (``resolve_checkpoint``);
-    ``artifact``: None for the shared model, else a scene's S-Ray delta (file or folder) finetuned from that
-    checkpoint on ``scene``. ValueError / FileNotFoundError (one line, naming the file and field) otherwise.
-    """
+    """The model (eval mode, CPU) and what made it; ``artifact``: a scene's S-Ray delta, None for the shared model."""
     folder = resolve_checkpoint(checkpoint)
     if artifact is None:
         return model_from_checkpoint(folder)[0], {"checkpoint": str(folder)}

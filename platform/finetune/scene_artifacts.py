@@ -1,20 +1,4 @@
-"""A scene's finetune artifact: only what differs from the shared model (safetensors files).
-
-S-Ray (``sray_delta.safetensors``): the tensors of the adapted modules (``FinetuneSettings.adapt``,
-prefixes of ``SRayModel.state_dict()`` keys), the sha256 of the shared checkpoint's ``state.pt``
-they were trained from and the adapted module list. :func:`load_scene_model` = shared model +
-artifact, bit for bit the finetuned model; an artifact of another base checkpoint is refused.
-
-Semantic-NeRF (``semantic_nerf.safetensors``): the whole state dict (it shares nothing) and its
-config, rebuilt by :func:`load_semantic_nerf`. ``2d-transfer`` (``segmenter.safetensors``): the whole finetuned
-2D segmenter and its config, rebuilt by :func:`load_segmenter_artifact`.
-
-The file names are the methods' (``artifact_file`` in :mod:`sray.platform.finetune.methods`).
-
-Sizes are compared with :func:`model_bytes` of the shared model: the bytes of its tensors alone
-(what a full per-scene copy of the model would cost), not the training checkpoint's ``state.pt``,
-which also holds the optimiser's moments.
-"""
+"""A scene's finetune artifact (safetensors): S-Ray's adapted tensors bound to the base's sha256, or a whole network."""
 
 from __future__ import annotations
 
@@ -37,7 +21,6 @@ from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.eval.segmenter import Segmenter, SegmenterConfig
 
 FORMAT = "sray-scene-delta"
-"""``format`` metadata of every scene artifact."""
 VERSION = "1"
 
 
@@ -87,8 +70,8 @@ def _atomic_save(tensors: dict[str, Tensor], metadata: dict[str, str], path: Pat
     return path.stat().st_size
 
 
-def _read(path: Path) -> tuple[dict[str, Tensor], dict[str, str]]:
-    """Tensors and metadata of an artifact; errors name the file and what is wrong."""
+def _read(path: Path, method: str) -> tuple[dict[str, Tensor], dict[str, str]]:
+    """Tensors and metadata of an artifact ``method`` wrote; errors name the file and what is wrong."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no scene artifact here; run `sray finetune-fleet` first")
@@ -98,6 +81,10 @@ def _read(path: Path) -> tuple[dict[str, Tensor], dict[str, str]]:
     if metadata.get("format") != FORMAT:
         raise ValueError(f"{path}: field 'format' is {metadata.get('format')!r}, expected {FORMAT!r}; "
                          "not an sray scene artifact")
+    if metadata.get("method") != method:
+        raise ValueError(f"{path}: field 'method' is {metadata.get('method')!r}, expected {method!r}"
+                         + ("; this is not an S-Ray scene artifact (a Semantic-NeRF one loads with load_semantic_nerf)"
+                            if method == "sray" else ""))
     return tensors, metadata
 
 
@@ -111,11 +98,7 @@ def save_sray_delta(path: Path, tensors: dict[str, Tensor], base_sha256: str, ad
 
 def read_sray_delta(path: Path) -> tuple[dict[str, Tensor], dict[str, str]]:
     """The tensors and metadata (``base_sha256``, ``adapt`` as JSON, ``scene``) of an S-Ray artifact."""
-    tensors, metadata = _read(path)
-    if metadata.get("method") != "sray":
-        raise ValueError(f"{Path(path)}: field 'method' is {metadata.get('method')!r}; this is not an S-Ray "
-                         "scene artifact (a Semantic-NeRF one loads with load_semantic_nerf)")
-    return tensors, metadata
+    return _read(path, "sray")
 
 
 def apply_delta(model: nn.Module, tensors: dict[str, Tensor], where: str) -> None:
@@ -134,25 +117,20 @@ def apply_delta(model: nn.Module, tensors: dict[str, Tensor], where: str) -> Non
 
 
 def load_scene_model(base_checkpoint: Path, artifact: Path, map_location: str = "cpu") -> SRayModel:
-    """The finetuned S-Ray model of one scene (eval mode): the shared checkpoint plus its artifact.
-
-    Refuses (ValueError) an artifact whose recorded base checksum is not the checkpoint's.
-    """
+    """The finetuned S-Ray model of one scene (eval mode); ValueError when the artifact is of another checkpoint."""
     tensors, metadata = read_sray_delta(artifact)
     actual = checkpoint_sha256(base_checkpoint)
     if metadata.get("base_sha256") != actual:
-        raise ValueError(
-            f"{artifact}: base checksum mismatch: the artifact was finetuned from a checkpoint with sha256 "
-            f"{metadata.get('base_sha256')}, but {state_file(base_checkpoint)} has {actual}; load it onto the "
-            "checkpoint the fleet was run with")
+        raise ValueError(f"{artifact}: base checksum mismatch: the artifact was finetuned from a checkpoint with "
+                         f"sha256 {metadata.get('base_sha256')}, but {state_file(base_checkpoint)} has {actual}; load "
+                         "it onto the checkpoint the fleet was run with")
     model, _ = model_from_checkpoint(base_checkpoint, map_location)
     apply_delta(model, tensors, str(artifact))
     return model.eval()
 
 
-def _save_whole(path: Path, model: SemanticNeRF | Segmenter, scene: str, method: str) -> int:
-    """Write the scene artifact of a per-scene model saved whole (its state dict + its config) under ``method``;
-    returns its bytes."""
+def save_whole(path: Path, model: SemanticNeRF | Segmenter, scene: str, method: str) -> int:
+    """Write a whole-model scene artifact (state dict + config) of ``method``; returns its bytes."""
     tensors = {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
     metadata = {"format": FORMAT, "version": VERSION, "method": method, "scene": scene,
                 "config": json.dumps(dataclasses.asdict(model.cfg))}
@@ -160,17 +138,9 @@ def _save_whole(path: Path, model: SemanticNeRF | Segmenter, scene: str, method:
 
 
 def _read_whole(artifact: Path, method: str) -> tuple[dict[str, Tensor], dict[str, Any]]:
-    """(state dict, config fields) of a whole-model artifact; ValueError naming the file unless ``method``
-    wrote it."""
-    tensors, metadata = _read(artifact)
-    if metadata.get("method") != method:
-        raise ValueError(f"{artifact}: field 'method' is {metadata.get('method')!r}, expected {method!r}")
+    """(state dict, config fields) of a whole-model artifact ``method`` wrote."""
+    tensors, metadata = _read(artifact, method)
     return tensors, json.loads(metadata["config"])
-
-
-def save_semantic_nerf(path: Path, model: SemanticNeRF, scene: str) -> int:
-    """Write a Semantic-NeRF scene artifact (whole state dict + config); returns its bytes."""
-    return _save_whole(path, model, scene, "semantic-nerf")
 
 
 def load_semantic_nerf(artifact: Path, map_location: str = "cpu") -> SemanticNeRF:
@@ -179,11 +149,6 @@ def load_semantic_nerf(artifact: Path, map_location: str = "cpu") -> SemanticNeR
     model = SemanticNeRF(SemanticNeRFConfig(**{**fields, "scene_center": tuple(fields["scene_center"])}))
     model.load_state_dict(tensors)
     return model.to(map_location).eval()
-
-
-def save_segmenter_artifact(path: Path, model: Segmenter, scene: str) -> int:
-    """Write a ``2d-transfer`` scene artifact (the whole segmenter's state dict + its config); returns its bytes."""
-    return _save_whole(path, model, scene, "2d-transfer")
 
 
 def load_segmenter_artifact(artifact: Path, map_location: str = "cpu") -> Segmenter:

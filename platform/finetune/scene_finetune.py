@@ -1,20 +1,4 @@
-"""One scene's finetune (the body of a fleet task) with any registered method (:mod:`sray.platform.finetune.methods`):
-S-Ray from the shared model, Semantic-NeRF from scratch, 2d-transfer from its pretrained segmenter, ...
-
-Every method trains on the scene's loader pool (test scenes: ``source`` + ``finetune`` views; train
-scenes: ``train`` minus held-out views) with its learner's loss, and is scored on the held-out ``test``
-views rendered from their fixed source views (``make_eval_samples``), every ``eval_every`` steps and at
-step 0 (zero-shot S-Ray, untrained Semantic-NeRF, 2d-transfer's pretrained segmenter). The score is the
-dataset-level mIoU (one confusion matrix over the scene's held-out views); how it was made (sources, stride,
-render mode, inputs) is the result's ``protocol`` (:class:`sray.platform.common.eval_protocol.EvalProtocol`). A
-finetune stops at the first of: ``patience`` evaluations without an improvement > ``min_delta`` (early stop),
-``max_steps``, ``max_seconds`` of training wall time, ``max_cpu_seconds`` of training CPU time. The best evaluated
-state is kept and stored as the scene artifact (:mod:`sray.platform.finetune.scene_artifacts`). Sampling uses the
-scene's own near/far from the shard metadata.
-
-Time: ``wall_s`` and ``cpu_s`` count training steps only (data, forward, backward, update: ``step_budget``); evaluation
-is left out, so methods compare at equal training time. One process: bf16 autocast, or fp16 with a GradScaler.
-"""
+"""One scene's finetune (a fleet task): evaluated every ``eval_every`` steps, its best state stored as the artifact."""
 
 from __future__ import annotations
 
@@ -36,16 +20,17 @@ from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.common.eval_protocol import EvalProtocol
 from sray.platform.common.fault_hook import fail_if_listed
-from sray.platform.common.progress import make_progress
-from sray.platform.common.throughput import ThroughputWindow, progress_postfix
+from sray.platform.common.progress import ThroughputWindow, make_progress, progress_postfix
 from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.eval.view_scoring import score_scene
 from sray.platform.finetune.learners import Learner
 from sray.platform.finetune.methods.method import SceneContext
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.finetune.scene_artifacts import model_bytes
-from sray.platform.finetune.scene_clips import SceneClips
 from sray.platform.finetune.step_budget import StepClock, time_limit_reached
+from sray.platform.render.flythrough import Flythrough
+from sray.platform.render.plan import plan_flythrough
+from sray.platform.render.tracked import ARTIFACT_PATH, log_flythrough
 from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle, RunLogger
 from sray.platform.train.step import NonFiniteTraining, step_seed
@@ -59,15 +44,11 @@ class SceneTask:
     """What one fleet task needs (picklable)."""
 
     scene: str
-    """Scene name in the shard manifest."""
     method: str
-    """A registered method's name (``sray``, ``semantic-nerf``, ...)."""
     checkpoint: str
-    """Shared S-Ray checkpoint folder (its config also sets the defaults both methods inherit)."""
+    """Shared S-Ray checkpoint folder (its config also sets the defaults the methods inherit)."""
     base_sha256: str
-    """sha256 of the checkpoint's ``state.pt`` (recorded in S-Ray artifacts)."""
     shards: str
-    """Shard folder (``manifest.json``)."""
     out_dir: str
     """``<fleet>/scenes/<scene>/<method>``: result.json and the scene artifact go here."""
     run: RunHandle | None
@@ -75,9 +56,8 @@ class SceneTask:
     attempt: int
     """1 for the first try, 2 for the first re-run, ..."""
     config: FleetConfig
-    """The fleet's configuration."""
     clip_frames: int = 0
-    """Frames of the fly-through rendered before and after the finetune (0: none; ``scene_clips.py``)."""
+    """Frames of the fly-through rendered before and after the finetune (0: none)."""
 
 
 @dataclass
@@ -89,10 +69,7 @@ class SceneOutcome:
 
 
 class EarlyStopping:
-    """Stop after ``patience`` evaluations in a row without beating the best by more than ``min_delta``.
-
-    The first value (step 0) sets the baseline; NaN never improves.
-    """
+    """Stop after ``patience`` evaluations in a row not beating the best by ``min_delta`` (NaN never improves)."""
 
     def __init__(self, patience: int, min_delta: float) -> None:
         self.patience, self.min_delta = patience, min_delta
@@ -101,8 +78,8 @@ class EarlyStopping:
 
     def update(self, value: float) -> bool:
         """Record an evaluation; True if it is the new best."""
-        first = self.best is None
-        if first or (not math.isnan(value) and (math.isnan(self.best) or value > self.best + self.min_delta)):
+        best = self.best
+        if best is None or (not math.isnan(value) and (math.isnan(best) or value > best + self.min_delta)):
             self.best, self.bad = value, 0
             return True
         self.bad += 1
@@ -124,17 +101,13 @@ def evaluate(learner: Learner, samples: list[EvalSample], cfg: FleetConfig, n_cl
                            learner.device, learner.fast).scores
 
 
-def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
-    """Write ``result.json`` atomically (temp name, then rename)."""
-    path = out_dir / RESULT_FILE
-    atomic_write_json(path, result)
-    return path
+def write_result(out_dir: Path, result: dict[str, Any]) -> None:
+    """Write ``result.json`` atomically."""
+    atomic_write_json(out_dir / RESULT_FILE, result)
 
 
 def scene_protocol(task: SceneTask, shared: SRayConfig, fast: FastRender | None = None) -> EvalProtocol:
-    """How the job's held-out scores are made (``finetune.held_out``: its stride, its fixed sources ranked by the
-    shards' neighbour rule, given as the method's ``inputs``, else the shared checkpoint's with ``train_inputs``;
-    rendered by the learner's ``fast`` mode or in full), or from no sources (per-scene models: Semantic-NeRF)."""
+    """How the held-out scores are made (``finetune.held_out``, the method's inputs, ``fast`` or a full render)."""
     ft, method = task.config.finetune, get_method(task.method)
     if method.uses_sources:
         inputs = (method.inputs, "") if method.inputs else (shared.inputs, shared.train_inputs)  # (test, training)
@@ -145,9 +118,7 @@ def scene_protocol(task: SceneTask, shared: SRayConfig, fast: FastRender | None 
 
 def _prepare(task: SceneTask,
              device: torch.device) -> tuple[Learner, Any, list[EvalSample], tuple[int, int, int, SRayConfig]]:
-    """The method's learner, the training loader (one epoch = ``eval_every`` samples), the held-out samples
-    and (classes, ignore id, shared model bytes, the shared model's config); ValueError when the scene does not
-    fit the checkpoint."""
+    """The learner, training loader, held-out samples and (classes, ignore id, shared model bytes and config)."""
     ft, shards = task.config.finetune, Path(task.shards)
     method = get_method(task.method)
     base, train_cfg = model_from_checkpoint(task.checkpoint)
@@ -163,12 +134,21 @@ def _prepare(task: SceneTask,
     setup = method.build(SceneContext(
         scene=task.scene, shards=shards, base=base, base_sha256=task.base_sha256, train_cfg=train_cfg, cfg=task.config,
         n_classes=n_classes, ignore_id=ignore_id, stored_neighbours=int(manifest.neighbours["k"]), device=device))
-    loader = make_train_loader(shards, n_source=setup.n_source, top_k=max(setup.top_k, setup.n_source),
-                               rays_per_batch=ft.rays_per_batch or train_cfg.data.rays_per_batch,
-                               batches_per_epoch=ft.eval_every, rank=0, world_size=1, num_workers=0, seed=ft.seed,
-                               scenes=[task.scene], source_labels=setup.source_labels)
+    loader = make_train_loader(shards, n_source=setup.n_source, top_k=max(setup.top_k, setup.n_source), rank=0,
+                               rays_per_batch=ft.rays_per_batch or train_cfg.data.rays_per_batch, num_workers=0,
+                               batches_per_epoch=ft.eval_every, world_size=1, seed=ft.seed, scenes=[task.scene],
+                               source_labels=setup.source_labels)
     samples = list(make_eval_samples(shards, task.scene, n_source=ft.held_out.sources(train_cfg.model.n_source)))
     return setup.learner, loader, samples, (n_classes, ignore_id, full_bytes, train_cfg.model)
+
+
+def render_clip(fly: Flythrough, stage: str, learner: Learner, out_dir: Path, logger: RunLogger | None) -> None:
+    """Render the fly-through of ``stage`` with the learner's state, as held-out views, into ``flythrough_<stage>/``."""
+    with learner.inference(), learner.step.autocast():
+        result = fly.render(out_dir / f"flythrough_{stage}", learner.device, label=f"{stage} finetuning",
+                            progress=False)
+    if logger is not None:
+        log_flythrough(logger, result["files"], f"{ARTIFACT_PATH}/{stage}")
 
 
 def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOutcome:
@@ -182,8 +162,9 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     out_dir = Path(task.out_dir)
     learner, loader, samples, (n_classes, ignore_id, full_bytes, shared) = _prepare(task, device)
     protocol = scene_protocol(task, shared, learner.fast)
-    clips = (SceneClips(learner.net, Path(task.shards), task.scene, task.clip_frames, cfg)
-             if task.clip_frames and get_method(task.method).clips else None)
+    fly = (Flythrough(learner.net, plan_flythrough(Path(task.shards), task.scene, n_frames=task.clip_frames),
+                      ft.held_out.sources(learner.net.cfg.n_source), ft.held_out.fast())
+           if task.clip_frames and get_method(task.method).clips else None)
     if logger is not None:
         logger.log_params(cfg.to_dict() | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
                                            "protocol": protocol.to_json()})
@@ -197,16 +178,15 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     def evaluate_now() -> None:
         nonlocal best_state, best_point
         scores = evaluate(learner, samples, cfg, n_classes, ignore_id)
-        point = {"step": step, "wall_s": clock.wall_s, "miou": scores["miou"],
-                 "miou_per_image": scores["miou_per_image"], "psnr": scores["psnr"]}
+        point = {"step": step, "wall_s": clock.wall_s} | {k: scores[k] for k in ("miou", "miou_per_image", "psnr")}
         curve.append(point)
         if stopper.update(scores["miou"]):
             best_state, best_point = learner.snapshot(), point
         if logger is not None:
             logger.log_metrics({f"heldout/{k}": v for k, v in (scores | {"train_s": clock.wall_s}).items()}, step)
 
-    if clips is not None:
-        clips.render("before", learner, out_dir, logger)
+    if fly is not None:
+        render_clip(fly, "before", learner, out_dir, logger)
     bar = make_progress(True, total=ft.max_steps, desc=f"{task.scene}/{task.method}")
     throughput = ThroughputWindow(loader.dataset.rays, 1, device)
     evaluate_now()
@@ -248,44 +228,33 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
         bar.close()
     learner.restore(best_state)
     learner.net.requires_grad_(True)  # the returned model is in the state of a reloaded one (see Learner.inference)
-    if clips is not None:
-        clips.render("after", learner, out_dir, logger)
+    if fly is not None:
+        render_clip(fly, "after", learner, out_dir, logger)
     artifact = out_dir / get_method(task.method).artifact_file
     learner.save(artifact, task.scene)
     best_point = best_point or curve[0]
     result = {
         "scene": task.scene, "method": task.method, "status": "finished", "error": None, "attempts": task.attempt,
         "steps_used": step, "max_steps": ft.max_steps, "stopped_early": reason == "patience", "stop_reason": reason,
-        "wall_s": clock.wall_s, "cpu_s": clock.cpu_s, "miou_before": curve[0]["miou"],
-        "miou_after": best_point["miou"], "psnr_after": best_point["psnr"],
-        "artifact_bytes": artifact.stat().st_size, "full_checkpoint_bytes": full_bytes,
-        "child_run_id": task.run.run_id if task.run else None, "protocol": protocol.to_json(), "curve": curve,
-        "gpu_peak_bytes": torch.cuda.max_memory_allocated(device) if use_cuda else None,
-    }
+        "wall_s": clock.wall_s, "cpu_s": clock.cpu_s, "miou_before": curve[0]["miou"], "miou_after": best_point["miou"],
+        "psnr_after": best_point["psnr"], "artifact_bytes": artifact.stat().st_size,
+        "full_checkpoint_bytes": full_bytes, "child_run_id": task.run.run_id if task.run else None,
+        "protocol": protocol.to_json(), "curve": curve,
+        "gpu_peak_bytes": torch.cuda.max_memory_allocated(device) if use_cuda else None}
     write_result(out_dir, result)
     if logger is not None:
-        logger.log_metrics({"result/steps_used": step, "result/miou_before": result["miou_before"],
-                            "result/miou_after": result["miou_after"], "result/psnr_after": result["psnr_after"],
-                            "result/best_step": best_point["step"], "result/stopped_early": float(reason == "patience"),
-                            "result/artifact_bytes": result["artifact_bytes"], "result/train_s": clock.wall_s,
-                            "result/train_cpu_s": clock.cpu_s}, step)
+        logged = ("steps_used", "miou_before", "miou_after", "psnr_after", "artifact_bytes")
+        logger.log_metrics({f"result/{k}": result[k] for k in logged} | {
+            "result/best_step": best_point["step"], "result/stopped_early": float(reason == "patience"),
+            "result/train_s": clock.wall_s, "result/train_cpu_s": clock.cpu_s}, step)
         logger.log_artifact(out_dir / RESULT_FILE)
         logger.log_artifact(artifact, "scene_artifact")
     return SceneOutcome(result, learner.net)
 
 
 def run_scene_task(task: SceneTask) -> dict[str, Any]:
-    """The fleet's Ray task body (here, so that Ray's workers import what a finetune needs and no more):
-    :func:`finetune_scene` logging into the job's child run; the result, with the Ray node it ran on
-    (``node_id``), is written to the task's folder and returned.
-
-    The child run is marked FINISHED on success and FAILED when this attempt raises (a later
-    successful re-run marks it FINISHED again). Torch uses as many threads as the task reserved
-    CPUs: more threads than reserved cores oversubscribe a shared machine (measured 10x slower
-    steps with 2 threads on a busy 2-core host). The count is set only when it differs: even a call that
-    keeps it (Ray's OMP_NUM_THREADS already matches) made SDPA's CPU flash kernel ~13% slower here
-    (docs/performance.md, "`torch.set_num_threads` only when the count changes").
-    """
+    """The fleet's Ray task body: :func:`finetune_scene` into the child run; its result with the Ray node. Torch gets
+    the task's CPUs as threads, set only when that differs (docs/performance.md, "`torch.set_num_threads`...")."""
     threads = max(1, int(task.config.cpus_per_task))
     if torch.get_num_threads() != threads:
         torch.set_num_threads(threads)

@@ -1,18 +1,4 @@
-"""The MLflow dashboard on a store: a lean ``mlflow server`` bound to localhost (``sray ui``).
-
-Lean: no job runner (``MLFLOW_SERVER_ENABLE_JOB_EXECUTION=false``) and one worker, which makes it
-2 processes and ~0.5 GiB instead of 15-27 processes and 2-3 GiB; telemetry and the AI Gateway are
-off (offline machines). The app is :mod:`sray.platform.tracking.ui_app`: MLflow's, with a new
-browser opening the model-training view instead of MLflow's GenAI view. Artifacts: the experiments
-:mod:`sray.platform.tracking.runs` creates carry an explicit ``file://`` artifact location, which the
-server reads directly when the UI asks for a run's artifacts; experiments created from the UI itself
-store theirs through the server's artifact proxy into ``--artifacts-destination``, the same
-``mlartifacts`` folder beside the SQLite database.
-
-:func:`runs_view_url` is the address of an experiment's classic runs table, whatever view a browser
-last chose. The server runs in its own process group so that :meth:`DashboardHandle.stop` ends it and its
-worker, and nothing else.
-"""
+"""``sray ui``: a lean ``mlflow server`` on localhost (no job runner, one worker: 2 processes, ~0.5 GiB, not 15-27)."""
 
 from __future__ import annotations
 
@@ -29,45 +15,28 @@ from dataclasses import dataclass, field
 from importlib.metadata import distributions
 from pathlib import Path
 
-from sray.platform.tracking.runs import DEFAULT_UI_PORT, default_tracking_uri, is_server, probe_server, sqlite_path
+from sray.platform.tracking.runs import (DEFAULT_UI_PORT, artifact_root, default_tracking_uri, is_server, probe_server,
+                                        sqlite_path)
 
 SERVER_ENV = {"MLFLOW_SERVER_ENABLE_JOB_EXECUTION": "false", "MLFLOW_DISABLE_TELEMETRY": "true",
               "DO_NOT_TRACK": "true", "MLFLOW_ENABLE_AI_GATEWAY": "false"}
 """Environment of the server process: no job runner, no telemetry, no AI Gateway (endpoints and UI)."""
 UI_APP = "sray-ui"
-"""The server app (``mlflow server --app-name``): MLflow's, opening on model training
-(:mod:`sray.platform.tracking.ui_app`, entry point group ``mlflow.app``)."""
-LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
-
-
+"""The server app (``mlflow server --app-name``, entry point group ``mlflow.app``): :mod:`~.ui_app`."""
 SORT_BY_RUN_NAME = "orderByKey=tags.%60mlflow.runName%60&orderByAsc=true"
-"""Runs-table query sorting by run name: the UI then lists child runs as rows of their own instead of
-folding them under their parent (it nests only when sorting by creation time without a filter)."""
+"""Runs-table query sorting by run name: the UI then lists child runs as rows of their own, not folded."""
 
 
 def runs_view_url(base_url: str, experiment_id: str, flat: bool = False) -> str:
-    """Address of an experiment's classic runs table (whichever view the browser last chose);
-    ``flat``: sorted by run name, child runs listed beside their parents rather than folded."""
+    """Address of an experiment's runs table; ``flat``: sorted by run name, child runs beside their parents."""
     url = f"{base_url.rstrip('/')}/#/experiments/{experiment_id}/runs?workflowType=machine_learning"
     return f"{url}&{SORT_BY_RUN_NAME}" if flat else url
-
-
-def run_artifacts_url(base_url: str, experiment_id: str, run_id: str, path: str = "") -> str:
-    """Address of a run's artifacts tab, with the artifact at ``path`` (relative) selected and previewed."""
-    url = f"{base_url.rstrip('/')}/#/experiments/{experiment_id}/runs/{run_id}/artifacts"
-    return (f"{url}/{path.strip('/')}" if path else url) + "?workflowType=machine_learning"
 
 
 def tunnel_hint(port: int) -> str:
     """How to reach a dashboard on a remote machine: an SSH tunnel from the laptop."""
     return (f"on a remote machine? on your laptop run  ssh -N -L {port}:127.0.0.1:{port} "
             f"USER@{socket.gethostname()}  and open the same address there")
-
-
-def artifact_destination(tracking_uri: str) -> Path | None:
-    """``mlartifacts`` beside a SQLite database (where :mod:`sray.platform.tracking.runs` puts artifacts)."""
-    db = sqlite_path(tracking_uri)
-    return None if db is None else db.parent / "mlartifacts"
 
 
 def experiment_links(tracking_uri: str, base_url: str) -> dict[str, str]:
@@ -80,8 +49,7 @@ def experiment_links(tracking_uri: str, base_url: str) -> dict[str, str]:
         runs = client.search_runs([exp.experiment_id], order_by=["attributes.start_time DESC"], max_results=1)
         if runs:
             newest.append((int(runs[0].info.start_time or 0), exp.name, exp.experiment_id))
-    newest.sort(reverse=True)
-    return {name: runs_view_url(base_url, exp_id) for _, name, exp_id in newest}
+    return {name: runs_view_url(base_url, exp_id) for _, name, exp_id in sorted(newest, reverse=True)}
 
 
 @dataclass
@@ -91,17 +59,11 @@ class DashboardHandle:
     process: subprocess.Popen
     """The ``mlflow server`` process (leader of its own process group)."""
     base_url: str
-    """``http://host:port``."""
     url: str
-    """Classic runs view of the experiment with the newest run (``base_url`` when there is none)."""
+    """Runs view of the experiment with the newest run (``base_url`` when there is none)."""
     log_path: Path
-    """File receiving the server's stdout and stderr."""
     experiment_urls: dict[str, str] = field(default_factory=dict)
     """Experiment name -> runs-view address, newest activity first."""
-
-    def running(self) -> bool:
-        """True while the server process is alive."""
-        return self.process.poll() is None
 
     def log_tail(self, n_chars: int = 2000) -> str:
         """The end of the server's log."""
@@ -112,17 +74,14 @@ class DashboardHandle:
 
     def stop(self, timeout_s: float = 15.0) -> int | None:
         """Stop the server and its worker (SIGTERM to its process group, SIGKILL after ``timeout_s``)."""
-        if self.running():
-            for sig in (signal.SIGTERM, signal.SIGKILL):
-                try:
-                    os.killpg(self.process.pid, sig)
-                except ProcessLookupError:
-                    break
-                try:
-                    self.process.wait(timeout_s)
-                    break
-                except subprocess.TimeoutExpired:
-                    continue
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            if self.process.poll() is not None:
+                break
+            try:
+                os.killpg(self.process.pid, sig)
+                self.process.wait(timeout_s)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                continue
         return self.process.poll()
 
     def __enter__(self) -> DashboardHandle:
@@ -133,8 +92,7 @@ class DashboardHandle:
 
 
 def _check_port_free(host: str, port: int) -> None:
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as s:
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind((host, port))
@@ -143,14 +101,8 @@ def _check_port_free(host: str, port: int) -> None:
                           f"there: open it, or pass --port with a free port") from None
 
 
-def is_tracking_server(tracking_uri: str) -> bool:
-    """True for a tracking server's URI (``http(s)://``), which serves its own dashboard."""
-    return is_server(tracking_uri)
-
-
 def server_links(tracking_uri: str) -> dict[str, str]:
-    """A tracking server's own runs views, experiment name -> address (it serves its dashboard itself);
-    ConnectionError naming the URI when it does not answer."""
+    """A tracking server's own runs views by experiment name; ConnectionError naming the URI when it does not answer."""
     probe_server(tracking_uri)
     return experiment_links(tracking_uri, tracking_uri)
 
@@ -170,37 +122,31 @@ def _resolve_store(tracking_uri: str | None) -> str:
 
 
 def _ui_app_installed() -> bool:
-    """True when an installed distribution offers :data:`UI_APP`. Every distribution is read: ``entry_points()``
-    keeps one per name, and a stale ``sray.egg-info`` in the working directory would hide the installed one."""
+    """True when a distribution offers :data:`UI_APP` (read all: a stale ``sray.egg-info`` hides it from one)."""
     return any(ep.group == "mlflow.app" and ep.name == UI_APP for dist in distributions() for ep in dist.entry_points)
 
 
-def _wait_ready(proc: subprocess.Popen, base_url: str, log_path: Path, timeout_s: float) -> None:
+def _wait_ready(handle: DashboardHandle, timeout_s: float) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            tail = log_path.read_text(errors="replace")[-2000:]
-            raise RuntimeError(f"mlflow server exited with code {proc.returncode} before answering; its log "
-                               f"({log_path}) ends with:\n{tail}")
+        if handle.process.poll() is not None:
+            raise RuntimeError(f"mlflow server exited with code {handle.process.returncode} before answering; its log "
+                               f"({handle.log_path}) ends with:\n{handle.log_tail()}")
         try:
-            with urllib.request.urlopen(f"{base_url}/health", timeout=2) as reply:
+            with urllib.request.urlopen(f"{handle.base_url}/health", timeout=2) as reply:
                 if reply.status == 200:
                     return
         except (urllib.error.URLError, ConnectionError, TimeoutError):
             pass
         time.sleep(0.3)
-    raise TimeoutError(f"mlflow server did not answer at {base_url}/health within {timeout_s:.0f} s; "
-                       f"see its log {log_path}")
+    raise TimeoutError(f"mlflow server did not answer at {handle.base_url}/health within {timeout_s:.0f} s; "
+                       f"see its log {handle.log_path}")
 
 
 def start_dashboard(tracking_uri: str | None = None, port: int = DEFAULT_UI_PORT, host: str = "127.0.0.1",
                     *, timeout_s: float = 120.0) -> DashboardHandle:
-    """Start the lean MLflow UI on ``tracking_uri`` (default: the working directory's SQLite store),
-    wait until it answers and return its handle (stop it with ``.stop()`` or a ``with`` block).
-
-    Errors: FileNotFoundError (no store), ValueError (a tracking server URI: it has its own UI),
-    OSError (port taken), RuntimeError/TimeoutError (the server failed; the message holds its log).
-    """
+    """Start the dashboard on ``tracking_uri`` (default: the working directory's SQLite store); its handle once it
+    answers. FileNotFoundError (no store), ValueError (a server), OSError (port taken), RuntimeError/TimeoutError."""
     uri = _resolve_store(tracking_uri)  # absolute: the server runs outside the working directory (see below)
     _check_port_free(host, port)
     if not _ui_app_installed():
@@ -208,13 +154,12 @@ def start_dashboard(tracking_uri: str | None = None, port: int = DEFAULT_UI_PORT
                            "(make setup, or pip install -e . in the repository)")
     cmd = [sys.executable, "-m", "mlflow", "server", "--backend-store-uri", uri, "--host", host,
            "--port", str(port), "--workers", "1", "--app-name", UI_APP]
-    destination = artifact_destination(uri)
+    destination = artifact_root(uri)
     if destination is not None:
         destination.mkdir(parents=True, exist_ok=True)
         cmd += ["--artifacts-destination", str(destination)]
     log_path = Path(tempfile.mkstemp(prefix=f"sray-ui-{port}-", suffix=".log")[1])
-    # In the log's folder: MLflow finds --app-name among entry points, which a stale sray.egg-info in the
-    # working directory (a repository checkout) would otherwise hide.
+    # run in the log's folder: a stale sray.egg-info in the working directory would hide the --app-name entry point
     with open(log_path, "wb") as log_file:
         proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                 env={**os.environ, **SERVER_ENV}, cwd=log_path.parent, start_new_session=True)
@@ -222,7 +167,7 @@ def start_dashboard(tracking_uri: str | None = None, port: int = DEFAULT_UI_PORT
     base_url = f"http://{url_host}:{port}"
     handle = DashboardHandle(process=proc, base_url=base_url, url=base_url + "/", log_path=log_path)
     try:
-        _wait_ready(proc, base_url, log_path, timeout_s)
+        _wait_ready(handle, timeout_s)
         handle.experiment_urls = experiment_links(uri, base_url)
     except BaseException:
         handle.stop()

@@ -1,23 +1,10 @@
-"""Rank-0 MLflow logging into a run prepared by the launcher, batched and never fatal.
-
-MLflow's :class:`~sray.platform.tracking.tracker.RunLogger`. Every MLflow call goes through
-:meth:`MlflowRunLogger._attempt`. A transient failure (server down, network, a locked database)
-is reported ONCE as a warning; what was being sent stays in a bounded
-buffer and is retried on a later flush after an exponential back-off. A permanent refusal (e.g. a
-param whose value changed) drops that item with a warning. Training never stops because of tracking.
-
-Metrics are buffered and sent with ``MlflowClient.log_batch`` (explicit step and timestamp) every
-``flush_every_steps`` steps or ``flush_every_s`` seconds: a SQLite write costs 20-190 ms here.
-Not thread-safe: one logger, used from one thread (rank 0's training loop).
-"""
+"""MLflow's :class:`~sray.platform.tracking.tracker.RunLogger`: batched (a SQLite write costs 20-190 ms), retrying
+with back-off after a transient failure (warned once), dropping what the store refuses. Not thread-safe."""
 
 from __future__ import annotations
 
-import json
 import logging
 import os
-import shutil
-import tempfile
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -34,16 +21,13 @@ from sray.platform.tracking.tracker import DRAIN_TIMEOUT_S, RunHandle, RunLogger
 
 log = logging.getLogger(__name__)
 
-PARAMS_PER_BATCH = 100
-"""MLflow's limit on params per ``log_batch`` call."""
-METRICS_PER_BATCH = 1000
-"""MLflow's limit on metrics per ``log_batch`` call."""
+PARAMS_PER_BATCH, METRICS_PER_BATCH = 100, 1000
+"""MLflow's limits per ``log_batch`` call."""
 PERMANENT_ERROR_CODES = frozenset({"INVALID_PARAMETER_VALUE", "RESOURCE_DOES_NOT_EXIST",
                                    "RESOURCE_ALREADY_EXISTS", "BAD_REQUEST", "INVALID_STATE"})
 """MLflow error codes that retrying cannot fix: the item is dropped with a warning."""
 HTTP_DEFAULTS = {"MLFLOW_HTTP_REQUEST_MAX_RETRIES": "0", "MLFLOW_HTTP_REQUEST_TIMEOUT": "30"}
-"""Set (if unset) in the logging process: MLflow's own HTTP retries would stall training for
-minutes on a dead server; this logger retries later instead."""
+"""Set (if unset): MLflow's own HTTP retries would stall training for minutes; this logger retries later instead."""
 
 
 class MlflowRunLogger(RunLogger):
@@ -52,33 +36,22 @@ class MlflowRunLogger(RunLogger):
     def __init__(self, handle: RunHandle, *, flush_every_steps: int = 20, flush_every_s: float = 30.0,
                  max_buffered_metrics: int = 100_000, retry_initial_s: float = 2.0, retry_max_s: float = 300.0,
                  close_timeout_s: float = DRAIN_TIMEOUT_S, close_poll_s: float = 2.0, client: Any = None) -> None:
-        """``client``: an ``MlflowClient`` for ``handle.store`` (built here when None); ``close_timeout_s``:
-        how long :meth:`close` keeps retrying undelivered items, every ``close_poll_s`` seconds."""
+        """``client``: an ``MlflowClient`` for ``handle.store`` (None: built here)."""
         for key, value in HTTP_DEFAULTS.items():
             os.environ.setdefault(key, value)
-        self.handle = handle
-        self.flush_every_steps = flush_every_steps
-        self.flush_every_s = flush_every_s
-        self.retry_initial_s = retry_initial_s
-        self.retry_max_s = retry_max_s
-        self.close_timeout_s = close_timeout_s
-        self.close_poll_s = close_poll_s
+        self.handle, self.flush_every_steps, self.flush_every_s = handle, flush_every_steps, flush_every_s
+        self.retry_initial_s, self.retry_max_s = retry_initial_s, retry_max_s
+        self.close_timeout_s, self.close_poll_s = close_timeout_s, close_poll_s
         self.registered: dict[str, str] = {}
         """Registered model name -> version, filled once a registration went through."""
         self._client = client
         self._params: dict[str, str] = {}
         self._metrics: deque = deque(maxlen=max_buffered_metrics)
         self._ops: deque[tuple[str, Callable[[Any], None]]] = deque(maxlen=1000)
-        self._staging: Path | None = None  # made by the first log_dict: a logger that writes none leaves nothing
         self._last_flush_step: int | None = None
-        self._last_flush_time = time.monotonic()
-        self._next_attempt = 0.0
-        self._delay = retry_initial_s
-        self._unreachable = False
-        self._dropped = 0
-        self._closed = False
+        self._last_flush_time, self._next_attempt, self._delay = time.monotonic(), 0.0, retry_initial_s
+        self._unreachable, self._dropped, self._closed = False, 0, False
 
-    # ----------------------------------------------------------------------------------- logging
     def log_params(self, config: Any) -> None:
         """Flatten a (nested) config dataclass or dict into dotted params and send them now."""
         self._params.update(to_params(config))
@@ -94,8 +67,7 @@ class MlflowRunLogger(RunLogger):
                 if self._dropped == 1:
                     log.warning("MLflow metric buffer is full (%d); dropping the oldest buffered metrics until "
                                 "%s is reachable", self._metrics.maxlen, self.handle.store)
-            self._metrics.append(Metric(key=sanitize_key(key), value=number,
-                                        timestamp=timestamp, step=int(step)))
+            self._metrics.append(Metric(key=sanitize_key(key), value=number, timestamp=timestamp, step=int(step)))
         due_steps = self._last_flush_step is None or step - self._last_flush_step >= self.flush_every_steps
         if due_steps or time.monotonic() - self._last_flush_time >= self.flush_every_s:
             self._last_flush_step = step
@@ -110,22 +82,8 @@ class MlflowRunLogger(RunLogger):
             self._queue(f"artifact {path}", lambda c: c.log_artifact(self.handle.run_id, str(path), artifact_path))
         self.flush()
 
-    def log_dict(self, obj: Any, artifact_file: str) -> None:
-        """Write ``obj`` as JSON to ``artifact_file`` (e.g. ``config.json``) in the run's artifacts."""
-        if self._staging is None:
-            self._staging = Path(tempfile.mkdtemp(prefix="sray-mlflow-"))
-        target = self._staging / artifact_file
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_text(json.dumps(obj, indent=1, default=str) + "\n")
-        folder = str(Path(artifact_file).parent)
-        self.log_artifact(target, None if folder == "." else folder)
-
     def register_model(self, checkpoint: Path, name: str, alias: str = "latest") -> str | None:
-        """Upload a checkpoint (file or folder) as ``checkpoint/`` and register it as ``name@alias``.
-
-        Returns the new version, or None when the store is unreachable now (retried on later
-        flushes and at close; :attr:`registered` holds the version once it went through).
-        """
+        """Upload a checkpoint and register it as ``name@alias``; its version, or None while the store is down."""
         self.log_artifact(checkpoint, "checkpoint")
         source = f"runs:/{self.handle.run_id}/checkpoint"
         created: list[str] = []  # the version, once made: a retry after a failed alias does not make another
@@ -145,7 +103,6 @@ class MlflowRunLogger(RunLogger):
         self.flush()
         return self.registered.get(name)
 
-    # ------------------------------------------------------------------------------ delivery
     def flush(self, force: bool = False) -> bool:
         """Send what is buffered; True when nothing is left. Skipped while backing off unless ``force``."""
         if not force and time.monotonic() < self._next_attempt:
@@ -191,18 +148,14 @@ class MlflowRunLogger(RunLogger):
             log.warning("MLflow run %s closed with undelivered items %s (tracking store %s unreachable)",
                         self.handle.run_id, self.pending(), self.handle.store)
         self._closed = True
-        if self._staging is not None:
-            shutil.rmtree(self._staging, ignore_errors=True)
 
     def watch_system(self, node: str, interval_s: float) -> Callable[[], None]:
-        """MLflow's system-metrics monitor on this run (metrics ``system/<node>/...``, continuing the run's system
-        steps after a restart); the returned function stops it and delivers what it sampled."""
+        """MLflow's system-metrics monitor on this run (``system/<node>/...``, its steps continued after a restart)."""
         monitor = SystemMetricsMonitor(self.handle.run_id, sampling_interval=interval_s, resume_logging=True,
                                        node_id=node, tracking_uri=self.handle.store)
         monitor.start()
         return monitor.finish
 
-    # ------------------------------------------------------------------------------- internals
     def _queue(self, what: str, op: Callable[[Any], None]) -> None:
         if len(self._ops) == self._ops.maxlen:
             log.warning("MLflow operation queue is full; dropping %s", self._ops[0][0])
@@ -211,8 +164,7 @@ class MlflowRunLogger(RunLogger):
     def _get_client(self) -> Any:
         if self._client is None:
             try:
-                self._client = MlflowClient(tracking_uri=self.handle.store,
-                                            registry_uri=self.handle.store)
+                self._client = MlflowClient(tracking_uri=self.handle.store, registry_uri=self.handle.store)
             except Exception as e:  # noqa: BLE001 - tracking never crashes training
                 self._transient_failure("connect", e)
         return self._client
@@ -230,8 +182,7 @@ class MlflowRunLogger(RunLogger):
         if self._unreachable:
             log.info("MLflow tracking store %s is reachable again; sending buffered items", self.handle.store)
             self._unreachable = False
-        self._delay = self.retry_initial_s
-        self._next_attempt = 0.0
+        self._delay, self._next_attempt = self.retry_initial_s, 0.0
         return True
 
     def _transient_failure(self, what: str, error: Exception) -> None:

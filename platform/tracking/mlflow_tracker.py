@@ -1,11 +1,4 @@
-"""MLflow as a :class:`~sray.platform.tracking.tracker.Tracker` (registry name ``mlflow``, the default).
-
-Runs are prepared by :mod:`sray.platform.tracking.runs` (SQLite schema, experiments with explicit
-artifact locations, nesting through MLflow's ``mlflow.parentRunId`` tag); loggers are
-:class:`sray.platform.tracking.logger.MlflowRunLogger` (batched, never fatal); models are
-registered in the store's MLflow model registry. ``mlflow`` itself is imported only when a store
-is used, so choosing a tracker by name stays cheap.
-"""
+"""MLflow as a :class:`~sray.platform.tracking.tracker.Tracker`; ``mlflow`` is imported only when a store is used."""
 
 from __future__ import annotations
 
@@ -17,7 +10,6 @@ from sray.platform.tracking import runs
 from sray.platform.tracking.tracker import RunHandle, RunLogger, Tracker
 
 TAG_VALUE_LIMIT = 5000
-"""MLflow's limit on a tag value's length; longer values are cut."""
 
 
 class MlflowTracker(Tracker):

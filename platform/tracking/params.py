@@ -14,11 +14,8 @@ log = logging.getLogger(__name__)
 MAX_PARAM_VALUE = 6000
 """MLflow 3.17's limit on a param value's length (``mlflow.utils.validation.MAX_PARAM_VAL_LENGTH``)."""
 MAX_KEY_LENGTH = 250
-"""MLflow's limit on a param or metric key's length."""
 _BAD_KEY_CHARS = re.compile(r"[^A-Za-z0-9_\-./ ]")
-"""Characters MLflow rejects in keys (it allows alphanumerics, ``_ - . /`` and space)."""
-
-
+"""Characters MLflow rejects in keys (its limit on their length: :data:`MAX_KEY_LENGTH`)."""
 TRUNCATION_MARKER = "...[truncated]"
 """Suffix of a param value cut to :data:`MAX_PARAM_VALUE` characters."""
 
@@ -36,23 +33,16 @@ def _is_container(value: Any) -> bool:
     return (dataclasses.is_dataclass(value) and not isinstance(value, type)) or isinstance(value, Mapping)
 
 
-def _items(value: Any) -> list[tuple[str, Any]]:
-    if isinstance(value, Mapping):
-        return [(str(k), v) for k, v in value.items()]
-    return [(f.name, getattr(value, f.name)) for f in dataclasses.fields(value)]
-
-
 def flatten_config(obj: Any, prefix: str = "") -> dict[str, Any]:
-    """Nested dataclasses/dicts -> {dotted key: leaf}; lists of containers get index keys.
-
-    ``flatten_config({"model": {"tau": 0.7}, "views": [1, 2]})`` gives
-    ``{"model.tau": 0.7, "views": [1, 2]}``: lists of scalars stay whole (one readable param).
-    """
+    """Nested dataclasses/dicts -> {dotted key: leaf}; lists of containers get index keys, lists of scalars stay
+    whole: ``{"model": {"tau": 0.7}, "views": [1, 2]}`` -> ``{"model.tau": 0.7, "views": [1, 2]}``."""
     if not _is_container(obj):
         return {prefix or "value": obj}
     out: dict[str, Any] = {}
-    for name, value in _items(obj):
-        key = f"{prefix}.{name}" if prefix else name
+    items = (obj.items() if isinstance(obj, Mapping)
+             else [(f.name, getattr(obj, f.name)) for f in dataclasses.fields(obj)])
+    for name, value in items:
+        key = f"{prefix}.{name}" if prefix else str(name)
         if _is_container(value):
             out.update(flatten_config(value, key))
         elif isinstance(value, (list, tuple)) and any(_is_container(v) for v in value):
@@ -72,10 +62,7 @@ def sanitize_key(key: str) -> str:
 
 
 def to_params(obj: Any) -> dict[str, str]:
-    """Flattened, MLflow-valid params: string values, over-long values truncated with a warning.
-
-    A truncated value ends in :data:`TRUNCATION_MARKER`; log the full config as an artifact too.
-    """
+    """Flattened, MLflow-valid params: strings, over-long ones cut (:data:`TRUNCATION_MARKER`) with a warning."""
     params: dict[str, str] = {}
     for key, value in flatten_config(obj).items():
         text = _leaf_text(value)

@@ -1,17 +1,5 @@
-"""MLflow runs prepared by the launcher, before any Ray worker starts (the MLflow side of
-:class:`sray.platform.tracking.mlflow_tracker.MlflowTracker`).
-
-The launcher (driver) creates the store schema, the experiment and the run once, then hands the
-resulting :class:`~sray.platform.tracking.tracker.RunHandle` (plain strings, picklable) to the
-workers. Rank 0 logs into that fixed run id through
-:class:`sray.platform.tracking.logger.MlflowRunLogger`, so a worker group restarted by Ray Train's
-``FailureConfig`` keeps writing into the same run instead of opening a new one.
-
-Default store (no ``--tracking-uri``): a SQLite file ``<workdir>/mlflow.db`` with artifacts under
-``<workdir>/mlartifacts``. MLflow 3.17's file store raises, so the URI and artifact location are
-always explicit. Several processes creating a new SQLite store at once corrupt it: the schema is
-created here, in one process, before any fan-out.
-"""
+"""MLflow runs prepared by a driver before any Ray worker starts (processes creating one SQLite store at once
+corrupt it). Default store: ``<workdir>/mlflow.db``, artifacts under ``<workdir>/mlartifacts`` (always explicit)."""
 
 from __future__ import annotations
 
@@ -27,12 +15,10 @@ from sray.platform.tracking.tracker import RunHandle
 log = logging.getLogger(__name__)
 
 NAME = "mlflow"
-"""Registry name of the MLflow tracker (``RunHandle.tracker`` of every run made here)."""
 DEFAULT_UI_PORT = 5000
-"""Port the UI command suggested for a local store listens on."""
 
 PARENT_RUN_TAG = "mlflow.parentRunId"
-"""MLflow's tag that nests a run under a parent (fleet: one parent run, one child per scene)."""
+"""MLflow's tag that nests a run under a parent (a fleet's scene runs)."""
 EXPERIMENT_KIND_TAG = "mlflow.experimentKind"
 """MLflow's experiment tag naming what an experiment is for (its UI offers views by kind)."""
 EXPERIMENT_KIND = "custom_model_development"
@@ -44,46 +30,21 @@ def default_tracking_uri(workdir: Path) -> str:
     return f"sqlite:///{Path(workdir).resolve() / 'mlflow.db'}"
 
 
-def default_artifact_root(workdir: Path) -> Path:
-    """``<abs workdir>/mlartifacts``: where the default store keeps run artifacts."""
-    return Path(workdir).resolve() / "mlartifacts"
-
-
 def sqlite_path(tracking_uri: str) -> Path | None:
     """The database file of a ``sqlite:///`` URI (absolute), or None for any other URI."""
     prefix = "sqlite:///"
-    if not tracking_uri.startswith(prefix):
-        return None
-    return Path(tracking_uri[len(prefix):]).resolve()
+    return Path(tracking_uri[len(prefix):]).resolve() if tracking_uri.startswith(prefix) else None
 
 
 def is_server(tracking_uri: str) -> bool:
-    """True for an ``http(s)://`` tracking server URI."""
+    """True for an ``http(s)://`` tracking server URI (which serves its own dashboard)."""
     return tracking_uri.startswith(("http://", "https://"))
 
 
-def _experiment_artifact_location(tracking_uri: str, experiment: str, artifact_root: Path | None) -> str | None:
-    """Artifact location for a new experiment: ``<root>/<experiment as a safe folder name>`` (file URI).
-
-    A tracking server decides for itself (``--artifacts-destination``), so None is returned there
-    unless a root is given; a SQLite store without a root keeps artifacts beside the database.
-    """
-    if artifact_root is None:
-        db = sqlite_path(tracking_uri)
-        if db is None:
-            return None
-        artifact_root = db.parent / "mlartifacts"
-    folder = re.sub(r"[^A-Za-z0-9._-]+", "_", experiment).strip("._") or "experiment"
-    return (Path(artifact_root).resolve() / folder).as_uri()
-
-
-def _ui_links(tracking_uri: str, experiment_id: str, run_id: str) -> tuple[str, str]:
-    page = f"#/experiments/{experiment_id}/runs/{run_id}"
-    if is_server(tracking_uri):
-        return f"{tracking_uri.rstrip('/')}/{page}", ""
-    hint = (f"sray ui --tracking-uri {tracking_uri}  (a lean MLflow server: --backend-store-uri {tracking_uri}, "
-            f"one worker, no job runner, port {DEFAULT_UI_PORT})")
-    return f"http://127.0.0.1:{DEFAULT_UI_PORT}/{page}", hint
+def artifact_root(tracking_uri: str) -> Path | None:
+    """``mlartifacts`` beside a SQLite database, where its artifacts go; None for any other store."""
+    db = sqlite_path(tracking_uri)
+    return None if db is None else db.parent / "mlartifacts"
 
 
 def mlflow_client(tracking_uri: str) -> Any:
@@ -94,8 +55,7 @@ def mlflow_client(tracking_uri: str) -> Any:
 
 
 def probe_server(tracking_uri: str, timeout_s: float = 3.0) -> None:
-    """ConnectionError naming the URI unless the server's ``/health`` answers within ``timeout_s``
-    (MLflow's own client would retry for minutes)."""
+    """ConnectionError naming the URI unless ``/health`` answers within ``timeout_s`` (MLflow would retry minutes)."""
     try:
         with urllib.request.urlopen(f"{tracking_uri.rstrip('/')}/health", timeout=timeout_s):
             return
@@ -108,11 +68,7 @@ def probe_server(tracking_uri: str, timeout_s: float = 3.0) -> None:
 
 
 def ensure_store(tracking_uri: str) -> None:
-    """Create the store's schema now (for SQLite: the folder and tables), in this one process.
-
-    Call before starting workers: concurrent first-time creation corrupts a SQLite store. Errors
-    name the URI (an unreachable server, an unwritable folder).
-    """
+    """Create the store's schema now, before workers start; ConnectionError naming the URI otherwise."""
     db = sqlite_path(tracking_uri)
     if is_server(tracking_uri):
         probe_server(tracking_uri)
@@ -121,19 +77,18 @@ def ensure_store(tracking_uri: str) -> None:
             db.parent.mkdir(parents=True, exist_ok=True)
         mlflow_client(tracking_uri).search_experiments(max_results=1)
     except Exception as e:  # noqa: BLE001 - re-raised with the URI and the fix
-        raise ConnectionError(
-            f"MLflow tracking store {tracking_uri!r} is not usable ({e}); check --tracking-uri, or "
-            "leave it out to use the local SQLite store in the working directory") from e
+        raise ConnectionError(f"MLflow tracking store {tracking_uri!r} is not usable ({e}); check --tracking-uri, or "
+                              "leave it out to use the local SQLite store in the working directory") from e
 
 
-def _experiment_id(client, tracking_uri: str, experiment: str, artifact_root: Path | None) -> str:
-    """Id of ``experiment``, created (with an explicit artifact location) or restored if needed; it carries
-    :data:`EXPERIMENT_KIND` (set on an existing experiment that has no kind yet)."""
+def _experiment_id(client: Any, tracking_uri: str, experiment: str) -> str:
+    """Id of ``experiment``, created (artifacts under :func:`artifact_root`) or restored, of :data:`EXPERIMENT_KIND`."""
     from mlflow.exceptions import MlflowException
 
     found = client.get_experiment_by_name(experiment)
     if found is None:
-        location = _experiment_artifact_location(tracking_uri, experiment, artifact_root)
+        root, folder = artifact_root(tracking_uri), re.sub(r"[^A-Za-z0-9._-]+", "_", experiment).strip("._")
+        location = None if root is None else (root / (folder or "experiment")).as_uri()
         try:
             return client.create_experiment(experiment, artifact_location=location,
                                             tags={EXPERIMENT_KIND_TAG: EXPERIMENT_KIND})
@@ -150,25 +105,26 @@ def _experiment_id(client, tracking_uri: str, experiment: str, artifact_root: Pa
 
 
 def prepare_run(tracking_uri: str, experiment: str, run_name: str, tags: dict[str, str] | None = None,
-                parent_run_id: str | None = None, artifact_root: Path | None = None) -> RunHandle:
-    """Create the schema (SQLite), the experiment and a new RUNNING run; return its fixed handle.
-
-    ``artifact_root``: folder for a new experiment's artifacts (default: beside a SQLite database;
-    a tracking server's own ``--artifacts-destination``). ``parent_run_id`` nests the run.
-    """
+                parent_run_id: str | None = None) -> RunHandle:
+    """Create the schema, the experiment and a new RUNNING run (nested under ``parent_run_id``); return its handle."""
     ensure_store(tracking_uri)
     client = mlflow_client(tracking_uri)
-    experiment_id = _experiment_id(client, tracking_uri, experiment, artifact_root)
-    all_tags = {str(k): str(v) for k, v in (tags or {}).items()}
-    if parent_run_id:
-        all_tags[PARENT_RUN_TAG] = parent_run_id
+    experiment_id = _experiment_id(client, tracking_uri, experiment)
+    nest = {PARENT_RUN_TAG: parent_run_id} if parent_run_id else {}
+    all_tags = {str(k): str(v) for k, v in (tags or {}).items()} | nest
     run = client.create_run(experiment_id, run_name=run_name, tags=all_tags)
     return run_handle(tracking_uri, experiment_id, run.info.run_id)
 
 
 def run_handle(tracking_uri: str, experiment_id: str, run_id: str) -> RunHandle:
-    """The handle of an existing run (with its UI links)."""
-    url, hint = _ui_links(tracking_uri, experiment_id, run_id)
+    """The handle of an existing run, with its page's address (and how to serve it for a local store)."""
+    page = f"#/experiments/{experiment_id}/runs/{run_id}"
+    if is_server(tracking_uri):
+        url, hint = f"{tracking_uri.rstrip('/')}/{page}", ""
+    else:
+        url = f"http://127.0.0.1:{DEFAULT_UI_PORT}/{page}"
+        hint = (f"sray ui --tracking-uri {tracking_uri}  (a lean MLflow server: --backend-store-uri {tracking_uri}, "
+                f"one worker, no job runner, port {DEFAULT_UI_PORT})")
     return RunHandle(tracker=NAME, store=tracking_uri, run_id=run_id, experiment_id=experiment_id, ui_url=url,
                      ui_hint=hint)
 
@@ -184,6 +140,4 @@ def find_run(tracking_uri: str, experiment: str, run_name: str) -> RunHandle | N
         return None
     runs = client.search_runs([found.experiment_id], filter_string=f"attributes.run_name = '{run_name}'",
                               order_by=["attributes.start_time DESC"], max_results=1)
-    if not runs:
-        return None
-    return run_handle(tracking_uri, found.experiment_id, runs[0].info.run_id)
+    return run_handle(tracking_uri, found.experiment_id, runs[0].info.run_id) if runs else None

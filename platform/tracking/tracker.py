@@ -1,15 +1,5 @@
-"""The tracker interface: where runs, params, metrics, artifacts and registered models go.
-
-Everything outside ``platform/tracking/`` talks to a :class:`Tracker` (chosen by name through
-:mod:`sray.platform.tracking.registry`) and the :class:`RunLogger` it opens; MLflow is one
-implementation (:mod:`sray.platform.tracking.mlflow_tracker`).
-
-A driver (the launcher, the eval job, the fleet) prepares a run with :meth:`Tracker.start_run` and
-gets a :class:`RunHandle`: plain strings, picklable, handed to Ray workers as they are. A worker
-opens a logger on that handle (:func:`sray.platform.tracking.registry.open_logger`), so a worker
-group restarted by Ray keeps writing into the same run. Tracking never stops a job: loggers buffer
-and warn instead of raising, and :meth:`Tracker.end_run` / :meth:`Tracker.tag_run` only warn.
-"""
+"""The tracker interface: a driver prepares a run and hands its picklable :class:`RunHandle` to Ray workers, which open
+loggers on it (so a restarted worker group writes into the same run). Tracking problems never stop a job: they warn."""
 
 from __future__ import annotations
 
@@ -25,8 +15,6 @@ log = logging.getLogger(__name__)
 
 DRAIN_TIMEOUT_S = 120.0
 """How long a logger keeps retrying what it still holds when its job ends (:meth:`RunLogger.drain`)."""
-RUN_STATUSES = ("RUNNING", "FINISHED", "FAILED", "KILLED")
-"""States a run can be put in (:meth:`Tracker.set_status`)."""
 
 
 @dataclass(frozen=True)
@@ -38,20 +26,17 @@ class RunHandle:
     store: str
     """Where the tracker keeps its runs (MLflow: the tracking URI)."""
     run_id: str
-    """The run's id in that store, fixed for the whole job (restarts included)."""
     experiment_id: str = ""
-    """Id of the run's experiment (group of runs) in the store."""
     ui_url: str = ""
     """Browser address of the run's page ('' when the tracker has no UI)."""
     ui_hint: str = ""
-    """How to start that UI when it is not running by itself ('' when nothing is needed)."""
+    """How to start that UI when it is not running by itself."""
 
 
 class RunLogger(ABC):
     """Logs into one run; never raises because of the tracking store (it warns and buffers)."""
 
     handle: RunHandle
-    """The run this logger writes into."""
 
     @abstractmethod
     def log_params(self, config: Any) -> None:
@@ -67,19 +52,14 @@ class RunLogger(ABC):
 
     @abstractmethod
     def register_model(self, checkpoint: Path, name: str, alias: str = "latest") -> str | None:
-        """Store a checkpoint and register it as a new version of model ``name`` reachable as ``name@alias``.
-
-        Returns the version, or None when it could not be made now.
-        """
+        """Store a checkpoint as a new version of model ``name`` (``name@alias``); the version, or None for now."""
 
     @abstractmethod
     def close(self, status: str = "FINISHED") -> None:
-        """Deliver what is buffered and put the run in ``status`` (one of :data:`RUN_STATUSES`)."""
+        """Deliver what is buffered and put the run in ``status`` (FINISHED, FAILED or KILLED)."""
 
     def watch_system(self, node: str, interval_s: float) -> Callable[[], None]:
-        """Record this machine's system metrics (CPU, memory, disk, network, GPU where present) into the run every
-        ``interval_s`` seconds, named after ``node``, until the returned function is called. A tracker without
-        system metrics records nothing (and returns a function that does nothing)."""
+        """Record this machine's system metrics every ``interval_s`` s until the returned function is called."""
         return lambda: None
 
     def log_image(self, png: Path, artifact_path: str = "renders") -> None:
@@ -91,15 +71,11 @@ class RunLogger(ABC):
         return True
 
     def unsent_metrics(self) -> list[tuple[str, float, int]]:
-        """Metrics logged but not delivered yet, as ``(key, value, step)`` (a logger without a buffer: none).
-
-        A training job stores them with each checkpoint: a worker restarted from it logs them again, so a
-        worker that dies while the store is unreachable leaves no gap in the history."""
+        """Metrics logged but not delivered yet, ``(key, value, step)`` (a training checkpoint keeps them)."""
         return []
 
     def drain(self, timeout_s: float = DRAIN_TIMEOUT_S, poll_s: float = 2.0) -> bool:
-        """Flush until nothing is left or ``timeout_s`` passed (a store restarting meanwhile loses nothing);
-        True when everything was delivered."""
+        """Flush until nothing is left (True) or ``timeout_s`` passed (False)."""
         deadline = time.monotonic() + timeout_s
         while not self.flush(force=True):
             if time.monotonic() >= deadline:
@@ -111,10 +87,8 @@ class RunLogger(ABC):
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: Any) -> None:
-        if exc_type is None:
-            self.close("FINISHED")
-        else:
-            self.close("KILLED" if issubclass(exc_type, KeyboardInterrupt) else "FAILED")
+        killed = exc_type is not None and issubclass(exc_type, KeyboardInterrupt)
+        self.close("FINISHED" if exc_type is None else "KILLED" if killed else "FAILED")
 
 
 class Tracker(ABC):
@@ -126,7 +100,6 @@ class Tracker(ABC):
     """Name shown to people in messages (``MLflow``)."""
 
     def __init__(self, store: str) -> None:
-        """``store``: where the runs live (MLflow: a tracking URI); see :meth:`default_store`."""
         self.store = store
 
     @classmethod
@@ -135,10 +108,7 @@ class Tracker(ABC):
         """The store used when none is given: one inside ``workdir``."""
 
     def ensure_store(self) -> None:
-        """Make the store usable now, in this process, before workers fan out (default: nothing to do).
-
-        Raises ConnectionError naming the store when it cannot be used.
-        """
+        """Make the store usable now, before workers fan out; ConnectionError naming the store otherwise."""
 
     @abstractmethod
     def start_run(self, experiment: str, run_name: str, tags: Mapping[str, str] | None = None,
@@ -155,7 +125,7 @@ class Tracker(ABC):
 
     @abstractmethod
     def set_status(self, handle: RunHandle, status: str) -> None:
-        """Put a run in ``status`` (one of :data:`RUN_STATUSES`); raises on failure."""
+        """Put a run in ``status`` (RUNNING, FINISHED, FAILED or KILLED); raises on failure."""
 
     @abstractmethod
     def set_tags(self, handle: RunHandle, tags: Mapping[str, str]) -> None:

@@ -1,24 +1,5 @@
-"""MLflow's server app as ``sray ui`` serves it: MLflow's own app, its landing page opening on sray's runs.
-
-MLflow 3.17's browser app keeps its view choices in the browser's ``localStorage``, starts in its
-GenAI view (traces, AI Gateway, an assistant panel that opens by itself on a local server, a
-UI-telemetry notice) and shows no metric column and no child run until asked; no server option
-changes those defaults, and the experiment tag ``mlflow.experimentKind`` does not either. This app
-serves MLflow's landing page (``index.html``, the page behind every address of the UI) with a
-script that runs before MLflow's own and, in the browser's ``localStorage``:
-
-- sets :data:`UI_DEFAULTS` where the browser holds no value yet (a choice made in the UI is kept);
-- gives each experiment sray made (tag :data:`~sray.platform.tracking.runs.EXPERIMENT_KIND_TAG`)
-  whose runs table the browser has not shown yet the :data:`HEADLINE_METRICS` as columns;
-- unfolds every parent run (a fleet) the browser has not unfolded before, so its children are
-  listed under it;
-- sends the bare server address to the runs of the experiment with the newest run.
-
-It is registered as the MLflow server app :data:`sray.platform.tracking.dashboard.UI_APP` (entry
-point group ``mlflow.app``, see pyproject.toml), which
-:func:`sray.platform.tracking.dashboard.start_dashboard` passes to ``mlflow server --app-name``.
-The ``localStorage`` keys and formats are those of the pinned MLflow (3.17).
-"""
+"""``sray ui``'s server app: MLflow's landing page with a script setting, in ``localStorage`` (MLflow 3.17's keys), the
+model-training view, headline metric columns, unfolded parent runs and the newest experiment as the start."""
 
 from __future__ import annotations
 
@@ -34,27 +15,19 @@ from mlflow.server.handlers import _get_tracking_store
 
 from sray.platform.tracking.runs import EXPERIMENT_KIND, EXPERIMENT_KIND_TAG, PARENT_RUN_TAG
 
-UI_DEFAULTS: dict[str, object] = {
-    "mlflow.workflowType_v1": "machine_learning",
-    "mlflow.assistant.fab.autoOpenedOnFirstLoad_v1": True,
-    "mlflow.telemetry.info.alert.dismissed_v1": True,
-}
-"""``localStorage`` entries (MLflow's keys: name and format version): open the model-training view, do not
-open the assistant panel by itself, no UI-telemetry notice (the server runs with telemetry off, so the UI
-sends nothing)."""
+UI_DEFAULTS: dict[str, object] = {"mlflow.workflowType_v1": "machine_learning",
+                                  "mlflow.assistant.fab.autoOpenedOnFirstLoad_v1": True,
+                                  "mlflow.telemetry.info.alert.dismissed_v1": True}
+"""The model-training view, no assistant panel opening by itself, no UI-telemetry notice (telemetry is off)."""
 HEADLINE_METRICS = ("result/miou_before", "result/miou_after", "result/psnr_after", "result/artifact_bytes",
                     "mean/miou", "mean/psnr", "zeroshot/miou", "zeroshot/psnr")
-"""Metric columns of a runs table: a fleet's scene runs (zero-shot mIoU, mIoU and PSNR after finetuning,
-the scene's artifact size), an evaluation (mean zero-shot mIoU and PSNR), a training run (zero-shot
-validation); a table shows those its runs have."""
+"""Metric columns of a runs table: a fleet's scene runs, an evaluation, a training run."""
 RUNS_TABLE_STATE = "MLflowLocalStorage-1.1-ExperimentPage-{}-ReactComponentState"
 """MLflow's ``localStorage`` key of an experiment's runs-table state ({} = the JSON list of its id)."""
 UNFOLDED_KEY = "sray.unfoldedParents"
 """``localStorage`` key of the parent runs this app has unfolded once (never again: the user may fold them)."""
 MAX_RUNS = 1000
-"""Runs read per experiment when looking for parents."""
 LANDING_PAGE = Path(flask_app.static_folder) / "index.html"
-"""MLflow's landing page, served for the server root (the UI's addresses are fragments of it)."""
 SCRIPT = """<script>(function(c){
 var s=window.localStorage,k,i,j;
 try{
@@ -80,9 +53,7 @@ def metric_column(key: str) -> str:
 
 
 def landing_config(store: Any) -> dict[str, Any]:
-    """What the landing page's script applies, read from the tracking ``store``: the defaults, per sray
-    experiment its table-state key, columns and parent runs, and the address of the experiment with the newest
-    run (``#/experiments/<id>``; the experiment list when no sray experiment has a run)."""
+    """The landing script's argument, read from the tracking ``store``."""
     experiments, newest = [], (0, "#/experiments")
     kind = f"tags.`{EXPERIMENT_KIND_TAG}` = '{EXPERIMENT_KIND}'"
     for exp in store.search_experiments(view_type=ViewType.ACTIVE_ONLY, filter_string=kind, max_results=1000):

@@ -1,10 +1,4 @@
-"""CPU seconds a training rank has spent: its own process and every process it started (DataLoader workers).
-
-``optim.cpu_seconds`` budgets a job by the CPU time summed over its ranks and their loader processes, a
-quantity that does not depend on what else the machine is running (wall time on a shared 2-core machine
-does). Each rank reads its own process tree here; the training step sums the ranks' readings in the
-transfer it makes anyway (``TrainStep``).
-"""
+"""CPU seconds a training rank has spent, its loader workers included (``optim.cpu_seconds`` budgets their sum)."""
 
 from __future__ import annotations
 
@@ -12,8 +6,7 @@ import psutil
 
 
 def process_tree_cpu_seconds(process: psutil.Process | None = None) -> float:
-    """User + system CPU seconds of ``process`` (default: this one), of its live descendants, and of the
-    children that already exited and were waited for (a finished epoch's loader workers)."""
+    """User + system CPU seconds of ``process`` (default: this one), its descendants and its exited children."""
     process = process or psutil.Process()
     own = process.cpu_times()
     total = own.user + own.system + own.children_user + own.children_system
@@ -27,13 +20,10 @@ def process_tree_cpu_seconds(process: psutil.Process | None = None) -> float:
 
 
 class CpuClock:
-    """A rank's CPU seconds since the job began, across resumes: the seconds recorded before this process
-    started (``already_spent``) plus what this process tree has spent since the clock was made."""
+    """A rank's CPU seconds since the job began: ``already_spent`` by earlier processes, plus this tree's."""
 
     def __init__(self, already_spent: float = 0.0) -> None:
-        """Start counting now, on top of ``already_spent`` seconds of this rank's earlier processes."""
-        self.already_spent = already_spent
-        self.start = process_tree_cpu_seconds()
+        self.already_spent, self.start = already_spent, process_tree_cpu_seconds()
 
     def seconds(self) -> float:
         """This rank's CPU seconds so far (earlier processes included)."""

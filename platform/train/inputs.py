@@ -1,10 +1,4 @@
-"""Check a training job's inputs before Ray starts: one clear line per problem, in seconds.
-
-A bad input found inside Ray Train costs a minute, a screen of tracebacks and retries of an error
-no retry can fix. :func:`check_train_inputs` finds it first: the resources asked for, the shard
-folder and its manifest, the job folder of a resumed job, the tracker and its store, the cluster to
-join. Each error names the file or field and the fix.
-"""
+"""Check a training job's inputs before Ray starts: one line naming the file or field and the fix, in seconds."""
 
 from __future__ import annotations
 
@@ -52,14 +46,6 @@ def check_shards(shards: Path) -> None:
         raise InputError(f"{shards / 'manifest.json'}: field 'scenes' is empty; re-run `sray data shard` with scenes")
 
 
-def check_resume(cfg: TrainConfig) -> None:
-    """A resumed job's folder exists under the output folder."""
-    job_dir = Path(cfg.run.output_dir).resolve() / cfg.run.name
-    if not (job_dir / "config.json").is_file():
-        raise InputError(f"{job_dir / 'config.json'}: missing, so there is no job {cfg.run.name!r} to resume; check "
-                         "--resume NAME and run.output_dir")
-
-
 def check_tracker(cfg: TrainConfig) -> None:
     """The tracker exists and its store answers (a server is asked once, briefly)."""
     try:
@@ -73,11 +59,12 @@ def check_tracker(cfg: TrainConfig) -> None:
 
 
 def check_train_inputs(cfg: TrainConfig, resume: bool = False, address: str | None = None) -> None:
-    """Every check above, cheapest first, and the cluster at ``address`` (reachable, token accepted) before
-    the tracker's store is made; InputError (RayAddressError for the address) on the first problem."""
+    """Every check, cheapest first; InputError (RayAddressError for the address) on the first problem."""
     check_request(cfg.run.workers, cfg.run.cpus_per_worker, cfg.run.gpus_per_worker, cfg.run.precision)
-    if resume:
-        check_resume(cfg)
+    config = Path(cfg.run.output_dir).resolve() / cfg.run.name / "config.json"
+    if resume and not config.is_file():
+        raise InputError(f"{config}: missing, so there is no job {cfg.run.name!r} to resume; check --resume NAME and "
+                         "run.output_dir")
     check_shards(Path(cfg.data.shards))
     if address:
         check_ray_address(address)

@@ -1,9 +1,4 @@
-"""The driver side of ``sray train``: Ray, resources, the tracked run, the TorchTrainer, Ctrl-C.
-
-Order matters: the tracker's store, experiment and run exist before any worker starts (several
-processes creating one SQLite store at once corrupt it), and the resource request is checked
-against the cluster before ``fit()`` (an infeasible request would otherwise wait forever).
-"""
+"""The driver side of ``sray train``: Ray, resources, the tracked run, the TorchTrainer, Ctrl-C."""
 
 from __future__ import annotations
 
@@ -23,22 +18,23 @@ import ray
 import ray.train
 from ray.train.torch import TorchTrainer
 
+from sray.data_tools.loader.class_stats import BALANCE_MODES, balanced_weights, shard_pixel_counts
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.common.fault_hook import propagated_env
 from sray.platform.common.progress import progress_env
 from sray.platform.common.ray_env import SETUP_HOOK, TRAIN_POLL_ENV, TRAIN_WORKER_ENV
 from sray.platform.config.train_config import CONFIG_FILE, TrainConfig
 from sray.platform.tracking.registry import get_tracker
-from sray.platform.tracking.tracker import RunHandle, Tracker
-from sray.platform.train.class_balance import set_class_weights
+from sray.platform.tracking.tracker import RunHandle
 from sray.platform.train.inputs import check_train_inputs
 from sray.platform.train.resources import check_feasible
 from sray.platform.train.validation import validation_protocol
 from sray.platform.train.worker import STOP_FILE, train_worker
 
+
 @dataclass
 class TrainOutcome:
-    """Where a finished (or stopped) job left its results."""
+    """Where a finished (or stopped) job left its results; ``status``: FINISHED, KILLED or FAILED."""
 
     job_dir: Path
     run: RunHandle
@@ -48,54 +44,57 @@ class TrainOutcome:
 
 
 def unique_name(cfg: TrainConfig) -> str:
-    """``cfg.run.name`` if free, else ``<recipe>-<UTC timestamp>``; an explicit name that is taken
-    is refused (a new job never resumes an old one by accident)."""
+    """``cfg.run.name`` (refused when taken), else ``<recipe>-<UTC timestamp>``."""
+    out = Path(cfg.run.output_dir)
     if cfg.run.name:
-        if (Path(cfg.run.output_dir) / cfg.run.name).exists():
-            raise FileExistsError(f"{Path(cfg.run.output_dir) / cfg.run.name}: a job called {cfg.run.name!r} "
-                                  f"exists; continue it with `sray train --resume {cfg.run.name}` "
-                                  "or pick another --name")
+        if (out / cfg.run.name).exists():
+            raise FileExistsError(f"{out / cfg.run.name}: a job called {cfg.run.name!r} exists; continue it with "
+                                  f"`sray train --resume {cfg.run.name}` or pick another --name")
         return cfg.run.name
     stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
     name, n = f"{cfg.recipe}-{stamp}", 1
-    while (Path(cfg.run.output_dir) / name).exists():
+    while (out / name).exists():
         n += 1
         name = f"{cfg.recipe}-{stamp}-{n}"
     return name
 
 
+def set_class_weights(cfg: TrainConfig) -> None:
+    """Fill ``cfg.model.class_weights`` as ``data.class_balance`` asks from the train scenes' labelled pixels."""
+    if cfg.data.class_balance not in BALANCE_MODES:
+        raise ValueError(f"data.class_balance is {cfg.data.class_balance!r}; use one of {BALANCE_MODES}")
+    if cfg.data.class_balance == "none" or cfg.model.class_weights:
+        return
+    names, per_scene = shard_pixel_counts(Path(cfg.data.shards), roles=("train",))
+    if len(names) != cfg.model.n_classes:
+        raise ValueError(f"{cfg.data.shards}/manifest.json: {len(names)} classes, model.n_classes is "
+                         f"{cfg.model.n_classes}; train on data of the model's label space")
+    counts = sum(per_scene.values())[:-1]  # (n_classes,): the ignore id's pixels are left out
+    weights = tuple(balanced_weights(counts, cfg.data.class_balance))
+    cfg.model = dataclasses.replace(cfg.model, class_weights=weights)
+
+
 LOCAL_WORKER_ENV = dict(TRAIN_POLL_ENV)
-"""Environment a local Ray cluster's workers inherit unless the user set it otherwise:
-:data:`TRAIN_POLL_ENV`, Ray Train's controller polls every 0.5 s (:mod:`sray.platform.common.ray_env`).
-PyTorch's huge-page CPU allocator path (``THP_MEM_ALLOC_ENABLE=1``) is not set: in alternating fresh-process
-runs of ``sray bench model`` it made the default paper-config step slower (4.81 -> 7.11 s; docs/performance.md,
-"No huge pages"); a user who measures a gain on their machine sets it in the environment, which is kept."""
+"""Environment a local Ray's workers inherit where unset (not ``THP_MEM_ALLOC_ENABLE``: docs/performance.md)."""
 
 
 def init_ray(address: str | None, num_cpus: int | None = None) -> None:
-    """Join a cluster at ``address`` or start a local Ray in-process (the embedded default).
-
-    A local cluster's processes inherit this process's environment, with ``LOCAL_WORKER_ENV``
-    added where the variable is unset.
-    """
+    """Join a cluster at ``address`` or start a local Ray in-process, with :data:`LOCAL_WORKER_ENV`."""
     if ray.is_initialized():
         return
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    if not address:
-        for key, value in LOCAL_WORKER_ENV.items():
-            os.environ.setdefault(key, value)
     quiet = {"worker_process_setup_hook": SETUP_HOOK}
     if address:
         ray.init(address=address, runtime_env=quiet)
         return
-    # Ray's own processes (gcs, raylet) share the terminal's process group: started with SIGINT
-    # ignored (inherited across exec), a Ctrl-C reaches only this driver, which then stops the
-    # workers cleanly with a checkpoint instead of losing the cluster under them.
+    for key, value in LOCAL_WORKER_ENV.items():
+        os.environ.setdefault(key, value)
+    # started with SIGINT ignored, Ray's processes leave Ctrl-C to this driver, which stops the workers cleanly
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        ray.init(address="local", num_cpus=num_cpus or os.cpu_count(), include_dashboard=False,
+        ray.init(address="local", num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, runtime_env=quiet,
                  _temp_dir=tempfile.mkdtemp(prefix="ray", dir="/tmp"), object_store_memory=200 * 2**20,
-                 log_to_driver=True, runtime_env=quiet)
+                 log_to_driver=True)
     finally:
         signal.signal(signal.SIGINT, previous)
 
@@ -114,12 +113,8 @@ def _install_stop_handler(job_dir: Path) -> Any:
 
 def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool = False, *,
                     parent: RunHandle | None = None, callbacks: Sequence[Any] = ()) -> TrainOutcome:
-    """Run a training job to the end (or a clean stop); ``resume`` continues ``cfg.run.name``.
-
-    ``parent``: the tracked run a new job's run is nested under (a sweep's run); ``callbacks``: Ray Train
-    callbacks of the job (a sweep trial passes Tune's report callback). Off the main thread (inside a Tune
-    trial) no Ctrl-C handler is installed: Python allows signal handlers on the main thread only.
-    """
+    """Run a training job to the end or a clean stop; ``resume`` continues ``cfg.run.name``; ``parent``: the run it
+    nests under; ``callbacks``: Ray Train callbacks (a Tune trial's, off the main thread: no Ctrl-C handler then)."""
     check_train_inputs(cfg, resume=resume, address=address)  # before Ray: one line, never retried
     tracker = get_tracker(cfg.run.tracker, cfg.run.tracking_uri)
     if not resume:
@@ -138,26 +133,28 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
     cfg.run.tracking_uri = tracker.store
     protocol = validation_protocol(cfg)
     tags = {"sray.recipe": cfg.recipe, "sray.job_dir": str(job_dir), "sray.protocol": protocol.describe()}
-    run = (tracker.resume_run(cfg.run.experiment, cfg.run.name) if resume
-           else tracker.start_run(cfg.run.experiment, cfg.run.name, tags=tags, parent=parent))
-    if not resume:
-        _log_run_start(tracker, run, job_dir / CONFIG_FILE, protocol.to_json())
+    if resume:
+        run = tracker.resume_run(cfg.run.experiment, cfg.run.name)
+    else:
+        run = tracker.start_run(cfg.run.experiment, cfg.run.name, tags=tags, parent=parent)
+        logger = tracker.logger(run)  # the config file and, once, the validation protocol (params protocol.*)
+        logger.log_artifact(job_dir / CONFIG_FILE)
+        logger.log_params({"protocol": protocol.to_json()})
+        logger.flush(force=True)
     print(f"[sray] job {cfg.run.name}: checkpoints in {job_dir / 'checkpoints'}\n"
           f"[sray] {tracker.label} run: {run.ui_url}" + (f"  ({run.ui_hint})" if run.ui_hint else ""), flush=True)
 
     latest = CheckpointManager(job_dir / "checkpoints").latest() if resume else None
+    gpus = {"GPU": cfg.run.gpus_per_worker} if cfg.run.gpus_per_worker > 0 else {}
     trainer = TorchTrainer(
-        train_worker,
-        train_loop_config={"config": cfg.to_dict(), "run": dataclasses.asdict(run),
-                           "resume_from": str(latest) if latest is not None else None},
-        scaling_config=ray.train.ScalingConfig(
-            num_workers=cfg.run.workers, use_gpu=cfg.run.gpus_per_worker > 0,
-            resources_per_worker={"CPU": cfg.run.cpus_per_worker, **({"GPU": cfg.run.gpus_per_worker}
-                                                                       if cfg.run.gpus_per_worker > 0 else {})}),
+        train_worker, train_loop_config={"config": cfg.to_dict(), "run": dataclasses.asdict(run),
+                                         "resume_from": str(latest) if latest is not None else None},
+        scaling_config=ray.train.ScalingConfig(num_workers=cfg.run.workers, use_gpu=bool(gpus),
+                                               resources_per_worker={"CPU": cfg.run.cpus_per_worker, **gpus}),
         run_config=ray.train.RunConfig(name=cfg.run.name, storage_path=str(job_dir / "ray"), callbacks=list(callbacks),
                                        failure_config=ray.train.FailureConfig(max_failures=cfg.run.max_failures),
-                                       worker_runtime_env={"env_vars": {**TRAIN_WORKER_ENV, **propagated_env(),
-                                                                        **progress_env()}}))
+                                       worker_runtime_env={"env_vars": TRAIN_WORKER_ENV | propagated_env()
+                                                                       | progress_env()}))
     on_main_thread = threading.current_thread() is threading.main_thread()
     previous = _install_stop_handler(job_dir) if on_main_thread else None
     status = "FAILED"
@@ -180,8 +177,7 @@ def launch_training(cfg: TrainConfig, address: str | None = None, resume: bool =
 
 
 def _fit_in_thread(trainer: Any) -> None:
-    """``trainer.fit()`` off the main thread, so that Ray Train installs no SIGINT handler of its
-    own (it aborts the run) and ours turns Ctrl-C into a checkpointed stop. Re-raises its error."""
+    """``trainer.fit()`` off the main thread, so that Ray Train installs no SIGINT handler (ours stops cleanly)."""
     failure: list[BaseException] = []
 
     def target() -> None:
@@ -207,11 +203,3 @@ def budget_spent(job_dir: Path, cfg: TrainConfig) -> bool:
         return True
     budget = cfg.optim.cpu_seconds
     return budget > 0 and load_checkpoint(latest)["counters"]["cpu_seconds"] >= budget
-
-
-def _log_run_start(tracker: Tracker, run: RunHandle, config_path: Path, protocol: dict[str, Any]) -> None:
-    """Log the config file and, once, the validation protocol (params ``protocol.*``) to a new run."""
-    logger = tracker.logger(run)
-    logger.log_artifact(config_path)
-    logger.log_params({"protocol": protocol})
-    logger.flush(force=True)

@@ -1,15 +1,10 @@
 """The one optimisation step of sray, shared by pretraining (``train_worker``) and per-scene finetuning.
 
-A step reads top to bottom: seed -> (caller: forward under :meth:`TrainStep.autocast`, loss) ->
-backward (scaled under fp16) -> unscale -> clip -> non-finite guard -> optimiser step -> scaler
-update -> zero grads. It waits for the device exactly once: the guard's flags (non-finite loss or
-gradient, and a stop request from any rank) and the ranks' CPU seconds are summed over the ranks and
-brought to the host in one transfer. Loss terms stay
-on the device; callers stack them and read them at their logging interval.
-
-Non-finite steps are skipped (no parameter or optimiser-state change), counted, and after
-``max_nonfinite_in_row`` in a row the step raises :class:`NonFiniteTraining`. Under fp16 the
-gradient scaler still lowers its scale after a skipped step.
+A step reads top to bottom: seed -> (caller: forward under :meth:`TrainStep.autocast`, loss) -> backward (scaled
+under fp16) -> unscale -> clip -> non-finite guard -> optimiser step -> scaler update -> zero grads. It waits for the
+device once: the guard's flags (non-finite loss or gradient, a stop request from any rank) and the ranks' CPU seconds
+are summed over the ranks in one transfer. Non-finite steps are skipped (no parameter or optimiser-state change),
+counted, and after ``max_nonfinite_in_row`` in a row the step raises :class:`NonFiniteTraining`.
 """
 
 from __future__ import annotations
@@ -29,11 +24,7 @@ class NonFiniteTraining(RuntimeError):
 
 
 def step_seed(seed: int, rank: int, step: int) -> int:
-    """Seed of everything random in one step (ray sampling, stratified depths) on one rank.
-
-    A pure function of (seed, rank, step): a resumed job draws exactly what an uninterrupted one
-    would, with no RNG state to carry between processes.
-    """
+    """Seed of one step on one rank: a pure function, so a resumed job draws what an uninterrupted one would."""
     return (seed * 1_000_003 + rank * 7_919 + step) % (2**63 - 1)
 
 
@@ -44,7 +35,6 @@ class StepOutcome:
     applied: bool
     """False when the step was skipped (non-finite loss or gradient)."""
     stop: bool
-    """True when any rank asked to stop (read in the same transfer as the guard)."""
     grad_norm: Tensor
     """Total gradient norm before clipping, a device scalar (read it only when logging)."""
     cpu_seconds: float = 0.0
@@ -81,8 +71,7 @@ class TrainStep:
         return torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in grads]))
 
     def __call__(self, loss: Tensor, stop_requested: bool = False, cpu_seconds: float = 0.0) -> StepOutcome:
-        """Apply one update from ``loss`` (a scalar with a graph); see the module docstring. ``cpu_seconds``:
-        this rank's CPU time so far, summed over the ranks into ``StepOutcome.cpu_seconds``."""
+        """Apply one update from ``loss`` (a scalar with a graph); ``cpu_seconds``: this rank's CPU time so far."""
         (self.scaler.scale(loss) if self.scaler is not None else loss).backward()
         if self.scaler is not None:
             self.scaler.unscale_(self.optimizer)
@@ -111,6 +100,5 @@ class TrainStep:
 
 
 def fused_adam(params: list[nn.Parameter], lr: float) -> torch.optim.Optimizer:
-    """Adam (the paper's optimiser) with the fused kernel (CPU and CUDA): one kernel per step and no host reads of
-    its step counters."""
+    """Adam (the paper's optimiser), fused (CPU and CUDA): one kernel per step, no host reads of its counters."""
     return torch.optim.Adam(params, lr=lr, fused=True)

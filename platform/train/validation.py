@@ -1,14 +1,4 @@
-"""Validation during training (rank 0): held-out views of training scenes and zero-shot unseen scenes.
-
-``val/*`` scores come from the held-out ``test`` views of the training scenes (sources from their
-``train`` views); ``zeroshot/*`` from the unseen test scenes' ``test`` views with their fixed
-``source`` views (the paper's generalization protocol). Logged against the step, they give the
-paper's table of metrics against iterations. Both groups are made the same way,
-:func:`validation_protocol` (logged once per run by the launcher: tag ``sray.protocol``, params
-``protocol.*``); validation renders are strided (``data.held_out.stride``), so they carry no SSIM
-unless that is 1, and use the fast render mode on those pixels unless ``data.held_out.render`` is ``full``
-(:mod:`sray.platform.config.held_out_render`). One validation reads the shard manifest once and hands it down.
-"""
+"""Validation during training (rank 0): ``val/*`` on training scenes' held-out views, ``zeroshot/*`` on test scenes."""
 
 from __future__ import annotations
 
@@ -31,25 +21,15 @@ GROUPS = {"val": "train", "zeroshot": "test"}
 
 
 def validation_protocol(cfg: TrainConfig) -> EvalProtocol:
-    """How ``val/*`` and ``zeroshot/*`` are made (``data.held_out``): its fixed sources (0: ``model.n_source``) ranked
-    by the shards' neighbour rule, every ``stride``-th pixel, the model's ``model.inputs`` (and what its training
-    read: ``SRayConfig.train_inputs``, ``rgbd`` with the depth loss), its render."""
+    """How ``val/*`` and ``zeroshot/*`` are made (``data.held_out``, ``model.inputs``, what its training read)."""
     held_out = cfg.data.held_out
     return EvalProtocol.from_shards(Path(cfg.data.shards), held_out.sources(cfg.model.n_source), held_out.stride,
                                     cfg.model.inputs, cfg.model.train_inputs).rendered_by(held_out.fast())
 
 
-def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
-    keys = scores[0].keys()
-    return {k: sum(s[k] for s in scores) / len(scores) for k in keys}
-
-
 def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: str,
                    device: torch.device) -> tuple[dict[str, float], list[tuple[str, ViewPrediction]]]:
-    """Scores averaged over the scenes of ``role`` (each scene scored from its own confusion matrix; the
-    first ``data.val_scenes`` of them by name when that is set), and the rendered views (scene, prediction).
-    Empty when no scene of that role has test views.
-    ``manifest``: the parsed ``cfg.data.shards`` manifest (not read again here)."""
+    """Mean scores over the scenes of ``role`` (the first ``data.val_scenes``) and the rendered (scene, view)s."""
     per_scene, renders = [], []
     scenes = [(name, entry) for name, entry in sorted(manifest.scenes.items())
               if entry.meta.get("role") == role and entry.meta.get("splits", {}).get("test")]
@@ -63,7 +43,8 @@ def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: s
                              cfg.model.ignore_id, held_out.stride, cfg.runtime.chunk, device, fast)
         per_scene.append(scored.scores)
         renders += [(name, v) for v in scored.views]
-    return (_mean(per_scene) if per_scene else {}), renders
+    means = {k: sum(s[k] for s in per_scene) / len(per_scene) for k in per_scene[0]} if per_scene else {}
+    return means, renders
 
 
 def validate(net: nn.Module, cfg: TrainConfig, step: int, logger: Any, job_dir: Path,

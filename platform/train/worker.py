@@ -1,9 +1,4 @@
-"""The function every Ray Train worker runs: an Accelerate training loop over the shard loader.
-
-Ray creates the process group (gloo on CPU, NCCL on GPU) and sets RANK/WORLD_SIZE; ``Accelerator()``
-picks it up. Rank 0 logs to the tracker into the run the launcher prepared, writes checkpoints and
-renders validation images; every rank reports to Ray at the same steps.
-"""
+"""The function every Ray Train worker runs: an Accelerate training loop over the shard loader."""
 
 from __future__ import annotations
 
@@ -14,13 +9,11 @@ from typing import Any
 import ray.train
 import torch
 from accelerate import Accelerator
-from ray.train import Checkpoint
 
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
 from sray.platform.common.fault_hook import active_faults, hold_if_due, kill_if_due
 from sray.platform.common.model_input import ray_batch
-from sray.platform.common.progress import make_progress
-from sray.platform.common.throughput import ThroughputWindow, peak_memory_mb, progress_postfix
+from sray.platform.common.progress import ThroughputWindow, make_progress, peak_memory_mb, progress_postfix
 from sray.platform.config.train_config import TrainConfig
 from sray.platform.tracking.registry import open_logger
 from sray.platform.tracking.tracker import RunHandle
@@ -34,16 +27,11 @@ from sray.platform.train.validation import validate
 STOP_FILE = "STOP"
 """A file of this name in the job folder asks every worker to checkpoint and stop (Ctrl-C)."""
 UNSENT_METRICS = "unsent_metrics"
-"""Checkpoint entry: ``[key, value, step]`` of each metric rank 0 could not deliver by then (the tracking
-store was unreachable); a worker restarted from the checkpoint logs them again."""
+"""Checkpoint entry: ``[key, value, step]`` of each metric not delivered by then, logged again on a restart."""
 
 
 def parameter_divergence(model: torch.nn.Module, world: int) -> float:
-    """Largest difference between ranks of a per-tensor parameter fingerprint (0 = in sync).
-
-    Every rank must call it (an all-gather); DDP keeps replicas identical, so anything but 0
-    means the ranks diverged.
-    """
+    """Largest difference between ranks of a parameter fingerprint (0 unless DDP replicas diverged; all ranks call)."""
     with torch.no_grad():
         fingerprint = torch.stack([p.detach().float().sum() + p.detach().float().abs().sum()
                                    for p in model.parameters()])  # on the params' device (NCCL needs CUDA tensors)
@@ -54,13 +42,13 @@ def parameter_divergence(model: torch.nn.Module, world: int) -> float:
     return float(torch.stack(gathered).amax(0).sub(torch.stack(gathered).amin(0)).abs().max())
 
 
-def to_ray_checkpoint(directory: Path) -> Checkpoint:
+def to_ray_checkpoint(directory: Path) -> ray.train.Checkpoint:
     """A ``ray.train.Checkpoint`` of one checkpoint folder (pass it to ``ray.train.report``)."""
     read_meta(directory)
-    return Checkpoint.from_directory(str(Path(directory).resolve()))
+    return ray.train.Checkpoint.from_directory(str(Path(directory).resolve()))
 
 
-def from_ray_checkpoint(checkpoint: Checkpoint, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+def from_ray_checkpoint(checkpoint: ray.train.Checkpoint, map_location: str | torch.device = "cpu") -> dict[str, Any]:
     """The state dict inside a ``ray.train.Checkpoint`` (e.g. from ``ray.train.get_checkpoint()``)."""
     with checkpoint.as_directory() as directory:
         read_meta(Path(directory))
@@ -72,24 +60,19 @@ def train_worker(payload: dict[str, Any]) -> None:
     cfg = TrainConfig.from_dict(payload["config"])
     ctx = ray.train.get_context()
     rank, world = ctx.get_world_rank(), ctx.get_world_size()
-    job_dir = cfg.job_dir()
-    stop_file = job_dir / STOP_FILE
-    faults = active_faults()
-
+    job_dir, faults = cfg.job_dir(), active_faults()
+    # Accelerate places the model and wraps it for DDP; autocast and loss scaling are the shared TrainStep's
     use_cuda = cfg.run.gpus_per_worker > 0 and torch.cuda.is_available()
-    # Accelerate places the model and wraps it for DDP; autocast and loss scaling are the shared
-    # TrainStep's, so pretraining and finetuning run the same step.
     accelerator = Accelerator(mixed_precision="no", cpu=not use_cuda)
     device = accelerator.device
     model, optimizer, scheduler = build_training(cfg)
     start, best, counters = 0, None, dict(FIRST_COUNTERS)
-    # A restarted worker group resumes from the last checkpoint Ray recorded; a resumed job
-    # (`--resume NAME`, a fresh Ray run) from the job's latest checkpoint folder.
+    # a restarted worker group resumes from Ray's last checkpoint, `--resume NAME` from the job's latest folder
     resumed = ray.train.get_checkpoint()
     state = (from_ray_checkpoint(resumed) if resumed is not None
              else load_checkpoint(Path(payload["resume_from"])) if payload.get("resume_from") else None)
     if state is not None:
-        start, best, counters = restore_training(state, model.net, optimizer, scheduler, None)
+        start, best, counters = restore_training(state, model.net, optimizer, scheduler)
         if rank == 0:
             how = "a restarted worker group" if resumed is not None else "--resume"
             print(f"[sray] resumed at step {start} ({how})", flush=True)
@@ -115,8 +98,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     if logger is not None and state is not None:
         for key, value, logged_at in state.get(UNSENT_METRICS, []):
             logger.log_metrics({key: value}, logged_at)  # the store missed them before the checkpoint
-    # Epoch e's stream depends only on (seed, e, rank), so a job resumed at step s re-enters epoch s // E at
-    # offset s % E and sees exactly the batches an uninterrupted job would have seen.
+    # epoch e's stream depends only on (seed, e, rank): a resumed job sees the batches an uninterrupted one would
     epoch_len = cfg.data.epoch_steps or cfg.run.ckpt_every
     loader = job_loader(cfg, rank, world, epoch_len)
 
@@ -131,8 +113,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     bar = make_progress(rank == 0, total=cfg.optim.steps, initial=start, desc=cfg.run.name)
 
     def checkpoint_and_report(step_done: int, metrics: dict[str, float]) -> None:
-        """Every rank reports; rank 0 flushes metrics and saves, with what it could not deliver (so a restart
-        never leaves a gap, even while the tracking store is down)."""
+        """Every rank reports; rank 0 flushes metrics and saves, with the metrics it could not deliver."""
         divergence = parameter_divergence(model, world)
         if rank == 0:
             logger.log_metrics({"ddp/param_divergence": divergence}, step_done)
@@ -151,7 +132,7 @@ def train_worker(payload: dict[str, Any]) -> None:
     budget = cfg.optim.cpu_seconds
 
     def follow_cpu_budget(next_step: int) -> None:
-        """With a CPU budget, the next step's learning rate from ``budget_lr_factor``."""
+        """With a CPU budget, set the next step's learning rate (``budget_lr_factor``)."""
         if budget > 0:
             factor = budget_lr_factor(cfg.optim, next_step, cpu_total)
             for group in optimizer.param_groups:
@@ -176,7 +157,7 @@ def train_worker(payload: dict[str, Any]) -> None:
                                     render=step >= cfg.optim.warmup_2d_steps, target_depth=sample.target_depth)
             if step == faults.nan_at_step:
                 loss = loss * float("nan")
-            stop_asked = stop_file.exists() or step + 1 == faults.stop_after_step
+            stop_asked = (job_dir / STOP_FILE).exists() or step + 1 == faults.stop_after_step
             outcome = train_step(loss, stop_requested=stop_asked, cpu_seconds=clock.seconds())
             cpu_total = outcome.cpu_seconds
             scheduler.step()
@@ -202,12 +183,11 @@ def train_worker(payload: dict[str, Any]) -> None:
                 bar.set_postfix(**progress_postfix(means.get("loss", float("nan")), figures), **spent)
                 window_terms = []
             metrics: dict[str, float] = {"step": step}
-            if step % cfg.run.val_every == 0 or finished:
-                if rank == 0:
-                    metrics |= validate(accelerator.unwrap_model(model).net, cfg, step, logger, job_dir, device)
-                    miou = metrics.get("val/miou")
-                    if miou is not None and (best is None or miou > best):
-                        best = miou
+            if rank == 0 and (step % cfg.run.val_every == 0 or finished):
+                metrics |= validate(accelerator.unwrap_model(model).net, cfg, step, logger, job_dir, device)
+                miou = metrics.get("val/miou")
+                if miou is not None and (best is None or miou > best):
+                    best = miou
             if outcome.stop:  # asked by a STOP file on any rank (all ranks read the same flag)
                 checkpoint_and_report(step, metrics | {"stopped": 1.0})
                 if rank == 0:

@@ -1,10 +1,4 @@
-"""Semantic-NeRF from scratch: the per-scene baseline, a positional-encoding MLP trained on the scene's rays.
-
-It shares nothing with the S-Ray checkpoint but its defaults (samples per ray) and label space; its
-artifact is the whole network and its config
-(:func:`sray.platform.finetune.scene_artifacts.save_semantic_nerf`). It renders held-out views
-from no source view.
-"""
+"""Semantic-NeRF from scratch: the per-scene baseline, trained on the scene's rays; its artifact is the whole net."""
 
 from __future__ import annotations
 
@@ -18,8 +12,7 @@ if TYPE_CHECKING:
 
 
 def build(ctx: SceneContext) -> SceneSetup:
-    """A seeded Semantic-NeRF of the scene (settings ``nerf.*``) behind a
-    :class:`~sray.platform.finetune.learners.NeRFLearner`; training samples need no source view."""
+    """A seeded Semantic-NeRF of the scene (``nerf.*``) behind a ``NeRFLearner``; samples need no source view."""
     from sray.model.ray_chunks import render_chunk_rays
     from sray.platform.finetune.learners import NeRFLearner, build_semantic_nerf
 
@@ -39,7 +32,5 @@ def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
 
 
 METHOD = Method(
-    name="semantic-nerf", summary="train Semantic-NeRF from scratch", build=build,
-    artifact_file="semantic_nerf.safetensors", load=load,
-    style=ChartStyle(label="Semantic-NeRF from scratch", color="#d1495b", marker="s"), uses_sources=False)
-"""The Semantic-NeRF per-scene method."""
+    name="semantic-nerf", summary="train Semantic-NeRF from scratch", build=build, load=load, uses_sources=False,
+    artifact_file="semantic_nerf.safetensors", style=ChartStyle("Semantic-NeRF from scratch", "#d1495b", "s"))

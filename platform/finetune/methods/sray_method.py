@@ -1,10 +1,4 @@
-"""S-Ray finetune: the shared model with only ``finetune.adapt`` trained per scene.
-
-Its artifact is the adapted tensors alone plus the shared checkpoint's checksum
-(:func:`sray.platform.finetune.scene_artifacts.save_sray_delta`); loading it needs that checkpoint.
-Held-out views are rendered from the shards' fixed source views, and its step-0 score is the
-shared model's zero-shot score (``sray eval --checkpoint``).
-"""
+"""S-Ray finetune: the shared model with only ``finetune.adapt`` trained per scene (step 0: zero-shot)."""
 
 from __future__ import annotations
 
@@ -20,12 +14,10 @@ if TYPE_CHECKING:
 
 
 NAME = "sray"
-"""The method's registry name."""
 
 
 def build(ctx: SceneContext) -> SceneSetup:
-    """An :class:`~sray.platform.finetune.learners.SRayLearner` on the shared model; training samples
-    with the checkpoint's source count (or ``finetune.n_source``) drawn from its ``top_k`` neighbours."""
+    """An ``SRayLearner`` on the shared model, its samples' sources as the checkpoint's (or ``finetune.*``)."""
     from sray.platform.finetune.learners import SRayLearner
 
     ft = ctx.cfg.finetune
@@ -44,8 +36,7 @@ def load(artifact: Path, base_checkpoint: Path) -> nn.Module:
 
 
 def eval_model(request: EvalRequest) -> EvalModel:
-    """The shared model of ``--checkpoint`` as it is (zero-shot), rendered as ``--render`` says, with the request's
-    source inputs (its own when the request names none)."""
+    """The shared model of ``--checkpoint`` (zero-shot), rendered as ``--render`` says, with the request's inputs."""
     from sray.platform.eval.eval_model import checkpoint_model
 
     if request.checkpoint is None:
@@ -56,7 +47,6 @@ def eval_model(request: EvalRequest) -> EvalModel:
 
 METHOD = Method(
     name=NAME, summary="finetune the shared S-Ray model", build=build, artifact_file="sray_delta.safetensors",
-    load=load, style=ChartStyle(label="S-Ray finetune", color="#1f6fb4", marker="o"), uses_sources=True,
+    load=load, style=ChartStyle(label="S-Ray finetune", color="#1f6fb4", marker="o"), uses_sources=True, clips=True,
     zero_shot=ChartStyle(label="S-Ray zero-shot (step 0, no per-scene steps)", color="#6b9fd1", marker="*"),
-    eval_model=eval_model, eval_reads=("checkpoint", "fast", "inputs"), clips=True)
-"""The S-Ray per-scene method."""
+    eval_model=eval_model, eval_reads=("checkpoint", "fast", "inputs"))

@@ -1,13 +1,4 @@
-"""S-Ray given the source views' depth (``sray-rgbd``): the shared checkpoint in RGB-D mode (docs/model.md "RGB-D
-mode": the source depth places the coarse samples; the parameters are the RGB mode's), finetuned per scene as
-``sray`` is. An RGB-D method, registered as ``sray``'s depth twin (``Method.given_depth_of``): wherever a method
-that reads the source depth is compared (``2d-transfer``), S-Ray given that same depth stands beside it
-(:func:`sray.platform.finetune.methods.registry.with_depth_twins`).
-
-Its artifact is ``sray``'s (the adapted tensors plus the shared checkpoint's checksum); loading it puts the model in
-RGB-D mode again. Its step-0 score is the shared model's zero-shot score given the depth (``sray eval --method
-sray-rgbd --checkpoint C``).
-"""
+"""S-Ray given the source depth (``sray-rgbd``, docs/model.md "RGB-D mode"): ``sray``'s depth twin."""
 
 from __future__ import annotations
 
@@ -24,9 +15,7 @@ if TYPE_CHECKING:
     from sray.platform.eval.eval_model import EvalModel
 
 NAME = "sray-rgbd"
-"""The method's registry name."""
 INPUTS = "rgbd"
-"""What it reads of the source views (``model.inputs``)."""
 
 
 def build(ctx: SceneContext) -> SceneSetup:
@@ -50,9 +39,7 @@ def eval_model(request: EvalRequest) -> EvalModel:
 
 METHOD = Method(
     name=NAME, summary="finetune the shared S-Ray model given the source depth (RGB-D)", build=build,
-    artifact_file=sray_method.METHOD.artifact_file, load=load,
-    style=ChartStyle(label="S-Ray finetune, with source depth", color="#9467bd", marker="P"), uses_sources=True,
+    artifact_file=sray_method.METHOD.artifact_file, load=load, uses_sources=True, clips=True,
+    style=ChartStyle(label="S-Ray finetune, with source depth", color="#9467bd", marker="P"),
     zero_shot=ChartStyle(label="S-Ray zero-shot, with source depth", color="#8c564b", marker="v"),
-    eval_model=eval_model, eval_reads=("checkpoint", "fast"), inputs=INPUTS, given_depth_of=sray_method.NAME,
-    clips=True)
-"""S-Ray's RGB-D per-scene method."""
+    eval_model=eval_model, eval_reads=("checkpoint", "fast"), inputs=INPUTS, given_depth_of=sray_method.NAME)

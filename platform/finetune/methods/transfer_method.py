@@ -1,14 +1,4 @@
-"""2D label transfer (``2d-transfer``): a 2D segmenter labels the source views, and their labels are carried into
-the query view by the SOURCE views' depth (``sray.platform.eval.segmenter``). An RGB-D method: it reads the
-source images, cameras and depth, and of the query view only its camera.
-
-Zero-shot (step 0; ``sray eval --method 2d-transfer --segmenter FOLDER``) it uses the pretrained segmenter of
-``transfer.segmenter`` (``sray bench segmenter``); in a fleet it finetunes the whole segmenter on the scene's
-finetune pool (the training samples' labelled source images, ``transfer.images_per_step`` per step) under the
-fleet's budget and early stopping, like the other methods. Its artifact is the finetuned segmenter and its config
-(:func:`sray.platform.finetune.scene_artifacts.save_segmenter_artifact`); loading it needs no checkpoint. A held-out
-pixel no source sees gets no prediction and scores as a miss (``label_transfer.UNSEEN_RULE``).
-"""
+"""2D label transfer (``2d-transfer``): segmenter labels of the source views carried by their depth to the query."""
 
 from __future__ import annotations
 
@@ -25,14 +15,10 @@ if TYPE_CHECKING:
     from sray.platform.eval.eval_model import EvalModel
 
 NAME = "2d-transfer"
-"""The method's registry name."""
 
 
 def build(ctx: SceneContext) -> SceneSetup:
-    """A :class:`~sray.platform.finetune.learners.TransferLearner` on the pretrained segmenter of
-    ``transfer.segmenter``; training samples carry ``transfer.images_per_step`` labelled source images drawn from
-    the checkpoint's ``top_k`` neighbours (or ``finetune.top_k``). ValueError when the segmenter's classes are not
-    the checkpoint's."""
+    """A ``TransferLearner`` on ``transfer.segmenter`` (ValueError unless of the checkpoint's classes)."""
     from sray.platform.eval.segmenter import load_segmenter
     from sray.platform.finetune.learners import TransferLearner
 
@@ -67,8 +53,7 @@ def eval_model(request: EvalRequest) -> EvalModel:
 
 
 def checked_config(cfg: FleetConfig) -> FleetConfig:
-    """``cfg`` with ``transfer.segmenter`` made absolute (tasks may run elsewhere), once it is set and the segmenter
-    there loads; ValueError or FileNotFoundError naming the field and the fix."""
+    """``cfg`` with ``transfer.segmenter`` made absolute (tasks may run elsewhere) once it is set and loads."""
     from sray.platform.eval.segmenter import load_segmenter
 
     if not cfg.transfer.segmenter:
@@ -82,8 +67,7 @@ def checked_config(cfg: FleetConfig) -> FleetConfig:
 
 METHOD = Method(
     name=NAME, summary="2D segmenter labels carried by the source depth (RGB-D), segmenter finetuned", build=build,
-    artifact_file="segmenter.safetensors", load=load,
-    style=ChartStyle(label="2d-transfer finetune", color="#e08a1e", marker="D"), uses_sources=True,
+    artifact_file="segmenter.safetensors", load=load, uses_sources=True,
+    style=ChartStyle(label="2d-transfer finetune", color="#e08a1e", marker="D"),
     zero_shot=ChartStyle(label="2d-transfer zero-shot (pretrained segmenter)", color="#f2c27b", marker="X"),
     eval_model=eval_model, eval_reads=("segmenter",), inputs="rgbd", checked_config=checked_config)
-"""The 2D label-transfer per-scene method."""
