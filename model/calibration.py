@@ -1,10 +1,6 @@
-"""Temperature calibration of a classifier's logits: the T > 0 that minimises the negative log-likelihood of
-labelled samples under softmax(logits / T) (Guo et al.'s temperature scaling, one parameter, argmax unchanged).
-
-Used for the fast render's coarse confidence (``FastRender.temperature``): fitted on validation rooms, so that
-"coarse confidence >= 0.9" keeps meaning a 90 % chance of being right on rooms that look unlike the training ones.
-The fit searches log T on a grid and refines the best grid cell by golden-section search (the NLL is smooth and
-unimodal in log T for practical logits): deterministic, no optimiser state, exact to ``tol`` in log T.
+"""Temperature calibration (Guo et al.): the T > 0 minimising the NLL of labelled samples under softmax(logits / T),
+fitted on validation rooms for the fast render's coarse confidence (``FastRender.temperature``). A grid over log T,
+then golden-section search in the best cell: deterministic, exact to ``tol``.
 """
 
 from __future__ import annotations

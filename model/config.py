@@ -8,48 +8,39 @@ from .attention_variants import ATTENTION_VARIANTS
 from .semantic_cues import check_cues
 
 FINE_SAMPLES = ("union", "new")
-"""What the fine pass evaluates (``SRayConfig.fine_samples``): ``new`` (default) only the n_fine
-resampled depths (the paper's public code: 128 evaluations per ray at 64 + 64); ``union`` the sorted
-union of the coarse and the resampled depths, n_coarse + n_fine per ray (NeRF; 192 at 64 + 64). ``new``
-is the default since it trained better and faster side by side (docs/performance.md)."""
+"""What the fine pass evaluates: ``new`` only the n_fine resampled depths (the paper's public code); ``union``
+the sorted union with the coarse depths (NeRF). ``new`` trained better and faster (docs/performance.md)."""
 
 INPUTS = ("rgb", "rgbd")
-"""What the network is given of its source views (``SRayConfig.inputs``): ``rgb`` (default, the paper's
-text) posed colour images only; ``rgbd`` also their depth maps, which place the coarse samples around
-the surfaces the sources saw (``depth_sampling``). The query view's depth is never an input."""
+"""What the network is given of its source views: ``rgb`` posed colour images only (the paper); ``rgbd`` also
+their depth maps, which place the coarse samples (``depth_sampling``). The query's depth is never an input."""
 
 
 @dataclass
 class SRayConfig:
-    """Every setting of the S-Ray network, its sampling and its loss weights: what a checkpoint stores. How the
-    network is run (implementation, rays per pass) is ``runtime.Runtime``, passed to each call.
-
-    Defaults are the paper's (Method section and appendix tables) where it states a value.
-    """
+    """Every setting of the S-Ray network, its sampling and its loss weights: what a checkpoint stores (how it is
+    run is ``runtime.Runtime``). Defaults are the paper's (Method section, appendix tables) where it states one."""
 
     n_classes: int = 20
     """Number of semantic classes L the classifier predicts (ScanNet benchmark: 20)."""
     feat_dim: int = 32
     """Channels C of the image features and of the contextual space M (paper: 32)."""
     encoder_width: int = 16
-    """Channels of the image encoder's first layer; every later layer scales with it (16 = the appendix table:
-    16/32/64/128 channels on the way down, 64/32 on the way up; ``encoder.ResUNetEncoder``)."""
+    """Channels of the image encoder's first layer, every later layer scaled with it (16 = the appendix table)."""
     n_source: int = 8
-    """Number of source views m a training sample carries (paper: 8); the network itself accepts
-    any m >= 1 at run time."""
+    """Source views m a training sample carries (paper: 8); the network accepts any m >= 1."""
     n_coarse: int = 64
     """Coarse samples per ray, stratified in training and bin centres in evaluation (paper: 64)."""
     n_fine: int = 64
-    """Fine samples per ray drawn from the coarse weights; the fine network sees the sorted union
-    of coarse and fine samples, n_coarse + n_fine in all (paper code: 64)."""
+    """Fine samples per ray drawn from the coarse weights (paper code: 64); evaluated as ``fine_samples`` says."""
     attention: str = "full"
-    """Cross-Reprojection Attention variant, a key of ``attention_variants.ATTENTION_VARIANTS``
-    (``full`` = the paper's CRA, ``intra``, ``cross``, ``none``, ``dense``)."""
+    """Cross-Reprojection Attention variant, a key of ``attention_variants.ATTENTION_VARIANTS`` (``full`` = the
+    paper's CRA, ``intra``, ``cross``, ``none``, ``dense``)."""
     n_heads: int = 4
     """Heads of every multi-head attention (CRA and the geometry net's ray attention; paper: 4)."""
     depth_freqs: int = 6
-    """Frequencies of the encoding of each sample's normalised depth (z - near) / (far - near)
-    whose learned projection is added to M before intra-view attention (0 = the raw depth only)."""
+    """Frequencies of the encoding of each sample's normalised depth (z - near) / (far - near) whose learned
+    projection is added to M before intra-view attention (0 = the raw depth only)."""
     dir_hidden: int = 16
     """Hidden width of the view-direction MLP (4 -> 16 -> C, appendix L21)."""
     weight_hidden: tuple[int, int] = (16, 8)
@@ -59,11 +50,9 @@ class SRayConfig:
     tau: float = 0.7
     """Bound of the semantic-aware weights: tau/m < w_i < 1/(tau m); tau = 1 is the plain mean."""
     weight_margin: float = 1e-3
-    """Fraction of the weight range kept unused so the bounds stay strict when the sigmoid
-    scores saturate to exactly 0 or 1 in floating point (see ``semantic_weights``)."""
+    """Fraction of the weight range kept unused so the bounds stay strict in floating point (``semantic_weights``)."""
     min_source_depth: float = 1e-3
-    """A projection is valid only if the point lies at least this far (camera z, scene units) in
-    front of the source camera."""
+    """A projection is valid only at least this far (camera z, scene units) in front of the source camera."""
     lambda_sem: float = 1.0
     """Weight of the semantic cross-entropy in the training loss (paper: 1)."""
     lambda_rgb: float = 1.0
@@ -81,25 +70,20 @@ class SRayConfig:
     ignore_id: int = 255
     """Label id of unlabelled pixels; never a prediction target."""
     class_weights: tuple[float, ...] = ()
-    """Per-class weights of the semantic cross-entropy (n_classes of them; empty = unweighted, the
-    paper's loss). Training fills it from the training set's class frequencies when
-    ``data.class_balance`` asks for it (``sray.data_tools.loader.class_stats.balanced_weights``)."""
+    """Per-class weights of the semantic cross-entropy (n_classes of them; empty = unweighted, the paper's loss),
+    filled from the class frequencies when ``data.class_balance`` asks (``loader.class_stats.balanced_weights``)."""
     fine_samples: str = "new"
     """Depths the fine pass evaluates, one of ``FINE_SAMPLES``."""
     inputs: str = "rgb"
-    """Source-view inputs, one of ``INPUTS``: ``rgb`` (default) or ``rgbd`` (source depth guides the
-    coarse samples; same parameters, so a checkpoint of either mode loads in the other)."""
+    """Source-view inputs, one of ``INPUTS`` (same parameters: a checkpoint of either mode loads in the other)."""
     depth_fraction: float = 0.5
-    """``rgbd`` only: share of the coarse samples placed in the band around the surface the source
-    depths show on the ray (``round(depth_fraction * n_coarse)`` of them); the rest cover the remainder of
-    [near, far] uniformly, so nothing is lost where the sources are wrong or disagree."""
+    """``rgbd`` only: share of the coarse samples in the band around the surface the source depths show on the ray;
+    the rest cover [near, far] uniformly, so nothing is lost where the sources are wrong."""
     depth_band: float = 0.1
     """``rgbd`` only: half-width of that band in z-depth (scene units, metres), clipped to [near, far]."""
-
     semantic_cues: tuple[str, ...] = ()
-    """Appearance-free inputs of the semantic head besides the semantic ray, names from ``semantic_cues.CUES``
-    (``density``, ``depth``, ``height``, ``elevation``); empty (default) is the paper's head. A departure from the
-    paper (docs/model.md): only the classifier's first layer widens, by one input per cue."""
+    """Appearance-free inputs of the semantic head besides the semantic ray, names from ``semantic_cues.CUES``;
+    empty is the paper's head. A departure from the paper (docs/model.md): the classifier's first layer widens."""
 
     def __post_init__(self) -> None:
         """Reject settings the network cannot run with, naming the field and the fix."""
@@ -111,7 +95,6 @@ class SRayConfig:
             check_cues(tuple(self.semantic_cues))
         except ValueError as e:
             raise bad("semantic_cues", f"is {self.semantic_cues!r}; {e}") from None
-
         if self.attention not in ATTENTION_VARIANTS:
             raise bad("attention", f"is {self.attention!r}; use one of {tuple(ATTENTION_VARIANTS)}")
         if self.fine_samples not in FINE_SAMPLES:

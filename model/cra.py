@@ -1,24 +1,10 @@
-"""Cross-Reprojection Attention (CRA) over the contextual space M, and its ablation variants.
+"""Cross-Reprojection Attention (CRA) over the contextual space M (R rays, m views, N samples, C channels).
 
-M has shape (R, m, N, C): R rays, m source views, N samples per ray, C channels.
-
-* intra-view radial attention: for every (ray, view), attention over that view's N samples, after
-  adding a learned embedding of each sample's normalised depth (appendix table: L1-L4). Depth, not
-  the sample's rank: in the fine pass (depths resampled on every ray) rank k
-  means a different depth on every ray, and a rank table fixes the sample count;
-* cross-view sparse attention: for every (ray, sample), attention over its m views (L5-L6);
-* ``dense``: the paper's costly baseline, one joint attention over all m * N tokens of a ray.
-
-Each attention is an ``AttentionBlock``: pre-norm residual multi-head attention (LayerNorm, then
-``scaled_dot_product_attention``, then an output projection added to the input), with no feed-forward (the
-appendix's CRA table lists attention layers only). Pre-norm keeps the residual path an identity, which trains
-stably from scratch.
-
-Masking: invalid projections are masked as KEYS. A sequence whose keys are all invalid (a view that
-sees no sample of the ray, a sample no view sees) attends over all its keys instead, which is
-finite. The outputs at invalid tokens are finite and ignored by everything downstream (they are
-masked as keys in the next attention, and the weight net gives invalid views weight exactly 0), so
-they are not zeroed, which saves a pass over the largest tensor.
+Stages (``attention_variants``): intra-view (appendix L1-L4, after adding an embedding of each sample's normalised
+depth: depth, not rank, which differs per ray in the fine pass), cross-view (L5-L6) or ``dense``. Each is an
+``AttentionBlock``: pre-norm residual multi-head attention, no feed-forward (the appendix lists none). Invalid
+projections are masked as keys; a sequence with no valid key attends over all of them (finite); outputs at invalid
+tokens are finite and ignored downstream, so they are not zeroed.
 """
 
 from __future__ import annotations
@@ -81,11 +67,7 @@ STAGES: dict[str, Callable[[AttentionBlock, Tensor, Tensor], Tensor]] = {
 
 
 class CrossReprojectionAttention(nn.Module):
-    """M (R, m, N, C) -> refined M'' (R, m, N, C) with the stages of the variant ``cfg.attention``.
-
-    Each stage's block is the attribute of the stage's name (``intra``, ``cross``, ``dense``), so a
-    checkpoint's keys name the stages it holds.
-    """
+    """M (R, m, N, C) -> M'' (R, m, N, C) by the stages of ``cfg.attention``, each block named after its stage."""
 
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
@@ -106,8 +88,7 @@ class CrossReprojectionAttention(nn.Module):
         return self.depth_embedding(depth01.float()[..., None])
 
     def forward(self, space: Tensor, valid: Tensor, depth01: Tensor) -> Tensor:
-        """space: (R, m, N, C); valid: (R, m, N) bool; depth01: (R, N) each sample's depth normalised
-        to [0, 1] between the ray's near and far. Returns (R, m, N, C), meaningful where valid."""
+        """space (R, m, N, C), valid (R, m, N), depth01 (R, N) in [0, 1] -> (R, m, N, C), meaningful where valid."""
         r, m, n, c = space.shape
         if depth01.shape != (r, n):
             raise ValueError(f"sray.model.cra: depth01 must be ({r}, {n}), got {tuple(depth01.shape)}.")

@@ -1,10 +1,5 @@
-"""Opt-in value checks that need a device -> host sync, off on the hot path by default.
-
-Shape and dtype checks cost nothing and always run. Checks that read tensor VALUES (``far >= near``
-on every ray, label ids inside the class range) force the host to wait for the device; on a GPU
-they idle it several times per training step. They run only when the environment variable
-``SRAY_DEBUG_CHECKS`` is ``1`` (read once per process, at import). The values they guard are
-validated once per batch where they are made instead (the loader, the scenes' checks).
+"""Opt-in checks that read tensor values (``far >= near`` on every ray, label ids in range) and so sync the device:
+they run only with ``SRAY_DEBUG_CHECKS=1`` (read once, at import); the loader and scene checks validate those values.
 """
 
 from __future__ import annotations

@@ -1,28 +1,7 @@
-"""RGB-D mode (``SRayConfig.inputs = "rgbd"``): the source views' depth places the coarse samples.
-
-The rule, in two steps (the query view's own depth is never an input; only the m source depth maps
-of the :class:`~sray.model.source_set.SourceSet` are read):
-
-1. **Where the sources saw a surface on the ray** (:func:`source_surface_depth`). P probes at the bin
-   centres of P equal bins of [near, far] (deterministic, also in training) are projected into every
-   source view. At a probe that projects inside view i, in front of it, onto a pixel of known depth
-   (nearest pixel, so depth edges are never blended), ``s = z_probe - D_i`` is the probe's camera
-   depth minus the depth that view measured there: negative in the free space the view saw, zero on
-   its surface. View i's estimate is the first sign change ``s_k < 0 <= s_{k+1}`` between two such
-   neighbouring probes with both ``|s|`` at most the probe spacing along the ray (``dt |d|``) plus
-   ``depth_band``; a larger jump is the edge of something in front of the ray in that view (the ray
-   passes into its shadow), not a surface. The crossing is interpolated linearly between the two
-   probes. The ray's surface depth is the lower median of the views' estimates; NaN where no view
-   has one (nothing known, or every source grazing or occluded).
-2. **Samples around it** (:func:`surface_samples`). Of the n coarse samples, ``round(fraction * n)``
-   go into the band ``[t - depth_band, t + depth_band]`` clipped to [near, far] and the others
-   cover the rest of [near, far] (the two pieces outside the band, as one stretch), each set in equal
-   bins: stratified in training, bin centres in evaluation. So exactly that share lies in the band
-   and the rest of the ray keeps samples when the sources are wrong. A ray without a surface depth
-   gets the rgb mode's samples, bit for bit (``rendering.sample_uniform`` with the same random draws).
-
-The fine pass is unchanged: inverse CDF of the coarse weights (``rendering.sample_pdf``), whose bins
-follow any sorted coarse samples.
+"""RGB-D mode (``SRayConfig.inputs = "rgbd"``): the source views' depth places the coarse samples; the query view's
+own depth is never an input. The rule (docs/model.md, "RGB-D mode"): :func:`source_surface_depth` finds the first
+surface the source depths show on each ray, :func:`surface_samples` puts ``depth_fraction`` of the coarse samples
+in a band around it and the rest over [near, far].
 """
 
 from __future__ import annotations
@@ -46,11 +25,8 @@ def _nearest_depth(depth: Tensor, uv: Tensor) -> Tensor:
 @torch.no_grad()
 def source_surface_depth(src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor, far: Tensor,
                          n_probe: int, band: float, min_depth: float) -> Tensor:
-    """Ray parameter (z-depth) of the first surface the source depths show on each ray (rule 1 above).
-
-    src: with ``depth`` (m, H, W) metres, 0 = unknown; origins, dirs (R, 3); near, far (R,).
-    Returns float32 (R,), NaN on rays without an estimate.
-    """
+    """Ray parameter (z-depth) of the first surface the source depths (``src.depth`` (m, H, W) metres, 0 =
+    unknown) show on each ray (rule 1): origins, dirs (R, 3), near, far (R,) -> float32 (R,), NaN: no estimate."""
     if src.depth is None:
         raise ValueError("sray.model.depth_sampling: the source set has no depth; encode the sources with "
                          "`src_depth` (m, H, W) for inputs='rgbd'.")

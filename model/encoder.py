@@ -1,46 +1,9 @@
-"""The ResUNet image encoder of the appendix table "Semantic feature extraction" (L1-L19).
-
-Layer shapes (H x W input; every stride-2 layer gives ceil(size / 2)):
-
-=====  =====================================  ===========  ===========
-layer  operation                              channels     resolution
-=====  =====================================  ===========  ===========
-L1     conv 7x7, stride 2, IN, ReLU           3 -> 16      1/2
-L2     ResBlock, stride 2                     16 -> 32     1/4  (skip)
-L3     ResBlock, stride 2                     32 -> 64     1/8
-L4     ResBlock                               64 -> 64     1/8  (skip)
-L5     ResBlock, stride 2                     64 -> 128    1/16
-L6-10  5 x ResBlock                           128 -> 128   1/16
-L11    conv 3x3, IN, ReLU                     128 -> 64    1/16
-L12    up-sample to the L4 grid               64           1/8
-L13    concat (L12, L4)                       128          1/8
-L14    conv 3x3, IN, ReLU                     128 -> 64    1/8
-L15    conv 3x3, IN, ReLU                     64 -> 32     1/8
-L16    up-sample to the L2 grid               32           1/4
-L17    concat (L16, L2)                       64           1/4
-L18    conv 3x3, IN, ReLU                     64 -> 32     1/4
-L19    conv 1x1, IN                           32 -> 32     1/4
-=====  =====================================  ===========  ===========
-
-Every channel count scales with the first layer's width ``w`` (``SRayConfig.encoder_width``; the table is
-``w`` = 16): L1 has ``w`` channels, L2 ``2w``, L3-L4 ``4w``, L5-L10 ``8w``, L11 and L14 ``4w``, L15 and L18 ``2w``.
-
-The table's strides are consistent with its 1/4-resolution output: four stride-2 stages
-(L1, L2, L3, L5) reach 1/16 and the two up-sampling stages return to 1/4, where the skips (L4 at
-1/8, L2 at 1/4) have matching shapes. Two reconciliations, both documented here:
-
-* The table lists no activation for the decoder convs L11-L18; a purely linear decoder would fold
-  L14 and L15 into one convolution, so each decoder conv but the last (L19) is followed by ReLU.
-* Sizes not divisible by 16 (e.g. 120 rows) make the up-sampled grid one pixel larger than the
-  skip; the up-sampling therefore targets the skip's exact size (see ``upsample_to``).
-
-Normalisation: the table's IN (instance norm) standardises every channel of every image on its own, with per-image
-statistics only, so it does not depend on the batch.
-
-Pixel geometry (relied on by ``reprojection.feature_grid``): a stride-2 convolution with
-padding k // 2 centres output pixel j on input pixel 2j, so feature pixel j of the 1/4 map is
-centred on full-resolution pixel 4j. ``upsample_to`` keeps that alignment exactly: fine pixel j
-reads coarse coordinate j / 2.
+"""The ResUNet image encoder of the appendix table "Semantic feature extraction" (L1-L19), every layer's channels
+scaled with the first's (``SRayConfig.encoder_width``, 16 = the table): four stride-2 stages to 1/16 (L1, L2, L3,
+L5), two up-sampling stages back to 1/4 with the L4 and L2 skips. Reconciliations with the table: ReLU after each
+decoder conv but L19 (a linear decoder would fold L14 into L15), up-sampling to the skip's exact size (sizes not
+divisible by 16). A stride-2 conv with padding k // 2 centres output pixel j on input pixel 2j, so feature pixel j
+sits on image pixel 4j (``reprojection``); ``upsample_to`` keeps that alignment.
 """
 
 from __future__ import annotations
@@ -56,17 +19,12 @@ MIN_IMAGE_SIZE = 32
 """Smallest image side the encoder accepts (instance norm needs > 1 pixel at 1/16 resolution)."""
 
 def _norm(channels: int) -> nn.Module:
-    """The instance normalisation of a ``channels``-wide layer, with a learned affine map and per-image statistics
-    only (no running stats)."""
+    """Instance normalisation with a learned affine map and per-image statistics only."""
     return nn.InstanceNorm2d(channels, affine=True, track_running_stats=False)
 
 
 def upsample_to(x: Tensor, size: tuple[int, int]) -> Tensor:
-    """Bilinear 2x up-sampling that keeps pixel centres aligned: (B, C, h, w) -> (B, C, *size).
-
-    Output pixel j reads input coordinate j / 2 (input pixel k sits under output pixel 2k),
-    clamped at the last input pixel. ``size`` may be at most (2h, 2w).
-    """
+    """Centre-aligned bilinear 2x up-sampling (B, C, h, w) -> (B, C, *size <= (2h, 2w)): pixel j reads j / 2."""
     h, w = x.shape[-2:]
     if size[0] > 2 * h or size[1] > 2 * w:
         raise ValueError(f"sray.model.encoder.upsample_to: target {size} exceeds twice {(h, w)}.")
@@ -77,8 +35,7 @@ def upsample_to(x: Tensor, size: tuple[int, int]) -> Tensor:
 
 
 class ResBlock(nn.Module):
-    """Two 3x3 convs with instance normalisation and ReLU plus a (projected when
-    needed) shortcut."""
+    """Two 3x3 convs with instance normalisation and ReLU plus a (projected when needed) shortcut."""
 
     def __init__(self, c_in: int, c_out: int, stride: int) -> None:
         super().__init__()
@@ -99,18 +56,14 @@ class ResBlock(nn.Module):
 
 def _conv_norm(c_in: int, c_out: int, k: int, relu: bool) -> nn.Sequential:
     """Conv k x k (stride 1, same padding) + instance normalisation (+ ReLU)."""
-    layers: list[nn.Module] = [nn.Conv2d(c_in, c_out, k, 1, k // 2, bias=False), _norm(c_out)]
-    if relu:
-        layers.append(nn.ReLU())
-    return nn.Sequential(*layers)
+    return nn.Sequential(nn.Conv2d(c_in, c_out, k, 1, k // 2, bias=False), _norm(c_out), *([nn.ReLU()] if relu else []))
 
 
 class ResUNetEncoder(nn.Module):
     """Shared per-view encoder: RGB (B, 3, H, W) in [0, 1] -> features (B, C, ceil(H/4), ceil(W/4))."""
 
     def __init__(self, out_dim: int = 32, width: int = 16) -> None:
-        """``out_dim`` feature channels (L19); ``width`` channels of L1, every other layer scaled with it (module
-        doc; 16 = the appendix table)."""
+        """``out_dim`` feature channels (L19); ``width`` channels of L1, every other layer scaled with it."""
         super().__init__()
         if width < 1:
             raise ValueError(f"sray.model.encoder: width is {width}; give the first layer at least one channel")
@@ -118,11 +71,9 @@ class ResUNetEncoder(nn.Module):
         self.stem = nn.Sequential(nn.Conv2d(3, w1, 7, 2, 3, bias=False), _norm(w1), nn.ReLU())  # L1
         self.down2 = ResBlock(w1, w2, 2)  # L2
         self.down3 = nn.Sequential(ResBlock(w2, w4, 2), ResBlock(w4, w4, 1))  # L3, L4
-        self.down4 = nn.Sequential(ResBlock(w4, w8, 2),
-                                   *[ResBlock(w8, w8, 1) for _ in range(5)])  # L5-L10
+        self.down4 = nn.Sequential(ResBlock(w4, w8, 2), *[ResBlock(w8, w8, 1) for _ in range(5)])  # L5-L10
         self.reduce4 = _conv_norm(w8, w4, 3, True)  # L11
-        self.merge3 = nn.Sequential(_conv_norm(2 * w4, w4, 3, True),  # L14
-                                    _conv_norm(w4, w2, 3, True))  # L15
+        self.merge3 = nn.Sequential(_conv_norm(2 * w4, w4, 3, True), _conv_norm(w4, w2, 3, True))  # L14, L15
         self.merge2 = _conv_norm(2 * w2, w2, 3, True)  # L18
         self.head = _conv_norm(w2, out_dim, 1, False)  # L19
 

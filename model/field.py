@@ -1,9 +1,6 @@
-"""``SRayField``: the per-sample network of one render pass (coarse or fine).
-
-For samples z (R, N) along query rays it builds the contextual space M by reprojection, refines it
-with Cross-Reprojection Attention into M'', forms the semantic ray s = sum_i w_i F''_i with the
-bounded semantic-aware weights, classifies s into per-sample logits (with ``semantic_cues``, s and appearance-free
-cues: ``semantic_cues.py``), and predicts density and colour with the geometry-aware net.
+"""``SRayField``, the per-sample network of one render pass: context M by reprojection, CRA into M'', the semantic
+ray s = sum_i w_i F''_i with bounded weights, per-sample logits of s (and ``semantic_cues``), density and colour
+from the geometry-aware net.
 """
 
 from __future__ import annotations
@@ -40,8 +37,7 @@ class SRayField(nn.Module):
         self.geometry = GeometryNet(cfg)
 
     def classify(self, semantic: Tensor, sigma: Tensor, depth01: Tensor, points: Tensor, dirs: Tensor) -> Tensor:
-        """Per-sample logits (R, N, L) of the semantic ray (R, N, C): the paper's head, or with
-        ``semantic_cues`` the head on the ray and the cues (``semantic_cues.semantic_cues``)."""
+        """Per-sample logits (R, N, L) of the semantic ray (R, N, C), with the ``semantic_cues`` when there are any."""
         if not self.cues:
             return self.classifier(semantic)
         cues = semantic_cues(self.cues, sigma, depth01, points, dirs).to(semantic.dtype)
@@ -49,12 +45,9 @@ class SRayField(nn.Module):
 
     def forward(self, src: SourceSet, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
                 far: Tensor, impl: str) -> dict[str, Tensor]:
-        """origins, dirs: (R, 3); z: (R, N) sample depths (ray parameters); near, far: (R,); ``impl``: the
-        implementation, one of ``runtime.IMPLS`` (the same values within float32 rounding).
-
-        Returns ``sigma`` (R, N) float32 >= 0 per world unit, ``logits`` (R, N, L), ``rgb`` (R, N, 3)
-        float32 and ``view_weights`` (R, m, N) float32 (the semantic-aware weights).
-        """
+        """origins, dirs (R, 3), z (R, N) ray parameters, near, far (R,), ``impl`` one of ``runtime.IMPLS`` ->
+        ``sigma`` (R, N) float32 >= 0 per world unit, ``logits`` (R, N, L), ``rgb`` (R, N, 3) float32 and
+        ``view_weights`` (R, m, N) float32 (the semantic-aware weights)."""
         points = origins[:, None, :] + z[..., None] * dirs[:, None, :]  # (R, N, 3)
         depth01 = normalised_depth(z, near, far)  # (R, N)
         ctx = self.context(src, points, dirs, impl)
@@ -63,11 +56,11 @@ class SRayField(nn.Module):
             w = weights_forward(self.view_weights, refined, ctx["dir"], ctx["valid"])  # (R, N, m)
             semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=2)  # (R, N, C)
             sigma, rgb = geometry_forward(self.geometry, ctx["M"], ctx["valid"], ctx["dir"], ctx["rgb"])
-            logits = self.classify(semantic, sigma, depth01, points, dirs)
-            return {"sigma": sigma, "logits": logits, "rgb": rgb, "view_weights": w.transpose(1, 2)}
-        refined = self.attention(ctx["M"], ctx["valid"], depth01)  # (R, m, N, C)
-        w = self.view_weights(refined, ctx["dir"], ctx["valid"])  # (R, m, N)
-        semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=1)  # (R, N, C)
-        sigma, rgb = self.geometry(ctx["M"], ctx["valid"], ctx["dir"], ctx["rgb"])
+            w = w.transpose(1, 2)  # (R, m, N)
+        else:
+            refined = self.attention(ctx["M"], ctx["valid"], depth01)  # (R, m, N, C)
+            w = self.view_weights(refined, ctx["dir"], ctx["valid"])  # (R, m, N)
+            semantic = (w[..., None].to(refined.dtype) * refined).sum(dim=1)  # (R, N, C)
+            sigma, rgb = self.geometry(ctx["M"], ctx["valid"], ctx["dir"], ctx["rgb"])
         logits = self.classify(semantic, sigma, depth01, points, dirs)
         return {"sigma": sigma, "logits": logits, "rgb": rgb, "view_weights": w}

@@ -1,20 +1,8 @@
-"""Geometry-aware net (appendix table): density per sample, plus a colour head for the photometric loss.
-
-Density path, on the initial contextual space M (R, m, N, C) as the table states:
-
-* L1-L4: per-view features ELU(Linear(C, C)) gated by sigmoid(Linear(C, 1));
-* L5-L7: mean and variance over the VALID views (float32), concatenated (2C);
-* L8: MLP 2C -> 32 -> 16 (ELU);
-* L9: 4-head attention along the ray over its N samples (an ``AttentionBlock`` without
-  feed-forward; samples no view sees are masked as keys);
-* L10-L11: MLP 16 -> 16 (ELU) -> 1, made non-negative by softplus (no dead units at the start; the appendix
-  lists ReLU).
-A sample that no source view sees gets density exactly 0.
-
-Colour head (the paper leaves it open): IBRNet-style blending. Each valid view scores its source
-colour from its gated feature and view-direction difference (MLP C + 4 -> 16 -> 1, ELU); a
-softmax over the valid views blends the source colours at the projections. A sample no view sees
-gets colour 0. Blending keeps colours in [0, 1] and generalises to unseen scenes by construction.
+"""Geometry-aware net (appendix table) on the initial M (R, m, N, C): L1-L4 per-view features gated by
+sigmoid(Linear(C, 1)); L5-L7 mean and variance over the valid views (float32); L8 MLP 2C -> 32 -> 16; L9 attention
+along the ray; L10-L11 MLP -> softplus density (the appendix lists ReLU; softplus has no dead units at the start),
+0 where no view sees the sample. Colour (the paper leaves it open): IBRNet-style blending of the source colours by
+a softmax over the valid views of a score MLP (C + 4 -> 16 -> 1) of gated feature and view-direction difference.
 """
 
 from __future__ import annotations
@@ -28,13 +16,9 @@ from .cra import AttentionBlock
 
 
 def masked_mean_var(x: Tensor, valid: Tensor, dim: int) -> tuple[Tensor, Tensor]:
-    """Float32 mean and (biased) variance over ``dim`` of the valid entries of ``x``.
-
-    x: (..., K, ..., D), ZERO wherever ``valid`` (same shape without D) is False. With n valid
-    entries out of K, the (K - n) zeros add (K - n) mean^2 to the sum of squared deviations,
-    which is subtracted again (two-pass variance, no E[x^2] - E[x]^2 cancellation). Entries
-    without any valid element give 0.
-    """
+    """Float32 mean and (biased) variance over ``dim`` of the valid entries of x (..., K, ..., D), which is ZERO
+    where ``valid`` (same shape without D) is False: the (K - n) zeros' (K - n) mean^2 is subtracted from the
+    two-pass sum of squared deviations. Rows without a valid entry give 0."""
     with torch.autocast(device_type=x.device.type, enabled=False):
         xf = x.float()
         n_valid = valid.float().sum(dim, keepdim=True)[..., None]
@@ -55,6 +39,11 @@ def masked_softmax(logits: Tensor, valid: Tensor, dim: int) -> Tensor:
         return torch.softmax(masked, dim=dim) * valid.float()
 
 
+def blend_colours(score: Tensor, valid: Tensor, src_rgb: Tensor, view_dim: int) -> Tensor:
+    """Source colours (..., 3) blended by the softmax of ``score`` over the valid views: (R, N, 3) float32."""
+    return (masked_softmax(score, valid, dim=view_dim)[..., None] * src_rgb.float()).sum(dim=view_dim)
+
+
 class GeometryNet(nn.Module):
     """M (R, m, N, C) -> density (R, N) and blended colour (R, N, 3)."""
 
@@ -69,19 +58,19 @@ class GeometryNet(nn.Module):
         self.density = nn.Sequential(nn.Linear(g2, g2), nn.ELU(), nn.Linear(g2, 1))  # L10, L11
         self.colour_score = nn.Sequential(nn.Linear(c + 4, 16), nn.ELU(), nn.Linear(16, 1))
 
+    def gated_density(self, space: Tensor, valid: Tensor, view_dim: int) -> tuple[Tensor, Tensor]:
+        """Gated per-view features (0 where invalid) and density sigma (R, N) float32 (L1-L11) of M whose views are
+        on ``view_dim`` (1 for (R, m, N, C), 2 for the fast path's (R, N, m, C))."""
+        keep = valid[..., None].to(space.dtype)
+        gated = self.feature(space) * (torch.sigmoid(self.gate(space)) * keep)
+        mean, var = masked_mean_var(gated, valid, dim=view_dim)  # (R, N, C) each
+        seen = valid.any(dim=view_dim)  # (R, N)
+        g = self.ray_attention(self.fuse(torch.cat([mean, var], dim=-1)), seen)  # (R, N, 16)
+        return gated, F.softplus(self.density(g).squeeze(-1).float()) * seen.float()
+
     def forward(self, space: Tensor, valid: Tensor, dirs: Tensor, src_rgb: Tensor) -> tuple[Tensor, Tensor]:
         """space: (R, m, N, C) (ignored where invalid); valid: (R, m, N); dirs: (R, m, N, 4);
         src_rgb: (R, m, N, 3) source colours at the projections. Returns sigma (R, N), rgb (R, N, 3)."""
-        keep = valid[..., None].to(space.dtype)
-        gated = self.feature(space) * (torch.sigmoid(self.gate(space)) * keep)  # (R, m, N, C), 0 if invalid
-        mean, var = masked_mean_var(gated, valid, dim=1)  # (R, N, C) each
-        seen = valid.any(dim=1)  # (R, N)
-        g = self.fuse(torch.cat([mean, var], dim=-1))  # (R, N, 16)
-        g = self.ray_attention(g, seen)  # (R, N, 16)
-        raw = self.density(g).squeeze(-1).float()  # (R, N)
-        sigma = F.softplus(raw) * seen.float()
-
+        gated, sigma = self.gated_density(space, valid, 1)
         score = self.colour_score(torch.cat([gated, dirs.to(gated.dtype)], dim=-1)).squeeze(-1)  # (R, m, N)
-        blend = masked_softmax(score, valid, dim=1)  # (R, m, N)
-        rgb = (blend[..., None] * src_rgb.float()).sum(dim=1)  # (R, N, 3), float32 outside autocast
-        return sigma, rgb
+        return sigma, blend_colours(score, valid, src_rgb, 1)

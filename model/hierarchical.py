@@ -1,21 +1,13 @@
 """The one hierarchical renderer of ``sray.model``: coarse pass -> inverse-CDF resampling -> fine pass.
 
-Every method (S-Ray, Semantic-NeRF, the next one) supplies a *pass field*, a callable that gives
-per-sample density, semantic logits and colour along a batch of rays for one named pass; this module
-owns the sampling and the compositing of a batch of rays (the whole-view loop over them is
-``view_render.render_view``). The rules it applies:
-
-* coarse samples: ``n_coarse`` equal bins of [near, far], stratified in training, bin centres in
-  evaluation; fine samples: ``n_fine`` draws from the detached coarse weights; the fine pass sees
-  the sorted union of both (NeRF's hierarchical sampling);
-* density is per world unit and ``composite`` multiplies the z-depth spacing by ``|d|`` (metric
-  distance), so non-unit ``pixel_rays`` directions render the same surface at every pixel.
+Every method supplies a :data:`PassField`; this module owns sampling and compositing of a batch of rays (the
+whole-view loop is ``view_render.render_view``). Density is per world unit and ``composite`` scales the z-depth
+spacing by ``|d|``, so non-unit ``pixel_rays`` directions render the same surface at every pixel.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
 
 import torch
 from torch import Tensor
@@ -27,23 +19,14 @@ PASSES = ("coarse", "fine")
 IMAGE_KEYS = ("logits", "rgb", "depth", "opacity")
 """Per-pass outputs ``view_render.render_view`` assembles into images (weights and z are left out)."""
 
-
-class PassField(Protocol):
-    """A method's per-sample network for one pass.
-
-    ``field(pass_name, origins (R, 3), dirs (R, 3), z (R, N), near (R,), far (R,))`` returns
-    ``{"sigma": (R, N) >= 0 per world unit, "logits": (R, N, L), "rgb": (R, N, 3)}``.
-    """
-
-    def __call__(self, pass_name: str, origins: Tensor, dirs: Tensor, z: Tensor, near: Tensor,
-                 far: Tensor) -> dict[str, Tensor]:
-        """Per-sample outputs of pass ``pass_name`` (see the class docstring)."""
-        ...
-
+PassField = Callable[[str, Tensor, Tensor, Tensor, Tensor, Tensor], dict[str, Tensor]]
+"""A method's per-sample network: ``field(pass_name, origins (R, 3), dirs (R, 3), z (R, N), near (R,), far (R,))
+-> {"sigma": (R, N) >= 0 per world unit, "logits": (R, N, L), "rgb": (R, N, 3)}``."""
 
 CoarseSampler = Callable[[Tensor, Tensor, Tensor, Tensor, int, bool, torch.Generator | None], Tensor]
 """``sampler(origins (R, 3), dirs (R, 3), near (R,), far (R,), n, stratified, generator) -> z (R, n)``
 sorted coarse depths in [near, far] (the RGB-D mode's ``depth_sampling``); None = ``sample_uniform``."""
+
 
 def per_ray_bounds(value: Tensor | float, n_rays: int, like: Tensor, name: str) -> Tensor:
     """A bound given as a Python scalar, a 0-d or an (R,) tensor, as a float32 (R,) tensor on ``like``'s device."""
@@ -73,20 +56,13 @@ def coarse_depths(sampler: CoarseSampler | None, origins: Tensor, dirs: Tensor, 
 
 
 def render_rays(field: PassField, origins: Tensor, dirs: Tensor, near: Tensor | float, far: Tensor | float,
-                n_coarse: int, n_fine: int, stratified: bool,
-                generator: torch.Generator | None = None,
+                n_coarse: int, n_fine: int, stratified: bool, generator: torch.Generator | None = None,
                 fine_samples: str = "union",
                 coarse_sampler: CoarseSampler | None = None) -> dict[str, dict[str, Tensor]]:
-    """Render rays o + t d, t in [near, far] (z-depth for ``pixel_rays`` directions), coarse then fine.
-
-    origins, dirs: (R, 3), any direction length; near, far: scalars or (R,). ``stratified``
-    jitters coarse and fine samples (training); otherwise sampling is deterministic.
-    ``fine_samples``: the fine pass evaluates the sorted union of coarse and resampled depths
-    (``"union"``, n_coarse + n_fine per ray) or the n_fine resampled depths alone (``"new"``).
-    ``coarse_sampler`` places the coarse samples (None: equal bins, ``sample_uniform``).
-    Returns ``{"coarse": pass, "fine": pass}``, a pass holding ``logits`` (R, L), ``rgb`` (R, 3),
-    ``depth`` (R,) (expected ray parameter), ``opacity`` (R,), ``weights`` (R, N) and ``z`` (R, N).
-    """
+    """Render rays o + t d, t in [near, far], coarse then fine: origins, dirs (R, 3), near, far scalars or (R,);
+    ``stratified`` jitters the samples (training); the fine pass evaluates the ``"union"`` of coarse and resampled
+    depths or the ``"new"`` ones only; ``coarse_sampler`` None: equal bins. Returns ``{"coarse": pass, "fine":
+    pass}``, each with ``logits`` (R, L), ``rgb`` (R, 3), ``depth``, ``opacity`` (R,), ``weights``, ``z`` (R, N)."""
     if origins.ndim != 2 or origins.shape[-1] != 3 or dirs.shape != origins.shape:
         raise ValueError(f"sray.model.hierarchical.render_rays: origins and dirs must both be (R, 3), got "
                          f"{tuple(origins.shape)} and {tuple(dirs.shape)}.")

@@ -3,13 +3,10 @@
 ``L_total = lambda_sem * L_sem + lambda_rgb * L_rgb [+ lambda_depth * L_depth]`` (the paper's appendix, as
 Semantic-NeRF, plus an optional depth term):
 
-- ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean cross-entropy over the LABELLED
-  rays of the batch (target != ignore id). A batch without a labelled ray gives ``L_sem = 0``
-  with a zero gradient, never NaN. With per-class weights ``w`` (the config's optional
-  ``class_weights``, class-frequency-aware training) it is the weighted mean
-  ``sum_i w[y_i] CE_i / sum_i w[y_i]`` over the labelled rays (torch's weighted ``mean``).
-- Label ids outside [0, L) are refused by the loader (once per batch, on the host); here only
-  with ``SRAY_DEBUG_CHECKS=1`` (the check reads tensor values: a device sync per step).
+- ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean cross-entropy over the labelled rays (target !=
+  ignore id; 0 with a zero gradient when there is none); with ``class_weights`` w the weighted mean
+  ``sum_i w[y_i] CE_i / sum_i w[y_i]``. Label ids outside [0, L) are refused by the loader, here only with
+  ``SRAY_DEBUG_CHECKS=1`` (a device sync).
 - ``L_rgb = MSE(coarse rgb) + MSE(fine rgb)`` over all rays (photometric loss).
 - ``L_depth = L1(coarse depth) + L1(fine depth)`` over the rays of known ground-truth z-depth, in units of each
   ray's far - near (``depth_loss``; a departure from the paper, docs/model.md): only when the config's
@@ -77,25 +74,15 @@ def psnr_from_mse(mse: Tensor) -> Tensor:
     return -10.0 * torch.log10(mse)
 
 
-def _labelled_cross_entropy(logits: Tensor, target: Tensor, n_labelled: Tensor, ignore_id: int,
-                            weight: Tensor | None = None) -> Tensor:
-    """Mean CE over the labelled rays: logits (R, L), target (R,) with ``ignore_id`` for unlabelled.
-
-    The ignored rays add 0 to the sum, which is divided by max(n_labelled, 1): an all-unlabelled
-    batch gives exactly 0 with a zero gradient. No boolean indexing, so no device -> host sync.
-    ``weight`` (L,): class weights; the sum is then divided by the labelled rays' total weight.
-    """
+def labelled_cross_entropy(logits: Tensor, target: Tensor, ignore_id: int, weight: Tensor | None = None) -> Tensor:
+    """Mean cross-entropy over the labelled entries: logits (N, L), target (N,) int64 with ``ignore_id`` for
+    unlabelled; the sum is divided by their count, or with class weights ``weight`` (L,) their total weight. No
+    boolean indexing (no device sync); exactly 0 with a zero gradient when nothing is labelled."""
     summed = F.cross_entropy(logits.float(), target, weight=weight, ignore_index=ignore_id, reduction="sum")
     if weight is None:
-        return summed / n_labelled.clamp_min(1).to(summed.dtype)
+        return summed / (target != ignore_id).sum().clamp_min(1).to(summed.dtype)
     total = _ray_weights(target, ignore_id, weight).sum()  # (R,) -> ()
     return summed / torch.where(total > 0, total, torch.ones_like(total))
-
-
-def labelled_cross_entropy(logits: Tensor, target: Tensor, ignore_id: int, weight: Tensor | None = None) -> Tensor:
-    """Mean (``weight``-weighted) cross-entropy over the labelled entries: logits (N, L), target (N,) int64 with
-    ``ignore_id`` for unlabelled; exactly 0 with a zero gradient when nothing is labelled."""
-    return _labelled_cross_entropy(logits, target, (target != ignore_id).sum(), ignore_id, weight)
 
 
 def _class_weights(cfg: LossSettings, device: torch.device) -> Tensor | None:
@@ -138,17 +125,13 @@ def render_loss(
     """
     passes = [p for p in PASSES if p in out]
     if not passes:
-        raise ValueError(
-            "sray.model.losses.render_loss: `out` holds neither a 'coarse' nor a 'fine' pass; "
-            "pass a model's render_rays output unchanged."
-        )
+        raise ValueError("sray.model.losses.render_loss: `out` holds neither a 'coarse' nor a 'fine' pass; pass a "
+                         "model's render_rays output unchanged.")
     n_rays, n_classes = out[passes[0]]["logits"].shape
     if target_label.shape != (n_rays,) or target_rgb.shape != (n_rays, 3):
-        raise ValueError(
-            f"sray.model.losses.render_loss: expected target_label ({n_rays},) and target_rgb "
-            f"({n_rays}, 3) for {n_rays} rendered rays, got {tuple(target_label.shape)} and "
-            f"{tuple(target_rgb.shape)}."
-        )
+        raise ValueError(f"sray.model.losses.render_loss: expected target_label ({n_rays},) and target_rgb ({n_rays}, "
+                         f"3) for {n_rays} rendered rays, got {tuple(target_label.shape)} and "
+                         f"{tuple(target_rgb.shape)}.")
     if target_label.dtype != torch.int64:
         raise ValueError(
             f"sray.model.losses.render_loss: target_label must be int64, got {target_label.dtype}."
@@ -165,18 +148,16 @@ def render_loss(
     n_labelled = mask.sum()
     bad = mask & ((target_label < 0) | (target_label >= n_classes)) if value_checks_enabled() else None
     if bad is not None and bool(bad.any()):
-        raise ValueError(
-            f"sray.model.losses.render_loss: label ids must lie in [0, {n_classes}) or equal the "
-            f"ignore id {cfg.ignore_id}; found {sorted(set(target_label[bad].tolist()))[:5]}. "
-            "Check the scene's label space against the model's n_classes."
-        )
+        raise ValueError(f"sray.model.losses.render_loss: label ids must lie in [0, {n_classes}) or equal the ignore "
+                         f"id {cfg.ignore_id}; found {sorted(set(target_label[bad].tolist()))[:5]}. Check the scene's "
+                         "label space against the model's n_classes.")
     with torch.autocast(device_type=target_rgb.device.type, enabled=False):
         rgb_target = target_rgb.float()
         terms: dict[str, Tensor] = {}
         sem_total = rgb_total = depth_total = rgb_target.new_zeros(())
         weight = _class_weights(cfg, rgb_target.device)  # (L,) or None
         for name in passes:
-            sem = _labelled_cross_entropy(out[name]["logits"], target_label, n_labelled, cfg.ignore_id, weight)
+            sem = labelled_cross_entropy(out[name]["logits"], target_label, cfg.ignore_id, weight)
             rgb = F.mse_loss(out[name]["rgb"].float(), rgb_target)
             if shares is not None:
                 sem, rgb = sem * shares.sem, rgb * shares.rgb
@@ -198,6 +179,5 @@ def render_loss(
 
 
 def labelled_weights(target_label: Tensor, cfg: LossSettings) -> Tensor:
-    """(R,) float32 weight of each ray in the semantic mean: 0 for an unlabelled ray, else its class's
-    weight (``class_weights``) or 1."""
+    """(R,) float32 weight of each ray in the semantic mean: 0 unlabelled, else its class weight or 1."""
     return _ray_weights(target_label, cfg.ignore_id, _class_weights(cfg, target_label.device))

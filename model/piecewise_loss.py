@@ -1,14 +1,6 @@
-"""A training batch's loss computed piece by piece: the same loss and gradients, a fraction of the memory.
-
-Every ray of S-Ray is rendered independently of the others once the source views are encoded, and the
-training loss is a weighted mean over rays. So the batch's loss is the sum of its pieces' losses, each
-scaled by its share of the batch (``render_loss(..., shares=...)``), and so is its gradient.
-:func:`piecewise_render_loss` renders one piece of rays at a time, takes that piece's gradient at once
-(``torch.autograd.grad``) and frees its per-sample tensors before the next piece. The gradients it
-gathered (for the source features and for the network's parameters) are handed back by
-:class:`_PrecomputedGradLoss` when the caller runs ``loss.backward()``, so the caller sees an ordinary
-scalar loss: the encoder's backward runs once, DDP's gradient hooks fire as usual, a loss scaler's scale
-reaches every gradient. On a CPU, pieces that fit the caches also run faster (``ray_chunks``).
+"""A training batch's loss computed piece by piece: the same loss and gradients, a fraction of the memory. Each
+piece's terms are scaled by its share of the batch and its gradient taken at once; :class:`_PrecomputedGradLoss`
+hands the gathered gradients back on ``loss.backward()`` (one encoder backward, DDP hooks, loss scaling intact).
 """
 
 from __future__ import annotations
@@ -34,8 +26,7 @@ class _PrecomputedGradLoss(torch.autograd.Function):
     @staticmethod
     def forward(ctx: Any, evaluate: Callable[[Tensor], tuple[Tensor, list[Tensor | None]]], feats: Tensor,
                 *params: Tensor) -> Tensor:
-        """Run ``evaluate(feats)`` -> (loss (), gradients of that loss for [feats, *params]) and keep the
-        gradients for :meth:`backward`."""
+        """Run ``evaluate(feats)`` -> (loss, its gradients for [feats, *params]), keeping the gradients."""
         loss, grads = evaluate(feats)
         ctx.grads = grads
         return loss

@@ -9,23 +9,17 @@ from torch import Tensor, nn
 
 
 class PositionalEncoding(nn.Module):
-    """gamma(x) = (x, sin(2^0 pi x), cos(2^0 pi x), ..., sin(2^(L-1) pi x), cos(2^(L-1) pi x)).
-
-    The raw input comes first; then, for each frequency ``k = 0 .. L-1`` in turn, the sines of
-    all ``in_dim`` coordinates followed by their cosines. The factor pi is the NeRF paper's
-    formula; inputs are expected in roughly [-1, 1] so the lowest band spans the scene once.
-    (..., in_dim) -> (..., out_dim) with ``out_dim = in_dim * (1 + 2 L)``.
-    """
+    """gamma(x) = (x, sin(2^0 pi x), cos(2^0 pi x), ..., sin(2^(L-1) pi x), cos(2^(L-1) pi x)): (..., in_dim) ->
+    (..., in_dim * (1 + 2 L)), per frequency the sines of all coordinates, then their cosines. Inputs in about
+    [-1, 1], so the lowest band (NeRF's factor pi) spans the scene once."""
 
     freq_bands: Tensor
 
     def __init__(self, in_dim: int, n_freqs: int) -> None:
         super().__init__()
         if in_dim < 1 or n_freqs < 0:
-            raise ValueError(
-                "sray.model.positional_encoding.PositionalEncoding: need in_dim >= 1 and "
-                f"n_freqs >= 0, got in_dim={in_dim}, n_freqs={n_freqs}."
-            )
+            raise ValueError("sray.model.positional_encoding.PositionalEncoding: need in_dim >= 1 and n_freqs >= 0, "
+                             f"got in_dim={in_dim}, n_freqs={n_freqs}.")
         self.in_dim = in_dim
         self.n_freqs = n_freqs
         self.out_dim = in_dim * (1 + 2 * n_freqs)
@@ -35,10 +29,8 @@ class PositionalEncoding(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """Encode x: (..., in_dim) -> (..., out_dim)."""
         if x.shape[-1] != self.in_dim:
-            raise ValueError(
-                f"sray.model.positional_encoding.PositionalEncoding: last dimension must be "
-                f"{self.in_dim}, got input of shape {tuple(x.shape)}."
-            )
+            raise ValueError(f"sray.model.positional_encoding.PositionalEncoding: last dimension must be "
+                             f"{self.in_dim}, got input of shape {tuple(x.shape)}.")
         if self.n_freqs == 0:
             return x
         scaled = x[..., None, :] * self.freq_bands.to(x.dtype)[:, None]  # (..., L, in_dim)

@@ -1,14 +1,9 @@
 """The model surface: one typed input (a batch of query rays of one scene) and the module that renders it.
 
-``RayBatch`` is what a caller hands the model: m source views, and a :class:`QueryRays` (query
-camera, the pixels to render, the scene's z-depth bounds as Python floats). :meth:`QueryRays.rays`
-is the one place pixels become rays and the bounds become per-ray (R,) tensors, made by ``torch.full``
-on the pixels' device (a fill: no host-to-device copy, so the host never waits for the device).
-
-``RayBatchLoss.forward`` = encode the sources + the training loss of the rays (rendered in pieces,
-``SRayModel.training_loss``). DDP synchronises gradients only for work done inside ``forward``, so
-training goes through this module; it holds the network as ``net`` (checkpoints store ``net``'s own keys,
-see ``sray.platform.train.state``).
+``RayBatch``: m source views and a :class:`QueryRays` (query camera, pixels, the scene's z-depth bounds as
+floats); :meth:`QueryRays.rays` is the one place pixels become rays and bounds per-ray tensors (a ``torch.full``
+on the device: no host-to-device copy). ``RayBatchLoss.forward`` encodes the sources and computes the training
+loss: DDP synchronises gradients only for work inside ``forward`` (checkpoints store ``net``'s own keys).
 """
 
 from __future__ import annotations
@@ -46,8 +41,7 @@ class QueryRays:
                          self.pixels.to(device, non_blocking=non_blocking), self.near, self.far)
 
     def rays(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-        """origins, dirs (R, 3) (``pixel_rays``: dirs have camera-z 1, so t is the z-depth) and near,
-        far (R,) float32, all on the pixels' device."""
+        """origins, dirs (R, 3) (``pixel_rays``: t is the z-depth) and near, far (R,) float32 on the pixels' device."""
         origins, dirs = pixel_rays(self.K, self.c2w, self.pixels)
         n, device = self.pixels.shape[0], self.pixels.device
         near = torch.full((n,), self.near, dtype=torch.float32, device=device)  # (R,)
@@ -70,8 +64,7 @@ class RayBatch:
     src_depth: Tensor | None = None
     """float32 (m, H, W) source z-depth in metres, 0 = unknown (read only with ``model.inputs='rgbd'``)."""
     src_label: Tensor | None = None
-    """int64 (m, H, W) source class ids, ignore id for unlabelled; read only by the training loss's
-    source-view term (``model.lambda_src_sem`` > 0), never by rendering."""
+    """int64 (m, H, W) source class ids (ignore id: unlabelled), read only by the source-view loss term."""
 
 
 class RayBatchLoss(nn.Module):

@@ -7,18 +7,12 @@ from torch import Tensor
 
 
 def pixel_rays(K: Tensor, c2w: Tensor, uv: Tensor) -> tuple[Tensor, Tensor]:
-    """Rays through pixels: K (3, 3), c2w (4, 4), uv (R, 2) -> origins (R, 3), dirs (R, 3).
-
-    ``dirs = R_c2w K^-1 [u, v, 1]`` is NOT unit length: its camera-z component is 1, so the ray
-    parameter t of ``o + t d`` is the camera z-depth and the scene's z-depth bounds apply as they
-    are. Computed in the dtype of ``c2w`` (float32 or float64), with autocast off: in bfloat16 a
-    principal point of 159.5 rounds to 160 and rays move by pixels.
-    """
+    """Rays through pixels: K (3, 3), c2w (4, 4), uv (R, 2) -> origins, dirs (R, 3); ``dirs = R_c2w K^-1 [u, v, 1]``
+    has camera-z 1 (NOT unit length), so t of ``o + t d`` is the z-depth. In ``c2w``'s dtype with autocast off (in
+    bfloat16 a principal point of 159.5 rounds to 160)."""
     if K.shape != (3, 3) or c2w.shape != (4, 4) or uv.ndim != 2 or uv.shape[-1] != 2:
-        raise ValueError(
-            "sray.model.rays.pixel_rays: expected K (3, 3), c2w (4, 4), uv (R, 2); got "
-            f"{tuple(K.shape)}, {tuple(c2w.shape)}, {tuple(uv.shape)}."
-        )
+        raise ValueError(f"sray.model.rays.pixel_rays: expected K (3, 3), c2w (4, 4), uv (R, 2); got "
+                         f"{tuple(K.shape)}, {tuple(c2w.shape)}, {tuple(uv.shape)}.")
     dtype = c2w.dtype
     with torch.autocast(device_type=c2w.device.type, enabled=False):
         ones = torch.ones_like(uv[:, :1], dtype=dtype)

@@ -1,19 +1,9 @@
 """Volume rendering along rays: sampling depths, hierarchical resampling and alpha compositing.
 
-Conventions shared by every model in ``sray.model``:
-
-- A ray is ``r(t) = o + t d`` and the sample values ``z`` are ray parameters ``t``. With the
-  non-unit directions of ``sray.model.rays.pixel_rays`` ``t`` is the camera z-depth, so the
-  scene's near/far z-depth bounds apply directly.
-- Sample ``k`` stands for the interval between the midpoints to its neighbours; the first interval
-  starts at ``near`` and the last ends at ``far``. So the interval lengths ``delta`` always sum to
-  ``far - near``, whatever the sampling (the paper's ``delta_k = z_{k+1} - z_k`` leaves the last
-  sample without a length; this is the same quadrature with both ends closed).
-- Opacity uses metric distance: ``alpha_k = 1 - exp(-sigma_k delta_k |d|)`` with ``sigma`` a density
-  per world unit, so a corner ray (``|d|`` about 1.2 at ScanNet's field of view) crosses the same
-  optical depth per metre as the centre ray. ``t`` stays the z-depth so the scenes' bounds apply.
-- Compositing runs in float32 even inside an autocast region: transmittance is an exponential of
-  a cumulative sum and loses all precision in bfloat16.
+Samples ``z`` are ray parameters t of ``o + t d`` (the camera z-depth for ``rays.pixel_rays`` directions); sample k
+stands for the interval between the midpoints to its neighbours, closed at near and far (the paper's
+``delta_k = z_{k+1} - z_k`` with both ends closed); ``alpha_k = 1 - exp(-sigma_k delta_k |d|)`` with sigma per
+world unit. Compositing runs in float32 under autocast (transmittance loses all precision in bfloat16).
 """
 
 from __future__ import annotations
@@ -23,90 +13,54 @@ from torch import Tensor
 
 from .debug_checks import value_checks_enabled
 
-# Keys that ``composite`` writes itself; a rendered value may not use them.
 RESERVED_KEYS = ("weights", "opacity", "depth")
-
-# Share of the fine-sample mass spread uniformly over [near, far] (see ``sample_pdf``).
+"""Keys that ``composite`` writes itself; a rendered value may not use them."""
 PDF_EPS = 1e-5
+"""Share of the fine-sample mass spread uniformly over [near, far] (see ``sample_pdf``)."""
 
 
 def _check_bounds(near: Tensor, far: Tensor, n_rays: int, where: str) -> None:
-    """Raise a clear error unless ``near`` and ``far`` are (R,) tensors (and, with
-    ``SRAY_DEBUG_CHECKS=1``, near <= far on every ray: a value check that syncs the device)."""
+    """ValueError unless ``near`` and ``far`` are (R,) tensors (and, with ``SRAY_DEBUG_CHECKS=1``, near <= far)."""
     for name, t in (("near", near), ("far", far)):
         if not isinstance(t, Tensor) or t.shape != (n_rays,):
             shape = tuple(t.shape) if isinstance(t, Tensor) else type(t).__name__
-            raise ValueError(
-                f"sray.model.rendering.{where}: `{name}` must be a tensor of shape ({n_rays},) "
-                f"(one bound per ray), got {shape}; expand a scalar with "
-                f"`torch.full((R,), value)`."
-            )
+            raise ValueError(f"sray.model.rendering.{where}: `{name}` must be a tensor of shape ({n_rays},) (one bound "
+                             f"per ray), got {shape}; expand a scalar with `torch.full((R,), value)`.")
     if value_checks_enabled() and bool((far < near).any()):
-        raise ValueError(
-            f"sray.model.rendering.{where}: some rays have far < near; check the scene's depth "
-            "bounds (near must not exceed far)."
-        )
+        raise ValueError(f"sray.model.rendering.{where}: some rays have far < near; check the scene's depth bounds "
+                         "(near must not exceed far).")
 
 
-def sample_uniform(
-    near: Tensor, far: Tensor, n: int, stratified: bool, generator: torch.Generator | None = None
-) -> Tensor:
-    """Sorted sample depths in [near, far] from ``n`` equal bins per ray.
-
-    near, far: (R,). Returns z: (R, n). Deterministic mode takes the bin centres; stratified mode
-    draws one uniform sample inside each bin (NeRF's stratified sampling), from ``generator`` if
-    one is given.
-    """
+def sample_uniform(near: Tensor, far: Tensor, n: int, stratified: bool,
+                   generator: torch.Generator | None = None) -> Tensor:
+    """Sorted depths (R, n) in [near, far] (R,): ``n`` bin centres, or one uniform draw per bin if ``stratified``."""
     if n < 1:
         raise ValueError(f"sray.model.rendering.sample_uniform: `n` must be >= 1, got {n}.")
     n_rays = near.shape[0] if isinstance(near, Tensor) and near.ndim == 1 else -1
     _check_bounds(near, far, n_rays, "sample_uniform")
-    offset: Tensor | float
+    offset: Tensor | float = 0.5
     if stratified:
         offset = torch.rand(n_rays, n, generator=generator, device=near.device, dtype=near.dtype)
-    else:
-        offset = 0.5
     steps = torch.arange(n, device=near.device, dtype=near.dtype)  # (n,)
-    frac = (steps + offset) / n  # (R, n) or (n,), in [0, 1)
-    return near[:, None] + (far - near)[:, None] * frac  # (R, n)
+    return near[:, None] + (far - near)[:, None] * ((steps + offset) / n)  # (R, n)
 
 
 def bin_edges(z: Tensor, near: Tensor, far: Tensor) -> Tensor:
-    """Edges of the intervals the sorted samples stand for: (R, N) -> (R, N + 1).
-
-    Inner edges are midpoints between neighbouring samples; the outer edges are near and far.
-    """
+    """Edges (R, N + 1) of the intervals sorted samples z (R, N) stand for: midpoints inside, near and far outside."""
     mids = 0.5 * (z[:, 1:] + z[:, :-1])  # (R, N-1)
     return torch.cat([near[:, None].to(z.dtype), mids, far[:, None].to(z.dtype)], dim=-1)
 
 
-def sample_pdf(
-    z: Tensor,
-    weights: Tensor,
-    near: Tensor,
-    far: Tensor,
-    n: int,
-    deterministic: bool,
-    generator: torch.Generator | None = None,
-) -> Tensor:
-    """Fine sample depths drawn by inverse CDF from coarse compositing weights.
-
-    z: (R, N) sorted coarse samples; weights: (R, N) their compositing weights (detached here);
-    near, far: (R,). Returns (R, n) sorted depths in [near, far], without gradient.
-
-    The piecewise-constant density puts mass ``w_k`` uniformly over the interval sample ``k``
-    stands for (see ``bin_edges``), plus ``PDF_EPS`` of mass spread uniformly over [near, far]
-    in proportion to interval length, so a ray whose weights are all zero samples uniformly.
-    The CDF is inverted at stratified quantiles ``(i + u_i) / n`` (``u_i = 0.5`` when
-    ``deterministic``): sorted by construction and of lower variance than i.i.d. quantiles.
-    """
+def sample_pdf(z: Tensor, weights: Tensor, near: Tensor, far: Tensor, n: int, deterministic: bool,
+               generator: torch.Generator | None = None) -> Tensor:
+    """Fine depths (R, n), sorted, in [near, far] (R,), without gradient: the inverse CDF of the coarse weights
+    (R, N) of sorted samples z (R, N), each spread over its interval plus ``PDF_EPS`` over [near, far], at stratified
+    quantiles ``(i + u_i) / n`` (``u_i = 0.5`` when ``deterministic``)."""
     if n < 1:
         raise ValueError(f"sray.model.rendering.sample_pdf: `n` must be >= 1, got {n}.")
     if weights.shape != z.shape or z.ndim != 2:
-        raise ValueError(
-            "sray.model.rendering.sample_pdf: `z` and `weights` must both be (R, N), got "
-            f"{tuple(z.shape)} and {tuple(weights.shape)}."
-        )
+        raise ValueError("sray.model.rendering.sample_pdf: `z` and `weights` must both be (R, N), got "
+                         f"{tuple(z.shape)} and {tuple(weights.shape)}.")
     n_rays = z.shape[0]
     _check_bounds(near, far, n_rays, "sample_pdf")
     z = z.detach().float()
@@ -114,16 +68,12 @@ def sample_pdf(
     edges = bin_edges(z, near, far)  # (R, N+1)
     widths = (edges[:, 1:] - edges[:, :-1]).clamp_min(0.0)  # (R, N)
     span = widths.sum(-1, keepdim=True).clamp_min(1e-12)  # (R, 1)
-    mass = weights.detach().float().clamp_min(0.0)  # (R, N)
-    mass = mass + PDF_EPS * widths / span
+    mass = weights.detach().float().clamp_min(0.0) + PDF_EPS * widths / span  # (R, N)
     cdf = torch.cumsum(mass, dim=-1) / mass.sum(-1, keepdim=True)  # (R, N)
     cdf = torch.cat([torch.zeros_like(cdf[:, :1]), cdf], dim=-1).contiguous()  # (R, N+1)
 
     steps = torch.arange(n, device=z.device, dtype=torch.float32)  # (n,)
-    if deterministic:
-        offset: Tensor | float = 0.5
-    else:
-        offset = torch.rand(n_rays, n, generator=generator, device=z.device)
+    offset: Tensor | float = 0.5 if deterministic else torch.rand(n_rays, n, generator=generator, device=z.device)
     u = ((steps + offset) / n).expand(n_rays, n).contiguous()  # (R, n) in [0, 1)
 
     idx = torch.searchsorted(cdf, u, right=True)  # (R, n), in [1, N+1]
@@ -141,53 +91,31 @@ def sample_pdf(
 def merge_samples(z_coarse: Tensor, z_fine: Tensor) -> Tensor:
     """Sorted union of two sample sets per ray: (R, N1), (R, N2) -> (R, N1 + N2)."""
     if z_coarse.shape[0] != z_fine.shape[0]:
-        raise ValueError(
-            "sray.model.rendering.merge_samples: both sample sets need the same number of rays, "
-            f"got {z_coarse.shape[0]} and {z_fine.shape[0]}."
-        )
+        raise ValueError("sray.model.rendering.merge_samples: both sample sets need the same number of rays, "
+                         f"got {z_coarse.shape[0]} and {z_fine.shape[0]}.")
     return torch.sort(torch.cat([z_coarse, z_fine.to(z_coarse.dtype)], dim=-1), dim=-1).values
 
 
-def composite(
-    sigma: Tensor, z: Tensor, near: Tensor, far: Tensor, values: dict[str, Tensor],
-    ray_length: Tensor | None = None,
-) -> dict[str, Tensor]:
-    """Alpha-composite per-sample densities and values along each ray (float32 throughout).
-
-    sigma: (R, N) non-negative densities per world unit; z: (R, N) sorted sample ray parameters;
-    near, far: (R,); values: name -> (R, N, D) per-sample quantities (semantic logits, colour, ...);
-    ray_length: (R,) the world length ``|d|`` of each ray's direction (None: unit directions).
-
-    With ``delta_k`` the interval of sample ``k`` in ray parameter (see the module docstring) and
-    ``l = |d|``, ``alpha_k = 1 - exp(-sigma_k delta_k l)`` and
-    ``T_k = exp(-sum_{j<k} sigma_j delta_j l)`` (exclusive cumulative sum in log space), the
-    weights are ``w_k = T_k alpha_k``.
-
-    Returns ``weights`` (R, N); ``opacity`` (R,) = sum w; ``depth`` (R,) = sum w z, the expected
-    depth with the empty remainder of the ray counting as 0 (NOT divided by opacity; divide by
-    ``opacity`` for the depth of the visible surface when opacity is well above 0); and for every
-    key of ``values`` the rendered (R, D) = sum_k w_k v_k.
-    """
+def composite(sigma: Tensor, z: Tensor, near: Tensor, far: Tensor, values: dict[str, Tensor],
+              ray_length: Tensor | None = None) -> dict[str, Tensor]:
+    """Alpha-composite sigma (R, N) per world unit and ``values`` name -> (R, N, D) at sorted z (R, N), near, far
+    (R,), ray_length (R,) = ``|d|`` (None: unit): ``w_k = T_k alpha_k``, ``T_k = exp(-sum_{j<k} sigma_j delta_j |d|)``.
+    Returns ``weights`` (R, N), ``opacity`` (R,) = sum w, ``depth`` (R,) = sum w z (NOT divided by opacity) and each
+    value (R, D) = sum_k w_k v_k, in float32."""
     if sigma.ndim != 2 or sigma.shape != z.shape:
-        raise ValueError(
-            "sray.model.rendering.composite: `sigma` and `z` must both be (R, N), got "
-            f"{tuple(sigma.shape)} and {tuple(z.shape)}."
-        )
+        raise ValueError("sray.model.rendering.composite: `sigma` and `z` must both be (R, N), got "
+                         f"{tuple(sigma.shape)} and {tuple(z.shape)}.")
     n_rays, n_samples = sigma.shape
     _check_bounds(near, far, n_rays, "composite")
     for key, v in values.items():
         if key in RESERVED_KEYS:
-            raise ValueError(
-                f"sray.model.rendering.composite: value name {key!r} is reserved for the "
-                f"compositor's own outputs {RESERVED_KEYS}; rename it."
-            )
+            raise ValueError(f"sray.model.rendering.composite: value name {key!r} is reserved for the compositor's "
+                             f"own outputs {RESERVED_KEYS}; rename it.")
         if v.ndim != 3 or v.shape[:2] != (n_rays, n_samples):
-            raise ValueError(
-                f"sray.model.rendering.composite: value {key!r} must be (R, N, D) = "
-                f"({n_rays}, {n_samples}, D), got {tuple(v.shape)}."
-            )
+            raise ValueError(f"sray.model.rendering.composite: value {key!r} must be (R, N, D) = ({n_rays}, "
+                             f"{n_samples}, D), got {tuple(v.shape)}.")
     with torch.autocast(device_type=sigma.device.type, enabled=False):
-        sigma32, z32 = sigma.float(), z.float()
+        z32 = z.float()
         edges = bin_edges(z32, near.float(), far.float())  # (R, N+1)
         delta = (edges[:, 1:] - edges[:, :-1]).clamp_min(0.0)  # (R, N) in ray parameter
         if ray_length is not None:
@@ -195,16 +123,12 @@ def composite(
                 raise ValueError(f"sray.model.rendering.composite: `ray_length` must be ({n_rays},), got "
                                  f"{tuple(ray_length.shape)}.")
             delta = delta * ray_length.float()[:, None]  # (R, N) metric interval lengths
-        tau = sigma32 * delta  # (R, N) optical depth of each interval
+        tau = sigma.float() * delta  # (R, N) optical depth of each interval
         alpha = -torch.expm1(-tau)  # 1 - exp(-tau), accurate for small tau
         # (R, N) exclusive sum sum_{j<k} tau_j; shifting (not subtracting tau) keeps it exact
         before = torch.cat([torch.zeros_like(tau[:, :1]), torch.cumsum(tau[:, :-1], -1)], -1)
         weights = torch.exp(-before) * alpha  # (R, N)
-        out = {
-            "weights": weights,
-            "opacity": weights.sum(-1),
-            "depth": (weights * z32).sum(-1),
-        }
+        out = {"weights": weights, "opacity": weights.sum(-1), "depth": (weights * z32).sum(-1)}
         for key, v in values.items():
             out[key] = torch.einsum("rn,rnd->rd", weights, v.float())
     return out

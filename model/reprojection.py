@@ -1,20 +1,9 @@
 """Reprojecting query-ray samples into the source views: the initial 3D contextual space M.
 
-Pixel conventions (one place, used by ``sample_maps``):
-
-* Full resolution: pixel (u, v) is centred at (u, v) in K's coordinates (the project-wide rule).
-* Feature maps: the encoder centres feature pixel (j, i) on full-res pixel (4j, 4i) (see
-  ``encoder.FEATURE_STRIDE``), so full-res (u, v) is feature coordinate (u / 4, v / 4).
-* ``grid_sample`` is called with ``align_corners=True``, where normalised -1 and +1 are the centres
-  of the first and last pixel: x = f / (w_map - 1) * 2 - 1 for map coordinate f. The source RGB is
-  sampled the same way with stride 1. Border padding clamps the few valid projections that fall
-  between the last feature centre and the image edge.
-
-A projection is valid when the point lies at least ``min_depth`` in front of the source camera
-and inside the image, u in [-0.5, W - 0.5] and v in [-0.5, H - 0.5]. Entries of M at invalid
-projections are finite (border-clamped samples) but meaningless: every consumer masks them with
-``valid`` (as attention keys, in the view weights, in the cross-view statistics and colour blend), so
-they are never zeroed here, which saves full passes over the largest tensors.
+``sample_maps`` reads feature pixel (j, i), centred on full-res pixel (4j, 4i), with ``grid_sample``
+(``align_corners=True``, border padding). A projection is valid at least ``min_depth`` in front of the source camera
+and inside [-0.5, W - 0.5] x [-0.5, H - 0.5]; M at invalid projections is finite but meaningless and every consumer
+masks it, so it is never zeroed (saving passes over the largest tensors).
 """
 
 from __future__ import annotations
@@ -31,14 +20,9 @@ _GRID_LIMIT = 2.0  # normalised grid coordinates are clamped to +-2 (outside +-1
 
 
 def project(points: Tensor, K: Tensor, w2c: Tensor, min_depth: float = 1e-6) -> tuple[Tensor, Tensor]:
-    """Pinhole projection of shared points into m views.
-
-    points: (..., 3) world coordinates; K: (m, 3, 3); w2c: (m, 4, 4).
-    Returns uv (m, ..., 2) pixel coordinates and depth (m, ...) camera z. Points closer than
-    ``min_depth`` (or behind the camera) get finite but meaningless uv; mask them with ``depth``.
-    Runs in the dtype of ``w2c`` (float32 or float64) with autocast off: in bfloat16 the matmuls
-    move projected pixels by up to several pixels at 640 x 480.
-    """
+    """Pinhole projection of world points (..., 3) into m views K (m, 3, 3), w2c (m, 4, 4): uv (m, ..., 2) pixels
+    and depth (m, ...) camera z; uv is finite but meaningless closer than ``min_depth`` (mask with ``depth``).
+    Runs in ``w2c``'s dtype with autocast off (bfloat16 moves pixels by several at 640 x 480)."""
     m = K.shape[0]
     lead = points.shape[:-1]
     with torch.autocast(device_type=points.device.type, enabled=False):
@@ -59,12 +43,9 @@ def valid_projection(uv: Tensor, depth: Tensor, hw: tuple[int, int], min_depth: 
 
 
 def sample_maps(maps: Tensor, uv: Tensor, stride: int) -> Tensor:
-    """Bilinear samples of per-view maps at full-res pixel coordinates.
-
-    maps: (m, D, h, w) whose pixel (j, i) is centred on full-res pixel (stride j, stride i);
-    uv: (m, R, N, 2) full-res pixel coordinates. Returns float32 (m, D, R, N): sampling runs in
-    float32 even under autocast, since bfloat16 grid coordinates would be off by up to ~0.5 pixel.
-    """
+    """Bilinear samples float32 (m, D, R, N) of maps (m, D, h, w), whose pixel (j, i) is centred on full-res pixel
+    (stride j, stride i), at full-res pixels uv (m, R, N, 2); float32 under autocast (bfloat16 grids are ~0.5 pixel
+    off)."""
     h, w = maps.shape[-2:]
     scale = uv.new_tensor([2.0 / (stride * max(w - 1, 1)), 2.0 / (stride * max(h - 1, 1))])
     grid = (uv.float() * scale.float() - 1.0).clamp(-_GRID_LIMIT, _GRID_LIMIT)  # (m, R, N, 2)
@@ -72,38 +53,24 @@ def sample_maps(maps: Tensor, uv: Tensor, stride: int) -> Tensor:
         return F.grid_sample(maps.float(), grid, mode="bilinear", padding_mode="border", align_corners=True)
 
 
-def view_direction_difference(points: Tensor, query_dirs: Tensor, centres: Tensor) -> Tensor:
-    """IBRNet-style 4-d comparison of the query ray with each source ray through a sample.
-
-    points: (R, N, 3); query_dirs: (R, 3) (any length); centres: (m, 3) source camera centres.
-    With unit vectors q (query camera -> point) and s (source camera -> point), returns
-    (m, R, N, 4) = [(q - s) / |q - s|, q . s]; the first part is 0 where q = s.
-    """
-    q = F.normalize(query_dirs, dim=-1)[None, :, None, :]  # (1, R, 1, 3)
-    s = F.normalize(points[None] - centres[:, None, None, :], dim=-1)  # (m, R, N, 3)
+def view_direction_difference(points: Tensor, query_dirs: Tensor, centres: Tensor, views_last: bool = False) -> Tensor:
+    """IBRNet-style comparison of the query ray with each source ray through a sample: with unit q (query camera ->
+    point) and s (source camera -> point), [(q - s) / |q - s|, q . s] (first part 0 where q = s). points (R, N, 3),
+    query_dirs (R, 3) (any length), centres (m, 3) -> (m, R, N, 4), or (R, N, m, 4) with ``views_last``."""
+    q = F.normalize(query_dirs, dim=-1)
+    if views_last:
+        q, s = q[:, None, None, :], points[:, :, None] - centres[None, None]  # (R, 1, 1, 3), (R, N, m, 3)
+    else:
+        q, s = q[None, :, None, :], points[None] - centres[:, None, None, :]  # (1, R, 1, 3), (m, R, N, 3)
+    s = F.normalize(s, dim=-1)
     diff = q - s
     unit_diff = diff / diff.norm(dim=-1, keepdim=True).clamp_min(1e-6)
     dot = (q * s).sum(-1, keepdim=True)
-    return torch.cat([unit_diff, dot], dim=-1)  # (m, R, N, 4)
-
-
-def view_direction_difference_nm(points: Tensor, query_dirs: Tensor, centres: Tensor) -> Tensor:
-    """``view_direction_difference`` computed in (R, N, m) order: (R, N, 3), (R, 3), (m, 3) -> (R, N, m, 4)."""
-    q = F.normalize(query_dirs, dim=-1)[:, None, None, :]  # (R, 1, 1, 3)
-    s = F.normalize(points[:, :, None] - centres[None, None], dim=-1)  # (R, N, m, 3)
-    diff = q - s
-    unit_diff = diff / diff.norm(dim=-1, keepdim=True).clamp_min(1e-6)
-    dot = (q * s).sum(-1, keepdim=True)
-    return torch.cat([unit_diff, dot], dim=-1)  # (R, N, m, 4)
+    return torch.cat([unit_diff, dot], dim=-1)
 
 
 class ContextualSpace(nn.Module):
-    """Builds M (appendix L20-L22): reprojected features plus an MLP of the view-direction difference.
-
-    ``impl="reference"`` samples with ``grid_sample`` and returns (R, m, N, ...) tensors;
-    ``impl="fast"`` gathers with ``source_gather`` and returns the same values in (R, N, m, ...)
-    order (``fast_field``'s layout), within float32 rounding.
-    """
+    """M (appendix L20-L22): reprojected features + an MLP of the view-direction difference."""
 
     def __init__(self, feat_dim: int, dir_hidden: int, min_depth: float) -> None:
         super().__init__()
@@ -111,15 +78,19 @@ class ContextualSpace(nn.Module):
         self.dir_mlp = nn.Sequential(nn.Linear(4, dir_hidden), nn.ELU(), nn.Linear(dir_hidden, feat_dim))
 
     def forward(self, src: SourceSet, points: Tensor, query_dirs: Tensor, impl: str) -> dict[str, Tensor]:
-        """points: (R, N, 3) samples of the query rays; query_dirs: (R, 3); ``impl``: one of ``runtime.IMPLS``.
-
-        Returns ``M`` (R, m, N, C), ``valid`` (R, m, N) bool, ``rgb`` (R, m, N, 3) source colours
-        at the projections and ``dir`` (R, m, N, 4) (axes m and N swapped with ``impl="fast"``);
-        entries at invalid projections are finite but meaningless (see the module docstring).
-        """
-        if impl == "fast":
-            return self._fast(src, points, query_dirs)
+        """points (R, N, 3) samples of the query rays, query_dirs (R, 3), ``impl`` one of ``runtime.IMPLS`` ->
+        ``M`` (R, m, N, C), ``valid`` (R, m, N) bool, ``rgb`` (R, m, N, 3) source colours at the projections and
+        ``dir`` (R, m, N, 4) (axes m and N swapped with ``impl="fast"``); meaningless where invalid."""
         uv, depth = project(points.float(), src.K.float(), src.w2c.float(), self.min_depth)
+        if impl == "fast":  # gathered taps, every per-view tensor made in (R, N, m) order
+            uv = uv.permute(1, 2, 0, 3)  # (R, N, m, 2): 2 channels are cheap to permute
+            valid = valid_projection(uv, depth.permute(1, 2, 0), src.image_hw, self.min_depth)  # (R, N, m)
+            idx, w = bilinear_taps(uv, 2, tuple(src.feats.shape[-2:]), FEATURE_STRIDE)  # (R, N, m, 4) each
+            feats = gather_bilinear(texel_table(src.feats), idx, w)  # (R, N, m, C)
+            idx, w = bilinear_taps(uv, 2, src.image_hw, 1)
+            rgb = gather_bilinear(texel_table(src.rgb), idx, w)  # (R, N, m, 3)
+            dirs = view_direction_difference(points.float(), query_dirs.float(), src.centres.float(), views_last=True)
+            return {"M": feats + self.dir_mlp(dirs), "valid": valid, "rgb": rgb, "dir": dirs}
         valid = valid_projection(uv, depth, src.image_hw, self.min_depth)  # (m, R, N)
         feats = sample_maps(src.feats, uv, FEATURE_STRIDE)  # (m, C, R, N)
         rgb = sample_maps(src.rgb, uv, 1)  # (m, 3, R, N)
@@ -128,15 +99,3 @@ class ContextualSpace(nn.Module):
         dirs = dirs.permute(1, 0, 2, 3)  # (R, m, N, 4)
         space = feats.permute(2, 0, 3, 1) + self.dir_mlp(dirs)  # (R, m, N, C)
         return {"M": space, "valid": valid, "rgb": rgb.permute(2, 0, 3, 1), "dir": dirs}
-
-    def _fast(self, src: SourceSet, points: Tensor, query_dirs: Tensor) -> dict[str, Tensor]:
-        """``forward`` with gathered taps and every per-view tensor made in (R, N, m) order."""
-        uv, depth = project(points.float(), src.K.float(), src.w2c.float(), self.min_depth)
-        uv = uv.permute(1, 2, 0, 3)  # (R, N, m, 2): 2 channels are cheap to permute
-        valid = valid_projection(uv, depth.permute(1, 2, 0), src.image_hw, self.min_depth)  # (R, N, m)
-        idx, w = bilinear_taps(uv, 2, tuple(src.feats.shape[-2:]), FEATURE_STRIDE)  # (R, N, m, 4) each
-        feats = gather_bilinear(texel_table(src.feats), idx, w)  # (R, N, m, C)
-        idx, w = bilinear_taps(uv, 2, src.image_hw, 1)
-        rgb = gather_bilinear(texel_table(src.rgb), idx, w)  # (R, N, m, 3)
-        dirs = view_direction_difference_nm(points.float(), query_dirs.float(), src.centres.float())
-        return {"M": feats + self.dir_mlp(dirs), "valid": valid, "rgb": rgb, "dir": dirs}

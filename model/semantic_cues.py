@@ -1,19 +1,7 @@
 """Appearance-free cues for the semantic head (``SRayConfig.semantic_cues``; a departure from the paper, off by
-default, docs/model.md "Cues that do not depend on the look").
-
-The paper's head classifies the semantic ray s = sum_i w_i F''_i alone. With cues on, each sample's classifier also
-reads quantities that no colour enters except through the density the field estimates, or that the poses give:
-
-* ``density``: log(1 + sigma) of the sample, the field's own density (detached: the semantic loss does not train
-  the density through this input);
-* ``depth``: the sample's depth along its ray as a fraction of [near, far];
-* ``height``: the sample's height along gravity, its world z in scene units (sray's procedural scenes and ScanNet's
-  aligned scans put z up with the floor near 0);
-* ``elevation``: the vertical component of the ray's unit direction (where the camera looks: down at the floor, level
-  at the walls).
-
-Surface orientation from a depth gradient needs neighbouring rays, which a training batch of random pixels does not
-have; ``height`` and ``elevation`` are the pose-given cues used instead.
+default, docs/model.md "Cues that do not depend on the look"): ``density`` log(1 + sigma) (detached), ``depth``
+the sample's fraction of [near, far], ``height`` its world z (z up, floor near 0), ``elevation`` the vertical
+component of the ray's unit direction. Orientation from depth gradients would need neighbouring rays.
 """
 
 from __future__ import annotations
@@ -33,8 +21,7 @@ def check_cues(cues: tuple[str, ...]) -> None:
 
 
 def semantic_cues(cues: tuple[str, ...], sigma: Tensor, depth01: Tensor, points: Tensor, dirs: Tensor) -> Tensor:
-    """The asked cues stacked in :data:`CUES` order: sigma (R, N), depth01 (R, N), points (R, N, 3) world, dirs (R, 3)
-    -> (R, N, len(cues)) float32."""
+    """The asked cues in :data:`CUES` order: sigma, depth01 (R, N), points (R, N, 3), dirs (R, 3) -> (R, N, k)."""
     elevation = dirs[:, 2] / dirs.norm(dim=-1).clamp_min(1e-9)  # (R,)
     values = {"density": torch.log1p(sigma.detach().float().clamp_min(0.0)), "depth": depth01.float(),
               "height": points[..., 2].float(), "elevation": elevation[:, None].expand_as(depth01).float()}

@@ -1,18 +1,13 @@
-"""Semantic-NeRF baseline (Zhi et al., ICCV 2021), written from the paper's description.
-
-A per-scene NeRF whose trunk also feeds a view-independent semantic head:
-
-- positions (normalised into the scene box, see ``SemanticNeRFConfig.scene_center``) and unit
-  viewing directions get NeRF's positional encoding (10 and 4 frequencies, raw input included);
+"""Semantic-NeRF baseline (Zhi et al., ICCV 2021), written from the paper's description: a per-scene NeRF whose
+trunk also feeds a view-independent semantic head.
+- positions (normalised by the scene box) and unit directions get NeRF's encoding (10 and 4 frequencies, + raw);
 - an 8 x 256 ReLU trunk re-reads the encoded position after its fifth layer (skip connection);
 - density: one linear unit on the trunk output, made non-negative by ``density_activation``;
 - semantics: trunk output -> 128 -> L logits, BEFORE the viewing direction enters, so the
   labels of a point do not depend on where it is seen from;
-- colour: a 256-wide linear feature concatenated with the encoded direction -> 128 -> rgb
-  (sigmoid).
-Like NeRF, a coarse and a fine network: the fine one is evaluated on the union of the coarse
-samples and samples drawn from the coarse weights. The hierarchical renderer, losses and metrics
-are shared with S-Ray (``sray.model.hierarchical``, ``.losses``, ``.metrics``).
+- colour: a 256-wide linear feature concatenated with the encoded direction -> 128 -> rgb (sigmoid).
+Like NeRF, coarse and fine networks, the fine one on the union of coarse and resampled depths; renderer, losses
+and metrics are S-Ray's (``hierarchical``, ``losses``, ``metrics``).
 """
 
 from __future__ import annotations
@@ -44,9 +39,8 @@ class SemanticNeRFConfig:
     width: int = 256
     """Width of the trunk layers."""
     skip_layer: int | None = 5
-    """The encoded position is concatenated to the activation of this many trunk layers and so
-    re-enters trunk layer ``skip_layer`` (0-based; 5 = after the fifth layer, as in NeRF). None
-    disables the skip connection."""
+    """0-based trunk layer that re-reads the encoded position (5 = after the fifth layer, as in NeRF); None: no
+    skip connection."""
     color_width: int = 128
     """Hidden width of the colour head."""
     semantic_width: int = 128
@@ -67,13 +61,10 @@ class SemanticNeRFConfig:
     chunk: int = 4096
     """Rays per forward pass in ``render_image``."""
     scene_center: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """World point mapped to the origin before the positional encoding (see
-    ``scene_box_from_cameras``)."""
+    """World point mapped to the origin before the positional encoding (``scene_box_from_cameras``)."""
     scene_scale: float = 1.0
-    """World length mapped to 1: positions enter the encoding as (x - center) / scale, which
-    should lie in about [-1, 1]. Densities stay per world unit (NeRF's convention); per
-    normalised unit they would have to grow ``scale`` times larger to make the same surface,
-    which slowed convergence in our tests."""
+    """World length mapped to 1: the encoding reads (x - center) / scale, about [-1, 1]. Densities stay per world
+    unit (NeRF's convention; per normalised unit they would need ``scale`` times larger values)."""
 
     def __post_init__(self) -> None:
         """Reject settings the network cannot run with, naming the field."""
@@ -91,8 +82,7 @@ class SemanticNeRFConfig:
             fail("density_activation", f"must be 'softplus' or 'relu', got "
                  f"{self.density_activation!r}")
         if self.n_coarse < 1 or self.n_fine < 1:
-            fail("n_coarse", f"n_coarse and n_fine must be >= 1, got {self.n_coarse}, "
-                 f"{self.n_fine}")
+            fail("n_coarse", f"n_coarse and n_fine must be >= 1, got {self.n_coarse}, {self.n_fine}")
         if self.scene_scale <= 0:
             fail("scene_scale", f"must be > 0, got {self.scene_scale}")
         if self.chunk < 1:
@@ -109,12 +99,8 @@ class SemanticNeRFField(nn.Module):
         self.dir_enc = PositionalEncoding(3, cfg.dir_freqs)
         pos_dim = self.pos_enc.out_dim
         self.trunk = nn.ModuleList(
-            nn.Linear(
-                (pos_dim if i == 0 else cfg.width) + (pos_dim if i == cfg.skip_layer else 0),
-                cfg.width,
-            )
-            for i in range(cfg.depth)
-        )
+            nn.Linear((pos_dim if i == 0 else cfg.width) + (pos_dim if i == cfg.skip_layer else 0), cfg.width)
+            for i in range(cfg.depth))
         self.density = nn.Linear(cfg.width, 1)
         self.density_act = F.softplus if cfg.density_activation == "softplus" else F.relu
         self.semantic = nn.Sequential(
@@ -122,17 +108,11 @@ class SemanticNeRFField(nn.Module):
             nn.Linear(cfg.semantic_width, cfg.n_classes),
         )
         self.feature = nn.Linear(cfg.width, cfg.width)
-        self.color = nn.Sequential(
-            nn.Linear(cfg.width + self.dir_enc.out_dim, cfg.color_width), nn.ReLU(),
-            nn.Linear(cfg.color_width, 3),
-        )
+        self.color = nn.Sequential(nn.Linear(cfg.width + self.dir_enc.out_dim, cfg.color_width), nn.ReLU(),
+                                   nn.Linear(cfg.color_width, 3))
 
     def forward(self, x: Tensor, d: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        """x: (..., 3) normalised positions; d: (..., 3) unit directions.
-
-        Returns density (...,) per world unit length, rgb (..., 3) in (0, 1) and semantic
-        logits (..., L).
-        """
+        """x (..., 3) normalised, d (..., 3) unit -> density (...,) per world unit, rgb (..., 3), logits (..., L)."""
         gamma_x = self.pos_enc(x)
         h = gamma_x
         for i, layer in enumerate(self.trunk):
@@ -168,50 +148,31 @@ class SemanticNeRF(nn.Module):
         sigma, rgb, logits = (self.coarse if name == "coarse" else self.fine)(x, unit)
         return {"sigma": sigma, "rgb": rgb, "logits": logits}
 
-    def render_rays(
-        self, origins: Tensor, dirs: Tensor, near: Tensor | float, far: Tensor | float,
-        stratified: bool, generator: torch.Generator | None = None,
-    ) -> dict[str, dict[str, Tensor]]:
-        """Render rays r(t) = o + t d for t in [near, far]; dirs need not be unit length.
-
-        origins, dirs: (R, 3); near, far: (R,) or scalars. ``stratified`` jitters the coarse
-        samples and the fine quantiles (training); off, rendering is deterministic.
-        Returns ``{"coarse": pass, "fine": pass}`` (see ``hierarchical.render_rays``).
-        """
+    def render_rays(self, origins: Tensor, dirs: Tensor, near: Tensor | float, far: Tensor | float,
+                    stratified: bool, generator: torch.Generator | None = None) -> dict[str, dict[str, Tensor]]:
+        """Render rays o + t d, t in [near, far] (``hierarchical.render_rays``); ``stratified`` in training."""
         return render_rays(self._field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine,
                            stratified, generator, fine_samples="union")  # NeRF's rule, as Semantic-NeRF
 
     def render_image(self, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
                      chunk: int | None = None, stride: int = 1) -> dict[str, dict[str, Tensor]]:
-        """Render the (H, W) = ``hw`` view of the camera K (3, 3), c2w (4, 4) (OpenCV axes) with the one whole-view
-        renderer (``view_render.render_view``): deterministic samples, every ``stride``-th pixel, ``chunk`` rays
-        at a time (default ``cfg.chunk``), no grad; near, far: scalar z-depth bounds.
-
-        Returns, like ``SRayModel.render_image``, ``{"coarse": ..., "fine": ...}`` with ``logits`` (h', w', L),
-        ``rgb`` (h', w', 3) in [0, 1], ``depth`` (h', w') (expected z-depth, not divided by opacity; see
-        ``sray.model.rendering.composite``) and ``opacity`` (h', w') per pass ((H, W) at stride 1).
-        """
+        """Render every ``stride``-th pixel of the (H, W) = ``hw`` view of the camera K (3, 3), c2w (4, 4) (OpenCV
+        axes) with ``view_render.render_view``, ``chunk`` rays at a time (default ``cfg.chunk``); near, far: scalar
+        z-depth bounds. Returns the passes of ``SRayModel.render_image``."""
         chunk = self.cfg.chunk if chunk is None else chunk
         return render_view(lambda o, d, lo, hi: self.render_rays(o, d, lo, hi, stratified=False), K, c2w, hw, near,
                            far, chunk, self.scene_center.device, stride)
 
 
-def scene_box_from_cameras(
-    K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float
-) -> tuple[tuple[float, float, float], float]:
-    """``scene_center`` and ``scene_scale`` that map all camera frusta into [-1, 1]^3.
-
-    K: (V, 3, 3) or (3, 3); c2w: (V, 4, 4) OpenCV axes; hw: image size; near/far: z-depth
-    bounds. The box is the axis-aligned hull of every frustum's corners between near and far;
-    the scale is half its longest side.
-    """
+def scene_box_from_cameras(K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float,
+                           far: float) -> tuple[tuple[float, float, float], float]:
+    """``scene_center`` and ``scene_scale`` (half the longest side) of the axis-aligned box around every camera
+    frustum between z-depths near and far: K (V, 3, 3) or (3, 3), c2w (V, 4, 4) OpenCV axes, hw the image size."""
     height, width = hw
     c2w = c2w.double().reshape(-1, 4, 4)
     K = K.double().expand(c2w.shape[0], 3, 3)
-    corners_px = torch.tensor(
-        [[-0.5, -0.5, 1.0], [width - 0.5, -0.5, 1.0], [-0.5, height - 0.5, 1.0],
-         [width - 0.5, height - 0.5, 1.0]], dtype=torch.float64,
-    )  # (4, 3) image corners in homogeneous pixels
+    corners_px = torch.tensor([[-0.5, -0.5, 1.0], [width - 0.5, -0.5, 1.0], [-0.5, height - 0.5, 1.0],
+                               [width - 0.5, height - 0.5, 1.0]], dtype=torch.float64)  # (4, 3) homogeneous pixels
     cam = torch.einsum("vij,cj->vci", torch.linalg.inv(K), corners_px)  # (V, 4, 3), z = 1
     cam = torch.cat([cam * near, cam * far], dim=1)  # (V, 8, 3) frustum corners
     world = torch.einsum("vij,vcj->vci", c2w[:, :3, :3], cam) + c2w[:, None, :3, 3]

@@ -5,22 +5,8 @@ Usage (pixelNeRF's encode / query split; the module keeps no state between the c
     src = model.encode(src_rgb, src_K, src_c2w)          # once per source set
     out = model.render_rays(src, origins, dirs, near, far, stratified=True)   # any number of times
 
-Every call that renders takes a ``runtime.Runtime`` (implementation, rays per pass; default: the fast path,
-rays per pass by device): how the network is run is the caller's choice, not part of the network.
-
-Design choices where the paper is silent:
-
-* One shared ResUNet encoder; two separate per-sample networks (``coarse`` for n_coarse samples,
-  ``fine`` for the sorted union of coarse and fine samples), as the paper's public code does.
-* Coarse samples: equal bins between the scene's near and far, stratified in training and bin
-  centres in evaluation. Fine samples: inverse CDF of the detached coarse weights
-  (``rendering.sample_pdf``), with the same stratified / deterministic switch.
-* The semantic logits of every sample are composited with the density weights (the paper's
-  semantic field rendering); colour comes from the geometry net's blending head.
-* Sampling and compositing are ``sray.model.hierarchical``'s and the whole-image loop is
-  ``sray.model.view_render``'s, both shared with Semantic-NeRF; this class supplies the per-pass field.
-* ``inputs="rgbd"``: ``encode`` keeps the source depth maps and the coarse samples are placed around the
-  surfaces they show (``depth_sampling``); the networks and their parameters are the rgb mode's.
+One shared encoder and separate coarse and fine fields (as the paper's public code); sampling, compositing and the
+whole-view loop are shared with Semantic-NeRF (``hierarchical``, ``view_render``); choices: docs/model.md.
 """
 
 from __future__ import annotations
@@ -34,7 +20,7 @@ from .depth_sampling import source_surface_depth, surface_samples
 from .encoder import ResUNetEncoder
 from .fast_render import FastRender, render_rays_fast
 from .field import SRayField
-from .hierarchical import CoarseSampler, per_ray_bounds, render_rays
+from .hierarchical import CoarseSampler, PassField, per_ray_bounds, render_rays
 from .losses import render_loss
 from .piecewise_loss import piecewise_render_loss
 from .ray_chunks import train_piece_rays
@@ -59,17 +45,12 @@ class SRayModel(nn.Module):
         """Training-only per-pixel classifier of the source views' features (``lambda_src_sem`` > 0)."""
 
     def encode(self, src_rgb: Tensor, src_K: Tensor, src_c2w: Tensor, src_depth: Tensor | None = None) -> SourceSet:
-        """Encode m source views once: src_rgb (m, 3, H, W) in [0, 1], src_K (m, 3, 3), src_c2w (m, 4, 4).
-
-        src_depth: (m, H, W) z-depth in metres (0 = unknown), required with ``inputs='rgbd'`` and
-        not kept with ``inputs='rgb'`` (the rgb mode never reads it).
-        """
+        """Encode m source views once: src_rgb (m, 3, H, W) in [0, 1], src_K (m, 3, 3), src_c2w (m, 4, 4);
+        src_depth (m, H, W) z-depth in metres (0 = unknown), required with ``inputs='rgbd'``, else not kept."""
         m = src_rgb.shape[0]
         if src_rgb.ndim != 4 or src_K.shape != (m, 3, 3) or src_c2w.shape != (m, 4, 4):
-            raise ValueError(
-                "sray.model.semantic_ray.encode: expected src_rgb (m, 3, H, W), src_K (m, 3, 3), src_c2w "
-                f"(m, 4, 4); got {tuple(src_rgb.shape)}, {tuple(src_K.shape)}, {tuple(src_c2w.shape)}."
-            )
+            raise ValueError("sray.model.semantic_ray.encode: expected src_rgb (m, 3, H, W), src_K (m, 3, 3), src_c2w "
+                             f"(m, 4, 4); got {tuple(src_rgb.shape)}, {tuple(src_K.shape)}, {tuple(src_c2w.shape)}.")
         if not src_rgb.is_floating_point():
             raise ValueError(f"sray.model.semantic_ray.encode: src_rgb must be float in [0, 1], got {src_rgb.dtype}; "
                              "divide uint8 images by 255.")
@@ -86,8 +67,7 @@ class SRayModel(nn.Module):
         return SourceSet(feats=feats, rgb=src_rgb, K=src_K.float(), c2w=c2w, w2c=rigid_inverse(c2w), depth=depth)
 
     def coarse_sampler(self, src: SourceSet) -> CoarseSampler | None:
-        """How the coarse samples are placed against ``src``: None (equal bins) with ``inputs='rgb'``,
-        around the surfaces of the source depths with ``inputs='rgbd'`` (``depth_sampling``)."""
+        """Coarse sample placement against ``src``: None (equal bins), or by the source depths with ``rgbd``."""
         if self.cfg.inputs == "rgb":
             return None
         cfg = self.cfg
@@ -99,22 +79,19 @@ class SRayModel(nn.Module):
 
         return sampler
 
+    def _pass_field(self, src: SourceSet, runtime: Runtime) -> PassField:
+        """The ``hierarchical.PassField`` of the coarse and fine fields against ``src``, run as ``runtime.impl``."""
+        fields = {"coarse": self.coarse, "fine": self.fine}
+        return lambda name, o, d, z, lo, hi: fields[name](src, o, d, z, lo, hi, runtime.impl)
+
     def render_rays(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                     far: Tensor | float, stratified: bool, generator: torch.Generator | None = None,
                     runtime: Runtime = Runtime()) -> dict[str, dict[str, Tensor]]:
-        """Render rays o + t d, t in [near, far] (camera z-depth for ``pixel_rays`` directions).
-
-        origins, dirs: (R, 3); near, far: scalars or (R,). ``stratified`` jitters coarse and fine
-        samples (training); otherwise sampling is deterministic (evaluation). The fields run
-        ``runtime.impl``. Returns ``{"coarse": pass, "fine": pass}`` (see ``hierarchical.render_rays``).
-        """
-        fields = {"coarse": self.coarse, "fine": self.fine}
-
-        def field(name: str, o: Tensor, d: Tensor, z: Tensor, lo: Tensor, hi: Tensor) -> dict[str, Tensor]:
-            return fields[name](src, o, d, z, lo, hi, runtime.impl)
-
-        return render_rays(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, stratified,
-                           generator, self.cfg.fine_samples, self.coarse_sampler(src))
+        """Render rays o + t d, t in [near, far] (z-depth for ``pixel_rays`` directions): origins, dirs (R, 3), near,
+        far scalars or (R,); ``stratified`` jitters the samples (training), else sampling is deterministic. Returns
+        ``{"coarse": pass, "fine": pass}`` (``hierarchical.render_rays``)."""
+        return render_rays(self._pass_field(src, runtime), origins, dirs, near, far, self.cfg.n_coarse,
+                           self.cfg.n_fine, stratified, generator, self.cfg.fine_samples, self.coarse_sampler(src))
 
     def training_loss(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                       far: Tensor | float, target_label: Tensor, target_rgb: Tensor,
@@ -148,22 +125,12 @@ class SRayModel(nn.Module):
     def render_rays_fast(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                          far: Tensor | float, confidence: float,
                          runtime: Runtime = Runtime(), temperature: float = 1.0) -> dict[str, dict[str, Tensor]]:
-        """The fast render mode's rays (``fast_render.render_rays_fast``): deterministic, no grad; a
-        fine pass only for rays whose coarse confidence (at ``temperature``) is below ``confidence``; fields:
-        ``runtime.impl``."""
-        fields = {"coarse": self.coarse, "fine": self.fine}
+        """The fast mode's rays (``fast_render.render_rays_fast``): a fine pass below ``confidence`` only."""
+        return render_rays_fast(self._pass_field(src, runtime), origins, dirs, near, far, self.cfg.n_coarse,
+                                self.cfg.n_fine, confidence, self.coarse_sampler(src), temperature)
 
-        def field(name: str, o: Tensor, d: Tensor, z: Tensor, lo: Tensor, hi: Tensor) -> dict[str, Tensor]:
-            return fields[name](src, o, d, z, lo, hi, runtime.impl)
-
-        return render_rays_fast(field, origins, dirs, near, far, self.cfg.n_coarse, self.cfg.n_fine, confidence,
-                                self.coarse_sampler(src), temperature)
-
-    def ray_renderer(self, src: SourceSet, fast: FastRender | None = None,
-                     runtime: Runtime = Runtime()) -> RayRenderer:
-        """A deterministic ray renderer bound to the encoded sources ``src`` (``view_render.RayRenderer``): the
-        full render, or with ``fast`` the fast mode's rays (a fine pass only below ``fast.confidence``); fields:
-        ``runtime.impl``."""
+    def ray_renderer(self, src: SourceSet, fast: FastRender | None = None, runtime: Runtime = Runtime()) -> RayRenderer:
+        """A deterministic ``view_render.RayRenderer`` bound to ``src``: the full render, or the fast mode's rays."""
         if fast is not None:
             return lambda o, d, near, far: self.render_rays_fast(src, o, d, near, far, fast.confidence, runtime,
                                                                  fast.temperature)
@@ -172,13 +139,6 @@ class SRayModel(nn.Module):
     def render_image(self, src: SourceSet, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
                      runtime: Runtime = Runtime(), stride: int = 1,
                      fast: FastRender | None = None) -> dict[str, dict[str, Tensor]]:
-        """Render the (H, W) = ``hw`` image of the query camera K (3, 3), c2w (4, 4) against ``src`` with the one
-        whole-view renderer (``view_render.render_view``): deterministic sampling, no grad, every ``stride``-th
-        pixel, the full render or the fast mode (``fast``); near, far: scalar z-depth bounds.
-
-        Returns ``{"coarse": ..., "fine": ...}`` with ``logits`` (h', w', L), ``rgb`` (h', w', 3) in [0, 1],
-        ``depth`` (h', w') and ``opacity`` (h', w') per pass ((H, W) at stride 1). Memory is bounded by
-        ``runtime.chunk`` rays per pass (0: by device, ``ray_chunks``); the fields run ``runtime.impl``.
-        """
+        """``view_render.render_view`` of the query camera K (3, 3), c2w (4, 4) against ``src``."""
         return render_view(self.ray_renderer(src, fast, runtime), K, c2w, hw, near, far, runtime.chunk,
                            src.feats.device, stride, fast)

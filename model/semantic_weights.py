@@ -1,26 +1,11 @@
 """Semantic-aware weight net: bounded per-view weights that build the semantic ray s = sum_i w_i F''_i.
 
-The paper asks for w in C(tau) = {tau/m < w_i < 1/(tau m), sum_i w_i = 1}. Here m is the number
-of views that VALIDLY see the sample (``n`` below): an invalid view gets weight exactly 0, which is
-the only way a view that sees nothing can have no influence while the others stay bounded below.
-
-The net's raw output a_i per valid view becomes a weight by the ``radial`` map (``radial_weights``), which gives
-exactly 0 to invalid views, w = 1 for n = 1, all 0 for n = 0, and the plain mean 1/n for tau = 1. Its raw outputs
-are centred, e_i = a_i - mean(a), and with p = 1/tau - 1 (room above 1/n, in units of 1/n) and q = 1 - tau (room
-below) its gauge g = max_i max(e_i / p, -e_i / q) >= 0 says how far e points towards the boundary:
-
-    w_i = (1 + (1 - margin) e_i / (1 + g)) / n.
-
-* sum: sum_i e_i = 0, so sum_i w_i = 1.
-* bounds: for e_i > 0, e_i <= g p, so n w_i - 1 <= (1 - margin) p g / (1 + g) < p, i.e.
-  w_i < (1 + p) / n = 1/(tau n); for e_i < 0 likewise n w_i - 1 > -q, i.e. w_i > tau / n.
-* range: near e = 0 the map is the identity to first order (w = (1 + e) / n); as one e_i grows (or falls) alone,
-  g -> infinity and w_i -> (1 + (1 - margin) p) / n (or (1 - (1 - margin) q) / n): both bounds are
-  approached to within a relative (margin p / (1 + p)) or (margin q / tau).
-
-Input of the net (37 = 32 + 4 + 1 channels at the default C = 32): the refined feature F''_i of
-the token (C), the 4-d view-direction difference of ``reprojection.view_direction_difference``
-and the fraction of the ray's N samples that view i sees (how much of the ray it observes).
+The paper asks for tau/m < w_i < 1/(tau m), sum_i w_i = 1; m is here the number n of views validly seeing the
+sample (an invalid view gets exactly 0). The ``radial`` map centres the raw outputs, e_i = a_i - mean(a), and with
+p = 1/tau - 1, q = 1 - tau and gauge g = max_i max(e_i / p, -e_i / q) >= 0 sets
+``w_i = (1 + (1 - margin) e_i / (1 + g)) / n``: sum_i e_i = 0 gives sum 1, e_i <= g p gives w_i < 1/(tau n) (and
+likewise w_i > tau / n), both bounds approachable; tau = 1 is the plain mean. Input (C + 5): the refined feature,
+the 4-d view-direction difference and the fraction of the ray's samples the view sees.
 """
 
 from __future__ import annotations
@@ -32,12 +17,8 @@ from .config import SRayConfig
 
 
 def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
-    """Raw per-view outputs (..., m) and validity (..., m) -> float32 weights (..., m).
-
-    Over the valid entries of each row the weights sum to 1 and obey tau/n < w_i < 1/(tau n), with
-    both bounds approachable (the ``radial`` map of the module docstring); invalid entries get 0, a
-    row without valid entries is all 0, and tau = 1 gives exactly 1/n.
-    """
+    """Raw per-view outputs (..., m) and validity (..., m) -> float32 weights (..., m) by the ``radial`` map
+    (module doc): over each row's valid entries they sum to 1 within tau/n < w_i < 1/(tau n); invalid entries 0."""
     with torch.autocast(device_type=logits.device.type, enabled=False):
         keep = valid.float()
         n = keep.sum(-1, keepdim=True)  # (..., 1)
@@ -62,10 +43,7 @@ class SemanticWeightNet(nn.Module):
                                  nn.Linear(h2, 1))
 
     def forward(self, feats: Tensor, dirs: Tensor, valid: Tensor) -> Tensor:
-        """feats: (R, m, N, C) refined space; dirs: (R, m, N, 4); valid: (R, m, N) bool.
-
-        Returns float32 weights (R, m, N), summing to 1 over the valid views of each sample.
-        """
+        """feats (R, m, N, C), dirs (R, m, N, 4), valid (R, m, N) -> float32 weights (R, m, N) (module doc)."""
         seen = valid.to(feats.dtype).mean(dim=2, keepdim=True).expand_as(valid)  # (R, m, N)
         x = torch.cat([feats, dirs.to(feats.dtype), seen[..., None]], dim=-1)  # (R, m, N, C + 5)
         raw = self.mlp(x).squeeze(-1).float().transpose(1, 2)  # (R, N, m)

@@ -1,16 +1,6 @@
-"""Bilinear sampling of per-view maps as a weighted gather: the fast path of ``reprojection.sample_maps``.
-
-``grid_sample``'s backward on CPU scatters every sample's gradient one element at a time and was the
-largest single cost of a training step (docs/benchmarks.md, "Profiles"). The same bilinear interpolation is a
-weighted sum of the 4 neighbouring texels; written as ``F.embedding_bag(mode="sum")`` over a
-texel table (m * h * w, D) with per-sample weights, its forward is one gather and its backward one
-sorted, vectorised accumulation. The output comes directly in the (R, m, N, D) token order the
-attention consumes, so no permuted copy of the largest tensor is made either.
-
-Same conventions as ``sample_maps`` (``grid_sample`` with ``align_corners=True`` and border padding):
-map pixel (j, i) is centred on full-res pixel (stride j, stride i); coordinates are clamped into
-the map (border padding); the weights are the bilinear ones, computed in float32. The sample
-positions carry no gradient (sample depths and cameras are constants of a step), only the maps do.
+"""Bilinear sampling of per-view maps as a weighted gather, the fast path of ``reprojection.sample_maps`` (same
+conventions): ``F.embedding_bag(mode="sum")`` over 4 texels of a (m * h * w, D) table, whose backward is one sorted
+accumulation instead of ``grid_sample``'s element-wise CPU scatter (docs/benchmarks/profile.md).
 """
 
 from __future__ import annotations
@@ -21,13 +11,9 @@ from torch import Tensor
 
 
 def bilinear_taps(uv: Tensor, view_dim: int, hw_map: tuple[int, int], stride: int) -> tuple[Tensor, Tensor]:
-    """Texel indices and bilinear weights of the 4 taps of each sample.
-
-    uv: (..., 2) full-res pixel coordinates whose dimension ``view_dim`` (of uv[..., 0]) is the source
-    view, e.g. (R, m, N, 2) with view_dim 1; hw_map: the map's (h, w). Returns idx (..., 4) int64 rows
-    of the flattened (m * h * w) texel table and weights (..., 4) float32 summing to 1, clamped to
-    the map's border like ``padding_mode="border"``.
-    """
+    """Texel rows idx (..., 4) int64 of the (m * h * w) table and bilinear weights (..., 4) float32 (summing to 1,
+    border-clamped) of the 4 taps of each sample: uv (..., 2) full-res pixels whose dimension ``view_dim`` is the
+    source view (e.g. (R, m, N, 2), view_dim 1); hw_map: the map's (h, w)."""
     h, w = hw_map
     m = uv.shape[view_dim]
     shape = [1] * (uv.ndim - 1)
@@ -55,10 +41,7 @@ def texel_table(maps: Tensor) -> Tensor:
 
 
 def gather_bilinear(table: Tensor, idx: Tensor, weights: Tensor) -> Tensor:
-    """Weighted sum of 4 texel rows per sample: table (T, D), idx and weights (..., 4) -> (..., D) float32.
-
-    Differentiable with respect to ``table`` (not the weights).
-    """
+    """Weighted sum of 4 rows of table (T, D) per sample (idx, weights (..., 4)) -> (..., D) float32."""
     lead = idx.shape[:-1]
     with torch.autocast(device_type=table.device.type, enabled=False):
         out = F.embedding_bag(idx.reshape(-1, 4), table, per_sample_weights=weights.reshape(-1, 4).to(table.dtype),

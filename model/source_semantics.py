@@ -1,19 +1,6 @@
-"""Dense 2D supervision of the encoder: a per-pixel semantic head on the source views' feature maps.
-
-S-Ray's ray loss sends the encoder the gradient of R labelled query pixels per step, while the m
-source images it encodes in the same step carry m x H x W labels. :class:`SourceSemanticHead` reads
-class logits off each source view's feature map with one 1x1 convolution (a linear read-out, so the
-class information has to sit in the features the semantic field aggregates), and
-:func:`source_semantic_loss` is their cross-entropy against the source views' own labels:
-
-* the logits (m, L, H/4, W/4) are brought to full resolution by two pixel-centre-aligned 2x
-  up-samplings (``encoder.upsample_to``: feature pixel j sits on image pixel 4j, so up-sampled pixel i
-  reads feature coordinate i/4), then
-* the mean cross-entropy over the labelled pixels of all m views (``ignore_id`` left out), weighted by
-  the model's ``class_weights`` when it has them, exactly as the ray loss weights its rays.
-
-This is a departure from the paper (docs/model.md): it adds ``n_classes x (feat_dim + 1)`` parameters,
-used in training only; rendering never reads the head.
+"""Dense 2D supervision of the encoder (a departure from the paper, docs/model.md, "Dense 2D supervision of the
+encoder"): a 1x1-conv semantic head on the source views' feature maps, up-sampled to full resolution with the
+encoder's centre-aligned rule, and its cross-entropy against their own labels; used in training only.
 """
 
 from __future__ import annotations
@@ -37,8 +24,7 @@ class SourceSemanticHead(nn.Module):
         self.classify = nn.Conv2d(cfg.feat_dim, cfg.n_classes, 1)
 
     def forward(self, feats: Tensor, image_hw: tuple[int, int]) -> Tensor:
-        """Logits (m, L, H, W) at the images' size ``image_hw`` = (H, W) from features (m, C, h, w) with
-        h = ceil(ceil(H/2)/2) (the encoder's output for those images)."""
+        """Logits (m, L, H, W) at the images' size ``image_hw`` from the encoder's features (m, C, h, w)."""
         h, w = image_hw
         expected = (math.ceil(math.ceil(h / 2) / 2), math.ceil(math.ceil(w / 2) / 2))
         if tuple(feats.shape[-2:]) != expected:
@@ -59,7 +45,6 @@ def source_semantic_loss(logits: Tensor, labels: Tensor, cfg: SRayConfig) -> Ten
                          f"{(logits.shape[0], *logits.shape[-2:])} for logits {tuple(logits.shape)}, got "
                          f"{labels.dtype} {tuple(labels.shape)}; pass the source views' label maps at their size.")
     flat_logits = logits.permute(0, 2, 3, 1).reshape(-1, logits.shape[1])  # (m H W, L)
-    flat_labels = labels.reshape(-1)  # (m H W,)
     weight = torch.tensor(cfg.class_weights, dtype=torch.float32, device=logits.device) if cfg.class_weights else None
     with torch.autocast(device_type=logits.device.type, enabled=False):
-        return labelled_cross_entropy(flat_logits.float(), flat_labels, cfg.ignore_id, weight)
+        return labelled_cross_entropy(flat_logits.float(), labels.reshape(-1), cfg.ignore_id, weight)

@@ -9,10 +9,8 @@ from torch import Tensor
 
 
 def rigid_inverse(c2w: Tensor) -> Tensor:
-    """Inverse of rigid camera-to-world transforms: (..., 4, 4) -> world-to-camera (..., 4, 4).
-
-    Computed in the input's dtype with autocast off (a bfloat16 translation is off by centimetres).
-    """
+    """World-to-camera (..., 4, 4) of rigid camera-to-world transforms (..., 4, 4), in their dtype with autocast
+    off (a bfloat16 translation is off by centimetres)."""
     rot_t = c2w[..., :3, :3].transpose(-1, -2)  # (..., 3, 3) R^T
     with torch.autocast(device_type=c2w.device.type, enabled=False):
         trans = -(rot_t @ c2w[..., :3, 3:])  # (..., 3, 1) -R^T t
@@ -24,10 +22,7 @@ def rigid_inverse(c2w: Tensor) -> Tensor:
 
 @dataclass
 class SourceSet:
-    """Source-view features and cameras, computed once and rendered against any number of times.
-
-    Holds no reference to the model; the model keeps no reference to it.
-    """
+    """Source-view features and cameras, encoded once and rendered against any number of times."""
 
     feats: Tensor
     """(m, C, h, w) encoder features; pixel (j, i) is centred on full-res pixel (4j, 4i)."""
@@ -41,11 +36,6 @@ class SourceSet:
     """(m, 4, 4) world-to-camera (rigid inverse of c2w)."""
     depth: Tensor | None = None
     """(m, H, W) source z-depth in metres, 0 = unknown; only in ``inputs='rgbd'`` (``depth_sampling``)."""
-
-    @property
-    def n_views(self) -> int:
-        """Number of source views m."""
-        return int(self.feats.shape[0])
 
     @property
     def image_hw(self) -> tuple[int, int]:

@@ -1,20 +1,9 @@
 """The one whole-view renderer of ``sray.model``: a query camera's pixels -> rays -> chunked render -> maps.
 
-Every whole-image render of the project goes through :func:`render_view`: ``SRayModel.render_image`` and
-``SemanticNeRF.render_image`` (the benchmarks, the profiler and ``sray gpu-check``), the held-out views of
-``sray eval``, validation, the fleet, the stability suite and ``sray bench speed-accuracy``
-(``platform/eval/view_scoring.py``), and the fly-through frames of ``sray render``. What it does:
-
-* the pixels: every ``stride``-th pixel in each direction (:func:`strided_pixels`; stride 1 = every pixel),
-  exact pixel centres of the image, so ground truth is read without resampling;
-* the rays: ``pixel_rays`` of all of them at once, bounds ``near``/``far`` per ray, rendered ``chunk`` rays
-  at a time (0: by device, ``ray_chunks``), no grad, each chunk's outputs kept in float32 on the device;
-* the fast render mode (``fast``, :class:`~sray.model.fast_render.FastRender`) owns its pixel stride and
-  upsampling: the rays are every ``stride * pixel stride``-th pixel (``FastRender.fitted_pixel_stride``) and
-  every map is upsampled bilinearly to the asked pixels (``fast_render.upsample_to``). The ray renderer must
-  then be the fast mode's rays (``SRayModel.ray_renderer(src, fast)``).
-
-Colours are clamped to [0, 1] before any upsampling.
+:func:`render_view` renders every ``stride``-th pixel (exact pixel centres, so ground truth is read without
+resampling), ``chunk`` rays at a time without grad, float32 outputs on the device, colours clamped to [0, 1]. The
+fast mode (``fast_render.FastRender``) owns its pixel stride and the bilinear upsampling to the asked pixels; the
+ray renderer must then be ``SRayModel.ray_renderer(src, fast)``.
 """
 
 from __future__ import annotations
@@ -30,14 +19,12 @@ from .ray_chunks import render_chunk_rays
 from .rays import pixel_rays
 
 RayRenderer = Callable[[Tensor, Tensor, Tensor, Tensor], dict[str, dict[str, Tensor]]]
-"""``render(origins (R, 3), dirs (R, 3), near (R,), far (R,)) -> {"coarse": pass, "fine": pass}``, deterministic
-sampling; the passes and keys a caller asks for must be there (held-out scores read the fine ``logits`` and
-``rgb`` only)."""
+"""``render(origins (R, 3), dirs (R, 3), near (R,), far (R,)) -> {"coarse": pass, "fine": pass}``, deterministic,
+with the passes and keys the caller asks for."""
 
 
 def strided_pixels(h: int, w: int, stride: int) -> tuple[Tensor, int, int]:
-    """Pixel centres (u, v) of every ``stride``-th pixel of an (h, w) image, from (stride // 2, stride // 2):
-    exact pixels of the full image, in row-major order. Returns (uv float32 (h' * w', 2), h', w')."""
+    """(uv (h' * w', 2), h', w'): every ``stride``-th pixel centre of an (h, w) image, row-major."""
     vs = torch.arange(stride // 2, h, stride, dtype=torch.float32)
     us = torch.arange(stride // 2, w, stride, dtype=torch.float32)
     v, u = torch.meshgrid(vs, us, indexing="ij")
@@ -46,8 +33,7 @@ def strided_pixels(h: int, w: int, stride: int) -> tuple[Tensor, int, int]:
 
 def _render_chunks(render: RayRenderer, origins: Tensor, dirs: Tensor, near: Tensor, far: Tensor, chunk: int,
                    passes: tuple[str, ...], keys: tuple[str, ...]) -> dict[str, dict[str, Tensor]]:
-    """``keys`` of ``passes`` for R rays (origins, dirs (R, 3); near, far (R,)), ``chunk`` rays at a time:
-    (R, ...) float32 each, on the rays' device."""
+    """``keys`` of ``passes`` for R rays, ``chunk`` rays at a time: (R, ...) float32 each."""
     parts: dict[str, dict[str, list[Tensor]]] = {p: {k: [] for k in keys} for p in passes}
     for start in range(0, origins.shape[0], chunk):
         sl = slice(start, start + chunk)
@@ -62,13 +48,9 @@ def _render_chunks(render: RayRenderer, origins: Tensor, dirs: Tensor, near: Ten
 def render_view(render: RayRenderer, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
                 chunk: int, device: torch.device, stride: int = 1, fast: FastRender | None = None,
                 passes: tuple[str, ...] = PASSES, keys: tuple[str, ...] = IMAGE_KEYS) -> dict[str, dict[str, Tensor]]:
-    """Render every ``stride``-th pixel of the (H, W) = ``hw`` image of the query camera K (3, 3), c2w (4, 4)
-    (module doc), rays on ``device``, z-depth bounds ``near``, ``far``, ``chunk`` rays per pass (0: by device).
-
-    Returns ``{pass: {"logits": (h', w', L), "rgb": (h', w', 3) in [0, 1], "depth": (h', w'),
-    "opacity": (h', w')}}`` (those of ``keys``) for each of ``passes``, float32 on ``device``; (h', w') is
-    ``strided_pixels(H, W, stride)``'s grid, (H, W) at stride 1.
-    """
+    """Render every ``stride``-th pixel of the (H, W) = ``hw`` image of the query camera K (3, 3), c2w (4, 4) with
+    z-depth bounds ``near``, ``far``, ``chunk`` rays per pass (0: by device). Returns ``{pass: {"logits": (h', w', L),
+    "rgb": (h', w', 3), "depth": (h', w'), "opacity": (h', w')}}`` (``keys`` of ``passes``), float32 on ``device``."""
     if stride < 1:
         raise ValueError(f"sray.model.view_render.render_view: stride must be >= 1, got {stride}.")
     h, w = hw

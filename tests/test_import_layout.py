@@ -10,9 +10,6 @@ import pytest
 from import_scan import LAB, PRODUCT, REPO, cycles, imported_modules, plant
 
 LAZY_IMPORTS_ALLOWED = {
-    "data_tools/readers/registry.py":
-        "reader plug-ins: `sray data convert` builds its parser from the registry without numpy or OpenCV; a "
-        "reader's module is imported when its format is converted (tests/test_reader_registry.py)",
     "platform/finetune/methods/sray_method.py":
         "method plug-ins: the CLI reads the method registry without torch; a method imports its learner and "
         "artifact loader when it is built or loaded (tests/test_recipe_method.py)",

@@ -18,9 +18,8 @@ from sray.model.metrics import (
     per_image_miou,
     psnr,
     scene_metrics,
-    ssim,
 )
-from sray.model.ssim import SSIM_K1, SSIM_K2
+from sray.model.ssim import SSIM_K1, SSIM_K2, ssim
 
 IGNORE = 255
 N_CLASSES = 5  # ground truth holds {0, 1, 2}; 3 is only predicted; 4 appears nowhere

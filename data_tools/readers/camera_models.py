@@ -1,16 +1,5 @@
-"""Camera models of captures (COLMAP, nerfstudio) -> a pinhole K plus OpenCV distortion, and undistortion.
-
-A capture states each camera as a model name and its parameters. This module turns one into a
-:class:`CaptureCamera`: sray's pinhole K (pixel-centre convention of ``scene.py``), the distortion
-coefficients in OpenCV's order and which OpenCV model removes them (``cv2.undistort``'s radial-tangential
-``(k1, k2, p1, p2[, k3[, k4, k5, k6]])`` or ``cv2.fisheye``'s ``(k1, k2, k3, k4)``). Models OpenCV cannot
-invert (COLMAP's FOV, RADIAL_FISHEYE, THIN_PRISM_FISHEYE, nerfstudio's EQUIRECTANGULAR, ...) are refused
-in one line naming the camera and its model.
-
-Pixel centres: COLMAP and nerfstudio place the centre of pixel (u, v) at (u + 0.5, v + 0.5) (their
-principal point of a centred camera is (W/2, H/2)); sray places it at (u, v). So ``cx_sray = cx - 0.5`` and
-``cy_sray = cy - 0.5``; focal lengths and distortion (which act on normalised coordinates) are unchanged.
-
+"""Camera models of captures (COLMAP, nerfstudio) -> a pinhole K plus OpenCV distortion, and undistortion
+(docs/capture.md). Captures centre pixel (u, v) at (u + 0.5, v + 0.5), sray at (u, v): ``c_sray = c - 0.5``.
 COLMAP parameter orders (``src/colmap/sensor/models.h``): SIMPLE_PINHOLE f cx cy; PINHOLE fx fy cx cy;
 SIMPLE_RADIAL f cx cy k; RADIAL f cx cy k1 k2; OPENCV fx fy cx cy k1 k2 p1 p2; OPENCV_FISHEYE fx fy cx cy
 k1 k2 k3 k4; FULL_OPENCV fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6.
@@ -18,6 +7,7 @@ k1 k2 k3 k4; FULL_OPENCV fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -26,12 +16,22 @@ import numpy as np
 COLMAP_MODELS: dict[int, tuple[str, int]] = {
     0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RADIAL", 4), 3: ("RADIAL", 5), 4: ("OPENCV", 8),
     5: ("OPENCV_FISHEYE", 8), 6: ("FULL_OPENCV", 12), 7: ("FOV", 5), 8: ("SIMPLE_RADIAL_FISHEYE", 4),
-    9: ("RADIAL_FISHEYE", 5), 10: ("THIN_PRISM_FISHEYE", 12),
-}
+    9: ("RADIAL_FISHEYE", 5), 10: ("THIN_PRISM_FISHEYE", 12)}
 """COLMAP model id -> (name, parameter count); the binary model stores the id, the text model the name."""
 
 PIXEL_CENTRE_SHIFT = 0.5
 """Subtracted from a capture's principal point: its pixel (u, v) is centred at (u + 0.5, v + 0.5)."""
+
+_COLMAP_OPENCV: dict[str, Callable[[list[float]], tuple[list[float], list[float], bool]]] = {
+    "SIMPLE_PINHOLE": lambda p: ([p[0], p[0], p[1], p[2]], [], False),
+    "PINHOLE": lambda p: (p, [], False),
+    "SIMPLE_RADIAL": lambda p: ([p[0], p[0], p[1], p[2]], [p[3], 0.0, 0.0, 0.0], False),
+    "RADIAL": lambda p: ([p[0], p[0], p[1], p[2]], [p[3], p[4], 0.0, 0.0], False),
+    "OPENCV": lambda p: (p[:4], p[4:8], False),
+    "FULL_OPENCV": lambda p: (p[:4], p[4:12], False),
+    "OPENCV_FISHEYE": lambda p: (p[:4], p[4:8], True),
+}
+"""COLMAP models OpenCV can undistort -> (fx fy cx cy, OpenCV distortion, fisheye) of their parameters."""
 
 
 @dataclass(frozen=True)
@@ -66,28 +66,15 @@ def colmap_camera(model: str, params: np.ndarray, hw: tuple[int, int], what: str
         raise ValueError(f"{what}: unknown camera model {model!r}; known: {', '.join(counts)}")
     if len(p) != counts[model]:
         raise ValueError(f"{what}: model {model} takes {counts[model]} parameters, got {len(p)}")
-    zeros = np.zeros(0)
-    if model == "SIMPLE_PINHOLE":
-        return CaptureCamera(pinhole(p[0], p[0], p[1], p[2]), hw, zeros, False)
-    if model == "PINHOLE":
-        return CaptureCamera(pinhole(*p), hw, zeros, False)
-    if model == "SIMPLE_RADIAL":
-        return CaptureCamera(pinhole(p[0], p[0], p[1], p[2]), hw, np.array([p[3], 0.0, 0.0, 0.0]), False)
-    if model == "RADIAL":
-        return CaptureCamera(pinhole(p[0], p[0], p[1], p[2]), hw, np.array([p[3], p[4], 0.0, 0.0]), False)
-    if model == "OPENCV":
-        return CaptureCamera(pinhole(*p[:4]), hw, np.array(p[4:8]), False)
-    if model == "FULL_OPENCV":
-        return CaptureCamera(pinhole(*p[:4]), hw, np.array(p[4:12]), False)
-    if model == "OPENCV_FISHEYE":
-        return CaptureCamera(pinhole(*p[:4]), hw, np.array(p[4:8]), True)
-    raise ValueError(f"{what}: camera model {model} cannot be undistorted with OpenCV; re-run COLMAP's "
-                     "image_undistorter (or calibrate with OPENCV / OPENCV_FISHEYE) and convert its output")
+    if model not in _COLMAP_OPENCV:
+        raise ValueError(f"{what}: camera model {model} cannot be undistorted with OpenCV; re-run COLMAP's "
+                         "image_undistorter (or calibrate with OPENCV / OPENCV_FISHEYE) and convert its output")
+    intrinsics, dist, fisheye = _COLMAP_OPENCV[model](p)
+    return CaptureCamera(pinhole(*intrinsics), hw, np.array(dist, dtype=np.float64), fisheye)
 
 
 def nerfstudio_camera(fields: dict, what: str) -> CaptureCamera:
-    """A camera from nerfstudio's transforms.json fields (``fl_x fl_y cx cy w h``, ``k1 k2 k3 k4 p1 p2``,
-    ``camera_model``), merged frame over top level by the caller; ``what`` names it in errors."""
+    """A camera from nerfstudio's transforms.json fields (frame over top level); ``what`` names it."""
     model = str(fields.get("camera_model", "OPENCV")).upper()
     missing = [k for k in ("fl_x", "cx", "cy", "w", "h") if k not in fields]
     if missing:
@@ -116,10 +103,7 @@ def nerfstudio_camera(fields: dict, what: str) -> CaptureCamera:
 
 def undistort_maps(camera: CaptureCamera) -> tuple[np.ndarray, np.ndarray]:
     """(map_x, map_y) float32 (H, W) for ``cv2.remap``: the source pixel of each pixel of the undistorted image,
-    which keeps ``camera.K`` (same focal lengths and principal point, borders the lens never saw left black).
-
-    OpenCV centres pixel (u, v) at (u, v), as sray does, so ``camera.K`` is passed unchanged.
-    """
+    which keeps ``camera.K`` (OpenCV centres pixels as sray does); borders the lens never saw stay black."""
     h, w = camera.hw
     if camera.fisheye:
         return cv2.fisheye.initUndistortRectifyMap(camera.K, camera.dist, np.eye(3), camera.K, (w, h), cv2.CV_32FC1)
@@ -127,8 +111,7 @@ def undistort_maps(camera: CaptureCamera) -> tuple[np.ndarray, np.ndarray]:
 
 
 def undistort(image: np.ndarray, camera: CaptureCamera, nearest: bool = False) -> np.ndarray:
-    """``image`` (H, W[, C]) of ``camera`` as the pinhole camera ``camera.K`` sees it (unchanged without
-    distortion); bilinear for colour, ``nearest`` for depth and labels; pixels outside the source are 0."""
+    """``image`` (H, W[, C]) as ``camera.K`` sees it: bilinear, or ``nearest`` for depth; 0 outside the source."""
     if not camera.distorted:
         return image
     if image.shape[:2] != camera.hw:

@@ -1,16 +1,6 @@
-"""A posed capture (COLMAP or nerfstudio, parsed by their readers) -> a canonical, unlabelled scene.
-
-Both capture readers reduce their files to a list of :class:`CaptureFrame` (image, camera, OpenCV
-camera-to-world in capture units, optional metric depth map, the 3D points the frame sees) and hand it to
-:func:`capture_scene`, which
-
-1. keeps every ``frame_skip``-th frame (capture order) and checks each pose is a rotation (det +1);
-2. finds the metric scale and the depth bounds (``capture_geometry.py``'s rule) and scales the poses;
-3. reads a view on demand: undistorts colour (bilinear) and depth (nearest) with OpenCV, resizes colour
-   with area averaging and depth by nearest pixel centre to ``size_hw``, scaling K (``scale_intrinsics``).
-
-The scene carries no labels: every label pixel is IGNORE_ID and ``meta.labelled`` is False, so ``sray
-data shard`` marks it inference-only and training refuses it.
+"""A posed capture (COLMAP or nerfstudio, parsed into :class:`CaptureFrame` lists) -> a canonical, unlabelled scene:
+every ``frame_skip``-th frame, scale and bounds by ``capture_geometry``, views undistorted and resized on demand.
+Labels are all IGNORE_ID and ``meta.labelled`` False (inference only).
 """
 
 from __future__ import annotations
@@ -22,13 +12,8 @@ import numpy as np
 
 from sray.data_tools.label_spaces import class_names
 from sray.data_tools.readers.camera_models import CaptureCamera, undistort
-from sray.data_tools.readers.capture_geometry import (
-    choose_scale,
-    depth_ratios,
-    measured_scale,
-    point_bounds,
-    project_points,
-)
+from sray.data_tools.readers.capture_geometry import (choose_scale, depth_ratios, measured_scale, point_bounds,
+                                                      project_points)
 from sray.data_tools.readers.common import read_depth_m, read_rgb8, resample_nearest, resize_rgb, scale_intrinsics
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
@@ -83,8 +68,7 @@ def read_capture_depth(frame: CaptureFrame, depth_scale: float) -> np.ndarray:
 def capture_scene(frames: list[CaptureFrame], points: np.ndarray, *, src: Path, name: str, source_format: str,
                   label_space: str, size_hw: tuple[int, int] | None, frame_skip: int, depth_scale: float,
                   scale: float | None, extra: dict) -> Scene:
-    """The unlabelled canonical scene of a parsed capture (module doc). ``points``: (P, 3) 3D points in capture
-    units (may be empty); ``scale``: ``--scale`` (metres per capture unit) or None to measure it."""
+    """The unlabelled scene of a parsed capture: ``points`` (P, 3) in capture units, ``scale`` None: measured."""
     if frame_skip < 1:
         raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
     kept = frames[::frame_skip]
@@ -128,7 +112,7 @@ def capture_scene(frames: list[CaptureFrame], points: np.ndarray, *, src: Path, 
                     label=np.full(hw, IGNORE_ID, np.uint16), K=K, c2w=c2w)
 
     meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space), view_ids=list(ids),
-                     splits={}, near=near, far=far, role="train", labelled=False,
+                     splits={}, near=near, far=far, labelled=False,
                      extra={"source_format": source_format, "source": str(src), "frame_skip": frame_skip,
                             "scale_m_per_unit": s, "scale_from": how, "n_points": int(len(points)),
                             "bounds_from": "depth maps" if has_depth else "3D points (per-view 1st/99th percentiles)",

@@ -1,15 +1,6 @@
-"""Metric scale and depth bounds of a capture whose units are arbitrary (COLMAP, nerfstudio).
-
-The rule (docs/capture.md, "Scale and depth range"):
-
-* **Scale** s (metres per capture unit): ``--scale`` when given; else measured where the capture holds both
-  metric depth maps and 3D points: each point a view sees is projected into it, and s is the median over
-  all such (view, point) pairs of ``depth map at the point's pixel / the point's depth in capture units``.
-  With neither, conversion stops in one line naming both ways.
-* **Depth bounds** (metres): from the depth maps when the capture has them (``scene.scene_depth_bounds``,
-  as every other reader); else from the 3D points: per view, the 1st and 99th percentiles of the depths of
-  the points it sees; near = s x the smallest 1st percentile x 0.9 (at least 0.05 m), far = s x the largest
-  99th percentile x 1.1.
+"""Metric scale and depth bounds of a capture whose units are arbitrary (docs/capture.md, "Scale and depth range"):
+scale = ``--scale``, else the median of metric depth / point depth over (view, point it sees) pairs; bounds from
+the depth maps, else s x the views' 1st / 99th point-depth percentiles with a 10 % margin (near >= 0.05 m).
 """
 
 from __future__ import annotations
@@ -38,8 +29,7 @@ def project_points(points: np.ndarray, K: np.ndarray, c2w: np.ndarray,
 
 
 def depth_ratios(points: np.ndarray, K: np.ndarray, c2w: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
-    """Ratios (n,) metric depth / point depth in capture units for the points (P, 3) a view (K, c2w in capture
-    units, float32 (H, W) metric depth, 0 = unknown) sees where its depth map is known."""
+    """Ratios (n,) metric depth / capture-unit depth of the points (P, 3) a view sees where its depth is known."""
     z, col, row = project_points(points, K, c2w, depth_m.shape)
     metric = depth_m[row, col].astype(np.float64)
     known = np.isfinite(metric) & (metric > 0)
@@ -53,8 +43,7 @@ def measured_scale(ratios: list[np.ndarray]) -> float | None:
 
 
 def point_bounds(view_depths: list[np.ndarray], scale: float) -> tuple[float, float]:
-    """(near, far) in metres from each view's point depths in capture units (module rule); ValueError when no
-    view sees a point."""
+    """(near, far) metres from each view's point depths in capture units; ValueError when no view sees one."""
     seen = [d for d in view_depths if d.size]
     if not seen:
         raise ValueError("no view sees any 3D point in front of it: near/far cannot be measured")
@@ -64,8 +53,7 @@ def point_bounds(view_depths: list[np.ndarray], scale: float) -> tuple[float, fl
 
 
 def choose_scale(given: float | None, measured: float | None, where: str) -> tuple[float, str]:
-    """(metres per capture unit, how it was found): ``given`` (``--scale``) first, then ``measured``; else a
-    one-line ValueError naming both ways."""
+    """(metres per capture unit, how found): ``given`` first, then ``measured``, else a ValueError."""
     if given is not None:
         if not (np.isfinite(given) and given > 0):
             raise ValueError(f"--scale must be a positive number of metres per capture unit, got {given}")

@@ -1,18 +1,6 @@
-"""Reader: a COLMAP capture (sparse model in text or binary form + its images), without labels.
-
-Expected layout (``SRC`` is the capture folder; ``--sparse`` and ``--images`` override the defaults)::
-
-    SRC/images/<name>                   the images COLMAP registered (names as in images.txt/bin)
-    SRC/sparse/0/cameras.{bin,txt}      cameras (also found at SRC/, SRC/sparse/, SRC/colmap/sparse/0/)
-    SRC/sparse/0/images.{bin,txt}       world-to-camera poses (quaternion w x y z, translation)
-    SRC/sparse/0/points3D.{bin,txt}     3D points with their tracks
-
-Poses: COLMAP's camera axes are OpenCV's, so only the world-to-camera pose is inverted
-(``colmap_model.image_c2w``). Intrinsics and distortion: ``camera_models.colmap_camera`` (principal point
-shifted by -0.5 to sray's pixel centres; OPENCV / OPENCV_FISHEYE / RADIAL distortion removed with OpenCV,
-models OpenCV cannot invert refused). Scale and depth bounds: the points each image observes
-(``capture_geometry.py``); a COLMAP model has no metric depth, so the scale comes from ``--scale``. Frames are
-taken in image-name order.
+"""Reader: a COLMAP capture (``sparse/0/{cameras,images,points3D}.{bin,txt}`` + ``images/``), without labels: poses
+inverted (``colmap_model.image_c2w``), cameras by ``camera_models.colmap_camera``, depth bounds from the points
+each image observes, scale from ``--scale``. Frames in image-name order. Conventions: docs/capture.md.
 """
 
 from __future__ import annotations
@@ -30,12 +18,9 @@ from sray.data_tools.scene import Scene
 def read_colmap(src: Path, name: str, label_space: str = "scannet20", size_hw: tuple[int, int] | None = (240, 320),
                 frame_skip: int = 1, depth_scale: float = 1000.0, scale: float | None = None,
                 images: Path | None = None, sparse: Path | None = None) -> Scene:
-    """Open a COLMAP capture as an unlabelled canonical scene (views load lazily); see the module doc.
-
-    ``scale``: metres per model unit (``--scale``); ``images``: image folder (default ``SRC/images``);
-    ``sparse``: model folder (default: searched, ``colmap_model.find_model``). ``depth_scale`` is unused (a
-    COLMAP model has no depth maps) and accepted because every reader takes it.
-    """
+    """Open a COLMAP capture as an unlabelled canonical scene (views load lazily): ``scale`` metres per model unit,
+    ``images`` the image folder (default ``SRC/images``), ``sparse`` the model folder (default: ``find_model``);
+    ``depth_scale`` is unused (no depth maps), taken because every reader takes it."""
     src = Path(src)
     folder = Path(sparse) if sparse is not None else find_model(src)
     model = read_model(folder)

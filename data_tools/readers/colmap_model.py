@@ -1,15 +1,12 @@
 """COLMAP sparse models (``cameras``, ``images``, ``points3D``) in text (``.txt``) or binary (``.bin``) form.
 
-Binary layout (little-endian): ``cameras.bin`` = uint64 count, then per camera int32 id, int32 model id,
-uint64 width, uint64 height, float64 params[n(model)]. ``images.bin`` = uint64 count, then per image int32
-id, float64 qw qx qy qz, float64 tx ty tz, int32 camera id, a NUL-terminated name, uint64 n2D, then n2D x
-(float64 x, float64 y, int64 point3D id; -1 = none). ``points3D.bin`` = uint64 count, then per point uint64
-id, float64 x y z, uint8 r g b, float64 error, uint64 track length, then length x (int32 image id, int32
-point2D index). The text files hold the same fields, one camera / point per line and two lines per image,
-``#`` starting a comment.
-
-A pose (q, t) maps world to camera: x_cam = R(q) x_world + t, with COLMAP's camera axes x right, y down, z
-forward (OpenCV's, so sray needs no axis change): c2w = [[R^T, -R^T t], [0, 0, 0, 1]].
+Binary (little-endian): ``cameras.bin`` = uint64 count, per camera int32 id, int32 model id, uint64 width, height,
+float64 params[n(model)]; ``images.bin`` = uint64 count, per image int32 id, float64 qw qx qy qz tx ty tz, int32
+camera id, a NUL-terminated name, uint64 n2D, n2D x (float64 x, y, int64 point3D id; -1 = none); ``points3D.bin``
+= uint64 count, per point uint64 id, float64 x y z, uint8 r g b, float64 error, uint64 track length, length x
+(int32 image id, int32 point2D index). Text files hold the same fields, one camera / point per line, two lines per
+image, ``#`` comments. A pose (q, t) maps world to camera, x_cam = R(q) x_world + t, in OpenCV's axes:
+c2w = [[R^T, -R^T t], [0, 0, 0, 1]].
 """
 
 from __future__ import annotations
@@ -25,42 +22,35 @@ from sray.data_tools.readers.camera_models import COLMAP_MODELS
 
 @dataclass(frozen=True)
 class ColmapCamera:
-    """One camera of ``cameras``: model name, image size and parameters."""
+    """One camera of ``cameras``: model name, image size and float64 parameters in the model's order."""
 
     camera_id: int
     model: str
     width: int
     height: int
     params: np.ndarray
-    """float64 (n,) in the model's order."""
 
 
 @dataclass(frozen=True)
 class ColmapImage:
-    """One registered image of ``images``: its world-to-camera pose, camera, file name and observed points."""
+    """One registered image of ``images``: world-to-camera quaternion (w, x, y, z) and translation (float64), camera,
+    file name (relative to the image folder) and int64 ids of the 3D points its keypoints observe."""
 
     image_id: int
     qvec: np.ndarray
-    """float64 (4,) rotation quaternion (w, x, y, z), world to camera."""
     tvec: np.ndarray
-    """float64 (3,) translation, world to camera."""
     camera_id: int
     name: str
-    """Image file name relative to the image folder."""
     point3d_ids: np.ndarray
-    """int64 (n,) ids of the 3D points its keypoints observe (-1 entries removed)."""
 
 
 @dataclass(frozen=True)
 class ColmapModel:
-    """A whole sparse model."""
+    """A whole sparse model (points: id -> float64 (3,) world position)."""
 
     cameras: dict[int, ColmapCamera]
     images: dict[int, ColmapImage]
     points: dict[int, np.ndarray]
-    """Point id -> float64 (3,) world position."""
-    folder: Path
-    """Where it was read from (error messages)."""
 
 
 def qvec_to_rotation(q: np.ndarray) -> np.ndarray:
@@ -91,6 +81,7 @@ class _Bytes:
         self.path, self.data, self.at = path, path.read_bytes(), 0
 
     def read(self, fmt: str) -> tuple:
+        """The next values of struct format ``fmt``; ValueError when the file ends first."""
         size = struct.calcsize("<" + fmt)
         if self.at + size > len(self.data):
             raise ValueError(f"{self.path}: ends after {len(self.data)} bytes in the middle of a record (truncated?)")
@@ -99,6 +90,7 @@ class _Bytes:
         return values
 
     def name(self) -> str:
+        """The next NUL-terminated UTF-8 string."""
         end = self.data.find(b"\0", self.at)
         if end < 0:
             raise ValueError(f"{self.path}: an image name has no terminating NUL byte (truncated?)")
@@ -153,22 +145,19 @@ def _read_txt(folder: Path) -> tuple[dict, dict, dict]:
         except (IndexError, ValueError):
             raise ValueError(f"{path}: line {line!r} is not CAMERA_ID MODEL WIDTH HEIGHT PARAMS...") from None
     path = folder / "images.txt"
-    lines = _data_lines(path)
-    i = 0
-    while i < len(lines):
-        if not lines[i]:
-            i += 1
+    lines = iter(_data_lines(path))
+    for line in lines:
+        if not line:
             continue
-        parts, obs = lines[i].split(), (lines[i + 1].split() if i + 1 < len(lines) else [])
+        parts, obs = line.split(), next(lines, "").split()  # an image's line, then its points' line
         try:
             ids = np.array([int(v) for v in obs[2::3]], dtype=np.int64)
             images[int(parts[0])] = ColmapImage(int(parts[0]), np.array([float(v) for v in parts[1:5]]),
                                                 np.array([float(v) for v in parts[5:8]]), int(parts[8]),
                                                 " ".join(parts[9:]), ids[ids >= 0])
         except (IndexError, ValueError):
-            raise ValueError(f"{path}: line {lines[i]!r} is not IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME "
+            raise ValueError(f"{path}: line {line!r} is not IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME "
                              "(followed by a line of X Y POINT3D_ID triples)") from None
-        i += 2
     path = folder / "points3D.txt"
     for line in filter(None, _data_lines(path)):
         parts = line.split()
@@ -180,8 +169,7 @@ def _read_txt(folder: Path) -> tuple[dict, dict, dict]:
 
 
 def find_model(src: Path) -> Path:
-    """The sparse model folder of a capture: ``src`` itself, ``src/sparse/0`` or ``src/sparse`` (first holding
-    ``cameras.bin`` or ``cameras.txt``); FileNotFoundError naming the places otherwise."""
+    """The sparse model folder of a capture (the first holding cameras.bin/.txt); FileNotFoundError else."""
     for folder in (src, src / "sparse" / "0", src / "sparse", src / "colmap" / "sparse" / "0"):
         if (folder / "cameras.bin").is_file() or (folder / "cameras.txt").is_file():
             return folder
@@ -203,4 +191,4 @@ def read_model(folder: Path) -> ColmapModel:
                              "cameras does not list")
     if not images:
         raise ValueError(f"{folder}: the model registers no image")
-    return ColmapModel(cameras, images, points, folder)
+    return ColmapModel(cameras, images, points)

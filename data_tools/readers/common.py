@@ -1,8 +1,5 @@
-"""Geometry and file helpers shared by the dataset readers (ScanNet export, Replica renders).
-
-Pixel-centre convention (see ``scene.py``): pixel (u, v) is centred at (u, v) in K's coordinates and
-covers [u - 0.5, u + 0.5). Resizing an image by ``s`` along an axis therefore maps a coordinate as
-``u' + 0.5 = s * (u + 0.5)``.
+"""Geometry and file helpers shared by the dataset readers. Pixel (u, v) is centred at (u, v) in K's coordinates and
+covers [u - 0.5, u + 0.5), so resizing by ``s`` along an axis maps ``u' + 0.5 = s * (u + 0.5)``.
 """
 
 from __future__ import annotations
@@ -18,12 +15,8 @@ from sray.data_tools.png import decode_png
 
 
 def numbered_files(folder: Path, pattern: str, suffixes: tuple[str, ...]) -> dict[int, Path]:
-    """Files of ``folder`` whose stem matches ``pattern`` and whose suffix is in ``suffixes``, keyed by
-    the number they carry, in numeric order (natural sort: ``rgb_9`` before ``rgb_10``).
-
-    ``pattern`` is a regex with one group of digits (e.g. ``r"rgb_(\\d+)"``); other names are ignored.
-    Raises ValueError when two files carry the same number (e.g. ``3.jpg`` and ``3.png``).
-    """
+    """Files of ``folder`` whose stem matches ``pattern`` (a regex with one group of digits, e.g. ``r"rgb_(\\d+)"``)
+    and whose suffix is in ``suffixes``, by their number in numeric order; ValueError when two carry one number."""
     found: dict[int, Path] = {}
     regex = re.compile(rf"^{pattern}$")
     for path in sorted(folder.iterdir()):
@@ -66,10 +59,7 @@ def kept_view_ids(poses: dict[int, np.ndarray], frame_skip: int, src: Path, drop
 
 
 def scale_intrinsics(K: np.ndarray, src_hw: tuple[int, int], dst_hw: tuple[int, int]) -> np.ndarray:
-    """K (3, 3) of an image of size ``src_hw`` -> K of the same camera resampled to ``dst_hw``.
-
-    With s = dst / src per axis: f' = s f and c' = s (c + 0.5) - 0.5 (pixel-centre convention).
-    """
+    """K (3, 3) for ``src_hw`` resampled to ``dst_hw``: with s = dst / src, f' = s f, c' = s (c + 0.5) - 0.5."""
     sy, sx = dst_hw[0] / src_hw[0], dst_hw[1] / src_hw[1]
     out = np.array(K, dtype=np.float64)
     out[0, :2] *= sx
@@ -81,13 +71,9 @@ def scale_intrinsics(K: np.ndarray, src_hw: tuple[int, int], dst_hw: tuple[int, 
 
 def resample_nearest(image: np.ndarray, K_src: np.ndarray, K_dst: np.ndarray,
                      dst_hw: tuple[int, int], fill: int | float) -> np.ndarray:
-    """Resample ``image`` (H, W) seen through K_src into a camera K_dst of size ``dst_hw``.
-
-    Both cameras share optical centre and orientation, so the warp is the 2D affine map
-    K_src K_dst^-1. Each output pixel takes the source pixel whose square contains its centre
-    (nearest, exact under the pixel-centre convention); pixels mapping outside get ``fill``.
-    Returns an array (dst_h, dst_w) of the input dtype.
-    """
+    """``image`` (H, W) seen through K_src, resampled into a camera K_dst (same optical centre and orientation: the
+    2D affine warp K_src K_dst^-1) of size ``dst_hw``: each output pixel takes the source pixel whose square holds
+    its centre, ``fill`` outside. Returns (dst_h, dst_w) of the input dtype."""
     h, w = dst_hw
     warp = np.asarray(K_src, np.float64) @ np.linalg.inv(np.asarray(K_dst, np.float64))
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
@@ -126,10 +112,7 @@ def check_principal_point(K: np.ndarray, hw: tuple[int, int], what: str) -> None
 
 
 def nyu40_to_label(space: str) -> dict[int, int]:
-    """NYU40 id (1..40) -> label id in ``space`` (``nyu40``: id - 1; ``scannet20``: benchmark index).
-
-    NYU40 ids without a class in ``space`` are absent (callers map them to IGNORE_ID).
-    """
+    """NYU40 id (1..40) -> label id in ``space`` (``nyu40``: id - 1; ``scannet20``: benchmark index)."""
     if space == "nyu40":
         return {nyu: nyu - 1 for nyu in range(1, len(NYU40) + 1)}
     if space == "scannet20":

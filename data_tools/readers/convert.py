@@ -1,19 +1,6 @@
 """``sray data convert``: one source scene (any format of ``readers/registry.py``) -> one scene in sray layout.
-
-Splits (see docs/data.md, "Readers and validation"):
-
-* role ``train``: every ``holdout_every``-th view (positions k//2, k//2 + k, ...; k = 20 by
-  default) is held out as ``test`` for validation during training; ``train`` holds all the others.
-  ``holdout_every`` 0 puts every view in ``train``. (The procedural generator uses the same rule.)
-* role ``test`` (the paper's protocol): a window of 20 consecutive views in capture order (after
-  frame skipping; centred in the capture unless ``window_start`` is given), read as four blocks of
-  five ``[finetune, source, test, source, finetune]``: 8 source, 8 finetune, 4 test, each test view
-  between two source views (the generator's blocks too). Only the window is written.
-
-Nothing partial is published: the scene is written into a hidden staging folder, near/far are
-measured from its depth (``scene.scene_depth_bounds``: a test scene's source and finetune views
-only, a train scene's every view; a capture without depth maps brings them from its 3D points),
-it must pass ``check_scene``, and only then is it renamed into place and added to ``dataset.json``.
+Splits, bounds and publication (staging folder, ``check_scene``, rename, ``dataset.json``): docs/data.md,
+"Splits, bounds and publication".
 """
 
 from __future__ import annotations
@@ -41,7 +28,7 @@ class ConvertConfig:
     """What ``sray data convert`` converts, and how."""
 
     format: str
-    """Source format: a name in the reader registry (``readers/registry.py``: ``scannet``, ``replica``)."""
+    """Source format: a name in ``readers/registry.py``."""
     src: Path
     """The source scan / sequence folder."""
     out: Path
@@ -59,9 +46,8 @@ class ConvertConfig:
     depth_scale: float = 1000.0
     """Source depth PNG units per metre (1000 = millimetres, as both layouts store)."""
     options: dict[str, object] = field(default_factory=dict)
-    """Reader-specific side inputs by the reader's option names: ``{"tsv": ...}`` (ScanNet's
-    ``scannetv2-labels.combined.tsv``), ``{"classes": ...}`` (Replica's ``info_semantic.json``), ``{"scale":
-    metres per unit}`` (captures); a file left out is searched for next to the source."""
+    """Reader-specific side inputs by option name (``tsv``, ``classes``, ``scale``, ...); a file left out is
+    searched for next to the source."""
     holdout_every: int = 20
     """Train scenes: hold out every n-th view as ``test`` (0 = none)."""
     window_start: int | None = None
@@ -72,20 +58,15 @@ class ConvertConfig:
 
 @dataclass
 class ConvertReport:
-    """What a conversion produced."""
+    """What a conversion produced: the published scene folder, views written and per split, the measured near/far
+    bounds (m), and the source frames left out with the reason (invalid pose, missing file)."""
 
     scene_dir: Path
-    """The published scene folder."""
     n_views: int
-    """Views written."""
     splits: dict[str, int]
-    """Views per split."""
     near: float
-    """Measured near bound (m)."""
     far: float
-    """Measured far bound (m)."""
     dropped_frames: dict[str, str] = field(default_factory=dict)
-    """Source frames left out, with the reason (invalid pose, missing file)."""
 
 
 def default_name(src: Path) -> str:
@@ -100,18 +81,14 @@ def _open_source(cfg: ConvertConfig, name: str) -> Scene:
     reader = get_reader(cfg.format)
     unknown = sorted(set(cfg.options) - {o.name for o in reader.options})
     if unknown:
-        raise ValueError(f"options {unknown} are not inputs of the {reader.name} reader; "
-                         f"it takes {[o.name for o in reader.options]}")
-    return reader.load()(cfg.src, name=name, label_space=cfg.label_space, depth_scale=cfg.depth_scale,
-                         size_hw=cfg.size_hw or reader.size_hw, frame_skip=cfg.frame_skip or reader.frame_skip,
-                         **cfg.options)
+        raise ValueError(f"options {unknown} are not inputs of the {reader.name} reader; it takes "
+                         f"{[o.name for o in reader.options]}")
+    return reader.load()(cfg.src, name=name, label_space=cfg.label_space, depth_scale=cfg.depth_scale, **cfg.options,
+                         size_hw=cfg.size_hw or reader.size_hw, frame_skip=cfg.frame_skip or reader.frame_skip)
 
 
 def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = None) -> ConvertReport:
-    """Convert one source scene into ``cfg.out`` (see the module docstring); returns the report.
-
-    ``on_view`` is called after each converted view with the number of views to convert (progress bars).
-    """
+    """Convert one source scene into ``cfg.out`` (module doc); ``on_view(n_views)`` is called after each view."""
     name = cfg.name or default_name(cfg.src)
     if not name or "." in name or "/" in name or name.startswith("-"):
         raise ValueError(f"scene name {name!r} must be non-empty, without '.' or '/'; pass --name")
@@ -157,6 +134,5 @@ def convert_scene(cfg: ConvertConfig, on_view: Callable[[int], None] | None = No
         shutil.rmtree(staging, ignore_errors=True)
     others = {p.name for p in list_scenes(out) if not p.name.startswith(".")}
     write_dataset_index(out, sorted(others | {name}))
-    return ConvertReport(scene_dir=target, n_views=len(meta.view_ids),
-                         splits={k: len(v) for k, v in meta.splits.items()}, near=meta.near, far=meta.far,
-                         dropped_frames=dict(meta.extra.get("dropped_frames", {})))
+    return ConvertReport(target, len(meta.view_ids), {k: len(v) for k, v in meta.splits.items()}, meta.near,
+                         meta.far, dict(meta.extra.get("dropped_frames", {})))

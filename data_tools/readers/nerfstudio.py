@@ -1,20 +1,7 @@
-"""Reader: a nerfstudio capture (``transforms.json`` as ``ns-process-data`` writes it), without labels.
-
-Expected layout (``SRC`` is the folder holding ``transforms.json``, or the file itself)::
-
-    SRC/transforms.json   camera fields shared at the top level or per frame, and "frames"
-    SRC/<file_path>       each frame's image (paths relative to the json's folder)
-    SRC/<depth_file_path> optional per-frame depth (16-bit PNG or .npy), --depth-scale units per metre
-    SRC/<ply_file_path>   optional 3D points (e.g. sparse_pc.ply), in the same world as the poses
-
-Fields: ``fl_x``, ``fl_y``, ``cx``, ``cy``, ``w``, ``h``, ``k1 k2 k3 k4 p1 p2`` and ``camera_model``
-(``OPENCV``, ``OPENCV_FISHEYE`` or ``PINHOLE``; default OPENCV), a frame's own value winning over the
-top level (``camera_models.nerfstudio_camera``: principal point shifted by -0.5 to sray's pixel centres).
-``transform_matrix`` is a camera-to-world in OpenGL/Blender axes (x right, y up, z backward); sray's OpenCV
-axes flip y and z: ``c2w_opencv = transform_matrix @ diag(1, -1, -1, 1)``. ``applied_transform`` (the world
-change ns-process-data made) needs no undoing: any rigid world frame will do, so it is only recorded.
-Frames are taken in ``file_path`` order. Scale: ``--scale``, or measured from the depth maps against the
-``ply_file_path`` points (``capture_geometry.py``).
+"""Reader: a nerfstudio capture (``transforms.json`` as ``ns-process-data`` writes it, images, optional depth maps
+and ``ply_file_path`` points), without labels. ``transform_matrix`` is an OpenGL camera-to-world:
+``c2w_opencv = transform_matrix @ diag(1, -1, -1, 1)``; ``applied_transform`` is only recorded. Frames in
+``file_path`` order. Conventions: docs/capture.md.
 """
 
 from __future__ import annotations
@@ -62,13 +49,9 @@ def frame_c2w(frame: dict, where: str) -> np.ndarray:
     return m @ OPENGL_TO_OPENCV
 
 
-def read_nerfstudio(src: Path, name: str, label_space: str = "scannet20",
-                    size_hw: tuple[int, int] | None = (240, 320),
+def read_nerfstudio(src: Path, name: str, label_space: str = "scannet20", size_hw: tuple[int, int] | None = (240, 320),
                     frame_skip: int = 1, depth_scale: float = 1000.0, scale: float | None = None) -> Scene:
-    """Open a nerfstudio capture as an unlabelled canonical scene (views load lazily); see the module doc.
-
-    ``scale``: metres per capture unit (``--scale``); ``depth_scale``: depth file units per metre (1000: mm).
-    """
+    """Open a nerfstudio capture as an unlabelled scene (views load lazily); ``scale``: ``--scale``."""
     src = Path(src)
     path = src if src.suffix == ".json" else src / "transforms.json"
     root = path.parent

@@ -1,19 +1,12 @@
-"""The reader registry: every source format ``sray data convert`` reads, with its defaults and options.
-
-``readers/convert.py`` opens sources through :data:`READERS`, and ``sray data convert``
-(``jobs/data/convert.py``) takes its ``--format`` choices, its reader-specific flags and the
-defaults in its help from here, so nothing else lists the formats. This module imports neither
-numpy nor OpenCV: the CLI builds its parser from it, and a reader's module is imported only when
-that reader is used.
-
-Adding a format: a module in this folder whose reader is called as ``read(src, name=..., label_space=...,
-size_hw=..., frame_skip=..., depth_scale=..., **options)`` and returns a canonical
-:class:`~sray.data_tools.scene.Scene`, plus one :class:`Reader` entry below (and its section in
-docs/data.md, "Readers and validation").
+"""The reader registry: every source format ``sray data convert`` reads, with its defaults and options; the CLI builds
+its parser from it, so it imports neither numpy nor OpenCV (a reader's module is imported when used). A new format:
+a module here whose ``read_<module>(src, name=..., label_space=..., size_hw=..., frame_skip=..., depth_scale=...,
+**options)`` returns a canonical ``Scene``, plus a :class:`Reader` entry (docs/data.md, "Readers and validation").
 """
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,9 +24,8 @@ class ReaderOption:
     """A side input only one reader takes (a file path), offered as ``--<name>`` by ``sray data convert``."""
 
     name: str
-    """Keyword of the reader function and key of ``ConvertConfig.options`` (``tsv``, ``classes``). Every
-    option is a flag of the one ``sray data convert`` command, so readers share a name only when they take
-    the same file (both ScanNet readers take ``tsv``)."""
+    """Keyword of the read function and key of ``ConvertConfig.options``; a flag of the one ``sray data convert``
+    command, so readers share a name only for the same file (both ScanNet readers' ``tsv``)."""
     help: str
     """What the file is and where the reader looks when it is not given (CLI help)."""
     type: Callable[[str], object] = Path
@@ -58,39 +50,9 @@ class Reader:
     """Reader-specific side inputs."""
 
 
-def _load_scannet() -> ReadFunction:
-    """The ScanNet reader, imported on use."""
-    from sray.data_tools.readers.scannet import read_scannet
-
-    return read_scannet
-
-
-def _load_scannet_sens() -> ReadFunction:
-    """The raw ScanNet (.sens + label zip) reader, imported on use."""
-    from sray.data_tools.readers.scannet_sens import read_scannet_sens
-
-    return read_scannet_sens
-
-
-def _load_replica() -> ReadFunction:
-    """The Replica reader, imported on use."""
-    from sray.data_tools.readers.replica import read_replica
-
-    return read_replica
-
-
-def _load_nerfstudio() -> ReadFunction:
-    """The nerfstudio (transforms.json) capture reader, imported on use."""
-    from sray.data_tools.readers.nerfstudio import read_nerfstudio
-
-    return read_nerfstudio
-
-
-def _load_colmap() -> ReadFunction:
-    """The COLMAP (sparse model + images) capture reader, imported on use."""
-    from sray.data_tools.readers.colmap import read_colmap
-
-    return read_colmap
+def _lazy(module: str) -> Callable[[], ReadFunction]:
+    """A ``Reader.load`` importing ``readers.<module>`` on first use and returning its ``read_<module>``."""
+    return lambda: getattr(importlib.import_module(f"sray.data_tools.readers.{module}"), f"read_{module}")
 
 
 SCALE_OPTION = ReaderOption("scale", "metres per capture unit (default: measured from metric depth maps against the "
@@ -99,24 +61,24 @@ SCALE_OPTION = ReaderOption("scale", "metres per capture unit (default: measured
 
 READERS: dict[str, Reader] = {r.name: r for r in (
     # 320x240 is the paper's size; every 10th frame of the 30 fps scan.
-    Reader(name="scannet", summary="ScanNet SensReader export + label-filt", load=_load_scannet,
+    Reader(name="scannet", summary="ScanNet SensReader export + label-filt", load=_lazy("scannet"),
            size_hw=(240, 320), frame_skip=10,
            options=(ReaderOption("tsv", "scannetv2-labels.combined.tsv (default: searched next to and above SRC)"),)),
     # The same scan read raw: <scan>.sens and <scan>_2d-label-filt.zip, no export or unzip step.
     Reader(name="scannet-sens", summary="raw ScanNet scan: <scan>.sens + <scan>_2d-label-filt.zip",
-           load=_load_scannet_sens, size_hw=(240, 320), frame_skip=10,
+           load=_lazy("scannet_sens"), size_hw=(240, 320), frame_skip=10,
            options=(ReaderOption("tsv", "scannetv2-labels.combined.tsv (default: searched next to and above SRC)"),
                     ReaderOption("labels", "<scan>_2d-label-filt.zip (default: the one such zip in SRC)"))),
     # The rendered size (640x480 in Semantic-NeRF's release, the paper's size); every 5th frame.
-    Reader(name="replica", summary="Replica as rendered for Semantic-NeRF", load=_load_replica,
+    Reader(name="replica", summary="Replica as rendered for Semantic-NeRF", load=_lazy("replica"),
            size_hw=None, frame_skip=5,
            options=(ReaderOption("classes", "class table, e.g. Replica/<scene>/habitat/info_semantic.json "
                                             "(default: SRC/info_semantic.json or SRC/../info_semantic.json)"),)),
     # Captures without labels (inference only): 320x240 like the paper's scans; every frame (already sparse).
     Reader(name="nerfstudio", summary="nerfstudio capture: transforms.json + images (+ depth), no labels",
-           load=_load_nerfstudio, size_hw=(240, 320), frame_skip=1, options=(SCALE_OPTION,)),
+           load=_lazy("nerfstudio"), size_hw=(240, 320), frame_skip=1, options=(SCALE_OPTION,)),
     Reader(name="colmap", summary="COLMAP capture: sparse/0/{cameras,images,points3D}.{bin,txt} + images/, no labels",
-           load=_load_colmap, size_hw=(240, 320), frame_skip=1,
+           load=_lazy("colmap"), size_hw=(240, 320), frame_skip=1,
            options=(SCALE_OPTION, ReaderOption("images", "image folder (default: SRC/images)"),
                     ReaderOption("sparse", "model folder (default: SRC, SRC/sparse/0, SRC/sparse or "
                                            "SRC/colmap/sparse/0, the first holding cameras.bin/.txt)"))),

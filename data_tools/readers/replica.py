@@ -1,25 +1,7 @@
-"""Reader: Replica sequences as rendered for Semantic-NeRF (Habitat-Sim renders of the Replica meshes).
-
-Expected layout (``SRC`` is one rendered sequence, e.g. ``Replica_Dataset/room_0/Sequence_1``)::
-
-    SRC/rgb/rgb_<i>.png                      8-bit colour
-    SRC/depth/depth_<i>.png                  16-bit depth, ``depth_scale`` units per metre (mm)
-    SRC/semantic_class/semantic_class_<i>.png  Replica class ids (0 = void)
-    SRC/traj_w_c.txt                         row i: camera-to-world of frame i, 16 numbers, row-major
-
-Axes: the rows of ``traj_w_c.txt`` are T_wc with an OpenCV camera (x right, y down, z forward) in
-Replica's z-up world. Semantic-NeRF's renderer converts each row to Habitat's OpenGL camera in its
-y-up frame only to place the simulator's agent, and its trainer casts rays from these rows with the
-"opencv" convention; so no axis change is needed here and none is applied.
-
-Intrinsics: a 90 degree horizontal field of view and square pixels, so fx = fy = W / (2 tan 45°) = W/2,
-cx = (W - 1) / 2, cy = (H - 1) / 2 (pixel-centre convention).
-
-Class ids: the renderer writes the class ids of the scene's Replica ``info_semantic.json``. That
-table is not part of the renders, so the user supplies it (``classes``; by default
-``SRC/info_semantic.json`` or ``SRC/../info_semantic.json``). Names map to NYU40 through
-:data:`REPLICA_TO_NYU40` (NYU40 names, hence all ScanNet-20 names, map to themselves) and on to the
-label space; names without a match become IGNORE_ID and are listed in ``meta.extra``.
+"""Reader: a Replica sequence as rendered for Semantic-NeRF (``rgb/``, ``depth/``, ``semantic_class/``,
+``traj_w_c.txt``: OpenCV camera-to-world rows, no axis change; fx = fy = W/2, cx = (W - 1) / 2, cy = (H - 1) / 2).
+Class ids -> names by the scene's ``info_semantic.json`` -> NYU40 by :data:`REPLICA_TO_NYU40` -> label space.
+Layout and rules: docs/data.md, "Replica as rendered for Semantic-NeRF".
 """
 
 from __future__ import annotations
@@ -31,49 +13,31 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import NYU40, SCANNET20, class_names
-from sray.data_tools.readers.common import (
-    kept_view_ids,
-    numbered_files,
-    nyu40_to_label,
-    read_depth_m,
-    read_image,
-    read_rgb8,
-    resample_nearest,
-    resize_rgb,
-    scale_intrinsics,
-)
+from sray.data_tools.readers.common import (kept_view_ids, numbered_files, nyu40_to_label, read_depth_m, read_image,
+                                            read_rgb8, resample_nearest, resize_rgb, scale_intrinsics)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
 CLASS_FILE = "info_semantic.json"
 
-REPLICA_TO_NYU40: dict[str, str | None] = {
-    "backpack": "bag", "handbag": "bag", "base cabinet": "cabinet", "wall cabinet": "cabinet",
-    "wardrobe": "cabinet", "book": "books", "countertop": "counter", "cushion": "pillow",
-    "nightstand": "night stand", "shelf": "shelves", "rack": "shelves", "rug": "floor mat",
-    "mat": "floor mat", "cloth": "clothes", "clothing": "clothes", "set of clothing": "clothes",
-    "scarf": "clothes", "paper towel": "towel", "tissue paper": "paper", "tv screen": "television",
-    "monitor": "television", "stool": "chair", "beanbag": "otherfurniture", "bench": "otherfurniture",
-    "plant stand": "otherfurniture", "tv stand": "otherfurniture", "beam": "otherstructure",
-    "pillar": "otherstructure", "pipe": "otherstructure", "panel": "otherstructure",
-    "handrail": "otherstructure", "stair": "otherstructure", "vent": "otherstructure",
-    "shower stall": "otherstructure", "basket": "otherprop", "bike": "otherprop", "bin": "otherprop",
-    "blanket": "otherprop", "comforter": "otherprop", "bottle": "otherprop", "bowl": "otherprop",
-    "camera": "otherprop", "candle": "otherprop", "chopping board": "otherprop", "clock": "otherprop",
-    "coaster": "otherprop", "computer keyboard": "otherprop", "cooktop": "otherprop", "cup": "otherprop",
-    "desk organizer": "otherprop", "desktop computer": "otherprop", "exercise ball": "otherprop",
-    "faucet": "otherprop", "hair dryer": "otherprop", "indoor plant": "otherprop",
-    "kitchen utensil": "otherprop", "knife block": "otherprop", "laptop": "otherprop",
-    "major appliance": "otherprop", "small appliance": "otherprop", "microwave": "otherprop",
-    "mouse": "otherprop", "pan": "otherprop", "phone": "otherprop", "plate": "otherprop",
-    "pot": "otherprop", "remote control": "otherprop", "sculpture": "otherprop", "shoe": "otherprop",
-    "switch": "otherprop", "table runner": "otherprop", "tablet": "otherprop", "toothbrush": "otherprop",
-    "umbrella": "otherprop", "utensil holder": "otherprop", "vase": "otherprop", "wall plug": "otherprop",
-    "logo": "otherprop", "undefined": None, "void": None, "other leaf": None, "anonymize text": None,
-    "anonymize picture": None,
+_REPLICA_NAMES: dict[str | None, str] = {
+    "bag": "backpack, handbag", "cabinet": "base cabinet, wall cabinet, wardrobe", "books": "book",
+    "counter": "countertop", "pillow": "cushion", "night stand": "nightstand", "shelves": "shelf, rack",
+    "floor mat": "rug, mat", "clothes": "cloth, clothing, set of clothing, scarf", "towel": "paper towel",
+    "paper": "tissue paper", "television": "tv screen, monitor", "chair": "stool",
+    "otherfurniture": "beanbag, bench, plant stand, tv stand",
+    "otherstructure": "beam, pillar, pipe, panel, handrail, stair, vent, shower stall",
+    "otherprop": "basket, bike, bin, blanket, comforter, bottle, bowl, camera, candle, chopping board, clock, coaster, "
+                 "computer keyboard, cooktop, cup, desk organizer, desktop computer, exercise ball, faucet, "
+                 "hair dryer, indoor plant, kitchen utensil, knife block, laptop, major appliance, small appliance, "
+                 "microwave, mouse, pan, phone, plate, pot, remote control, sculpture, shoe, switch, table runner, "
+                 "tablet, toothbrush, umbrella, utensil holder, vase, wall plug, logo",
+    None: "undefined, void, other leaf, anonymize text, anonymize picture",
 }
-"""Replica class name (normalised: lower case, '-' and '_' as spaces) -> NYU40 class name or None
-(ignore). Our judgement by meaning; names that are already NYU40 names (wall, floor, chair, door,
-...) map to themselves and are not repeated here."""
+"""NYU40 class name (None: ignore) -> the normalised Replica class names mapped to it, by meaning; NYU40 names
+(wall, floor, chair, ...) map to themselves and are not listed."""
+
+REPLICA_TO_NYU40: dict[str, str | None] = {r: n for n, names in _REPLICA_NAMES.items() for r in names.split(", ")}
+"""Replica class name (normalised) -> NYU40 class name or None (ignore)."""
 
 REPLICA_TO_SCANNET20: dict[str, str | None] = {
     **{n: (n if n in SCANNET20 else None) for n in NYU40},
@@ -126,10 +90,10 @@ def find_class_table(src: Path) -> Path:
     for path in candidates:
         if path.is_file():
             return path
-    raise FileNotFoundError(
-        f"no class table for {src / 'semantic_class'} (looked for {', '.join(map(str, candidates))}); copy the "
-        f"scene's Replica/<scene>/habitat/{CLASS_FILE} there or pass --classes PATH (a JSON {{id: name}} or a "
-        "TSV with columns id and name also works)")
+    raise FileNotFoundError(f"no class table for {src / 'semantic_class'} (looked for "
+                            f"{', '.join(map(str, candidates))}); copy the scene's Replica/<scene>/habitat/"
+                            f"{CLASS_FILE} there or pass --classes PATH (a JSON {{id: name}} or a TSV with columns id "
+                            "and name also works)")
 
 
 def class_lut(table: dict[int, str], space: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -153,14 +117,10 @@ def class_lut(table: dict[int, str], space: str) -> tuple[np.ndarray, np.ndarray
 
 
 def read_replica(src: Path, name: str, classes: Path | None = None, label_space: str = "scannet20",
-                 size_hw: tuple[int, int] | None = None, frame_skip: int = 5,
-                 depth_scale: float = 1000.0) -> Scene:
-    """Open a Semantic-NeRF Replica rendering as a canonical scene (views load lazily).
-
-    Frames without a depth or semantic image, or with a non-finite trajectory row, are dropped and
-    listed in ``meta.extra["dropped_frames"]``; then every ``frame_skip``-th remaining frame is kept.
-    ``size_hw`` None keeps the rendered resolution (640 x 480 in Semantic-NeRF's release).
-    """
+                 size_hw: tuple[int, int] | None = None, frame_skip: int = 5, depth_scale: float = 1000.0) -> Scene:
+    """Open a Semantic-NeRF Replica rendering as a canonical scene (views load lazily). Frames without a depth or
+    semantic image or with a non-finite trajectory row go to ``meta.extra["dropped_frames"]``; every
+    ``frame_skip``-th remaining one is kept. ``size_hw`` None keeps the rendered size (640 x 480)."""
     src = Path(src)
     for folder in ("rgb", "depth", "semantic_class"):
         if not (src / folder).is_dir():
@@ -218,13 +178,10 @@ def read_replica(src: Path, name: str, classes: Path | None = None, label_space:
         if unknown.size:
             raise ValueError(f"{sems[frame]}: class ids {unknown.tolist()} are not listed in {classes}; "
                              "is that the class table of this scene?")
-        return View(view_id=view_id, rgb=resize_rgb(rgb, hw),
-                    depth=resample_nearest(depth, K_native, K, hw, 0.0),
-                    label=lut[resample_nearest(sem, K_native, K, hw, 0)],
-                    K=K, c2w=poses[frame])
+        return View(view_id=view_id, rgb=resize_rgb(rgb, hw), depth=resample_nearest(depth, K_native, K, hw, 0.0),
+                    label=lut[resample_nearest(sem, K_native, K, hw, 0)], K=K, c2w=poses[frame])
 
-    meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space),
-                     view_ids=list(ids), splits={}, role="train",
-                     extra={"source_format": "replica", "source": str(src), "class_table": str(classes),
-                            "ignored_classes": ignored, "frame_skip": frame_skip, "dropped_frames": dropped})
+    meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space), view_ids=list(ids),
+                     splits={}, extra={"source_format": "replica", "source": str(src), "class_table": str(classes),
+                                       "ignored_classes": ignored, "frame_skip": frame_skip, "dropped_frames": dropped})
     return Scene(meta=meta, read_view=read_view)

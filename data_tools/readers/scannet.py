@@ -1,19 +1,7 @@
-"""Reader: ScanNet frames as exported by ScanNet's SensReader plus the unzipped 2D label images.
-
-Expected layout (``SRC`` is one scan's export folder)::
-
-    SRC/color/<i>.jpg            colour (1296 x 968 in ScanNet); <i>.png is accepted too (lossless)
-    SRC/depth/<i>.png            16-bit depth in millimetres (640 x 480), depth camera
-    SRC/pose/<i>.txt             4 x 4 camera-to-world, OpenCV axes; invalid frames hold -inf rows
-    SRC/intrinsic/intrinsic_color.txt, intrinsic_depth.txt    4 x 4, K in the top-left 3 x 3
-    SRC/label-filt/<i>.png       16-bit raw ScanNet label ids, colour camera (from *_2d-label-filt.zip)
-
-Raw ids go through the user's ``scannetv2-labels.combined.tsv`` (columns ``id`` and ``nyu40id``,
-found by header name) to NYU40 and on to the requested label space; everything else becomes
-IGNORE_ID. Colour is area-resized to the target size, K scaled under the pixel-centre convention;
-depth and labels are resampled into that same target camera with exact nearest sampling (depth and
-colour cameras share optical centre and orientation in the export, so this is a 2D warp between the
-two intrinsics).
+"""Reader: one ScanNet scan exported by ScanNet's SensReader with its ``label-filt/`` unzipped (``color/``,
+``depth/``, ``pose/``, ``intrinsic/``); raw label ids -> NYU40 -> label space through
+``scannetv2-labels.combined.tsv``, depth and labels resampled into the target colour camera.
+Layout and rules: docs/data.md, "ScanNet exported frames".
 """
 
 from __future__ import annotations
@@ -25,35 +13,19 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import class_names
-from sray.data_tools.readers.common import (
-    check_principal_point,
-    kept_view_ids,
-    numbered_files,
-    nyu40_to_label,
-    read_depth_m,
-    read_image,
-    read_rgb8,
-    resample_nearest,
-    resize_rgb,
-    scale_intrinsics,
-)
+from sray.data_tools.readers.common import (check_principal_point, kept_view_ids, numbered_files, nyu40_to_label,
+                                            read_depth_m, read_image, read_rgb8, resample_nearest, resize_rgb,
+                                            scale_intrinsics)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
 TSV_NAME = "scannetv2-labels.combined.tsv"
-_FOLDER_FIX = {
-    "color": "export the .sens file with ScanNet's SensReader (--export_color_images)",
-    "depth": "export the .sens file with ScanNet's SensReader (--export_depth_images)",
-    "pose": "export the .sens file with ScanNet's SensReader (--export_poses)",
-    "intrinsic": "export the .sens file with ScanNet's SensReader (--export_intrinsics)",
-    "label-filt": "unzip <scan>_2d-label-filt.zip into SRC (it holds label-filt/<i>.png)",
-}
+_FOLDER_FIX = {folder: f"export the .sens file with ScanNet's SensReader (--export_{flag})" for folder, flag in
+               (("color", "color_images"), ("depth", "depth_images"), ("pose", "poses"), ("intrinsic", "intrinsics"))}
+_FOLDER_FIX["label-filt"] = "unzip <scan>_2d-label-filt.zip into SRC (it holds label-filt/<i>.png)"
 
 
 def read_label_tsv(tsv: Path) -> dict[int, int]:
-    """Raw ScanNet label id -> NYU40 id (0 = none) from ``scannetv2-labels.combined.tsv``.
-
-    Columns are found by header name (``id``, ``nyu40id``); errors name the file and the column.
-    """
+    """Raw ScanNet label id -> NYU40 id (0 = none) from ``scannetv2-labels.combined.tsv``."""
     tsv = Path(tsv)
     try:
         text = tsv.read_text()
@@ -122,12 +94,10 @@ def read_matrix4(path: Path) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FrameCameras:
-    """The colour and depth intrinsics of a scan, with where they were read (for errors)."""
+    """The colour and depth intrinsics (3, 3) of a scan at their images' resolutions, with where they were read."""
 
     K_color: np.ndarray
-    """(3, 3) colour camera intrinsics at the colour images' resolution."""
     K_depth: np.ndarray
-    """(3, 3) depth camera intrinsics at the depth images' resolution."""
     color_where: str
     depth_where: str
 
@@ -151,12 +121,11 @@ def frame_view(view_id: str, rgb: np.ndarray, depth_m: np.ndarray, raw_label: np
 def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str = "scannet20",
                  size_hw: tuple[int, int] | None = (240, 320), frame_skip: int = 10,
                  depth_scale: float = 1000.0) -> Scene:
-    """Open a ScanNet export as a canonical scene (views load lazily).
+    """Open a ScanNet export as a canonical scene (views load lazily, ids zero-padded frame numbers, no splits).
 
-    Frames without a depth, pose or label file, or whose pose holds -inf/NaN, are dropped and listed
-    in ``meta.extra["dropped_frames"]`` ({frame number: reason}); then every ``frame_skip``-th of the
-    remaining frames (natural order) is kept. ``size_hw`` None keeps the colour resolution. View ids
-    are zero-padded frame numbers. Splits are left empty (the converter assigns them).
+    Frames without a depth, pose or label file or with a -inf/NaN pose are dropped into
+    ``meta.extra["dropped_frames"]`` ({frame: reason}); every ``frame_skip``-th remaining frame (natural order)
+    is kept. ``size_hw`` None keeps the colour resolution.
     """
     src = Path(src)
     for folder, fix in _FOLDER_FIX.items():
@@ -172,9 +141,8 @@ def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str
     colors = numbered_files(src / "color", r"(\d+)", (".jpg", ".jpeg", ".png"))
     if not colors:
         raise FileNotFoundError(f"{src / 'color'}: no <i>.jpg or <i>.png frames; {_FOLDER_FIX['color']}")
-    others = {kind: numbered_files(src / folder, r"(\d+)", (suffix,))
-              for kind, folder, suffix in (("depth", "depth", ".png"), ("pose", "pose", ".txt"),
-                                           ("label", "label-filt", ".png"))}
+    others = {kind: numbered_files(src / folder, r"(\d+)", (suffix,)) for kind, folder, suffix in
+              (("depth", "depth", ".png"), ("pose", "pose", ".txt"), ("label", "label-filt", ".png"))}
     dropped: dict[str, str] = {}
     poses: dict[int, np.ndarray] = {}
     for frame in colors:
@@ -197,8 +165,7 @@ def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str
                           poses[frame], FrameCameras(K_color, K_depth, str(k_color_path), str(k_depth_path)),
                           size_hw, lut, str(others["label"][frame]))
 
-    meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space),
-                     view_ids=list(ids), splits={}, role="train",
-                     extra={"source_format": "scannet", "source": str(src), "label_tsv": str(tsv),
-                            "frame_skip": frame_skip, "dropped_frames": dropped})
+    meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space), view_ids=list(ids),
+                     splits={}, extra={"source_format": "scannet", "source": str(src), "label_tsv": str(tsv),
+                                       "frame_skip": frame_skip, "dropped_frames": dropped})
     return Scene(meta=meta, read_view=read_view)

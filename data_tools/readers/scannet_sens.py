@@ -1,25 +1,15 @@
-"""Reader: a raw ScanNet scan in one step, its ``<scan>.sens`` stream and ``<scan>_2d-label-filt.zip`` read
-directly (no SensReader export, no unzipping).
+"""Reader: a raw ScanNet scan, ``SRC/<scan>.sens`` and ``SRC/<scan>_2d-label-filt.zip`` (label-filt/<frame>.png,
+16-bit raw label ids) read directly, without SensReader export or unzipping.
 
-Expected layout (``SRC`` is one scan's folder, as ScanNet's download writes it)::
+The ``.sens`` layout (ScanNet's SensReader, little-endian): header ``uint32`` version (4); ``uint64`` n + n bytes
+sensor name; four ``float32`` 4 x 4 matrices (colour intrinsics, colour extrinsics, depth intrinsics, depth
+extrinsics); ``int32`` colour compression (0 raw, 1 PNG, 2 JPEG) and depth compression (0 raw uint16, 1 zlib
+uint16); ``uint32`` colour width, height, depth width, height; ``float32`` depth shift (units per metre); ``uint64``
+frame count. Each frame: ``float32`` 4 x 4 camera-to-world; ``uint64`` colour and depth timestamps and byte
+counts; the colour bytes; the depth bytes.
 
-    SRC/<scan>.sens                     the RGB-D stream (below)
-    SRC/<scan>_2d-label-filt.zip        label-filt/<frame>.png, 16-bit raw ScanNet label ids
-
-The ``.sens`` layout (ScanNet's SensReader documentation, little-endian): a header, then the frames.
-
-* header: ``uint32`` version (4); ``uint64`` n + n bytes sensor name; four ``float32`` 4 x 4 matrices
-  (colour intrinsics, colour extrinsics, depth intrinsics, depth extrinsics); ``int32`` colour
-  compression (0 raw, 1 PNG, 2 JPEG); ``int32`` depth compression (0 raw uint16, 1 zlib uint16);
-  ``uint32`` colour width, height, depth width, height; ``float32`` depth shift (units per metre);
-  ``uint64`` frame count;
-* each frame: a ``float32`` 4 x 4 camera-to-world; ``uint64`` colour and depth timestamps; ``uint64``
-  colour and depth byte counts; the colour bytes; the depth bytes.
-
-The file is streamed once to index its frames (poses and byte offsets; scans are gigabytes) and each
-view is then read on demand by seeking to its bytes. Frame selection, label mapping, resampling, errors
-and the near/far rule are those of the exported-frames reader (:mod:`sray.data_tools.readers.scannet`):
-the same content gives the same scene.
+The file is streamed once to index its frames (scans are gigabytes), each view read on demand by seeking. Frame
+selection, label mapping, resampling and errors are those of ``readers.scannet``: the same content, the same scene.
 """
 
 from __future__ import annotations
@@ -50,14 +40,12 @@ _FRAME_HEAD = struct.Struct("<16f4Q")
 
 @dataclass(frozen=True)
 class SensHeader:
-    """What the .sens header says about the whole scan."""
+    """What the .sens header says about the whole scan (intrinsics (3, 3) float64)."""
 
     version: int
     sensor: str
     K_color: np.ndarray
-    """(3, 3) float64 colour intrinsics."""
     K_depth: np.ndarray
-    """(3, 3) float64 depth intrinsics."""
     color_codec: int
     depth_codec: int
     color_hw: tuple[int, int]
@@ -69,10 +57,9 @@ class SensHeader:
 
 @dataclass(frozen=True)
 class SensFrame:
-    """Where one frame's bytes lie in the file, and its pose."""
+    """Where one frame's bytes lie in the file, and its pose (4, 4) float64 camera-to-world (-inf rows: invalid)."""
 
     c2w: np.ndarray
-    """(4, 4) float64 camera-to-world (-inf rows: an invalid pose)."""
     color_at: int
     color_bytes: int
     depth_at: int
@@ -80,6 +67,7 @@ class SensFrame:
 
 
 def _read(f: BinaryIO, n: int, path: Path, what: str) -> bytes:
+    """The next ``n`` bytes of ``f``; ValueError naming ``what`` when the file ends first."""
     data = f.read(n)
     if len(data) != n:
         raise ValueError(f"{path}: file ends inside the {what} ({len(data)} of {n} bytes); the .sens file is "
@@ -99,12 +87,10 @@ def read_sens_header(f: BinaryIO, path: Path) -> SensHeader:
     mats = np.frombuffer(_read(f, 4 * 16 * 4, path, "calibration matrices"), "<f4").reshape(4, 4, 4)
     color_codec, depth_codec, cw, ch, dw, dh, shift, n_frames = struct.unpack(
         "<iiIIIIfQ", _read(f, 4 * 7 + 8, path, "image sizes and codecs"))
-    if color_codec not in COLOR_CODECS:
-        raise ValueError(f"{path}: colour compression {color_codec} is not read here (readable: {COLOR_CODECS}); "
-                         "export the scan with ScanNet's SensReader and use --format scannet")
-    if depth_codec not in DEPTH_CODECS:
-        raise ValueError(f"{path}: depth compression {depth_codec} is not read here (readable: {DEPTH_CODECS}); "
-                         "export the scan with ScanNet's SensReader and use --format scannet")
+    for what, codec, readable in (("colour", color_codec, COLOR_CODECS), ("depth", depth_codec, DEPTH_CODECS)):
+        if codec not in readable:
+            raise ValueError(f"{path}: {what} compression {codec} is not read here (readable: {readable}); export the "
+                             "scan with ScanNet's SensReader and use --format scannet")
     if shift <= 0:
         raise ValueError(f"{path}: header depth shift is {shift}; it must be > 0 (ScanNet: 1000 units per metre)")
     return SensHeader(version, sensor, mats[0, :3, :3].astype(np.float64), mats[2, :3, :3].astype(np.float64),
@@ -166,11 +152,8 @@ def find_label_zip(src: Path) -> Path:
 def read_scannet_sens(src: Path, name: str, tsv: Path | None = None, labels: Path | None = None,
                       label_space: str = "scannet20", size_hw: tuple[int, int] | None = (240, 320),
                       frame_skip: int = 10, depth_scale: float = 1000.0, progress: bool = True) -> Scene:
-    """Open a raw ScanNet scan folder as a canonical scene (views load lazily; see the module doc).
-
-    ``depth_scale`` is ignored: the .sens header carries the depth shift. Frames without a label image or
-    with an invalid pose are dropped and listed in ``meta.extra["dropped_frames"]``.
-    """
+    """Open a raw ScanNet scan folder as a canonical scene (views load lazily). ``depth_scale`` is ignored (the
+    header has the depth shift); frames without a label image or valid pose go to ``extra["dropped_frames"]``."""
     src = Path(src)
     sens_files = sorted(src.glob("*.sens"))
     if len(sens_files) != 1:
@@ -213,9 +196,8 @@ def read_scannet_sens(src: Path, name: str, tsv: Path | None = None, labels: Pat
             raise ValueError(f"{label_zip}:{members[str(i)]}: not a readable PNG")
         return frame_view(view_id, rgb, depth, raw, poses[i], cameras, size_hw, lut, f"{label_zip}:{members[str(i)]}")
 
-    meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space),
-                     view_ids=list(ids), splits={}, role="train",
-                     extra={"source_format": "scannet-sens", "source": str(sens), "labels": str(label_zip),
+    meta = SceneMeta(name=name, label_space=label_space, class_names=class_names(label_space), view_ids=list(ids),
+                     splits={}, extra={"source_format": "scannet-sens", "source": str(sens), "labels": str(label_zip),
                             "label_tsv": str(tsv), "frame_skip": frame_skip, "dropped_frames": dropped,
                             "sensor": header.sensor, "depth_shift": header.depth_shift})
     return Scene(meta=meta, read_view=read_view)
