@@ -12,9 +12,10 @@ import dataclasses
 import typing
 from typing import Any
 
-CONFIG_VERSION = 2
+CONFIG_VERSION = 3
 """Format of stored configs. 1 (no ``format_version`` key): sray up to commit 7734061, with the flat ``data.val_*``
-and ``finetune.eval_*`` settings and the fields since removed; 2: the nested ``held_out`` sections."""
+settings; 2 (up to 7966ddf): the nested ``held_out`` sections; 3: without the fields removed since
+(``sray.platform.migrate.config_formats``)."""
 VERSION_KEY = "format_version"
 """Key of the format version in a stored config dict."""
 

@@ -57,7 +57,7 @@ class DataSettings:
     when the job starts and stored as ``model.class_weights``."""
     aug: Augmentation = field(default_factory=Augmentation)
     """Training-sample augmentation (``sray.data_tools.loader.augment``: source colour jitter and noise,
-    random source count, source resolution and query crops; every option off by default), set field by
+    random source count and source resolution; every option off by default), set field by
     field: ``--set data.aug.colour_ev=0.3``."""
 
     def __post_init__(self) -> None:

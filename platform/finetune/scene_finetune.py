@@ -133,11 +133,11 @@ def write_result(out_dir: Path, result: dict[str, Any]) -> Path:
 
 def scene_protocol(task: SceneTask, shared: SRayConfig, fast: FastRender | None = None) -> EvalProtocol:
     """How the job's held-out scores are made (``finetune.held_out``: its stride, its fixed sources ranked by the
-    shards' neighbour rule, given as the method's ``inputs``, else the shared checkpoint's with ``train_inputs``;
+    shards' neighbour rule, given as the method's ``inputs``, else the shared checkpoint's;
     rendered by the learner's ``fast`` mode or in full), or from no sources (per-scene models: Semantic-NeRF)."""
     ft, method = task.config.finetune, get_method(task.method)
     if method.uses_sources:
-        inputs = (method.inputs, "") if method.inputs else (shared.inputs, shared.train_inputs)  # (test, training)
+        inputs = (method.inputs, "") if method.inputs else (shared.inputs, "")  # (test, training)
         n_source = ft.held_out.sources(shared.n_source)
         return EvalProtocol.from_shards(Path(task.shards), n_source, ft.held_out.stride, *inputs).rendered_by(fast)
     return EvalProtocol.without_sources(ft.held_out.stride)

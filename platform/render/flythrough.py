@@ -43,13 +43,11 @@ PROTOCOL_FILE = "protocol.txt"
 """The protocol line beside the videos."""
 
 
-def flythrough_protocol(plan: FlythroughPlan, n_source: int, inputs: str, fast: FastRender | None,
-                        train_inputs: str = "") -> EvalProtocol:
+def flythrough_protocol(plan: FlythroughPlan, n_source: int, inputs: str, fast: FastRender | None) -> EvalProtocol:
     """How the frames are made: ``n_source`` sources per frame, top-ranked by the shards' neighbour rule,
-    whole images, the render mode of ``fast`` (None: full), the model's ``inputs`` and what its training read
-    (``train_inputs``; empty: the same as ``inputs``)."""
+    whole images, the render mode of ``fast`` (None: full), the model's ``inputs``."""
     where = str(plan.shards / "manifest.json")
-    return EvalProtocol.from_manifest(plan.manifest, n_source, 1, where, inputs, train_inputs).rendered_by(fast)
+    return EvalProtocol.from_manifest(plan.manifest, n_source, 1, where, inputs).rendered_by(fast)
 
 
 def _sample(plan: FlythroughPlan, index: int, picker: SourcePicker, ids: list[str]) -> SceneQuery:
@@ -75,7 +73,7 @@ class Flythrough:
                              f"the model predicts {net.cfg.n_classes}; render data of the model's label space")
         self.net, self.plan, self.fast, self.runtime = net.eval(), plan, fast, runtime
         self.picker = SourcePicker(plan.views, plan.meta, n_source)
-        self.protocol = flythrough_protocol(plan, n_source, net.cfg.inputs, fast, net.cfg.train_inputs)
+        self.protocol = flythrough_protocol(plan, n_source, net.cfg.inputs, fast)
         self.layout = panel_layout(plan.path.hw, len(names))
         self._encoded: tuple[list[str], torch.device, SourceSet] | None = None
 

@@ -129,19 +129,19 @@ def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra:
         if not trained and record.eval_model is None:
             continue
         if record.given_depth_of:  # its training read the depth only when it was trained on the scene with it
-            rows.append(_row(name, trained, "", record.inputs, "rgbd" if trained else checkpoint.train_inputs))
+            rows.append(_row(name, trained, "", record.inputs, "rgbd" if trained else checkpoint.inputs))
         elif not follows_checkpoint(name):
             rows.append(_row(name, trained, "", record.inputs or "rgb"))
         else:
-            rows.append(_row(name, trained, "", checkpoint.inputs, checkpoint.train_inputs))
+            rows.append(_row(name, trained, "", checkpoint.inputs))
             if not trained and no_cra is not None:
-                rows.append(_row(name, trained, "no-cra", no_cra.inputs, no_cra.train_inputs))
+                rows.append(_row(name, trained, "no-cra", no_cra.inputs))
     return rows
 
 
 def suite_rows(methods: list[str], modes: list[str], checkpoint: SRayConfig, no_cra: SRayConfig | None) -> list[Row]:
     """Every row of ``methods`` (registered names) in ``modes``, zero-shot rows first. ``checkpoint``: the S-Ray
-    checkpoint's model config (its ``inputs`` and ``train_inputs``); ``no_cra``: the no-CRA checkpoint's (None: none
+    checkpoint's model config (its ``inputs``); ``no_cra``: the no-CRA checkpoint's (None: none
     given, no row)."""
     unknown = [m for m in modes if m not in MODES]
     if unknown:

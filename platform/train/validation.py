@@ -33,11 +33,10 @@ GROUPS = {"val": "train", "zeroshot": "test"}
 
 def validation_protocol(cfg: TrainConfig) -> EvalProtocol:
     """How ``val/*`` and ``zeroshot/*`` are made (``data.held_out``): its fixed sources (0: ``model.n_source``) ranked
-    by the shards' neighbour rule, every ``stride``-th pixel, the model's ``model.inputs`` (and what its training
-    read: ``SRayConfig.train_inputs``, ``rgbd`` with the depth loss), its render."""
+    by the shards' neighbour rule, every ``stride``-th pixel, the model's ``model.inputs``, its render."""
     held_out = cfg.data.held_out
     return EvalProtocol.from_shards(Path(cfg.data.shards), held_out.sources(cfg.model.n_source), held_out.stride,
-                                    cfg.model.inputs, cfg.model.train_inputs).rendered_by(held_out.fast())
+                                    cfg.model.inputs).rendered_by(held_out.fast())
 
 
 def _mean(scores: list[dict[str, float]]) -> dict[str, float]:
