@@ -38,8 +38,8 @@ CKPT = Path("job") / "checkpoints" / "step_000000002"
 NERF = Path("fleet") / "scene0" / "semantic-nerf" / "semantic_nerf.safetensors"
 
 
-def _builder(fixture: Path = FIXTURE):  # the fixture's own builder module: its probe inputs and its tiny network
-    spec = importlib.util.spec_from_file_location("make_fixture", fixture / "make_fixture.py")
+def _builder():  # the 7734061 fixture's builder module: the probe inputs and tiny network of both fixtures
+    spec = importlib.util.spec_from_file_location("make_fixture", FIXTURE / "make_fixture.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -52,8 +52,8 @@ def old_job(tmp_path: Path) -> Path:
     return tmp_path / "old"
 
 
-def _render(net: SRayModel, fixture: Path = FIXTURE) -> dict[str, torch.Tensor]:
-    rgb, K, c2w, origins, dirs = _builder(fixture).probe_inputs()
+def _render(net: SRayModel) -> dict[str, torch.Tensor]:
+    rgb, K, c2w, origins, dirs = _builder().probe_inputs()
     with torch.no_grad():
         fine = net.render_rays(net.encode(rgb, K, c2w), origins, dirs, 0.5, 3.0, stratified=False)["fine"]
     return {k: fine[k] for k in ("logits", "rgb", "depth")}
@@ -206,9 +206,9 @@ def test_a_7966ddf_job_and_scene_artifact_are_refused_then_migrate_to_the_same_o
     want = torch.load(FIXTURE_2 / "expected.pt", weights_only=True)
     net, cfg = model_from_checkpoint(job_7966ddf / CKPT)
     nerf = load_semantic_nerf(job_7966ddf / NERF)
-    rgb, K, c2w, origins, dirs = _builder(FIXTURE_2).probe_inputs()
+    origins, dirs = _builder().probe_inputs()[3:]
     with torch.no_grad():
-        got = {"sray": _render(net, FIXTURE_2),
+        got = {"sray": _render(net),
                "semantic-nerf": nerf.render_rays(origins, dirs, 0.5, 3.0, stratified=False)["fine"]}
     for model, outputs in want.items():
         for key in outputs:
