@@ -19,7 +19,7 @@ is left out, so methods compare at equal training time. One process: bf16 autoca
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -185,8 +185,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
     clips = (SceneClips(learner.net, Path(task.shards), task.scene, task.clip_frames, cfg)
              if task.clip_frames and get_method(task.method).clips else None)
     if logger is not None:
-        logger.log_params(cfg.to_dict() | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
-                                           "protocol": protocol.to_json()})
+        logger.log_params(asdict(cfg) | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
+                                         "protocol": protocol.to_json()})
         logger.log_metrics({"attempt": task.attempt}, 0)
 
     curve: list[dict[str, float]] = []
