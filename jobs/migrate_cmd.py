@@ -1,7 +1,8 @@
 """``sray migrate PATH``: convert the stored artifacts of an earlier sray under PATH to today's format, once.
 
-Checkpoints, job configs, sweep records and 2D segmenter folders written up to commit 7734061 are refused by
-today's load paths with a line naming this command (``sray.platform.migrate.artifacts`` says what it converts).
+Checkpoints, job configs, sweep records, Semantic-NeRF scene artifacts and 2D segmenter folders of an earlier sray
+are refused by today's load paths with a line naming this command (``sray.platform.migrate.artifacts`` says what
+it converts).
 """
 
 from __future__ import annotations
@@ -13,9 +14,10 @@ from pathlib import Path
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``sray migrate``."""
-    p = sub.add_parser("migrate", help="convert checkpoints, job configs, sweeps and segmenters of an earlier sray",
+    p = sub.add_parser("migrate", help="convert the checkpoints, configs, sweeps, scene artifacts and "
+                       "segmenters of an earlier sray",
                        description="Convert every stored artifact of an earlier sray under PATH (a checkpoint folder, "
-                                   "a job folder, a sweep folder, a segmenter folder or any folder above them) to "
+                                   "a job, sweep, fleet or segmenter folder, or any folder above them) to "
                                    "today's format, in place and atomically; nothing is written unless all of them "
                                    "convert.")
     p.add_argument("path", type=Path, metavar="PATH", help="file or folder to convert (searched recursively)")
@@ -25,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Convert, print one line per artifact; exit 2 (nothing written) when an artifact cannot be converted."""
     from sray.platform.migrate.artifacts import find_conversions
-    from sray.platform.migrate.config_v1 import MigrationRefused
+    from sray.platform.migrate.config_formats import MigrationRefused
 
     try:
         conversions = find_conversions(args.path)

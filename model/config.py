@@ -49,8 +49,6 @@ class SRayConfig:
     """Widths of the geometry net's MLP on [mean, variance] (64 -> 32 -> 16, appendix L8)."""
     tau: float = 0.7
     """Bound of the semantic-aware weights: tau/m < w_i < 1/(tau m); tau = 1 is the plain mean."""
-    weight_margin: float = 1e-3
-    """Fraction of the weight range kept unused so the bounds stay strict in floating point (``semantic_weights``)."""
     min_source_depth: float = 1e-3
     """A projection is valid only at least this far (camera z, scene units) in front of the source camera."""
     lambda_sem: float = 1.0
@@ -61,12 +59,6 @@ class SRayConfig:
     """Weight of the auxiliary per-pixel cross-entropy on the source views' own labels, read off the encoder's
     feature maps by a linear head (``source_semantics``; a departure from the paper, docs/model.md); 0 (the
     paper) builds no head. The head exists only in training: rendering never reads it."""
-    lambda_depth: float = 0.0
-    """Weight of the training-time depth loss (``depth_loss``; a departure from the paper, docs/model.md): per
-    pass, the L1 distance between the rendered expected z-depth and the query pixel's ground-truth z-depth, in
-    units of the ray's depth range far - near, over the rays whose ground-truth depth is known. It reads the
-    training query's depth, never a test view's: evaluation stays RGB-only. 0 (the paper) leaves the loss
-    unchanged and the loader does not decode the query's depth."""
     ignore_id: int = 255
     """Label id of unlabelled pixels; never a prediction target."""
     class_weights: tuple[float, ...] = ()
@@ -107,8 +99,6 @@ class SRayConfig:
             raise bad("depth_band", f"is {self.depth_band}; it must be > 0 (metres)")
         if self.lambda_src_sem < 0:
             raise bad("lambda_src_sem", f"is {self.lambda_src_sem}; use 0 (no source-view head) or a positive weight")
-        if not self.lambda_depth >= 0:
-            raise bad("lambda_depth", f"is {self.lambda_depth}; use 0 (no depth loss) or a positive weight")
         if self.depth_freqs < 0:
             raise bad("depth_freqs", f"is {self.depth_freqs}; use 0 or more")
         for name in ("n_classes", "feat_dim", "encoder_width", "n_source", "n_coarse", "n_fine", "n_heads",
@@ -120,8 +110,6 @@ class SRayConfig:
                       f"and geo_hidden[-1] ({self.geo_hidden[-1]})")
         if not 0.0 < self.tau <= 1.0:
             raise bad("tau", f"is {self.tau}; it must lie in (0, 1] (1 = mean aggregation)")
-        if not 0.0 < self.weight_margin < 1.0:
-            raise bad("weight_margin", f"is {self.weight_margin}; it must lie in (0, 1)")
         if self.min_source_depth <= 0.0:
             raise bad("min_source_depth", f"is {self.min_source_depth}; it must be > 0")
         if self.class_weights and (len(self.class_weights) != self.n_classes or min(self.class_weights) <= 0):
@@ -129,13 +117,6 @@ class SRayConfig:
                       f"none or {self.n_classes} positive weights")
         if len(self.weight_hidden) != 2 or len(self.geo_hidden) != 2:
             raise bad("weight_hidden/geo_hidden", "must each hold exactly two widths")
-
-    @property
-    def train_inputs(self) -> str:
-        """What training read of its views besides colours and labels, in ``INPUTS``' words: ``rgbd`` when it read
-        ground-truth depth (the sources' with ``inputs='rgbd'``, the query's with ``lambda_depth`` > 0), else
-        ``rgb``. Evaluation reads ``inputs`` only."""
-        return "rgbd" if self.inputs == "rgbd" or self.lambda_depth > 0 else "rgb"
 
     @property
     def n_fine_total(self) -> int:

@@ -1,17 +1,12 @@
 """Training objective shared by S-Ray and the Semantic-NeRF baseline.
 
-``L_total = lambda_sem * L_sem + lambda_rgb * L_rgb [+ lambda_depth * L_depth]`` (the paper's appendix, as
-Semantic-NeRF, plus an optional depth term):
+``L_total = lambda_sem * L_sem + lambda_rgb * L_rgb`` (the paper's appendix, as Semantic-NeRF):
 
 - ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean cross-entropy over the labelled rays (target !=
   ignore id; 0 with a zero gradient when there is none); with ``class_weights`` w the weighted mean
   ``sum_i w[y_i] CE_i / sum_i w[y_i]``. Label ids outside [0, L) are refused by the loader, here only with
   ``SRAY_DEBUG_CHECKS=1`` (a device sync).
 - ``L_rgb = MSE(coarse rgb) + MSE(fine rgb)`` over all rays (photometric loss).
-- ``L_depth = L1(coarse depth) + L1(fine depth)`` over the rays of known ground-truth z-depth, in units of each
-  ray's far - near (``depth_loss``; a departure from the paper, docs/model.md): only when the config's
-  ``lambda_depth`` > 0 and the caller passes a ``DepthTarget``; otherwise the loss and its terms are exactly
-  the two-term loss's.
 Everything is computed in float32, whatever autocast region the caller is in.
 """
 
@@ -25,7 +20,6 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from .debug_checks import value_checks_enabled
-from .depth_loss import DepthTarget, depth_l1
 
 # Render passes in the order the loss sums them; see docs/CONTRACTS.md for the ``out`` structure.
 PASSES = ("coarse", "fine")
@@ -37,8 +31,7 @@ class LossSettings(Protocol):
     lambda_sem: float
     lambda_rgb: float
     ignore_id: int
-    # optional: ``class_weights: tuple[float, ...]`` (per-class CE weights; absent or empty = unweighted) and
-    # ``lambda_depth: float`` (weight of the depth term; absent = 0, as Semantic-NeRF's config)
+    # optional: ``class_weights: tuple[float, ...]`` (per-class CE weights; absent or empty = unweighted)
 
 
 @dataclass
@@ -53,8 +46,6 @@ class LossConfig:
     """Label id of unlabelled pixels; such rays are left out of the cross-entropy."""
     class_weights: tuple[float, ...] = ()
     """Per-class weights of the cross-entropy (empty = unweighted)."""
-    lambda_depth: float = 0.0
-    """Weight of the depth term (``depth_loss``; 0 = none, the paper's loss)."""
 
 
 class LossShares(NamedTuple):
@@ -65,8 +56,6 @@ class LossShares(NamedTuple):
     """Share of the batch's labelled weight (the semantic terms)."""
     rgb: Tensor
     """Share of the batch's rays (the photometric terms)."""
-    depth: Tensor | None = None
-    """Share of the batch's rays of known depth (the depth terms; needed only with a depth target)."""
 
 
 def psnr_from_mse(mse: Tensor) -> Tensor:
@@ -105,22 +94,17 @@ def render_loss(
     target_rgb: Tensor,
     cfg: LossSettings,
     shares: LossShares | None = None,
-    target_depth: DepthTarget | None = None,
 ) -> tuple[Tensor, dict[str, Tensor]]:
-    """Semantic + photometric (+ depth) loss of a model's ``render_rays`` output.
+    """Semantic + photometric loss of a model's ``render_rays`` output.
 
-    out: ``{"coarse": pass, "fine": pass}`` with ``logits`` (R, L), ``rgb`` (R, 3) and (read with a depth
-    target) ``depth`` (R,) per pass (a model without a fine pass may give ``coarse`` only); target_label: (R,)
-    int64 with ``cfg.ignore_id`` for unlabelled rays; target_rgb: (R, 3) in [0, 1].
+    out: ``{"coarse": pass, "fine": pass}`` with ``logits`` (R, L) and ``rgb`` (R, 3) per pass (a model
+    without a fine pass may give ``coarse`` only); target_label: (R,) int64 with ``cfg.ignore_id`` for
+    unlabelled rays; target_rgb: (R, 3) in [0, 1].
     Returns the scalar total and detached terms: ``sem_<pass>``, ``rgb_<pass>`` per pass,
     ``n_labelled`` and ``psnr`` (of the last pass's colour, the fine one when present).
 
-    target_depth: the rays' ground-truth z-depth and depth range (``depth_loss.DepthTarget``); with the config's
-    ``lambda_depth`` > 0 it adds ``lambda_depth`` times the depth term, logged as ``depth_<pass>``; None, or a
-    weight of 0, leaves the loss and its terms exactly the two-term loss's (a finetune that passes no depth).
-
     shares: for one piece of a larger batch (``piecewise_loss``), the piece's :class:`LossShares`; every
-    semantic, photometric and depth term is multiplied by its share, so the pieces' losses and terms sum to
+    semantic and photometric term is multiplied by its share, so the pieces' losses and terms sum to
     the batch's. ``psnr`` is then left out (the caller computes it from the summed colour term).
     """
     passes = [p for p in PASSES if p in out]
@@ -136,14 +120,6 @@ def render_loss(
         raise ValueError(
             f"sray.model.losses.render_loss: target_label must be int64, got {target_label.dtype}."
         )
-    lambda_depth = float(getattr(cfg, "lambda_depth", 0.0))
-    depth_target = target_depth if lambda_depth > 0 else None
-    if depth_target is not None and depth_target.depth.shape != (n_rays,):
-        raise ValueError(f"sray.model.losses.render_loss: target_depth holds {depth_target.depth.shape[0]} rays for "
-                         f"{n_rays} rendered rays; pass the depth of the same query pixels.")
-    if depth_target is not None and shares is not None and shares.depth is None:
-        raise ValueError("sray.model.losses.render_loss: a piece with a depth target needs its depth share "
-                         "(LossShares.depth).")
     mask = target_label != cfg.ignore_id  # (R,)
     n_labelled = mask.sum()
     bad = mask & ((target_label < 0) | (target_label >= n_classes)) if value_checks_enabled() else None
@@ -154,7 +130,7 @@ def render_loss(
     with torch.autocast(device_type=target_rgb.device.type, enabled=False):
         rgb_target = target_rgb.float()
         terms: dict[str, Tensor] = {}
-        sem_total = rgb_total = depth_total = rgb_target.new_zeros(())
+        sem_total = rgb_total = rgb_target.new_zeros(())
         weight = _class_weights(cfg, rgb_target.device)  # (L,) or None
         for name in passes:
             sem = labelled_cross_entropy(out[name]["logits"], target_label, cfg.ignore_id, weight)
@@ -163,15 +139,7 @@ def render_loss(
                 sem, rgb = sem * shares.sem, rgb * shares.rgb
             sem_total, rgb_total = sem_total + sem, rgb_total + rgb
             terms[f"sem_{name}"], terms[f"rgb_{name}"] = sem.detach(), rgb.detach()
-            if depth_target is not None:
-                depth = depth_l1(out[name]["depth"], depth_target)
-                if shares is not None:
-                    depth = depth * shares.depth
-                depth_total = depth_total + depth
-                terms[f"depth_{name}"] = depth.detach()
         total = cfg.lambda_sem * sem_total + cfg.lambda_rgb * rgb_total
-        if depth_target is not None:
-            total = total + lambda_depth * depth_total
     terms["n_labelled"] = n_labelled.detach()
     if shares is None:
         terms["psnr"] = psnr_from_mse(terms[f"rgb_{passes[-1]}"])

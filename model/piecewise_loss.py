@@ -12,7 +12,6 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from .depth_loss import DepthTarget
 from .losses import LossSettings, LossShares, labelled_weights, psnr_from_mse, render_loss
 from .source_set import SourceSet
 
@@ -44,21 +43,20 @@ def _piece_shares(weights: Tensor, pieces: list[slice]) -> Tensor:
 
 
 def piecewise_render_loss(render: PieceRenderer, src: SourceSet, params: list[nn.Parameter], n_rays: int,
-                          piece: int, target_label: Tensor, target_rgb: Tensor, cfg: LossSettings,
-                          target_depth: DepthTarget | None = None) -> tuple[Tensor, dict[str, Tensor]]:
+                          piece: int, target_label: Tensor, target_rgb: Tensor,
+                          cfg: LossSettings) -> tuple[Tensor, dict[str, Tensor]]:
     """``render_loss`` of ``n_rays`` rays rendered ``piece`` rays at a time, with gradients to ``src.feats``
     and ``params`` (the network's parameters outside the encoder) as if they had been rendered at once.
 
-    target_label (R,) int64, target_rgb (R, 3), target_depth (the depth term's target of the R rays, or None);
-    ``render(src, slice)`` renders the rays of that slice. Each piece's terms are scaled by its shares of the
-    batch (:class:`~sray.model.losses.LossShares`): of the labelled weight, of the rays, of the rays of known depth.
+    target_label (R,) int64, target_rgb (R, 3); ``render(src, slice)`` renders the rays of that slice. Each
+    piece's terms are scaled by its shares of the batch (:class:`~sray.model.losses.LossShares`): of the labelled
+    weight, of the rays.
     Returns the scalar loss (its backward delivers the gathered gradients) and the terms of
     ``render_loss`` for the whole batch. Without grad mode (or with nothing that needs a gradient) it
     returns the same values without keeping any gradient.
     """
     pieces = [slice(start, min(start + piece, n_rays)) for start in range(0, n_rays, piece)]
     sem_shares = _piece_shares(labelled_weights(target_label, cfg), pieces)  # (P,)
-    depth_shares = None if target_depth is None else _piece_shares(target_depth.known(), pieces)  # (P,)
     ray_shares = target_rgb.new_tensor([sl.stop - sl.start for sl in pieces], dtype=torch.float32) / n_rays  # (P,)
     wants_grad = torch.is_grad_enabled() and (src.feats.requires_grad or any(p.requires_grad for p in params))
     summed: dict[str, Tensor] = {}
@@ -71,9 +69,8 @@ def piecewise_render_loss(render: PieceRenderer, src: SourceSet, params: list[nn
         loss = target_rgb.new_zeros((), dtype=torch.float32)
         with torch.enable_grad() if wants_grad else torch.no_grad():
             for i, sl in enumerate(pieces):
-                shares = LossShares(sem_shares[i], ray_shares[i], None if depth_shares is None else depth_shares[i])
-                piece_loss, terms = render_loss(render(piece_src, sl), target_label[sl], target_rgb[sl], cfg, shares,
-                                                None if target_depth is None else target_depth[sl])
+                shares = LossShares(sem_shares[i], ray_shares[i])
+                piece_loss, terms = render_loss(render(piece_src, sl), target_label[sl], target_rgb[sl], cfg, shares)
                 if wants_grad:
                     got = torch.autograd.grad(piece_loss, inputs, allow_unused=True)
                     grads = [g if a is None else a if g is None else a + g for a, g in zip(grads, got)]

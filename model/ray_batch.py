@@ -69,8 +69,7 @@ class RayBatch:
 
 class RayBatchLoss(nn.Module):
     """One ``forward`` = encode a :class:`RayBatch`'s sources + the training loss of its rays
-    (``SRayModel.training_loss``: stratified samples, rendered in pieces; with ``lambda_depth`` > 0 its depth
-    term against the query pixels' ground-truth depth), plus, with ``lambda_src_sem`` > 0
+    (``SRayModel.training_loss``: stratified samples, rendered in pieces), plus, with ``lambda_src_sem`` > 0
     and source labels in the batch, ``lambda_src_sem`` times the source views' per-pixel cross-entropy
     (``source_semantics``); what training runs (DDP included). Holds the network as ``net`` (checkpoints
     store ``net``'s own keys) and the ``runtime`` its loss is computed with (implementation, rays per piece)."""
@@ -81,12 +80,11 @@ class RayBatchLoss(nn.Module):
         self.net = SRayModel(cfg)
         self.runtime = runtime
 
-    def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor, render: bool = True,
-                target_depth: Tensor | None = None) -> tuple[Tensor, dict[str, Tensor]]:
+    def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor,
+                render: bool = True) -> tuple[Tensor, dict[str, Tensor]]:
         """(scalar loss, detached terms) for the batch's R rays: target_label (R,) int64 (ignore id for
-        unlabelled), target_rgb (R, 3) in [0, 1], target_depth (R,) float32 ground-truth z-depth of the query
-        pixels (0 = unknown; required when ``lambda_depth`` > 0, ignored otherwise). Terms: ``render_loss``'s
-        (``depth_<pass>`` with the depth term), and ``sem_src`` when the source-view term is on.
+        unlabelled), target_rgb (R, 3) in [0, 1]. Terms: ``render_loss``'s, and ``sem_src`` when the source-view
+        term is on.
 
         ``render=False`` (the 2D warm-up): the source-view term alone; nothing is rendered, and every
         parameter outside the encoder and its head enters the loss with weight 0, so each parameter
@@ -98,13 +96,8 @@ class RayBatchLoss(nn.Module):
         if not render and not use_src:
             raise ValueError("sray.model.ray_batch: a 2D-only step needs model.lambda_src_sem > 0 and source "
                              "labels in the batch (src_label); set model.lambda_src_sem or render the rays.")
-        if render and net.cfg.lambda_depth > 0 and target_depth is None:
-            raise ValueError("sray.model.ray_batch: model.lambda_depth > 0 but no target_depth was passed; give the "
-                             "query pixels' depth (a training loader built with query_depth=True) or set "
-                             "model.lambda_depth=0.")
         if render:
-            loss, terms = net.training_loss(src, *batch.query.rays(), target_label, target_rgb, self.runtime,
-                                            target_depth)
+            loss, terms = net.training_loss(src, *batch.query.rays(), target_label, target_rgb, self.runtime)
         else:
             idle = [p for name, p in net.named_parameters() if not name.startswith(("encoder.", "src_head."))]
             loss = torch.stack([p.view(-1)[0] for p in idle]).sum() * 0.0

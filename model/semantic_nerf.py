@@ -2,7 +2,8 @@
 trunk also feeds a view-independent semantic head.
 - positions (normalised by the scene box) and unit directions get NeRF's encoding (10 and 4 frequencies, + raw);
 - an 8 x 256 ReLU trunk re-reads the encoded position after its fifth layer (skip connection);
-- density: one linear unit on the trunk output, made non-negative by ``density_activation``;
+- density: one linear unit on the trunk output, made non-negative by a softplus (NeRF: ReLU; softplus keeps a
+  gradient where the raw output is negative, so rays cannot die empty at initialisation);
 - semantics: trunk output -> 128 -> L logits, BEFORE the viewing direction enters, so the
   labels of a point do not depend on where it is seen from;
 - colour: a 256-wide linear feature concatenated with the encoded direction -> 128 -> rgb (sigmoid).
@@ -13,7 +14,6 @@ and metrics are S-Ray's (``hierarchical``, ``losses``, ``metrics``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import torch
 import torch.nn.functional as F
@@ -45,9 +45,6 @@ class SemanticNeRFConfig:
     """Hidden width of the colour head."""
     semantic_width: int = 128
     """Hidden width of the semantic head."""
-    density_activation: Literal["softplus", "relu"] = "softplus"
-    """Non-negativity of the density. NeRF uses ReLU; softplus (default) keeps a gradient where
-    the raw output is negative, so rays cannot die empty at initialisation."""
     n_coarse: int = 64
     """Coarse samples per ray (stratified in training, bin centres otherwise)."""
     n_fine: int = 64
@@ -78,9 +75,6 @@ class SemanticNeRFConfig:
             fail("depth", f"depth and width must be >= 1, got {self.depth} and {self.width}")
         if self.skip_layer is not None and not 0 < self.skip_layer < self.depth:
             fail("skip_layer", f"must be in [1, {self.depth - 1}] or None, got {self.skip_layer}")
-        if self.density_activation not in ("softplus", "relu"):
-            fail("density_activation", f"must be 'softplus' or 'relu', got "
-                 f"{self.density_activation!r}")
         if self.n_coarse < 1 or self.n_fine < 1:
             fail("n_coarse", f"n_coarse and n_fine must be >= 1, got {self.n_coarse}, {self.n_fine}")
         if self.scene_scale <= 0:
@@ -102,7 +96,6 @@ class SemanticNeRFField(nn.Module):
             nn.Linear((pos_dim if i == 0 else cfg.width) + (pos_dim if i == cfg.skip_layer else 0), cfg.width)
             for i in range(cfg.depth))
         self.density = nn.Linear(cfg.width, 1)
-        self.density_act = F.softplus if cfg.density_activation == "softplus" else F.relu
         self.semantic = nn.Sequential(
             nn.Linear(cfg.width, cfg.semantic_width), nn.ReLU(),
             nn.Linear(cfg.semantic_width, cfg.n_classes),
@@ -119,7 +112,7 @@ class SemanticNeRFField(nn.Module):
             if i == self.skip_layer:
                 h = torch.cat([h, gamma_x], dim=-1)
             h = F.relu(layer(h))
-        sigma = self.density_act(self.density(h)).squeeze(-1)
+        sigma = F.softplus(self.density(h)).squeeze(-1)
         logits = self.semantic(h)
         rgb = torch.sigmoid(self.color(torch.cat([self.feature(h), self.dir_enc(d)], dim=-1)))
         return sigma, rgb, logits

@@ -15,7 +15,6 @@ import torch
 from torch import Tensor, nn
 
 from .config import SRayConfig
-from .depth_loss import DepthTarget
 from .depth_sampling import source_surface_depth, surface_samples
 from .encoder import ResUNetEncoder
 from .fast_render import FastRender, render_rays_fast
@@ -95,11 +94,9 @@ class SRayModel(nn.Module):
 
     def training_loss(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                       far: Tensor | float, target_label: Tensor, target_rgb: Tensor,
-                      runtime: Runtime = Runtime(),
-                      target_depth: Tensor | None = None) -> tuple[Tensor, dict[str, Tensor]]:
+                      runtime: Runtime = Runtime()) -> tuple[Tensor, dict[str, Tensor]]:
         """``render_loss`` of rays rendered with stratified samples: origins, dirs (R, 3), near, far scalars
-        or (R,), target_label (R,) int64, target_rgb (R, 3), target_depth (R,) float32 ground-truth z-depth of
-        the rays' query pixels (0 = unknown), read by the depth term when ``lambda_depth`` > 0 (None: no term).
+        or (R,), target_label (R,) int64, target_rgb (R, 3).
 
         The rays are rendered (fields: ``runtime.impl``) in pieces of ``runtime.train_piece`` rays (0: by device,
         ``ray_chunks``), each piece's gradient taken before the next is rendered (``piecewise_loss``): the same
@@ -108,18 +105,17 @@ class SRayModel(nn.Module):
         n_rays = origins.shape[0]
         near_r = per_ray_bounds(near, n_rays, origins, "near")  # (R,)
         far_r = per_ray_bounds(far, n_rays, origins, "far")  # (R,)
-        depth = None if target_depth is None else DepthTarget.of_rays(target_depth, near_r, far_r)
         piece = train_piece_rays(runtime.train_piece, origins.device, n_rays)
         if piece >= n_rays:
             out = self.render_rays(src, origins, dirs, near, far, stratified=True, runtime=runtime)
-            return render_loss(out, target_label, target_rgb, self.cfg, target_depth=depth)
+            return render_loss(out, target_label, target_rgb, self.cfg)
 
         def render(piece_src: SourceSet, sl: slice) -> dict[str, dict[str, Tensor]]:
             return self.render_rays(piece_src, origins[sl], dirs[sl], near_r[sl], far_r[sl], stratified=True,
                                     runtime=runtime)
 
         params = [p for name, p in self.named_parameters() if not name.startswith("encoder.")]
-        return piecewise_render_loss(render, src, params, n_rays, piece, target_label, target_rgb, self.cfg, depth)
+        return piecewise_render_loss(render, src, params, n_rays, piece, target_label, target_rgb, self.cfg)
 
     @torch.no_grad()
     def render_rays_fast(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,

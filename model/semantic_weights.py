@@ -15,6 +15,10 @@ from torch import Tensor, nn
 
 from .config import SRayConfig
 
+WEIGHT_MARGIN = 1e-3
+"""``margin`` of the net's weights: the fraction of the weight range kept unused so the bounds stay strict when the
+raw scores saturate in floating point."""
+
 
 def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
     """Raw per-view outputs (..., m) and validity (..., m) -> float32 weights (..., m) by the ``radial`` map
@@ -38,7 +42,7 @@ class SemanticWeightNet(nn.Module):
     def __init__(self, cfg: SRayConfig) -> None:
         super().__init__()
         h1, h2 = cfg.weight_hidden
-        self.tau, self.margin = cfg.tau, cfg.weight_margin
+        self.tau, self.margin = cfg.tau, WEIGHT_MARGIN
         self.mlp = nn.Sequential(nn.Linear(cfg.feat_dim + 5, h1), nn.ELU(), nn.Linear(h1, h2), nn.ELU(),
                                  nn.Linear(h2, 1))
 

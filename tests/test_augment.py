@@ -73,10 +73,10 @@ def test_loader_with_augmentation_off_yields_identical_batches(shards: Path) -> 
 def test_set_data_aug_reaches_the_training_loader(shards: Path) -> None:
     """``sray train --set data.aug.<field>=...`` -> the config the workers receive -> a rank's loader."""
     args = build_parser().parse_args(["train", "--data", str(shards), "--set", "data.aug.colour_ev=0.3",
-                                      "--set", "data.aug.query_crop=0.5", "--set", "model.n_source=3"])
+                                      "--set", "data.aug.min_source=2", "--set", "model.n_source=3"])
     payload = json.loads(json.dumps(build_config(args).to_dict()))  # as the launcher hands it to the workers
     loader = job_loader(TrainConfig.from_dict(payload), rank=0, world_size=1, batches_per_epoch=2)
-    assert loader.dataset.augment == Augmentation(colour_ev=0.3, query_crop=0.5)
+    assert loader.dataset.augment == Augmentation(colour_ev=0.3, min_source=2)
 
 
 @pytest.mark.parametrize("scale", [0.5, 0.63, 0.8])
@@ -136,30 +136,18 @@ def test_source_count_subsets_and_resolution_vary_inside_their_ranges(shards: Pa
     assert counts == set(range(2, 7)) and len(widths) > 5
 
 
-def test_query_crop_keeps_rays_in_one_window(views: dict) -> None:
-    for seed in range(5):
-        sample = _draw(views, Augmentation(query_crop=0.5), seed=seed, n_rays=40)
-        u, v = sample.pixels[:, 0], sample.pixels[:, 1]
-        assert float(u.max() - u.min()) < 20 and float(v.max() - v.min()) < 15
-        assert len(set(zip(u.tolist(), v.tolist()))) == 40
-
-
 def test_bad_settings_name_the_field() -> None:
     with pytest.raises(ValueError, match="source_scale"):
         Augmentation(source_scale=1.0)
-    with pytest.raises(ValueError, match="query_crop"):
-        Augmentation(query_crop=1.5)
 
 
-def test_query_pixels_are_distinct_pixels_of_the_crop_window_with_their_labels(views: dict) -> None:
-    """Inside the crop window (replayed here: it is the sample's first draw) the query pixels are distinct and in the
-    window, and their targets are the labels there."""
-    ids, crop = sorted(views), Augmentation(query_crop=0.5)
+def test_query_pixels_are_distinct_pixels_of_the_image_with_their_labels(views: dict) -> None:
+    """The query pixels are distinct pixels inside the image, and their targets are the labels there."""
+    ids = sorted(views)
     label = views[ids[0]].label()
     for seed in range(10):
-        v0, u0, ch, cw = crop.crop_window(np.random.default_rng(seed), *label.shape)
-        sample = train_sample(views, ids[0], ids[1:3], 40, np.random.default_rng(seed), "a", 0.5, 6.0, 20, crop)
+        sample = train_sample(views, ids[0], ids[1:3], 40, np.random.default_rng(seed), "a", 0.5, 6.0, 20)
         u, v = sample.pixels[:, 0].long().numpy(), sample.pixels[:, 1].long().numpy()
         assert len(set(zip(u.tolist(), v.tolist()))) == 40
-        assert (v >= v0).all() and (v < v0 + ch).all() and (u >= u0).all() and (u < u0 + cw).all()
+        assert (v >= 0).all() and (v < label.shape[0]).all() and (u >= 0).all() and (u < label.shape[1]).all()
         assert torch.equal(sample.target_label, torch.from_numpy(label[v, u].astype(np.int64)))

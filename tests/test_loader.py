@@ -122,19 +122,6 @@ def test_training_samples_match_the_scenes(data: tuple[Path, Path]) -> None:
     assert seen == {"a", "unseen"}
 
 
-def test_query_depth_is_delivered_only_when_asked_and_is_the_query_pixels_depth(data: tuple[Path, Path]) -> None:
-    """``query_depth=True``: ``target_depth`` is the query view's stored z-depth at the sampled pixels (against
-    the scene folder's view, read directly); by default no sample carries it (its PNG is not decoded)."""
-    scenes_dir, shards = data
-    assert all(s.target_depth is None for s in _loader(shards, batches_per_epoch=2))
-    for s in _loader(shards, batches_per_epoch=4, rays_per_batch=40, query_depth=True):
-        query = {v.view_id: v for v in read_scene(scenes_dir / s.scene).views()}[s.query_id]
-        u, v = s.pixels.long().unbind(1)
-        assert s.target_depth.dtype == torch.float32 and s.target_depth.shape == (40,)
-        assert torch.equal(s.target_depth, torch.from_numpy(query.depth[v, u]))
-        assert (s.target_depth > 0).any()
-
-
 def test_epochs_advance_and_set_epoch_replays(data: tuple[Path, Path]) -> None:
     """Each iteration is a new epoch; set_epoch(0) replays the first one exactly; scenes=None means the
     train-role scenes only (the unseen test scene never leaks into pretraining)."""

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sray.platform.config.optim_settings import OptimSettings
+from sray.platform.config.train_config import OptimSettings
 from sray.platform.train.state import budget_lr_factor
 
 OPT = OptimSettings(steps=20000, cpu_seconds=7200.0, lr=1e-3, lr_final=1e-4, warmup_steps=100)

@@ -1,9 +1,9 @@
-"""``sray migrate`` on a real training job written by sray at commit 7734061 (``tests/fixtures/sray_7734061``, built
-by its ``make_fixture.py`` from that commit's code): today's load paths refuse it in one line naming the command;
-migrated, it loads and renders exactly what it rendered there. Older layouts that 7734061 still read (flat
-augmentation keys, runtime settings in the model section, ``net.``-prefixed weights, fault settings in the run
-section), sweep records and segmenter folders migrate too; a removed setting it cannot keep is refused and nothing
-is written."""
+"""``sray migrate`` on real training jobs written by sray at commits 7734061 and 7966ddf (``tests/fixtures/sray_*``,
+each built by its ``make_fixture.py`` from that commit's code; the second with a Semantic-NeRF scene artifact): today's
+load paths refuse them in one line naming the command; migrated, they load and render exactly what they rendered
+there. Older layouts that 7734061 still read (flat augmentation keys, runtime settings in the model section,
+``net.``-prefixed weights, fault settings in the run section), sweep records and segmenter folders migrate too; a
+removed setting it cannot keep is refused and nothing is written."""
 
 from __future__ import annotations
 
@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pytest
 import torch
+from safetensors import safe_open
+from safetensors.torch import save
 
 from sray.jobs.cli import main
 from sray.model.semantic_ray import SRayModel
@@ -24,15 +26,18 @@ from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import load_job_config
 from sray.platform.eval.segmenter import Segmenter, SegmenterConfig, load_segmenter, save_segmenter
-from sray.platform.migrate.config_v1 import REMOVED_FIELDS
+from sray.platform.finetune.scene_artifacts import load_semantic_nerf
+from sray.platform.migrate.config_formats import REMOVED_FIELDS
 from sray.platform.sweep.prepare import read_sweep_record, reload_sweep
 from sray.platform.train.state import build_training, restore_training
 
 FIXTURE = Path(__file__).parent / "fixtures" / "sray_7734061"
+FIXTURE_2 = Path(__file__).parent / "fixtures" / "sray_7966ddf"
 CKPT = Path("job") / "checkpoints" / "step_000000002"
+NERF = Path("fleet") / "scene0" / "semantic-nerf" / "semantic_nerf.safetensors"
 
 
-def _builder():  # the fixture's own builder module: its probe inputs and its tiny network
+def _builder():  # the 7734061 fixture's builder module: the probe inputs and tiny network of both fixtures
     spec = importlib.util.spec_from_file_location("make_fixture", FIXTURE / "make_fixture.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -167,3 +172,75 @@ def test_a_fleet_record_without_a_tracker_name_is_refused_then_migrates(tmp_path
         _fleet_record(tmp_path, "abc", tracker)
     assert main(["migrate", str(tmp_path / "fleet.json")]) == 0
     assert _fleet_record(tmp_path, "abc", tracker)["tracker"] == "mlflow"
+
+
+@pytest.fixture
+def job_7966ddf(tmp_path: Path) -> Path:
+    """A copy of the 7966ddf fixture (a job and a fleet's Semantic-NeRF artifact)."""
+    shutil.copytree(FIXTURE_2, tmp_path / "old")
+    return tmp_path / "old"
+
+
+def _nerf_config(artifact: Path, **changes: object) -> None:
+    """Rewrite the stored config of a Semantic-NeRF artifact with ``changes`` (its tensors as they were)."""
+    with safe_open(str(artifact), framework="pt") as f:
+        metadata, tensors = f.metadata(), {k: f.get_tensor(k) for k in f.keys()}
+    artifact.write_bytes(save(tensors, metadata=metadata | {"config": json.dumps(json.loads(metadata["config"]) |
+                                                                                 changes)}))
+
+
+def test_a_7966ddf_job_and_scene_artifact_are_refused_then_migrate_to_the_same_outputs(
+        job_7966ddf: Path, capsys: pytest.CaptureFixture) -> None:
+    """Format-2 configs (``model.lambda_depth``, ``model.weight_margin``, ``data.aug.query_crop`` at their no-op values)
+    and a Semantic-NeRF artifact with ``density_activation`` softplus: refused by name, migrated once, then bit for
+    bit what 7966ddf rendered."""
+    for load in (lambda: model_from_checkpoint(job_7966ddf / CKPT), lambda: load_job_config(str(job_7966ddf), "job"),
+                 lambda: load_semantic_nerf(job_7966ddf / NERF)):
+        with pytest.raises(ValueError, match=r"written by an earlier sray .*`sray migrate PATH`") as caught:
+            load()
+        assert "\n" not in str(caught.value) and str(job_7966ddf) in str(caught.value)
+    assert main(["migrate", str(job_7966ddf)]) == 0
+    migrated = {line.split(":")[0].removeprefix("[sray] migrated ") for line in capsys.readouterr().out.splitlines()}
+    assert {"checkpoint", "job config", "Semantic-NeRF artifact"} <= migrated
+    want = torch.load(FIXTURE_2 / "expected.pt", weights_only=True)
+    net, cfg = model_from_checkpoint(job_7966ddf / CKPT)
+    nerf = load_semantic_nerf(job_7966ddf / NERF)
+    origins, dirs = _builder().probe_inputs()[3:]
+    with torch.no_grad():
+        got = {"sray": _render(net),
+               "semantic-nerf": nerf.render_rays(origins, dirs, 0.5, 3.0, stratified=False)["fine"]}
+    for model, outputs in want.items():
+        for key in outputs:
+            torch.testing.assert_close(got[model][key], outputs[key], rtol=0, atol=0, msg=f"{model} {key}")
+    stored = json.loads((FIXTURE_2 / "job" / "config.json").read_text())
+    assert dataclasses.asdict(cfg.model) == {k: v for k, v in stored["model"].items()
+                                             if k not in ("lambda_depth", "weight_margin")} | {
+        "weight_hidden": (4, 4), "geo_hidden": (8, 4), "class_weights": (), "semantic_cues": ()}
+    assert dataclasses.asdict(cfg.data.aug) == {k: v for k, v in stored["data"]["aug"].items() if k != "query_crop"}
+    assert load_job_config(str(job_7966ddf), "job") == cfg
+    assert main(["migrate", str(job_7966ddf)]) == 0
+    assert "nothing to do" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("where", "field", "value"), [("model", "lambda_depth", 0.1), ("data.aug", "query_crop", 0.5),
+                                                       ("model", "weight_margin", 0.01),
+                                                       ("nerf", "density_activation", "relu")])
+def test_a_7966ddf_setting_in_use_is_refused_in_one_line_and_nothing_is_written(
+        job_7966ddf: Path, where: str, field: str, value: object, capsys: pytest.CaptureFixture) -> None:
+    if where == "nerf":
+        _nerf_config(job_7966ddf / NERF, **{field: value})
+        path = f"{field}"
+    else:
+        config = json.loads((job_7966ddf / "job" / "config.json").read_text())
+        section = config
+        for name in where.split("."):
+            section = section[name]
+        section[field] = value
+        (job_7966ddf / "job" / "config.json").write_text(json.dumps(config))
+        path = f"{where}.{field}"
+    before = _files(job_7966ddf)
+    assert main(["migrate", str(job_7966ddf)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and f"{path} is {value!r}" in err and "use commit 7966ddf" in err
+    assert str(job_7966ddf / (NERF if where == "nerf" else Path("job") / "config.json")) in err
+    assert _files(job_7966ddf) == before

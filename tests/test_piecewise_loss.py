@@ -14,7 +14,6 @@ import torch
 from test_model_sray import FAR, NEAR, rig
 
 from sray.model.config import SRayConfig
-from sray.model.depth_loss import DepthTarget
 from sray.model.losses import render_loss
 from sray.model.ray_chunks import CPU_RAYS, CUDA_RENDER_RAYS, render_chunk_rays, train_piece_rays
 from sray.model.runtime import Runtime
@@ -47,33 +46,21 @@ def _targets(n: int) -> tuple[torch.Tensor, torch.Tensor]:
     return label, torch.rand(n, 3, generator=gen)
 
 
-def _depths(n: int) -> torch.Tensor:
-    """Ground-truth z-depths in [NEAR, FAR], unknown (0) on the whole third piece of 5 and on two more rays."""
-    depth = NEAR + (FAR - NEAR) * torch.rand(n, generator=torch.Generator().manual_seed(2))
-    depth[10:15] = 0.0
-    depth[[3, 21]] = 0.0
-    return depth
-
-
-def _loss_and_grads(net: SRayModel, piece: int, scale: float = 1.0, frozen_encoder: bool = False,
-                    depth: bool = False) -> tuple[torch.Tensor, dict, dict[str, torch.Tensor]]:
+def _loss_and_grads(net: SRayModel, piece: int, scale: float = 1.0,
+                    frozen_encoder: bool = False) -> tuple[torch.Tensor, dict, dict[str, torch.Tensor]]:
     """Loss, terms and parameter gradients of the rig's batch: ``training_loss`` in pieces of ``piece`` rays, or
-    with ``piece`` 0 the reference, the batch rendered at once and ``render_loss`` over all of it; ``depth``:
-    with the rays' ground-truth depth (:func:`_depths`)."""
+    with ``piece`` 0 the reference, the batch rendered at once and ``render_loss`` over all of it."""
     r = rig(m=3, facing_away=1)
     n = r["origins"].shape[0]
     label, rgb = _targets(n)
-    target_depth = _depths(n) if depth else None
     near = torch.full((n,), NEAR)  # (R,) bounds: the pieces slice them
     with torch.no_grad() if frozen_encoder else torch.enable_grad():
         src = net.encode(r["rgb"], r["K"], r["c2w"])
     if piece:
-        loss, terms = net.training_loss(src, r["origins"], r["dirs"], near, FAR, label, rgb, Runtime(train_piece=piece),
-                                        target_depth)
+        loss, terms = net.training_loss(src, r["origins"], r["dirs"], near, FAR, label, rgb, Runtime(train_piece=piece))
     else:
         out = net.render_rays(src, r["origins"], r["dirs"], near, FAR, stratified=True)
-        target = None if target_depth is None else DepthTarget.of_rays(target_depth, near, torch.full((n,), FAR))
-        loss, terms = render_loss(out, label, rgb, net.cfg, target_depth=target)
+        loss, terms = render_loss(out, label, rgb, net.cfg)
     (loss * scale).backward()
     return loss.detach(), terms, {n: p.grad for n, p in net.named_parameters() if p.grad is not None}
 
@@ -96,19 +83,6 @@ def test_pieces_give_the_whole_batch_loss_terms_and_gradients(class_weights: tup
     for key in terms_w:
         torch.testing.assert_close(terms_p[key].float(), terms_w[key].float(), rtol=1e-6, atol=1e-7, msg=key)
     assert any(name.startswith("encoder.") for name in grads_w)  # the encoder's gradient arrives too
-    _assert_grads_close(grads_p, grads_w)
-
-
-def test_pieces_give_the_whole_batch_loss_and_gradients_with_the_depth_term() -> None:
-    """``lambda_depth`` > 0: each piece's depth term is scaled by its share of the batch's rays of known depth
-    (0 for the third piece, which has none), and the pieces sum to the batch."""
-    loss_w, terms_w, grads_w = _loss_and_grads(_net(lambda_depth=0.7), piece=0, depth=True)
-    loss_p, terms_p, grads_p = _loss_and_grads(_net(lambda_depth=0.7), piece=5, depth=True)
-    assert {"depth_coarse", "depth_fine"} <= set(terms_w) and set(terms_p) == set(terms_w)
-    assert float(terms_w["depth_fine"]) > 0
-    torch.testing.assert_close(loss_p, loss_w, rtol=1e-6, atol=0)
-    for key in terms_w:
-        torch.testing.assert_close(terms_p[key].float(), terms_w[key].float(), rtol=1e-6, atol=1e-7, msg=key)
     _assert_grads_close(grads_p, grads_w)
 
 

@@ -3,14 +3,11 @@ conversion from a loader sample to it (``sray.platform.common.model_input.ray_ba
 
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
 import torch
 
 from sray.data_tools.loader.sample_types import EvalSample, QueryCamera, SourceViews, TrainSample
 from sray.model.config import SRayConfig
-from sray.model.depth_loss import DepthTarget
 from sray.model.losses import render_loss
 from sray.model.ray_batch import QueryRays, RayBatch, RayBatchLoss
 from sray.model.rays import pixel_rays
@@ -36,22 +33,19 @@ def _sample(seed: int = 0) -> TrainSample:
                        target_label=torch.randint(0, 5, (R,), generator=g), target_rgb=torch.rand(R, 3, generator=g))
 
 
-def _surface(**kw: float) -> RayBatchLoss:
+def _surface() -> RayBatchLoss:
     torch.manual_seed(0)
-    return RayBatchLoss(SRayConfig(n_classes=5, feat_dim=8, n_coarse=6, n_fine=6, n_source=M, **kw),
-                        Runtime(train_piece=R))
+    return RayBatchLoss(SRayConfig(n_classes=5, feat_dim=8, n_coarse=6, n_fine=6, n_source=M), Runtime(train_piece=R))
 
 
 def _direct(model: RayBatchLoss, sample: TrainSample) -> tuple[torch.Tensor, dict]:
     """The bare network's own calls: encode, ``pixel_rays``, the scalar bounds expanded by ``render_rays``
-    (stratified samples), and ``render_loss`` (with the sample's depth target when it has one)."""
+    (stratified samples), and ``render_loss``."""
     net = model.net
     src = net.encode(sample.sources.rgb, sample.sources.K, sample.sources.c2w)
     origins, dirs = pixel_rays(sample.query.K, sample.query.c2w, sample.pixels)
     out = net.render_rays(src, origins, dirs, sample.near, sample.far, stratified=True)
-    depth = None if sample.target_depth is None else DepthTarget.of_rays(
-        sample.target_depth, torch.full((R,), sample.near), torch.full((R,), sample.far))
-    return render_loss(out, sample.target_label, sample.target_rgb, net.cfg, target_depth=depth)
+    return render_loss(out, sample.target_label, sample.target_rgb, net.cfg)
 
 
 def test_the_surface_computes_the_loss_of_encode_render_rays_and_render_loss() -> None:
@@ -72,23 +66,6 @@ def test_the_surface_computes_the_loss_of_encode_render_rays_and_render_loss() -
     torch.testing.assert_close(terms_got, terms_want, **TOL)
     assert grads_got.keys() == grads_want.keys() and any(k.startswith("net.encoder.") for k in grads_got)
     torch.testing.assert_close(grads_got, grads_want, rtol=1e-5, atol=1e-6)
-
-
-def test_the_surface_adds_the_depth_term_and_refuses_to_run_without_the_depth() -> None:
-    """``model.lambda_depth`` > 0: ``forward(..., target_depth=)`` is the bare calls' loss with the depth term
-    (terms ``depth_coarse``, ``depth_fine``); without the query pixels' depth it stops with the fix."""
-    model = _surface(lambda_depth=0.5)
-    depth = torch.linspace(0.0, 4.0, R)  # the first ray unknown
-    sample = dataclasses.replace(_sample(), target_depth=depth)
-    torch.manual_seed(7)
-    loss, terms = model(ray_batch(sample), sample.target_label, sample.target_rgb, target_depth=sample.target_depth)
-    torch.manual_seed(7)
-    want_loss, want_terms = _direct(model, sample)
-    assert {"depth_coarse", "depth_fine"} <= set(terms)
-    torch.testing.assert_close(loss, want_loss, **TOL)
-    torch.testing.assert_close(terms, want_terms, **TOL)
-    with pytest.raises(ValueError, match="lambda_depth > 0 but no target_depth.*query_depth=True"):
-        model(ray_batch(sample), sample.target_label, sample.target_rgb)
 
 
 def test_query_rays_are_pixel_rays_with_per_ray_bounds() -> None:

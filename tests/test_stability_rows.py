@@ -72,7 +72,7 @@ def test_every_rgbd_method_has_sray_given_the_depth_beside_it(monkeypatch) -> No
     by = {r.name: r for r in suite_rows(["sray", "2d-transfer"], list(MODES), RGB, None)}
     assert (by["sray-rgbd"].train_inputs, by["sray-rgbd-scene"].train_inputs) == ("rgb", "rgbd")  # what training read
     depth_read = suite_rows(["sray", "2d-transfer"], ["zero-shot"], SRayConfig(inputs="rgbd"), None)
-    assert [(r.name, r.inputs, r.train_inputs) for r in depth_read] == [("sray", "rgbd", "rgbd"),
+    assert [(r.name, r.inputs, r.train_inputs) for r in depth_read] == [("sray", "rgbd", ""),  # "": as its inputs
                                                                         ("2d-transfer", "rgbd", "")]
     monkeypatch.setitem(registry.METHODS, "fake-depth", _fake("fake-depth", inputs="rgbd"))
     assert _names(["sray", "fake-depth"], ["zero-shot"], None) == ["sray", "sray-rgbd", "fake-depth"]

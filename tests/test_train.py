@@ -126,11 +126,10 @@ def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(r
                                                                                  tmp_path) -> None:
     """``optim.cpu_seconds`` ends the job at the first step whose CPU seconds (both ranks, summed) reach the
     budget, long before the step cap; the learning rate decays with the CPU fraction; the 2D warm-up steps
-    (source labels only) and the source-view and depth terms after them keep the two DDP ranks identical; the
-    depth term is logged on every rendering step and the run's protocol says its training read depth."""
+    (source labels only) and the source-view term after them keep the two DDP ranks identical."""
     cfg = tiny_config(tiny_shards, tmp_path, name="budget")
     cfg.optim.steps, cfg.optim.cpu_seconds, cfg.optim.warmup_2d_steps = 400, 12.0, 3
-    cfg.model.lambda_src_sem, cfg.model.lambda_depth = 0.5, 0.2
+    cfg.model.lambda_src_sem = 0.5
     cfg.run.val_every, cfg.run.ckpt_every, cfg.run.system_metrics_s = 1000, 1000, 0.0
     outcome = launch_training(cfg)
     assert outcome.status == "FINISHED"
@@ -149,9 +148,8 @@ def test_cpu_budget_stops_within_a_step_and_the_2d_warm_up_keeps_ranks_in_sync(r
     src_steps, ray_steps = ({s for s, _ in _history(cfg, key)} for key in ("train/sem_src", "train/sem_fine"))
     assert src_steps == set(range(1, last_step + 1))  # every step, warm-up included
     assert ray_steps == set(range(4, last_step + 1))  # rays rendered only after the 3 warm-up steps
-    assert {s for s, _ in _history(cfg, "train/depth_fine")} == ray_steps
     divergence = _history(cfg, "ddp/param_divergence")
     assert divergence and all(v == 0.0 for _, v in divergence), divergence
     run = MlflowClient(cfg.run.tracking_uri).get_run(outcome.run.run_id)
     assert not any(k.startswith("system/") for k in run.data.metrics)  # run.system_metrics_s = 0: switched off
-    assert (run.data.params["protocol.inputs"], run.data.params["protocol.train_inputs"]) == ("rgb", "rgbd")
+    assert (run.data.params["protocol.inputs"], run.data.params["protocol.train_inputs"]) == ("rgb", "rgb")

@@ -15,9 +15,7 @@
   [1 - ``source_scale``, 1] (a Gaussian prefilter against aliasing, then bilinear sampling, which
   keeps pixel centres exact; OpenCV's area filter shifts them by up to 0.05 pixel at non-integer
   factors), their intrinsics following the pixel-centre rule ``u' + 0.5 = s (u + 0.5)`` (per axis,
-  with the rounded output size), so geometry stays exact;
-* **random query crops**: the sample's rays are drawn inside a random window whose sides are
-  ``query_crop`` of the image's (0 = the whole image): dense local supervision, as a patch.
+  with the rounded output size), so geometry stays exact.
 
 With every option off nothing is drawn from the sample's random generator, so samples are
 bit-identical to the loader without augmentation.
@@ -53,8 +51,6 @@ class Augmentation:
     """Fewest source views of a sample (m uniform in [min_source, n_source]); 0 = always n_source."""
     source_scale: float = 0.0
     """Sources are resized by a factor uniform in [1 - source_scale, 1]; 0 = off."""
-    query_crop: float = 0.0
-    """Rays come from a random window with sides this fraction of the image's; 0 = whole image."""
 
     def __post_init__(self) -> None:
         """ValueError naming the field that is out of range."""
@@ -63,8 +59,6 @@ class Augmentation:
                 raise ValueError(f"augmentation: {name} is {getattr(self, name)}; it must be >= 0 (0 = off)")
         if not 0.0 <= self.source_scale < 1.0:
             raise ValueError(f"augmentation: source_scale is {self.source_scale}; use 0 (off) up to below 1")
-        if not 0.0 <= self.query_crop <= 1.0:
-            raise ValueError(f"augmentation: query_crop is {self.query_crop}; use 0 (off) or a fraction in (0, 1]")
 
     @property
     def jitters_colour(self) -> bool:
@@ -105,13 +99,6 @@ class Augmentation:
         grey = x.mean(axis=2, keepdims=True)
         x = grey + chroma * (x - grey)
         return np.round(np.clip(x, 0.0, 1.0) * 255.0).astype(np.uint8)
-
-    def crop_window(self, rng: np.random.Generator, h: int, w: int) -> tuple[int, int, int, int]:
-        """(v0, u0, height, width) of the window rays are drawn from; the whole image when off."""
-        if self.query_crop <= 0 or self.query_crop >= 1:
-            return 0, 0, h, w
-        ch, cw = max(1, round(self.query_crop * h)), max(1, round(self.query_crop * w))
-        return int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1)), ch, cw
 
 
 def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:

@@ -107,10 +107,6 @@ class TrainSample(SceneQuery):
     """int64 (R,) class ids, ``IGNORE_ID`` (255) for unlabelled pixels."""
     target_rgb: Tensor
     """float32 (R, 3) colours in [0, 1]."""
-    target_depth: Tensor | None = None
-    """float32 (R,) ground-truth z-depth of the sampled pixels in metres, 0 = unknown: filled only when the
-    training loader is asked for the query's depth (the training-time depth loss, ``model.lambda_depth`` > 0);
-    None otherwise. Never a model input: only the loss reads it."""
 
 
 @dataclass(frozen=True)

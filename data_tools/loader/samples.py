@@ -83,26 +83,21 @@ def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str
 
 def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
                  rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int,
-                 augment: Augmentation | None = None, source_labels: bool = False,
-                 query_depth: bool = False) -> TrainSample:
+                 augment: Augmentation | None = None, source_labels: bool = False) -> TrainSample:
     """A training sample: sources, query camera and ``n_rays`` random pixels of the query with targets.
 
     Pixels are drawn without replacement (with replacement only when ``n_rays`` exceeds the pixel
-    count), uniformly inside the augmentation's crop window (the whole image by default); ``pixels``
-    (R, 2) holds integer (u, v) pixel centres as float32. Target label ids are checked against the
-    scene's ``n_classes`` (:func:`check_label_ids`). ``augment`` (:mod:`.augment`) jitters and
-    resizes the sources; None, or every option off, gives the plain sample. ``source_labels`` also
-    delivers the source views' class ids (``SourceViews.label``, for the source-view semantic loss);
-    ``query_depth`` the query view's stored z-depth at the sampled pixels (``target_depth``, for the depth loss;
-    its PNG is decoded only then).
+    count), uniformly over the image; ``pixels`` (R, 2) holds integer (u, v) pixel centres as float32. Target
+    label ids are checked against the scene's ``n_classes`` (:func:`check_label_ids`). ``augment``
+    (:mod:`.augment`) jitters and resizes the sources; None, or every option off, gives the plain sample.
+    ``source_labels`` also delivers the source views' class ids (``SourceViews.label``, for the source-view
+    semantic loss).
     """
     query = views[query_id]
     rgb, label = query.rgb(), query.label()                                           # (H, W, 3), (H, W)
     h, w = label.shape
-    v0, u0, ch, cw = augment.crop_window(rng, h, w) if augment is not None else (0, 0, h, w)
-    flat = rng.choice(ch * cw, size=n_rays, replace=n_rays > ch * cw)                     # (R,)
-    v, u = np.divmod(flat, cw)
-    v, u = v + v0, u + u0
+    flat = rng.choice(h * w, size=n_rays, replace=n_rays > h * w)                     # (R,)
+    v, u = np.divmod(flat, w)
     targets = label[v, u].astype(np.int64)                                            # (R,)
     check_label_ids(targets, n_classes, scene, query_id)
     plain = augment is None or (not augment.jitters_colour and augment.source_scale <= 0)
@@ -114,8 +109,7 @@ def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[s
         near=float(near), far=float(far),
         pixels=torch.from_numpy(np.stack([u, v], axis=1).astype(np.float32)),          # (R, 2)
         target_label=torch.from_numpy(targets),
-        target_rgb=torch.from_numpy(rgb[v, u].astype(np.float32) / 255.0),            # (R, 3)
-        target_depth=torch.from_numpy(query.depth()[v, u]) if query_depth else None)  # (R,) metres
+        target_rgb=torch.from_numpy(rgb[v, u].astype(np.float32) / 255.0))            # (R, 3)
 
 
 def eval_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], scene: str,

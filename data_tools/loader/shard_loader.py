@@ -74,7 +74,7 @@ class TrainTuples(IterableDataset):
     def __init__(self, shards_dir: Path, manifest: Manifest, scenes: list[str], *, n_source: int, top_k: int,
                  rays_per_batch: int, batches_per_epoch: int, rank: int, world_size: int, seed: int,
                  cache_scenes: int, visit_samples: int, augment: Augmentation | None = None,
-                 source_labels: bool = False, query_depth: bool = False) -> None:
+                 source_labels: bool = False) -> None:
         self.shards_dir, self.manifest, self.scenes = Path(shards_dir), manifest, scenes
         self.metas = {s: SceneMeta.from_json(manifest.scenes[s].meta) for s in scenes}
         self.pools = {s: source_pool(m) for s, m in self.metas.items()}
@@ -84,8 +84,6 @@ class TrainTuples(IterableDataset):
         self.augment = augment or Augmentation()
         self.source_labels = source_labels
         """Whether samples carry their source views' class ids (the source-view semantic loss)."""
-        self.query_depth = query_depth
-        """Whether samples carry their query pixels' depth (``target_depth``, the depth loss)."""
         self.epoch = 0
         """Epoch whose random stream the next ``iter()`` produces."""
 
@@ -117,7 +115,7 @@ class TrainTuples(IterableDataset):
                                      f"n_source={self.n_source} needed; re-shard with a larger --neighbours")
                 sources = [candidates[i] for i in self.augment.source_choice(rng, len(candidates), self.n_source)]
                 yield train_sample(views, query_id, sources, self.rays, rng, scene, meta.near, meta.far,
-                                   len(meta.class_names), self.augment, self.source_labels, self.query_depth)
+                                   len(meta.class_names), self.augment, self.source_labels)
                 remaining -= 1
 
 
@@ -166,8 +164,7 @@ def _open(shards_dir: Path, scenes: list[str] | None,
 def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_batch: int, batches_per_epoch: int,
                       rank: int, world_size: int, num_workers: int, seed: int, scenes: list[str] | None = None,
                       cache_scenes: int = 2, visit_samples: int = 16, pin_memory: bool = False,
-                      augment: Augmentation | None = None, source_labels: bool = False,
-                      query_depth: bool = False) -> EpochLoader:
+                      augment: Augmentation | None = None, source_labels: bool = False) -> EpochLoader:
     """The training DataLoader of one rank: one :class:`TrainSample` per step (``batch_size=None``).
 
     ``scenes``: scene names to train on; None = every scene whose role is ``train`` (unseen test
@@ -178,8 +175,6 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
     training augmentation (:mod:`sray.data_tools.loader.augment`; None = none). ``source_labels``: samples
     also carry their source views' class ids; the sources come from the same pool as the queries (a train
     scene's ``train`` split minus its held-out views), so no held-out or test view's labels are read.
-    ``query_depth``: samples also carry the query pixels' stored depth (``TrainSample.target_depth``, the
-    training-time depth loss), read from the same training query views as their labels.
     """
     manifest, names = _open(shards_dir, scenes)
     if not 0 <= rank < world_size:
@@ -193,7 +188,7 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
     dataset = TrainTuples(Path(shards_dir), manifest, names, n_source=n_source, top_k=top_k,
                           rays_per_batch=rays_per_batch, batches_per_epoch=batches_per_epoch, rank=rank,
                           world_size=world_size, seed=seed, cache_scenes=cache_scenes, visit_samples=visit_samples,
-                          augment=augment, source_labels=source_labels, query_depth=query_depth)
+                          augment=augment, source_labels=source_labels)
     for scene, pool in dataset.pools.items():
         if len(pool) < n_source + 1:
             raise ValueError(f"scene {scene!r}: {len(pool)} query/source views, n_source + 1 = {n_source + 1} "

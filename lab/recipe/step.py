@@ -151,8 +151,7 @@ class VariantRunner:
             torch.manual_seed(step_seed(self.cfg.run.seed, 0, self.step))
             self.model.train()
             with self.train_step.autocast():
-                loss, _ = self.model(ray_batch(sample), sample.target_label, sample.target_rgb, render=self.render,
-                                     target_depth=sample.target_depth)
+                loss, _ = self.model(ray_batch(sample), sample.target_label, sample.target_rgb, render=self.render)
             t2 = time.process_time()
             forward = self.clock.take()
             self.train_step(loss)

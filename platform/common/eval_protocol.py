@@ -55,8 +55,7 @@ class EvalProtocol:
     """Source-view inputs, one of :data:`INPUTS`."""
     train_inputs: str = ""
     """What the evaluated model's training read of its views besides colours and labels, one of :data:`INPUTS`:
-    ``rgbd`` when it read ground-truth depth (``SRayConfig.train_inputs``: the training query's depth with
-    ``model.lambda_depth`` > 0, the sources' with ``model.inputs='rgbd'``), else ``rgb``. Empty (the default, and
+    ``rgbd`` when it read ground-truth depth (a scene finetune of ``sray-rgbd``), else ``rgb``. Empty (the default, and
     descriptors stored before the field existed) means the same as ``inputs``; it is then filled with it."""
     miou: str = DATASET_PROTOCOL
     """Protocol of ``miou`` and the accuracies (one confusion matrix per scene)."""

@@ -1,16 +1,11 @@
-"""Typed configuration of a finetune fleet (``sray finetune-fleet``): budgets, method settings, scheduling.
-
-The methods themselves are registered in :mod:`sray.platform.finetune.methods.registry`.
-
-``--set section.field=value`` overrides any field (:func:`apply_fleet_override`), e.g.
-``--set finetune.patience=5`` or ``--set max_parallel=4``. Fields whose default is None inherit
-the shared checkpoint's training value (its rays per batch, source views, samples per ray).
+"""Typed configuration of a finetune fleet (``sray finetune-fleet``): budgets, method settings, scheduling; ``--set``
+overrides any field. Fields whose default is None inherit the shared checkpoint's training value.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
+from operator import attrgetter
 from typing import Any
 
 from sray.platform.config.held_out_render import HeldOutRender
@@ -19,14 +14,12 @@ from sray.platform.config.overrides import apply_settings, set_field
 PRECISIONS = ("no", "bf16", "fp16")
 """fp32, bfloat16 autocast (CPU and CUDA), float16 autocast with loss scaling (CUDA only)."""
 DEFAULT_ADAPT = ("encoder.merge2", "encoder.head", "coarse", "fine")
-"""S-Ray modules a finetune trains and stores by default: the image encoder's last two layers (L18,
-L19) and both per-sample networks (2.8% of the model's bytes; the rest of the encoder stays shared).
-Measured on 3 unseen procedural test scenes (72x96, a 400-step synth-small checkpoint, zero-shot
-mIoU 0.122), 80 steps at lr 1e-3, held-out mIoU after / artifact bytes:
-classifiers only 0.349 / 15 kB; + view weights 0.349 / 22 kB; whole per-sample networks 0.373 /
-158 kB; encoder L18-L19 + classifiers 0.567 / 94 kB; **encoder L18-L19 + per-sample networks 0.601 /
-237 kB**; whole encoder decoder (L11-L19) + per-sample networks 0.644 / 902 kB; everything 0.626 /
-8.3 MB. Adapting the image features is what transfers; the decoder-wide choice is one ``--set`` away."""
+"""S-Ray modules a finetune trains and stores by default: the image encoder's last two layers (L18, L19) and both
+per-sample networks (2.8% of the model's bytes). Measured on 3 unseen procedural test scenes (72x96, a 400-step
+synth-small checkpoint, zero-shot mIoU 0.122), 80 steps at lr 1e-3, held-out mIoU after / artifact bytes:
+classifiers only 0.349 / 15 kB; + view weights 0.349 / 22 kB; whole per-sample networks 0.373 / 158 kB; encoder
+L18-L19 + classifiers 0.567 / 94 kB; **encoder L18-L19 + per-sample networks 0.601 / 237 kB**; whole encoder decoder
+(L11-L19) + per-sample networks 0.644 / 902 kB; everything 0.626 / 8.3 MB. Adapting the image features transfers."""
 
 
 @dataclass
@@ -36,12 +29,10 @@ class FinetuneSettings:
     max_steps: int = 300
     """Most optimiser steps a scene may use."""
     max_seconds: float = 0.0
-    """Training wall-clock budget per scene in seconds (evaluation time not counted); 0 = none.
-    Equal budgets let methods be compared at equal wall-clock time."""
+    """Training wall-clock budget per scene in seconds (evaluation not counted); 0 = none."""
     max_cpu_seconds: float = 0.0
-    """Training CPU budget per scene in seconds (``time.process_time`` of the task's process over its training
-    steps, evaluation not counted: ``sray.platform.finetune.step_budget``); 0 = none. Unlike wall time it does not
-    depend on what else shares the cores, so equal budgets compare methods at equal compute on a busy machine."""
+    """Training CPU budget per scene in seconds (the task's ``time.process_time`` over its training steps,
+    ``sray.platform.finetune.step_budget``); 0 = none. Unlike wall time, other jobs on the cores do not inflate it."""
     eval_every: int = 25
     """Held-out evaluation cadence in steps (also after step 0, the zero-shot model)."""
     patience: int = 3
@@ -59,15 +50,12 @@ class FinetuneSettings:
     n_source: int | None = None
     """Source views per training sample; None = the checkpoint's ``model.n_source``."""
     top_k: int | None = None
-    """Training sources are drawn from this many ranked neighbours; None = the checkpoint's
-    ``data.top_k`` capped at the shards' stored neighbours."""
+    """Training sources are drawn from this many ranked neighbours; None = the checkpoint's ``data.top_k`` (capped)."""
     held_out: HeldOutRender = field(default_factory=lambda: HeldOutRender(stride=2, fast_stride=1))
-    """How the held-out views are rendered and scored (``sray.platform.config.held_out_render``): 8 fixed sources
-    (the paper's protocol), every 2nd pixel (speed), S-Ray's fast render on those pixels (Semantic-NeRF always
-    renders in full); set field by field: ``--set finetune.held_out.render=full``."""
+    """How the held-out views are rendered and scored: 8 fixed sources (the paper's protocol), every 2nd pixel
+    (speed), S-Ray's fast render on those pixels; set field by field: ``--set finetune.held_out.render=full``."""
     eval_chunk: int = 0
-    """Rays per forward pass when rendering held-out views; 0 (default) leaves it to the device (256 on a
-    CPU, 4096 on a GPU: ``sray.model.ray_chunks``)."""
+    """Rays per forward pass when rendering held-out views; 0 = by device (``sray.model.ray_chunks``)."""
     precision: str = "no"
     """One of ``PRECISIONS``; fp16 needs ``gpus_per_task > 0``."""
     adapt: tuple[str, ...] = DEFAULT_ADAPT
@@ -103,13 +91,11 @@ class TransferSettings:
     """2D label transfer (method ``2d-transfer``): the pretrained segmenter it starts from and its finetune."""
 
     segmenter: str = ""
-    """Folder of the pretrained 2D segmenter (``sray bench segmenter --out``); required by ``2d-transfer``
-    (``--segmenter``), unused by the other methods."""
+    """Folder of the pretrained 2D segmenter (``sray bench segmenter --out``); required by ``2d-transfer``."""
     lr: float = 1e-3
     """Adam learning rate of the whole segmenter (constant; the rate ``sray bench segmenter`` pretrains with)."""
     images_per_step: int = 4
-    """Labelled images per finetune step: a training sample's source views, drawn from its ``finetune.top_k``
-    neighbours in the scene's finetune pool."""
+    """Labelled images per finetune step: a sample's source views, from its ``finetune.top_k`` neighbours."""
     tolerance: float = 0.05
     """Relative depth agreement of the forward splatting's occlusion test (``label_transfer``)."""
 
@@ -145,38 +131,26 @@ class FleetConfig:
         """Reject settings a fleet cannot run with, naming the field and the fix."""
         check_fleet_config(self)
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict (JSON-safe; tuples become lists)."""
-        return dataclasses.asdict(self)
+
+POSITIVE = ("finetune.max_steps", "finetune.eval_every", "finetune.patience", "finetune.max_nonfinite_in_row",
+            "max_parallel", "nerf.depth", "nerf.width", "transfer.images_per_step", "finetune.rays_per_batch",
+            "finetune.n_source", "finetune.top_k", "nerf.n_coarse", "nerf.n_fine")
+"""Fleet fields that must be positive integers where set (None: inherited from the checkpoint)."""
+NON_NEGATIVE = ("finetune.eval_chunk", "finetune.max_seconds", "finetune.max_cpu_seconds", "finetune.min_delta",
+                "finetune.lr", "finetune.grad_clip", "nerf.lr", "transfer.lr", "cpus_per_task", "gpus_per_task",
+                "retries", "retry_backoff_s")
+"""Fleet fields that must be >= 0."""
 
 
 def check_fleet_config(cfg: FleetConfig) -> None:
     """ValueError naming the first field that is out of range."""
     ft = cfg.finetune
-    positive = {"finetune.max_steps": ft.max_steps, "finetune.eval_every": ft.eval_every,
-                "finetune.patience": ft.patience,
-                "finetune.max_nonfinite_in_row": ft.max_nonfinite_in_row, "max_parallel": cfg.max_parallel,
-                "nerf.depth": cfg.nerf.depth, "nerf.width": cfg.nerf.width,
-                "transfer.images_per_step": cfg.transfer.images_per_step}
-    for name in ("rays_per_batch", "n_source", "top_k"):
-        if getattr(ft, name) is not None:
-            positive[f"finetune.{name}"] = getattr(ft, name)
-    for name in ("n_coarse", "n_fine"):
-        if getattr(cfg.nerf, name) is not None:
-            positive[f"nerf.{name}"] = getattr(cfg.nerf, name)
-    for name, value in positive.items():
-        if int(value) < 1:
-            raise ValueError(f"fleet config: {name} is {value}; it must be a positive integer")
-    non_negative = {"finetune.eval_chunk": ft.eval_chunk, "finetune.max_seconds": ft.max_seconds,
-                    "finetune.max_cpu_seconds": ft.max_cpu_seconds,
-                    "finetune.min_delta": ft.min_delta,
-                    "finetune.lr": ft.lr, "finetune.grad_clip": ft.grad_clip, "nerf.lr": cfg.nerf.lr,
-                    "transfer.lr": cfg.transfer.lr,
-                    "cpus_per_task": cfg.cpus_per_task, "gpus_per_task": cfg.gpus_per_task,
-                    "retries": cfg.retries, "retry_backoff_s": cfg.retry_backoff_s}
-    for name, value in non_negative.items():
-        if value < 0:
-            raise ValueError(f"fleet config: {name} is {value}; it must be >= 0")
+    for path in POSITIVE:
+        if (value := attrgetter(path)(cfg)) is not None and int(value) < 1:
+            raise ValueError(f"fleet config: {path} is {value}; it must be a positive integer")
+    for path in NON_NEGATIVE:
+        if (value := attrgetter(path)(cfg)) < 0:
+            raise ValueError(f"fleet config: {path} is {value}; it must be >= 0")
     if cfg.transfer.tolerance <= 0:
         raise ValueError(f"fleet config: transfer.tolerance is {cfg.transfer.tolerance}; it must be > 0 (a relative "
                          "depth agreement, e.g. 0.05)")
@@ -197,17 +171,13 @@ def check_fleet_config(cfg: FleetConfig) -> None:
 
 
 def apply_fleet_override(cfg: FleetConfig, assignment: str) -> None:
-    """Apply one ``[section.]field=value`` override in place (value parsed as the field's type).
-
-    Raises ValueError naming an unknown section or field and listing the valid ones, or a value
-    out of range (the config keeps its previous value then).
-    """
+    """Apply one ``[section.]field=value`` override in place (``overrides.set_field``): ValueError names an unknown
+    section or field, or a value out of range (the config keeps its previous value then)."""
     set_field(cfg, assignment, "finetune.patience=5", lambda: check_fleet_config(cfg))
 
 
 def build_fleet_config(flags: dict[str, Any], assignments: list[str]) -> FleetConfig:
-    """A command's FleetConfig: the defaults, then its flags (``path -> value``, None = not given), then its
-    ``--set`` assignments."""
+    """A command's FleetConfig: the defaults, then its flags (``path -> value``), then its ``--set`` assignments."""
     cfg = FleetConfig()
     apply_settings(cfg, flags, assignments, apply_fleet_override)
     return cfg

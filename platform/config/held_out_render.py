@@ -1,13 +1,6 @@
 """How a held-out view is rendered and scored: one setting type for validation (``data.held_out``), the finetune
-fleet's held-out scores (``finetune.held_out``), ``sray eval`` and ``sray render`` (their ``--n-source``,
-``--stride``, ``--render``, ``--fast-stride`` and ``--fast-confidence`` flags, ``sray.jobs.held_out_flags``).
-
-The fast render (``sray.model.fast_render``) renders every ``fast_stride``-th pixel of the scored pixel grid and
-upsamples, and gives a ray a fine pass only where its coarse pass is below ``fast_confidence``. Validation and the
-fleet already score a strided grid of their own (``stride`` 2), so their fast mode renders exactly those pixels
-(``fast_stride`` 1) and saves only where the model is sure; ``sray eval`` and ``sray render`` score whole images
-and render every 8th pixel. Its cost in mIoU is measured, paired against the full render, by ``sray bench
-speed-accuracy`` (docs/benchmarks.md).
+fleet (``finetune.held_out``), ``sray eval`` and ``sray render`` (their flags, ``sray.jobs.held_out_flags``). The fast
+render's cost in mIoU against the full render is measured by ``sray bench speed-accuracy`` (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -23,29 +16,24 @@ HELD_OUT_RENDERS = ("fast", "full")
 
 @dataclass
 class HeldOutRender:
-    """Sources, pixels and render of a held-out evaluation; checked by the config that holds it (:meth:`check`) and by
-    the commands' flag parser."""
+    """Sources, pixels and render of a held-out evaluation; checked by the config that holds it (:meth:`check`)."""
 
     n_source: int = 8
     """Fixed source views per held-out view, top-ranked by the shards' neighbour rule (the paper's protocol: 8);
     0 = the model's own ``model.n_source`` (validation's default)."""
     stride: int = 1
-    """Every ``stride``-th pixel of a held-out view is scored, in each direction (1 = whole images, the only stride
-    with SSIM)."""
+    """Every ``stride``-th pixel is scored, in each direction (1 = whole images, the only stride with SSIM)."""
     render: str = "fast"
     """One of ``HELD_OUT_RENDERS``: ``fast`` (``fast_stride`` and ``fast_confidence``) or ``full``."""
     fast_stride: int = 8
     """Fast render: rays every ``fast_stride``-th scored pixel, upsampled to the others (1 = every scored pixel)."""
     fast_confidence: float = 0.9
-    """Fast render: a ray whose coarse softmax maximum reaches this keeps its coarse result (> 1: every ray gets a
-    fine pass)."""
+    """Fast render: a ray whose coarse softmax maximum reaches this skips the fine pass (> 1: no ray skips it)."""
     fast_temperature: float = 1.0
-    """Fast render: the coarse logits are divided by this before that softmax (1 = uncalibrated; ``sray eval
-    --calibrate`` fits it on validation rooms)."""
+    """Fast render: temperature of that softmax (1 = uncalibrated; ``sray eval --calibrate`` fits it)."""
 
     def check(self, name: Callable[[str], str]) -> None:
-        """ValueError naming the first bad setting as ``name(field)`` spells it (``data.held_out.render``,
-        ``--render``) and the fix."""
+        """ValueError naming the first bad setting as ``name(field)`` spells it (``--render``), and the fix."""
         if self.render not in HELD_OUT_RENDERS:
             raise ValueError(f"{name('render')} is {self.render!r}; use one of {HELD_OUT_RENDERS} (fast: the fine "
                              "pass only where the coarse pass is unsure; full: the whole render)")

@@ -1,9 +1,6 @@
-"""``--set section.field=value`` on nested config dataclasses: the one override mechanism of every command.
-
-A value is parsed as the field's annotated type (int, float, str, bool, ``X | None``, tuple or list
-of X); an unknown section or field is refused with the valid names; a value the config's own checks
-reject is rolled back, so the config stays valid. A frozen section (an immutable value such as the
-loader's ``Augmentation``) is rebuilt with the new value, which runs its own checks, and put in place.
+"""``--set section.field=value`` on nested config dataclasses, the one override mechanism of every command: a value
+is parsed as the field's annotated type; an unknown section or field is refused with the valid names; a value the
+config's own checks reject is rolled back.
 """
 
 from __future__ import annotations
@@ -40,23 +37,14 @@ def _sections(node: Any) -> list[str]:
     return [f.name for f in dataclasses.fields(node) if dataclasses.is_dataclass(getattr(node, f.name))]
 
 
-def _frozen(node: Any) -> bool:
-    """Whether the dataclass instance ``node`` is frozen (its fields cannot be assigned)."""
-    return bool(type(node).__dataclass_params__.frozen)
-
-
 def set_field(cfg: Any, assignment: str, example: str, validate: Callable[[], None]) -> None:
-    """Apply one ``[section.]field=value`` to ``cfg`` in place, then ``validate()``.
-
-    ``example`` is shown when the assignment has no ``=``. If ``validate`` raises ValueError the
-    field gets its previous value back and the error propagates. Frozen sections on the path are
-    replaced by copies holding the new value (``dataclasses.replace``), from the field up to the first
-    mutable section.
-    """
+    """Apply one ``[section.]field=value`` to ``cfg`` in place, then ``validate()``; if that raises ValueError the
+    field gets its previous value back and the error propagates. ``example`` is shown when the assignment has no
+    ``=``. Frozen sections on the path are replaced by copies holding the new value, up to the first mutable one."""
     if "=" not in assignment:
         raise ValueError(f"--set {assignment!r}: expected [section.]field=value, e.g. {example}")
-    path, raw = assignment.split("=", 1)
-    parts = path.strip().split(".")
+    path, raw = (part.strip() for part in assignment.split("=", 1))
+    parts = path.split(".")
     chain: list[Any] = [cfg]
     for part in parts[:-1]:
         child = getattr(chain[-1], part, None)
@@ -64,17 +52,17 @@ def set_field(cfg: Any, assignment: str, example: str, validate: Callable[[], No
             raise ValueError(f"--set {assignment!r}: no section {part!r}; sections: {', '.join(_sections(chain[-1]))}")
         chain.append(child)
     target, name = chain[-1], parts[-1]
-    fields = {f.name for f in dataclasses.fields(target)} - set(_sections(target))
-    if name in _sections(target):
+    where, sections = f"--set {assignment!r}: no field {name!r} in {type(target).__name__}", _sections(target)
+    if name in sections:
         inner = sorted(f.name for f in dataclasses.fields(getattr(target, name)))
-        raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; {name!r} is a section: "
-                         f"set its fields, {path.strip()}.<field> with <field> one of {', '.join(inner)}")
+        raise ValueError(f"{where}; {name!r} is a section: set its fields, {path}.<field> with <field> one of "
+                         f"{', '.join(inner)}")
+    fields = {f.name for f in dataclasses.fields(target)} - set(sections)
     if name not in fields:
-        raise ValueError(f"--set {assignment!r}: no field {name!r} in {type(target).__name__}; "
-                         f"fields: {', '.join(sorted(fields))}")
-    value = parse_value(typing.get_type_hints(type(target))[name], raw.strip(), assignment)
+        raise ValueError(f"{where}; fields: {', '.join(sorted(fields))}")
+    value = parse_value(typing.get_type_hints(type(target))[name], raw, assignment)
     depth = len(parts) - 1
-    while depth > 0 and _frozen(chain[depth]):
+    while depth > 0 and type(chain[depth]).__dataclass_params__.frozen:
         value = dataclasses.replace(chain[depth], **{parts[depth]: value})
         depth -= 1
     owner, key = chain[depth], parts[depth]
@@ -90,8 +78,5 @@ def set_field(cfg: Any, assignment: str, example: str, validate: Callable[[], No
 def apply_settings(cfg: Any, flags: dict[str, Any], assignments: list[str],
                    apply: Callable[[Any, str], None]) -> None:
     """Apply a command's flags (``path -> value``, None = not given), then its ``--set`` assignments."""
-    for path, value in flags.items():
-        if value is not None:
-            apply(cfg, f"{path}={value}")
-    for assignment in assignments:
+    for assignment in [f"{path}={value}" for path, value in flags.items() if value is not None] + list(assignments):
         apply(cfg, assignment)

@@ -1,9 +1,6 @@
-"""Reading a stored config (a job's ``config.json``, a checkpoint's ``config`` entry, a sweep's base config) back
-into its typed dataclass: today's format only.
-
-Every stored config carries ``format_version``. A dict of another version was written by an earlier sray and is
-refused in one line that names ``sray migrate`` (``sray.platform.migrate``), which converts it once; a dict of
-today's version must hold exactly the fields of today's dataclasses (an unknown field is refused by name).
+"""Reading a stored config (a job's ``config.json``, a checkpoint's ``config``, a sweep's base) back into its typed
+dataclass, today's format only: another ``format_version`` is refused in one line naming ``sray migrate``
+(``sray.platform.migrate``), which converts it once; an unknown field is refused by name.
 """
 
 from __future__ import annotations
@@ -12,9 +9,10 @@ import dataclasses
 import typing
 from typing import Any
 
-CONFIG_VERSION = 2
+CONFIG_VERSION = 3
 """Format of stored configs. 1 (no ``format_version`` key): sray up to commit 7734061, with the flat ``data.val_*``
-and ``finetune.eval_*`` settings and the fields since removed; 2: the nested ``held_out`` sections."""
+settings; 2 (up to 7966ddf): the nested ``held_out`` sections; 3: without the fields removed since
+(``sray.platform.migrate.config_formats``)."""
 VERSION_KEY = "format_version"
 """Key of the format version in a stored config dict."""
 
@@ -27,13 +25,6 @@ def outdated(what: str, found: Any, expected: Any) -> OutdatedFormat:
     """The one-line refusal of an artifact in format ``found`` where this sray reads ``expected``."""
     return OutdatedFormat(f"{what} is in format {found}, written by an earlier sray (this one reads {expected}); "
                           "convert it once with `sray migrate PATH`")
-
-
-def check_version(d: dict[str, Any], what: str) -> None:
-    """OutdatedFormat unless the stored config ``d`` is in today's format (``CONFIG_VERSION``)."""
-    version = d.get(VERSION_KEY, 1)
-    if version != CONFIG_VERSION:
-        raise outdated(what, version, CONFIG_VERSION)
 
 
 def from_plain(cls: type, d: dict[str, Any], where: str) -> Any:

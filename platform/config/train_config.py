@@ -12,12 +12,8 @@ from sray.data_tools.loader.augment import Augmentation
 from sray.model.config import SRayConfig
 from sray.model.runtime import Runtime
 from sray.platform.config.held_out_render import HeldOutRender
-from sray.platform.config.optim_settings import OptimSettings
 from sray.platform.config.overrides import set_field
-from sray.platform.config.stored_format import CONFIG_VERSION, VERSION_KEY, check_version, from_plain
-
-PRECISIONS = ("no", "bf16", "fp16")
-"""Mixed-precision modes: fp32, bfloat16 autocast (CPU and CUDA), fp16 with loss scaling (CUDA)."""
+from sray.platform.config.stored_format import CONFIG_VERSION, VERSION_KEY, from_plain, outdated
 
 
 @dataclass
@@ -27,8 +23,7 @@ class DataSettings:
     shards: str = "outputs/demo/shards"
     """Folder holding ``manifest.json`` and the webdataset shards (``sray data shard``)."""
     top_k: int = 12
-    """Source views (``model.n_source`` of them) are drawn from this many top-ranked neighbours
-    of the query view."""
+    """Source views (``model.n_source`` of them) are drawn from this many top-ranked neighbours of the query view."""
     rays_per_batch: int = 1024
     """Rays per training step and rank (paper: 1024)."""
     loader_workers: int = 1
@@ -45,20 +40,15 @@ class DataSettings:
     val_views_per_scene: int = 2
     """Held-out views rendered per scene at each validation (in chunks of ``runtime.chunk`` rays)."""
     held_out: HeldOutRender = field(default_factory=lambda: HeldOutRender(n_source=0, stride=2, fast_stride=1))
-    """How validation renders and scores its views (``sray.platform.config.held_out_render``): the model's own
-    source count, every 2nd pixel to keep it cheap, the fast render on those pixels; set field by field:
-    ``--set data.held_out.render=full``."""
+    """How validation renders and scores its views: the model's own source count, every 2nd pixel to keep it cheap,
+    the fast render on those pixels; set field by field: ``--set data.held_out.render=full``."""
     val_scenes: int = 0
-    """Scenes of each role (train, unseen test) validated, the first ones by name; 0 = all of them
-    (a run over many scenes keeps its validations cheap with a few)."""
+    """Scenes of each role (train, unseen test) validated, the first ones by name; 0 = all of them."""
     class_balance: str = "none"
-    """Class-frequency-aware semantic loss: ``none`` (the paper), ``inverse-sqrt`` or ``inverse``
-    weights from the training scenes' pixel frequencies (``sray.data_tools.loader.class_stats``), computed
-    when the job starts and stored as ``model.class_weights``."""
+    """Semantic loss weights: ``none`` (the paper), ``inverse-sqrt`` or ``inverse`` of the training scenes' pixel
+    frequencies (``sray.data_tools.loader.class_stats``), computed at the start, stored as ``model.class_weights``."""
     aug: Augmentation = field(default_factory=Augmentation)
-    """Training-sample augmentation (``sray.data_tools.loader.augment``: source colour jitter and noise,
-    random source count, source resolution and query crops; every option off by default), set field by
-    field: ``--set data.aug.colour_ev=0.3``."""
+    """Training-sample augmentation (``sray.data_tools.loader.augment``; all off by default), field by field."""
 
     def __post_init__(self) -> None:
         """ValueError naming a field out of range."""
@@ -69,6 +59,31 @@ class DataSettings:
             raise ValueError(f"train config: data.epoch_steps is {self.epoch_steps}; give a number of steps, or 0 for "
                              "one loader epoch per run.ckpt_every steps")
         self.held_out.check(lambda field: f"train config: data.held_out.{field}")
+
+
+@dataclass
+class OptimSettings:
+    """Optimiser, schedule and stability guards."""
+
+    steps: int = 250_000
+    """Total optimiser steps (paper: 250k)."""
+    lr: float = 1e-3
+    """Initial Adam learning rate (paper: 1e-3)."""
+    lr_final: float = 5e-5
+    """Learning rate reached at the last step by exponential decay (paper: 5e-5)."""
+    warmup_steps: int = 0
+    """Linear warm-up steps before the decay starts."""
+    grad_clip: float = 1.0
+    """Global gradient-norm clipping threshold (0 disables clipping)."""
+    cpu_seconds: float = 0.0
+    """Stop once the job has spent this many CPU seconds, summed over its ranks and their loader processes
+    (``sray.platform.train.cpu_clock``), or at ``steps``, whichever comes first; the learning-rate decay then
+    follows the larger of the step and the CPU fraction (set ``steps`` as a cap). 0 = steps only."""
+    warmup_2d_steps: int = 0
+    """The first this many steps train the encoder and its source-view head on the source views' labels alone
+    (nothing rendered; a departure from the paper, docs/model.md); they count toward ``steps``; 0 = off."""
+    max_nonfinite_in_row: int = 20
+    """A non-finite loss or gradient skips the step; this many in a row stop the job."""
 
 
 @dataclass
@@ -84,10 +99,9 @@ class RunSettings:
     tracker: str = "mlflow"
     """Tracker the job logs to, by registry name (``sray.platform.tracking.registry``)."""
     tracking_uri: str = ""
-    """The tracker's store (MLflow: the tracking URI); empty = its default store in the working directory
-    (MLflow: a SQLite file)."""
+    """The tracker's store (MLflow: the tracking URI); empty = its default store in the working directory."""
     precision: str = "no"
-    """One of ``PRECISIONS``."""
+    """Mixed precision: ``no`` (fp32), ``bf16`` (autocast, CPU and CUDA) or ``fp16`` (loss scaling, CUDA)."""
     workers: int = 2
     """Ray Train workers (one Accelerate process each)."""
     cpus_per_worker: float = 1.0
@@ -108,8 +122,7 @@ class RunSettings:
     max_failures: int = 2
     """Worker-group restarts Ray Train attempts after a worker dies."""
     system_metrics_s: float = 0.0
-    """Every this many seconds the first worker of each node records the node's system metrics (CPU, memory,
-    disk, network, GPU where present) into the job's run as ``system/node<k>/...``; 0 = off (the default)."""
+    """Seconds between records of each node's system metrics (``system/node<k>/...``) by its first worker; 0 = off."""
     register_model: str = "sray"
     """Name the final checkpoint is registered under in the tracker's model registry ('' = do not register)."""
 
@@ -129,12 +142,31 @@ class TrainConfig:
     run: RunSettings = field(default_factory=RunSettings)
     """Cadence, precision, placement, outputs."""
     runtime: Runtime = field(default_factory=Runtime)
-    """How the network is run in training and validation: implementation, rays per training piece and per
-    render chunk (``sray.model.runtime``), set field by field: ``--set runtime.chunk=4096``."""
+    """How the network is run (``sray.model.runtime``), set field by field: ``--set runtime.chunk=4096``."""
 
     def __post_init__(self) -> None:
-        """Reject settings of different sections that cannot train together."""
-        check_sections(self)
+        """Reject settings the sections cannot train with (:meth:`check`)."""
+        self.check()
+
+    def check(self) -> None:
+        """ValueError naming a field out of range, or settings of sections that cannot train together: fp16 with a
+        loss in pieces smaller than the batch (a piece's gradients are not loss-scaled, so small ones could
+        underflow), a 2D warm-up without the source-view head it trains."""
+        self.model.__post_init__()
+        self.data.__post_init__()
+        if self.optim.cpu_seconds < 0:
+            raise ValueError(f"train config: optim.cpu_seconds is {self.optim.cpu_seconds}; use 0 (steps only) or a "
+                             "positive CPU-second budget")
+        warmup, src_sem = self.optim.warmup_2d_steps, self.model.lambda_src_sem
+        if warmup < 0 or (warmup > 0 and src_sem <= 0):
+            raise ValueError(f"train config: optim.warmup_2d_steps is {warmup}; it must be >= 0, and a warm-up "
+                             "trains the source-view head, so it needs model.lambda_src_sem > 0 "
+                             f"(is {src_sem}). Set model.lambda_src_sem=1 or optim.warmup_2d_steps=0.")
+        piece, rays = self.runtime.train_piece, self.data.rays_per_batch
+        if self.run.precision == "fp16" and 0 < piece < rays:
+            raise ValueError(f"train config: runtime.train_piece is {piece} (< data.rays_per_batch {rays}) with "
+                             "run.precision=fp16; a piece's gradients are not loss-scaled. "
+                             "Set runtime.train_piece=0 (the whole batch on a GPU) or run.precision=bf16.")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (JSON/YAML-safe; tuples become lists) with its ``format_version``."""
@@ -142,9 +174,9 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`, today's format only: OutdatedFormat (naming ``sray migrate``) for a config an
-        earlier sray wrote, ValueError naming a field today's config does not have."""
-        check_version(d, "train config")
+        """Inverse of :meth:`to_dict`, today's format only (``stored_format``)."""
+        if (version := d.get(VERSION_KEY, 1)) != CONFIG_VERSION:
+            raise outdated("train config", version, CONFIG_VERSION)
         return from_plain(cls, {k: v for k, v in d.items() if k != VERSION_KEY}, "train config")
 
     def job_dir(self) -> Path:
@@ -152,38 +184,11 @@ class TrainConfig:
         return Path(self.run.output_dir).resolve() / self.run.name
 
 
-def check_sections(cfg: TrainConfig) -> None:
-    """ValueError for settings of different sections that cannot train together: fp16 with a loss in pieces
-    smaller than the batch (a piece's gradients are taken before the loss scaler scales them,
-    ``sray.model.piecewise_loss``, so small ones could underflow), a 2D warm-up without the source-view
-    head it trains, and a negative CPU budget."""
-    if cfg.optim.cpu_seconds < 0:
-        raise ValueError(f"train config: optim.cpu_seconds is {cfg.optim.cpu_seconds}; use 0 (steps only) or a "
-                         "positive CPU-second budget")
-    if cfg.optim.warmup_2d_steps < 0 or (cfg.optim.warmup_2d_steps > 0 and cfg.model.lambda_src_sem <= 0):
-        raise ValueError(f"train config: optim.warmup_2d_steps is {cfg.optim.warmup_2d_steps}; it must be >= 0, and "
-                         "a warm-up trains the source-view head, so it needs model.lambda_src_sem > 0 "
-                         f"(is {cfg.model.lambda_src_sem}). Set model.lambda_src_sem=1 or optim.warmup_2d_steps=0.")
-    if cfg.run.precision == "fp16" and 0 < cfg.runtime.train_piece < cfg.data.rays_per_batch:
-        raise ValueError(f"train config: runtime.train_piece is {cfg.runtime.train_piece} (< data.rays_per_batch "
-                         f"{cfg.data.rays_per_batch}) with run.precision=fp16; a piece's gradients are not "
-                         "loss-scaled. "
-                         "Set runtime.train_piece=0 (the whole batch on a GPU) or run.precision=bf16.")
-
-
 def apply_override(cfg: TrainConfig, assignment: str) -> None:
-    """Apply one ``section.field=value`` override in place, parsing the value as the field's type.
-
-    Raises ValueError naming the unknown section or field and listing the valid ones, or a value the network
-    cannot run with (the config keeps its previous value then).
-    """
-
-    def check() -> None:
-        cfg.model.__post_init__()
-        cfg.data.__post_init__()
-        check_sections(cfg)
-
-    set_field(cfg, assignment, "optim.lr=5e-4", check)
+    """Apply one ``section.field=value`` override in place, the value parsed as the field's type
+    (``overrides.set_field``): ValueError names an unknown section or field and lists the valid ones, or a value the
+    network cannot run with (the config keeps its previous value then)."""
+    set_field(cfg, assignment, "optim.lr=5e-4", cfg.check)
 
 
 CONFIG_FILE = "config.json"
@@ -191,8 +196,7 @@ CONFIG_FILE = "config.json"
 
 
 def load_job_config(output_dir: str, name: str) -> TrainConfig:
-    """The saved config of an existing job (for ``--resume``); errors name the file and the fix (for a config an
-    earlier sray wrote: ``sray migrate``)."""
+    """The saved config of an existing job (for ``--resume``); errors name the file and the fix."""
     path = Path(output_dir) / name / CONFIG_FILE
     if not path.exists():
         raise FileNotFoundError(f"{path}: no job called {name!r} under {output_dir}; "

@@ -49,8 +49,6 @@ class EvalModel:
     """Run tags naming it (e.g. ``sray.checkpoint``)."""
     subject: str
     """What predicts, in error messages ("the checkpoint's model")."""
-    train_inputs: str = ""
-    """What its training read besides colours and labels (``EvalProtocol.train_inputs``; empty: ``inputs``)."""
 
 
 def torch_device(device: str | None) -> torch.device:
@@ -81,7 +79,7 @@ def checkpoint_model(checkpoint: Path, device: str | None = None, fast: FastRend
                      ignore_id=cfg.model.ignore_id, inputs=net.cfg.inputs, fast=fast, chunk=runtime.chunk,
                      device=where, step=step, record=record,
                      name=f"{job}{checkpoint.name}", tags={"sray.checkpoint": str(checkpoint)},
-                     subject="the checkpoint's model", train_inputs=cfg.model.train_inputs)
+                     subject="the checkpoint's model")
 
 
 def segmenter_model(folder: Path, device: str | None = None, tolerance: float = 0.05) -> EvalModel:

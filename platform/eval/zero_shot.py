@@ -146,8 +146,8 @@ def evaluate_model(model: EvalModel, shards: Path, scenes: list[str] | None, out
     tracking = get_tracker(tracker, tracking_uri or "")
     shards, out_dir = Path(shards).resolve(), Path(out_dir).resolve()
     names, metas = select_scenes(shards, scenes)
-    protocol = EvalProtocol.from_shards(shards, n_source, stride, model.inputs,
-                                        model.train_inputs).rendered_by(model.fast)
+    protocol = EvalProtocol.from_shards(shards, n_source, stride, model.inputs)
+    protocol = protocol.rendered_by(model.fast)
     n_classes, ignore_id = model.n_classes, model.ignore_id
     for name in names:
         if len(metas[name]["class_names"]) != n_classes:

@@ -235,7 +235,7 @@ def run_fleet(cfg: FleetConfig, checkpoint: Path, shards: Path, scenes: list[str
     status = "FAILED"
     try:
         if is_new:
-            logger.log_params(cfg.to_dict() | {"checkpoint": str(checkpoint), "shards": str(shards)})
+            logger.log_params(dataclasses.asdict(cfg) | {"checkpoint": str(checkpoint), "shards": str(shards)})
         if tasks:
             done |= _schedule(tasks, cfg, full_bytes, tracker)
         results = [done[p] for p in pairs]

@@ -4,8 +4,7 @@ same rays) and :class:`TransferLearner` (the ``2d-transfer`` segmenter, finetune
 
 All update through the shared :class:`sray.platform.train.step.TrainStep` (autocast bf16 on CPU and
 CUDA or fp16 with a GradScaler on CUDA, clipping, the non-finite guard); the loss itself is computed in
-float32 (``render_loss``; the segmenter's ``source_semantic_loss``). No learner passes the query's depth, so a
-shared model trained with the depth loss (``model.lambda_depth`` > 0) finetunes without that term.
+float32 (``render_loss``; the segmenter's ``source_semantic_loss``).
 """
 
 from __future__ import annotations

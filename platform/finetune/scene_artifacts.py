@@ -18,6 +18,7 @@ from sray.model.semantic_nerf import SemanticNeRF, SemanticNeRFConfig
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import STATE_FILE
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
+from sray.platform.config.stored_format import outdated
 from sray.platform.eval.segmenter import Segmenter, SegmenterConfig
 
 FORMAT = "sray-scene-delta"
@@ -146,6 +147,8 @@ def _read_whole(artifact: Path, method: str) -> tuple[dict[str, Tensor], dict[st
 def load_semantic_nerf(artifact: Path, map_location: str = "cpu") -> SemanticNeRF:
     """The Semantic-NeRF of one scene (eval mode) rebuilt from its artifact."""
     tensors, fields = _read_whole(artifact, "semantic-nerf")
+    if "density_activation" in fields:
+        raise outdated(f"{artifact}: this Semantic-NeRF artifact", "1 (with density_activation)", "2")
     model = SemanticNeRF(SemanticNeRFConfig(**{**fields, "scene_center": tuple(fields["scene_center"])}))
     model.load_state_dict(tensors)
     return model.to(map_location).eval()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -110,7 +110,7 @@ def scene_protocol(task: SceneTask, shared: SRayConfig, fast: FastRender | None 
     """How the held-out scores are made (``finetune.held_out``, the method's inputs, ``fast`` or a full render)."""
     ft, method = task.config.finetune, get_method(task.method)
     if method.uses_sources:
-        inputs = (method.inputs, "") if method.inputs else (shared.inputs, shared.train_inputs)  # (test, training)
+        inputs = (method.inputs, "") if method.inputs else (shared.inputs, "")  # (test, training)
         n_source = ft.held_out.sources(shared.n_source)
         return EvalProtocol.from_shards(Path(task.shards), n_source, ft.held_out.stride, *inputs).rendered_by(fast)
     return EvalProtocol.without_sources(ft.held_out.stride)
@@ -166,8 +166,8 @@ def finetune_scene(task: SceneTask, logger: RunLogger | None = None) -> SceneOut
                       ft.held_out.sources(learner.net.cfg.n_source), ft.held_out.fast())
            if task.clip_frames and get_method(task.method).clips else None)
     if logger is not None:
-        logger.log_params(cfg.to_dict() | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
-                                           "protocol": protocol.to_json()})
+        logger.log_params(asdict(cfg) | {"scene": task.scene, "method": task.method, "checkpoint": task.checkpoint,
+                                         "protocol": protocol.to_json()})
         logger.log_metrics({"attempt": task.attempt}, 0)
 
     curve: list[dict[str, float]] = []

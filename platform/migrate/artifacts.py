@@ -1,19 +1,12 @@
 """``sray migrate PATH``: find the stored artifacts of an earlier sray under PATH and convert them to today's format.
 
-What it converts (format 1: everything sray wrote up to commit 7734061, ``config_v1``):
-
-* a training checkpoint folder (``meta.json`` + ``state.pt``): its config, its model keys (the oldest ones hold the
-  training module's ``net.``-prefixed keys), its counters (every one present: those an older sray did not count
-  become 0, or NaN = unknown for the wall seconds of a checkpoint past step 0), ``meta.json`` version 2;
-* a job's ``config.json`` (``sray train --resume`` reads it);
-* a sweep's ``sweep.json``: its base config and the parameters it sweeps (moved paths renamed);
-* a fleet's ``fleet.json`` written before trackers had names (its tracker: MLflow);
-* a 2D segmenter folder (``segmenter.json`` and an unfinished training's ``training_state.pt``): the removed
-  ``encoder_norm`` setting.
-
-Everything is converted in memory first; only when every artifact converts is anything written, each file or
-checkpoint folder atomically (``sray.data_tools.atomic``), so a refusal leaves PATH as it was. An artifact already
-in today's format is left alone.
+It converts training configs (``config_formats``) in checkpoints, jobs' ``config.json`` and sweeps' ``sweep.json``
+(whose swept parameters are renamed or dropped too); a checkpoint whose ``meta.json`` is version 1 (up to 7734061)
+also gets its model keys (the oldest hold ``net.``-prefixed keys) and every counter (0, or NaN = unknown for the
+wall seconds of a checkpoint past step 0). A fleet's ``fleet.json`` written before trackers had names gets MLflow;
+Semantic-NeRF scene artifacts and 2D segmenter folders lose their removed settings. Everything is converted in
+memory first; only when every artifact converts is anything written, each file atomically, so a refusal leaves
+PATH as it was. An artifact already in today's format is left alone.
 """
 
 from __future__ import annotations
@@ -21,40 +14,38 @@ from __future__ import annotations
 import io
 import json
 import math
-import os
-import shutil
-import uuid
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import torch
+from safetensors import safe_open
+from safetensors.torch import save
 
-from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json, replace_dir
+from sray.data_tools.atomic import atomic_write_bytes, atomic_write_json
 from sray.platform.checkpoints.folders import FORMAT, META_FILE, STATE_FILE, VERSION, check_weights_only_safe
-from sray.platform.config.stored_format import VERSION_KEY
+from sray.platform.config.stored_format import CONFIG_VERSION, VERSION_KEY
 from sray.platform.config.train_config import CONFIG_FILE, TrainConfig
 from sray.platform.finetune.fleet import FLEET_FILE
-from sray.platform.migrate.config_v1 import MigrationRefused, removed_value, today_path, train_config_v2
+from sray.platform.finetune.methods.semantic_nerf_method import METHOD as SEMANTIC_NERF
+from sray.platform.migrate.config_formats import (MigrationRefused, drop_removed, refuse_unless_noop, today_path,
+                                                   train_config_today)
 from sray.platform.sweep.prepare import FORMAT as SWEEP_FORMAT, RECORD_FILE as SWEEP_FILE
 
 SEGMENTER_FILE, SEGMENTER_STATE = "segmenter.json", "training_state.pt"
 """A 2D segmenter folder's config and an unfinished training's state (``sray.platform.eval.segmenter*``)."""
-LEGACY_PREFIX = "net."
-"""Format 1's oldest checkpoints hold the training module's keys: ``net.`` + the bare model's."""
+SEGMENTER_REMOVED = {"encoder_norm": ("instance", "7734061")}
+NERF_REMOVED = {"density_activation": ("softplus", "7966ddf")}
+"""Removed settings of a segmenter's and a Semantic-NeRF's config, as ``config_formats.REMOVED_FIELDS``."""
 
 
-@dataclass
-class Conversion:
-    """One artifact's conversion, computed and checked, not yet written."""
+class Conversion(NamedTuple):
+    """One artifact's conversion, computed and checked, not yet written: the file or checkpoint folder it replaces,
+    what it is (for the report line) and the function that writes it in place, atomically."""
 
     path: Path
-    """The file or checkpoint folder it replaces."""
     what: str
-    """What it is, for the report line."""
     write: Callable[[], None]
-    """Writes the converted artifact in place, atomically."""
 
 
 def _json(path: Path) -> Any:
@@ -66,8 +57,8 @@ def _json(path: Path) -> Any:
 
 
 def _checked(d: dict[str, Any], where: Path) -> dict[str, Any]:
-    """``d`` converted to format 2 and proven to load as today's ``TrainConfig``."""
-    out = train_config_v2(d, str(where))
+    """``d`` converted to today's format and proven to load as today's ``TrainConfig``."""
+    out = train_config_today(d, str(where))
     try:
         TrainConfig.from_dict(out)
     except (TypeError, ValueError) as e:
@@ -82,99 +73,115 @@ def _state_bytes(state: dict[str, Any]) -> bytes:
     return buffer.getvalue()
 
 
-def checkpoint(folder: Path) -> Conversion | None:
-    """The conversion of checkpoint folder ``folder`` (None when already today's)."""
+def checkpoint(folder: Path) -> list[Conversion] | None:
+    """The conversion of checkpoint folder ``folder`` (none when already today's; None: not a checkpoint folder)."""
+    if not (folder / META_FILE).is_file() or not (folder / STATE_FILE).is_file():
+        return None
     meta = _json(folder / META_FILE)
     if meta.get("format") != FORMAT or meta.get("version") not in (1, VERSION):
         raise MigrationRefused(f"{folder / META_FILE}: format {meta.get('format')!r} version {meta.get('version')!r} "
                                f"is not an sray checkpoint this sray understands")
-    if meta["version"] == VERSION:
-        return None
-    state = torch.load(folder / STATE_FILE, map_location="cpu", weights_only=True)
+    state = torch.load(folder / STATE_FILE, map_location="cpu", weights_only=True, mmap=True)
+    if meta["version"] == VERSION and state["config"].get(VERSION_KEY) == CONFIG_VERSION:
+        return []
     state["config"] = _checked(state["config"], folder / STATE_FILE)
-    if state["model"] and all(k.startswith(LEGACY_PREFIX) for k in state["model"]):
-        state["model"] = {k.removeprefix(LEGACY_PREFIX): v for k, v in state["model"].items()}
-    state.setdefault("best_metric", None)
-    counters = state.setdefault("counters", {})
-    counters.pop("ray_phase_cpu_seconds", None)  # kept only for the removed optim.lr_decay_start
-    for name in ("skipped_steps", "cpu_seconds", "peak_memory_mb"):
-        counters.setdefault(name, 0.0 if name != "skipped_steps" else 0)
-    counters.setdefault("wall_seconds", 0.0 if int(state["step"]) == 0 else math.nan)
+    if meta["version"] == 1:
+        if state["model"] and all(k.startswith("net.") for k in state["model"]):
+            state["model"] = {k.removeprefix("net."): v for k, v in state["model"].items()}
+        state.setdefault("best_metric", None)
+        counters = state.setdefault("counters", {})
+        counters.pop("ray_phase_cpu_seconds", None)  # kept only for the removed optim.lr_decay_start
+        for name, value in {"skipped_steps": 0, "cpu_seconds": 0.0, "peak_memory_mb": 0.0,
+                            "wall_seconds": 0.0 if int(state["step"]) == 0 else math.nan}.items():
+            counters.setdefault(name, value)
     data, new_meta = _state_bytes(state), {**meta, "version": VERSION}
 
-    def write() -> None:
-        tag = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        ready = folder.with_name(f".migrate-{folder.name}-{tag}")
-        shutil.copytree(folder, ready)
-        try:
-            (ready / STATE_FILE).write_bytes(data)
-            (ready / META_FILE).write_text(json.dumps(new_meta, indent=1) + "\n")
-            replace_dir(ready, folder, folder.with_name(f".old-{folder.name}-{tag}"))
-        except BaseException:
-            shutil.rmtree(ready, ignore_errors=True)
-            raise
-    return Conversion(folder, "checkpoint", write)
+    def write() -> None:  # the state first: one still marked version 1 is converted again, to the same
+        atomic_write_bytes(folder / STATE_FILE, data)
+        atomic_write_json(folder / META_FILE, new_meta)
+    return [Conversion(folder, "checkpoint", write)]
 
 
-def job_config(path: Path) -> Conversion | None:
-    """The conversion of a job's ``config.json`` (None when already today's or not a training config)."""
+def job_config(path: Path) -> list[Conversion] | None:
+    """The conversion of a job's ``config.json`` (none when already today's; None when not a training config)."""
     d = _json(path)
-    if not isinstance(d, dict) or not {"model", "data", "run"} <= set(d) or VERSION_KEY in d:
+    if not isinstance(d, dict) or not {"model", "data", "run"} <= set(d):
         return None
+    if d.get(VERSION_KEY) == CONFIG_VERSION:
+        return []
     out = _checked(d, path)
-    return Conversion(path, "job config", lambda: atomic_write_json(path, out))
+    return [Conversion(path, "job config", lambda: atomic_write_json(path, out))]
 
 
-def sweep_record(path: Path) -> Conversion | None:
-    """The conversion of a sweep's ``sweep.json`` (None when already today's)."""
+def sweep_record(path: Path) -> list[Conversion]:
+    """The conversion of a sweep's ``sweep.json`` (none when already today's)."""
     record = _json(path)
     if record.get("format") != SWEEP_FORMAT:
         raise MigrationRefused(f"{path}: format {record.get('format')!r} is not an sray sweep record")
-    if VERSION_KEY in record["base"]:
-        return None
+    if record["base"].get(VERSION_KEY) == CONFIG_VERSION:
+        return []
     record["base"] = _checked(record["base"], path)
-    plan = {}
     for key, point in record["plan"].items():
-        for field, value in point.items():
-            if today_path(field) is None:
-                removed_value(field, value, f"{path}: trial {key}")
-        plan[key] = {today_path(field): value for field, value in point.items() if today_path(field) is not None}
-    params = [f"{today_path(field)}={spec}" for field, _, spec in (p.partition("=") for p in record["params"])
-              if today_path(field) is not None]
-    record["plan"], record["params"] = plan, params
-    return Conversion(path, "sweep record", lambda: atomic_write_json(path, record))
+        for field in [f for f in point if today_path(f) is None]:
+            refuse_unless_noop(field, point.pop(field), f"{path}: trial {key}")
+        record["plan"][key] = {today_path(field): value for field, value in point.items()}
+    record["params"] = [f"{today_path(field)}={spec}" for field, _, spec in (p.partition("=") for p in record["params"])
+                        if today_path(field) is not None]
+    return [Conversion(path, "sweep record", lambda: atomic_write_json(path, record))]
 
 
-def segmenter(folder: Path) -> list[Conversion]:
-    """The conversions of a 2D segmenter folder: its ``segmenter.json`` and an unfinished training's state (the
-    removed ``encoder_norm`` setting, dropped where it is the instance norm every segmenter now has)."""
-    out = []
-    path = folder / SEGMENTER_FILE
+def segmenter(folder: Path) -> list[Conversion] | None:
+    """The conversions of a 2D segmenter folder's ``segmenter.json`` and training state (None: not one)."""
+    path, state_path, out = folder / SEGMENTER_FILE, folder / SEGMENTER_STATE, []
+    if not path.is_file():
+        return None
     stored = _json(path)
     if "encoder_norm" in stored.get("config", {}):
-        removed_value("model.encoder_norm", stored["config"].pop("encoder_norm"), str(path))
+        drop_removed(stored["config"], SEGMENTER_REMOVED, str(path))
         stored.get("training", {}).pop("encoder_norm", None)
         out.append(Conversion(path, "segmenter config", lambda: atomic_write_json(path, stored)))
-    state_path = folder / SEGMENTER_STATE
-    if state_path.is_file():
-        state = torch.load(state_path, map_location="cpu", weights_only=True)
-        if "encoder_norm" in state.get("settings", {}):
-            removed_value("model.encoder_norm", state["settings"].pop("encoder_norm"), str(state_path))
-            data = _state_bytes(state)
-            out.append(Conversion(state_path, "segmenter training state",
-                                  lambda: atomic_write_bytes(state_path, data)))
+    state = torch.load(state_path, map_location="cpu", weights_only=True) if state_path.is_file() else {}
+    if "encoder_norm" in state.get("settings", {}):
+        drop_removed(state["settings"], SEGMENTER_REMOVED, str(state_path))
+        data = _state_bytes(state)
+        out.append(Conversion(state_path, "segmenter training state", lambda: atomic_write_bytes(state_path, data)))
     return out
 
 
-def fleet_record(path: Path) -> Conversion | None:
+def semantic_nerf(path: Path) -> list[Conversion]:
+    """The conversion of a Semantic-NeRF scene artifact (none when already today's)."""
+    with safe_open(str(path), framework="pt") as f:
+        metadata = dict(f.metadata() or {})
+        if metadata.get("method") != SEMANTIC_NERF.name:
+            raise MigrationRefused(f"{path}: method {metadata.get('method')!r} is not a Semantic-NeRF scene artifact")
+        config = json.loads(metadata["config"])
+        if not NERF_REMOVED.keys() & config.keys():
+            return []
+        tensors = {k: f.get_tensor(k) for k in f.keys()}
+    drop_removed(config, NERF_REMOVED, str(path))
+    data = save(tensors, metadata=metadata | {"config": json.dumps(config)})
+    return [Conversion(path, "Semantic-NeRF artifact", lambda: atomic_write_bytes(path, data))]
+
+
+def fleet_record(path: Path) -> list[Conversion]:
     """The conversion of a fleet's ``fleet.json`` written before trackers had names (its runs are MLflow's)."""
     record = _json(path)
     if record.get("format") != "sray-fleet":
         raise MigrationRefused(f"{path}: format {record.get('format')!r} is not an sray fleet record")
     if "tracker" in record:
-        return None
+        return []
     record["tracker"] = "mlflow"
-    return Conversion(path, "fleet record", lambda: atomic_write_json(path, record))
+    return [Conversion(path, "fleet record", lambda: atomic_write_json(path, record))]
+
+
+FILES: dict[str, Callable[[Path], list[Conversion] | None]] = {
+    CONFIG_FILE: job_config, SWEEP_FILE: sweep_record, FLEET_FILE: fleet_record,
+    SEMANTIC_NERF.artifact_file: semantic_nerf}
+"""Artifact file name -> its conversions (None: a file of that name that sray did not write)."""
+FOLDERS = (checkpoint, segmenter)
+"""The conversions of an artifact folder (None: a folder of another kind)."""
+KINDS = (f"a checkpoint folder, a job's {CONFIG_FILE}, a sweep's {SWEEP_FILE}, a fleet's {FLEET_FILE}, a "
+         f"{SEMANTIC_NERF.artifact_file} or a segmenter folder")
 
 
 def find_conversions(root: Path) -> list[Conversion]:
@@ -183,41 +190,16 @@ def find_conversions(root: Path) -> list[Conversion]:
     root = Path(root)
     if not root.exists():
         raise MigrationRefused(f"{root}: no such file or folder")
-    if root.is_file():
-        folders, files = [], [root]
-        if root.name in (STATE_FILE, META_FILE, SEGMENTER_STATE):
-            folders, files = [root.parent], []
+    if root.is_file() and root.name in FILES:
+        found = [FILES[root.name](root)]
+    elif root.is_file() and root.name in (STATE_FILE, META_FILE, SEGMENTER_FILE, SEGMENTER_STATE):
+        found = [kind(root.parent) for kind in FOLDERS]
+    elif root.is_file():
+        raise MigrationRefused(f"{root}: not an artifact sray migrate understands ({KINDS})")
     else:
         folders = [root, *(p for p in sorted(root.rglob("*")) if p.is_dir() and not p.name.startswith("."))]
-        files = []
-    found, known = [], False
-    for folder in folders:
-        if (folder / META_FILE).is_file() and (folder / STATE_FILE).is_file():
-            known = True
-            found.append(checkpoint(folder))
-        if (folder / SEGMENTER_FILE).is_file():
-            known = True
-            found += segmenter(folder)
-        files += [folder / name for name in (CONFIG_FILE, SWEEP_FILE, FLEET_FILE) if (folder / name).is_file()]
-    for file in files:
-        if file.name == SWEEP_FILE:
-            known = True
-            found.append(sweep_record(file))
-        elif file.name == FLEET_FILE:
-            known = True
-            found.append(fleet_record(file))
-        elif file.name == CONFIG_FILE:
-            conversion = job_config(file)
-            known = known or conversion is not None or VERSION_KEY in _json(file)
-            found.append(conversion)
-        elif file.name == SEGMENTER_FILE:
-            known = True
-            found += segmenter(file.parent)
-        else:
-            raise MigrationRefused(f"{file}: not an artifact sray migrate understands (a checkpoint folder, a job's "
-                                   f"{CONFIG_FILE}, a sweep's {SWEEP_FILE}, a fleet's {FLEET_FILE} or a segmenter "
-                                   "folder)")
-    if not known:
-        raise MigrationRefused(f"{root}: holds no sray artifact (a checkpoint folder, a job's {CONFIG_FILE}, a sweep's "
-                               f"{SWEEP_FILE} or a segmenter folder)")
-    return [c for c in found if c is not None]
+        found = [kind(folder) for folder in folders for kind in FOLDERS]
+        found += [kind(f / name) for f in folders for name, kind in FILES.items() if (f / name).is_file()]
+    if all(conversions is None for conversions in found):
+        raise MigrationRefused(f"{root}: holds no sray artifact ({KINDS})")
+    return [c for conversions in found if conversions for c in conversions]

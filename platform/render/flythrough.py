@@ -44,8 +44,8 @@ class Flythrough:
                              f"the model predicts {net.cfg.n_classes}; render data of the model's label space")
         self.net, self.plan, self.fast, self.runtime = net.eval(), plan, fast, runtime
         self.picker = SourcePicker(plan.views, plan.meta, n_source)
-        self.protocol = EvalProtocol.from_manifest(plan.manifest, n_source, 1, str(manifest), net.cfg.inputs,
-                                                   net.cfg.train_inputs).rendered_by(fast)
+        self.protocol = EvalProtocol.from_manifest(plan.manifest, n_source, 1, str(manifest),
+                                                   net.cfg.inputs).rendered_by(fast)
         self.layout = panel_layout(plan.path.hw, len(names))
         self._encoded: tuple[list[str], torch.device, SourceSet] | None = None
 

@@ -96,13 +96,13 @@ def mode_rows(methods: list[str], trained: bool, checkpoint: SRayConfig, no_cra:
         if not trained and record.eval_model is None:
             continue
         if record.given_depth_of:  # its training read the depth only when it was trained on the scene with it
-            rows.append(_row(name, trained, "", record.inputs, "rgbd" if trained else checkpoint.train_inputs))
+            rows.append(_row(name, trained, "", record.inputs, "rgbd" if trained else checkpoint.inputs))
         elif record.inputs or not record.uses_sources:  # it does not read the sources as the checkpoint does
             rows.append(_row(name, trained, "", record.inputs or "rgb"))
         else:
-            rows.append(_row(name, trained, "", checkpoint.inputs, checkpoint.train_inputs))
+            rows.append(_row(name, trained, "", checkpoint.inputs))
             if not trained and no_cra is not None:
-                rows.append(_row(name, trained, "no-cra", no_cra.inputs, no_cra.train_inputs))
+                rows.append(_row(name, trained, "no-cra", no_cra.inputs))
     return rows
 
 

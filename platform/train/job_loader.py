@@ -11,12 +11,10 @@ from sray.platform.config.train_config import TrainConfig
 
 def job_loader(cfg: TrainConfig, rank: int, world_size: int, batches_per_epoch: int) -> EpochLoader:
     """Rank ``rank``'s training loader of the job ``cfg``: ``batches_per_epoch`` samples per epoch, augmented by
-    ``data.aug``, with the sources' class ids when the source-view semantic loss is on and the query pixels'
-    depth when the depth loss is (``model.lambda_depth`` > 0)."""
+    ``data.aug``, with the sources' class ids when the source-view semantic loss is on."""
     data = cfg.data
     return make_train_loader(
         Path(data.shards), n_source=cfg.model.n_source, top_k=data.top_k, rays_per_batch=data.rays_per_batch,
         batches_per_epoch=batches_per_epoch, rank=rank, world_size=world_size, num_workers=data.loader_workers,
         seed=cfg.run.seed, augment=data.aug, source_labels=cfg.model.lambda_src_sem > 0,
-        query_depth=cfg.model.lambda_depth > 0,
         visit_samples=data.visit_samples, cache_scenes=data.cache_scenes)

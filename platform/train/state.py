@@ -11,8 +11,7 @@ import torch
 from sray.model.ray_batch import RayBatchLoss
 from sray.model.semantic_ray import SRayModel
 from sray.platform.checkpoints.folders import write_checkpoint
-from sray.platform.config.optim_settings import OptimSettings
-from sray.platform.config.train_config import TrainConfig
+from sray.platform.config.train_config import OptimSettings, TrainConfig
 from sray.platform.train.step import fused_adam
 
 FIRST_COUNTERS: dict[str, int | float] = {"skipped_steps": 0, "cpu_seconds": 0.0, "wall_seconds": 0.0,

@@ -24,7 +24,7 @@ def validation_protocol(cfg: TrainConfig) -> EvalProtocol:
     """How ``val/*`` and ``zeroshot/*`` are made (``data.held_out``, ``model.inputs``, what its training read)."""
     held_out = cfg.data.held_out
     return EvalProtocol.from_shards(Path(cfg.data.shards), held_out.sources(cfg.model.n_source), held_out.stride,
-                                    cfg.model.inputs, cfg.model.train_inputs).rendered_by(held_out.fast())
+                                    cfg.model.inputs).rendered_by(held_out.fast())
 
 
 def evaluate_group(net: nn.Module, cfg: TrainConfig, manifest: Manifest, role: str,

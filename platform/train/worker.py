@@ -154,7 +154,7 @@ def train_worker(payload: dict[str, Any]) -> None:
             model.train()
             with train_step.autocast():  # the first optim.warmup_2d_steps steps train on source labels only
                 loss, terms = model(ray_batch(sample), sample.target_label, sample.target_rgb,
-                                    render=step >= cfg.optim.warmup_2d_steps, target_depth=sample.target_depth)
+                                    render=step >= cfg.optim.warmup_2d_steps)
             if step == faults.nan_at_step:
                 loss = loss * float("nan")
             stop_asked = (job_dir / STOP_FILE).exists() or step + 1 == faults.stop_after_step
