@@ -1,8 +1,5 @@
-"""The catalog of a room's furniture: for each class one of several shape templates, with clutter on top.
-
-Room recipes (``room_types.py``) ask the catalog for "a table" or "a chair"; the catalog draws which
-template builds it (``furniture.py``, ``fittings.py``, ``templates.py``) and, for pieces with a
-usable top, stands small objects on it (``clutter.py``). Template weights favour the common shapes.
+"""The catalog of a room's furniture: room recipes ask for "a table" or "a chair"; the catalog draws the shape
+template that builds it (weights favour the common shapes) and stands small objects on a usable top (``clutter.py``).
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
-"""Clutter: small objects (cups, vases, bottles, book stacks, boxes, plants, lamps) on furniture tops.
-
-ScanNet-20 has no class for such objects, so they are ignore-labelled, as ScanNet's own small
-objects are ("otherprop" maps to no benchmark class). They matter for generalization anyway: real
-tables are never bare, and the model must learn that what stands on a table is not the table.
-Objects are built in the host piece's object frame, inside the top rectangle of one of its boxes,
-never overlapping each other or any taller box of the piece (a monitor, a tap).
+"""Clutter: small objects (cups, vases, bottles, book stacks, boxes, plants, lamps) on furniture tops, ignore-labelled
+as ScanNet's own small objects are; real tables are never bare, and what stands on a table is not the table. Objects
+stand inside the top of one box of the host piece, overlapping neither each other nor a taller box of the piece.
 """
 
 from __future__ import annotations
@@ -16,8 +12,7 @@ from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.furniture import Piece, span
 from sray.data_tools.synth.geometry import Box
 
-Rect = tuple[float, float, float, float]
-"""(x0, x1, y0, y1) in the piece's object frame (metres)."""
+Rect = tuple[float, float, float, float]  # (x0, x1, y0, y1) in the piece's object frame, metres
 
 
 def _object(rng: np.random.Generator, x: float, y: float, z: float) -> tuple[list[Box], float]:
@@ -65,10 +60,8 @@ def top_surface(piece: Piece, label: int) -> tuple[Rect, float]:
 
 
 def add_clutter(rng: np.random.Generator, piece: Piece, label: int, count: int, edge: float = 0.04) -> int:
-    """Stand up to ``count`` small objects on the top of ``piece``'s ``label`` box; returns how many fitted.
-
-    The piece's height grows to its tallest object (wall placement uses it to keep windows clear).
-    """
+    """Stand up to ``count`` small objects on the top of ``piece``'s ``label`` box; returns how many fitted. The
+    piece's height grows to its tallest object (wall placement uses it to keep windows clear)."""
     (x0, x1, y0, y1), z = top_surface(piece, label)
     taken: list[Rect] = [(b.center[0] - b.size[0] / 2, b.center[0] + b.size[0] / 2, b.center[1] - b.size[1] / 2,
                           b.center[1] + b.size[1] / 2) for b in piece.boxes if b.center[2] + b.size[2] / 2 > z + 1e-3]

@@ -1,16 +1,6 @@
-"""Content beyond the first catalog: rugs, kitchen islands, open shelving, under-counter fridges and doors of other
-styles, each labelled with the ScanNet-20 class a ScanNet annotator would give it.
-
-Labels (docs/data.md, "What is in a room"):
-
-* a rug or runner lying on the floor is ``floor``: a floor covering seen from a handheld camera is floor to every
-  downstream use; the Replica reader maps a Replica rug to NYU40 ``floor mat`` (no ScanNet-20 class: ignored), so
-  labelling rugs floor here costs nothing there and teaches a model that a patterned covering is still floor;
-* a kitchen island is a ``cabinet`` body under a ``counter`` top, like the counter run along a wall;
-* an open shelving unit standing on the floor is ``bookshelf`` (ScanNet-20's class for shelf units);
-* an under-counter fridge is ``refrigerator``; glazed, double and plank doors are ``door`` (their glass too).
-
-Same object frame as ``furniture.py``: footprint centred on the origin, z = 0 the floor, back at -y.
+"""Rugs, kitchen islands, open shelving, under-counter fridges and doors of other styles (object frame of
+``furniture.py``), labelled as a ScanNet annotator would: a rug is ``floor`` (docs/data.md, "What is in a room",
+says why), an island a ``cabinet`` under a ``counter``, open shelving ``bookshelf``, every door part ``door``.
 """
 
 from __future__ import annotations

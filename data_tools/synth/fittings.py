@@ -1,11 +1,10 @@
-"""Fittings, the built-in pieces of a room: wall fixtures, kitchen and bathroom pieces, made of boxes.
-
-Same object frame as ``furniture.py`` (the free-standing pieces): footprint centred on the origin,
-back (the wall side) at -y, front at +y, floor at z = 0. Wall fixtures (doors, windows, pictures,
-curtains) are thin pieces whose back lies on the wall.
+"""Fittings, the built-in pieces of a room: wall fixtures (thin pieces whose back lies on the wall), kitchen and
+bathroom pieces, in the object frame of ``furniture.py``.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -17,8 +16,7 @@ from sray.data_tools.synth.geometry import Box
 
 def against_wall(boxes: list[Box], width: float, depth: float, height: float) -> Piece:
     """A piece built with its back at y = 0 and its front at y = depth, recentred on its footprint."""
-    moved = [Box(center=(b.center[0], b.center[1] - depth / 2, b.center[2]), size=b.size, label=b.label,
-                 material=b.material, yaw=b.yaw, casts_shadow=b.casts_shadow) for b in boxes]
+    moved = [replace(b, center=(b.center[0], b.center[1] - depth / 2, b.center[2])) for b in boxes]
     return Piece(moved, width, depth, height)
 
 
@@ -161,10 +159,8 @@ def washbasin(rng: np.random.Generator, vanity: bool) -> Piece:
 
 
 def bathtub(rng: np.random.Generator, length: float, curtain_side: float | None) -> Piece:
-    """An open bathtub (floor, four walls) along a wall; optional shower curtain on its open side.
-
-    ``curtain_side`` in (0, 1] is the drawn fraction of the tub's length covered by the curtain.
-    """
+    """An open bathtub (floor, four walls) along a wall; a shower curtain covering the fraction ``curtain_side`` of
+    its length on its open side, if given."""
     label, china = CLS["bathtub"], mat.ceramic(rng)
     w, h, t = float(rng.uniform(0.7, 0.8)), float(rng.uniform(0.5, 0.6)), 0.07
     boxes = [span(label, china, -length / 2, length / 2, 0.0, w, 0.0, 0.1),

@@ -1,9 +1,8 @@
 """The floor plan of a procedural room: placing pieces without collisions (floor footprints, wall spans).
 
-Walls are numbered counter-clockwise seen from above: wall 0 runs along y = 0 from x = 0 to Lx,
-wall 1 along x = Lx, wall 2 along y = Ly (from x = Lx back to 0), wall 3 along x = 0. A position
-``s`` on a wall is measured from the wall's start; a piece against a wall faces the room (its +y
-along the wall's inward normal).
+Walls are numbered counter-clockwise seen from above: wall 0 runs along y = 0 from x = 0 to Lx, wall 1 along x = Lx,
+wall 2 along y = Ly (back to x = 0), wall 3 along x = 0. A position ``s`` on a wall is measured from its start; a
+piece against a wall faces the room (its +y along the wall's inward normal).
 """
 
 from __future__ import annotations
@@ -23,36 +22,28 @@ Rect = tuple[float, float, float, float]
 
 @dataclass
 class Light:
-    """A point light (shading only: lights are not visible themselves)."""
+    """A point light (not visible itself): world position in metres, brightness at 1 m in units of the ambient
+    term, linear RGB tint and the colour temperature it comes from (``lighting.kelvin_rgb``)."""
 
     position: tuple[float, float, float]
-    """World position in metres."""
     intensity: float
-    """Brightness at 1 m, in units of the ambient term."""
     color: tuple[float, float, float]
-    """Linear RGB tint."""
     kelvin: float
-    """Colour temperature the tint comes from (``lighting.kelvin_rgb``)."""
 
 
 @dataclass
 class FloorPlan:
-    """A room under construction: its boxes, occupied floor and wall regions, lights and finishes."""
+    """A room under construction (interior extents (Lx, Ly, H) in metres): its boxes (world frame), occupied floor
+    rectangles (furniture, door clearances), occupied (s0, s1, z0, z1) regions per wall, lights, (wall, s0, s1) of
+    each door opening (baseboards stop there) and a point 0.6 m in front of each window (its daylight goes there)."""
 
     size: tuple[float, float, float]
-    """Interior extents (Lx, Ly, H) in metres."""
     boxes: list[Box] = field(default_factory=list)
-    """Every box placed so far (world frame)."""
     footprints: list[Rect] = field(default_factory=list)
-    """Occupied floor rectangles (furniture and door clearances)."""
     spans: list[list[tuple[float, float, float, float]]] = field(default_factory=lambda: [[], [], [], []])
-    """Per wall: occupied (s0, s1, z0, z1) regions."""
     lights: list[Light] = field(default_factory=list)
-    """Point lights."""
     doors: list[tuple[int, float, float]] = field(default_factory=list)
-    """(wall, s0, s1) of each door opening (baseboards stop there)."""
     windows: list[tuple[float, float, float]] = field(default_factory=list)
-    """A point 0.6 m in front of each window's centre, in the room (where its daylight fill light goes)."""
 
     def wall_length(self, wall: int) -> float:
         """Length of a wall in metres."""
@@ -107,10 +98,8 @@ class FloorPlan:
     def try_wall(self, rng: np.random.Generator, piece: Piece, wall: int, z_range: tuple[float, float] | None = None,
                  s: float | None = None, gap: float = 0.015, occupies_floor: bool = True, tries: int = 25,
                  margin: float = 0.05) -> float | None:
-        """Place a piece against a wall at a random (or given) position; returns its s or None.
-
-        z_range is the height band the piece covers on the wall (default: floor to its top).
-        """
+        """Place a piece against a wall at a random (or given) position; returns its s or None. ``z_range``: the
+        height band it covers on the wall (default: floor to its top)."""
         length = self.wall_length(wall)
         lo, hi = piece.width / 2 + margin, length - piece.width / 2 - margin
         if hi < lo:
@@ -144,12 +133,8 @@ class FloorPlan:
         finish = mat.painted(rng) if rng.random() < 0.6 else mat.wood(rng)
         for wall in range(4):
             cuts = sorted((s0, s1) for w, s0, s1 in self.doors if w == wall)
-            edges, pos = [], 0.0
-            for s0, s1 in cuts:
-                edges.append((pos, s0))
-                pos = s1
-            edges.append((pos, self.wall_length(wall)))
-            for a, b in edges:
+            starts, ends = [0.0] + [s1 for _, s1 in cuts], [s0 for s0, _ in cuts] + [self.wall_length(wall)]
+            for a, b in zip(starts, ends):
                 if b - a > 0.05:
                     board = Piece([span(CLS["wall"], finish, -(b - a) / 2, (b - a) / 2, -0.006, 0.006, 0.0, h)],
                                   b - a, 0.012, h)

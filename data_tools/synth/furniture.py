@@ -1,7 +1,5 @@
-"""Free-standing furniture assembled from boxes, each in its own object frame.
-
-Object frame: the footprint is centred on the origin, z = 0 is the floor, the back faces -y and
-the front (where one sits or opens doors) faces +y. ``geometry.place`` puts a piece in a room.
+"""Free-standing furniture assembled from boxes in its object frame: the footprint centred on the origin, z = 0 the
+floor, the back at -y and the front (where one sits or opens doors) at +y. ``geometry.place`` puts it in a room.
 """
 
 from __future__ import annotations
@@ -21,16 +19,13 @@ CLS: dict[str, int] = {name: i for i, name in enumerate(SCANNET20)}
 
 @dataclass
 class Piece:
-    """One object: its boxes in the object frame and its footprint."""
+    """One object: its boxes in the object frame, its footprint's extents along object x and y and its top above the
+    floor (metres)."""
 
     boxes: list[Box]
-    """Boxes in the object frame."""
     width: float
-    """Footprint extent along object x (metres)."""
     depth: float
-    """Footprint extent along object y (metres)."""
     height: float
-    """Top of the object above the floor (metres)."""
 
 
 def span(label: int, material: mat.Material, x0: float, x1: float, y0: float, y1: float,

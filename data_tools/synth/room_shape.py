@@ -1,9 +1,5 @@
-"""Room shapes beyond the rectangle: L-shaped rooms (a floor-to-ceiling block cut out of a corner) and
-wall columns (pilasters), all labelled wall, as ScanNet labels such structure.
-
-``shaped_plan`` is called before anything else is placed, so the blocks' floor and wall regions are
-reserved and furniture, doors and windows avoid them. Each block has its own wall finish (a chimney
-breast or a column is often painted apart).
+"""Room shapes beyond the rectangle: L-shaped rooms (a floor-to-ceiling block cut out of a corner) and wall columns,
+labelled wall as ScanNet labels such structure, each with its own finish; placed first, so everything avoids them.
 """
 
 from __future__ import annotations
@@ -15,10 +11,8 @@ from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.floor_plan import FloorPlan
 from sray.data_tools.synth.furniture import CLS, Piece, span
 
-L_SHAPE_PROB = 0.3
-"""Probability that a room loses a corner block (an L-shaped room)."""
-COLUMN_PROB = 0.3
-"""Probability that a room gets one wall column."""
+L_SHAPE_PROB = 0.3  # probability that a room loses a corner block (an L-shaped room)
+COLUMN_PROB = 0.3  # probability that a room gets one wall column
 
 
 def _reserve(plan: FloorPlan, wall: int, s0: float, s1: float, height: float) -> None:

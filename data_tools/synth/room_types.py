@@ -1,7 +1,5 @@
-"""Furniture recipes per room type: each returns (floor plan, wall finish, floor finish).
-
-Placement is by rejection sampling against the floor plan's free floor and wall regions, so every
-object stays inside the room and no two objects intersect; a piece that finds no room is skipped.
+"""Furniture recipes per room type, each returning (floor plan, wall finish, floor finish). Placement is rejection
+sampling against the plan's free floor and wall regions; a piece that finds no room is left out.
 """
 
 from __future__ import annotations
@@ -27,9 +25,8 @@ Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Mate
 
 def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
           h: tuple[float, float]) -> FloorPlan:
-    """An empty floor plan (maybe L-shaped or with a column) of a size drawn from the ranges, which one
-    scale factor per room widens (``domains.TRAIN_SCALE``); a geometry-shifted room is scaled by
-    ``domains.HELD_OUT_SCALE`` and has a ceiling in ``domains.HELD_OUT_CEILING``."""
+    """An empty floor plan (``room_shape.shaped_plan``) of a size drawn from the ranges, the floor scaled by one
+    factor per room (held-out scale and ceiling in a geometry-shifted room)."""
     shifted = domains.current().geometry_shift
     scale = float(rng.uniform(*(domains.HELD_OUT_SCALE if shifted else domains.TRAIN_SCALE)))
     return shaped_plan(rng, (scale * float(rng.uniform(*lx)), scale * float(rng.uniform(*ly)),
@@ -42,8 +39,8 @@ def _walls(rng: np.random.Generator) -> list[int]:
 
 def _anywhere_on_walls(rng: np.random.Generator, plan: FloorPlan, piece: fu.Piece,
                        z_range: tuple[float, float] | None = None) -> tuple[int, float] | None:
-    """Try every wall in random order; returns (wall, s) of the placement or None. In a geometry-shifted room the
-    piece stands ``domains.HELD_OUT_WALL_GAP`` off the wall."""
+    """Try every wall in random order; returns (wall, s) of the placement or None (held-out wall gap in a
+    geometry-shifted room)."""
     gap = float(rng.uniform(*domains.HELD_OUT_WALL_GAP)) if domains.current().geometry_shift else 0.015
     for wall in _walls(rng):
         s = plan.try_wall(rng, piece, wall, z_range=z_range, gap=gap)
@@ -162,8 +159,7 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
 
 
 def _island(rng: np.random.Generator, plan: FloorPlan, wall: int) -> None:
-    """Half the time, a kitchen island parallel to the counter run on ``wall``, 1.0-1.3 m in front of it, with
-    stools (labelled chair) along its far side."""
+    """Half the time, a kitchen island 1.0-1.3 m in front of the counter run on ``wall``, with stools (chairs)."""
     if rng.random() >= 0.5:
         return
     w, d = float(rng.uniform(1.2, 2.0)), float(rng.uniform(0.6, 0.9))

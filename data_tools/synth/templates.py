@@ -1,9 +1,5 @@
-"""Alternative shape templates of the furniture classes (the first template of each class is in
-``furniture.py`` / ``fittings.py``); ``catalog.py`` draws one template per object.
-
-Same object frame as ``furniture.py``: footprint centred on the origin, z = 0 the floor, back at -y,
-front at +y. Every template of a class carries that class's label, so the label of a class no
-longer comes with one silhouette.
+"""More shape templates of the furniture classes (the first of each class is in ``furniture.py`` / ``fittings.py``),
+in the same object frame, so no class comes with one silhouette; ``catalog.py`` draws one template per object.
 """
 
 from __future__ import annotations

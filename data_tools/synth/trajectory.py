@@ -1,11 +1,6 @@
-"""Handheld-scan-like camera paths through a procedural room.
-
-The camera walks a smooth arc of an ellipse (a third to a full turn) or a straight line over free
-floor at 1.0-1.85 m, wobbling a little in position, height and roll, and looks outward across the room
-(or to one side of its walk) at a target near the far side that drifts left and right, at a height
-drawn per path (so pitch varies from level to steeply down), as a person scanning a room does. Consecutive
-views are a few degrees apart, so neighbours overlap strongly. Every camera centre stays inside
-the room, away from the walls, and outside every box grown by a safety margin.
+"""Handheld-scan-like camera paths through a procedural room (docs/data.md, "Camera paths"): an arc of an ellipse or
+a straight walk over free floor, wobbling in position, height and roll, looking out across the room; every camera
+centre stays inside the room, away from the walls and outside every box grown by a margin.
 """
 
 from __future__ import annotations
@@ -17,14 +12,10 @@ import numpy as np
 from sray.data_tools.synth import domains
 from sray.data_tools.synth.geometry import PackedBoxes
 
-HEIGHT_RANGE = (1.0, 1.85)
-"""Camera height band of training scans in metres."""
-WALL_CLEARANCE = 0.35
-"""Minimum distance of a camera centre from any wall, floor or ceiling (metres)."""
-BOX_MARGIN = 0.25
-"""Minimum distance of a camera centre from every box (metres, per axis)."""
-BODY_RADIUS = 0.25
-"""How far the scanning person's standing point keeps from furniture footprints (metres)."""
+HEIGHT_RANGE = (1.0, 1.85)  # camera height band of training scans, metres
+WALL_CLEARANCE = 0.35  # least distance of a camera centre from any wall, floor or ceiling, metres
+BOX_MARGIN = 0.25  # least distance of a camera centre from every box, metres per axis
+BODY_RADIUS = 0.25  # how far the scanning person's standing point keeps from furniture footprints, metres
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.ndarray:
@@ -52,10 +43,8 @@ def _wobble(rng: np.random.Generator, s: np.ndarray, amplitude: float, cycles: t
 
 def camera_valid(centres: np.ndarray, size: tuple[float, float, float], boxes: PackedBoxes,
                  standing: bool = False) -> np.ndarray:
-    """bool (N,): camera centres (N, 3) inside the room with clearance and outside every grown box.
-
-    With ``standing`` the centre must also be above free floor: outside the floor footprint of every
-    box taller than a rug, grown by the scanning person's reach (:data:`BODY_RADIUS`).
+    """bool (N,): camera centres (N, 3) inside the room with clearance and outside every grown box; with
+    ``standing`` also above free floor (off every footprint of a box taller than a rug, grown by :data:`BODY_RADIUS`).
     """
     hi = np.asarray(size)
     ok = np.all((centres >= WALL_CLEARANCE) & (centres <= hi - WALL_CLEARANCE), axis=1)
@@ -105,12 +94,8 @@ def _walk(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndar
 
 def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_views: int
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One random path: eyes (n, 3), look-at targets (n, 3) and roll angles (n,) in radians.
-
-    Path style: an arc of an ellipse (70 %) or a straight walk (30 %); the camera's base height and
-    the height it looks at (its pitch) are drawn per path: in the training bands, or in a geometry-shifted
-    room in ``domains.HELD_OUT_CAMERA`` and ``domains.HELD_OUT_LOOK`` (low, looking level or up).
-    """
+    """One random path, an arc (70 %) or a walk: eyes (n, 3), look-at targets (n, 3) and roll angles (n,) in
+    radians; base height and look-at height are drawn per path (held-out bands in a geometry-shifted room)."""
     lx, ly, _ = size
     shifted = domains.current().geometry_shift
     heights = domains.HELD_OUT_CAMERA if shifted else HEIGHT_RANGE
@@ -129,12 +114,8 @@ def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_vie
 
 def scan_path(rng: np.random.Generator, size: tuple[float, float, float], boxes: PackedBoxes,
               n_views: int, attempts: int = 1500) -> np.ndarray:
-    """A valid handheld-style path of ``n_views`` cameras: float64 (n_views, 4, 4) c2w, OpenCV axes.
-
-    The first two thirds of the attempts require the person to stand on free floor; the rest only
-    keep the camera clear of every box (a scan reaching over a bed or table). Raises RuntimeError
-    when no valid path is found.
-    """
+    """A valid path of ``n_views`` cameras, float64 (n_views, 4, 4) c2w in OpenCV axes; RuntimeError when none is
+    found. The first two thirds of the attempts need the person on free floor, the rest may reach over furniture."""
     if n_views < 1:
         raise ValueError(f"n_views must be >= 1, got {n_views}")
     for attempt in range(attempts):
