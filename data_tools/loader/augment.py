@@ -1,16 +1,9 @@
 """Training-sample augmentation that teaches generalization (every option off by default).
 
-* **colour jitter per source view**: each source image independently gets an exposure change of
-  ``colour_ev`` stops at most and a per-channel change of ``channel_ev`` stops at most (a white
-  balance shift), through the stability suite's :func:`sray.data_tools.perturbations.exposure`,
-  and optionally Gaussian noise (:func:`~sray.data_tools.perturbations.gaussian_noise`); for a stronger change,
-  a per-view tone curve (each channel raised to the power 2 ** g, g uniform in ±``gamma_ev``) and a per-view
-  saturation change (the colour's distance from its grey level scaled by 2 ** s, s uniform in ±``saturation_ev``),
-  so the sources of one sample disagree in contrast and colourfulness as well as brightness; the
-  query's target colours are left alone, so the model must see through its inputs' photometry;
-* **random source-view count and neighbour subsets**: each sample carries m sources, m drawn
-  uniformly in [``min_source``, n_source], chosen at random among the first k ranked neighbours,
-  k drawn uniformly in [m, top_k] (near-duplicate or wide-baseline sets);
+* **colour jitter per source view** (exposure, white balance, tone curve, saturation, noise: the fields say how
+  much): the sources of one sample disagree in photometry while the query's targets stay as they are;
+* **random source-view count and neighbour subsets**: m sources, m uniform in [``min_source``, n_source], among
+  the first k ranked neighbours, k uniform in [m, top_k] (near-duplicate or wide-baseline sets);
 * **random source resolution**: all sources of a sample are resized by one factor drawn in
   [1 - ``source_scale``, 1] (a Gaussian prefilter against aliasing, then bilinear sampling, which
   keeps pixel centres exact; OpenCV's area filter shifts them by up to 0.05 pixel at non-integer
