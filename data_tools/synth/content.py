@@ -9,20 +9,18 @@ import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import materials as mat
-from sray.data_tools.synth.fittings import against_wall
-from sray.data_tools.synth.furniture import CLS, Piece, span
+from sray.data_tools.synth.fittings import against_wall, casing
+from sray.data_tools.synth.furniture import CLS, Piece, legs, span
 
 
 def rug(rng: np.random.Generator, w: float, d: float) -> Piece:
     """A rug (labelled floor): plain, plaid or striped pile, 8-15 mm thick, casting no shadow."""
-    pick = rng.random()
-    if pick < 0.4:
+    if rng.random() < 0.4:
         pile = mat.fabric(rng)
     else:
         a, b = mat.hsv(rng, (0, 1), (0.1, 0.7), (0.15, 0.85)), mat.hsv(rng, (0, 1), (0.1, 0.7), (0.15, 0.85))
         pile = mat.Material(mat.STRIPES, a, b, scale=float(rng.uniform(2.0, 8.0)),
-                            contrast=float(rng.uniform(0.4, 1.0)), axis=int(rng.integers(2)),
-                            seed=int(rng.integers(0, 2**31 - 1)))
+                            contrast=float(rng.uniform(0.4, 1.0)), axis=int(rng.integers(2)), seed=mat.new_seed(rng))
     t = float(rng.uniform(0.008, 0.015))
     return Piece([span(CLS["floor"], pile, -w / 2, w / 2, -d / 2, d / 2, 0.0, t, casts_shadow=False)], w, d, t)
 
@@ -47,8 +45,7 @@ def open_shelf(rng: np.random.Generator, w: float) -> Piece:
     frame = mat.metal(rng) if rng.random() < 0.5 else mat.wood(rng)
     shelf = frame if rng.random() < 0.5 else mat.furniture_surface(rng)
     label, post = CLS["bookshelf"], float(rng.uniform(0.025, 0.04))
-    boxes = [span(label, frame, x, x + post, y, y + post, 0.0, h)
-             for x in (-w / 2, w / 2 - post) for y in (-d / 2, d / 2 - post)]
+    boxes = legs(label, frame, w, d, h, post, 0.0)
     n = int(rng.integers(3, 6))
     for i in range(n):
         z = 0.08 + i * (h - 0.1) / (n - 1)
@@ -71,49 +68,38 @@ def mini_fridge(rng: np.random.Generator) -> Piece:
     return against_wall(boxes, w, d + 0.03, h)
 
 
-def _casing(material: mat.Material, w: float, h: float, c: float) -> list:
-    """Two jambs and a head around a w x h opening (labelled door)."""
-    label = CLS["door"]
-    return [span(label, material, -w / 2 - c, -w / 2, 0.0, 0.045, 0.0, h + c),
-            span(label, material, w / 2, w / 2 + c, 0.0, 0.045, 0.0, h + c),
-            span(label, material, -w / 2, w / 2, 0.0, 0.045, h, h + c)]
-
-
 def glazed_door(rng: np.random.Generator, w: float, h: float) -> Piece:
     """A door with a glass panel in its upper part (stile-and-rail frame; the glass is door-labelled too)."""
     label, frame = CLS["door"], mat.furniture_surface(rng)
     glass = mat.Material(mat.PAINT, mat.hsv(rng, (0.45, 0.6), (0.0, 0.15), (0.55, 0.85)), (0, 0, 0), scale=2.0,
-                         contrast=0.05, seed=int(rng.integers(0, 2**31 - 1)))
-    c, rail = float(rng.uniform(0.05, 0.09)), float(rng.uniform(0.08, 0.14))
-    z0 = float(rng.uniform(0.9, 1.1))
+                         contrast=0.05, seed=mat.new_seed(rng))
+    c, rail, z0 = float(rng.uniform(0.05, 0.09)), float(rng.uniform(0.08, 0.14)), float(rng.uniform(0.9, 1.1))
     boxes = [span(label, frame, -w / 2, w / 2, 0.0, 0.03, 0.0, z0),
              span(label, frame, -w / 2, -w / 2 + rail, 0.0, 0.03, z0, h),
              span(label, frame, w / 2 - rail, w / 2, 0.0, 0.03, z0, h),
              span(label, frame, -w / 2 + rail, w / 2 - rail, 0.0, 0.03, h - rail, h),
              span(label, glass, -w / 2 + rail, w / 2 - rail, 0.0, 0.015, z0, h - rail),
              span(label, mat.metal(rng), w / 2 - 0.12, w / 2 - 0.06, 0.03, 0.09, 0.98, 1.02),
-             *_casing(mat.painted(rng) if rng.random() < 0.6 else frame, w, h, c)]
+             *casing(mat.painted(rng) if rng.random() < 0.6 else frame, w, h, c)]
     return against_wall(boxes, w + 2 * c, 0.09, h + c)
 
 
 def double_door(rng: np.random.Generator, w: float, h: float) -> Piece:
     """Two panelled leaves meeting in the middle, each with a handle by the meeting stiles."""
-    label = CLS["door"]
-    leaf = mat.furniture_surface(rng, panels=True, panel_width=w / 2)
+    label, leaf = CLS["door"], mat.furniture_surface(rng, panels=True, panel_width=w / 2)
     handle, c = mat.metal(rng), float(rng.uniform(0.05, 0.09))
     boxes = [span(label, leaf, -w / 2, -0.004, 0.0, 0.03, 0.0, h), span(label, leaf, 0.004, w / 2, 0.0, 0.03, 0.0, h),
              span(label, handle, -0.1, -0.06, 0.03, 0.09, 0.98, 1.02),
              span(label, handle, 0.06, 0.1, 0.03, 0.09, 0.98, 1.02),
-             *_casing(mat.painted(rng), w, h, c)]
+             *casing(mat.painted(rng), w, h, c)]
     return against_wall(boxes, w + 2 * c, 0.09, h + c)
 
 
 def plank_door(rng: np.random.Generator, w: float, h: float) -> Piece:
     """A sliding plank (barn) door hanging on a rail in front of the wall, wider than its opening."""
-    label = CLS["door"]
-    a = mat.hsv(rng, (0.03, 0.12), (0.25, 0.7), (0.2, 0.8))
+    label, a = CLS["door"], mat.hsv(rng, (0.03, 0.12), (0.25, 0.7), (0.2, 0.8))
     planks = mat.Material(mat.PLANKS, a, tuple(min(1.0, v * 0.7) for v in a), scale=float(rng.uniform(5, 9)),
-                          contrast=float(rng.uniform(0.3, 0.6)), seed=int(rng.integers(0, 2**31 - 1)))
+                          contrast=float(rng.uniform(0.3, 0.6)), seed=mat.new_seed(rng))
     rail = mat.dark_plastic(rng)
     boxes = [span(label, planks, -w / 2, w / 2, 0.02, 0.06, 0.01, h),
              span(label, planks, -w / 2, w / 2, 0.06, 0.08, h * 0.45, h * 0.52),

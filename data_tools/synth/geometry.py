@@ -118,9 +118,8 @@ def cast_rays(origin: np.ndarray, dirs: np.ndarray, boxes: PackedBoxes, active: 
               t_min: float = 1e-4, chunk: int = 8192) -> tuple[np.ndarray, np.ndarray]:
     """Nearest box hit of rays from one origin: (t float32 (N,), box index int64 (N,)).
 
-    origin: (3,) shared ray origin; dirs: (N, 3), any length; active: bool (P,) boxes to test
-    (default all). Hits with t <= t_min (origin inside or on a box) are ignored; misses give
-    t = inf and index -1.
+    origin: (3,) shared ray origin; dirs: (N, 3), any length; active: bool (P,) boxes to test (default all). Hits at
+    t <= t_min (origin inside or on a box) are ignored; misses give t = inf and index -1.
     """
     n = len(dirs)
     best_t = np.full(n, np.inf, np.float32)

@@ -9,7 +9,7 @@ import numpy as np
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.fittings import against_wall
-from sray.data_tools.synth.furniture import CLS, Piece, span
+from sray.data_tools.synth.furniture import CLS, Piece, legs, span
 
 
 def pedestal_table(rng: np.random.Generator, w: float, d: float, h: float | None = None) -> Piece:
@@ -27,10 +27,9 @@ def pedestal_table(rng: np.random.Generator, w: float, d: float, h: float | None
 def trestle_table(rng: np.random.Generator, w: float, d: float, h: float | None = None) -> Piece:
     """A table on two solid end panels joined by a stretcher (refectory or desk-like table)."""
     h = float(rng.uniform(0.72, 0.78)) if h is None else h
-    top = mat.furniture_surface(rng)
+    top, label = mat.furniture_surface(rng), CLS["table"]
     ends = top if rng.random() < 0.6 else mat.furniture_surface(rng)
     th, inset, panel = float(rng.uniform(0.03, 0.06)), float(rng.uniform(0.08, 0.2)), float(rng.uniform(0.04, 0.08))
-    label = CLS["table"]
     x0, x1 = -w / 2 + inset, w / 2 - inset - panel
     boxes = [span(label, top, -w / 2, w / 2, -d / 2, d / 2, h - th, h),
              span(label, ends, x0, x0 + panel, -d / 2 + 0.06, d / 2 - 0.06, 0.0, h - th),
@@ -42,15 +41,13 @@ def trestle_table(rng: np.random.Generator, w: float, d: float, h: float | None 
 def stool(rng: np.random.Generator) -> Piece:
     """A backless stool (labelled chair, as ScanNet does): a square seat on four legs with a footrest ring."""
     s, h = float(rng.uniform(0.3, 0.42)), float(rng.uniform(0.45, 0.75))
-    wood, legs = mat.furniture_surface(rng), mat.metal(rng) if rng.random() < 0.5 else mat.wood(rng)
+    wood, leg_mat = mat.furniture_surface(rng), mat.metal(rng) if rng.random() < 0.5 else mat.wood(rng)
     label, leg = CLS["chair"], float(rng.uniform(0.025, 0.04))
     boxes = [span(label, wood, -s / 2, s / 2, -s / 2, s / 2, h - 0.04, h)]
-    for x in (-s / 2 + 0.01, s / 2 - 0.01 - leg):
-        for y in (-s / 2 + 0.01, s / 2 - 0.01 - leg):
-            boxes.append(span(label, legs, x, x + leg, y, y + leg, 0.0, h - 0.04))
+    boxes += legs(label, leg_mat, s, s, h - 0.04, leg, 0.01)
     ring = h * 0.35
-    boxes += [span(label, legs, -s / 2 + 0.01, s / 2 - 0.01, -s / 2 + 0.01, -s / 2 + 0.01 + leg, ring, ring + 0.02),
-              span(label, legs, -s / 2 + 0.01, s / 2 - 0.01, s / 2 - 0.01 - leg, s / 2 - 0.01, ring, ring + 0.02)]
+    boxes += [span(label, leg_mat, -s / 2 + 0.01, s / 2 - 0.01, -s / 2 + 0.01, -s / 2 + 0.01 + leg, ring, ring + 0.02),
+              span(label, leg_mat, -s / 2 + 0.01, s / 2 - 0.01, s / 2 - 0.01 - leg, s / 2 - 0.01, ring, ring + 0.02)]
     return Piece(boxes, s, s, h)
 
 
@@ -91,8 +88,7 @@ def platform_bed(rng: np.random.Generator, w: float, length: float) -> Piece:
     """A low platform bed: a wide plinth, mattress and blanket, a panel headboard; pillows ignore-labelled."""
     base, label = mat.furniture_surface(rng), CLS["bed"]
     plinth = float(rng.uniform(0.12, 0.25))
-    top = plinth + float(rng.uniform(0.15, 0.25))
-    head = float(rng.uniform(0.5, 0.9))
+    top, head = plinth + float(rng.uniform(0.15, 0.25)), float(rng.uniform(0.5, 0.9))
     boxes = [span(label, base, -w / 2 - 0.1, w / 2 + 0.1, -length / 2, length / 2 + 0.1, 0.0, plinth),
              span(label, mat.fabric(rng), -w / 2, w / 2, -length / 2 + 0.05, length / 2, plinth, top),
              span(label, mat.fabric(rng), -w / 2 - 0.02, w / 2 + 0.02, -length / 2 + 0.55, length / 2 + 0.02,
