@@ -59,17 +59,16 @@ def top_surface(piece: Piece, label: int) -> tuple[Rect, float]:
     return (cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2), cz + sz / 2
 
 
-def add_clutter(rng: np.random.Generator, piece: Piece, label: int, count: int, edge: float = 0.04) -> int:
-    """Stand up to ``count`` small objects on the top of ``piece``'s ``label`` box; returns how many fitted. The
-    piece's height grows to its tallest object (wall placement uses it to keep windows clear)."""
+def add_clutter(rng: np.random.Generator, piece: Piece, label: int, count: int, edge: float = 0.04) -> None:
+    """Stand up to ``count`` small objects on the top of ``piece``'s ``label`` box (6 tries each). The piece's height
+    grows to its tallest object (wall placement uses it to keep windows clear)."""
     (x0, x1, y0, y1), z = top_surface(piece, label)
+    if x1 - x0 < 2 * edge + 0.1 or y1 - y0 < 2 * edge + 0.1:
+        return
     taken: list[Rect] = [(b.center[0] - b.size[0] / 2, b.center[0] + b.size[0] / 2, b.center[1] - b.size[1] / 2,
                           b.center[1] + b.size[1] / 2) for b in piece.boxes if b.center[2] + b.size[2] / 2 > z + 1e-3]
-    placed = 0
     for _ in range(count):
         for _ in range(6):
-            if x1 - x0 < 2 * edge + 0.1 or y1 - y0 < 2 * edge + 0.1:
-                return placed
             x, y = float(rng.uniform(x0 + edge, x1 - edge)), float(rng.uniform(y0 + edge, y1 - edge))
             boxes, half = _object(rng, x, y, z)
             rect = (x - half, x + half, y - half, y + half)
@@ -79,6 +78,4 @@ def add_clutter(rng: np.random.Generator, piece: Piece, label: int, count: int, 
                 piece.boxes.extend(boxes)
                 piece.height = max(piece.height, max(b.center[2] + b.size[2] / 2 for b in boxes))
                 taken.append(rect)
-                placed += 1
                 break
-    return placed

@@ -49,23 +49,20 @@ def _anywhere_on_walls(rng: np.random.Generator, plan: FloorPlan, piece: fu.Piec
     return None
 
 
-def _chair_facing(rng: np.random.Generator, plan: FloorPlan, x: float, y: float, yaw: float,
-                  distance: float) -> bool:
+def _chair_facing(rng: np.random.Generator, plan: FloorPlan, x: float, y: float, yaw: float, distance: float) -> None:
     """A chair at ``distance`` from (x, y) along the direction yaw points +y to, facing back to (x, y)."""
     chair = cat.chair(rng)
     dx, dy = -math.sin(yaw), math.cos(yaw)
     cx, cy = x + dx * (distance + chair.depth / 2), y + dy * (distance + chair.depth / 2)
-    return plan.try_floor(chair, cx, cy, yaw + math.pi + float(rng.uniform(-0.3, 0.3)), clearance=0.02)
+    plan.try_floor(chair, cx, cy, yaw + math.pi + float(rng.uniform(-0.3, 0.3)), clearance=0.02)
 
 
-def _desk_with_chair(rng: np.random.Generator, plan: FloorPlan) -> bool:
+def _desk_with_chair(rng: np.random.Generator, plan: FloorPlan) -> None:
     desk = cat.desk(rng, float(rng.uniform(1.0, 1.6)))
     spot = _anywhere_on_walls(rng, plan, desk)
-    if spot is None:
-        return False
-    x, y, yaw = plan.wall_pose(spot[0], spot[1], desk.depth, 0.015)
-    _chair_facing(rng, plan, x, y, yaw, desk.depth / 2 + 0.08)
-    return True
+    if spot is not None:
+        x, y, yaw = plan.wall_pose(spot[0], spot[1], desk.depth, 0.015)
+        _chair_facing(rng, plan, x, y, yaw, desk.depth / 2 + 0.08)
 
 
 def _dining_set(rng: np.random.Generator, plan: FloorPlan, chairs: int) -> None:
@@ -194,9 +191,8 @@ def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
         z1 = min(plan.size[2] - 0.05, z0 + float(rng.uniform(0.6, 0.8)))
         for k in range(2):
             part = length / 2 - 0.05
-            upper = fx.wall_cabinets(rng, part, z0, z1)
-            plan.try_wall(rng, upper, wall, s=s - length / 2 + part / 2 + k * (part + 0.1), z_range=(z0, z1),
-                          occupies_floor=False, gap=0.0)
+            plan.try_wall(rng, fx.wall_cabinets(rng, part, z0, z1), wall, z_range=(z0, z1), occupies_floor=False,
+                          gap=0.0, s=s - length / 2 + part / 2 + k * (part + 0.1))
         break
     _dining_set(rng, plan, int(rng.integers(2, 5)))
     if rng.random() < 0.5:
@@ -213,8 +209,7 @@ def bathroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mat
     plan = _plan(rng, (2.4, 3.4), (2.1, 3.0), (2.4, 2.7))
     add_door(rng, plan, width=(0.7, 0.82))
     add_window(rng, plan, sill=(1.2, 1.5), width=(0.5, 0.9), curtain_prob=0.2)
-    walls = sorted(range(4), key=lambda w: -plan.wall_length(w) + float(rng.uniform(0, 0.3)))
-    for wall in walls:
+    for wall in sorted(range(4), key=lambda w: -plan.wall_length(w) + float(rng.uniform(0, 0.3))):
         length = min(float(rng.uniform(1.5, 1.75)), plan.wall_length(wall) - 0.05)
         tub = fx.bathtub(rng, length, float(rng.uniform(0.35, 0.8)) if rng.random() < 0.85 else None)
         end = length / 2 + 0.02 if rng.random() < 0.5 else plan.wall_length(wall) - length / 2 - 0.02
