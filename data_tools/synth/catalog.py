@@ -8,7 +8,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from sray.data_tools.synth import content as ct
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import furniture as fu
 from sray.data_tools.synth import templates as tp
@@ -56,7 +55,7 @@ def bed(rng: np.random.Generator, w: float, length: float) -> Piece:
 def bookshelf(rng: np.random.Generator, w: float) -> Piece:
     """A shelved bookcase, an open cube shelf or an open shelving unit."""
     return _pick(rng, [(0.5, lambda: fu.bookshelf(rng, w)), (0.25, lambda: tp.cube_shelf(rng, w)),
-                       (0.25, lambda: ct.open_shelf(rng, w))])
+                       (0.25, lambda: tp.open_shelf(rng, w))])
 
 
 def cabinet(rng: np.random.Generator, w: float, d: float, h: float) -> Piece:
@@ -81,13 +80,13 @@ def counter_run(rng: np.random.Generator, length: float, sink_at: float | None) 
 def refrigerator(rng: np.random.Generator) -> Piece:
     """A one-door fridge, a side-by-side or an under-counter fridge."""
     return _pick(rng, [(0.5, lambda: fx.refrigerator(rng)), (0.35, lambda: tp.side_by_side_fridge(rng)),
-                       (0.15, lambda: ct.mini_fridge(rng))])
+                       (0.15, lambda: tp.mini_fridge(rng))])
 
 
 def door(rng: np.random.Generator, w: float, h: float) -> Piece:
     """A plain or panelled door, a glazed door or a sliding plank door (a double door: ``content.double_door``)."""
-    return _pick(rng, [(0.6, lambda: fx.door(rng, w, h)), (0.25, lambda: ct.glazed_door(rng, w, h)),
-                       (0.15, lambda: ct.plank_door(rng, w, h))])
+    return _pick(rng, [(0.6, lambda: fx.door(rng, w, h)), (0.25, lambda: tp.glazed_door(rng, w, h)),
+                       (0.15, lambda: tp.plank_door(rng, w, h))])
 
 
 def toilet(rng: np.random.Generator) -> Piece:

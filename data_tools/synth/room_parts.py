@@ -6,9 +6,9 @@ import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import catalog as cat
-from sray.data_tools.synth import content as ct
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth import templates as tp
 from sray.data_tools.synth.floor_plan import FloorPlan
 from sray.data_tools.synth.furniture import Piece, span
 
@@ -17,7 +17,7 @@ def add_door(rng: np.random.Generator, plan: FloorPlan, width: tuple[float, floa
     """A closed door of a random style (``catalog.door``; a double door one time in eight, in rooms whose door may be
     wide) on a random wall, with a clear floor area in front."""
     h = min(float(rng.uniform(2.0, 2.1)), plan.size[2] - 0.2)
-    piece = (ct.double_door(rng, float(rng.uniform(1.2, 1.5)), h) if width[1] >= 0.9 and rng.random() < 0.125
+    piece = (tp.double_door(rng, float(rng.uniform(1.2, 1.5)), h) if width[1] >= 0.9 and rng.random() < 0.125
              else cat.door(rng, float(rng.uniform(*width)), h))
     for wall in rng.permutation(4):
         s = plan.try_wall(rng, piece, int(wall), z_range=(0.0, plan.size[2]), gap=0.0, occupies_floor=False,
@@ -83,7 +83,7 @@ def add_rug(rng: np.random.Generator, plan: FloorPlan, prob: float, size: tuple[
     if rng.random() >= prob:
         return
     w, d = float(rng.uniform(*size)), float(rng.uniform(0.6, 0.75)) * float(rng.uniform(*size))
-    piece = ct.rug(rng, w, d)
+    piece = tp.rug(rng, w, d)
     lx, ly, _ = plan.size
     for _ in range(12):
         x, y = float(rng.uniform(w / 2, lx - w / 2)) if lx > w else lx / 2, float(rng.uniform(0, ly))

@@ -11,11 +11,11 @@ import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import catalog as cat
-from sray.data_tools.synth import content as ct
 from sray.data_tools.synth import domains
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import furniture as fu
 from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth import templates as tp
 from sray.data_tools.synth.floor_plan import FloorPlan
 from sray.data_tools.synth.room_parts import add_door, add_pictures, add_rug, add_window
 from sray.data_tools.synth.room_shape import shaped_plan
@@ -128,7 +128,7 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
         gap = sofa.depth / 2 + float(rng.uniform(0.35, 0.5)) + ctd / 2
         tx, ty = x + dx * gap, y + dy * gap
         if rng.random() < 0.5:
-            rug = ct.rug(rng, ctw + 0.8, ctd + 1.0)
+            rug = tp.rug(rng, ctw + 0.8, ctd + 1.0)
             if plan.is_free(plan.footprint(rug, tx, ty, yaw), clearance=-0.02):
                 plan.add(rug, tx, ty, yaw, occupies_floor=False)
         if plan.try_floor(cat.table(rng, ctw, ctd, float(rng.uniform(0.38, 0.48))), tx, ty, yaw):
@@ -162,7 +162,7 @@ def _island(rng: np.random.Generator, plan: FloorPlan, wall: int) -> None:
     w, d = float(rng.uniform(1.2, 2.0)), float(rng.uniform(0.6, 0.9))
     s = plan.wall_length(wall) / 2 + float(rng.uniform(-0.3, 0.3))
     x, y, yaw = plan.wall_pose(wall, s, d, 0.62 + float(rng.uniform(1.0, 1.3)))
-    if plan.try_floor(ct.kitchen_island(rng, w, d), x, y, yaw, clearance=0.5):
+    if plan.try_floor(tp.kitchen_island(rng, w, d), x, y, yaw, clearance=0.5):
         for k in range(int(rng.integers(0, 3))):
             _chair_facing(rng, plan, x + (k - 0.5) * 0.5 * math.cos(yaw), y + (k - 0.5) * 0.5 * math.sin(yaw), yaw,
                           d / 2 + 0.05)
@@ -249,7 +249,7 @@ def office(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mater
     if rng.random() < 0.7:
         _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     if rng.random() < 0.3:
-        _anywhere_on_walls(rng, plan, ct.mini_fridge(rng))
+        _anywhere_on_walls(rng, plan, tp.mini_fridge(rng))
     add_pictures(rng, plan, int(rng.integers(1, 4)))
     add_rug(rng, plan, 0.4)
     return plan, mat.wall_paint(rng), mat.floor_surface(rng)
