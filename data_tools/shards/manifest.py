@@ -51,10 +51,6 @@ class Manifest:
     version: int = VERSION
     extra: dict = field(default_factory=dict)
 
-    def to_json(self) -> dict:
-        """JSON form (key order fixed, so equal manifests serialise to equal bytes)."""
-        return asdict(self)
-
     @classmethod
     def from_json(cls, d: dict, where: str = MANIFEST_NAME) -> Manifest:
         """Parse a manifest; errors name the file and the field."""
@@ -73,20 +69,18 @@ class Manifest:
 
 
 def manifest_bytes(manifest: Manifest) -> bytes:
-    """The exact bytes written to ``manifest.json``."""
-    return (json.dumps(manifest.to_json(), indent=1, sort_keys=True) + "\n").encode()
+    """The exact bytes written to ``manifest.json`` (equal manifests give equal bytes)."""
+    return (json.dumps(asdict(manifest), indent=1, sort_keys=True) + "\n").encode()
 
 
 def read_manifest(shards_dir: Path) -> Manifest:
     """Read ``shards_dir/manifest.json``; a missing one means the folder is incomplete."""
     path = Path(shards_dir) / MANIFEST_NAME
     try:
-        text = path.read_text()
+        data = json.loads(path.read_text())
     except FileNotFoundError:
         raise FileNotFoundError(f"{path}: missing; the shard folder is incomplete or was never written: "
                                 f"run `sray data shard SCENES_DIR --out {shards_dir}`") from None
-    try:
-        data = json.loads(text)
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON ({e}); re-run `sray data shard`") from None
     return Manifest.from_json(data, str(path))
