@@ -108,11 +108,8 @@ class Augmentation:
 
 
 def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
-    """Resize uint8 (H, W, 3) by ``scale`` (Gaussian prefilter, then bilinear) and move K (3, 3) by the
-    pixel-centre rule.
-
-    The output size is rounded per axis, and each axis uses its exact factor ``W'/W`` or ``H'/H``:
-    ``f' = s f``, ``c' = s (c + 0.5) - 0.5``. Returns the new image and float64 K.
+    """(image, float64 K): uint8 (H, W, 3) resized by ``scale`` (Gaussian prefilter, then bilinear; size rounded per
+    axis) and K (3, 3) moved by the pixel-centre rule with each axis's exact factor s: f' = s f, c' = s (c + 0.5) - 0.5.
     """
     h, w = rgb.shape[:2]
     nh, nw = max(1, round(h * scale)), max(1, round(w * scale))
@@ -129,11 +126,9 @@ def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarr
 
 
 def rescale_nearest(depth: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
-    """A per-pixel map (H, W) (float32 depth in metres, or integer class ids) at ``size_hw`` = (H', W'): each
-    output pixel takes the input pixel nearest to its centre under the pixel-centre rule
-    ``u = (u' + 0.5) W / W' - 0.5`` (the geometry of :func:`rescale_view`); values are never blended, so no
-    depth appears between a surface and what is behind it, no class id between two classes, and 0
-    (unknown depth) stays 0."""
+    """A per-pixel map (H, W) (float32 depth in metres, or class ids) at ``size_hw`` = (H', W'): each output pixel takes
+    the input pixel nearest to its centre, u = (u' + 0.5) W / W' - 0.5 (the geometry of :func:`rescale_view`); values
+    are never blended (no depth between a surface and what is behind it, no class between two classes)."""
     h, w = depth.shape
     nh, nw = size_hw
     if (nh, nw) == (h, w):

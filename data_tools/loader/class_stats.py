@@ -55,8 +55,7 @@ def dataset_pixel_counts(dataset_dir: Path, roles: tuple[str, ...] = ("train", "
 def shard_pixel_counts(shards_dir: Path, roles: tuple[str, ...] = ("train",)
                        ) -> tuple[list[str], dict[str, np.ndarray]]:
     """(class names, {scene: counts}) of every scene of ``roles`` in a shard folder, over the views the training
-    loader reads (``source_pool``: a train scene's ``train`` split minus its held-out views; a test scene's
-    ``source`` and ``finetune`` views), so class weights never read a held-out or test view's labels."""
+    loader reads (``scene.source_pool``), so class weights never read a held-out or test view's labels."""
     manifest = read_manifest(Path(shards_dir))
     names: list[str] | None = None
     per_scene: dict[str, np.ndarray] = {}

@@ -1,8 +1,5 @@
-"""The loader's sample types (docs/CONTRACTS.md "Loader samples"): one scene, one ray batch, no batch dimension.
-
-With ``batch_size=None`` the DataLoader's ``default_convert`` passes these dataclasses through unchanged, workers
-pickle them (module-level classes; tensors through shared memory), and ``pin_memory=True`` calls
-:meth:`TensorFields.pin_memory`. ``near`` and ``far`` stay Python floats (z-depth bounds in metres) up to the model.
+"""The loader's sample types (docs/CONTRACTS.md "Loader samples", how they travel): one scene, one ray batch, no
+batch dimension; ``near`` and ``far`` stay Python floats (z-depth bounds in metres) up to the model.
 """
 
 from __future__ import annotations

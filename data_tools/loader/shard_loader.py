@@ -1,11 +1,6 @@
-"""The shard loader (docs/data.md, "The loader"): resampled training samples, fixed evaluation samples.
-
-Training: a scene is the unit split over ranks and DataLoader workers (a sample needs several views of one scene):
-the ``world_size * num_workers`` slots take the scenes, shuffled by (seed, epoch), round-robin; with fewer scenes
-than slots, slots share a scene but take disjoint query views. Each worker caches a few scenes' encoded views and
-draws ``visit_samples`` samples from a scene before picking the next; every rank yields exactly
-``batches_per_epoch`` samples per epoch, so DDP ranks never wait. Never pass these loaders through
-``accelerator.prepare``: it re-shards iterable datasets and drops samples.
+"""The shard loader (docs/data.md, "The loader"): resampled training samples with a fixed epoch length per rank
+(scenes are the unit split over ranks and DataLoader workers), fixed evaluation samples. Never pass these loaders
+through ``accelerator.prepare``: it re-shards iterable datasets and drops samples.
 """
 
 from __future__ import annotations

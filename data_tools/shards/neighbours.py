@@ -1,10 +1,6 @@
-"""Ranked source-view neighbours, rule ``frustum-overlap`` (docs/data.md, "Source-view neighbours").
-
-A sparse grid of each view's pixels is back-projected with its depth (or the scene's median depth where it has too
-little); a candidate's score is the fraction of the query's points in front of and inside the candidate's camera.
-A blind view (:func:`blind_views`) is scored the other way round, by the fraction of each candidate's own points
-inside the query camera, so its depth is never read. Ties go to the smaller angle between optical axes, then the
-nearer camera centre, then capture order; candidates come from ``scene.source_pool``.
+"""Ranked source-view neighbours, rule ``frustum-overlap`` (docs/data.md, "Source-view neighbours"): a candidate
+scores the fraction of the query's depth-grid points inside its camera; a :func:`blind_views` view, whose depth is
+never read, scores each candidate by the fraction of the candidate's own points inside the query camera.
 """
 
 from __future__ import annotations
@@ -103,8 +99,7 @@ def fractions_inside(points: np.ndarray, proj: np.ndarray, hw: tuple[int, int]) 
 
 
 def _seen_by_query(points: list[np.ndarray], proj_query: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
-    """Fraction (C,) of each candidate's own world points (C arrays (P_c, 3)) in front of and inside
-    the query camera ``proj_query`` (3, 4)."""
+    """Fraction (C,) of each candidate's own world points (C arrays (P_c, 3)) seen by the query camera (3, 4)."""
     return np.array([fractions_inside(p, proj_query[None], hw)[0] for p in points])
 
 

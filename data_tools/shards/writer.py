@@ -1,10 +1,5 @@
 """Canonical scenes -> webdataset tar shards grouped by scene, plus ``manifest.json`` (members, manifest and safety
-rules: docs/data.md, "Shards and loader").
-
-Shard ``<scene>-NNNNNN.tar`` holds up to ``views_per_shard`` views of one scene in capture order, one sample per view
-(key ``<scene>__<view_id>``: rgb, depth and label PNGs, camera and neighbours JSON; the first sample of a shard also
-carries ``scene.json``). Same input, same bytes; files are replaced atomically, an unchanged shard is left alone, and
-the old manifest is removed before the first shard changes and the new one written last.
+rules: docs/data.md, "Shards and loader"): same input, same bytes; a folder with a manifest is complete.
 """
 
 from __future__ import annotations

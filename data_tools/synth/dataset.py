@@ -51,15 +51,13 @@ class ScenePlan:
 
 def plan_scene(seed: int, n_views: int, room_type: str | None = None, split: str = "in-distribution",
                randomise: float = 0.0) -> ScenePlan:
-    """Room and camera path of a scene (deterministic in ``seed``), drawn from the region of ``split``
-    (:mod:`~sray.data_tools.synth.domains`) with appearance randomisation of strength ``randomise``; retries
-    cluttered rooms."""
+    """Room and camera path of a scene (deterministic in ``seed``), drawn from the region of ``split`` with appearance
+    randomisation of strength ``randomise`` (:mod:`~sray.data_tools.synth.domains`); retries cluttered rooms."""
     rng = np.random.default_rng(seed)
     kind = room_type if room_type is not None else ROOM_TYPES[int(rng.integers(len(ROOM_TYPES)))]
     with domains.drawing(domains.domain_of(split, randomise)):
         for _ in range(10):
-            room = build_room(rng, kind)
-            exposure = domains.exposure(rng)
+            room, exposure = build_room(rng, kind), domains.exposure(rng)
             k, gamma, noise = domains.sensor(rng)
             prepared = RenderScene.prepare(room, exposure=exposure, tone=(k, gamma), noise_sigma=noise, noise_seed=seed,
                                            tint=domains.room_tint(rng), randomise=randomise)

@@ -1,9 +1,6 @@
-"""Box primitives of the procedural scenes and vectorised ray casting against them.
-
-World frame: metres, z up, the floor at z = 0. A box has a centre, full extents along its own axes and a yaw about
-world z; yaws that are multiples of 90 degrees are folded into the extents when packed, so most boxes are tested in
-the fast axis-aligned group. Rays of one view share their origin, so each slab offset is a per-box constant; with
-``dirs = R K^-1 [u, v, 1]`` (not unit length) the hit parameter ``t`` is the camera z-depth.
+"""Box primitives of the procedural scenes (world frame: metres, z up, floor at z = 0) and vectorised ray casting:
+quarter-turned boxes are folded into axis-aligned ones, and with ``dirs = R K^-1 [u, v, 1]`` (not unit length) the
+hit parameter ``t`` is the camera z-depth.
 """
 
 from __future__ import annotations

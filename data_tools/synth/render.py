@@ -1,8 +1,5 @@
-"""Render one view of a procedural room: RGB, z-depth and labels by analytic ray casting, one ray per pixel centre.
-
-Shading depends only on the surface point and the lights (docs/data.md, "Appearance"), never on the camera; the
-camera applies the scene's exposure, gains, tone curve and sensor noise (drawn per view from the scene's noise seed
-and the view's index). Ceiling pixels are IGNORE_ID (ScanNet-20 has no ceiling class).
+"""Render one view of a procedural room (RGB, z-depth, labels) by analytic ray casting through each pixel centre;
+shading never depends on the camera (docs/data.md, "Appearance"), so views agree. Ceiling pixels are IGNORE_ID.
 """
 
 from __future__ import annotations
