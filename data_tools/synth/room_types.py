@@ -16,16 +16,15 @@ from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import furniture as fu
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth import templates as tp
-from sray.data_tools.synth.floor_plan import FloorPlan
+from sray.data_tools.synth.floor_plan import FloorPlan, shaped_plan
 from sray.data_tools.synth.room_parts import add_door, add_pictures, add_rug, add_window
-from sray.data_tools.synth.room_shape import shaped_plan
 
 Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Material]]
 
 
 def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
           h: tuple[float, float]) -> FloorPlan:
-    """An empty floor plan (``room_shape.shaped_plan``) of a size drawn from the ranges, the floor scaled by one
+    """An empty floor plan (``floor_plan.shaped_plan``) of a size drawn from the ranges, the floor scaled by one
     factor per room (held-out scale and ceiling in a geometry-shifted room)."""
     shifted = domains.current().geometry_shift
     scale = float(rng.uniform(*(domains.HELD_OUT_SCALE if shifted else domains.TRAIN_SCALE)))
