@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from sray.data_tools.synth import domains
-from sray.data_tools.synth.geometry import PackedBoxes
+from sray.data_tools.synth.geometry import PackedBoxes, in_frame
 
 HEIGHT_RANGE = (1.0, 1.85)  # camera height band of training scans, metres
 WALL_CLEARANCE = 0.35  # least distance of a camera centre from any wall, floor or ceiling, metres
@@ -59,10 +59,8 @@ def camera_valid(centres: np.ndarray, size: tuple[float, float, float], boxes: P
 
 def _near_footprint(points: np.ndarray, boxes: PackedBoxes, radius: float) -> np.ndarray:
     """bool (N, P): a floor point within ``radius`` (per axis, in the box frame) of a box footprint."""
-    rel = points[:, None, :2] - boxes.center[None, :, :2]
-    c, s = np.cos(boxes.yaw)[None, :], np.sin(boxes.yaw)[None, :]
-    lx, ly = c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]
-    return (np.abs(lx) <= boxes.half[None, :, 0] + radius) & (np.abs(ly) <= boxes.half[None, :, 1] + radius)
+    local = in_frame(points[:, None, :] - boxes.center[None, :, :], np.cos(boxes.yaw), np.sin(boxes.yaw))
+    return np.all(np.abs(local[..., :2]) <= boxes.half[None, :, :2] + radius, axis=2)
 
 
 def _arc(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndarray
@@ -84,8 +82,7 @@ def _walk(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndar
     """Floor positions and headings of a straight walk (1-2.5 m) looking to one side of the walking line."""
     lx, ly, _ = size
     start = np.array([rng.uniform(0.3 * lx, 0.7 * lx), rng.uniform(0.3 * ly, 0.7 * ly)])
-    direction = float(rng.uniform(0, 2 * math.pi))
-    length = float(rng.uniform(1.0, 2.5))
+    direction, length = float(rng.uniform(0, 2 * math.pi)), float(rng.uniform(1.0, 2.5))
     x = start[0] + (s - 0.5) * length * math.cos(direction) + _wobble(rng, s, 0.05, (1.5, 4.0))
     y = start[1] + (s - 0.5) * length * math.sin(direction) + _wobble(rng, s, 0.05, (1.5, 4.0))
     side = float(rng.choice([-1.0, 1.0])) * float(rng.uniform(0.35, 1.75))
@@ -98,8 +95,7 @@ def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_vie
     radians; base height and look-at height are drawn per path (held-out bands in a geometry-shifted room)."""
     lx, ly, _ = size
     shifted = domains.current().geometry_shift
-    heights = domains.HELD_OUT_CAMERA if shifted else HEIGHT_RANGE
-    look = domains.HELD_OUT_LOOK if shifted else (0.2, 1.3)
+    heights, look = (domains.HELD_OUT_CAMERA, domains.HELD_OUT_LOOK) if shifted else (HEIGHT_RANGE, (0.2, 1.3))
     s = np.linspace(0.0, 1.0, n_views)
     x, y, heading = (_arc if rng.random() < 0.7 else _walk)(rng, size, s)
     z = np.clip(float(rng.uniform(heights[0] + 0.05, heights[1] - 0.1)) + _wobble(rng, s, 0.1, (1.0, 4.0)), *heights)
