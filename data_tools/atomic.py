@@ -1,10 +1,5 @@
-"""Atomic file writes: a temporary sibling, fsync, then one rename.
-
-A reader sees either the old file or the whole new one, never a partial file. The temporary file is
-``.<name>.tmp<pid>`` in the target's folder (same file system, so the rename is atomic); it is
-removed when the write fails or is interrupted, and :data:`TEMP_NAME` matches the ones a killed
-process may leave behind. :func:`save_png` writes a matplotlib figure the same way. Importable from every
-part of sray (``sray.data_tools.atomic``).
+"""Atomic file writes, importable from every part of sray: a temporary sibling ``.<name>.tmp<pid>`` (same file
+system), fsync, then one rename, so a reader sees the old file or the whole new one, never a partial file.
 """
 
 from __future__ import annotations
@@ -18,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 TEMP_NAME = re.compile(r"^\..+\.tmp\d+$")
-"""File names of this module's temporary files (left over only when a process was killed)."""
+"""Names of this module's temporary files (left behind only by a killed process)."""
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
@@ -51,7 +46,7 @@ def save_png(fig: Any, path: Path, dpi: int) -> Path:
     """Render the matplotlib figure ``fig`` to PNG in memory and write it to ``path`` atomically; returns ``path``."""
     buf = io.BytesIO()
     fig.savefig(buf, dpi=dpi, format="png")
-    atomic_write_bytes(Path(path), buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue())
     return Path(path)
 
 

@@ -1,21 +1,6 @@
-"""Seeded perturbations of posed views, with their units: what ``sray stability`` sweeps and what
-training may use as augmentation.
-
-Every function is pure (inputs are never modified) and draws only from the ``numpy`` generator it is
-given, so a (seed, level) pair always produces the same perturbation.
-
-Units:
-
-* pose noise: rotation in **degrees** (the angle of the relative rotation R_noisy R_cleanᵀ) and
-  translation in **centimetres** (the distance between the clean and noisy camera centres), with
-  uniformly random axes and directions; poses are camera-to-world matrices in metres;
-* Gaussian noise: σ in **8-bit intensity levels** (0-255), added to every channel, then clipped;
-* motion blur: a straight kernel of **length in pixels** (odd, ≥ 1) at a random angle, normalised to
-  sum 1, with reflected borders (so the image mean is kept, exactly for a constant image);
-* exposure: a change of **EV stops**: intensities multiplied by 2^ev, then clipped;
-* JPEG: encoder **quality** 1-100 (OpenCV's encoder, 4:2:0 chroma subsampling);
-* occlusion: the **fraction of pixels** (0-1) hidden by random axis-aligned rectangles of a flat
-  random colour; exactly ``round(fraction · H · W)`` pixels are hidden.
+"""Seeded perturbations of posed views, each in its own unit (in its docstring): what ``sray stability`` sweeps and
+what training may use as augmentation. Every function is pure and draws only from the generator it is given, so a
+(seed, level) pair always produces the same perturbation.
 """
 
 from __future__ import annotations
@@ -30,19 +15,13 @@ def random_unit_vector(rng: np.random.Generator) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def axis_angle_matrix(axis: np.ndarray, angle_rad: float) -> np.ndarray:
-    """Rotation matrix (3, 3) of ``angle_rad`` about the unit ``axis`` (Rodrigues' formula)."""
-    rot, _ = cv2.Rodrigues(np.asarray(axis, np.float64).reshape(3, 1) * angle_rad)
-    return rot
-
-
 def noisy_pose(c2w: np.ndarray, rotation_deg: float, translation_cm: float, rng: np.random.Generator) -> np.ndarray:
-    """``c2w`` (4, 4) turned by exactly ``rotation_deg`` about a random axis through the camera centre and
-    moved by exactly ``translation_cm`` in a random direction; returns a new (4, 4) float64 matrix."""
+    """``c2w`` (4, 4, metres) turned by exactly ``rotation_deg`` degrees about a random axis through the camera
+    centre and moved by exactly ``translation_cm`` centimetres in a random direction; a new (4, 4) float64 matrix."""
     if rotation_deg < 0 or translation_cm < 0:
         raise ValueError(f"pose noise magnitudes must be >= 0, got {rotation_deg} deg and {translation_cm} cm")
     out = np.array(c2w, dtype=np.float64, copy=True)
-    turn = axis_angle_matrix(random_unit_vector(rng), np.deg2rad(rotation_deg))
+    turn, _ = cv2.Rodrigues(random_unit_vector(rng).reshape(3, 1) * np.deg2rad(rotation_deg))
     out[:3, :3] = turn @ out[:3, :3]
     out[:3, 3] = out[:3, 3] + random_unit_vector(rng) * translation_cm / 100.0
     return out
@@ -71,7 +50,8 @@ def motion_blur_kernel(length_px: int, angle_rad: float) -> np.ndarray:
 
 
 def motion_blur(rgb: np.ndarray, length_px: int, rng: np.random.Generator) -> np.ndarray:
-    """uint8 (H, W, 3) blurred along a random direction by a ``length_px`` kernel (reflected borders)."""
+    """uint8 (H, W, 3) blurred along a random direction by a ``length_px`` kernel (reflected borders, so the mean is
+    kept)."""
     if length_px == 1:
         return rgb.copy()
     kernel = motion_blur_kernel(length_px, float(rng.uniform(0.0, np.pi)))
@@ -85,7 +65,7 @@ def exposure(rgb: np.ndarray, ev: float) -> np.ndarray:
 
 
 def jpeg(rgb: np.ndarray, quality: int) -> np.ndarray:
-    """uint8 (H, W, 3) RGB after a JPEG round trip at ``quality`` (1-100)."""
+    """uint8 (H, W, 3) RGB after a JPEG round trip at ``quality`` (1-100; OpenCV's encoder, 4:2:0 chroma)."""
     if not 1 <= quality <= 100:
         raise ValueError(f"JPEG quality must be in 1..100, got {quality}")
     ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
@@ -124,13 +104,7 @@ def occlude(rgb: np.ndarray, fraction: float, rng: np.random.Generator) -> tuple
     """uint8 (H, W, 3) with ``fraction`` of its pixels covered by flat random colours; returns (image, mask)."""
     mask = occlusion_mask(rgb.shape[:2], fraction, rng)
     out = rgb.copy()
-    labels, n = _components(mask)
-    for k in range(1, n + 1):
+    n, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    for k in range(1, n):
         out[labels == k] = rng.integers(0, 256, 3, dtype=np.uint8)
     return out, mask
-
-
-def _components(mask: np.ndarray) -> tuple[np.ndarray, int]:
-    """Connected components of a mask (8-connected): labels (H, W) int32 and their count."""
-    n, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
-    return labels, n - 1

@@ -1,7 +1,5 @@
-"""Lossless PNG codecs of sray's images: 8-bit RGB, 16-bit labels and 16-bit depth in millimetres.
-
-The scene folder (``scene_folder.py``), the shards and the readers all store images through these,
-so a view survives every hop without loss (depth to the 1 mm of the 16-bit PNG).
+"""Lossless PNG codecs of sray's images (8-bit RGB, 16-bit labels, 16-bit depth in millimetres), used by the scene
+folder, the shards and the readers alike, so a view survives every hop without loss.
 """
 
 from __future__ import annotations

@@ -1,20 +1,13 @@
 """The canonical scene: the one in-memory contract every reader produces and the shard writer consumes.
 
-Conventions (stated once, used everywhere; see docs/data.md):
-
-* ``rgb``: uint8 (H, W, 3), RGB order.
-* ``depth``: float32 (H, W) in metres, 0 = unknown.
-* ``label``: uint16 (H, W) class ids of the scene's label space; :data:`IGNORE_ID` = unlabelled.
-* ``K``: float64 (3, 3) pinhole intrinsics for that image size. Pixel (u, v) is centred at (u, v)
-  in K's coordinates, so a centred principal point is ((W - 1) / 2, (H - 1) / 2).
-* ``c2w``: float64 (4, 4) camera-to-world in OpenCV axes (x right, y down, z forward).
-  Readers convert once; nothing downstream converts again.
+Pixel (u, v) is centred at (u, v) in K's coordinates (a centred principal point is ((W - 1) / 2, (H - 1) / 2));
+poses are camera-to-world in OpenCV axes (x right, y down, z forward): readers convert once, nothing downstream.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -29,20 +22,16 @@ finetuning) and ``test`` (held-out views that are only ever evaluated)."""
 
 @dataclass
 class View:
-    """One posed, labelled frame of a scene."""
+    """One posed, labelled frame of a scene: ``rgb`` uint8 (H, W, 3); ``depth`` float32 (H, W) metres, 0 = unknown;
+    ``label`` uint16 (H, W) class ids, IGNORE_ID = unlabelled; ``K`` float64 (3, 3); ``c2w`` float64 (4, 4)."""
 
     view_id: str
     """Stable id, unique within the scene, without '.' (webdataset splits keys on dots)."""
     rgb: np.ndarray
-    """uint8 (H, W, 3)."""
     depth: np.ndarray
-    """float32 (H, W) metres, 0 = unknown."""
     label: np.ndarray
-    """uint16 (H, W) class ids; IGNORE_ID = unlabelled."""
     K: np.ndarray
-    """float64 (3, 3) intrinsics, pixel-centre convention above."""
     c2w: np.ndarray
-    """float64 (4, 4) camera-to-world, OpenCV axes."""
 
     @property
     def hw(self) -> tuple[int, int]:
@@ -71,7 +60,6 @@ class SceneMeta:
     role: str = "train"
     """``train`` (seen in pretraining) or ``test`` (unseen scene, evaluated with the protocol)."""
     ignore_id: int = IGNORE_ID
-    """Label id of unlabelled pixels."""
     labelled: bool = True
     """False: a capture without labels (every label pixel is ``ignore_id``), for inference only (``sray label``);
     training refuses it."""
@@ -80,36 +68,18 @@ class SceneMeta:
 
     def to_json(self) -> dict:
         """JSON-serialisable form (used by scene.json and the shard metadata)."""
-        return {
-            "name": self.name,
-            "label_space": self.label_space,
-            "class_names": list(self.class_names),
-            "view_ids": list(self.view_ids),
-            "splits": {k: list(v) for k, v in self.splits.items()},
-            "near": float(self.near),
-            "far": float(self.far),
-            "role": self.role,
-            "ignore_id": int(self.ignore_id),
-            "labelled": bool(self.labelled),
-            "extra": self.extra,
-        }
+        return {**asdict(self), "class_names": list(self.class_names), "view_ids": list(self.view_ids),
+                "splits": {k: list(v) for k, v in self.splits.items()}, "near": float(self.near),
+                "far": float(self.far), "ignore_id": int(self.ignore_id), "labelled": bool(self.labelled)}
 
     @classmethod
     def from_json(cls, d: dict) -> SceneMeta:
         """Inverse of :meth:`to_json`; raises KeyError naming a missing field."""
-        return cls(
-            name=d["name"],
-            label_space=d["label_space"],
-            class_names=list(d["class_names"]),
-            view_ids=list(d["view_ids"]),
-            splits={k: list(v) for k, v in d["splits"].items()},
-            near=float(d.get("near", 0.0)),
-            far=float(d.get("far", 0.0)),
-            role=d.get("role", "train"),
-            ignore_id=int(d.get("ignore_id", IGNORE_ID)),
-            labelled=bool(d.get("labelled", True)),
-            extra=dict(d.get("extra", {})),
-        )
+        return cls(name=d["name"], label_space=d["label_space"], class_names=list(d["class_names"]),
+                   view_ids=list(d["view_ids"]), splits={k: list(v) for k, v in d["splits"].items()},
+                   near=float(d.get("near", 0.0)), far=float(d.get("far", 0.0)), role=d.get("role", "train"),
+                   ignore_id=int(d.get("ignore_id", IGNORE_ID)), labelled=bool(d.get("labelled", True)),
+                   extra=dict(d.get("extra", {})))
 
 
 @dataclass
@@ -121,9 +91,8 @@ class Scene:
     """Loads one view by id."""
 
     def views(self) -> Iterator[View]:
-        """Yield every view in ``meta.view_ids`` order."""
-        for vid in self.meta.view_ids:
-            yield self.read_view(vid)
+        """Every view in ``meta.view_ids`` order, read lazily."""
+        return map(self.read_view, self.meta.view_ids)
 
     @classmethod
     def in_memory(cls, meta: SceneMeta, views: list[View]) -> Scene:
@@ -151,20 +120,14 @@ def source_pool(meta: SceneMeta) -> list[str]:
 
 
 def depth_views(meta: SceneMeta) -> list[str]:
-    """View ids whose depth may shape scene-wide quantities (near/far, the neighbours' fallback depth).
-
-    ``test`` scenes: the :func:`source_pool` only, so nothing measured depends on the depth of the
-    ``test`` views (ground truth a user does not have at test time). ``train`` scenes: every view.
-    """
+    """View ids whose depth may shape scene-wide quantities (near/far, the neighbours' fallback depth): every view
+    of a ``train`` scene, the :func:`source_pool` of a ``test`` scene (its test views' depth is ground truth)."""
     return source_pool(meta) if meta.role == "test" else list(meta.view_ids)
 
 
 def scene_depth_bounds(meta: SceneMeta, depth_of_view: Callable[[str], np.ndarray]) -> tuple[float, float]:
-    """The scene's (near, far): :func:`depth_bounds` over the depth maps of :func:`depth_views`.
-
-    ``depth_of_view(view_id)`` returns that view's float32 (H, W) depth in metres (any subsampling
-    of it will do). The one place that decides which views measure a scene's bounds.
-    """
+    """The scene's (near, far): :func:`depth_bounds` over the depth maps of :func:`depth_views`;
+    ``depth_of_view(view_id)`` returns that view's float32 (H, W) depth in metres (any subsampling of it will do)."""
     views = depth_views(meta)
     try:
         return depth_bounds([depth_of_view(v) for v in views])
@@ -175,13 +138,9 @@ def scene_depth_bounds(meta: SceneMeta, depth_of_view: Callable[[str], np.ndarra
 
 def depth_bounds(depths: list[np.ndarray], lo_pct: float = 1.0, hi_pct: float = 99.0,
                  margin: float = 0.1) -> tuple[float, float]:
-    """Near/far from valid depth: the (lo, hi) percentiles widened by ``margin`` (relative).
-
-    near = max(p_lo * (1 - margin), 0.05 m); far = p_hi * (1 + margin). Raises ValueError when no
-    pixel has a valid (> 0, finite) depth.
-    """
-    valid = [d[(d > 0) & np.isfinite(d)] for d in depths]
-    values = np.concatenate([v.ravel() for v in valid]) if valid else np.zeros(0)
+    """Near/far from valid depth: near = max(p_lo * (1 - margin), 0.05 m), far = p_hi * (1 + margin) with the
+    ``lo_pct`` and ``hi_pct`` percentiles; ValueError when no pixel has a valid (> 0, finite) depth."""
+    values = np.concatenate([d[(d > 0) & np.isfinite(d)].ravel() for d in depths] or [np.zeros(0)])
     if values.size == 0:
         raise ValueError("no valid depth (> 0, finite) in any view: near/far cannot be measured")
     lo, hi = np.percentile(values, [lo_pct, hi_pct])

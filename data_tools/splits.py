@@ -1,20 +1,12 @@
-"""The view-split rules every scene source shares (procedural generator and converters alike).
-
-* Train scenes: every ``holdout_every``-th view (offset by half a period: views 10, 30, 50, ... for
-  the default 20) is held out as ``test`` for validation during training; the rest are ``train``.
-* Test scenes (the paper's protocol, appendix "Data split"): a window of 20 nearby views, in blocks
-  of five ``[finetune, source, test, source, finetune]``, giving 8 source views, 8 finetune views
-  and 4 test views, each test view flanked by two source views.
+"""The view-split rules every scene source shares (docs/data.md, "Splits"): train scenes hold out every 20th view
+for validation; test scenes follow the paper's protocol (20 nearby views: 8 source, 8 finetune, 4 test).
 """
 
 from __future__ import annotations
 
-PROTOCOL_WINDOW = 20
-"""Views of a test scene's evaluation window: 8 source + 8 finetune + 4 test."""
-PROTOCOL_BLOCK = ("finetune", "source", "test", "source", "finetune")
-"""Split of each position in a block of five consecutive window views."""
-HOLDOUT_EVERY = 20
-"""Default hold-out period of train scenes."""
+PROTOCOL_WINDOW = 20  # views of a test scene's evaluation window
+PROTOCOL_BLOCK = ("finetune", "source", "test", "source", "finetune")  # splits of five consecutive window views
+HOLDOUT_EVERY = 20  # default hold-out period of train scenes
 
 
 def train_splits(view_ids: list[str], holdout_every: int = HOLDOUT_EVERY) -> dict[str, list[str]]:
@@ -35,7 +27,5 @@ def protocol_splits(view_ids: list[str], start: int | None) -> tuple[list[str], 
     if not 0 <= start <= len(view_ids) - PROTOCOL_WINDOW:
         raise ValueError(f"window start {start} out of range 0..{len(view_ids) - PROTOCOL_WINDOW}")
     window = view_ids[start:start + PROTOCOL_WINDOW]
-    splits: dict[str, list[str]] = {"source": [], "finetune": [], "test": []}
-    for k, view in enumerate(window):
-        splits[PROTOCOL_BLOCK[k % len(PROTOCOL_BLOCK)]].append(view)
-    return window, splits
+    return window, {name: [v for k, v in enumerate(window) if PROTOCOL_BLOCK[k % 5] == name]
+                    for name in ("source", "finetune", "test")}

@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sray.data_tools.scene import SceneMeta, source_pool
-from sray.data_tools.shards.neighbours import grid_points, grid_samples, overlap_fractions, rank_neighbours
+from sray.data_tools.shards.neighbours import (fractions_inside, grid_points, grid_samples, projection_matrices,
+                                              rank_neighbours)
 from sray.data_tools.shards.writer import scene_neighbours
 
 
@@ -110,13 +111,13 @@ def _random_camera(rng: np.random.Generator) -> np.ndarray:
 
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), n_points=st.integers(1, 60), n_cams=st.integers(1, 5))
-def test_overlap_fractions_match_opencv(seed: int, n_points: int, n_cams: int) -> None:
+def test_fractions_inside_match_opencv(seed: int, n_points: int, n_cams: int) -> None:
     """The vectorised fraction equals cv2.projectPoints camera by camera (one boundary point of slack)."""
     rng = np.random.default_rng(seed)
     points = rng.normal(scale=2.0, size=(n_points, 3))
     c2ws = np.stack([_random_camera(rng) for _ in range(n_cams)])
     Ks = np.stack([scene_fixtures.intrinsics(24, 32, focal_ratio=rng.uniform(0.3, 1.5)) for _ in range(n_cams)])
-    got = overlap_fractions(points, Ks, c2ws, (24, 32))
+    got = fractions_inside(points, projection_matrices(Ks, c2ws), (24, 32))
     want = [_opencv_fraction(points, K, c, (24, 32)) for K, c in zip(Ks, c2ws)]
     np.testing.assert_allclose(got, want, atol=1.0 / n_points + 1e-12)
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from sray.data_tools.scene import IGNORE_ID
-from sray.data_tools.synth import content as ct
 from sray.data_tools.synth import materials as mat
+from sray.data_tools.synth import templates as tp
 from sray.data_tools.synth.dataset import intrinsics, plan_scene, scene_seed
 from sray.data_tools.synth.floor_plan import FloorPlan, Light
 from sray.data_tools.synth.furniture import CLS
@@ -42,23 +42,23 @@ def _added_labels(piece, pose, target) -> np.ndarray:
 
 
 def test_a_rug_s_pixels_are_floor() -> None:
-    labels = _added_labels(ct.rug(np.random.default_rng(1), 1.6, 1.1), (2.2, 2.2, 0.0), (2.2, 2.2, 0.0))
+    labels = _added_labels(tp.rug(np.random.default_rng(1), 1.6, 1.1), (2.2, 2.2, 0.0), (2.2, 2.2, 0.0))
     assert set(labels.tolist()) == {CLS["floor"]}
 
 
 @pytest.mark.parametrize(("build", "allowed", "required"), [
-    (lambda rng: ct.mini_fridge(rng), {CLS["refrigerator"]}, {CLS["refrigerator"]}),
-    (lambda rng: ct.kitchen_island(rng, 1.6, 0.8), {CLS["cabinet"], CLS["counter"]}, {CLS["cabinet"], CLS["counter"]}),
-    (lambda rng: ct.open_shelf(rng, 1.0), {CLS["bookshelf"], IGNORE_ID}, {CLS["bookshelf"]}),
+    (lambda rng: tp.mini_fridge(rng), {CLS["refrigerator"]}, {CLS["refrigerator"]}),
+    (lambda rng: tp.kitchen_island(rng, 1.6, 0.8), {CLS["cabinet"], CLS["counter"]}, {CLS["cabinet"], CLS["counter"]}),
+    (lambda rng: tp.open_shelf(rng, 1.0), {CLS["bookshelf"], IGNORE_ID}, {CLS["bookshelf"]}),
 ])
 def test_kitchen_pieces_and_shelves_carry_their_classes(build, allowed, required) -> None:
     labels = set(_added_labels(build(np.random.default_rng(2)), (2.5, 2.6, -0.6), (2.5, 2.6, 0.5)).tolist())
     assert required <= labels <= allowed
 
 
-@pytest.mark.parametrize("build", [ct.glazed_door, ct.double_door, ct.plank_door])
+@pytest.mark.parametrize("build", [tp.glazed_door, tp.double_door, tp.plank_door])
 def test_every_door_style_is_door(build) -> None:
-    door = build(np.random.default_rng(3), 1.2 if build is ct.double_door else 0.85, 2.05)
+    door = build(np.random.default_rng(3), 1.2 if build is tp.double_door else 0.85, 2.05)
     pose = (2.0, SIZE[1] - door.depth / 2, np.pi)  # against the far wall (y = Ly), facing the room
     assert set(_added_labels(door, pose, (2.0, SIZE[1], 1.0)).tolist()) == {CLS["door"]}
 

@@ -1,8 +1,5 @@
-"""The rules of ``sray data check``: pure functions from values to a list of problems.
-
-Each function inspects one thing (a pose, an intrinsic matrix, a label map, scene.json's fields) and
-returns :class:`Problem` records naming the file, what is wrong and how to fix it. They read and
-write nothing, so the on-disk check (``scenes.py``) and the in-memory check share them.
+"""The rules of ``sray data check``: pure functions from a value (a pose, intrinsics, a label map, scene.json's
+fields) to :class:`Problem` records, shared by the on-disk and the in-memory check (``scenes.py``).
 """
 
 from __future__ import annotations
@@ -24,14 +21,12 @@ RECONVERT = "re-run `sray data convert` (or `sray data synth`) for this scene"
 
 @dataclass(frozen=True)
 class Problem:
-    """One defect found by the checker."""
+    """One defect found by the checker: the file at fault (``<scene>:<view_id>`` for in-memory scenes), what is wrong
+    with the offending values, and how to fix it."""
 
     file: str
-    """The file at fault (a path; for in-memory scenes ``<scene>:<view_id>``)."""
     what: str
-    """What is wrong, with the offending values."""
     fix: str
-    """How to fix it."""
 
 
 @dataclass
@@ -47,22 +42,30 @@ class CheckLimits:
     pose_tol: float = 1e-4
     """Tolerance of the rigidity checks: |R^T R - I|, |det R - 1| and the last row of c2w."""
     max_centre_offset: float = 0.2
-    """Largest allowed distance of the principal point from the image centre, as a fraction of the
-    image size; larger offsets are almost always intrinsics of another resolution."""
+    """Largest distance of the principal point from the image centre, as a fraction of the image size (larger ones
+    are almost always intrinsics of another resolution)."""
+
+
+def _matrix(value: object, name: str, shape: tuple[int, int], file: str, view: str,
+            fix: str) -> tuple[np.ndarray | None, list[Problem]]:
+    """(the float64 matrix, []) or (None, [why it is not a finite matrix of ``shape``])."""
+    try:
+        m = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None, [Problem(file, f"view {view!r}: {name} is not a numeric matrix", fix)]
+    if m.shape != shape:
+        return None, [Problem(file, f"view {view!r}: {name} has shape {m.shape}, expected {shape}", fix)]
+    if not np.isfinite(m).all():
+        return None, [Problem(file, f"view {view!r}: {name} has non-finite entries (inf/NaN)", fix)]
+    return m, []
 
 
 def pose_problems(c2w: object, file: str, view: str, tol: float) -> list[Problem]:
     """A camera-to-world must be a finite 4x4 rigid transform: R orthonormal, det +1, last row 0 0 0 1."""
     fix = f"store a rigid camera-to-world (OpenCV axes) for view {view!r}; {RECONVERT}"
-    try:
-        m = np.asarray(c2w, dtype=np.float64)
-    except (TypeError, ValueError):
-        return [Problem(file, f"view {view!r}: c2w is not a numeric matrix", fix)]
-    if m.shape != (4, 4):
-        return [Problem(file, f"view {view!r}: c2w has shape {m.shape}, expected (4, 4)", fix)]
-    if not np.isfinite(m).all():
-        return [Problem(file, f"view {view!r}: c2w has non-finite entries (inf/NaN)", fix)]
-    out = []
+    m, out = _matrix(c2w, "c2w", (4, 4), file, view, fix)
+    if m is None:
+        return out
     if np.abs(m[3] - [0.0, 0.0, 0.0, 1.0]).max() > tol:
         out.append(Problem(file, f"view {view!r}: c2w last row is {m[3].tolist()}, expected [0, 0, 0, 1]", fix))
     r = m[:3, :3]
@@ -83,15 +86,9 @@ def intrinsics_problems(K: object, hw: tuple[int, int] | None, file: str, view: 
     point inside (and near the centre of) an image of size ``hw`` (skipped when ``hw`` is None)."""
     fix = f"store the intrinsics of the {hw[1]}x{hw[0]} images" if hw else "store valid intrinsics"
     fix += f" for view {view!r} (pixel (u, v) centred at (u, v)); {RECONVERT}"
-    try:
-        k = np.asarray(K, dtype=np.float64)
-    except (TypeError, ValueError):
-        return [Problem(file, f"view {view!r}: K is not a numeric matrix", fix)]
-    if k.shape != (3, 3):
-        return [Problem(file, f"view {view!r}: K has shape {k.shape}, expected (3, 3)", fix)]
-    if not np.isfinite(k).all():
-        return [Problem(file, f"view {view!r}: K has non-finite entries", fix)]
-    out = []
+    k, out = _matrix(K, "K", (3, 3), file, view, fix)
+    if k is None:
+        return out
     if not np.array_equal(k[2], [0.0, 0.0, 1.0]) or k[1, 0] != 0.0:
         out.append(Problem(file, f"view {view!r}: K is not an upper-triangular pinhole matrix with last row "
                                  f"[0, 0, 1] (rows {k[1].tolist()}, {k[2].tolist()})", fix))

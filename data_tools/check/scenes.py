@@ -1,12 +1,6 @@
-"""``sray data check``: validate a dataset in sray layout and list every problem; write nothing.
-
-A scene whose scene.json says ``"labelled": false`` (a capture for inference only) passes with label images
-that hold the ignore id everywhere; ``sray data shard`` keeps the flag and training refuses such a scene.
-
-:func:`check_dataset` walks a dataset folder (or a single scene folder), :func:`check_scene` one
-scene, :func:`check_scene_object` an in-memory :class:`Scene`. Each returns a list of
-:class:`Problem` (file, what, fix); an empty list means the data is fit for ``sray data shard``,
-which refuses any input this check rejects. Files are only ever opened for reading.
+"""``sray data check``: list every :class:`Problem` of a dataset folder (:func:`check_dataset`), a scene folder
+(:func:`check_scene`) or an in-memory :class:`Scene` (:func:`check_scene_object`), reading only; no problem means
+the data is fit for ``sray data shard``. A scene marked ``"labelled": false`` passes with ignore-only label images.
 """
 
 from __future__ import annotations
@@ -16,20 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sray.data_tools.check.rules import (
-    RECONVERT,
-    CheckLimits,
-    Problem,
-    intrinsics_problems,
-    label_problems,
-    meta_problems,
-    pose_problems,
-)
+from sray.data_tools.check.rules import (RECONVERT, CheckLimits, Problem, intrinsics_problems, label_problems,
+                                         meta_problems, pose_problems)
 from sray.data_tools.png import decode_png
 from sray.data_tools.scene import Scene
 from sray.data_tools.scene_folder import FORMAT, VERSION
-
-__all__ = ["CheckLimits", "Problem", "check_dataset", "check_scene", "check_scene_object"]
 
 
 def _read_json(path: Path, out: list[Problem]) -> object | None:

@@ -1,16 +1,9 @@
 """Training-sample augmentation that teaches generalization (every option off by default).
 
-* **colour jitter per source view**: each source image independently gets an exposure change of
-  ``colour_ev`` stops at most and a per-channel change of ``channel_ev`` stops at most (a white
-  balance shift), through the stability suite's :func:`sray.data_tools.perturbations.exposure`,
-  and optionally Gaussian noise (:func:`~sray.data_tools.perturbations.gaussian_noise`); for a stronger change,
-  a per-view tone curve (each channel raised to the power 2 ** g, g uniform in ±``gamma_ev``) and a per-view
-  saturation change (the colour's distance from its grey level scaled by 2 ** s, s uniform in ±``saturation_ev``),
-  so the sources of one sample disagree in contrast and colourfulness as well as brightness; the
-  query's target colours are left alone, so the model must see through its inputs' photometry;
-* **random source-view count and neighbour subsets**: each sample carries m sources, m drawn
-  uniformly in [``min_source``, n_source], chosen at random among the first k ranked neighbours,
-  k drawn uniformly in [m, top_k] (near-duplicate or wide-baseline sets);
+* **colour jitter per source view** (exposure, white balance, tone curve, saturation, noise: the fields say how
+  much): the sources of one sample disagree in photometry while the query's targets stay as they are;
+* **random source-view count and neighbour subsets**: m sources, m uniform in [``min_source``, n_source], among
+  the first k ranked neighbours, k uniform in [m, top_k] (near-duplicate or wide-baseline sets);
 * **random source resolution**: all sources of a sample are resized by one factor drawn in
   [1 - ``source_scale``, 1] (a Gaussian prefilter against aliasing, then bilinear sampling, which
   keeps pixel centres exact; OpenCV's area filter shifts them by up to 0.05 pixel at non-integer
@@ -102,11 +95,8 @@ class Augmentation:
 
 
 def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
-    """Resize uint8 (H, W, 3) by ``scale`` (Gaussian prefilter, then bilinear) and move K (3, 3) by the
-    pixel-centre rule.
-
-    The output size is rounded per axis, and each axis uses its exact factor ``W'/W`` or ``H'/H``:
-    ``f' = s f``, ``c' = s (c + 0.5) - 0.5``. Returns the new image and float64 K.
+    """(image, float64 K): uint8 (H, W, 3) resized by ``scale`` (Gaussian prefilter, then bilinear; size rounded per
+    axis) and K (3, 3) moved by the pixel-centre rule with each axis's exact factor s: f' = s f, c' = s (c + 0.5) - 0.5.
     """
     h, w = rgb.shape[:2]
     nh, nw = max(1, round(h * scale)), max(1, round(w * scale))
@@ -123,11 +113,9 @@ def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarr
 
 
 def rescale_nearest(depth: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
-    """A per-pixel map (H, W) (float32 depth in metres, or integer class ids) at ``size_hw`` = (H', W'): each
-    output pixel takes the input pixel nearest to its centre under the pixel-centre rule
-    ``u = (u' + 0.5) W / W' - 0.5`` (the geometry of :func:`rescale_view`); values are never blended, so no
-    depth appears between a surface and what is behind it, no class id between two classes, and 0
-    (unknown depth) stays 0."""
+    """A per-pixel map (H, W) (float32 depth in metres, or class ids) at ``size_hw`` = (H', W'): each output pixel takes
+    the input pixel nearest to its centre, u = (u' + 0.5) W / W' - 0.5 (the geometry of :func:`rescale_view`); values
+    are never blended (no depth between a surface and what is behind it, no class between two classes)."""
     h, w = depth.shape
     nh, nw = size_hw
     if (nh, nw) == (h, w):

@@ -1,8 +1,5 @@
-"""Per-class pixel statistics of a dataset (scene folders or shards) and class weights derived from them.
-
-``count_pixels`` tallies label images; ``dataset_pixel_counts`` reads a folder of scenes in sray layout
-(labels only), ``shard_pixel_counts`` a shard folder (the views the training loader reads);
-``balanced_weights`` turns counts into the weights of the class-frequency-aware semantic loss.
+"""Per-class pixel counts of a dataset (scene folders or shards) and the class weights of the class-frequency-aware
+semantic loss derived from them.
 """
 
 from __future__ import annotations
@@ -24,10 +21,8 @@ BALANCE_MODES = ("none", "inverse-sqrt", "inverse")
 
 
 def count_pixels(labels: Iterable[np.ndarray], n_classes: int) -> np.ndarray:
-    """int64 (n_classes + 1,): pixels of each class id, then of the ignore id, over all label images.
-
-    Ids other than 0..n_classes-1 and ``IGNORE_ID`` raise ValueError (a label space mismatch).
-    """
+    """int64 (n_classes + 1,): pixels of each class id, then of the ignore id, over all label images; other ids raise
+    ValueError (a label space mismatch)."""
     counts = np.zeros(n_classes + 1, np.int64)
     for label in labels:
         flat = np.asarray(label).ravel().astype(np.int64)
@@ -60,8 +55,7 @@ def dataset_pixel_counts(dataset_dir: Path, roles: tuple[str, ...] = ("train", "
 def shard_pixel_counts(shards_dir: Path, roles: tuple[str, ...] = ("train",)
                        ) -> tuple[list[str], dict[str, np.ndarray]]:
     """(class names, {scene: counts}) of every scene of ``roles`` in a shard folder, over the views the training
-    loader reads (``source_pool``: a train scene's ``train`` split minus its held-out views; a test scene's
-    ``source`` and ``finetune`` views), so class weights never read a held-out or test view's labels."""
+    loader reads (``scene.source_pool``), so class weights never read a held-out or test view's labels."""
     manifest = read_manifest(Path(shards_dir))
     names: list[str] | None = None
     per_scene: dict[str, np.ndarray] = {}
@@ -78,12 +72,9 @@ def shard_pixel_counts(shards_dir: Path, roles: tuple[str, ...] = ("train",)
 
 
 def balanced_weights(counts: np.ndarray, mode: str, max_ratio: float = 10.0) -> list[float]:
-    """Per-class loss weights (n_classes,) from pixel counts (n_classes,) of the labelled classes.
-
-    ``inverse-sqrt``: w_c ∝ f_c^-1/2; ``inverse``: w_c ∝ f_c^-1; then clipped to ``max_ratio`` times
-    the smallest weight and scaled so the pixel-weighted mean weight is 1 (sum_c f_c w_c = 1, the
-    loss keeps its scale). Classes with no pixel get the largest weight (they never are targets).
-    """
+    """Per-class loss weights (n_classes,) from pixel counts (n_classes,) of the labelled classes, by ``mode``
+    (:data:`BALANCE_MODES`), clipped to ``max_ratio`` times the smallest and scaled so that sum_c f_c w_c = 1 (the
+    loss keeps its scale); classes without pixels (never targets) get the largest weight."""
     if mode not in BALANCE_MODES:
         raise ValueError(f"class balance mode {mode!r}; use one of {BALANCE_MODES}")
     counts = np.asarray(counts, np.float64)

@@ -1,18 +1,5 @@
-"""The loader's sample types (docs/CONTRACTS.md "Loader samples"): one scene, no batch dimension.
-
-One sample is one ray batch. How samples travel:
-
-* the training DataLoader runs with ``batch_size=None``, so its collation is torch's
-  ``default_convert``, which passes these dataclasses through unchanged (it converts only tensors,
-  arrays, mappings and sequences);
-* DataLoader workers send them to the main process pickled (the classes live at module level; torch
-  moves their tensors through shared memory);
-* with ``pin_memory=True`` the DataLoader calls each sample's :meth:`TensorFields.pin_memory`, after
-  which ``sample.to(device, non_blocking=True)`` copies without making the host wait.
-
-``near`` and ``far`` have one form outside the model: Python floats, the scene's z-depth bounds in
-metres. They need no device move; the model surface (``sray.model.ray_batch.QueryRays.rays``) turns
-them into per-ray (R,) tensors, once.
+"""The loader's sample types (docs/CONTRACTS.md "Loader samples", how they travel): one scene, one ray batch, no
+batch dimension; ``near`` and ``far`` stay Python floats (z-depth bounds in metres) up to the model.
 """
 
 from __future__ import annotations
@@ -53,48 +40,37 @@ class TensorFields:
 
 @dataclass(frozen=True)
 class SourceViews(TensorFields):
-    """The m source views of a sample (ranked neighbours of its query view), full resolution."""
+    """The m source views of a sample (ranked neighbours of its query view): ``rgb`` float32 (m, 3, H, W) in [0, 1],
+    ``K`` float32 (m, 3, 3) (pixel (u, v) centred at (u, v)), ``c2w`` float32 (m, 4, 4) OpenCV axes."""
 
     rgb: Tensor
-    """float32 (m, 3, H, W) colours in [0, 1]."""
     K: Tensor
-    """float32 (m, 3, 3) intrinsics (pixel (u, v) centred at (u, v))."""
     c2w: Tensor
-    """float32 (m, 4, 4) camera-to-world, OpenCV axes."""
     depth: Tensor | None = None
-    """float32 (m, H, W) z-depth in metres, 0 = unknown, at the colours' size (the loader always fills it;
-    the model reads it only with ``model.inputs='rgbd'``). A query view's depth is never a source input."""
+    """float32 (m, H, W) z-depth in metres, 0 = unknown (always filled; read with ``model.inputs='rgbd'``)."""
     label: Tensor | None = None
-    """int64 (m, H, W) class ids, ``IGNORE_ID`` (255) unlabelled, at the colours' size: filled only when the
-    training loader is asked for source labels (the source-view semantic loss); evaluation never fills it."""
+    """int64 (m, H, W) class ids, ``IGNORE_ID`` unlabelled: only for a training loader asked for source labels."""
 
 
 @dataclass(frozen=True)
 class QueryCamera(TensorFields):
-    """The camera of a sample's query view."""
+    """The camera of a sample's query view: ``K`` float32 (3, 3), ``c2w`` float32 (4, 4) OpenCV axes."""
 
     K: Tensor
-    """float32 (3, 3) intrinsics."""
     c2w: Tensor
-    """float32 (4, 4) camera-to-world, OpenCV axes."""
 
 
 @dataclass(frozen=True)
 class SceneQuery(TensorFields):
-    """What every sample holds: which view of which scene, the cameras and the scene's bounds."""
+    """What every sample holds: which view of which scene (a key of the shard manifest), the source views, the query
+    camera and the scene's own z-depth bounds in metres."""
 
     scene: str
-    """Scene name (a key of the shard manifest)."""
     query_id: str
-    """The query view's id within its scene."""
     sources: SourceViews
-    """The source views the model sees."""
     query: QueryCamera
-    """The query view's camera."""
     near: float
-    """The scene's near z-depth bound in metres (its own, measured from its depth)."""
     far: float
-    """The scene's far z-depth bound in metres."""
 
 
 @dataclass(frozen=True)

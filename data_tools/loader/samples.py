@@ -16,59 +16,42 @@ def ranked_candidates(query: StoredView, allowed: set[str], limit: int) -> list[
     return [v for v in query.neighbours.ids if v in allowed and v != query.view_id][:limit]
 
 
-def _cameras(views: list[StoredView]) -> tuple[torch.Tensor, torch.Tensor]:
-    """K (m, 3, 3) and c2w (m, 4, 4) as float32 tensors."""
-    K = torch.from_numpy(np.stack([v.K for v in views])).float()
-    c2w = torch.from_numpy(np.stack([v.c2w for v in views])).float()
-    return K, c2w
-
-
-def _source_labels(views: list[StoredView], n_classes: int, scene: str,
-                   size_hw: tuple[int, int] | None = None) -> torch.Tensor:
-    """int64 (m, H, W) class ids of the source views (``IGNORE_ID`` unlabelled), checked against ``n_classes``;
-    resized to ``size_hw`` by nearest pixel centre (:func:`rescale_nearest`) when given."""
+def _source_labels(views: list[StoredView], n_classes: int, scene: str, size_hw: tuple[int, int]) -> torch.Tensor:
+    """int64 (m, H, W) class ids of the source views (``IGNORE_ID`` unlabelled), checked against ``n_classes`` and
+    resized to ``size_hw`` by nearest pixel centre (:func:`rescale_nearest`)."""
     maps = []
     for view in views:
         label = view.label()
         check_label_ids(label, n_classes, scene, view.view_id)
-        maps.append(label if size_hw is None else rescale_nearest(label, size_hw))
+        maps.append(rescale_nearest(label, size_hw))
     return torch.from_numpy(np.stack(maps).astype(np.int64))
 
 
-def _sources(views: dict[str, StoredView], source_ids: list[str], labels: tuple[int, str] | None = None) -> SourceViews:
-    """The source views' colours (m, 3, H, W) in [0, 1], depth (m, H, W) in metres and cameras; with
-    ``labels`` = (n_classes, scene) also their class ids (m, H, W)."""
+def _sources(views: dict[str, StoredView], source_ids: list[str], augment: Augmentation | None = None,
+             rng: np.random.Generator | None = None, labels: tuple[int, str] | None = None) -> SourceViews:
+    """The source views' colours (m, 3, H, W) in [0, 1], depth (m, H, W) in metres and cameras; with ``labels`` =
+    (n_classes, scene) also their class ids (m, H, W). ``augment`` jitters each image on its own and resizes all by
+    one drawn factor (depth and labels by nearest pixel centre, never blended); it draws nothing when off."""
     sources = [views[s] for s in source_ids]
-    rgb = torch.from_numpy(np.stack([v.rgb() for v in sources])).permute(0, 3, 1, 2)  # (m, 3, H, W) uint8 view
-    src_rgb = torch.empty(rgb.shape, dtype=torch.float32).copy_(rgb).div_(255.0)       # one strided pass
-    K, c2w = _cameras(sources)
-    depth = torch.from_numpy(np.stack([v.depth() for v in sources]))                  # (m, H, W) float32
-    label = None if labels is None else _source_labels(sources, *labels)
-    return SourceViews(rgb=src_rgb, K=K, c2w=c2w, depth=depth, label=label)
-
-
-def _augmented_sources(views: dict[str, StoredView], source_ids: list[str], augment: Augmentation,
-                       rng: np.random.Generator, labels: tuple[int, str] | None = None) -> SourceViews:
-    """Like :func:`_sources`, each image jittered on its own and all resized by one drawn factor (depth and
-    labels by nearest pixel centre, never blended: :func:`~sray.data_tools.loader.augment.rescale_nearest`)."""
-    scale = augment.scale(rng)
+    scale = augment.scale(rng) if augment is not None else 1.0
     images, Ks, depths = [], [], []
-    for s in source_ids:
-        rgb, K = rescale_view(augment.jitter(views[s].rgb(), rng), views[s].K, scale)
+    for view in sources:
+        rgb = augment.jitter(view.rgb(), rng) if augment is not None else view.rgb()
+        rgb, K = rescale_view(rgb, view.K, scale)
         images.append(rgb)
         Ks.append(K)
-        depths.append(rescale_nearest(views[s].depth(), rgb.shape[:2]))
-    rgb = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2)                      # (m, 3, H', W') uint8
-    c2w = torch.from_numpy(np.stack([views[s].c2w for s in source_ids])).float()
-    label = None if labels is None else _source_labels([views[s] for s in source_ids], *labels, rgb.shape[-2:])
-    return SourceViews(rgb=rgb.float().div_(255.0), K=torch.from_numpy(np.stack(Ks)).float(), c2w=c2w,
-                       depth=torch.from_numpy(np.stack(depths)), label=label)
+        depths.append(rescale_nearest(view.depth(), rgb.shape[:2]))
+    rgb = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2)                      # (m, 3, H, W) uint8 view
+    return SourceViews(rgb=torch.empty(rgb.shape, dtype=torch.float32).copy_(rgb).div_(255.0),  # one strided pass
+                       K=torch.from_numpy(np.stack(Ks)).float(),
+                       c2w=torch.from_numpy(np.stack([v.c2w for v in sources])).float(),
+                       depth=torch.from_numpy(np.stack(depths)),                         # (m, H, W) float32
+                       label=None if labels is None else _source_labels(sources, *labels, rgb.shape[-2:]))
 
 
 def _query(view: StoredView) -> QueryCamera:
     """The query view's camera: K (3, 3), c2w (4, 4)."""
-    K, c2w = _cameras([view])
-    return QueryCamera(K=K[0], c2w=c2w[0])
+    return QueryCamera(K=torch.tensor(view.K, dtype=torch.float32), c2w=torch.tensor(view.c2w, dtype=torch.float32))
 
 
 def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str) -> None:
@@ -100,10 +83,7 @@ def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[s
     v, u = np.divmod(flat, w)
     targets = label[v, u].astype(np.int64)                                            # (R,)
     check_label_ids(targets, n_classes, scene, query_id)
-    plain = augment is None or (not augment.jitters_colour and augment.source_scale <= 0)
-    labels = (n_classes, scene) if source_labels else None
-    sources = (_sources(views, source_ids, labels) if plain
-               else _augmented_sources(views, source_ids, augment, rng, labels))
+    sources = _sources(views, source_ids, augment, rng, (n_classes, scene) if source_labels else None)
     return TrainSample(
         scene=scene, query_id=query_id, sources=sources, query=_query(query),
         near=float(near), far=float(far),

@@ -1,35 +1,6 @@
-"""The shard loader: resampled training tuples for the trainer, fixed evaluation samples.
-
-Training (:func:`make_train_loader`). One sample = one ray batch of one scene: a query view, m
-source views drawn at random from its top-k ranked neighbours, R random pixels of the query with
-their labels and colours (and, when asked, their depth), and the scene's near/far (a :class:`TrainSample`,
-docs/CONTRACTS.md). Because a
-tuple needs several views of ONE scene, the unit that is split across ranks and DataLoader workers
-is a scene (all of its shards):
-
-* the ``world_size * num_workers`` loader slots (slot = rank * num_workers + worker) take the
-  scenes, shuffled with a seed shared by every rank (seed, epoch), round-robin: with at least as
-  many scenes as slots, every slot reads a disjoint set of scenes and so of shards;
-* with fewer scenes than slots (a per-scene finetune, say), slots share a scene but get disjoint
-  query views of it (every ``n``-th view of the scene's pool); sources may come from the whole pool;
-* each worker streams its scenes' shards into a small least-recently-used cache of ENCODED views
-  (``cache_scenes`` scenes at most) and decodes only what a sample uses; it draws
-  ``visit_samples`` samples from a scene before choosing its next scene at random;
-* resampling with a fixed epoch length: every rank yields exactly ``batches_per_epoch`` samples per
-  epoch (split as evenly as possible over its workers), whatever the shard counts, so DDP never
-  waits on a rank that ran dry. Each new ``iter(loader)`` starts a new epoch (new random stream);
-  ``loader.set_epoch(e)`` sets it explicitly (for resuming).
-
-Which views are queries and sources (``scene.source_pool``): train scenes use their ``train``
-split minus held-out ``test`` views; test scenes (finetuning) use ``source`` plus ``finetune``.
-
-Evaluation (:func:`make_eval_samples`) yields whole query images with FIXED source views (the
-top-n ranked neighbours within the source split), in split order, identical on every call.
-
-Samples are dataclasses (:mod:`sray.data_tools.loader.sample_types`, which says how they cross
-worker processes, pinning and device moves). Never pass these loaders through ``accelerator.prepare``:
-Accelerate re-shards iterable datasets and drops samples. Rank and world size are explicit arguments
-(pass Ray Train's values).
+"""The shard loader (docs/data.md, "The loader"): resampled training samples with a fixed epoch length per rank
+(scenes are the unit split over ranks and DataLoader workers), fixed evaluation samples. Never pass these loaders
+through ``accelerator.prepare``: it re-shards iterable datasets and drops samples.
 """
 
 from __future__ import annotations
@@ -50,10 +21,8 @@ from sray.data_tools.shards.manifest import Manifest, read_manifest, verify_shar
 
 def slot_scenes(scenes: list[str], pools: dict[str, list[str]], slot: int, n_slots: int,
                 shared_rng: np.random.Generator) -> list[tuple[str, list[str]]]:
-    """The (scene, query view ids) a loader slot draws from this epoch (see the module docstring).
-
-    ``shared_rng`` must be seeded identically in every slot: it shuffles the scene order.
-    """
+    """The (scene, query view ids) a loader slot draws from this epoch; ``shared_rng``, seeded identically in every
+    slot, shuffles the scene order."""
     order = [scenes[i] for i in shared_rng.permutation(len(scenes))]
     if len(order) >= n_slots:
         return [(s, pools[s]) for s in order[slot::n_slots]]
@@ -69,7 +38,7 @@ def worker_batches(batches_per_epoch: int, worker: int, num_workers: int) -> int
 
 
 class TrainTuples(IterableDataset):
-    """Resampled training samples of one rank (see the module docstring); length = batches per epoch."""
+    """Resampled training samples of one rank; length = batches per epoch."""
 
     def __init__(self, shards_dir: Path, manifest: Manifest, scenes: list[str], *, n_source: int, top_k: int,
                  rays_per_batch: int, batches_per_epoch: int, rank: int, world_size: int, seed: int,
@@ -135,8 +104,7 @@ class EpochLoader(DataLoader):
 
 def _open(shards_dir: Path, scenes: list[str] | None,
           manifest: Manifest | None = None) -> tuple[Manifest, list[str]]:
-    """Read the manifest and refuse a damaged folder (size check) unless the caller passes the manifest
-    it has read already; resolve the scene list (None = train scenes)."""
+    """The manifest (read and size-checked unless the caller passes it) and the scene list (None = train scenes)."""
     if manifest is None:
         problems = verify_shards(shards_dir, checksums=False)
         if problems:
@@ -167,14 +135,9 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
                       augment: Augmentation | None = None, source_labels: bool = False) -> EpochLoader:
     """The training DataLoader of one rank: one :class:`TrainSample` per step (``batch_size=None``).
 
-    ``scenes``: scene names to train on; None = every scene whose role is ``train`` (unseen test
-    scenes never leak into pretraining; name a test scene explicitly to finetune on it).
-
-    Every rank gets exactly ``batches_per_epoch`` samples per epoch. Do NOT pass it to
-    ``accelerator.prepare`` (it drops samples); move tensors to the device yourself. ``augment``:
-    training augmentation (:mod:`sray.data_tools.loader.augment`; None = none). ``source_labels``: samples
-    also carry their source views' class ids; the sources come from the same pool as the queries (a train
-    scene's ``train`` split minus its held-out views), so no held-out or test view's labels are read.
+    ``scenes``: scene names to train on; None = every scene whose role is ``train`` (name a test scene to finetune
+    on it). ``augment``: training augmentation (None = none). ``source_labels``: samples also carry their
+    source views' class ids, from the same pool as the queries (no held-out or test view's labels are read).
     """
     manifest, names = _open(shards_dir, scenes)
     if not 0 <= rank < world_size:
@@ -198,14 +161,9 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
 
 def make_eval_samples(shards_dir: Path, scene: str, split: str = "test", source_split: str | None = None,
                       n_source: int = 8, *, manifest: Manifest | None = None) -> Iterator[EvalSample]:
-    """Evaluation samples of ``scene``'s ``split`` views, in split order, with fixed sources.
-
-    Sources are the query's top ``n_source`` ranked neighbours inside ``source_split`` (default:
-    ``source`` for test scenes, ``train`` for train scenes; held-out views are never sources).
-    Deterministic: every call yields the same samples. Validates before returning a generator.
-    ``manifest``: the folder's manifest when the caller has read it already (it is then neither read
-    nor size-checked again); None = read and check it here.
-    """
+    """Evaluation samples of ``scene``'s ``split`` views, in split order, each with fixed sources: its top
+    ``n_source`` ranked neighbours inside ``source_split`` (default ``source`` for test scenes, ``train`` for train
+    scenes). Validates before returning the generator. ``manifest``: the folder's manifest if already read."""
     manifest, _ = _open(shards_dir, [scene], manifest)
     meta = SceneMeta.from_json(manifest.scenes[scene].meta)
     source_split = source_split or ("source" if meta.role == "test" else "train")
@@ -220,9 +178,4 @@ def make_eval_samples(shards_dir: Path, scene: str, split: str = "test", source_
         if len(sources) < n_source:
             raise ValueError(f"scene {scene!r}, view {q!r}: {len(sources)} ranked {source_split!r} neighbours, "
                              f"n_source={n_source} needed; lower n_source or re-shard with a larger --neighbours")
-
-    def generate() -> Iterator[EvalSample]:
-        for q, sources in plan:
-            yield eval_sample(views, q, sources, scene, meta.near, meta.far)
-
-    return generate()
+    return (eval_sample(views, q, sources, scene, meta.near, meta.far) for q, sources in plan)

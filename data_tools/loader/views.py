@@ -1,8 +1,7 @@
 """Reading one scene's views out of its shards into memory, and decoding them without loss.
 
-A loader worker keeps the ENCODED views of at most a few scenes (:class:`SceneCache`, least
-recently used first out) and decodes only the images a sample needs, so memory stays near the
-scenes' PNG bytes on disk (about 0.1-0.2 MB per 320x240 view) whatever the dataset size.
+A loader worker keeps the ENCODED views of at most a few scenes (:class:`SceneCache`) and decodes only the images a
+sample needs, so memory stays near the scenes' PNG bytes (about 0.1-0.2 MB per 320x240 view) whatever the dataset.
 """
 
 from __future__ import annotations
@@ -26,56 +25,37 @@ REQUIRED = ("rgb.png", "depth.png", "label.png", "camera.json", "neighbours.json
 
 @dataclass
 class StoredView:
-    """One view as stored in a shard: encoded images, camera and ranked neighbours."""
+    """One view as stored in a shard: encoded PNGs (8-bit RGB, 16-bit depth in millimetres, 16-bit labels), float64
+    K (3, 3) and c2w (4, 4, OpenCV axes), ranked neighbours, and ``shard:key`` for error messages."""
 
     view_id: str
-    """The view's id within its scene."""
     rgb_png: bytes
-    """8-bit RGB PNG."""
     depth_png: bytes
-    """16-bit depth PNG in millimetres."""
     label_png: bytes
-    """16-bit label PNG."""
     K: np.ndarray
-    """float64 (3, 3) intrinsics."""
     c2w: np.ndarray
-    """float64 (4, 4) camera-to-world, OpenCV axes."""
     neighbours: Neighbours
-    """Ranked source-view candidates."""
     where: str
-    """``shard:key`` for error messages."""
 
     def rgb(self) -> np.ndarray:
         """uint8 (H, W, 3) RGB."""
         return decode_png(self.rgb_png, f"{self.where}.rgb.png")
 
     def label(self) -> np.ndarray:
-        """uint16 (H, W) class ids (16-bit decoded without loss)."""
-        label = decode_png(self.label_png, f"{self.where}.label.png")
-        if label.dtype != np.uint16 or label.ndim != 2:
-            raise ValueError(f"{self.where}.label.png: expected a 16-bit single-channel PNG, got {label.dtype} "
-                             f"{label.shape}; re-run `sray data shard`")
-        return label
+        """uint16 (H, W) class ids."""
+        return self._png16(self.label_png, "label")
 
     def depth(self) -> np.ndarray:
-        """float32 (H, W) metres, 0 = unknown (16-bit millimetres decoded without loss)."""
-        depth = decode_png(self.depth_png, f"{self.where}.depth.png")
-        if depth.dtype != np.uint16 or depth.ndim != 2:
-            raise ValueError(f"{self.where}.depth.png: expected a 16-bit single-channel PNG, got {depth.dtype} "
-                             f"{depth.shape}; re-run `sray data shard`")
-        return png16_to_depth(depth)
+        """float32 (H, W) metres, 0 = unknown."""
+        return png16_to_depth(self._png16(self.depth_png, "depth"))
 
-
-def _stored_view(sample: dict, view_id: str, where: str) -> StoredView:
-    """Build a :class:`StoredView` from one webdataset sample dict (bytes per member suffix)."""
-    missing = [c for c in REQUIRED if c not in sample]
-    if missing:
-        raise ValueError(f"{where}: members {missing} are missing; re-run `sray data shard`")
-    camera = json.loads(sample["camera.json"])
-    return StoredView(view_id=view_id, rgb_png=sample["rgb.png"], depth_png=sample["depth.png"],
-                      label_png=sample["label.png"], K=np.asarray(camera["K"], np.float64),
-                      c2w=np.asarray(camera["c2w"], np.float64),
-                      neighbours=Neighbours.from_json(json.loads(sample["neighbours.json"])), where=where)
+    def _png16(self, data: bytes, member: str) -> np.ndarray:
+        """A 16-bit single-channel PNG decoded without loss."""
+        image = decode_png(data, f"{self.where}.{member}.png")
+        if image.dtype != np.uint16 or image.ndim != 2:
+            raise ValueError(f"{self.where}.{member}.png: expected a 16-bit single-channel PNG, got {image.dtype} "
+                             f"{image.shape}; re-run `sray data shard`")
+        return image
 
 
 def read_scene_views(shards_dir: Path, entry: SceneEntry) -> dict[str, StoredView]:
@@ -89,8 +69,13 @@ def read_scene_views(shards_dir: Path, entry: SceneEntry) -> dict[str, StoredVie
             key = sample["__key__"]
             if not key.startswith(prefix):
                 raise ValueError(f"{url}: sample {key!r} is not a view of scene {scene!r}; re-run `sray data shard`")
-            view_id = key[len(prefix):]
-            views[view_id] = _stored_view(sample, view_id, f"{url}:{key}")
+            missing = [c for c in REQUIRED if c not in sample]
+            if missing:
+                raise ValueError(f"{url}:{key}: members {missing} are missing; re-run `sray data shard`")
+            camera, view_id = json.loads(sample["camera.json"]), key[len(prefix):]
+            views[view_id] = StoredView(view_id, sample["rgb.png"], sample["depth.png"], sample["label.png"],
+                                        np.asarray(camera["K"], np.float64), np.asarray(camera["c2w"], np.float64),
+                                        Neighbours.from_json(json.loads(sample["neighbours.json"])), f"{url}:{key}")
     missing = [v for v in entry.meta["view_ids"] if v not in views]
     if missing:
         raise ValueError(f"{entry.shards}: views {missing[:5]} of scene {scene!r} are missing from its shards; "
@@ -106,8 +91,6 @@ class SceneCache:
             raise ValueError(f"cache capacity must be >= 1 scene, got {capacity}")
         self.capacity, self.load = capacity, load
         self._scenes: OrderedDict[str, dict[str, StoredView]] = OrderedDict()
-        self.loads = 0
-        """How many times a scene was read from its shards (for tests and benchmarks)."""
 
     def get(self, scene: str) -> dict[str, StoredView]:
         """The scene's views, reading its shards on a miss and evicting the least recently used."""
@@ -117,7 +100,6 @@ class SceneCache:
         while len(self._scenes) >= self.capacity:
             self._scenes.popitem(last=False)
         views = self._scenes[scene] = self.load(scene)
-        self.loads += 1
         return views
 
     def __len__(self) -> int:

@@ -1,8 +1,5 @@
-"""``manifest.json``: the index of a shard folder, and the check that its shards are intact.
-
-The manifest is written last and atomically by ``sray data shard``: a folder with a manifest is
-complete; its shards match the listed sizes and sha256 checksums unless something changed them
-afterwards, which :func:`verify_shards` reports.
+"""``manifest.json``: the index of a shard folder (written last: a folder with a manifest is complete), and
+:func:`verify_shards`, which reports shards changed since (size and sha256).
 """
 
 from __future__ import annotations
@@ -19,56 +16,40 @@ MANIFEST_NAME = "manifest.json"
 
 @dataclass
 class ShardEntry:
-    """One tar shard (all its views belong to one scene)."""
+    """One tar shard of one scene's views: its file name in the folder (``<scene>-NNNNNN.tar``), scene, view count,
+    hex sha256 and size in bytes."""
 
     path: str
-    """File name relative to the shard folder, ``<scene>-NNNNNN.tar``."""
     scene: str
-    """Scene whose views the shard holds."""
     n_views: int
-    """Views (samples) in the shard."""
     sha256: str
-    """Hex sha256 of the whole file."""
     bytes: int
-    """File size in bytes."""
 
 
 @dataclass
 class SceneEntry:
-    """One scene: its metadata and where its views are."""
+    """One scene: its ``SceneMeta.to_json()``, the shards holding its views in view order, its view count and the
+    [H, W] every view shares."""
 
     meta: dict
-    """``SceneMeta.to_json()``: label space, class names, view ids, splits, near/far, role."""
     shards: list[str]
-    """Shard file names holding the scene's views, in view order."""
     n_views: int
-    """Views stored for the scene (all of ``meta['view_ids']``)."""
     image_size: list[int]
-    """[H, W] shared by every view of the scene."""
 
 
 @dataclass
 class Manifest:
-    """Everything a loader needs to know before opening a shard."""
+    """Everything a loader needs to know before opening a shard: every shard (sorted by file name), the scenes by
+    name, the class names of each label space, the neighbour rule with its parameters, the format and version
+    (readers refuse others) and the writer's options."""
 
     shards: list[ShardEntry]
-    """Every shard, sorted by file name."""
     scenes: dict[str, SceneEntry]
-    """Scenes by name."""
     label_spaces: dict[str, list[str]]
-    """Class names of every label space used by the scenes."""
     neighbours: dict
-    """The neighbour rule and its parameters (rule, version, k, grid, pool rule)."""
     format: str = FORMAT
-    """Always ``sray-shards``."""
     version: int = VERSION
-    """Format version; readers refuse versions they do not know."""
     extra: dict = field(default_factory=dict)
-    """Free-form provenance (shard writer options)."""
-
-    def to_json(self) -> dict:
-        """JSON form (key order fixed, so equal manifests serialise to equal bytes)."""
-        return asdict(self)
 
     @classmethod
     def from_json(cls, d: dict, where: str = MANIFEST_NAME) -> Manifest:
@@ -88,40 +69,32 @@ class Manifest:
 
 
 def manifest_bytes(manifest: Manifest) -> bytes:
-    """The exact bytes written to ``manifest.json``."""
-    return (json.dumps(manifest.to_json(), indent=1, sort_keys=True) + "\n").encode()
+    """The exact bytes written to ``manifest.json`` (equal manifests give equal bytes)."""
+    return (json.dumps(asdict(manifest), indent=1, sort_keys=True) + "\n").encode()
 
 
 def read_manifest(shards_dir: Path) -> Manifest:
     """Read ``shards_dir/manifest.json``; a missing one means the folder is incomplete."""
     path = Path(shards_dir) / MANIFEST_NAME
     try:
-        text = path.read_text()
+        data = json.loads(path.read_text())
     except FileNotFoundError:
         raise FileNotFoundError(f"{path}: missing; the shard folder is incomplete or was never written: "
                                 f"run `sray data shard SCENES_DIR --out {shards_dir}`") from None
-    try:
-        data = json.loads(text)
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON ({e}); re-run `sray data shard`") from None
     return Manifest.from_json(data, str(path))
 
 
-def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
+def sha256_file(path: Path) -> str:
     """Hex sha256 of a file, read in chunks."""
-    h = hashlib.sha256()
     with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
+        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 def verify_shards(shards_dir: Path, checksums: bool = True) -> list[str]:
-    """Problems with a shard folder, one line each (empty when intact).
-
-    Checks the manifest parses, every listed shard exists with the listed size and, when
-    ``checksums`` is true, the listed sha256 (a size check alone catches truncation cheaply).
-    """
+    """Problems with a shard folder, one line each (empty when intact): the manifest parses, every listed shard
+    exists with its size and, with ``checksums``, its sha256 (a size check alone catches truncation cheaply)."""
     root = Path(shards_dir)
     try:
         manifest = read_manifest(root)

@@ -1,34 +1,6 @@
-"""Ranked source-view neighbours: which views see the most of what a view sees.
-
-Rule ``frustum-overlap`` (version 2), computed once at shard time when depth is at hand:
-
-1. For a view, take a sparse grid of pixels (``GRID`` = 12 rows x 16 columns, at pixel centres)
-   and back-project those with known depth to world points with the view's K and c2w. If fewer
-   than ``MIN_POINTS`` grid pixels have depth, the whole grid is back-projected at the scene's
-   median valid depth instead (so a view without depth still gets a sensible ranking); that
-   median comes from ``scene.depth_views`` (a test scene's source pool, a train scene's views), and
-   in a scene with no depth at all (a capture without depth maps) it is sqrt(near * far).
-2. Query views whose depth may be used: a candidate's score is the fraction of the QUERY's points
-   that land in front of the candidate camera (z > 0) and inside its image (-0.5 <= u < W - 0.5,
-   -0.5 <= v < H - 0.5, the pixel-centre convention): "how much of what the query sees does this
-   candidate see".
-   Blind queries (:func:`blind_views`: the ``test`` split of a test scene, whose depth and labels
-   are ground truth a user does not have): a candidate's score is the fraction of the CANDIDATE's
-   own points that land in front of and inside the query camera: "how much of what this candidate
-   saw lies in the query's frustum". It needs only the query's pose and intrinsics; the query's
-   depth is never read. Both scores are scale-free and directed; occlusion is not modelled (a
-   frustum overlap, not a visibility test).
-3. Candidates are sorted by score (descending), ties broken by the smaller angle between optical
-   axes, then the smaller camera-centre distance, then capture order. The top ``k`` are kept.
-
-The paper's public code ranks by camera-centre distance alone; at 30 fps that returns
-near-duplicate frames and, worse, cameras next to the query that look the other way. The overlap
-score never prefers a camera facing away, and the loader samples m sources at random from the top
-k so near duplicates are not always chosen.
-
-Candidates come from ``scene.source_pool`` (which also measures bounds): the views a training or
-evaluation tuple may use as sources (for training scenes, the ``train`` split minus held-out
-``test`` views; for test scenes, ``source`` plus ``finetune``).
+"""Ranked source-view neighbours, rule ``frustum-overlap`` (docs/data.md, "Source-view neighbours"): a candidate
+scores the fraction of the query's depth-grid points inside its camera; a :func:`blind_views` view, whose depth is
+never read, scores each candidate by the fraction of the candidate's own points inside the query camera.
 """
 
 from __future__ import annotations
@@ -49,12 +21,11 @@ MIN_POINTS = 8
 
 @dataclass
 class Neighbours:
-    """Ranked source-view candidates of one view (best first)."""
+    """Ranked source-view candidates of one view: view ids, best first (never the view itself), and the overlap
+    fraction in [0, 1] of each."""
 
     ids: list[str]
-    """View ids, best first; never the view itself."""
     scores: list[float]
-    """Overlap fraction in [0, 1] of each id, index-aligned with ``ids``."""
 
     def to_json(self) -> dict:
         """JSON form stored in the shards as ``<key>.neighbours.json``."""
@@ -67,11 +38,8 @@ class Neighbours:
 
 
 def blind_views(meta: SceneMeta) -> set[str]:
-    """Views ranked without their own depth or labels: the ``test`` split of a ``test`` scene.
-
-    At test time a user has only such a view's pose and intrinsics; its depth and labels are the
-    ground truth it is scored against, so they must not choose its source views.
-    """
+    """Views ranked without their own depth or labels: the ``test`` split of a ``test`` scene (a user has only their
+    poses and intrinsics; their depth and labels are the ground truth they are scored against)."""
     return set(meta.splits.get("test", [])) if meta.role == "test" else set()
 
 
@@ -85,9 +53,8 @@ def grid_samples(depth: np.ndarray, grid: tuple[int, int] = GRID) -> np.ndarray:
 
 
 def fallback_depth(samples: list[np.ndarray], bounds: tuple[float, float] | None = None) -> float:
-    """Median valid depth over grid samples (each (P, 3), from :func:`grid_samples`; pass those of
-    ``scene.depth_views``), used where a view lacks depth. A scene without any depth (a capture converted
-    without depth maps) falls back to the geometric mean of its ``bounds`` (near, far) when given."""
+    """Median valid depth over grid samples (each (P, 3), of ``scene.depth_views``), used where a view lacks depth;
+    in a scene without any depth, the geometric mean of its ``bounds`` (near, far) when given."""
     z = np.concatenate([s[:, 2] for s in samples]) if samples else np.zeros(0)
     z = z[np.isfinite(z) & (z > 0)]
     if z.size == 0:
@@ -115,11 +82,9 @@ def projection_matrices(Ks: np.ndarray, c2ws: np.ndarray) -> np.ndarray:
     return Ks @ w2c
 
 
-def _fractions(points: np.ndarray, proj: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
-    """Fraction (C,) of world points (P, 3) in front of and inside each camera of ``proj`` (C, 3, 4).
-
-    K's last row is [0, 0, 1], so the third projected coordinate is the camera z.
-    """
+def fractions_inside(points: np.ndarray, proj: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
+    """Fraction (C,) of world points (P, 3) in front of and inside each camera of ``proj`` (C, 3, 4) (K's last row
+    is [0, 0, 1], so the third projected coordinate is the camera z)."""
     if len(points) == 0:
         return np.zeros(len(proj))
     # Broadcast multiply-adds, not a matmul: with cv2 or torch imported, numpy's OpenBLAS matmul on
@@ -133,48 +98,35 @@ def _fractions(points: np.ndarray, proj: np.ndarray, hw: tuple[int, int]) -> np.
     return inside.mean(axis=0)
 
 
-def overlap_fractions(points: np.ndarray, Ks: np.ndarray, c2ws: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
-    """Fraction (C,) of world points (P, 3) in front of and inside each of C cameras (Ks (C,3,3), c2ws (C,4,4))."""
-    return _fractions(points, projection_matrices(Ks, c2ws), hw)
-
-
 def _seen_by_query(points: list[np.ndarray], proj_query: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
-    """Fraction (C,) of each candidate's own world points (C arrays (P_c, 3)) in front of and inside
-    the query camera ``proj_query`` (3, 4)."""
-    return np.array([_fractions(p, proj_query[None], hw)[0] for p in points])
+    """Fraction (C,) of each candidate's own world points (C arrays (P_c, 3)) seen by the query camera (3, 4)."""
+    return np.array([fractions_inside(p, proj_query[None], hw)[0] for p in points])
 
 
-def rank_order(capture: np.ndarray, score: np.ndarray, cos: np.ndarray, dist: np.ndarray, k: int) -> np.ndarray:
-    """Positions (<= k,) of the best candidates (rule step 3): ``score`` (C,) descending (to 1e-6), ties broken
-    by the larger ``cos`` (C,) between optical axes, the smaller camera-centre ``dist`` (C,), the earlier
+def rank_order(capture: np.ndarray, score: np.ndarray, axes: np.ndarray, centres: np.ndarray, c2w: np.ndarray,
+               k: int) -> np.ndarray:
+    """Positions (<= k,) of the best of C candidates: ``score`` (C,) descending (to 1e-6), ties broken by the larger
+    cosine between their optical ``axes`` (C, 3) and ``c2w``'s, the nearer camera ``centres`` (C, 3), the earlier
     ``capture`` index (C,)."""
+    cos = axes @ c2w[:3, 2]
+    dist = np.linalg.norm(centres - c2w[:3, 3], axis=1)
     return np.lexsort((capture, dist, -cos, -np.round(score, 6)))[:k]                 # last key sorts first
 
 
 def rank_camera(K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int], c2ws: np.ndarray, points: list[np.ndarray],
                 k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Rank C candidates in capture order for a camera no depth is known for, as a :func:`blind_views` view is.
-
-    K (3, 3), c2w (4, 4) and ``hw``: the camera; c2ws (C, 4, 4): the candidates' poses; points: their
-    :func:`grid_points` (C arrays (P_c, 3)). Returns (positions of the top ``k`` candidates, best first; their
-    scores), the ranking :func:`rank_neighbours` gives a blind view.
-    """
+    """Rank C candidates (poses c2ws (C, 4, 4) in capture order, their :func:`grid_points`) for a camera (K (3, 3),
+    c2w (4, 4), ``hw``) without depth, as a :func:`blind_views` view is: (positions of the top ``k``, their scores)."""
     score = _seen_by_query(points, projection_matrices(K[None], c2w[None])[0], hw)
-    cos = c2ws[:, :3, 2] @ c2w[:3, 2]
-    dist = np.linalg.norm(c2ws[:, :3, 3] - c2w[:3, 3], axis=1)
-    order = rank_order(np.arange(len(points)), score, cos, dist, k)
+    order = rank_order(np.arange(len(points)), score, c2ws[:, :3, 2], c2ws[:, :3, 3], c2w, k)
     return order, score[order]
 
 
 def rank_neighbours(view_ids: list[str], Ks: np.ndarray, c2ws: np.ndarray, hw: tuple[int, int],
                     points: dict[str, np.ndarray], pool: list[str], k: int) -> dict[str, Neighbours]:
-    """Top-``k`` neighbours from ``pool`` for every view (see the module rule).
-
-    view_ids: V ids; Ks (V, 3, 3); c2ws (V, 4, 4); points: world points (P_i, 3) from
-    :func:`grid_points` of every view whose own depth may be used, by id. A view absent from
-    ``points`` (a :func:`blind_views` view) is scored by how much of each candidate's points lies in
-    its camera; every pool view needs points (ValueError otherwise).
-    """
+    """Top-``k`` neighbours from ``pool`` for every one of V views (Ks (V, 3, 3), c2ws (V, 4, 4)). ``points``: the
+    :func:`grid_points` of every view whose own depth may be used, by id; every pool view needs them, and a view
+    without them (a :func:`blind_views` view) is ranked by its candidates' points."""
     index = {vid: i for i, vid in enumerate(view_ids)}
     cand = np.array([index[v] for v in pool])
     missing = [v for v in pool if v not in points]
@@ -182,17 +134,14 @@ def rank_neighbours(view_ids: list[str], Ks: np.ndarray, c2ws: np.ndarray, hw: t
         raise ValueError(f"pool views {missing} have no grid points; every candidate needs them (a view ranked "
                          "without its own depth is scored with its candidates' points)")
     proj = projection_matrices(Ks, c2ws)                                              # (V, 3, 4)
-    axes = c2ws[:, :3, 2]                                                             # (V, 3) optical axes
-    centres = c2ws[:, :3, 3]                                                          # (V, 3)
+    axes, centres = c2ws[:, :3, 2], c2ws[:, :3, 3]                                    # (V, 3) each
     out: dict[str, Neighbours] = {}
     for i, vid in enumerate(view_ids):
         others = cand[cand != i]
         if vid in points:
-            score = _fractions(points[vid], proj[others], hw)
+            score = fractions_inside(points[vid], proj[others], hw)
         else:
             score = _seen_by_query([points[view_ids[j]] for j in others], proj[i], hw)
-        cos = axes[others] @ axes[i]
-        dist = np.linalg.norm(centres[others] - centres[i], axis=1)
-        order = rank_order(others, score, cos, dist, k)
+        order = rank_order(others, score, axes[others], centres[others], c2ws[i], k)
         out[vid] = Neighbours(ids=[view_ids[j] for j in others[order]], scores=[float(s) for s in score[order]])
     return out

@@ -1,21 +1,5 @@
-"""Canonical scenes -> webdataset tar shards grouped by scene, plus ``manifest.json``.
-
-Shard ``<scene>-NNNNNN.tar`` holds up to ``views_per_shard`` views of ONE scene, in capture order.
-Each view is one webdataset sample with key ``<scene>__<view_id>`` and the members
-
-* ``.rgb.png``        8-bit RGB
-* ``.depth.png``      16-bit depth in millimetres, 0 = unknown (lossless)
-* ``.label.png``      16-bit class ids, the scene's ignore id = unlabelled (lossless)
-* ``.camera.json``    ``{"K": 3x3, "c2w": 4x4, "image_size": [H, W]}`` (OpenCV axes, metres)
-* ``.neighbours.json`` ``{"ids": [...], "scores": [...]}`` ranked source views (``neighbours.py``)
-
-and the first sample of every shard also carries ``.scene.json`` (``SceneMeta.to_json()``), so a
-shard describes itself; the loader works from the manifest alone.
-
-Runs are reproducible and safe to interrupt: tar headers are fixed (mtime 0, uid/gid 0, no user
-names, mode 0644, fixed member order), every file goes through a temporary name and a rename, an
-existing shard whose bytes already match is left alone, the old manifest is removed before the
-first shard changes, and the new manifest is written last.
+"""Canonical scenes -> webdataset tar shards grouped by scene, plus ``manifest.json`` (members, manifest and safety
+rules: docs/data.md, "Shards and loader"): same input, same bytes; a folder with a manifest is complete.
 """
 
 from __future__ import annotations
@@ -38,18 +22,7 @@ from sray.data_tools.png import depth_to_png16, encode_png
 from sray.data_tools.scene import Scene, View, depth_views, source_pool
 from sray.data_tools.scene_folder import list_scenes, read_scene
 from sray.data_tools.shards.manifest import MANIFEST_NAME, Manifest, SceneEntry, ShardEntry, manifest_bytes, sha256_file
-from sray.data_tools.shards.neighbours import (
-    GRID,
-    MIN_POINTS,
-    RULE,
-    RULE_VERSION,
-    Neighbours,
-    blind_views,
-    fallback_depth,
-    grid_points,
-    grid_samples,
-    rank_neighbours,
-)
+from sray.data_tools.shards import neighbours as nb
 
 KEY_SEPARATOR = "__"
 """Between scene name and view id in a sample key."""
@@ -67,16 +40,13 @@ class DatasetRejected(ValueError):
 
 @dataclass
 class ShardResult:
-    """What a :func:`write_shards` run did."""
+    """What a :func:`write_shards` run did: the manifest now on disk and the shard files (re)written, left alone
+    (already byte-identical) and deleted (no longer listed)."""
 
     manifest: Manifest
-    """The manifest now on disk."""
     written: list[str] = field(default_factory=list)
-    """Shard files (re)written."""
     unchanged: list[str] = field(default_factory=list)
-    """Shard files already byte-identical, left alone."""
     removed: list[str] = field(default_factory=list)
-    """Stale shard files no longer listed in the manifest, deleted."""
 
 
 def sample_key(scene: str, view_id: str) -> str:
@@ -86,11 +56,6 @@ def sample_key(scene: str, view_id: str) -> str:
             raise ValueError(f"scene {scene!r}: {what} {name!r} contains '.' or '/' or is empty; rename it "
                              "in scene.json / cameras.json (webdataset splits sample keys on dots)")
     return f"{scene}{KEY_SEPARATOR}{view_id}"
-
-
-def shard_name(scene: str, index: int) -> str:
-    """File name of a scene's ``index``-th shard."""
-    return f"{scene}-{index:06d}.tar"
 
 
 def json_bytes(obj: object) -> bytes:
@@ -111,7 +76,8 @@ def tar_bytes(members: list[tuple[str, bytes]]) -> bytes:
     return buf.getvalue()
 
 
-def view_members(scene: str, view: View, neighbours: Neighbours, scene_json: dict | None) -> list[tuple[str, bytes]]:
+def view_members(scene: str, view: View, neighbours: nb.Neighbours, scene_json: dict | None
+                 ) -> list[tuple[str, bytes]]:
     """Tar members of one view sample (``scene_json`` only on a shard's first sample)."""
     key = sample_key(scene, view.view_id)
     camera = {"K": np.asarray(view.K, np.float64).tolist(), "c2w": np.asarray(view.c2w, np.float64).tolist(),
@@ -126,14 +92,12 @@ def view_members(scene: str, view: View, neighbours: Neighbours, scene_json: dic
     return members
 
 
-def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None) -> tuple[dict[str, Neighbours], tuple[int, int]]:
-    """Read every view once (cameras + a depth grid) and rank its neighbours; returns them and (H, W).
-
-    The depth of a blind view (``neighbours.blind_views``: a test scene's ``test`` split) is never
-    sampled, and the fallback depth comes from ``scene.depth_views`` only.
-    """
+def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None
+                     ) -> tuple[dict[str, nb.Neighbours], tuple[int, int]]:
+    """Read every view once (cameras + a depth grid) and rank its neighbours; returns them and (H, W). A blind
+    view's depth (``neighbours.blind_views``) is never sampled; the fallback depth comes from ``scene.depth_views``."""
     meta = scene.meta
-    blind = blind_views(meta)
+    blind = nb.blind_views(meta)
     Ks, c2ws, samples, hw = [], [], {}, None
     for view in scene.views():
         if hw is not None and view.hw != hw:
@@ -143,19 +107,18 @@ def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None) -> tuple[dic
         Ks.append(np.asarray(view.K, np.float64))
         c2ws.append(np.asarray(view.c2w, np.float64))
         if view.view_id not in blind:
-            samples[view.view_id] = grid_samples(view.depth)
+            samples[view.view_id] = nb.grid_samples(view.depth)
         if bar is not None:
             bar.update(1)
     if hw is None:
         raise ValueError(f"scene {meta.name!r}: field 'view_ids' is empty; a scene needs views")
-    fallback = fallback_depth([samples[v] for v in depth_views(meta)], (meta.near, meta.far))
+    fallback = nb.fallback_depth([samples[v] for v in depth_views(meta)], (meta.near, meta.far))
     index = {v: i for i, v in enumerate(meta.view_ids)}
-    points = {v: grid_points(s, Ks[index[v]], c2ws[index[v]], fallback) for v, s in samples.items()}
-    ranked = rank_neighbours(meta.view_ids, np.stack(Ks), np.stack(c2ws), hw, points, source_pool(meta), k)
-    return ranked, hw
+    points = {v: nb.grid_points(s, Ks[index[v]], c2ws[index[v]], fallback) for v, s in samples.items()}
+    return nb.rank_neighbours(meta.view_ids, np.stack(Ks), np.stack(c2ws), hw, points, source_pool(meta), k), hw
 
 
-def scene_shards(scene: Scene, ranked: dict[str, Neighbours], views_per_shard: int,
+def scene_shards(scene: Scene, ranked: dict[str, nb.Neighbours], views_per_shard: int,
                  bar: tqdm | None = None) -> Iterator[tuple[str, int, bytes]]:
     """(file name, view count, tar bytes) of each shard of one scene, in view order."""
     meta = scene.meta
@@ -166,7 +129,7 @@ def scene_shards(scene: Scene, ranked: dict[str, Neighbours], views_per_shard: i
             members += view_members(meta.name, scene.read_view(vid), ranked[vid], meta.to_json() if j == 0 else None)
             if bar is not None:
                 bar.update(1)
-        yield shard_name(meta.name, index), len(ids), tar_bytes(members)
+        yield f"{meta.name}-{index:06d}.tar", len(ids), tar_bytes(members)
 
 
 def _label_spaces(scenes: list[Scene]) -> dict[str, list[str]]:
@@ -185,23 +148,16 @@ def is_current(path: Path, data: bytes) -> bool:
     return path.is_file() and path.stat().st_size == len(data) and sha256_file(path) == hashlib.sha256(data).hexdigest()
 
 
-def _check_input(scenes_dir: Path) -> None:
-    """Refuse input that ``sray data check`` rejects."""
-    problems = check_dataset(Path(scenes_dir))
-    if problems:
-        raise DatasetRejected(problems)
-
-
 def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256, neighbours: int = 32,
                  progress: bool = True) -> ShardResult:
-    """Shard every scene of ``scenes_dir`` (sray layout) into ``out_dir`` and write its manifest.
-
-    Raises :class:`DatasetRejected` (listing file, problem and fix) when ``sray data check`` rejects
-    the input. ``neighbours`` = ranked source views kept per view (the loader's top-k must not exceed it).
+    """Shard every scene of ``scenes_dir`` (sray layout) into ``out_dir`` and write its manifest; ``neighbours``
+    ranked source views are kept per view. Raises :class:`DatasetRejected` when ``sray data check`` rejects the input.
     """
     if views_per_shard < 1 or neighbours < 1:
         raise ValueError(f"views_per_shard ({views_per_shard}) and neighbours ({neighbours}) must be >= 1")
-    _check_input(scenes_dir)
+    problems = check_dataset(Path(scenes_dir))
+    if problems:
+        raise DatasetRejected(problems)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for stale in out.iterdir():
@@ -232,8 +188,8 @@ def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256,
     manifest = Manifest(
         shards=sorted(entries, key=lambda e: e.path), scenes=dict(sorted(scene_entries.items())),
         label_spaces=label_spaces,
-        neighbours={"rule": RULE, "version": RULE_VERSION, "k": neighbours, "grid": list(GRID),
-                    "min_points": MIN_POINTS, "pool": "train scenes: train split minus test split; "
+        neighbours={"rule": nb.RULE, "version": nb.RULE_VERSION, "k": neighbours, "grid": list(nb.GRID),
+                    "min_points": nb.MIN_POINTS, "pool": "train scenes: train split minus test split; "
                     "test scenes: source plus finetune splits",
                     "test_views": "test split of test scenes: score = fraction of each candidate's own depth-grid "
                     "points in front of and inside the query camera (the query's depth and labels are never read)",
@@ -242,9 +198,7 @@ def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256,
     if not is_current(out / MANIFEST_NAME, manifest_bytes(manifest)):
         atomic_write_bytes(out / MANIFEST_NAME, manifest_bytes(manifest))
     listed = {e.path for e in entries}
-    removed = []
-    for path in sorted(out.iterdir()):
-        if SHARD_NAME.match(path.name) and path.name not in listed:
-            path.unlink()
-            removed.append(path.name)
+    removed = [p.name for p in sorted(out.iterdir()) if SHARD_NAME.match(p.name) and p.name not in listed]
+    for name in removed:
+        (out / name).unlink()
     return ShardResult(manifest=manifest, written=written, unchanged=unchanged, removed=removed)

@@ -1,16 +1,6 @@
-"""Procedural indoor scenes as canonical :class:`Scene` objects and as an sray-layout dataset.
-
-``generate_scene`` builds one room, walks a handheld-style camera path through it and renders every
-view (RGB, z-depth, ScanNet-20 labels). ``generate_dataset`` writes train and unseen test scenes
-with ``scene_folder.write_scene`` and skips scenes already written with the same parameters.
-
-Splits (documented in docs/data.md, "Procedural scenes"):
-
-* train scenes: ``test`` holds every 20th view starting at view 10 (held out for validation) and
-  ``train`` holds all the other views;
-* test scenes (the paper's protocol): a window of 20 consecutive views starting at a seeded
-  offset, read as four blocks of five ``[finetune, source, test, source, finetune]``, so each test
-  view sits between two source views: 8 source, 8 finetune, 4 test; other views are in no split.
+"""Procedural indoor scenes: :func:`generate_scene` builds a room, walks a handheld-style camera path through it and
+renders every view (RGB, z-depth, ScanNet-20 labels); :func:`generate_dataset` writes train and unseen test scenes in
+sray layout, skipping scenes already written with the same parameters. Splits: ``data_tools/splits.py``.
 """
 
 from __future__ import annotations
@@ -38,11 +28,7 @@ from sray.data_tools.synth.trajectory import scan_path
 GENERATOR = "sray-synth"
 """Value of ``extra["generator"]`` in every procedural scene."""
 GENERATOR_VERSION = 4
-"""Bumped whenever the same parameters would write different files (pixels, or metadata such as near/far:
-version 2 measures a test scene's bounds from its source and finetune views only; version 3 is the
-richer world: shape templates, clutter, L-shaped rooms, lighting and camera variety; version 4 keeps training rooms
-out of the held-out regions of ``domains.py``, adds shifted splits and the new content: rugs, kitchen islands,
-open shelves, glazed and sliding doors)."""
+"""Bumped whenever the same parameters would write different files (pixels or metadata)."""
 HFOV_DEG = 62.0
 """Horizontal field of view (ScanNet's colour camera is about 58 degrees, its depth camera 58-60)."""
 
@@ -58,24 +44,20 @@ class ScenePlan:
     """Everything about a procedural scene except its pixels."""
 
     room: Room
-    """The generated room."""
     render_scene: RenderScene
-    """The room prepared for rendering."""
     poses: np.ndarray
     """float64 (n_views, 4, 4) camera-to-world, OpenCV axes."""
 
 
 def plan_scene(seed: int, n_views: int, room_type: str | None = None, split: str = "in-distribution",
                randomise: float = 0.0) -> ScenePlan:
-    """Room and camera path of a scene (deterministic in ``seed``), drawn from the region of ``split``
-    (:mod:`~sray.data_tools.synth.domains`) with appearance randomisation of strength ``randomise``; retries
-    cluttered rooms."""
+    """Room and camera path of a scene (deterministic in ``seed``), drawn from the region of ``split`` with appearance
+    randomisation of strength ``randomise`` (:mod:`~sray.data_tools.synth.domains`); retries cluttered rooms."""
     rng = np.random.default_rng(seed)
     kind = room_type if room_type is not None else ROOM_TYPES[int(rng.integers(len(ROOM_TYPES)))]
     with domains.drawing(domains.domain_of(split, randomise)):
         for _ in range(10):
-            room = build_room(rng, kind)
-            exposure = domains.exposure(rng)
+            room, exposure = build_room(rng, kind), domains.exposure(rng)
             k, gamma, noise = domains.sensor(rng)
             prepared = RenderScene.prepare(room, exposure=exposure, tone=(k, gamma), noise_sigma=noise, noise_seed=seed,
                                            tint=domains.room_tint(rng), randomise=randomise)
@@ -111,12 +93,11 @@ def scene_params(seed: int, n_views: int, height: int, width: int, role: str, ro
 def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, role: str,
                    room_type: str | None = None, on_view: Callable[[], None] | None = None,
                    split: str = "in-distribution", randomise: float = 0.0) -> Scene:
-    """Render a procedural scene in memory (deterministic: same arguments, identical arrays).
+    """Render a procedural scene in memory (same arguments, identical arrays).
 
-    ``room_type`` picks one of ``ROOM_TYPES`` (default: drawn from the seed); ``on_view`` is
-    called after each rendered view (progress bars); ``split`` is the region the room is drawn from
-    (``domains.SPLITS``; a training scene must be ``in-distribution``); ``randomise`` the strength of the appearance
-    randomisation of a training scene (``domains``; 0 = off).
+    ``room_type``: one of ``ROOM_TYPES`` (None: drawn from the seed); ``on_view`` is called after each view;
+    ``split``: the region the room is drawn from (``domains.SPLITS``); ``randomise``: a training scene's appearance
+    randomisation (0 = off).
     """
     if role == "train" and split != "in-distribution":
         raise ValueError(f"a training scene is always drawn in-distribution, got split {split!r}")
@@ -127,8 +108,8 @@ def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, 
     K = intrinsics(height, width)
     views = []
     for i, c2w in enumerate(plan.poses):
-        rgb, depth, label = render_view(plan.render_scene, K, c2w, (height, width), view_index=i)
-        views.append(View(view_id=f"{i:05d}", rgb=rgb, depth=depth, label=label, K=K.copy(), c2w=c2w))
+        views.append(View(f"{i:05d}", *render_view(plan.render_scene, K, c2w, (height, width), view_index=i),
+                          K=K.copy(), c2w=c2w))
         if on_view is not None:
             on_view()
     view_ids = [v.view_id for v in views]
@@ -156,12 +137,9 @@ def scene_seed(seed: int, role: str, index: int, split: str = "in-distribution")
 
 def _is_current(scene_dir: Path, params: dict) -> bool:
     """Whether ``scene_dir`` holds a complete scene written with exactly these parameters."""
-    meta_path = scene_dir / "scene.json"
-    if not meta_path.exists():
-        return False
     try:
-        extra = json.loads(meta_path.read_text()).get("extra", {})
-    except json.JSONDecodeError:
+        extra = json.loads((scene_dir / "scene.json").read_text()).get("extra", {})
+    except (FileNotFoundError, json.JSONDecodeError):
         return False
     return all(extra.get(k) == v for k, v in params.items())
 
@@ -181,8 +159,7 @@ def _write_scene(out: Path, name: str, own_seed: int, n_views: int, height: int,
     scene_dir = out / name
     scene = generate_scene(name, own_seed, n_views, height, width, role, room_type, on_view=on_view, split=split,
                            randomise=randomise)
-    if (scene_dir / "scene.json").exists():
-        (scene_dir / "scene.json").unlink()
+    (scene_dir / "scene.json").unlink(missing_ok=True)
     write_scene(scene, out)
     _prune_stale_views(scene_dir, scene.meta.view_ids)
     return scene_dir
@@ -193,24 +170,17 @@ def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height:
                      randomise: float = 0.0) -> list[Path]:
     """Write ``n_train`` train and ``n_test`` test scenes under ``out`` (sray layout); returns scene dirs.
 
-    Training scenes are always in-distribution; the test scenes come from ``split`` (``domains.SPLITS``), each
-    split from its own seed stream (:func:`scene_seed`); ``randomise`` is the appearance randomisation of the training
-    scenes (test scenes never get it, so worlds with and without it share their test rooms).
-
-    Scene names are ``synth_train_000``, ``synth_test_000``, ...; room types cycle through
-    ``ROOM_TYPES`` from a seed-dependent offset so a small dataset covers every type. A scene whose
-    scene.json already records the same parameters is skipped (scene.json is written last, so its
-    presence means the scene is complete). ``workers`` > 1 renders that many scenes at once in
-    separate processes; every scene depends only on its own seed, so the files are the same. The
-    processes are spawned, not forked, so a caller that already runs threads (torch, a Ray worker)
-    can ask for them safely.
+    Test scenes come from ``split``; ``randomise`` applies to the training scenes only (worlds with and without it
+    share their test rooms). Room types cycle through ``ROOM_TYPES`` from a seed-dependent offset, so a small dataset
+    covers every type. A scene whose scene.json (written last) records the same parameters is skipped. ``workers``
+    > 1 renders that many scenes at once in spawned processes (safe beside threads; same files).
     """
     if n_train < 0 or n_test < 0 or n_train + n_test == 0:
         raise ValueError(f"need at least one scene, got n_train={n_train}, n_test={n_test}")
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    domains.domain_of(split)  # validates the split's name
-    domains.domain_of("in-distribution", randomise)  # and the randomisation's range
+    domains.domain_of(split)
+    domains.domain_of("in-distribution", randomise)
     out = Path(out)
     jobs = [("train", i) for i in range(n_train)] + [("test", i) for i in range(n_test)]
     offset = seed % len(ROOM_TYPES)

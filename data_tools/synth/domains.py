@@ -1,33 +1,8 @@
 """Held-out regions of the generator's appearance and geometry spaces, and which region a scene is drawn from.
 
-A procedural world's test rooms come from one of four **splits** (``World.split``, docs/data.md):
-
-* ``in-distribution``: the training distribution (the default);
-* ``validation``: the training distribution, from a seed stream no training or test room uses (rooms for choosing);
-* ``appearance-shift``: training geometry, appearance drawn inside the held-out appearance region;
-* ``geometry-shift``: training appearance, geometry drawn inside the held-out geometry region.
-
-Training rooms are always drawn from the training distribution, which never enters a held-out region (the
-constants below; ``tests/test_synth_shift.py`` samples many training rooms to prove it):
-
-appearance: saturated blue-to-violet surface colours (hue in :data:`HELD_OUT_HUE`, saturation >= :data:`HELD_OUT_SAT`;
-training colours there are desaturated below it); stone (``MARBLE``) textures on any surface, floors included (floor
-coverings: marble floors and large-pattern plaid carpet); ceiling-lamp colour temperatures in :data:`HELD_OUT_KELVIN`
-(every training light is at least 2400 K); a low main (shadow-casting) light, below :data:`LOW_LIGHT_TOP` (training:
-on the ceiling); exposure beyond ±:data:`TRAIN_EXPOSURE_EV` stops; a tone curve with another strength and gamma
-(:data:`TRAIN_TONE`); sensor noise (training: none);
-
-geometry: rooms scaled by :data:`HELD_OUT_SCALE` (training :data:`TRAIN_SCALE`) with ceilings in
-:data:`HELD_OUT_CEILING` (training at most 3.0 m); two corner blocks (training at most one); furniture standing
-:data:`HELD_OUT_WALL_GAP` off the walls and dining tables turned diagonally; cameras carried at
-:data:`HELD_OUT_CAMERA` (training ``trajectory.HEIGHT_RANGE``) and looking up.
-
-**Appearance randomisation** (``World.randomise``, training rooms only, off by default): each surface colour is
-perturbed, each room gets a white-balance error and each view its own exposure and channel gains, all inside the
-training region (the constants ``RANDOM_*``).
-
-Generation code asks :func:`current` which region it draws from; :func:`drawing` sets it for one scene (a context
-variable, so the answer is per thread and per process, and generation stays deterministic in the scene's seed).
+A world's test rooms come from one of :data:`SPLITS` (docs/data.md, "Shifted test splits", describes each region);
+training rooms never enter a held-out region (``tests/test_synth_shift.py``). Generation code asks :func:`current`
+which region it draws from; :func:`drawing` sets it for one scene (a context variable: per thread and process).
 """
 
 from __future__ import annotations
@@ -40,42 +15,27 @@ from dataclasses import dataclass
 import numpy as np
 
 SPLITS = ("in-distribution", "validation", "appearance-shift", "geometry-shift")
-"""Test-room splits of a world (module docstring)."""
+"""Test-room splits of a world; ``validation`` is the training distribution from a seed stream of its own."""
 
-HELD_OUT_HUE = (0.50, 0.75)
-"""Hue band (HSV, 0..1) of the held-out surface colours: cyan-blue to violet."""
-HELD_OUT_SAT = 0.25
-"""Saturation from which a colour in the held-out hue band is held out."""
-SHIFT_COLOUR_PROB = 0.5
-"""Share of a shifted room's surface colours moved into the held-out colour region."""
-HELD_OUT_KELVIN = (1500.0, 2100.0)
-"""Ceiling-lamp colour temperatures of shifted rooms (training lights: 2400 K and above)."""
-LOW_LIGHT_TOP = 0.9
-"""Highest main light of a shifted room, metres above the floor (training: the ceiling lamp, 2 m and higher)."""
-TRAIN_EXPOSURE_EV = 0.6
-"""Training exposure: 2 ** uniform(-0.6, 0.6)."""
-HELD_OUT_EXPOSURE_EV = (0.9, 1.4)
-"""Shifted exposure: 2 ** (±uniform(0.9, 1.4)), darker or brighter than any training room."""
-TRAIN_TONE = (1.6, 2.2)
-"""Training tone curve: rgb = (1 - exp(-k x)) ** (1 / gamma) with (k, gamma)."""
+# Held-out appearance (training values in brackets).
+HELD_OUT_HUE = (0.50, 0.75)  # HSV hue band of held-out surface colours: cyan-blue to violet
+HELD_OUT_SAT = 0.25  # saturation from which a colour in that band is held out
+SHIFT_COLOUR_PROB = 0.5  # share of a shifted room's surface colours moved into the held-out region
+HELD_OUT_KELVIN = (1500.0, 2100.0)  # ceiling-lamp colour temperatures (training: 2400 K and above)
+LOW_LIGHT_TOP = 0.9  # highest main light, metres above the floor (training: the ceiling lamp)
+TRAIN_EXPOSURE_EV = 0.6  # training exposure: 2 ** uniform(-0.6, 0.6)
+HELD_OUT_EXPOSURE_EV = (0.9, 1.4)  # shifted exposure: 2 ** (±uniform(0.9, 1.4))
+TRAIN_TONE = (1.6, 2.2)  # training (k, gamma) of the tone curve rgb = (1 - exp(-k x)) ** (1 / gamma)
 HELD_OUT_TONE_K = (2.4, 3.2)
-"""Tone strength k of shifted rooms."""
 HELD_OUT_GAMMA = (1.5, 1.9)
-"""Gamma of shifted rooms."""
-HELD_OUT_NOISE = (3.0, 8.0)
-"""Sensor noise sigma of shifted rooms, 8-bit levels, per pixel and channel (training: 0)."""
-TRAIN_SCALE = (0.9, 1.2)
-"""Training room scale factor applied to a room type's floor ranges."""
+HELD_OUT_NOISE = (3.0, 8.0)  # sensor noise sigma, 8-bit levels (training: 0)
+# Held-out geometry.
+TRAIN_SCALE = (0.9, 1.2)  # training room scale factor applied to a room type's floor ranges
 HELD_OUT_SCALE = (1.3, 1.55)
-"""Room scale factor of geometry-shifted rooms."""
-HELD_OUT_CEILING = (3.1, 3.6)
-"""Ceiling heights of geometry-shifted rooms, metres (training: 3.0 at most)."""
-HELD_OUT_WALL_GAP = (0.3, 0.6)
-"""Gap between a wall and the furniture placed against it in geometry-shifted rooms (training: 0.015 m)."""
-HELD_OUT_CAMERA = (0.55, 0.95)
-"""Camera height band of geometry-shifted scans, metres (training: 1.0-1.85)."""
-HELD_OUT_LOOK = (1.0, 1.9)
-"""Look-at target heights of geometry-shifted scans (looking level or up; training 0.2-1.3, looking down)."""
+HELD_OUT_CEILING = (3.1, 3.6)  # ceiling heights, metres (training: 3.0 at most)
+HELD_OUT_WALL_GAP = (0.3, 0.6)  # gap between a wall and the furniture against it (training: 0.015 m)
+HELD_OUT_CAMERA = (0.55, 0.95)  # camera heights, metres (training: ``trajectory.HEIGHT_RANGE``)
+HELD_OUT_LOOK = (1.0, 1.9)  # look-at target heights: level or up (training 0.2-1.3, looking down)
 
 
 @dataclass(frozen=True)
@@ -83,18 +43,13 @@ class Domain:
     """Which region a scene's appearance and its geometry are drawn from."""
 
     appearance_shift: bool = False
-    """Appearance drawn inside the held-out appearance region."""
     geometry_shift: bool = False
-    """Geometry drawn inside the held-out geometry region."""
     randomise: float = 0.0
     """Strength (0-1) of the appearance randomisation of training rooms (:func:`jitter_colour`, :func:`room_tint`,
     :func:`view_gains`); 0 = off. It never leaves the training region."""
 
 
-TRAINING = Domain()
-"""The training distribution."""
-
-_CURRENT: ContextVar[Domain] = ContextVar("sray_synth_domain", default=TRAINING)
+_CURRENT: ContextVar[Domain] = ContextVar("sray_synth_domain", default=Domain())
 
 
 def domain_of(split: str, randomise: float = 0.0) -> Domain:
@@ -111,7 +66,7 @@ def domain_of(split: str, randomise: float = 0.0) -> Domain:
 
 
 def current() -> Domain:
-    """The region the scene being generated is drawn from (:data:`TRAINING` outside :func:`drawing`)."""
+    """The region the scene being generated is drawn from (the training one outside :func:`drawing`)."""
     return _CURRENT.get()
 
 
@@ -131,26 +86,22 @@ def held_out_colour(hue: float, sat: float) -> bool:
 
 
 def surface_colour(rng: np.random.Generator, hue: float, sat: float) -> tuple[float, float]:
-    """(hue, saturation) of a surface colour drawn as (hue, sat), moved to where the current region allows:
-    in training a held-out colour is desaturated below :data:`HELD_OUT_SAT` (no extra draw); in an
-    appearance-shifted room a share :data:`SHIFT_COLOUR_PROB` of the colours is moved into the region."""
+    """(hue, saturation) of a drawn surface colour where the current region allows it: in training a held-out colour
+    is desaturated below :data:`HELD_OUT_SAT` (no extra draw); in an appearance-shifted room a share
+    :data:`SHIFT_COLOUR_PROB` of the colours is moved into the region."""
     if current().appearance_shift:
         if rng.random() < SHIFT_COLOUR_PROB:
             return float(rng.uniform(*HELD_OUT_HUE)), float(rng.uniform(0.3, 0.85))
         return hue, sat
-    if held_out_colour(hue, sat):
-        return hue, sat * (HELD_OUT_SAT - 0.01)
-    return hue, sat
+    return (hue, sat * (HELD_OUT_SAT - 0.01)) if held_out_colour(hue, sat) else (hue, sat)
 
 
+# Randomisation at strength 1 (scaled by ``randomise``): per surface a hue shift up to ±0.1 and saturation and value
+# scaled by up to 2 ** ±0.5 and 2 ** ±0.4; per room a white-balance error up to 2 ** ±0.2 per channel; per view an
+# exposure change up to ±0.25 stops (with the room's ±0.6 still short of the held-out 0.9) and ±0.08 per channel.
 RANDOM_HUE, RANDOM_SAT_EV, RANDOM_VAL_EV = 0.1, 0.5, 0.4
-"""Per-surface randomisation at strength 1: hue shift up to ±0.1, saturation and value scaled by up to 2 ** ±0.5 and
-2 ** ±0.4 (then kept out of the held-out colours like any training colour)."""
 RANDOM_TINT_EV = 0.2
-"""Per-room randomisation at strength 1: a white-balance error, each channel scaled by up to 2 ** ±0.2."""
 RANDOM_VIEW_EV, RANDOM_VIEW_CHANNEL_EV = 0.25, 0.08
-"""Per-view randomisation at strength 1: the view's exposure changes by up to ±0.25 stops (with the room's ±0.6,
-at most 0.85: still short of the held-out 0.9) and each channel by up to ±0.08 stops more."""
 
 
 def jitter_colour(rng: np.random.Generator, hue: float, sat: float, val: float) -> tuple[float, float, float]:
@@ -181,7 +132,7 @@ def view_gains(randomise: float, rng: np.random.Generator) -> np.ndarray:
 
 
 def exposure(rng: np.random.Generator) -> float:
-    """A scene's exposure scale (module docstring)."""
+    """A scene's exposure scale: 2 ** uniform(±TRAIN_EXPOSURE_EV), or beyond it in a shifted room."""
     if current().appearance_shift:
         sign = 1.0 if rng.random() < 0.5 else -1.0
         return float(2.0 ** (sign * rng.uniform(*HELD_OUT_EXPOSURE_EV)))
@@ -189,7 +140,7 @@ def exposure(rng: np.random.Generator) -> float:
 
 
 def sensor(rng: np.random.Generator) -> tuple[float, float, float]:
-    """(tone strength k, gamma, noise sigma in 8-bit levels) of a scene's camera (module docstring)."""
+    """(tone strength k, gamma, noise sigma in 8-bit levels) of a scene's camera."""
     if current().appearance_shift:
         k, gamma = float(rng.uniform(*HELD_OUT_TONE_K)), float(rng.uniform(*HELD_OUT_GAMMA))
         return k, gamma, float(rng.uniform(*HELD_OUT_NOISE))

@@ -1,11 +1,10 @@
-"""Fittings, the built-in pieces of a room: wall fixtures, kitchen and bathroom pieces, made of boxes.
-
-Same object frame as ``furniture.py`` (the free-standing pieces): footprint centred on the origin,
-back (the wall side) at -y, front at +y, floor at z = 0. Wall fixtures (doors, windows, pictures,
-curtains) are thin pieces whose back lies on the wall.
+"""Fittings, the built-in pieces of a room: wall fixtures (thin pieces whose back lies on the wall), kitchen and
+bathroom pieces, in the object frame of ``furniture.py``.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -17,22 +16,25 @@ from sray.data_tools.synth.geometry import Box
 
 def against_wall(boxes: list[Box], width: float, depth: float, height: float) -> Piece:
     """A piece built with its back at y = 0 and its front at y = depth, recentred on its footprint."""
-    moved = [Box(center=(b.center[0], b.center[1] - depth / 2, b.center[2]), size=b.size, label=b.label,
-                 material=b.material, yaw=b.yaw, casts_shadow=b.casts_shadow) for b in boxes]
+    moved = [replace(b, center=(b.center[0], b.center[1] - depth / 2, b.center[2])) for b in boxes]
     return Piece(moved, width, depth, height)
+
+
+def casing(material: mat.Material, w: float, h: float, c: float) -> list[Box]:
+    """Two jambs and a head, ``c`` wide, around a w x h door opening (labelled door; against-wall frame)."""
+    label = CLS["door"]
+    return [span(label, material, -w / 2 - c, -w / 2, 0.0, 0.045, 0.0, h + c),
+            span(label, material, w / 2, w / 2 + c, 0.0, 0.045, 0.0, h + c),
+            span(label, material, -w / 2, w / 2, 0.0, 0.045, h, h + c)]
 
 
 def door(rng: np.random.Generator, w: float, h: float) -> Piece:
     """A closed door: leaf, casing (two jambs and a head) and a handle, all labelled door."""
     label = CLS["door"]
     leaf = mat.furniture_surface(rng, panels=rng.random() < 0.5, panel_width=w)
-    casing = mat.painted(rng) if rng.random() < 0.6 else leaf
-    handle = mat.metal(rng)
-    c = float(rng.uniform(0.05, 0.09))
-    boxes = [span(label, leaf, -w / 2, w / 2, 0.0, 0.03, 0.0, h),
-             span(label, casing, -w / 2 - c, -w / 2, 0.0, 0.045, 0.0, h + c),
-             span(label, casing, w / 2, w / 2 + c, 0.0, 0.045, 0.0, h + c),
-             span(label, casing, -w / 2, w / 2, 0.0, 0.045, h, h + c),
+    trim = mat.painted(rng) if rng.random() < 0.6 else leaf
+    handle, c = mat.metal(rng), float(rng.uniform(0.05, 0.09))
+    boxes = [span(label, leaf, -w / 2, w / 2, 0.0, 0.03, 0.0, h), *casing(trim, w, h, c),
              span(label, handle, w / 2 - 0.12, w / 2 - 0.06, 0.03, 0.09, 0.98, 1.02)]
     return against_wall(boxes, w + 2 * c, 0.09, h + c)
 
@@ -65,8 +67,7 @@ def curtain(rng: np.random.Generator, w: float, z0: float, z1: float, material: 
 
 def picture(rng: np.random.Generator, w: float, h: float, z_centre: float) -> Piece:
     """A framed picture: frame and a canvas standing 5 mm proud of it, both labelled picture."""
-    label = CLS["picture"]
-    border = float(rng.uniform(0.02, 0.06))
+    label, border = CLS["picture"], float(rng.uniform(0.02, 0.06))
     frame = mat.wood(rng) if rng.random() < 0.5 else mat.painted(rng)
     z0, z1 = z_centre - h / 2, z_centre + h / 2
     boxes = [span(label, frame, -w / 2, w / 2, 0.0, 0.025, z0, z1),
@@ -77,7 +78,7 @@ def picture(rng: np.random.Generator, w: float, h: float, z_centre: float) -> Pi
 def mirror(rng: np.random.Generator, w: float, h: float, z_centre: float) -> Piece:
     """A wall mirror (ScanNet-20 has no mirror class: ignore-labelled)."""
     glass = mat.Material(mat.PAINT, mat.hsv(rng, (0.5, 0.6), (0.0, 0.1), (0.6, 0.85)), (0, 0, 0),
-                         scale=3.0, contrast=0.08, seed=int(rng.integers(0, 2**31 - 1)))
+                         scale=3.0, contrast=0.08, seed=mat.new_seed(rng))
     boxes = [span(IGNORE_ID, glass, -w / 2, w / 2, 0.0, 0.02, z_centre - h / 2, z_centre + h / 2)]
     return against_wall(boxes, w, 0.02, z_centre + h / 2)
 
@@ -90,7 +91,7 @@ def counter_run(rng: np.random.Generator, length: float, sink_at: float | None) 
         doors = mat.wood(rng)
     worktop = mat.wood(rng) if rng.random() < 0.3 else mat.Material(
         mat.PAINT, mat.hsv(rng, (0, 1), (0.0, 0.3), (0.1, 0.95)), (0, 0, 0), scale=float(rng.uniform(8, 25)),
-        contrast=float(rng.uniform(0.1, 0.4)), seed=int(rng.integers(0, 2**31 - 1)))
+        contrast=float(rng.uniform(0.1, 0.4)), seed=mat.new_seed(rng))
     x0, x1 = -length / 2, length / 2
     boxes = [span(CLS["cabinet"], mat.dark_plastic(rng), x0, x1, 0.0, 0.52, 0.0, 0.1),
              span(CLS["cabinet"], doors, x0, x1, 0.0, 0.58, 0.1, top - 0.04),
@@ -161,10 +162,8 @@ def washbasin(rng: np.random.Generator, vanity: bool) -> Piece:
 
 
 def bathtub(rng: np.random.Generator, length: float, curtain_side: float | None) -> Piece:
-    """An open bathtub (floor, four walls) along a wall; optional shower curtain on its open side.
-
-    ``curtain_side`` in (0, 1] is the drawn fraction of the tub's length covered by the curtain.
-    """
+    """An open bathtub (floor, four walls) along a wall; a shower curtain covering the fraction ``curtain_side`` of
+    its length on its open side, if given."""
     label, china = CLS["bathtub"], mat.ceramic(rng)
     w, h, t = float(rng.uniform(0.7, 0.8)), float(rng.uniform(0.5, 0.6)), 0.07
     boxes = [span(label, china, -length / 2, length / 2, 0.0, w, 0.0, 0.1),

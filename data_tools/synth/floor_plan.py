@@ -1,9 +1,9 @@
-"""The floor plan of a procedural room: placing pieces without collisions (floor footprints, wall spans).
+"""The floor plan of a procedural room: placing pieces without collisions (floor footprints, wall spans), and room
+shapes beyond the rectangle (:func:`shaped_plan`).
 
-Walls are numbered counter-clockwise seen from above: wall 0 runs along y = 0 from x = 0 to Lx,
-wall 1 along x = Lx, wall 2 along y = Ly (from x = Lx back to 0), wall 3 along x = 0. A position
-``s`` on a wall is measured from the wall's start; a piece against a wall faces the room (its +y
-along the wall's inward normal).
+Walls are numbered counter-clockwise seen from above: wall 0 runs along y = 0 from x = 0 to Lx, wall 1 along x = Lx,
+wall 2 along y = Ly (back to x = 0), wall 3 along x = 0. A position ``s`` on a wall is measured from its start; a
+piece against a wall faces the room (its +y along the wall's inward normal).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sray.data_tools.synth import domains
 from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.furniture import CLS, Piece, span
 from sray.data_tools.synth.geometry import Box, place
@@ -23,36 +24,28 @@ Rect = tuple[float, float, float, float]
 
 @dataclass
 class Light:
-    """A point light (shading only: lights are not visible themselves)."""
+    """A point light (not visible itself): world position in metres, brightness at 1 m in units of the ambient
+    term, linear RGB tint and the colour temperature it comes from (``lighting.kelvin_rgb``)."""
 
     position: tuple[float, float, float]
-    """World position in metres."""
     intensity: float
-    """Brightness at 1 m, in units of the ambient term."""
     color: tuple[float, float, float]
-    """Linear RGB tint."""
     kelvin: float
-    """Colour temperature the tint comes from (``lighting.kelvin_rgb``)."""
 
 
 @dataclass
 class FloorPlan:
-    """A room under construction: its boxes, occupied floor and wall regions, lights and finishes."""
+    """A room under construction (interior extents (Lx, Ly, H) in metres): its boxes (world frame), occupied floor
+    rectangles (furniture, door clearances), occupied (s0, s1, z0, z1) regions per wall, lights, (wall, s0, s1) of
+    each door opening (baseboards stop there) and a point 0.6 m in front of each window (its daylight goes there)."""
 
     size: tuple[float, float, float]
-    """Interior extents (Lx, Ly, H) in metres."""
     boxes: list[Box] = field(default_factory=list)
-    """Every box placed so far (world frame)."""
     footprints: list[Rect] = field(default_factory=list)
-    """Occupied floor rectangles (furniture and door clearances)."""
     spans: list[list[tuple[float, float, float, float]]] = field(default_factory=lambda: [[], [], [], []])
-    """Per wall: occupied (s0, s1, z0, z1) regions."""
     lights: list[Light] = field(default_factory=list)
-    """Point lights."""
     doors: list[tuple[int, float, float]] = field(default_factory=list)
-    """(wall, s0, s1) of each door opening (baseboards stop there)."""
     windows: list[tuple[float, float, float]] = field(default_factory=list)
-    """A point 0.6 m in front of each window's centre, in the room (where its daylight fill light goes)."""
 
     def wall_length(self, wall: int) -> float:
         """Length of a wall in metres."""
@@ -107,10 +100,8 @@ class FloorPlan:
     def try_wall(self, rng: np.random.Generator, piece: Piece, wall: int, z_range: tuple[float, float] | None = None,
                  s: float | None = None, gap: float = 0.015, occupies_floor: bool = True, tries: int = 25,
                  margin: float = 0.05) -> float | None:
-        """Place a piece against a wall at a random (or given) position; returns its s or None.
-
-        z_range is the height band the piece covers on the wall (default: floor to its top).
-        """
+        """Place a piece against a wall at a random (or given) position; returns its s or None. ``z_range``: the
+        height band it covers on the wall (default: floor to its top)."""
         length = self.wall_length(wall)
         lo, hi = piece.width / 2 + margin, length - piece.width / 2 - margin
         if hi < lo:
@@ -144,14 +135,75 @@ class FloorPlan:
         finish = mat.painted(rng) if rng.random() < 0.6 else mat.wood(rng)
         for wall in range(4):
             cuts = sorted((s0, s1) for w, s0, s1 in self.doors if w == wall)
-            edges, pos = [], 0.0
-            for s0, s1 in cuts:
-                edges.append((pos, s0))
-                pos = s1
-            edges.append((pos, self.wall_length(wall)))
-            for a, b in edges:
+            starts, ends = [0.0] + [s1 for _, s1 in cuts], [s0 for s0, _ in cuts] + [self.wall_length(wall)]
+            for a, b in zip(starts, ends):
                 if b - a > 0.05:
                     board = Piece([span(CLS["wall"], finish, -(b - a) / 2, (b - a) / 2, -0.006, 0.006, 0.0, h)],
                                   b - a, 0.012, h)
                     x, y, yaw = self.wall_pose(wall, (a + b) / 2, 0.012)
                     self.add(board, x, y, yaw, occupies_floor=False)
+
+
+L_SHAPE_PROB = 0.3  # probability that a room loses a corner block (an L-shaped room)
+COLUMN_PROB = 0.3  # probability that a room gets one wall column
+
+
+def _reserve(plan: FloorPlan, wall: int, s0: float, s1: float, height: float) -> None:
+    """Mark [s0, s1] of ``wall`` as taken over the whole height."""
+    plan.spans[wall].append((s0, s1, 0.0, height))
+
+
+def _solid(rng: np.random.Generator, plan: FloorPlan, rect: tuple[float, float, float, float]) -> None:
+    """A floor-to-ceiling wall block over the floor rectangle ``rect`` (x0, x1, y0, y1)."""
+    x0, x1, y0, y1 = rect
+    h = plan.size[2]
+    block = Piece([span(CLS["wall"], mat.wall_paint(rng), -(x1 - x0) / 2, (x1 - x0) / 2, -(y1 - y0) / 2,
+                        (y1 - y0) / 2, 0.0, h)], x1 - x0, y1 - y0, h)
+    plan.add(block, (x0 + x1) / 2, (y0 + y1) / 2, 0.0)
+
+
+def add_corner_block(rng: np.random.Generator, plan: FloorPlan, corner: int | None = None) -> None:
+    """Cut a block out of a corner (random unless given): the room becomes L-shaped."""
+    lx, ly, h = plan.size
+    k = int(rng.integers(4)) if corner is None else corner  # corner k is where wall k starts and wall k-1 ends
+    start, tangent, normal = plan.wall_frame(k)
+    along = float(rng.uniform(0.5, 0.3 * plan.wall_length(k)))
+    across = float(rng.uniform(0.5, 0.3 * plan.wall_length((k - 1) % 4)))
+    corners = [start + a * tangent + b * normal for a in (0.0, along) for b in (0.0, across)]
+    xs, ys = [c[0] for c in corners], [c[1] for c in corners]
+    _solid(rng, plan, (min(xs), max(xs), min(ys), max(ys)))
+    _reserve(plan, k, 0.0, along, h)
+    prev = (k - 1) % 4
+    _reserve(plan, prev, plan.wall_length(prev) - across, plan.wall_length(prev), h)
+
+
+def add_column(rng: np.random.Generator, plan: FloorPlan) -> None:
+    """A square column standing against a random wall, away from the corners."""
+    wall = int(rng.integers(4))
+    width, depth = float(rng.uniform(0.25, 0.5)), float(rng.uniform(0.15, 0.45))
+    length = plan.wall_length(wall)
+    s = float(rng.uniform(0.6 + width / 2, length - 0.6 - width / 2))
+    if not plan.span_free(wall, s - width / 2, s + width / 2, 0.0, plan.size[2]):
+        return
+    x, y, _ = plan.wall_pose(wall, s, depth)
+    start, tangent, normal = plan.wall_frame(wall)
+    hx = abs(tangent[0]) * width / 2 + abs(normal[0]) * depth / 2
+    hy = abs(tangent[1]) * width / 2 + abs(normal[1]) * depth / 2
+    _solid(rng, plan, (x - hx, x + hx, y - hy, y + hy))
+    _reserve(plan, wall, s - width / 2, s + width / 2, plan.size[2])
+
+
+def shaped_plan(rng: np.random.Generator, size: tuple[float, float, float]) -> FloorPlan:
+    """An empty floor plan of the given interior extents, sometimes L-shaped, sometimes with a column (wall-labelled
+    blocks with their own finish, placed first so everything avoids them); a geometry-shifted room always loses two
+    opposite corners (a Z-shaped room, which no training room is)."""
+    plan = FloorPlan(size)
+    if domains.current().geometry_shift:
+        first = int(rng.integers(4))
+        add_corner_block(rng, plan, first)
+        add_corner_block(rng, plan, (first + 2) % 4)
+    elif rng.random() < L_SHAPE_PROB:
+        add_corner_block(rng, plan)
+    if rng.random() < COLUMN_PROB:
+        add_column(rng, plan)
+    return plan

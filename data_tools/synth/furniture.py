@@ -1,7 +1,5 @@
-"""Free-standing furniture assembled from boxes, each in its own object frame.
-
-Object frame: the footprint is centred on the origin, z = 0 is the floor, the back faces -y and
-the front (where one sits or opens doors) faces +y. ``geometry.place`` puts a piece in a room.
+"""Free-standing furniture assembled from boxes in its object frame: the footprint centred on the origin, z = 0 the
+floor, the back at -y and the front (where one sits or opens doors) at +y. ``geometry.place`` puts it in a room.
 """
 
 from __future__ import annotations
@@ -21,16 +19,13 @@ CLS: dict[str, int] = {name: i for i, name in enumerate(SCANNET20)}
 
 @dataclass
 class Piece:
-    """One object: its boxes in the object frame and its footprint."""
+    """One object: its boxes in the object frame, its footprint's extents along object x and y and its top above the
+    floor (metres)."""
 
     boxes: list[Box]
-    """Boxes in the object frame."""
     width: float
-    """Footprint extent along object x (metres)."""
     depth: float
-    """Footprint extent along object y (metres)."""
     height: float
-    """Top of the object above the floor (metres)."""
 
 
 def span(label: int, material: mat.Material, x0: float, x1: float, y0: float, y1: float,
@@ -40,8 +35,7 @@ def span(label: int, material: mat.Material, x0: float, x1: float, y0: float, y1
                label=label, material=material, casts_shadow=casts_shadow)
 
 
-def _legs(label: int, material: mat.Material, w: float, d: float, h: float, leg: float,
-          inset: float) -> list[Box]:
+def legs(label: int, material: mat.Material, w: float, d: float, h: float, leg: float, inset: float) -> list[Box]:
     """Four square legs under a w x d top, from the floor to height h."""
     xs = (-w / 2 + inset, w / 2 - inset - leg)
     ys = (-d / 2 + inset, d / 2 - inset - leg)
@@ -53,19 +47,16 @@ def table(rng: np.random.Generator, w: float, d: float, h: float | None = None) 
     h = float(rng.uniform(0.72, 0.78)) if h is None else h
     surface = mat.furniture_surface(rng)
     legs_mat = surface if rng.random() < 0.6 else mat.metal(rng)
-    th = float(rng.uniform(0.025, 0.05))
-    leg = float(rng.uniform(0.035, 0.07))
+    th, leg = float(rng.uniform(0.025, 0.05)), float(rng.uniform(0.035, 0.07))
     boxes = [span(CLS["table"], surface, -w / 2, w / 2, -d / 2, d / 2, h - th, h)]
-    boxes += _legs(CLS["table"], legs_mat, w, d, h - th, leg, float(rng.uniform(0.02, 0.08)))
+    boxes += legs(CLS["table"], legs_mat, w, d, h - th, leg, float(rng.uniform(0.02, 0.08)))
     return Piece(boxes, w, d, h)
 
 
 def chair(rng: np.random.Generator) -> Piece:
     """A dining chair (seat, back, four legs) or an office chair (column, star base, seat, back)."""
     w, d = float(rng.uniform(0.42, 0.52)), float(rng.uniform(0.42, 0.52))
-    seat_h = float(rng.uniform(0.43, 0.5))
-    back_h = float(rng.uniform(0.35, 0.5))
-    label = CLS["chair"]
+    seat_h, back_h, label = float(rng.uniform(0.43, 0.5)), float(rng.uniform(0.35, 0.5)), CLS["chair"]
     if rng.random() < 0.35:
         shell, frame = mat.fabric(rng), mat.dark_plastic(rng)
         boxes = [span(label, shell, -w / 2, w / 2, -d / 2, d / 2, seat_h - 0.08, seat_h),
@@ -79,14 +70,13 @@ def chair(rng: np.random.Generator) -> Piece:
     th, leg = float(rng.uniform(0.03, 0.06)), float(rng.uniform(0.03, 0.045))
     boxes = [span(label, seat_mat, -w / 2, w / 2, -d / 2, d / 2, seat_h - th, seat_h),
              span(label, surface, -w / 2, w / 2, -d / 2, -d / 2 + 0.035, seat_h, seat_h + back_h)]
-    boxes += _legs(label, surface, w, d, seat_h - th, leg, 0.01)
+    boxes += legs(label, surface, w, d, seat_h - th, leg, 0.01)
     return Piece(boxes, w, d, seat_h + back_h)
 
 
 def armchair(rng: np.random.Generator) -> Piece:
     """An upholstered armchair (labelled chair, as ScanNet does): base, seat, back, arms."""
-    w, d = float(rng.uniform(0.7, 0.9)), float(rng.uniform(0.75, 0.9))
-    cover = mat.fabric(rng)
+    w, d, cover = float(rng.uniform(0.7, 0.9)), float(rng.uniform(0.75, 0.9)), mat.fabric(rng)
     label, arm = CLS["chair"], float(rng.uniform(0.1, 0.16))
     boxes = [span(label, cover, -w / 2, w / 2, -d / 2, d / 2, 0.08, 0.38),
              span(label, mat.fabric(rng), -w / 2 + arm, w / 2 - arm, -d / 2 + 0.18, d / 2, 0.38, 0.46),
@@ -98,8 +88,7 @@ def armchair(rng: np.random.Generator) -> Piece:
 
 def sofa(rng: np.random.Generator, w: float) -> Piece:
     """A sofa: base on short legs, seat cushions, back rest, two arms; cushions can differ in colour."""
-    d = float(rng.uniform(0.85, 1.0))
-    cover = mat.fabric(rng)
+    d, cover = float(rng.uniform(0.85, 1.0)), mat.fabric(rng)
     cushion = cover if rng.random() < 0.6 else mat.fabric(rng)
     label, arm = CLS["sofa"], float(rng.uniform(0.15, 0.25))
     back_h, arm_h = float(rng.uniform(0.78, 0.95)), float(rng.uniform(0.55, 0.68))
@@ -107,21 +96,17 @@ def sofa(rng: np.random.Generator, w: float) -> Piece:
              span(label, cover, -w / 2, w / 2, -d / 2, -d / 2 + 0.22, 0.38, back_h),
              span(label, cover, -w / 2, -w / 2 + arm, -d / 2, d / 2, 0.38, arm_h),
              span(label, cover, w / 2 - arm, w / 2, -d / 2, d / 2, 0.38, arm_h)]
-    n = 2 if w < 1.8 else 3
-    inner = w - 2 * arm
+    n, inner = 2 if w < 1.8 else 3, w - 2 * arm
     for i in range(n):
         x0 = -w / 2 + arm + i * inner / n
         boxes.append(span(label, cushion, x0 + 0.01, x0 + inner / n - 0.01, -d / 2 + 0.22, d / 2 - 0.02, 0.38, 0.5))
-    legs = mat.dark_plastic(rng)
-    boxes += _legs(label, legs, w, d, 0.1, 0.05, 0.05)
+    boxes += legs(label, mat.dark_plastic(rng), w, d, 0.1, 0.05, 0.05)
     return Piece(boxes, w, d, back_h)
 
 
 def bed(rng: np.random.Generator, w: float, length: float) -> Piece:
     """A bed: frame, mattress, blanket, headboard, optional footboard; pillows are ignore-labelled."""
-    frame_mat = mat.furniture_surface(rng)
-    label = CLS["bed"]
-    frame_top = float(rng.uniform(0.25, 0.38))
+    frame_mat, label, frame_top = mat.furniture_surface(rng), CLS["bed"], float(rng.uniform(0.25, 0.38))
     mattress_top = frame_top + float(rng.uniform(0.18, 0.28))
     head_h = float(rng.uniform(0.85, 1.3))
     y0, y1 = -length / 2, length / 2
@@ -132,8 +117,7 @@ def bed(rng: np.random.Generator, w: float, length: float) -> Piece:
              span(label, frame_mat, -w / 2 - 0.03, w / 2 + 0.03, y0, y0 + 0.06, 0.0, head_h)]
     if rng.random() < 0.4:
         boxes.append(span(label, frame_mat, -w / 2 - 0.03, w / 2 + 0.03, y1 - 0.05, y1, 0.0, mattress_top - 0.05))
-    pillow = mat.fabric(rng)
-    n = 1 if w < 1.2 else 2
+    pillow, n = mat.fabric(rng), 1 if w < 1.2 else 2
     for i in range(n):
         x0 = -w / 2 + 0.08 + i * (w - 0.16) / n
         boxes.append(span(IGNORE_ID, pillow, x0 + 0.02, x0 + (w - 0.16) / n - 0.02, y0 + 0.12, y0 + 0.5,
@@ -144,8 +128,7 @@ def bed(rng: np.random.Generator, w: float, length: float) -> Piece:
 def bookshelf(rng: np.random.Generator, w: float) -> Piece:
     """A bookshelf: sides, top, bottom, back panel, shelves; rows of (ignore-labelled) books."""
     d, h = float(rng.uniform(0.28, 0.4)), float(rng.uniform(1.2, 2.1))
-    surface = mat.furniture_surface(rng)
-    label, th = CLS["bookshelf"], 0.025
+    surface, label, th = mat.furniture_surface(rng), CLS["bookshelf"], 0.025
     boxes = [span(label, surface, -w / 2, -w / 2 + th, -d / 2, d / 2, 0, h),
              span(label, surface, w / 2 - th, w / 2, -d / 2, d / 2, 0, h),
              span(label, surface, -w / 2 + th, w / 2 - th, -d / 2, d / 2, h - th, h),
@@ -170,8 +153,7 @@ def cabinet(rng: np.random.Generator, w: float, d: float, h: float) -> Piece:
     """A cabinet (nightstand, wardrobe, file or TV cabinet by size): body, door seams, handles."""
     n_doors = max(1, round(w / 0.5))
     door_w = w / n_doors
-    body = mat.furniture_surface(rng, panels=True, panel_width=door_w)
-    label = CLS["cabinet"]
+    body, label = mat.furniture_surface(rng, panels=True, panel_width=door_w), CLS["cabinet"]
     handle = mat.metal(rng) if rng.random() < 0.6 else mat.dark_plastic(rng)
     boxes = [span(label, body, -w / 2, w / 2, -d / 2, d / 2, 0.0, h)]
     hz = min(h - 0.1, float(rng.uniform(0.9, 1.1))) if h > 1.2 else h * 0.75
@@ -191,12 +173,11 @@ def desk(rng: np.random.Generator, w: float) -> Piece:
     if rng.random() < 0.5:
         boxes.append(span(label, surface, -w / 2, -w / 2 + 0.025, -d / 2, d / 2 - 0.03, 0, h - th))
     else:
-        boxes += _legs(label, surface, w, d, h - th, 0.04, 0.02)[:2]
+        boxes += legs(label, surface, w, d, h - th, 0.04, 0.02)[:2]
     drawers = mat.furniture_surface(rng, panels=True, panel_width=0.2) if rng.random() < 0.4 else surface
     boxes.append(span(label, drawers, w / 2 - 0.42, w / 2 - 0.02, -d / 2 + 0.02, d / 2 - 0.02, 0.02, h - th))
     if rng.random() < 0.75:
-        screen = mat.dark_plastic(rng)
-        mw = float(rng.uniform(0.45, 0.65))
+        screen, mw = mat.dark_plastic(rng), float(rng.uniform(0.45, 0.65))
         boxes += [span(IGNORE_ID, screen, -mw / 2, mw / 2, -d / 2 + 0.12, -d / 2 + 0.15, h + 0.1, h + 0.1 + mw * 0.6),
                   span(IGNORE_ID, screen, -0.03, 0.03, -d / 2 + 0.1, -d / 2 + 0.16, h, h + 0.12)]
     return Piece(boxes, w, d, h)
@@ -204,14 +185,12 @@ def desk(rng: np.random.Generator, w: float) -> Piece:
 
 def other_furniture(rng: np.random.Generator) -> Piece:
     """ScanNet's 'otherfurniture': an ottoman, a bench, a trash can or a side cart."""
-    label = CLS["otherfurniture"]
-    pick = rng.random()
+    label, pick = CLS["otherfurniture"], rng.random()
     if pick < 0.3:
         s = float(rng.uniform(0.4, 0.6))
         return Piece([span(label, mat.fabric(rng), -s / 2, s / 2, -s / 2, s / 2, 0.0, 0.42)], s, s, 0.42)
     if pick < 0.55:
-        w = float(rng.uniform(0.8, 1.3))
-        top = mat.furniture_surface(rng)
+        w, top = float(rng.uniform(0.8, 1.3)), mat.furniture_surface(rng)
         boxes = [span(label, top, -w / 2, w / 2, -0.18, 0.18, 0.4, 0.45),
                  span(label, top, -w / 2 + 0.03, -w / 2 + 0.07, -0.16, 0.16, 0, 0.4),
                  span(label, top, w / 2 - 0.07, w / 2 - 0.03, -0.16, 0.16, 0, 0.4)]
@@ -219,8 +198,7 @@ def other_furniture(rng: np.random.Generator) -> Piece:
     if pick < 0.8:
         s, h = float(rng.uniform(0.25, 0.35)), float(rng.uniform(0.35, 0.65))
         return Piece([span(label, mat.metal(rng), -s / 2, s / 2, -s / 2, s / 2, 0.0, h)], s, s, h)
-    w, h = float(rng.uniform(0.5, 0.8)), float(rng.uniform(0.6, 0.9))
-    frame = mat.metal(rng)
+    w, h, frame = float(rng.uniform(0.5, 0.8)), float(rng.uniform(0.6, 0.9)), mat.metal(rng)
     boxes = [span(label, frame, -w / 2, w / 2, -0.2, 0.2, z, z + 0.03) for z in (0.1, h / 2, h - 0.03)]
-    boxes += _legs(label, frame, w, 0.4, h, 0.03, 0.0)
+    boxes += legs(label, frame, w, 0.4, h, 0.03, 0.0)
     return Piece(boxes, w, 0.4, h)

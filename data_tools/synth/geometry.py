@@ -1,19 +1,12 @@
-"""Box primitives of the procedural scenes and vectorised ray casting against them.
-
-World frame: metres, z up, the floor at z = 0, the room's interior spans [0, Lx] x [0, Ly] x [0, H].
-A box has a centre, full extents along its own axes and a yaw (rotation about world z). Boxes whose
-yaw is a multiple of 90 degrees are turned into yaw-0 boxes with swapped extents when packed, so
-most of a scene is tested in the fast axis-aligned group.
-
-Every ray of one view starts at the camera centre, so each slab offset ``(bound - origin)`` is a
-per-box constant and one slab test costs a multiply per axis and side. Ray directions need not be
-unit length: with ``dirs = R K^-1 [u, v, 1]`` the hit parameter ``t`` is the camera z-depth.
+"""Box primitives of the procedural scenes (world frame: metres, z up, floor at z = 0) and vectorised ray casting:
+quarter-turned boxes are folded into axis-aligned ones, and with ``dirs = R K^-1 [u, v, 1]`` (not unit length) the
+hit parameter ``t`` is the camera z-depth.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -22,32 +15,23 @@ from sray.data_tools.synth.materials import Material
 
 @dataclass(frozen=True)
 class Box:
-    """One oriented box of a scene (or of an object, in the object's own frame)."""
+    """One oriented box of a scene (or of an object, in its own frame): centre and full extents along its local axes
+    in metres, class id (IGNORE_ID for props), material (evaluated in the box's frame), yaw about world z in radians;
+    light fixtures cast no shadow (they would shadow their own light)."""
 
     center: tuple[float, float, float]
-    """Centre in metres."""
     size: tuple[float, float, float]
-    """Full extents along the box's local x, y, z (metres, all > 0)."""
     label: int
-    """Class id of the scene's label space (IGNORE_ID for props outside it)."""
     material: Material
-    """Surface appearance (pattern, colours); evaluated in the box's local frame."""
     yaw: float = 0.0
-    """Rotation about world z in radians."""
     casts_shadow: bool = True
-    """False for light fixtures, which would otherwise shadow their own light."""
 
 
 def place(boxes: list[Box], x: float, y: float, yaw: float, z: float = 0.0) -> list[Box]:
     """Move boxes built in an object frame to world position (x, y, z) turned by ``yaw``."""
     c, s = math.cos(yaw), math.sin(yaw)
-    out = []
-    for b in boxes:
-        bx, by, bz = b.center
-        out.append(Box(center=(x + c * bx - s * by, y + s * bx + c * by, z + bz), size=b.size,
-                       label=b.label, material=b.material, yaw=b.yaw + yaw,
-                       casts_shadow=b.casts_shadow))
-    return out
+    return [replace(b, center=(x + c * b.center[0] - s * b.center[1], y + s * b.center[0] + c * b.center[1],
+                               z + b.center[2]), yaw=b.yaw + yaw) for b in boxes]
 
 
 def _canonical(yaw: float, size: tuple[float, float, float]) -> tuple[float, tuple[float, float, float], int]:
@@ -62,22 +46,17 @@ def _canonical(yaw: float, size: tuple[float, float, float]) -> tuple[float, tup
 
 @dataclass
 class PackedBoxes:
-    """Structure-of-arrays form of a box list, grouped by yaw for the ray caster."""
+    """Structure-of-arrays form of P boxes for the ray caster: ``center`` float64 (P, 3); ``half`` float64 (P, 3)
+    half extents after folding quarter turns; ``yaw`` float64 (P,) residual yaw; ``quarter`` int64 (P,) quarter
+    turns folded into ``half`` (keeps textures on the object); ``label`` int64 (P,); ``casts_shadow`` bool (P,)."""
 
     center: np.ndarray
-    """float64 (P, 3)."""
     half: np.ndarray
-    """float64 (P, 3) half extents in the box frame (after folding quarter turns)."""
     yaw: np.ndarray
-    """float64 (P,) residual yaw (0 for axis-aligned boxes)."""
     quarter: np.ndarray
-    """int64 (P,) quarter turns folded into ``half``; keeps textures attached to the object frame."""
     label: np.ndarray
-    """int64 (P,)."""
     casts_shadow: np.ndarray
-    """bool (P,)."""
     materials: list[Material]
-    """Per-box material, index-aligned."""
 
     @classmethod
     def from_boxes(cls, boxes: list[Box]) -> PackedBoxes:
@@ -104,9 +83,7 @@ class PackedBoxes:
 
     def to_local(self, index: np.ndarray, points: np.ndarray) -> np.ndarray:
         """World points (N, 3) -> the frames of boxes ``index`` (N,), relative to their centres."""
-        rel = points - self.center[index]
-        c, s = np.cos(self.yaw[index]), np.sin(self.yaw[index])
-        return np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1], rel[:, 2]], axis=1)
+        return in_frame(points - self.center[index], np.cos(self.yaw[index]), np.sin(self.yaw[index]))
 
     def overlaps(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """bool (P,): the box's world-axis bounding box meets the region [lo, hi] (each (3,))."""
@@ -117,16 +94,15 @@ class PackedBoxes:
 
     def contains(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
         """bool (N, P): point n lies inside box p grown by ``margin`` on every side."""
-        rel = points[:, None, :] - self.center[None, :, :]
-        c, s = np.cos(self.yaw)[None, :], np.sin(self.yaw)[None, :]
-        local = np.stack([c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1], rel[..., 2]], -1)
+        local = in_frame(points[:, None, :] - self.center[None, :, :], np.cos(self.yaw)[None, :],
+                         np.sin(self.yaw)[None, :])
         return np.all(np.abs(local) <= self.half[None, :, :] + margin, axis=2)
 
 
-def _rotate_z(v: np.ndarray, yaw: float) -> np.ndarray:
-    """World vectors (N, 3) expressed in a frame turned by ``yaw`` about z."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]], axis=1)
+def in_frame(v: np.ndarray, c: np.ndarray | float, s: np.ndarray | float) -> np.ndarray:
+    """Vectors (..., 3) expressed in a frame turned about z by the angle of cosine ``c`` and sine ``s`` (broadcast
+    against ``v[..., 0]``)."""
+    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1], v[..., 2]], -1)
 
 
 def _safe_inverse(d: np.ndarray) -> np.ndarray:
@@ -139,9 +115,8 @@ def cast_rays(origin: np.ndarray, dirs: np.ndarray, boxes: PackedBoxes, active: 
               t_min: float = 1e-4, chunk: int = 8192) -> tuple[np.ndarray, np.ndarray]:
     """Nearest box hit of rays from one origin: (t float32 (N,), box index int64 (N,)).
 
-    origin: (3,) shared ray origin; dirs: (N, 3), any length; active: bool (P,) boxes to test
-    (default all). Hits with t <= t_min (origin inside or on a box) are ignored; misses give
-    t = inf and index -1.
+    origin: (3,) shared ray origin; dirs: (N, 3), any length; active: bool (P,) boxes to test (default all). Hits at
+    t <= t_min (origin inside or on a box) are ignored; misses give t = inf and index -1.
     """
     n = len(dirs)
     best_t = np.full(n, np.inf, np.float32)
@@ -154,8 +129,9 @@ def cast_rays(origin: np.ndarray, dirs: np.ndarray, boxes: PackedBoxes, active: 
         groups.setdefault(float(boxes.yaw[p]), []).append(int(p))
     for yaw, members in groups.items():
         idx = np.array(members)
-        inv = _safe_inverse(_rotate_z(dirs, yaw))
-        o_local = _rotate_z((origin[None, :] - boxes.center[idx]), yaw)
+        c, s = math.cos(yaw), math.sin(yaw)
+        inv = _safe_inverse(in_frame(dirs, c, s))
+        o_local = in_frame(origin[None, :] - boxes.center[idx], c, s)
         lo = (-boxes.half[idx] - o_local).astype(np.float32)
         hi = (boxes.half[idx] - o_local).astype(np.float32)
         for start in range(0, n, chunk):
@@ -200,7 +176,5 @@ def box_normals(boxes: PackedBoxes, index: np.ndarray, local: np.ndarray) -> tup
     sign = np.sign(local[np.arange(len(local)), axis])
     n_local = np.zeros_like(local)
     n_local[np.arange(len(local)), axis] = sign
-    c, s = np.cos(boxes.yaw[index]), np.sin(boxes.yaw[index])
-    world = np.stack([c * n_local[:, 0] - s * n_local[:, 1], s * n_local[:, 0] + c * n_local[:, 1],
-                      n_local[:, 2]], axis=1)
+    world = in_frame(n_local, np.cos(boxes.yaw[index]), -np.sin(boxes.yaw[index]))
     return world.astype(np.float32), axis

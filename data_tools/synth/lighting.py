@@ -1,10 +1,6 @@
-"""A room's lights: ceiling lamps, an optional floor lamp and daylight from the windows, each with a
-colour temperature; the ambient level and the camera's exposure are drawn per scene elsewhere.
-
-Colours come from Planck's law: the black-body radiance at three representative wavelengths (610,
-550 and 465 nm) relative to that of a 6504 K body (the sRGB white point), normalised so the largest
-channel is 1, and then half white-balanced (square root), as a camera's auto white balance removes
-part of a colour cast. 2700 K gives (1, 0.76, 0.46), 6500 K white, 10000 K (0.84, 0.89, 1).
+"""A room's lights: ceiling lamps, an optional floor lamp and daylight from the windows, each tinted by its colour
+temperature (Planck's law at three wavelengths relative to a 6504 K white, half white-balanced: docs/data.md,
+"Appearance"); 2700 K gives (1, 0.76, 0.46), 10000 K (0.84, 0.89, 1).
 """
 
 from __future__ import annotations
@@ -20,10 +16,8 @@ from sray.data_tools.synth import materials as mat
 from sray.data_tools.synth.floor_plan import FloorPlan, Light
 from sray.data_tools.synth.furniture import Piece, span
 
-WAVELENGTHS_M = (610e-9, 550e-9, 465e-9)
-"""Representative wavelengths of the red, green and blue channels (metres)."""
-WHITE_K = 6504.0
-"""Colour temperature that renders white (the sRGB / D65 white point)."""
+WAVELENGTHS_M = (610e-9, 550e-9, 465e-9)  # representative wavelengths of the red, green and blue channels
+WHITE_K = 6504.0  # the colour temperature that renders white (sRGB / D65 white point)
 
 
 def _planck(wavelength: float, kelvin: float) -> float:
@@ -35,8 +29,7 @@ def _planck(wavelength: float, kelvin: float) -> float:
 def kelvin_rgb(kelvin: float) -> tuple[float, float, float]:
     """Linear RGB tint (max channel 1) of a light of colour temperature ``kelvin`` (module docstring)."""
     ratio = [_planck(lam, kelvin) / _planck(lam, WHITE_K) for lam in WAVELENGTHS_M]
-    top = max(ratio)
-    return tuple(math.sqrt(r / top) for r in ratio)  # type: ignore[return-value]
+    return tuple(math.sqrt(r / max(ratio)) for r in ratio)  # type: ignore[return-value]
 
 
 def _floor_lamp(rng: np.random.Generator, height: float) -> Piece:
@@ -63,9 +56,9 @@ def _low_main_light(rng: np.random.Generator, plan: FloorPlan) -> None:
 
 
 def add_lights(rng: np.random.Generator, plan: FloorPlan) -> None:
-    """Ceiling lamps (1-4 by floor area) with a point light under each (the first casts shadows), an
-    optional floor lamp and a daylight fill light in front of each of up to two windows. In an
-    appearance-shifted room the ceiling lamps take held-out colour temperatures and a low main light comes first."""
+    """Ceiling lamps (1-4 by floor area) with a point light under each (the first casts shadows), an optional floor
+    lamp and daylight in front of up to two windows; an appearance-shifted room gets held-out lamp colour
+    temperatures and a low main light first."""
     lx, ly, h = plan.size
     shifted = domains.current().appearance_shift
     if shifted:

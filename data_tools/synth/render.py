@@ -1,13 +1,5 @@
-"""Render one view of a procedural room: RGB, z-depth and labels from analytic ray casting.
-
-One ray per pixel through the exact pixel centre (pixel (u, v) is centred at (u, v) in K's
-coordinates), so depth is the z-depth of that ray's first hit. Shading depends only on the surface
-point and the lights (Lambertian point lights with a soft distance falloff, one shadow-casting
-light, ambient with darkening along room edges); nothing depends on the camera, so every surface
-point has the same colour in every view (up to sensor noise). A scene's camera has a tone curve
-rgb = (1 - exp(-k x)) ** (1 / gamma) and optional Gaussian sensor noise, drawn per view from the scene's noise seed
-and the view's index. Ceiling pixels are labelled IGNORE_ID (ScanNet-20 has
-no ceiling class).
+"""Render one view of a procedural room (RGB, z-depth, labels) by analytic ray casting through each pixel centre;
+shading never depends on the camera (docs/data.md, "Appearance"), so views agree. Ceiling pixels are IGNORE_ID.
 """
 
 from __future__ import annotations
@@ -19,7 +11,7 @@ import numpy as np
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth.domains import view_gains
 from sray.data_tools.synth.furniture import CLS
-from sray.data_tools.synth.geometry import PackedBoxes, box_normals, cast_rays, cast_shell
+from sray.data_tools.synth.geometry import PackedBoxes, box_normals, cast_rays, cast_shell, in_frame
 from sray.data_tools.synth.materials import UNLIT_KINDS
 from sray.data_tools.synth.rooms import Room
 from sray.data_tools.synth.textures import MaterialTable, albedo
@@ -30,32 +22,26 @@ SHELL_LABELS = (CLS["wall"], CLS["floor"], IGNORE_ID)
 
 @dataclass
 class RenderScene:
-    """A room prepared for rendering (packed boxes and the material table of every surface)."""
+    """A room prepared for rendering, with its camera: ``materials`` holds the P boxes' materials, then the walls',
+    floor's and ceiling's (P, P+1, P+2); ``tone`` is (k, gamma) of rgb = (1 - exp(-k x)) ** (1 / gamma);
+    ``noise_sigma`` is in 8-bit levels; ``noise_seed`` seeds the noise and the per-view gains (``domains.view_gains``
+    at strength ``randomise``); ``tint`` is the room's white balance (``domains.room_tint``)."""
 
     room: Room
-    """The room being rendered."""
     boxes: PackedBoxes
-    """The room's boxes, packed."""
     materials: MaterialTable
-    """Materials of the P boxes, then of the walls, floor and ceiling (indices P, P+1, P+2)."""
     exposure: float
-    """Brightness scale applied before tone mapping."""
     tone: tuple[float, float] = (1.6, 2.2)
-    """(k, gamma) of the tone curve (module docstring)."""
     noise_sigma: float = 0.0
-    """Sensor noise sigma in 8-bit levels (0 = none)."""
     noise_seed: int = 0
-    """Seed of the sensor noise and of the per-view gains (with the view's index)."""
     tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    """Per-channel white-balance gains of the room (``domains.room_tint``)."""
     randomise: float = 0.0
-    """Strength of the per-view exposure and channel gains (``domains.view_gains``; 0 = none)."""
 
     @classmethod
     def prepare(cls, room: Room, exposure: float = 1.0, tone: tuple[float, float] = (1.6, 2.2),
                 noise_sigma: float = 0.0, noise_seed: int = 0, tint: tuple[float, float, float] = (1.0, 1.0, 1.0),
                 randomise: float = 0.0) -> RenderScene:
-        """Pack a room's boxes and materials; the camera's exposure, tone curve and noise as the fields say."""
+        """Pack a room's boxes and materials; the camera as the fields say."""
         boxes = PackedBoxes.from_boxes(room.boxes)
         shell_half = np.tile(np.array(room.size) / 2, (3, 1))
         table = MaterialTable.build(boxes.materials + [room.wall, room.floor, room.ceiling],
@@ -80,9 +66,7 @@ def visible_boxes(boxes: PackedBoxes, K: np.ndarray, c2w: np.ndarray, hw: tuple[
     """bool (P,): boxes not entirely outside one of the view frustum's side or near planes."""
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], np.float64)
     local = corners[None, :, :] * boxes.half[:, None, :]
-    c, s = np.cos(boxes.yaw)[:, None], np.sin(boxes.yaw)[:, None]
-    world = np.stack([c * local[..., 0] - s * local[..., 1], s * local[..., 0] + c * local[..., 1], local[..., 2]], -1)
-    world = world + boxes.center[:, None, :]
+    world = in_frame(local, np.cos(boxes.yaw)[:, None], -np.sin(boxes.yaw)[:, None]) + boxes.center[:, None, :]
     cam = (world - c2w[:3, 3]) @ c2w[:3, :3]
     x, y, z = cam[..., 0], cam[..., 1], cam[..., 2]
     h, w = hw

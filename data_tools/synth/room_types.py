@@ -1,7 +1,5 @@
-"""Furniture recipes per room type: each returns (floor plan, wall finish, floor finish).
-
-Placement is by rejection sampling against the floor plan's free floor and wall regions, so every
-object stays inside the room and no two objects intersect; a piece that finds no room is skipped.
+"""Furniture recipes per room type, each returning (floor plan, wall finish, floor finish). Placement is rejection
+sampling against the plan's free floor and wall regions; a piece that finds no room is left out.
 """
 
 from __future__ import annotations
@@ -13,23 +11,21 @@ import numpy as np
 
 from sray.data_tools.scene import IGNORE_ID
 from sray.data_tools.synth import catalog as cat
-from sray.data_tools.synth import content as ct
 from sray.data_tools.synth import domains
 from sray.data_tools.synth import fittings as fx
 from sray.data_tools.synth import furniture as fu
 from sray.data_tools.synth import materials as mat
-from sray.data_tools.synth.floor_plan import FloorPlan
+from sray.data_tools.synth import templates as tp
+from sray.data_tools.synth.floor_plan import FloorPlan, shaped_plan
 from sray.data_tools.synth.room_parts import add_door, add_pictures, add_rug, add_window
-from sray.data_tools.synth.room_shape import shaped_plan
 
 Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Material]]
 
 
 def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
           h: tuple[float, float]) -> FloorPlan:
-    """An empty floor plan (maybe L-shaped or with a column) of a size drawn from the ranges, which one
-    scale factor per room widens (``domains.TRAIN_SCALE``); a geometry-shifted room is scaled by
-    ``domains.HELD_OUT_SCALE`` and has a ceiling in ``domains.HELD_OUT_CEILING``."""
+    """An empty floor plan (``floor_plan.shaped_plan``) of a size drawn from the ranges, the floor scaled by one
+    factor per room (held-out scale and ceiling in a geometry-shifted room)."""
     shifted = domains.current().geometry_shift
     scale = float(rng.uniform(*(domains.HELD_OUT_SCALE if shifted else domains.TRAIN_SCALE)))
     return shaped_plan(rng, (scale * float(rng.uniform(*lx)), scale * float(rng.uniform(*ly)),
@@ -42,8 +38,8 @@ def _walls(rng: np.random.Generator) -> list[int]:
 
 def _anywhere_on_walls(rng: np.random.Generator, plan: FloorPlan, piece: fu.Piece,
                        z_range: tuple[float, float] | None = None) -> tuple[int, float] | None:
-    """Try every wall in random order; returns (wall, s) of the placement or None. In a geometry-shifted room the
-    piece stands ``domains.HELD_OUT_WALL_GAP`` off the wall."""
+    """Try every wall in random order; returns (wall, s) of the placement or None (held-out wall gap in a
+    geometry-shifted room)."""
     gap = float(rng.uniform(*domains.HELD_OUT_WALL_GAP)) if domains.current().geometry_shift else 0.015
     for wall in _walls(rng):
         s = plan.try_wall(rng, piece, wall, z_range=z_range, gap=gap)
@@ -52,23 +48,20 @@ def _anywhere_on_walls(rng: np.random.Generator, plan: FloorPlan, piece: fu.Piec
     return None
 
 
-def _chair_facing(rng: np.random.Generator, plan: FloorPlan, x: float, y: float, yaw: float,
-                  distance: float) -> bool:
+def _chair_facing(rng: np.random.Generator, plan: FloorPlan, x: float, y: float, yaw: float, distance: float) -> None:
     """A chair at ``distance`` from (x, y) along the direction yaw points +y to, facing back to (x, y)."""
     chair = cat.chair(rng)
     dx, dy = -math.sin(yaw), math.cos(yaw)
     cx, cy = x + dx * (distance + chair.depth / 2), y + dy * (distance + chair.depth / 2)
-    return plan.try_floor(chair, cx, cy, yaw + math.pi + float(rng.uniform(-0.3, 0.3)), clearance=0.02)
+    plan.try_floor(chair, cx, cy, yaw + math.pi + float(rng.uniform(-0.3, 0.3)), clearance=0.02)
 
 
-def _desk_with_chair(rng: np.random.Generator, plan: FloorPlan) -> bool:
+def _desk_with_chair(rng: np.random.Generator, plan: FloorPlan) -> None:
     desk = cat.desk(rng, float(rng.uniform(1.0, 1.6)))
     spot = _anywhere_on_walls(rng, plan, desk)
-    if spot is None:
-        return False
-    x, y, yaw = plan.wall_pose(spot[0], spot[1], desk.depth, 0.015)
-    _chair_facing(rng, plan, x, y, yaw, desk.depth / 2 + 0.08)
-    return True
+    if spot is not None:
+        x, y, yaw = plan.wall_pose(spot[0], spot[1], desk.depth, 0.015)
+        _chair_facing(rng, plan, x, y, yaw, desk.depth / 2 + 0.08)
 
 
 def _dining_set(rng: np.random.Generator, plan: FloorPlan, chairs: int) -> None:
@@ -134,7 +127,7 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
         gap = sofa.depth / 2 + float(rng.uniform(0.35, 0.5)) + ctd / 2
         tx, ty = x + dx * gap, y + dy * gap
         if rng.random() < 0.5:
-            rug = ct.rug(rng, ctw + 0.8, ctd + 1.0)
+            rug = tp.rug(rng, ctw + 0.8, ctd + 1.0)
             if plan.is_free(plan.footprint(rug, tx, ty, yaw), clearance=-0.02):
                 plan.add(rug, tx, ty, yaw, occupies_floor=False)
         if plan.try_floor(cat.table(rng, ctw, ctd, float(rng.uniform(0.38, 0.48))), tx, ty, yaw):
@@ -162,14 +155,13 @@ def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.
 
 
 def _island(rng: np.random.Generator, plan: FloorPlan, wall: int) -> None:
-    """Half the time, a kitchen island parallel to the counter run on ``wall``, 1.0-1.3 m in front of it, with
-    stools (labelled chair) along its far side."""
+    """Half the time, a kitchen island 1.0-1.3 m in front of the counter run on ``wall``, with stools (chairs)."""
     if rng.random() >= 0.5:
         return
     w, d = float(rng.uniform(1.2, 2.0)), float(rng.uniform(0.6, 0.9))
     s = plan.wall_length(wall) / 2 + float(rng.uniform(-0.3, 0.3))
     x, y, yaw = plan.wall_pose(wall, s, d, 0.62 + float(rng.uniform(1.0, 1.3)))
-    if plan.try_floor(ct.kitchen_island(rng, w, d), x, y, yaw, clearance=0.5):
+    if plan.try_floor(tp.kitchen_island(rng, w, d), x, y, yaw, clearance=0.5):
         for k in range(int(rng.integers(0, 3))):
             _chair_facing(rng, plan, x + (k - 0.5) * 0.5 * math.cos(yaw), y + (k - 0.5) * 0.5 * math.sin(yaw), yaw,
                           d / 2 + 0.05)
@@ -198,9 +190,8 @@ def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
         z1 = min(plan.size[2] - 0.05, z0 + float(rng.uniform(0.6, 0.8)))
         for k in range(2):
             part = length / 2 - 0.05
-            upper = fx.wall_cabinets(rng, part, z0, z1)
-            plan.try_wall(rng, upper, wall, s=s - length / 2 + part / 2 + k * (part + 0.1), z_range=(z0, z1),
-                          occupies_floor=False, gap=0.0)
+            plan.try_wall(rng, fx.wall_cabinets(rng, part, z0, z1), wall, z_range=(z0, z1), occupies_floor=False,
+                          gap=0.0, s=s - length / 2 + part / 2 + k * (part + 0.1))
         break
     _dining_set(rng, plan, int(rng.integers(2, 5)))
     if rng.random() < 0.5:
@@ -217,8 +208,7 @@ def bathroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mat
     plan = _plan(rng, (2.4, 3.4), (2.1, 3.0), (2.4, 2.7))
     add_door(rng, plan, width=(0.7, 0.82))
     add_window(rng, plan, sill=(1.2, 1.5), width=(0.5, 0.9), curtain_prob=0.2)
-    walls = sorted(range(4), key=lambda w: -plan.wall_length(w) + float(rng.uniform(0, 0.3)))
-    for wall in walls:
+    for wall in sorted(range(4), key=lambda w: -plan.wall_length(w) + float(rng.uniform(0, 0.3))):
         length = min(float(rng.uniform(1.5, 1.75)), plan.wall_length(wall) - 0.05)
         tub = fx.bathtub(rng, length, float(rng.uniform(0.35, 0.8)) if rng.random() < 0.85 else None)
         end = length / 2 + 0.02 if rng.random() < 0.5 else plan.wall_length(wall) - length / 2 - 0.02
@@ -258,7 +248,7 @@ def office(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mater
     if rng.random() < 0.7:
         _anywhere_on_walls(rng, plan, fu.other_furniture(rng))
     if rng.random() < 0.3:
-        _anywhere_on_walls(rng, plan, ct.mini_fridge(rng))
+        _anywhere_on_walls(rng, plan, tp.mini_fridge(rng))
     add_pictures(rng, plan, int(rng.integers(1, 4)))
     add_rug(rng, plan, 0.4)
     return plan, mat.wall_paint(rng), mat.floor_surface(rng)

@@ -1,7 +1,6 @@
-"""A procedural room: shell (maybe L-shaped), finishes, lights, the furniture of its room type and clutter.
+"""A procedural room (:func:`build_room`): shell, finishes, lights, the furniture of its room type and clutter.
 
-``build_room(rng, room_type)`` returns a :class:`Room`; the furniture of each room type comes from
-``synth_room_types``. The room's interior is the box [0, Lx] x [0, Ly] x [0, H] (z up, floor at 0).
+The room's interior is the box [0, Lx] x [0, Ly] x [0, H] (z up, floor at 0).
 """
 
 from __future__ import annotations
@@ -23,24 +22,17 @@ ROOM_TYPES: tuple[str, ...] = tuple(RECIPES)
 
 @dataclass
 class Room:
-    """A finished procedural room."""
+    """A finished procedural room: interior extents (Lx, Ly, H) in metres, boxes in the world frame, point lights
+    (the first casts shadows), ambient light level and the finishes of the shell."""
 
     room_type: str
-    """One of :data:`ROOM_TYPES`."""
     size: tuple[float, float, float]
-    """Interior extents (Lx, Ly, H) in metres."""
     boxes: list[Box]
-    """All boxes (world frame)."""
     lights: list[Light]
-    """Point lights; the first one casts shadows."""
     ambient: float
-    """Ambient light level."""
     wall: mat.Material
-    """Wall finish."""
     floor: mat.Material
-    """Floor finish."""
     ceiling: mat.Material
-    """Ceiling finish."""
 
 
 def build_room(rng: np.random.Generator, room_type: str) -> Room:

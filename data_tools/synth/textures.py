@@ -1,8 +1,5 @@
-"""Procedural albedo evaluated in each surface's local 3D frame (multi-view consistent by design).
-
-The colour of a point depends only on the point (in its surface's frame), its face and its
-material: never on the camera. Noise is hash-based value noise on an integer lattice (uint32
-arithmetic, so results are identical across runs and platforms).
+"""Procedural albedo of a point in its surface's own 3D frame: it depends on the point, its face and its material,
+never on the camera. Noise is hash-based value noise on an integer lattice (uint32 arithmetic, identical everywhere).
 """
 
 from __future__ import annotations
@@ -11,22 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sray.data_tools.synth.materials import (
-    BOOKS,
-    FABRIC,
-    LAMP,
-    MARBLE,
-    PAINT,
-    PAINTING,
-    PANELS,
-    PLANKS,
-    RUNNING_BOND,
-    SKY,
-    STRIPES,
-    TILES,
-    WOOD,
-    Material,
-)
+from sray.data_tools.synth import materials as mat
 
 
 def _hash(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, seed: np.ndarray) -> np.ndarray:
@@ -74,43 +56,33 @@ def fbm(p: np.ndarray, seed: np.ndarray, octaves: int = 3) -> np.ndarray:
     return total / norm
 
 
+_COLUMNS = (("kind", np.int64), ("color_a", np.float32), ("color_b", np.float32), ("scale", np.float32),
+            ("contrast", np.float32), ("axis", np.int64), ("variant", np.int64), ("seed", np.uint32))
+
+
 @dataclass
 class MaterialTable:
-    """Per-surface material arrays (index-aligned with the surfaces a hit can name)."""
+    """The materials of S surfaces (index-aligned with what a hit can name) as arrays: colours float32 (S, 3) linear
+    RGB, ``scale`` and ``contrast`` float32 (S,), ``seed`` uint32 (S,), the others int64 (S,), ``axis`` in the
+    surface's local frame; ``half`` float32 (S, 3) is the surface's box's half extents (grain, panel seams)."""
 
     kind: np.ndarray
-    """int64 (S,)."""
     color_a: np.ndarray
-    """float32 (S, 3) linear RGB."""
     color_b: np.ndarray
-    """float32 (S, 3) linear RGB."""
     scale: np.ndarray
-    """float32 (S,)."""
     contrast: np.ndarray
-    """float32 (S,)."""
     axis: np.ndarray
-    """int64 (S,) pattern axis in the surface's local frame."""
     variant: np.ndarray
-    """int64 (S,)."""
     seed: np.ndarray
-    """uint32 (S,)."""
     half: np.ndarray
-    """float32 (S, 3) half extents of the surface's box (drives grain direction and panel seams)."""
 
     @classmethod
-    def build(cls, materials: list[Material], halves: np.ndarray, quarters: np.ndarray) -> MaterialTable:
+    def build(cls, materials: list[mat.Material], halves: np.ndarray, quarters: np.ndarray) -> MaterialTable:
         """Pack materials; a quarter-turned box swaps the x/y pattern axis to stay on the object."""
-        axis = np.array([m.axis for m in materials], np.int64)
-        odd = (quarters % 2 == 1) & (axis < 2)
-        axis = np.where(odd, 1 - axis, axis)
-        return cls(kind=np.array([m.kind for m in materials], np.int64),
-                   color_a=np.array([m.color_a for m in materials], np.float32),
-                   color_b=np.array([m.color_b for m in materials], np.float32),
-                   scale=np.array([m.scale for m in materials], np.float32),
-                   contrast=np.array([m.contrast for m in materials], np.float32),
-                   axis=axis, variant=np.array([m.variant for m in materials], np.int64),
-                   seed=np.array([m.seed % (2**32) for m in materials], np.uint32),
-                   half=np.asarray(halves, np.float32))
+        table = {name: np.array([getattr(m, name) for m in materials], dtype) for name, dtype in _COLUMNS}
+        odd = (quarters % 2 == 1) & (table["axis"] < 2)
+        table["axis"] = np.where(odd, 1 - table["axis"], table["axis"])
+        return cls(**table, half=np.asarray(halves, np.float32))
 
 
 def _mix(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -132,9 +104,9 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
     """Albedo (N, 3) of one pattern kind for points q (N, 3) in their surfaces' frames."""
     a, b, scale, contrast, seed = m["color_a"], m["color_b"], m["scale"], m["contrast"], m["seed"]
     one = np.ones(len(q), np.float32)
-    if kind == PAINT:
+    if kind == mat.PAINT:
         return a * (1.0 + contrast * (2.0 * fbm(q * scale[:, None], seed) - 1.0))[:, None]
-    if kind == WOOD:
+    if kind == mat.WOOD:
         grain = np.argmax(m["half"], axis=1)
         across = _pick(q, (grain + 1) % 3) + 0.6 * _pick(q, (grain + 2) % 3)
         stretch = np.full(q.shape, 8.0, np.float32)
@@ -143,7 +115,7 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
         ring = (0.5 + 0.5 * np.sin(2 * np.pi * (across * scale + 2.5 * warp))) ** 3
         fine = value_noise(q * 60.0, seed + np.uint32(5))
         return _mix(a, b, contrast * ring) * (0.95 + 0.1 * fine)[:, None]
-    if kind == PLANKS:
+    if kind == mat.PLANKS:
         u, v = _tangents(q, n_axis)
         pw = 1.0 / scale
         row = np.floor(v / pw)
@@ -155,10 +127,10 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
         c = _mix(a, b, contrast * tone) * (0.92 + 0.16 * grain)[:, None]
         seam = ((v / pw) % 1.0 < 0.03) | (((u + offset) / 1.4) % 1.0 < 0.005)
         return np.where(seam[:, None], c * 0.5, c)
-    if kind == TILES:
+    if kind == mat.TILES:
         u, v = _tangents(q, n_axis)
         fu, fv = u * scale, v * scale
-        bond = m["variant"] == RUNNING_BOND
+        bond = m["variant"] == mat.RUNNING_BOND
         fv = np.where(bond, fv * 2.0, fv)                      # bricks: rows half as tall as they are long
         fu = np.where(bond & (np.floor(fv) % 2 == 1), fu + 0.5, fu)
         iu, iv = np.floor(fu).astype(np.int64), np.floor(fv).astype(np.int64)
@@ -169,20 +141,20 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
         grout = (fu % 1.0 < g) | (fu % 1.0 > 1 - g) | (fv % 1.0 < g) | (fv % 1.0 > 1 - g)
         grout_col = np.where((m["variant"] == 1)[:, None], 0.3 * (a + b), 0.6 * b)
         return np.where(grout[:, None], grout_col, c)
-    if kind == FABRIC:
+    if kind == mat.FABRIC:
         weave = fbm(q * scale[:, None], seed, 2)
         mottle = fbm(q * 2.5, seed + np.uint32(11), 2)
         c = _mix(a, b, contrast * mottle) * (0.85 + 0.3 * weave)[:, None]
         u, v = _tangents(q, n_axis)
         plaid = (m["variant"] == 1) & (((u * 4.0) % 1.0 < 0.25) ^ ((v * 4.0) % 1.0 < 0.25))
         return np.where(plaid[:, None], _mix(c, b, 0.6 * one), c)
-    if kind == STRIPES:
+    if kind == mat.STRIPES:
         x = _pick(q, m["axis"])
         band = ((x * scale) % 1.0 < 0.5).astype(np.float32)
         c = _mix(a, b, contrast * band)
         folds = np.where(m["variant"] == 1, 0.8 + 0.2 * np.sin(2 * np.pi * x * 9.0), 1.0)
         return c * (folds * (0.95 + 0.1 * fbm(q * 20.0, seed, 1)))[:, None]
-    if kind == PANELS:
+    if kind == mat.PANELS:
         x = _pick(q, m["axis"]) + _pick(m["half"], m["axis"])
         length = 2.0 * _pick(m["half"], m["axis"])
         n_panels = np.maximum(1.0, np.round(length * scale))
@@ -191,19 +163,19 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
         c = a * (1.0 + contrast * (2.0 * fbm(q * 4.0, seed, 2) - 1.0))[:, None]
         seam = (dist < 0.006) & (x > 0.01) & (x < length - 0.01)
         return np.where(seam[:, None], b, c)
-    if kind == SKY:
+    if kind == mat.SKY:
         height = (q[:, 2] + m["half"][:, 2]) / (2.0 * m["half"][:, 2])
         horizon = 0.18 + 0.2 * fbm(np.stack([q[:, 0] * 3.0 + q[:, 1] * 3.0, one, one], 1), seed, 2)
         clouds = fbm(q * 3.0, seed + np.uint32(3), 3)
         sky = _mix(b, a, np.clip(height, 0, 1)) + (contrast * np.clip(clouds - 0.5, 0, 1))[:, None]
         ground = np.array([0.08, 0.14, 0.06], np.float32) * (0.6 + 0.8 * clouds)[:, None]
         return np.where((height < horizon)[:, None], ground, sky)
-    if kind == PAINTING:
+    if kind == mat.PAINTING:
         n1 = fbm(q * scale[:, None], seed, 3)
         n2 = fbm(q * scale[:, None] * 0.5 + 7.1, seed + np.uint32(9), 2)
         c = _mix(a, b, np.clip((n1 - 0.3) / 0.4, 0, 1))
         return c * (1.0 - contrast * 0.6 + contrast * 1.2 * n2)[:, None]
-    if kind == BOOKS:
+    if kind == mat.BOOKS:
         x = _pick(q, m["axis"]) * scale
         spine = np.floor(x).astype(np.int64)
         zero = spine * 0
@@ -213,9 +185,9 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
         height = (q[:, 2] + m["half"][:, 2]) / (2.0 * m["half"][:, 2])
         gap = (x % 1.0) < 0.08
         return np.where(((height > tall) | gap)[:, None], b, col)
-    if kind == LAMP:
+    if kind == mat.LAMP:
         return a.copy()
-    if kind == MARBLE:
+    if kind == mat.MARBLE:
         warp = fbm(q * scale[:, None], seed, 3)
         vein = np.abs(np.sin(2 * np.pi * (q[:, 0] + 0.7 * q[:, 1] + 0.4 * q[:, 2] + 2.0 * warp)))
         return _mix(a, b, contrast * (1.0 - vein) ** 6) * (0.94 + 0.12 * warp)[:, None]
@@ -223,17 +195,12 @@ def _pattern(kind: int, q: np.ndarray, n_axis: np.ndarray, m: dict[str, np.ndarr
 
 
 def albedo(table: MaterialTable, surface: np.ndarray, q: np.ndarray, normal_axis: np.ndarray) -> np.ndarray:
-    """Linear RGB albedo float32 (N, 3) of points q (N, 3) on surfaces ``surface`` (N,).
-
-    q is in the surface's local frame (metres); normal_axis (N,) is the local axis the hit face is
-    perpendicular to (planks and tiles lie in that face).
-    """
+    """Linear RGB albedo float32 (N, 3) of points q (N, 3), in metres in the frames of their surfaces ``surface``
+    (N,); normal_axis (N,) is the local axis the hit face is perpendicular to (planks and tiles lie in that face)."""
     out = np.zeros((len(q), 3), np.float32)
     kinds = table.kind[surface]
     for kind in np.unique(kinds):
         sel = np.flatnonzero(kinds == kind)
-        s = surface[sel]
-        fields = {name: getattr(table, name)[s] for name in
-                  ("color_a", "color_b", "scale", "contrast", "axis", "variant", "seed", "half")}
+        fields = {name: column[surface[sel]] for name, column in vars(table).items()}
         out[sel] = _pattern(int(kind), q[sel].astype(np.float32), normal_axis[sel], fields)
     return np.clip(out, 0.0, 1.0)

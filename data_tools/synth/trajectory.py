@@ -1,11 +1,6 @@
-"""Handheld-scan-like camera paths through a procedural room.
-
-The camera walks a smooth arc of an ellipse (a third to a full turn) or a straight line over free
-floor at 1.0-1.85 m, wobbling a little in position, height and roll, and looks outward across the room
-(or to one side of its walk) at a target near the far side that drifts left and right, at a height
-drawn per path (so pitch varies from level to steeply down), as a person scanning a room does. Consecutive
-views are a few degrees apart, so neighbours overlap strongly. Every camera centre stays inside
-the room, away from the walls, and outside every box grown by a safety margin.
+"""Handheld-scan-like camera paths through a procedural room (docs/data.md, "Camera paths"): an arc of an ellipse or
+a straight walk over free floor, wobbling in position, height and roll, looking out across the room; every camera
+centre stays inside the room, away from the walls and outside every box grown by a margin.
 """
 
 from __future__ import annotations
@@ -15,16 +10,12 @@ import math
 import numpy as np
 
 from sray.data_tools.synth import domains
-from sray.data_tools.synth.geometry import PackedBoxes
+from sray.data_tools.synth.geometry import PackedBoxes, in_frame
 
-HEIGHT_RANGE = (1.0, 1.85)
-"""Camera height band of training scans in metres."""
-WALL_CLEARANCE = 0.35
-"""Minimum distance of a camera centre from any wall, floor or ceiling (metres)."""
-BOX_MARGIN = 0.25
-"""Minimum distance of a camera centre from every box (metres, per axis)."""
-BODY_RADIUS = 0.25
-"""How far the scanning person's standing point keeps from furniture footprints (metres)."""
+HEIGHT_RANGE = (1.0, 1.85)  # camera height band of training scans, metres
+WALL_CLEARANCE = 0.35  # least distance of a camera centre from any wall, floor or ceiling, metres
+BOX_MARGIN = 0.25  # least distance of a camera centre from every box, metres per axis
+BODY_RADIUS = 0.25  # how far the scanning person's standing point keeps from furniture footprints, metres
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.ndarray:
@@ -52,10 +43,8 @@ def _wobble(rng: np.random.Generator, s: np.ndarray, amplitude: float, cycles: t
 
 def camera_valid(centres: np.ndarray, size: tuple[float, float, float], boxes: PackedBoxes,
                  standing: bool = False) -> np.ndarray:
-    """bool (N,): camera centres (N, 3) inside the room with clearance and outside every grown box.
-
-    With ``standing`` the centre must also be above free floor: outside the floor footprint of every
-    box taller than a rug, grown by the scanning person's reach (:data:`BODY_RADIUS`).
+    """bool (N,): camera centres (N, 3) inside the room with clearance and outside every grown box; with
+    ``standing`` also above free floor (off every footprint of a box taller than a rug, grown by :data:`BODY_RADIUS`).
     """
     hi = np.asarray(size)
     ok = np.all((centres >= WALL_CLEARANCE) & (centres <= hi - WALL_CLEARANCE), axis=1)
@@ -70,10 +59,8 @@ def camera_valid(centres: np.ndarray, size: tuple[float, float, float], boxes: P
 
 def _near_footprint(points: np.ndarray, boxes: PackedBoxes, radius: float) -> np.ndarray:
     """bool (N, P): a floor point within ``radius`` (per axis, in the box frame) of a box footprint."""
-    rel = points[:, None, :2] - boxes.center[None, :, :2]
-    c, s = np.cos(boxes.yaw)[None, :], np.sin(boxes.yaw)[None, :]
-    lx, ly = c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]
-    return (np.abs(lx) <= boxes.half[None, :, 0] + radius) & (np.abs(ly) <= boxes.half[None, :, 1] + radius)
+    local = in_frame(points[:, None, :] - boxes.center[None, :, :], np.cos(boxes.yaw), np.sin(boxes.yaw))
+    return np.all(np.abs(local[..., :2]) <= boxes.half[None, :, :2] + radius, axis=2)
 
 
 def _arc(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndarray
@@ -95,8 +82,7 @@ def _walk(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndar
     """Floor positions and headings of a straight walk (1-2.5 m) looking to one side of the walking line."""
     lx, ly, _ = size
     start = np.array([rng.uniform(0.3 * lx, 0.7 * lx), rng.uniform(0.3 * ly, 0.7 * ly)])
-    direction = float(rng.uniform(0, 2 * math.pi))
-    length = float(rng.uniform(1.0, 2.5))
+    direction, length = float(rng.uniform(0, 2 * math.pi)), float(rng.uniform(1.0, 2.5))
     x = start[0] + (s - 0.5) * length * math.cos(direction) + _wobble(rng, s, 0.05, (1.5, 4.0))
     y = start[1] + (s - 0.5) * length * math.sin(direction) + _wobble(rng, s, 0.05, (1.5, 4.0))
     side = float(rng.choice([-1.0, 1.0])) * float(rng.uniform(0.35, 1.75))
@@ -105,16 +91,11 @@ def _walk(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndar
 
 def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_views: int
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One random path: eyes (n, 3), look-at targets (n, 3) and roll angles (n,) in radians.
-
-    Path style: an arc of an ellipse (70 %) or a straight walk (30 %); the camera's base height and
-    the height it looks at (its pitch) are drawn per path: in the training bands, or in a geometry-shifted
-    room in ``domains.HELD_OUT_CAMERA`` and ``domains.HELD_OUT_LOOK`` (low, looking level or up).
-    """
+    """One random path, an arc (70 %) or a walk: eyes (n, 3), look-at targets (n, 3) and roll angles (n,) in
+    radians; base height and look-at height are drawn per path (held-out bands in a geometry-shifted room)."""
     lx, ly, _ = size
     shifted = domains.current().geometry_shift
-    heights = domains.HELD_OUT_CAMERA if shifted else HEIGHT_RANGE
-    look = domains.HELD_OUT_LOOK if shifted else (0.2, 1.3)
+    heights, look = (domains.HELD_OUT_CAMERA, domains.HELD_OUT_LOOK) if shifted else (HEIGHT_RANGE, (0.2, 1.3))
     s = np.linspace(0.0, 1.0, n_views)
     x, y, heading = (_arc if rng.random() < 0.7 else _walk)(rng, size, s)
     z = np.clip(float(rng.uniform(heights[0] + 0.05, heights[1] - 0.1)) + _wobble(rng, s, 0.1, (1.0, 4.0)), *heights)
@@ -129,12 +110,8 @@ def _candidate(rng: np.random.Generator, size: tuple[float, float, float], n_vie
 
 def scan_path(rng: np.random.Generator, size: tuple[float, float, float], boxes: PackedBoxes,
               n_views: int, attempts: int = 1500) -> np.ndarray:
-    """A valid handheld-style path of ``n_views`` cameras: float64 (n_views, 4, 4) c2w, OpenCV axes.
-
-    The first two thirds of the attempts require the person to stand on free floor; the rest only
-    keep the camera clear of every box (a scan reaching over a bed or table). Raises RuntimeError
-    when no valid path is found.
-    """
+    """A valid path of ``n_views`` cameras, float64 (n_views, 4, 4) c2w in OpenCV axes; RuntimeError when none is
+    found. The first two thirds of the attempts need the person on free floor, the rest may reach over furniture."""
     if n_views < 1:
         raise ValueError(f"n_views must be >= 1, got {n_views}")
     for attempt in range(attempts):

@@ -1,18 +1,7 @@
-"""One procedural world: its settings (:class:`World`) and :func:`make_world`, which generates its scenes,
-shards them and verifies the shards, or reuses a folder that already holds it.
-
-A world folder holds ``scenes/`` (as ``sray data synth`` writes them) and ``shards/`` (as ``sray data shard``
-writes them). The shards' ``manifest.json``, written last, is the record of a complete world: it lists every
-scene with its role, views and image size, each scene's seed (``extra["seed"]``) and the neighbours kept per
-view, so every field of :class:`World` can be read back from it, also in folders made before this module.
-
-* no manifest yet (a new or interrupted folder): the scenes are generated (those already written with the same
-  parameters are skipped), checked and sharded (shards already written are left alone);
-* a manifest recording the asked world: reused as it is, even if the generator has changed since, so models
-  trained on it stay comparable with later runs;
-* a manifest recording another world: refused, naming the folder, the fields and the fix.
-
-Either way the shards are then verified against the manifest's sizes and sha256 checksums.
+"""One procedural world: its settings (:class:`World`) and :func:`make_world`, which generates, shards and verifies
+it in a folder (``scenes/``, ``shards/``; the shards' manifest, written last, records every field of :class:`World`).
+A folder without a manifest is (re)generated, skipping finished scenes and shards; one recording the asked world is
+reused even after the generator changed (models trained on it stay comparable); one recording another is refused.
 """
 
 from __future__ import annotations
@@ -25,8 +14,7 @@ from sray.data_tools.shards.writer import write_shards
 from sray.data_tools.synth import domains
 from sray.data_tools.synth.dataset import generate_dataset, scene_name, scene_seed
 
-SCENES, SHARDS = "scenes", "shards"
-"""Sub-folders of a world folder: the scenes (sray layout) and their shards."""
+SCENES, SHARDS = "scenes", "shards"  # sub-folders of a world folder
 
 
 @dataclass(frozen=True)
@@ -34,27 +22,20 @@ class World:
     """The settings that determine a procedural world: same settings, same files."""
 
     train_scenes: int
-    """Training scenes (``synth_train_000``, ...)."""
     test_scenes: int
-    """Unseen test scenes (``synth_test_000``, ...)."""
     views: int
     """Views per scene (a test scene needs at least 20: 8 source, 8 finetune, 4 test)."""
     height: int
-    """Image height in pixels."""
     width: int
-    """Image width in pixels."""
     seed: int = 0
     """Dataset seed; each scene's own seed is derived from it."""
     neighbours: int = 32
     """Ranked source views kept per view in the shards (a loader's ``top_k`` must not exceed it)."""
     split: str = "in-distribution"
-    """Region the test scenes are drawn from, one of ``domains.SPLITS``: ``in-distribution``, ``validation`` (the
-    training distribution, rooms of their own), ``appearance-shift`` or ``geometry-shift`` (held-out regions no
-    training room samples; docs/data.md, "Shifted test splits"). Training scenes are always in-distribution."""
-
+    """Region the test scenes are drawn from, one of ``domains.SPLITS``; training scenes are always in-distribution."""
     randomise: float = 0.0
-    """Strength (0-1) of the appearance randomisation of the training scenes (per surface, per room, per view;
-    ``domains``, docs/data.md); 0 = off. Test scenes never get it: worlds that differ only here share their tests."""
+    """Strength (0-1) of the training scenes' appearance randomisation (``domains``); 0 = off. Test scenes never get
+    it: worlds that differ only here share their tests."""
 
     def __post_init__(self) -> None:
         """ValueError naming the valid splits or the randomisation's range."""
@@ -68,9 +49,8 @@ SPLIT_RESULTS = {"zero_shot": "in-distribution", "validation": "validation",
 
 
 def evaluation_worlds(world: World, rooms: int = 16) -> dict[str, World]:
-    """The evaluation worlds of a training world by result name (:data:`SPLIT_RESULTS`): ``rooms`` test rooms each
-    and no training room, at its views, image size, seed and neighbours, in-distribution, validation,
-    appearance-shifted and geometry-shifted. None of their rooms is one of ``world``'s training rooms."""
+    """The evaluation worlds of a training world by result name (:data:`SPLIT_RESULTS`): ``rooms`` test rooms each,
+    no training room, at its views, image size, seed and neighbours."""
     return {name: replace(world, train_scenes=0, test_scenes=rooms, split=split)
             for name, split in SPLIT_RESULTS.items()}
 
@@ -109,13 +89,11 @@ def _one(values: set[int]) -> int | list[int]:
 
 
 def make_world(world: World, root: Path, progress: bool = True, workers: int = 1) -> Path:
-    """The verified shard folder of ``world`` under ``root`` (``root/scenes``, ``root/shards``): generated,
-    checked by ``sray data check`` and sharded when ``root`` holds no complete world, reused when it holds this one.
+    """The verified shard folder of ``world`` under ``root``: generated, checked and sharded when ``root`` holds no
+    complete world, reused when it holds this one; ``workers`` scenes are rendered at once (same files).
 
-    Raises :class:`WorldFolderError` when ``root`` holds another world or damaged shards (naming the folder, the
-    problem and the fix), and :class:`~sray.data_tools.shards.writer.DatasetRejected` when the generated scenes
-    fail ``sray data check``. ``progress`` shows the generator's and the shard writer's progress bars;
-    ``workers`` scenes are rendered at once (:func:`~sray.data_tools.synth.dataset.generate_dataset`: same files).
+    Raises :class:`WorldFolderError` when ``root`` holds another world or damaged shards, and
+    :class:`~sray.data_tools.shards.writer.DatasetRejected` when the generated scenes fail ``sray data check``.
     """
     root = Path(root)
     shards = root / SHARDS
