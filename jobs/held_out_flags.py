@@ -1,10 +1,5 @@
-"""The held-out render flags of ``sray eval`` and ``sray render``, parsed once into a ``HeldOutRender``
-(``sray.platform.config.held_out_render``, the setting type validation and the fleet hold as ``data.held_out`` and
-``finetune.held_out``).
-
-``--render``, ``--fast-stride`` and ``--fast-confidence`` record that they were typed (:class:`GivenFlag`), so that
-``sray eval`` can refuse them for a method that renders one way only.
-"""
+"""The held-out render flags of ``sray eval`` and ``sray render``, parsed into a ``HeldOutRender`` (the setting
+validation and the fleet hold too); the fast-render flags record that they were typed (:class:`GivenFlag`)."""
 
 from __future__ import annotations
 
@@ -14,12 +9,10 @@ from sray.jobs.methods.flags import GivenFlag
 from sray.platform.config.held_out_render import HELD_OUT_RENDERS, HeldOutRender
 
 DEFAULTS = HeldOutRender()
-"""The commands' defaults: 8 sources, whole images, the fast render at every 8th pixel."""
 
 
 def add_held_out_flags(p: argparse.ArgumentParser, scored_stride: bool) -> None:
-    """Add ``--n-source``, ``--render``, ``--fast-stride``, ``--fast-confidence``, ``--fast-temperature`` and, with
-    ``scored_stride`` (a command that scores pixels, ``sray eval``), ``--stride``; defaults :data:`DEFAULTS`'."""
+    """Add the held-out render flags to ``p``, with ``--stride`` for a command that scores pixels."""
     p.add_argument("--n-source", type=int, default=DEFAULTS.n_source,
                    help="fixed source views per view, top-ranked (default %(default)s, the paper's protocol)")
     if scored_stride:
@@ -39,8 +32,7 @@ def add_held_out_flags(p: argparse.ArgumentParser, scored_stride: bool) -> None:
 
 
 def held_out_from_args(args: argparse.Namespace) -> HeldOutRender:
-    """The ``HeldOutRender`` of the parsed flags (``--stride`` 1 where the command has none); ValueError naming the
-    flag and the fix."""
+    """The ``HeldOutRender`` of the parsed flags; ValueError naming the flag and the fix."""
     if args.n_source < 1:
         raise ValueError(f"--n-source is {args.n_source}; give at least one source view")
     settings = HeldOutRender(n_source=args.n_source, stride=getattr(args, "stride", DEFAULTS.stride),

@@ -10,7 +10,6 @@ from sray.jobs.held_out_flags import add_held_out_flags, held_out_from_args
 from sray.jobs.tracked_run_flags import add_tracked_run_flags, print_tracked_run
 
 DEFAULT_FRAMES = 60
-"""Frames of a built path (``--path``) unless ``--frames`` says otherwise."""
 
 
 def size_arg(text: str) -> tuple[int, int]:

@@ -1,8 +1,5 @@
-"""``sray submit``: send a ``sray train`` job to a Ray cluster's Jobs API; ``--wait`` follows it.
-
-The job's driver runs on the head node and its Ray Train workers on the worker nodes; paths are
-made absolute here (the driver starts in another folder) and must be on storage the nodes share.
-"""
+"""``sray submit``: send a ``sray train`` job to a Ray cluster's Jobs API; ``--wait`` follows it. Paths are made
+absolute here (the driver starts in another folder) and must be on storage the nodes share."""
 
 from __future__ import annotations
 
@@ -17,7 +14,7 @@ from sray.platform.common.fault_hook import propagated_env
 
 FORWARDED = {"recipe": "--recipe", "workers": "--workers", "gpus_per_worker": "--gpus-per-worker",
              "precision": "--precision", "tracker": "--tracker", "tracking_uri": "--tracking-uri"}
-"""Flags passed on to ``sray train`` as given (paths and the job name are handled apart)."""
+"""Flags passed on to ``sray train`` as given."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,8 +48,7 @@ def train_command(args: argparse.Namespace, name: str, output_dir: Path, data: P
 
 
 def job_runtime_env(working_dir: str | None) -> dict[str, object] | None:
-    """The job's Ray runtime env: the shipped folder, and ``SRAY_FAULTS`` when set here (a drill's faults
-    reach the job's driver, which forwards them to its workers)."""
+    """The job's Ray runtime env: the shipped folder, and ``SRAY_FAULTS`` when set here (a drill's faults)."""
     env: dict[str, object] = {"working_dir": str(Path(working_dir).resolve())} if working_dir else {}
     if propagated_env():
         env["env_vars"] = propagated_env()

@@ -1,6 +1,4 @@
-"""The flags of a command that renders with a checkpoint and logs what it wrote as one tracked run (``sray render``,
-``sray label``): the torch device, the tracker and its store, the experiment, and ``--no-track``; and the line
-that tells where the tracked run went."""
+"""The flags of a command that logs what it wrote as one tracked run, and the line that tells where the run went."""
 
 from __future__ import annotations
 
@@ -9,8 +7,7 @@ from typing import Any
 
 
 def add_tracked_run_flags(p: argparse.ArgumentParser, experiment: str) -> None:
-    """Add ``--device``, ``--tracker``, ``--tracking-uri``, ``--experiment`` (default ``experiment``) and
-    ``--no-track`` to ``p``."""
+    """Add ``--device``, ``--tracker``, ``--tracking-uri``, ``--experiment`` and ``--no-track`` to ``p``."""
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
     p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "

@@ -1,5 +1,4 @@
-"""The Pareto chart of ``sray bench speed-accuracy``: mIoU against CPU seconds per view, S-Ray's render settings and
-the other registered methods' zero-shot models (drawn with their registry records' zero-shot styles)."""
+"""The Pareto chart of ``sray bench speed-accuracy``: mIoU against CPU seconds per view."""
 
 from __future__ import annotations
 
@@ -14,15 +13,12 @@ from sray.jobs.bench.speed_accuracy import pareto
 from sray.platform.common.eval_protocol import inputs_name
 from sray.platform.finetune.methods.registry import get_method
 
-FAST, FULL = "tab:blue", "tab:gray"
-"""Colours of S-Ray's fast-render and full-render settings."""
+FAST, FULL = "tab:blue", "tab:gray"  # S-Ray's fast-render and full-render settings
 
 
 def chart(rows: list[dict], path: Path, protocol: str) -> Path:
-    """Pareto chart: mIoU (%) against CPU seconds per view (log scale), the front joined by a line. Points are
-    numbered and a key beside the axes names them with their inputs (names of nearby rows would overlap); another
-    method's row is drawn in its zero-shot style (``Method.zero_shot``, else its ``style``) and named in the legend;
-    the protocol is wrapped into the title."""
+    """mIoU (%) against CPU seconds per view (log scale), the front joined by a line, numbered points named in a key
+    (nearby names would overlap), another method's row in its zero-shot style, the protocol in the title."""
     fig = Figure(figsize=(11, 6.5))
     FigureCanvasAgg(fig)
     ax = fig.add_axes((0.07, 0.1, 0.56, 0.74))

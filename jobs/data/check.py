@@ -52,5 +52,4 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _scene_names(root: Path) -> list[str]:
-    """Scene names of a dataset that passed the check (dataset.json if present, else scene folders)."""
     return [p.name for p in list_scenes(root) if not p.name.startswith(".")]

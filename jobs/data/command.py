@@ -12,7 +12,7 @@ DATA_SUBCOMMAND_MODULES = (
     "sray.jobs.data.shard",
     "sray.jobs.data.stats",
 )
-"""Each module exposes ``register(subparsers)`` for one ``sray data`` verb."""
+"""Each exposes ``register(subparsers)`` for one ``sray data`` verb."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -20,7 +20,6 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def _default_size(size_hw: tuple[int, int] | None) -> str:
-    """A reader's default output size as the CLI writes it (``320x240``)."""
     return "the source's size" if size_hw is None else f"{size_hw[1]}x{size_hw[0]}"
 
 
