@@ -120,9 +120,8 @@ def run_demo(args: argparse.Namespace) -> int:
     fleet_cfg.transfer.segmenter = str(segmenter_dir)
     scenes_fleet = scenes_test[:args.fleet_scenes] if args.fleet_scenes > 0 else scenes_test
     _say(f"8/9 finetune fleet on {len(scenes_fleet)} of the {len(scenes_test)} unseen scenes "
-         f"({', '.join(scenes_fleet)}): S-Ray (RGB, from the trained model), "
-         f"Semantic-NeRF (RGB, from scratch), S-Ray given the source depth (RGB-D, the same model) and 2d-transfer "
-         f"(RGB-D, from the segmenter of stage 6: "
+         f"({', '.join(scenes_fleet)}): S-Ray (RGB, from the trained model), Semantic-NeRF (RGB, from scratch), S-Ray "
+         "given the source depth (RGB-D, the same model) and 2d-transfer (RGB-D, from the segmenter of stage 6: "
          f"{segmenter.training['cpu_seconds_budget']:.0f} CPU s of pretraining against S-Ray's {sray_cpu_s:.0f}), "
          f"{args.finetune_seconds:.0f} s budget each, early stopping on held-out mIoU")
     results = run_fleet(fleet_cfg, checkpoint, shards, scenes_fleet, args.out / "fleet", "", FLEET_METHODS)

@@ -50,9 +50,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"the fleet finetunes the first N unseen scenes (default {FLEET_SCENES}; 0 = every one); the "
                         "zero-shot evaluation scores them all")
     p.add_argument("--eval-stride", type=int, default=2,
-                   help="score every n-th pixel in each direction in the zero-shot evaluation "
-                        "(the fleet's held-out curves use twice this); 1 = full images, the only stride "
-                        "with SSIM")
+                   help="score every n-th pixel in each direction in the zero-shot evaluation (the fleet's held-out "
+                        "curves use twice this); 1 = full images, the only stride with SSIM")
     p.add_argument("--clip-frames", type=int, default=24,
                    help="frames of the zero-shot fly-through video rendered after the evaluation")
     p.add_argument("--seed", type=int, default=0)

@@ -9,9 +9,8 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from sray.jobs.held_out_flags import add_held_out_flags, held_out_from_args
 from sray.jobs.methods.flags import GivenFlag, refusal, unread_flags
-from sray.jobs.tracked_run_flags import print_tracked_run
+from sray.jobs.render_flags import add_held_out_flags, held_out_from_args, print_tracked_run
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import eval_method_names, get_method
 

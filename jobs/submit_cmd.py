@@ -79,11 +79,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"sray submit: the Jobs API at {args.address} refused the job ({reason}); check --address "
               "(`sray cluster status`) and the Ray token (RAY_AUTH_MODE=token, RAY_AUTH_TOKEN_PATH)", file=sys.stderr)
         return 2
-    print(f"[sray] submitted {job_id}: job {name}\n[sray] {entrypoint}\n"
-          f"[sray] follow: ray job logs --follow {job_id} --address {args.address}\n"
-          f"[sray] stop:   ray job stop {job_id} --address {args.address}\n"
-          f"[sray] resume: sray submit --resume {name} --set run.output_dir={Path(cfg.run.output_dir).resolve()} "
-          f"--address {args.address}", flush=True)
+    print(f"[sray] submitted {job_id}: job {name}\n[sray] {entrypoint}\n[sray] follow: ray job logs --follow {job_id} "
+          f"--address {args.address}\n[sray] stop:   ray job stop {job_id} --address {args.address}\n[sray] resume: "
+          f"sray submit --resume {name} --set run.output_dir={Path(cfg.run.output_dir).resolve()} --address "
+          f"{args.address}", flush=True)
     if not args.wait:
         return 0
     try:

@@ -58,9 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--views-per-scene", type=int, default=2,
                        help="test views rendered per scene and setting (0: every test view)")
     speed.add_argument("--settings", nargs="+", default=None, metavar="NAME",
-                       help="measure only these settings, by their table names, the first being the row the others "
-                            "are compared with (default: all; a chosen set replaces the 'chosen settings' table "
-                            "and chart)")
+                       help="measure only these settings, by their table names, the first being the row the others are "
+                            "compared with (default: all; a chosen set replaces the 'chosen settings' table and chart)")
     speed.add_argument("--methods", nargs="+", default=[], choices=other_methods(), metavar="METHOD",
                        help="also time these registered methods' zero-shot models (choices: "
                             f"{', '.join(other_methods())}), each on the same views and sources as S-Ray's setting "

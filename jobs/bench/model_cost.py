@@ -165,19 +165,18 @@ def _training_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
         "One step = encode the source views, render coarse + fine, semantic + photometric loss, backward, fused Adam "
         "(the optimizer training uses); synthetic scene; 'first step' is the warm-up, 's / step' the median over "
         f"{sz.rounds} fresh process(es) (rows alternating round by round) of each process's median step; peak RSS is "
-        f"the process's VmHWM, torch runtime included ({res['params'] / 1e6:.2f} M parameters). impl: `runtime.impl` "
-        "— `reference` is the unoptimised path of this same commit, `fast` the gathered, transpose-free one "
+        f"the process's VmHWM, torch runtime included ({res['params'] / 1e6:.2f} M parameters). impl: `runtime.impl` — "
+        "`reference` is the unoptimised path of this same commit, `fast` the gathered, transpose-free one "
         "(docs/performance.md); both compute the same values (tests/test_model_fast_path.py); 'compiled': the coarse "
-        "and fine networks through `torch.compile` (GPU rows; its compilation is in 'first step'). 'samples (fine "
-        "pass sees)': `fine_samples` union (the fine pass re-evaluates the coarse depths, 64 + 128 = 192 evaluations "
-        "per ray) or new (the model default: only the resampled ones, 64 + 64 = 128, as the official code). Rays per "
+        "and fine networks through `torch.compile` (GPU rows; its compilation is in 'first step'). 'samples (fine pass "
+        "sees)': `fine_samples` union (the fine pass re-evaluates the coarse depths, 64 + 128 = 192 evaluations per "
+        "ray) or new (the model default: only the resampled ones, 64 + 64 = 128, as the official code). Rays per "
         "piece: the loss is computed over pieces of that many rays, each piece's gradient taken before the next is "
         "rendered (`runtime.train_piece`, `model/piecewise_loss.py`): the same loss and gradients as the whole batch "
         "at once (tests/test_piecewise_loss.py); the reference rows compute the whole batch in one piece. The paper's "
         "public code is compared in a run of its own beside sray's default step (`--official-side-by-side`, its own "
         "table). CPU allocator: THP_MEM_ALLOC_ENABLE=1 (read by PyTorch at start-up) backs large allocations with 2 "
-        "MiB huge pages. The machine is shared: absolute times are noisy, ratios within one run are what carries "
-        "over.")
+        "MiB huge pages. The machine is shared: absolute times are noisy, ratios within one run are what carries over.")
     return "Training step: time and memory", "\n".join(lines), notes
 
 

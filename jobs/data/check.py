@@ -37,8 +37,7 @@ def run(args: argparse.Namespace) -> int:
             print(file)
             for p in items:
                 print(f"  - {p.what}\n    fix: {p.fix}")
-        print(f"{len(problems)} problem{'s' * (len(problems) != 1)} in {len(by_file)} "
-              f"file{'s' * (len(by_file) != 1)}")
+        print(f"{len(problems)} problem{'s' * (len(problems) != 1)} in {len(by_file)} file{'s' * (len(by_file) != 1)}")
         return 1
     scene_files = [args.path / "scene.json"] if (args.path / "scene.json").exists() else \
         [args.path / name / "scene.json" for name in _scene_names(args.path)]

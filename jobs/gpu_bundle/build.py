@@ -108,9 +108,8 @@ def assemble(pins: list[Pin], wheels: Path, out: Path, python_version: str, limi
             largest = ", ".join("{file} {mib:.1f} MiB".format(file=e["file"], mib=e["bytes"] / 2**20)
                                 for e in sorted(entries, key=lambda e: -e["bytes"])[:3])
             raise BundleError(f"the bundle would weigh {total / 2**20:.1f} MiB, over its {limit_mib:g} MiB limit "
-                              f"(largest: {largest}): "
-                              "leave out more of what sray never loads (DROP in jobs/gpu_bundle/build.py, LEFT_OUT "
-                              "in jobs/gpu_bundle/resolve.py)")
+                              f"(largest: {largest}): leave out more of what sray never loads (DROP in "
+                              "jobs/gpu_bundle/build.py, LEFT_OUT in jobs/gpu_bundle/resolve.py)")
         replace_dir(work, out, out.with_name(f".{out.name}.old{os.getpid()}"))
     finally:
         shutil.rmtree(work, ignore_errors=True)

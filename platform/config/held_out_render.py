@@ -1,6 +1,6 @@
 """How a held-out view is rendered and scored: one setting type for validation (``data.held_out``), the finetune
 fleet's held-out scores (``finetune.held_out``), ``sray eval`` and ``sray render`` (their ``--n-source``,
-``--stride``, ``--render``, ``--fast-stride`` and ``--fast-confidence`` flags, ``sray.jobs.held_out_flags``).
+``--stride``, ``--render``, ``--fast-stride`` and ``--fast-confidence`` flags, ``sray.jobs.render_flags``).
 
 The fast render (``sray.model.fast_render``) renders every ``fast_stride``-th pixel of the scored pixel grid and
 upsamples, and gives a ray a fine pass only where its coarse pass is below ``fast_confidence``. Validation and the
