@@ -116,7 +116,7 @@ def test_every_allowed_lazy_import_is_still_needed() -> None:
              if not reason.strip() or not (REPO / rel).is_file() or not function_imports(REPO / rel)]
     assert not stale, f"drop these from LAZY_IMPORTS_ALLOWED: {stale}"
     entries = command_entry_points(REPO)
-    assert entries["jobs/train_cmd.py"] == {"_train"} and entries["jobs/data/stats.py"] == {"_run"}, entries
+    assert entries["jobs/train_cmd.py"] == {"_train"} and entries["jobs/data/convert.py"] == {"run"}, entries
 
 
 def test_the_lazy_import_scan_finds_violations(tmp_path: Path) -> None:
