@@ -1,13 +1,6 @@
-"""The ``sray`` console script: one parser, a few shallow subcommands.
-
-Each subcommand module exposes ``register(subparsers)``, which adds its parser and sets
-``func`` to a callable taking the parsed namespace and returning an exit code. What only a running
-command needs (Ray, MLflow, the training stack) is imported inside that callable, its entry function,
-so that ``sray --help`` stays fast (docs/architecture.md, "Imports at the top of a module").
-
-Commands outside the product are plug-ins: every entry point of the group :data:`PLUGIN_GROUP` is a
-``register(subparsers)`` function, called after the product's own (the lab's ``sray lab``: ``sray.lab.cli``).
-"""
+"""The ``sray`` console script. Each subcommand module exposes ``register(subparsers)``, which sets ``func`` to its
+entry function (namespace -> exit code); what only a running command needs is imported there, so ``sray --help``
+stays fast. Plug-ins (the lab's ``sray lab``) register through the entry points of :data:`PLUGIN_GROUP`."""
 
 from __future__ import annotations
 
@@ -23,7 +16,6 @@ SUBCOMMAND_MODULES = ("sray.jobs.data.command", "sray.jobs.train_cmd", "sray.job
                       "sray.jobs.demo_cmd", "sray.jobs.ui_cmd", "sray.jobs.cluster_cmd", "sray.jobs.migrate_cmd")
 """Modules that register subcommands, in the order `sray --help` lists them."""
 PLUGIN_GROUP = "sray.commands"
-"""Entry-point group of the commands that installed plug-ins add (pyproject.toml: ``lab = "sray.lab.cli:register"``)."""
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -8,7 +8,6 @@ import sys
 from pathlib import Path
 
 DEFAULT_DIR = Path("outputs/cluster")
-"""Default cluster folder: database, artifacts, shared storage, Ray temp dirs, logs."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:

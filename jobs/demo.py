@@ -1,16 +1,7 @@
-"""The README's main job, run by ``sray demo`` on the embedded defaults.
-
-procedural scenes -> ``sray data check`` -> shards (+ verification) -> a picture of a loader
-sample -> a short S-Ray training run on local Ray with two CPU workers, tracked in MLflow -> the 2D
-segmenter of ``2d-transfer`` trained on the same train scenes for the CPU seconds that training spent (capped
-by ``--segmenter-cpu-seconds``) -> zero-shot evaluation on the unseen scenes -> a short fly-through video of
-one of them -> a finetune fleet (S-Ray, Semantic-NeRF, and the RGB-D pair: S-Ray given the source depth beside
-2d-transfer) on them -> accuracy-against-time charts -> the results table and the ``sray ui`` command. Each
-printed table ends with its protocol line (sources, stride, render mode, inputs), and the fleet's table names each
-row's inputs.
-Everything goes under ``--out`` (default ``outputs/demo``); the MLflow store is the working
-directory's default SQLite store.
-"""
+"""The README's main job, run by ``sray demo`` on the embedded defaults, everything under ``--out``: procedural scenes
+-> checked shards -> a picture of a loader sample -> a short S-Ray training run on local Ray, tracked in MLflow -> the
+2D segmenter of ``2d-transfer`` for the CPU seconds that training spent -> zero-shot evaluation on the unseen scenes
+-> a fly-through video -> a finetune fleet on them -> charts, the results table and the ``sray ui`` command."""
 
 from __future__ import annotations
 
@@ -19,15 +10,20 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
+from sray.data_tools.atomic import save_png
+from sray.data_tools.loader.sample_types import TrainSample
 from sray.data_tools.loader.shard_loader import make_train_loader
 from sray.data_tools.shards.manifest import read_manifest, unseen_scenes
 from sray.data_tools.shards.writer import DatasetRejected
 from sray.data_tools.synth.world import SCENES, World, WorldFolderError, make_world
 from sray.jobs.bench.segmenter import run_segmenter
 from sray.jobs.bench.speed_accuracy import Setting, measure
-from sray.jobs.sample_picture import write_sample_picture
 from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.folders import load_checkpoint
 from sray.platform.config.fleet_config import FleetConfig
@@ -41,14 +37,12 @@ from sray.platform.render.flythrough import Flythrough
 from sray.platform.render.plan import plan_flythrough
 from sray.platform.render.tracked import tracked_flythrough
 from sray.platform.train.launcher import launch_training
-
+from sray.platform.viz.palette import palette
 
 RECIPE = "synth-demo"
-"""The recipe S-Ray trains with; the 2D segmenter takes its data settings (sources per step, neighbours,
-augmentation, class balance) and feature width."""
+"""The recipe S-Ray trains with; the 2D segmenter takes its data settings and feature width."""
 FLEET_METHODS = ["sray", "semantic-nerf", "2d-transfer"]
-"""The per-scene methods the demo asks its fleet for; the fleet adds ``sray-rgbd`` beside the RGB-D 2d-transfer
-(``registry.with_depth_twins``)."""
+"""The fleet's methods (it adds ``sray-rgbd`` beside the RGB-D 2d-transfer)."""
 
 
 def _say(msg: str) -> None:
@@ -67,8 +61,7 @@ def _sray_command() -> str:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    """Run every stage of ``sray demo`` (``args``: its parsed flags), printing where each result went; exit 1 if
-    the data fails its checks."""
+    """Run every stage of ``sray demo``, printing where each result went; exit 1 if the data fails its checks."""
     t0 = time.perf_counter()
     world = World(train_scenes=args.train_scenes, test_scenes=args.test_scenes, views=args.views,
                   height=args.height, width=args.width, seed=args.seed)
@@ -127,9 +120,8 @@ def run_demo(args: argparse.Namespace) -> int:
     fleet_cfg.transfer.segmenter = str(segmenter_dir)
     scenes_fleet = scenes_test[:args.fleet_scenes] if args.fleet_scenes > 0 else scenes_test
     _say(f"8/9 finetune fleet on {len(scenes_fleet)} of the {len(scenes_test)} unseen scenes "
-         f"({', '.join(scenes_fleet)}): S-Ray (RGB, from the trained model), "
-         f"Semantic-NeRF (RGB, from scratch), S-Ray given the source depth (RGB-D, the same model) and 2d-transfer "
-         f"(RGB-D, from the segmenter of stage 6: "
+         f"({', '.join(scenes_fleet)}): S-Ray (RGB, from the trained model), Semantic-NeRF (RGB, from scratch), S-Ray "
+         "given the source depth (RGB-D, the same model) and 2d-transfer (RGB-D, from the segmenter of stage 6: "
          f"{segmenter.training['cpu_seconds_budget']:.0f} CPU s of pretraining against S-Ray's {sray_cpu_s:.0f}), "
          f"{args.finetune_seconds:.0f} s budget each, early stopping on held-out mIoU")
     results = run_fleet(fleet_cfg, checkpoint, shards, scenes_fleet, args.out / "fleet", "", FLEET_METHODS)
@@ -144,10 +136,8 @@ def run_demo(args: argparse.Namespace) -> int:
 
 def train_segmenter_stage(shards: Path, out: Path, cap: float, sray_cpu_s: float,
                           seed: int) -> tuple[SegmenterRecord, str]:
-    """Stage 6: train 2d-transfer's 2D segmenter on the train scenes of ``shards`` (their source pools: the ``train``
-    split minus held-out views) with :data:`RECIPE`'s data settings into folder ``out``, for ``sray_cpu_s`` (the CPU
-    seconds S-Ray's training spent) or ``cap`` when that is smaller and not 0. Returns its record and a note of the
-    budget it got and why."""
+    """Stage 6: train 2d-transfer's segmenter on the train scenes' source pools into ``out`` for ``sray_cpu_s`` (what
+    S-Ray's training spent) or ``cap`` when smaller and not 0; its record and a note of the budget and why."""
     budget = sray_cpu_s if cap == 0 else min(sray_cpu_s, cap)
     note = (f"{budget:.0f} CPU s, capped by --segmenter-cpu-seconds below the {sray_cpu_s:.0f} CPU s S-Ray's training "
             "spent" if budget < sray_cpu_s else f"{budget:.0f} CPU s, what S-Ray's training spent (equal CPU)")
@@ -158,8 +148,7 @@ def train_segmenter_stage(shards: Path, out: Path, cap: float, sray_cpu_s: float
 
 
 def _flythrough(checkpoint: Path, shards: Path, scene: str, out: Path, n_frames: int) -> Path:
-    """Render the zero-shot fly-through ``sray render`` makes by default (spline through the scene's cameras, fast
-    mode, 8 sources), ``n_frames`` long, tracked in the working directory's store; returns the WebM's path."""
+    """The WebM of ``sray render``'s default zero-shot fly-through, ``n_frames`` long, tracked in the default store."""
     plan = plan_flythrough(shards, scene, path="spline", n_frames=n_frames)
     net, about = render_model(checkpoint, None, scene)
     fly = Flythrough(net, plan, 8, FastRender())
@@ -169,11 +158,52 @@ def _flythrough(checkpoint: Path, shards: Path, scene: str, out: Path, n_frames:
 
 
 def _speed_line(checkpoint: Path, shards: Path, n_source: int) -> str:
-    """One line of ``sray bench speed-accuracy``: the full render against the fast render mode on the first
-    test view of each unseen scene (paired, whole images, ``n_source`` source views)."""
+    """One line of ``sray bench speed-accuracy``: full against fast render on each unseen scene's first test view."""
     full, fast = measure(checkpoint, shards, [Setting("full", n_source), Setting("fast", n_source, fast=FastRender())],
                          1, progress=False)
     return (f"[demo] speed vs accuracy (first test view per unseen scene, whole image): full render "
             f"{full['s_per_view']:.1f} s/view, mIoU {full['miou']:.1f}%; fast render {fast['s_per_view']:.2f} s/view "
             f"({full['s_per_view'] / fast['s_per_view']:.0f}x), mIoU {fast['miou']:.1f}% "
             f"({fast['miou'] - full['miou']:+.1f} points); more settings: sray bench speed-accuracy")
+
+
+def write_sample_picture(sample: TrainSample, class_names: list[str], path: Path, ignore_id: int = 255) -> Path:
+    """The sampled rays' colours and labels scattered over the query frame (the query image is not in a training
+    sample), beside the m source views."""
+    src = sample.sources.rgb.permute(0, 2, 3, 1).numpy()  # (m, H, W, 3)
+    m, h, w = src.shape[:3]
+    uv = sample.pixels.numpy()  # (R, 2)
+    labels = sample.target_label.numpy()  # (R,)
+    colours = sample.target_rgb.numpy()  # (R, 3)
+    pal = palette(len(class_names)) / 255.0
+    label_colours = np.where((labels == ignore_id)[:, None], 0.0, pal[np.minimum(labels, len(class_names) - 1)])
+
+    cols = max(m, 2)
+    fig = Figure(figsize=(3 * cols, 5.2))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, cols, squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, colour, title in ((axes[0, 0], colours, "query: sampled ray colours"),
+                              (axes[0, 1], label_colours, "query: sampled ray labels")):
+        ax.set_facecolor("0.85")
+        ax.axis("on")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.scatter(uv[:, 0], uv[:, 1], c=colour, s=6)
+        ax.set_xlim(-0.5, w - 0.5)
+        ax.set_ylim(h - 0.5, -0.5)
+        ax.set_title(title, fontsize=9)
+    present = sorted(int(c) for c in np.unique(labels) if c != ignore_id)
+    handles = [Line2D([], [], marker="s", ls="", color=pal[c], label=class_names[c]) for c in present]
+    if (labels == ignore_id).any():
+        handles.append(Line2D([], [], marker="s", ls="", color="black", label=f"ignore ({ignore_id})"))
+    axes[0, 2 if cols > 2 else 1].legend(handles=handles, loc="center", fontsize=7, frameon=False, ncol=2)
+    for i in range(m):
+        axes[1, i].imshow(src[i])
+        axes[1, i].set_title(f"source {i + 1}", fontsize=9)
+    fig.suptitle(f"scene {sample.scene}, query view {sample.query_id}: {len(uv)} rays, "
+                 f"{m} source views, depth range {sample.near:.2f}-{sample.far:.2f} m", fontsize=10)
+    fig.tight_layout()
+    save_png(fig, path, 100)
+    return path

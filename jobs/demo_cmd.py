@@ -9,22 +9,16 @@ from sray.platform.config.recipes import DEMO_STEPS
 
 
 SEGMENTER_CPU_CAP = 60.0
-"""Default of ``--segmenter-cpu-seconds``. Uncapped, the segmenter would get the CPU seconds of S-Ray's demo
-training, several more minutes of wall time on a 2-core machine; the cap keeps its stage short (the stage prints both
-budgets; the demo's stored runs are in study ``demo-recipe``, listed in docs/benchmarks.md)."""
+"""Uncapped, the segmenter would get the CPU seconds of S-Ray's training, minutes more on a 2-core machine."""
 TRAIN_SCENES = 19
-"""Default of ``--train-scenes``. The generator cycles room types over the scene index, so 4 + 5k training rooms keep
-the two test rooms of the 4-room world file for file; 19 rooms are quick to generate, check and shard, and with the
-synth-demo recipe they lift zero-shot mIoU where 4 rooms do not (study ``demo-recipe``, listed in
-docs/benchmarks.md)."""
+"""4 + 5k training rooms keep the 4-room world's two test rooms file for file (room types cycle over the index); 19
+lift zero-shot mIoU where 4 do not (study ``demo-recipe``)."""
 FLEET_SCENES = 1
-"""Default of ``--fleet-scenes``: each fleet scene costs its four methods' finetunes (minutes of wall time on a
-2-core machine at the default budget), so the demo finetunes one of its unseen scenes and evaluates all of
-them."""
+"""Each fleet scene costs four finetunes (minutes on a 2-core machine): the demo finetunes one, evaluates all."""
 
 
 def _cpu_cap(text: str) -> float:
-    """``--segmenter-cpu-seconds``: a number of CPU seconds >= 0."""
+    """``--segmenter-cpu-seconds``: CPU seconds >= 0."""
     try:
         value = float(text)
     except ValueError:
@@ -56,9 +50,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"the fleet finetunes the first N unseen scenes (default {FLEET_SCENES}; 0 = every one); the "
                         "zero-shot evaluation scores them all")
     p.add_argument("--eval-stride", type=int, default=2,
-                   help="score every n-th pixel in each direction in the zero-shot evaluation "
-                        "(the fleet's held-out curves use twice this); 1 = full images, the only stride "
-                        "with SSIM")
+                   help="score every n-th pixel in each direction in the zero-shot evaluation (the fleet's held-out "
+                        "curves use twice this); 1 = full images, the only stride with SSIM")
     p.add_argument("--clip-frames", type=int, default=24,
                    help="frames of the zero-shot fly-through video rendered after the evaluation")
     p.add_argument("--seed", type=int, default=0)

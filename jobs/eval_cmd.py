@@ -1,12 +1,6 @@
 """``sray eval``: zero-shot scores of a registered method's pretrained model on unseen scenes (the paper's
-generalization protocol): an S-Ray checkpoint (``--method sray``, the default; ``sray-rgbd``: given the source
-depth) or ``2d-transfer``'s segmenter.
-
-The ``--method`` choices come from the method registry (:mod:`sray.platform.finetune.methods.registry`): every
-method with an ``eval_model`` builder. A flag the chosen method does not read (its record's ``eval_reads``:
-``--checkpoint`` and ``--render``/``--fast-*`` for S-Ray, ``--segmenter`` for ``2d-transfer``) is refused with exit
-status 2, never ignored.
-"""
+generalization protocol). A flag the chosen method does not read (its record's ``eval_reads``) is refused, never
+ignored."""
 
 from __future__ import annotations
 
@@ -15,8 +9,8 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from sray.jobs.held_out_flags import add_held_out_flags, held_out_from_args
 from sray.jobs.methods.flags import GivenFlag, refusal, unread_flags
+from sray.jobs.render_flags import add_held_out_flags, held_out_from_args, print_tracked_run
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import eval_method_names, get_method
 
@@ -96,7 +90,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"[sray] splits: {args.out / SPLITS_FILE}")
     print(f"[sray] metrics: {report['metrics_path']}")
     print(f"[sray] renders: {Path(report['out_dir']) / 'renders'}")
-    run = report["run"]
-    hint = run["ui_hint"]
-    print(f"[sray] {run['tracker']} run: {run['ui_url']}" + (f"  (start the UI: {hint})" if hint else ""))
+    print_tracked_run(report)
     return 0

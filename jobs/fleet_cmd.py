@@ -1,7 +1,5 @@
-"""``sray finetune-fleet``: per-scene methods (S-Ray finetune, Semantic-NeRF, ...) as a fleet of Ray tasks.
-
-The ``--methods`` choices come from the method registry (:mod:`sray.platform.finetune.methods.registry`).
-"""
+"""``sray finetune-fleet``: per-scene methods of the registry (S-Ray finetune, Semantic-NeRF, ...) as a fleet of Ray
+tasks."""
 
 from __future__ import annotations
 
@@ -13,7 +11,6 @@ from typing import Any
 from sray.platform.finetune.methods.registry import METHODS, method_names
 
 ALL_METHODS = "all"
-"""``--methods`` value that runs every registered method."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:

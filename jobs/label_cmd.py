@@ -1,5 +1,4 @@
-"""``sray label``: semantic labels for every frame of a capture (or any scene) with a trained checkpoint, no labels
-needed: per frame the label map, a colour overlay, the confidence and the depth, plus a fly-through, as one
+"""``sray label``: semantic labels for every frame of a capture (or any scene) with a trained checkpoint, as one
 tracked run (docs/capture.md)."""
 
 from __future__ import annotations
@@ -8,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sray.jobs.tracked_run_flags import add_tracked_run_flags, print_tracked_run
+from sray.jobs.render_flags import add_tracked_run_flags, print_tracked_run
 
 
 def register(sub: argparse._SubParsersAction) -> None:

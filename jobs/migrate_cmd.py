@@ -1,9 +1,5 @@
-"""``sray migrate PATH``: convert the stored artifacts of an earlier sray under PATH to today's format, once.
-
-Checkpoints, job configs, sweep records, Semantic-NeRF scene artifacts and 2D segmenter folders of an earlier sray
-are refused by today's load paths with a line naming this command (``sray.platform.migrate.artifacts`` says what
-it converts).
-"""
+"""``sray migrate PATH``: convert the stored artifacts of an earlier sray under PATH to today's format, once (today's
+load paths refuse them with a line naming this command)."""
 
 from __future__ import annotations
 

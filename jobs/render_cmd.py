@@ -6,22 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from sray.jobs.held_out_flags import add_held_out_flags, held_out_from_args
-from sray.jobs.tracked_run_flags import add_tracked_run_flags, print_tracked_run
+from sray.jobs.data.convert import size_arg
+from sray.jobs.render_flags import add_held_out_flags, add_tracked_run_flags, held_out_from_args, print_tracked_run
 
 DEFAULT_FRAMES = 60
-"""Frames of a built path (``--path``) unless ``--frames`` says otherwise."""
-
-
-def size_arg(text: str) -> tuple[int, int]:
-    """``WxH`` (e.g. ``320x240``) -> (H, W); argparse reports anything else."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: give the size as WIDTHxHEIGHT, e.g. 320x240") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: width and height must be positive")
-    return h, w
 
 
 def register(sub: argparse._SubParsersAction) -> None:

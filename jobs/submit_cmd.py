@@ -1,8 +1,5 @@
-"""``sray submit``: send a ``sray train`` job to a Ray cluster's Jobs API; ``--wait`` follows it.
-
-The job's driver runs on the head node and its Ray Train workers on the worker nodes; paths are
-made absolute here (the driver starts in another folder) and must be on storage the nodes share.
-"""
+"""``sray submit``: send a ``sray train`` job to a Ray cluster's Jobs API; ``--wait`` follows it. Paths are made
+absolute here (the driver starts in another folder) and must be on storage the nodes share."""
 
 from __future__ import annotations
 
@@ -17,7 +14,7 @@ from sray.platform.common.fault_hook import propagated_env
 
 FORWARDED = {"recipe": "--recipe", "workers": "--workers", "gpus_per_worker": "--gpus-per-worker",
              "precision": "--precision", "tracker": "--tracker", "tracking_uri": "--tracking-uri"}
-"""Flags passed on to ``sray train`` as given (paths and the job name are handled apart)."""
+"""Flags passed on to ``sray train`` as given."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,8 +48,7 @@ def train_command(args: argparse.Namespace, name: str, output_dir: Path, data: P
 
 
 def job_runtime_env(working_dir: str | None) -> dict[str, object] | None:
-    """The job's Ray runtime env: the shipped folder, and ``SRAY_FAULTS`` when set here (a drill's faults
-    reach the job's driver, which forwards them to its workers)."""
+    """The job's Ray runtime env: the shipped folder, and ``SRAY_FAULTS`` when set here (a drill's faults)."""
     env: dict[str, object] = {"working_dir": str(Path(working_dir).resolve())} if working_dir else {}
     if propagated_env():
         env["env_vars"] = propagated_env()
@@ -83,11 +79,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"sray submit: the Jobs API at {args.address} refused the job ({reason}); check --address "
               "(`sray cluster status`) and the Ray token (RAY_AUTH_MODE=token, RAY_AUTH_TOKEN_PATH)", file=sys.stderr)
         return 2
-    print(f"[sray] submitted {job_id}: job {name}\n[sray] {entrypoint}\n"
-          f"[sray] follow: ray job logs --follow {job_id} --address {args.address}\n"
-          f"[sray] stop:   ray job stop {job_id} --address {args.address}\n"
-          f"[sray] resume: sray submit --resume {name} --set run.output_dir={Path(cfg.run.output_dir).resolve()} "
-          f"--address {args.address}", flush=True)
+    print(f"[sray] submitted {job_id}: job {name}\n[sray] {entrypoint}\n[sray] follow: ray job logs --follow {job_id} "
+          f"--address {args.address}\n[sray] stop:   ray job stop {job_id} --address {args.address}\n[sray] resume: "
+          f"sray submit --resume {name} --set run.output_dir={Path(cfg.run.output_dir).resolve()} --address "
+          f"{args.address}", flush=True)
     if not args.wait:
         return 0
     try:

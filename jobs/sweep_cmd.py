@@ -17,19 +17,17 @@ from sray.platform.train.inputs import InputError
 
 DEFAULT_OUT = "outputs/sweeps"
 """Folder holding sweeps unless ``--out`` says otherwise."""
-OPTION_FLAGS = {"samples": int, "seeds": int, "seed": int, "metric": str, "mode": str, "scheduler": str,
-                "grace": int, "reduction_factor": float, "max_concurrent": int, "steps": int, "cpu_seconds": float,
-                "minutes": float}
-"""Flags of the sweep's options (``SweepOptions``; a spec file's keys of the same names)."""
-HELP = {"samples": "draws of the random parameters (default 1)", "seeds": "seeds per point: run.seed=grid(0..N-1)",
-        "seed": "seed of the parameter draws", "metric": "validation metric to compare by (default val/miou)",
-        "mode": "max or min (default max)", "scheduler": "asha (default) or none",
-        "grace": "ASHA: steps before a trial can be stopped (default run.ckpt_every)",
-        "reduction_factor": "ASHA: 1 in this many trials continues at each rung (default 3)",
-        "max_concurrent": "trials at once (default: as many as the cluster fits)",
-        "steps": "budget per trial in steps (optim.steps)",
-        "cpu_seconds": "budget per trial in CPU seconds summed over its ranks (optim.cpu_seconds)",
-        "minutes": "budget per trial in wall-clock minutes"}
+OPTION_FLAGS = {"samples": (int, "draws of the random parameters (default 1)"),
+                "seeds": (int, "seeds per point: run.seed=grid(0..N-1)"), "seed": (int, "seed of the parameter draws"),
+                "metric": (str, "validation metric to compare by (default val/miou)"),
+                "mode": (str, "max or min (default max)"), "scheduler": (str, "asha (default) or none"),
+                "grace": (int, "ASHA: steps before a trial can be stopped (default run.ckpt_every)"),
+                "reduction_factor": (float, "ASHA: 1 in this many trials continues at each rung (default 3)"),
+                "max_concurrent": (int, "trials at once (default: as many as the cluster fits)"),
+                "steps": (int, "budget per trial in steps (optim.steps)"),
+                "cpu_seconds": (float, "budget per trial in CPU seconds summed over its ranks (optim.cpu_seconds)"),
+                "minutes": (float, "budget per trial in wall-clock minutes")}
+"""Flags of the sweep's options (``SweepOptions``; a spec file's keys of the same names): type and help."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -47,8 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gpus-per-worker", type=float, help="GPUs per worker, fractions allowed with one worker")
     p.add_argument("--tracker", help="tracker, by registry name (default mlflow)")
     p.add_argument("--tracking-uri", help="the tracker's store (default: SQLite store in this folder)")
-    for name, kind in OPTION_FLAGS.items():
-        p.add_argument(f"--{name.replace('_', '-')}", dest=name, type=kind, help=HELP[name])
+    for name, (kind, text) in OPTION_FLAGS.items():
+        p.add_argument(f"--{name.replace('_', '-')}", dest=name, type=kind, help=text)
     p.add_argument("--name", help="sweep name (default sweep-<UTC time>)")
     p.add_argument("--out", type=Path, default=Path(DEFAULT_OUT), help=f"folder of sweeps (default {DEFAULT_OUT})")
     p.add_argument("--address", help="join this Ray cluster (default: start Ray locally in-process)")

@@ -34,7 +34,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     train.set_defaults(func=_train)
 
 
-
 def build_config(args: argparse.Namespace) -> TrainConfig:
     """The job's TrainConfig: the recipe (or a resumed job's saved config) plus flags and --set."""
     cfg = get_recipe(args.recipe)

@@ -10,7 +10,7 @@ from mlflow_fixtures import mlflow_template, mlflow_uri  # noqa: F401
 from train_fixtures import tiny_shards  # noqa: F401
 
 from sray.jobs.bench.speed_accuracy import pareto, table
-from sray.jobs.bench.speed_chart import chart
+from sray.jobs.bench.speed_accuracy_run import chart
 from sray.model.fast_render import FastRender
 
 

@@ -20,7 +20,7 @@ from sray.data_tools.label_spaces import SCANNET20
 from sray.data_tools.png import encode_png
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 from sray.data_tools.scene_folder import write_dataset_index, write_scene
-from sray.jobs.data import check as data_check_cmd
+from sray.jobs.data import command as data_command
 
 H, W = 16, 20
 
@@ -238,7 +238,7 @@ def tree_snapshot(root: Path) -> dict[str, tuple[str, bytes | None]]:
 def run_cli(argv: list[str]) -> int:
     """Run ``sray data check ARGV`` through its own parser; returns the exit code."""
     parser = argparse.ArgumentParser()
-    data_check_cmd.register(parser.add_subparsers())
+    data_command.register_check(parser.add_subparsers())
     args = parser.parse_args(["check", *argv])
     return args.func(args)
 

@@ -11,7 +11,7 @@ import torch
 
 from sray.data_tools.loader.class_stats import balanced_weights, count_pixels, dataset_pixel_counts
 from sray.data_tools.scene import IGNORE_ID
-from sray.jobs.data.stats import format_stats
+from sray.jobs.data.command import format_stats
 from sray.model.losses import LossConfig, render_loss
 
 

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from sray.jobs.cli import main
-from sray.jobs.gpu_check import context, runner, stage_recipe
+from sray.jobs.gpu_check import context, runner, stage_training
 from sray.jobs.gpu_check.report import REPORT_FILE, STAGE_NAMES, StageResult, load_report
 
 REPO = Path(__file__).resolve().parents[1]
@@ -59,15 +59,15 @@ def test_dry_run_runs_every_stage_and_a_rerun_resumes(ray_session, tmp_path: Pat
 
 def test_recipe_stage_fails_when_the_warm_up_does_not_learn(tmp_path: Path, monkeypatch) -> None:
     flat = [{"phase": float(i >= 3), "seconds": 0.1, "loss": 3.0, "sem_src": 3.0, "skipped": 0.0} for i in range(6)]
-    monkeypatch.setattr(stage_recipe, "phase_curve", lambda ctx, precision, steps, rays: flat)
+    monkeypatch.setattr(stage_training, "phase_curve", lambda ctx, precision, steps, rays: flat)
     ctx = context.CheckContext(torch.device("cpu"), True, tmp_path, REPO)
-    result = stage_recipe.run(ctx)
+    result = stage_training.recipe(ctx)
     assert result.status == "failed" and "did not fall over the warm-up" in result.summary
 
 
 def test_brightness_labels_cut_the_mean_channel_into_bands() -> None:
     rgb = torch.tensor([0.0, 0.049, 0.05, 0.5, 0.999, 1.0]).view(1, 1, 1, 6).expand(1, 3, 1, 6)
-    assert stage_recipe.brightness_labels(rgb, 20).flatten().tolist() == [0, 0, 1, 10, 19, 19]
+    assert stage_training.brightness_labels(rgb, 20).flatten().tolist() == [0, 0, 1, 10, 19, 19]
 
 
 def test_a_failing_stage_is_recorded_and_the_next_stage_runs(tmp_path: Path, monkeypatch) -> None:

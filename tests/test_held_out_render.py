@@ -16,7 +16,7 @@ from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
 from sray.platform.config.fleet_config import check_fleet_config
 from sray.jobs.cli import build_parser
-from sray.jobs.held_out_flags import held_out_from_args
+from sray.jobs.render_flags import held_out_from_args
 from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.train_config import apply_override
 from sray.platform.eval.view_scoring import predict_view, sray_renderer

@@ -46,12 +46,12 @@ a command module (:func:`command_entry_points`)."""
 
 def command_entry_points(root: Path) -> dict[str, set[str]]:
     """File (relative to ``root``) -> names of its entry functions, for every command module: the modules
-    ``jobs/cli.py``, ``jobs/data/command.py``, ``jobs/bench/command.py`` and the lab's ``lab/cli.py`` register, their
+    ``jobs/cli.py``, ``jobs/data/command.py`` and the lab's ``lab/cli.py`` register, their
     functions passed as ``set_defaults(func=...)``.
     Their imports may wait for the command to run, so that ``sray --help`` stays fast."""
     modules = []
     for path, name in (("jobs/cli.py", "SUBCOMMAND_MODULES"), ("jobs/data/command.py", "DATA_SUBCOMMAND_MODULES"),
-                       ("jobs/bench/command.py", "BENCH_SUBCOMMAND_MODULES"), ("lab/cli.py", "LAB_COMMAND_MODULES")):
+                       ("lab/cli.py", "LAB_COMMAND_MODULES")):
         if (root / path).is_file():
             for node in ast.parse((root / path).read_text()).body:
                 if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name for t in node.targets):
@@ -113,7 +113,7 @@ def test_every_allowed_lazy_import_is_still_needed() -> None:
              if not reason.strip() or not (REPO / rel).is_file() or not function_imports(REPO / rel)]
     assert not stale, f"drop these from LAZY_IMPORTS_ALLOWED: {stale}"
     entries = command_entry_points(REPO)
-    assert entries["jobs/train_cmd.py"] == {"_train"} and entries["jobs/data/stats.py"] == {"_run"}, entries
+    assert entries["jobs/train_cmd.py"] == {"_train"} and entries["jobs/data/convert.py"] == {"run"}, entries
 
 
 def test_the_lazy_import_scan_finds_violations(tmp_path: Path) -> None:

@@ -73,7 +73,7 @@ def test_the_official_code_table_reads_a_same_run_side_by_side(tmp_path) -> None
     ratio against sray's default of the same file, never a stored constant."""
     import json
 
-    from sray.jobs.bench.official_code import official_side_by_side
+    from sray.jobs.bench.model_cost import official_side_by_side
 
     def runs(*steps: list[float], gib: float) -> list[dict]:
         return [{"times": [99.0, *s], "rss_bytes": gib * 2**30, "torch": "2.x", "threads": 2} for s in steps]

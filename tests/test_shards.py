@@ -192,10 +192,10 @@ def test_input_rejected_by_check_is_not_sharded(scenes_dir: Path, tmp_path: Path
 
 def _shard_cli(argv: list[str]) -> int:
     """Run the ``sray data shard`` verb alone (the other verbs are other modules' business)."""
-    from sray.jobs.data import shard as data_shard_cmd
+    from sray.jobs.data.command import register_shard
 
     parser = argparse.ArgumentParser(prog="sray data")
-    data_shard_cmd.register(parser.add_subparsers(dest="verb", required=True))
+    register_shard(parser.add_subparsers(dest="verb", required=True))
     args = parser.parse_args(["shard", *argv])
     return args.func(args)
 

@@ -12,7 +12,7 @@ import torch
 
 from sray.data_tools.scene_folder import list_scenes, read_scene, write_scene
 from sray.data_tools.synth.dataset import generate_dataset, generate_scene
-from sray.jobs.data import synth as data_synth_cmd
+from sray.jobs.data.command import register_synth
 
 
 def _files(root: Path) -> dict[str, bytes]:
@@ -67,7 +67,7 @@ def test_scene_round_trips_through_the_sray_layout(tmp_path: Path) -> None:
 
 def test_cli_writes_the_dataset_and_says_where(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     parser = argparse.ArgumentParser(prog="sray data")
-    data_synth_cmd.register(parser.add_subparsers(dest="verb", required=True))
+    register_synth(parser.add_subparsers(dest="verb", required=True))
     out = tmp_path / "synth"
     args = parser.parse_args(["synth", "--out", str(out), "--train-scenes", "1", "--test-scenes", "1",
                               "--views", "20", "--height", "24", "--width", "32", "--seed", "3"])

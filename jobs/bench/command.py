@@ -1,18 +1,13 @@
-"""``sray bench loader|model|profile|speed-accuracy|segmenter``: the benchmarks a user runs on their own setup;
-measured tables, printed, stored as data beside their charts and rendered into docs/benchmarks.md (one section per
-benchmark and device). The studies and diagnostics are the lab's (``sray lab``, lab/cli.py)."""
+"""``sray bench loader|model|profile|speed-accuracy|segmenter``: the benchmarks a user runs on their own setup; each
+table is printed, stored beside its charts and rendered into docs/benchmarks.md (a section per benchmark and device)."""
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from pathlib import Path
 
 from sray.jobs.bench.speed_methods import other_methods
-
-BENCH_SUBCOMMAND_MODULES = ("sray.jobs.bench.segmenter_command",)
-"""Modules that register more sub-benchmarks (each exposes ``register(kinds)``), listed after ``accuracy``."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -63,9 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--views-per-scene", type=int, default=2,
                        help="test views rendered per scene and setting (0: every test view)")
     speed.add_argument("--settings", nargs="+", default=None, metavar="NAME",
-                       help="measure only these settings, by their table names, the first being the row the others "
-                            "are compared with (default: all; a chosen set replaces the 'chosen settings' table "
-                            "and chart)")
+                       help="measure only these settings, by their table names, the first being the row the others are "
+                            "compared with (default: all; a chosen set replaces the 'chosen settings' table and chart)")
     speed.add_argument("--methods", nargs="+", default=[], choices=other_methods(), metavar="METHOD",
                        help="also time these registered methods' zero-shot models (choices: "
                             f"{', '.join(other_methods())}), each on the same views and sources as S-Ray's setting "
@@ -82,17 +76,35 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     speed.set_defaults(func=_bench_speed_accuracy)
 
-    for name in BENCH_SUBCOMMAND_MODULES:
-        importlib.import_module(name).register(kinds)
-
+    segmenter = kinds.add_parser("segmenter", help="train the 2D segmenter (encoder + linear head) of the ceilings "
+                                 "rows for a CPU-second budget on the train scenes' source views, or take S-Ray's "
+                                 "own from a checkpoint")
+    segmenter.add_argument("--data", type=Path, default=None, help="shard folder with train scenes")
+    segmenter.add_argument("--cpu-seconds", type=float, default=None,
+                           help="training budget in CPU seconds of this process (time.process_time)")
+    segmenter.add_argument("--from-checkpoint", type=Path, default=None, metavar="CHECKPOINT",
+                           help="instead of training: write this S-Ray checkpoint's encoder and source-view head "
+                           "as the segmenter (no --data, --cpu-seconds or --set)")
+    segmenter.add_argument("--out", type=Path, required=True, help="folder the segmenter is saved in")
+    segmenter.add_argument("--recipe", default="synth-cpu-hour",
+                           help="recipe whose augmentation, class balance and source counts the training uses")
+    segmenter.add_argument("--seed", type=int, default=0)
+    segmenter.add_argument("--max-steps", type=int, default=None,
+                           help="stop after this many steps even within the budget (default: the budget alone)")
+    segmenter.add_argument("--encoder-width", type=int, default=None, help="channels of the encoder's first layer, "
+                           "every later layer scaled with it (default: the recipe's model.encoder_width)")
+    segmenter.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                           help="override a field of the recipe the training reads (repeatable), e.g. "
+                           "--set data.aug.colour_ev=0")
+    segmenter.set_defaults(func=_bench_segmenter)
 
 
 def _bench_profile(args: argparse.Namespace) -> int:
-    from sray.jobs.bench.model_cost import resolve_device
+    from sray.jobs.bench.probes import resolve_device
     from sray.jobs.bench.profile import run_profiles, write_profiles
 
-    sections = run_profiles(resolve_device(args.device), tuple(args.impl), tuple(args.workload), args.quick)
-    write_profiles(sections, args.doc)
+    write_profiles(run_profiles(resolve_device(args.device), tuple(args.impl), tuple(args.workload), args.quick),
+                   args.doc)
     return 0
 
 
@@ -110,8 +122,8 @@ def _bench_speed_accuracy(args: argparse.Namespace) -> int:
 
 
 def _bench_loader(args: argparse.Namespace) -> int:
-    from sray.platform.common.bench_doc import record
     from sray.jobs.bench.loader_throughput import LOADER, run_loader_benchmark
+    from sray.platform.common.bench_doc import record
 
     title, table, notes = run_loader_benchmark(args.data, batches=args.batches)
     record(LOADER, title, table, args.doc, notes)
@@ -119,13 +131,41 @@ def _bench_loader(args: argparse.Namespace) -> int:
 
 
 def _bench_model(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.model_cost import MODEL, official_side_by_side, run_model_benchmark
     from sray.platform.common.bench_doc import record
-    from sray.jobs.bench.model_cost import MODEL, run_model_benchmark
-    from sray.jobs.bench.official_code import official_side_by_side
 
     sections = run_model_benchmark(device=args.device, quick=args.quick, tables=tuple(args.tables))
     if args.official_side_by_side is not None:
         sections.append(official_side_by_side(args.official_side_by_side))
     for title, table, notes in sections:
         record(MODEL, title, table, args.doc, notes)
+    return 0
+
+
+def _bench_segmenter(args: argparse.Namespace) -> int:
+    from sray.jobs.bench.segmenter import run_segmenter
+    from sray.platform.eval.segmenter import segmenter_from_checkpoint
+
+    if args.from_checkpoint is not None:
+        if args.data is not None or args.cpu_seconds is not None or args.overrides:
+            print("sray bench segmenter: --from-checkpoint takes the trained network of a checkpoint; drop --data, "
+                  "--cpu-seconds and --set, or drop --from-checkpoint to train one", file=sys.stderr)
+            return 2
+        try:
+            _, record = segmenter_from_checkpoint(args.from_checkpoint, args.out)
+        except (ValueError, FileNotFoundError) as e:
+            print(f"sray bench segmenter: {e}", file=sys.stderr)
+            return 2
+        print(f"segmenter saved in {args.out}: {record.budget()}")
+        return 0
+    if args.data is None or args.cpu_seconds is None:
+        print("sray bench segmenter: give --data SHARDS and --cpu-seconds S to train a segmenter, or "
+              "--from-checkpoint CHECKPOINT to take S-Ray's own", file=sys.stderr)
+        return 2
+    try:
+        run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed, args.max_steps,
+                      args.encoder_width, tuple(args.overrides))
+    except ValueError as e:
+        print(f"sray bench segmenter: {e}", file=sys.stderr)
+        return 2
     return 0

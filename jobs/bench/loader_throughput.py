@@ -15,10 +15,8 @@ from sray.data_tools.synth.world import World, make_world
 from sray.platform.common.bench_doc import Bench
 
 LOADER = Bench("loader", "Shard loader")
-"""The benchmark's section in docs/benchmarks.md."""
-
 BENCH_SCENES, BENCH_VIEWS, BENCH_HW = 2, 20, (240, 320)
-"""Procedural data used when no shard folder is given: 2 train scenes x 20 views at 320x240 (ScanNet size)."""
+"""Procedural data when no shard folder is given: 2 train scenes x 20 views at 320x240 (ScanNet size)."""
 
 
 def procedural_shards(root: Path, seed: int = 0) -> Path:

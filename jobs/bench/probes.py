@@ -1,26 +1,26 @@
-"""Measurement helpers for ``sray.jobs.bench.model_cost``: FLOP counts, peak allocations, timings, training steps.
+"""What ``sray bench model`` and ``sray bench profile`` run and how they measure it.
 
-* FLOPs: ``torch.utils.flop_counter.FlopCounterMode`` with SDPA forced onto its MATH backend, which
-  decomposes attention into counted matmuls (the fused CPU flash kernel has no FLOP formula and
-  would count 0). Fused kernels do the same matmul work, so the count holds for every backend.
-* Peak memory: on CUDA, ``torch.cuda.max_memory_allocated`` above the level before the call; on
-  CPU, the profiler's allocator trace (``profile_memory=True``): the highest "Total Allocated"
-  reached during the call minus the level when it started. Both count PyTorch's allocator only
-  (tensors and kernel scratch), the quantity the paper's "memory increment" reports.
-* Training steps (``workloads``) run in a fresh spawned process each, so the process peak RSS they report
-  (VmHWM) belongs to that configuration alone, as in the reference measurement of the paper's
-  public code.
+Workloads: a training step and a whole-image render on a synthetic scene (random sources whose cameras all see the
+query's frustum), so they measure the model alone. A spec dict names the sizes: rays, coarse, fine, views, hw,
+device, steps; optionally dtype (fp32, bf16, fp16), impl (``Runtime.impl``), fine_samples, piece
+(``Runtime.train_piece``), chunk (``Runtime.chunk``; 0 or absent: by device), compile (both fields through
+``torch.compile``) and model (other ``SRayConfig`` fields; ``inputs='rgbd'`` gives the sources depth maps).
+
+Measures: FLOPs with ``FlopCounterMode`` and SDPA on its MATH backend (the fused CPU flash kernel has no FLOP formula;
+fused kernels do the same matmul work); peak memory as the allocator's peak above its level before the call (the
+paper's "memory increment"); training steps in a fresh spawned process each, so their peak RSS is theirs alone.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import resource
 import tempfile
 import time
-from collections.abc import Callable
-from contextlib import nullcontext
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, nullcontext
 
 import torch
 from torch.nn.attention import SDPBackend, sdpa_kernel
@@ -28,6 +28,10 @@ from torch.utils.flop_counter import FlopCounterMode
 
 from sray.model.config import SRayConfig
 from sray.model.cra import CrossReprojectionAttention
+from sray.model.rays import pixel_rays
+from sray.model.runtime import Runtime
+from sray.model.semantic_ray import SRayModel
+from sray.platform.train.step import fused_adam
 
 
 def resolve_device(device: str) -> torch.device:
@@ -41,28 +45,37 @@ def resolve_device(device: str) -> torch.device:
     return dev
 
 
-def attention_case(
-    variant: str, rays: int, views: int, samples: int, channels: int, device: torch.device, seed: int = 0
-) -> tuple[CrossReprojectionAttention, torch.Tensor, torch.Tensor]:
-    """A CRA module of ``variant`` and its input: space (R, m, N, C) and a validity mask (90% valid)."""
-    gen = torch.Generator().manual_seed(seed)
-    cfg = SRayConfig(feat_dim=channels, attention=variant, n_coarse=samples)
-    torch.manual_seed(seed)
-    module = CrossReprojectionAttention(cfg).to(device)
+@contextmanager
+def env_var(name: str, value: str) -> Iterator[None]:
+    """Set environment variable ``name`` to ``value`` for the block, then restore it (or its absence)."""
+    saved = os.environ.get(name)
+    os.environ[name] = value
+    try:
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = saved
+
+
+def attention_case(variant: str, rays: int, views: int, samples: int, channels: int,
+                   device: torch.device) -> tuple[CrossReprojectionAttention, torch.Tensor, torch.Tensor]:
+    """A seeded CRA module of ``variant`` and its input: space (R, m, N, C) and a validity mask (90% valid)."""
+    gen = torch.Generator().manual_seed(0)
+    torch.manual_seed(0)
+    module = CrossReprojectionAttention(SRayConfig(feat_dim=channels, attention=variant, n_coarse=samples)).to(device)
     space = torch.randn(rays, views, samples, channels, generator=gen).to(device)
     valid = (torch.rand(rays, views, samples, generator=gen) < 0.9).to(device)
     return module, space, valid
 
 
-def sample_depths(rays: int, samples: int, device: torch.device) -> torch.Tensor:
-    """Evenly spread normalised sample depths (R, N) in (0, 1), the position input of CRA."""
-    return ((torch.arange(samples, dtype=torch.float32) + 0.5) / samples).expand(rays, samples).to(device)
-
-
 def attention_call(module: CrossReprojectionAttention, space: torch.Tensor, valid: torch.Tensor,
                    backward: bool) -> Callable[[], None]:
-    """A closure running the attention stage forward (and backward of its output sum)."""
-    depth01 = sample_depths(space.shape[0], space.shape[2], space.device)
+    """A closure running the attention stage forward (and backward of its output sum), at evenly spread normalised
+    sample depths."""
+    rays, samples = space.shape[0], space.shape[2]
+    depth01 = ((torch.arange(samples, dtype=torch.float32) + 0.5) / samples).expand(rays, samples).to(space.device)
 
     def run() -> None:
         x = space.detach().requires_grad_(backward)
@@ -73,37 +86,18 @@ def attention_call(module: CrossReprojectionAttention, space: torch.Tensor, vali
     return run
 
 
-def count_flops(fn: Callable[[], None]) -> int:
-    """Matmul FLOPs of ``fn`` (forward and whatever backward it runs), SDPA on the MATH backend."""
-    with sdpa_kernel(SDPBackend.MATH), FlopCounterMode(display=False) as counter:
-        fn()
-    return int(counter.get_total_flops())
-
-
 def attention_flops(variant: str, sizes: dict, count_rays: int, device: torch.device, backward: bool) -> int:
-    """FLOPs of the attention stage at ``sizes["rays"]`` rays, counted at ``count_rays`` and scaled.
-
-    The scaling is exact because every op is batched over rays; it is checked by also counting at
-    half as many rays. sizes: rays, views, samples, channels.
-    """
+    """Matmul FLOPs of the attention stage at ``sizes["rays"]`` rays (sizes: rays, views, samples, channels), counted
+    at ``count_rays`` and scaled: exact, as every op is batched over rays (checked by counting at half as many)."""
     counts = []
     for r in (count_rays // 2, count_rays):
         module, space, valid = attention_case(variant, r, sizes["views"], sizes["samples"], sizes["channels"], device)
-        counts.append(count_flops(attention_call(module, space, valid, backward)))
+        with sdpa_kernel(SDPBackend.MATH), FlopCounterMode(display=False) as counter:
+            attention_call(module, space, valid, backward)()
+        counts.append(int(counter.get_total_flops()))
     if counts[1] != 2 * counts[0]:
         raise RuntimeError(f"sray.jobs.bench.probes: FLOPs of {variant} are not linear in rays ({counts}).")
     return counts[1] * sizes["rays"] // count_rays
-
-
-def _cpu_peak_from_trace(path: str) -> int:
-    """Peak allocator increment in a chrome trace written by a ``profile_memory=True`` profile."""
-    with open(path) as f:
-        events = [e["args"] for e in json.load(f)["traceEvents"]
-                  if e.get("name") == "[memory]" and e["args"].get("Device Type") == 0]
-    if not events:
-        return 0
-    start = events[0]["Total Allocated"] - events[0]["Bytes"]
-    return max(int(e["Total Allocated"]) for e in events) - int(start)
 
 
 def peak_bytes(fn: Callable[[], None], device: torch.device, backend: SDPBackend | None = None) -> int:
@@ -123,11 +117,17 @@ def peak_bytes(fn: Callable[[], None], device: torch.device, backend: SDPBackend
                                          profile_memory=True) as prof:
             fn()
         prof.export_chrome_trace(trace)
-        return _cpu_peak_from_trace(trace)
+        with open(trace) as f:
+            events = [e["args"] for e in json.load(f)["traceEvents"]
+                      if e.get("name") == "[memory]" and e["args"].get("Device Type") == 0]
+    if not events:
+        return 0
+    start = events[0]["Total Allocated"] - events[0]["Bytes"]
+    return max(int(e["Total Allocated"]) for e in events) - int(start)
 
 
 def timed_runs(fn: Callable[[], None], device: torch.device, runs: int) -> list[float]:
-    """Wall-clock seconds of ``runs`` consecutive calls of ``fn``."""
+    """Wall-clock seconds of ``runs`` consecutive calls of ``fn`` (CUDA synchronised)."""
     times = []
     for _ in range(runs):
         if device.type == "cuda":
@@ -147,11 +147,8 @@ def time_call(fn: Callable[[], None], device: torch.device, repeats: int) -> flo
 
 
 def peak_rss_bytes() -> int:
-    """Peak resident set size of this process: VmHWM from /proc (Linux), else ``ru_maxrss``.
-
-    ``ru_maxrss`` survives ``exec``: a spawned child would report at least its parent's RSS at the
-    fork, so VmHWM (the high-water mark of this process's own address space) is preferred.
-    """
+    """Peak resident set size of this process: VmHWM from /proc (Linux; ``ru_maxrss`` survives ``exec``, so a spawned
+    child would report at least its parent's RSS at the fork), else ``ru_maxrss``."""
     try:
         with open("/proc/self/status") as f:
             for line in f:
@@ -160,3 +157,94 @@ def peak_rss_bytes() -> int:
     except OSError:
         pass
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024  # KiB on Linux
+
+
+def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device, depth: bool = False) -> dict:
+    """Random source images (m, 3, H, W), their cameras, ``rays`` query rays, labels and colours; with ``depth``,
+    source z-depth maps (m, H, W) in [1.5, 4.5] m (inside the workloads' near 1, far 5)."""
+    h, w = hw
+    gen = torch.Generator().manual_seed(0)
+    K = torch.tensor([[w / 2, 0.0, (w - 1) / 2], [0.0, w / 2, (h - 1) / 2], [0.0, 0.0, 1.0]])
+    c2w = torch.eye(4).repeat(views, 1, 1)
+    c2w[:, 0, 3] = torch.linspace(-0.3, 0.3, views)
+    c2w[:, 1, 3] = 0.1 * torch.sin(torch.arange(views, dtype=torch.float32))
+    uv = torch.rand(rays, 2, generator=gen) * torch.tensor([w - 1.0, h - 1.0])
+    origins, dirs = pixel_rays(K, torch.eye(4), uv)
+    batch = {"src_rgb": torch.rand(views, 3, h, w, generator=gen), "src_K": K.expand(views, 3, 3).clone(),
+             "src_c2w": c2w, "origins": origins, "dirs": dirs, "K": K,
+             "label": torch.randint(0, 20, (rays,), generator=gen), "rgb": torch.rand(rays, 3, generator=gen)}
+    if depth:
+        batch["src_depth"] = 1.5 + 3.0 * torch.rand(views, h, w, generator=gen)
+    return {k: v.to(device) for k, v in batch.items()}
+
+
+def model_config(spec: dict) -> SRayConfig:
+    """The spec's ``SRayConfig``: its ``model`` fields, sizes and fine_samples over the paper defaults."""
+    cfg = SRayConfig(**spec.get("model", {}))
+    return dataclasses.replace(cfg, n_coarse=spec["coarse"], n_fine=spec["fine"], n_source=spec["views"],
+                               fine_samples=spec.get("fine_samples", cfg.fine_samples))
+
+
+def spec_runtime(spec: dict) -> Runtime:
+    """The spec's ``Runtime``: its impl, piece and chunk (defaults where it leaves them out or sets 0)."""
+    fields = {"impl": "impl", "piece": "train_piece", "chunk": "chunk"}
+    return Runtime(**{field: spec[key] for key, field in fields.items() if spec.get(key)})
+
+
+def make_train_step(spec: dict) -> Callable[[], None]:
+    """A closure running one full training step (encode, render, loss, backward, Adam) of ``spec``."""
+    device = torch.device(spec["device"])
+    torch.manual_seed(0)
+    cfg, runtime = model_config(spec), spec_runtime(spec)
+    model = SRayModel(cfg).to(device)
+    if spec.get("compile"):
+        model.coarse.compile()
+        model.fine.compile()
+    opt = fused_adam(list(model.parameters()), 1e-3)  # the optimizer training uses
+    batch = synthetic_batch(spec["rays"], spec["views"], tuple(spec["hw"]), device, depth=cfg.inputs == "rgbd")
+    dtype = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}[spec.get("dtype", "fp32")]
+    scaler = torch.amp.GradScaler(device.type, enabled=dtype == torch.float16)
+
+    def step() -> None:
+        with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
+            src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"], batch.get("src_depth"))
+            loss, _ = model.training_loss(src, batch["origins"], batch["dirs"], 1.0, 5.0, batch["label"], batch["rgb"],
+                                          runtime)
+        opt.zero_grad(set_to_none=True)
+        scaler.scale(loss).backward()
+        scaler.step(opt)
+        scaler.update()
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"sray.jobs.bench.probes: non-finite loss in {spec}.")
+
+    step.n_params = sum(p.numel() for p in model.parameters())  # type: ignore[attr-defined]
+    return step
+
+
+def render_case(spec: dict) -> Callable[[], None]:
+    """A closure rendering one whole (H, W) view of the synthetic scene with ``render_image`` (no grad)."""
+    device = torch.device(spec["device"])
+    torch.manual_seed(0)
+    model, runtime = SRayModel(model_config(spec)).to(device).eval(), spec_runtime(spec)
+    h, w = spec["hw"]
+    batch = synthetic_batch(1, spec["views"], (h, w), device)
+    with torch.no_grad():
+        src = model.encode(batch["src_rgb"], batch["src_K"], batch["src_c2w"])
+    query = torch.eye(4, device=device)
+
+    def render() -> None:
+        model.render_image(src, batch["K"], query, (h, w), 1.0, 5.0, runtime)
+    return render
+
+
+def train_step_worker(spec: dict) -> dict:
+    """Time ``spec["steps"]`` training steps after a warm-up one (meant for a fresh process; ``alloc='thp'`` needs
+    THP_MEM_ALLOC_ENABLE=1 set before it starts): the first step's seconds (compilation included), the median of the
+    others, the process's peak RSS, the GPU allocator's peak and the parameter count."""
+    device = torch.device(spec["device"])
+    step = make_train_step(spec)
+    times = timed_runs(step, device, int(spec["steps"]) + 1)
+    peak_gpu = int(torch.cuda.max_memory_allocated(device)) if device.type == "cuda" else 0
+    rest = sorted(times[1:])
+    return {"first": times[0], "seconds": rest[len(rest) // 2], "rss_bytes": peak_rss_bytes(),
+            "gpu_peak_bytes": peak_gpu, "params": step.n_params}  # type: ignore[attr-defined]

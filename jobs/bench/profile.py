@@ -1,14 +1,7 @@
-"""``sray bench profile``: ``torch.profiler`` of the paper-config training step and of a whole-image render.
-
-Writes the top operators (self time, the share of the total, calls) as tables of the "Profiles" section
-of ``docs/benchmarks.md`` (one per device), each table replaced when its workload and implementation
-are profiled again, so the decisions in ``docs/performance.md`` are read off a profile, not guessed.
-
-* training step: 1024 rays, 64+64 samples, 8 source views, 320x240, fp32, encode + render +
-  loss + backward + Adam (``probes.train_step_worker``'s step), profiled after one warm-up step;
-* render: ``SRayModel.render_image`` of one 320x240 view against 8 encoded source views, with the
-  demo's 24+24-sample model (``--quick`` shrinks both).
-"""
+"""``sray bench profile``: ``torch.profiler`` of the paper-config training step and of a whole-image render (the demo's
+24+24-sample model), their top operators as tables of the "Profiles" section of ``docs/benchmarks.md`` per device,
+each replaced when profiled again, so the decisions in ``docs/performance.md`` are read off a profile; and the levers
+those profiles point at, timed (``levers``)."""
 
 from __future__ import annotations
 
@@ -19,18 +12,18 @@ from pathlib import Path
 import torch
 from torch.profiler import ProfilerActivity, profile
 
-from sray.jobs.bench.attention_keys import key_length_table
-from sray.jobs.bench.render_levers import chunk_table, kernel_table
-from sray.jobs.bench.workloads import make_train_step, render_case
+from sray.jobs.bench.levers import chunk_table, kernel_table, key_length_table
+from sray.jobs.bench.probes import make_train_step, render_case
 from sray.model.ray_chunks import CUDA_RENDER_RAYS, render_chunk_rays, train_piece_rays
 from sray.platform.common.bench_doc import Bench, record
 
-TOP_OPS = 18
-"""Operators listed per profile."""
+PROFILES = Bench("profile", "Profiles")
+"""Where the time of a training step and of a render goes (self time: spent in an operator itself, not in those it
+calls), and the levers timed."""
 
 
-def _top_table(prof: profile, wall_s: float, n: int = TOP_OPS) -> str:
-    """Markdown table of the ``n`` operators with the most self CPU time (and self CUDA time)."""
+def _top_table(prof: profile, wall_s: float, n: int = 18) -> str:
+    """Markdown table of the ``n`` operators with the most self CPU time (self CUDA time where there is one)."""
     events = [e for e in prof.key_averages() if e.self_cpu_time_total > 0 or e.self_device_time_total > 0]
     cuda = any(e.self_device_time_total > 0 for e in events)
     key = (lambda e: e.self_device_time_total) if cuda else (lambda e: e.self_cpu_time_total)
@@ -45,8 +38,8 @@ def _top_table(prof: profile, wall_s: float, n: int = TOP_OPS) -> str:
 
 
 def profile_call(fn: Callable[[], None], device: torch.device, warm_up: bool = True) -> tuple[profile, float]:
-    """Run ``fn`` once to warm up (unless ``warm_up`` is False), then once under ``torch.profiler``;
-    returns the profile and its wall time."""
+    """Run ``fn`` once to warm up (unless ``warm_up`` is False), then once under ``torch.profiler``; the profile and
+    its wall time."""
     if warm_up:
         fn()
     activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
@@ -61,15 +54,8 @@ def profile_call(fn: Callable[[], None], device: torch.device, warm_up: bool = T
 
 def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[str, ...],
                  quick: bool, step_dtypes: tuple[str, ...] = ("fp32",)) -> list[tuple[str, str, str]]:
-    """Profile the ``workloads`` (``train``: the training step, ``render``: a whole-image render) per
-    implementation, and time the levers (``kernels``: attention implementations at the render's shapes;
-    ``train-kernels``: the same, forward + backward, at the training step's; ``chunks``: rays per chunk,
-    per implementation; ``attention-keys``: SDPA's flash kernel against the sliced CPU kernel over the
-    intra-view stage's key lengths). The training step is profiled in each of ``step_dtypes`` (``fp32``, or autocast
-    to ``bf16`` / ``fp16``).
-
-    Returns (title, markdown table, notes) sections, written by :func:`write_profiles`.
-    """
+    """(title, markdown table, notes) sections: the ``train`` (in each of ``step_dtypes``) and ``render`` profiles per
+    implementation, and the levers ``kernels``, ``train-kernels``, ``attention-keys`` and ``chunks`` timed."""
     step_spec = ({"rays": 16, "coarse": 4, "fine": 4, "views": 2, "hw": (32, 32)} if quick else
                  {"rays": 1024, "coarse": 64, "fine": 64, "views": 8, "hw": (240, 320)})
     render_spec = ({"coarse": 4, "fine": 4, "views": 2, "hw": (32, 48)} if quick else
@@ -93,8 +79,8 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
                          f"One attention stage of one pass of the paper-config training step: {rays} rays, {samples} "
                          "samples (the coarse pass, and the fine pass with `fine_samples=new`), 8 views, 4 heads of 8 "
                          "channels, CPU; forward + backward of a dense random gradient to q, k and v, median of 2 "
-                         "calls after a warm-up. GFLOP/s "
-                         "counts the forward's two matmuls (4 L^2 d per head) and the backward's four (2x), as 3x."))
+                         "calls after a warm-up. GFLOP/s counts the forward's two matmuls (4 L^2 d per head) and the "
+                         "backward's four (2x), as 3x."))
     if "attention-keys" in workloads:
         samples, rays = ((8, 24), 16) if quick else ((16, 24, 32, 40, 48, 64, 96), 256)
         sections.append(("Attention kernel by key length: SDPA flash against sliced (CPU)",
@@ -114,7 +100,7 @@ def run_profiles(device: torch.device, impls: tuple[str, ...], workloads: tuple[
     return sections
 
 
-def _profile_train(s: dict, impl: str, device: torch.device, dtype: str = "fp32") -> tuple[str, str, str]:
+def _profile_train(s: dict, impl: str, device: torch.device, dtype: str) -> tuple[str, str, str]:
     """The profile section of one training step of spec ``s`` in precision ``dtype``."""
     piece = train_piece_rays(s["rays"] if impl == "reference" else 0, device, s["rays"])  # reference: unoptimised
     prof, wall = profile_call(make_train_step(dict(s, impl=impl, device=str(device), dtype=dtype, piece=piece)),
@@ -135,11 +121,6 @@ def _profile_render(r: dict, impl: str, device: torch.device) -> tuple[str, str,
             f"`render_image` of one {r['hw'][1]}x{r['hw'][0]} view, {r['views']} source views, "
             f"{r['coarse']}+{r['fine']} samples (the demo's model size), no grad, chunks of {chunk} rays; no "
             "warm-up render on CPU (nothing to compile, and one render is minutes).")
-
-
-PROFILES = Bench("profile", "Profiles")
-"""The section of ``sray bench profile``'s tables: where the time of a training step and of a render goes
-(self time: the time spent in an operator itself, not in the operators it calls) and the levers timed."""
 
 
 def write_profiles(sections: list[tuple[str, str, str]], doc: Path) -> None:

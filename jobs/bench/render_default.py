@@ -2,16 +2,8 @@
 
 The rule (:func:`choose_default`): the default is the **fastest** measured setting that loses at most
 :data:`MAX_MIOU_LOSS` points of mIoU overall **and** at most :data:`MAX_CLASS_LOSS` points of IoU on every class
-holding at least :data:`MIN_CLASS_SHARE` of the labelled test pixels, both against the full render measured on the
-same views. Classes under that share are not counted (a few pixels swing their IoU by tens of points). Ties in
-time go to the higher mIoU, then to the setting listed first. The full render loses nothing against itself, so
-some setting always qualifies. The rule reads only the rows it is given: which settings may be a default at all
-is the caller's choice (``sray bench speed-accuracy`` offers the render modes the defaults can name).
-
-:func:`todays_defaults` names the render each user of the default renders with today: ``sray eval`` (its flags'
-defaults are ``HeldOutRender()``'s), validation (``data.held_out``) and the fleet's S-Ray held-out scores
-(``finetune.held_out``). Validation and the fleet score a strided pixel grid of their own and render each of its
-pixels (fast stride 1), so per scored pixel they match the bench's ``fast s1``.
+holding at least :data:`MIN_CLASS_SHARE` of the labelled test pixels (rarer classes swing by tens of points), both
+against the full render on the same views; ties in time go to the higher mIoU, then to the setting listed first.
 """
 
 from __future__ import annotations
@@ -24,11 +16,8 @@ from sray.platform.config.held_out_render import HeldOutRender
 from sray.platform.config.train_config import DataSettings
 
 MAX_MIOU_LOSS = 1.0
-"""Points of mIoU (overall: the mean over scenes) the default may lose against the full render."""
 MAX_CLASS_LOSS = 3.0
-"""Points of IoU the default may lose on any counted class."""
 MIN_CLASS_SHARE = 0.01
-"""Share of the labelled test pixels from which a class is counted."""
 _FLOAT_SLACK = 1e-9
 """Points: a loss within this of its limit passes (differences of percentages carry float noise)."""
 
@@ -41,9 +30,9 @@ class Measured:
     miou: float
     """mIoU in %, overall."""
     seconds: float
-    """Time per view (the bench: CPU seconds), lower is faster."""
+    """Time per view, lower is faster."""
     class_iou: dict[str, float | None]
-    """Class name -> IoU in % over the test views (None: the class is absent from their ground truth)."""
+    """Class name -> IoU in % (None: absent from the ground truth)."""
     class_share: dict[str, float]
     """Class name -> its share of the labelled test pixels (0..1)."""
 
@@ -55,9 +44,7 @@ class Shortfall:
     where: str
     """``overall`` or the class's name."""
     loss: float
-    """Points lost against the full render."""
     limit: float
-    """Points the rule allows there."""
 
     def describe(self) -> str:
         """``chair -4.20`` (points, against the full render)."""
@@ -69,11 +56,9 @@ class DefaultChoice:
     """What the rule decided on one set of rows."""
 
     reference: str
-    """The full render every loss is measured against."""
     chosen: str
-    """The fastest qualifying setting."""
     counted: tuple[str, ...]
-    """Classes holding at least ``MIN_CLASS_SHARE`` of the labelled test pixels, by the reference's ground truth."""
+    """Classes holding at least ``MIN_CLASS_SHARE`` of the labelled test pixels."""
     shortfalls: dict[str, tuple[Shortfall, ...]]
     """Every setting's shortfalls (empty: it qualifies), fastest setting first."""
 
@@ -93,10 +78,8 @@ def counted_classes(reference: Measured) -> tuple[str, ...]:
 
 
 def shortfalls(row: Measured, reference: Measured, counted: tuple[str, ...]) -> tuple[Shortfall, ...]:
-    """Where ``row`` loses more than the rule allows against ``reference``: overall first, then the counted classes.
-
-    ValueError when ``row`` has no IoU for a counted class (rows measured on other views).
-    """
+    """Where ``row`` loses more than the rule allows against ``reference``, overall first; ValueError when it has no
+    IoU for a counted class (rows measured on other views)."""
     found = []
     if reference.miou - row.miou > MAX_MIOU_LOSS + _FLOAT_SLACK:
         found.append(Shortfall("overall", reference.miou - row.miou, MAX_MIOU_LOSS))
@@ -112,10 +95,7 @@ def shortfalls(row: Measured, reference: Measured, counted: tuple[str, ...]) -> 
 
 
 def choose_default(rows: list[Measured], reference: str) -> DefaultChoice:
-    """Apply the rule (module docstring) to ``rows`` against the row named ``reference`` (the full render).
-
-    ValueError when ``reference`` is not among the rows.
-    """
+    """Apply the rule (module docstring) to ``rows`` against the row named ``reference`` (the full render)."""
     by_name = {r.name: r for r in rows}
     if reference not in by_name:
         raise ValueError(f"default render rule: the reference {reference!r} is not among the rows {list(by_name)}")
@@ -128,6 +108,8 @@ def choose_default(rows: list[Measured], reference: str) -> DefaultChoice:
 
 
 def todays_defaults() -> dict[str, FastRender | None]:
-    """Who uses a default render today -> the fast render mode it uses (None: the full render)."""
+    """Who uses a default render today -> its fast render mode (None: full): ``sray eval``, validation
+    (``data.held_out``) and the fleet's held-out scores (``finetune.held_out``); the last two render every pixel of
+    their own strided grid, so per scored pixel they match the bench's ``fast s1``."""
     return {"sray eval": HeldOutRender().fast(), "validation": DataSettings().held_out.fast(),
             "fleet held-out": FinetuneSettings().held_out.fast()}

@@ -1,5 +1,4 @@
-"""``sray bench segmenter``: train the 2D segmenter (encoder + linear head) that ``2d-transfer`` and the ceilings'
-rows read, for a CPU-second budget, with a recipe's images and augmentation."""
+"""``sray bench segmenter``'s training: the 2D segmenter of ``2d-transfer`` for a CPU-second budget."""
 
 from __future__ import annotations
 
@@ -14,12 +13,9 @@ from sray.platform.eval.segmenter_training import train_segmenter
 def run_segmenter(shards: Path, cpu_seconds: float, out: Path, recipe: str = "synth-cpu-hour",
                   seed: int = 0, max_steps: int | None = None, encoder_width: int | None = None,
                   overrides: tuple[str, ...] = ()) -> SegmenterRecord:
-    """Train the 2D segmenter with ``recipe``'s augmentation, class balance, source counts and encoder for
-    ``cpu_seconds`` (or ``max_steps``, when sooner), resuming an interrupted training left in ``out``; saved in
-    ``out``. ``encoder_width``: the encoder's first-layer width instead of the recipe's ``model.encoder_width``.
-    ``overrides``: ``section.field=value``
-    assignments applied to the recipe first (``data.aug.colour_ev=0``: the same training without exposure jitter);
-    ValueError names a field that does not exist."""
+    """Train the 2D segmenter into ``out`` (resuming one left there) with ``recipe``'s augmentation, class balance,
+    source counts and encoder (``encoder_width`` overrides its first-layer width) for ``cpu_seconds`` or ``max_steps``,
+    whichever ends first. ``overrides``: ``section.field=value`` applied to the recipe first (ValueError: no field)."""
     cfg = get_recipe(recipe)
     for assignment in overrides:
         apply_override(cfg, assignment)

@@ -1,17 +1,7 @@
-"""``sray bench speed-accuracy``: the settings, their paired measurement and the table.
-
-Every setting renders the same views of the unseen test scenes (paired), so the accuracy each
-setting gives up is measured against the full render of the same run. Settings trade accuracy for
-speed along these axes: samples the fine pass evaluates (the union of coarse and resampled depths, or
-the resampled ones only), source views, precision, the fast render mode (pixel stride = resolution,
-fine pass only where the coarse pass is unsure) and the RGB-D mode's depth-guided samples (``rgbd``
-settings render with the sources' depth, by the ``--checkpoint-rgbd`` model when one is given, else by
-the main checkpoint's weights with ``model.inputs`` switched, as both modes share their parameters).
-Other registered methods' zero-shot models (``speed_methods``) are rows too, each scored and timed on the same
-views as the S-Ray row of its inputs listed just above it (:func:`paired_settings`). Each row is also scored per
-class (``speed_classes``); the default-render rule (``render_default``) reads only S-Ray's rows. The chart is
-``speed_chart``; the command itself, over one checkpoint or several, is ``speed_accuracy_run``.
-"""
+"""``sray bench speed-accuracy``: the settings, their paired measurement (every setting renders the same views of the
+unseen test scenes, so what it gives up is measured against the full render of the same run) and the table. Other
+registered methods' zero-shot models (``speed_methods``) are rows too, each on the views of S-Ray's row of its inputs;
+each row is scored per class (``speed_classes``); the default-render rule (``render_default``) reads S-Ray's rows."""
 
 from __future__ import annotations
 
@@ -46,39 +36,35 @@ from sray.platform.finetune.methods.sray_method import NAME as SRAY
 
 @dataclass(frozen=True)
 class Setting:
-    """One point of the chart: how the views are rendered."""
+    """One point of the chart: how the views are rendered (``""``: as the checkpoint does)."""
 
     name: str
     n_source: int = 8
     fine_samples: str = ""
-    """``SRayConfig.fine_samples`` to render with: ``""`` the checkpoint's own (what ``sray eval --render full``
-    renders), ``union`` (the fine pass re-evaluates the coarse depths too) or ``new`` (resampled depths only)."""
+    """``SRayConfig.fine_samples``: ``union`` (the fine pass re-evaluates the coarse depths too) or ``new``."""
     fast: FastRender | None = None
     bf16: bool = False
     impl: str = "fast"
-    """``Runtime.impl`` of the per-sample networks: ``reference`` is the unoptimised first implementation."""
+    """``Runtime.impl``: ``reference`` is the unoptimised first implementation."""
     chunk: int = 0
-    """Rays per render chunk; 0 = by device (``sray.model.ray_chunks``: 256 on a CPU)."""
+    """Rays per render chunk; 0 = by device (``sray.model.ray_chunks``)."""
     sample_scale: float = 1.0
     """Coarse and fine samples per ray as a fraction of the checkpoint's."""
     inputs: str = ""
-    """``model.inputs`` to render with: ``""`` the checkpoint's own, ``rgbd`` the sources' depth places the
-    coarse samples (``sray.model.depth_sampling``)."""
+    """``model.inputs``: ``rgbd`` places the coarse samples by the sources' depth."""
 
     def runtime(self) -> Runtime:
-        """The ``Runtime`` the setting's views are rendered with: its implementation and rays per chunk."""
+        """The ``Runtime`` the views are rendered with."""
         return Runtime(impl=self.impl, chunk=self.chunk)
 
     def same_evaluation(self, other: Setting) -> bool:
-        """Whether the two settings differ at most in how they render (full or fast with its stride and confidence,
-        implementation, rays per chunk): the same sources, inputs, samples and precision, so either may stand in for
-        the other as a default render. Fewer sources, depth inputs, other samples or bf16 change what is evaluated."""
+        """Whether the settings differ at most in how they render (full or fast, implementation, chunk), so either may
+        stand in for the other as a default render: the same sources, inputs, samples and precision."""
         return dataclasses.replace(self, name=other.name, fast=other.fast, impl=other.impl, chunk=other.chunk) == other
 
 
 def default_settings() -> list[Setting]:
-    """The unoptimised full render (the reference point: speed-ups and mIoU differences are against it),
-    the lossless fast path and the settings traded against it."""
+    """The unoptimised full render (the reference point), the lossless fast path and the settings traded against it."""
     return [
         Setting("full, reference path", impl="reference", chunk=CUDA_RENDER_RAYS),
         Setting("full"),
@@ -99,14 +85,12 @@ def default_settings() -> list[Setting]:
 
 
 SPEED = Bench("speed-accuracy", "Speed against accuracy")
-"""The benchmark's section in docs/benchmarks.md."""
 DEFAULT_TABLE, CHOSEN_TABLE = "Default settings", "Chosen settings"
 """The section's two tables: the whole default set, and the latest run of chosen settings."""
 
 
 def select_settings(names: list[str] | None) -> list[Setting]:
-    """The default settings named in ``names``, in that order (None or empty: all of them). The first is
-    the row the others are compared with."""
+    """The default settings named in ``names``, in that order (None or empty: all); the first is the reference."""
     settings = {st.name: st for st in default_settings()}
     if not names:
         return list(settings.values())
@@ -122,16 +106,15 @@ def table_title(names: list[str] | None) -> str:
 
 
 def paired_settings(settings: list[Setting], inputs: Iterable[str]) -> list[Setting]:
-    """``settings`` plus, for each of ``inputs`` (``rgb``, ``rgbd``) that no setting names, ``full, <inputs>`` with
-    the first setting's sources: S-Ray's row of those inputs, beside which a method reading them is listed."""
+    """``settings`` plus ``full, <inputs>`` (the first setting's sources) for each of ``inputs`` no setting names: the
+    S-Ray row a method reading those inputs is listed beside."""
     named = {st.inputs for st in settings}
     return [*settings, *(Setting(f"full, {x}", n_source=settings[0].n_source, inputs=x)
                          for x in dict.fromkeys(inputs) if x not in named)]
 
 
 def twin(settings: list[Setting], inputs: str) -> Setting:
-    """The setting a method reading ``inputs`` is listed after and scored like: the last one naming those inputs;
-    ValueError when none does (:func:`paired_settings` adds one)."""
+    """The last setting naming ``inputs``: a method reading them is listed after it and scored like it."""
     named = [st for st in settings if st.inputs == inputs]
     if not named:
         raise ValueError(f"speed-accuracy: no setting renders S-Ray with inputs {inputs!r}, the row a method reading "
@@ -140,8 +123,7 @@ def twin(settings: list[Setting], inputs: str) -> Setting:
 
 
 def _views(shards: Path, n_source: int, views_per_scene: int) -> Callable[[str], list[EvalSample]]:
-    """Scene -> its first ``views_per_scene`` test views (every one when <= 0), with ``n_source`` fixed sources
-    (decoded on each call: one scene in memory at a time)."""
+    """Scene -> its first ``views_per_scene`` test views (<= 0: all) with ``n_source`` sources, decoded per call."""
     def views(scene: str) -> list[EvalSample]:
         samples = list(make_eval_samples(shards, scene, split="test", n_source=n_source))
         return samples[:views_per_scene] if views_per_scene > 0 else samples
@@ -153,10 +135,9 @@ def timed_scores(renderer: Callable[[EvalSample], RayRenderer], scenes: list[str
                  views: Callable[[str], list[EvalSample]], n_classes: int, ignore_id: int, chunk: int,
                  fast: FastRender | None, device: torch.device,
                  context: Callable[[], AbstractContextManager] = nullcontext) -> dict[str, Any]:
-    """Render and score the ``views`` of each of ``scenes`` with ``renderer`` inside ``context``, timed: a row's miou
-    and psnr (dataset-level per scene, mean over scenes), class_iou and class_share (``speed_classes.class_scores``
-    of one confusion matrix over every view), s_per_view (CPU seconds of this process, all threads), wall_s_per_view
-    and views. Source encoding (or segmentation) and scoring count; decoding the shards does not."""
+    """Render and score the ``views`` of ``scenes`` with ``renderer`` inside ``context``, timed: miou and psnr
+    (dataset-level per scene, mean over scenes), class_iou and class_share (one confusion matrix over every view),
+    s_per_view (CPU seconds of this process), wall_s_per_view and views. Decoding the shards is not timed."""
     seconds, cpu_seconds, per_scene, conf, n_views = 0.0, 0.0, [], 0, 0
     for scene in scenes:
         samples = views(scene)
@@ -179,15 +160,11 @@ def timed_scores(renderer: Callable[[EvalSample], RayRenderer], scenes: list[str
 def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_scene: int,
             progress: bool = True, checkpoint_rgbd: Path | None = None,
             others: dict[str, EvalModel] | None = None, store: Path | None = None) -> list[dict]:
-    """Score every setting on the first ``views_per_scene`` test views of each unseen scene (<= 0: every one).
-
-    ``checkpoint_rgbd``: the model that renders the ``inputs="rgbd"`` settings (None: ``checkpoint``'s).
-    ``others``: registered methods' zero-shot models by method name; each is scored on the views and sources of its
-    :func:`twin` and listed right after it. ``store``: a folder keeping each setting's rows as they are measured
-    (``speed_store``); rows it holds for the same measurement are read instead of measured again. Returns one row per
-    setting or method: name, method, inputs, :func:`timed_scores`' values, class_names, and for S-Ray's rows the
-    setting and its fine_samples (None for another method's row).
-    """
+    """One row per setting (and per method of ``others``, zero-shot models by name, each after its :func:`twin`) on
+    the first ``views_per_scene`` test views of each unseen scene (<= 0: all): name, method, inputs,
+    :func:`timed_scores`' values, class_names, setting and fine_samples (None for another method). ``checkpoint_rgbd``
+    renders the ``rgbd`` settings (None: ``checkpoint``); ``store`` keeps rows measured (``speed_store``) and gives
+    back those it holds instead of measuring them again."""
     loaded = {}
     for key, path in (("main", checkpoint), ("rgbd", checkpoint_rgbd)):
         if path is not None:
@@ -237,15 +214,13 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
 
 
 def _apply(net: torch.nn.Module, st: Setting, own: SRayConfig) -> None:
-    """Put the setting's sampling choices on the model: fine samples, samples per ray and inputs, starting from
-    ``own``, the checkpoint's model config (what a setting leaves empty keeps)."""
+    """Put the setting's fine samples, samples per ray and inputs on the model over ``own``, the checkpoint's."""
     net.cfg.fine_samples, net.cfg.inputs = st.fine_samples or own.fine_samples, st.inputs or own.inputs
     net.cfg.n_coarse, net.cfg.n_fine = (max(1, round(n * st.sample_scale)) for n in (own.n_coarse, own.n_fine))
 
 
 def pareto(rows: list[dict], cost: str = "s_per_view", score: str = "miou") -> list[dict]:
-    """Rows no other row beats on both ``cost`` (lower is better) and ``score`` (higher is better),
-    cheapest first."""
+    """Rows no other row beats on both ``cost`` (lower is better) and ``score`` (higher), cheapest first."""
     front, best = [], float("-inf")
     for r in sorted(rows, key=lambda r: (r[cost], -r[score])):
         if r[score] > best:
@@ -255,10 +230,8 @@ def pareto(rows: list[dict], cost: str = "s_per_view", score: str = "miou") -> l
 
 
 def table(rows: list[dict], choice: DefaultChoice | None = None) -> str:
-    """Markdown table: each row's inputs, mIoU and its paired difference to the first row (the default set's first
-    is the unoptimised full render), PSNR, seconds per view, speed-up against the first row; with ``choice``, a last
-    column saying what the default-render rule made of each S-Ray setting (:func:`rule_cell`; another method's row:
-    ``another method``)."""
+    """Markdown table: inputs, mIoU and its paired difference to the first row, PSNR, seconds per view, speed-up
+    against the first row, Pareto front; with ``choice``, what the default-render rule made of each row."""
     ref = rows[0]
     first = "reference" if ref["name"] == "full, reference path" else f"'{ref['name']}'"
     on_front = {r["name"] for r in pareto(rows)}
@@ -278,9 +251,7 @@ def table(rows: list[dict], choice: DefaultChoice | None = None) -> str:
 
 
 def rule_cell(name: str, choice: DefaultChoice) -> str:
-    """What the rule made of setting ``name``: ``**chosen**``, ``passes``, ``reference``, the shortfalls that
-    rejected it (``✗ chair -4.20``), or ``not offered`` for a setting that evaluates otherwise (sources, inputs,
-    samples, precision)."""
+    """``**chosen**``, ``passes``, ``reference``, the shortfalls (``✗ chair -4.20``) or ``not offered``."""
     if name not in choice.shortfalls:
         return "not offered"
     if name == choice.chosen:

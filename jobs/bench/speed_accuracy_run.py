@@ -1,26 +1,21 @@
 """``sray bench speed-accuracy`` as a command: the settings measured on one checkpoint or several (a recipe's seeds),
-with the rows of other registered methods (``--methods``, ``speed_methods``) beside S-Ray's row of their inputs, the
-default-render rule applied to each checkpoint's S-Ray rows and to their mean, chart and tables written into the
-benchmark's section of docs/benchmarks.md and logged to the tracker.
-
-The section's first table holds one checkpoint's rows, or with several the mean over them (per row: mIoU,
-PSNR, times and each class's IoU; each checkpoint's own tables are printed). With the full render as the first
-row, it gains a column saying what the rule (``render_default``) made of each setting, and two tables follow: the
-IoU of every class holding at least 1% of the labelled test pixels, and the rule's verdict per checkpoint (and on
-the mean): the chosen setting, why each faster one was rejected, whether today's defaults pass. The default set
-fills one table of the section, a run of chosen settings (``--settings``) the other; each is replaced by the next
-run of its kind.
-"""
+other registered methods' rows (``--methods``) beside S-Ray's row of their inputs, the default-render rule applied to
+each checkpoint's S-Ray rows and to their mean, chart and tables written into docs/benchmarks.md and logged. The
+default set fills one table of the section, a run of chosen settings (``--settings``) the other."""
 
 from __future__ import annotations
 
 import os
+import textwrap
 import time
 from pathlib import Path
 
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from sray.data_tools.atomic import save_png
 from sray.jobs.bench.render_default import MAX_CLASS_LOSS, MAX_MIOU_LOSS, MIN_CLASS_SHARE, DefaultChoice
-from sray.jobs.bench.speed_accuracy import SPEED, measure, paired_settings, select_settings, table, table_title
-from sray.jobs.bench.speed_chart import chart
+from sray.jobs.bench.speed_accuracy import SPEED, measure, paired_settings, pareto, select_settings, table, table_title
 from sray.jobs.bench.speed_classes import class_table, mean_rows
 from sray.jobs.bench.speed_methods import method_models
 from sray.jobs.bench.speed_verdict import checkpoint_label, rule_choice, todays_settings, verdict_table
@@ -30,6 +25,8 @@ from sray.platform.common.bench_doc import bench_dir, record
 from sray.platform.common.eval_protocol import EvalProtocol, inputs_name
 from sray.platform.finetune.methods.registry import get_method
 from sray.platform.tracking.registry import get_tracker
+
+FAST, FULL = "tab:blue", "tab:gray"  # the chart's S-Ray fast-render and full-render settings
 
 
 def report(rows: list[dict], choice: DefaultChoice | None) -> str:
@@ -43,12 +40,10 @@ def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: i
                        tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None,
                        methods: list[str] | None = None, segmenter: Path | None = None,
                        store: Path | None = None) -> str:
-    """Measure the default settings, or those ``names`` chooses (the ``rgbd`` ones by ``checkpoint_rgbd`` when
-    given), and the zero-shot models of the registered ``methods`` (built with ``segmenter`` where one reads it;
-    S-Ray's setting of each one's inputs is added when missing) on each of ``checkpoints``; apply the default-render
-    rule to each and to their mean; write the chart and the table section, log both; returns the section.
-    ``store``: a folder keeping every measured row (``speed_store``), so a run stopped part-way resumes.
-    ValueError or FileNotFoundError (before anything is measured) for a method that cannot be built."""
+    """Measure the settings ``names`` chooses (None: the defaults) and the ``methods``' zero-shot models (built with
+    ``segmenter`` where one reads it) on each of ``checkpoints``, apply the rule to each and to their mean, write the
+    chart and the section, log both; returns the section. ValueError or FileNotFoundError, before anything is
+    measured, for a method that cannot be built."""
     shards, methods = Path(shards), list(methods or [])
     others = [method_models(methods, Path(c), segmenter) for c in checkpoints]
     settings = paired_settings(select_settings(names), (m.inputs for m in others[0].values()))
@@ -93,8 +88,8 @@ def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: i
 
 def notes(rows: list[dict], checkpoints: list[Path], shards: Path, views_per_scene: int,
           checkpoint_rgbd: Path | None, today: dict[str, str | None], protocol: str, png: Path, doc: Path) -> str:
-    """The notes under the section's tables: what was measured on which views, what each setting means, the
-    per-class and rule conventions, the setting each of ``today``'s defaults renders as, the protocol, the chart."""
+    """The notes under the section's tables: what was measured on which views, what each setting means, the rule's
+    conventions, the setting each of ``today``'s defaults renders as, the protocol, the chart."""
     rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
     own_fine = ", ".join(sorted({f"`fine_samples={r['fine_samples']}`" for r in rows if r["setting"] is not None
                                  and not r["setting"]["fine_samples"] and not r["setting"]["fast"]})) or "-"
@@ -104,29 +99,24 @@ def notes(rows: list[dict], checkpoints: list[Path], shards: Path, views_per_sce
     named = ", ".join(f"`{c}`" for c in checkpoints)
     whose = (f"Checkpoint {named}" if len(checkpoints) == 1 else
              f"Checkpoints {named}; rows, per-class IoU and the rule's last line are the mean over them")
-    return (f"{whose}; {which} of each unseen scene of `{shards}`, "
-            f"the same views for every setting (paired); mIoU dataset-level per scene, then the mean over "
-            f"scenes; per-class IoU dataset-level over all those views together (one confusion matrix). CPU s / view "
-            f"is the CPU time this process spent (all its threads) encoding the sources, "
-            f"rendering and scoring one whole view (`sray eval`'s loop), the speed measure here because other "
-            f"jobs may share the cores (on a quiet "
-            f"machine wall time is about CPU time / torch threads); wall s / view is shown beside it. Settings: "
-            f"'full, reference path' is the unoptimised path "
-            f"(`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with "
-            f"the checkpoint's samples; 'full' is the optimised path "
-            f"(chunks by device: 256 rays on a CPU), equal to it "
-            f"within fp32 tolerance. Both render as the checkpoint was trained ({own_fine}), as `sray eval "
-            f"--render full` does; 'fine union' makes the fine pass re-evaluate the coarse depths too, 'fine new "
-            f"only' evaluates the resampled depths alone. 'fast sS cC': the fast render mode "
-            f"(`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine pass (resampled "
-            f"depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed by the "
-            f"sources' depth (docs/model.md, RGB-D mode), rendered by "
-            f"{rgbd_by}. The default-render rule (`jobs/bench/render_default.py`) is offered the settings that differ "
-            f"from the first row only in how they render (full or fast, implementation): the same sources, inputs, "
-            f"samples and precision; 'not offered' marks the others, and it never reads another method's row. "
-            f"{method_sentence(rows)}Today's defaults render as: {defaults} "
-            f"(validation and the fleet score a strided grid of their own and render its every pixel: per scored "
-            f"pixel, pixel stride 1). Protocol: {protocol}.\n\n"
+    return (f"{whose}; {which} of each unseen scene of `{shards}`, the same views for every setting (paired); mIoU "
+            f"dataset-level per scene, then the mean over scenes; per-class IoU dataset-level over all those views "
+            f"together (one confusion matrix). CPU s / view is the CPU time this process spent (all its threads) "
+            f"encoding the sources, rendering and scoring one whole view (`sray eval`'s loop), the speed measure here "
+            f"because other jobs may share the cores (on a quiet machine wall time is about CPU time / torch "
+            f"threads); wall s / view is shown beside it. Settings: 'full, reference path' is the unoptimised path "
+            f"(`impl=reference`, chunks of {CUDA_RENDER_RAYS} rays) with the checkpoint's samples; 'full' is the "
+            f"optimised path (chunks by device: 256 rays on a CPU), equal to it within fp32 tolerance. Both render as "
+            f"the checkpoint was trained ({own_fine}), as `sray eval --render full` does; 'fine union' makes the fine "
+            f"pass re-evaluate the coarse depths too, 'fine new only' evaluates the resampled depths alone. 'fast sS "
+            f"cC': the fast render mode (`sray.model.fast_render`), rays every S-th pixel upsampled bilinearly, fine "
+            f"pass (resampled depths only) where the coarse confidence is below C. 'rgbd': the coarse samples placed "
+            f"by the sources' depth (docs/model.md, RGB-D mode), rendered by {rgbd_by}. The default-render rule "
+            f"(`jobs/bench/render_default.py`) is offered the settings that differ from the first row only in how "
+            f"they render (full or fast, implementation): the same sources, inputs, samples and precision; 'not "
+            f"offered' marks the others, and it never reads another method's row. {method_sentence(rows)}Today's "
+            f"defaults render as: {defaults} (validation and the fleet score a strided grid of their own and render "
+            f"its every pixel: per scored pixel, pixel stride 1). Protocol: {protocol}.\n\n"
             f"![speed-accuracy]({os.path.relpath(png, doc.parent)})")
 
 
@@ -142,3 +132,39 @@ def method_sentence(rows: list[dict]) -> str:
             "builds it, full render, scored on the same views with the same sources as the S-Ray setting of its "
             "inputs listed just above it (S-Ray's RGB-D row beside an RGB-D method) and timed the same way, "
             "everything it runs per view included. ")
+
+
+def chart(rows: list[dict], path: Path, protocol: str) -> Path:
+    """mIoU (%) against CPU seconds per view (log scale), the front joined by a line, numbered points named in a key
+    (nearby names would overlap), another method's row in its zero-shot style, the protocol in the title."""
+    fig = Figure(figsize=(11, 6.5))
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.07, 0.1, 0.56, 0.74))
+    others = {}
+    for i, r in enumerate(rows, 1):
+        if r["setting"] is None:
+            method = get_method(r["method"])
+            style = others.setdefault(r["method"], method.zero_shot or method.style)
+            ax.scatter(r["s_per_view"], r["miou"], s=60, color=style.color, marker=style.marker)
+        else:
+            ax.scatter(r["s_per_view"], r["miou"], s=40, color=FAST if r["setting"]["fast"] else FULL)
+        ax.annotate(str(i), (r["s_per_view"], r["miou"]), textcoords="offset points", xytext=(4, 3), fontsize=8)
+    front = pareto(rows)
+    ax.plot([r["s_per_view"] for r in front], [r["miou"] for r in front], color="tab:orange", lw=1.5,
+            label="Pareto front")
+    ax.scatter([], [], color=FAST, label="S-Ray, fast render mode")
+    ax.scatter([], [], color=FULL, label="S-Ray, full render")
+    for style in others.values():
+        ax.scatter([], [], color=style.color, marker=style.marker, label=style.label)
+    ax.set_xscale("log")
+    ax.set_xlabel("CPU seconds per view (log scale; this process, all threads)")
+    ax.set_ylabel("mIoU (%)")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.legend(*ax.get_legend_handles_labels(), loc="lower left", bbox_to_anchor=(0.655, 0.1), fontsize=8)
+    key = [f"{i:>2}  {r['name']} ({inputs_name(r['inputs'])}): {r['miou']:.2f}%, {r['s_per_view']:.2f} CPU s"
+           for i, r in enumerate(rows, 1)]
+    fig.text(0.66, 0.84, "\n".join(key), va="top", ha="left", family="monospace", fontsize=8)
+    what = "S-Ray's render settings" + (f" and {', '.join(others)}" if others else "")
+    title = [f"Zero-shot accuracy against render time: {what}"] + textwrap.wrap(protocol, 150)
+    fig.text(0.5, 0.98, "\n".join(title), va="top", ha="center", fontsize=8)
+    return save_png(fig, path, dpi=120)

@@ -1,11 +1,6 @@
-"""Per-class accounting of ``sray bench speed-accuracy``: each setting's IoU per class over the test views and each
-class's share of their labelled pixels, the mean of several checkpoints' rows, the per-class table and the rows as
-the default-render rule reads them.
-
-Per-class IoU is dataset-level over every test view the bench rendered (all unseen scenes in one confusion
-matrix, ``sray.model.metrics.scene_metrics``), in %; a class's share is its count of labelled ground-truth pixels
-over all labelled ones. Every setting renders the same views, so the shares are the same in every row.
-"""
+"""Per-class accounting of ``sray bench speed-accuracy``: IoU per class in %, dataset-level over every test view
+rendered (one confusion matrix), each class's share of the labelled pixels, the mean of several checkpoints' rows,
+the per-class table and the rows as the default-render rule reads them."""
 
 from __future__ import annotations
 
@@ -18,12 +13,11 @@ from sray.model.metrics import scene_metrics
 from sray.platform.common.doc_blocks import markdown_table
 
 MEAN_KEYS = ("miou", "psnr", "s_per_view", "wall_s_per_view")
-"""Row values averaged over checkpoints by :func:`mean_rows`."""
 
 
 def class_scores(conf: Tensor) -> tuple[list[float | None], list[float]]:
-    """IoU of each class in % (None for a class absent from the ground truth) and each class's share of the
-    labelled pixels (0..1; all 0 when nothing is labelled), from an (L, L) confusion matrix (ground-truth rows)."""
+    """IoU of each class in % (None: absent from the ground truth) and its share of the labelled pixels (0..1), from
+    an (L, L) confusion matrix (ground-truth rows)."""
     ious = [None if math.isnan(v) else 100.0 * float(v) for v in scene_metrics(conf)["iou_per_class"]]
     counts = conf.sum(1).double()
     total = float(counts.sum())
@@ -36,9 +30,8 @@ def _mean(values: list[float | None]) -> float | None:
 
 
 def mean_rows(runs: list[list[dict]]) -> list[dict]:
-    """One row per setting: the mean over ``runs`` (each one checkpoint's ``measure`` rows, same settings in the same
-    order) of ``MEAN_KEYS``, of each class's IoU (None where a run has none) and share; the rest from the first run,
-    with ``checkpoints`` = the number of runs. ValueError when the runs measured other settings."""
+    """Per setting, the mean over ``runs`` (each one checkpoint's ``measure`` rows) of ``MEAN_KEYS`` and of each
+    class's IoU (None where a run has none) and share; the rest from the first run, with ``checkpoints``."""
     names = [[r["name"] for r in run] for run in runs]
     if any(n != names[0] for n in names):
         raise ValueError(f"speed-accuracy: the checkpoints' rows name other settings: {names}")
@@ -61,9 +54,8 @@ def measured(row: dict) -> Measured:
 
 
 def class_table(rows: list[dict], chosen: str | None = None) -> str:
-    """Markdown table: one column per class the default-render rule counts (a share of the labelled test pixels of
-    at least ``MIN_CLASS_SHARE``), a first line with each class's share, then per setting the class's IoU and its
-    difference to the first row (points); the setting named ``chosen`` is marked."""
+    """One column per class the rule counts: a line of shares, then per setting each IoU and its difference to the
+    first row (points), the ``chosen`` one marked."""
     ref = measured(rows[0])
     counted = counted_classes(ref)
     lines = [["share of labelled test pixels", *(f"{100 * ref.class_share[c]:.1f}%" for c in counted)]]

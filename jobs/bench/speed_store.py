@@ -1,12 +1,6 @@
-"""Rows of ``sray bench speed-accuracy`` kept per checkpoint and setting (``--store``), so that a run over several
-checkpoints and slow settings, longer than one sitting, resumes where it stopped: a row is measured once and read
-back by every later run that asks for the same measurement.
-
-A stored row stands for exactly one measurement: the key is the checkpoint (and the RGB-D checkpoint where the
-setting renders with depth), the shard folder, the test views per scene, every field of the setting, and each other
-method's model listed beside it. Its times are CPU seconds of the process that measured it (the speed measure on a
-shared machine), so rows measured in different runs compare as well as rows of one run do on a quiet machine.
-"""
+"""Rows of ``sray bench speed-accuracy`` kept per measurement (``--store``), so a long run resumes where it stopped.
+The key names everything measured: checkpoints, shards, views per scene, the setting and the methods beside it; times
+are CPU seconds, so rows of different runs compare as rows of one run do."""
 
 from __future__ import annotations
 
@@ -22,8 +16,7 @@ from sray.platform.common.machine import describe_machine
 
 def row_key(checkpoint: Path, checkpoint_rgbd: Path | None, shards: Path, views_per_scene: int, setting: Any,
             methods: dict[str, str]) -> dict[str, Any]:
-    """What one setting's rows measured: resolved paths, views, the setting's fields and ``methods`` (name -> the
-    model each other method listed beside it scored, its ``EvalModel.subject``)."""
+    """What one setting's rows measured (``methods``: name -> the ``EvalModel.subject`` listed beside it)."""
     key = {"checkpoint": str(Path(checkpoint).resolve()),
            "checkpoint_rgbd": str(Path(checkpoint_rgbd).resolve()) if checkpoint_rgbd else None,
            "shards": str(Path(shards).resolve()), "views_per_scene": views_per_scene,
@@ -46,8 +39,7 @@ def stored_rows(store: Path, key: dict[str, Any]) -> list[dict[str, Any]] | None
 
 
 def store_rows(store: Path, key: dict[str, Any], rows: list[dict[str, Any]]) -> Path:
-    """Write one setting's ``rows`` under ``key`` (atomically) with the machine that measured them
-    (``describe_machine``); returns the file."""
+    """Write one setting's ``rows`` under ``key`` with the machine that measured them; returns the file."""
     path = _path(store, key)
     atomic_write_json(path, {"key": key, "rows": rows, "machine": describe_machine()})
     return path

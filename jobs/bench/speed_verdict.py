@@ -1,6 +1,4 @@
-"""The default-render rule applied to ``sray bench speed-accuracy``'s rows: which of S-Ray's settings it is offered
-(never another method's row), which measured setting each user of a default renders with today, and the verdict
-table (one line per checkpoint and one for their mean)."""
+"""The default-render rule applied to ``sray bench speed-accuracy``'s rows, and its verdict table."""
 
 from __future__ import annotations
 
@@ -13,9 +11,8 @@ from sray.platform.common.doc_blocks import markdown_table
 
 
 def rule_choice(rows: list[dict], settings: list[Setting]) -> DefaultChoice | None:
-    """The rule over S-Ray's rows (those carrying a ``setting``; another method's row is never offered) whose
-    settings evaluate as the first row does (``Setting.same_evaluation``), against the first row; None when the first
-    row is not a full render (then there is no reference for the losses)."""
+    """The rule over S-Ray's rows whose settings evaluate as the first row's (``Setting.same_evaluation``), against
+    it; None when the first row is not a full render (no reference for the losses)."""
     by_name = {s.name: s for s in settings}
     first = by_name[rows[0]["name"]]
     if first.fast is not None:
@@ -25,8 +22,8 @@ def rule_choice(rows: list[dict], settings: list[Setting]) -> DefaultChoice | No
 
 
 def todays_settings(settings: list[Setting]) -> dict[str, str | None]:
-    """Each user of a default render (``render_default.todays_defaults``) -> the setting among ``settings`` that
-    renders as it does, on the optimised path and evaluating as the first setting does; None when there is none."""
+    """Each user of a default render (``todays_defaults``) -> the setting that renders as it does on the optimised
+    path, evaluating as the first setting (None: none does)."""
     found = {}
     for user, fast in todays_defaults().items():
         match = [s.name for s in settings if s.same_evaluation(settings[0]) and s.impl == "fast" and s.fast == fast]
@@ -35,14 +32,13 @@ def todays_settings(settings: list[Setting]) -> dict[str, str | None]:
 
 
 def checkpoint_label(path: Path) -> str:
-    """A checkpoint's short name in a table: ``<job>/<step folder>`` for a job's checkpoint, else its folder name."""
+    """``<job>/<step folder>`` for a job's checkpoint, else its folder name."""
     path = Path(path)
     return f"{path.parent.parent.name}/{path.name}" if path.parent.name == "checkpoints" else path.name
 
 
 def today_cell(choice: DefaultChoice, today: dict[str, str | None]) -> str:
-    """Whether the setting of each of today's defaults passes: ``sray eval (fast s8 c0.9): fails (chair -4.20)``,
-    users sharing a setting named together."""
+    """Whether each of today's defaults passes: ``sray eval (fast s8 c0.9): fails (chair -4.20)``."""
     users: dict[str | None, list[str]] = {}
     for user, name in today.items():
         users.setdefault(name, []).append(user)
@@ -57,8 +53,8 @@ def today_cell(choice: DefaultChoice, today: dict[str, str | None]) -> str:
 
 
 def verdict_table(labels: list[str], choices: list[DefaultChoice], today: dict[str, str | None]) -> str:
-    """Markdown table, one line per label (a checkpoint, or their mean): the setting the rule chose, each faster
-    setting it rejected and why, and whether today's defaults pass."""
+    """One line per label (a checkpoint, or their mean): the setting chosen, each faster one rejected and why, and
+    whether today's defaults pass."""
     lines = []
     for label, choice in zip(labels, choices, strict=True):
         rejected = "; ".join(f"{name}: {', '.join(s.describe() for s in why)}"

@@ -11,16 +11,15 @@ from sray.data_tools.label_spaces import LABEL_SPACES
 from sray.data_tools.readers.registry import READERS
 
 
-def _size(text: str) -> tuple[int, int]:
-    """``WxH`` (e.g. ``320x240``) -> (H, W)."""
-    match = re.fullmatch(r"(\d+)x(\d+)", text.strip())
-    if not match or int(match.group(1)) < 1 or int(match.group(2)) < 1:
-        raise argparse.ArgumentTypeError(f"size must look like 320x240 (width x height), got {text!r}")
-    return int(match.group(2)), int(match.group(1))
+def size_arg(text: str) -> tuple[int, int]:
+    """``WxH`` (e.g. ``320x240``) -> (H, W); argparse reports anything else."""
+    match = re.fullmatch(r"(\d+)x(\d+)", text.strip().lower())
+    if not match or min(int(match[1]), int(match[2])) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: give the size as WIDTHxHEIGHT with positive sides, e.g. 320x240")
+    return int(match[2]), int(match[1])
 
 
 def _default_size(size_hw: tuple[int, int] | None) -> str:
-    """A reader's default output size as the CLI writes it (``320x240``)."""
     return "the source's size" if size_hw is None else f"{size_hw[1]}x{size_hw[0]}"
 
 
@@ -38,7 +37,7 @@ def register(verbs: argparse._SubParsersAction) -> None:
                    help="train: all views, every --holdout-every-th held out as 'test'; "
                         "test: 20-view window, 8 source / 8 finetune / 4 test")
     p.add_argument("--label-space", default="scannet20", choices=tuple(LABEL_SPACES))
-    p.add_argument("--size", type=_size, default=None, metavar="WxH",
+    p.add_argument("--size", type=size_arg, default=None, metavar="WxH",
                    help="output size (default: " +
                         ", ".join(f"{_default_size(r.size_hw)} for {r.name}" for r in READERS.values()) + ")")
     p.add_argument("--frame-skip", type=int, default=None, metavar="N",

@@ -1,9 +1,6 @@
-"""Build the GPU bundle: resolve (:mod:`.resolve`), download the wheels, repack Ray without what sray never
-loads, refuse a bundle over the size a GPU call carries, and write the folder with its install script.
-
-The folder is assembled beside ``out`` and renamed into place whole: a refused or failed build leaves the
-previous bundle as it was.
-"""
+"""Build the GPU bundle: resolve (:mod:`.resolve`), download the wheels, repack Ray without what sray never loads,
+refuse a bundle over the size a GPU call carries, and write the folder with ``install.sh`` (the one install command,
+offline) and ``README.md``, assembled beside ``out`` and renamed into place whole (a failed build leaves the old)."""
 
 from __future__ import annotations
 
@@ -14,30 +11,37 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sray.data_tools.atomic import atomic_write_json, replace_dir
+from sray.data_tools.atomic import atomic_write_json, atomic_write_text, replace_dir
 
 from .image import normalise
-from .install_files import write_install_files
 from .resolve import LEFT_OUT, BundleError, Pin, bundle_pins, check_pins, read_constraints, resolve, target_options
 from .wheel_strip import strip_wheel
 
 DROP = {"ray": ("ray/jars/", "ray/dashboard/client/build/", "ray/rllib/", "ray/serve/", "ray/llm/")}
-"""Folders left out of a wheel, per distribution: Ray's Java workers (the 32 MB ``ray_dist.jar``), its dashboard's
-web page (sray starts Ray without the dashboard) and its RLlib, Serve and LLM libraries (sray imports none)."""
+"""Folders left out of a wheel: Ray's Java workers (the 32 MB ``ray_dist.jar``), its dashboard's web page (sray starts
+Ray without the dashboard) and its RLlib, Serve and LLM libraries (sray imports none)."""
 STRIP = {"ray": ("ray/_raylet.so", "ray/core/src/ray/gcs/gcs_server", "ray/core/src/ray/raylet/raylet")}
-"""Native binaries stripped of their symbol tables, per distribution: Ray's three largest (about 4.5 MB of the
-wheel), which leaves the bundle room beside the checkout in a 64 MiB call."""
+"""Native binaries stripped of their symbol tables: Ray's three largest (about 4.5 MB of the wheel)."""
 LIMIT_MIB = 60.0
 """Most a bundle may weigh: a GPU call carries 64 MiB, the checkout included."""
 MANIFEST = "bundle.json"
-"""The bundle's table of contents: target, wheels (name, version, file, bytes, dropped folders), what was left out."""
+DEFAULT_TARGET = "/tmp/sray-site"
+"""Where ``install.sh`` puts the packages unless told otherwise."""
+INSTALL_SH = """#!/bin/sh
+# Install this bundle's wheels offline into a folder (default {target}); then put it on PYTHONPATH.
+# Usage: sh install.sh [TARGET]   (PYTHON=... picks the interpreter; default python3)
+set -eu
+here=$(cd "$(dirname "$0")" && pwd)
+target=${{1:-{target}}}
+"${{PYTHON:-python3}}" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \\
+    --target "$target" "$here"/*.whl
+echo "gpu-bundle: {count} wheels installed into $target; now: export PYTHONPATH=$target${{PYTHONPATH:+:$PYTHONPATH}}"
+"""
 
 
 def download(pins: list[Pin], dest: Path, python_version: str, find_links: Path | None = None) -> None:
-    """Download one wheel per pin (no dependencies: the set is already resolved) for CPython ``python_version``
-    on manylinux x86-64 into ``dest``; from ``find_links`` alone, offline, when given.
-
-    Raises :class:`BundleError` naming the package pip found no wheel for, and the fix."""
+    """Download one wheel per pin (no dependencies) for CPython ``python_version`` on manylinux x86-64 into ``dest``,
+    from ``find_links`` alone when given; :class:`BundleError` naming the package without a wheel, and the fix."""
     where = ["--no-index", "--find-links", str(find_links)] if find_links else []
     done = subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--no-deps", *where, "-d", str(dest),
                            *target_options(python_version), *(p.spec() for p in pins)],
@@ -52,18 +56,12 @@ def download(pins: list[Pin], dest: Path, python_version: str, find_links: Path 
                           "MANYLINUX_TAGS in jobs/gpu_bundle/resolve.py, and build again")
 
 
-def wheel_name(path: Path) -> str:
-    """Normalised distribution name of a wheel file (the part of its name before the first ``-``)."""
-    return normalise(path.name.split("-", 1)[0])
-
-
 def match_wheels(pins: list[Pin], folder: Path) -> dict[str, Path]:
-    """``name -> wheel`` for every pin, from the ``*.whl`` files in ``folder``.
-
-    Raises :class:`BundleError` naming each pinned package without exactly one wheel there, and the fix."""
+    """``name -> wheel`` for every pin, from the ``*.whl`` files in ``folder``; :class:`BundleError` naming each pin
+    without exactly one wheel there, and the fix."""
     wheels: dict[str, list[Path]] = {}
     for path in sorted(folder.glob("*.whl")):
-        wheels.setdefault(wheel_name(path), []).append(path)
+        wheels.setdefault(normalise(path.name.split("-", 1)[0]), []).append(path)
     missing = [p.spec() for p in pins if len(wheels.get(p.name, [])) == 0]
     doubled = [p.spec() for p in pins if len(wheels.get(p.name, [])) > 1]
     if missing or doubled:
@@ -80,11 +78,9 @@ def folder_bytes(folder: Path) -> int:
 
 
 def assemble(pins: list[Pin], wheels: Path, out: Path, python_version: str, limit_mib: float = LIMIT_MIB) -> dict:
-    """Write the bundle folder ``out`` from the downloaded ``wheels``: repacked wheels, ``install.sh``,
-    ``README.md`` and ``bundle.json``; returns the manifest.
-
-    Raises :class:`BundleError` (``out`` untouched) when a wheel is missing or the bundle weighs more than
-    ``limit_mib``."""
+    """Write the bundle folder ``out`` from the downloaded ``wheels`` (repacked wheels, ``install.sh``, ``README.md``,
+    ``bundle.json``); returns the manifest. :class:`BundleError`, ``out`` untouched, for a missing wheel or a bundle
+    over ``limit_mib``."""
     found = match_wheels(pins, wheels)
     work = out.with_name(f".{out.name}.tmp{os.getpid()}")
     shutil.rmtree(work, ignore_errors=True)
@@ -112,9 +108,8 @@ def assemble(pins: list[Pin], wheels: Path, out: Path, python_version: str, limi
             largest = ", ".join("{file} {mib:.1f} MiB".format(file=e["file"], mib=e["bytes"] / 2**20)
                                 for e in sorted(entries, key=lambda e: -e["bytes"])[:3])
             raise BundleError(f"the bundle would weigh {total / 2**20:.1f} MiB, over its {limit_mib:g} MiB limit "
-                              f"(largest: {largest}): "
-                              "leave out more of what sray never loads (DROP in jobs/gpu_bundle/build.py, LEFT_OUT "
-                              "in jobs/gpu_bundle/resolve.py)")
+                              f"(largest: {largest}): leave out more of what sray never loads (DROP in "
+                              "jobs/gpu_bundle/build.py, LEFT_OUT in jobs/gpu_bundle/resolve.py)")
         replace_dir(work, out, out.with_name(f".{out.name}.old{os.getpid()}"))
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -123,8 +118,8 @@ def assemble(pins: list[Pin], wheels: Path, out: Path, python_version: str, limi
 
 def build_bundle(out: Path, python_version: str, constraints_file: Path, limit_mib: float = LIMIT_MIB,
                  find_links: Path | None = None) -> dict:
-    """Resolve, check the pins against ``constraints_file``, download and assemble the bundle; returns its
-    manifest. Raises :class:`BundleError` with the package and the fix when any step cannot be done."""
+    """Resolve, check the pins against ``constraints_file``, download and assemble the bundle; returns its manifest
+    (:class:`BundleError` with the package and the fix when a step cannot be done)."""
     pins = bundle_pins(resolve(python_version, constraints_file))
     check_pins(pins, read_constraints(constraints_file))
     downloads = out.with_name(f".{out.name}.downloads{os.getpid()}")
@@ -134,3 +129,43 @@ def build_bundle(out: Path, python_version: str, constraints_file: Path, limit_m
         return assemble(pins, downloads, out, python_version, limit_mib)
     finally:
         shutil.rmtree(downloads, ignore_errors=True)
+
+
+def bundle_table(manifest: dict) -> str:
+    """The bundle's wheels as a Markdown table: name, version, MiB and what the repack changed, then the total."""
+    rows = []
+    for w in manifest["wheels"]:
+        changes = ([f"without {' '.join(w['dropped'])}"] if w["dropped"] else []) + (
+            [f"symbols stripped from {' '.join(w['symbols_stripped'])}"] if w["symbols_stripped"] else [])
+        rows.append(f"| {w['name']} | {w['version']} | {w['bytes'] / 2**20:.2f} | {'; '.join(changes)} |")
+    total = sum(w["bytes"] for w in manifest["wheels"]) / 2**20
+    return ("| distribution | version | MiB | repacked |\n|---|---|---:|---|\n" + "\n".join(rows)
+            + f"\n| **{len(rows)} wheels** | | **{total:.1f}** | |")
+
+
+def write_install_files(folder: Path, manifest: dict) -> None:
+    """Write ``install.sh`` (executable) and ``README.md`` into the bundle ``folder``."""
+    script = folder / "install.sh"
+    atomic_write_text(script, INSTALL_SH.format(target=DEFAULT_TARGET, count=len(manifest["wheels"])))
+    os.chmod(script, 0o755)
+    left_out = "\n".join(f"- {name}: {why}" for name, why in manifest["left_out"].items())
+    atomic_write_text(folder / "README.md", f"""# sray GPU bundle (CPython {manifest['python_version']}, \
+{manifest['platform']})
+
+What sray needs at `sray gpu-check`'s `ray` and `fleet` stages beyond the GPU image (which has torch, accelerate,
+numpy, pandas, pyarrow, OpenCV, matplotlib and the rest listed in `jobs/gpu_bundle/image.py`). Install it offline,
+with no dependency resolution (the set is resolved already):
+
+```
+sh install.sh {DEFAULT_TARGET} && export PYTHONPATH={DEFAULT_TARGET}
+```
+
+(that is `python3 -m pip install --no-index --no-deps --no-compile --target {DEFAULT_TARGET} *.whl`). Built by
+`sray gpu-bundle` (`make gpu-bundle`); `bundle.json` lists the same in data.
+
+{bundle_table(manifest)}
+
+Left out (declared dependencies sray never loads):
+
+{left_out}
+""")

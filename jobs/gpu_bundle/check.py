@@ -1,10 +1,6 @@
-"""``sray gpu-bundle --check``: the bundle, built for this machine's Python, and a clean venv that stands in for the
-GPU image (the CPU torch, and the image's packages at this environment's versions); then the prepared GPU call
-(``jobs/gpu_check/gpu_run.sh``) runs there as on a bare GPU machine, in a dry run: it installs the bundle offline,
-links the checkout and runs gpu-check's ``ray``, ``fleet`` and ``minutes`` stages on the CPU. A wheel missing from
-the bundle fails here, not on the GPU. Slow (minutes: a venv, two installs and the stages); the suite tests the
-builder's parts and the script's mechanics instead.
-"""
+"""``sray gpu-bundle --check``: the bundle for this machine's Python and a clean venv standing in for the GPU image
+(the CPU torch, the image's packages at this environment's versions); then the prepared GPU call runs there in a dry
+run, as on a bare GPU machine, so a wheel missing from the bundle fails here, not on the GPU. Slow (minutes)."""
 
 from __future__ import annotations
 
@@ -24,15 +20,13 @@ from .image import IMAGE_PACKAGES, IMAGE_SIDE_NEEDS
 from .resolve import BundleError, environment_constraints, read_constraints, resolve
 
 TORCH_PIN = "torch"
-"""The one package the stand-in takes from ``constraints.txt`` first (its CPU build, as this machine has)."""
+"""The package the stand-in takes from ``constraints.txt`` first (its CPU build)."""
 RESULT = "check.json"
-"""What the check found: bundle size, the stages' status, seconds."""
 SCRIPT = "jobs/gpu_check/gpu_run.sh"
-"""The prepared GPU call, run here as on a bare GPU machine (it installs the bundle and links the checkout)."""
 STAGES = "ray fleet minutes"
 """The stages that need the bundle."""
 CPU_BUDGET_S = 3600
-"""The script's time budget here (its default is sized for a GPU call; a loaded CPU runs the toy stages slower)."""
+"""The script's time budget here (its default is sized for a GPU call)."""
 
 
 def _run(step: str, command: list[str], env: dict[str, str] | None = None) -> None:
@@ -45,9 +39,8 @@ def _run(step: str, command: list[str], env: dict[str, str] | None = None) -> No
 
 
 def run_bundle_check(work: Path, python_version: str, constraints_file: Path, limit_mib: float) -> int:
-    """Build, install and run the stages under ``work``; returns gpu-check's exit code (0: both stages passed).
-
-    Raises :class:`BundleError` when the bundle cannot be built or installed."""
+    """Build, install and run the stages under ``work``; gpu-check's exit code (:class:`BundleError` when the bundle
+    cannot be built or installed)."""
     here = f"{sys.version_info.major}.{sys.version_info.minor}"
     if python_version != here:
         raise BundleError(f"--check installs into a venv of this Python ({here}), not {python_version}: drop "

@@ -1,7 +1,5 @@
-"""``sray gpu-bundle [--python-version 3.12] [--out DIR] [--find-links DIR] [--check]``: the wheels a bare GPU
-machine needs beyond its image (Ray without its Java jar, MLflow's client with its SQL store, webdataset), as
-one folder with its install script; ``--check`` proves a bundle for this machine's Python installs offline beside
-the CPU torch and runs the prepared GPU call's stages there in a dry run (docs/gpu.md)."""
+"""``sray gpu-bundle``: the wheels a bare GPU machine needs beyond its image, as one folder with its install script;
+``--check`` proves one installs offline and runs the prepared GPU call there in a dry run (docs/gpu.md)."""
 
 from __future__ import annotations
 
@@ -11,8 +9,7 @@ from pathlib import Path
 
 from .build import LIMIT_MIB
 
-GPU_PYTHON = "3.12"
-"""The GPU image's Python."""
+GPU_PYTHON = "3.12"  # the GPU image's
 
 
 def register(sub: argparse._SubParsersAction) -> None:

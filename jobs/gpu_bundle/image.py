@@ -1,10 +1,6 @@
-"""What the GPU machines' image already holds, so the bundle carries only the rest.
-
-The image ('cuda', Python 3.12.3 at /opt/torch/.venv, offline) lists these distributions, as read on one of
-its machines on 2026-11-17 (the device notes' package list). A distribution named here never goes into the
-bundle; its version there is the image's own, so the bundle check installs the versions this machine's
-environment resolved in their place.
-"""
+"""What the GPU machines' image ('cuda', Python 3.12.3, offline) already holds, as read on one of its machines on
+2026-11-17, so the bundle carries only the rest (the bundle check installs this environment's versions in their
+place)."""
 
 from __future__ import annotations
 
@@ -35,9 +31,8 @@ wrapt xarray xxhash yarl zipp
 
 IMAGE_SIDE_NEEDS = ("accelerate", "numpy", "einops", "tqdm", "matplotlib", "psutil", "safetensors", "pyyaml",
                     "opencv-python-headless")
-"""What sray imports at the ``ray`` and ``fleet`` stages that the image provides (torch aside): the bundle check
-installs these, beside the CPU torch, to stand in for the image. The image's OpenCV is the plain headless build,
-which has every ``cv2`` function sray calls (no contrib module)."""
+"""What sray imports at the ``ray`` and ``fleet`` stages that the image provides (torch aside; its OpenCV is the plain
+headless build): the bundle check installs these to stand in for the image."""
 
 
 def normalise(name: str) -> str:

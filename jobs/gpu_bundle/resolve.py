@@ -1,9 +1,6 @@
-"""Which wheels the GPU bundle holds: the dependencies of what sray runs at the ``ray`` and ``fleet`` stages,
-resolved by pip for the target Python and platform, minus what the GPU image has and what sray never loads.
-
-Versions come from ``constraints.txt`` first and then from this environment (``pip freeze``: the stack the suite
-tests here), so the bundle for the GPU holds the versions tested on this machine.
-"""
+"""Which wheels the GPU bundle holds: the dependencies of what sray runs at the ``ray`` and ``fleet`` stages, resolved
+by pip for the target, minus what the GPU image has and what sray never loads; versions from ``constraints.txt``,
+then from this environment (the stack the suite tests here)."""
 
 from __future__ import annotations
 
@@ -17,10 +14,10 @@ from pathlib import Path
 from .image import IMAGE_PACKAGES, normalise
 
 ROOTS = ("ray[train]", "mlflow-skinny", "sqlalchemy", "alembic", "webdataset")
-"""What the bundle is for: Ray Train, MLflow's client with its SQL store (SQLite tracking needs SQLAlchemy and
-Alembic, which the full ``mlflow`` package adds beside its server) and the shard loader."""
+"""Ray Train, MLflow's client with its SQL store (SQLite tracking needs SQLAlchemy and Alembic) and the shard
+loader."""
 PIN_FROM = {"mlflow-skinny": "mlflow"}
-"""Roots pinned to another constraint's version (mlflow-skinny is released with mlflow, at the same version)."""
+"""Roots pinned to another constraint's version (released together)."""
 LEFT_OUT = {"google-auth": "databricks-sdk's Google Cloud credentials, loaded only for Databricks on Google Cloud",
             "pyasn1": "needed only by google-auth", "pyasn1-modules": "needed only by google-auth"}
 """Declared dependencies sray never loads, left out for size (the bundle check proves the stages run without)."""
@@ -35,12 +32,10 @@ class BundleError(RuntimeError):
 
 @dataclass(frozen=True)
 class Pin:
-    """One distribution of the resolved set."""
+    """One distribution of the resolved set: normalised name (PEP 503) and exact version."""
 
     name: str
-    """Normalised distribution name (PEP 503)."""
     version: str
-    """Exact version."""
 
     def spec(self) -> str:
         """``name==version`` for pip."""
@@ -56,9 +51,7 @@ def target_options(python_version: str) -> list[str]:
 
 
 def read_constraints(path: Path) -> dict[str, str]:
-    """``name -> version`` of the ``name==version`` lines of a constraints file (comments and blank lines skipped).
-
-    Raises :class:`BundleError` on a line that is not an exact pin (the bundle needs one version of each)."""
+    """``name -> version`` of a constraints file's ``name==version`` lines; :class:`BundleError` on any other."""
     pins = {}
     for number, raw in enumerate(path.read_text().splitlines(), 1):
         line = raw.split("#", 1)[0].strip()
@@ -72,8 +65,7 @@ def read_constraints(path: Path) -> dict[str, str]:
 
 
 def root_requirements(constraints: dict[str, str]) -> list[str]:
-    """:data:`ROOTS` as requirements, each pinned to its ``constraints.txt`` version where it (or the package it
-    is released with, :data:`PIN_FROM`) has one."""
+    """:data:`ROOTS` as requirements, each pinned to its (or its :data:`PIN_FROM`'s) ``constraints.txt`` version."""
     requirements = []
     for root in ROOTS:
         name = normalise(root.split("[", 1)[0])
@@ -83,11 +75,8 @@ def root_requirements(constraints: dict[str, str]) -> list[str]:
 
 
 def resolve(python_version: str, constraints_file: Path) -> list[Pin]:
-    """Every distribution the roots need on CPython ``python_version`` (pip's resolver, nothing downloaded but
-    metadata), pinned by ``constraints_file`` and then by this environment's versions.
-
-    Raises :class:`BundleError` naming pip's complaint when the set does not resolve.
-    """
+    """Every distribution the roots need on CPython ``python_version`` (pip's resolver, metadata only), pinned by
+    ``constraints_file``, then by this environment; :class:`BundleError` naming pip's complaint."""
     pip = [sys.executable, "-m", "pip"]
     constraints = read_constraints(constraints_file)
     with tempfile.TemporaryDirectory() as tmp:
@@ -105,8 +94,7 @@ def resolve(python_version: str, constraints_file: Path) -> list[Pin]:
 
 
 def environment_constraints(path: Path, constraints: dict[str, str]) -> Path:
-    """Write this environment's ``name==version`` lines (``pip freeze``, editable installs and the names
-    ``constraints`` pins left out) to ``path`` as a constraints file; returns ``path``."""
+    """Write this environment's ``pip freeze`` pins (but editable ones and those ``constraints`` has) to ``path``."""
     freeze = subprocess.run([sys.executable, "-m", "pip", "freeze", "--exclude-editable"], capture_output=True,
                             text=True, check=True)
     path.write_text("\n".join(line for line in freeze.stdout.splitlines()
@@ -115,7 +103,7 @@ def environment_constraints(path: Path, constraints: dict[str, str]) -> Path:
 
 
 def _last_error(stderr: str) -> str:
-    """The lines of pip's output that say what went wrong (its warnings about local indexes dropped)."""
+    """The last lines of pip's output but its warnings about local indexes."""
     lines = [line for line in stderr.splitlines() if line.strip() and "is ignored" not in line]
     return " ".join(lines[-3:]) or "no message"
 
@@ -127,8 +115,7 @@ def bundle_pins(resolved: list[Pin]) -> list[Pin]:
 
 
 def check_pins(pins: list[Pin], constraints: dict[str, str]) -> None:
-    """Raise :class:`BundleError` when a bundled distribution's version differs from its ``constraints.txt`` pin
-    (directly, or through :data:`PIN_FROM`)."""
+    """:class:`BundleError` when a bundled version differs from its (or its :data:`PIN_FROM`'s) pin."""
     for pin in pins:
         wanted = constraints.get(normalise(PIN_FROM.get(pin.name, pin.name)))
         if wanted is not None and wanted != pin.version:

@@ -1,10 +1,6 @@
-"""Repack a wheel without some of its files: the ``RECORD`` rewritten with each kept file's hash and size, the
-console scripts of dropped modules removed from ``entry_points.txt``, file modes (the executables) kept, and
-the symbol tables of named native binaries removed (``strip --strip-unneeded``: what the dynamic linker and
-Python need stays; only crash backtraces lose function names).
-
-The result installs with pip like the original (same name, version and tags); only the dropped paths are absent.
-"""
+"""Repack a wheel without some of its files and with named native binaries stripped of their symbol tables (only
+crash backtraces lose function names): ``RECORD`` rewritten, dropped modules' console scripts removed, file modes
+kept, so it installs with pip like the original."""
 
 from __future__ import annotations
 
@@ -23,14 +19,11 @@ from sray.data_tools.atomic import atomic_write_bytes
 
 @dataclass(frozen=True)
 class Stripped:
-    """What one repack did."""
+    """What one repack did: the new wheel, files left out and bytes saved (uncompressed)."""
 
     path: Path
-    """The new wheel."""
     dropped_files: int
-    """Files left out."""
     dropped_bytes: int
-    """Bytes saved, uncompressed: the files left out and the symbol tables stripped."""
 
 
 def record_hash(data: bytes) -> str:
@@ -60,8 +53,7 @@ def filter_entry_points(text: str, drop: tuple[str, ...]) -> str:
 
 
 def strip_symbols(data: bytes) -> bytes:
-    """``data`` (an ELF binary) without its symbol tables (``strip --strip-unneeded``); raises ``ValueError``
-    where binutils' ``strip`` is not installed or refuses the file."""
+    """``data`` (an ELF binary) after ``strip --strip-unneeded``; ValueError where ``strip`` is missing or fails."""
     if shutil.which("strip") is None:
         raise ValueError("binutils' strip is not installed: apt-get install binutils, then build again")
     with tempfile.TemporaryDirectory() as tmp:
@@ -74,10 +66,8 @@ def strip_symbols(data: bytes) -> bytes:
 
 
 def strip_wheel(src: Path, dest_dir: Path, drop: tuple[str, ...], binaries: tuple[str, ...] = ()) -> Stripped:
-    """Write ``src`` into ``dest_dir`` (same file name) without the files under the ``drop`` folders (paths inside
-    the wheel, each ending in ``/``) and with the ``binaries`` (paths of native files) stripped of their symbol
-    tables. Raises ``ValueError`` when a folder or binary named is not in the wheel (a stale list) or a folder
-    names the ``.dist-info`` folder."""
+    """Write ``src`` into ``dest_dir`` without the files under the ``drop`` folders (each ending in ``/``) and with
+    the ``binaries`` stripped; ValueError for a folder or binary not in the wheel (a stale list) or in .dist-info."""
     bad = [p for p in drop if not p.endswith("/") or ".dist-info/" in p]
     if bad:
         raise ValueError(f"folders to drop must end in '/' and stay out of .dist-info: {bad}")

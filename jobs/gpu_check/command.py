@@ -1,7 +1,5 @@
-"""``sray gpu-check [--stages ...] [--out DIR] [--dry-run] [--fresh]``: check sray's CUDA path stage by stage.
-
-Needs torch and accelerate only (the stages that need Ray, MLflow or webdataset say so and skip).
-"""
+"""``sray gpu-check``: check sray's CUDA path stage by stage (torch and accelerate suffice; the stages that need Ray,
+MLflow or webdataset say so and skip)."""
 
 from __future__ import annotations
 

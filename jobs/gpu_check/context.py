@@ -8,11 +8,13 @@ from pathlib import Path
 
 import torch
 
+from .report import StageResult
+
 INSTALLED_AT = Path(__file__).resolve().parents[2]
-"""The folder holding the installed ``sray.jobs`` package: the checkout's root under an editable install (or
-the folders linked onto the path), ``site-packages/sray`` under a wheel."""
-CHECKOUT_FOLDERS = ("tests", "docs")
-"""What the check needs beside the package: the suite (the ``tests`` stage) and the reports (``docs/``)."""
+"""The folder holding the installed ``sray.jobs``: the checkout's root under an editable install (or the folders
+linked onto the path), ``site-packages/sray`` under a wheel."""
+FULL_STACK = ("ray", "mlflow", "webdataset")
+"""What the stages that run sray's commands need beyond torch (the GPU image may lack them)."""
 
 
 class NotACheckout(RuntimeError):
@@ -20,11 +22,9 @@ class NotACheckout(RuntimeError):
 
 
 def checkout_root() -> Path:
-    """The checkout sray is installed from (its ``tests/`` and ``docs/``), whatever the working directory.
-
-    Raises :class:`NotACheckout` when they are not beside the installed package (a wheel install).
-    """
-    missing = [f"{name}/" for name in CHECKOUT_FOLDERS if not (INSTALLED_AT / name).is_dir()]
+    """The checkout sray is installed from (its ``tests/`` feed the tests stage, ``docs/`` the reports), whatever the
+    working directory; :class:`NotACheckout` under a wheel install."""
+    missing = [f"{name}/" for name in ("tests", "docs") if not (INSTALLED_AT / name).is_dir()]
     if missing:
         raise NotACheckout(f"sray is installed at {INSTALLED_AT}, which has no {' or '.join(missing)}: run it from a "
                            "git checkout of sray installed with pip install -e . (or with its folders on the path, "
@@ -34,35 +34,33 @@ def checkout_root() -> Path:
 
 @dataclass(frozen=True)
 class CheckContext:
-    """The run's settings, shared by all stages."""
+    """The run's settings, shared by all stages; a dry run has toy sizes on the CPU (the suite runs it)."""
 
     device: torch.device
-    """``cuda`` on a GPU machine; ``cpu`` in a dry run."""
     dry_run: bool
-    """Toy sizes on the CPU (the suite runs this so the command cannot rot)."""
     out: Path
     """Work folder: the report, scratch data and logs."""
     repo: Path
-    """Checkout root (its ``tests/`` feed the tests stage)."""
+    """Checkout root."""
 
     @property
     def image_hw(self) -> tuple[int, int]:
-        """Image size of the model checks: 240 x 320 on a GPU, 32 x 40 in a dry run."""
+        """Image size of the model checks: 240 x 320 on a GPU."""
         return (32, 40) if self.dry_run else (240, 320)
 
     @property
     def samples(self) -> tuple[int, int]:
-        """(coarse, fine) samples per ray: the paper's 64 + 64 on a GPU, 4 + 4 in a dry run."""
+        """(coarse, fine) samples per ray: the paper's 64 + 64 on a GPU."""
         return (4, 4) if self.dry_run else (64, 64)
 
     @property
     def views(self) -> int:
-        """Source views: the paper's 8 on a GPU, 2 in a dry run."""
+        """Source views: the paper's 8 on a GPU."""
         return 2 if self.dry_run else 8
 
     @property
     def rays(self) -> int:
-        """Rays per training step: 1024 on a GPU (the paper's), 32 in a dry run."""
+        """Rays per training step: the paper's 1024 on a GPU."""
         return 32 if self.dry_run else 1024
 
     def low_precisions(self) -> list[str]:
@@ -71,5 +69,11 @@ class CheckContext:
 
 
 def has_module(name: str) -> bool:
-    """Whether ``name`` can be imported here (the GPU image may lack ray, mlflow or webdataset)."""
+    """Whether ``name`` can be imported here."""
     return importlib.util.find_spec(name) is not None
+
+
+def skipped_without(needs: tuple[str, ...], stage: str) -> StageResult | None:
+    """A skipped result naming the packages of ``needs`` not installed here (None when all are)."""
+    missing = [m for m in needs if not has_module(m)]
+    return StageResult("skipped", f"{', '.join(missing)} not installed here: {stage}") if missing else None

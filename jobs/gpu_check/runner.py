@@ -1,11 +1,6 @@
-"""``sray gpu-check``: the CUDA path checked stage by stage, resumable, with a Markdown report.
-
-Each stage is a function ``CheckContext -> StageResult`` (the ``stage_*`` modules). A stage that
-raises is recorded as failed with its error and the next one runs. Results are saved after every
-stage, so an interrupted or partial run resumes where it stopped; ``--fresh`` starts over. On a GPU
-the report becomes the "GPU check" section of docs/benchmarks.md for that device; a dry run (CPU, toy sizes) writes it
-under ``--out`` only.
-"""
+"""``sray gpu-check``: the CUDA path checked stage by stage (each a ``CheckContext -> StageResult`` function of a
+``stage_*`` module), the report saved after every stage so a run resumes. A stage that raises is recorded as failed
+and the next one runs. On a GPU the report becomes the "GPU check" section of docs/benchmarks.md for that device."""
 
 from __future__ import annotations
 
@@ -18,16 +13,14 @@ import torch
 
 from sray.platform.common.bench_doc import Bench, record
 
-from . import (stage_bench, stage_env, stage_fleet, stage_minutes, stage_precision, stage_profile, stage_ray,
-               stage_recipe, stage_training)
+from . import stage_bench, stage_env, stage_fleet, stage_minutes, stage_precision, stage_ray, stage_training
 from .context import CheckContext
 from .report import STAGE_NAMES, StageResult, load_report, markdown, save_report
 
 STAGES: dict[str, Callable[[CheckContext], StageResult]] = dict(zip(STAGE_NAMES, (
-    stage_env.environment, stage_env.tests, stage_precision.run, stage_training.run, stage_recipe.run,
-    stage_bench.run, stage_profile.run, stage_ray.run, stage_fleet.run, stage_minutes.run), strict=True))
+    stage_env.environment, stage_env.tests, stage_precision.run, stage_training.run, stage_training.recipe,
+    stage_bench.run, stage_bench.profile, stage_ray.run, stage_fleet.run, stage_minutes.run), strict=True))
 """Every stage, in the order they run (each at most a few minutes on a GPU)."""
-REPORT_TITLE = "Stages"
 
 
 class NoCudaDevice(RuntimeError):
@@ -45,12 +38,9 @@ def _run_stage(name: str, ctx: CheckContext) -> StageResult:
     return result
 
 
-def run_gpu_check(stages: list[str], out: Path, dry_run: bool, fresh: bool, repo: Path,
-                  doc: Path | None) -> dict:
-    """Run the chosen stages not yet in the report; print a line per stage; returns the report.
-
-    Raises :class:`NoCudaDevice` when no CUDA device is visible and ``dry_run`` is off.
-    """
+def run_gpu_check(stages: list[str], out: Path, dry_run: bool, fresh: bool, repo: Path, doc: Path | None) -> dict:
+    """Run the chosen stages not yet in the report, printing a line per stage; returns the report.
+    :class:`NoCudaDevice` when no CUDA device is visible and ``dry_run`` is off."""
     unknown = [s for s in stages if s not in STAGES]
     if unknown:
         raise ValueError(f"unknown stage(s) {unknown}; choose from {list(STAGES)}")
@@ -67,13 +57,12 @@ def run_gpu_check(stages: list[str], out: Path, dry_run: bool, fresh: bool, repo
                   f"({report['stages'][name].status}), skipped", flush=True)
             continue
         print(f"[gpu-check {i}/{len(stages)}] {name} ...", flush=True)
-        result = _run_stage(name, ctx)
-        report["stages"][name] = result
+        result = report["stages"][name] = _run_stage(name, ctx)
         save_report(ctx.out, report)
         print(f"[gpu-check {i}/{len(stages)}] {name}: {result.status} in {result.seconds:.0f} s: {result.summary}",
               flush=True)
     text = markdown(report, list(STAGES))
     (ctx.out / "gpu_check.md").write_text(text + "\n")
     if doc is not None and not dry_run:
-        record(Bench("gpu-check", "GPU check"), REPORT_TITLE, text, doc)
+        record(Bench("gpu-check", "GPU check"), "Stages", text, doc)
     return report

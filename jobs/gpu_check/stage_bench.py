@@ -1,37 +1,36 @@
-"""Stage ``bench``: ``sray bench model`` on this device (attention cost with the fused kernels, the
-paper-config step in each precision) and the time to render one whole view."""
+"""Stages ``bench`` (``sray bench model`` on this device and the time to render one whole view) and ``profile``
+(``sray bench profile``: the fast path's training step in fp32 and bf16 and a whole-image render; on a GPU the full
+tables also go into the "Profiles" section of ``docs/benchmarks.md``)."""
 
 from __future__ import annotations
 
-import time
+import re
 
 import torch
 
 from sray.jobs.bench.model_cost import run_model_benchmark
+from sray.jobs.bench.probes import time_call
+from sray.jobs.bench.profile import run_profiles, write_profiles
 
 from .context import CheckContext
 from .report import StageResult, table_cells
 from .synthetic import model, rig
 
+TOP_ROWS = 5
+"""Operators per profile kept in the report."""
+
 
 def render_seconds(ctx: CheckContext, repeats: int, dtype: torch.dtype | None = None) -> float:
-    """Median seconds to render one (H, W) view from ``ctx.views`` sources, fp32 weights, no grad; under
-    autocast to ``dtype`` (bf16, fp16) when given, as ``sray eval`` runs a low-precision checkpoint."""
+    """Median seconds to render one (H, W) view from ``ctx.views`` sources, fp32 weights, no grad, after a warm-up;
+    under autocast to ``dtype`` when given, as ``sray eval`` runs a low-precision checkpoint."""
     net = model(ctx.samples, ctx.views, ctx.device).eval()
     sources, query = rig(ctx.views, ctx.image_hw, ctx.device)
-    times = []
-    for _ in range(repeats + 1):
-        if ctx.device.type == "cuda":
-            torch.cuda.synchronize(ctx.device)
-        start = time.perf_counter()
+
+    def render() -> None:
         with torch.no_grad(), torch.autocast(ctx.device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
             src = net.encode(sources.rgb, sources.K, sources.c2w, sources.depth)
             net.render_image(src, query.K, query.c2w, ctx.image_hw, 1.0, 5.0)
-        if ctx.device.type == "cuda":
-            torch.cuda.synchronize(ctx.device)
-        times.append(time.perf_counter() - start)
-    rest = sorted(times[1:])
-    return rest[len(rest) // 2]
+    return time_call(render, ctx.device, repeats)
 
 
 def run(ctx: CheckContext) -> StageResult:
@@ -48,3 +47,20 @@ def run(ctx: CheckContext) -> StageResult:
                      f"{name}: {seconds[name]:.3f} s/view ({1 / seconds[name]:.2f} views/s)"])
     summary = ", ".join(f"{k} {v:.3f}" for k, v in seconds.items())
     return StageResult("passed", f"render {w}x{h} s/view: {summary}", header=["benchmark", "row"], rows=rows)
+
+
+def profile(ctx: CheckContext) -> StageResult:
+    """Stage ``profile``: the top operators of each profile become the stage's rows."""
+    sections = run_profiles(ctx.device, ("fast",), ("train", "render"), quick=ctx.dry_run,
+                            step_dtypes=("fp32", "bf16"))
+    if not ctx.dry_run:
+        write_profiles(sections, ctx.repo / "docs" / "benchmarks.md")
+    header = ["profile", "operator", "calls", "self CPU ms", "share of self time", "self CUDA ms"]
+    rows, walls = [], []
+    for title, table, _notes in sections:
+        name = title.removeprefix("Profile: ")
+        _, body = table_cells(table)
+        rows.extend([name, *cells, *["-"] * (len(header) - 1 - len(cells))] for cells in body[:TOP_ROWS])
+        wall = re.search(r"Wall time of the profiled call: ([0-9.]+) s", table)
+        walls.append(f"{name} {wall.group(1) if wall else '?'} s")
+    return StageResult("passed", "profiled wall time: " + ", ".join(walls), header=header, rows=rows)

@@ -13,13 +13,13 @@ from .context import CheckContext, has_module
 from .report import StageResult
 
 GPU_TEST_FILES = ("tests/test_model_gpu.py", "tests/test_model_rendering.py")
-"""Files holding the tests marked ``gpu`` (they skip on a CPU)."""
+"""Files holding the tests marked ``gpu``."""
 MODEL_TEST_FILES = ("tests/test_model_sray.py", "tests/test_model_attention.py", "tests/test_model_weights.py",
                     "tests/test_weight_cross_view.py", "tests/test_model_precision.py", "tests/test_train_step.py")
 """Model-level tests that need torch alone (no Ray, MLflow or webdataset)."""
 DRY_RUN_TESTS = ("tests/test_model_gpu.py",
                  "tests/test_model_weights.py::test_radial_weights_come_within_one_percent_of_both_bounds")
-"""A dry run only proves the stage runs: the GPU tests (skipping on a CPU) and one quick model test."""
+"""A dry run only proves the stage runs."""
 
 
 def environment(ctx: CheckContext) -> StageResult:

@@ -1,9 +1,6 @@
-"""Stage ``fleet``: the finetune fleet with fractional GPUs, as ``sray finetune-fleet`` runs it. One S-Ray scene task
-alone on the GPU, then ``SHARING`` scenes with each of ``METHODS`` (S-Ray finetuned, Semantic-NeRF from scratch,
-2D label transfer), ``SHARING`` tasks at once on the GPU (``1 / SHARING`` of it each): training seconds per scene
-and method against the task alone, the fleet's wall time and each task's peak GPU memory. A dry run shares the
-CPUs between ``DRY_RUN_SHARING`` tasks instead. Skipped, with the reason, where Ray, MLflow or webdataset are not
-installed."""
+"""Stage ``fleet``: the finetune fleet with fractional GPUs, as ``sray finetune-fleet`` runs it: one S-Ray scene task
+alone on the GPU, then ``SHARING`` scenes with each of ``METHODS``, ``SHARING`` tasks at once (``1 / SHARING`` of the
+GPU each): training seconds per scene against the task alone, the fleet's wall time, each task's peak GPU memory."""
 
 from __future__ import annotations
 
@@ -16,17 +13,13 @@ from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.config.recipes import get_recipe
 from sray.platform.train.state import write_initial_checkpoint
 
-from .context import CheckContext, has_module
+from .context import FULL_STACK, CheckContext, skipped_without
 from .report import StageResult
 
-NEEDS = ("ray", "mlflow", "webdataset")
 SHARING = 4
-"""Scene tasks sharing the one GPU in the shared run."""
 METHODS = ("sray", "semantic-nerf", "2d-transfer")
-"""Methods run per scene in the shared run."""
 DRY_RUN_SHARING = 2
-"""Scene tasks sharing the CPUs in a dry run (one CPU each, as on a 2-core machine: the dry run stays within a
-minute)."""
+"""Scene tasks sharing the CPUs in a dry run (one CPU each, as on a 2-core machine)."""
 
 
 def _shards(ctx: CheckContext, root: Path) -> Path:
@@ -37,8 +30,7 @@ def _shards(ctx: CheckContext, root: Path) -> Path:
 
 
 def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
-    """A step-0 shared checkpoint of the GPU recipe's network (``synth-gpu-minutes``, with its source-view head) at
-    this run's sizes (timing needs no pretraining; the fleet reads it as any other checkpoint)."""
+    """A step-0 checkpoint of the GPU recipe's network at this run's sizes (timing needs no pretraining)."""
     cfg = get_recipe("synth-gpu-minutes")
     cfg.model.n_source, (cfg.model.n_coarse, cfg.model.n_fine) = min(ctx.views, 4), ctx.samples
     cfg.data.shards, cfg.data.top_k = str(shards), 6
@@ -47,8 +39,7 @@ def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
 
 def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes: list[str],
            methods: list[str], segmenter: Path) -> tuple[float, list]:
-    """Run the fleet's ``methods`` on ``scenes``, ``len(scenes)`` tasks at once, each with ``1 / len(scenes)`` of the
-    device; (wall s, results)."""
+    """(wall s, results) of the fleet's ``methods`` on ``scenes``, all at once, each with its share of the device."""
     from sray.platform.finetune.fleet import run_fleet
 
     share = 1.0 / len(scenes)
@@ -66,7 +57,6 @@ def _fleet(ctx: CheckContext, out: Path, checkpoint: Path, shards: Path, scenes:
 
 
 def _mean(results: list, key: str) -> float:
-    """Mean of one numeric result field over a fleet's results."""
     return sum(r[key] for r in results) / len(results)
 
 
@@ -80,9 +70,9 @@ def _row(name: str, share: int, wall: float, results: list) -> list[str]:
 
 def run(ctx: CheckContext) -> StageResult:
     """One task alone, then ``SHARING`` tasks sharing the device; every task must finish."""
-    missing = [m for m in NEEDS if not has_module(m)]
-    if missing:
-        return StageResult("skipped", f"{', '.join(missing)} not installed here: the fleet stage needs the full stack")
+    skipped = skipped_without(FULL_STACK, "the fleet stage needs the full stack")
+    if skipped:
+        return skipped
     from sray.platform.eval.segmenter import segmenter_from_checkpoint
 
     root = ctx.out / "fleet"

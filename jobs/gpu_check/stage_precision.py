@@ -1,5 +1,5 @@
-"""Stage ``precision``: fp32 against bf16 (and fp16 on CUDA) for projection, a rendered image and a
-training step's loss and gradients, each with its tolerance."""
+"""Stage ``precision``: fp32 against bf16 (and fp16 on CUDA) for projection, a rendered image and a training step's
+loss and gradients, each with its tolerance."""
 
 from __future__ import annotations
 
@@ -16,16 +16,13 @@ from .report import StageResult
 from .synthetic import model, pinhole, rig, training_sample
 
 PROJECTION_TOL_PX = 0.01
-"""Largest allowed difference of a projected pixel between fp32 and a low-precision autocast."""
 ARGMAX_AGREEMENT = 0.99
 """Least share of confident pixels (fp32 top-2 logit margin > ``MARGIN``) whose label must agree."""
 MARGIN = 0.1
 LOSS_REL_TOL = 0.02
-"""Largest relative difference of a training step's loss."""
 GRAD_COSINE = 0.85
-"""Least cosine similarity of the whole gradient vector with the fp32 one (bf16 autocast of a freshly
-initialised model measured 0.92 on the CPU: the 19 encoder layers accumulate rounding; a wrong
-geometry or a NaN gives far less)."""
+"""Least cosine similarity of the gradient with fp32's (bf16 of a fresh model measured 0.92 on the CPU: the 19 encoder
+layers accumulate rounding; a wrong geometry or a NaN gives far less)."""
 
 
 def _autocast(ctx: CheckContext, precision: str) -> torch.autocast:

@@ -1,52 +1,39 @@
-"""Stage ``ray``: what a user does first on a GPU, through the ``sray`` commands themselves, on procedural shards.
-
-1. ``sray train`` of the GPU recipe (``synth-gpu-minutes``, shortened to a few hundred steps) with one worker
-   through Ray Train and Accelerate (bf16 on CUDA, fp32 on the CPU), tracked in MLflow on SQLite; rank 0 is
-   killed half-way (the fault hook's ``train.kill_at_step``), Ray Train restarts the worker and the job resumes
-   from its last checkpoint to the last step.
-2. ``sray eval`` of the trained checkpoint on the unseen scene (views per second, end to end).
-3. ``sray render`` of a 320x240 fly-through with the trained checkpoint (frames per second).
-4. Two Train workers asking for one GPU between them (0.5 each): refused before Ray starts, since NCCL refuses two
-   ranks on one GPU.
-
-Skipped, with the reason, where Ray, MLflow or webdataset are not installed."""
+"""Stage ``ray``: what a user does first on a GPU, through the ``sray`` commands themselves, on procedural shards:
+``sray train`` of the GPU recipe (shortened) with one worker, rank 0 killed half-way (the fault hook) and the job
+resumed to its last step; ``sray eval`` and ``sray render`` with the trained checkpoint; and two workers asking for
+one GPU between them, refused before Ray starts (NCCL refuses two ranks on one GPU)."""
 
 from __future__ import annotations
 
 import copy
 import json
-import os
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sray.data_tools.shards.manifest import unseen_scenes
 from sray.data_tools.synth.world import World, make_world
+from sray.jobs.bench.probes import env_var
 from sray.platform.common.fault_hook import ENV_VAR, KILL_MARKER
 from sray.platform.config.recipes import get_recipe
 from sray.platform.train.inputs import InputError
 
-from .context import CheckContext, has_module
+from .context import FULL_STACK, CheckContext, skipped_without
 from .report import StageResult
 
 if TYPE_CHECKING:
     from sray.platform.config.train_config import TrainConfig
 
-NEEDS = ("ray", "mlflow", "webdataset")
 RECIPE = "synth-gpu-minutes"
-"""The GPU recipe the stage trains (its model, losses and data settings; steps and world shortened)."""
-GPU_STEPS = 300
-"""Training steps on a GPU (4 in a dry run); rank 0 dies at half of them."""
-RENDER_SIZE = "320x240"
-"""Fly-through size (width x height); 80x60 in a dry run."""
-RENDER_FRAMES = 60
+RENDER_SIZE, RENDER_FRAMES = "320x240", 60
+"""Fly-through size (width x height) and frames on a GPU."""
 FAST = ("--render", "fast", "--fast-stride", "1", "--fast-confidence", "0.9")
 """The hour recipe's evaluation render (``fast s1 c0.9``), for ``sray eval`` and ``sray render`` alike."""
-"""Fly-through frames on a GPU (4 in a dry run)."""
 
 
 def _steps(ctx: CheckContext) -> int:
-    return 4 if ctx.dry_run else GPU_STEPS
+    """Training steps: 300 on a GPU; rank 0 dies at half of them."""
+    return 4 if ctx.dry_run else 300
 
 
 def train_arguments(ctx: CheckContext, shards: Path, root: Path, name: str) -> list[str]:
@@ -68,24 +55,17 @@ def _killed_and_resumed(ctx: CheckContext, arguments: list[str]) -> tuple[int, f
     """Run ``sray train`` with rank 0 killed at half the steps; (exit code, seconds)."""
     from sray.jobs.cli import main
 
-    before = os.environ.get(ENV_VAR)
-    os.environ[ENV_VAR] = f"train.kill_at_step={max(2, _steps(ctx) // 2)}"
     start = time.perf_counter()
-    try:
+    with env_var(ENV_VAR, f"train.kill_at_step={max(2, _steps(ctx) // 2)}"):
         code = main(arguments)
-    finally:
-        if before is None:
-            os.environ.pop(ENV_VAR, None)
-        else:
-            os.environ[ENV_VAR] = before
     return code, time.perf_counter() - start
 
 
 def run(ctx: CheckContext) -> StageResult:
     """Train (killed and resumed), evaluate and render with the trained weights; refuse a shared GPU."""
-    missing = [m for m in NEEDS if not has_module(m)]
-    if missing:
-        return StageResult("skipped", f"{', '.join(missing)} not installed here: the Ray stage needs the full stack")
+    skipped = skipped_without(FULL_STACK, "the Ray stage needs the full stack")
+    if skipped:
+        return skipped
     from sray.jobs.cli import main
     from sray.platform.checkpoints.folders import read_meta, resolve_checkpoint
 
@@ -141,8 +121,7 @@ def _config(shards: Path, root: Path, name: str, precision: str) -> TrainConfig:
 
 
 def shared_gpu_request(cfg: TrainConfig) -> tuple[bool, list[str]]:
-    """Launch ``cfg`` with 2 workers of 0.5 GPU (both would land on one GPU, which NCCL refuses): whether it was
-    refused before Ray started, and the table row (time to the refusal, its message)."""
+    """Launch ``cfg`` with 2 workers of 0.5 GPU: whether it was refused before Ray started, and the table row."""
     from sray.platform.train.launcher import launch_training
 
     shared = copy.deepcopy(cfg)

@@ -1,8 +1,5 @@
-"""Synthetic inputs of the model-level checks: a camera rig, source images and training samples.
-
-Random images are enough where a check compares two computations of the same thing (fp32 against a
-low precision, a timing); every tensor is drawn from a seeded generator, so runs repeat.
-"""
+"""Seeded synthetic inputs of the model-level checks (random images suffice where a check compares two computations
+of the same thing): a camera rig, source images and training samples."""
 
 from __future__ import annotations
 

@@ -1,10 +1,5 @@
-"""How the commands address registered methods: the flags that build a method's pretrained model (an
-:class:`~sray.platform.finetune.methods.method.EvalRequest`), and which of them a chosen method reads.
-
-A method's record names the request fields its ``eval_model`` reads (``Method.eval_reads``); a command refuses a
-flag that sets any other field (``sray eval --method 2d-transfer --render fast``) instead of ignoring it.
-:class:`GivenFlag` records which flags were typed, so that a flag given with its default value counts too.
-"""
+"""The flags that build a registered method's pretrained model (an ``EvalRequest``): a command refuses a flag that
+sets a field the method's ``eval_model`` does not read (``Method.eval_reads``) instead of ignoring it."""
 
 from __future__ import annotations
 
@@ -19,8 +14,8 @@ REQUEST_FLAGS: dict[str, str] = {"--checkpoint": "checkpoint", "--segmenter": "s
 
 
 class GivenFlag(argparse.Action):
-    """``store``, and the flag's option string appended to ``namespace.given`` (a tuple; give the parser
-    ``set_defaults(given=())``)."""
+    """``store``, and the option string appended to ``namespace.given`` (a tuple; ``set_defaults(given=())``), so a
+    flag given with its default value counts too."""
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
                  option_string: str | None = None) -> None:
@@ -42,8 +37,7 @@ def unread_flags(given: Sequence[str], reads: Iterable[str]) -> list[str]:
 
 
 def refusal(flags: list[str], who: str, reads: Iterable[str]) -> str:
-    """The error for ``flags`` that ``who`` (``--method 2d-transfer``) does not read: the flags, what it reads, the
-    fix."""
+    """The error for ``flags`` that ``who`` (``--method 2d-transfer``) does not read: what it reads, the fix."""
     them = "it" if len(flags) == 1 else "them"
     used = ", ".join(flags_reading(reads)) or "none of these flags"
     return (f"{', '.join(flags)} {'does' if len(flags) == 1 else 'do'} not apply to {who} (it reads {used}); "

@@ -1,12 +1,6 @@
 """``sray stability``: stress every registered method's rows (zero-shot, and trained on the scene at one CPU-second
-budget) along each axis and chart where each breaks (:mod:`sray.platform.stability`).
-
-Given ``--checkpoint`` (and ``--checkpoint-no-cra``, ``--segmenter``) the suite stresses those models and pretrains
-nothing; without them a preset builds its own world and pretrains its models (:mod:`sray.jobs.stability.world`).
-Points are stored as they finish under ``--out``, so an axis-by-axis run (``--axes pose_noise``) or a
-re-run after an interruption computes only what is missing. Tables go into the preset's section of
-``docs/benchmarks.md`` (``--doc``): one table per axis plus the breaking points with the charts.
-"""
+budget) along each axis and chart where each breaks (:mod:`sray.platform.stability`). Points are stored as they
+finish under ``--out``, so an axis-by-axis run or a re-run after an interruption computes only what is missing."""
 
 from __future__ import annotations
 
@@ -70,8 +64,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _record(job: object, outputs: dict) -> None:
-    """The preset's section of ``docs/benchmarks.md``: one table per axis, then the breaking points with the
-    charts (copied beside the section's data)."""
+    """The preset's section of ``docs/benchmarks.md``: one table per axis, then the breaking points with the charts
+    (copied beside the section's data)."""
     preset, doc = job.preset.name, job.doc
     bench = Bench(f"stability-{preset}", f"Stability, {preset}")
     figures = bench_dir(doc, bench)

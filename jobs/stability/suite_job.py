@@ -1,11 +1,6 @@
-"""One ``sray stability`` job: its inputs checked up front, the models given or pretrained, the rows read off the
-method registry, the suite run, and the outputs written over every axis whose points are all stored (so
-axis-by-axis runs add up to one table).
-
-Given models (``--checkpoint``, ``--checkpoint-no-cra``, ``--segmenter``) are used as they are and nothing is
-pretrained; the data defaults to the shards the checkpoint was trained on. Without ``--checkpoint`` the preset
-builds its own world and pretrains every model (:mod:`sray.jobs.stability.world`).
-"""
+"""One ``sray stability`` job: its inputs checked up front, the models given (nothing pretrained; the data defaults to
+the checkpoint's training shards) or the preset's world pretrained, the rows read off the method registry, the suite
+run, and the outputs written over every axis whose points are all stored (axis-by-axis runs add up to one table)."""
 
 from __future__ import annotations
 
@@ -31,7 +26,6 @@ from sray.platform.stability.suite import planned_points
 from sray.platform.tracking.registry import get_tracker
 
 MODEL_FLAGS = {"checkpoint": "--checkpoint", "checkpoint_no_cra": "--checkpoint-no-cra", "segmenter": "--segmenter"}
-"""``SuiteModels`` field -> the flag that gives it."""
 
 
 @dataclass
@@ -41,13 +35,12 @@ class StabilityJob:
     preset: Preset
     axes: list[str]
     methods: list[str]
-    """Registered method names whose rows are stressed."""
     modes: list[str]
     """``zero-shot`` and/or ``scene`` (``rows.MODES``)."""
     out: Path
     doc: Path
     given: SuiteModels | None = None
-    """The models given on the command line (None: the preset builds its world and pretrains them)."""
+    """The models given on the command line (None: the preset pretrains them)."""
     data: Path | None = None
     """Shards of the test scenes (None: the checkpoint's training shards, or the preset's world)."""
     scenes: list[str] | None = None
@@ -88,8 +81,8 @@ class StabilityJob:
 
 
 def resolve_models(job: StabilityJob) -> tuple[Path, SuiteModels]:
-    """(shards, models): the given models and ``--data`` (default: the checkpoint's training shards), nothing
-    pretrained; or, with no model given, the preset's world and its pretrained models."""
+    """(shards, models): the given models and ``--data`` (default: the checkpoint's training shards), or the preset's
+    world and its pretrained models."""
     if job.given is None:
         job.out.mkdir(parents=True, exist_ok=True)
         shards = world_shards(job.preset, job.out)
@@ -105,8 +98,8 @@ def resolve_models(job: StabilityJob) -> tuple[Path, SuiteModels]:
 
 
 def _label_space(models: SuiteModels) -> tuple[SRayConfig, SRayConfig | None]:
-    """The model configs of the S-Ray checkpoint and of the no-CRA checkpoint (None without one); ValueError when
-    the two predict different label spaces."""
+    """The model configs of the S-Ray and the no-CRA checkpoint (None without one); ValueError when their label
+    spaces differ."""
     _, cfg = model_from_checkpoint(models.checkpoint)
     if models.checkpoint_no_cra is None:
         return cfg.model, None
@@ -118,8 +111,8 @@ def _label_space(models: SuiteModels) -> tuple[SRayConfig, SRayConfig | None]:
 
 
 def check_rows(rows: list[Row], models: SuiteModels, preset: Preset, n_classes: int, where: Path) -> None:
-    """Build each zero-shot row's model once (on the CPU) and each trained row's fleet settings, so that a missing
-    or mismatched model fails now, naming its flag; ValueError otherwise."""
+    """Build each zero-shot row's model once (on the CPU) and each trained row's fleet settings, so that a missing or
+    mismatched model fails now (ValueError naming its flag)."""
     for row in rows:
         if not row.trained:
             model = get_method(row.method).eval_model(row.request(models, "cpu"))
@@ -154,8 +147,7 @@ def prepare(job: StabilityJob) -> tuple[SuiteInputs, list[Row]]:
 
 
 def run_job(job: StabilityJob, suite: SuiteInputs, rows: list[Row]) -> dict[str, Any]:
-    """Run the suite; returns :func:`~sray.platform.stability.report.write_outputs`'s dict plus ``parent_run`` and
-    ``axes`` (those whose points are all stored)."""
+    """Run the suite; ``write_outputs``'s dict plus ``parent_run`` and ``axes`` (those whose points are all stored)."""
     job.out.mkdir(parents=True, exist_ok=True)
     outcomes = run_points(job.out, planned_points(job.preset, job.axes, rows), suite)
     errors = {o.key: o.note for o in outcomes if o.reason == "errored"}

@@ -1,11 +1,6 @@
-"""The world a stability preset builds when it is given no checkpoint: procedural scenes, their shards, one
-pretraining per S-Ray variant (full CRA, and ``attention=none``), each a real ``sray train`` job (Ray Train,
-tracked), and the 2D segmenter of ``2d-transfer`` (``sray bench segmenter``'s training, for the preset's CPU
-seconds).
-
-Every piece is kept under ``<out>/world`` and reused by a later run: scenes already generated are
-skipped, shards are written once, and a finished pretraining is recorded in ``models.json``.
-"""
+"""The world a stability preset builds when it is given no checkpoint, kept under ``<out>/world`` and reused by a
+later run: procedural scenes and their shards, one ``sray train`` job per S-Ray variant (full CRA, and
+``attention=none``) and the 2D segmenter of ``2d-transfer``, each finished pretraining recorded in ``models.json``."""
 
 from __future__ import annotations
 
@@ -22,20 +17,17 @@ from sray.platform.stability.rows import SuiteModels
 from sray.platform.train.launcher import launch_training
 
 CHECKPOINT_ATTENTION = {"checkpoint": "full", "checkpoint_no_cra": "none"}
-"""``SuiteModels`` field of each pretrained S-Ray checkpoint -> the ``model.attention`` it is pretrained with."""
+"""``SuiteModels`` field of each pretrained S-Ray checkpoint -> its ``model.attention``."""
 MODELS_FILE = "models.json"
-"""``SuiteModels`` field -> pretrained model folder, under ``<out>/world``."""
 
 
 def world_shards(preset: Preset, out: Path) -> Path:
-    """Generate the preset's procedural scenes (seed 0) and shard them; a world already sharded under ``out`` is
-    reused as it is (its models were pretrained on it), even if the generator has changed since."""
+    """The preset's procedural scenes (seed 0), sharded; one already sharded under ``out`` is reused as it is."""
     return make_world(preset.world.scenes, out / "world")
 
 
 def pretrain(role: str, preset: Preset, shards: Path, out: Path, tracking_uri: str) -> Path:
-    """One ``sray train`` job of the S-Ray checkpoint ``role`` (its attention variant) on the train scenes; its best
-    (else latest) checkpoint."""
+    """The best (else latest) checkpoint of one ``sray train`` job of the S-Ray checkpoint ``role``."""
     w = preset.world
     cfg = get_recipe("synth-paper" if preset.name == "gpu" else "synth-small")
     cfg.model.attention, cfg.model.n_source = CHECKPOINT_ATTENTION[role], w.train_n_source
@@ -53,8 +45,8 @@ def pretrain(role: str, preset: Preset, shards: Path, out: Path, tracking_uri: s
 
 
 def pretrain_segmenter(preset: Preset, shards: Path, out: Path) -> Path:
-    """The 2D segmenter of ``2d-transfer`` trained on the train scenes for ``world.segmenter_cpu_seconds``, with as
-    many images per step as S-Ray's pretraining has sources; its folder."""
+    """The folder of ``2d-transfer``'s segmenter trained for ``world.segmenter_cpu_seconds``, with as many images per
+    step as S-Ray's pretraining has sources."""
     w, folder = preset.world, out / "world" / "segmenter"
     train_segmenter(shards, w.segmenter_cpu_seconds, folder, seed=0, n_source=w.train_n_source,
                     top_k=w.train_n_source + 2)

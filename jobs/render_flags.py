@@ -1,25 +1,20 @@
-"""The held-out render flags of ``sray eval`` and ``sray render``, parsed once into a ``HeldOutRender``
-(``sray.platform.config.held_out_render``, the setting type validation and the fleet hold as ``data.held_out`` and
-``finetune.held_out``).
-
-``--render``, ``--fast-stride`` and ``--fast-confidence`` record that they were typed (:class:`GivenFlag`), so that
-``sray eval`` can refuse them for a method that renders one way only.
-"""
+"""Flags the rendering commands share: the held-out render of ``sray eval`` and ``sray render``, parsed into a
+``HeldOutRender`` (the fast-render flags record that they were typed, :class:`GivenFlag`), and the tracked run of
+``sray render`` and ``sray label`` with the line that tells where it went."""
 
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from sray.jobs.methods.flags import GivenFlag
 from sray.platform.config.held_out_render import HELD_OUT_RENDERS, HeldOutRender
 
 DEFAULTS = HeldOutRender()
-"""The commands' defaults: 8 sources, whole images, the fast render at every 8th pixel."""
 
 
 def add_held_out_flags(p: argparse.ArgumentParser, scored_stride: bool) -> None:
-    """Add ``--n-source``, ``--render``, ``--fast-stride``, ``--fast-confidence``, ``--fast-temperature`` and, with
-    ``scored_stride`` (a command that scores pixels, ``sray eval``), ``--stride``; defaults :data:`DEFAULTS`'."""
+    """Add the held-out render flags to ``p``, with ``--stride`` for a command that scores pixels."""
     p.add_argument("--n-source", type=int, default=DEFAULTS.n_source,
                    help="fixed source views per view, top-ranked (default %(default)s, the paper's protocol)")
     if scored_stride:
@@ -32,15 +27,13 @@ def add_held_out_flags(p: argparse.ArgumentParser, scored_stride: bool) -> None:
     p.add_argument("--fast-stride", type=int, default=DEFAULTS.fast_stride, action=GivenFlag,
                    help="fast mode: render every N-th pixel and upsample (default %(default)s)")
     p.add_argument("--fast-confidence", type=float, default=DEFAULTS.fast_confidence, action=GivenFlag,
-                   help="fast mode: rays whose coarse confidence reaches this skip the fine pass (default "
-                        "%(default)s)")
+                   help="fast mode: rays whose coarse confidence reaches this skip the fine pass (default %(default)s)")
     p.add_argument("--fast-temperature", type=float, default=DEFAULTS.fast_temperature, action=GivenFlag,
                    help="fast mode: divide the coarse logits by this before the confidence rule (default %(default)s)")
 
 
 def held_out_from_args(args: argparse.Namespace) -> HeldOutRender:
-    """The ``HeldOutRender`` of the parsed flags (``--stride`` 1 where the command has none); ValueError naming the
-    flag and the fix."""
+    """The ``HeldOutRender`` of the parsed flags; ValueError naming the flag and the fix."""
     if args.n_source < 1:
         raise ValueError(f"--n-source is {args.n_source}; give at least one source view")
     settings = HeldOutRender(n_source=args.n_source, stride=getattr(args, "stride", DEFAULTS.stride),
@@ -48,3 +41,21 @@ def held_out_from_args(args: argparse.Namespace) -> HeldOutRender:
                              fast_temperature=args.fast_temperature)
     settings.check(lambda field: "--" + field.replace("_", "-"))
     return settings
+
+
+def add_tracked_run_flags(p: argparse.ArgumentParser, experiment: str) -> None:
+    """Add ``--device``, ``--tracker``, ``--tracking-uri``, ``--experiment`` and ``--no-track`` to ``p``."""
+    p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
+    p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
+                                                      "SQLite store in this folder)")
+    p.add_argument("--experiment", default=experiment, help="experiment name (default %(default)s)")
+    p.add_argument("--no-track", action="store_true", help="write the files only, no tracked run")
+
+
+def print_tracked_run(result: dict[str, Any]) -> None:
+    """Print the tracked run's address (and how to start the UI) when ``result`` holds a ``run``."""
+    if "run" in result:
+        hint = result["run"]["ui_hint"]
+        print(f"[sray] {result['run']['tracker']} run: {result['run']['ui_url']}"
+              + (f"  (start the UI: {hint})" if hint else ""))
