@@ -57,7 +57,7 @@ class SweepRecord:
 def write_sweep_record(folder: Path, record: SweepRecord) -> Path:
     """Write ``sweep.json`` atomically; returns its path."""
     path = Path(folder) / RECORD_FILE
-    atomic_write_json(path, asdict(record))
+    atomic_write_json(path, dataclasses.asdict(record))
     return path
 
 
