@@ -1,14 +1,7 @@
-"""``sray bench profile --workload kernels train-kernels chunks attention-keys``: levers the profiles point at, timed.
-
-* ``kernels``: the attention call that dominates the render profile at the render's shapes, with each CPU option torch
-  offers (all compute the same attention; the table gives their largest difference to the first); ``train-kernels``:
-  the same forward + backward at one pass of the paper-config training step;
-* ``chunks``: a whole-image render of a small crop at several chunk sizes (a chunk's token tensors decide whether they
-  stay in cache and whether glibc serves them from its heap or maps fresh pages);
-* ``attention-keys``: the intra-view stage of one 256-ray piece with SDPA's flash kernel and with ``sliced_attention``
-  by sample count (key length), and the kernel ``model.sliced_attention.attention`` picks there; on another CPU, rerun
-  it (and the whole-step trials in docs/performance.md) before trusting those ranges.
-"""
+"""``sray bench profile --workload kernels train-kernels chunks attention-keys``: levers the profiles point at, timed:
+each CPU attention option torch offers at the render's (and the training step's) shapes, a render at several chunk
+sizes (a chunk's token tensors decide whether they stay in cache and how glibc serves them), and SDPA's flash kernel
+against ``sliced_attention`` by key length (on another CPU, rerun it before trusting docs/performance.md's ranges)."""
 
 from __future__ import annotations
 

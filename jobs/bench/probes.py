@@ -1,14 +1,10 @@
 """What ``sray bench model`` and ``sray bench profile`` run and how they measure it.
 
-Workloads: a training step and a whole-image render on a synthetic scene (random sources whose cameras all see the
-query's frustum), so they measure the model alone. A spec dict names the sizes: rays, coarse, fine, views, hw,
-device, steps; optionally dtype (fp32, bf16, fp16), impl (``Runtime.impl``), fine_samples, piece
-(``Runtime.train_piece``), chunk (``Runtime.chunk``; 0 or absent: by device), compile (both fields through
-``torch.compile``) and model (other ``SRayConfig`` fields; ``inputs='rgbd'`` gives the sources depth maps).
-
-Measures: FLOPs with ``FlopCounterMode`` and SDPA on its MATH backend (the fused CPU flash kernel has no FLOP formula;
-fused kernels do the same matmul work); peak memory as the allocator's peak above its level before the call (the
-paper's "memory increment"); training steps in a fresh spawned process each, so their peak RSS is theirs alone.
+Workloads: a training step and a whole-image render on a synthetic scene (random sources seeing the query's frustum),
+sized by a spec dict: rays, coarse, fine, views, hw, device, steps; optionally dtype, impl, fine_samples, piece,
+chunk (``Runtime`` fields; 0 or absent: by device), compile and model (other ``SRayConfig`` fields). Measures: FLOPs
+with SDPA on its MATH backend (the fused CPU kernel has no FLOP formula), the allocator's peak above its level before
+the call (the paper's "memory increment"), training steps in a fresh process each (their peak RSS is theirs alone).
 """
 
 from __future__ import annotations

@@ -65,10 +65,10 @@ def match_wheels(pins: list[Pin], folder: Path) -> dict[str, Path]:
     missing = [p.spec() for p in pins if len(wheels.get(p.name, [])) == 0]
     doubled = [p.spec() for p in pins if len(wheels.get(p.name, [])) > 1]
     if missing or doubled:
-        raise BundleError(("no wheel for " + ", ".join(missing) if missing else "")
-                          + ("; " if missing and doubled else "")
-                          + ("several wheels for " + ", ".join(doubled) if doubled else "")
-                          + f" in {folder}: run `sray gpu-bundle` again (it downloads exactly one of each)")
+        problems = [f"{what} {', '.join(specs)}" for what, specs in (("no wheel for", missing),
+                                                                    ("several wheels for", doubled)) if specs]
+        raise BundleError(f"{'; '.join(problems)} in {folder}: run `sray gpu-bundle` again (it downloads exactly one "
+                          "of each)")
     return {p.name: wheels[p.name][0] for p in pins}
 
 
