@@ -49,8 +49,7 @@ def _kernels(q: Tensor, k: Tensor, v: Tensor, mask: Tensor) -> dict[str, Callabl
 
 
 def with_backward(fn: Callable[[], Tensor], inputs: tuple[Tensor, ...]) -> Callable[[], Tensor]:
-    """``fn`` followed by the backward pass of a dense random gradient of its output to ``inputs`` (discarded). Dense
-    as in a training step: ``out.sum()``'s stride-0 gradient sends batched matmuls down a per-matrix path."""
+    """``fn`` and the backward of a dense random gradient (as a training step's; ``out.sum()``'s is stride-0)."""
     upstream = torch.randn(fn().shape, generator=torch.Generator().manual_seed(1))
 
     def call() -> Tensor:
@@ -89,8 +88,7 @@ def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = Fal
 
 def chunk_table(chunks: tuple[int, ...], impl: str, crop: tuple[int, int] = (60, 80), samples: int = 24,
                 repeats: int = 2) -> str:
-    """Seconds to render a ``crop`` (h, w) of the 320x240 view (same field of view, fewer rays) with ``samples`` +
-    ``samples`` samples at each chunk size, and the whole view's seconds extrapolated."""
+    """Seconds to render a ``crop`` (h, w) of the 320x240 view at each chunk size, and the whole view's estimate."""
     torch.manual_seed(0)
     model = SRayModel(model_config({"coarse": samples, "fine": samples, "views": VIEWS})).eval()
     batch = synthetic_batch(1, VIEWS, (240, 320), CPU)
@@ -137,8 +135,7 @@ def _stage_seconds(kernel: Callable[..., Tensor], rays: int, samples: int, views
 
 
 def key_length_table(samples: tuple[int, ...], rays: int = 256, views: int = 8, repeats: int = 3) -> str:
-    """Milliseconds per intra-view stage with SDPA's flash kernel and with the sliced kernel, per sample count,
-    forward and forward + backward, and the kernel ``attention`` uses there."""
+    """Milliseconds per intra-view stage, flash against sliced, per sample count and pass; the kernel used there."""
     lines = ["| samples (keys) | pass | SDPA flash ms | sliced ms | flash / sliced | kernel used on a CPU |",
              "|---:|---|---:|---:|---:|---|"]
     for n in samples:

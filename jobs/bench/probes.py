@@ -68,8 +68,7 @@ def attention_case(variant: str, rays: int, views: int, samples: int, channels: 
 
 def attention_call(module: CrossReprojectionAttention, space: torch.Tensor, valid: torch.Tensor,
                    backward: bool) -> Callable[[], None]:
-    """A closure running the attention stage forward (and backward of its output sum), at evenly spread normalised
-    sample depths."""
+    """A closure running the attention stage forward (and backward of its output sum)."""
     rays, samples = space.shape[0], space.shape[2]
     depth01 = ((torch.arange(samples, dtype=torch.float32) + 0.5) / samples).expand(rays, samples).to(space.device)
 
@@ -156,8 +155,7 @@ def peak_rss_bytes() -> int:
 
 
 def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device, depth: bool = False) -> dict:
-    """Random source images (m, 3, H, W), their cameras, ``rays`` query rays, labels and colours; with ``depth``,
-    source z-depth maps (m, H, W) in [1.5, 4.5] m (inside the workloads' near 1, far 5)."""
+    """Random sources (m, 3, H, W), cameras, query rays, labels, colours; ``depth``: (m, H, W) in [1.5, 4.5] m."""
     h, w = hw
     gen = torch.Generator().manual_seed(0)
     K = torch.tensor([[w / 2, 0.0, (w - 1) / 2], [0.0, w / 2, (h - 1) / 2], [0.0, 0.0, 1.0]])
