@@ -168,8 +168,7 @@ def _speed_line(checkpoint: Path, shards: Path, n_source: int) -> str:
 
 
 def write_sample_picture(sample: TrainSample, class_names: list[str], path: Path, ignore_id: int = 255) -> Path:
-    """The sampled rays' colours and labels scattered over the query frame (the query image is not in a training
-    sample), beside the m source views."""
+    """The sampled rays' colours and labels over the query frame (a sample lacks its image), beside the m sources."""
     src = sample.sources.rgb.permute(0, 2, 3, 1).numpy()  # (m, H, W, 3)
     m, h, w = src.shape[:3]
     uv = sample.pixels.numpy()  # (R, 2)

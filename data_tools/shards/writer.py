@@ -68,10 +68,8 @@ def tar_bytes(members: list[tuple[str, bytes]]) -> bytes:
     buf = io.BytesIO()
     with tarfile.open(fileobj=buf, mode="w", format=tarfile.GNU_FORMAT) as tar:
         for name, data in members:
-            info = tarfile.TarInfo(name)
-            info.size, info.mtime, info.mode = len(data), 0, 0o644
-            info.uid = info.gid = 0
-            info.uname = info.gname = ""
+            info = tarfile.TarInfo(name)  # fixed defaults: mtime 0, uid/gid 0, no user names, mode 0644
+            info.size = len(data)
             tar.addfile(info, io.BytesIO(data))
     return buf.getvalue()
 

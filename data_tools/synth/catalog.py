@@ -18,7 +18,6 @@ from sray.data_tools.synth import templates as tp
 from sray.data_tools.synth.furniture import CLS, Piece, span
 from sray.data_tools.synth.geometry import Box
 
-
 Rect = tuple[float, float, float, float]  # (x0, x1, y0, y1) in the piece's object frame, metres
 
 
@@ -33,8 +32,7 @@ def _object(rng: np.random.Generator, x: float, y: float, z: float) -> tuple[lis
         m = mat.ceramic(rng) if rng.random() < 0.5 else mat.painted(rng)
         return [span(IGNORE_ID, m, x - s, x + s, y - s, y + s, z, z + h)], s
     if kind == 2:    # bottle: body and neck
-        s, h = float(rng.uniform(0.03, 0.045)), float(rng.uniform(0.16, 0.26))
-        m = mat.painted(rng)
+        s, h, m = float(rng.uniform(0.03, 0.045)), float(rng.uniform(0.16, 0.26)), mat.painted(rng)
         return [span(IGNORE_ID, m, x - s, x + s, y - s, y + s, z, z + h),
                 span(IGNORE_ID, m, x - 0.012, x + 0.012, y - 0.012, y + 0.012, z + h, z + h + 0.07)], s
     if kind == 3:    # stack of books or magazines

@@ -154,15 +154,13 @@ def _prune_stale_views(scene_dir: Path, view_ids: list[str]) -> None:
 
 
 def _write_scene(out: Path, name: str, own_seed: int, n_views: int, height: int, width: int, role: str,
-                 room_type: str, split: str, randomise: float, on_view: Callable[[], None] | None = None) -> Path:
-    """Generate one scene and write it under ``out`` (scene.json last); returns its folder."""
-    scene_dir = out / name
+                 room_type: str, split: str, randomise: float, on_view: Callable[[], None] | None = None) -> None:
+    """Generate one scene and write it under ``out`` (scene.json last)."""
     scene = generate_scene(name, own_seed, n_views, height, width, role, room_type, on_view=on_view, split=split,
                            randomise=randomise)
-    (scene_dir / "scene.json").unlink(missing_ok=True)
+    (out / name / "scene.json").unlink(missing_ok=True)
     write_scene(scene, out)
-    _prune_stale_views(scene_dir, scene.meta.view_ids)
-    return scene_dir
+    _prune_stale_views(out / name, scene.meta.view_ids)
 
 
 def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height: int, width: int, seed: int,

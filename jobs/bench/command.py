@@ -19,7 +19,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     loader.add_argument("--data", type=Path, default=None,
                         help="shard folder (default: generate small procedural shards in a temp folder)")
     loader.add_argument("--batches", type=int, default=30, help="batches timed per setting")
-    loader.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     loader.set_defaults(func=_bench_loader)
 
     model = kinds.add_parser("model", help="CRA vs dense attention cost; training-step time and memory")
@@ -30,7 +29,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     model.add_argument("--official-side-by-side", type=Path, default=None, metavar="RESULTS_JSON",
                        help="results.json of a same-run side-by-side of the official S-Ray code and sray "
                             "(the shared tools' official_side_by_side/run.py): adds its table to the section")
-    model.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     model.set_defaults(func=_bench_model)
 
     prof = kinds.add_parser("profile", help="torch.profiler of the training step and of a whole-image render")
@@ -43,7 +41,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                            "train-kernels: the attention kernels forward + backward at the training step's shapes; "
                            "attention-keys: SDPA flash against the sliced CPU kernel by key length")
     prof.add_argument("--quick", action="store_true", help="tiny sizes (for tests)")
-    prof.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     prof.set_defaults(func=_bench_profile)
 
     speed = kinds.add_parser("speed-accuracy", help="mIoU (overall and per class) and PSNR against seconds per view "
@@ -73,8 +70,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                             "reads the rows it holds instead of measuring them again, so a long run resumes")
     speed.add_argument("--tracker", default="mlflow")
     speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
-    speed.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
     speed.set_defaults(func=_bench_speed_accuracy)
+    for table_bench in (loader, model, prof, speed):
+        table_bench.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
 
     segmenter = kinds.add_parser("segmenter", help="train the 2D segmenter (encoder + linear head) of the ceilings "
                                  "rows for a CPU-second budget on the train scenes' source views, or take S-Ray's "

@@ -1,14 +1,7 @@
-"""``sray bench profile --workload kernels train-kernels chunks attention-keys``: levers the profiles point at, timed.
-
-* ``kernels``: the attention call that dominates the render profile at the render's shapes, with each CPU option torch
-  offers (all compute the same attention; the table gives their largest difference to the first); ``train-kernels``:
-  the same forward + backward at one pass of the paper-config training step;
-* ``chunks``: a whole-image render of a small crop at several chunk sizes (a chunk's token tensors decide whether they
-  stay in cache and whether glibc serves them from its heap or maps fresh pages);
-* ``attention-keys``: the intra-view stage of one 256-ray piece with SDPA's flash kernel and with ``sliced_attention``
-  by sample count (key length), and the kernel ``model.sliced_attention.attention`` picks there; on another CPU, rerun
-  it (and the whole-step trials in docs/performance.md) before trusting those ranges.
-"""
+"""``sray bench profile --workload kernels train-kernels chunks attention-keys``: levers the profiles point at, timed:
+each CPU attention option torch offers at the render's (and the training step's) shapes, a render at several chunk
+sizes (a chunk's token tensors decide whether they stay in cache and how glibc serves them), and SDPA's flash kernel
+against ``sliced_attention`` by key length (on another CPU, rerun it before trusting docs/performance.md's ranges)."""
 
 from __future__ import annotations
 
@@ -56,8 +49,7 @@ def _kernels(q: Tensor, k: Tensor, v: Tensor, mask: Tensor) -> dict[str, Callabl
 
 
 def with_backward(fn: Callable[[], Tensor], inputs: tuple[Tensor, ...]) -> Callable[[], Tensor]:
-    """``fn`` followed by the backward pass of a dense random gradient of its output to ``inputs`` (discarded). Dense
-    as in a training step: ``out.sum()``'s stride-0 gradient sends batched matmuls down a per-matrix path."""
+    """``fn`` and the backward of a dense random gradient (as a training step's; ``out.sum()``'s is stride-0)."""
     upstream = torch.randn(fn().shape, generator=torch.Generator().manual_seed(1))
 
     def call() -> Tensor:
@@ -96,8 +88,7 @@ def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = Fal
 
 def chunk_table(chunks: tuple[int, ...], impl: str, crop: tuple[int, int] = (60, 80), samples: int = 24,
                 repeats: int = 2) -> str:
-    """Seconds to render a ``crop`` (h, w) of the 320x240 view (same field of view, fewer rays) with ``samples`` +
-    ``samples`` samples at each chunk size, and the whole view's seconds extrapolated."""
+    """Seconds to render a ``crop`` (h, w) of the 320x240 view at each chunk size, and the whole view's estimate."""
     torch.manual_seed(0)
     model = SRayModel(model_config({"coarse": samples, "fine": samples, "views": VIEWS})).eval()
     batch = synthetic_batch(1, VIEWS, (240, 320), CPU)
@@ -144,8 +135,7 @@ def _stage_seconds(kernel: Callable[..., Tensor], rays: int, samples: int, views
 
 
 def key_length_table(samples: tuple[int, ...], rays: int = 256, views: int = 8, repeats: int = 3) -> str:
-    """Milliseconds per intra-view stage with SDPA's flash kernel and with the sliced kernel, per sample count,
-    forward and forward + backward, and the kernel ``attention`` uses there."""
+    """Milliseconds per intra-view stage, flash against sliced, per sample count and pass; the kernel used there."""
     lines = ["| samples (keys) | pass | SDPA flash ms | sliced ms | flash / sliced | kernel used on a CPU |",
              "|---:|---|---:|---:|---:|---|"]
     for n in samples:

@@ -189,8 +189,7 @@ def run_model_benchmark(device: str = "auto", quick: bool = False,
 
 
 def _summary(runs: list[dict]) -> dict:
-    """Median, min and max seconds per timed step (each process's first is its warm-up), the per-process medians and
-    the median peak RSS in GiB."""
+    """Seconds per timed step (each process's first is its warm-up): median, range, per process; median RSS GiB."""
     timed = [t for r in runs for t in r["times"][1:]]
     return {"median": statistics.median(timed), "min": min(timed), "max": max(timed),
             "per_round": [statistics.median(r["times"][1:]) for r in runs],
@@ -198,8 +197,7 @@ def _summary(runs: list[dict]) -> dict:
 
 
 def official_side_by_side(results_json: Path) -> tuple[str, str, str]:
-    """(title, Markdown table, notes): per variant the seconds per step and peak RSS, and both against sray's
-    default."""
+    """(title, table, notes): per variant the seconds per step and peak RSS, both against sray's default."""
     results = json.loads(Path(results_json).read_text())
     if SRAY_DEFAULT not in results:
         raise ValueError(f"{results_json}: no {SRAY_DEFAULT!r} row; pass the results.json that "

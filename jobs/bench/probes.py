@@ -1,14 +1,10 @@
 """What ``sray bench model`` and ``sray bench profile`` run and how they measure it.
 
-Workloads: a training step and a whole-image render on a synthetic scene (random sources whose cameras all see the
-query's frustum), so they measure the model alone. A spec dict names the sizes: rays, coarse, fine, views, hw,
-device, steps; optionally dtype (fp32, bf16, fp16), impl (``Runtime.impl``), fine_samples, piece
-(``Runtime.train_piece``), chunk (``Runtime.chunk``; 0 or absent: by device), compile (both fields through
-``torch.compile``) and model (other ``SRayConfig`` fields; ``inputs='rgbd'`` gives the sources depth maps).
-
-Measures: FLOPs with ``FlopCounterMode`` and SDPA on its MATH backend (the fused CPU flash kernel has no FLOP formula;
-fused kernels do the same matmul work); peak memory as the allocator's peak above its level before the call (the
-paper's "memory increment"); training steps in a fresh spawned process each, so their peak RSS is theirs alone.
+Workloads: a training step and a whole-image render on a synthetic scene (random sources seeing the query's frustum),
+sized by a spec dict: rays, coarse, fine, views, hw, device, steps; optionally dtype, impl, fine_samples, piece,
+chunk (``Runtime`` fields; 0 or absent: by device), compile and model (other ``SRayConfig`` fields). Measures: FLOPs
+with SDPA on its MATH backend (the fused CPU kernel has no FLOP formula), the allocator's peak above its level before
+the call (the paper's "memory increment"), training steps in a fresh process each (their peak RSS is theirs alone).
 """
 
 from __future__ import annotations
@@ -72,8 +68,7 @@ def attention_case(variant: str, rays: int, views: int, samples: int, channels: 
 
 def attention_call(module: CrossReprojectionAttention, space: torch.Tensor, valid: torch.Tensor,
                    backward: bool) -> Callable[[], None]:
-    """A closure running the attention stage forward (and backward of its output sum), at evenly spread normalised
-    sample depths."""
+    """A closure running the attention stage forward (and backward of its output sum)."""
     rays, samples = space.shape[0], space.shape[2]
     depth01 = ((torch.arange(samples, dtype=torch.float32) + 0.5) / samples).expand(rays, samples).to(space.device)
 
@@ -160,8 +155,7 @@ def peak_rss_bytes() -> int:
 
 
 def synthetic_batch(rays: int, views: int, hw: tuple[int, int], device: torch.device, depth: bool = False) -> dict:
-    """Random source images (m, 3, H, W), their cameras, ``rays`` query rays, labels and colours; with ``depth``,
-    source z-depth maps (m, H, W) in [1.5, 4.5] m (inside the workloads' near 1, far 5)."""
+    """Random sources (m, 3, H, W), cameras, query rays, labels, colours; ``depth``: (m, H, W) in [1.5, 4.5] m."""
     h, w = hw
     gen = torch.Generator().manual_seed(0)
     K = torch.tensor([[w / 2, 0.0, (w - 1) / 2], [0.0, w / 2, (h - 1) / 2], [0.0, 0.0, 1.0]])

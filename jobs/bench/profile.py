@@ -38,8 +38,7 @@ def _top_table(prof: profile, wall_s: float, n: int = 18) -> str:
 
 
 def profile_call(fn: Callable[[], None], device: torch.device, warm_up: bool = True) -> tuple[profile, float]:
-    """Run ``fn`` once to warm up (unless ``warm_up`` is False), then once under ``torch.profiler``; the profile and
-    its wall time."""
+    """Run ``fn`` (after a warm-up call unless told not to) under ``torch.profiler``; the profile and its wall time."""
     if warm_up:
         fn()
     activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])

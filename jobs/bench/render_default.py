@@ -1,10 +1,7 @@
-"""The evaluation's default render, chosen by a rule from paired measurements, and the renders used today.
-
-The rule (:func:`choose_default`): the default is the **fastest** measured setting that loses at most
-:data:`MAX_MIOU_LOSS` points of mIoU overall **and** at most :data:`MAX_CLASS_LOSS` points of IoU on every class
-holding at least :data:`MIN_CLASS_SHARE` of the labelled test pixels (rarer classes swing by tens of points), both
-against the full render on the same views; ties in time go to the higher mIoU, then to the setting listed first.
-"""
+"""The evaluation's default render by a rule (:func:`choose_default`): the **fastest** measured setting that loses at
+most :data:`MAX_MIOU_LOSS` points of mIoU **and** :data:`MAX_CLASS_LOSS` on every class holding :data:`MIN_CLASS_SHARE`
+of the labelled pixels (rarer ones swing by tens of points) against the full render on the same views; ties go to the
+higher mIoU, then the first listed."""
 
 from __future__ import annotations
 

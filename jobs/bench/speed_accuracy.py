@@ -106,8 +106,7 @@ def table_title(names: list[str] | None) -> str:
 
 
 def paired_settings(settings: list[Setting], inputs: Iterable[str]) -> list[Setting]:
-    """``settings`` plus ``full, <inputs>`` (the first setting's sources) for each of ``inputs`` no setting names: the
-    S-Ray row a method reading those inputs is listed beside."""
+    """``settings`` plus ``full, <inputs>`` for each of ``inputs`` none names (methods reading them go beside it)."""
     named = {st.inputs for st in settings}
     return [*settings, *(Setting(f"full, {x}", n_source=settings[0].n_source, inputs=x)
                          for x in dict.fromkeys(inputs) if x not in named)]
@@ -230,8 +229,7 @@ def pareto(rows: list[dict], cost: str = "s_per_view", score: str = "miou") -> l
 
 
 def table(rows: list[dict], choice: DefaultChoice | None = None) -> str:
-    """Markdown table: inputs, mIoU and its paired difference to the first row, PSNR, seconds per view, speed-up
-    against the first row, Pareto front; with ``choice``, what the default-render rule made of each row."""
+    """Markdown table of the rows against the first; with ``choice``, what the default-render rule made of each."""
     ref = rows[0]
     first = "reference" if ref["name"] == "full, reference path" else f"'{ref['name']}'"
     on_front = {r["name"] for r in pareto(rows)}

@@ -88,8 +88,7 @@ def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: i
 
 def notes(rows: list[dict], checkpoints: list[Path], shards: Path, views_per_scene: int,
           checkpoint_rgbd: Path | None, today: dict[str, str | None], protocol: str, png: Path, doc: Path) -> str:
-    """The notes under the section's tables: what was measured on which views, what each setting means, the rule's
-    conventions, the setting each of ``today``'s defaults renders as, the protocol, the chart."""
+    """The notes under the section's tables: what was measured, what each setting means, today's defaults, the chart."""
     rgbd_by = f"`{checkpoint_rgbd}` (trained with model.inputs=rgbd)" if checkpoint_rgbd else "the same weights"
     own_fine = ", ".join(sorted({f"`fine_samples={r['fine_samples']}`" for r in rows if r["setting"] is not None
                                  and not r["setting"]["fine_samples"] and not r["setting"]["fast"]})) or "-"
@@ -135,8 +134,7 @@ def method_sentence(rows: list[dict]) -> str:
 
 
 def chart(rows: list[dict], path: Path, protocol: str) -> Path:
-    """mIoU (%) against CPU seconds per view (log scale), the front joined by a line, numbered points named in a key
-    (nearby names would overlap), another method's row in its zero-shot style, the protocol in the title."""
+    """mIoU (%) against CPU seconds per view (log), the Pareto front joined, points numbered and named in a key."""
     fig = Figure(figsize=(11, 6.5))
     FigureCanvasAgg(fig)
     ax = fig.add_axes((0.07, 0.1, 0.56, 0.74))

@@ -16,8 +16,7 @@ MEAN_KEYS = ("miou", "psnr", "s_per_view", "wall_s_per_view")
 
 
 def class_scores(conf: Tensor) -> tuple[list[float | None], list[float]]:
-    """IoU of each class in % (None: absent from the ground truth) and its share of the labelled pixels (0..1), from
-    an (L, L) confusion matrix (ground-truth rows)."""
+    """Each class's IoU in % (None: absent) and labelled-pixel share of an (L, L) confusion matrix (truth rows)."""
     ious = [None if math.isnan(v) else 100.0 * float(v) for v in scene_metrics(conf)["iou_per_class"]]
     counts = conf.sum(1).double()
     total = float(counts.sum())
@@ -54,8 +53,7 @@ def measured(row: dict) -> Measured:
 
 
 def class_table(rows: list[dict], chosen: str | None = None) -> str:
-    """One column per class the rule counts: a line of shares, then per setting each IoU and its difference to the
-    first row (points), the ``chosen`` one marked."""
+    """Per counted class, its share, then each setting's IoU and its difference to the first row (``chosen`` marked)."""
     ref = measured(rows[0])
     counted = counted_classes(ref)
     lines = [["share of labelled test pixels", *(f"{100 * ref.class_share[c]:.1f}%" for c in counted)]]

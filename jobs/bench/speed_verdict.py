@@ -22,8 +22,7 @@ def rule_choice(rows: list[dict], settings: list[Setting]) -> DefaultChoice | No
 
 
 def todays_settings(settings: list[Setting]) -> dict[str, str | None]:
-    """Each user of a default render (``todays_defaults``) -> the setting that renders as it does on the optimised
-    path, evaluating as the first setting (None: none does)."""
+    """Each user of a default render -> the setting that renders as it does on the optimised path (None: none)."""
     found = {}
     for user, fast in todays_defaults().items():
         match = [s.name for s in settings if s.same_evaluation(settings[0]) and s.impl == "fast" and s.fast == fast]
@@ -53,8 +52,7 @@ def today_cell(choice: DefaultChoice, today: dict[str, str | None]) -> str:
 
 
 def verdict_table(labels: list[str], choices: list[DefaultChoice], today: dict[str, str | None]) -> str:
-    """One line per label (a checkpoint, or their mean): the setting chosen, each faster one rejected and why, and
-    whether today's defaults pass."""
+    """Per checkpoint (or mean): the setting chosen, each faster one rejected and why, whether today's defaults pass."""
     lines = []
     for label, choice in zip(labels, choices, strict=True):
         rejected = "; ".join(f"{name}: {', '.join(s.describe() for s in why)}"

@@ -57,18 +57,17 @@ def download(pins: list[Pin], dest: Path, python_version: str, find_links: Path 
 
 
 def match_wheels(pins: list[Pin], folder: Path) -> dict[str, Path]:
-    """``name -> wheel`` for every pin, from the ``*.whl`` files in ``folder``; :class:`BundleError` naming each pin
-    without exactly one wheel there, and the fix."""
+    """``name -> wheel`` for every pin from ``folder``; :class:`BundleError` for a pin without exactly one wheel."""
     wheels: dict[str, list[Path]] = {}
     for path in sorted(folder.glob("*.whl")):
         wheels.setdefault(normalise(path.name.split("-", 1)[0]), []).append(path)
     missing = [p.spec() for p in pins if len(wheels.get(p.name, [])) == 0]
     doubled = [p.spec() for p in pins if len(wheels.get(p.name, [])) > 1]
     if missing or doubled:
-        raise BundleError(("no wheel for " + ", ".join(missing) if missing else "")
-                          + ("; " if missing and doubled else "")
-                          + ("several wheels for " + ", ".join(doubled) if doubled else "")
-                          + f" in {folder}: run `sray gpu-bundle` again (it downloads exactly one of each)")
+        problems = [f"{what} {', '.join(specs)}" for what, specs in (("no wheel for", missing),
+                                                                    ("several wheels for", doubled)) if specs]
+        raise BundleError(f"{'; '.join(problems)} in {folder}: run `sray gpu-bundle` again (it downloads exactly one "
+                          "of each)")
     return {p.name: wheels[p.name][0] for p in pins}
 
 
@@ -118,8 +117,7 @@ def assemble(pins: list[Pin], wheels: Path, out: Path, python_version: str, limi
 
 def build_bundle(out: Path, python_version: str, constraints_file: Path, limit_mib: float = LIMIT_MIB,
                  find_links: Path | None = None) -> dict:
-    """Resolve, check the pins against ``constraints_file``, download and assemble the bundle; returns its manifest
-    (:class:`BundleError` with the package and the fix when a step cannot be done)."""
+    """Resolve, check the pins, download and assemble the bundle; its manifest (else :class:`BundleError`)."""
     pins = bundle_pins(resolve(python_version, constraints_file))
     check_pins(pins, read_constraints(constraints_file))
     downloads = out.with_name(f".{out.name}.downloads{os.getpid()}")

@@ -39,8 +39,7 @@ def _run(step: str, command: list[str], env: dict[str, str] | None = None) -> No
 
 
 def run_bundle_check(work: Path, python_version: str, constraints_file: Path, limit_mib: float) -> int:
-    """Build, install and run the stages under ``work``; gpu-check's exit code (:class:`BundleError` when the bundle
-    cannot be built or installed)."""
+    """Build, install and run the stages under ``work``; gpu-check's exit code (else :class:`BundleError`)."""
     here = f"{sys.version_info.major}.{sys.version_info.minor}"
     if python_version != here:
         raise BundleError(f"--check installs into a venv of this Python ({here}), not {python_version}: drop "

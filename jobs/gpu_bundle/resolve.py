@@ -85,10 +85,11 @@ def resolve(python_version: str, constraints_file: Path) -> list[Pin]:
         done = subprocess.run([*pip, "install", "--dry-run", "--ignore-installed", "-q", "--report", str(report),
                                *target_options(python_version), "-c", str(constraints_file), "-c", str(frozen),
                                *root_requirements(constraints)], capture_output=True, text=True, check=False)
-        if done.returncode != 0:
+        if done.returncode != 0:  # pip's last lines, but its warnings about local indexes
+            said = [line for line in done.stderr.splitlines() if line.strip() and "is ignored" not in line]
             raise BundleError(f"pip could not resolve {' '.join(ROOTS)} for CPython {python_version} on manylinux "
-                              f"x86-64 with {constraints_file}: {_last_error(done.stderr)}; fix the pin it names in "
-                              f"{constraints_file.name} (or the environment's version) and build again")
+                              f"x86-64 with {constraints_file}: {' '.join(said[-3:]) or 'no message'}; fix the pin "
+                              f"it names in {constraints_file.name} (or the environment's version) and build again")
         items = json.loads(report.read_text())["install"]
     return [Pin(normalise(i["metadata"]["name"]), i["metadata"]["version"]) for i in items]
 
@@ -100,12 +101,6 @@ def environment_constraints(path: Path, constraints: dict[str, str]) -> Path:
     path.write_text("\n".join(line for line in freeze.stdout.splitlines()
                               if "==" in line and normalise(line.split("==")[0]) not in constraints) + "\n")
     return path
-
-
-def _last_error(stderr: str) -> str:
-    """The last lines of pip's output but its warnings about local indexes."""
-    lines = [line for line in stderr.splitlines() if line.strip() and "is ignored" not in line]
-    return " ".join(lines[-3:]) or "no message"
 
 
 def bundle_pins(resolved: list[Pin]) -> list[Pin]:

@@ -39,16 +39,13 @@ def dist_info_dir(names: list[str], wheel: Path) -> str:
     return folders.pop()
 
 
-def _module_dropped(reference: str, drop: tuple[str, ...]) -> bool:
-    """Whether an entry point's ``module:attr`` lives under one of the dropped folders."""
-    module_path = reference.split(":", 1)[0].strip().replace(".", "/")
-    return any((module_path + "/").startswith(prefix) for prefix in drop)
-
-
 def filter_entry_points(text: str, drop: tuple[str, ...]) -> str:
-    """``entry_points.txt`` without the entries whose module is under a dropped folder."""
-    kept = [line for line in text.splitlines()
-            if "=" not in line or line.lstrip().startswith("[") or not _module_dropped(line.split("=", 1)[1], drop)]
+    """``entry_points.txt`` without the entries whose ``module:attr`` lives under a dropped folder."""
+    def dropped(line: str) -> bool:
+        module_path = line.split("=", 1)[1].split(":", 1)[0].strip().replace(".", "/")
+        return any((module_path + "/").startswith(prefix) for prefix in drop)
+
+    kept = [line for line in text.splitlines() if "=" not in line or line.lstrip().startswith("[") or not dropped(line)]
     return "\n".join(kept) + "\n"
 
 

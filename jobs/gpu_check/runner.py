@@ -39,8 +39,7 @@ def _run_stage(name: str, ctx: CheckContext) -> StageResult:
 
 
 def run_gpu_check(stages: list[str], out: Path, dry_run: bool, fresh: bool, repo: Path, doc: Path | None) -> dict:
-    """Run the chosen stages not yet in the report, printing a line per stage; returns the report.
-    :class:`NoCudaDevice` when no CUDA device is visible and ``dry_run`` is off."""
+    """Run the chosen stages not yet in the report, printing a line per stage; returns the report."""
     unknown = [s for s in stages if s not in STAGES]
     if unknown:
         raise ValueError(f"unknown stage(s) {unknown}; choose from {list(STAGES)}")

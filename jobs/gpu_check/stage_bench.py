@@ -21,8 +21,7 @@ TOP_ROWS = 5
 
 
 def render_seconds(ctx: CheckContext, repeats: int, dtype: torch.dtype | None = None) -> float:
-    """Median seconds to render one (H, W) view from ``ctx.views`` sources, fp32 weights, no grad, after a warm-up;
-    under autocast to ``dtype`` when given, as ``sray eval`` runs a low-precision checkpoint."""
+    """Median seconds to render one view, fp32 weights, no grad, under autocast to ``dtype`` when given."""
     net = model(ctx.samples, ctx.views, ctx.device).eval()
     sources, query = rig(ctx.views, ctx.image_hw, ctx.device)
 

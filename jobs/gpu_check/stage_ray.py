@@ -5,11 +5,9 @@ one GPU between them, refused before Ray starts (NCCL refuses two ranks on one G
 
 from __future__ import annotations
 
-import copy
 import json
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from sray.data_tools.shards.manifest import unseen_scenes
 from sray.data_tools.synth.world import World, make_world
@@ -20,9 +18,6 @@ from sray.platform.train.inputs import InputError
 
 from .context import FULL_STACK, CheckContext, skipped_without
 from .report import StageResult
-
-if TYPE_CHECKING:
-    from sray.platform.config.train_config import TrainConfig
 
 RECIPE = "synth-gpu-minutes"
 RENDER_SIZE, RENDER_FRAMES = "320x240", 60
@@ -101,7 +96,7 @@ def run(ctx: CheckContext) -> StageResult:
     rows.append([f"sray render {size} fly-through (fast s1 c0.9, trained weights)",
                  "fp32", f"{frames['n_frames']} frames", f"{frames['n_frames'] / frames['frames_per_s']:.1f}",
                  f"{frames['frames_per_s']:.2f} frames/s"])
-    refused, shared_row = shared_gpu_request(_config(shards, root, name, precision))
+    refused, shared_row = shared_gpu_request(shards, root, name, precision)
     rows.append(shared_row)
     ok = code == 0 and eval_code == 0 and render_code == 0 and killed and step == _steps(ctx) and refused
     summary = (f"sray train: {step} of {_steps(ctx)} steps in {train_s:.0f} s, "
@@ -111,26 +106,19 @@ def run(ctx: CheckContext) -> StageResult:
                        header=["command", "precision", "work", "seconds", "result"])
 
 
-def _config(shards: Path, root: Path, name: str, precision: str) -> TrainConfig:
-    """The recipe's config for the shared-GPU request (its sizes do not matter: it is refused first)."""
-    cfg = get_recipe(RECIPE)
-    cfg.run.precision = precision
-    cfg.data.shards, cfg.run.output_dir, cfg.run.name = str(shards), str(root / "jobs"), name
-    cfg.run.tracking_uri = f"sqlite:///{root / 'mlflow.db'}"
-    return cfg
-
-
-def shared_gpu_request(cfg: TrainConfig) -> tuple[bool, list[str]]:
-    """Launch ``cfg`` with 2 workers of 0.5 GPU: whether it was refused before Ray started, and the table row."""
+def shared_gpu_request(shards: Path, root: Path, name: str, precision: str) -> tuple[bool, list[str]]:
+    """Launch the recipe with 2 workers of 0.5 GPU (its sizes do not matter: it is refused first): whether it was
+    refused before Ray started, and the table row."""
     from sray.platform.train.launcher import launch_training
 
-    shared = copy.deepcopy(cfg)
-    shared.run.workers, shared.run.gpus_per_worker = 2, 0.5
-    shared.run.name = f"{cfg.run.name}-shared-gpu"
+    cfg = get_recipe(RECIPE)
+    cfg.data.shards, cfg.run.output_dir, cfg.run.name = str(shards), str(root / "jobs"), f"{name}-shared-gpu"
+    cfg.run.precision, cfg.run.tracking_uri = precision, f"sqlite:///{root / 'mlflow.db'}"
+    cfg.run.workers, cfg.run.gpus_per_worker = 2, 0.5
     start = time.perf_counter()
     try:
-        launch_training(shared)
+        launch_training(cfg)
         refused, message = False, "ran: not refused"
     except InputError as err:
         refused, message = True, str(err)
-    return refused, ["2 x 0.5 GPU", cfg.run.precision, "0 steps", f"{time.perf_counter() - start:.1f}", message]
+    return refused, ["2 x 0.5 GPU", precision, "0 steps", f"{time.perf_counter() - start:.1f}", message]

@@ -1,11 +1,6 @@
-"""Stages ``training`` and ``recipe``: Accelerate training steps through the shared ``TrainStep`` on one device.
-
-``training``: the paper's model in fp32 and each low precision (fp16 with loss scaling on CUDA): steps/s, rays/s, peak
-memory, no non-finite step. ``recipe``: the hour recipe's model and losses (``synth-cpu-hour``: the source-view head,
-the 2D-only warm-up, then ray steps): steps/s and rays/s of each phase and a short loss curve on one fixed batch,
-written to ``<out>/recipe_curve.json``. Its batch is synthetic but learnable (each source pixel's label is its
-colour's brightness band), so a working warm-up must lower the source-view loss.
-"""
+"""Stages ``training`` (the paper's model in fp32 and each low precision: steps/s, rays/s, peak memory, no non-finite
+step) and ``recipe`` (the hour recipe's model, its 2D-only warm-up then ray steps, on one synthetic but learnable
+batch: each phase's speed and a loss curve, ``<out>/recipe_curve.json``), through the shared ``TrainStep``."""
 
 from __future__ import annotations
 

@@ -64,8 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _record(job: object, outputs: dict) -> None:
-    """The preset's section of ``docs/benchmarks.md``: one table per axis, then the breaking points with the charts
-    (copied beside the section's data)."""
+    """The preset's section of ``docs/benchmarks.md``: a table per axis, the breaking points, the charts."""
     preset, doc = job.preset.name, job.doc
     bench = Bench(f"stability-{preset}", f"Stability, {preset}")
     figures = bench_dir(doc, bench)

@@ -81,8 +81,7 @@ class StabilityJob:
 
 
 def resolve_models(job: StabilityJob) -> tuple[Path, SuiteModels]:
-    """(shards, models): the given models and ``--data`` (default: the checkpoint's training shards), or the preset's
-    world and its pretrained models."""
+    """(shards, models): those given (shards: the checkpoint's by default), or the preset's world, pretrained."""
     if job.given is None:
         job.out.mkdir(parents=True, exist_ok=True)
         shards = world_shards(job.preset, job.out)
@@ -98,8 +97,7 @@ def resolve_models(job: StabilityJob) -> tuple[Path, SuiteModels]:
 
 
 def _label_space(models: SuiteModels) -> tuple[SRayConfig, SRayConfig | None]:
-    """The model configs of the S-Ray and the no-CRA checkpoint (None without one); ValueError when their label
-    spaces differ."""
+    """The model configs of the S-Ray and no-CRA checkpoints (None: none); ValueError when their labels differ."""
     _, cfg = model_from_checkpoint(models.checkpoint)
     if models.checkpoint_no_cra is None:
         return cfg.model, None

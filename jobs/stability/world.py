@@ -45,8 +45,7 @@ def pretrain(role: str, preset: Preset, shards: Path, out: Path, tracking_uri: s
 
 
 def pretrain_segmenter(preset: Preset, shards: Path, out: Path) -> Path:
-    """The folder of ``2d-transfer``'s segmenter trained for ``world.segmenter_cpu_seconds``, with as many images per
-    step as S-Ray's pretraining has sources."""
+    """The folder of ``2d-transfer``'s segmenter trained for the preset's CPU seconds."""
     w, folder = preset.world, out / "world" / "segmenter"
     train_segmenter(shards, w.segmenter_cpu_seconds, folder, seed=0, n_source=w.train_n_source,
                     top_k=w.train_n_source + 2)

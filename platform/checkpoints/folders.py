@@ -159,10 +159,7 @@ class CheckpointManager:
 
     def _prune(self) -> None:
         entries = self.entries()
-        keep = {p for _, _, p in entries[-self.keep_last:]}
-        best = self.best()
-        if best is not None:
-            keep.add(best)
+        keep = {p for _, _, p in entries[-self.keep_last:]} | {self.best()}
         for _, _, path in entries:
             if path not in keep:
                 shutil.rmtree(path, ignore_errors=True)
@@ -173,7 +170,7 @@ def resolve_checkpoint(path: Path) -> Path:
     (best checkpoint, else the latest); FileNotFoundError names the path and what was expected."""
     path = Path(path).resolve()
     for root in (path, path / "checkpoints"):
-        if (root / "state.pt").is_file():
+        if (root / STATE_FILE).is_file():
             return root
         if root.is_dir() and any(root.glob("step_*")):
             manager = CheckpointManager(root)

@@ -177,7 +177,7 @@ def down(root: Path) -> list[str]:
     stopped = []
     for prefix in STOP_ORDER:
         for name in sorted(n for n in state.processes if n.startswith(prefix)):
-            if _stop(name, state.record(name)):
+            if _stop(name, ProcessRecord(**state.processes[name])):
                 stopped.append(name)
     update_state(state.root, lambda on_disk: on_disk.processes.clear())
     return stopped
