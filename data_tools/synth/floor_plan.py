@@ -148,11 +148,6 @@ L_SHAPE_PROB = 0.3  # probability that a room loses a corner block (an L-shaped 
 COLUMN_PROB = 0.3  # probability that a room gets one wall column
 
 
-def _reserve(plan: FloorPlan, wall: int, s0: float, s1: float, height: float) -> None:
-    """Mark [s0, s1] of ``wall`` as taken over the whole height."""
-    plan.spans[wall].append((s0, s1, 0.0, height))
-
-
 def _solid(rng: np.random.Generator, plan: FloorPlan, rect: tuple[float, float, float, float]) -> None:
     """A floor-to-ceiling wall block over the floor rectangle ``rect`` (x0, x1, y0, y1)."""
     x0, x1, y0, y1 = rect
@@ -172,9 +167,9 @@ def add_corner_block(rng: np.random.Generator, plan: FloorPlan, corner: int | No
     corners = [start + a * tangent + b * normal for a in (0.0, along) for b in (0.0, across)]
     xs, ys = [c[0] for c in corners], [c[1] for c in corners]
     _solid(rng, plan, (min(xs), max(xs), min(ys), max(ys)))
-    _reserve(plan, k, 0.0, along, h)
     prev = (k - 1) % 4
-    _reserve(plan, prev, plan.wall_length(prev) - across, plan.wall_length(prev), h)
+    plan.spans[k].append((0.0, along, 0.0, h))  # both walls are taken over the whole height
+    plan.spans[prev].append((plan.wall_length(prev) - across, plan.wall_length(prev), 0.0, h))
 
 
 def add_column(rng: np.random.Generator, plan: FloorPlan) -> None:
@@ -190,7 +185,7 @@ def add_column(rng: np.random.Generator, plan: FloorPlan) -> None:
     hx = abs(tangent[0]) * width / 2 + abs(normal[0]) * depth / 2
     hy = abs(tangent[1]) * width / 2 + abs(normal[1]) * depth / 2
     _solid(rng, plan, (x - hx, x + hx, y - hy, y + hy))
-    _reserve(plan, wall, s - width / 2, s + width / 2, plan.size[2])
+    plan.spans[wall].append((s - width / 2, s + width / 2, 0.0, plan.size[2]))
 
 
 def shaped_plan(rng: np.random.Generator, size: tuple[float, float, float]) -> FloorPlan:

@@ -36,20 +36,15 @@ class Material:
     seed: int = 0
 
 
-def _linear(rgb: tuple[float, float, float]) -> tuple[float, float, float]:
-    """sRGB in [0, 1] -> linear RGB."""
-    return tuple(float(c) ** 2.2 for c in rgb)  # type: ignore[return-value]
-
-
 def hsv(rng: np.random.Generator, h: tuple[float, float], s: tuple[float, float],
         v: tuple[float, float], emissive: bool = False) -> tuple[float, float, float]:
-    """A linear RGB colour drawn uniformly from an HSV box (hue wraps around); a surface colour (not ``emissive``) is
+    """A linear RGB colour (sRGB ** 2.2) drawn uniformly from an HSV box (hue wraps around); a surface colour (not ``emissive``) is
     then randomised (``domains.jitter_colour``) and kept out of, or moved into, the held-out colour region."""
     hue, sat, val = float(rng.uniform(*h)) % 1.0, float(rng.uniform(*s)), float(rng.uniform(*v))
     if not emissive:
         hue, sat, val = domains.jitter_colour(rng, hue, sat, val)
         hue, sat = domains.surface_colour(rng, hue, sat)
-    return _linear(colorsys.hsv_to_rgb(hue, sat, val))
+    return tuple(float(c) ** 2.2 for c in colorsys.hsv_to_rgb(hue, sat, val))  # type: ignore[return-value]
 
 
 def new_seed(rng: np.random.Generator) -> int:

@@ -11,8 +11,8 @@ import numpy as np
 from sray.data_tools.synth import materials as mat
 
 
-def _hash(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, seed: np.ndarray) -> np.ndarray:
-    """uint32 hash of integer lattice coordinates and a per-point seed (all (N,))."""
+def hash01(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """uint32 hash of integer lattice coordinates and a per-point seed (all (N,)), mapped to float32 [0, 1)."""
     h = (seed.astype(np.uint32) ^ (ix.astype(np.uint32) * np.uint32(0x8DA6B343))
          ^ (iy.astype(np.uint32) * np.uint32(0xD8163841)) ^ (iz.astype(np.uint32) * np.uint32(0xCB1AB31F)))
     h ^= h >> np.uint32(16)
@@ -20,12 +20,7 @@ def _hash(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, seed: np.ndarray) -> n
     h ^= h >> np.uint32(15)
     h *= np.uint32(0x846CA68B)
     h ^= h >> np.uint32(16)
-    return h
-
-
-def hash01(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, seed: np.ndarray) -> np.ndarray:
-    """Lattice hash mapped to float32 [0, 1) (all inputs (N,))."""
-    return (_hash(ix, iy, iz, seed) >> np.uint32(8)).astype(np.float32) / np.float32(1 << 24)
+    return (h >> np.uint32(8)).astype(np.float32) / np.float32(1 << 24)
 
 
 def value_noise(p: np.ndarray, seed: np.ndarray) -> np.ndarray:

@@ -52,15 +52,10 @@ def camera_valid(centres: np.ndarray, size: tuple[float, float, float], boxes: P
     if standing:
         tall = (boxes.center[:, 2] + boxes.half[:, 2]) > 0.05
         floor_level = np.concatenate([centres[:, :2], np.zeros((len(centres), 1))], axis=1)
-        grown = boxes.contains(floor_level, 0.0) | _near_footprint(floor_level, boxes, BODY_RADIUS)
-        ok &= ~np.any(grown[:, tall], axis=1)
+        local = in_frame(floor_level[:, None, :] - boxes.center[None, :, :], np.cos(boxes.yaw), np.sin(boxes.yaw))
+        near = np.all(np.abs(local[..., :2]) <= boxes.half[None, :, :2] + BODY_RADIUS, axis=2)  # (N, P) per axis
+        ok &= ~np.any(near[:, tall], axis=1)
     return ok
-
-
-def _near_footprint(points: np.ndarray, boxes: PackedBoxes, radius: float) -> np.ndarray:
-    """bool (N, P): a floor point within ``radius`` (per axis, in the box frame) of a box footprint."""
-    local = in_frame(points[:, None, :] - boxes.center[None, :, :], np.cos(boxes.yaw), np.sin(boxes.yaw))
-    return np.all(np.abs(local[..., :2]) <= boxes.half[None, :, :2] + radius, axis=2)
 
 
 def _arc(rng: np.random.Generator, size: tuple[float, float, float], s: np.ndarray
