@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from sray.data_tools.perturbations import exposure, gaussian_noise
+from sray.data_tools.readers.common import scale_intrinsics
 
 
 @dataclass(frozen=True)
@@ -96,20 +97,14 @@ class Augmentation:
 
 def rescale_view(rgb: np.ndarray, K: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
     """(image, float64 K): uint8 (H, W, 3) resized by ``scale`` (Gaussian prefilter, then bilinear; size rounded per
-    axis) and K (3, 3) moved by the pixel-centre rule with each axis's exact factor s: f' = s f, c' = s (c + 0.5) - 0.5.
-    """
+    axis) and K (3, 3) by each axis's exact factor (pixel-centre rule, ``readers.common.scale_intrinsics``)."""
     h, w = rgb.shape[:2]
     nh, nw = max(1, round(h * scale)), max(1, round(w * scale))
     if (nh, nw) == (h, w):
         return rgb, np.asarray(K, np.float64)
-    sx, sy = nw / w, nh / h
-    sigma_x, sigma_y = (0.5 * np.sqrt(max(1.0 / f**2 - 1.0, 0.0)) for f in (sx, sy))  # antialiasing, in pixels
+    sigma_x, sigma_y = (0.5 * np.sqrt(max(1.0 / f**2 - 1.0, 0.0)) for f in (nw / w, nh / h))  # antialiasing, pixels
     blurred = cv2.GaussianBlur(rgb, (0, 0), sigmaX=max(sigma_x, 1e-3), sigmaY=max(sigma_y, 1e-3))
-    out = cv2.resize(blurred, (nw, nh), interpolation=cv2.INTER_LINEAR)
-    K2 = np.array(K, np.float64, copy=True)
-    K2[0, 0], K2[0, 1], K2[0, 2] = sx * K2[0, 0], sx * K2[0, 1], sx * (K2[0, 2] + 0.5) - 0.5
-    K2[1, 1], K2[1, 2] = sy * K2[1, 1], sy * (K2[1, 2] + 0.5) - 0.5
-    return out, K2
+    return cv2.resize(blurred, (nw, nh), interpolation=cv2.INTER_LINEAR), scale_intrinsics(K, (h, w), (nh, nw))
 
 
 def rescale_nearest(depth: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
