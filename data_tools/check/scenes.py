@@ -107,11 +107,6 @@ def check_scene(scene_dir: Path, limits: CheckLimits | None = None) -> list[Prob
     return out
 
 
-def _scene_dirs(root: Path) -> list[Path]:
-    """Visible sub-folders holding a scene.json (hidden ones are a converter's unfinished work)."""
-    return sorted(p.parent for p in root.glob("*/scene.json") if not p.parent.name.startswith("."))
-
-
 def check_dataset(path: Path, limits: CheckLimits | None = None) -> list[Problem]:
     """Every problem of a dataset folder in sray layout (or of one scene folder)."""
     root = Path(path)
@@ -121,7 +116,8 @@ def check_dataset(path: Path, limits: CheckLimits | None = None) -> list[Problem
         return check_scene(root, limits)
     out: list[Problem] = []
     index_path = root / "dataset.json"
-    on_disk = {p.name for p in _scene_dirs(root)}
+    # visible sub-folders holding a scene.json (hidden ones are a converter's unfinished work)
+    on_disk = {p.parent.name for p in root.glob("*/scene.json") if not p.parent.name.startswith(".")}
     names = sorted(on_disk)
     if index_path.exists():
         index = _read_json(index_path, out)

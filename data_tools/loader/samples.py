@@ -67,15 +67,10 @@ def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str
 def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
                  rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int,
                  augment: Augmentation | None = None, source_labels: bool = False) -> TrainSample:
-    """A training sample: sources, query camera and ``n_rays`` random pixels of the query with targets.
-
-    Pixels are drawn without replacement (with replacement only when ``n_rays`` exceeds the pixel
-    count), uniformly over the image; ``pixels`` (R, 2) holds integer (u, v) pixel centres as float32. Target
-    label ids are checked against the scene's ``n_classes`` (:func:`check_label_ids`). ``augment``
-    (:mod:`.augment`) jitters and resizes the sources; None, or every option off, gives the plain sample.
-    ``source_labels`` also delivers the source views' class ids (``SourceViews.label``, for the source-view
-    semantic loss).
-    """
+    """A training sample: sources, query camera and ``n_rays`` pixels of the query drawn uniformly without
+    replacement (with it only when ``n_rays`` exceeds the pixel count), with targets checked against ``n_classes``.
+    ``augment`` jitters and resizes the sources (None or all off: the plain sample); ``source_labels`` adds the
+    sources' class ids (``SourceViews.label``, for the source-view semantic loss)."""
     query = views[query_id]
     rgb, label = query.rgb(), query.label()                                           # (H, W, 3), (H, W)
     h, w = label.shape

@@ -6,10 +6,8 @@ sensor name; four ``float32`` 4 x 4 matrices (colour intrinsics, colour extrinsi
 extrinsics); ``int32`` colour compression (0 raw, 1 PNG, 2 JPEG) and depth compression (0 raw uint16, 1 zlib
 uint16); ``uint32`` colour width, height, depth width, height; ``float32`` depth shift (units per metre); ``uint64``
 frame count. Each frame: ``float32`` 4 x 4 camera-to-world; ``uint64`` colour and depth timestamps and byte
-counts; the colour bytes; the depth bytes.
-
-The file is streamed once to index its frames (scans are gigabytes), each view read on demand by seeking. Frame
-selection, label mapping, resampling and errors are those of ``readers.scannet``: the same content, the same scene.
+counts; the colour bytes; the depth bytes. Streamed once to index the frames, then read by seeking; everything
+after decoding is ``readers.scannet``'s (docs/data.md, "A raw ScanNet scan in one step").
 """
 
 from __future__ import annotations
