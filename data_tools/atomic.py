@@ -1,6 +1,5 @@
 """Atomic file writes, importable from every part of sray: a temporary sibling ``.<name>.tmp<pid>`` (same file
-system), fsync, then one rename, so a reader sees the old file or the whole new one, never a partial file.
-"""
+system), fsync, then one rename, so a reader sees the old file or the whole new one, never a partial file."""
 
 from __future__ import annotations
 

@@ -5,8 +5,7 @@ from __future__ import annotations
 SCANNET20: list[str] = ["wall", "floor", "cabinet", "bed", "chair", "sofa", "table", "door", "window", "bookshelf",
                          "picture", "counter", "desk", "curtain", "refrigerator", "shower curtain", "toilet", "sink",
                          "bathtub", "otherfurniture"]
-"""The ScanNet benchmark's 20 classes, ids 0..19 in this order (NYU40 ids 1,2,3,4,5,6,7,8,9,10,11,
-12,14,16,24,28,33,34,36,39)."""
+"""The ScanNet benchmark's 20 classes, ids 0..19 in this order (NYU40 ids: :data:`SCANNET20_NYU40_IDS`)."""
 
 SCANNET20_NYU40_IDS: list[int] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 14, 16, 24, 28, 33, 34, 36, 39]
 """NYU40 id of each ScanNet-20 class, index-aligned with :data:`SCANNET20`."""

@@ -1,7 +1,6 @@
 """Seeded perturbations of posed views, each in its own unit (in its docstring): what ``sray stability`` sweeps and
 what training may use as augmentation. Every function is pure and draws only from the generator it is given, so a
-(seed, level) pair always produces the same perturbation.
-"""
+(seed, level) pair always produces the same perturbation."""
 
 from __future__ import annotations
 
@@ -50,8 +49,7 @@ def motion_blur_kernel(length_px: int, angle_rad: float) -> np.ndarray:
 
 
 def motion_blur(rgb: np.ndarray, length_px: int, rng: np.random.Generator) -> np.ndarray:
-    """uint8 (H, W, 3) blurred along a random direction by a ``length_px`` kernel (reflected borders, so the mean is
-    kept)."""
+    """uint8 (H, W, 3) blurred along a random direction by a ``length_px`` kernel (reflected borders keep the mean)."""
     if length_px == 1:
         return rgb.copy()
     kernel = motion_blur_kernel(length_px, float(rng.uniform(0.0, np.pi)))
@@ -75,11 +73,8 @@ def jpeg(rgb: np.ndarray, quality: int) -> np.ndarray:
 
 
 def occlusion_mask(hw: tuple[int, int], fraction: float, rng: np.random.Generator) -> np.ndarray:
-    """bool (H, W) with exactly ``round(fraction · H · W)`` True pixels, made of random rectangles.
-
-    Rectangles (sides 5-35 % of the image's) are added until the target is reached; pixels the last
-    one adds beyond the target are left out in raster order, so that rectangle ends in a partial row.
-    """
+    """bool (H, W) with exactly ``round(fraction · H · W)`` True pixels: random rectangles (sides 5-35 % of the
+    image's) until the target is reached, the last one's excess pixels left out in raster order (a partial row)."""
     if not 0.0 <= fraction <= 1.0:
         raise ValueError(f"occlusion fraction must be in [0, 1], got {fraction}")
     h, w = hw

@@ -1,6 +1,5 @@
 """Lossless PNG codecs of sray's images (8-bit RGB, 16-bit labels, 16-bit depth in millimetres), used by the scene
-folder, the shards and the readers alike, so a view survives every hop without loss.
-"""
+folder, the shards and the readers alike, so a view survives every hop without loss."""
 
 from __future__ import annotations
 

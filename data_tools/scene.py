@@ -1,8 +1,6 @@
-"""The canonical scene: the one in-memory contract every reader produces and the shard writer consumes.
-
-Pixel (u, v) is centred at (u, v) in K's coordinates (a centred principal point is ((W - 1) / 2, (H - 1) / 2));
-poses are camera-to-world in OpenCV axes (x right, y down, z forward): readers convert once, nothing downstream.
-"""
+"""The canonical scene: the one in-memory contract every reader produces and the shard writer consumes. Pixel (u, v)
+is centred at (u, v) in K's coordinates (a centred principal point is ((W - 1) / 2, (H - 1) / 2));
+poses are camera-to-world in OpenCV axes (x right, y down, z forward): readers convert once, nothing downstream."""
 
 from __future__ import annotations
 
@@ -15,9 +13,8 @@ IGNORE_ID = 255
 """Label id of unlabelled pixels in every label space; never a prediction target."""
 
 SPLIT_NAMES = ("train", "source", "finetune", "test")
-"""Per-scene view splits. A training scene uses ``train`` (all views); an unseen test scene uses the
-paper's protocol: ``source`` (fixed source views), ``finetune`` (extra views for per-scene
-finetuning) and ``test`` (held-out views that are only ever evaluated)."""
+"""Per-scene view splits: ``train`` in a training scene; in an unseen test scene the paper's protocol, ``source``
+(fixed source views), ``finetune`` (extra views for per-scene finetuning), ``test`` (held out, only evaluated)."""
 
 
 @dataclass
@@ -61,8 +58,7 @@ class SceneMeta:
     """``train`` (seen in pretraining) or ``test`` (unseen scene, evaluated with the protocol)."""
     ignore_id: int = IGNORE_ID
     labelled: bool = True
-    """False: a capture without labels (every label pixel is ``ignore_id``), for inference only (``sray label``);
-    training refuses it."""
+    """False: a capture without labels (all ``ignore_id``), for inference only (``sray label``); training refuses it."""
     extra: dict = field(default_factory=dict)
     """Free-form provenance (source format, dropped frames, generator seed, ...)."""
 
@@ -102,11 +98,9 @@ class Scene:
 
 
 def source_pool(meta: SceneMeta) -> list[str]:
-    """View ids that may serve as source views (and as training queries), in capture order.
-
-    ``train`` scenes: the ``train`` split minus the ``test`` split (held-out validation views).
-    ``test`` scenes: ``source`` plus ``finetune`` (the paper's protocol never shows ``test`` views).
-    """
+    """View ids that may serve as source views (and training queries), in capture order: in a ``train`` scene the
+    ``train`` split minus the held-out ``test`` split; in a ``test`` scene ``source`` plus ``finetune`` (the paper's
+    protocol never shows ``test`` views)."""
     if meta.role == "test":
         allowed = set(meta.splits.get("source", [])) | set(meta.splits.get("finetune", []))
         fix = "a test scene needs a non-empty 'source' split"

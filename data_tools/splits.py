@@ -1,6 +1,5 @@
 """The view-split rules every scene source shares (docs/data.md, "Splits"): train scenes hold out every 20th view
-for validation; test scenes follow the paper's protocol (20 nearby views: 8 source, 8 finetune, 4 test).
-"""
+for validation; test scenes follow the paper's protocol (20 nearby views: 8 source, 8 finetune, 4 test)."""
 
 from __future__ import annotations
 

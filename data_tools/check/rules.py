@@ -1,6 +1,5 @@
 """The rules of ``sray data check``: pure functions from a value (a pose, intrinsics, a label map, scene.json's
-fields) to :class:`Problem` records, shared by the on-disk and the in-memory check (``scenes.py``).
-"""
+fields) to :class:`Problem` records, shared by the on-disk and the in-memory check (``scenes.py``)."""
 
 from __future__ import annotations
 
@@ -21,8 +20,7 @@ RECONVERT = "re-run `sray data convert` (or `sray data synth`) for this scene"
 
 @dataclass(frozen=True)
 class Problem:
-    """One defect found by the checker: the file at fault (``<scene>:<view_id>`` for in-memory scenes), what is wrong
-    with the offending values, and how to fix it."""
+    """One defect: the file at fault (``<scene>:<view_id>`` in memory), what is wrong (with the values), the fix."""
 
     file: str
     what: str

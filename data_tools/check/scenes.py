@@ -1,7 +1,6 @@
 """``sray data check``: list every :class:`Problem` of a dataset folder (:func:`check_dataset`), a scene folder
 (:func:`check_scene`) or an in-memory :class:`Scene` (:func:`check_scene_object`), reading only; no problem means
-the data is fit for ``sray data shard``. A scene marked ``"labelled": false`` passes with ignore-only label images.
-"""
+the data is fit for ``sray data shard``. A scene marked ``"labelled": false`` passes with ignore-only label images."""
 
 from __future__ import annotations
 

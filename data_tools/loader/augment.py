@@ -4,15 +4,11 @@
   much): the sources of one sample disagree in photometry while the query's targets stay as they are;
 * **random source-view count and neighbour subsets**: m sources, m uniform in [``min_source``, n_source], among
   the first k ranked neighbours, k uniform in [m, top_k] (near-duplicate or wide-baseline sets);
-* **random source resolution**: all sources of a sample are resized by one factor drawn in
-  [1 - ``source_scale``, 1] (a Gaussian prefilter against aliasing, then bilinear sampling, which
-  keeps pixel centres exact; OpenCV's area filter shifts them by up to 0.05 pixel at non-integer
-  factors), their intrinsics following the pixel-centre rule ``u' + 0.5 = s (u + 0.5)`` (per axis,
-  with the rounded output size), so geometry stays exact.
+* **random source resolution**: all sources of a sample are resized by one factor drawn in [1 - ``source_scale``, 1]
+  (a Gaussian prefilter against aliasing, then bilinear sampling, which keeps pixel centres exact; OpenCV's area
+  filter shifts them by up to 0.05 pixel at non-integer factors), their intrinsics by the pixel-centre rule.
 
-With every option off nothing is drawn from the sample's random generator, so samples are
-bit-identical to the loader without augmentation.
-"""
+With every option off nothing is drawn from the sample's generator: samples are bit-identical to no augmentation."""
 
 from __future__ import annotations
 
@@ -39,8 +35,7 @@ class Augmentation:
     """Largest per-view tone-curve change: each source's channels are raised to 2 ** g, g uniform in ±gamma_ev
     (0.5 = exponents 0.71 to 1.41); 0 = off."""
     saturation_ev: float = 0.0
-    """Largest per-view saturation change: each source's distance from its grey level is scaled by 2 ** s, s
-    uniform in ±saturation_ev; 0 = off."""
+    """Largest per-view saturation change: distances from the grey level scaled by 2 ** (±saturation_ev); 0 = off."""
     min_source: int = 0
     """Fewest source views of a sample (m uniform in [min_source, n_source]); 0 = always n_source."""
     source_scale: float = 0.0

@@ -1,6 +1,4 @@
-"""Per-class pixel counts of a dataset (scene folders or shards) and the class weights of the class-frequency-aware
-semantic loss derived from them.
-"""
+"""Per-class pixel counts of a dataset (scene folders or shards) and the class-frequency-aware loss weights."""
 
 from __future__ import annotations
 
@@ -21,8 +19,7 @@ BALANCE_MODES = ("none", "inverse-sqrt", "inverse")
 
 
 def count_pixels(labels: Iterable[np.ndarray], n_classes: int) -> np.ndarray:
-    """int64 (n_classes + 1,): pixels of each class id, then of the ignore id, over all label images; other ids raise
-    ValueError (a label space mismatch)."""
+    """int64 (n_classes + 1,): pixels of each class id, then of the ignore id; other ids: ValueError (wrong space)."""
     counts = np.zeros(n_classes + 1, np.int64)
     for label in labels:
         flat = np.asarray(label).ravel().astype(np.int64)

@@ -1,6 +1,5 @@
 """The loader's sample types (docs/CONTRACTS.md "Loader samples", how they travel): one scene, one ray batch, no
-batch dimension; ``near`` and ``far`` stay Python floats (z-depth bounds in metres) up to the model.
-"""
+batch dimension; ``near`` and ``far`` stay Python floats (z-depth bounds in metres) up to the model."""
 
 from __future__ import annotations
 
@@ -15,8 +14,7 @@ T = TypeVar("T", bound="TensorFields")
 
 
 class TensorFields:
-    """Device moves of a dataclass whose fields are tensors, nested :class:`TensorFields` or host values
-    (strings, floats), which stay as they are."""
+    """Device moves of a dataclass of tensors, nested :class:`TensorFields` and host values (left as they are)."""
 
     def _map(self: T, fn: Callable[[Tensor], Tensor]) -> T:
         """A copy with ``fn`` applied to every tensor field, nested ones included."""
@@ -62,8 +60,7 @@ class QueryCamera(TensorFields):
 
 @dataclass(frozen=True)
 class SceneQuery(TensorFields):
-    """What every sample holds: which view of which scene (a key of the shard manifest), the source views, the query
-    camera and the scene's own z-depth bounds in metres."""
+    """What every sample holds: scene (a manifest key) and query view, sources, query camera, z-depth bounds (m)."""
 
     scene: str
     query_id: str

@@ -55,8 +55,8 @@ def _query(view: StoredView) -> QueryCamera:
 
 
 def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str) -> None:
-    """Refuse label ids outside [0, n_classes) other than ``IGNORE_ID`` (checked here, on the host,
-    once per batch, so the training step never reads tensor values to check them)."""
+    """Refuse label ids outside [0, n_classes) other than ``IGNORE_ID`` (on the host, so the training step never
+    reads tensor values to check them)."""
     bad = (labels != IGNORE_ID) & (labels >= n_classes)
     if bad.any():
         raise ValueError(f"scene {scene!r}, view {view_id!r}: label ids {sorted(set(labels[bad].tolist()))[:5]} lie "

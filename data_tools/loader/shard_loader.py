@@ -1,7 +1,6 @@
 """The shard loader (docs/data.md, "The loader"): resampled training samples with a fixed epoch length per rank
 (scenes are the unit split over ranks and DataLoader workers), fixed evaluation samples. Never pass these loaders
-through ``accelerator.prepare``: it re-shards iterable datasets and drops samples.
-"""
+through ``accelerator.prepare``: it re-shards iterable datasets and drops samples."""
 
 from __future__ import annotations
 
@@ -133,12 +132,9 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
                       rank: int, world_size: int, num_workers: int, seed: int, scenes: list[str] | None = None,
                       cache_scenes: int = 2, visit_samples: int = 16, pin_memory: bool = False,
                       augment: Augmentation | None = None, source_labels: bool = False) -> EpochLoader:
-    """The training DataLoader of one rank: one :class:`TrainSample` per step (``batch_size=None``).
-
-    ``scenes``: scene names to train on; None = every scene whose role is ``train`` (name a test scene to finetune
-    on it). ``augment``: training augmentation (None = none). ``source_labels``: samples also carry their
-    source views' class ids, from the same pool as the queries (no held-out or test view's labels are read).
-    """
+    """The training DataLoader of one rank: one :class:`TrainSample` per step (``batch_size=None``). ``scenes``:
+    None = every scene of role ``train`` (name a test scene to finetune on it); ``source_labels``: samples also carry
+    their sources' class ids, from the queries' pool (no held-out or test view's labels are read)."""
     manifest, names = _open(shards_dir, scenes)
     if not 0 <= rank < world_size:
         raise ValueError(f"rank {rank} is outside 0..{world_size - 1}")

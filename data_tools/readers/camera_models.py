@@ -2,8 +2,7 @@
 (docs/capture.md). Captures centre pixel (u, v) at (u + 0.5, v + 0.5), sray at (u, v): ``c_sray = c - 0.5``.
 COLMAP parameter orders (``src/colmap/sensor/models.h``): SIMPLE_PINHOLE f cx cy; PINHOLE fx fy cx cy;
 SIMPLE_RADIAL f cx cy k; RADIAL f cx cy k1 k2; OPENCV fx fy cx cy k1 k2 p1 p2; OPENCV_FISHEYE fx fy cx cy
-k1 k2 k3 k4; FULL_OPENCV fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6.
-"""
+k1 k2 k3 k4; FULL_OPENCV fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """A posed capture (COLMAP or nerfstudio, parsed into :class:`CaptureFrame` lists) -> a canonical, unlabelled scene:
-every ``frame_skip``-th frame, scale and bounds by ``capture_geometry``, views undistorted and resized on demand.
-Labels are all IGNORE_ID and ``meta.labelled`` False (inference only).
-"""
+every ``frame_skip``-th frame, scale and bounds by ``capture_geometry``, views undistorted and resized on demand;
+labels all IGNORE_ID, ``meta.labelled`` False (inference only)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """Metric scale and depth bounds of a capture whose units are arbitrary (docs/capture.md, "Scale and depth range"):
 scale = ``--scale``, else the median of metric depth / point depth over (view, point it sees) pairs; bounds from
-the depth maps, else s x the views' 1st / 99th point-depth percentiles with a 10 % margin (near >= 0.05 m).
-"""
+the depth maps, else s x the views' 1st / 99th point-depth percentiles with a 10 % margin (near >= 0.05 m)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """Reader: a COLMAP capture (``sparse/0/{cameras,images,points3D}.{bin,txt}`` + ``images/``), without labels: poses
 inverted (``colmap_model.image_c2w``), cameras by ``camera_models.colmap_camera``, depth bounds from the points
-each image observes, scale from ``--scale``. Frames in image-name order. Conventions: docs/capture.md.
-"""
+each image observes, scale from ``--scale``. Frames in image-name order. Conventions: docs/capture.md."""
 
 from __future__ import annotations
 
@@ -20,7 +19,7 @@ def read_colmap(src: Path, name: str, label_space: str = "scannet20", size_hw: t
                 images: Path | None = None, sparse: Path | None = None) -> Scene:
     """Open a COLMAP capture as an unlabelled canonical scene (views load lazily): ``scale`` metres per model unit,
     ``images`` the image folder (default ``SRC/images``), ``sparse`` the model folder (default: ``find_model``);
-    ``depth_scale`` is unused (no depth maps), taken because every reader takes it."""
+    ``depth_scale`` is unused (no depth maps)."""
     src = Path(src)
     folder = Path(sparse) if sparse is not None else find_model(src)
     model = read_model(folder)

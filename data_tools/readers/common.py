@@ -1,6 +1,5 @@
 """Geometry and file helpers shared by the dataset readers. Pixel (u, v) is centred at (u, v) in K's coordinates and
-covers [u - 0.5, u + 0.5), so resizing by ``s`` along an axis maps ``u' + 0.5 = s * (u + 0.5)``.
-"""
+covers [u - 0.5, u + 0.5), so resizing by ``s`` along an axis maps ``u' + 0.5 = s * (u + 0.5)``."""
 
 from __future__ import annotations
 

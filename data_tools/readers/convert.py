@@ -1,7 +1,5 @@
 """``sray data convert``: one source scene (any format of ``readers/registry.py``) -> one scene in sray layout.
-Splits, bounds and publication (staging folder, ``check_scene``, rename, ``dataset.json``): docs/data.md,
-"Splits, bounds and publication".
-"""
+Splits, bounds and publication (staging folder, ``check_scene``, rename, ``dataset.json``): docs/data.md."""
 
 from __future__ import annotations
 
@@ -46,8 +44,7 @@ class ConvertConfig:
     depth_scale: float = 1000.0
     """Source depth PNG units per metre (1000 = millimetres, as both layouts store)."""
     options: dict[str, object] = field(default_factory=dict)
-    """Reader-specific side inputs by option name (``tsv``, ``classes``, ``scale``, ...); a file left out is
-    searched for next to the source."""
+    """Reader-specific side inputs by option name (``tsv``, ``classes``, ``scale``); files left out are searched."""
     holdout_every: int = 20
     """Train scenes: hold out every n-th view as ``test`` (0 = none)."""
     window_start: int | None = None

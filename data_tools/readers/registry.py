@@ -1,8 +1,7 @@
 """The reader registry: every source format ``sray data convert`` reads, with its defaults and options; the CLI builds
 its parser from it, so it imports neither numpy nor OpenCV (a reader's module is imported when used). A new format:
 a module here whose ``read_<module>(src, name=..., label_space=..., size_hw=..., frame_skip=..., depth_scale=...,
-**options)`` returns a canonical ``Scene``, plus a :class:`Reader` entry (docs/data.md, "Readers and validation").
-"""
+**options)`` returns a canonical ``Scene``, plus a :class:`Reader` entry (docs/data.md, "Readers and validation")."""
 
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
 """Reader: a Replica sequence as rendered for Semantic-NeRF (``rgb/``, ``depth/``, ``semantic_class/``,
 ``traj_w_c.txt``: OpenCV camera-to-world rows, no axis change; fx = fy = W/2, cx = (W - 1) / 2, cy = (H - 1) / 2).
 Class ids -> names by the scene's ``info_semantic.json`` -> NYU40 by :data:`REPLICA_TO_NYU40` -> label space.
-Layout and rules: docs/data.md, "Replica as rendered for Semantic-NeRF".
-"""
+Layout and rules: docs/data.md, "Replica as rendered for Semantic-NeRF"."""
 
 from __future__ import annotations
 
@@ -59,8 +58,8 @@ def replica_intrinsics(hw: tuple[int, int]) -> np.ndarray:
 
 
 def read_class_table(path: Path) -> dict[int, str]:
-    """Class id -> name from Replica's ``info_semantic.json`` ({"classes": [{"id", "name"}, ...]}),
-    a JSON object {"<id>": "<name>"}, or a TSV with header columns ``id`` and ``name``."""
+    """Class id -> name from ``info_semantic.json`` ({"classes": [{"id", "name"}, ...]}), {"<id>": "<name>"} or a TSV
+    with columns ``id`` and ``name``."""
     path = Path(path)
     try:
         text = path.read_text()

@@ -1,8 +1,7 @@
 """Reader: one ScanNet scan exported by ScanNet's SensReader with its ``label-filt/`` unzipped (``color/``,
 ``depth/``, ``pose/``, ``intrinsic/``); raw label ids -> NYU40 -> label space through
 ``scannetv2-labels.combined.tsv``, depth and labels resampled into the target colour camera.
-Layout and rules: docs/data.md, "ScanNet exported frames".
-"""
+Layout and rules: docs/data.md, "ScanNet exported frames"."""
 
 from __future__ import annotations
 

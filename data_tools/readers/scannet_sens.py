@@ -7,8 +7,7 @@ extrinsics); ``int32`` colour compression (0 raw, 1 PNG, 2 JPEG) and depth compr
 uint16); ``uint32`` colour width, height, depth width, height; ``float32`` depth shift (units per metre); ``uint64``
 frame count. Each frame: ``float32`` 4 x 4 camera-to-world; ``uint64`` colour and depth timestamps and byte
 counts; the colour bytes; the depth bytes. Streamed once to index the frames, then read by seeking; everything
-after decoding is ``readers.scannet``'s (docs/data.md, "A raw ScanNet scan in one step").
-"""
+after decoding is ``readers.scannet``'s (docs/data.md, "A raw ScanNet scan in one step")."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
 """``manifest.json``: the index of a shard folder (written last: a folder with a manifest is complete), and
-:func:`verify_shards`, which reports shards changed since (size and sha256).
-"""
+:func:`verify_shards`, which reports shards changed since (size and sha256)."""
 
 from __future__ import annotations
 
@@ -16,8 +15,7 @@ MANIFEST_NAME = "manifest.json"
 
 @dataclass
 class ShardEntry:
-    """One tar shard of one scene's views: its file name in the folder (``<scene>-NNNNNN.tar``), scene, view count,
-    hex sha256 and size in bytes."""
+    """One tar shard of one scene: file name (``<scene>-NNNNNN.tar``), scene, view count, hex sha256, size in bytes."""
 
     path: str
     scene: str
@@ -28,8 +26,7 @@ class ShardEntry:
 
 @dataclass
 class SceneEntry:
-    """One scene: its ``SceneMeta.to_json()``, the shards holding its views in view order, its view count and the
-    [H, W] every view shares."""
+    """One scene: its ``SceneMeta.to_json()``, its shards in view order, its view count, the [H, W] all views share."""
 
     meta: dict
     shards: list[str]

@@ -1,7 +1,6 @@
 """Ranked source-view neighbours, rule ``frustum-overlap`` (docs/data.md, "Source-view neighbours"): a candidate
 scores the fraction of the query's depth-grid points inside its camera; a :func:`blind_views` view, whose depth is
-never read, scores each candidate by the fraction of the candidate's own points inside the query camera.
-"""
+never read, scores each candidate by the fraction of the candidate's own points inside the query camera."""
 
 from __future__ import annotations
 
@@ -21,8 +20,7 @@ MIN_POINTS = 8
 
 @dataclass
 class Neighbours:
-    """Ranked source-view candidates of one view: view ids, best first (never the view itself), and the overlap
-    fraction in [0, 1] of each."""
+    """Ranked source-view candidates of one view: ids best first (never the view itself), overlaps in [0, 1]."""
 
     ids: list[str]
     scores: list[float]

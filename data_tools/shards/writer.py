@@ -1,6 +1,5 @@
 """Canonical scenes -> webdataset tar shards grouped by scene, plus ``manifest.json`` (members, manifest and safety
-rules: docs/data.md, "Shards and loader"): same input, same bytes; a folder with a manifest is complete.
-"""
+rules: docs/data.md, "Shards and loader"): same input, same bytes; a folder with a manifest is complete."""
 
 from __future__ import annotations
 
@@ -40,8 +39,7 @@ class DatasetRejected(ValueError):
 
 @dataclass
 class ShardResult:
-    """What a :func:`write_shards` run did: the manifest now on disk and the shard files (re)written, left alone
-    (already byte-identical) and deleted (no longer listed)."""
+    """What :func:`write_shards` did: the manifest on disk, shards (re)written, left alone (same bytes), deleted."""
 
     manifest: Manifest
     written: list[str] = field(default_factory=list)
@@ -148,9 +146,8 @@ def is_current(path: Path, data: bytes) -> bool:
 
 def write_shards(scenes_dir: Path, out_dir: Path, *, views_per_shard: int = 256, neighbours: int = 32,
                  progress: bool = True) -> ShardResult:
-    """Shard every scene of ``scenes_dir`` (sray layout) into ``out_dir`` and write its manifest; ``neighbours``
-    ranked source views are kept per view. Raises :class:`DatasetRejected` when ``sray data check`` rejects the input.
-    """
+    """Shard every scene of ``scenes_dir`` (sray layout) into ``out_dir`` with ``neighbours`` ranked source views per
+    view, then write the manifest; :class:`DatasetRejected` when ``sray data check`` rejects the input."""
     if views_per_shard < 1 or neighbours < 1:
         raise ValueError(f"views_per_shard ({views_per_shard}) and neighbours ({neighbours}) must be >= 1")
     problems = check_dataset(Path(scenes_dir))

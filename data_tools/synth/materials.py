@@ -38,8 +38,8 @@ class Material:
 
 def hsv(rng: np.random.Generator, h: tuple[float, float], s: tuple[float, float],
         v: tuple[float, float], emissive: bool = False) -> tuple[float, float, float]:
-    """A linear RGB colour (sRGB ** 2.2) drawn uniformly from an HSV box (hue wraps around); a surface colour (not ``emissive``) is
-    then randomised (``domains.jitter_colour``) and kept out of, or moved into, the held-out colour region."""
+    """A linear RGB colour (sRGB ** 2.2) drawn uniformly from an HSV box (hue wraps around); a surface colour (not
+    ``emissive``) is then randomised (``domains.jitter_colour``) and kept out of, or moved into, the held-out region."""
     hue, sat, val = float(rng.uniform(*h)) % 1.0, float(rng.uniform(*s)), float(rng.uniform(*v))
     if not emissive:
         hue, sat, val = domains.jitter_colour(rng, hue, sat, val)
