@@ -11,8 +11,7 @@
         depth/<view_id>.png        16-bit, millimetres, 0 = unknown
         label/<view_id>.png        16-bit class ids, IGNORE_ID = unlabelled
 
-Every file is written atomically (``atomic.py``), images through the lossless codecs of ``png.py``.
-"""
+Every file is written atomically (``atomic.py``), images through the lossless codecs of ``png.py``."""
 
 from __future__ import annotations
 

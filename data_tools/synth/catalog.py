@@ -1,8 +1,7 @@
 """The catalog of a room's furniture: room recipes ask for "a table" or "a chair"; the catalog draws the shape
 template that builds it (weights favour the common shapes) and stands clutter on a usable top: cups, vases, bottles,
 book stacks, boxes, plants and lamps, ignore-labelled as ScanNet's own small objects are (real tables are never bare,
-and what stands on a table is not the table).
-"""
+and what stands on a table is not the table)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """Procedural indoor scenes: :func:`generate_scene` builds a room, walks a handheld-style camera path through it and
 renders every view (RGB, z-depth, ScanNet-20 labels); :func:`generate_dataset` writes train and unseen test scenes in
-sray layout, skipping scenes already written with the same parameters. Splits: ``data_tools/splits.py``.
-"""
+sray layout, skipping scenes already written with the same parameters. Splits: ``data_tools/splits.py``."""
 
 from __future__ import annotations
 
@@ -69,8 +68,7 @@ def plan_scene(seed: int, n_views: int, room_type: str | None = None, split: str
 
 
 def split_views(view_ids: list[str], role: str, seed: int) -> dict[str, list[str]]:
-    """The scene's splits for its role (rules in ``data_tools/splits.py``); a test scene's 20-view
-    window starts at a seed-derived offset."""
+    """The scene's splits for its role (``data_tools/splits.py``); a test scene's window starts at a seeded offset."""
     if role == "train":
         return train_splits(view_ids)
     if role == "test":

@@ -2,8 +2,7 @@
 
 A world's test rooms come from one of :data:`SPLITS` (docs/data.md, "Shifted test splits", describes each region);
 training rooms never enter a held-out region (``tests/test_synth_shift.py``). Generation code asks :func:`current`
-which region it draws from; :func:`drawing` sets it for one scene (a context variable: per thread and process).
-"""
+which region it draws from; :func:`drawing` sets it for one scene (a context variable: per thread and process)."""
 
 from __future__ import annotations
 

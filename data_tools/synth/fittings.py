@@ -1,6 +1,5 @@
 """Fittings, the built-in pieces of a room: wall fixtures (thin pieces whose back lies on the wall), kitchen and
-bathroom pieces, in the object frame of ``furniture.py``.
-"""
+bathroom pieces, in the object frame of ``furniture.py``."""
 
 from __future__ import annotations
 
@@ -162,8 +161,7 @@ def washbasin(rng: np.random.Generator, vanity: bool) -> Piece:
 
 
 def bathtub(rng: np.random.Generator, length: float, curtain_side: float | None) -> Piece:
-    """An open bathtub (floor, four walls) along a wall; a shower curtain covering the fraction ``curtain_side`` of
-    its length on its open side, if given."""
+    """An open bathtub (floor, four walls) along a wall; a shower curtain over ``curtain_side`` of its open side."""
     label, china = CLS["bathtub"], mat.ceramic(rng)
     w, h, t = float(rng.uniform(0.7, 0.8)), float(rng.uniform(0.5, 0.6)), 0.07
     boxes = [span(label, china, -length / 2, length / 2, 0.0, w, 0.0, 0.1),

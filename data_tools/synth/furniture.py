@@ -1,6 +1,5 @@
 """Free-standing furniture assembled from boxes in its object frame: the footprint centred on the origin, z = 0 the
-floor, the back at -y and the front (where one sits or opens doors) at +y. ``geometry.place`` puts it in a room.
-"""
+floor, the back at -y and the front (where one sits or opens doors) at +y. ``geometry.place`` puts it in a room."""
 
 from __future__ import annotations
 
@@ -19,8 +18,7 @@ CLS: dict[str, int] = {name: i for i, name in enumerate(SCANNET20)}
 
 @dataclass
 class Piece:
-    """One object: its boxes in the object frame, its footprint's extents along object x and y and its top above the
-    floor (metres)."""
+    """One object: its boxes (object frame), its footprint's extents along x and y, its top above the floor (m)."""
 
     boxes: list[Box]
     width: float

@@ -1,7 +1,6 @@
 """Box primitives of the procedural scenes (world frame: metres, z up, floor at z = 0) and vectorised ray casting:
 quarter-turned boxes are folded into axis-aligned ones, and with ``dirs = R K^-1 [u, v, 1]`` (not unit length) the
-hit parameter ``t`` is the camera z-depth.
-"""
+hit parameter ``t`` is the camera z-depth."""
 
 from __future__ import annotations
 
@@ -100,8 +99,7 @@ class PackedBoxes:
 
 
 def in_frame(v: np.ndarray, c: np.ndarray | float, s: np.ndarray | float) -> np.ndarray:
-    """Vectors (..., 3) expressed in a frame turned about z by the angle of cosine ``c`` and sine ``s`` (broadcast
-    against ``v[..., 0]``)."""
+    """Vectors (..., 3) in a frame turned about z by the angle of cosine ``c``, sine ``s`` (broadcast as v[..., 0])."""
     return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1], v[..., 2]], -1)
 
 
@@ -113,11 +111,9 @@ def _safe_inverse(d: np.ndarray) -> np.ndarray:
 
 def cast_rays(origin: np.ndarray, dirs: np.ndarray, boxes: PackedBoxes, active: np.ndarray | None = None,
               t_min: float = 1e-4, chunk: int = 8192) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest box hit of rays from one origin: (t float32 (N,), box index int64 (N,)).
-
-    origin: (3,) shared ray origin; dirs: (N, 3), any length; active: bool (P,) boxes to test (default all). Hits at
-    t <= t_min (origin inside or on a box) are ignored; misses give t = inf and index -1.
-    """
+    """Nearest box hit of rays from one origin (3,) along ``dirs`` (N, 3), any length: (t float32 (N,), box index
+    int64 (N,)); ``active`` bool (P,) boxes to test (default all). Hits at t <= t_min (origin inside or on a box) are
+    ignored; misses give t = inf and index -1."""
     n = len(dirs)
     best_t = np.full(n, np.inf, np.float32)
     best_i = np.full(n, -1, np.int64)
@@ -154,10 +150,8 @@ def cast_rays(origin: np.ndarray, dirs: np.ndarray, boxes: PackedBoxes, active: 
 
 
 def cast_shell(origin: np.ndarray, dirs: np.ndarray, room: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
-    """Exit of rays from inside the room's interior box: (t float32 (N,), face int64 (N,)).
-
-    Faces: 0 = x=0 wall, 1 = x=Lx wall, 2 = y=0 wall, 3 = y=Ly wall, 4 = floor, 5 = ceiling.
-    """
+    """Exit of rays from inside the room's interior box: (t float32 (N,), face int64 (N,)); faces 0 = x=0 wall,
+    1 = x=Lx wall, 2 = y=0 wall, 3 = y=Ly wall, 4 = floor, 5 = ceiling."""
     hi = np.asarray(room, np.float64)
     inv = _safe_inverse(dirs)
     pos = inv > 0

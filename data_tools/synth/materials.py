@@ -1,7 +1,6 @@
 """Surface materials of the procedural scenes: a pattern kind, two linear RGB colours and a few parameters,
 evaluated in the surface's own frame (``textures.py``). Palettes are wide on purpose (any hue for paint, fabric and
-curtains; light to dark for wood) so that colour alone does not give a class away.
-"""
+curtains; light to dark for wood) so that colour alone does not give a class away."""
 
 from __future__ import annotations
 

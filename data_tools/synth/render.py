@@ -1,6 +1,5 @@
 """Render one view of a procedural room (RGB, z-depth, labels) by analytic ray casting through each pixel centre;
-shading never depends on the camera (docs/data.md, "Appearance"), so views agree. Ceiling pixels are IGNORE_ID.
-"""
+shading never depends on the camera (docs/data.md, "Appearance"), so views agree. Ceiling pixels are IGNORE_ID."""
 
 from __future__ import annotations
 

@@ -94,8 +94,7 @@ def add_rug(rng: np.random.Generator, plan: FloorPlan, prob: float, size: tuple[
 
 
 def add_floor_clutter(rng: np.random.Generator, plan: FloorPlan, count: int) -> None:
-    """Up to ``count`` boxes, baskets, bags and stacks on the floor against the walls (ignore-labelled, like ScanNet's
-    unlabelled props)."""
+    """Up to ``count`` boxes, baskets, bags and stacks on the floor against the walls (ignore-labelled props)."""
     for _ in range(count):
         w, d, h = float(rng.uniform(0.2, 0.55)), float(rng.uniform(0.2, 0.45)), float(rng.uniform(0.1, 0.5))
         cover = mat.fabric(rng) if rng.random() < 0.5 else mat.painted(rng)

@@ -1,6 +1,5 @@
 """Furniture recipes per room type, each returning (floor plan, wall finish, floor finish). Placement is rejection
-sampling against the plan's free floor and wall regions; a piece that finds no room is left out.
-"""
+sampling against the plan's free floor and wall regions; a piece that finds no room is left out."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
 """Procedural albedo of a point in its surface's own 3D frame: it depends on the point, its face and its material,
-never on the camera. Noise is hash-based value noise on an integer lattice (uint32 arithmetic, identical everywhere).
-"""
+never on the camera. Noise is hash-based value noise on an integer lattice (uint32 arithmetic, identical everywhere)."""
 
 from __future__ import annotations
 

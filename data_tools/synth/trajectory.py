@@ -1,7 +1,6 @@
 """Handheld-scan-like camera paths through a procedural room (docs/data.md, "Camera paths"): an arc of an ellipse or
 a straight walk over free floor, wobbling in position, height and roll, looking out across the room; every camera
-centre stays inside the room, away from the walls and outside every box grown by a margin.
-"""
+centre stays inside the room, away from the walls and outside every box grown by a margin."""
 
 from __future__ import annotations
 
@@ -43,9 +42,8 @@ def _wobble(rng: np.random.Generator, s: np.ndarray, amplitude: float, cycles: t
 
 def camera_valid(centres: np.ndarray, size: tuple[float, float, float], boxes: PackedBoxes,
                  standing: bool = False) -> np.ndarray:
-    """bool (N,): camera centres (N, 3) inside the room with clearance and outside every grown box; with
-    ``standing`` also above free floor (off every footprint of a box taller than a rug, grown by :data:`BODY_RADIUS`).
-    """
+    """bool (N,): camera centres (N, 3) inside the room with clearance and outside every grown box; ``standing``:
+    also above free floor (off every footprint of a box taller than a rug, grown by :data:`BODY_RADIUS`)."""
     hi = np.asarray(size)
     ok = np.all((centres >= WALL_CLEARANCE) & (centres <= hi - WALL_CLEARANCE), axis=1)
     ok &= ~np.any(boxes.contains(centres, BOX_MARGIN), axis=1)

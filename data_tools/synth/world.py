@@ -1,8 +1,7 @@
 """One procedural world: its settings (:class:`World`) and :func:`make_world`, which generates, shards and verifies
 it in a folder (``scenes/``, ``shards/``; the shards' manifest, written last, records every field of :class:`World`).
 A folder without a manifest is (re)generated, skipping finished scenes and shards; one recording the asked world is
-reused even after the generator changed (models trained on it stay comparable); one recording another is refused.
-"""
+reused even after the generator changed (models trained on it stay comparable); one recording another is refused."""
 
 from __future__ import annotations
 
@@ -90,11 +89,9 @@ def _one(values: set[int]) -> int | list[int]:
 
 def make_world(world: World, root: Path, progress: bool = True, workers: int = 1) -> Path:
     """The verified shard folder of ``world`` under ``root``: generated, checked and sharded when ``root`` holds no
-    complete world, reused when it holds this one; ``workers`` scenes are rendered at once (same files).
-
-    Raises :class:`WorldFolderError` when ``root`` holds another world or damaged shards, and
-    :class:`~sray.data_tools.shards.writer.DatasetRejected` when the generated scenes fail ``sray data check``.
-    """
+    complete world, reused when it holds this one; ``workers`` scenes are rendered at once (same files). Raises
+    :class:`WorldFolderError` when ``root`` holds another world or damaged shards, and
+    :class:`~sray.data_tools.shards.writer.DatasetRejected` when the generated scenes fail ``sray data check``."""
     root = Path(root)
     shards = root / SHARDS
     if (shards / MANIFEST_NAME).exists():
