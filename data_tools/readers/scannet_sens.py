@@ -39,7 +39,6 @@ _FRAME_HEAD = struct.Struct("<16f4Q")
 class SensHeader:
     """What the .sens header says about the whole scan (intrinsics (3, 3) float64)."""
 
-    version: int
     sensor: str
     K_color: np.ndarray
     K_depth: np.ndarray
@@ -54,12 +53,11 @@ class SensHeader:
 
 @dataclass(frozen=True)
 class SensFrame:
-    """Where one frame's bytes lie in the file, and its pose (4, 4) float64 camera-to-world (-inf rows: invalid)."""
+    """Where one frame's colour bytes (then its depth bytes) lie in the file; its float64 (4, 4) c2w (-inf: invalid)."""
 
     c2w: np.ndarray
     color_at: int
     color_bytes: int
-    depth_at: int
     depth_bytes: int
 
 
@@ -90,7 +88,7 @@ def read_sens_header(f: BinaryIO, path: Path) -> SensHeader:
                              "scan with ScanNet's SensReader and use --format scannet")
     if shift <= 0:
         raise ValueError(f"{path}: header depth shift is {shift}; it must be > 0 (ScanNet: 1000 units per metre)")
-    return SensHeader(version, sensor, mats[0, :3, :3].astype(np.float64), mats[2, :3, :3].astype(np.float64),
+    return SensHeader(sensor, mats[0, :3, :3].astype(np.float64), mats[2, :3, :3].astype(np.float64),
                       color_codec, depth_codec, (ch, cw), (dh, dw), float(shift), n_frames)
 
 
@@ -101,8 +99,7 @@ def index_frames(f: BinaryIO, header: SensHeader, path: Path, progress: bool) ->
         values = _FRAME_HEAD.unpack(_read(f, _FRAME_HEAD.size, path, f"head of frame {len(frames)}"))
         color_bytes, depth_bytes = values[18], values[19]
         color_at = f.tell()
-        frames.append(SensFrame(np.array(values[:16], np.float64).reshape(4, 4), color_at, color_bytes,
-                                color_at + color_bytes, depth_bytes))
+        frames.append(SensFrame(np.array(values[:16], np.float64).reshape(4, 4), color_at, color_bytes, depth_bytes))
         f.seek(color_bytes + depth_bytes, 1)
     end = f.tell()
     f.seek(0, 2)

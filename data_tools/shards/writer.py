@@ -88,8 +88,7 @@ def view_members(scene: str, view: View, neighbours: nb.Neighbours, scene_json: 
     return members
 
 
-def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None
-                     ) -> tuple[dict[str, nb.Neighbours], tuple[int, int]]:
+def scene_neighbours(scene: Scene, k: int, bar: tqdm) -> tuple[dict[str, nb.Neighbours], tuple[int, int]]:
     """Read every view once (cameras + a depth grid) and rank its neighbours; returns them and (H, W). A blind
     view's depth (``neighbours.blind_views``) is never sampled; the fallback depth comes from ``scene.depth_views``."""
     meta = scene.meta
@@ -104,8 +103,7 @@ def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None
         c2ws.append(np.asarray(view.c2w, np.float64))
         if view.view_id not in blind:
             samples[view.view_id] = nb.grid_samples(view.depth)
-        if bar is not None:
-            bar.update(1)
+        bar.update(1)
     if hw is None:
         raise ValueError(f"scene {meta.name!r}: field 'view_ids' is empty; a scene needs views")
     fallback = nb.fallback_depth([samples[v] for v in depth_views(meta)], (meta.near, meta.far))
@@ -115,7 +113,7 @@ def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None
 
 
 def scene_shards(scene: Scene, ranked: dict[str, nb.Neighbours], views_per_shard: int,
-                 bar: tqdm | None = None) -> Iterator[tuple[str, int, bytes]]:
+                 bar: tqdm) -> Iterator[tuple[str, int, bytes]]:
     """(file name, view count, tar bytes) of each shard of one scene, in view order."""
     meta = scene.meta
     for index, start in enumerate(range(0, len(meta.view_ids), views_per_shard)):
@@ -123,8 +121,7 @@ def scene_shards(scene: Scene, ranked: dict[str, nb.Neighbours], views_per_shard
         members = []
         for j, vid in enumerate(ids):
             members += view_members(meta.name, scene.read_view(vid), ranked[vid], meta.to_json() if j == 0 else None)
-            if bar is not None:
-                bar.update(1)
+            bar.update(1)
         yield f"{meta.name}-{index:06d}.tar", len(ids), tar_bytes(members)
 
 
