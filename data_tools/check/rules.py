@@ -40,8 +40,7 @@ class CheckLimits:
     pose_tol: float = 1e-4
     """Tolerance of the rigidity checks: |R^T R - I|, |det R - 1| and the last row of c2w."""
     max_centre_offset: float = 0.2
-    """Largest distance of the principal point from the image centre, as a fraction of the image size (larger ones
-    are almost always intrinsics of another resolution)."""
+    """Largest principal-point offset from the image centre, as a fraction of its size (beyond: K of another size)."""
 
 
 def _matrix(value: object, name: str, shape: tuple[int, int], file: str, view: str,

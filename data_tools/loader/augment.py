@@ -32,8 +32,7 @@ class Augmentation:
     noise_sigma: float = 0.0
     """Largest Gaussian noise sigma of a source view, in 8-bit levels (uniform in [0, value]); 0 = off."""
     gamma_ev: float = 0.0
-    """Largest per-view tone-curve change: each source's channels are raised to 2 ** g, g uniform in ±gamma_ev
-    (0.5 = exponents 0.71 to 1.41); 0 = off."""
+    """Largest per-view tone-curve change: channels raised to 2 ** (±gamma_ev) (0.5: exponents 0.71-1.41); 0 = off."""
     saturation_ev: float = 0.0
     """Largest per-view saturation change: distances from the grey level scaled by 2 ** (±saturation_ev); 0 = off."""
     min_source: int = 0

@@ -17,8 +17,7 @@ def ranked_candidates(query: StoredView, allowed: set[str], limit: int) -> list[
 
 
 def _source_labels(views: list[StoredView], n_classes: int, scene: str, size_hw: tuple[int, int]) -> torch.Tensor:
-    """int64 (m, H, W) class ids of the source views (``IGNORE_ID`` unlabelled), checked against ``n_classes`` and
-    resized to ``size_hw`` by nearest pixel centre (:func:`rescale_nearest`)."""
+    """int64 (m, H, W) source class ids (``IGNORE_ID`` unlabelled), checked, nearest-resized to ``size_hw``."""
     maps = []
     for view in views:
         label = view.label()
@@ -55,8 +54,7 @@ def _query(view: StoredView) -> QueryCamera:
 
 
 def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str) -> None:
-    """Refuse label ids outside [0, n_classes) other than ``IGNORE_ID`` (on the host, so the training step never
-    reads tensor values to check them)."""
+    """Refuse label ids outside [0, n_classes) but ``IGNORE_ID``, on the host (the step never reads tensor values)."""
     bad = (labels != IGNORE_ID) & (labels >= n_classes)
     if bad.any():
         raise ValueError(f"scene {scene!r}, view {view_id!r}: label ids {sorted(set(labels[bad].tolist()))[:5]} lie "

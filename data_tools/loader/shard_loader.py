@@ -20,8 +20,7 @@ from sray.data_tools.shards.manifest import Manifest, read_manifest, verify_shar
 
 def slot_scenes(scenes: list[str], pools: dict[str, list[str]], slot: int, n_slots: int,
                 shared_rng: np.random.Generator) -> list[tuple[str, list[str]]]:
-    """The (scene, query view ids) a loader slot draws from this epoch; ``shared_rng``, seeded identically in every
-    slot, shuffles the scene order."""
+    """The (scene, query view ids) of a slot this epoch; ``shared_rng`` (same seed in every slot) orders the scenes."""
     order = [scenes[i] for i in shared_rng.permutation(len(scenes))]
     if len(order) >= n_slots:
         return [(s, pools[s]) for s in order[slot::n_slots]]

@@ -58,8 +58,7 @@ def replica_intrinsics(hw: tuple[int, int]) -> np.ndarray:
 
 
 def read_class_table(path: Path) -> dict[int, str]:
-    """Class id -> name from ``info_semantic.json`` ({"classes": [{"id", "name"}, ...]}), {"<id>": "<name>"} or a TSV
-    with columns ``id`` and ``name``."""
+    """Id -> name from ``info_semantic.json`` ({"classes": [{"id", "name"}]}), {"<id>": "<name>"} or an id/name TSV."""
     path = Path(path)
     try:
         text = path.read_text()

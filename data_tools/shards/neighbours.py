@@ -81,8 +81,7 @@ def projection_matrices(Ks: np.ndarray, c2ws: np.ndarray) -> np.ndarray:
 
 
 def fractions_inside(points: np.ndarray, proj: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
-    """Fraction (C,) of world points (P, 3) in front of and inside each camera of ``proj`` (C, 3, 4) (K's last row
-    is [0, 0, 1], so the third projected coordinate is the camera z)."""
+    """Fraction (C,) of points (P, 3) in front of and inside each camera of ``proj`` (C, 3, 4) (K row 3: 0 0 1)."""
     if len(points) == 0:
         return np.zeros(len(proj))
     # Broadcast multiply-adds, not a matmul: with cv2 or torch imported, numpy's OpenBLAS matmul on

@@ -44,16 +44,14 @@ class Domain:
     appearance_shift: bool = False
     geometry_shift: bool = False
     randomise: float = 0.0
-    """Strength (0-1) of the appearance randomisation of training rooms (:func:`jitter_colour`, :func:`room_tint`,
-    :func:`view_gains`); 0 = off. It never leaves the training region."""
+    """Strength (0-1) of the training rooms' appearance randomisation (never leaving the training region); 0 = off."""
 
 
 _CURRENT: ContextVar[Domain] = ContextVar("sray_synth_domain", default=Domain())
 
 
 def domain_of(split: str, randomise: float = 0.0) -> Domain:
-    """The region a split's rooms are drawn from, with appearance randomisation of strength ``randomise`` (0-1;
-    training rooms only); ValueError naming the valid splits or the range."""
+    """A split's region with randomisation ``randomise`` (0-1, training rooms only); ValueError names valid values."""
     if split not in SPLITS:
         raise ValueError(f"split {split!r} is not one of {SPLITS}")
     if not 0.0 <= randomise <= 1.0:

@@ -99,8 +99,7 @@ class FloorPlan:
     def try_wall(self, rng: np.random.Generator, piece: Piece, wall: int, z_range: tuple[float, float] | None = None,
                  s: float | None = None, gap: float = 0.015, occupies_floor: bool = True, tries: int = 25,
                  margin: float = 0.05) -> float | None:
-        """Place a piece against a wall at a random (or given) position; returns its s or None. ``z_range``: the
-        height band it covers on the wall (default: floor to its top)."""
+        """Put a piece against a wall at a random (or given) ``s``: s or None; ``z_range``: its band (default 0-top)."""
         length = self.wall_length(wall)
         lo, hi = piece.width / 2 + margin, length - piece.width / 2 - margin
         if hi < lo:

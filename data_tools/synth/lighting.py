@@ -46,8 +46,7 @@ def _light(position: tuple[float, float, float], intensity: float, kelvin: float
 
 
 def _low_main_light(rng: np.random.Generator, plan: FloorPlan) -> None:
-    """The held-out main light of an appearance-shifted room: low (below ``domains.LOW_LIGHT_TOP``) near a wall,
-    so light grazes up the walls and furniture casts shadows upwards."""
+    """The held-out main light of a shifted room: low (below ``domains.LOW_LIGHT_TOP``) by a wall, shadows cast up."""
     wall = int(rng.integers(4))
     x, y, _ = plan.wall_pose(wall, float(rng.uniform(0.3, plan.wall_length(wall) - 0.3)), 0.0, 0.25)
     plan.lights.append(_light((x, y, float(rng.uniform(0.3, domains.LOW_LIGHT_TOP))), float(rng.uniform(1.5, 2.5)),

@@ -123,8 +123,7 @@ def _lighting(scene: RenderScene, points: np.ndarray, normals: np.ndarray) -> np
 
 def render_view(scene: RenderScene, K: np.ndarray, c2w: np.ndarray, hw: tuple[int, int], view_index: int = 0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Render (rgb uint8 (H, W, 3), depth float32 (H, W) z-depth in metres, label uint16 (H, W)); ``view_index``
-    seeds the view's sensor noise (with the scene's ``noise_seed``)."""
+    """Render (rgb uint8 (H, W, 3), z-depth float32 (H, W) metres, label uint16 (H, W)); ``view_index`` seeds noise."""
     h, w = hw
     origin = np.asarray(c2w, np.float64)[:3, 3]
     dirs = pixel_directions(np.asarray(K, np.float64), np.asarray(c2w, np.float64), hw)

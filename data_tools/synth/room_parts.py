@@ -14,8 +14,7 @@ from sray.data_tools.synth.furniture import Piece, span
 
 
 def add_door(rng: np.random.Generator, plan: FloorPlan, width: tuple[float, float] = (0.8, 0.95)) -> None:
-    """A closed door of a random style (``catalog.door``; a double door one time in eight, in rooms whose door may be
-    wide) on a random wall, with a clear floor area in front."""
+    """A closed door (``catalog.door``; 1 in 8 a double door where wide fits) on a random wall, clear floor in front."""
     h = min(float(rng.uniform(2.0, 2.1)), plan.size[2] - 0.2)
     piece = (tp.double_door(rng, float(rng.uniform(1.2, 1.5)), h) if width[1] >= 0.9 and rng.random() < 0.125
              else cat.door(rng, float(rng.uniform(*width)), h))

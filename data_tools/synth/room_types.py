@@ -23,8 +23,7 @@ Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Mate
 
 def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
           h: tuple[float, float]) -> FloorPlan:
-    """An empty floor plan (``floor_plan.shaped_plan``) of a size drawn from the ranges, the floor scaled by one
-    factor per room (held-out scale and ceiling in a geometry-shifted room)."""
+    """An empty plan (``shaped_plan``) of a size drawn from the ranges, floor scaled per room (held out if shifted)."""
     shifted = domains.current().geometry_shift
     scale = float(rng.uniform(*(domains.HELD_OUT_SCALE if shifted else domains.TRAIN_SCALE)))
     return shaped_plan(rng, (scale * float(rng.uniform(*lx)), scale * float(rng.uniform(*ly)),
@@ -37,8 +36,7 @@ def _walls(rng: np.random.Generator) -> list[int]:
 
 def _anywhere_on_walls(rng: np.random.Generator, plan: FloorPlan, piece: fu.Piece,
                        z_range: tuple[float, float] | None = None) -> tuple[int, float] | None:
-    """Try every wall in random order; returns (wall, s) of the placement or None (held-out wall gap in a
-    geometry-shifted room)."""
+    """Try every wall in random order: (wall, s) of the placement or None (held-out wall gap when shifted)."""
     gap = float(rng.uniform(*domains.HELD_OUT_WALL_GAP)) if domains.current().geometry_shift else 0.015
     for wall in _walls(rng):
         s = plan.try_wall(rng, piece, wall, z_range=z_range, gap=gap)
@@ -167,8 +165,7 @@ def _island(rng: np.random.Generator, plan: FloorPlan, wall: int) -> None:
 
 
 def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
-    """Counter run with base and wall cabinets and a sink, fridge, maybe an island, dining table and chairs, bin,
-    maybe a runner rug."""
+    """Counter run (base and wall cabinets, sink), fridge, maybe an island, dining set, bin, maybe a runner rug."""
     plan = _plan(rng, (3.4, 5.2), (3.0, 4.6), (2.4, 2.8))
     add_door(rng, plan)
     add_window(rng, plan, sill=(1.0, 1.15), curtain_prob=0.3)

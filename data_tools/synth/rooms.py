@@ -21,8 +21,7 @@ ROOM_TYPES: tuple[str, ...] = tuple(RECIPES)
 
 @dataclass
 class Room:
-    """A finished procedural room: interior extents (Lx, Ly, H) in metres, boxes in the world frame, point lights
-    (the first casts shadows), ambient light level and the finishes of the shell."""
+    """A built room: extents (Lx, Ly, H) m, world boxes, point lights (the first casts shadows), ambient, finishes."""
 
     room_type: str
     size: tuple[float, float, float]

@@ -194,8 +194,7 @@ def kitchen_island(rng: np.random.Generator, w: float, d: float) -> Piece:
 
 
 def open_shelf(rng: np.random.Generator, w: float) -> Piece:
-    """An open shelving unit (labelled bookshelf): four posts and 3-5 shelves, no back, sometimes with boxes or
-    books on the shelves (ignore-labelled)."""
+    """An open shelving unit (bookshelf): four posts, 3-5 shelves, no back, some ignore-labelled books or boxes."""
     d, h = float(rng.uniform(0.3, 0.45)), float(rng.uniform(0.9, 1.9))
     frame = mat.metal(rng) if rng.random() < 0.5 else mat.wood(rng)
     shelf = frame if rng.random() < 0.5 else mat.furniture_surface(rng)

@@ -33,8 +33,7 @@ class World:
     split: str = "in-distribution"
     """Region the test scenes are drawn from, one of ``domains.SPLITS``; training scenes are always in-distribution."""
     randomise: float = 0.0
-    """Strength (0-1) of the training scenes' appearance randomisation (``domains``); 0 = off. Test scenes never get
-    it: worlds that differ only here share their tests."""
+    """Strength (0-1) of the training scenes' appearance randomisation (``domains``), 0 = off; never in test scenes."""
 
     def __post_init__(self) -> None:
         """ValueError naming the valid splits or the randomisation's range."""
@@ -48,8 +47,7 @@ SPLIT_RESULTS = {"zero_shot": "in-distribution", "validation": "validation",
 
 
 def evaluation_worlds(world: World, rooms: int = 16) -> dict[str, World]:
-    """The evaluation worlds of a training world by result name (:data:`SPLIT_RESULTS`): ``rooms`` test rooms each,
-    no training room, at its views, image size, seed and neighbours."""
+    """A training world's evaluation worlds by result name (:data:`SPLIT_RESULTS`), ``rooms`` test rooms each."""
     return {name: replace(world, train_scenes=0, test_scenes=rooms, split=split)
             for name, split in SPLIT_RESULTS.items()}
 
