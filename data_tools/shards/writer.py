@@ -88,7 +88,8 @@ def view_members(scene: str, view: View, neighbours: nb.Neighbours, scene_json: 
     return members
 
 
-def scene_neighbours(scene: Scene, k: int, bar: tqdm) -> tuple[dict[str, nb.Neighbours], tuple[int, int]]:
+def scene_neighbours(scene: Scene, k: int, bar: tqdm | None = None
+                     ) -> tuple[dict[str, nb.Neighbours], tuple[int, int]]:
     """Read every view once (cameras + a depth grid) and rank its neighbours; returns them and (H, W). A blind
     view's depth (``neighbours.blind_views``) is never sampled; the fallback depth comes from ``scene.depth_views``."""
     meta = scene.meta
@@ -103,7 +104,8 @@ def scene_neighbours(scene: Scene, k: int, bar: tqdm) -> tuple[dict[str, nb.Neig
         c2ws.append(np.asarray(view.c2w, np.float64))
         if view.view_id not in blind:
             samples[view.view_id] = nb.grid_samples(view.depth)
-        bar.update(1)
+        if bar is not None:
+            bar.update(1)
     if hw is None:
         raise ValueError(f"scene {meta.name!r}: field 'view_ids' is empty; a scene needs views")
     fallback = nb.fallback_depth([samples[v] for v in depth_views(meta)], (meta.near, meta.far))
