@@ -18,9 +18,6 @@ COLMAP_MODELS: dict[int, tuple[str, int]] = {
     9: ("RADIAL_FISHEYE", 5), 10: ("THIN_PRISM_FISHEYE", 12)}
 """COLMAP model id -> (name, parameter count); the binary model stores the id, the text model the name."""
 
-PIXEL_CENTRE_SHIFT = 0.5
-"""Subtracted from a capture's principal point: its pixel (u, v) is centred at (u + 0.5, v + 0.5)."""
-
 _COLMAP_OPENCV: dict[str, Callable[[list[float]], tuple[list[float], list[float], bool]]] = {
     "SIMPLE_PINHOLE": lambda p: ([p[0], p[0], p[1], p[2]], [], False),
     "PINHOLE": lambda p: (p, [], False),
@@ -53,8 +50,8 @@ class CaptureCamera:
 
 
 def pinhole(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
-    """sray's K (3, 3) from a capture's focal lengths and principal point (pixel centres at +0.5)."""
-    return np.array([[fx, 0.0, cx - PIXEL_CENTRE_SHIFT], [0.0, fy, cy - PIXEL_CENTRE_SHIFT], [0.0, 0.0, 1.0]])
+    """sray's K (3, 3) from a capture's focal lengths and principal point (its pixel (u, v) centred at +0.5)."""
+    return np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
 
 
 def colmap_camera(model: str, params: np.ndarray, hw: tuple[int, int], what: str) -> CaptureCamera:
