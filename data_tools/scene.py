@@ -98,9 +98,8 @@ class Scene:
 
 
 def source_pool(meta: SceneMeta) -> list[str]:
-    """View ids that may serve as source views (and training queries), in capture order: in a ``train`` scene the
-    ``train`` split minus the held-out ``test`` split; in a ``test`` scene ``source`` plus ``finetune`` (the paper's
-    protocol never shows ``test`` views)."""
+    """View ids that may serve as source views (and training queries), in capture order: a ``train`` scene's ``train``
+    minus its held-out ``test``; a ``test`` scene's ``source`` plus ``finetune`` (never ``test``)."""
     if meta.role == "test":
         allowed = set(meta.splits.get("source", [])) | set(meta.splits.get("finetune", []))
         fix = "a test scene needs a non-empty 'source' split"

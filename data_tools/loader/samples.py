@@ -65,10 +65,9 @@ def check_label_ids(labels: np.ndarray, n_classes: int, scene: str, view_id: str
 def train_sample(views: dict[str, StoredView], query_id: str, source_ids: list[str], n_rays: int,
                  rng: np.random.Generator, scene: str, near: float, far: float, n_classes: int,
                  augment: Augmentation | None = None, source_labels: bool = False) -> TrainSample:
-    """A training sample: sources, query camera and ``n_rays`` pixels of the query drawn uniformly without
-    replacement (with it only when ``n_rays`` exceeds the pixel count), with targets checked against ``n_classes``.
-    ``augment`` jitters and resizes the sources (None or all off: the plain sample); ``source_labels`` adds the
-    sources' class ids (``SourceViews.label``, for the source-view semantic loss)."""
+    """A training sample: sources, query camera and ``n_rays`` query pixels drawn uniformly without replacement (with it
+    only beyond the pixel count), targets checked against ``n_classes``; ``augment`` jitters and resizes the sources
+    (None or all off: plain); ``source_labels`` adds their class ids (``SourceViews.label``)."""
     query = views[query_id]
     rgb, label = query.rgb(), query.label()                                           # (H, W, 3), (H, W)
     h, w = label.shape

@@ -156,9 +156,8 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
 
 def make_eval_samples(shards_dir: Path, scene: str, split: str = "test", source_split: str | None = None,
                       n_source: int = 8, *, manifest: Manifest | None = None) -> Iterator[EvalSample]:
-    """Evaluation samples of ``scene``'s ``split`` views, in split order, each with fixed sources: its top
-    ``n_source`` ranked neighbours inside ``source_split`` (default ``source`` for test scenes, ``train`` for train
-    scenes). Validates before returning the generator. ``manifest``: the folder's manifest if already read."""
+    """Evaluation samples of ``scene``'s ``split`` views in order, each with its top ``n_source`` neighbours in
+    ``source_split`` (default ``source`` in test scenes, else ``train``); validated before the generator returns."""
     manifest, _ = _open(shards_dir, [scene], manifest)
     meta = SceneMeta.from_json(manifest.scenes[scene].meta)
     source_split = source_split or ("source" if meta.role == "test" else "train")

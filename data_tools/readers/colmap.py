@@ -17,9 +17,8 @@ from sray.data_tools.scene import Scene
 def read_colmap(src: Path, name: str, label_space: str = "scannet20", size_hw: tuple[int, int] | None = (240, 320),
                 frame_skip: int = 1, depth_scale: float = 1000.0, scale: float | None = None,
                 images: Path | None = None, sparse: Path | None = None) -> Scene:
-    """Open a COLMAP capture as an unlabelled canonical scene (views load lazily): ``scale`` metres per model unit,
-    ``images`` the image folder (default ``SRC/images``), ``sparse`` the model folder (default: ``find_model``);
-    ``depth_scale`` is unused (no depth maps)."""
+    """Open a COLMAP capture as an unlabelled scene (views load lazily): ``scale`` metres per model unit, ``images`` the
+    image folder (default ``SRC/images``), ``sparse`` the model (default ``find_model``)."""
     src = Path(src)
     folder = Path(sparse) if sparse is not None else find_model(src)
     model = read_model(folder)

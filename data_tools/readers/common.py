@@ -70,9 +70,8 @@ def scale_intrinsics(K: np.ndarray, src_hw: tuple[int, int], dst_hw: tuple[int, 
 
 def resample_nearest(image: np.ndarray, K_src: np.ndarray, K_dst: np.ndarray,
                      dst_hw: tuple[int, int], fill: int | float) -> np.ndarray:
-    """``image`` (H, W) seen through K_src, resampled into a camera K_dst (same optical centre and orientation: the
-    2D affine warp K_src K_dst^-1) of size ``dst_hw``: each output pixel takes the source pixel whose square holds
-    its centre, ``fill`` outside. Returns (dst_h, dst_w) of the input dtype."""
+    """``image`` (H, W) seen through K_src, resampled into K_dst (same centre and orientation: the affine warp K_src
+    K_dst^-1) of size ``dst_hw``: each pixel takes the source pixel whose square holds its centre, ``fill`` outside."""
     h, w = dst_hw
     warp = np.asarray(K_src, np.float64) @ np.linalg.inv(np.asarray(K_dst, np.float64))
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))

@@ -120,9 +120,8 @@ def frame_view(view_id: str, rgb: np.ndarray, depth_m: np.ndarray, raw_label: np
 def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str = "scannet20",
                  size_hw: tuple[int, int] | None = (240, 320), frame_skip: int = 10,
                  depth_scale: float = 1000.0) -> Scene:
-    """Open a ScanNet export as a canonical scene (views load lazily, ids zero-padded frame numbers, no splits).
-    Frames without a depth, pose or label file or with a -inf/NaN pose go to ``meta.extra["dropped_frames"]``
-    ({frame: reason}); every ``frame_skip``-th remaining one is kept. ``size_hw`` None keeps the colour resolution."""
+    """Open a ScanNet export as a scene (views load lazily, ids zero-padded frame numbers); frames without depth, pose
+    or label or with a -inf/NaN pose go to ``meta.extra["dropped_frames"]``, every ``frame_skip``-th other is kept."""
     src = Path(src)
     for folder, fix in _FOLDER_FIX.items():
         if not (src / folder).is_dir():

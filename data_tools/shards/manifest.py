@@ -36,9 +36,8 @@ class SceneEntry:
 
 @dataclass
 class Manifest:
-    """Everything a loader needs to know before opening a shard: every shard (sorted by file name), the scenes by
-    name, the class names of each label space, the neighbour rule with its parameters, the format and version
-    (readers refuse others) and the writer's options."""
+    """What a loader needs before opening a shard: every shard (by file name), the scenes by name, each label space's
+    class names, the neighbour rule, the format and version (others refused), the writer's options."""
 
     shards: list[ShardEntry]
     scenes: dict[str, SceneEntry]

@@ -102,9 +102,8 @@ def _seen_by_query(points: list[np.ndarray], proj_query: np.ndarray, hw: tuple[i
 
 def rank_order(capture: np.ndarray, score: np.ndarray, axes: np.ndarray, centres: np.ndarray, c2w: np.ndarray,
                k: int) -> np.ndarray:
-    """Positions (<= k,) of the best of C candidates: ``score`` (C,) descending (to 1e-6), ties broken by the larger
-    cosine between their optical ``axes`` (C, 3) and ``c2w``'s, the nearer camera ``centres`` (C, 3), the earlier
-    ``capture`` index (C,)."""
+    """Positions (<= k,) of the best of C candidates: ``score`` (C,) descending (to 1e-6), ties to the larger cosine
+    between optical ``axes`` (C, 3) and ``c2w``'s, then the nearer ``centres`` (C, 3), the earlier ``capture`` (C,)."""
     cos = axes @ c2w[:3, 2]
     dist = np.linalg.norm(centres - c2w[:3, 3], axis=1)
     return np.lexsort((capture, dist, -cos, -np.round(score, 6)))[:k]                 # last key sorts first

@@ -91,9 +91,8 @@ def scene_params(seed: int, n_views: int, height: int, width: int, role: str, ro
 def generate_scene(name: str, seed: int, n_views: int, height: int, width: int, role: str,
                    room_type: str | None = None, on_view: Callable[[], None] | None = None,
                    split: str = "in-distribution", randomise: float = 0.0) -> Scene:
-    """Render a procedural scene in memory (same arguments, identical arrays): ``room_type`` one of ``ROOM_TYPES``
-    (None: drawn from the seed), ``on_view`` called after each view, ``split`` the region the room is drawn from
-    (``domains.SPLITS``), ``randomise`` a training scene's appearance randomisation (0 = off)."""
+    """Render a procedural scene in memory (same arguments, identical arrays): ``room_type`` in ``ROOM_TYPES`` (None:
+    from the seed), ``on_view`` after each view, ``split`` in ``domains.SPLITS``, ``randomise`` 0 = off."""
     if role == "train" and split != "in-distribution":
         raise ValueError(f"a training scene is always drawn in-distribution, got split {split!r}")
     if height < 8 or width < 8:
@@ -161,11 +160,10 @@ def _write_scene(out: Path, name: str, own_seed: int, n_views: int, height: int,
 def generate_dataset(out: Path, n_train: int, n_test: int, n_views: int, height: int, width: int, seed: int,
                      progress: bool = True, workers: int = 1, split: str = "in-distribution",
                      randomise: float = 0.0) -> list[Path]:
-    """Write ``n_train`` train and ``n_test`` test scenes under ``out`` (sray layout); returns scene dirs. Test scenes
-    come from ``split``; ``randomise`` applies to training scenes only (worlds with and without it share their test
-    rooms). Room types cycle through ``ROOM_TYPES`` from a seed-dependent offset, so a small dataset covers every
-    type. A scene whose scene.json (written last) records the same parameters is skipped. ``workers`` > 1 renders
-    that many scenes at once in spawned processes (safe beside threads; same files)."""
+    """Write ``n_train`` train and ``n_test`` test scenes (from ``split``) under ``out``; returns scene dirs.
+    ``randomise`` applies to training scenes only (worlds with and without it share test rooms); room types cycle from a
+    seeded offset (a small dataset covers all); a scene whose scene.json (written last) records the same parameters is
+    skipped; ``workers`` > 1 renders in spawned processes (same files)."""
     if n_train < 0 or n_test < 0 or n_train + n_test == 0:
         raise ValueError(f"need at least one scene, got n_train={n_train}, n_test={n_test}")
     if workers < 1:

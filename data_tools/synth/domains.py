@@ -83,9 +83,8 @@ def held_out_colour(hue: float, sat: float) -> bool:
 
 
 def surface_colour(rng: np.random.Generator, hue: float, sat: float) -> tuple[float, float]:
-    """(hue, saturation) of a drawn surface colour where the current region allows it: in training a held-out colour
-    is desaturated below :data:`HELD_OUT_SAT` (no extra draw); in an appearance-shifted room a share
-    :data:`SHIFT_COLOUR_PROB` of the colours is moved into the region."""
+    """(hue, saturation) of a surface colour as the region allows: in training a held-out colour is desaturated below
+    :data:`HELD_OUT_SAT` (no draw); when shifted a share :data:`SHIFT_COLOUR_PROB` moves into it."""
     if current().appearance_shift:
         if rng.random() < SHIFT_COLOUR_PROB:
             return float(rng.uniform(*HELD_OUT_HUE)), float(rng.uniform(0.3, 0.85))

@@ -14,9 +14,8 @@ from sray.data_tools.synth.materials import Material
 
 @dataclass(frozen=True)
 class Box:
-    """One oriented box of a scene (or of an object, in its own frame): centre and full extents along its local axes
-    in metres, class id (IGNORE_ID for props), material (evaluated in the box's frame), yaw about world z in radians;
-    light fixtures cast no shadow (they would shadow their own light)."""
+    """One oriented box (world or object frame): centre and full extents along its axes (m), class id (IGNORE_ID for
+    props), material (in the box's frame), yaw about z (rad); light fixtures cast no shadow (on their own light)."""
 
     center: tuple[float, float, float]
     size: tuple[float, float, float]
@@ -111,9 +110,8 @@ def _safe_inverse(d: np.ndarray) -> np.ndarray:
 
 def cast_rays(origin: np.ndarray, dirs: np.ndarray, boxes: PackedBoxes, active: np.ndarray | None = None,
               t_min: float = 1e-4, chunk: int = 8192) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest box hit of rays from one origin (3,) along ``dirs`` (N, 3), any length: (t float32 (N,), box index
-    int64 (N,)); ``active`` bool (P,) boxes to test (default all). Hits at t <= t_min (origin inside or on a box) are
-    ignored; misses give t = inf and index -1."""
+    """Nearest box hit of rays from one origin (3,) along ``dirs`` (N, 3), any length: (t float32 (N,), box int64 (N,));
+    ``active`` bool (P,) boxes to test; hits at t <= t_min ignored, misses t = inf, index -1."""
     n = len(dirs)
     best_t = np.full(n, np.inf, np.float32)
     best_i = np.full(n, -1, np.int64)

@@ -54,9 +54,8 @@ def _low_main_light(rng: np.random.Generator, plan: FloorPlan) -> None:
 
 
 def add_lights(rng: np.random.Generator, plan: FloorPlan) -> None:
-    """Ceiling lamps (1-4 by floor area) with a point light under each (the first casts shadows), an optional floor
-    lamp and daylight in front of up to two windows; an appearance-shifted room gets held-out lamp colour
-    temperatures and a low main light first."""
+    """Ceiling lamps (1-4 by floor area) with a point light under each (the first casts shadows), maybe a floor lamp,
+    daylight by up to two windows; a shifted room: held-out lamp colours, a low main light first."""
     lx, ly, h = plan.size
     shifted = domains.current().appearance_shift
     if shifted:

@@ -21,10 +21,9 @@ SHELL_LABELS = (CLS["wall"], CLS["floor"], IGNORE_ID)
 
 @dataclass
 class RenderScene:
-    """A room prepared for rendering, with its camera: ``materials`` holds the P boxes' materials, then the walls',
-    floor's and ceiling's (P, P+1, P+2); ``tone`` is (k, gamma) of rgb = (1 - exp(-k x)) ** (1 / gamma);
-    ``noise_sigma`` is in 8-bit levels; ``noise_seed`` seeds the noise and the per-view gains (``domains.view_gains``
-    at strength ``randomise``); ``tint`` is the room's white balance (``domains.room_tint``)."""
+    """A room prepared for rendering, with its camera: ``materials`` = the P boxes', then walls', floor's, ceiling's;
+    ``tone`` (k, gamma) of rgb = (1 - exp(-k x)) ** (1 / gamma); ``noise_sigma`` in 8-bit levels; ``noise_seed`` seeds
+    noise and view gains (``randomise``); ``tint``: white balance."""
 
     room: Room
     boxes: PackedBoxes

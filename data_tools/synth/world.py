@@ -86,10 +86,9 @@ def _one(values: set[int]) -> int | list[int]:
 
 
 def make_world(world: World, root: Path, progress: bool = True, workers: int = 1) -> Path:
-    """The verified shard folder of ``world`` under ``root``: generated, checked and sharded when ``root`` holds no
-    complete world, reused when it holds this one; ``workers`` scenes are rendered at once (same files). Raises
-    :class:`WorldFolderError` when ``root`` holds another world or damaged shards, and
-    :class:`~sray.data_tools.shards.writer.DatasetRejected` when the generated scenes fail ``sray data check``."""
+    """The verified shard folder of ``world`` under ``root``, generated, checked and sharded unless ``root`` holds it
+    (``workers`` scenes rendered at once); :class:`WorldFolderError` when ``root`` holds another world or damaged
+    shards, :class:`~sray.data_tools.shards.writer.DatasetRejected` when ``sray data check`` fails."""
     root = Path(root)
     shards = root / SHARDS
     if (shards / MANIFEST_NAME).exists():
