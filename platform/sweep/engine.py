@@ -5,7 +5,7 @@ early stops (ASHA, the wall-time budget) are requests the trial carries out itse
 
 A study completed launch after launch (``sray lab study``, ``sray stability``: :func:`run_missing`) runs, in each
 launch, only the trials without a result (errored ones again), as a new Tune experiment; the trials' records are the
-store, and a result an earlier harness stored elsewhere can be imported as a finished trial.
+store.
 """
 
 from __future__ import annotations
@@ -178,18 +178,6 @@ def run_study(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction, se
     grid = tuner.fit()
     errors = {r.config["key"]: f"{type(r.error).__name__}: {r.error}" for r in grid if r.error is not None}
     return collect_outcomes(settings.folder, plan, errors, settings.time_attr)
-
-
-def import_result(study: Path, key: str, result: dict[str, Any], source: Path) -> bool:
-    """Record ``result``, read from ``source``, as the finished trial ``key`` unless it finished; True if imported."""
-    folder = trial_folder(study, key)
-    record = read_record(folder)
-    if record.outcome == FINISHED:
-        return False
-    folder.mkdir(parents=True, exist_ok=True)
-    write_record(folder, TrialRecord(launches=record.launches, outcome=FINISHED, result=result,
-                                     imported=str(source)))
-    return True
 
 
 def missing(study: Path, plan: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
