@@ -94,10 +94,6 @@ class GracefulASHA(AsyncHyperBandScheduler):
         return TrialScheduler.CONTINUE
 
 
-def _point_text(point: Mapping[str, Any]) -> str:
-    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in point.items())
-
-
 class TrialLog(Callback):
     """The driver's record of results (``history.jsonl``), a line per result, the wall-time budget's stop requests."""
 
@@ -116,7 +112,9 @@ class TrialLog(Callback):
         if s.start_by and time.time() >= s.start_by:
             print(f"[{s.label}] {key} not started: no trial starts after the study's time limit", flush=True)
             return
-        print(f"[{s.label}] {key} started: {_point_text(self.plan.get(key, {}))}", flush=True)
+        point = self.plan.get(key, {}).items()
+        print(f"[{s.label}] {key} started: " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                                                         for k, v in point), flush=True)
 
     def on_trial_result(self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any],
                         **info: Any) -> None:
