@@ -4,8 +4,7 @@ early stops (ASHA, the wall-time budget) are requests the trial carries out itse
 (ASHA's rungs start empty). A training job's last report after a stop lacks the metric: Tune's strict check is off.
 
 A study completed launch after launch (``sray lab study``, ``sray stability``: :func:`run_missing`) runs, in each
-launch, only the trials without a result (errored ones again), as a new Tune experiment; the trials' records are the
-store.
+launch, only the trials without a result (errored ones again) as a new Tune experiment; the records are the store.
 """
 
 from __future__ import annotations
