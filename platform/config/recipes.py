@@ -63,10 +63,8 @@ def synth_cpu_hour() -> TrainConfig:
 
 
 def synth_gpu_minutes() -> TrainConfig:
-    """Minutes of pretraining on one GPU: ``synth-cpu-hour``'s model, losses, augmentation, world and protocol, at
-    4,096 rays per step in bf16 on one GPU worker, for 3,600 steps (about six minutes at the rate ``sray gpu-check``
-    measured on an H200, docs/gpu.md) instead of a CPU budget, its 2D warm-up scaled with the steps. ``sray
-    gpu-check``'s ``minutes`` stage generates the world, trains it and records its minutes and mIoU."""
+    """Minutes of pretraining on one GPU: ``synth-cpu-hour`` for 3,600 steps (about six minutes on an H200,
+    docs/gpu.md) instead of a CPU budget; ``sray gpu-check``'s ``minutes`` stage trains it and records the mIoU."""
     cfg = synth_cpu_hour()
     cfg.recipe = "synth-gpu-minutes"
     cfg.data.rays_per_batch, cfg.data.loader_workers = 4096, 6
