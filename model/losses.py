@@ -20,8 +20,8 @@ from torch import Tensor
 
 from . import debug_checks
 
-# Render passes in the order the loss sums them; see docs/CONTRACTS.md for the ``out`` structure.
 PASSES = ("coarse", "fine")
+"""Render passes in the order the loss sums them (docs/CONTRACTS.md)."""
 
 
 class LossSettings(Protocol):
@@ -75,18 +75,11 @@ def _ray_weights(target: Tensor, ignore_id: int, weight: Tensor | None) -> Tenso
 
 def render_loss(out: dict[str, dict[str, Tensor]], target_label: Tensor, target_rgb: Tensor, cfg: LossSettings,
                 shares: LossShares | None = None) -> tuple[Tensor, dict[str, Tensor]]:
-    """Semantic + photometric loss of a model's ``render_rays`` output.
-
-    out: ``{"coarse": pass, "fine": pass}`` with ``logits`` (R, L) and ``rgb`` (R, 3) per pass (a model
-    without a fine pass may give ``coarse`` only); target_label: (R,) int64 with ``cfg.ignore_id`` for
-    unlabelled rays; target_rgb: (R, 3) in [0, 1].
-    Returns the scalar total and detached terms: ``sem_<pass>``, ``rgb_<pass>`` per pass,
-    ``n_labelled`` and ``psnr`` (of the last pass's colour, the fine one when present).
-
-    shares: for one piece of a larger batch (``piecewise_loss``), the piece's :class:`LossShares`; every
-    semantic and photometric term is multiplied by its share, so the pieces' losses and terms sum to
-    the batch's. ``psnr`` is then left out (the caller computes it from the summed colour term).
-    """
+    """Semantic + photometric loss of a ``render_rays`` output ``{"coarse": pass, "fine": pass}`` (``coarse``
+    alone for a model without a fine pass) with ``logits`` (R, L) and ``rgb`` (R, 3) per pass; target_label (R,)
+    int64 (``cfg.ignore_id``: unlabelled), target_rgb (R, 3) in [0, 1]. Returns the scalar total and detached terms
+    ``sem_<pass>``, ``rgb_<pass>``, ``n_labelled`` and ``psnr`` (of the last pass's colour). With ``shares`` (one
+    piece of a batch, :class:`LossShares`) every term is scaled by its share and ``psnr`` is left to the caller."""
     passes = [p for p in PASSES if p in out]
     if not passes:
         raise ValueError("sray.model.losses.render_loss: `out` holds neither a 'coarse' nor a 'fine' pass; pass a "
