@@ -6,12 +6,13 @@ one GPU between them, refused before Ray starts (NCCL refuses two ranks on one G
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
+from unittest import mock
 
 from sray.data_tools.shards.manifest import unseen_scenes
 from sray.data_tools.synth.world import World, make_world
-from sray.jobs.bench.probes import env_var
 from sray.platform.common.fault_hook import ENV_VAR, KILL_MARKER
 from sray.platform.config.recipes import get_recipe
 from sray.platform.train.inputs import InputError
@@ -51,7 +52,7 @@ def _killed_and_resumed(ctx: CheckContext, arguments: list[str]) -> tuple[int, f
     from sray.jobs.cli import main
 
     start = time.perf_counter()
-    with env_var(ENV_VAR, f"train.kill_at_step={max(2, _steps(ctx) // 2)}"):
+    with mock.patch.dict(os.environ, {ENV_VAR: f"train.kill_at_step={max(2, _steps(ctx) // 2)}"}):
         code = main(arguments)
     return code, time.perf_counter() - start
 
