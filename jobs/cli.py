@@ -1,6 +1,5 @@
-"""The ``sray`` console script. Each subcommand module exposes ``register(subparsers)``, which sets ``func`` to its
-entry function (namespace -> exit code); what only a running command needs is imported there, so ``sray --help``
-stays fast. Plug-ins (the lab's ``sray lab``) register through the entry points of :data:`PLUGIN_GROUP`."""
+"""The ``sray`` console script: each subcommand module's ``register(subparsers)`` sets ``func`` (namespace -> exit code)
+and imports heavy modules only there, so ``sray --help`` stays fast; plug-ins register via :data:`PLUGIN_GROUP`."""
 
 from __future__ import annotations
 

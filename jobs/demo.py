@@ -1,7 +1,6 @@
-"""The README's main job, run by ``sray demo`` on the embedded defaults, everything under ``--out``: procedural scenes
--> checked shards -> a picture of a loader sample -> a short S-Ray training run on local Ray, tracked in MLflow -> the
-2D segmenter of ``2d-transfer`` for the CPU seconds that training spent -> zero-shot evaluation on the unseen scenes
--> a fly-through video -> a finetune fleet on them -> charts, the results table and the ``sray ui`` command."""
+"""``sray demo``, the README's main job, under ``--out``: scenes -> checked shards -> a loader sample's picture -> a
+short S-Ray training on local Ray -> 2d-transfer's segmenter for the same CPU seconds -> zero-shot evaluation -> a
+fly-through -> a finetune fleet -> charts, the results table and the ``sray ui`` command."""
 
 from __future__ import annotations
 
@@ -185,13 +184,9 @@ def write_sample_picture(sample: TrainSample, class_names: list[str], path: Path
         ax.axis("off")
     for ax, colour, title in ((axes[0, 0], colours, "query: sampled ray colours"),
                               (axes[0, 1], label_colours, "query: sampled ray labels")):
-        ax.set_facecolor("0.85")
         ax.axis("on")
-        ax.set_xticks([])
-        ax.set_yticks([])
+        ax.set(facecolor="0.85", xticks=[], yticks=[], xlim=(-0.5, w - 0.5), ylim=(h - 0.5, -0.5))
         ax.scatter(uv[:, 0], uv[:, 1], c=colour, s=6)
-        ax.set_xlim(-0.5, w - 0.5)
-        ax.set_ylim(h - 0.5, -0.5)
         ax.set_title(title, fontsize=9)
     present = sorted(int(c) for c in np.unique(labels) if c != ignore_id)
     handles = [Line2D([], [], marker="s", ls="", color=pal[c], label=class_names[c]) for c in present]

@@ -1,6 +1,5 @@
-"""``sray eval``: zero-shot scores of a registered method's pretrained model on unseen scenes (the paper's
-generalization protocol). A flag the chosen method does not read (its record's ``eval_reads``) is refused, never
-ignored."""
+"""``sray eval``: zero-shot scores of a registered method's pretrained model on unseen scenes (the paper's protocol);
+a flag the method does not read (``eval_reads``) is refused, never ignored."""
 
 from __future__ import annotations
 
@@ -47,8 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Evaluate, print the table and where everything went; exit 2 on bad input (a flag the method does not read
-    included)."""
+    """Evaluate, print the table and where everything went; exit 2 on bad input (an unread flag included)."""
     from sray.platform.eval.split_gap import SPLITS_FILE, format_splits, split_summary
     from sray.platform.eval.zero_shot import (CALIBRATION_FILE, calibrate, evaluate_model, format_table,
                                               write_json_atomic)

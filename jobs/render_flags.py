@@ -1,6 +1,5 @@
-"""Flags the rendering commands share: the held-out render of ``sray eval`` and ``sray render``, parsed into a
-``HeldOutRender`` (the fast-render flags record that they were typed, :class:`GivenFlag`), and the tracked run of
-``sray render`` and ``sray label`` with the line that tells where it went."""
+"""Flags the rendering commands share: ``sray eval``'s and ``sray render``'s held-out render (a ``HeldOutRender``; the
+fast-render flags are :class:`GivenFlag`) and the tracked run of ``sray render`` and ``sray label``."""
 
 from __future__ import annotations
 

@@ -10,9 +10,4 @@ ENV_VAR = "SRAY_DEBUG_CHECKS"
 """Set to ``1`` to turn the value checks on (e.g. while debugging a new dataset reader)."""
 
 ENABLED = os.environ.get(ENV_VAR, "") == "1"
-"""Whether value checks run in this process."""
-
-
-def value_checks_enabled() -> bool:
-    """True when ``SRAY_DEBUG_CHECKS=1``: run the checks that read tensor values."""
-    return ENABLED
+"""Whether value checks run in this process (read at call time, so tests may patch it)."""

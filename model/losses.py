@@ -12,17 +12,16 @@ Everything is computed in float32, whatever autocast region the caller is in.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from .debug_checks import value_checks_enabled
+from . import debug_checks
 
-# Render passes in the order the loss sums them; see docs/CONTRACTS.md for the ``out`` structure.
 PASSES = ("coarse", "fine")
+"""Render passes in the order the loss sums them (docs/CONTRACTS.md)."""
 
 
 class LossSettings(Protocol):
@@ -32,20 +31,6 @@ class LossSettings(Protocol):
     lambda_rgb: float
     ignore_id: int
     # optional: ``class_weights: tuple[float, ...]`` (per-class CE weights; absent or empty = unweighted)
-
-
-@dataclass
-class LossConfig:
-    """Stand-alone loss settings, for callers without a model config."""
-
-    lambda_sem: float = 1.0
-    """Weight of the semantic cross-entropy (paper: 1)."""
-    lambda_rgb: float = 1.0
-    """Weight of the photometric MSE (paper: 1)."""
-    ignore_id: int = 255
-    """Label id of unlabelled pixels; such rays are left out of the cross-entropy."""
-    class_weights: tuple[float, ...] = ()
-    """Per-class weights of the cross-entropy (empty = unweighted)."""
 
 
 class LossShares(NamedTuple):
@@ -88,25 +73,13 @@ def _ray_weights(target: Tensor, ignore_id: int, weight: Tensor | None) -> Tenso
     return torch.where(labelled, weight[torch.where(labelled, target, 0)], 0.0)
 
 
-def render_loss(
-    out: dict[str, dict[str, Tensor]],
-    target_label: Tensor,
-    target_rgb: Tensor,
-    cfg: LossSettings,
-    shares: LossShares | None = None,
-) -> tuple[Tensor, dict[str, Tensor]]:
-    """Semantic + photometric loss of a model's ``render_rays`` output.
-
-    out: ``{"coarse": pass, "fine": pass}`` with ``logits`` (R, L) and ``rgb`` (R, 3) per pass (a model
-    without a fine pass may give ``coarse`` only); target_label: (R,) int64 with ``cfg.ignore_id`` for
-    unlabelled rays; target_rgb: (R, 3) in [0, 1].
-    Returns the scalar total and detached terms: ``sem_<pass>``, ``rgb_<pass>`` per pass,
-    ``n_labelled`` and ``psnr`` (of the last pass's colour, the fine one when present).
-
-    shares: for one piece of a larger batch (``piecewise_loss``), the piece's :class:`LossShares`; every
-    semantic and photometric term is multiplied by its share, so the pieces' losses and terms sum to
-    the batch's. ``psnr`` is then left out (the caller computes it from the summed colour term).
-    """
+def render_loss(out: dict[str, dict[str, Tensor]], target_label: Tensor, target_rgb: Tensor, cfg: LossSettings,
+                shares: LossShares | None = None) -> tuple[Tensor, dict[str, Tensor]]:
+    """Semantic + photometric loss of a ``render_rays`` output ``{"coarse": pass, "fine": pass}`` (``coarse``
+    alone for a model without a fine pass) with ``logits`` (R, L) and ``rgb`` (R, 3) per pass; target_label (R,)
+    int64 (``cfg.ignore_id``: unlabelled), target_rgb (R, 3) in [0, 1]. Returns the scalar total and detached terms
+    ``sem_<pass>``, ``rgb_<pass>``, ``n_labelled`` and ``psnr`` (of the last pass's colour). With ``shares`` (one
+    piece of a batch, :class:`LossShares`) every term is scaled by its share and ``psnr`` is left to the caller."""
     passes = [p for p in PASSES if p in out]
     if not passes:
         raise ValueError("sray.model.losses.render_loss: `out` holds neither a 'coarse' nor a 'fine' pass; pass a "
@@ -117,12 +90,10 @@ def render_loss(
                          f"3) for {n_rays} rendered rays, got {tuple(target_label.shape)} and "
                          f"{tuple(target_rgb.shape)}.")
     if target_label.dtype != torch.int64:
-        raise ValueError(
-            f"sray.model.losses.render_loss: target_label must be int64, got {target_label.dtype}."
-        )
+        raise ValueError(f"sray.model.losses.render_loss: target_label must be int64, got {target_label.dtype}.")
     mask = target_label != cfg.ignore_id  # (R,)
     n_labelled = mask.sum()
-    bad = mask & ((target_label < 0) | (target_label >= n_classes)) if value_checks_enabled() else None
+    bad = mask & ((target_label < 0) | (target_label >= n_classes)) if debug_checks.ENABLED else None
     if bad is not None and bool(bad.any()):
         raise ValueError(f"sray.model.losses.render_loss: label ids must lie in [0, {n_classes}) or equal the ignore "
                          f"id {cfg.ignore_id}; found {sorted(set(target_label[bad].tolist()))[:5]}. Check the scene's "

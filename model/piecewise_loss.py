@@ -45,16 +45,10 @@ def _piece_shares(weights: Tensor, pieces: list[slice]) -> Tensor:
 def piecewise_render_loss(render: PieceRenderer, src: SourceSet, params: list[nn.Parameter], n_rays: int,
                           piece: int, target_label: Tensor, target_rgb: Tensor,
                           cfg: LossSettings) -> tuple[Tensor, dict[str, Tensor]]:
-    """``render_loss`` of ``n_rays`` rays rendered ``piece`` rays at a time, with gradients to ``src.feats``
-    and ``params`` (the network's parameters outside the encoder) as if they had been rendered at once.
-
-    target_label (R,) int64, target_rgb (R, 3); ``render(src, slice)`` renders the rays of that slice. Each
-    piece's terms are scaled by its shares of the batch (:class:`~sray.model.losses.LossShares`): of the labelled
-    weight, of the rays.
-    Returns the scalar loss (its backward delivers the gathered gradients) and the terms of
-    ``render_loss`` for the whole batch. Without grad mode (or with nothing that needs a gradient) it
-    returns the same values without keeping any gradient.
-    """
+    """``render_loss`` of ``n_rays`` rays rendered ``piece`` rays at a time by ``render(src, slice)``, with the
+    gradients to ``src.feats`` and ``params`` (the network outside the encoder) of one pass over them all.
+    target_label (R,) int64, target_rgb (R, 3). Returns the scalar loss (its backward delivers the gathered
+    gradients; none are kept without grad mode) and the batch's ``render_loss`` terms."""
     pieces = [slice(start, min(start + piece, n_rays)) for start in range(0, n_rays, piece)]
     sem_shares = _piece_shares(labelled_weights(target_label, cfg), pieces)  # (P,)
     ray_shares = target_rgb.new_tensor([sl.stop - sl.start for sl in pieces], dtype=torch.float32) / n_rays  # (P,)

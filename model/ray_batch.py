@@ -68,11 +68,10 @@ class RayBatch:
 
 
 class RayBatchLoss(nn.Module):
-    """One ``forward`` = encode a :class:`RayBatch`'s sources + the training loss of its rays
-    (``SRayModel.training_loss``: stratified samples, rendered in pieces), plus, with ``lambda_src_sem`` > 0
-    and source labels in the batch, ``lambda_src_sem`` times the source views' per-pixel cross-entropy
-    (``source_semantics``); what training runs (DDP included). Holds the network as ``net`` (checkpoints
-    store ``net``'s own keys) and the ``runtime`` its loss is computed with (implementation, rays per piece)."""
+    """What training runs (DDP included): one ``forward`` encodes a :class:`RayBatch`'s sources and computes
+    ``SRayModel.training_loss`` of its rays, plus ``lambda_src_sem`` times the source views' cross-entropy
+    (``source_semantics``) when that is on and the batch has source labels. ``net``: the network; ``runtime``:
+    how its loss is run."""
 
     def __init__(self, cfg: SRayConfig, runtime: Runtime = Runtime()) -> None:
         """Build the S-Ray network it trains (no device work here); ``runtime``: how its loss is run."""
@@ -82,14 +81,10 @@ class RayBatchLoss(nn.Module):
 
     def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor,
                 render: bool = True) -> tuple[Tensor, dict[str, Tensor]]:
-        """(scalar loss, detached terms) for the batch's R rays: target_label (R,) int64 (ignore id for
-        unlabelled), target_rgb (R, 3) in [0, 1]. Terms: ``render_loss``'s, and ``sem_src`` when the source-view
-        term is on.
-
-        ``render=False`` (the 2D warm-up): the source-view term alone; nothing is rendered, and every
-        parameter outside the encoder and its head enters the loss with weight 0, so each parameter
-        still receives a gradient (DDP requires one per parameter and step).
-        """
+        """(scalar loss, detached terms: ``render_loss``'s, and ``sem_src`` with the source-view term) for the batch's
+        R rays: target_label (R,) int64 (ignore id: unlabelled), target_rgb (R, 3) in [0, 1]. ``render=False`` (the 2D
+        warm-up): the source-view term alone, every other parameter in the loss with weight 0 (DDP needs a gradient
+        for each parameter every step)."""
         net = self.net
         src = net.encode(batch.src_rgb, batch.src_K, batch.src_c2w, batch.src_depth)
         use_src = net.src_head is not None and batch.src_label is not None

@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from .debug_checks import value_checks_enabled
+from . import debug_checks
 
 RESERVED_KEYS = ("weights", "opacity", "depth")
 """Keys that ``composite`` writes itself; a rendered value may not use them."""
@@ -26,7 +26,7 @@ def _check_bounds(near: Tensor, far: Tensor, n_rays: int, where: str) -> None:
             shape = tuple(t.shape) if isinstance(t, Tensor) else type(t).__name__
             raise ValueError(f"sray.model.rendering.{where}: `{name}` must be a tensor of shape ({n_rays},) (one bound "
                              f"per ray), got {shape}; expand a scalar with `torch.full((R,), value)`.")
-    if value_checks_enabled() and bool((far < near).any()):
+    if debug_checks.ENABLED and bool((far < near).any()):
         raise ValueError(f"sray.model.rendering.{where}: some rays have far < near; check the scene's depth bounds "
                          "(near must not exceed far).")
 

@@ -1,14 +1,9 @@
-"""Semantic-NeRF baseline (Zhi et al., ICCV 2021), written from the paper's description: a per-scene NeRF whose
-trunk also feeds a view-independent semantic head.
-- positions (normalised by the scene box) and unit directions get NeRF's encoding (10 and 4 frequencies, + raw);
-- an 8 x 256 ReLU trunk re-reads the encoded position after its fifth layer (skip connection);
-- density: one linear unit on the trunk output, made non-negative by a softplus (NeRF: ReLU; softplus keeps a
-  gradient where the raw output is negative, so rays cannot die empty at initialisation);
-- semantics: trunk output -> 128 -> L logits, BEFORE the viewing direction enters, so the
-  labels of a point do not depend on where it is seen from;
-- colour: a 256-wide linear feature concatenated with the encoded direction -> 128 -> rgb (sigmoid).
-Like NeRF, coarse and fine networks, the fine one on the union of coarse and resampled depths; renderer, losses
-and metrics are S-Ray's (``hierarchical``, ``losses``, ``metrics``).
+"""Semantic-NeRF baseline (Zhi et al., ICCV 2021) from the paper's description: a per-scene NeRF (positions
+normalised by the scene box, unit directions; NeRF's encoding with 10 and 4 frequencies + raw) whose 8 x 256 ReLU
+trunk, re-reading the encoded position after its fifth layer, feeds density (softplus, not NeRF's ReLU, so rays cannot
+die empty at initialisation), semantics (-> 128 -> L logits, before the direction enters: labels do not depend on
+the viewpoint) and colour (256-wide feature + encoded direction -> 128 -> sigmoid rgb). Coarse and fine networks,
+the fine one on the union of coarse and resampled depths; renderer, losses and metrics are S-Ray's.
 """
 
 from __future__ import annotations

@@ -95,13 +95,10 @@ class SRayModel(nn.Module):
     def training_loss(self, src: SourceSet, origins: Tensor, dirs: Tensor, near: Tensor | float,
                       far: Tensor | float, target_label: Tensor, target_rgb: Tensor,
                       runtime: Runtime = Runtime()) -> tuple[Tensor, dict[str, Tensor]]:
-        """``render_loss`` of rays rendered with stratified samples: origins, dirs (R, 3), near, far scalars
-        or (R,), target_label (R,) int64, target_rgb (R, 3).
-
-        The rays are rendered (fields: ``runtime.impl``) in pieces of ``runtime.train_piece`` rays (0: by device,
-        ``ray_chunks``), each piece's gradient taken before the next is rendered (``piecewise_loss``): the same
-        loss and gradients as one pass over the batch, within float32 rounding. One piece is one ordinary pass.
-        """
+        """``render_loss`` of rays rendered with stratified samples: origins, dirs (R, 3), near, far scalars or (R,),
+        target_label (R,) int64, target_rgb (R, 3). Rendered in pieces of ``runtime.train_piece`` rays (0: by device),
+        each piece's gradient taken before the next (``piecewise_loss``): the loss and gradients of one pass over the
+        batch, within float32 rounding."""
         n_rays = origins.shape[0]
         near_r = per_ray_bounds(near, n_rays, origins, "near")  # (R,)
         far_r = per_ray_bounds(far, n_rays, origins, "far")  # (R,)

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 import scene_fixtures
 import torch
+from loss_settings import LossConfig
 
 from sray.data_tools.loader.class_stats import balanced_weights, count_pixels, dataset_pixel_counts
 from sray.data_tools.scene import IGNORE_ID
 from sray.jobs.data.command import format_stats
-from sray.model.losses import LossConfig, render_loss
+from sray.model.losses import render_loss
 
 
 def test_pixel_counts_match_a_per_pixel_loop() -> None:

@@ -6,8 +6,9 @@ import math
 
 import pytest
 import torch
+from loss_settings import LossConfig
 
-from sray.model.losses import LossConfig, render_loss
+from sray.model.losses import render_loss
 
 IGNORE = 255
 

@@ -210,8 +210,7 @@ def test_point_records_come_from_the_study_and_an_errored_trial_is_a_failed_poin
     """Each planned point reads its spec's trial: finished -> its result, errored -> failed with the error,
     missing -> no records (the axis is not complete)."""
     from sray.platform.stability.points_study import point_records, study_folder, study_plan
-    from sray.platform.sweep.engine import import_result
-    from sray.platform.sweep.study import TrialRecord, trial_folder, write_record
+    from sray.platform.sweep.study import FINISHED, TrialRecord, trial_folder, write_record
 
     planned = planned_points(TOY, ["exposure"], [SRAY])
     plan = study_plan(TOY, planned)
@@ -220,7 +219,7 @@ def test_point_records_come_from_the_study_and_an_errored_trial_is_a_failed_poin
     clean, *seeded = plan
     ok = {"status": "ok", "miou": 40.0, "psnr": 20.0, "error": None}
     for key in (clean, *seeded[:-1]):
-        import_result(study, key, ok, tmp_path / "x.json")
+        write_record(trial_folder(study, key), TrialRecord(outcome=FINISHED, result=ok))
     assert point_records(tmp_path, TOY, planned) is None  # the last seed is missing
     assert point_records(tmp_path, TOY, planned, {seeded[-1]: "RayActorError: died"})[-1]["error"] == \
         "RayActorError: died"

@@ -61,13 +61,12 @@ def test_a_finished_trial_never_runs_again_and_an_errored_one_stays_errored(tmp_
     assert calls == ["t000"], "neither the errored trial nor the stopped one ran again"
 
 
-def test_a_study_run_piece_by_piece_keeps_results_imports_old_ones_and_reruns_only_errors(tmp_path: Path,
-                                                                                        monkeypatch) -> None:
+def test_a_study_run_piece_by_piece_keeps_results_and_reruns_only_errors(tmp_path: Path, monkeypatch) -> None:
     """The harnesses' way of running the engine (``run_missing``), with Tune replaced by the trial wrapper run
-    in this process: results kept in the records, an imported result never computed, an errored trial run again
-    by the next launch, no trial started past the time limit."""
+    in this process: results kept in the records, a finished trial never computed again, an errored trial run
+    again by the next launch, no trial started past the time limit."""
     from sray.platform.sweep import engine
-    from sray.platform.sweep.study import StudySettings
+    from sray.platform.sweep.study import FINISHED, StudySettings, TrialRecord, write_record
 
     monkeypatch.setattr(engine, "run_study", run_study_here)
     calls: list[str] = []
@@ -78,13 +77,12 @@ def test_a_study_run_piece_by_piece_keeps_results_imports_old_ones_and_reruns_on
 
     plan = {k: {"x": x} for k, x in (("a", 2), ("b", 3), ("c", 4), ("d", 5))}
     settings = StudySettings(folder=tmp_path, metric="y", mode="max", label="test")
-    assert engine.import_result(tmp_path, "c", {"y": -1}, tmp_path / "old" / "c.json")
+    write_record(trial_folder(tmp_path, "c"), TrialRecord(outcome=FINISHED, result={"y": -1}))
     with injected_faults("sweep.fail_trials=b"):
         first = engine.run_missing(plan, square, settings)
     assert [(o.key, o.reason, o.result) for o in first] == [
         ("a", "finished", {"y": 4}), ("b", "errored", None), ("c", "finished", {"y": -1}), ("d", "finished", {"y": 25})]
-    assert calls == ["a", "d"] and read_record(trial_folder(tmp_path, "c")).imported.endswith("c.json")
-    assert not engine.import_result(tmp_path, "a", {"y": 0}, tmp_path / "old" / "a.json")  # finished stays
+    assert calls == ["a", "d"]
     assert engine.missing(tmp_path, plan) == {"b": {"x": 3}}
     late = dataclasses.replace(settings, start_by=time.time() - 1)
     assert [o.reason for o in engine.run_missing(plan, square, late)][1] == "errored" and len(calls) == 2

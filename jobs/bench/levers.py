@@ -1,7 +1,6 @@
-"""``sray bench profile --workload kernels train-kernels chunks attention-keys``: levers the profiles point at, timed:
-each CPU attention option torch offers at the render's (and the training step's) shapes, a render at several chunk
-sizes (a chunk's token tensors decide whether they stay in cache and how glibc serves them), and SDPA's flash kernel
-against ``sliced_attention`` by key length (on another CPU, rerun it before trusting docs/performance.md's ranges)."""
+"""``sray bench profile --workload kernels train-kernels chunks attention-keys``: the CPU attention options at the
+render's and training step's shapes, a render per chunk size (whether a chunk's tokens stay in cache), and SDPA's
+flash kernel against ``sliced_attention`` by key length (rerun on another CPU before trusting docs/performance.md)."""
 
 from __future__ import annotations
 

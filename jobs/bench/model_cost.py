@@ -7,15 +7,17 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import os
 import statistics
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from unittest import mock
 
 import torch
 from torch.nn.attention import SDPBackend
 
-from sray.jobs.bench.probes import (attention_call, attention_case, attention_flops, env_var, model_config, peak_bytes,
+from sray.jobs.bench.probes import (attention_call, attention_case, attention_flops, model_config, peak_bytes,
                                     resolve_device, time_call, train_step_worker)
 from sray.model.ray_chunks import train_piece_rays
 from sray.platform.common.bench_doc import Bench
@@ -120,7 +122,7 @@ def _attention_table(device: torch.device, sz: _Sizes) -> tuple[str, str, str]:
 def run_in_fresh_process(spec: dict) -> dict:
     """``train_step_worker(spec)`` in a newly spawned interpreter (clean peak RSS), with THP_MEM_ALLOC_ENABLE=1 for
     ``alloc='thp'`` and 0 otherwise, whatever this process's environment says (PyTorch reads it once)."""
-    with env_var("THP_MEM_ALLOC_ENABLE", "1" if spec.get("alloc") == "thp" else "0"), \
+    with mock.patch.dict(os.environ, {"THP_MEM_ALLOC_ENABLE": "1" if spec.get("alloc") == "thp" else "0"}), \
             ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
         return pool.submit(train_step_worker, spec).result()
 

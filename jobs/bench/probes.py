@@ -13,10 +13,11 @@ import dataclasses
 import json
 import os
 import resource
+import statistics
 import tempfile
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager, nullcontext
+from collections.abc import Callable
+from contextlib import nullcontext
 
 import torch
 from torch.nn.attention import SDPBackend, sdpa_kernel
@@ -39,20 +40,6 @@ def resolve_device(device: str) -> torch.device:
         raise ValueError("sray.jobs.bench.model_cost: device 'cuda' asked for but no CUDA device is visible; "
                          "use --device cpu or auto.")
     return dev
-
-
-@contextmanager
-def env_var(name: str, value: str) -> Iterator[None]:
-    """Set environment variable ``name`` to ``value`` for the block, then restore it (or its absence)."""
-    saved = os.environ.get(name)
-    os.environ[name] = value
-    try:
-        yield
-    finally:
-        if saved is None:
-            os.environ.pop(name, None)
-        else:
-            os.environ[name] = saved
 
 
 def attention_case(variant: str, rays: int, views: int, samples: int, channels: int,
@@ -137,8 +124,7 @@ def timed_runs(fn: Callable[[], None], device: torch.device, runs: int) -> list[
 
 def time_call(fn: Callable[[], None], device: torch.device, repeats: int) -> float:
     """Median wall-clock seconds of ``fn`` over ``repeats`` runs after one warm-up run."""
-    times = timed_runs(fn, device, repeats + 1)[1:]
-    return sorted(times)[len(times) // 2]
+    return statistics.median_high(timed_runs(fn, device, repeats + 1)[1:])
 
 
 def peak_rss_bytes() -> int:
@@ -239,6 +225,5 @@ def train_step_worker(spec: dict) -> dict:
     step = make_train_step(spec)
     times = timed_runs(step, device, int(spec["steps"]) + 1)
     peak_gpu = int(torch.cuda.max_memory_allocated(device)) if device.type == "cuda" else 0
-    rest = sorted(times[1:])
-    return {"first": times[0], "seconds": rest[len(rest) // 2], "rss_bytes": peak_rss_bytes(),
+    return {"first": times[0], "seconds": statistics.median_high(times[1:]), "rss_bytes": peak_rss_bytes(),
             "gpu_peak_bytes": peak_gpu, "params": step.n_params}  # type: ignore[attr-defined]

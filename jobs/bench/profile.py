@@ -1,7 +1,6 @@
-"""``sray bench profile``: ``torch.profiler`` of the paper-config training step and of a whole-image render (the demo's
-24+24-sample model), their top operators as tables of the "Profiles" section of ``docs/benchmarks.md`` per device,
-each replaced when profiled again, so the decisions in ``docs/performance.md`` are read off a profile; and the levers
-those profiles point at, timed (``levers``)."""
+"""``sray bench profile``: the top operators of the paper-config training step and of a whole-image render (the demo's
+24+24-sample model) under ``torch.profiler``, as docs/benchmarks.md's "Profiles" tables per device (each replaced
+when profiled again; docs/performance.md's decisions are read off them), and the levers they point at (``levers``)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
-"""``sray bench speed-accuracy`` as a command: the settings measured on one checkpoint or several (a recipe's seeds),
-other registered methods' rows (``--methods``) beside S-Ray's row of their inputs, the default-render rule applied to
-each checkpoint's S-Ray rows and to their mean, chart and tables written into docs/benchmarks.md and logged. The
-default set fills one table of the section, a run of chosen settings (``--settings``) the other."""
+"""``sray bench speed-accuracy``: the settings on one checkpoint or several (a recipe's seeds), other methods' rows
+(``--methods``), the default-render rule per checkpoint and on their mean, chart and tables into docs/benchmarks.md
+(the default set fills one table, a run of ``--settings`` the other) and logged."""
 
 from __future__ import annotations
 
@@ -154,9 +153,7 @@ def chart(rows: list[dict], path: Path, protocol: str) -> Path:
     ax.scatter([], [], color=FULL, label="S-Ray, full render")
     for style in others.values():
         ax.scatter([], [], color=style.color, marker=style.marker, label=style.label)
-    ax.set_xscale("log")
-    ax.set_xlabel("CPU seconds per view (log scale; this process, all threads)")
-    ax.set_ylabel("mIoU (%)")
+    ax.set(xscale="log", xlabel="CPU seconds per view (log scale; this process, all threads)", ylabel="mIoU (%)")
     ax.grid(True, which="both", alpha=0.3)
     fig.legend(*ax.get_legend_handles_labels(), loc="lower left", bbox_to_anchor=(0.655, 0.1), fontsize=8)
     key = [f"{i:>2}  {r['name']} ({inputs_name(r['inputs'])}): {r['miou']:.2f}%, {r['s_per_view']:.2f} CPU s"

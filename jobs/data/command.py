@@ -97,7 +97,7 @@ def _check(args: argparse.Namespace) -> int:
         print(f"{len(problems)} problem{'s' * (len(problems) != 1)} in {len(by_file)} file{'s' * (len(by_file) != 1)}")
         return 1
     scene_files = [args.path / "scene.json"] if (args.path / "scene.json").exists() else \
-        [args.path / name / "scene.json" for name in _scene_names(args.path)]
+        [p / "scene.json" for p in list_scenes(args.path) if not p.name.startswith(".")]
     metas = [json.loads(f.read_text()) for f in scene_files]
     n_views = sum(len(m["view_ids"]) for m in metas)
     unlabelled = sum(m.get("labelled", True) is False for m in metas)
@@ -105,10 +105,6 @@ def _check(args: argparse.Namespace) -> int:
     print(f"OK: {len(scene_files)} scene{'s' * (len(scene_files) != 1)}{note}, {n_views} views in {args.path}, "
           "no problems")
     return 0
-
-
-def _scene_names(root: Path) -> list[str]:
-    return [p.name for p in list_scenes(root) if not p.name.startswith(".")]
 
 
 def register_shard(verbs: argparse._SubParsersAction) -> None:

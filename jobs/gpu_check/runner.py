@@ -1,6 +1,6 @@
-"""``sray gpu-check``: the CUDA path checked stage by stage (each a ``CheckContext -> StageResult`` function of a
-``stage_*`` module), the report saved after every stage so a run resumes. A stage that raises is recorded as failed
-and the next one runs. On a GPU the report becomes the "GPU check" section of docs/benchmarks.md for that device."""
+"""``sray gpu-check``: the stages (``CheckContext -> StageResult`` functions of the ``stage_*`` modules) in order, the
+report saved after each so a run resumes; a stage that raises is recorded as failed. On a GPU the report becomes the
+"GPU check" section of docs/benchmarks.md for that device."""
 
 from __future__ import annotations
 

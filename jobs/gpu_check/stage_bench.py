@@ -1,6 +1,5 @@
-"""Stages ``bench`` (``sray bench model`` on this device and the time to render one whole view) and ``profile``
-(``sray bench profile``: the fast path's training step in fp32 and bf16 and a whole-image render; on a GPU the full
-tables also go into the "Profiles" section of ``docs/benchmarks.md``)."""
+"""Stages ``bench`` (``sray bench model`` and one whole-view render's time) and ``profile`` (``sray bench profile`` of
+the fast path's step in fp32 and bf16 and of a render; on a GPU also into docs/benchmarks.md's "Profiles")."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""Stage ``fleet``: the finetune fleet with fractional GPUs, as ``sray finetune-fleet`` runs it: one S-Ray scene task
-alone on the GPU, then ``SHARING`` scenes with each of ``METHODS``, ``SHARING`` tasks at once (``1 / SHARING`` of the
-GPU each): training seconds per scene against the task alone, the fleet's wall time, each task's peak GPU memory."""
+"""Stage ``fleet``: ``sray finetune-fleet`` with fractional GPUs: one S-Ray task alone, then ``SHARING`` scenes x
+``METHODS`` with ``SHARING`` tasks at once: seconds per scene against alone, fleet wall time, peak GPU memory."""
 
 from __future__ import annotations
 
@@ -70,8 +69,7 @@ def _row(name: str, share: int, wall: float, results: list) -> list[str]:
 
 def run(ctx: CheckContext) -> StageResult:
     """One task alone, then ``SHARING`` tasks sharing the device; every task must finish."""
-    skipped = skipped_without(FULL_STACK, "the fleet stage needs the full stack")
-    if skipped:
+    if skipped := skipped_without(FULL_STACK, "the fleet stage needs the full stack"):
         return skipped
     from sray.platform.eval.segmenter import segmenter_from_checkpoint
 

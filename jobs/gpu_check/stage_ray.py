@@ -1,17 +1,17 @@
-"""Stage ``ray``: what a user does first on a GPU, through the ``sray`` commands themselves, on procedural shards:
-``sray train`` of the GPU recipe (shortened) with one worker, rank 0 killed half-way (the fault hook) and the job
-resumed to its last step; ``sray eval`` and ``sray render`` with the trained checkpoint; and two workers asking for
-one GPU between them, refused before Ray starts (NCCL refuses two ranks on one GPU)."""
+"""Stage ``ray``: a user's first GPU run through the ``sray`` commands on procedural shards: ``sray train`` (one worker,
+rank 0 killed half-way by the fault hook, resumed), ``sray eval`` and ``sray render`` of its checkpoint, and two
+workers on one GPU refused before Ray starts (NCCL refuses two ranks on one GPU)."""
 
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
+from unittest import mock
 
 from sray.data_tools.shards.manifest import unseen_scenes
 from sray.data_tools.synth.world import World, make_world
-from sray.jobs.bench.probes import env_var
 from sray.platform.common.fault_hook import ENV_VAR, KILL_MARKER
 from sray.platform.config.recipes import get_recipe
 from sray.platform.train.inputs import InputError
@@ -51,15 +51,14 @@ def _killed_and_resumed(ctx: CheckContext, arguments: list[str]) -> tuple[int, f
     from sray.jobs.cli import main
 
     start = time.perf_counter()
-    with env_var(ENV_VAR, f"train.kill_at_step={max(2, _steps(ctx) // 2)}"):
+    with mock.patch.dict(os.environ, {ENV_VAR: f"train.kill_at_step={max(2, _steps(ctx) // 2)}"}):
         code = main(arguments)
     return code, time.perf_counter() - start
 
 
 def run(ctx: CheckContext) -> StageResult:
     """Train (killed and resumed), evaluate and render with the trained weights; refuse a shared GPU."""
-    skipped = skipped_without(FULL_STACK, "the Ray stage needs the full stack")
-    if skipped:
+    if skipped := skipped_without(FULL_STACK, "the Ray stage needs the full stack"):
         return skipped
     from sray.jobs.cli import main
     from sray.platform.checkpoints.folders import read_meta, resolve_checkpoint

@@ -1,6 +1,5 @@
-"""Stages ``training`` (the paper's model in fp32 and each low precision: steps/s, rays/s, peak memory, no non-finite
-step) and ``recipe`` (the hour recipe's model, its 2D-only warm-up then ray steps, on one synthetic but learnable
-batch: each phase's speed and a loss curve, ``<out>/recipe_curve.json``), through the shared ``TrainStep``."""
+"""Stages ``training`` (the paper's model per precision: steps/s, rays/s, peak memory, no non-finite step) and
+``recipe`` (the hour recipe's 2D warm-up then ray steps on one learnable batch: speed, ``<out>/recipe_curve.json``)."""
 
 from __future__ import annotations
 
@@ -134,8 +133,8 @@ def phase_curve(ctx: CheckContext, precision: str, steps: tuple[int, int], rays:
 
 
 def _phase_cells(points: list[dict[str, float]], rays: int, renders: bool) -> list[str]:
-    """steps/s and rays/s (median step after the phase's first, which holds allocation and kernel choice) and the
-    loss and ``sem_src`` from the phase's first to its last step."""
+    """steps/s and rays/s (median step after the phase's first, which holds allocation and kernel choice), loss and
+    ``sem_src`` from the phase's first to its last step."""
     timed = points[1:] or points
     per_step = sorted(p["seconds"] for p in timed)[len(timed) // 2]
     return [f"{1 / per_step:.2f}", f"{rays / per_step:.0f}" if renders else "-",

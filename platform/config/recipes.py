@@ -25,11 +25,9 @@ DEMO_STEPS = 600
 
 
 def synth_demo() -> TrainConfig:
-    """The demo's recipe: ``synth-cpu-hour`` scaled down to minutes on ``sray demo``'s world (19 training rooms,
-    160x120): ``synth-small``'s model, rays and sources trained the hour recipe's way (class-balanced semantic loss,
-    scenes interleaved, the source-view loss, a 2D warm-up of its first third), without view augmentation (not
-    measured at this length) and with full CRA (intra-only scored lower here and saved no CPU): study ``demo-recipe``
-    (docs/benchmarks.md). Its data order is the loader's default, chosen without scoring orders on any room."""
+    """``synth-cpu-hour`` scaled down to minutes on ``sray demo``'s world (19 training rooms, 160x120):
+    ``synth-small``'s model, rays and sources trained the hour recipe's way, without view augmentation (not measured
+    at this length), with full CRA (intra-only scored lower here): study ``demo-recipe`` (docs/benchmarks.md)."""
     cfg = synth_small()
     cfg.recipe = "synth-demo"
     cfg.model.lambda_src_sem = 1.0
@@ -47,15 +45,9 @@ jobs/studies/hour-recipe.yaml`` generates in the studies' default work folder.""
 
 def synth_cpu_hour() -> TrainConfig:
     """One hour of pretraining on 2 CPU cores, built to generalize rather than to memorize its rooms; each choice
-    won its arm in docs/studies/hour-recipe.md (``hour-intra-uncapped``, ``hour-warm2d``, ``hour-intra``).
-
-    A budget of 7,200 CPU seconds (both cores of a 2-core machine for an hour) ends the job; the 20,000-step cap lies
-    beyond it and only bounds the learning-rate schedule on a faster machine. 498 procedural rooms at 160x120
-    (``--set data.shards=DIR`` for another world); 2-8 sources from 12 ranked neighbours at a random share of their
-    resolution, with exposure, white-balance and noise jitter; class-balanced semantic loss; scenes interleaved step
-    by step with the source-view loss (trials ``source-loss-600``), which alone trains the first 1,500 steps (2D
-    warm-up); intra-view attention only. Its figures are the README's recipe card (``python -m sray.lab.publish``).
-    """
+    won its arm in docs/studies/hour-recipe.md. A budget of 7,200 CPU seconds (both cores of a 2-core machine for an
+    hour) ends the job; the 20,000-step cap only bounds the learning-rate schedule on a faster machine. Its figures
+    are the README's recipe card (``python -m sray.lab.publish``)."""
     return TrainConfig(
         recipe="synth-cpu-hour",
         model=SRayConfig(n_source=8, n_coarse=24, n_fine=24, attention="intra", lambda_src_sem=1.0),
@@ -71,10 +63,8 @@ def synth_cpu_hour() -> TrainConfig:
 
 
 def synth_gpu_minutes() -> TrainConfig:
-    """Minutes of pretraining on one GPU: ``synth-cpu-hour``'s model, losses, augmentation, world and protocol, at
-    4,096 rays per step in bf16 on one GPU worker, for 3,600 steps (about six minutes at the rate ``sray gpu-check``
-    measured on an H200, docs/gpu.md) instead of a CPU budget, its 2D warm-up scaled with the steps. ``sray
-    gpu-check``'s ``minutes`` stage generates the world, trains it and records its minutes and mIoU."""
+    """Minutes of pretraining on one GPU: ``synth-cpu-hour`` for 3,600 steps (about six minutes on an H200,
+    docs/gpu.md) instead of a CPU budget; ``sray gpu-check``'s ``minutes`` stage trains it and records the mIoU."""
     cfg = synth_cpu_hour()
     cfg.recipe = "synth-gpu-minutes"
     cfg.data.rays_per_batch, cfg.data.loader_workers = 4096, 6

@@ -31,8 +31,7 @@ UNSEEN_RULE = ("a pixel without prediction counts as an extra 'unseen' class tha
 """How every score counts an :data:`UNSEEN` pixel (:func:`unseen_as_class`)."""
 
 MODES = ("backward", "forward")
-"""Transfer geometries: ``backward`` (from a depth of the query: its ground truth, an oracle, or a rendered one) or
-``forward`` (source depth splatting)."""
+"""Transfer geometries (module doc)."""
 
 
 @dataclass(frozen=True)

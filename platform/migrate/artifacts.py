@@ -1,12 +1,11 @@
 """``sray migrate PATH``: find the stored artifacts of an earlier sray under PATH and convert them to today's format.
 
-It converts training configs (``config_formats``) in checkpoints, jobs' ``config.json`` and sweeps' ``sweep.json``
-(whose swept parameters are renamed or dropped too); a checkpoint whose ``meta.json`` is version 1 (up to 7734061)
-also gets its model keys (the oldest hold ``net.``-prefixed keys) and every counter (0, or NaN = unknown for the
-wall seconds of a checkpoint past step 0). A fleet's ``fleet.json`` written before trackers had names gets MLflow;
-Semantic-NeRF scene artifacts and 2D segmenter folders lose their removed settings. Everything is converted in
-memory first; only when every artifact converts is anything written, each file atomically, so a refusal leaves
-PATH as it was. An artifact already in today's format is left alone.
+Training configs (``config_formats``) in checkpoints, jobs' ``config.json`` and sweeps' ``sweep.json`` (swept
+parameters renamed or dropped too); a version-1 checkpoint (up to 7734061) also gets its model keys (the oldest hold
+``net.``-prefixed keys) and every counter (0, or NaN = unknown for the wall seconds past step 0); a ``fleet.json``
+without a tracker name gets MLflow; Semantic-NeRF scene artifacts and 2D segmenters lose removed settings. All is
+converted in memory first and written (atomically) only when everything converts, so a refusal leaves PATH as it
+was; an artifact already in today's format is left alone.
 """
 
 from __future__ import annotations

@@ -1,8 +1,6 @@
 """The stability suite's points as a study of the engine, completed launch after launch (``engine.run_missing``): one
-trial per point key under ``<out>/study/<preset>/``, run one after another in one process that loads the scenes and
-models once (:func:`suite_for`), ``definition.json`` refusing a changed preset or model (docs/stability.md,
-"Outputs").
-"""
+trial per point key under ``<out>/study/<preset>/``, run in turn in one process that loads scenes and models once
+(:func:`suite_for`); ``definition.json`` refuses a changed preset or model (docs/stability.md, "Outputs")."""
 
 from __future__ import annotations
 

@@ -4,8 +4,7 @@ early stops (ASHA, the wall-time budget) are requests the trial carries out itse
 (ASHA's rungs start empty). A training job's last report after a stop lacks the metric: Tune's strict check is off.
 
 A study completed launch after launch (``sray lab study``, ``sray stability``: :func:`run_missing`) runs, in each
-launch, only the trials without a result (errored ones again), as a new Tune experiment; the trials' records are the
-store, and a result an earlier harness stored elsewhere can be imported as a finished trial.
+launch, only the trials without a result (errored ones again) as a new Tune experiment; the records are the store.
 """
 
 from __future__ import annotations
@@ -94,10 +93,6 @@ class GracefulASHA(AsyncHyperBandScheduler):
         return TrialScheduler.CONTINUE
 
 
-def _point_text(point: Mapping[str, Any]) -> str:
-    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in point.items())
-
-
 class TrialLog(Callback):
     """The driver's record of results (``history.jsonl``), a line per result, the wall-time budget's stop requests."""
 
@@ -116,7 +111,9 @@ class TrialLog(Callback):
         if s.start_by and time.time() >= s.start_by:
             print(f"[{s.label}] {key} not started: no trial starts after the study's time limit", flush=True)
             return
-        print(f"[{s.label}] {key} started: {_point_text(self.plan.get(key, {}))}", flush=True)
+        point = self.plan.get(key, {}).items()
+        print(f"[{s.label}] {key} started: " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                                                         for k, v in point), flush=True)
 
     def on_trial_result(self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any],
                         **info: Any) -> None:
@@ -178,18 +175,6 @@ def run_study(plan: Mapping[str, Mapping[str, Any]], point_fn: PointFunction, se
     grid = tuner.fit()
     errors = {r.config["key"]: f"{type(r.error).__name__}: {r.error}" for r in grid if r.error is not None}
     return collect_outcomes(settings.folder, plan, errors, settings.time_attr)
-
-
-def import_result(study: Path, key: str, result: dict[str, Any], source: Path) -> bool:
-    """Record ``result``, read from ``source``, as the finished trial ``key`` unless it finished; True if imported."""
-    folder = trial_folder(study, key)
-    record = read_record(folder)
-    if record.outcome == FINISHED:
-        return False
-    folder.mkdir(parents=True, exist_ok=True)
-    write_record(folder, TrialRecord(launches=record.launches, outcome=FINISHED, result=result,
-                                     imported=str(source)))
-    return True
 
 
 def missing(study: Path, plan: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:

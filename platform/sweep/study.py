@@ -46,7 +46,7 @@ class TrialRecord:
     result: dict[str, Any] | None = None
     """What the point function returned (a JSON-able dict); None when nothing."""
     imported: str = ""
-    """The file an imported result was read from ('' when the trial computed it)."""
+    """The file an earlier harness imported the result from ('' otherwise; nothing imports now)."""
 
 
 def read_record(folder: Path) -> TrialRecord:

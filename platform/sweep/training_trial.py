@@ -34,17 +34,13 @@ def job_name(sweep: str, key: str) -> str:
     return f"{sweep}-{key}"
 
 
-def _text(value: Any) -> str:
-    return repr(value) if isinstance(value, float) else str(value)
-
-
 def trial_config(base: TrainConfig, point: Mapping[str, Any], name: str = "") -> TrainConfig:
     """``base`` with the point's values set (a copy), the job named ``name`` when given; :class:`SpecError` naming
     the parameter a value breaks."""
     cfg = copy.deepcopy(base)
     for path, value in point.items():
         try:
-            apply_override(cfg, f"{path}={_text(value)}")
+            apply_override(cfg, f"{path}={value!r}" if isinstance(value, float) else f"{path}={value}")
         except ValueError as e:
             raise SpecError(f"sweep parameter {path}: {e}") from None
     if name:
