@@ -107,3 +107,31 @@ def test_a_trial_stores_the_fleet_and_the_ceilings_as_the_product_and_the_lab_me
     assert f"lr-2x | test rooms after a per-room S-Ray finetune | 0 | {50.0 - fleet['miou']:+.2f}" in text
     row_s = ceilings["rows"]["s"]["miou"]
     assert "## Ceilings" in text and f"s | S-Ray zero-shot render | no | {row_s:.2f} (1) | {row_s:.2f} (1)\n" in text
+
+
+def test_a_rerun_trial_scores_only_what_its_stopped_run_left_and_a_new_protocol_scores_again(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tiny_shards: Path,  # noqa: F811
+        tiny_checkpoint: Path, mlflow_uri: str, one_thread: None) -> None:  # noqa: F811
+    text = SPEC.replace("evaluations: [zero_shot, validation, fleet, ceilings]", "evaluations: [zero_shot, validation]")
+    text = text.split("fleet: {")[0] + "calibration: {stride: 4}\neval: {sources: 4, confidence: 0.9}\n"
+    spec = load_study(_spec(tmp_path, text))
+    out, calls = tmp_path / "out" / "evals", []
+    evaluate, calibrate = trial.evaluate_checkpoint, trial.calibrate
+    monkeypatch.setattr(trial, "make_world", lambda world, root, progress: tiny_shards)
+    monkeypatch.setattr(trial, "train", lambda cfg: tiny_checkpoint)
+    monkeypatch.setattr(trial, "evaluate_checkpoint",
+                        lambda *a, **kw: calls.append(a[3].parent.name) or evaluate(*a, **kw))
+    monkeypatch.setattr(trial, "calibrate", lambda *a: calls.append("calibration") or calibrate(*a))
+    first = trial.run_trial(spec, "base", 0, out, mlflow_uri)
+    assert calls == ["calibration", "zero_shot", "validation"]
+
+    (out / "eval" / "validation" / "evals-base-s0" / "metrics.json").unlink()  # stopped while scoring validation
+    calls.clear()
+    assert trial.run_trial(spec, "base", 0, out, mlflow_uri)["metrics"] == first["metrics"]
+    assert calls == ["validation"]
+
+    calls.clear()  # the same checkpoint at another confidence: same temperature fit, new scores
+    other = load_study(_spec(tmp_path, text.replace("confidence: 0.9", "confidence: 0.5")))
+    assert trial.run_trial(other, "base", 0, out, mlflow_uri)["metrics"]["zero_shot"]["protocol"] != \
+        first["metrics"]["zero_shot"]["protocol"]
+    assert calls == ["zero_shot", "validation"]

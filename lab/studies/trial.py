@@ -8,7 +8,8 @@ appearance- and geometry-shifted ones, ``zero_shot_appearance`` and ``zero_shot_
 first training rooms (``held_out``) and the validation rooms (``validation``: rooms no result is reported on, where
 arms are chosen). With ``calibration`` the fast rule's temperature is first fitted on the validation rooms and every
 split is scored at it (the protocol names it). With ``fleet`` the checkpoint is also finetuned per test room, with
-``ceilings`` its ceiling rows are scored (:mod:`sray.lab.studies.fleet_ceilings`).
+``ceilings`` its ceiling rows are scored (:mod:`sray.lab.studies.fleet_ceilings`). A rerun reuses the calibration
+and the splits a stopped trial already scored (:mod:`sray.lab.studies.resume`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import Any
 from sray.data_tools.synth.world import World, make_world
 from sray.lab.studies.results import FORMAT, write_result
 from sray.lab.studies.fleet_ceilings import ceilings_metrics, fleet_metrics
+from sray.lab.studies.resume import stored_calibration, stored_report
 from sray.lab.studies.spec import ROOM_SPLITS, Arm, StudySpec, assignments, load_study
 from sray.model.fast_render import FastRender
 from sray.platform.checkpoints.folders import CheckpointManager, load_checkpoint, read_meta
@@ -31,7 +33,7 @@ from sray.platform.common.machine import describe_machine
 from sray.platform.config.recipes import get_recipe
 from sray.platform.config.train_config import CONFIG_FILE, TrainConfig, apply_override, load_job_config
 from sray.platform.eval.eval_model import checkpoint_model
-from sray.platform.eval.zero_shot import (calibrate, evaluate_checkpoint, select_scenes, training_scenes,
+from sray.platform.eval.zero_shot import (METRICS_FILE, calibrate, evaluate_checkpoint, select_scenes, training_scenes,
                                           write_json_atomic)
 from sray.platform.sweep.study import TrialContext
 from sray.platform.train.launcher import budget_spent, launch_training
@@ -138,15 +140,21 @@ def run_trial(spec: StudySpec, arm_name: str, seed: int, out: Path, tracking_uri
     rooms = evaluation_rooms(spec, shards, Path(out).parent)
     fast = None if spec.eval_fast is None else FastRender(pixel_stride=spec.eval_fast[0], confidence=spec.eval_fast[1])
     if spec.calibration_stride is not None:
-        fitted = calibrate(checkpoint_model(checkpoint, fast=fast), rooms["validation"][0], spec.eval_sources,
-                           spec.calibration_stride)
-        write_json_atomic(fitted, Path(out) / "eval" / "calibration" / f"{cfg.run.name}.json")
+        fitted_at = Path(out) / "eval" / "calibration" / f"{cfg.run.name}.json"
+        fitted = stored_calibration(fitted_at, checkpoint, rooms["validation"][0], spec.eval_sources,
+                                    spec.calibration_stride)
+        if fitted is None:
+            fitted = calibrate(checkpoint_model(checkpoint, fast=fast), rooms["validation"][0], spec.eval_sources,
+                               spec.calibration_stride)
+            write_json_atomic({**fitted, "checkpoint": str(checkpoint)}, fitted_at)
         fast = replace(fast, temperature=fitted["temperature"])
     metrics = {}
     for split, (folder, scenes) in rooms.items():
-        report = evaluate_checkpoint(checkpoint, folder, scenes, Path(out) / "eval" / split / cfg.run.name,
-                                     n_source=spec.eval_sources, tracking_uri=tracking_uri, experiment=EXPERIMENT,
-                                     progress=False, fast=fast)
+        out_dir = Path(out) / "eval" / split / cfg.run.name
+        report = stored_report(out_dir / METRICS_FILE, checkpoint, folder, scenes, spec.eval_sources, fast)
+        if report is None:
+            report = evaluate_checkpoint(checkpoint, folder, scenes, out_dir, n_source=spec.eval_sources,
+                                         tracking_uri=tracking_uri, experiment=EXPERIMENT, progress=False, fast=fast)
         metrics[split] = split_metrics(report, folder, scenes)
     if spec.fleet is not None:
         metrics["fleet"] = fleet_metrics(spec.fleet, checkpoint, *rooms["zero_shot"], Path(out) / "eval" / "fleet" /
