@@ -154,7 +154,7 @@ def refrigerator(rng: np.random.Generator) -> Piece:
 
 
 def door(rng: np.random.Generator, w: float, h: float) -> Piece:
-    """A plain or panelled door, a glazed door or a sliding plank door (a double door: ``content.double_door``)."""
+    """A plain or panelled door, a glazed door or a sliding plank door (a double door: ``templates.double_door``)."""
     return _pick(rng, [(0.6, lambda: fx.door(rng, w, h)), (0.25, lambda: tp.glazed_door(rng, w, h)),
                        (0.15, lambda: tp.plank_door(rng, w, h))])
 
