@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.readers.camera_models import COLMAP_MODELS
+from sray.data_tools.readers.common import read_file
 
 
 @dataclass(frozen=True)
@@ -124,11 +125,8 @@ def _read_bin(folder: Path) -> tuple[dict, dict, dict]:
 
 def _data_lines(path: Path) -> list[str]:
     """Lines of a text model file without comments (blank lines kept: an image's point line may be empty)."""
-    try:
-        return [line.strip() for line in path.read_text().splitlines() if not line.lstrip().startswith("#")]
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing; a COLMAP text model has cameras.txt, images.txt, "
-                                "points3D.txt") from None
+    text = read_file(path, "missing; a COLMAP text model has cameras.txt, images.txt, points3D.txt", text=True)
+    return [line.strip() for line in text.splitlines() if not line.lstrip().startswith("#")]
 
 
 def _read_txt(folder: Path) -> tuple[dict, dict, dict]:

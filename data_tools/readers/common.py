@@ -30,12 +30,17 @@ def numbered_files(folder: Path, pattern: str, suffixes: tuple[str, ...]) -> dic
     return dict(sorted(found.items()))
 
 
+def read_file(path: Path, missing: str = "missing", text: bool = False) -> bytes | str:
+    """The bytes (``text``: the text) of ``path``; FileNotFoundError "<path>: <missing>" when it is absent."""
+    try:
+        return path.read_text() if text else path.read_bytes()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: {missing}") from None
+
+
 def read_image(path: Path) -> np.ndarray:
     """Decode a PNG or JPEG without loss of bit depth (16-bit stays 16-bit; colour comes back RGB)."""
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing") from None
+    data = read_file(path)
     try:
         return decode_png(data, str(path))
     except ValueError:

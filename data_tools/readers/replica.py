@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import NYU40, SCANNET20, class_names
-from sray.data_tools.readers.common import (numbered_files, nyu40_to_label, read_depth_m, read_image, read_rgb8,
-                                            resample_nearest, resize_rgb, scale_intrinsics, select_frames)
+from sray.data_tools.readers.common import (numbered_files, nyu40_to_label, read_depth_m, read_file, read_image,
+                                            read_rgb8, resample_nearest, resize_rgb, scale_intrinsics, select_frames)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
 CLASS_FILE = "info_semantic.json"
@@ -60,10 +60,7 @@ def replica_intrinsics(hw: tuple[int, int]) -> np.ndarray:
 def read_class_table(path: Path) -> dict[int, str]:
     """Id -> name from ``info_semantic.json`` ({"classes": [{"id", "name"}]}), {"<id>": "<name>"} or an id/name TSV."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: class table missing; pass --classes with the scene's {CLASS_FILE}") from None
+    text = read_file(path, f"class table missing; pass --classes with the scene's {CLASS_FILE}", text=True)
     try:
         if path.suffix.lower() == ".json":
             data = json.loads(text)

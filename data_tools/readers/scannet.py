@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import class_names
-from sray.data_tools.readers.common import (check_principal_point, numbered_files, nyu40_to_label,
-                                            read_depth_m, read_image, read_rgb8, resample_nearest, resize_rgb,
+from sray.data_tools.readers.common import (check_principal_point, numbered_files, nyu40_to_label, read_depth_m,
+                                            read_file, read_image, read_rgb8, resample_nearest, resize_rgb,
                                             scale_intrinsics, select_frames)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
@@ -26,10 +26,7 @@ _FOLDER_FIX["label-filt"] = "unzip <scan>_2d-label-filt.zip into SRC (it holds l
 def read_label_tsv(tsv: Path) -> dict[int, int]:
     """Raw ScanNet label id -> NYU40 id (0 = none) from ``scannetv2-labels.combined.tsv``."""
     tsv = Path(tsv)
-    try:
-        text = tsv.read_text()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{tsv}: missing; pass --tsv with the path of ScanNet's {TSV_NAME}") from None
+    text = read_file(tsv, f"missing; pass --tsv with the path of ScanNet's {TSV_NAME}", text=True)
     rows = list(csv.reader(text.splitlines(), delimiter="\t"))
     if not rows:
         raise ValueError(f"{tsv}: empty; expected ScanNet's {TSV_NAME}")
