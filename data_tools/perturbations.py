@@ -1,6 +1,5 @@
-"""Seeded perturbations of posed views, each in its own unit (in its docstring): what ``sray stability`` sweeps and
-what training may use as augmentation. Every function is pure and draws only from the generator it is given, so a
-(seed, level) pair always produces the same perturbation."""
+"""Seeded perturbations of posed views (units in each docstring), swept by ``sray stability``, usable as augmentation;
+pure functions drawing only from the given generator: a (seed, level) pair always gives one perturbation."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
-"""Reader: a nerfstudio capture (``transforms.json`` as ``ns-process-data`` writes it, images, optional depth maps
-and ``ply_file_path`` points), without labels. ``transform_matrix`` is an OpenGL camera-to-world:
-``c2w_opencv = transform_matrix @ diag(1, -1, -1, 1)``; ``applied_transform`` is only recorded. Frames in
-``file_path`` order. Conventions: docs/capture.md."""
+"""Reader: a nerfstudio capture (``ns-process-data``'s ``transforms.json``, images, optional depth maps and
+``ply_file_path`` points), without labels; ``c2w_opencv = transform_matrix @ diag(1, -1, -1, 1)`` (OpenGL axes),
+``applied_transform`` only recorded; frames in ``file_path`` order. Conventions: docs/capture.md."""
 
 from __future__ import annotations
 

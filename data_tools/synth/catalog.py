@@ -1,7 +1,6 @@
-"""The catalog of a room's furniture: room recipes ask for "a table" or "a chair"; the catalog draws the shape
-template that builds it (weights favour the common shapes) and stands clutter on a usable top: cups, vases, bottles,
-book stacks, boxes, plants and lamps, ignore-labelled as ScanNet's own small objects are (real tables are never bare,
-and what stands on a table is not the table)."""
+"""The catalog of a room's furniture: recipes ask for "a table" or "a chair", the catalog draws a shape template
+(weights favour common shapes) and stands clutter on usable tops (cups, vases, bottles, books, boxes, plants, lamps),
+ignore-labelled like ScanNet's small objects (real tables are never bare)."""
 
 from __future__ import annotations
 
