@@ -102,8 +102,7 @@ def table(rng: np.random.Generator, w: float, d: float, h: float | None = None) 
     options = [(0.5, lambda: fu.table(rng, w, d, h)), (0.25, lambda: tp.pedestal_table(rng, w, d, h))]
     if w >= 0.8:
         options.append((0.25, lambda: tp.trestle_table(rng, w, d, h)))
-    piece = _pick(rng, options)
-    return _cluttered(rng, piece, CLS["table"], 0.7, 4)
+    return _cluttered(rng, _pick(rng, options), CLS["table"], 0.7, 4)
 
 
 def chair(rng: np.random.Generator) -> Piece:
@@ -132,8 +131,7 @@ def cabinet(rng: np.random.Generator, w: float, d: float, h: float) -> Piece:
     options = [(0.6, lambda: fu.cabinet(rng, w, d, h))]
     if h < 1.4:
         options.append((0.4, lambda: tp.drawer_chest(rng, w, d, h)))
-    piece = _pick(rng, options)
-    return _cluttered(rng, piece, CLS["cabinet"], 0.6 if h < 1.3 else 0.0, 3)
+    return _cluttered(rng, _pick(rng, options), CLS["cabinet"], 0.6 if h < 1.3 else 0.0, 3)
 
 
 def desk(rng: np.random.Generator, w: float) -> Piece:
