@@ -1,11 +1,10 @@
-"""COLMAP sparse models (``cameras``, ``images``, ``points3D``) in text (``.txt``) or binary (``.bin``) form.
-
-Binary (little-endian): ``cameras.bin`` = uint64 count, per camera int32 id, int32 model id, uint64 width, height,
-float64 params[n(model)]; ``images.bin`` = uint64 count, per image int32 id, float64 qw qx qy qz tx ty tz, int32
-camera id, a NUL-terminated name, uint64 n2D, n2D x (float64 x, y, int64 point3D id; -1 = none); ``points3D.bin``
-= uint64 count, per point uint64 id, float64 x y z, uint8 r g b, float64 error, uint64 track length, length x
-(int32 image id, int32 point2D index). Text files hold the same fields, one camera / point per line, two lines per
-image, ``#`` comments. A pose (q, t) maps world to camera, x_cam = R(q) x_world + t, in OpenCV's axes."""
+"""COLMAP sparse models (``cameras``, ``images``, ``points3D``) in text (``.txt``) or binary (``.bin``) form. Binary
+(little-endian): ``cameras.bin`` = uint64 count, per camera int32 id, int32 model id, uint64 width, height, float64
+params[n(model)]; ``images.bin`` = uint64 count, per image int32 id, float64 qw qx qy qz tx ty tz, int32 camera id, a
+NUL-terminated name, uint64 n2D, n2D x (float64 x, y, int64 point3D id; -1 = none); ``points3D.bin`` = uint64 count, per
+point uint64 id, float64 x y z, uint8 r g b, float64 error, uint64 track length, length x (int32 image id, int32 point2D
+index). Text files hold the same fields, one camera / point per line, two lines per image, ``#`` comments. A pose (q, t)
+maps world to camera, x_cam = R(q) x_world + t, in OpenCV's axes."""
 
 from __future__ import annotations
 
