@@ -52,8 +52,7 @@ def motion_blur(rgb: np.ndarray, length_px: int, rng: np.random.Generator) -> np
     if length_px == 1:
         return rgb.copy()
     kernel = motion_blur_kernel(length_px, float(rng.uniform(0.0, np.pi)))
-    blurred = cv2.filter2D(rgb.astype(np.float64), -1, kernel, borderType=cv2.BORDER_REFLECT)
-    return _to_uint8(blurred)
+    return _to_uint8(cv2.filter2D(rgb.astype(np.float64), -1, kernel, borderType=cv2.BORDER_REFLECT))
 
 
 def exposure(rgb: np.ndarray, ev: float) -> np.ndarray:
