@@ -1,6 +1,5 @@
-"""Seeded perturbations of posed views, each in its own unit (in its docstring): what ``sray stability`` sweeps and
-what training may use as augmentation. Every function is pure and draws only from the generator it is given, so a
-(seed, level) pair always produces the same perturbation."""
+"""Seeded perturbations of posed views (units in each docstring), swept by ``sray stability``, usable as augmentation;
+pure functions drawing only from the given generator: a (seed, level) pair always gives one perturbation."""
 
 from __future__ import annotations
 
@@ -53,8 +52,7 @@ def motion_blur(rgb: np.ndarray, length_px: int, rng: np.random.Generator) -> np
     if length_px == 1:
         return rgb.copy()
     kernel = motion_blur_kernel(length_px, float(rng.uniform(0.0, np.pi)))
-    blurred = cv2.filter2D(rgb.astype(np.float64), -1, kernel, borderType=cv2.BORDER_REFLECT)
-    return _to_uint8(blurred)
+    return _to_uint8(cv2.filter2D(rgb.astype(np.float64), -1, kernel, borderType=cv2.BORDER_REFLECT))
 
 
 def exposure(rgb: np.ndarray, ev: float) -> np.ndarray:

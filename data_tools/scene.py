@@ -93,8 +93,7 @@ class Scene:
     @classmethod
     def in_memory(cls, meta: SceneMeta, views: list[View]) -> Scene:
         """A scene backed by a list of already-loaded views."""
-        by_id = {v.view_id: v for v in views}
-        return cls(meta=meta, read_view=by_id.__getitem__)
+        return cls(meta=meta, read_view={v.view_id: v for v in views}.__getitem__)
 
 
 def source_pool(meta: SceneMeta) -> list[str]:

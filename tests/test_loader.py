@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from sray.data_tools.loader.sample_types import EvalSample, TrainSample
 from sray.data_tools.loader.shard_loader import make_eval_samples, make_train_loader, slot_scenes, worker_batches
-from sray.data_tools.loader.views import SceneCache, StoredView
+from sray.data_tools.loader.views import StoredView
 from sray.data_tools.png import encode_png
 from sray.data_tools.scene import source_pool
 from sray.data_tools.scene_folder import read_scene
@@ -169,16 +169,6 @@ def test_16_bit_pngs_decode_without_loss() -> None:
                       np.eye(3), np.eye(4), Neighbours([], []), "test")
     np.testing.assert_array_equal(view.label(), label)
     np.testing.assert_array_equal(view.depth(), depth_mm.astype(np.float32) / 1000.0)
-
-
-def test_scene_cache_is_bounded_and_least_recently_used() -> None:
-    """Capacity 2 never holds 3 scenes and evicts the least recently used one."""
-    loaded = []
-    cache = SceneCache(2, lambda s: loaded.append(s) or {})
-    for s in ["a", "b", "a", "c", "b", "a"]:
-        cache.get(s)
-        assert len(cache) <= 2
-    assert loaded == ["a", "b", "c", "b", "a"]
 
 
 def test_bad_arguments_are_refused(data: tuple[Path, Path]) -> None:

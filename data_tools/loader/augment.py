@@ -1,14 +1,11 @@
-"""Training-sample augmentation that teaches generalization (every option off by default).
-
-* **colour jitter per source view** (exposure, white balance, tone curve, saturation, noise: the fields say how
-  much): the sources of one sample disagree in photometry while the query's targets stay as they are;
-* **random source-view count and neighbour subsets**: m sources, m uniform in [``min_source``, n_source], among
-  the first k ranked neighbours, k uniform in [m, top_k] (near-duplicate or wide-baseline sets);
-* **random source resolution**: all sources of a sample are resized by one factor drawn in [1 - ``source_scale``, 1]
-  (a Gaussian prefilter against aliasing, then bilinear sampling, which keeps pixel centres exact; OpenCV's area
-  filter shifts them by up to 0.05 pixel at non-integer factors), their intrinsics by the pixel-centre rule.
-
-With every option off nothing is drawn from the sample's generator: samples are bit-identical to no augmentation."""
+"""Training-sample augmentation that teaches generalization, every option off by default: colour jitter per source view
+(exposure, white balance, tone curve, saturation, noise; the fields say how much), so a sample's sources disagree in
+photometry while the query's targets stay as they are; random source-view count and neighbour subsets (m sources, m
+uniform in [``min_source``, n_source], among the first k ranked neighbours, k uniform in [m, top_k]: near-duplicate or
+wide-baseline sets); random source resolution (all sources of a sample resized by one factor in [1 - ``source_scale``,
+1]: a Gaussian prefilter against aliasing, then bilinear sampling, which keeps pixel centres exact where OpenCV's area
+filter shifts them by up to 0.05 pixel at non-integer factors; intrinsics by the pixel-centre rule). With every option
+off nothing is drawn from the sample's generator: samples are bit-identical to no augmentation."""
 
 from __future__ import annotations
 

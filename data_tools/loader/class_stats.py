@@ -32,40 +32,43 @@ def count_pixels(labels: Iterable[np.ndarray], n_classes: int) -> np.ndarray:
     return counts
 
 
+def _scene_counts(scenes: Iterable[tuple[str, list[str], Iterable[np.ndarray]]], missing: str
+                  ) -> tuple[list[str], dict[str, np.ndarray]]:
+    """(class names, {scene: counts}) of ``(scene, class names, labels read lazily)``; ValueError(missing) if none."""
+    names: list[str] = []
+    per_scene: dict[str, np.ndarray] = {}
+    for scene, class_names, labels in scenes:
+        names = names or list(class_names)
+        per_scene[scene] = count_pixels(labels, len(names))
+    if not per_scene:
+        raise ValueError(missing)
+    return names, per_scene
+
+
 def dataset_pixel_counts(dataset_dir: Path, roles: tuple[str, ...] = ("train", "test")
                          ) -> tuple[list[str], dict[str, np.ndarray]]:
     """(class names, {scene: counts}) of every scene of ``roles`` in a dataset folder (sray layout)."""
-    names: list[str] | None = None
-    per_scene: dict[str, np.ndarray] = {}
-    for scene_dir in list_scenes(Path(dataset_dir)):
-        meta = SceneMeta.from_json(json.loads((scene_dir / "scene.json").read_text()))
-        if meta.role not in roles:
-            continue
-        names = names or list(meta.class_names)
-        paths = [scene_dir / "label" / f"{v}.png" for v in meta.view_ids]
-        per_scene[meta.name] = count_pixels((decode_png(p.read_bytes(), str(p)) for p in paths), len(names))
-    if names is None:
-        raise ValueError(f"{dataset_dir}: no scene with role in {roles}; is it a dataset written by `sray data synth`?")
-    return names, per_scene
+    def scenes():
+        for scene_dir in list_scenes(Path(dataset_dir)):
+            meta = SceneMeta.from_json(json.loads((scene_dir / "scene.json").read_text()))
+            if meta.role in roles:
+                paths = [scene_dir / "label" / f"{v}.png" for v in meta.view_ids]
+                yield meta.name, meta.class_names, (decode_png(p.read_bytes(), str(p)) for p in paths)
+    return _scene_counts(scenes(), f"{dataset_dir}: no scene with role in {roles}; is it a dataset written by "
+                                   "`sray data synth`?")
 
 
 def shard_pixel_counts(shards_dir: Path, roles: tuple[str, ...] = ("train",)
                        ) -> tuple[list[str], dict[str, np.ndarray]]:
     """(class names, {scene: counts}) of every scene of ``roles`` in a shard folder, over the views the training
     loader reads (``scene.source_pool``), so class weights never read a held-out or test view's labels."""
-    manifest = read_manifest(Path(shards_dir))
-    names: list[str] | None = None
-    per_scene: dict[str, np.ndarray] = {}
-    for scene, entry in sorted(manifest.scenes.items()):
-        if entry.meta.get("role", "train") not in roles:
-            continue
-        names = names or list(entry.meta["class_names"])
-        views = read_scene_views(Path(shards_dir), entry)
-        pool = source_pool(SceneMeta.from_json(entry.meta))
-        per_scene[scene] = count_pixels((views[v].label() for v in pool), len(names))
-    if names is None:
-        raise ValueError(f"{shards_dir}/manifest.json: no scene with role in {roles}")
-    return names, per_scene
+    def scenes():
+        for scene, entry in sorted(read_manifest(Path(shards_dir)).scenes.items()):
+            if entry.meta.get("role", "train") in roles:
+                views = read_scene_views(Path(shards_dir), entry)
+                pool = source_pool(SceneMeta.from_json(entry.meta))
+                yield scene, entry.meta["class_names"], (views[v].label() for v in pool)
+    return _scene_counts(scenes(), f"{shards_dir}/manifest.json: no scene with role in {roles}")
 
 
 def balanced_weights(counts: np.ndarray, mode: str, max_ratio: float = 10.0) -> list[float]:

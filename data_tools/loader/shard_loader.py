@@ -5,6 +5,7 @@ through ``accelerator.prepare``: it re-shards iterable datasets and drops sample
 from __future__ import annotations
 
 from collections.abc import Iterator
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 from sray.data_tools.loader.augment import Augmentation
 from sray.data_tools.loader.sample_types import EvalSample, TrainSample
 from sray.data_tools.loader.samples import eval_sample, ranked_candidates, train_sample
-from sray.data_tools.loader.views import SceneCache, read_scene_views
+from sray.data_tools.loader.views import read_scene_views
 from sray.data_tools.scene import SceneMeta, source_pool
 from sray.data_tools.shards.manifest import Manifest, read_manifest, verify_shards
 
@@ -68,11 +69,11 @@ class TrainTuples(IterableDataset):
         slot, n_slots = self.rank * n_workers + worker, self.world_size * n_workers
         assigned = slot_scenes(self.scenes, self.pools, slot, n_slots, np.random.default_rng([self.seed, epoch]))
         rng = np.random.default_rng([self.seed, epoch, self.rank, worker, 1])
-        cache = SceneCache(self.cache_scenes, lambda s: read_scene_views(self.shards_dir, self.manifest.scenes[s]))
+        cache = lru_cache(self.cache_scenes)(lambda s: read_scene_views(self.shards_dir, self.manifest.scenes[s]))
         remaining = worker_batches(self.batches, worker, n_workers)
         while remaining > 0:
             scene, queries = assigned[rng.integers(len(assigned))]
-            views, meta = cache.get(scene), self.metas[scene]
+            views, meta = cache(scene), self.metas[scene]
             allowed = set(self.pools[scene])
             for _ in range(min(self.visit_samples, remaining)):
                 query_id = queries[rng.integers(len(queries))]
@@ -140,9 +141,9 @@ def make_train_loader(shards_dir: Path, *, n_source: int, top_k: int, rays_per_b
     if not 1 <= n_source <= top_k <= int(manifest.neighbours["k"]):
         raise ValueError(f"need 1 <= n_source ({n_source}) <= top_k ({top_k}) <= the shards' neighbours per view "
                          f"({manifest.neighbours['k']}); re-shard with a larger --neighbours or lower top_k")
-    if rays_per_batch < 1 or batches_per_epoch < 1 or num_workers < 0:
-        raise ValueError(f"rays_per_batch ({rays_per_batch}) and batches_per_epoch ({batches_per_epoch}) must be "
-                         f">= 1, num_workers ({num_workers}) >= 0")
+    if rays_per_batch < 1 or batches_per_epoch < 1 or cache_scenes < 1 or num_workers < 0:
+        raise ValueError(f"rays_per_batch ({rays_per_batch}), batches_per_epoch ({batches_per_epoch}) and "
+                         f"cache_scenes ({cache_scenes}) must be >= 1, num_workers ({num_workers}) >= 0")
     dataset = TrainTuples(Path(shards_dir), manifest, names, n_source=n_source, top_k=top_k,
                           rays_per_batch=rays_per_batch, batches_per_epoch=batches_per_epoch, rank=rank,
                           world_size=world_size, seed=seed, cache_scenes=cache_scenes, visit_samples=visit_samples,

@@ -1,12 +1,10 @@
 """Reading one scene's views out of its shards into memory, and decoding them without loss. A loader worker keeps
-the ENCODED views of at most a few scenes (:class:`SceneCache`) and decodes only the images a sample needs, so memory
+the ENCODED views of at most a few scenes (an LRU cache) and decodes only the images a sample needs, so memory
 stays near the scenes' PNG bytes (about 0.1-0.2 MB per 320x240 view) whatever the dataset."""
 
 from __future__ import annotations
 
 import json
-from collections import OrderedDict
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -79,27 +77,3 @@ def read_scene_views(shards_dir: Path, entry: SceneEntry) -> dict[str, StoredVie
         raise ValueError(f"{entry.shards}: views {missing[:5]} of scene {scene!r} are missing from its shards; "
                          "re-run `sray data shard` and `sray data shard --verify`")
     return views
-
-
-class SceneCache:
-    """Least-recently-used cache of at most ``capacity`` scenes' encoded views (one per loader worker)."""
-
-    def __init__(self, capacity: int, load: Callable[[str], dict[str, StoredView]]) -> None:
-        if capacity < 1:
-            raise ValueError(f"cache capacity must be >= 1 scene, got {capacity}")
-        self.capacity, self.load = capacity, load
-        self._scenes: OrderedDict[str, dict[str, StoredView]] = OrderedDict()
-
-    def get(self, scene: str) -> dict[str, StoredView]:
-        """The scene's views, reading its shards on a miss and evicting the least recently used."""
-        if scene in self._scenes:
-            self._scenes.move_to_end(scene)
-            return self._scenes[scene]
-        while len(self._scenes) >= self.capacity:
-            self._scenes.popitem(last=False)
-        views = self._scenes[scene] = self.load(scene)
-        return views
-
-    def __len__(self) -> int:
-        """Scenes currently cached."""
-        return len(self._scenes)

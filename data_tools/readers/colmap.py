@@ -1,6 +1,6 @@
-"""Reader: a COLMAP capture (``sparse/0/{cameras,images,points3D}.{bin,txt}`` + ``images/``), without labels: poses
-inverted (``colmap_model.image_c2w``), cameras by ``camera_models.colmap_camera``, depth bounds from the points
-each image observes, scale from ``--scale``. Frames in image-name order. Conventions: docs/capture.md."""
+"""Reader: a COLMAP capture (``sparse/0/{cameras,images,points3D}.{bin,txt}`` + ``images/``), unlabelled: poses by
+``colmap_model.image_c2w``, cameras by ``camera_models.colmap_camera``, bounds from each image's points, scale from
+``--scale``, frames in name order (docs/capture.md)."""
 
 from __future__ import annotations
 

@@ -1,11 +1,10 @@
-"""COLMAP sparse models (``cameras``, ``images``, ``points3D``) in text (``.txt``) or binary (``.bin``) form.
-
-Binary (little-endian): ``cameras.bin`` = uint64 count, per camera int32 id, int32 model id, uint64 width, height,
-float64 params[n(model)]; ``images.bin`` = uint64 count, per image int32 id, float64 qw qx qy qz tx ty tz, int32
-camera id, a NUL-terminated name, uint64 n2D, n2D x (float64 x, y, int64 point3D id; -1 = none); ``points3D.bin``
-= uint64 count, per point uint64 id, float64 x y z, uint8 r g b, float64 error, uint64 track length, length x
-(int32 image id, int32 point2D index). Text files hold the same fields, one camera / point per line, two lines per
-image, ``#`` comments. A pose (q, t) maps world to camera, x_cam = R(q) x_world + t, in OpenCV's axes."""
+"""COLMAP sparse models (``cameras``, ``images``, ``points3D``) in text (``.txt``) or binary (``.bin``) form. Binary
+(little-endian): ``cameras.bin`` = uint64 count, per camera int32 id, int32 model id, uint64 width, height, float64
+params[n(model)]; ``images.bin`` = uint64 count, per image int32 id, float64 qw qx qy qz tx ty tz, int32 camera id, a
+NUL-terminated name, uint64 n2D, n2D x (float64 x, y, int64 point3D id; -1 = none); ``points3D.bin`` = uint64 count, per
+point uint64 id, float64 x y z, uint8 r g b, float64 error, uint64 track length, length x (int32 image id, int32 point2D
+index). Text files hold the same fields, one camera / point per line, two lines per image, ``#`` comments. A pose (q, t)
+maps world to camera, x_cam = R(q) x_world + t, in OpenCV's axes."""
 
 from __future__ import annotations
 
@@ -16,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.readers.camera_models import COLMAP_MODELS
+from sray.data_tools.readers.common import read_file
 
 
 @dataclass(frozen=True)
@@ -124,11 +124,8 @@ def _read_bin(folder: Path) -> tuple[dict, dict, dict]:
 
 def _data_lines(path: Path) -> list[str]:
     """Lines of a text model file without comments (blank lines kept: an image's point line may be empty)."""
-    try:
-        return [line.strip() for line in path.read_text().splitlines() if not line.lstrip().startswith("#")]
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing; a COLMAP text model has cameras.txt, images.txt, "
-                                "points3D.txt") from None
+    text = read_file(path, "missing; a COLMAP text model has cameras.txt, images.txt, points3D.txt", text=True)
+    return [line.strip() for line in text.splitlines() if not line.lstrip().startswith("#")]
 
 
 def _read_txt(folder: Path) -> tuple[dict, dict, dict]:

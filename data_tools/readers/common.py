@@ -4,6 +4,7 @@ covers [u - 0.5, u + 0.5), so resizing by ``s`` along an axis maps ``u' + 0.5 = 
 from __future__ import annotations
 
 import re
+from collections.abc import Callable, Container, Iterable
 from pathlib import Path
 
 import cv2
@@ -29,12 +30,17 @@ def numbered_files(folder: Path, pattern: str, suffixes: tuple[str, ...]) -> dic
     return dict(sorted(found.items()))
 
 
+def read_file(path: Path, missing: str = "missing", text: bool = False) -> bytes | str:
+    """The bytes (``text``: the text) of ``path``; FileNotFoundError "<path>: <missing>" when it is absent."""
+    try:
+        return path.read_text() if text else path.read_bytes()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: {missing}") from None
+
+
 def read_image(path: Path) -> np.ndarray:
     """Decode a PNG or JPEG without loss of bit depth (16-bit stays 16-bit; colour comes back RGB)."""
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing") from None
+    data = read_file(path)
     try:
         return decode_png(data, str(path))
     except ValueError:
@@ -55,6 +61,24 @@ def kept_view_ids(poses: dict[int, np.ndarray], frame_skip: int, src: Path, drop
     if not kept:
         raise ValueError(f"{src}: no usable frame (dropped: {dropped})")
     return {f"{frame:06d}": frame for frame in kept}
+
+
+def select_frames(src: Path, frames: Iterable[int], companions: dict[str, Container[int]],
+                  read_pose: Callable[[int], np.ndarray], bad_pose: Callable[[int], str], frame_skip: int
+                  ) -> tuple[dict[int, np.ndarray], dict[str, int], dict[str, str]]:
+    """(c2w (4, 4) by usable frame, view id -> frame of every ``frame_skip``-th, frame -> why it was dropped): a
+    frame missing from a ``companions`` kind (depth, label, ...) or whose pose has -inf/NaN entries is dropped."""
+    poses: dict[int, np.ndarray] = {}
+    dropped: dict[str, str] = {}
+    for frame in frames:
+        missing = [kind for kind, files in companions.items() if frame not in files]
+        if missing:
+            dropped[str(frame)] = f"no {' or '.join(missing)} file"
+        elif np.isfinite(c2w := read_pose(frame)).all():
+            poses[frame] = c2w
+        else:
+            dropped[str(frame)] = bad_pose(frame)
+    return poses, kept_view_ids(poses, frame_skip, src, dropped), dropped
 
 
 def scale_intrinsics(K: np.ndarray, src_hw: tuple[int, int], dst_hw: tuple[int, int]) -> np.ndarray:

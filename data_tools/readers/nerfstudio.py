@@ -1,7 +1,6 @@
-"""Reader: a nerfstudio capture (``transforms.json`` as ``ns-process-data`` writes it, images, optional depth maps
-and ``ply_file_path`` points), without labels. ``transform_matrix`` is an OpenGL camera-to-world:
-``c2w_opencv = transform_matrix @ diag(1, -1, -1, 1)``; ``applied_transform`` is only recorded. Frames in
-``file_path`` order. Conventions: docs/capture.md."""
+"""Reader: a nerfstudio capture (``ns-process-data``'s ``transforms.json``, images, optional depth maps and
+``ply_file_path`` points), without labels; ``c2w_opencv = transform_matrix @ diag(1, -1, -1, 1)`` (OpenGL axes),
+``applied_transform`` only recorded; frames in ``file_path`` order. Conventions: docs/capture.md."""
 
 from __future__ import annotations
 
@@ -12,6 +11,7 @@ import numpy as np
 
 from sray.data_tools.readers.camera_models import nerfstudio_camera
 from sray.data_tools.readers.capture import CaptureFrame, capture_scene
+from sray.data_tools.readers.common import read_file
 from sray.data_tools.readers.point_cloud import read_ply_points
 from sray.data_tools.scene import Scene
 
@@ -22,10 +22,9 @@ CAMERA_FIELDS = ("camera_model", "fl_x", "fl_y", "cx", "cy", "w", "h", "k1", "k2
 
 def read_transforms(path: Path) -> dict:
     """The parsed transforms.json; errors name the file."""
+    text = read_file(path, "missing; is this a nerfstudio capture (ns-process-data output)?", text=True)
     try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing; is this a nerfstudio capture (ns-process-data output)?") from None
+        data = json.loads(text)
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON ({e})") from None
     if not isinstance(data, dict) or not isinstance(data.get("frames"), list) or not data["frames"]:

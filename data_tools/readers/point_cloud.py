@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sray.data_tools.readers.common import read_file
+
 PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
              "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
@@ -16,10 +18,7 @@ PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": 
 def read_ply_points(path: Path) -> np.ndarray:
     """float64 (P, 3) vertex positions of a PLY file; ValueError naming the file and what is unsupported."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: missing (named by transforms.json's ply_file_path)") from None
+    data = read_file(path, "missing (named by transforms.json's ply_file_path)")
     end = data.find(b"end_header\n")
     if not data.startswith(b"ply") or end < 0:
         raise ValueError(f"{path}: not a PLY file (no 'ply' magic or no end_header)")

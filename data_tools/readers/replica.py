@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import NYU40, SCANNET20, class_names
-from sray.data_tools.readers.common import (kept_view_ids, numbered_files, nyu40_to_label, read_depth_m, read_image,
-                                            read_rgb8, resample_nearest, resize_rgb, scale_intrinsics)
+from sray.data_tools.readers.common import (numbered_files, nyu40_to_label, read_depth_m, read_file, read_image,
+                                            read_rgb8, resample_nearest, resize_rgb, scale_intrinsics, select_frames)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
 CLASS_FILE = "info_semantic.json"
@@ -60,10 +60,7 @@ def replica_intrinsics(hw: tuple[int, int]) -> np.ndarray:
 def read_class_table(path: Path) -> dict[int, str]:
     """Id -> name from ``info_semantic.json`` ({"classes": [{"id", "name"}]}), {"<id>": "<name>"} or an id/name TSV."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: class table missing; pass --classes with the scene's {CLASS_FILE}") from None
+    text = read_file(path, f"class table missing; pass --classes with the scene's {CLASS_FILE}", text=True)
     try:
         if path.suffix.lower() == ".json":
             data = json.loads(text)
@@ -142,20 +139,13 @@ def read_replica(src: Path, name: str, classes: Path | None = None, label_space:
         raise FileNotFoundError(f"{src / 'rgb'}: no rgb_<i>.png frames")
     depths = numbered_files(src / "depth", r"depth_(\d+)", (".png",))
     sems = numbered_files(src / "semantic_class", r"semantic_class_(\d+)", (".png",))
-    dropped: dict[str, str] = {}
-    poses: dict[int, np.ndarray] = {}
-    for frame in rgbs:
-        if frame >= len(traj):
-            raise ValueError(f"{traj_path}: {len(traj)} rows, but {rgbs[frame]} needs row {frame}; "
-                             "use the trajectory rendered with these images")
-        missing = [kind for kind, files in (("depth", depths), ("semantic_class", sems)) if frame not in files]
-        if missing:
-            dropped[str(frame)] = f"no {' or '.join(missing)} file"
-        elif not np.isfinite(traj[frame]).all():
-            dropped[str(frame)] = f"non-finite pose in row {frame} of traj_w_c.txt"
-        else:
-            poses[frame] = traj[frame].reshape(4, 4)
-    ids = kept_view_ids(poses, frame_skip, src, dropped)
+    beyond = [frame for frame in rgbs if frame >= len(traj)]
+    if beyond:
+        raise ValueError(f"{traj_path}: {len(traj)} rows, but {rgbs[beyond[0]]} needs row {beyond[0]}; "
+                         "use the trajectory rendered with these images")
+    poses, ids, dropped = select_frames(
+        src, rgbs, {"depth": depths, "semantic_class": sems}, lambda frame: traj[frame].reshape(4, 4),
+        lambda frame: f"non-finite pose in row {frame} of traj_w_c.txt", frame_skip)
 
     def read_view(view_id: str) -> View:
         """Load, map and (optionally) resize one rendered frame."""

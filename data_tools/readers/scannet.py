@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from sray.data_tools.label_spaces import class_names
-from sray.data_tools.readers.common import (check_principal_point, kept_view_ids, numbered_files, nyu40_to_label,
-                                            read_depth_m, read_image, read_rgb8, resample_nearest, resize_rgb,
-                                            scale_intrinsics)
+from sray.data_tools.readers.common import (check_principal_point, numbered_files, nyu40_to_label, read_depth_m,
+                                            read_file, read_image, read_rgb8, resample_nearest, resize_rgb,
+                                            scale_intrinsics, select_frames)
 from sray.data_tools.scene import IGNORE_ID, Scene, SceneMeta, View
 
 TSV_NAME = "scannetv2-labels.combined.tsv"
@@ -26,10 +26,7 @@ _FOLDER_FIX["label-filt"] = "unzip <scan>_2d-label-filt.zip into SRC (it holds l
 def read_label_tsv(tsv: Path) -> dict[int, int]:
     """Raw ScanNet label id -> NYU40 id (0 = none) from ``scannetv2-labels.combined.tsv``."""
     tsv = Path(tsv)
-    try:
-        text = tsv.read_text()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{tsv}: missing; pass --tsv with the path of ScanNet's {TSV_NAME}") from None
+    text = read_file(tsv, f"missing; pass --tsv with the path of ScanNet's {TSV_NAME}", text=True)
     rows = list(csv.reader(text.splitlines(), delimiter="\t"))
     if not rows:
         raise ValueError(f"{tsv}: empty; expected ScanNet's {TSV_NAME}")
@@ -138,19 +135,9 @@ def read_scannet(src: Path, name: str, tsv: Path | None = None, label_space: str
         raise FileNotFoundError(f"{src / 'color'}: no <i>.jpg or <i>.png frames; {_FOLDER_FIX['color']}")
     others = {kind: numbered_files(src / folder, r"(\d+)", (suffix,)) for kind, folder, suffix in
               (("depth", "depth", ".png"), ("pose", "pose", ".txt"), ("label", "label-filt", ".png"))}
-    dropped: dict[str, str] = {}
-    poses: dict[int, np.ndarray] = {}
-    for frame in colors:
-        missing = [kind for kind, files in others.items() if frame not in files]
-        if missing:
-            dropped[str(frame)] = f"no {' or '.join(missing)} file"
-            continue
-        c2w = read_matrix4(others["pose"][frame])
-        if not np.isfinite(c2w).all():
-            dropped[str(frame)] = f"invalid pose in {others['pose'][frame].name} (-inf or NaN entries)"
-            continue
-        poses[frame] = c2w
-    ids = kept_view_ids(poses, frame_skip, src, dropped)
+    poses, ids, dropped = select_frames(
+        src, colors, others, lambda frame: read_matrix4(others["pose"][frame]),
+        lambda frame: f"invalid pose in {others['pose'][frame].name} (-inf or NaN entries)", frame_skip)
 
     def read_view(view_id: str) -> View:
         """Load one exported frame and bring it into the target colour camera."""

@@ -1,13 +1,12 @@
-"""Reader: a raw ScanNet scan, ``SRC/<scan>.sens`` and ``SRC/<scan>_2d-label-filt.zip`` (label-filt/<frame>.png,
-16-bit raw label ids) read directly, without SensReader export or unzipping.
-
-The ``.sens`` layout (ScanNet's SensReader, little-endian): header ``uint32`` version (4); ``uint64`` n + n bytes
-sensor name; four ``float32`` 4 x 4 matrices (colour intrinsics, colour extrinsics, depth intrinsics, depth
-extrinsics); ``int32`` colour compression (0 raw, 1 PNG, 2 JPEG) and depth compression (0 raw uint16, 1 zlib
-uint16); ``uint32`` colour width, height, depth width, height; ``float32`` depth shift (units per metre); ``uint64``
-frame count. Each frame: ``float32`` 4 x 4 camera-to-world; ``uint64`` colour and depth timestamps and byte
-counts; the colour bytes; the depth bytes. Streamed once to index the frames, then read by seeking; everything
-after decoding is ``readers.scannet``'s (docs/data.md, "A raw ScanNet scan in one step")."""
+"""Reader: a raw ScanNet scan, ``SRC/<scan>.sens`` and ``SRC/<scan>_2d-label-filt.zip`` (label-filt/<frame>.png, 16-bit
+raw label ids) read directly, without SensReader export or unzipping. The ``.sens`` layout (ScanNet's SensReader,
+little-endian): header ``uint32`` version (4); ``uint64`` n + n bytes sensor name; four ``float32`` 4 x 4 matrices
+(colour intrinsics, colour extrinsics, depth intrinsics, depth extrinsics); ``int32`` colour compression (0 raw, 1 PNG,
+2 JPEG) and depth compression (0 raw uint16, 1 zlib uint16); ``uint32`` colour width, height, depth width, height;
+``float32`` depth shift (units per metre); ``uint64`` frame count. Each frame: ``float32`` 4 x 4 camera-to-world;
+``uint64`` colour and depth timestamps and byte counts; the colour bytes; the depth bytes. Streamed once to index the
+frames, then read by seeking; everything after decoding is ``readers.scannet``'s (docs/data.md, "A raw ScanNet scan in
+one step")."""
 
 from __future__ import annotations
 

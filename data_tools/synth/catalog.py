@@ -1,7 +1,6 @@
-"""The catalog of a room's furniture: room recipes ask for "a table" or "a chair"; the catalog draws the shape
-template that builds it (weights favour the common shapes) and stands clutter on a usable top: cups, vases, bottles,
-book stacks, boxes, plants and lamps, ignore-labelled as ScanNet's own small objects are (real tables are never bare,
-and what stands on a table is not the table)."""
+"""The catalog of a room's furniture: recipes ask for "a table" or "a chair", the catalog draws a shape template
+(weights favour common shapes) and stands clutter on usable tops (cups, vases, bottles, books, boxes, plants, lamps),
+ignore-labelled like ScanNet's small objects (real tables are never bare)."""
 
 from __future__ import annotations
 
@@ -103,8 +102,7 @@ def table(rng: np.random.Generator, w: float, d: float, h: float | None = None) 
     options = [(0.5, lambda: fu.table(rng, w, d, h)), (0.25, lambda: tp.pedestal_table(rng, w, d, h))]
     if w >= 0.8:
         options.append((0.25, lambda: tp.trestle_table(rng, w, d, h)))
-    piece = _pick(rng, options)
-    return _cluttered(rng, piece, CLS["table"], 0.7, 4)
+    return _cluttered(rng, _pick(rng, options), CLS["table"], 0.7, 4)
 
 
 def chair(rng: np.random.Generator) -> Piece:
@@ -133,8 +131,7 @@ def cabinet(rng: np.random.Generator, w: float, d: float, h: float) -> Piece:
     options = [(0.6, lambda: fu.cabinet(rng, w, d, h))]
     if h < 1.4:
         options.append((0.4, lambda: tp.drawer_chest(rng, w, d, h)))
-    piece = _pick(rng, options)
-    return _cluttered(rng, piece, CLS["cabinet"], 0.6 if h < 1.3 else 0.0, 3)
+    return _cluttered(rng, _pick(rng, options), CLS["cabinet"], 0.6 if h < 1.3 else 0.0, 3)
 
 
 def desk(rng: np.random.Generator, w: float) -> Piece:
@@ -154,7 +151,7 @@ def refrigerator(rng: np.random.Generator) -> Piece:
 
 
 def door(rng: np.random.Generator, w: float, h: float) -> Piece:
-    """A plain or panelled door, a glazed door or a sliding plank door (a double door: ``content.double_door``)."""
+    """A plain or panelled door, a glazed door or a sliding plank door (a double door: ``templates.double_door``)."""
     return _pick(rng, [(0.6, lambda: fx.door(rng, w, h)), (0.25, lambda: tp.glazed_door(rng, w, h)),
                        (0.15, lambda: tp.plank_door(rng, w, h))])
 

@@ -1,8 +1,7 @@
-"""Held-out regions of the generator's appearance and geometry spaces, and which region a scene is drawn from.
-
-A world's test rooms come from one of :data:`SPLITS` (docs/data.md, "Shifted test splits", describes each region);
-training rooms never enter a held-out region (``tests/test_synth_shift.py``). Generation code asks :func:`current`
-which region it draws from; :func:`drawing` sets it for one scene (a context variable: per thread and process)."""
+"""Held-out regions of the generator's appearance and geometry spaces and which one a scene is drawn from: a world's
+test rooms come from one of :data:`SPLITS` (docs/data.md, "Shifted test splits"); training rooms never enter a held-out
+region (``tests/test_synth_shift.py``). :func:`current` says the region being drawn from; :func:`drawing` sets it for
+one scene (a context variable: per thread and process)."""
 
 from __future__ import annotations
 

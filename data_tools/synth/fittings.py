@@ -60,8 +60,7 @@ def window(rng: np.random.Generator, w: float, sill: float, h: float) -> Piece:
 def curtain(rng: np.random.Generator, w: float, z0: float, z1: float, material: mat.Material) -> Piece:
     """One curtain panel hanging in front of a wall, from z0 up to its rod at z1."""
     t = float(rng.uniform(0.04, 0.07))
-    boxes = [span(CLS["curtain"], material, -w / 2, w / 2, 0.1, 0.1 + t, z0, z1)]
-    return against_wall(boxes, w, 0.1 + t, z1)
+    return against_wall([span(CLS["curtain"], material, -w / 2, w / 2, 0.1, 0.1 + t, z0, z1)], w, 0.1 + t, z1)
 
 
 def picture(rng: np.random.Generator, w: float, h: float, z_centre: float) -> Piece:
@@ -111,8 +110,7 @@ def counter_run(rng: np.random.Generator, length: float, sink_at: float | None) 
 def wall_cabinets(rng: np.random.Generator, length: float, z0: float, z1: float) -> Piece:
     """Upper kitchen cabinets hung on a wall between heights z0 and z1."""
     body = mat.furniture_surface(rng, panels=True, panel_width=float(rng.uniform(0.35, 0.6)))
-    boxes = [span(CLS["cabinet"], body, -length / 2, length / 2, 0.0, 0.35, z0, z1)]
-    return against_wall(boxes, length, 0.35, z1)
+    return against_wall([span(CLS["cabinet"], body, -length / 2, length / 2, 0.0, 0.35, z0, z1)], length, 0.35, z1)
 
 
 def refrigerator(rng: np.random.Generator) -> Piece:

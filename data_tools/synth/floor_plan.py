@@ -1,9 +1,7 @@
 """The floor plan of a procedural room: placing pieces without collisions (floor footprints, wall spans), and room
-shapes beyond the rectangle (:func:`shaped_plan`).
-
-Walls are numbered counter-clockwise seen from above: wall 0 runs along y = 0 from x = 0 to Lx, wall 1 along x = Lx,
-wall 2 along y = Ly (back to x = 0), wall 3 along x = 0. A position ``s`` on a wall is measured from its start; a
-piece against a wall faces the room (its +y along the wall's inward normal)."""
+shapes beyond the rectangle (:func:`shaped_plan`). Walls are numbered counter-clockwise seen from above: wall 0 runs
+along y = 0 from x = 0 to Lx, wall 1 along x = Lx, wall 2 along y = Ly (back to x = 0), wall 3 along x = 0; a position
+``s`` on a wall is measured from its start; a piece against a wall faces the room (+y inward)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""A room's lights: ceiling lamps, an optional floor lamp and daylight from the windows, each tinted by its colour
-temperature (Planck's law at three wavelengths relative to a 6504 K white, half white-balanced: docs/data.md,
-"Appearance"); 2700 K gives (1, 0.76, 0.46), 10000 K (0.84, 0.89, 1)."""
+"""A room's lights: ceiling lamps, an optional floor lamp and window daylight, each tinted by its colour temperature
+(Planck's law at three wavelengths relative to 6504 K white, half white-balanced: docs/data.md, "Appearance")."""
 
 from __future__ import annotations
 

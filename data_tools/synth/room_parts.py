@@ -78,7 +78,7 @@ def add_pictures(rng: np.random.Generator, plan: FloorPlan, count: int) -> None:
 
 
 def add_rug(rng: np.random.Generator, plan: FloorPlan, prob: float, size: tuple[float, float] = (1.0, 2.2)) -> None:
-    """With probability ``prob``, a rug (labelled floor, ``content.rug``) on a free stretch of floor."""
+    """With probability ``prob``, a rug (labelled floor, ``templates.rug``) on a free stretch of floor."""
     if rng.random() >= prob:
         return
     w, d = float(rng.uniform(*size)), float(rng.uniform(0.6, 0.75)) * float(rng.uniform(*size))

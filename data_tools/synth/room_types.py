@@ -21,13 +21,15 @@ from sray.data_tools.synth.room_parts import add_door, add_pictures, add_rug, ad
 Recipe = Callable[[np.random.Generator], tuple[FloorPlan, mat.Material, mat.Material]]
 
 
-def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float],
-          h: tuple[float, float]) -> FloorPlan:
-    """An empty plan (``shaped_plan``) of a size drawn from the ranges, floor scaled per room (held out if shifted)."""
+def _plan(rng: np.random.Generator, lx: tuple[float, float], ly: tuple[float, float], h: tuple[float, float],
+          door: tuple[float, float] = (0.8, 0.95)) -> FloorPlan:
+    """A plan (``shaped_plan``) with a door, sized from the ranges (floor scaled per room, held out if shifted)."""
     shifted = domains.current().geometry_shift
     scale = float(rng.uniform(*(domains.HELD_OUT_SCALE if shifted else domains.TRAIN_SCALE)))
-    return shaped_plan(rng, (scale * float(rng.uniform(*lx)), scale * float(rng.uniform(*ly)),
+    plan = shaped_plan(rng, (scale * float(rng.uniform(*lx)), scale * float(rng.uniform(*ly)),
                              float(rng.uniform(*(domains.HELD_OUT_CEILING if shifted else h)))))
+    add_door(rng, plan, width=door)
+    return plan
 
 
 def _walls(rng: np.random.Generator) -> list[int]:
@@ -81,7 +83,6 @@ def _dining_set(rng: np.random.Generator, plan: FloorPlan, chairs: int) -> None:
 def bedroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Bed with nightstands, wardrobe, desk and chair, bookshelf, ottoman or bin, pictures."""
     plan = _plan(rng, (3.4, 5.0), (3.2, 4.6), (2.45, 2.9))
-    add_door(rng, plan)
     for _ in range(int(rng.integers(1, 3))):
         add_window(rng, plan)
     bw = float(rng.choice([0.9, 1.4, 1.6, 1.8]))
@@ -112,7 +113,6 @@ def bedroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
 def living_room(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Sofa with coffee table (on a rug) and armchairs, TV cabinet, bookshelves, side table, pictures."""
     plan = _plan(rng, (4.2, 6.5), (3.6, 5.5), (2.5, 3.0))
-    add_door(rng, plan)
     for _ in range(int(rng.integers(1, 4))):
         add_window(rng, plan)
     sofa = cat.sofa(rng, float(rng.uniform(1.6, 2.4)))
@@ -167,7 +167,6 @@ def _island(rng: np.random.Generator, plan: FloorPlan, wall: int) -> None:
 def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Counter run (base and wall cabinets, sink), fridge, maybe an island, dining set, bin, maybe a runner rug."""
     plan = _plan(rng, (3.4, 5.2), (3.0, 4.6), (2.4, 2.8))
-    add_door(rng, plan)
     add_window(rng, plan, sill=(1.0, 1.15), curtain_prob=0.3)
     for wall in _walls(rng):
         length = float(rng.uniform(1.8, max(1.9, plan.wall_length(wall) - 1.2)))
@@ -201,8 +200,7 @@ def kitchen(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mate
 
 def bathroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Bathtub with shower curtain, toilet, washbasin with mirror, cabinet, bin, small window."""
-    plan = _plan(rng, (2.4, 3.4), (2.1, 3.0), (2.4, 2.7))
-    add_door(rng, plan, width=(0.7, 0.82))
+    plan = _plan(rng, (2.4, 3.4), (2.1, 3.0), (2.4, 2.7), door=(0.7, 0.82))
     add_window(rng, plan, sill=(1.2, 1.5), width=(0.5, 0.9), curtain_prob=0.2)
     for wall in sorted(range(4), key=lambda w: -plan.wall_length(w) + float(rng.uniform(0, 0.3))):
         length = min(float(rng.uniform(1.5, 1.75)), plan.wall_length(wall) - 0.05)
@@ -227,7 +225,6 @@ def bathroom(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Mat
 def office(rng: np.random.Generator) -> tuple[FloorPlan, mat.Material, mat.Material]:
     """Desks with chairs, bookshelves, file cabinets, optional meeting table and sofa, pictures."""
     plan = _plan(rng, (3.6, 6.0), (3.2, 5.0), (2.5, 3.0))
-    add_door(rng, plan)
     for _ in range(int(rng.integers(1, 4))):
         add_window(rng, plan, curtain_prob=0.6)
     for _ in range(int(rng.integers(1, 4))):

@@ -1,6 +1,5 @@
-"""A procedural room (:func:`build_room`): shell, finishes, lights, the furniture of its room type and clutter.
-
-The room's interior is the box [0, Lx] x [0, Ly] x [0, H] (z up, floor at 0)."""
+"""A procedural room (:func:`build_room`): shell, finishes, lights, the furniture of its room type and clutter; its
+interior is the box [0, Lx] x [0, Ly] x [0, H] (z up, floor at 0)."""
 
 from __future__ import annotations
 

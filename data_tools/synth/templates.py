@@ -1,7 +1,6 @@
-"""More shape templates of the furniture classes (the first of each class is in ``furniture.py`` / ``fittings.py``),
-in the same object frame, so no class comes with one silhouette; ``catalog.py`` draws one template per object. Also
-rugs (labelled ``floor``: docs/data.md, "What is in a room", says why) and kitchen islands (a ``cabinet`` under a
-``counter``), labelled as a ScanNet annotator would."""
+"""More shape templates per furniture class (the first is in ``furniture.py`` / ``fittings.py``), same object frame, so
+no class has one silhouette; ``catalog.py`` draws one per object. Also rugs (labelled ``floor``: docs/data.md, "What is
+in a room") and kitchen islands (a ``cabinet`` under a ``counter``), labelled as a ScanNet annotator would."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
-"""Handheld-scan-like camera paths through a procedural room (docs/data.md, "Camera paths"): an arc of an ellipse or
-a straight walk over free floor, wobbling in position, height and roll, looking out across the room; every camera
-centre stays inside the room, away from the walls and outside every box grown by a margin."""
+"""Handheld-scan-like camera paths (docs/data.md, "Camera paths"): an ellipse arc or a straight walk over free floor,
+wobbling in position, height and roll, looking across the room; centres stay in the room, off the walls and out of every
+box grown by a margin."""
 
 from __future__ import annotations
 

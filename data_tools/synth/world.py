@@ -1,7 +1,7 @@
-"""One procedural world: its settings (:class:`World`) and :func:`make_world`, which generates, shards and verifies
-it in a folder (``scenes/``, ``shards/``; the shards' manifest, written last, records every field of :class:`World`).
-A folder without a manifest is (re)generated, skipping finished scenes and shards; one recording the asked world is
-reused even after the generator changed (models trained on it stay comparable); one recording another is refused."""
+"""One procedural world: its settings (:class:`World`) and :func:`make_world`, which generates, shards and verifies it
+in a folder (``scenes/``, ``shards/``, the manifest last, recording the :class:`World`). Without a manifest it is
+(re)generated, skipping finished parts; one recording this world is reused even after generator changes (trained models
+stay comparable), another's refused."""
 
 from __future__ import annotations
 
