@@ -1,7 +1,5 @@
-"""How a held-out view is rendered and scored: one setting type for validation (``data.held_out``), the finetune
-fleet (``finetune.held_out``), ``sray eval`` and ``sray render`` (their flags, ``sray.jobs.render_flags``). The fast
-render's cost in mIoU against the full render is measured by ``sray bench speed-accuracy`` (docs/benchmarks.md).
-"""
+"""How a held-out view is rendered and scored, for validation (``data.held_out``), the fleet (``finetune.held_out``),
+``sray eval`` and ``sray render``; the fast render's mIoU cost: ``sray bench speed-accuracy`` (docs/benchmarks.md)."""
 
 from __future__ import annotations
 

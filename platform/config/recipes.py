@@ -1,6 +1,5 @@
 """Training recipes: named functions that return a complete ``TrainConfig``; ``sray train --recipe NAME`` starts
-from one, ``--set section.field=value`` and the common flags override its fields.
-"""
+from one, ``--set section.field=value`` and the common flags override its fields."""
 
 from __future__ import annotations
 
@@ -44,10 +43,9 @@ jobs/studies/hour-recipe.yaml`` generates in the studies' default work folder.""
 
 
 def synth_cpu_hour() -> TrainConfig:
-    """One hour of pretraining on 2 CPU cores, built to generalize rather than to memorize its rooms; each choice
-    won its arm in docs/studies/hour-recipe.md. A budget of 7,200 CPU seconds (both cores of a 2-core machine for an
-    hour) ends the job; the 20,000-step cap only bounds the learning-rate schedule on a faster machine. Its figures
-    are the README's recipe card (``python -m sray.lab.publish``)."""
+    """One hour of pretraining on 2 CPU cores, built to generalize (each choice won its arm in
+    docs/studies/hour-recipe.md): 7,200 CPU seconds end the job; the 20,000-step cap only bounds the learning-rate
+    schedule on a faster machine. Figures: the README's recipe card (``python -m sray.lab.publish``)."""
     return TrainConfig(
         recipe="synth-cpu-hour",
         model=SRayConfig(n_source=8, n_coarse=24, n_fine=24, attention="intra", lambda_src_sem=1.0),
