@@ -22,7 +22,7 @@ from ray.tune import Callback
 from ray.tune.result import AUTO_RESULT_KEYS, DEBUG_METRICS
 from ray.tune.schedulers import AsyncHyperBandScheduler, TrialScheduler
 
-from sray.platform.common.fault_hook import fail_trial_if_listed, propagated_env
+from sray.platform.common.fault_hook import error_text, fail_trial_if_listed, propagated_env
 from sray.platform.sweep.outcomes import TrialOutcome, collect_outcomes
 from sray.platform.sweep.study import (BY_BUDGET, BY_SCHEDULER, ERRORED, FINISHED, PointFunction, StudySettings,
                                        TrialContext, TrialRecord, append_history, read_history, read_record,
@@ -64,8 +64,7 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
         fail_trial_if_listed(key)
         result = job.point_fn(job.plan[key], TrialContext(key, folder))
     except BaseException as e:
-        lines = str(e).strip().splitlines()
-        record.outcome, record.error = ERRORED, f"{type(e).__name__}: {lines[-1] if lines else ''}"[:2000]
+        record.outcome, record.error = ERRORED, error_text(e)
         write_record(folder, record)
         raise
     record.outcome, record.result = FINISHED, result
