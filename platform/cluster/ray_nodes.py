@@ -1,7 +1,6 @@
 """Ray nodes of a local cluster: a head (GCS, dashboard, Jobs API; no CPUs) and worker nodes, each a ``ray start
 --block`` process with its own temp dir, ports and resources, whose SIGTERM stops that node only. Every node and
-client uses the cluster's token (``RAY_AUTH_MODE=token``, ``RAY_AUTH_TOKEN_PATH``): one without it is refused.
-"""
+client uses the cluster's token (``RAY_AUTH_MODE=token``, ``RAY_AUTH_TOKEN_PATH``): one without it is refused."""
 
 from __future__ import annotations
 

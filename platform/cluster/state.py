@@ -1,7 +1,6 @@
 """The record of a local cluster, ``<dir>/cluster.json`` (owner-only): what ``up`` chose and started (ports, the
 database password, process ids with start times), so ``status`` reports and ``down`` stops exactly those. It stays
-after ``down`` for the next ``up``. Commands that may run at once change it under a lock (:func:`update_state`).
-"""
+after ``down`` for the next ``up``. Commands that may run at once change it under a lock (:func:`update_state`)."""
 
 from __future__ import annotations
 

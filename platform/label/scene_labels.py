@@ -1,8 +1,7 @@
 """``sray label`` for one scene of a shard folder: every frame labelled by :meth:`Labeller.label` and written
 (atomically) as ``label/``, ``overlay/``, ``confidence/``, ``depth/`` PNGs and ``labels.json`` (docs/capture.md).
 A frame is rendered from its other frames, so the scores compare each prediction with labels its render never
-saw (Semantic-NeRF's dataset-level protocol, one confusion matrix).
-"""
+saw (Semantic-NeRF's dataset-level protocol, one confusion matrix)."""
 
 from __future__ import annotations
 

@@ -5,8 +5,7 @@ parameters renamed or dropped too); a version-1 checkpoint (up to 7734061) also 
 ``net.``-prefixed keys) and every counter (0, or NaN = unknown for the wall seconds past step 0); a ``fleet.json``
 without a tracker name gets MLflow; Semantic-NeRF scene artifacts and 2D segmenters lose removed settings. All is
 converted in memory first and written (atomically) only when everything converts, so a refusal leaves PATH as it
-was; an artifact already in today's format is left alone.
-"""
+was; an artifact already in today's format is left alone."""
 
 from __future__ import annotations
 

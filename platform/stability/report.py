@@ -1,7 +1,6 @@
 """What a stability run leaves (docs/stability.md, "Outputs"): per-level statistics of its point records, breaking
 points, ``stability.json``, a chart per score, a table per axis and the tracked runs; every legend and header says
-whether its row saw the scene and what it was given.
-"""
+whether its row saw the scene and what it was given."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """The unseen test scenes a stability suite stresses, read once; their perturbed copies (query views never, the
 generator of a (seed, axis, scene) the same at every level); the sources a point renders each query from (with no
-perturbation, ``sray eval``'s), how much of the query they see, and the watch over every point's renders.
-"""
+perturbation, ``sray eval``'s), how much of the query they see, and the watch over every point's renders."""
 
 from __future__ import annotations
 

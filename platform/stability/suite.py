@@ -2,8 +2,7 @@
 zero-shot row's model rendered as ``sray eval`` does, a trained row's method trained (``scene_points``); a method that
 raises, diverges or outputs non-finite values is ``failed`` there. A point record: ``axis``, ``method`` (the row),
 ``level``, ``seed`` (None: deterministic), ``status``, ``miou`` (%), ``psnr`` (dB), ``x`` (the chart's), ``error``,
-``key`` and the spec's result.
-"""
+``key`` and the spec's result."""
 
 from __future__ import annotations
 

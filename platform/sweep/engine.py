@@ -2,10 +2,8 @@
 fault-isolated. A trial with an outcome never runs again; one that raises records its error while the others go on;
 early stops (ASHA, the wall-time budget) are requests the trial carries out itself; ``resume`` restores Tune's state
 (ASHA's rungs start empty). A training job's last report after a stop lacks the metric: Tune's strict check is off.
-
-A study completed launch after launch (``sray lab study``, ``sray stability``: :func:`run_missing`) runs, in each
-launch, only the trials without a result (errored ones again) as a new Tune experiment; the records are the store.
-"""
+A study run launch after launch (:func:`run_missing`) runs only the trials without a result (errored ones again),
+as a new Tune experiment each time; the records are the store."""
 
 from __future__ import annotations
 

@@ -2,8 +2,7 @@
 files under ``<study>/trials/<key>/``, each with one writer, written atomically: ``trial.json`` (:class:`TrialRecord`,
 by the trial's process: its launches and outcome), ``stop_request.json`` (by the driver: end early, the trial stops
 itself so its workers hand their resources back), ``history.jsonl`` (by the driver: every result, with the running
-time across launches; a line cut by a killed driver is skipped on reading).
-"""
+time across launches; a line cut by a killed driver is skipped on reading)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """The trial of a training sweep: one real training job ``<sweep>-<key>`` with the point's values set through the
 typed ``--set`` path of ``sray train``, nested under the sweep's run, reporting its validation metrics to Tune at
-each checkpoint. A second launch resumes it; a stop request becomes its STOP file (it checkpoints and ends).
-"""
+each checkpoint. A second launch resumes it; a stop request becomes its STOP file (it checkpoints and ends)."""
 
 from __future__ import annotations
 
