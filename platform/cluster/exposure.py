@@ -31,8 +31,7 @@ class Listener:
 
 
 def listeners(parts: dict[str, int]) -> list[Listener]:
-    """Listening TCP sockets of each part's process tree (``parts``: name -> root pid), sorted by part
-    and port; a part whose process is gone contributes nothing."""
+    """Listening TCP sockets of each part's process tree (``parts``: name -> root pid; gone: none), by part, port."""
     owner: dict[int, tuple[str, str]] = {}
     for part, pid in parts.items():
         try:

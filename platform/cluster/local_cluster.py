@@ -184,8 +184,7 @@ def down(root: Path) -> list[str]:
 
 
 def describe(state: ClusterState) -> str:
-    """What ``sray cluster up|status|restart`` print: each process and whether it runs, the addresses and the
-    token clients need, and the ports open beyond loopback."""
+    """What ``sray cluster up|status|restart`` print: processes, addresses, the clients' token, non-loopback ports."""
     alive = state.alive()
     running = ", ".join(f"{n} {'up' if ok else 'DOWN'} (pid {state.processes[n]['pid']})" for n, ok in alive.items())
     env = " ".join(f"{k}={v}" for k, v in ray_nodes.auth_env(state.token_path).items())

@@ -95,8 +95,7 @@ def load_state(root: Path) -> ClusterState | None:
 
 
 def update_state(root: Path, change: Callable[[ClusterState], None]) -> ClusterState:
-    """Apply ``change`` to the record on disk and save it, holding the folder's lock; returns the new record.
-    ClusterError when ``root`` holds no record."""
+    """Apply ``change`` to the record on disk under the folder's lock; the new record (ClusterError: no record)."""
     with open(Path(root) / LOCK_FILE, "a") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
         state = load_state(root)

@@ -35,8 +35,7 @@ class Flythrough:
     def __init__(self, net: SRayModel, plan: FlythroughPlan, n_source: int, fast: FastRender | None = None,
                  runtime: Runtime = Runtime()) -> None:
         """Check that ``plan``'s scene fits ``net`` and gives ``n_source`` sources per frame (ValueError naming the
-        manifest or the scene otherwise). ``fast``: the fast render mode (None: the full renderer); ``runtime``:
-        the implementation and rays per chunk the network runs with. The protocol's inputs are ``net.cfg``'s."""
+        manifest or the scene). ``fast``: the fast mode (None: full render); ``runtime``: implementation, chunk."""
         manifest = plan.shards / "manifest.json"
         names = plan.meta.class_names
         if len(names) != net.cfg.n_classes:
@@ -76,9 +75,8 @@ class Flythrough:
 
     def render(self, out_dir: Path, device: torch.device, *, about: dict[str, Any] | None = None, label: str = "",
                progress: bool = True) -> dict[str, Any]:
-        """Render every frame and write the outputs under ``out_dir``. ``about``: what made the model
-        (checkpoint, artifact), copied into frames.json; ``label``: shown in every frame's title.
-        Returns ``{"files": {name: path}, "n_frames", "size", "frames_per_s", "protocol"}``."""
+        """Render every frame into ``out_dir``; ``about`` (checkpoint, artifact) goes into frames.json, ``label``
+        into every title. ``{"files": {name: path}, "n_frames", "size", "frames_per_s", "protocol"}``."""
         plan, path, n = self.plan, self.plan.path, len(self.plan.path)
         self.net.to(device)
         self._encoded = None  # the weights may have changed since the last render (a fleet's clip after finetuning)

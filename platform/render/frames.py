@@ -29,9 +29,8 @@ class FrameRender:
 @torch.no_grad()
 def render_frame(render: RayRenderer, sample: SceneQuery, hw: tuple[int, int], chunk: int, device: torch.device,
                  fast: FastRender | None = None) -> FrameRender:
-    """Render every pixel of the ``hw`` = (H, W) image of ``sample``'s query camera with ``render`` (bound to
-    ``sample``'s sources: ``SRayModel.ray_renderer``), in chunks of ``chunk`` rays (0: by device); with
-    ``fast``, every ``fast.pixel_stride``-th pixel, upsampled."""
+    """Render the (H, W) = ``hw`` image of ``sample``'s query camera with ``render`` (``SRayModel.ray_renderer`` on
+    its sources) in ``chunk``-ray chunks (0: by device); ``fast``: every ``fast.pixel_stride``-th pixel, upsampled."""
     fine = render_view(render, sample.query.K, sample.query.c2w, hw, sample.near, sample.far, chunk, device,
                        fast=fast, passes=("fine",), keys=("logits", "rgb", "depth"))["fine"]
     logits = fine["logits"].cpu()  # (H, W, L)

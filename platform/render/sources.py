@@ -40,8 +40,7 @@ class SourcePicker:
         return [self.candidates[i] for i in order]
 
     def sources(self, ids: list[str]) -> SourceViews:
-        """The views ``ids`` as model inputs: rgb (m, 3, H, W) in [0, 1], K (m, 3, 3), c2w (m, 4, 4), depth
-        (m, H, W) in metres; each view is decoded once and kept."""
+        """Views ``ids`` as model inputs, each decoded once: rgb (m, 3, H, W) in [0, 1], K, c2w, depth (m, H, W) m."""
         for v in ids:
             if v not in self._decoded:
                 rgb = torch.from_numpy(self.views[v].rgb()).permute(2, 0, 1).float().div_(255.0)  # (3, H, W)

@@ -57,8 +57,7 @@ class VideoSet:
         self._count += 1
 
     def finish(self, extra: dict[str, bytes]) -> dict[str, Path]:
-        """Close the videos, write the GIF and the ``extra`` files (name -> bytes), and rename everything into
-        the output folder; returns {name: final path} (videos as ``webm``, ``mp4``, ``gif``)."""
+        """Close the videos, write the GIF and ``extra`` (name -> bytes), rename all into place; {name: final path}."""
         self._release()
         if not self._gif:
             self.abort()

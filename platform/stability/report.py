@@ -214,8 +214,7 @@ def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str]
 
 def track(tracker: Tracker, experiment: str, run_name: str, outputs: dict[str, Any],
           records: list[dict[str, Any]], axes: list[str], preset: Preset) -> str:
-    """Log a parent run (charts, stability.json) and a child run per axis (its table, metrics at step = level index);
-    the parent's id."""
+    """Log a parent run (charts, stability.json) and a child per axis (its table, metrics at step = level index)."""
     parent = tracker.start_run(experiment, run_name, tags={"sray.kind": "stability", "sray.preset": preset.name})
     with tracker.logger(parent) as log:
         log.log_params({"preset": preset.name, "axes": axes, "seeds": preset.seeds, "levels": preset.levels,

@@ -52,8 +52,7 @@ def _footnote_parts(ok: list[dict[str, Any]], results: list[dict[str, Any]], ext
 
 def _framed_figure(width: float, body_height: float, title: str, handles: list[Any],
                    footnote: list[str]) -> tuple[Any, Any]:
-    """A figure with a header (title + legend), a body sub-figure for the axes, and a footnote; returns (figure,
-    body sub-figure); sizes in inches."""
+    """(figure, body sub-figure for the axes) with a header (title + legend) and a footnote; sizes in inches."""
     ncols = 4 if width >= 12 else 2
     head_h = 0.45 + 0.22 * math.ceil(len(handles) / ncols)
     lines = [line for part in footnote for line in textwrap.wrap(part, max(60, int(width * 17)))]

@@ -61,8 +61,7 @@ def average_curves(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndar
 
 
 def zero_shot_value(result: dict[str, Any], y_key: str, methods: ChartedMethods) -> float | None:
-    """The step-0 score of a result whose method starts from a zero-shot model (S-Ray), or None when it
-    has none (another method, or no step-0 point)."""
+    """The step-0 score of a result whose method starts from a zero-shot model (S-Ray), else None."""
     method = methods.get(result.get("method", ""))
     first = result["curve"][0] if result.get("curve") else None
     if method is None or method.zero_shot is None or first is None or int(first.get("step", -1)) != 0:

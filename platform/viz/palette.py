@@ -12,9 +12,8 @@ SCANNET20_COLORS: list[tuple[int, int, int]] = [
     (0, 128, 0), (128, 0, 128), (64, 128, 128), (128, 128, 255), (192, 192, 0),
     (0, 192, 255), (64, 64, 0), (128, 255, 128), (255, 64, 64), (0, 192, 128),
 ]
-"""RGB of class ids 0..19 (ScanNet-20 order: wall, floor, cabinet, ...). Chosen greedily from a
-5-level RGB grid to maximise the smallest CIELAB distance (>= 36) while avoiding near-black,
-near-white and grey, which stay reserved for the ignore label and the error map."""
+"""RGB of class ids 0..19 (ScanNet-20 order: wall, floor, cabinet, ...), chosen greedily from a 5-level RGB grid to
+maximise the smallest CIELAB distance (>= 36), avoiding near-black, near-white and grey (ignore label, error map)."""
 
 IGNORE_COLOR: tuple[int, int, int] = (0, 0, 0)
 """Colour of unlabelled pixels (the ignore id) in every semantic map."""

@@ -26,8 +26,7 @@ LEGEND_ROW_INCHES = 0.22  # height of one legend row
 
 @dataclass(frozen=True)
 class LevelPoint:
-    """One method at one level: where it is drawn (a number, or a category name), the mean over seeds (None:
-    every seed failed) and their spread."""
+    """One method at one level: x (a number or a category), mean over seeds (None: all failed), their spread."""
 
     x: float | str
     mean: float | None

@@ -32,8 +32,7 @@ class TrialCurve:
 
 def write_sweep_chart(curves: list[TrialCurve], metric: str, title: str, footnote: str, path: Path,
                       best: str | None = None) -> Path:
-    """Draw the curves (``best``: label of the best trial) and write the PNG to ``path``; ValueError when no curve
-    has a point."""
+    """Draw the curves (``best``: the best trial's label) into the PNG ``path``; ValueError when none has a point."""
     drawn = [c for c in curves if c.values]
     if not drawn:
         raise ValueError(f"{path}: no trial reported {metric}; nothing to chart")
