@@ -81,8 +81,7 @@ def spawn(cmd: list[str], log_path: Path, env: Mapping[str, str] | None = None, 
 
 def wait_until(check: Callable[[], bool], timeout_s: float, what: str, log_path: Path | None = None,
                alive: ProcessRecord | None = None) -> None:
-    """Poll ``check`` until True; ClusterError naming ``what`` and ``log_path`` after ``timeout_s`` or once ``alive``
-    (the process that should answer) died."""
+    """Poll ``check`` until True; ClusterError naming ``what``, ``log_path`` at ``timeout_s`` or if ``alive`` died."""
     t0 = time.monotonic()
     where = f"; see {log_path}" if log_path else ""
     while not check():

@@ -41,8 +41,7 @@ class LabelTransfer:
     seen: Tensor
     """bool (H, W) pixels at least one source view sees, by the transfer's geometry (labelled or not)."""
     rgb: Tensor | None = None
-    """float32 (H, W, 3) mean colour of the source pixels that see each pixel, 0 where none does; None unless
-    the source colours were given."""
+    """float32 (H, W, 3) mean colour of the source pixels seeing each pixel (0: none); None without source colours."""
 
 
 def project_points(points: Tensor, K: Tensor, c2w: Tensor) -> tuple[Tensor, Tensor]:

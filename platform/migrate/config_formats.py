@@ -34,8 +34,7 @@ class MigrationRefused(ValueError):
 
 
 def refuse_unless_noop(path: str, value: Any, where: str, removed: dict[str, tuple[Any, str]] = REMOVED_FIELDS) -> None:
-    """MigrationRefused (naming ``where``, the field and the commit to use) unless ``value`` of the removed field
-    ``path`` is the one that changed nothing."""
+    """MigrationRefused (``where``, field, commit to use) unless ``value`` of removed ``path`` is a no-op."""
     noop, commit = removed[path]
     if value != noop:
         raise MigrationRefused(f"{where}: {path} is {value!r}, a setting removed from sray (a lever that lost); this "

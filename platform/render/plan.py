@@ -35,8 +35,7 @@ class FlythroughPlan:
 
 def built_path(kind: str, views: dict[str, StoredView], meta: SceneMeta, image_hw: tuple[int, int],
                n_frames: int, size_hw: tuple[int, int]) -> CameraPath:
-    """The ``kind`` path (:data:`BUILT_PATHS`) of ``n_frames`` frames at ``size_hw`` through or around the scene's
-    pool cameras (views stored at ``image_hw``)."""
+    """``kind`` path (:data:`BUILT_PATHS`), ``n_frames`` at ``size_hw``, by pool cameras (stored at ``image_hw``)."""
     if kind not in BUILT_PATHS:
         raise ValueError(f"path {kind!r}: use one of {', '.join(BUILT_PATHS)} or a camera-path file")
     build, what = BUILT_PATHS[kind]

@@ -135,8 +135,7 @@ class StudySettings:
     wall_budget_s: float = 0.0
     """A trial is asked to stop once it has run this long across its launches (0 = no limit)."""
     start_by: float = 0.0
-    """Unix time after which no trial starts (0 = no limit): a later trial returns at once and stays unfinished
-    for the next launch. Running trials go on."""
+    """Unix time after which no trial starts (0 = none); a later one returns at once, unfinished for the next launch."""
     reuse_actors: bool = False
     """Run the trials in one process (Tune's ``reuse_actors``), for short trials that keep what they loaded. Off:
     a fresh process per trial (a trial that trains with Accelerate needs one)."""

@@ -34,8 +34,7 @@ def job_name(sweep: str, key: str) -> str:
 
 
 def trial_config(base: TrainConfig, point: Mapping[str, Any], name: str = "") -> TrainConfig:
-    """``base`` with the point's values set (a copy), the job named ``name`` when given; :class:`SpecError` naming
-    the parameter a value breaks."""
+    """A copy of ``base`` with the point's values (job named ``name`` if given); :class:`SpecError` names a bad one."""
     cfg = copy.deepcopy(base)
     for path, value in point.items():
         try:

@@ -1,5 +1,4 @@
-"""The shard loader of one training rank, built from the job's config (the data section, with its
-augmentation, the model's source-view count and the run's seed)."""
+"""The shard loader of one training rank, from the job's config (data section, augmentation, n_source, run seed)."""
 
 from __future__ import annotations
 

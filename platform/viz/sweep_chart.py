@@ -21,8 +21,7 @@ DPI = 110
 
 @dataclass(frozen=True)
 class TrialCurve:
-    """One trial's line: legend text (the trial's key and values), its running time (s) and the metric at each
-    report, and why it ended (a key of :data:`ENDS`)."""
+    """One trial's line: legend (key, values), running time (s) and metric per report, its end (key of :data:`ENDS`)."""
 
     label: str
     time_s: list[float]
