@@ -1,8 +1,7 @@
 """A stored training config of an earlier format (``stored_format.CONFIG_VERSION``), as a plain dict, converted to
-today's. Format 1 also covers the older layouts 7734061 still read: ``aug_<field>`` flat in the data section,
-runtime settings in the model section, fault settings in the run section. A removed field (a lever that lost) is
-dropped where it holds the value at which it changed nothing; any other value is refused by name, with the last
-commit that had it."""
+today's. Format 1 also covers the older layouts 7734061 still read: ``aug_<field>`` flat in the data section, runtime
+settings in the model section, fault settings in the run section. A removed field (a lever that lost) is dropped where
+it holds the value at which it changed nothing; any other value is refused by name, with the last commit that had it."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""What a stability run leaves (docs/stability.md, "Outputs"): per-level statistics of its point records, breaking
-points, ``stability.json``, a chart per score, a table per axis and the tracked runs; every legend and header says
-whether its row saw the scene and what it was given."""
+"""What a stability run leaves (docs/stability.md, "Outputs"): per-level statistics, breaking points,
+``stability.json``, a chart per score, a table per axis and the tracked runs."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""The rows of the stability suite, read off the method registry (docs/stability.md, "Rows"): ``<name>`` (zero-shot,
-when the method has an ``eval_model``), ``<name>-scene`` (trained on the scene), S-Ray's ``-no-cra``, the depth twins
-placed; how legends and headers name what a row saw and was given."""
+"""The stability suite's rows, read off the method registry (docs/stability.md, "Rows"), and how legends and headers
+name what a row saw and was given."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
-"""Why each trial of a study ended (``finished``: returned, or reached its wall-time budget; ``stopped`` by the
-scheduler; ``errored``; ``unfinished``: ``--resume`` runs it), read back from its files and Tune's errors, and the
-results table (Markdown, CSV, JSON with every trial's history). The best trial is the finished one with the best
-last value of the metric (the model its final checkpoint holds)."""
+"""Why each trial of a study ended (``finished``: returned or out of wall time; ``stopped`` by the scheduler;
+``errored``; ``unfinished``: ``--resume`` runs it), from its files and Tune's errors, and the results table (Markdown,
+CSV, JSON with histories). The best trial: the finished one with the best last metric (its final checkpoint's)."""
 
 from __future__ import annotations
 

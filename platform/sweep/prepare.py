@@ -1,6 +1,5 @@
-"""Everything about a training sweep checked before anything starts or is written, and its record ``sweep.json``
-(everything needed to continue it). A wrong parameter, value, metric, scheduler, name, shard folder or store, or
-more trials at once than the cluster has workers for, is refused in one line."""
+"""A training sweep checked before anything starts or is written (anything wrong is refused in one line), and its
+record ``sweep.json``, everything needed to continue it."""
 
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
-"""What the study engine and a point function share: the study's settings, the trial's context, and the trial's
-files under ``<study>/trials/<key>/``, each with one writer, written atomically: ``trial.json`` (:class:`TrialRecord`,
-by the trial's process: its launches and outcome), ``stop_request.json`` (by the driver: end early, the trial stops
-itself so its workers hand their resources back), ``history.jsonl`` (by the driver: every result, with the running
-time across launches; a line cut by a killed driver is skipped on reading)."""
+"""What the study engine and a point function share: settings, the trial's context and its files under
+``<study>/trials/<key>/``, each with one writer, written atomically: ``trial.json`` (:class:`TrialRecord`, by the
+trial: launches, outcome), ``stop_request.json`` (by the driver; the trial stops itself, so its workers hand their
+resources back), ``history.jsonl`` (by the driver: every result with the running time; a cut line is skipped)."""
 
 from __future__ import annotations
 

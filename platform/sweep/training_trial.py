@@ -1,6 +1,5 @@
-"""The trial of a training sweep: one real training job ``<sweep>-<key>`` with the point's values set through the
-typed ``--set`` path of ``sray train``, nested under the sweep's run, reporting its validation metrics to Tune at
-each checkpoint. A second launch resumes it; a stop request becomes its STOP file (it checkpoints and ends)."""
+"""A training sweep's trial: the job ``<sweep>-<key>`` with the point set via ``sray train``'s ``--set``, nested under
+the sweep's run, reporting to Tune at each checkpoint; a relaunch resumes it, a stop request becomes its STOP file."""
 
 from __future__ import annotations
 
