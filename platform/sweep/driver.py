@@ -1,6 +1,6 @@
 """``sray sweep``'s driver: check, start (or resume) and finish a training sweep on the study engine, with a parent
-run and each trial's job run as its child (ended with ``sray.stop_reason``, ``sray.stop_note``, checkpoint,
-status); once none is unfinished, the best trial's checkpoint gets the sweep's alias. Idempotent; tracking errors warn."""
+run and each trial's job run as its child (ended with ``sray.stop_reason``, ``sray.stop_note``, checkpoint, status);
+once none is unfinished, the best trial's checkpoint gets the sweep's alias. Idempotent; tracking errors warn."""
 
 from __future__ import annotations
 
