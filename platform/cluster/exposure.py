@@ -1,6 +1,5 @@
-"""Which of a local cluster's processes listen beyond loopback, from the kernel's socket table: Ray 2.60's GCS
-server and raylets listen on every interface whatever ``--node-ip-address`` says, guarded only by the token
-(docs/cluster.md)."""
+"""Which of a local cluster's processes listen beyond loopback (the kernel's socket table): Ray 2.60's GCS and
+raylets listen on every interface whatever ``--node-ip-address`` says, guarded by the token (docs/cluster.md)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""``sray cluster up|status|restart|down``: PostgreSQL, an MLflow server on it and a multi-node Ray, as processes
-on this machine bound to 127.0.0.1 (docs/cluster.md). ``up`` starts and records them in dependency order (a part
-that fails stops what it had started); ``down`` stops them in reverse order and keeps the data."""
+"""``sray cluster up|status|restart|down`` (docs/cluster.md): PostgreSQL, MLflow and a multi-node Ray on 127.0.0.1;
+``up`` starts them in dependency order (a failure stops what it started), ``down`` in reverse, keeping the data."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""The record of a local cluster, ``<dir>/cluster.json`` (owner-only): what ``up`` chose and started (ports, the
-database password, process ids with start times), so ``status`` reports and ``down`` stops exactly those. It stays
-after ``down`` for the next ``up``. Commands that may run at once change it under a lock (:func:`update_state`)."""
+"""A local cluster's record ``<dir>/cluster.json`` (owner-only): ports, database password, process ids with start
+times, so ``down`` stops exactly those; kept for the next ``up``, changed under a lock (:func:`update_state`)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
-"""Train the plain 2D segmenter for a budget of CPU seconds (``time.process_time`` of the loop, data loading
-included, summed over resumed runs) on the train scenes' source pools only (class weights counted there too),
-resumable: each loader epoch (``EPOCH_STEPS`` steps) writes ``STATE_FILE``, from which the same settings continue on
-the same data stream to the weights of an uninterrupted run; the file goes once the segmenter is saved."""
+"""Train the plain 2D segmenter for a budget of CPU seconds (the loop's ``time.process_time``, loading included, over
+resumed runs) on the train scenes' source pools only; each loader epoch writes ``STATE_FILE``, from which a resumed
+run reaches an uninterrupted run's weights; the file goes once the segmenter is saved."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
-"""Render held-out query views and score them, and the one render-and-score loop of every held-out score
-(:func:`score_scene`). Semantics from one confusion matrix per scene ("dataset-level") and per image, colour by PSNR,
-and by SSIM on whole images only. A pixel without prediction (all logits -inf) holds ``UNSEEN``, a miss of its true
-class. LPIPS is not reported: its backbones are downloaded at run time."""
+"""Every held-out score's render-and-score loop (:func:`score_scene`): semantics by one confusion matrix per scene
+("dataset-level") and per image, a pixel without prediction (all logits -inf) a miss; colour by PSNR, and SSIM on
+whole images only. No LPIPS: its backbones are downloaded at run time."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""``sray label``'s whole job (docs/capture.md): per chosen scene of a shard folder, its label files and a spline
-fly-through by the same model and render mode under ``OUT/<scene>/``; tracked, with each labelled scene's scores as
-metrics (``<scene>/miou``, ...) and its labels.json and fly-through files as artifacts under ``<scene>/``."""
+"""``sray label``'s whole job (docs/capture.md): per chosen scene, its label files and a spline fly-through under
+``OUT/<scene>/``, tracked (metrics ``<scene>/miou``, ...; labels.json and fly-through files under ``<scene>/``)."""
 
 from __future__ import annotations
 

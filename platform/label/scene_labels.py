@@ -1,7 +1,6 @@
-"""``sray label`` for one scene of a shard folder: every frame labelled by :meth:`Labeller.label` and written
-(atomically) as ``label/``, ``overlay/``, ``confidence/``, ``depth/`` PNGs and ``labels.json`` (docs/capture.md).
-A frame is rendered from its other frames, so the scores compare each prediction with labels its render never
-saw (Semantic-NeRF's dataset-level protocol, one confusion matrix)."""
+"""``sray label`` for one scene: every frame labelled by :meth:`Labeller.label`, written atomically as ``label/``,
+``overlay/``, ``confidence/``, ``depth/`` PNGs and ``labels.json`` (docs/capture.md); scores are dataset-level and
+fair, each frame being rendered from its other frames."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""Render a planned fly-through into videos, ``frames.json`` and ``protocol.txt`` (docs/render.md): per frame, rank
-its sources, encode them (a frame choosing the same set of views as the last one reuses that encoding, reordered:
-the encoder sees each view alone), render the whole frame, compose the panels and append them to the videos."""
+"""Render a planned fly-through into videos, ``frames.json`` and ``protocol.txt`` (docs/render.md); a frame with the
+last one's set of sources reuses their encoding, reordered (the encoder sees each view alone)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""One frame rendered whole by the model's whole-view renderer (``model.view_render.render_view``, as ``sray
-eval``'s views at stride 1), so a frame at a view's pose with its sources shows ``sray eval``'s labels and colours.
-In the fast mode logits, colours and depths are upsampled bilinearly: a depth edge blends over one grid cell."""
+"""One frame rendered whole by ``model.view_render.render_view``, as ``sray eval``'s views at stride 1; in the fast
+mode logits, colours and depths are upsampled bilinearly (a depth edge blends over one grid cell)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""Camera paths drawn in nerfstudio's viewer: its ``camera_path.json`` read and checked (docs/render.md). Its
-``camera_to_world`` uses OpenGL camera axes, flipped here to OpenCV's; ``fov`` is vertical, in degrees. Every
-problem is refused in one line naming the file and the field."""
+"""nerfstudio's ``camera_path.json``, read and checked (docs/render.md): ``camera_to_world`` in OpenGL camera axes,
+flipped to OpenCV's; ``fov`` vertical, in degrees. A problem is refused in one line naming the file and field."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
-"""A fly-through frame as one picture (docs/render.md): a title, then colour | semantic labels | depth | confidence
-tiles (the rendered pixels enlarged by an integer factor) with colour bars under depth (turbo over the scene's
-fixed near..far) and confidence (viridis over 0..1), then a legend of the classes present. Every frame of a video
-has the same size (the legend keeps room for every class). Drawn with OpenCV on a numpy array."""
+"""A fly-through frame as one picture, drawn with OpenCV (docs/render.md): title, colour | labels | depth | confidence
+tiles, colour bars under depth (turbo over the scene's near..far) and confidence (viridis, 0..1), the classes present.
+Every frame of a video has the same size (the legend keeps room for every class)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""Source views of a fly-through frame: the shards' ranking of a held-out test view (``neighbours.rank_camera``),
-which needs only a camera's pose and intrinsics. Candidates: a test scene's ``source`` split, a train scene's
-``scene.source_pool``; depth is read only from the pool, so no ``test`` view is ever decoded."""
+"""Source views of a fly-through frame, ranked as for a held-out test view (``neighbours.rank_camera``: pose and
+intrinsics only) among a test scene's ``source`` split or a train scene's pool; no ``test`` view is ever decoded."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""A fly-through's frames as a VP8 WebM, an MPEG-4 part 2 MP4 and a GIF preview (docs/render.md), written into a
-staging folder ``.<stem>.tmp<pid>`` beside them (same names: FFmpeg picks the container from the name) and renamed
-into place by :meth:`VideoSet.finish`: an error or a kill never leaves a half-written file under a final name."""
+"""A fly-through as a VP8 WebM, an MPEG-4 part 2 MP4 and a GIF preview (docs/render.md), written into the staging
+folder ``.<stem>.tmp<pid>`` and renamed into place by :meth:`VideoSet.finish`, so none is ever left half-written."""
 
 from __future__ import annotations
 

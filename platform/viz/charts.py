@@ -1,7 +1,6 @@
-"""Charts of a finetune fleet's results (docs/CONTRACTS.md, docs/dashboard.md), one PNG per :data:`FLEET_CHARTS` entry:
-held-out scores against time and steps (a panel per scene, a first one of their step-function mean; a zero-shot
-step-0 score as a dashed line) and mIoU against per-scene artifact bytes (zero-shot S-Ray on a "0 B" tick). Legend
-entries carry each method's inputs, footnotes the protocol lines and the results left out. Agg canvas, no pyplot."""
+"""Charts of a fleet's results (docs/dashboard.md), a PNG per :data:`FLEET_CHARTS` entry: held-out scores against
+time and steps (a panel per scene after their mean; zero-shot step 0 dashed), mIoU against artifact bytes (zero-shot
+S-Ray at "0 B"); footnotes name the protocols and results left out. Agg canvas, no pyplot."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""Fleet results as curves (``curve`` in a fleet result, docs/CONTRACTS.md). Between evaluations and after the last
-one (early stop) the model is the one last evaluated, so a score is a step function holding its last value:
-averaging across scenes resamples every curve on the union of their points."""
+"""Fleet results' ``curve`` (docs/CONTRACTS.md) as step functions (the model is the last evaluated until the next
+evaluation or the end); averaging across scenes resamples every curve on the union of their points."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""One PNG per evaluated view: predicted and ground-truth semantics and the error map above, predicted and
-ground-truth colour and the legend below. Tiles are the view's pixels enlarged by an integer factor at exact
-offsets (:func:`panel_grid`), so a test reads class colours back; Agg canvas, no pyplot state (safe in Ray workers)."""
+"""One PNG per evaluated view: semantics (predicted, ground truth, errors) above, colour and legend below, the view's
+pixels enlarged at exact offsets (:func:`panel_grid`); Agg canvas, no pyplot state (safe in Ray workers)."""
 
 from __future__ import annotations
 
