@@ -11,9 +11,8 @@ import psutil
 
 @dataclass(frozen=True)
 class Listener:
-    """A listening TCP socket of one of the cluster's processes: the part whose process tree holds it (``ray-head``,
-    ``mlflow`` ...), the owning process's name (``raylet`` ...) and pid, the bound address (``127.0.0.1``, or
-    ``0.0.0.0`` / ``::`` for every interface) and the port."""
+    """A listening TCP socket: the part whose process tree holds it (``ray-head`` ...), the owner's name (``raylet``
+    ...) and pid, the bound address (``0.0.0.0`` / ``::``: every interface) and the port."""
 
     part: str
     process: str

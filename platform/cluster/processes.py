@@ -93,9 +93,8 @@ def wait_until(check: Callable[[], bool], timeout_s: float, what: str, log_path:
 
 
 def stop(record: ProcessRecord, timeout_s: float = 20.0, sig: int = signal.SIGTERM, supervisor: bool = False) -> bool:
-    """Send ``sig`` to the recorded process's group, SIGKILL after ``timeout_s``; True when it ran.
-    ``supervisor``: the leader only watches the rest of its group (``ray start --block``, whose own exit can sit
-    out the whole wait), so it gets SIGKILL as soon as the rest of the group has ended."""
+    """Send ``sig`` to the recorded process's group, SIGKILL after ``timeout_s``; True when it ran. A ``supervisor``
+    leader (``ray start --block``, whose exit can sit out the wait) gets SIGKILL once the rest of its group ended."""
     if not is_alive(record):
         return False
     for signum in (sig, signal.SIGKILL):

@@ -20,10 +20,9 @@ FORMAT = "sray-cluster/1"  # format tag of the record
 
 @dataclass
 class ClusterState:
-    """Everything ``sray cluster`` knows of one cluster folder: the folder (absolute; database, artifacts, Ray temp
-    dirs, shared storage, logs), the PostgreSQL password of the ``sray`` role, the ``postgres``, ``mlflow``, ``gcs``
-    and ``dashboard`` ports (127.0.0.1), the worker nodes and CPUs per node of the last ``up``, each part's process
-    (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-1`` ... -> ``{pid, started}``) and its start-up seconds."""
+    """All ``sray cluster`` knows of a cluster folder: the folder (absolute; database, artifacts, Ray temp dirs, shared
+    storage, logs), the ``sray`` role's password, the ``postgres``, ``mlflow``, ``gcs`` and ``dashboard`` ports, the
+    last ``up``'s workers and CPUs per node, each part's process (-> ``{pid, started}``) and start-up seconds."""
 
     dir: str
     password: str

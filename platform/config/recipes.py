@@ -24,9 +24,9 @@ DEMO_STEPS = 600
 
 
 def synth_demo() -> TrainConfig:
-    """``synth-cpu-hour`` scaled down to minutes on ``sray demo``'s world (19 training rooms, 160x120):
-    ``synth-small``'s model, rays and sources trained the hour recipe's way, without view augmentation (not measured
-    at this length), with full CRA (intra-only scored lower here): study ``demo-recipe`` (docs/benchmarks.md)."""
+    """``synth-cpu-hour`` scaled to minutes on ``sray demo``'s world (19 training rooms, 160x120): ``synth-small``'s
+    model, rays, sources; no view augmentation (unmeasured here), full CRA (intra-only scored lower): study
+    ``demo-recipe`` (docs/benchmarks.md)."""
     cfg = synth_small()
     cfg.recipe = "synth-demo"
     cfg.model.lambda_src_sem = 1.0

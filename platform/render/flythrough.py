@@ -57,9 +57,8 @@ class Flythrough:
 
     @torch.no_grad()
     def picture(self, index: int, device: torch.device, label: str = "") -> tuple[np.ndarray, list[str]]:
-        """Frame ``index`` as its uint8 panel picture and its source ids, best first; ``label`` goes into the
-        title. ``net`` must be on ``device``; the last encoding is reused between calls (:meth:`render` starts
-        afresh, so change the weights only between renders)."""
+        """Frame ``index``'s uint8 panel picture (``label`` in its title) and source ids, best first; ``net`` on
+        ``device``. Calls reuse the last encoding, so change the weights only between :meth:`render` calls."""
         meta, path = self.plan.meta, self.plan.path
         ids = self.picker.choose(path.K[index], path.c2w[index], path.hw)
         query = QueryCamera(K=torch.from_numpy(path.K[index]).float(), c2w=torch.from_numpy(path.c2w[index]).float())

@@ -40,9 +40,8 @@ CONFIDENCE_COLORS = _lut(cv2.COLORMAP_VIRIDIS)  # 0 (index 0) to 1 (255)
 
 @dataclass(frozen=True)
 class PanelLayout:
-    """Pixel geometry of a frame picture (x right, y down, origin top-left): its (height, width), both even (video
-    encoders subsample colour by 2), the integer enlargement of the rendered pixels, tile name (:data:`TILES`) ->
-    (x, y, width, height), and the legend block's (x, y, columns)."""
+    """Pixel geometry of a frame picture (x right, y down, origin top-left): (height, width), both even (encoders
+    subsample colour by 2), the integer enlargement, tile name -> (x, y, width, height), legend (x, y, columns)."""
 
     size: tuple[int, int]
     scale: int
