@@ -21,8 +21,7 @@ class ClusterError(RuntimeError):
 
 @dataclass(frozen=True)
 class ProcessRecord:
-    """One process a cluster started: its pid (also its process group id: it leads its own session) and its start
-    time in clock ticks since boot (``/proc/<pid>/stat``)."""
+    """A started process: pid (also its group id: it leads its session) and start time in clock ticks since boot."""
 
     pid: int
     started: int

@@ -17,8 +17,7 @@ class HeldOutRender:
     """Sources, pixels and render of a held-out evaluation; checked by the config that holds it (:meth:`check`)."""
 
     n_source: int = 8
-    """Fixed source views per held-out view, top-ranked by the shards' neighbour rule (the paper's protocol: 8);
-    0 = the model's own ``model.n_source`` (validation's default)."""
+    """Fixed sources per held-out view, top-ranked by the shards (paper: 8); 0 = ``model.n_source`` (validation's)."""
     stride: int = 1
     """Every ``stride``-th pixel is scored, in each direction (1 = whole images, the only stride with SSIM)."""
     render: str = "fast"

@@ -70,8 +70,7 @@ def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device, fast
 
 
 def scene_confusion(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> Tensor:
-    """One (L+1, L+1) int64 confusion matrix over ``views``: column L counts the pixels without prediction
-    (``unseen_as_class``); row L is empty (no ground truth holds it)."""
+    """One (L+1, L+1) int64 confusion matrix over ``views``; column L counts pixels without prediction, row L is 0."""
     return sum(confusion_matrix(unseen_as_class(v.pred_label, n_classes), v.gt_label, n_classes + 1, ignore_id)
                for v in views)
 

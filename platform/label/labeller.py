@@ -129,8 +129,7 @@ class Labeller:
 
 
 def load(checkpoint: str | Path, n_source: int = 8, render: str = "fast", device: str | None = None) -> Labeller:
-    """The :class:`Labeller` of a training checkpoint (a checkpoint folder, a job's ``checkpoints/`` or a job
-    folder); ``render``: ``fast`` (default, as ``sray eval``) or ``full``."""
+    """The :class:`Labeller` of a checkpoint (folder, job ``checkpoints/`` or job); ``render``: ``fast`` or ``full``."""
     if render not in ("fast", "full"):
         raise ValueError(f"render must be 'fast' or 'full', got {render!r}")
     folder = resolve_checkpoint(Path(checkpoint))

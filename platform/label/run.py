@@ -34,8 +34,7 @@ def chosen_scenes(shards: Path, scenes: list[str] | None) -> list[str]:
 
 def label_scenes(labeller: Labeller, shards: Path, scenes: list[str], out: Path, fly_frames: int,
                  logger: RunLogger | None = None, progress: bool = True) -> dict[str, Any]:
-    """Label and fly through (``fly_frames`` 0: not) every scene of ``scenes`` under ``out``; returns per scene its
-    labels.json record plus ``flythrough`` (the fly-through's files)."""
+    """Label and fly through ``scenes`` (``fly_frames`` 0: none) into ``out``; per scene its record + ``flythrough``."""
     manifest = read_manifest(Path(shards))
     total = sum(len(manifest.scenes[s].meta["view_ids"]) for s in scenes)
     bar = make_progress(progress, total=total, desc="sray label")

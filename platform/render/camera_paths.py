@@ -17,8 +17,7 @@ SAME_POSE = 1e-9  # consecutive key cameras closer than this (metres + weighted 
 @dataclass(frozen=True)
 class CameraPath:
     """One camera per frame: ``c2w`` float64 (N, 4, 4) camera-to-world (OpenCV axes), ``K`` float64 (N, 3, 3) at
-    ``hw`` = (H, W) pixels, pixel (u, v) centred at (u, v); ``describe``: the path's origin (``spline through 16
-    cameras``, a file name, ...)."""
+    ``hw`` = (H, W), pixel (u, v) centred at (u, v); ``describe``: the path's origin (``spline through 16 cameras``)."""
 
     c2w: np.ndarray
     K: np.ndarray

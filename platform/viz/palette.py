@@ -34,8 +34,7 @@ def palette(n_classes: int) -> np.ndarray:
 
 
 def colorize(labels: np.ndarray, n_classes: int, ignore_id: int = 255) -> np.ndarray:
-    """uint8 (H, W, 3) image of integer labels (H, W), ``ignore_id`` pixels in :data:`IGNORE_COLOR`; ValueError
-    names the ids that are neither a class id nor the ignore id."""
+    """uint8 (H, W, 3) image of labels (H, W), ``ignore_id`` in :data:`IGNORE_COLOR`; ValueError names unknown ids."""
     labels = np.asarray(labels)
     if labels.ndim != 2 or not np.issubdtype(labels.dtype, np.integer):
         raise ValueError(f"labels must be an integer (H, W) array, got {labels.dtype} {labels.shape}")
