@@ -1,5 +1,4 @@
-"""Training recipes: named functions that return a complete ``TrainConfig``; ``sray train --recipe NAME`` starts
-from one, ``--set section.field=value`` and the common flags override its fields."""
+"""Training recipes: functions returning a whole ``TrainConfig``, for ``sray train --recipe NAME`` (then ``--set``)."""
 
 from __future__ import annotations
 

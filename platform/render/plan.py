@@ -22,8 +22,7 @@ DEFAULT_FPS = 15.0  # frames per second of a video when neither the request nor 
 
 @dataclass(frozen=True)
 class FlythroughPlan:
-    """A checked fly-through request: the shard folder, its manifest, the scene's metadata, its stored views by
-    id (decoded only where used), one camera per frame and the videos' frames per second."""
+    """A checked fly-through request: shards, manifest, scene metadata, views by id (decoded if used), cameras, fps."""
 
     shards: Path
     manifest: Manifest

@@ -1,5 +1,4 @@
-"""What a stability run leaves (docs/stability.md, "Outputs"): per-level statistics, breaking points,
-``stability.json``, a chart per score, a table per axis and the tracked runs."""
+"""What a stability run leaves (docs/stability.md, "Outputs"): stats, breaking points, charts, tables, runs."""
 
 from __future__ import annotations
 

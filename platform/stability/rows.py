@@ -1,5 +1,4 @@
-"""The stability suite's rows, read off the method registry (docs/stability.md, "Rows"), and how legends and headers
-name what a row saw and was given."""
+"""The stability suite's rows, read off the method registry, and what legends say a row saw (docs/stability.md)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""A training sweep checked before anything starts or is written (anything wrong is refused in one line), and its
-record ``sweep.json``, everything needed to continue it."""
+"""A training sweep checked before anything starts or is written (refusal: one line) and its record ``sweep.json``."""
 
 from __future__ import annotations
 

@@ -136,7 +136,6 @@ class StudySettings:
     start_by: float = 0.0
     """Unix time after which no trial starts (0 = none); a later one returns at once, unfinished for the next launch."""
     reuse_actors: bool = False
-    """Run the trials in one process (Tune's ``reuse_actors``), for short trials that keep what they loaded. Off:
-    a fresh process per trial (a trial that trains with Accelerate needs one)."""
+    """One process for all trials (Tune's ``reuse_actors``), for short ones; off for trials training with Accelerate."""
     label: str = "sweep"
     """Prefix of the study's progress lines (``[sweep] t001 started: ...``)."""
