@@ -68,7 +68,7 @@ class Labeller:
 
     def __init__(self, net: SRayModel, n_source: int = 8, fast: FastRender | None = FastRender(),
                  device: str | None = None, about: dict | None = None) -> None:
-        """``net`` must read RGB; ``fast`` None: the full render; ``device`` None: cuda if any; ``about``: provenance."""
+        """``net`` must read RGB; ``fast`` None: full render; ``device`` None: cuda or CPU; ``about``: provenance."""
         if net.cfg.inputs != "rgb":
             raise ValueError(f"this checkpoint reads source {net.cfg.inputs!r}; sray.load labels RGB photos with a "
                              "model trained on RGB inputs")
