@@ -165,8 +165,7 @@ class CheckpointManager:
 
 
 def resolve_checkpoint(path: Path) -> Path:
-    """A checkpoint folder from a checkpoint folder, a job's ``checkpoints/`` folder or a job folder
-    (best checkpoint, else the latest); FileNotFoundError names the path and what was expected."""
+    """The checkpoint folder of itself, a job's ``checkpoints/`` or a job (best, else latest); FileNotFoundError."""
     path = Path(path).resolve()
     for root in (path, path / "checkpoints"):
         if (root / STATE_FILE).is_file():

@@ -37,8 +37,7 @@ def synth_demo() -> TrainConfig:
 
 
 CPU_HOUR_SHARDS = "outputs/studies/worlds/train498-test4-v40-120x160-s0/shards"
-"""Default shards of ``synth-cpu-hour``: its study's 498-room world, which ``sray lab study --worlds
-jobs/studies/hour-recipe.yaml`` generates in the studies' default work folder."""
+"""``synth-cpu-hour``'s shards: the 498-room world of ``sray lab study --worlds jobs/studies/hour-recipe.yaml``."""
 
 
 def synth_cpu_hour() -> TrainConfig:

@@ -46,8 +46,7 @@ def trial_config(base: TrainConfig, point: Mapping[str, Any], name: str = "") ->
 
 
 def check_params(base: TrainConfig, params: list[Param]) -> None:
-    """Each parameter names a field of the config, each listed value (each bound of a range) is valid there, and
-    a range's field is a float; :class:`SpecError` naming the parameter otherwise."""
+    """:class:`SpecError` unless each parameter's field exists and takes its values (range bounds; ranges: floats)."""
     for param in params:
         ranged = param.kind in ("uniform", "loguniform")
         hint = ("; uniform and loguniform draw floats: for an integer or text field list the values with choice(...) "
