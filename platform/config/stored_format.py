@@ -9,9 +9,8 @@ import typing
 from typing import Any
 
 CONFIG_VERSION = 3
-"""Format of stored configs. 1 (no ``format_version`` key): sray up to commit 7734061, with the flat ``data.val_*``
-settings; 2 (up to 7966ddf): the nested ``held_out`` sections; 3: without the fields removed since
-(``sray.platform.migrate.config_formats``)."""
+"""Format of stored configs: 1 (no ``format_version``; sray up to 7734061, flat ``data.val_*``), 2 (up to 7966ddf,
+nested ``held_out``), 3 (without the fields removed since, ``sray.platform.migrate.config_formats``)."""
 VERSION_KEY = "format_version"
 """Key of the format version in a stored config dict."""
 

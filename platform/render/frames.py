@@ -15,9 +15,8 @@ from sray.model.view_render import RayRenderer, render_view
 
 @dataclass(frozen=True)
 class FrameRender:
-    """What a frame shows, on CPU: ``label`` int64 (H, W) argmax of the rendered logits, ``rgb`` float32 (H, W, 3)
-    colour in [0, 1], ``depth`` float32 (H, W) z-depth in metres (the fine pass), ``confidence`` float32 (H, W)
-    largest softmax probability of the logits, in [1/L, 1]."""
+    """A frame on CPU: ``label`` int64 (H, W) argmax of the logits, ``rgb`` float32 (H, W, 3) in [0, 1], ``depth``
+    float32 (H, W) fine-pass z-depth (m), ``confidence`` float32 (H, W) largest softmax probability, in [1/L, 1]."""
 
     label: Tensor
     rgb: Tensor

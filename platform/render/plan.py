@@ -47,9 +47,8 @@ def built_path(kind: str, views: dict[str, StoredView], meta: SceneMeta, image_h
 def plan_flythrough(shards: Path, scene: str, *, path: str = "spline", camera_path: Path | None = None,
                     n_frames: int = 60, size_hw: tuple[int, int] | None = None,
                     fps: float | None = None) -> FlythroughPlan:
-    """Check the request and build its cameras (writes nothing): a nerfstudio ``camera_path`` file (``size_hw`` and
-    ``fps`` override its own), else a built ``path`` of ``n_frames`` frames at ``size_hw`` (default: the scene's size).
-    Bad input: a one-line error naming the file and field."""
+    """Check the request and build its cameras: a nerfstudio ``camera_path`` file (``size_hw`` and ``fps`` override its
+    own), else a built ``path`` of ``n_frames`` at ``size_hw`` (default: the scene's); errors name file and field."""
     if camera_path is None and n_frames < 1:
         raise ValueError(f"frames is {n_frames}; a fly-through needs at least 1 frame")
     if size_hw is not None and min(size_hw) < 1:

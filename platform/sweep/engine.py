@@ -70,9 +70,8 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
 
 
 class GracefulASHA(AsyncHyperBandScheduler):
-    """ASHA whose STOP becomes the trial's own stop request (``study.request_stop``), always CONTINUE for Tune: a
-    trial's process Tune ends leaves its placement group behind (Ray Train's cleaner polls the state API, which a
-    local Ray without the dashboard does not serve), holding its CPUs; asked, the trial checkpoints and returns."""
+    """ASHA whose STOP becomes a trial's stop request, always CONTINUE to Tune: a trial Tune ends leaves its placement
+    group holding its CPUs (Ray Train's cleaner needs the dashboard); asked, the trial checkpoints and returns."""
 
     def __init__(self, study: str, **asha: Any) -> None:
         super().__init__(**asha)
