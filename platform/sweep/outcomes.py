@@ -51,8 +51,7 @@ class TrialOutcome:
 
 def _reason(record: TrialRecord, stop: dict[str, Any] | None, tune_error: str | None,
             last_at: float | None) -> tuple[str, str]:
-    """(reason, note). A stop request that came with the trial's own last report (``last_at``, the time attribute
-    there) found nothing left to stop: the trial ended by itself."""
+    """(reason, note); a stop request made at the trial's own last report (``last_at``) counts as ending by itself."""
     if record.outcome == ERRORED or tune_error is not None:
         return "errored", record.error or tune_error or ""
     too_late = stop is not None and record.outcome == FINISHED and last_at is not None and \
