@@ -49,7 +49,7 @@ class FinetuneSettings:
     top_k: int | None = None
     """Training sources are drawn from this many ranked neighbours; None = the checkpoint's ``data.top_k`` (capped)."""
     held_out: HeldOutRender = field(default_factory=lambda: HeldOutRender(stride=2, fast_stride=1))
-    """Held-out scoring: 8 fixed sources (paper), every 2nd pixel, fast; ``--set finetune.held_out.render=full``."""
+    """Held-out scoring: 8 fixed sources, every 2nd pixel, fast render; ``--set finetune.held_out.render=full``."""
     eval_chunk: int = 0
     """Rays per forward pass when rendering held-out views; 0 = by device (``sray.model.ray_chunks``)."""
     precision: str = "no"

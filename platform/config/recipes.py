@@ -1,4 +1,4 @@
-"""Training recipes: functions returning a whole ``TrainConfig``, for ``sray train --recipe NAME`` (then ``--set``)."""
+"""Training recipes: functions returning a ``TrainConfig`` for ``sray train --recipe NAME``; ``--set`` overrides."""
 
 from __future__ import annotations
 
