@@ -68,9 +68,6 @@ def failed_result(task: SceneTask, error: str, full_bytes: int | None) -> dict[s
             "gpu_peak_bytes": None}
 
 
-
-
-
 def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
     """ValueError naming what is wrong with the request, before anything starts."""
     known = method_names()
