@@ -108,8 +108,7 @@ def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dic
 
 
 class CheckpointManager:
-    """Numbered checkpoints under ``root``: save, ``latest`` (highest step), ``best`` (highest validation metric),
-    pruning to the last k, all derived from the complete folders alone."""
+    """Checkpoints under ``root``, known from their whole folders alone: save, ``latest``, ``best``, prune to last k."""
 
     def __init__(self, root: Path, keep_last: int = 3) -> None:
         """``keep_last``: newest checkpoints kept besides the best."""
@@ -166,8 +165,7 @@ class CheckpointManager:
 
 
 def resolve_checkpoint(path: Path) -> Path:
-    """A checkpoint folder from a checkpoint folder, a job's ``checkpoints/`` folder or a job folder
-    (best checkpoint, else the latest); FileNotFoundError names the path and what was expected."""
+    """The checkpoint folder of itself, a job's ``checkpoints/`` or a job (best, else latest); FileNotFoundError."""
     path = Path(path).resolve()
     for root in (path, path / "checkpoints"):
         if (root / STATE_FILE).is_file():

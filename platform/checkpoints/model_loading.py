@@ -11,8 +11,7 @@ from sray.platform.config.train_config import TrainConfig
 
 
 def model_from_checkpoint(path: Any, map_location: str = "cpu") -> tuple[SRayModel, TrainConfig]:
-    """The bare ``SRayModel`` (eval mode) and the job config stored in a training checkpoint folder; ValueError
-    naming the folder for a checkpoint an earlier sray wrote (convert it with ``sray migrate``)."""
+    """The bare ``SRayModel`` (eval mode) and job config of a checkpoint folder; ValueError: older (sray migrate)."""
     state = load_checkpoint(Path(path), map_location)
     try:
         cfg = TrainConfig.from_dict(state["config"])

@@ -1,6 +1,5 @@
-"""Which of a local cluster's processes listen beyond loopback, from the kernel's socket table: Ray 2.60's GCS
-server and raylets listen on every interface whatever ``--node-ip-address`` says, guarded only by the token
-(docs/cluster.md)."""
+"""Which of a local cluster's processes listen beyond loopback (the kernel's socket table): Ray 2.60's GCS and
+raylets listen on every interface whatever ``--node-ip-address`` says, guarded by the token (docs/cluster.md)."""
 
 from __future__ import annotations
 
@@ -12,9 +11,8 @@ import psutil
 
 @dataclass(frozen=True)
 class Listener:
-    """A listening TCP socket of one of the cluster's processes: the part whose process tree holds it (``ray-head``,
-    ``mlflow`` ...), the owning process's name (``raylet`` ...) and pid, the bound address (``127.0.0.1``, or
-    ``0.0.0.0`` / ``::`` for every interface) and the port."""
+    """A listening TCP socket: the part whose process tree holds it (``ray-head`` ...), the owner's name (``raylet``
+    ...) and pid, the bound address (``0.0.0.0`` / ``::``: every interface) and the port."""
 
     part: str
     process: str
@@ -31,8 +29,7 @@ class Listener:
 
 
 def listeners(parts: dict[str, int]) -> list[Listener]:
-    """Listening TCP sockets of each part's process tree (``parts``: name -> root pid), sorted by part
-    and port; a part whose process is gone contributes nothing."""
+    """Listening TCP sockets of each part's process tree (``parts``: name -> root pid; gone: none), by part, port."""
     owner: dict[int, tuple[str, str]] = {}
     for part, pid in parts.items():
         try:

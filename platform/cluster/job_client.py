@@ -15,8 +15,7 @@ EXIT_CODES = {"SUCCEEDED": 0, "FAILED": 1, "STOPPED": 3}
 
 def submit(address: str, entrypoint: str, submission_id: str | None = None,
            runtime_env: dict[str, Any] | None = None) -> str:
-    """Submit ``entrypoint`` (a shell command run on the head) to the dashboard at ``address`` (http://host:port);
-    returns the job id."""
+    """Submit ``entrypoint`` (a shell command run on the head) to the dashboard at ``address``; the job id."""
     return JobSubmissionClient(address).submit_job(entrypoint=entrypoint, submission_id=submission_id,
                                                    runtime_env=runtime_env or None)
 

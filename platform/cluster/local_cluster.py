@@ -1,6 +1,5 @@
-"""``sray cluster up|status|restart|down``: PostgreSQL, an MLflow server on it and a multi-node Ray, as processes
-on this machine bound to 127.0.0.1 (docs/cluster.md). ``up`` starts and records them in dependency order (a part
-that fails stops what it had started); ``down`` stops them in reverse order and keeps the data."""
+"""``sray cluster up|status|restart|down`` (docs/cluster.md): PostgreSQL, MLflow and a multi-node Ray on 127.0.0.1;
+``up`` starts them in dependency order (a failure stops what it started), ``down`` in reverse, keeping the data."""
 
 from __future__ import annotations
 
@@ -184,8 +183,7 @@ def down(root: Path) -> list[str]:
 
 
 def describe(state: ClusterState) -> str:
-    """What ``sray cluster up|status|restart`` print: each process and whether it runs, the addresses and the
-    token clients need, and the ports open beyond loopback."""
+    """What ``sray cluster up|status|restart`` print: processes, addresses, the clients' token, non-loopback ports."""
     alive = state.alive()
     running = ", ".join(f"{n} {'up' if ok else 'DOWN'} (pid {state.processes[n]['pid']})" for n, ok in alive.items())
     env = " ".join(f"{k}={v}" for k, v in ray_nodes.auth_env(state.token_path).items())

@@ -58,8 +58,8 @@ def _service_user() -> str | None:
 
 
 def init_db(bins: Path, data: Path, password: str, log_path: Path) -> None:
-    """``initdb`` into ``data`` (unless done) with role :data:`DB_USER` and scram password auth.
-    ClusterError naming the first folder above ``data`` that the service user cannot enter."""
+    """``initdb`` into ``data`` (unless done) with role :data:`DB_USER`, scram password auth; ClusterError naming the
+    first folder above ``data`` that the service user cannot enter."""
     user = _service_user()
     for folder in reversed(data.parent.parents):
         if user and not folder.stat().st_mode & 0o001:

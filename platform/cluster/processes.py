@@ -21,8 +21,7 @@ class ClusterError(RuntimeError):
 
 @dataclass(frozen=True)
 class ProcessRecord:
-    """One process a cluster started: its pid (also its process group id: it leads its own session) and its start
-    time in clock ticks since boot (``/proc/<pid>/stat``)."""
+    """A started process: pid (also its group id: it leads its session) and start time in clock ticks since boot."""
 
     pid: int
     started: int
@@ -81,8 +80,7 @@ def spawn(cmd: list[str], log_path: Path, env: Mapping[str, str] | None = None, 
 
 def wait_until(check: Callable[[], bool], timeout_s: float, what: str, log_path: Path | None = None,
                alive: ProcessRecord | None = None) -> None:
-    """Poll ``check`` until True; ClusterError after ``timeout_s`` or when ``alive`` (the process that should
-    answer) died, naming ``what`` and ``log_path``."""
+    """Poll ``check`` until True; ClusterError naming ``what``, ``log_path`` at ``timeout_s`` or if ``alive`` died."""
     t0 = time.monotonic()
     where = f"; see {log_path}" if log_path else ""
     while not check():
@@ -94,9 +92,8 @@ def wait_until(check: Callable[[], bool], timeout_s: float, what: str, log_path:
 
 
 def stop(record: ProcessRecord, timeout_s: float = 20.0, sig: int = signal.SIGTERM, supervisor: bool = False) -> bool:
-    """Send ``sig`` to the recorded process's group, SIGKILL after ``timeout_s``; True when it ran.
-    ``supervisor``: the leader only watches the rest of its group (``ray start --block``, whose own exit can sit
-    out the whole wait), so it gets SIGKILL as soon as the rest of the group has ended."""
+    """Send ``sig`` to the recorded process's group, SIGKILL after ``timeout_s``; True when it ran. A ``supervisor``
+    leader (``ray start --block``, whose exit can sit out the wait) gets SIGKILL once the rest of its group ended."""
     if not is_alive(record):
         return False
     for signum in (sig, signal.SIGKILL):

@@ -1,7 +1,6 @@
 """Ray nodes of a local cluster: a head (GCS, dashboard, Jobs API; no CPUs) and worker nodes, each a ``ray start
 --block`` process with its own temp dir, ports and resources, whose SIGTERM stops that node only. Every node and
-client uses the cluster's token (``RAY_AUTH_MODE=token``, ``RAY_AUTH_TOKEN_PATH``): one without it is refused.
-"""
+client uses the cluster's token (``RAY_AUTH_MODE=token``, ``RAY_AUTH_TOKEN_PATH``): one without it is refused."""
 
 from __future__ import annotations
 
@@ -32,10 +31,9 @@ def _ray() -> str:
 
 
 def _node_env(token_path: Path, gcs_address: str) -> dict[str, str]:
-    """A node's environment: ours, the token, this Python environment's scripts first on PATH (jobs run the
-    cluster's installation), jobs' worker polling (:mod:`sray.platform.common.ray_env`) unless ours sets it, and
-    ``RAY_ADDRESS`` naming this cluster: Ray's own actors look theirs up with ``address="auto"``, which fails
-    with "Found multiple active Ray instances" while another Ray runs on the machine."""
+    """A node's environment: ours, the token, this environment's scripts first on PATH (jobs run the cluster's
+    installation), jobs' worker polling (:mod:`sray.platform.common.ray_env`) unless ours sets it, and ``RAY_ADDRESS``
+    naming this cluster (Ray's actors look up ``address="auto"``, which fails while another Ray runs here)."""
     env = {**TRAIN_POLL_ENV, **os.environ, **NODE_ENV, **auth_env(token_path), "RAY_ADDRESS": gcs_address}
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     return env

@@ -1,7 +1,5 @@
-"""The record of a local cluster, ``<dir>/cluster.json`` (owner-only): what ``up`` chose and started (ports, the
-database password, process ids with start times), so ``status`` reports and ``down`` stops exactly those. It stays
-after ``down`` for the next ``up``. Commands that may run at once change it under a lock (:func:`update_state`).
-"""
+"""A local cluster's record ``<dir>/cluster.json`` (owner-only): ports, database password, process ids with start
+times, so ``down`` stops exactly those; kept for the next ``up``, changed under a lock (:func:`update_state`)."""
 
 from __future__ import annotations
 
@@ -22,10 +20,9 @@ FORMAT = "sray-cluster/1"  # format tag of the record
 
 @dataclass
 class ClusterState:
-    """Everything ``sray cluster`` knows of one cluster folder: the folder (absolute; database, artifacts, Ray temp
-    dirs, shared storage, logs), the PostgreSQL password of the ``sray`` role, the ``postgres``, ``mlflow``, ``gcs``
-    and ``dashboard`` ports (127.0.0.1), the worker nodes and CPUs per node of the last ``up``, each part's process
-    (``postgres``, ``mlflow``, ``ray-head``, ``ray-worker-1`` ... -> ``{pid, started}``) and its start-up seconds."""
+    """All ``sray cluster`` knows of a cluster folder: the folder (absolute; database, artifacts, Ray temp dirs, shared
+    storage, logs), the ``sray`` role's password, the ``postgres``, ``mlflow``, ``gcs`` and ``dashboard`` ports, the
+    last ``up``'s workers and CPUs per node, each part's process (-> ``{pid, started}``) and start-up seconds."""
 
     dir: str
     password: str
@@ -96,8 +93,7 @@ def load_state(root: Path) -> ClusterState | None:
 
 
 def update_state(root: Path, change: Callable[[ClusterState], None]) -> ClusterState:
-    """Apply ``change`` to the record on disk and save it, holding the folder's lock; returns the new record.
-    ClusterError when ``root`` holds no record."""
+    """Apply ``change`` to the record on disk under the folder's lock; the new record (ClusterError: no record)."""
     with open(Path(root) / LOCK_FILE, "a") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
         state = load_state(root)

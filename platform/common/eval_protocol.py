@@ -54,9 +54,8 @@ class EvalProtocol:
     inputs: str = "rgb"
     """Source-view inputs, one of :data:`INPUTS`."""
     train_inputs: str = ""
-    """What the evaluated model's training read of its views besides colours and labels, one of :data:`INPUTS`:
-    ``rgbd`` when it read ground-truth depth (a scene finetune of ``sray-rgbd``), else ``rgb``. Empty (the default, and
-    descriptors stored before the field existed) means the same as ``inputs``; it is then filled with it."""
+    """What the model's training read besides colours and labels (:data:`INPUTS`): ``rgbd`` for ground-truth depth
+    (a ``sray-rgbd`` scene finetune), else ``rgb``; empty (the default) means ``inputs`` and is filled with it."""
     miou: str = DATASET_PROTOCOL
     """Protocol of ``miou`` and the accuracies (one confusion matrix per scene)."""
     miou_per_image: str = PER_IMAGE_PROTOCOL

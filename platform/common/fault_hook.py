@@ -117,6 +117,12 @@ def poisoned_point(method: str, axis: str, level: object) -> bool:
     return f"{method}/{axis}/{level}" in active_faults().nan_points
 
 
+def error_text(error: BaseException) -> str:
+    """``Type: last message line`` of a failure, at most 2,000 characters: a fleet task's or sweep trial's record."""
+    lines = str(error).strip().splitlines()
+    return f"{type(error).__name__}: {lines[-1] if lines else ''}"[:2000]
+
+
 def fail_if_listed(scene: str, attempt: int) -> None:
     """Raise :class:`InjectedFailure` when ``scene`` is listed in ``fleet.fail_scenes``."""
     if scene in active_faults().fail_scenes:

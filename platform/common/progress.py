@@ -36,8 +36,7 @@ class _RayBar(tqdm_ray.tqdm):
 
 
 class LineProgress:
-    """Progress lines ``[sray] DESC: step N/TOTAL (P%), R s/step, ETA M:SS, key=value ...``: at most one every
-    ``every_s`` seconds, and one at the last step."""
+    """``[sray] DESC: step N/TOTAL (P%), R s/step, ETA M:SS, key=value ...``: one per ``every_s`` s, and the last."""
 
     def __init__(self, total: int, initial: int = 0, desc: str = "", every_s: float = LINE_EVERY_S) -> None:
         self.total, self.n, self.desc, self.every_s = total, initial, desc, every_s

@@ -1,6 +1,5 @@
 """Typed configuration of a finetune fleet (``sray finetune-fleet``): budgets, method settings, scheduling; ``--set``
-overrides any field. Fields whose default is None inherit the shared checkpoint's training value.
-"""
+overrides any field. Fields whose default is None inherit the shared checkpoint's training value."""
 
 from __future__ import annotations
 
@@ -15,11 +14,10 @@ PRECISIONS = ("no", "bf16", "fp16")
 """fp32, bfloat16 autocast (CPU and CUDA), float16 autocast with loss scaling (CUDA only)."""
 DEFAULT_ADAPT = ("encoder.merge2", "encoder.head", "coarse", "fine")
 """S-Ray modules a finetune trains and stores by default: the image encoder's last two layers (L18, L19) and both
-per-sample networks (2.8% of the model's bytes). Measured on 3 unseen procedural test scenes (72x96, a 400-step
-synth-small checkpoint, zero-shot mIoU 0.122), 80 steps at lr 1e-3, held-out mIoU after / artifact bytes:
-classifiers only 0.349 / 15 kB; + view weights 0.349 / 22 kB; whole per-sample networks 0.373 / 158 kB; encoder
-L18-L19 + classifiers 0.567 / 94 kB; **encoder L18-L19 + per-sample networks 0.601 / 237 kB**; whole encoder decoder
-(L11-L19) + per-sample networks 0.644 / 902 kB; everything 0.626 / 8.3 MB. Adapting the image features transfers."""
+per-sample networks (2.8% of the model's bytes). Held-out mIoU / artifact bytes after 80 steps at lr 1e-3 on 3 unseen
+test scenes (72x96, 400-step synth-small checkpoint, zero-shot 0.122): classifiers 0.349 / 15 kB; + view weights
+0.349 / 22 kB; per-sample networks 0.373 / 158 kB; encoder L18-L19 + classifiers 0.567 / 94 kB; **encoder L18-L19 +
+per-sample networks 0.601 / 237 kB**; encoder L11-L19 + per-sample networks 0.644 / 902 kB; all 0.626 / 8.3 MB."""
 
 
 @dataclass
@@ -31,8 +29,7 @@ class FinetuneSettings:
     max_seconds: float = 0.0
     """Training wall-clock budget per scene in seconds (evaluation not counted); 0 = none."""
     max_cpu_seconds: float = 0.0
-    """Training CPU budget per scene in seconds (the task's ``time.process_time`` over its training steps,
-    ``sray.platform.finetune.step_budget``); 0 = none. Unlike wall time, other jobs on the cores do not inflate it."""
+    """Training CPU seconds per scene (``step_budget``; other jobs on the cores do not inflate it); 0 = none."""
     eval_every: int = 25
     """Held-out evaluation cadence in steps (also after step 0, the zero-shot model)."""
     patience: int = 3
@@ -52,8 +49,7 @@ class FinetuneSettings:
     top_k: int | None = None
     """Training sources are drawn from this many ranked neighbours; None = the checkpoint's ``data.top_k`` (capped)."""
     held_out: HeldOutRender = field(default_factory=lambda: HeldOutRender(stride=2, fast_stride=1))
-    """How the held-out views are rendered and scored: 8 fixed sources (the paper's protocol), every 2nd pixel
-    (speed), S-Ray's fast render on those pixels; set field by field: ``--set finetune.held_out.render=full``."""
+    """Held-out scoring: 8 fixed sources, every 2nd pixel, fast render; ``--set finetune.held_out.render=full``."""
     eval_chunk: int = 0
     """Rays per forward pass when rendering held-out views; 0 = by device (``sray.model.ray_chunks``)."""
     precision: str = "no"

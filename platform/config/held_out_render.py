@@ -1,7 +1,5 @@
-"""How a held-out view is rendered and scored: one setting type for validation (``data.held_out``), the finetune
-fleet (``finetune.held_out``), ``sray eval`` and ``sray render`` (their flags, ``sray.jobs.render_flags``). The fast
-render's cost in mIoU against the full render is measured by ``sray bench speed-accuracy`` (docs/benchmarks.md).
-"""
+"""How a held-out view is rendered and scored, for validation (``data.held_out``), the fleet (``finetune.held_out``),
+``sray eval`` and ``sray render``; the fast render's mIoU cost: ``sray bench speed-accuracy`` (docs/benchmarks.md)."""
 
 from __future__ import annotations
 
@@ -19,8 +17,7 @@ class HeldOutRender:
     """Sources, pixels and render of a held-out evaluation; checked by the config that holds it (:meth:`check`)."""
 
     n_source: int = 8
-    """Fixed source views per held-out view, top-ranked by the shards' neighbour rule (the paper's protocol: 8);
-    0 = the model's own ``model.n_source`` (validation's default)."""
+    """Fixed sources per held-out view, top-ranked by the shards (paper: 8); 0 = ``model.n_source`` (validation's)."""
     stride: int = 1
     """Every ``stride``-th pixel is scored, in each direction (1 = whole images, the only stride with SSIM)."""
     render: str = "fast"

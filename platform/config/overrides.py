@@ -1,7 +1,5 @@
-"""``--set section.field=value`` on nested config dataclasses, the one override mechanism of every command: a value
-is parsed as the field's annotated type; an unknown section or field is refused with the valid names; a value the
-config's own checks reject is rolled back.
-"""
+"""``--set section.field=value`` on nested config dataclasses, every command's override: the value is parsed as the
+field's type; an unknown name is refused with the valid ones; a value the config's checks reject is rolled back."""
 
 from __future__ import annotations
 
@@ -38,9 +36,8 @@ def _sections(node: Any) -> list[str]:
 
 
 def set_field(cfg: Any, assignment: str, example: str, validate: Callable[[], None]) -> None:
-    """Apply one ``[section.]field=value`` to ``cfg`` in place, then ``validate()``; if that raises ValueError the
-    field gets its previous value back and the error propagates. ``example`` is shown when the assignment has no
-    ``=``. Frozen sections on the path are replaced by copies holding the new value, up to the first mutable one."""
+    """Apply ``[section.]field=value`` to ``cfg`` and ``validate()``, restoring the old value on ValueError (``example``
+    is shown without ``=``); frozen sections on the path are replaced by copies, up to the first mutable one."""
     if "=" not in assignment:
         raise ValueError(f"--set {assignment!r}: expected [section.]field=value, e.g. {example}")
     path, raw = (part.strip() for part in assignment.split("=", 1))

@@ -1,6 +1,4 @@
-"""Training recipes: named functions that return a complete ``TrainConfig``; ``sray train --recipe NAME`` starts
-from one, ``--set section.field=value`` and the common flags override its fields.
-"""
+"""Training recipes: functions returning a ``TrainConfig`` for ``sray train --recipe NAME``; ``--set`` overrides."""
 
 from __future__ import annotations
 
@@ -25,9 +23,9 @@ DEMO_STEPS = 600
 
 
 def synth_demo() -> TrainConfig:
-    """``synth-cpu-hour`` scaled down to minutes on ``sray demo``'s world (19 training rooms, 160x120):
-    ``synth-small``'s model, rays and sources trained the hour recipe's way, without view augmentation (not measured
-    at this length), with full CRA (intra-only scored lower here): study ``demo-recipe`` (docs/benchmarks.md)."""
+    """``synth-cpu-hour`` scaled to minutes on ``sray demo``'s world (19 training rooms, 160x120): ``synth-small``'s
+    model, rays, sources; no view augmentation (unmeasured here), full CRA (intra-only scored lower): study
+    ``demo-recipe`` (docs/benchmarks.md)."""
     cfg = synth_small()
     cfg.recipe = "synth-demo"
     cfg.model.lambda_src_sem = 1.0
@@ -39,15 +37,13 @@ def synth_demo() -> TrainConfig:
 
 
 CPU_HOUR_SHARDS = "outputs/studies/worlds/train498-test4-v40-120x160-s0/shards"
-"""Default shards of ``synth-cpu-hour``: its study's 498-room world, which ``sray lab study --worlds
-jobs/studies/hour-recipe.yaml`` generates in the studies' default work folder."""
+"""``synth-cpu-hour``'s shards: the 498-room world of ``sray lab study --worlds jobs/studies/hour-recipe.yaml``."""
 
 
 def synth_cpu_hour() -> TrainConfig:
-    """One hour of pretraining on 2 CPU cores, built to generalize rather than to memorize its rooms; each choice
-    won its arm in docs/studies/hour-recipe.md. A budget of 7,200 CPU seconds (both cores of a 2-core machine for an
-    hour) ends the job; the 20,000-step cap only bounds the learning-rate schedule on a faster machine. Its figures
-    are the README's recipe card (``python -m sray.lab.publish``)."""
+    """One hour of pretraining on 2 CPU cores, built to generalize (each choice won its arm in
+    docs/studies/hour-recipe.md): 7,200 CPU seconds end the job; the 20,000-step cap only bounds the learning-rate
+    schedule on a faster machine. Figures: the README's recipe card (``python -m sray.lab.publish``)."""
     return TrainConfig(
         recipe="synth-cpu-hour",
         model=SRayConfig(n_source=8, n_coarse=24, n_fine=24, attention="intra", lambda_src_sem=1.0),

@@ -1,7 +1,6 @@
 """Reading a stored config (a job's ``config.json``, a checkpoint's ``config``, a sweep's base) back into its typed
 dataclass, today's format only: another ``format_version`` is refused in one line naming ``sray migrate``
-(``sray.platform.migrate``), which converts it once; an unknown field is refused by name.
-"""
+(``sray.platform.migrate``), which converts it once; an unknown field is refused by name."""
 
 from __future__ import annotations
 
@@ -10,9 +9,8 @@ import typing
 from typing import Any
 
 CONFIG_VERSION = 3
-"""Format of stored configs. 1 (no ``format_version`` key): sray up to commit 7734061, with the flat ``data.val_*``
-settings; 2 (up to 7966ddf): the nested ``held_out`` sections; 3: without the fields removed since
-(``sray.platform.migrate.config_formats``)."""
+"""Format of stored configs: 1 (no ``format_version``; sray up to 7734061, flat ``data.val_*``), 2 (up to 7966ddf,
+nested ``held_out``), 3 (without the fields removed since, ``sray.platform.migrate.config_formats``)."""
 VERSION_KEY = "format_version"
 """Key of the format version in a stored config dict."""
 
@@ -28,9 +26,8 @@ def outdated(what: str, found: Any, expected: Any) -> OutdatedFormat:
 
 
 def from_plain(cls: type, d: dict[str, Any], where: str) -> Any:
-    """The dataclass ``cls`` built from its plain-dict form ``d`` (``dataclasses.asdict``): nested sections built
-    as their own dataclasses, lists read back as tuples where the field is a tuple; ValueError names a field of
-    ``d`` that ``cls`` does not have (``where``: the section's dotted name)."""
+    """``cls`` from its ``dataclasses.asdict`` form ``d``, nested sections included, lists as tuples where typed so;
+    ValueError names a field of ``d`` that ``cls`` lacks (``where``: the section's dotted name)."""
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(d) - names)

@@ -185,9 +185,8 @@ class TrainConfig:
 
 
 def apply_override(cfg: TrainConfig, assignment: str) -> None:
-    """Apply one ``section.field=value`` override in place, the value parsed as the field's type
-    (``overrides.set_field``): ValueError names an unknown section or field and lists the valid ones, or a value the
-    network cannot run with (the config keeps its previous value then)."""
+    """Apply one ``section.field=value`` override in place (``overrides.set_field``): ValueError names an unknown
+    section or field and lists the valid ones, or a value the network cannot run with (the old value stays)."""
     set_field(cfg, assignment, "optim.lr=5e-4", cfg.check)
 
 

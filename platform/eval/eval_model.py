@@ -1,6 +1,5 @@
 """What ``sray eval`` scores: any method's pretrained model as one record, :class:`EvalModel`, made by the method's
-``eval_model`` builder (S-Ray: :func:`checkpoint_model`; ``2d-transfer``: :func:`segmenter_model`).
-"""
+``eval_model`` builder (S-Ray: :func:`checkpoint_model`; ``2d-transfer``: :func:`segmenter_model`)."""
 
 from __future__ import annotations
 

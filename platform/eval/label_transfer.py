@@ -1,17 +1,15 @@
-"""Label transfer between posed views: per-pixel labels of m source views carried into a query view by one
-function, :func:`transfer_labels`, with two geometries and one vote (docs/fleet.md, "2D label transfer"). Pixel
-(u, v) is centred at (u, v), cameras are OpenCV's, depth is camera z in metres (0 = unknown); geometry runs in
-float64, so rounding never moves with float32 noise.
+"""Label transfer: per-pixel labels of m posed source views carried into a query view by :func:`transfer_labels`
+(docs/fleet.md, "2D label transfer"). Pixel (u, v) is centred at (u, v), cameras are OpenCV's, depth is camera z in
+metres (0 = unknown); geometry runs in float64, so rounding never moves with float32 noise.
 
-* ``backward`` (from a depth of the query: its ground truth, an oracle, or a rendered one): each query pixel with
-  depth d > 0 goes to the nearest pixel of every source; source j sees it when it lies in front of the camera,
-  inside the image, and |z_j - D_j| < ``tolerance`` * D_j for j's own depth D_j > 0 (no test without source depth).
-* ``forward`` (splatting by the source depth, the query's camera only): per source a z-buffer keeps the nearest
-  point of each query pixel (equal depths: the lowest source pixel index); source j sees the pixel when its buffer
-  holds a point within ``tolerance`` * z* of the nearest buffer's z*.
-* the vote: the most votes win (labels ``ignore_id`` never vote), a tie goes to the label whose first voter is the
-  best-ranked source; no vote: :data:`UNSEEN`, scored as a miss (:data:`UNSEEN_RULE`).
-"""
+* ``backward`` (by a depth of the query): each query pixel with depth d > 0 goes to the nearest pixel of every
+  source; source j sees it in front of the camera, inside the image, and where |z_j - D_j| < ``tolerance`` * D_j for
+  j's own depth D_j > 0 (no test without source depth).
+* ``forward`` (by the source depth, the query's camera only): per source a z-buffer keeps each query pixel's nearest
+  point (ties: the lowest source pixel index); j sees the pixel when its point is within ``tolerance`` * z* of the
+  nearest buffer's z*.
+* vote: the most votes win (``ignore_id`` never votes), ties to the label of the best-ranked first voter; no vote:
+  :data:`UNSEEN`, scored as a miss (:data:`UNSEEN_RULE`)."""
 
 from __future__ import annotations
 
@@ -43,8 +41,7 @@ class LabelTransfer:
     seen: Tensor
     """bool (H, W) pixels at least one source view sees, by the transfer's geometry (labelled or not)."""
     rgb: Tensor | None = None
-    """float32 (H, W, 3) mean colour of the source pixels that see each pixel, 0 where none does; None unless
-    the source colours were given."""
+    """float32 (H, W, 3) mean colour of the source pixels seeing each pixel (0: none); None without source colours."""
 
 
 def project_points(points: Tensor, K: Tensor, c2w: Tensor) -> tuple[Tensor, Tensor]:

@@ -1,9 +1,7 @@
-"""The plain 2D segmenter, S-Ray's encoder plus its source-view head and loss (``sray.model.source_semantics``)
-trained alone, and the ``2d-transfer`` prediction it makes: its labels of the source images, and their colours,
-splatted into the query by the SOURCE depth (``label_transfer``, ``forward``), reading of the query only its camera
-(docs/fleet.md, "2D label transfer"); ceilings row c is this transfer. A segmenter is a folder: ``segmenter.pt`` (the
-state dict, ``weights_only``-safe) and ``segmenter.json`` (its config and training record).
-"""
+"""The plain 2D segmenter (S-Ray's encoder, source-view head and loss, ``sray.model.source_semantics``, trained alone)
+and its ``2d-transfer`` prediction: its labels and colours of the source images splatted into the query by the SOURCE
+depth (``label_transfer``, ``forward``; docs/fleet.md, "2D label transfer"). A segmenter is a folder:
+``segmenter.pt`` (the state dict, ``weights_only``-safe) and ``segmenter.json`` (its config and training record)."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""Train the plain 2D segmenter for a budget of CPU seconds (``time.process_time`` of the loop, data loading
-included, summed over resumed runs) on the train scenes' source pools only (class weights counted there too),
-resumable: each loader epoch (``EPOCH_STEPS`` steps) writes ``STATE_FILE``, from which the same settings continue on
-the same data stream to the weights of an uninterrupted run; the file goes once the segmenter is saved.
-"""
+"""Train the plain 2D segmenter for a budget of CPU seconds (the loop's ``time.process_time``, loading included, over
+resumed runs) on the train scenes' source pools only; each loader epoch writes ``STATE_FILE``, from which a resumed
+run reaches an uninterrupted run's weights; the file goes once the segmenter is saved."""
 
 from __future__ import annotations
 
@@ -86,11 +84,9 @@ def train_segmenter(shards: Path, cpu_seconds: float, out: Path, seed: int = 0, 
                     top_k: int = 12, lr: float = 1e-3, feat_dim: int = 32, encoder_width: int = 16,
                     visit_samples: int = 1, cache_scenes: int = 4,
                     max_steps: int | None = None, progress: bool = True) -> SegmenterRecord:
-    """Train a segmenter on the train scenes of ``shards`` for ``cpu_seconds`` (module doc), save it in ``out`` and
-    return its record. ``class_balance``: ``none``, ``inverse-sqrt`` or ``inverse``; ``n_source`` images per step
-    from ``top_k`` ranked neighbours; ``feat_dim``, ``encoder_width``: S-Ray's fields of those names;
-    ``visit_samples``: consecutive steps on one scene (1: interleaved, which transfers better at an equal budget,
-    docs/benchmarks.md "Ceilings"); ``cache_scenes``: decoded scenes kept; ``max_steps``: a cap within the budget."""
+    """Train a segmenter on ``shards``' train scenes for ``cpu_seconds`` into ``out``; its record. ``n_source`` images
+    per step of ``top_k`` ranked neighbours; ``visit_samples``: steps per scene visit (1, interleaved, transfers better,
+    docs/benchmarks.md "Ceilings"); ``cache_scenes``: decoded scenes kept; ``max_steps``: a cap; the rest: S-Ray's."""
     if cpu_seconds <= 0:
         raise ValueError(f"cpu_seconds is {cpu_seconds}; give the segmenter a positive CPU budget")
     shards = Path(shards)

@@ -1,6 +1,5 @@
 """Zero-shot scores on several test splits side by side and the mIoU gap from the first split, the headline of a
-shift evaluation (``sray eval --split``): each row from the ``mean`` block of a report, in percent (gaps in points).
-"""
+shift evaluation (``sray eval --split``): each row from the ``mean`` block of a report, in percent (gaps in points)."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""Render held-out query views and score them, and the one render-and-score loop of every held-out score
-(:func:`score_scene`). Semantics from one confusion matrix per scene ("dataset-level") and per image, colour by PSNR,
-and by SSIM on whole images only. A pixel without prediction (all logits -inf) holds ``UNSEEN``, a miss of its true
-class. LPIPS is not reported: its backbones are downloaded at run time.
-"""
+"""Every held-out score's render-and-score loop (:func:`score_scene`): semantics by one confusion matrix per scene
+("dataset-level") and per image, a pixel without prediction (all logits -inf) a miss; colour by PSNR, and SSIM on
+whole images only. No LPIPS: its backbones are downloaded at run time."""
 
 from __future__ import annotations
 
@@ -72,8 +70,7 @@ def sray_renderer(net: nn.Module, sample: EvalSample, device: torch.device, fast
 
 
 def scene_confusion(views: list[ViewPrediction], n_classes: int, ignore_id: int) -> Tensor:
-    """One (L+1, L+1) int64 confusion matrix over ``views``: column L counts the pixels without prediction
-    (``unseen_as_class``); row L is empty (no ground truth holds it)."""
+    """One (L+1, L+1) int64 confusion matrix over ``views``; column L counts pixels without prediction, row L is 0."""
     return sum(confusion_matrix(unseen_as_class(v.pred_label, n_classes), v.gt_label, n_classes + 1, ignore_id)
                for v in views)
 

@@ -1,10 +1,8 @@
-"""``sray eval``: score any method's pretrained model as it is on unseen scenes with the paper's generalization
-protocol (docs/fleet.md, "``sray eval``"): every ``test`` view from its ``n_source`` fixed sources, at every
-``stride``-th pixel. Writes ``metrics.json`` (the model's record, the protocol, per scene and the unweighted mean
-over scenes in blocks that name their protocol, per-view scores) and the PNGs of every view, all of it in a new
-tracked run (metrics at the checkpoint's step, 0 without one). ``sray eval --calibrate`` first fits the fast
-render's coarse confidence on validation rooms (:func:`calibrate`, docs/fleet.md, "Shifted splits").
-"""
+"""``sray eval``: score any method's pretrained model on unseen scenes with the paper's generalization protocol
+(docs/fleet.md, "``sray eval``"): every ``test`` view from its ``n_source`` fixed sources, every ``stride``-th pixel.
+Writes ``metrics.json`` (model record, protocol, per-scene blocks, their unweighted mean, per-view scores) and every
+view's PNGs in a new tracked run (metrics at the checkpoint's step, 0 without one). ``--calibrate`` first fits the
+fast render's coarse confidence on validation rooms (:func:`calibrate`, docs/fleet.md, "Shifted splits")."""
 
 from __future__ import annotations
 

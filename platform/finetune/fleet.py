@@ -16,7 +16,7 @@ from sray.data_tools.atomic import atomic_write_json, atomic_write_text
 from sray.data_tools.shards.manifest import read_manifest
 from sray.platform.checkpoints.folders import resolve_checkpoint
 from sray.platform.checkpoints.model_loading import model_from_checkpoint
-from sray.platform.common.fault_hook import propagated_env
+from sray.platform.common.fault_hook import error_text, propagated_env
 from sray.platform.common.progress import progress_env
 from sray.platform.common.ray_address import check_ray_address
 from sray.platform.config.fleet_config import FleetConfig, check_fleet_config
@@ -66,13 +66,6 @@ def failed_result(task: SceneTask, error: str, full_bytes: int | None) -> dict[s
             "artifact_bytes": None, "full_checkpoint_bytes": full_bytes,
             "child_run_id": task.run.run_id if task.run else None, "protocol": None, "curve": [], "node_id": None,
             "gpu_peak_bytes": None}
-
-
-def _error_text(error: BaseException) -> str:
-    """``Type: message`` of a task's failure (the original exception inside a RayTaskError)."""
-    cause = getattr(error, "cause", None) or error
-    message = str(cause).strip().splitlines()
-    return f"{type(cause).__name__}: {message[-1] if message else ''}"[:2000]
 
 
 def _validate(shards: Path, scenes: list[str], methods: list[str]) -> None:
@@ -159,7 +152,7 @@ def _schedule(tasks: list[SceneTask], cfg: FleetConfig, full_bytes: int,
                 try:
                     result = ray.get(ref)
                 except Exception as e:  # noqa: BLE001 - a task error or a dead worker: re-run or report
-                    error = _error_text(e)
+                    error = error_text(getattr(e, "cause", None) or e)  # the exception inside a RayTaskError
                     if task.attempt <= cfg.retries:
                         delay = cfg.retry_backoff_s * 2 ** (task.attempt - 1)
                         waiting.append((time.monotonic() + delay, dataclasses.replace(task, attempt=task.attempt + 1)))

@@ -1,11 +1,7 @@
-"""The per-scene learners a fleet task trains, behind one interface, :class:`Learner`: :class:`SRayLearner` (the
-shared model with only the modules ``adapt`` trainable), :class:`NeRFLearner` (a Semantic-NeRF from scratch on the
-same rays) and :class:`TransferLearner` (the ``2d-transfer`` segmenter, finetuned whole on labelled source images).
-
-All update through the shared :class:`sray.platform.train.step.TrainStep` (autocast bf16 on CPU and
-CUDA or fp16 with a GradScaler on CUDA, clipping, the non-finite guard); the loss itself is computed in
-float32 (``render_loss``; the segmenter's ``source_semantic_loss``).
-"""
+"""The per-scene learners of a fleet task behind :class:`Learner`: :class:`SRayLearner` (the shared model, only the
+``adapt`` modules trainable), :class:`NeRFLearner` (a Semantic-NeRF from scratch) and :class:`TransferLearner` (the
+``2d-transfer`` segmenter, finetuned whole), all updated by :class:`~sray.platform.train.step.TrainStep`; the loss is
+float32 (``render_loss``; the segmenter's ``source_semantic_loss``)."""
 
 from __future__ import annotations
 

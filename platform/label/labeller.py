@@ -26,10 +26,9 @@ INDOOR_RANGE = (0.1, 10.0)  # depth range (metres) used when ``label`` is given 
 
 @dataclass(frozen=True)
 class Labels:
-    """What :meth:`Labeller.label` returns, per frame: ``label`` uint8 (N, H, W) class ids of the model's label
-    space, ``confidence`` float32 (N, H, W) largest softmax probability, ``depth`` float32 (N, H, W) rendered
-    z-depth in metres, ``rgb`` uint8 (N, H, W, 3) rendered colour, ``sources`` the indices of the frames each
-    was rendered from, best first."""
+    """What :meth:`Labeller.label` returns: ``label`` uint8 (N, H, W) class ids of the model's label space,
+    ``confidence`` float32 (N, H, W) largest softmax probability, ``depth`` float32 (N, H, W) rendered z-depth in
+    metres, ``rgb`` uint8 (N, H, W, 3) rendered colour, ``sources`` each frame's source indices, best first."""
 
     label: np.ndarray
     confidence: np.ndarray
@@ -69,8 +68,7 @@ class Labeller:
 
     def __init__(self, net: SRayModel, n_source: int = 8, fast: FastRender | None = FastRender(),
                  device: str | None = None, about: dict | None = None) -> None:
-        """``net``: the model (RGB inputs); ``n_source``: sources per frame; ``fast``: the fast render mode (None:
-        the full renderer); ``device``: torch device (default cuda when available); ``about``: provenance."""
+        """``net`` must read RGB; ``fast`` None: full render; ``device`` None: cuda or CPU; ``about``: provenance."""
         if net.cfg.inputs != "rgb":
             raise ValueError(f"this checkpoint reads source {net.cfg.inputs!r}; sray.load labels RGB photos with a "
                              "model trained on RGB inputs")
@@ -130,8 +128,7 @@ class Labeller:
 
 
 def load(checkpoint: str | Path, n_source: int = 8, render: str = "fast", device: str | None = None) -> Labeller:
-    """The :class:`Labeller` of a training checkpoint (a checkpoint folder, a job's ``checkpoints/`` or a job
-    folder); ``render``: ``fast`` (default, as ``sray eval``) or ``full``."""
+    """The :class:`Labeller` of a checkpoint (folder, job ``checkpoints/`` or job); ``render``: ``fast`` or ``full``."""
     if render not in ("fast", "full"):
         raise ValueError(f"render must be 'fast' or 'full', got {render!r}")
     folder = resolve_checkpoint(Path(checkpoint))

@@ -1,6 +1,5 @@
-"""``sray label``'s whole job (docs/capture.md): per chosen scene of a shard folder, its label files and a spline
-fly-through by the same model and render mode under ``OUT/<scene>/``; tracked, with each labelled scene's scores as
-metrics (``<scene>/miou``, ...) and its labels.json and fly-through files as artifacts under ``<scene>/``."""
+"""``sray label``'s whole job (docs/capture.md): per chosen scene, its label files and a spline fly-through under
+``OUT/<scene>/``, tracked (metrics ``<scene>/miou``, ...; labels.json and fly-through files under ``<scene>/``)."""
 
 from __future__ import annotations
 
@@ -35,8 +34,7 @@ def chosen_scenes(shards: Path, scenes: list[str] | None) -> list[str]:
 
 def label_scenes(labeller: Labeller, shards: Path, scenes: list[str], out: Path, fly_frames: int,
                  logger: RunLogger | None = None, progress: bool = True) -> dict[str, Any]:
-    """Label and fly through (``fly_frames`` 0: not) every scene of ``scenes`` under ``out``; returns per scene its
-    labels.json record plus ``flythrough`` (the fly-through's files)."""
+    """Label and fly through ``scenes`` (``fly_frames`` 0: none) into ``out``; per scene its record + ``flythrough``."""
     manifest = read_manifest(Path(shards))
     total = sum(len(manifest.scenes[s].meta["view_ids"]) for s in scenes)
     bar = make_progress(progress, total=total, desc="sray label")

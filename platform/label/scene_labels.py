@@ -1,8 +1,6 @@
-"""``sray label`` for one scene of a shard folder: every frame labelled by :meth:`Labeller.label` and written
-(atomically) as ``label/``, ``overlay/``, ``confidence/``, ``depth/`` PNGs and ``labels.json`` (docs/capture.md).
-A frame is rendered from its other frames, so the scores compare each prediction with labels its render never
-saw (Semantic-NeRF's dataset-level protocol, one confusion matrix).
-"""
+"""``sray label`` for one scene: every frame labelled by :meth:`Labeller.label`, written atomically as ``label/``,
+``overlay/``, ``confidence/``, ``depth/`` PNGs and ``labels.json`` (docs/capture.md); scores are dataset-level and
+fair, each frame being rendered from its other frames."""
 
 from __future__ import annotations
 
@@ -31,8 +29,7 @@ def overlay(rgb: np.ndarray, label: np.ndarray, n_classes: int) -> np.ndarray:
 
 
 def write_frame_files(out_dir: Path, view_id: str, rgb: np.ndarray, labels: Labels, i: int, n_classes: int) -> None:
-    """The four PNGs of frame ``i``: uint8 class ids, the frame and the label colours half and half, 16-bit
-    confidence x 65535 and 16-bit depth in millimetres."""
+    """Frame ``i``'s PNGs: uint8 class ids, frame/label blend, 16-bit confidence x 65535 and depth in mm."""
     conf = np.round(np.clip(labels.confidence[i], 0, 1) * 65535).astype(np.uint16)
     for sub, image in (("label", labels.label[i]), ("overlay", overlay(rgb, labels.label[i], n_classes)),
                        ("confidence", conf), ("depth", depth_to_png16(labels.depth[i]))):

@@ -1,12 +1,9 @@
-"""``sray migrate PATH``: find the stored artifacts of an earlier sray under PATH and convert them to today's format.
-
-Training configs (``config_formats``) in checkpoints, jobs' ``config.json`` and sweeps' ``sweep.json`` (swept
-parameters renamed or dropped too); a version-1 checkpoint (up to 7734061) also gets its model keys (the oldest hold
-``net.``-prefixed keys) and every counter (0, or NaN = unknown for the wall seconds past step 0); a ``fleet.json``
-without a tracker name gets MLflow; Semantic-NeRF scene artifacts and 2D segmenters lose removed settings. All is
-converted in memory first and written (atomically) only when everything converts, so a refusal leaves PATH as it
-was; an artifact already in today's format is left alone.
-"""
+"""``sray migrate PATH``: convert the stored artifacts of an earlier sray under PATH to today's format. Training
+configs (``config_formats``) in checkpoints, jobs' ``config.json`` and sweeps' ``sweep.json`` (swept parameters too);
+a version-1 checkpoint's (up to 7734061) model keys (the oldest ``net.``-prefixed) and counters (0, or NaN = unknown
+for the wall seconds past step 0); a ``fleet.json`` without a tracker name gets MLflow; Semantic-NeRF artifacts and
+2D segmenters lose removed settings. Nothing is written (atomically) until everything converts, so a refusal leaves
+PATH as it was; an artifact already in today's format is left alone."""
 
 from __future__ import annotations
 

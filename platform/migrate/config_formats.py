@@ -1,9 +1,7 @@
 """A stored training config of an earlier format (``stored_format.CONFIG_VERSION``), as a plain dict, converted to
-today's. Format 1 also covers the older layouts 7734061 still read: ``aug_<field>`` flat in the data section,
-runtime settings in the model section, fault settings in the run section. A removed field (a lever that lost) is
-dropped where it holds the value at which it changed nothing; any other value is refused by name, with the last
-commit that had it.
-"""
+today's. Format 1 also covers the older layouts 7734061 still read: ``aug_<field>`` flat in the data section, runtime
+settings in the model section, fault settings in the run section. A removed field (a lever that lost) is dropped where
+it holds the value at which it changed nothing; any other value is refused by name, with the last commit that had it."""
 
 from __future__ import annotations
 
@@ -35,8 +33,7 @@ class MigrationRefused(ValueError):
 
 
 def refuse_unless_noop(path: str, value: Any, where: str, removed: dict[str, tuple[Any, str]] = REMOVED_FIELDS) -> None:
-    """MigrationRefused (naming ``where``, the field and the commit to use) unless ``value`` of the removed field
-    ``path`` is the one that changed nothing."""
+    """MigrationRefused (``where``, field, commit to use) unless ``value`` of removed ``path`` is a no-op."""
     noop, commit = removed[path]
     if value != noop:
         raise MigrationRefused(f"{where}: {path} is {value!r}, a setting removed from sray (a lever that lost); this "

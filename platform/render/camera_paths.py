@@ -16,9 +16,8 @@ SAME_POSE = 1e-9  # consecutive key cameras closer than this (metres + weighted 
 
 @dataclass(frozen=True)
 class CameraPath:
-    """The cameras of a fly-through, one per frame: ``c2w`` float64 (N, 4, 4) camera-to-world (OpenCV axes), ``K``
-    float64 (N, 3, 3) intrinsics at ``hw`` = (height, width) in pixels, pixel (u, v) centred at (u, v), and
-    ``describe``, where the path came from in one phrase (``spline through 16 cameras``, a file name, ...)."""
+    """One camera per frame: ``c2w`` float64 (N, 4, 4) camera-to-world (OpenCV axes), ``K`` float64 (N, 3, 3) at
+    ``hw`` = (H, W), pixel (u, v) centred at (u, v); ``describe``: the path's origin (``spline through 16 cameras``)."""
 
     c2w: np.ndarray
     K: np.ndarray

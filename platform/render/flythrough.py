@@ -1,6 +1,5 @@
-"""Render a planned fly-through into videos, ``frames.json`` and ``protocol.txt`` (docs/render.md): per frame, rank
-its sources, encode them (a frame choosing the same set of views as the last one reuses that encoding, reordered:
-the encoder sees each view alone), render the whole frame, compose the panels and append them to the videos."""
+"""Render a planned fly-through into videos, ``frames.json`` and ``protocol.txt`` (docs/render.md); a frame with the
+last one's set of sources reuses their encoding, reordered (the encoder sees each view alone)."""
 
 from __future__ import annotations
 
@@ -35,8 +34,7 @@ class Flythrough:
     def __init__(self, net: SRayModel, plan: FlythroughPlan, n_source: int, fast: FastRender | None = None,
                  runtime: Runtime = Runtime()) -> None:
         """Check that ``plan``'s scene fits ``net`` and gives ``n_source`` sources per frame (ValueError naming the
-        manifest or the scene otherwise). ``fast``: the fast render mode (None: the full renderer); ``runtime``:
-        the implementation and rays per chunk the network runs with. The protocol's inputs are ``net.cfg``'s."""
+        manifest or the scene). ``fast``: the fast mode (None: full render); ``runtime``: implementation, chunk."""
         manifest = plan.shards / "manifest.json"
         names = plan.meta.class_names
         if len(names) != net.cfg.n_classes:
@@ -59,9 +57,8 @@ class Flythrough:
 
     @torch.no_grad()
     def picture(self, index: int, device: torch.device, label: str = "") -> tuple[np.ndarray, list[str]]:
-        """Frame ``index`` as its uint8 panel picture and its source ids, best first; ``label`` goes into the
-        title. ``net`` must be on ``device``; the last encoding is reused between calls (:meth:`render` starts
-        afresh, so change the weights only between renders)."""
+        """Frame ``index``'s uint8 panel picture (``label`` in its title) and source ids, best first; ``net`` on
+        ``device``. Calls reuse the last encoding, so change the weights only between :meth:`render` calls."""
         meta, path = self.plan.meta, self.plan.path
         ids = self.picker.choose(path.K[index], path.c2w[index], path.hw)
         query = QueryCamera(K=torch.from_numpy(path.K[index]).float(), c2w=torch.from_numpy(path.c2w[index]).float())
@@ -76,9 +73,8 @@ class Flythrough:
 
     def render(self, out_dir: Path, device: torch.device, *, about: dict[str, Any] | None = None, label: str = "",
                progress: bool = True) -> dict[str, Any]:
-        """Render every frame and write the outputs under ``out_dir``. ``about``: what made the model
-        (checkpoint, artifact), copied into frames.json; ``label``: shown in every frame's title.
-        Returns ``{"files": {name: path}, "n_frames", "size", "frames_per_s", "protocol"}``."""
+        """Render every frame into ``out_dir``; ``about`` (checkpoint, artifact) goes into frames.json, ``label``
+        into every title. ``{"files": {name: path}, "n_frames", "size", "frames_per_s", "protocol"}``."""
         plan, path, n = self.plan, self.plan.path, len(self.plan.path)
         self.net.to(device)
         self._encoded = None  # the weights may have changed since the last render (a fleet's clip after finetuning)

@@ -1,6 +1,5 @@
-"""One frame rendered whole by the model's whole-view renderer (``model.view_render.render_view``, as ``sray
-eval``'s views at stride 1), so a frame at a view's pose with its sources shows ``sray eval``'s labels and colours.
-In the fast mode logits, colours and depths are upsampled bilinearly: a depth edge blends over one grid cell."""
+"""One frame rendered whole by ``model.view_render.render_view``, as ``sray eval``'s views at stride 1; in the fast
+mode logits, colours and depths are upsampled bilinearly (a depth edge blends over one grid cell)."""
 
 from __future__ import annotations
 
@@ -16,9 +15,8 @@ from sray.model.view_render import RayRenderer, render_view
 
 @dataclass(frozen=True)
 class FrameRender:
-    """What a frame shows, on CPU: ``label`` int64 (H, W) argmax of the rendered logits, ``rgb`` float32 (H, W, 3)
-    colour in [0, 1], ``depth`` float32 (H, W) z-depth in metres (the fine pass), ``confidence`` float32 (H, W)
-    largest softmax probability of the logits, in [1/L, 1]."""
+    """A frame on CPU: ``label`` int64 (H, W) argmax of the logits, ``rgb`` float32 (H, W, 3) in [0, 1], ``depth``
+    float32 (H, W) fine-pass z-depth (m), ``confidence`` float32 (H, W) largest softmax probability, in [1/L, 1]."""
 
     label: Tensor
     rgb: Tensor
@@ -29,9 +27,8 @@ class FrameRender:
 @torch.no_grad()
 def render_frame(render: RayRenderer, sample: SceneQuery, hw: tuple[int, int], chunk: int, device: torch.device,
                  fast: FastRender | None = None) -> FrameRender:
-    """Render every pixel of the ``hw`` = (H, W) image of ``sample``'s query camera with ``render`` (bound to
-    ``sample``'s sources: ``SRayModel.ray_renderer``), in chunks of ``chunk`` rays (0: by device); with
-    ``fast``, every ``fast.pixel_stride``-th pixel, upsampled."""
+    """Render the (H, W) = ``hw`` image of ``sample``'s query camera with ``render`` (``SRayModel.ray_renderer`` on
+    its sources) in ``chunk``-ray chunks (0: by device); ``fast``: every ``fast.pixel_stride``-th pixel, upsampled."""
     fine = render_view(render, sample.query.K, sample.query.c2w, hw, sample.near, sample.far, chunk, device,
                        fast=fast, passes=("fine",), keys=("logits", "rgb", "depth"))["fine"]
     logits = fine["logits"].cpu()  # (H, W, L)

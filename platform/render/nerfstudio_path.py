@@ -1,6 +1,5 @@
-"""Camera paths drawn in nerfstudio's viewer: its ``camera_path.json`` read and checked (docs/render.md). Its
-``camera_to_world`` uses OpenGL camera axes, flipped here to OpenCV's; ``fov`` is vertical, in degrees. Every
-problem is refused in one line naming the file and the field."""
+"""nerfstudio's ``camera_path.json``, read and checked (docs/render.md): ``camera_to_world`` in OpenGL camera axes,
+flipped to OpenCV's; ``fov`` vertical, in degrees. A problem is refused in one line naming the file and field."""
 
 from __future__ import annotations
 
@@ -21,8 +20,7 @@ LAYOUT_HINT = "see docs/render.md for the camera_path.json layout"
 
 
 def fov_intrinsics(fov_deg: float, hw: tuple[int, int]) -> np.ndarray:
-    """(3, 3) K of a vertical field of view ``fov_deg`` at ``hw`` = (H, W): f = (H/2)/tan(fov/2), centred
-    principal point ((W-1)/2, (H-1)/2)."""
+    """(3, 3) K of vertical FOV ``fov_deg`` at ``hw`` = (H, W): f = (H/2)/tan(fov/2), centre ((W-1)/2, (H-1)/2)."""
     h, w = hw
     f = (h / 2.0) / math.tan(math.radians(fov_deg) / 2.0)
     return np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])

@@ -1,8 +1,6 @@
-"""A fly-through frame as one picture (docs/render.md): a title, then colour | semantic labels | depth | confidence
-tiles (the rendered pixels enlarged by an integer factor) with colour bars under depth (turbo over the scene's
-fixed near..far) and confidence (viridis over 0..1), then a legend of the classes present. Every frame of a video
-has the same size (the legend keeps room for every class). Drawn with OpenCV on a numpy array.
-"""
+"""A fly-through frame as one picture, drawn with OpenCV (docs/render.md): title, colour | labels | depth | confidence
+tiles, colour bars under depth (turbo over the scene's near..far) and confidence (viridis, 0..1), the classes present.
+Every frame of a video has the same size (the legend keeps room for every class)."""
 
 from __future__ import annotations
 
@@ -42,9 +40,8 @@ CONFIDENCE_COLORS = _lut(cv2.COLORMAP_VIRIDIS)  # 0 (index 0) to 1 (255)
 
 @dataclass(frozen=True)
 class PanelLayout:
-    """Pixel geometry of a frame picture (x right, y down, origin top-left): its (height, width), both even (video
-    encoders subsample colour by 2), the integer enlargement of the rendered pixels, tile name (:data:`TILES`) ->
-    (x, y, width, height), and the legend block's (x, y, columns)."""
+    """Pixel geometry of a frame picture (x right, y down, origin top-left): (height, width), both even (encoders
+    subsample colour by 2), the integer enlargement, tile name -> (x, y, width, height), legend (x, y, columns)."""
 
     size: tuple[int, int]
     scale: int

@@ -22,8 +22,7 @@ DEFAULT_FPS = 15.0  # frames per second of a video when neither the request nor 
 
 @dataclass(frozen=True)
 class FlythroughPlan:
-    """A checked fly-through request: the shard folder, its manifest, the scene's metadata, its stored views by
-    id (decoded only where used), one camera per frame and the videos' frames per second."""
+    """A checked fly-through request: shards, manifest, scene metadata, views by id (decoded if used), cameras, fps."""
 
     shards: Path
     manifest: Manifest
@@ -35,8 +34,7 @@ class FlythroughPlan:
 
 def built_path(kind: str, views: dict[str, StoredView], meta: SceneMeta, image_hw: tuple[int, int],
                n_frames: int, size_hw: tuple[int, int]) -> CameraPath:
-    """The ``kind`` path (:data:`BUILT_PATHS`) of ``n_frames`` frames at ``size_hw`` through or around the scene's
-    pool cameras (views stored at ``image_hw``)."""
+    """``kind`` path (:data:`BUILT_PATHS`), ``n_frames`` at ``size_hw``, by pool cameras (stored at ``image_hw``)."""
     if kind not in BUILT_PATHS:
         raise ValueError(f"path {kind!r}: use one of {', '.join(BUILT_PATHS)} or a camera-path file")
     build, what = BUILT_PATHS[kind]
@@ -49,9 +47,8 @@ def built_path(kind: str, views: dict[str, StoredView], meta: SceneMeta, image_h
 def plan_flythrough(shards: Path, scene: str, *, path: str = "spline", camera_path: Path | None = None,
                     n_frames: int = 60, size_hw: tuple[int, int] | None = None,
                     fps: float | None = None) -> FlythroughPlan:
-    """Check the request and build its cameras (reads the scene's views, writes nothing): a nerfstudio
-    ``camera_path`` file (``size_hw`` and ``fps`` override its own), else a built ``path`` of ``n_frames`` frames at
-    ``size_hw`` (default: the scene's image size). Bad input: a one-line error naming the file and field."""
+    """Check the request and build its cameras: a nerfstudio ``camera_path`` file (``size_hw`` and ``fps`` override its
+    own), else a built ``path`` of ``n_frames`` at ``size_hw`` (default: the scene's); errors name file and field."""
     if camera_path is None and n_frames < 1:
         raise ValueError(f"frames is {n_frames}; a fly-through needs at least 1 frame")
     if size_hw is not None and min(size_hw) < 1:

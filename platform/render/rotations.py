@@ -60,8 +60,7 @@ def rotation_angle(r0: np.ndarray, r1: np.ndarray) -> float:
 
 
 def rigid_problem(pose: np.ndarray, tolerance: float = RIGID_TOLERANCE) -> str | None:
-    """What keeps a 4x4 pose from being rigid (finite, last row (0, 0, 0, 1), orthonormal rotation with
-    determinant +1) within ``tolerance``, as a phrase; None when it is rigid."""
+    """Why a 4x4 pose is not rigid (finite, last row 0 0 0 1, orthonormal, det +1) within ``tolerance``; else None."""
     m = np.asarray(pose, np.float64)
     if m.shape != (4, 4):
         return f"shape is {m.shape}, not (4, 4)"

@@ -1,6 +1,5 @@
-"""Source views of a fly-through frame: the shards' ranking of a held-out test view (``neighbours.rank_camera``),
-which needs only a camera's pose and intrinsics. Candidates: a test scene's ``source`` split, a train scene's
-``scene.source_pool``; depth is read only from the pool, so no ``test`` view is ever decoded."""
+"""Source views of a fly-through frame, ranked as for a held-out test view (``neighbours.rank_camera``: pose and
+intrinsics only) among a test scene's ``source`` split or a train scene's pool; no ``test`` view is ever decoded."""
 
 from __future__ import annotations
 
@@ -40,8 +39,7 @@ class SourcePicker:
         return [self.candidates[i] for i in order]
 
     def sources(self, ids: list[str]) -> SourceViews:
-        """The views ``ids`` as model inputs: rgb (m, 3, H, W) in [0, 1], K (m, 3, 3), c2w (m, 4, 4), depth
-        (m, H, W) in metres; each view is decoded once and kept."""
+        """Views ``ids`` as model inputs, each decoded once: rgb (m, 3, H, W) in [0, 1], K, c2w, depth (m, H, W) m."""
         for v in ids:
             if v not in self._decoded:
                 rgb = torch.from_numpy(self.views[v].rgb()).permute(2, 0, 1).float().div_(255.0)  # (3, H, W)

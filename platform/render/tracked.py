@@ -1,6 +1,5 @@
-"""A fly-through as a tracked run (``sray render``): the request and the protocol as params (as ``sray eval``), the
-protocol line as the ``sray.protocol`` tag, the render rate as metrics, every output file as an artifact under
-``flythrough/`` (the tracker's UI plays the WebM)."""
+"""A fly-through as a tracked run (``sray render``): request and protocol as params, the protocol line as the
+``sray.protocol`` tag, the render rate as metrics, every output file as an artifact under ``flythrough/``."""
 
 from __future__ import annotations
 

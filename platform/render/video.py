@@ -1,6 +1,5 @@
-"""A fly-through's frames as a VP8 WebM, an MPEG-4 part 2 MP4 and a GIF preview (docs/render.md), written into a
-staging folder ``.<stem>.tmp<pid>`` beside them (same names: FFmpeg picks the container from the name) and renamed
-into place by :meth:`VideoSet.finish`: an error or a kill never leaves a half-written file under a final name."""
+"""A fly-through as a VP8 WebM, an MPEG-4 part 2 MP4 and a GIF preview (docs/render.md), written into the staging
+folder ``.<stem>.tmp<pid>`` and renamed into place by :meth:`VideoSet.finish`, so none is ever left half-written."""
 
 from __future__ import annotations
 
@@ -57,8 +56,7 @@ class VideoSet:
         self._count += 1
 
     def finish(self, extra: dict[str, bytes]) -> dict[str, Path]:
-        """Close the videos, write the GIF and the ``extra`` files (name -> bytes), and rename everything into
-        the output folder; returns {name: final path} (videos as ``webm``, ``mp4``, ``gif``)."""
+        """Close the videos, write the GIF and ``extra`` (name -> bytes), rename all into place; {name: final path}."""
         self._release()
         if not self._gif:
             self.abort()

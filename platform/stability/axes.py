@@ -1,8 +1,5 @@
-"""The axes ``sray stability`` sweeps, from harmless to broken (docs/stability.md, "Axes and their units"), the
-presets' levels and budgets (docs/stability.md, "Presets"), and what a point shows a row: many points show a row the
-same thing (every clean level is the clean input), so a point becomes a :class:`PointSpec`, its result stored and
-reused per spec.
-"""
+"""The axes ``sray stability`` sweeps, harmless to broken, and the presets (docs/stability.md, "Axes and their units",
+"Presets"); a point becomes a :class:`PointSpec`, its result stored and reused per spec (clean levels coincide)."""
 
 from __future__ import annotations
 

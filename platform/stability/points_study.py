@@ -1,6 +1,5 @@
-"""The stability suite's points as a study of the engine, completed launch after launch (``engine.run_missing``): one
-trial per point key under ``<out>/study/<preset>/``, run in turn in one process that loads scenes and models once
-(:func:`suite_for`); ``definition.json`` refuses a changed preset or model (docs/stability.md, "Outputs")."""
+"""The stability suite's points as an engine study (``engine.run_missing``), one trial per point key under
+``<out>/study/<preset>/`` in one process (:func:`suite_for`); ``definition.json`` (docs/stability.md, "Outputs")."""
 
 from __future__ import annotations
 

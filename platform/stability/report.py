@@ -1,7 +1,4 @@
-"""What a stability run leaves (docs/stability.md, "Outputs"): per-level statistics of its point records, breaking
-points, ``stability.json``, a chart per score, a table per axis and the tracked runs; every legend and header says
-whether its row saw the scene and what it was given.
-"""
+"""What a stability run leaves (docs/stability.md, "Outputs"): stats, breaking points, charts, tables, runs."""
 
 from __future__ import annotations
 
@@ -215,8 +212,7 @@ def write_outputs(records: list[dict[str, Any]], preset: Preset, axes: list[str]
 
 def track(tracker: Tracker, experiment: str, run_name: str, outputs: dict[str, Any],
           records: list[dict[str, Any]], axes: list[str], preset: Preset) -> str:
-    """Log a parent run (charts, stability.json) and a child run per axis (its table, metrics at step = level index);
-    the parent's id."""
+    """Log a parent run (charts, stability.json) and a child per axis (its table, metrics at step = level index)."""
     parent = tracker.start_run(experiment, run_name, tags={"sray.kind": "stability", "sray.preset": preset.name})
     with tracker.logger(parent) as log:
         log.log_params({"preset": preset.name, "axes": axes, "seeds": preset.seeds, "levels": preset.levels,

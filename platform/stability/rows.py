@@ -1,7 +1,4 @@
-"""The rows of the stability suite, read off the method registry (docs/stability.md, "Rows"): ``<name>`` (zero-shot,
-when the method has an ``eval_model``), ``<name>-scene`` (trained on the scene), S-Ray's ``-no-cra``, the depth twins
-placed; how legends and headers name what a row saw and was given.
-"""
+"""The stability suite's rows, read off the method registry, and what legends say a row saw (docs/stability.md)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,5 @@
-"""One point of the suite for a row trained on the scene: the method's fleet learner trained on what the spec shows
-it of one test scene for the suite's CPU-second budget (samples drawn as the fleet's loader draws them, seeded), then
-scored on the scene's held-out views; no early stopping (docs/stability.md, "Trained on the scene").
-"""
+"""One point of a row trained on the scene: the method's fleet learner trained on what the spec shows of one test
+scene for the suite's CPU-second budget, scored on its held-out views (docs/stability.md, "Trained on the scene")."""
 
 from __future__ import annotations
 

@@ -1,7 +1,5 @@
-"""The unseen test scenes a stability suite stresses, read once; their perturbed copies (query views never, the
-generator of a (seed, axis, scene) the same at every level); the sources a point renders each query from (with no
-perturbation, ``sray eval``'s), how much of the query they see, and the watch over every point's renders.
-"""
+"""The unseen test scenes a stability suite stresses, read once; their perturbed copies (never the query views; one
+generator per (seed, axis, scene) at every level); each query's sources, how much of it they see; the render watch."""
 
 from __future__ import annotations
 

@@ -1,9 +1,7 @@
-"""What the stability suite computes: every (axis, row, level, seed) a run asks for, and the result of a spec: a
-zero-shot row's model rendered as ``sray eval`` does, a trained row's method trained (``scene_points``); a method that
-raises, diverges or outputs non-finite values is ``failed`` there. A point record: ``axis``, ``method`` (the row),
-``level``, ``seed`` (None: deterministic), ``status``, ``miou`` (%), ``psnr`` (dB), ``x`` (the chart's), ``error``,
-``key`` and the spec's result.
-"""
+"""What the stability suite computes: every (axis, row, level, seed) a run asks for, and a spec's result (a zero-shot
+row rendered as ``sray eval`` does, a trained row's method trained: ``scene_points``); a method that raises, diverges
+or outputs non-finite values is ``failed`` there. A point record: ``axis``, ``method`` (the row), ``level``, ``seed``
+(None: deterministic), ``status``, ``miou`` (%), ``psnr`` (dB), ``x`` (the chart's), ``error``, ``key``, the result."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""``sray sweep``'s driver: check, start (or resume) and finish a training sweep on the study engine, with its
-tracked runs: a parent run, and each trial's training-job run as its child, finished here with why it ended
-(``sray.stop_reason``, ``sray.stop_note``), its final checkpoint and a status. Once no trial is unfinished, the best
-trial's checkpoint is registered under the sweep's alias. Idempotent across resumes; tracking problems only warn.
-"""
+"""``sray sweep``'s driver: check, start (or resume) and finish a training sweep on the study engine, with a parent
+run and each trial's job run as its child (ended with ``sray.stop_reason``, ``sray.stop_note``, checkpoint, status);
+once none is unfinished, the best trial's checkpoint gets the sweep's alias. Idempotent; tracking errors warn."""
 
 from __future__ import annotations
 

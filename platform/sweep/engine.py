@@ -2,10 +2,8 @@
 fault-isolated. A trial with an outcome never runs again; one that raises records its error while the others go on;
 early stops (ASHA, the wall-time budget) are requests the trial carries out itself; ``resume`` restores Tune's state
 (ASHA's rungs start empty). A training job's last report after a stop lacks the metric: Tune's strict check is off.
-
-A study completed launch after launch (``sray lab study``, ``sray stability``: :func:`run_missing`) runs, in each
-launch, only the trials without a result (errored ones again) as a new Tune experiment; the records are the store.
-"""
+A study run launch after launch (:func:`run_missing`) runs only the trials without a result (errored ones again),
+as a new Tune experiment each time; the records are the store."""
 
 from __future__ import annotations
 
@@ -22,7 +20,7 @@ from ray.tune import Callback
 from ray.tune.result import AUTO_RESULT_KEYS, DEBUG_METRICS
 from ray.tune.schedulers import AsyncHyperBandScheduler, TrialScheduler
 
-from sray.platform.common.fault_hook import fail_trial_if_listed, propagated_env
+from sray.platform.common.fault_hook import error_text, fail_trial_if_listed, propagated_env
 from sray.platform.sweep.outcomes import TrialOutcome, collect_outcomes
 from sray.platform.sweep.study import (BY_BUDGET, BY_SCHEDULER, ERRORED, FINISHED, PointFunction, StudySettings,
                                        TrialContext, TrialRecord, append_history, read_history, read_record,
@@ -64,8 +62,7 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
         fail_trial_if_listed(key)
         result = job.point_fn(job.plan[key], TrialContext(key, folder))
     except BaseException as e:
-        lines = str(e).strip().splitlines()
-        record.outcome, record.error = ERRORED, f"{type(e).__name__}: {lines[-1] if lines else ''}"[:2000]
+        record.outcome, record.error = ERRORED, error_text(e)
         write_record(folder, record)
         raise
     record.outcome, record.result = FINISHED, result
@@ -73,9 +70,8 @@ def _run_trial(config: dict[str, Any], job: _TrialJob) -> None:
 
 
 class GracefulASHA(AsyncHyperBandScheduler):
-    """ASHA whose STOP becomes the trial's own stop request (``study.request_stop``), always CONTINUE for Tune: a
-    trial's process Tune ends leaves its placement group behind (Ray Train's cleaner polls the state API, which a
-    local Ray without the dashboard does not serve), holding its CPUs; asked, the trial checkpoints and returns."""
+    """ASHA whose STOP becomes a trial's stop request, always CONTINUE to Tune: a trial Tune ends leaves its placement
+    group holding its CPUs (Ray Train's cleaner needs the dashboard); asked, the trial checkpoints and returns."""
 
     def __init__(self, study: str, **asha: Any) -> None:
         super().__init__(**asha)

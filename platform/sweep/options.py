@@ -1,7 +1,6 @@
 """A sweep as asked for: its options, its spec file and the request built from both. A spec file's keys are
 ``sray sweep``'s own flags (``recipe``, ``data``, ``set``, ``params`` and every option; ``jobs/sweeps/demo_lr_sem.yaml``
-is one); flags given on the command line win over the file's values, and what neither gives keeps its default.
-"""
+is one); flags given on the command line win over the file's values, and what neither gives keeps its default."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""Why each trial of a study ended (``finished``: returned, or reached its wall-time budget; ``stopped`` by the
-scheduler; ``errored``; ``unfinished``: ``--resume`` runs it), read back from its files and Tune's errors, and the
-results table (Markdown, CSV, JSON with every trial's history). The best trial is the finished one with the best
-last value of the metric (the model its final checkpoint holds).
-"""
+"""Why each trial of a study ended (``finished``: returned or out of wall time; ``stopped`` by the scheduler;
+``errored``; ``unfinished``: ``--resume`` runs it), from its files and Tune's errors, and the results table (Markdown,
+CSV, JSON with histories). The best trial: the finished one with the best last metric (its final checkpoint's)."""
 
 from __future__ import annotations
 
@@ -53,8 +51,7 @@ class TrialOutcome:
 
 def _reason(record: TrialRecord, stop: dict[str, Any] | None, tune_error: str | None,
             last_at: float | None) -> tuple[str, str]:
-    """(reason, note). A stop request that came with the trial's own last report (``last_at``, the time attribute
-    there) found nothing left to stop: the trial ended by itself."""
+    """(reason, note); a stop request made at the trial's own last report (``last_at``) counts as ending by itself."""
     if record.outcome == ERRORED or tune_error is not None:
         return "errored", record.error or tune_error or ""
     too_late = stop is not None and record.outcome == FINISHED and last_at is not None and \

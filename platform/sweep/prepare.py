@@ -1,7 +1,4 @@
-"""Everything about a training sweep checked before anything starts or is written, and its record ``sweep.json``
-(everything needed to continue it). A wrong parameter, value, metric, scheduler, name, shard folder or store, or
-more trials at once than the cluster has workers for, is refused in one line.
-"""
+"""A training sweep checked before anything starts or is written (refusal: one line) and its record ``sweep.json``."""
 
 from __future__ import annotations
 

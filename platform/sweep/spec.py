@@ -1,9 +1,8 @@
 """A sweep parameter, ``section.field=SPEC`` with SPEC one of ``choice(a, ...)``, ``grid(a, ...)`` (every value,
 crossed with the other grids), ``uniform(lo, hi)``, ``loguniform(lo, hi)``, and the plan: every trial's values, drawn
-once from a seeded generator before anything runs (so a resumed sweep runs the same trials under the same keys), in
-Tune's order (the samples in turn, each crossed with every grid combination). Listed values stay as written: the
-field's own type parses them through the typed ``--set`` path, so a sweep takes any field ``sray train --set`` takes.
-"""
+once from a seeded generator before anything runs (a resumed sweep runs the same trials under the same keys), in
+Tune's order. Listed values are parsed by the field's type through the typed ``--set`` path, so a sweep takes any
+field ``sray train --set`` takes."""
 
 from __future__ import annotations
 

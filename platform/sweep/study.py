@@ -1,9 +1,7 @@
-"""What the study engine and a point function share: the study's settings, the trial's context, and the trial's
-files under ``<study>/trials/<key>/``, each with one writer, written atomically: ``trial.json`` (:class:`TrialRecord`,
-by the trial's process: its launches and outcome), ``stop_request.json`` (by the driver: end early, the trial stops
-itself so its workers hand their resources back), ``history.jsonl`` (by the driver: every result, with the running
-time across launches; a line cut by a killed driver is skipped on reading).
-"""
+"""What the study engine and a point function share: settings, the trial's context and its files under
+``<study>/trials/<key>/``, each with one writer, written atomically: ``trial.json`` (:class:`TrialRecord`, by the
+trial: launches, outcome), ``stop_request.json`` (by the driver; the trial stops itself, so its workers hand their
+resources back), ``history.jsonl`` (by the driver: every result with the running time; a cut line is skipped)."""
 
 from __future__ import annotations
 
@@ -136,10 +134,8 @@ class StudySettings:
     wall_budget_s: float = 0.0
     """A trial is asked to stop once it has run this long across its launches (0 = no limit)."""
     start_by: float = 0.0
-    """Unix time after which no trial starts (0 = no limit): a later trial returns at once and stays unfinished
-    for the next launch. Running trials go on."""
+    """Unix time after which no trial starts (0 = none); a later one returns at once, unfinished for the next launch."""
     reuse_actors: bool = False
-    """Run the trials in one process (Tune's ``reuse_actors``), for short trials that keep what they loaded. Off:
-    a fresh process per trial (a trial that trains with Accelerate needs one)."""
+    """One process for all trials (Tune's ``reuse_actors``), for short ones; off for trials training with Accelerate."""
     label: str = "sweep"
     """Prefix of the study's progress lines (``[sweep] t001 started: ...``)."""

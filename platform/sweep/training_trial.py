@@ -1,7 +1,5 @@
-"""The trial of a training sweep: one real training job ``<sweep>-<key>`` with the point's values set through the
-typed ``--set`` path of ``sray train``, nested under the sweep's run, reporting its validation metrics to Tune at
-each checkpoint. A second launch resumes it; a stop request becomes its STOP file (it checkpoints and ends).
-"""
+"""A training sweep's trial: the job ``<sweep>-<key>`` with the point set via ``sray train``'s ``--set``, nested under
+the sweep's run, reporting to Tune at each checkpoint; a relaunch resumes it, a stop request becomes its STOP file."""
 
 from __future__ import annotations
 
@@ -35,8 +33,7 @@ def job_name(sweep: str, key: str) -> str:
 
 
 def trial_config(base: TrainConfig, point: Mapping[str, Any], name: str = "") -> TrainConfig:
-    """``base`` with the point's values set (a copy), the job named ``name`` when given; :class:`SpecError` naming
-    the parameter a value breaks."""
+    """A copy of ``base`` with the point's values (job named ``name`` if given); :class:`SpecError` names a bad one."""
     cfg = copy.deepcopy(base)
     for path, value in point.items():
         try:
@@ -49,8 +46,7 @@ def trial_config(base: TrainConfig, point: Mapping[str, Any], name: str = "") ->
 
 
 def check_params(base: TrainConfig, params: list[Param]) -> None:
-    """Each parameter names a field of the config, each listed value (each bound of a range) is valid there, and
-    a range's field is a float; :class:`SpecError` naming the parameter otherwise."""
+    """:class:`SpecError` unless each parameter's field exists and takes its values (range bounds; ranges: floats)."""
     for param in params:
         ranged = param.kind in ("uniform", "loguniform")
         hint = ("; uniform and loguniform draw floats: for an integer or text field list the values with choice(...) "

@@ -1,5 +1,4 @@
-"""``sray ui``'s server app: MLflow's landing page with a script setting, in ``localStorage`` (MLflow 3.17's keys), the
-model-training view, headline metric columns, unfolded parent runs and the newest experiment as the start."""
+"""``sray ui``'s server app: MLflow's landing page with a script presetting its ``localStorage`` (docs/dashboard.md)."""
 
 from __future__ import annotations
 

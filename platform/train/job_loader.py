@@ -1,5 +1,4 @@
-"""The shard loader of one training rank, built from the job's config (the data section, with its
-augmentation, the model's source-view count and the run's seed)."""
+"""The shard loader of one training rank, from the job's config (data section, augmentation, n_source, run seed)."""
 
 from __future__ import annotations
 
@@ -10,8 +9,7 @@ from sray.platform.config.train_config import TrainConfig
 
 
 def job_loader(cfg: TrainConfig, rank: int, world_size: int, batches_per_epoch: int) -> EpochLoader:
-    """Rank ``rank``'s training loader of the job ``cfg``: ``batches_per_epoch`` samples per epoch, augmented by
-    ``data.aug``, with the sources' class ids when the source-view semantic loss is on."""
+    """``rank``'s loader of ``cfg``: ``batches_per_epoch`` samples an epoch, ``data.aug``, source labels if used."""
     data = cfg.data
     return make_train_loader(
         Path(data.shards), n_source=cfg.model.n_source, top_k=data.top_k, rays_per_batch=data.rays_per_batch,

@@ -33,8 +33,8 @@ def lr_lambda(opt: OptimSettings) -> Any:
 
 
 def budget_lr_factor(opt: OptimSettings, step: int, cpu_seconds: float) -> float:
-    """Multiplier of the base lr at ``step`` of a CPU-budgeted job after ``cpu_seconds``: the warm-up counts steps,
-    the decay the step or the spent share of the budget, whichever is further along."""
+    """Base-lr multiplier at ``step`` after ``cpu_seconds`` of a CPU budget: warm-up by steps, decay by the further of
+    the step and budget fractions."""
     return lr_lambda(opt)(step if step < opt.warmup_steps else max(step, cpu_seconds / opt.cpu_seconds * opt.steps))
 
 

@@ -1,11 +1,9 @@
-"""The one optimisation step of sray, shared by pretraining (``train_worker``) and per-scene finetuning.
-
-A step reads top to bottom: seed -> (caller: forward under :meth:`TrainStep.autocast`, loss) -> backward (scaled
-under fp16) -> unscale -> clip -> non-finite guard -> optimiser step -> scaler update -> zero grads. It waits for the
-device once: the guard's flags (non-finite loss or gradient, a stop request from any rank) and the ranks' CPU seconds
-are summed over the ranks in one transfer. Non-finite steps are skipped (no parameter or optimiser-state change),
-counted, and after ``max_nonfinite_in_row`` in a row the step raises :class:`NonFiniteTraining`.
-"""
+"""The one optimisation step of sray, shared by pretraining (``train_worker``) and per-scene finetuning. A step reads
+top to bottom: seed -> (caller: forward under :meth:`TrainStep.autocast`, loss) -> backward (scaled under fp16) ->
+unscale -> clip -> non-finite guard -> optimiser step -> scaler update -> zero grads. It waits for the device once: the
+guard's flags (non-finite loss or gradient, a stop request from any rank) and the ranks' CPU seconds are summed over the
+ranks in one transfer. Non-finite steps are skipped (no parameter or optimiser-state change), counted, and after
+``max_nonfinite_in_row`` in a row the step raises :class:`NonFiniteTraining`."""
 
 from __future__ import annotations
 

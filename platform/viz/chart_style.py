@@ -1,6 +1,5 @@
-"""How charts draw a method (:class:`ChartStyle`) and what they read of one (:class:`ChartedMethod`): charts sit
-below the method registry (``platform/finetune/methods``), so callers hand them the methods (a registered
-``Method`` is one)."""
+"""How charts draw a method (:class:`ChartStyle`) and what they read of one (:class:`ChartedMethod`); charts sit
+below the method registry, so callers hand them the methods (a registered ``Method`` is one)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
-"""Charts of a finetune fleet's results (docs/CONTRACTS.md, docs/dashboard.md), one PNG per :data:`FLEET_CHARTS` entry:
-held-out scores against time and steps (a panel per scene, a first one of their step-function mean; a zero-shot
-step-0 score as a dashed line) and mIoU against per-scene artifact bytes (zero-shot S-Ray on a "0 B" tick). Legend
-entries carry each method's inputs, footnotes the protocol lines and the results left out. Agg canvas, no pyplot."""
+"""Charts of a fleet's results (docs/dashboard.md), a PNG per :data:`FLEET_CHARTS` entry: held-out scores against
+time and steps (a panel per scene after their mean; zero-shot step 0 dashed), mIoU against artifact bytes (zero-shot
+S-Ray at "0 B"); footnotes name the protocols and results left out. Agg canvas, no pyplot."""
 
 from __future__ import annotations
 
@@ -52,8 +51,7 @@ def _footnote_parts(ok: list[dict[str, Any]], results: list[dict[str, Any]], ext
 
 def _framed_figure(width: float, body_height: float, title: str, handles: list[Any],
                    footnote: list[str]) -> tuple[Any, Any]:
-    """A figure with a header (title + legend), a body sub-figure for the axes, and a footnote; returns (figure,
-    body sub-figure); sizes in inches."""
+    """(figure, body sub-figure for the axes) with a header (title + legend) and a footnote; sizes in inches."""
     ncols = 4 if width >= 12 else 2
     head_h = 0.45 + 0.22 * math.ceil(len(handles) / ncols)
     lines = [line for part in footnote for line in textwrap.wrap(part, max(60, int(width * 17)))]

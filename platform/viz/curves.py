@@ -1,6 +1,5 @@
-"""Fleet results as curves (``curve`` in a fleet result, docs/CONTRACTS.md). Between evaluations and after the last
-one (early stop) the model is the one last evaluated, so a score is a step function holding its last value:
-averaging across scenes resamples every curve on the union of their points."""
+"""Fleet results' ``curve`` (docs/CONTRACTS.md) as step functions (the model is the last evaluated until the next
+evaluation or the end); averaging across scenes resamples every curve on the union of their points."""
 
 from __future__ import annotations
 
@@ -61,8 +60,7 @@ def average_curves(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndar
 
 
 def zero_shot_value(result: dict[str, Any], y_key: str, methods: ChartedMethods) -> float | None:
-    """The step-0 score of a result whose method starts from a zero-shot model (S-Ray), or None when it
-    has none (another method, or no step-0 point)."""
+    """The step-0 score of a result whose method starts from a zero-shot model (S-Ray), else None."""
     method = methods.get(result.get("method", ""))
     first = result["curve"][0] if result.get("curve") else None
     if method is None or method.zero_shot is None or first is None or int(first.get("step", -1)) != 0:

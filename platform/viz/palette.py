@@ -12,9 +12,8 @@ SCANNET20_COLORS: list[tuple[int, int, int]] = [
     (0, 128, 0), (128, 0, 128), (64, 128, 128), (128, 128, 255), (192, 192, 0),
     (0, 192, 255), (64, 64, 0), (128, 255, 128), (255, 64, 64), (0, 192, 128),
 ]
-"""RGB of class ids 0..19 (ScanNet-20 order: wall, floor, cabinet, ...). Chosen greedily from a
-5-level RGB grid to maximise the smallest CIELAB distance (>= 36) while avoiding near-black,
-near-white and grey, which stay reserved for the ignore label and the error map."""
+"""RGB of class ids 0..19 (ScanNet-20 order: wall, floor, cabinet, ...), chosen greedily from a 5-level RGB grid to
+maximise the smallest CIELAB distance (>= 36), avoiding near-black, near-white and grey (ignore label, error map)."""
 
 IGNORE_COLOR: tuple[int, int, int] = (0, 0, 0)
 """Colour of unlabelled pixels (the ignore id) in every semantic map."""
@@ -35,8 +34,7 @@ def palette(n_classes: int) -> np.ndarray:
 
 
 def colorize(labels: np.ndarray, n_classes: int, ignore_id: int = 255) -> np.ndarray:
-    """uint8 (H, W, 3) image of integer labels (H, W), ``ignore_id`` pixels in :data:`IGNORE_COLOR`; ValueError
-    names the ids that are neither a class id nor the ignore id."""
+    """uint8 (H, W, 3) image of labels (H, W), ``ignore_id`` in :data:`IGNORE_COLOR`; ValueError names unknown ids."""
     labels = np.asarray(labels)
     if labels.ndim != 2 or not np.issubdtype(labels.dtype, np.integer):
         raise ValueError(f"labels must be an integer (H, W) array, got {labels.dtype} {labels.shape}")

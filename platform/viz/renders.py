@@ -1,6 +1,5 @@
-"""One PNG per evaluated view: predicted and ground-truth semantics and the error map above, predicted and
-ground-truth colour and the legend below. Tiles are the view's pixels enlarged by an integer factor at exact
-offsets (:func:`panel_grid`), so a test reads class colours back; Agg canvas, no pyplot state (safe in Ray workers)."""
+"""One PNG per evaluated view: semantics (predicted, ground truth, errors) above, colour and legend below, the view's
+pixels enlarged at exact offsets (:func:`panel_grid`); Agg canvas, no pyplot state (safe in Ray workers)."""
 
 from __future__ import annotations
 
@@ -29,9 +28,8 @@ _DPI = 100
 
 @dataclass(frozen=True)
 class PanelGrid:
-    """Pixel geometry of a panel PNG (x right, y down, origin top-left): its (height, width), the integer
-    enlargement of the view's pixels, tile name (pred_sem, gt_sem, error, pred_rgb, gt_rgb, legend) -> (x, y,
-    width, height), and the top-left (x, y) of each legend swatch (classes present by id, then the ignore label)."""
+    """Pixel geometry of a panel PNG (x right, y down, origin top-left): (height, width), the integer enlargement, tile
+    name -> (x, y, width, height), and each legend swatch's top-left (x, y) (classes by id, then the ignore label)."""
 
     size: tuple[int, int]
     scale: int
@@ -79,8 +77,8 @@ def error_map(pred: np.ndarray, gt: np.ndarray, ignore_id: int = 255) -> np.ndar
 
 def render_panel(pred_labels: np.ndarray, gt_labels: np.ndarray, pred_rgb: np.ndarray, gt_rgb: np.ndarray,
                  class_names: list[str], path: Path, ignore_id: int = 255, title: str = "") -> Path:
-    """Write the panel PNG of one view to ``path`` (atomically); returns ``path``. Labels: int (H, W) class ids
-    (``ignore_id``: unlabelled in gt); colours: (H, W, 3) floats in [0, 1] or uint8."""
+    """Write one view's panel PNG to ``path`` atomically: labels int (H, W) (gt ``ignore_id``: unlabelled), colours
+    (H, W, 3) floats in [0, 1] or uint8."""
     pred, gt = np.asarray(pred_labels), np.asarray(gt_labels)
     if pred.shape != gt.shape or pred.ndim != 2:
         raise ValueError(f"pred_labels {pred.shape} and gt_labels {gt.shape} must be the same (H, W)")

@@ -26,8 +26,7 @@ LEGEND_ROW_INCHES = 0.22  # height of one legend row
 
 @dataclass(frozen=True)
 class LevelPoint:
-    """One method at one level: where it is drawn (a number, or a category name), the mean over seeds (None:
-    every seed failed) and their spread."""
+    """One method at one level: x (a number or a category), mean over seeds (None: all failed), their spread."""
 
     x: float | str
     mean: float | None
@@ -37,9 +36,8 @@ class LevelPoint:
 
 @dataclass
 class StabilityPanel:
-    """One axis: its title, x label and one list of points per method, in level order; ``log_x``: x on a log-2
-    scale (counts of views); ``harmless_high``: the harmless end is the largest value (views, JPEG quality), so x
-    is drawn decreasing and every panel reads from harmless (left) to broken (right)."""
+    """One axis: title, x label, points per method in level order; ``log_x``: log-2 x (counts of views);
+    ``harmless_high``: x drawn decreasing (views, JPEG quality), so every panel reads harmless (left) to broken."""
 
     title: str
     x_label: str
@@ -58,8 +56,7 @@ def _positions(panel: StabilityPanel) -> tuple[dict[float | str, float], list[st
 
 def write_stability_chart(panels: list[StabilityPanel], styles: Mapping[str, ChartStyle], y_label: str, title: str,
                           footnote: list[str], path: Path) -> Path:
-    """Draw ``panels`` (a failed level: a red x at the bottom of its panel) and write the PNG to ``path``;
-    ``title``: the chart's name (drawn larger), then any further lines (the protocol)."""
+    """Draw ``panels`` (a failed level: a red x at the bottom) into the PNG ``path``; ``title``: name, then protocol."""
     rows = math.ceil(len(panels) / COLUMNS)
     width = PANEL_SIZE[0] * min(COLUMNS, len(panels))
     lines = [ln for part in footnote for ln in textwrap.wrap(part, max(60, int(width * 17)))]

@@ -21,8 +21,7 @@ DPI = 110
 
 @dataclass(frozen=True)
 class TrialCurve:
-    """One trial's line: legend text (the trial's key and values), its running time (s) and the metric at each
-    report, and why it ended (a key of :data:`ENDS`)."""
+    """One trial's line: legend (key, values), running time (s) and metric per report, its end (key of :data:`ENDS`)."""
 
     label: str
     time_s: list[float]
@@ -32,8 +31,7 @@ class TrialCurve:
 
 def write_sweep_chart(curves: list[TrialCurve], metric: str, title: str, footnote: str, path: Path,
                       best: str | None = None) -> Path:
-    """Draw the curves (``best``: label of the best trial) and write the PNG to ``path``; ValueError when no curve
-    has a point."""
+    """Draw the curves (``best``: the best trial's label) into the PNG ``path``; ValueError when none has a point."""
     drawn = [c for c in curves if c.values]
     if not drawn:
         raise ValueError(f"{path}: no trial reported {metric}; nothing to chart")

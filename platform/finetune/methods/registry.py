@@ -40,8 +40,7 @@ def reads_depth(name: str) -> bool:
 
 
 def with_depth_twins(methods: list[str], checkpoint_inputs: str = "rgb") -> list[str]:
-    """``methods`` (each once) with every depth twin just before the first that reads depth; with an RGB-D checkpoint
-    each twin is its own method (``sray-rgbd`` -> ``sray``)."""
+    """``methods`` once each, twins before the first depth reader; an RGB-D checkpoint's twins become their base."""
     names = list(dict.fromkeys(methods))
     first = next((i for i, name in enumerate(names) if reads_depth(name)), None)
     if first is not None:
