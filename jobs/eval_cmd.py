@@ -8,8 +8,8 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from sray.jobs.methods.flags import GivenFlag, refusal, unread_flags
-from sray.jobs.render_flags import add_held_out_flags, held_out_from_args, print_tracked_run
+from sray.jobs.methods.flags import GivenFlag, add_tracker_flags, print_tracked_run, refusal, unread_flags
+from sray.jobs.render_flags import add_held_out_flags, held_out_from_args
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import eval_method_names, get_method
 
@@ -30,9 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="scenes to evaluate (default: every scene whose role is 'test')")
     add_held_out_flags(p, scored_stride=True)
     p.add_argument("--out", type=Path, default=Path("outputs/eval"), help="output folder")
-    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
-    p.add_argument("--tracking-uri", help="the tracker's store, for MLflow its tracking URI (default: SQLite store "
-                                          "in this folder)")
+    add_tracker_flags(p, "mlflow")
     p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--calibrate", type=Path, action=GivenFlag, metavar="VAL_SHARDS",

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from sray.jobs.methods.flags import add_tracker_flags
 from sray.platform.finetune.methods.registry import METHODS, method_names
 
 ALL_METHODS = "all"
@@ -36,9 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--segmenter", help="pretrained 2D segmenter folder of method 2d-transfer, written by `sray bench "
                                        "segmenter` (transfer.segmenter)")
     p.add_argument("--out", type=Path, default=Path("outputs/fleet"), help="fleet folder (default outputs/fleet)")
-    p.add_argument("--tracker", help="tracker to log to, by registry name (tracker; default: mlflow)")
-    p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
-                                                      "SQLite store in this folder)")
+    add_tracker_flags(p, uri="")
     p.add_argument("--clip-frames", type=int, default=0, metavar="N",
                    help="render an N-frame fly-through per S-Ray scene before and after finetuning, logged to the "
                         "scene's run (default 0: none; docs/render.md)")

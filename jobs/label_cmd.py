@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sray.jobs.render_flags import add_tracked_run_flags, print_tracked_run
+from sray.jobs.methods.flags import add_tracked_run_flags, print_tracked_run
 
 
 def register(sub: argparse._SubParsersAction) -> None:

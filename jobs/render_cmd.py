@@ -7,7 +7,8 @@ import sys
 from pathlib import Path
 
 from sray.jobs.data.convert import size_arg
-from sray.jobs.render_flags import add_held_out_flags, add_tracked_run_flags, held_out_from_args, print_tracked_run
+from sray.jobs.methods.flags import add_tracked_run_flags, print_tracked_run
+from sray.jobs.render_flags import add_held_out_flags, held_out_from_args
 
 DEFAULT_FRAMES = 60
 

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from sray.jobs.methods.flags import add_tracker_flags
 from sray.platform.config.overrides import apply_settings
 from sray.platform.config.recipes import RECIPES, get_recipe
 from sray.platform.config.train_config import apply_override
@@ -43,8 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fixed override of every trial, as sray train --set (repeatable)")
     p.add_argument("--workers", type=int, help="Ray Train workers per trial (run.workers)")
     p.add_argument("--gpus-per-worker", type=float, help="GPUs per worker, fractions allowed with one worker")
-    p.add_argument("--tracker", help="tracker, by registry name (default mlflow)")
-    p.add_argument("--tracking-uri", help="the tracker's store (default: SQLite store in this folder)")
+    add_tracker_flags(p)
     for name, (kind, text) in OPTION_FLAGS.items():
         p.add_argument(f"--{name.replace('_', '-')}", dest=name, type=kind, help=text)
     p.add_argument("--name", help="sweep name (default sweep-<UTC time>)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from sray.jobs.methods.flags import add_tracker_flags
 from sray.platform.config.overrides import apply_settings
 from sray.platform.config.recipes import RECIPES, get_recipe
 from sray.platform.config.train_config import TrainConfig, apply_override, load_job_config
@@ -19,9 +20,7 @@ def add_train_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, help="Ray Train workers (run.workers)")
     p.add_argument("--gpus-per-worker", type=float, help="GPUs per worker, fractions allowed")
     p.add_argument("--precision", choices=["no", "bf16", "fp16"], help="mixed precision (fp16: CUDA only)")
-    p.add_argument("--tracker", help="tracker to log to, by registry name (run.tracker; default: mlflow)")
-    p.add_argument("--tracking-uri", help="the tracker's store, for MLflow its tracking URI (default: SQLite store "
-                                          "in this folder)")
+    add_tracker_flags(p)
     p.add_argument("--name", help="job name (unique; default <recipe>-<timestamp>)")
     p.add_argument("--resume", metavar="NAME", help="continue the stopped or crashed job NAME")
 

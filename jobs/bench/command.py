@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from sray.jobs.bench.speed_methods import other_methods
+from sray.jobs.methods.flags import add_tracker_flags
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -68,8 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--store", type=Path, default=None, metavar="FOLDER",
                        help="keep every measured row here (per checkpoint and setting); a re-run with the same folder "
                             "reads the rows it holds instead of measuring them again, so a long run resumes")
-    speed.add_argument("--tracker", default="mlflow")
-    speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
+    add_tracker_flags(speed, "mlflow", "")
     speed.set_defaults(func=_bench_speed_accuracy)
     for table_bench in (loader, model, prof, speed):
         table_bench.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))

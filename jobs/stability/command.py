@@ -10,6 +10,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from sray.jobs.methods.flags import add_tracker_flags
 from sray.platform.common.bench_doc import Bench, bench_dir, record
 from sray.platform.finetune.methods.registry import method_names
 from sray.platform.stability.axes import AXES, PRESETS
@@ -37,8 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", choices=list(PRESETS), default="cpu-small", help="levels, seeds and budgets")
     p.add_argument("--scenes", nargs="+", metavar="SCENE", help="test scenes (default: every role 'test' scene)")
     p.add_argument("--out", type=Path, help="output folder (default: outputs/stability/<preset>)")
-    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
-    p.add_argument("--tracking-uri", help="the tracker's store (default: SQLite store in the output folder)")
+    add_tracker_flags(p, "mlflow", store="the output folder")
     p.add_argument("--experiment", default="sray-stability", help="experiment name")
     p.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"), help="benchmarks document to update")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
