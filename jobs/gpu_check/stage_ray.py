@@ -11,13 +11,14 @@ from pathlib import Path
 from unittest import mock
 
 from sray.data_tools.shards.manifest import unseen_scenes
-from sray.data_tools.synth.world import World, make_world
+from sray.data_tools.synth.world import make_world
 from sray.platform.common.fault_hook import ENV_VAR, KILL_MARKER
 from sray.platform.config.recipes import get_recipe
 from sray.platform.train.inputs import InputError
 
 from .context import FULL_STACK, CheckContext, skipped_without
 from .report import StageResult
+from .synthetic import toy_world
 
 RECIPE = "synth-gpu-minutes"
 RENDER_SIZE, RENDER_FRAMES = "320x240", 60
@@ -64,9 +65,7 @@ def run(ctx: CheckContext) -> StageResult:
     from sray.platform.checkpoints.folders import read_meta, resolve_checkpoint
 
     root = ctx.out / "ray"
-    hw = (48, 64) if ctx.dry_run else (120, 160)  # the recipe draws sources down to 75% size: 32 pixels at least
-    world = World(train_scenes=2, test_scenes=1, views=20, height=hw[0], width=hw[1], seed=0, neighbours=8)
-    shards = make_world(world, root, progress=False)
+    shards = make_world(toy_world(ctx.dry_run), root, progress=False)
     name = f"gpu-check-{time.strftime('%Y%m%d-%H%M%S')}"
     arguments = train_arguments(ctx, shards, root, name)
     code, train_s = _killed_and_resumed(ctx, arguments)
