@@ -4,11 +4,10 @@ tasks."""
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
-from sray.jobs.methods.flags import add_tracker_flags
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 from sray.platform.finetune.methods.registry import METHODS, method_names
 
 ALL_METHODS = "all"
@@ -74,6 +73,5 @@ def run(args: argparse.Namespace) -> int:
         results = run_fleet(cfg, args.checkpoint, args.data, scenes, args.out, args.tracking_uri,
                             chosen_methods(args.methods), args.clip_frames)
     except (InfeasibleRequest, FileNotFoundError, ValueError) as e:
-        print(f"sray finetune-fleet: {e}", file=sys.stderr)
-        return 2
+        return refuse("finetune-fleet", e)
     return 0 if all(r["status"] == "finished" for r in results) else 1

@@ -4,11 +4,10 @@ run per trial (docs/sweeps.md)."""
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
-from sray.jobs.methods.flags import add_tracker_flags
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 from sray.platform.config.overrides import apply_settings
 from sray.platform.config.recipes import RECIPES, get_recipe
 from sray.platform.config.train_config import apply_override
@@ -78,18 +77,13 @@ def build_request(args: argparse.Namespace) -> SweepRequest:
                         options=options)
 
 
-def _refuse(message: str) -> int:
-    print(f"sray sweep: {message}", file=sys.stderr)
-    return 2
-
-
 def _sweep(args: argparse.Namespace) -> int:
     from sray.platform.train.resources import InfeasibleRequest
 
     refused = (FileExistsError, FileNotFoundError, ValueError, InputError, InfeasibleRequest)
     if args.resume and (args.spec or args.params or args.overrides or args.name):
-        return _refuse(f"--resume {args.resume} continues the recorded sweep; leave out the spec file, --param, "
-                       "--set and --name")
+        return refuse("sweep", f"--resume {args.resume} continues the recorded sweep; leave out the spec file, "
+                       "--param, --set and --name")
     try:
         if args.resume:
             from sray.platform.sweep.driver import resume_sweep
@@ -100,7 +94,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
             result = run_sweep(build_request(args), args.address)  # every check runs before Ray starts
     except refused as e:
-        return _refuse(str(e).splitlines()[0] if str(e) else type(e).__name__)
+        return refuse("sweep", str(e).splitlines()[0] if str(e) else type(e).__name__)
     print((result.folder / "results.md").read_text(), flush=True)
     print(f"[sweep] results: {', '.join(str(f) for f in result.files)}\n"
           f"[sweep] parent run: {result.parent.ui_url}", flush=True)

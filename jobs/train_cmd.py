@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
-from sray.jobs.methods.flags import add_tracker_flags
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 from sray.platform.config.overrides import apply_settings
 from sray.platform.config.recipes import RECIPES, get_recipe
 from sray.platform.config.train_config import TrainConfig, apply_override, load_job_config
@@ -55,15 +54,13 @@ def _train(args: argparse.Namespace) -> int:
         cfg = build_config(args)
         check_train_inputs(cfg, resume=bool(args.resume), address=args.address)
     except (FileExistsError, FileNotFoundError, ValueError) as e:
-        print(f"sray train: {e}", file=sys.stderr)
-        return 2
+        return refuse("train", e)
     from sray.platform.train.launcher import launch_training
     from sray.platform.train.resources import InfeasibleRequest
 
     try:
         outcome = launch_training(cfg, address=args.address, resume=bool(args.resume))
     except (InfeasibleRequest, FileExistsError, FileNotFoundError, ValueError) as e:
-        print(f"sray train: {e}", file=sys.stderr)
-        return 2
+        return refuse("train", e)
     return 0 if outcome.status in ("FINISHED", "KILLED") else 1
 

@@ -1,10 +1,12 @@
 """Flags several commands share: those that build a registered method's pretrained model (an ``EvalRequest``; a
 command refuses a flag that sets a field the method's ``eval_model`` does not read, ``Method.eval_reads``, instead of
-ignoring it) and those of a tracked run. Here, not beside the commands, so that ``jobs/bench`` may import them."""
+ignoring it), those of a tracked run, and the one-line refusal of bad input. Here, not beside the commands, so that
+``jobs/bench`` may import them."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -68,3 +70,9 @@ def print_tracked_run(result: dict[str, Any]) -> None:
         hint = result["run"]["ui_hint"]
         print(f"[sray] {result['run']['tracker']} run: {result['run']['ui_url']}"
               + (f"  (start the UI: {hint})" if hint else ""))
+
+
+def refuse(command: str, message: object) -> int:
+    """Print ``sray <command>: <message>`` to stderr; returns 2, the exit code of bad input."""
+    print(f"sray {command}: {message}", file=sys.stderr)
+    return 2

@@ -7,10 +7,9 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import sys
 from pathlib import Path
 
-from sray.jobs.methods.flags import add_tracker_flags
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 from sray.platform.common.bench_doc import Bench, bench_dir, record
 from sray.platform.finetune.methods.registry import method_names
 from sray.platform.stability.axes import AXES, PRESETS
@@ -53,8 +52,7 @@ def run(args: argparse.Namespace) -> int:
         job = StabilityJob.from_args(args)
         suite, rows = prepare(job)
     except (FileNotFoundError, ValueError) as e:
-        print(f"sray stability: {e}", file=sys.stderr)
-        return 2
+        return refuse("stability", e)
     outputs = run_job(job, suite, rows)
     _record(job, outputs)
     print(f"[sray] results: {outputs['json']}")
