@@ -1,10 +1,8 @@
-"""The fast forward of ``SRayField`` (``Runtime.impl="fast"``): same parameters, same values, fewer copies.
-
-Every per-view tensor stays in (R, N, m, C) order, so no transposed copy of M is made (docs/benchmarks/profile.md):
-q, k, v are three (R, N, m, C) tensors (rows of the block's ``qkv``) handed to SDPA as strided views, intra-view
-attention with the views folded into the head axis (R, m * heads, N, d), cross-view as (R * N, heads, m, d).
-First linear layers of the weight net and colour score act piecewise (W [a; b] = W_a a + W_b b), not on a concat.
-"""
+"""The fast forward of ``SRayField`` (``Runtime.impl="fast"``): same parameters and values, fewer copies. Per-view
+tensors stay in (R, N, m, C) order, so no transposed copy of M is made (docs/benchmarks/profile.md): q, k, v are
+(R, N, m, C) views of the block's ``qkv`` handed to SDPA as strided views, intra-view attention with the views folded
+into the head axis (R, m * heads, N, d), cross-view as (R * N, heads, m, d). The first linear layers of the weight
+net and colour score act piecewise (W [a; b] = W_a a + W_b b), not on a concat."""
 
 from __future__ import annotations
 

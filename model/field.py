@@ -1,7 +1,6 @@
 """``SRayField``, the per-sample network of one render pass: context M by reprojection, CRA into M'', the semantic
 ray s = sum_i w_i F''_i with bounded weights, per-sample logits of s (and ``semantic_cues``), density and colour
-from the geometry-aware net.
-"""
+from the geometry-aware net."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """A training batch's loss computed piece by piece: the same loss and gradients, a fraction of the memory. Each
 piece's terms are scaled by its share of the batch and its gradient taken at once; :class:`_PrecomputedGradLoss`
-hands the gathered gradients back on ``loss.backward()`` (one encoder backward, DDP hooks, loss scaling intact).
-"""
+hands the gathered gradients back on ``loss.backward()`` (one encoder backward, DDP hooks, loss scaling intact)."""
 
 from __future__ import annotations
 

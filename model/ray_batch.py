@@ -1,10 +1,8 @@
-"""The model surface: one typed input (a batch of query rays of one scene) and the module that renders it.
-
-``RayBatch``: m source views and a :class:`QueryRays` (query camera, pixels, the scene's z-depth bounds as
-floats); :meth:`QueryRays.rays` is the one place pixels become rays and bounds per-ray tensors (a ``torch.full``
-on the device: no host-to-device copy). ``RayBatchLoss.forward`` encodes the sources and computes the training
-loss: DDP synchronises gradients only for work inside ``forward`` (checkpoints store ``net``'s own keys).
-"""
+"""The model surface: ``RayBatch`` (m source views and :class:`QueryRays` of one scene: query camera, pixels, the
+scene's z-depth bounds as floats) and the module that renders it. :meth:`QueryRays.rays` is the one place pixels
+become rays and bounds per-ray tensors (``torch.full`` on the device: no host-to-device copy).
+``RayBatchLoss.forward`` encodes the sources and computes the training loss: DDP synchronises gradients only for
+work inside ``forward`` (checkpoints store ``net``'s own keys)."""
 
 from __future__ import annotations
 

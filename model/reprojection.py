@@ -1,10 +1,8 @@
-"""Reprojecting query-ray samples into the source views: the initial 3D contextual space M.
-
-``sample_maps`` reads feature pixel (j, i), centred on full-res pixel (4j, 4i), with ``grid_sample``
-(``align_corners=True``, border padding). A projection is valid at least ``min_depth`` in front of the source camera
-and inside [-0.5, W - 0.5] x [-0.5, H - 0.5]; M at invalid projections is finite but meaningless and every consumer
-masks it, so it is never zeroed (saving passes over the largest tensors).
-"""
+"""Reprojecting query-ray samples into the source views: the initial 3D contextual space M. ``sample_maps`` reads
+feature pixel (j, i), centred on full-res pixel (4j, 4i), with ``grid_sample`` (``align_corners=True``, border
+padding). A projection is valid at least ``min_depth`` in front of the source camera and inside [-0.5, W - 0.5] x
+[-0.5, H - 0.5]; M at invalid projections is finite but meaningless and every consumer masks it, so it is never
+zeroed (saving passes over the largest tensors)."""
 
 from __future__ import annotations
 

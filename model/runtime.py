@@ -1,6 +1,5 @@
 """``Runtime``: how an ``SRayModel`` is run (code path, rays per pass), apart from what it is (``SRayConfig``): speed
-and memory, never a parameter; outputs only within float32 rounding. Every rendering call takes one.
-"""
+and memory, never a parameter; outputs only within float32 rounding. Every rendering call takes one."""
 
 from __future__ import annotations
 

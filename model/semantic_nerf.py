@@ -3,8 +3,7 @@ normalised by the scene box, unit directions; NeRF's encoding with 10 and 4 freq
 trunk, re-reading the encoded position after its fifth layer, feeds density (softplus, not NeRF's ReLU, so rays cannot
 die empty at initialisation), semantics (-> 128 -> L logits, before the direction enters: labels do not depend on
 the viewpoint) and colour (256-wide feature + encoded direction -> 128 -> sigmoid rgb). Coarse and fine networks,
-the fine one on the union of coarse and resampled depths; renderer, losses and metrics are S-Ray's.
-"""
+the fine one on the union of coarse and resampled depths; renderer, losses and metrics are S-Ray's."""
 
 from __future__ import annotations
 

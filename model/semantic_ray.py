@@ -1,13 +1,11 @@
-"""``SRayModel``: the Semantic Ray network (S-Ray, CVPR 2023) with coarse-to-fine volume rendering.
-
-Usage (pixelNeRF's encode / query split; the module keeps no state between the calls)::
+"""``SRayModel``: the Semantic Ray network (S-Ray, CVPR 2023), pixelNeRF's encode / query split with no state kept
+between the calls::
 
     src = model.encode(src_rgb, src_K, src_c2w)          # once per source set
     out = model.render_rays(src, origins, dirs, near, far, stratified=True)   # any number of times
 
-One shared encoder and separate coarse and fine fields (as the paper's public code); sampling, compositing and the
-whole-view loop are shared with Semantic-NeRF (``hierarchical``, ``view_render``); choices: docs/model.md.
-"""
+One shared encoder, separate coarse and fine fields (as the paper's public code); sampling, compositing and the
+whole-view loop are shared with Semantic-NeRF (``hierarchical``, ``view_render``); choices: docs/model.md."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """Dense 2D supervision of the encoder (a departure from the paper, docs/model.md, "Dense 2D supervision of the
 encoder"): a 1x1-conv semantic head on the source views' feature maps, up-sampled to full resolution with the
-encoder's centre-aligned rule, and its cross-entropy against their own labels; used in training only.
-"""
+encoder's centre-aligned rule, and its cross-entropy against their own labels; used in training only."""
 
 from __future__ import annotations
 
