@@ -1,5 +1,4 @@
-"""``sray finetune-fleet``: per-scene methods of the registry (S-Ray finetune, Semantic-NeRF, ...) as a fleet of Ray
-tasks."""
+"""``sray finetune-fleet``: the registry's per-scene methods (S-Ray finetune, Semantic-NeRF, ...) as Ray tasks."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""``sray label``: semantic labels for every frame of a capture (or any scene) with a trained checkpoint, as one
-tracked run (docs/capture.md)."""
+"""``sray label``: semantic labels for every frame of a capture (or any scene), one tracked run (docs/capture.md)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""The held-out render flags of ``sray eval`` and ``sray render`` (a ``HeldOutRender``; the fast-render flags are
-:class:`GivenFlag`)."""
+"""The held-out render flags of ``sray eval`` and ``sray render`` (``HeldOutRender``; fast ones :class:`GivenFlag`)."""
 
 from __future__ import annotations
 

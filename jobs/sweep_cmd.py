@@ -1,5 +1,4 @@
-"""``sray sweep``: a hyperparameter sweep of training jobs on Ray Tune, tracked as one parent run with a child
-run per trial (docs/sweeps.md)."""
+"""``sray sweep``: training jobs on Ray Tune, one parent run and a child run per trial (docs/sweeps.md)."""
 
 from __future__ import annotations
 

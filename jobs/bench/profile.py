@@ -1,6 +1,5 @@
-"""``sray bench profile``: the top operators of the paper-config training step and of a whole-image render (the demo's
-24+24-sample model) under ``torch.profiler``, as docs/benchmarks.md's "Profiles" tables per device (each replaced
-when profiled again; docs/performance.md's decisions are read off them), and the levers they point at (``levers``)."""
+"""``sray bench profile``: top operators of the paper-config training step and of a whole-image render (the demo's
+24+24 samples) under ``torch.profiler``, as docs/benchmarks.md's "Profiles" per device, and their ``levers``."""
 
 from __future__ import annotations
 

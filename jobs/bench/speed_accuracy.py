@@ -1,7 +1,6 @@
-"""``sray bench speed-accuracy``: the settings, their paired measurement (every setting renders the same views of the
-unseen test scenes, so what it gives up is measured against the full render of the same run) and the table. Other
-registered methods' zero-shot models (``speed_methods``) are rows too, each on the views of S-Ray's row of its inputs;
-each row is scored per class (``speed_classes``); the default-render rule (``render_default``) reads S-Ray's rows."""
+"""``sray bench speed-accuracy``: the settings, their paired measurement (each renders the views the full render of
+the same run renders) and the table; other methods' zero-shot models (``speed_methods``) are rows on the views of
+S-Ray's row of their inputs, every row scored per class (``speed_classes``); the rule: ``render_default``."""
 
 from __future__ import annotations
 

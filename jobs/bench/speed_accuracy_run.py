@@ -1,6 +1,5 @@
-"""``sray bench speed-accuracy``: the settings on one checkpoint or several (a recipe's seeds), other methods' rows
-(``--methods``), the default-render rule per checkpoint and on their mean, chart and tables into docs/benchmarks.md
-(the default set fills one table, a run of ``--settings`` the other) and logged."""
+"""``sray bench speed-accuracy`` on one checkpoint or several (a recipe's seeds): settings, ``--methods`` rows, the rule
+per checkpoint and on their mean; chart and tables (default set, or ``--settings``) into docs/benchmarks.md, logged."""
 
 from __future__ import annotations
 

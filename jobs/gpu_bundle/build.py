@@ -1,6 +1,5 @@
-"""Build the GPU bundle: resolve (:mod:`.resolve`), download the wheels, repack Ray without what sray never loads,
-refuse a bundle over the size a GPU call carries, and write the folder with ``install.sh`` (the one install command,
-offline) and ``README.md``, assembled beside ``out`` and renamed into place whole (a failed build leaves the old)."""
+"""Build the GPU bundle: resolve (:mod:`.resolve`), download, repack Ray without what sray never loads, refuse one
+over a GPU call's size limit, write ``install.sh`` (offline) and ``README.md``; built beside ``out``, renamed whole."""
 
 from __future__ import annotations
 

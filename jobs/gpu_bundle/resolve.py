@@ -1,6 +1,5 @@
-"""Which wheels the GPU bundle holds: the dependencies of what sray runs at the ``ray`` and ``fleet`` stages, resolved
-by pip for the target, minus what the GPU image has and what sray never loads; versions from ``constraints.txt``,
-then from this environment (the stack the suite tests here)."""
+"""Which wheels the GPU bundle holds: what the ``ray`` and ``fleet`` stages need, resolved by pip for the target, minus
+the GPU image's packages and what sray never loads; versions from ``constraints.txt``, then this environment."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""Stage ``ray``: a user's first GPU run through the ``sray`` commands on procedural shards: ``sray train`` (one worker,
-rank 0 killed half-way by the fault hook, resumed), ``sray eval`` and ``sray render`` of its checkpoint, and two
-workers on one GPU refused before Ray starts (NCCL refuses two ranks on one GPU)."""
+"""Stage ``ray``: ``sray train`` on procedural shards (one worker, rank 0 killed half-way by the fault hook, resumed),
+``sray eval`` and ``sray render`` of its checkpoint; 2 workers on one GPU refused before Ray starts (NCCL would)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
 """``sray stability``: stress every registered method's rows (zero-shot, and trained on the scene at one CPU-second
-budget) along each axis and chart where each breaks (:mod:`sray.platform.stability`). Points are stored as they
-finish under ``--out``, so an axis-by-axis run or a re-run after an interruption computes only what is missing."""
+budget) along each axis and chart where each breaks; points stored as they finish, so a re-run computes the rest."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""One ``sray stability`` job: its inputs checked up front, the models given (nothing pretrained; the data defaults to
-the checkpoint's training shards) or the preset's world pretrained, the rows read off the method registry, the suite
-run, and the outputs written over every axis whose points are all stored (axis-by-axis runs add up to one table)."""
+"""One ``sray stability`` job: inputs checked up front; the given models (data: the checkpoint's shards) or the preset's
+world pretrained; rows from the method registry; outputs of every axis whose points are all stored (runs add up)."""
 
 from __future__ import annotations
 
