@@ -1,9 +1,8 @@
-"""Training objective of S-Ray and the Semantic-NeRF baseline (the paper's appendix, as Semantic-NeRF), in float32
-whatever the autocast region: ``L_total = lambda_sem * L_sem + lambda_rgb * L_rgb`` with ``L_sem = CE(coarse logits)
-+ CE(fine logits)``, each the mean cross-entropy over the labelled rays (target != ignore id; 0 with a zero gradient
-when there is none; with ``class_weights`` w, ``sum_i w[y_i] CE_i / sum_i w[y_i]``), and ``L_rgb = MSE(coarse rgb) +
-MSE(fine rgb)`` over all rays. Label ids outside [0, L) are refused by the loader, here only with
-``SRAY_DEBUG_CHECKS=1`` (a device sync)."""
+"""Training objective of S-Ray and Semantic-NeRF (the paper's appendix), in float32 whatever the autocast region:
+``L_total = lambda_sem * L_sem + lambda_rgb * L_rgb``; ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean
+cross-entropy over the labelled rays (target != ignore id; 0 with a zero gradient when there is none; with
+``class_weights`` w, ``sum_i w[y_i] CE_i / sum_i w[y_i]``); ``L_rgb = MSE(coarse rgb) + MSE(fine rgb)`` over all rays.
+Label ids outside [0, L) are refused by the loader, here only with ``SRAY_DEBUG_CHECKS=1`` (a device sync)."""
 
 from __future__ import annotations
 

@@ -67,9 +67,8 @@ class RayBatch:
 
 class RayBatchLoss(nn.Module):
     """What training runs (DDP included): one ``forward`` encodes a :class:`RayBatch`'s sources and computes
-    ``SRayModel.training_loss`` of its rays, plus ``lambda_src_sem`` times the source views' cross-entropy
-    (``source_semantics``) when that is on and the batch has source labels. ``net``: the network; ``runtime``:
-    how its loss is run."""
+    ``SRayModel.training_loss`` of its rays plus ``lambda_src_sem`` times the source views' cross-entropy
+    (``source_semantics``) when on and the batch has source labels; ``runtime``: how the loss of ``net`` is run."""
 
     def __init__(self, cfg: SRayConfig, runtime: Runtime = Runtime()) -> None:
         """Build the S-Ray network it trains (no device work here); ``runtime``: how its loss is run."""
@@ -79,8 +78,8 @@ class RayBatchLoss(nn.Module):
 
     def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor,
                 render: bool = True) -> tuple[Tensor, dict[str, Tensor]]:
-        """(scalar loss, detached terms: ``render_loss``'s, and ``sem_src`` with the source-view term) for the batch's
-        R rays: target_label (R,) int64 (ignore id: unlabelled), target_rgb (R, 3) in [0, 1]. ``render=False`` (the 2D
+        """(scalar loss, detached terms: ``render_loss``'s and ``sem_src``, the source-view term) for the batch's R
+        rays: target_label (R,) int64 (ignore id: unlabelled), target_rgb (R, 3) in [0, 1]. ``render=False`` (2D
         warm-up): the source-view term alone, every other parameter in the loss with weight 0 (DDP needs a gradient
         for each parameter every step)."""
         net = self.net

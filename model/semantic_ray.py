@@ -94,9 +94,8 @@ class SRayModel(nn.Module):
                       far: Tensor | float, target_label: Tensor, target_rgb: Tensor,
                       runtime: Runtime = Runtime()) -> tuple[Tensor, dict[str, Tensor]]:
         """``render_loss`` of rays rendered with stratified samples: origins, dirs (R, 3), near, far scalars or (R,),
-        target_label (R,) int64, target_rgb (R, 3). Rendered in pieces of ``runtime.train_piece`` rays (0: by device),
-        each piece's gradient taken before the next (``piecewise_loss``): the loss and gradients of one pass over the
-        batch, within float32 rounding."""
+        target_label (R,) int64, target_rgb (R, 3). Rendered ``runtime.train_piece`` rays at a time (0: by device),
+        each piece's gradient taken before the next (``piecewise_loss``): one pass's loss and gradients (float32)."""
         n_rays = origins.shape[0]
         near_r = per_ray_bounds(near, n_rays, origins, "near")  # (R,)
         far_r = per_ray_bounds(far, n_rays, origins, "far")  # (R,)
