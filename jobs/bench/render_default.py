@@ -1,7 +1,6 @@
-"""The evaluation's default render by a rule (:func:`choose_default`): the **fastest** measured setting that loses at
-most :data:`MAX_MIOU_LOSS` points of mIoU **and** :data:`MAX_CLASS_LOSS` on every class holding :data:`MIN_CLASS_SHARE`
-of the labelled pixels (rarer ones swing by tens of points) against the full render on the same views; ties go to the
-higher mIoU, then the first listed."""
+"""The evaluation's default render by :func:`choose_default`: the **fastest** measured setting losing at most
+:data:`MAX_MIOU_LOSS` mIoU points **and** :data:`MAX_CLASS_LOSS` on every class holding :data:`MIN_CLASS_SHARE` of the
+labelled pixels (rarer ones swing by tens of points) against the full render of the same views; ties: higher mIoU."""
 
 from __future__ import annotations
 

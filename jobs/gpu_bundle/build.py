@@ -76,9 +76,8 @@ def folder_bytes(folder: Path) -> int:
 
 
 def assemble(pins: list[Pin], wheels: Path, out: Path, python_version: str, limit_mib: float = LIMIT_MIB) -> dict:
-    """Write the bundle folder ``out`` from the downloaded ``wheels`` (repacked wheels, ``install.sh``, ``README.md``,
-    ``bundle.json``); returns the manifest. :class:`BundleError`, ``out`` untouched, for a missing wheel or a bundle
-    over ``limit_mib``."""
+    """Write the bundle folder ``out`` (repacked ``wheels``, ``install.sh``, ``README.md``, ``bundle.json``); returns
+    the manifest. :class:`BundleError`, ``out`` untouched, for a missing wheel or a bundle over ``limit_mib``."""
     found = match_wheels(pins, wheels)
     work = out.with_name(f".{out.name}.tmp{os.getpid()}")
     shutil.rmtree(work, ignore_errors=True)

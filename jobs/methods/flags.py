@@ -1,7 +1,6 @@
-"""Flags several commands share: those that build a registered method's pretrained model (an ``EvalRequest``; a
-command refuses a flag that sets a field the method's ``eval_model`` does not read, ``Method.eval_reads``, instead of
-ignoring it), those of a tracked run, and the one-line refusal of bad input. Here, not beside the commands, so that
-``jobs/bench`` may import them."""
+"""Flags several commands share (here, not beside the commands, so ``jobs/bench`` may import them): those building a
+registered method's pretrained model (an ``EvalRequest``; a flag its ``eval_model`` does not read (``eval_reads``)
+is refused, not ignored), those of a tracked run, and the one-line refusal of bad input."""
 
 from __future__ import annotations
 
@@ -49,8 +48,7 @@ def refusal(flags: list[str], who: str, reads: Iterable[str]) -> str:
 
 def add_tracker_flags(p: argparse.ArgumentParser, tracker: str | None = None, uri: str | None = None,
                       store: str = "this folder") -> None:
-    """Add ``--tracker`` and ``--tracking-uri`` with these defaults (None: the config's value); ``store`` names where
-    the default SQLite store lies."""
+    """Add ``--tracker`` and ``--tracking-uri`` (None: the config's value); ``store``: the SQLite default's folder."""
     p.add_argument("--tracker", default=tracker, help="tracker to log to, by registry name (default: mlflow)")
     p.add_argument("--tracking-uri", default=uri,
                    help=f"the tracker's store, for MLflow its tracking URI (default: SQLite store in {store})")
