@@ -69,11 +69,10 @@ def _ray_weights(target: Tensor, ignore_id: int, weight: Tensor | None) -> Tenso
 
 def render_loss(out: dict[str, dict[str, Tensor]], target_label: Tensor, target_rgb: Tensor, cfg: LossSettings,
                 shares: LossShares | None = None) -> tuple[Tensor, dict[str, Tensor]]:
-    """Semantic + photometric loss of a ``render_rays`` output ``{"coarse": pass, "fine": pass}`` (``coarse``
-    alone for a model without a fine pass) with ``logits`` (R, L) and ``rgb`` (R, 3) per pass; target_label (R,)
-    int64 (``cfg.ignore_id``: unlabelled), target_rgb (R, 3) in [0, 1]. Returns the scalar total and detached terms
-    ``sem_<pass>``, ``rgb_<pass>``, ``n_labelled`` and ``psnr`` (of the last pass's colour). With ``shares`` (one
-    piece of a batch, :class:`LossShares`) every term is scaled by its share and ``psnr`` is left to the caller."""
+    """Semantic + photometric loss of ``render_rays``' passes (``coarse`` alone without a fine pass), each with
+    ``logits`` (R, L) and ``rgb`` (R, 3); target_label (R,) int64 (``cfg.ignore_id``: unlabelled), target_rgb (R, 3)
+    in [0, 1]. Returns the scalar total and detached ``sem_<pass>``, ``rgb_<pass>``, ``n_labelled`` and ``psnr`` (last
+    pass's colour). With ``shares`` (a batch piece's, :class:`LossShares`) every term is scaled, ``psnr`` left out."""
     passes = [p for p in PASSES if p in out]
     if not passes:
         raise ValueError("sray.model.losses.render_loss: `out` holds neither a 'coarse' nor a 'fine' pass; pass a "

@@ -85,8 +85,7 @@ class SRayModel(nn.Module):
                     far: Tensor | float, stratified: bool, generator: torch.Generator | None = None,
                     runtime: Runtime = Runtime()) -> dict[str, dict[str, Tensor]]:
         """Render rays o + t d, t in [near, far] (z-depth for ``pixel_rays`` directions): origins, dirs (R, 3), near,
-        far scalars or (R,); ``stratified`` jitters the samples (training), else sampling is deterministic. Returns
-        ``{"coarse": pass, "fine": pass}`` (``hierarchical.render_rays``)."""
+        far scalars or (R,); ``stratified`` jitters the samples (training). Returns ``hierarchical.render_rays``'."""
         return render_rays(self._pass_field(src, runtime), origins, dirs, near, far, self.cfg.n_coarse,
                            self.cfg.n_fine, stratified, generator, self.cfg.fine_samples, self.coarse_sampler(src))
 
