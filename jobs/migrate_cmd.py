@@ -1,5 +1,4 @@
-"""``sray migrate PATH``: convert the stored artifacts of an earlier sray under PATH to today's format, once (today's
-load paths refuse them with a line naming this command)."""
+"""``sray migrate PATH``: convert an earlier sray's artifacts under PATH to today's format (loads refuse old ones)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""``sray ui``: the MLflow dashboard on a local store until Ctrl-C, SIGTERM or SIGHUP, which all stop its server too;
-on a tracking server, the server's own runs views."""
+"""``sray ui``: the MLflow dashboard of a local store until Ctrl-C, SIGTERM or SIGHUP; of a server, its runs views."""
 
 from __future__ import annotations
 

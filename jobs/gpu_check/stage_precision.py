@@ -1,5 +1,4 @@
-"""Stage ``precision``: fp32 against bf16 (and fp16 on CUDA) for projection, a rendered image and a training step's
-loss and gradients, each with its tolerance."""
+"""Stage ``precision``: fp32 against bf16 (and fp16 on CUDA) in projection, a render, a step's loss and gradients."""
 
 from __future__ import annotations
 

@@ -104,8 +104,7 @@ def run(ctx: CheckContext) -> StageResult:
 
 
 def shared_gpu_request(shards: Path, root: Path, name: str, precision: str) -> tuple[bool, list[str]]:
-    """Launch the recipe with 2 workers of 0.5 GPU (its sizes do not matter: it is refused first): whether it was
-    refused before Ray started, and the table row."""
+    """(refused before Ray started, table row) of the recipe on 2 workers of 0.5 GPU (any sizes: refused first)."""
     from sray.platform.train.launcher import launch_training
 
     cfg = get_recipe(RECIPE)

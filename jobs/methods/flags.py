@@ -16,8 +16,7 @@ REQUEST_FLAGS: dict[str, str] = {"--checkpoint": "checkpoint", "--segmenter": "s
 
 
 class GivenFlag(argparse.Action):
-    """``store``, and the option string appended to ``namespace.given`` (a tuple; ``set_defaults(given=())``), so a
-    flag given with its default value counts too."""
+    """``store``, and the option string added to ``namespace.given`` (a tuple): a flag given at its default counts."""
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
                  option_string: str | None = None) -> None:

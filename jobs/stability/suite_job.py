@@ -108,8 +108,7 @@ def _label_space(models: SuiteModels) -> tuple[SRayConfig, SRayConfig | None]:
 
 
 def check_rows(rows: list[Row], models: SuiteModels, preset: Preset, n_classes: int, where: Path) -> None:
-    """Build each zero-shot row's model once (on the CPU) and each trained row's fleet settings, so that a missing or
-    mismatched model fails now (ValueError naming its flag)."""
+    """Build each zero-shot row's model (CPU) and trained row's fleet settings now: ValueError naming a bad flag."""
     for row in rows:
         if not row.trained:
             model = get_method(row.method).eval_model(row.request(models, "cpu"))
