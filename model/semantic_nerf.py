@@ -33,8 +33,7 @@ class SemanticNeRFConfig:
     width: int = 256
     """Width of the trunk layers."""
     skip_layer: int | None = 5
-    """0-based trunk layer that re-reads the encoded position (5 = after the fifth layer, as in NeRF); None: no
-    skip connection."""
+    """0-based trunk layer that re-reads the encoded position (5 = after the fifth layer, as NeRF); None: no skip."""
     color_width: int = 128
     """Hidden width of the colour head."""
     semantic_width: int = 128

@@ -14,8 +14,7 @@ from torch import Tensor, nn
 from .config import SRayConfig
 
 WEIGHT_MARGIN = 1e-3
-"""``margin`` of the net's weights: the fraction of the weight range kept unused so the bounds stay strict when the
-raw scores saturate in floating point."""
+"""``margin``: the fraction of the weight range kept unused, so the bounds stay strict when raw scores saturate."""
 
 
 def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:
