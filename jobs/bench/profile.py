@@ -16,8 +16,7 @@ from sray.model.ray_chunks import CUDA_RENDER_RAYS, render_chunk_rays, train_pie
 from sray.platform.common.bench_doc import Bench, record
 
 PROFILES = Bench("profile", "Profiles")
-"""Where the time of a training step and of a render goes (self time: spent in an operator itself, not in those it
-calls), and the levers timed."""
+"""Where a training step's and a render's time goes (self time: in an operator, not its callees); the levers timed."""
 
 
 def _top_table(prof: profile, wall_s: float, n: int = 18) -> str:

@@ -13,8 +13,7 @@ from pathlib import Path
 from .image import IMAGE_PACKAGES, normalise
 
 ROOTS = ("ray[train]", "mlflow-skinny", "sqlalchemy", "alembic", "webdataset")
-"""Ray Train, MLflow's client with its SQL store (SQLite tracking needs SQLAlchemy and Alembic) and the shard
-loader."""
+"""Ray Train, MLflow's client with its SQL store (SQLite tracking needs SQLAlchemy and Alembic), the shard loader."""
 PIN_FROM = {"mlflow-skinny": "mlflow"}
 """Roots pinned to another constraint's version (released together)."""
 LEFT_OUT = {"google-auth": "databricks-sdk's Google Cloud credentials, loaded only for Databricks on Google Cloud",
