@@ -21,9 +21,8 @@ def _key_mask(valid: Tensor, dim: int) -> Tensor:
 
 
 def block_forward(block: AttentionBlock, x: Tensor, valid: Tensor, stage: str) -> Tensor:
-    """One ``AttentionBlock`` on tokens x (R, N, m, C) with validity (R, N, m); ``stage`` is
-    ``intra`` (over N per (ray, view)), ``cross`` (over m per (ray, sample)) or ``dense`` (over all).
-    Returns (R, N, m, C), the reference block's values in this order."""
+    """One ``AttentionBlock`` on tokens x (R, N, m, C) with validity (R, N, m) at ``stage`` ``intra`` (over N per (ray,
+    view)), ``cross`` (over m per (ray, sample)) or ``dense``: the reference block's values, (R, N, m, C)."""
     r, n, m, c = x.shape
     heads, d = block.heads, c // block.heads
     h = block.norm(x)

@@ -142,9 +142,8 @@ class SemanticNeRF(nn.Module):
 
     def render_image(self, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
                      chunk: int | None = None, stride: int = 1) -> dict[str, dict[str, Tensor]]:
-        """Render every ``stride``-th pixel of the (H, W) = ``hw`` view of the camera K (3, 3), c2w (4, 4) (OpenCV
-        axes) with ``view_render.render_view``, ``chunk`` rays at a time (default ``cfg.chunk``); near, far: scalar
-        z-depth bounds. Returns the passes of ``SRayModel.render_image``."""
+        """``view_render.render_view`` of every ``stride``-th pixel of the (H, W) = ``hw`` view of camera K (3, 3), c2w
+        (4, 4) (OpenCV axes), scalar z-depth bounds near, far, ``chunk`` rays at a time (default ``cfg.chunk``)."""
         chunk = self.cfg.chunk if chunk is None else chunk
         return render_view(lambda o, d, lo, hi: self.render_rays(o, d, lo, hi, stratified=False), K, c2w, hw, near,
                            far, chunk, self.scene_center.device, stride)
