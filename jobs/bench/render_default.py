@@ -104,8 +104,7 @@ def choose_default(rows: list[Measured], reference: str) -> DefaultChoice:
 
 
 def todays_defaults() -> dict[str, FastRender | None]:
-    """Who uses a default render today -> its fast render mode (None: full): ``sray eval``, validation
-    (``data.held_out``) and the fleet's held-out scores (``finetune.held_out``); the last two render every pixel of
-    their own strided grid, so per scored pixel they match the bench's ``fast s1``."""
+    """Who uses a default render today -> its fast mode (None: full): ``sray eval``, validation (``data.held_out``),
+    the fleet's held-out scores (``finetune.held_out``); the last two render all of their strided grid: ``fast s1``."""
     return {"sray eval": HeldOutRender().fast(), "validation": DataSettings().held_out.fast(),
             "fleet held-out": FinetuneSettings().held_out.fast()}

@@ -161,8 +161,7 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     """One row per setting (and per method of ``others``, zero-shot models by name, each after its :func:`twin`) on
     the first ``views_per_scene`` test views of each unseen scene (<= 0: all): name, method, inputs,
     :func:`timed_scores`' values, class_names, setting and fine_samples (None for another method). ``checkpoint_rgbd``
-    renders the ``rgbd`` settings (None: ``checkpoint``); ``store`` keeps rows measured (``speed_store``) and gives
-    back those it holds instead of measuring them again."""
+    renders the ``rgbd`` settings (None: ``checkpoint``); ``store`` (``speed_store``): rows kept and reused."""
     loaded = {}
     for key, path in (("main", checkpoint), ("rgbd", checkpoint_rgbd)):
         if path is not None:
