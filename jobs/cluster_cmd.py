@@ -4,8 +4,9 @@ and worker nodes) as processes on this machine, bound to 127.0.0.1 (docs/cluster
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
+
+from sray.jobs.methods.flags import refuse
 
 DEFAULT_DIR = Path("outputs/cluster")
 
@@ -49,6 +50,5 @@ def run(args: argparse.Namespace) -> int:
             print(f"[cluster] stopped {', '.join(stopped) if stopped else 'nothing (nothing was running)'}; "
                   f"data kept in {args.dir.resolve()}")
     except ClusterError as e:
-        print(f"sray cluster {args.action}: {e}", file=sys.stderr)
-        return 2
+        return refuse(f"cluster {args.action}", e)
     return 0

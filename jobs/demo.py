@@ -88,10 +88,8 @@ def run_demo(args: argparse.Namespace) -> int:
     cfg.data.shards = str(shards)
     # --steps keeps the recipe's share of 2D-only warm-up steps and its data order (a loader epoch per checkpoint)
     cfg.optim.warmup_2d_steps = round(args.steps * cfg.optim.warmup_2d_steps / cfg.optim.steps)
-    cfg.optim.steps = args.steps
-    cfg.run.output_dir = str(args.out / "train")
-    cfg.run.seed = args.seed
-    cfg.run.ckpt_every = max(args.steps // 2, 1)
+    cfg.optim.steps, cfg.run.seed = args.steps, args.seed
+    cfg.run.output_dir, cfg.run.ckpt_every = str(args.out / "train"), max(args.steps // 2, 1)
     cfg.run.val_every = args.steps  # one validation, at the end: it costs about a minute on 2 cores
     _say(f"5/9 training S-Ray ({RECIPE}) for {args.steps} steps on local Ray with {cfg.run.workers} CPU workers, the "
          f"first {cfg.optim.warmup_2d_steps} on the source views' labels alone")
@@ -113,10 +111,8 @@ def run_demo(args: argparse.Namespace) -> int:
     _say(f"    render any scene yourself:  {_sray_command()} render --checkpoint {checkpoint} --data {shards} "
          f"--scene {scenes_test[0]} --out {args.out / 'render'}")
     fleet_cfg = FleetConfig()
-    fleet_cfg.finetune.max_seconds = args.finetune_seconds
-    fleet_cfg.finetune.held_out.n_source = cfg.model.n_source
-    fleet_cfg.finetune.held_out.stride = 2 * args.eval_stride
-    fleet_cfg.transfer.segmenter = str(segmenter_dir)
+    fleet_cfg.finetune.max_seconds, fleet_cfg.transfer.segmenter = args.finetune_seconds, str(segmenter_dir)
+    fleet_cfg.finetune.held_out.n_source, fleet_cfg.finetune.held_out.stride = cfg.model.n_source, 2 * args.eval_stride
     scenes_fleet = scenes_test[:args.fleet_scenes] if args.fleet_scenes > 0 else scenes_test
     _say(f"8/9 finetune fleet on {len(scenes_fleet)} of the {len(scenes_test)} unseen scenes "
          f"({', '.join(scenes_fleet)}): S-Ray (RGB, from the trained model), Semantic-NeRF (RGB, from scratch), S-Ray "

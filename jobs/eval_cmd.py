@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 from pathlib import Path
 
-from sray.jobs.methods.flags import GivenFlag, refusal, unread_flags
-from sray.jobs.render_flags import add_held_out_flags, held_out_from_args, print_tracked_run
+from sray.jobs.methods.flags import GivenFlag, add_tracker_flags, print_tracked_run, refusal, refuse, unread_flags
+from sray.jobs.render_flags import add_held_out_flags, held_out_from_args
 from sray.platform.finetune.methods.method import EvalRequest
 from sray.platform.finetune.methods.registry import eval_method_names, get_method
 
@@ -30,9 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="scenes to evaluate (default: every scene whose role is 'test')")
     add_held_out_flags(p, scored_stride=True)
     p.add_argument("--out", type=Path, default=Path("outputs/eval"), help="output folder")
-    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
-    p.add_argument("--tracking-uri", help="the tracker's store, for MLflow its tracking URI (default: SQLite store "
-                                          "in this folder)")
+    add_tracker_flags(p, "mlflow")
     p.add_argument("--experiment", default="sray-eval", help="experiment name")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--calibrate", type=Path, action=GivenFlag, metavar="VAL_SHARDS",
@@ -54,12 +51,10 @@ def run(args: argparse.Namespace) -> int:
     method = get_method(args.method)
     unread = unread_flags(args.given, method.eval_reads)
     if unread:
-        print(f"sray eval: {refusal(unread, f'--method {method.name}', method.eval_reads)}", file=sys.stderr)
-        return 2
+        return refuse("eval", refusal(unread, f"--method {method.name}", method.eval_reads))
     splits = dict(item.split("=", 1) for item in args.split if "=" in item)
     if len(splits) != len(args.split) or "" in splits:
-        print(f"sray eval: --split takes NAME=DIR with distinct names, got {args.split}", file=sys.stderr)
-        return 2
+        return refuse("eval", f"--split takes NAME=DIR with distinct names, got {args.split}")
     try:
         held_out = held_out_from_args(args)
         request = EvalRequest(checkpoint=args.checkpoint, segmenter=args.segmenter, device=args.device,
@@ -78,8 +73,7 @@ def run(args: argparse.Namespace) -> int:
         others = {name: evaluate_model(model, Path(folder), None, args.out / name, **kwargs)
                   for name, folder in splits.items()}
     except (FileNotFoundError, ValueError) as e:
-        print(f"sray eval: {e}", file=sys.stderr)
-        return 2
+        return refuse("eval", e)
     print(format_table(report))
     if others:
         summary = split_summary({"data": report, **others})

@@ -1,13 +1,12 @@
-"""``sray finetune-fleet``: per-scene methods of the registry (S-Ray finetune, Semantic-NeRF, ...) as a fleet of Ray
-tasks."""
+"""``sray finetune-fleet``: the registry's per-scene methods (S-Ray finetune, Semantic-NeRF, ...) as Ray tasks."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 from sray.platform.finetune.methods.registry import METHODS, method_names
 
 ALL_METHODS = "all"
@@ -36,9 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--segmenter", help="pretrained 2D segmenter folder of method 2d-transfer, written by `sray bench "
                                        "segmenter` (transfer.segmenter)")
     p.add_argument("--out", type=Path, default=Path("outputs/fleet"), help="fleet folder (default outputs/fleet)")
-    p.add_argument("--tracker", help="tracker to log to, by registry name (tracker; default: mlflow)")
-    p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
-                                                      "SQLite store in this folder)")
+    add_tracker_flags(p, uri="")
     p.add_argument("--clip-frames", type=int, default=0, metavar="N",
                    help="render an N-frame fly-through per S-Ray scene before and after finetuning, logged to the "
                         "scene's run (default 0: none; docs/render.md)")
@@ -75,6 +72,5 @@ def run(args: argparse.Namespace) -> int:
         results = run_fleet(cfg, args.checkpoint, args.data, scenes, args.out, args.tracking_uri,
                             chosen_methods(args.methods), args.clip_frames)
     except (InfeasibleRequest, FileNotFoundError, ValueError) as e:
-        print(f"sray finetune-fleet: {e}", file=sys.stderr)
-        return 2
+        return refuse("finetune-fleet", e)
     return 0 if all(r["status"] == "finished" for r in results) else 1

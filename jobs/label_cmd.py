@@ -1,13 +1,11 @@
-"""``sray label``: semantic labels for every frame of a capture (or any scene) with a trained checkpoint, as one
-tracked run (docs/capture.md)."""
+"""``sray label``: semantic labels for every frame of a capture (or any scene), one tracked run (docs/capture.md)."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from sray.jobs.render_flags import add_tracked_run_flags, print_tracked_run
+from sray.jobs.methods.flags import add_tracked_run_flags, print_tracked_run, refuse
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,8 +46,7 @@ def run(args: argparse.Namespace) -> int:
             result = tracked_labels(labeller, args.data, scenes, args.out, args.flythrough_frames,
                                     tracker=args.tracker, tracking_uri=args.tracking_uri, experiment=args.experiment)
     except (FileNotFoundError, ValueError) as e:
-        print(f"sray label: {e}", file=sys.stderr)
-        return 2
+        return refuse("label", e)
     for scene, record in result["scenes"].items():
         scores = record.get("scores")
         line = f"mIoU {100 * scores['miou']:.1f} against its labels" if scores else "no labels to score against"

@@ -1,11 +1,11 @@
-"""``sray migrate PATH``: convert the stored artifacts of an earlier sray under PATH to today's format, once (today's
-load paths refuse them with a line naming this command)."""
+"""``sray migrate PATH``: convert an earlier sray's artifacts under PATH to today's format (loads refuse old ones)."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
+
+from sray.jobs.methods.flags import refuse
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,8 +28,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         conversions = find_conversions(args.path)
     except MigrationRefused as e:
-        print(f"sray migrate: {e}", file=sys.stderr)
-        return 2
+        return refuse("migrate", e)
     for conversion in conversions:
         conversion.write()
         print(f"[sray] migrated {conversion.what}: {conversion.path}")

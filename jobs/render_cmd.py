@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from sray.jobs.data.convert import size_arg
-from sray.jobs.render_flags import add_held_out_flags, add_tracked_run_flags, held_out_from_args, print_tracked_run
+from sray.jobs.methods.flags import add_tracked_run_flags, print_tracked_run, refuse
+from sray.jobs.render_flags import add_held_out_flags, held_out_from_args
 
 DEFAULT_FRAMES = 60
 
@@ -63,8 +63,7 @@ def run(args: argparse.Namespace) -> int:
         except RuntimeError as e:
             raise ValueError(f"--device {args.device!r}: {e}") from None
     except (FileNotFoundError, ValueError) as e:
-        print(f"sray render: {e}", file=sys.stderr)
-        return 2
+        return refuse("render", e)
     label = "finetuned" if args.artifact is not None else "zero-shot"
     if args.no_track:
         result = fly.render(args.out, device, about=about, label=label)

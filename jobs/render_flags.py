@@ -1,10 +1,8 @@
-"""Flags the rendering commands share: ``sray eval``'s and ``sray render``'s held-out render (a ``HeldOutRender``; the
-fast-render flags are :class:`GivenFlag`) and the tracked run of ``sray render`` and ``sray label``."""
+"""The held-out render flags of ``sray eval`` and ``sray render`` (``HeldOutRender``; fast ones :class:`GivenFlag`)."""
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from sray.jobs.methods.flags import GivenFlag
 from sray.platform.config.held_out_render import HELD_OUT_RENDERS, HeldOutRender
@@ -41,20 +39,3 @@ def held_out_from_args(args: argparse.Namespace) -> HeldOutRender:
     settings.check(lambda field: "--" + field.replace("_", "-"))
     return settings
 
-
-def add_tracked_run_flags(p: argparse.ArgumentParser, experiment: str) -> None:
-    """Add ``--device``, ``--tracker``, ``--tracking-uri``, ``--experiment`` and ``--no-track`` to ``p``."""
-    p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
-    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
-    p.add_argument("--tracking-uri", default="", help="the tracker's store, for MLflow its tracking URI (default: "
-                                                      "SQLite store in this folder)")
-    p.add_argument("--experiment", default=experiment, help="experiment name (default %(default)s)")
-    p.add_argument("--no-track", action="store_true", help="write the files only, no tracked run")
-
-
-def print_tracked_run(result: dict[str, Any]) -> None:
-    """Print the tracked run's address (and how to start the UI) when ``result`` holds a ``run``."""
-    if "run" in result:
-        hint = result["run"]["ui_hint"]
-        print(f"[sray] {result['run']['tracker']} run: {result['run']['ui_url']}"
-              + (f"  (start the UI: {hint})" if hint else ""))

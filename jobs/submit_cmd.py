@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import argparse
 import shlex
-import sys
 import time
 from pathlib import Path
 
+from sray.jobs.methods.flags import refuse
 from sray.jobs.train_cmd import add_train_flags, build_config
 from sray.platform.common.fault_hook import propagated_env
 
@@ -63,8 +63,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = build_config(args)  # refuse bad flags here, not minutes later on the cluster
         check_train_inputs(cfg, resume=bool(args.resume))
     except (InputError, FileNotFoundError, FileExistsError, ValueError) as e:
-        print(f"sray submit: {e}", file=sys.stderr)
-        return 2
+        return refuse("submit", e)
     from sray.platform.cluster import job_client
 
     name = args.resume or cfg.run.name or f"{cfg.recipe}-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}"
@@ -76,9 +75,8 @@ def run(args: argparse.Namespace) -> int:
         job_id = job_client.submit(args.address, entrypoint, runtime_env=runtime_env)
     except Exception as e:  # noqa: BLE001 - the head is unreachable or refused us: one line, the fix
         reason = str(e).strip().splitlines()[-1][:300] if str(e).strip() else type(e).__name__
-        print(f"sray submit: the Jobs API at {args.address} refused the job ({reason}); check --address "
-              "(`sray cluster status`) and the Ray token (RAY_AUTH_MODE=token, RAY_AUTH_TOKEN_PATH)", file=sys.stderr)
-        return 2
+        return refuse("submit", f"the Jobs API at {args.address} refused the job ({reason}); check --address "
+                      "(`sray cluster status`) and the Ray token (RAY_AUTH_MODE=token, RAY_AUTH_TOKEN_PATH)")
     print(f"[sray] submitted {job_id}: job {name}\n[sray] {entrypoint}\n[sray] follow: ray job logs --follow {job_id} "
           f"--address {args.address}\n[sray] stop:   ray job stop {job_id} --address {args.address}\n[sray] resume: "
           f"sray submit --resume {name} --set run.output_dir={Path(cfg.run.output_dir).resolve()} --address "

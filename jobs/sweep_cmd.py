@@ -1,13 +1,12 @@
-"""``sray sweep``: a hyperparameter sweep of training jobs on Ray Tune, tracked as one parent run with a child
-run per trial (docs/sweeps.md)."""
+"""``sray sweep``: training jobs on Ray Tune, one parent run and a child run per trial (docs/sweeps.md)."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 from sray.platform.config.overrides import apply_settings
 from sray.platform.config.recipes import RECIPES, get_recipe
 from sray.platform.config.train_config import apply_override
@@ -43,8 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fixed override of every trial, as sray train --set (repeatable)")
     p.add_argument("--workers", type=int, help="Ray Train workers per trial (run.workers)")
     p.add_argument("--gpus-per-worker", type=float, help="GPUs per worker, fractions allowed with one worker")
-    p.add_argument("--tracker", help="tracker, by registry name (default mlflow)")
-    p.add_argument("--tracking-uri", help="the tracker's store (default: SQLite store in this folder)")
+    add_tracker_flags(p)
     for name, (kind, text) in OPTION_FLAGS.items():
         p.add_argument(f"--{name.replace('_', '-')}", dest=name, type=kind, help=text)
     p.add_argument("--name", help="sweep name (default sweep-<UTC time>)")
@@ -78,18 +76,13 @@ def build_request(args: argparse.Namespace) -> SweepRequest:
                         options=options)
 
 
-def _refuse(message: str) -> int:
-    print(f"sray sweep: {message}", file=sys.stderr)
-    return 2
-
-
 def _sweep(args: argparse.Namespace) -> int:
     from sray.platform.train.resources import InfeasibleRequest
 
     refused = (FileExistsError, FileNotFoundError, ValueError, InputError, InfeasibleRequest)
     if args.resume and (args.spec or args.params or args.overrides or args.name):
-        return _refuse(f"--resume {args.resume} continues the recorded sweep; leave out the spec file, --param, "
-                       "--set and --name")
+        return refuse("sweep", f"--resume {args.resume} continues the recorded sweep; leave out the spec file, "
+                       "--param, --set and --name")
     try:
         if args.resume:
             from sray.platform.sweep.driver import resume_sweep
@@ -100,7 +93,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
             result = run_sweep(build_request(args), args.address)  # every check runs before Ray starts
     except refused as e:
-        return _refuse(str(e).splitlines()[0] if str(e) else type(e).__name__)
+        return refuse("sweep", str(e).splitlines()[0] if str(e) else type(e).__name__)
     print((result.folder / "results.md").read_text(), flush=True)
     print(f"[sweep] results: {', '.join(str(f) for f in result.files)}\n"
           f"[sweep] parent run: {result.parent.ui_url}", flush=True)

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 from sray.platform.config.overrides import apply_settings
 from sray.platform.config.recipes import RECIPES, get_recipe
 from sray.platform.config.train_config import TrainConfig, apply_override, load_job_config
@@ -19,9 +19,7 @@ def add_train_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, help="Ray Train workers (run.workers)")
     p.add_argument("--gpus-per-worker", type=float, help="GPUs per worker, fractions allowed")
     p.add_argument("--precision", choices=["no", "bf16", "fp16"], help="mixed precision (fp16: CUDA only)")
-    p.add_argument("--tracker", help="tracker to log to, by registry name (run.tracker; default: mlflow)")
-    p.add_argument("--tracking-uri", help="the tracker's store, for MLflow its tracking URI (default: SQLite store "
-                                          "in this folder)")
+    add_tracker_flags(p)
     p.add_argument("--name", help="job name (unique; default <recipe>-<timestamp>)")
     p.add_argument("--resume", metavar="NAME", help="continue the stopped or crashed job NAME")
 
@@ -56,15 +54,13 @@ def _train(args: argparse.Namespace) -> int:
         cfg = build_config(args)
         check_train_inputs(cfg, resume=bool(args.resume), address=args.address)
     except (FileExistsError, FileNotFoundError, ValueError) as e:
-        print(f"sray train: {e}", file=sys.stderr)
-        return 2
+        return refuse("train", e)
     from sray.platform.train.launcher import launch_training
     from sray.platform.train.resources import InfeasibleRequest
 
     try:
         outcome = launch_training(cfg, address=args.address, resume=bool(args.resume))
     except (InfeasibleRequest, FileExistsError, FileNotFoundError, ValueError) as e:
-        print(f"sray train: {e}", file=sys.stderr)
-        return 2
+        return refuse("train", e)
     return 0 if outcome.status in ("FINISHED", "KILLED") else 1
 

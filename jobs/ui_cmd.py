@@ -1,5 +1,4 @@
-"""``sray ui``: the MLflow dashboard on a local store until Ctrl-C, SIGTERM or SIGHUP, which all stop its server too;
-on a tracking server, the server's own runs views."""
+"""``sray ui``: the MLflow dashboard of a local store until Ctrl-C, SIGTERM or SIGHUP; of a server, its runs views."""
 
 from __future__ import annotations
 
@@ -8,6 +7,7 @@ import signal
 import sys
 from typing import Any
 
+from sray.jobs.methods.flags import refuse
 from sray.platform.tracking.dashboard import DEFAULT_UI_PORT, is_server, server_links, start_dashboard, tunnel_hint
 
 
@@ -31,8 +31,7 @@ def _show_server(uri: str) -> int:
     try:
         links = server_links(uri)
     except ConnectionError as e:
-        print(f"sray ui: {e}", file=sys.stderr)
-        return 2
+        return refuse("ui", e)
     print(f"[sray] {uri} is a tracking server: its dashboard is {uri.rstrip('/')}/")
     for name, url in links.items():
         print(f"[sray]   runs of experiment {name!r}: {url}")
@@ -54,8 +53,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             handle = start_dashboard(args.tracking_uri, port=args.port, host=args.host)
         except (ValueError, OSError, RuntimeError) as e:  # no store, port taken, server failed
-            print(f"sray ui: {e}", file=sys.stderr)
-            return 2
+            return refuse("ui", e)
         print(f"[sray] MLflow dashboard: {handle.url}")
         for name, url in handle.experiment_urls.items():
             print(f"[sray]   runs of experiment {name!r}: {url}")

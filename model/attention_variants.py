@@ -1,8 +1,6 @@
-"""The Cross-Reprojection Attention variants, each the sequence of attention stages it runs over M (R, m, N, C):
-``intra`` over each (ray, view)'s N samples (appendix L1-L4), ``cross`` over each (ray, sample)'s m views (L5-L6),
-``dense`` over all m * N tokens of a ray (the paper's costly baseline). A new grouping of tokens is also one
-function in ``cra.STAGES``.
-"""
+"""The Cross-Reprojection Attention variants as sequences of stages over M (R, m, N, C) (``cra.STAGES``): ``intra``
+over each (ray, view)'s N samples (appendix L1-L4), ``cross`` over each (ray, sample)'s m views (L5-L6), ``dense``
+over all m * N tokens of a ray (the paper's costly baseline)."""
 
 from __future__ import annotations
 

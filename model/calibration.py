@@ -1,7 +1,6 @@
 """Temperature calibration (Guo et al.): the T > 0 minimising the NLL of labelled samples under softmax(logits / T),
 fitted on validation rooms for the fast render's coarse confidence (``FastRender.temperature``). A grid over log T,
-then golden-section search in the best cell: deterministic, exact to ``tol``.
-"""
+then golden-section search in the best cell: deterministic, exact to ``tol``."""
 
 from __future__ import annotations
 

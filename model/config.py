@@ -56,9 +56,8 @@ class SRayConfig:
     lambda_rgb: float = 1.0
     """Weight of the photometric MSE in the training loss (paper: 1)."""
     lambda_src_sem: float = 0.0
-    """Weight of the auxiliary per-pixel cross-entropy on the source views' own labels, read off the encoder's
-    feature maps by a linear head (``source_semantics``; a departure from the paper, docs/model.md); 0 (the
-    paper) builds no head. The head exists only in training: rendering never reads it."""
+    """Weight of the auxiliary per-pixel cross-entropy of a linear head on the encoder's feature maps against the source
+    views' labels (``source_semantics``, docs/model.md; 0: the paper, no head). The head exists only in training."""
     ignore_id: int = 255
     """Label id of unlabelled pixels; never a prediction target."""
     class_weights: tuple[float, ...] = ()

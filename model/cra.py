@@ -1,11 +1,8 @@
-"""Cross-Reprojection Attention (CRA) over the contextual space M (R rays, m views, N samples, C channels).
-
-Stages (``attention_variants``): intra-view (appendix L1-L4, after adding an embedding of each sample's normalised
-depth: depth, not rank, which differs per ray in the fine pass), cross-view (L5-L6) or ``dense``. Each is an
-``AttentionBlock``: pre-norm residual multi-head attention, no feed-forward (the appendix lists none). Invalid
-projections are masked as keys; a sequence with no valid key attends over all of them (finite); outputs at invalid
-tokens are finite and ignored downstream, so they are not zeroed.
-"""
+"""Cross-Reprojection Attention (CRA) over the contextual space M (R rays, m views, N samples, C channels): the
+stages of ``attention_variants``, intra-view after adding an embedding of each sample's normalised depth (depth, not
+rank, which differs per ray in the fine pass). Each stage is an ``AttentionBlock``: pre-norm residual multi-head
+attention, no feed-forward (the appendix lists none). Invalid projections are masked as keys; a sequence with no
+valid key attends over all of them (finite); outputs at invalid tokens are finite, ignored downstream, not zeroed."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""Opt-in checks that read tensor values (``far >= near`` on every ray, label ids in range) and so sync the device:
-they run only with ``SRAY_DEBUG_CHECKS=1`` (read once, at import); the loader and scene checks validate those values.
-"""
+"""Opt-in checks that read tensor values (``far >= near`` on every ray, label ids in range), so sync the device: on
+only with ``SRAY_DEBUG_CHECKS=1`` (read at import); the loader and scene checks validate those values."""
 
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
-"""RGB-D mode (``SRayConfig.inputs = "rgbd"``): the source views' depth places the coarse samples; the query view's
-own depth is never an input. The rule (docs/model.md, "RGB-D mode"): :func:`source_surface_depth` finds the first
+"""RGB-D mode (``SRayConfig.inputs = "rgbd"``): the source views' depth places the coarse samples (the query view's
+depth is never an input). The rule (docs/model.md, "RGB-D mode"): :func:`source_surface_depth` finds the first
 surface the source depths show on each ray, :func:`surface_samples` puts ``depth_fraction`` of the coarse samples
-in a band around it and the rest over [near, far].
-"""
+in a band around it and the rest over [near, far]."""
 
 from __future__ import annotations
 

@@ -1,10 +1,8 @@
-"""The ResUNet image encoder of the appendix table "Semantic feature extraction" (L1-L19), every layer's channels
-scaled with the first's (``SRayConfig.encoder_width``, 16 = the table): four stride-2 stages to 1/16 (L1, L2, L3,
-L5), two up-sampling stages back to 1/4 with the L4 and L2 skips. Reconciliations with the table: ReLU after each
-decoder conv but L19 (a linear decoder would fold L14 into L15), up-sampling to the skip's exact size (sizes not
-divisible by 16). A stride-2 conv with padding k // 2 centres output pixel j on input pixel 2j, so feature pixel j
-sits on image pixel 4j (``reprojection``); ``upsample_to`` keeps that alignment.
-"""
+"""The ResUNet image encoder of the appendix table "Semantic feature extraction" (L1-L19), channels scaled with the
+first layer's (``SRayConfig.encoder_width``, 16 = the table): four stride-2 stages to 1/16 (L1, L2, L3, L5), two
+up-sampling stages back to 1/4 with the L4 and L2 skips; ReLU after each decoder conv but L19 (a linear decoder would
+fold L14 into L15); up-sampling to the skip's exact size (sizes not divisible by 16). Padding k // 2 centres stride-2
+output pixel j on input pixel 2j, so feature pixel j sits on image pixel 4j (``reprojection``, ``upsample_to``)."""
 
 from __future__ import annotations
 

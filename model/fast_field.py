@@ -1,10 +1,8 @@
-"""The fast forward of ``SRayField`` (``Runtime.impl="fast"``): same parameters, same values, fewer copies.
-
-Every per-view tensor stays in (R, N, m, C) order, so no transposed copy of M is made (docs/benchmarks/profile.md):
-q, k, v are three (R, N, m, C) tensors (rows of the block's ``qkv``) handed to SDPA as strided views, intra-view
-attention with the views folded into the head axis (R, m * heads, N, d), cross-view as (R * N, heads, m, d).
-First linear layers of the weight net and colour score act piecewise (W [a; b] = W_a a + W_b b), not on a concat.
-"""
+"""The fast forward of ``SRayField`` (``Runtime.impl="fast"``): same parameters and values, fewer copies. Per-view
+tensors stay in (R, N, m, C) order, so no transposed copy of M is made (docs/benchmarks/profile.md): q, k, v are
+(R, N, m, C) views of the block's ``qkv`` handed to SDPA as strided views, intra-view attention with the views folded
+into the head axis (R, m * heads, N, d), cross-view as (R * N, heads, m, d). The first linear layers of the weight
+net and colour score act piecewise (W [a; b] = W_a a + W_b b), not on a concat."""
 
 from __future__ import annotations
 
@@ -23,9 +21,8 @@ def _key_mask(valid: Tensor, dim: int) -> Tensor:
 
 
 def block_forward(block: AttentionBlock, x: Tensor, valid: Tensor, stage: str) -> Tensor:
-    """One ``AttentionBlock`` on tokens x (R, N, m, C) with validity (R, N, m); ``stage`` is
-    ``intra`` (over N per (ray, view)), ``cross`` (over m per (ray, sample)) or ``dense`` (over all).
-    Returns (R, N, m, C), the reference block's values in this order."""
+    """One ``AttentionBlock`` on tokens x (R, N, m, C) with validity (R, N, m) at ``stage`` ``intra`` (over N per (ray,
+    view)), ``cross`` (over m per (ray, sample)) or ``dense``: the reference block's values, (R, N, m, C)."""
     r, n, m, c = x.shape
     heads, d = block.heads, c // block.heads
     h = block.norm(x)

@@ -1,8 +1,7 @@
 """The fast render mode, an approximation of the full render (cost measured by ``sray bench speed-accuracy``,
 docs/benchmarks/speed-accuracy.md): rays every ``pixel_stride``-th pixel, maps upsampled bilinearly
 (:func:`upsample_to`, applied by ``view_render``); a fine pass (resampled depths only) just for rays whose coarse
-softmax (logits / ``temperature``, ``model.calibration``) is below ``confidence``.
-"""
+softmax (logits / ``temperature``, ``model.calibration``) is below ``confidence``."""
 
 from __future__ import annotations
 

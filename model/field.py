@@ -1,7 +1,5 @@
-"""``SRayField``, the per-sample network of one render pass: context M by reprojection, CRA into M'', the semantic
-ray s = sum_i w_i F''_i with bounded weights, per-sample logits of s (and ``semantic_cues``), density and colour
-from the geometry-aware net.
-"""
+"""``SRayField``, the per-sample network of one render pass: context M by reprojection, CRA into M'', the semantic ray
+s = sum_i w_i F''_i (bounded weights), its logits (and ``semantic_cues``), geometry-aware density and colour."""
 
 from __future__ import annotations
 

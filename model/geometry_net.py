@@ -2,8 +2,7 @@
 sigmoid(Linear(C, 1)); L5-L7 mean and variance over the valid views (float32); L8 MLP 2C -> 32 -> 16; L9 attention
 along the ray; L10-L11 MLP -> softplus density (the appendix lists ReLU; softplus has no dead units at the start),
 0 where no view sees the sample. Colour (the paper leaves it open): IBRNet-style blending of the source colours by
-a softmax over the valid views of a score MLP (C + 4 -> 16 -> 1) of gated feature and view-direction difference.
-"""
+a softmax over the valid views of a score MLP (C + 4 -> 16 -> 1) of gated feature and view-direction difference."""
 
 from __future__ import annotations
 

@@ -1,9 +1,6 @@
-"""The one hierarchical renderer of ``sray.model``: coarse pass -> inverse-CDF resampling -> fine pass.
-
-Every method supplies a :data:`PassField`; this module owns sampling and compositing of a batch of rays (the
-whole-view loop is ``view_render.render_view``). Density is per world unit and ``composite`` scales the z-depth
-spacing by ``|d|``, so non-unit ``pixel_rays`` directions render the same surface at every pixel.
-"""
+"""The one hierarchical renderer of ``sray.model``, coarse pass -> inverse-CDF resampling -> fine pass over a batch of
+rays, for any method's :data:`PassField` (whole views: ``view_render``). Density is per world unit and ``composite``
+scales the z spacing by ``|d|``, so non-unit ``pixel_rays`` directions render the same surface at every pixel."""
 
 from __future__ import annotations
 

@@ -1,14 +1,8 @@
-"""Training objective shared by S-Ray and the Semantic-NeRF baseline.
-
-``L_total = lambda_sem * L_sem + lambda_rgb * L_rgb`` (the paper's appendix, as Semantic-NeRF):
-
-- ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean cross-entropy over the labelled rays (target !=
-  ignore id; 0 with a zero gradient when there is none); with ``class_weights`` w the weighted mean
-  ``sum_i w[y_i] CE_i / sum_i w[y_i]``. Label ids outside [0, L) are refused by the loader, here only with
-  ``SRAY_DEBUG_CHECKS=1`` (a device sync).
-- ``L_rgb = MSE(coarse rgb) + MSE(fine rgb)`` over all rays (photometric loss).
-Everything is computed in float32, whatever autocast region the caller is in.
-"""
+"""Training objective of S-Ray and Semantic-NeRF (the paper's appendix), in float32 whatever the autocast region:
+``L_total = lambda_sem * L_sem + lambda_rgb * L_rgb``; ``L_sem = CE(coarse logits) + CE(fine logits)``, each the mean
+cross-entropy over the labelled rays (target != ignore id; 0 with a zero gradient when there is none; with
+``class_weights`` w, ``sum_i w[y_i] CE_i / sum_i w[y_i]``); ``L_rgb = MSE(coarse rgb) + MSE(fine rgb)`` over all rays.
+Label ids outside [0, L) are refused by the loader, here only with ``SRAY_DEBUG_CHECKS=1`` (a device sync)."""
 
 from __future__ import annotations
 
@@ -75,11 +69,10 @@ def _ray_weights(target: Tensor, ignore_id: int, weight: Tensor | None) -> Tenso
 
 def render_loss(out: dict[str, dict[str, Tensor]], target_label: Tensor, target_rgb: Tensor, cfg: LossSettings,
                 shares: LossShares | None = None) -> tuple[Tensor, dict[str, Tensor]]:
-    """Semantic + photometric loss of a ``render_rays`` output ``{"coarse": pass, "fine": pass}`` (``coarse``
-    alone for a model without a fine pass) with ``logits`` (R, L) and ``rgb`` (R, 3) per pass; target_label (R,)
-    int64 (``cfg.ignore_id``: unlabelled), target_rgb (R, 3) in [0, 1]. Returns the scalar total and detached terms
-    ``sem_<pass>``, ``rgb_<pass>``, ``n_labelled`` and ``psnr`` (of the last pass's colour). With ``shares`` (one
-    piece of a batch, :class:`LossShares`) every term is scaled by its share and ``psnr`` is left to the caller."""
+    """Semantic + photometric loss of ``render_rays``' passes (``coarse`` alone without a fine pass), each with
+    ``logits`` (R, L) and ``rgb`` (R, 3); target_label (R,) int64 (``cfg.ignore_id``: unlabelled), target_rgb (R, 3)
+    in [0, 1]. Returns the scalar total and detached ``sem_<pass>``, ``rgb_<pass>``, ``n_labelled`` and ``psnr`` (last
+    pass's colour). With ``shares`` (a batch piece's, :class:`LossShares`) every term is scaled, ``psnr`` left out."""
     passes = [p for p in PASSES if p in out]
     if not passes:
         raise ValueError("sray.model.losses.render_loss: `out` holds neither a 'coarse' nor a 'fine' pass; pass a "

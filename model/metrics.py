@@ -1,10 +1,8 @@
-"""Segmentation and image-quality metrics, each result naming its protocol.
-
-Confusion matrices: ground truth in rows, predictions in columns, ignore-id pixels left out. ``scene_metrics``: one
-matrix per scene, scores over the classes present in its ground truth (Semantic-NeRF's dataset-level protocol);
-``per_image_miou``: the same per image, averaged (the S-Ray authors' code). A class predicted but absent from the
-ground truth is not in the mean; its pixels are false negatives of the classes they cover.
-"""
+"""Segmentation and image-quality metrics, each result naming its protocol. Confusion matrices: ground truth in
+rows, predictions in columns, ignore-id pixels left out. ``scene_metrics``: one matrix per scene, scores over the
+classes present in its ground truth (Semantic-NeRF's dataset-level protocol); ``per_image_miou``: the same per image,
+averaged (the S-Ray authors' code). A class predicted but absent from the ground truth is not in the mean; its
+pixels are false negatives of the classes they cover."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """A training batch's loss computed piece by piece: the same loss and gradients, a fraction of the memory. Each
 piece's terms are scaled by its share of the batch and its gradient taken at once; :class:`_PrecomputedGradLoss`
-hands the gathered gradients back on ``loss.backward()`` (one encoder backward, DDP hooks, loss scaling intact).
-"""
+hands the gathered gradients back on ``loss.backward()`` (one encoder backward, DDP hooks, loss scaling intact)."""
 
 from __future__ import annotations
 
@@ -45,10 +44,9 @@ def _piece_shares(weights: Tensor, pieces: list[slice]) -> Tensor:
 def piecewise_render_loss(render: PieceRenderer, src: SourceSet, params: list[nn.Parameter], n_rays: int,
                           piece: int, target_label: Tensor, target_rgb: Tensor,
                           cfg: LossSettings) -> tuple[Tensor, dict[str, Tensor]]:
-    """``render_loss`` of ``n_rays`` rays rendered ``piece`` rays at a time by ``render(src, slice)``, with the
-    gradients to ``src.feats`` and ``params`` (the network outside the encoder) of one pass over them all.
-    target_label (R,) int64, target_rgb (R, 3). Returns the scalar loss (its backward delivers the gathered
-    gradients; none are kept without grad mode) and the batch's ``render_loss`` terms."""
+    """``render_loss`` of ``n_rays`` rays rendered ``piece`` rays at a time by ``render(src, slice)``, with one pass's
+    gradients to ``src.feats`` and ``params`` (the network outside the encoder); target_label (R,) int64, target_rgb
+    (R, 3). Returns the scalar loss (its backward delivers them; none kept without grad mode) and the batch's terms."""
     pieces = [slice(start, min(start + piece, n_rays)) for start in range(0, n_rays, piece)]
     sem_shares = _piece_shares(labelled_weights(target_label, cfg), pieces)  # (P,)
     ray_shares = target_rgb.new_tensor([sl.stop - sl.start for sl in pieces], dtype=torch.float32) / n_rays  # (P,)

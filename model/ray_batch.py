@@ -1,10 +1,8 @@
-"""The model surface: one typed input (a batch of query rays of one scene) and the module that renders it.
-
-``RayBatch``: m source views and a :class:`QueryRays` (query camera, pixels, the scene's z-depth bounds as
-floats); :meth:`QueryRays.rays` is the one place pixels become rays and bounds per-ray tensors (a ``torch.full``
-on the device: no host-to-device copy). ``RayBatchLoss.forward`` encodes the sources and computes the training
-loss: DDP synchronises gradients only for work inside ``forward`` (checkpoints store ``net``'s own keys).
-"""
+"""The model surface: ``RayBatch`` (m source views and :class:`QueryRays` of one scene: query camera, pixels, the
+scene's z-depth bounds as floats) and the module that renders it. :meth:`QueryRays.rays` is the one place pixels
+become rays and bounds per-ray tensors (``torch.full`` on the device: no host-to-device copy).
+``RayBatchLoss.forward`` encodes the sources and computes the training loss: DDP synchronises gradients only for
+work inside ``forward`` (checkpoints store ``net``'s own keys)."""
 
 from __future__ import annotations
 
@@ -69,9 +67,8 @@ class RayBatch:
 
 class RayBatchLoss(nn.Module):
     """What training runs (DDP included): one ``forward`` encodes a :class:`RayBatch`'s sources and computes
-    ``SRayModel.training_loss`` of its rays, plus ``lambda_src_sem`` times the source views' cross-entropy
-    (``source_semantics``) when that is on and the batch has source labels. ``net``: the network; ``runtime``:
-    how its loss is run."""
+    ``SRayModel.training_loss`` of its rays plus ``lambda_src_sem`` times the source views' cross-entropy
+    (``source_semantics``) when on and the batch has source labels; ``runtime``: how the loss of ``net`` is run."""
 
     def __init__(self, cfg: SRayConfig, runtime: Runtime = Runtime()) -> None:
         """Build the S-Ray network it trains (no device work here); ``runtime``: how its loss is run."""
@@ -81,8 +78,8 @@ class RayBatchLoss(nn.Module):
 
     def forward(self, batch: RayBatch, target_label: Tensor, target_rgb: Tensor,
                 render: bool = True) -> tuple[Tensor, dict[str, Tensor]]:
-        """(scalar loss, detached terms: ``render_loss``'s, and ``sem_src`` with the source-view term) for the batch's
-        R rays: target_label (R,) int64 (ignore id: unlabelled), target_rgb (R, 3) in [0, 1]. ``render=False`` (the 2D
+        """(scalar loss, detached terms: ``render_loss``'s and ``sem_src``, the source-view term) for the batch's R
+        rays: target_label (R,) int64 (ignore id: unlabelled), target_rgb (R, 3) in [0, 1]. ``render=False`` (2D
         warm-up): the source-view term alone, every other parameter in the loss with weight 0 (DDP needs a gradient
         for each parameter every step)."""
         net = self.net

@@ -1,6 +1,5 @@
 """Rays per forward pass when a setting leaves it to the device (0): on a CPU small chunks keep a chunk's tensors near
-the caches (measured in docs/performance.md, ``runtime.chunk``, ``runtime.train_piece``); a GPU wants large ones.
-"""
+the caches (measured in docs/performance.md, ``runtime.chunk``, ``runtime.train_piece``); a GPU wants large ones."""
 
 from __future__ import annotations
 

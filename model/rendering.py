@@ -1,10 +1,8 @@
-"""Volume rendering along rays: sampling depths, hierarchical resampling and alpha compositing.
-
-Samples ``z`` are ray parameters t of ``o + t d`` (the camera z-depth for ``rays.pixel_rays`` directions); sample k
-stands for the interval between the midpoints to its neighbours, closed at near and far (the paper's
-``delta_k = z_{k+1} - z_k`` with both ends closed); ``alpha_k = 1 - exp(-sigma_k delta_k |d|)`` with sigma per
-world unit. Compositing runs in float32 under autocast (transmittance loses all precision in bfloat16).
-"""
+"""Volume rendering along rays: sampling depths, hierarchical resampling and alpha compositing. Samples ``z`` are
+ray parameters t of ``o + t d`` (the camera z-depth for ``rays.pixel_rays`` directions); sample k stands for the
+interval between the midpoints to its neighbours, closed at near and far (the paper's ``delta_k = z_{k+1} - z_k``
+with both ends closed); ``alpha_k = 1 - exp(-sigma_k delta_k |d|)`` with sigma per world unit. Compositing runs in
+float32 under autocast (transmittance loses all precision in bfloat16)."""
 
 from __future__ import annotations
 

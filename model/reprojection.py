@@ -1,10 +1,8 @@
-"""Reprojecting query-ray samples into the source views: the initial 3D contextual space M.
-
-``sample_maps`` reads feature pixel (j, i), centred on full-res pixel (4j, 4i), with ``grid_sample``
-(``align_corners=True``, border padding). A projection is valid at least ``min_depth`` in front of the source camera
-and inside [-0.5, W - 0.5] x [-0.5, H - 0.5]; M at invalid projections is finite but meaningless and every consumer
-masks it, so it is never zeroed (saving passes over the largest tensors).
-"""
+"""Reprojecting query-ray samples into the source views: the initial 3D contextual space M. ``sample_maps`` reads
+feature pixel (j, i), centred on full-res pixel (4j, 4i), with ``grid_sample`` (``align_corners=True``, border
+padding). A projection is valid at least ``min_depth`` in front of the source camera and inside [-0.5, W - 0.5] x
+[-0.5, H - 0.5]; M at invalid projections is finite but meaningless and every consumer masks it, so it is never
+zeroed (saving passes over the largest tensors)."""
 
 from __future__ import annotations
 
@@ -43,9 +41,8 @@ def valid_projection(uv: Tensor, depth: Tensor, hw: tuple[int, int], min_depth: 
 
 
 def sample_maps(maps: Tensor, uv: Tensor, stride: int) -> Tensor:
-    """Bilinear samples float32 (m, D, R, N) of maps (m, D, h, w), whose pixel (j, i) is centred on full-res pixel
-    (stride j, stride i), at full-res pixels uv (m, R, N, 2); float32 under autocast (bfloat16 grids are ~0.5 pixel
-    off)."""
+    """Bilinear samples float32 (m, D, R, N) of maps (m, D, h, w), pixel (j, i) centred on full-res pixel (stride j,
+    stride i), at full-res pixels uv (m, R, N, 2); float32 under autocast (bfloat16 grids are ~0.5 pixel off)."""
     h, w = maps.shape[-2:]
     scale = uv.new_tensor([2.0 / (stride * max(w - 1, 1)), 2.0 / (stride * max(h - 1, 1))])
     grid = (uv.float() * scale.float() - 1.0).clamp(-_GRID_LIMIT, _GRID_LIMIT)  # (m, R, N, 2)

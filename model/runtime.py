@@ -1,6 +1,5 @@
 """``Runtime``: how an ``SRayModel`` is run (code path, rays per pass), apart from what it is (``SRayConfig``): speed
-and memory, never a parameter; outputs only within float32 rounding. Every rendering call takes one.
-"""
+and memory, never a parameter; outputs only within float32 rounding. Every rendering call takes one."""
 
 from __future__ import annotations
 
@@ -19,12 +18,10 @@ class Runtime:
     impl: str = "fast"
     """Implementation of the per-sample computation, one of ``IMPLS``."""
     chunk: int = 0
-    """Rays per forward pass of ``render_image`` and the evaluations (bounds their memory); 0: by device
-    (``ray_chunks``)."""
+    """Rays per forward pass of ``render_image`` and the evaluations (bounds memory); 0: by device (``ray_chunks``)."""
     train_piece: int = 0
-    """Rays per piece of a training step's loss (``piecewise_loss``: same loss and gradients, one piece's tensors
-    alive at a time); 0: by device (``ray_chunks``). Gradients inside a smaller piece are not loss-scaled, so use 0
-    with fp16."""
+    """Rays per piece of a training step's loss (``piecewise_loss``: same loss and gradients, one piece's tensors alive
+    at a time); 0: by device (``ray_chunks``). Gradients inside a smaller piece are not loss-scaled: use 0 with fp16."""
 
     def __post_init__(self) -> None:
         """Reject settings no call can run with, naming the field and the fix."""

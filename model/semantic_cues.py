@@ -1,8 +1,7 @@
-"""Appearance-free cues for the semantic head (``SRayConfig.semantic_cues``; a departure from the paper, off by
-default, docs/model.md "Cues that do not depend on the look"): ``density`` log(1 + sigma) (detached), ``depth``
-the sample's fraction of [near, far], ``height`` its world z (z up, floor near 0), ``elevation`` the vertical
-component of the ray's unit direction. Orientation from depth gradients would need neighbouring rays.
-"""
+"""Appearance-free cues for the semantic head (``SRayConfig.semantic_cues``, off by default; a departure from the
+paper, docs/model.md "Cues that do not depend on the look"): ``density`` log(1 + sigma) (detached), ``depth`` the
+sample's fraction of [near, far], ``height`` its world z (z up, floor near 0), ``elevation`` the vertical component
+of the ray's unit direction. Orientation from depth gradients would need neighbouring rays."""
 
 from __future__ import annotations
 

@@ -3,8 +3,7 @@ normalised by the scene box, unit directions; NeRF's encoding with 10 and 4 freq
 trunk, re-reading the encoded position after its fifth layer, feeds density (softplus, not NeRF's ReLU, so rays cannot
 die empty at initialisation), semantics (-> 128 -> L logits, before the direction enters: labels do not depend on
 the viewpoint) and colour (256-wide feature + encoded direction -> 128 -> sigmoid rgb). Coarse and fine networks,
-the fine one on the union of coarse and resampled depths; renderer, losses and metrics are S-Ray's.
-"""
+the fine one on the union of coarse and resampled depths; renderer, losses and metrics are S-Ray's."""
 
 from __future__ import annotations
 
@@ -34,8 +33,7 @@ class SemanticNeRFConfig:
     width: int = 256
     """Width of the trunk layers."""
     skip_layer: int | None = 5
-    """0-based trunk layer that re-reads the encoded position (5 = after the fifth layer, as in NeRF); None: no
-    skip connection."""
+    """0-based trunk layer that re-reads the encoded position (5 = after the fifth layer, as NeRF); None: no skip."""
     color_width: int = 128
     """Hidden width of the colour head."""
     semantic_width: int = 128
@@ -144,9 +142,8 @@ class SemanticNeRF(nn.Module):
 
     def render_image(self, K: Tensor, c2w: Tensor, hw: tuple[int, int], near: float, far: float,
                      chunk: int | None = None, stride: int = 1) -> dict[str, dict[str, Tensor]]:
-        """Render every ``stride``-th pixel of the (H, W) = ``hw`` view of the camera K (3, 3), c2w (4, 4) (OpenCV
-        axes) with ``view_render.render_view``, ``chunk`` rays at a time (default ``cfg.chunk``); near, far: scalar
-        z-depth bounds. Returns the passes of ``SRayModel.render_image``."""
+        """``view_render.render_view`` of every ``stride``-th pixel of the (H, W) = ``hw`` view of camera K (3, 3), c2w
+        (4, 4) (OpenCV axes), scalar z-depth bounds near, far, ``chunk`` rays at a time (default ``cfg.chunk``)."""
         chunk = self.cfg.chunk if chunk is None else chunk
         return render_view(lambda o, d, lo, hi: self.render_rays(o, d, lo, hi, stratified=False), K, c2w, hw, near,
                            far, chunk, self.scene_center.device, stride)

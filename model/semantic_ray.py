@@ -1,13 +1,11 @@
-"""``SRayModel``: the Semantic Ray network (S-Ray, CVPR 2023) with coarse-to-fine volume rendering.
-
-Usage (pixelNeRF's encode / query split; the module keeps no state between the calls)::
+"""``SRayModel``: the Semantic Ray network (S-Ray, CVPR 2023), pixelNeRF's encode / query split with no state kept
+between the calls::
 
     src = model.encode(src_rgb, src_K, src_c2w)          # once per source set
     out = model.render_rays(src, origins, dirs, near, far, stratified=True)   # any number of times
 
-One shared encoder and separate coarse and fine fields (as the paper's public code); sampling, compositing and the
-whole-view loop are shared with Semantic-NeRF (``hierarchical``, ``view_render``); choices: docs/model.md.
-"""
+One shared encoder, separate coarse and fine fields (as the paper's public code); sampling, compositing and the
+whole-view loop are shared with Semantic-NeRF (``hierarchical``, ``view_render``); choices: docs/model.md."""
 
 from __future__ import annotations
 
@@ -87,8 +85,7 @@ class SRayModel(nn.Module):
                     far: Tensor | float, stratified: bool, generator: torch.Generator | None = None,
                     runtime: Runtime = Runtime()) -> dict[str, dict[str, Tensor]]:
         """Render rays o + t d, t in [near, far] (z-depth for ``pixel_rays`` directions): origins, dirs (R, 3), near,
-        far scalars or (R,); ``stratified`` jitters the samples (training), else sampling is deterministic. Returns
-        ``{"coarse": pass, "fine": pass}`` (``hierarchical.render_rays``)."""
+        far scalars or (R,); ``stratified`` jitters the samples (training). Returns ``hierarchical.render_rays``'."""
         return render_rays(self._pass_field(src, runtime), origins, dirs, near, far, self.cfg.n_coarse,
                            self.cfg.n_fine, stratified, generator, self.cfg.fine_samples, self.coarse_sampler(src))
 
@@ -96,9 +93,8 @@ class SRayModel(nn.Module):
                       far: Tensor | float, target_label: Tensor, target_rgb: Tensor,
                       runtime: Runtime = Runtime()) -> tuple[Tensor, dict[str, Tensor]]:
         """``render_loss`` of rays rendered with stratified samples: origins, dirs (R, 3), near, far scalars or (R,),
-        target_label (R,) int64, target_rgb (R, 3). Rendered in pieces of ``runtime.train_piece`` rays (0: by device),
-        each piece's gradient taken before the next (``piecewise_loss``): the loss and gradients of one pass over the
-        batch, within float32 rounding."""
+        target_label (R,) int64, target_rgb (R, 3). Rendered ``runtime.train_piece`` rays at a time (0: by device),
+        each piece's gradient taken before the next (``piecewise_loss``): one pass's loss and gradients (float32)."""
         n_rays = origins.shape[0]
         near_r = per_ray_bounds(near, n_rays, origins, "near")  # (R,)
         far_r = per_ray_bounds(far, n_rays, origins, "far")  # (R,)

@@ -1,12 +1,10 @@
-"""Semantic-aware weight net: bounded per-view weights that build the semantic ray s = sum_i w_i F''_i.
-
-The paper asks for tau/m < w_i < 1/(tau m), sum_i w_i = 1; m is here the number n of views validly seeing the
-sample (an invalid view gets exactly 0). The ``radial`` map centres the raw outputs, e_i = a_i - mean(a), and with
+"""Semantic-aware weight net: bounded per-view weights that build the semantic ray s = sum_i w_i F''_i. The paper
+asks for tau/m < w_i < 1/(tau m), sum_i w_i = 1; m is here the number n of views validly seeing the sample (an
+invalid view gets exactly 0). The ``radial`` map centres the raw outputs, e_i = a_i - mean(a), and with
 p = 1/tau - 1, q = 1 - tau and gauge g = max_i max(e_i / p, -e_i / q) >= 0 sets
 ``w_i = (1 + (1 - margin) e_i / (1 + g)) / n``: sum_i e_i = 0 gives sum 1, e_i <= g p gives w_i < 1/(tau n) (and
 likewise w_i > tau / n), both bounds approachable; tau = 1 is the plain mean. Input (C + 5): the refined feature,
-the 4-d view-direction difference and the fraction of the ray's samples the view sees.
-"""
+the 4-d view-direction difference and the fraction of the ray's samples the view sees."""
 
 from __future__ import annotations
 
@@ -16,8 +14,7 @@ from torch import Tensor, nn
 from .config import SRayConfig
 
 WEIGHT_MARGIN = 1e-3
-"""``margin`` of the net's weights: the fraction of the weight range kept unused so the bounds stay strict when the
-raw scores saturate in floating point."""
+"""``margin``: the fraction of the weight range kept unused, so the bounds stay strict when raw scores saturate."""
 
 
 def radial_weights(logits: Tensor, valid: Tensor, tau: float, margin: float) -> Tensor:

@@ -1,8 +1,6 @@
-"""Attention for the fast path: SDPA, or in a CPU render over 24 to 64 keys, scores built in cache-sized slices
-(one matmul, mask, softmax, matmul per slice), faster there than SDPA's CPU flash kernel, whose running-softmax
-bookkeeping dominates with 8-channel heads. Where it is used was set by timing renders and steps side by side
-(docs/performance.md; ``sray bench profile --workload attention-keys``).
-"""
+"""Attention for the fast path: SDPA, or in a CPU render over 24 to 64 keys, scores built in cache-sized slices (one
+matmul, mask, softmax, matmul per slice): faster there than SDPA's CPU flash kernel, whose running-softmax bookkeeping
+dominates with 8-channel heads (docs/performance.md; ``sray bench profile --workload attention-keys``)."""
 
 from __future__ import annotations
 

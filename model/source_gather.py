@@ -1,7 +1,6 @@
 """Bilinear sampling of per-view maps as a weighted gather, the fast path of ``reprojection.sample_maps`` (same
 conventions): ``F.embedding_bag(mode="sum")`` over 4 texels of a (m * h * w, D) table, whose backward is one sorted
-accumulation instead of ``grid_sample``'s element-wise CPU scatter (docs/benchmarks/profile.md).
-"""
+accumulation instead of ``grid_sample``'s element-wise CPU scatter (docs/benchmarks/profile.md)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """Dense 2D supervision of the encoder (a departure from the paper, docs/model.md, "Dense 2D supervision of the
 encoder"): a 1x1-conv semantic head on the source views' feature maps, up-sampled to full resolution with the
-encoder's centre-aligned rule, and its cross-entropy against their own labels; used in training only.
-"""
+encoder's centre-aligned rule, and its cross-entropy against their own labels; used in training only."""
 
 from __future__ import annotations
 
@@ -37,9 +36,8 @@ class SourceSemanticHead(nn.Module):
 
 
 def source_semantic_loss(logits: Tensor, labels: Tensor, cfg: SRayConfig) -> Tensor:
-    """Mean (class-weighted) cross-entropy of source-view logits (m, L, H, W) against their labels (m, H, W)
-    int64 (``cfg.ignore_id`` = unlabelled, left out); 0 with a zero gradient when no pixel is labelled.
-    Computed in float32 whatever the autocast region."""
+    """Mean (class-weighted) float32 cross-entropy of source-view logits (m, L, H, W) against labels (m, H, W) int64
+    (``cfg.ignore_id``: unlabelled, left out), whatever the autocast; 0 with a zero gradient when none is labelled."""
     if labels.shape != (logits.shape[0], *logits.shape[-2:]) or labels.dtype != torch.int64:
         raise ValueError(f"sray.model.source_semantics: labels must be int64 (m, H, W) = "
                          f"{(logits.shape[0], *logits.shape[-2:])} for logits {tuple(logits.shape)}, got "

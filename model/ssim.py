@@ -1,8 +1,6 @@
 """Structural similarity (SSIM) of Wang, Bovik, Sheikh and Simoncelli (IEEE TIP 2004): an 11x11 Gaussian window
-(sigma 1.5, sum 1) at the positions where it lies fully inside the image (no padding), weighted (population)
-variances, C1 = (0.01 L)^2 and C2 = (0.03 L)^2; colour scored per channel, the mean over positions, channels and
-images.
-"""
+(sigma 1.5, sum 1) where it lies fully inside the image (no padding), weighted (population) variances,
+C1 = (0.01 L)^2, C2 = (0.03 L)^2; colour scored per channel; the mean over positions, channels and images."""
 
 from __future__ import annotations
 

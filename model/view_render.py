@@ -1,10 +1,8 @@
 """The one whole-view renderer of ``sray.model``: a query camera's pixels -> rays -> chunked render -> maps.
-
 :func:`render_view` renders every ``stride``-th pixel (exact pixel centres, so ground truth is read without
 resampling), ``chunk`` rays at a time without grad, float32 outputs on the device, colours clamped to [0, 1]. The
-fast mode (``fast_render.FastRender``) owns its pixel stride and the bilinear upsampling to the asked pixels; the
-ray renderer must then be ``SRayModel.ray_renderer(src, fast)``.
-"""
+fast mode (``fast_render.FastRender``) owns its pixel stride and the bilinear upsampling to the asked pixels; its ray
+renderer is ``SRayModel.ray_renderer(src, fast)``."""
 
 from __future__ import annotations
 

@@ -4,10 +4,10 @@ table is printed, stored beside its charts and rendered into docs/benchmarks.md 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from sray.jobs.bench.speed_methods import other_methods
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -68,8 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     speed.add_argument("--store", type=Path, default=None, metavar="FOLDER",
                        help="keep every measured row here (per checkpoint and setting); a re-run with the same folder "
                             "reads the rows it holds instead of measuring them again, so a long run resumes")
-    speed.add_argument("--tracker", default="mlflow")
-    speed.add_argument("--tracking-uri", default="", help="tracker store (default: SQLite store in this folder)")
+    add_tracker_flags(speed, "mlflow", "")
     speed.set_defaults(func=_bench_speed_accuracy)
     for table_bench in (loader, model, prof, speed):
         table_bench.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"))
@@ -114,8 +113,7 @@ def _bench_speed_accuracy(args: argparse.Namespace) -> int:
                            args.tracking_uri, args.checkpoint_rgbd, args.settings, args.methods, args.segmenter,
                            args.store)
     except (FileNotFoundError, ValueError) as e:
-        print(f"sray bench speed-accuracy: {e}", file=sys.stderr)
-        return 2
+        return refuse("bench speed-accuracy", e)
     return 0
 
 
@@ -146,24 +144,20 @@ def _bench_segmenter(args: argparse.Namespace) -> int:
 
     if args.from_checkpoint is not None:
         if args.data is not None or args.cpu_seconds is not None or args.overrides:
-            print("sray bench segmenter: --from-checkpoint takes the trained network of a checkpoint; drop --data, "
-                  "--cpu-seconds and --set, or drop --from-checkpoint to train one", file=sys.stderr)
-            return 2
+            return refuse("bench segmenter", "--from-checkpoint takes the trained network of a checkpoint; drop "
+                          "--data, --cpu-seconds and --set, or drop --from-checkpoint to train one")
         try:
             _, record = segmenter_from_checkpoint(args.from_checkpoint, args.out)
         except (ValueError, FileNotFoundError) as e:
-            print(f"sray bench segmenter: {e}", file=sys.stderr)
-            return 2
+            return refuse("bench segmenter", e)
         print(f"segmenter saved in {args.out}: {record.budget()}")
         return 0
     if args.data is None or args.cpu_seconds is None:
-        print("sray bench segmenter: give --data SHARDS and --cpu-seconds S to train a segmenter, or "
-              "--from-checkpoint CHECKPOINT to take S-Ray's own", file=sys.stderr)
-        return 2
+        return refuse("bench segmenter", "give --data SHARDS and --cpu-seconds S to train a segmenter, or "
+                      "--from-checkpoint CHECKPOINT to take S-Ray's own")
     try:
         run_segmenter(args.data, args.cpu_seconds, args.out, args.recipe, args.seed, args.max_steps,
                       args.encoder_width, tuple(args.overrides))
     except ValueError as e:
-        print(f"sray bench segmenter: {e}", file=sys.stderr)
-        return 2
+        return refuse("bench segmenter", e)
     return 0

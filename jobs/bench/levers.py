@@ -59,9 +59,8 @@ def with_backward(fn: Callable[[], Tensor], inputs: tuple[Tensor, ...]) -> Calla
 
 
 def kernel_table(rays: int, samples: int, repeats: int = 2, backward: bool = False) -> str:
-    """Seconds per call and GFLOP/s of each implementation at the intra-view stage (per ray and view, over
-    ``samples``) and the cross-view stage (per ray and sample, over the views); with ``backward``, forward + backward,
-    the backward's matmuls counted too (3x the forward's)."""
+    """Seconds per call and GFLOP/s of each implementation at the intra-view (per ray and view, over ``samples``) and
+    cross-view stage (per ray and sample, over the views); ``backward``: forward + backward, 3x the forward's FLOPs."""
     gen = torch.Generator().manual_seed(0)
     shapes = {"intra-view": (rays, VIEWS * HEADS, samples), "cross-view": (rays * samples, HEADS, VIEWS)}
     lines = ["| stage | q, k, v shape | implementation | s / call | GFLOP/s | max abs diff to the first |",

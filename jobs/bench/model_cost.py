@@ -1,7 +1,6 @@
-"""``sray bench model``: the attention stage's cost per CRA variant against dense attention, and the time and memory
-of a whole training step, every ratio measured in the same run (how each number is taken: ``probes``); with
-``--official-side-by-side``, the paper's public code against sray's step from the ``results.json`` of the shared tool
-``official_side_by_side/run.py`` (fresh processes alternating in one run: every ratio is one of that run)."""
+"""``sray bench model``: the attention stage's cost per CRA variant against dense attention and a training step's
+time and memory, ratios measured in one run (how: ``probes``); ``--official-side-by-side`` adds the paper's public
+code against sray's step from the ``results.json`` of the shared tool ``official_side_by_side/run.py`` (one run too)."""
 
 from __future__ import annotations
 

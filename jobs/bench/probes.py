@@ -1,11 +1,9 @@
-"""What ``sray bench model`` and ``sray bench profile`` run and how they measure it.
-
-Workloads: a training step and a whole-image render on a synthetic scene (random sources seeing the query's frustum),
-sized by a spec dict: rays, coarse, fine, views, hw, device, steps; optionally dtype, impl, fine_samples, piece,
-chunk (``Runtime`` fields; 0 or absent: by device), compile and model (other ``SRayConfig`` fields). Measures: FLOPs
-with SDPA on its MATH backend (the fused CPU kernel has no FLOP formula), the allocator's peak above its level before
-the call (the paper's "memory increment"), training steps in a fresh process each (their peak RSS is theirs alone).
-"""
+"""What ``sray bench model`` and ``sray bench profile`` run and how they measure it. Workloads: a training step and a
+whole-image render on a synthetic scene (random sources seeing the query's frustum), sized by a spec dict: rays,
+coarse, fine, views, hw, device, steps; optionally dtype, impl, fine_samples, piece, chunk (``Runtime`` fields; 0 or
+absent: by device), compile and model (other ``SRayConfig`` fields). Measures: FLOPs with SDPA on its MATH backend
+(the fused CPU kernel has no FLOP formula), the allocator's peak above its level before the call (the paper's "memory
+increment"), training steps in a fresh process each (their peak RSS is theirs alone)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""``sray bench profile``: the top operators of the paper-config training step and of a whole-image render (the demo's
-24+24-sample model) under ``torch.profiler``, as docs/benchmarks.md's "Profiles" tables per device (each replaced
-when profiled again; docs/performance.md's decisions are read off them), and the levers they point at (``levers``)."""
+"""``sray bench profile``: top operators of the paper-config training step and of a whole-image render (the demo's
+24+24 samples) under ``torch.profiler``, as docs/benchmarks.md's "Profiles" per device, and their ``levers``."""
 
 from __future__ import annotations
 
@@ -17,8 +16,7 @@ from sray.model.ray_chunks import CUDA_RENDER_RAYS, render_chunk_rays, train_pie
 from sray.platform.common.bench_doc import Bench, record
 
 PROFILES = Bench("profile", "Profiles")
-"""Where the time of a training step and of a render goes (self time: spent in an operator itself, not in those it
-calls), and the levers timed."""
+"""Where a training step's and a render's time goes (self time: in an operator, not its callees); the levers timed."""
 
 
 def _top_table(prof: profile, wall_s: float, n: int = 18) -> str:

@@ -1,7 +1,6 @@
-"""The evaluation's default render by a rule (:func:`choose_default`): the **fastest** measured setting that loses at
-most :data:`MAX_MIOU_LOSS` points of mIoU **and** :data:`MAX_CLASS_LOSS` on every class holding :data:`MIN_CLASS_SHARE`
-of the labelled pixels (rarer ones swing by tens of points) against the full render on the same views; ties go to the
-higher mIoU, then the first listed."""
+"""The evaluation's default render by :func:`choose_default`: the **fastest** measured setting losing at most
+:data:`MAX_MIOU_LOSS` mIoU points **and** :data:`MAX_CLASS_LOSS` on every class holding :data:`MIN_CLASS_SHARE` of the
+labelled pixels (rarer ones swing by tens of points) against the full render of the same views; ties: higher mIoU."""
 
 from __future__ import annotations
 
@@ -105,8 +104,7 @@ def choose_default(rows: list[Measured], reference: str) -> DefaultChoice:
 
 
 def todays_defaults() -> dict[str, FastRender | None]:
-    """Who uses a default render today -> its fast render mode (None: full): ``sray eval``, validation
-    (``data.held_out``) and the fleet's held-out scores (``finetune.held_out``); the last two render every pixel of
-    their own strided grid, so per scored pixel they match the bench's ``fast s1``."""
+    """Who uses a default render today -> its fast mode (None: full): ``sray eval``, validation (``data.held_out``),
+    the fleet's held-out scores (``finetune.held_out``); the last two render all of their strided grid: ``fast s1``."""
     return {"sray eval": HeldOutRender().fast(), "validation": DataSettings().held_out.fast(),
             "fleet held-out": FinetuneSettings().held_out.fast()}

@@ -1,7 +1,6 @@
-"""``sray bench speed-accuracy``: the settings, their paired measurement (every setting renders the same views of the
-unseen test scenes, so what it gives up is measured against the full render of the same run) and the table. Other
-registered methods' zero-shot models (``speed_methods``) are rows too, each on the views of S-Ray's row of its inputs;
-each row is scored per class (``speed_classes``); the default-render rule (``render_default``) reads S-Ray's rows."""
+"""``sray bench speed-accuracy``: the settings, their paired measurement (each renders the views the full render of
+the same run renders) and the table; other methods' zero-shot models (``speed_methods``) are rows on the views of
+S-Ray's row of their inputs, every row scored per class (``speed_classes``); the rule: ``render_default``."""
 
 from __future__ import annotations
 
@@ -162,8 +161,7 @@ def measure(checkpoint: Path, shards: Path, settings: list[Setting], views_per_s
     """One row per setting (and per method of ``others``, zero-shot models by name, each after its :func:`twin`) on
     the first ``views_per_scene`` test views of each unseen scene (<= 0: all): name, method, inputs,
     :func:`timed_scores`' values, class_names, setting and fine_samples (None for another method). ``checkpoint_rgbd``
-    renders the ``rgbd`` settings (None: ``checkpoint``); ``store`` keeps rows measured (``speed_store``) and gives
-    back those it holds instead of measuring them again."""
+    renders the ``rgbd`` settings (None: ``checkpoint``); ``store`` (``speed_store``): rows kept and reused."""
     loaded = {}
     for key, path in (("main", checkpoint), ("rgbd", checkpoint_rgbd)):
         if path is not None:

@@ -1,6 +1,5 @@
-"""``sray bench speed-accuracy``: the settings on one checkpoint or several (a recipe's seeds), other methods' rows
-(``--methods``), the default-render rule per checkpoint and on their mean, chart and tables into docs/benchmarks.md
-(the default set fills one table, a run of ``--settings`` the other) and logged."""
+"""``sray bench speed-accuracy`` on one checkpoint or several (a recipe's seeds): settings, ``--methods`` rows, the rule
+per checkpoint and on their mean; chart and tables (default set, or ``--settings``) into docs/benchmarks.md, logged."""
 
 from __future__ import annotations
 
@@ -39,10 +38,9 @@ def run_speed_accuracy(checkpoints: list[Path], shards: Path, views_per_scene: i
                        tracking_uri: str, checkpoint_rgbd: Path | None = None, names: list[str] | None = None,
                        methods: list[str] | None = None, segmenter: Path | None = None,
                        store: Path | None = None) -> str:
-    """Measure the settings ``names`` chooses (None: the defaults) and the ``methods``' zero-shot models (built with
-    ``segmenter`` where one reads it) on each of ``checkpoints``, apply the rule to each and to their mean, write the
-    chart and the section, log both; returns the section. ValueError or FileNotFoundError, before anything is
-    measured, for a method that cannot be built."""
+    """Measure the settings ``names`` (None: the defaults) and the ``methods``' zero-shot models (with ``segmenter``
+    where one reads it) on each of ``checkpoints``, apply the rule to each and their mean, write and log the chart and
+    section; returns the section. ValueError or FileNotFoundError, before any measuring, for a method not buildable."""
     shards, methods = Path(shards), list(methods or [])
     others = [method_models(methods, Path(c), segmenter) for c in checkpoints]
     settings = paired_settings(select_settings(names), (m.inputs for m in others[0].values()))

@@ -1,6 +1,5 @@
-"""Per-class accounting of ``sray bench speed-accuracy``: IoU per class in %, dataset-level over every test view
-rendered (one confusion matrix), each class's share of the labelled pixels, the mean of several checkpoints' rows,
-the per-class table and the rows as the default-render rule reads them."""
+"""Per-class accounting of ``sray bench speed-accuracy``: IoU in % over every rendered test view (one confusion matrix),
+each class's share of labelled pixels, the mean of several checkpoints' rows, the table and the rule's rows."""
 
 from __future__ import annotations
 

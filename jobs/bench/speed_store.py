@@ -1,6 +1,5 @@
-"""Rows of ``sray bench speed-accuracy`` kept per measurement (``--store``), so a long run resumes where it stopped.
-The key names everything measured: checkpoints, shards, views per scene, the setting and the methods beside it; times
-are CPU seconds, so rows of different runs compare as rows of one run do."""
+"""Rows of ``sray bench speed-accuracy`` kept per measurement (``--store``) so a long run resumes; the key names all
+that was measured (checkpoints, shards, views per scene, setting, methods beside it); CPU seconds compare over runs."""
 
 from __future__ import annotations
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from sray.data_tools.scene_folder import list_scenes
 from sray.data_tools.synth.domains import SPLITS
+from sray.jobs.methods.flags import refuse
 
 DATA_SUBCOMMAND_MODULES = ("sray.jobs.data.convert",)
 """Modules that register a ``sray data`` verb of their own (``register(subparsers)``)."""
@@ -129,8 +130,7 @@ def _shard(args: argparse.Namespace) -> int:
     from sray.data_tools.shards.writer import DatasetRejected, write_shards
 
     if args.scenes_dir is None and not args.verify:
-        print("sray data shard: give SCENES_DIR to shard, or --verify to check --out", file=sys.stderr)
-        return 2
+        return refuse("data shard", "give SCENES_DIR to shard, or --verify to check --out")
     if args.scenes_dir is not None:
         try:
             result = write_shards(args.scenes_dir, args.out, views_per_shard=args.views_per_shard,

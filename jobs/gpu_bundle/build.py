@@ -1,6 +1,5 @@
-"""Build the GPU bundle: resolve (:mod:`.resolve`), download the wheels, repack Ray without what sray never loads,
-refuse a bundle over the size a GPU call carries, and write the folder with ``install.sh`` (the one install command,
-offline) and ``README.md``, assembled beside ``out`` and renamed into place whole (a failed build leaves the old)."""
+"""Build the GPU bundle: resolve (:mod:`.resolve`), download, repack Ray without what sray never loads, refuse one
+over a GPU call's size limit, write ``install.sh`` (offline) and ``README.md``; built beside ``out``, renamed whole."""
 
 from __future__ import annotations
 
@@ -77,9 +76,8 @@ def folder_bytes(folder: Path) -> int:
 
 
 def assemble(pins: list[Pin], wheels: Path, out: Path, python_version: str, limit_mib: float = LIMIT_MIB) -> dict:
-    """Write the bundle folder ``out`` from the downloaded ``wheels`` (repacked wheels, ``install.sh``, ``README.md``,
-    ``bundle.json``); returns the manifest. :class:`BundleError`, ``out`` untouched, for a missing wheel or a bundle
-    over ``limit_mib``."""
+    """Write the bundle folder ``out`` (repacked ``wheels``, ``install.sh``, ``README.md``, ``bundle.json``); returns
+    the manifest. :class:`BundleError`, ``out`` untouched, for a missing wheel or a bundle over ``limit_mib``."""
     found = match_wheels(pins, wheels)
     work = out.with_name(f".{out.name}.tmp{os.getpid()}")
     shutil.rmtree(work, ignore_errors=True)

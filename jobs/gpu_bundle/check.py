@@ -1,6 +1,5 @@
-"""``sray gpu-bundle --check``: the bundle for this machine's Python and a clean venv standing in for the GPU image
-(the CPU torch, the image's packages at this environment's versions); then the prepared GPU call runs there in a dry
-run, as on a bare GPU machine, so a wheel missing from the bundle fails here, not on the GPU. Slow (minutes)."""
+"""``sray gpu-bundle --check`` (minutes): install the bundle in a clean venv standing in for the GPU image (CPU torch,
+the image's packages at our versions) and dry-run the prepared GPU call there: a missing wheel fails here."""
 
 from __future__ import annotations
 

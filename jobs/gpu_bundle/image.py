@@ -1,6 +1,5 @@
-"""What the GPU machines' image ('cuda', Python 3.12.3, offline) already holds, as read on one of its machines on
-2026-11-17, so the bundle carries only the rest (the bundle check installs this environment's versions in their
-place)."""
+"""What the GPU machines' image ('cuda', Python 3.12.3, offline) holds, as read on one of its machines on 2026-11-17,
+so the bundle carries only the rest (the bundle check installs this environment's versions in their place)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""Which wheels the GPU bundle holds: the dependencies of what sray runs at the ``ray`` and ``fleet`` stages, resolved
-by pip for the target, minus what the GPU image has and what sray never loads; versions from ``constraints.txt``,
-then from this environment (the stack the suite tests here)."""
+"""Which wheels the GPU bundle holds: what the ``ray`` and ``fleet`` stages need, resolved by pip for the target, minus
+the GPU image's packages and what sray never loads; versions from ``constraints.txt``, then this environment."""
 
 from __future__ import annotations
 
@@ -14,8 +13,7 @@ from pathlib import Path
 from .image import IMAGE_PACKAGES, normalise
 
 ROOTS = ("ray[train]", "mlflow-skinny", "sqlalchemy", "alembic", "webdataset")
-"""Ray Train, MLflow's client with its SQL store (SQLite tracking needs SQLAlchemy and Alembic) and the shard
-loader."""
+"""Ray Train, MLflow's client with its SQL store (SQLite tracking needs SQLAlchemy and Alembic), the shard loader."""
 PIN_FROM = {"mlflow-skinny": "mlflow"}
 """Roots pinned to another constraint's version (released together)."""
 LEFT_OUT = {"google-auth": "databricks-sdk's Google Cloud credentials, loaded only for Databricks on Google Cloud",

@@ -1,6 +1,5 @@
-"""Repack a wheel without some of its files and with named native binaries stripped of their symbol tables (only
-crash backtraces lose function names): ``RECORD`` rewritten, dropped modules' console scripts removed, file modes
-kept, so it installs with pip like the original."""
+"""Repack a wheel without some files and with named native binaries stripped of symbols (only crash backtraces lose
+names): ``RECORD`` rewritten, dropped modules' console scripts removed, file modes kept; pip installs it as before."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""``sray gpu-check``: check sray's CUDA path stage by stage (torch and accelerate suffice; the stages that need Ray,
-MLflow or webdataset say so and skip)."""
+"""``sray gpu-check``: sray's CUDA path by stages (torch and accelerate suffice; Ray, MLflow, webdataset ones skip)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""``sray gpu-check``: the stages (``CheckContext -> StageResult`` functions of the ``stage_*`` modules) in order, the
-report saved after each so a run resumes; a stage that raises is recorded as failed. On a GPU the report becomes the
-"GPU check" section of docs/benchmarks.md for that device."""
+"""``sray gpu-check``: the ``stage_*`` functions (``CheckContext -> StageResult``) in order, the report saved after
+each so a run resumes (a raising stage is recorded failed); on a GPU it is docs/benchmarks.md's "GPU check" section."""
 
 from __future__ import annotations
 

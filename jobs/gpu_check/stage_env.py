@@ -33,8 +33,7 @@ def environment(ctx: CheckContext) -> StageResult:
                  ["cuDNN", str(torch.backends.cudnn.version())],
                  ["driver", _nvidia_smi_driver()]]
     rows.append(["NCCL", str(torch.distributed.is_nccl_available()) if torch.distributed.is_available() else "no"])
-    for name in ("accelerate", "ray", "mlflow", "webdataset", "pytest"):
-        rows.append([name, _version(name)])
+    rows += [[name, _version(name)] for name in ("accelerate", "ray", "mlflow", "webdataset", "pytest")]
     gpu = next((r[1] for r in rows if r[0] == "GPU"), "no GPU (dry run)")
     return StageResult("passed", f"{gpu}, torch {torch.__version__}", header=["what", "value"], rows=rows)
 

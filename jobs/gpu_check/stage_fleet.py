@@ -7,25 +7,19 @@ import time
 from pathlib import Path
 
 from sray.data_tools.shards.manifest import unseen_scenes
-from sray.data_tools.synth.world import World, make_world
+from sray.data_tools.synth.world import make_world
 from sray.platform.config.fleet_config import FleetConfig
 from sray.platform.config.recipes import get_recipe
 from sray.platform.train.state import write_initial_checkpoint
 
 from .context import FULL_STACK, CheckContext, skipped_without
 from .report import StageResult
+from .synthetic import toy_world
 
 SHARING = 4
 METHODS = ("sray", "semantic-nerf", "2d-transfer")
 DRY_RUN_SHARING = 2
 """Scene tasks sharing the CPUs in a dry run (one CPU each, as on a 2-core machine)."""
-
-
-def _shards(ctx: CheckContext, root: Path) -> Path:
-    """``SHARING`` unseen procedural scenes (and one train scene), sharded with their neighbours."""
-    hw = (48, 64) if ctx.dry_run else (120, 160)
-    world = World(train_scenes=1, test_scenes=SHARING, views=20, height=hw[0], width=hw[1], seed=0, neighbours=8)
-    return make_world(world, root, progress=False)
 
 
 def _checkpoint(ctx: CheckContext, root: Path, shards: Path) -> Path:
@@ -74,7 +68,7 @@ def run(ctx: CheckContext) -> StageResult:
     from sray.platform.eval.segmenter import segmenter_from_checkpoint
 
     root = ctx.out / "fleet"
-    shards = _shards(ctx, root)
+    shards = make_world(toy_world(ctx.dry_run, train_scenes=1, test_scenes=SHARING), root, progress=False)
     checkpoint = _checkpoint(ctx, root, shards)
     segmenter = root / "segmenter"
     segmenter_from_checkpoint(checkpoint, segmenter)  # 2d-transfer starts from the checkpoint's encoder and head

@@ -12,6 +12,7 @@ from sray.platform.config.recipes import get_recipe
 
 from .context import FULL_STACK, CheckContext, skipped_without
 from .report import StageResult
+from .synthetic import toy_world
 
 RECIPE = "synth-gpu-minutes"
 EVAL_FAST = FastRender(pixel_stride=1, confidence=0.9)
@@ -20,13 +21,6 @@ HOUR_WORLD = World(train_scenes=498, test_scenes=4, views=40, height=120, width=
 """The hour recipe's world (``jobs/studies/hour-recipe.yaml``)."""
 HELD_OUT_ROOMS = 8
 """Training rooms whose held-out views are scored (the studies' ``held_out_rooms``)."""
-
-
-def world(ctx: CheckContext) -> World:
-    """The hour recipe's world (:data:`HOUR_WORLD`); a toy world in a dry run."""
-    if ctx.dry_run:
-        return World(train_scenes=2, test_scenes=1, views=20, height=48, width=64, seed=0, neighbours=8)
-    return HOUR_WORLD
 
 
 def run(ctx: CheckContext) -> StageResult:
@@ -38,7 +32,8 @@ def run(ctx: CheckContext) -> StageResult:
 
     root = ctx.out / "minutes"
     start = time.perf_counter()
-    shards = make_world(world(ctx), root / "world", progress=False, workers=os.cpu_count() or 1)
+    world = toy_world(ctx.dry_run) if ctx.dry_run else HOUR_WORLD
+    shards = make_world(world, root / "world", progress=False, workers=os.cpu_count() or 1)
     world_s = time.perf_counter() - start
     cfg = get_recipe(RECIPE)
     cfg.data.shards = str(shards)

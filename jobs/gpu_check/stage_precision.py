@@ -1,5 +1,4 @@
-"""Stage ``precision``: fp32 against bf16 (and fp16 on CUDA) for projection, a rendered image and a training step's
-loss and gradients, each with its tolerance."""
+"""Stage ``precision``: fp32 against bf16 (and fp16 on CUDA) in projection, a render, a step's loss and gradients."""
 
 from __future__ import annotations
 
@@ -96,10 +95,8 @@ def run(ctx: CheckContext) -> StageResult:
                    f">= {100 * ARGMAX_AGREEMENT:.0f} %"),
                   ("step loss", f"{loss_rel:.2e} relative", loss_rel <= LOSS_REL_TOL, f"<= {LOSS_REL_TOL}"),
                   ("step gradient", f"cosine {cosine:.4f}", cosine >= GRAD_COSINE, f">= {GRAD_COSINE}")]
-        for name, value, ok, tol in checks:
-            rows.append([precision, name, value, tol, "ok" if ok else "FAIL"])
-            if not ok:
-                failures.append(f"{precision} {name} {value}")
+        rows += [[precision, name, value, tol, "ok" if ok else "FAIL"] for name, value, ok, tol in checks]
+        failures += [f"{precision} {name} {value}" for name, value, ok, _ in checks if not ok]
     summary = ("all within tolerance" if not failures else "outside tolerance: " + "; ".join(failures))
     return StageResult("failed" if failures else "passed", summary,
                        header=["precision", "check", "measured", "tolerance", "verdict"], rows=rows)

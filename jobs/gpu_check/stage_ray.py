@@ -1,6 +1,5 @@
-"""Stage ``ray``: a user's first GPU run through the ``sray`` commands on procedural shards: ``sray train`` (one worker,
-rank 0 killed half-way by the fault hook, resumed), ``sray eval`` and ``sray render`` of its checkpoint, and two
-workers on one GPU refused before Ray starts (NCCL refuses two ranks on one GPU)."""
+"""Stage ``ray``: ``sray train`` on procedural shards (one worker, rank 0 killed half-way by the fault hook, resumed),
+``sray eval`` and ``sray render`` of its checkpoint; 2 workers on one GPU refused before Ray starts (NCCL would)."""
 
 from __future__ import annotations
 
@@ -11,13 +10,14 @@ from pathlib import Path
 from unittest import mock
 
 from sray.data_tools.shards.manifest import unseen_scenes
-from sray.data_tools.synth.world import World, make_world
+from sray.data_tools.synth.world import make_world
 from sray.platform.common.fault_hook import ENV_VAR, KILL_MARKER
 from sray.platform.config.recipes import get_recipe
 from sray.platform.train.inputs import InputError
 
 from .context import FULL_STACK, CheckContext, skipped_without
 from .report import StageResult
+from .synthetic import toy_world
 
 RECIPE = "synth-gpu-minutes"
 RENDER_SIZE, RENDER_FRAMES = "320x240", 60
@@ -64,9 +64,7 @@ def run(ctx: CheckContext) -> StageResult:
     from sray.platform.checkpoints.folders import read_meta, resolve_checkpoint
 
     root = ctx.out / "ray"
-    hw = (48, 64) if ctx.dry_run else (120, 160)  # the recipe draws sources down to 75% size: 32 pixels at least
-    world = World(train_scenes=2, test_scenes=1, views=20, height=hw[0], width=hw[1], seed=0, neighbours=8)
-    shards = make_world(world, root, progress=False)
+    shards = make_world(toy_world(ctx.dry_run), root, progress=False)
     name = f"gpu-check-{time.strftime('%Y%m%d-%H%M%S')}"
     arguments = train_arguments(ctx, shards, root, name)
     code, train_s = _killed_and_resumed(ctx, arguments)
@@ -106,8 +104,7 @@ def run(ctx: CheckContext) -> StageResult:
 
 
 def shared_gpu_request(shards: Path, root: Path, name: str, precision: str) -> tuple[bool, list[str]]:
-    """Launch the recipe with 2 workers of 0.5 GPU (its sizes do not matter: it is refused first): whether it was
-    refused before Ray started, and the table row."""
+    """(refused before Ray started, table row) of the recipe on 2 workers of 0.5 GPU (any sizes: refused first)."""
     from sray.platform.train.launcher import launch_training
 
     cfg = get_recipe(RECIPE)

@@ -133,8 +133,7 @@ def phase_curve(ctx: CheckContext, precision: str, steps: tuple[int, int], rays:
 
 
 def _phase_cells(points: list[dict[str, float]], rays: int, renders: bool) -> list[str]:
-    """steps/s and rays/s (median step after the phase's first, which holds allocation and kernel choice), loss and
-    ``sem_src`` from the phase's first to its last step."""
+    """steps/s, rays/s (median step after the first: allocation, kernel choice), loss and sem_src first -> last."""
     timed = points[1:] or points
     per_step = sorted(p["seconds"] for p in timed)[len(timed) // 2]
     return [f"{1 / per_step:.2f}", f"{rays / per_step:.0f}" if renders else "-",

@@ -1,5 +1,5 @@
-"""Seeded synthetic inputs of the model-level checks (random images suffice where a check compares two computations
-of the same thing): a camera rig, source images and training samples."""
+"""Seeded synthetic inputs of the checks (random images suffice where a check compares two computations of the same
+thing): a camera rig, source images, training samples and a toy procedural world."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import math
 import torch
 
 from sray.data_tools.loader.sample_types import QueryCamera, SourceViews, TrainSample
+from sray.data_tools.synth.world import World
 from sray.model.config import SRayConfig
 from sray.model.semantic_ray import SRayModel
 
@@ -46,3 +47,11 @@ def model(samples: tuple[int, int], views: int, device: torch.device, seed: int 
     """A seeded S-Ray model of the paper's widths with the given (coarse, fine) samples."""
     torch.manual_seed(seed)
     return SRayModel(SRayConfig(n_coarse=samples[0], n_fine=samples[1], n_source=views)).to(device)
+
+
+def toy_world(dry_run: bool, train_scenes: int = 2, test_scenes: int = 1) -> World:
+    """A procedural world of 20 views per room and 8 ranked neighbours, 120 x 160 pixels (48 x 64 in a dry run: the
+    recipe draws sources down to 75% size, 32 pixels at least)."""
+    hw = (48, 64) if dry_run else (120, 160)
+    return World(train_scenes=train_scenes, test_scenes=test_scenes, views=20, height=hw[0], width=hw[1], seed=0,
+                 neighbours=8)

@@ -1,15 +1,14 @@
 """``sray stability``: stress every registered method's rows (zero-shot, and trained on the scene at one CPU-second
-budget) along each axis and chart where each breaks (:mod:`sray.platform.stability`). Points are stored as they
-finish under ``--out``, so an axis-by-axis run or a re-run after an interruption computes only what is missing."""
+budget) along each axis and chart where each breaks; points stored as they finish, so a re-run computes the rest."""
 
 from __future__ import annotations
 
 import argparse
 import os
 import shutil
-import sys
 from pathlib import Path
 
+from sray.jobs.methods.flags import add_tracker_flags, refuse
 from sray.platform.common.bench_doc import Bench, bench_dir, record
 from sray.platform.finetune.methods.registry import method_names
 from sray.platform.stability.axes import AXES, PRESETS
@@ -37,8 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", choices=list(PRESETS), default="cpu-small", help="levels, seeds and budgets")
     p.add_argument("--scenes", nargs="+", metavar="SCENE", help="test scenes (default: every role 'test' scene)")
     p.add_argument("--out", type=Path, help="output folder (default: outputs/stability/<preset>)")
-    p.add_argument("--tracker", default="mlflow", help="tracker to log to, by registry name (default: mlflow)")
-    p.add_argument("--tracking-uri", help="the tracker's store (default: SQLite store in the output folder)")
+    add_tracker_flags(p, "mlflow", store="the output folder")
     p.add_argument("--experiment", default="sray-stability", help="experiment name")
     p.add_argument("--doc", type=Path, default=Path("docs/benchmarks.md"), help="benchmarks document to update")
     p.add_argument("--device", help="torch device (default: cuda if available, else cpu)")
@@ -53,8 +51,7 @@ def run(args: argparse.Namespace) -> int:
         job = StabilityJob.from_args(args)
         suite, rows = prepare(job)
     except (FileNotFoundError, ValueError) as e:
-        print(f"sray stability: {e}", file=sys.stderr)
-        return 2
+        return refuse("stability", e)
     outputs = run_job(job, suite, rows)
     _record(job, outputs)
     print(f"[sray] results: {outputs['json']}")

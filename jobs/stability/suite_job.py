@@ -1,6 +1,5 @@
-"""One ``sray stability`` job: its inputs checked up front, the models given (nothing pretrained; the data defaults to
-the checkpoint's training shards) or the preset's world pretrained, the rows read off the method registry, the suite
-run, and the outputs written over every axis whose points are all stored (axis-by-axis runs add up to one table)."""
+"""One ``sray stability`` job: inputs checked up front; the given models (data: the checkpoint's shards) or the preset's
+world pretrained; rows from the method registry; outputs of every axis whose points are all stored (runs add up)."""
 
 from __future__ import annotations
 
@@ -109,8 +108,7 @@ def _label_space(models: SuiteModels) -> tuple[SRayConfig, SRayConfig | None]:
 
 
 def check_rows(rows: list[Row], models: SuiteModels, preset: Preset, n_classes: int, where: Path) -> None:
-    """Build each zero-shot row's model once (on the CPU) and each trained row's fleet settings, so that a missing or
-    mismatched model fails now (ValueError naming its flag)."""
+    """Build each zero-shot row's model (CPU) and trained row's fleet settings now: ValueError naming a bad flag."""
     for row in rows:
         if not row.trained:
             model = get_method(row.method).eval_model(row.request(models, "cpu"))

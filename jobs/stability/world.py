@@ -1,6 +1,5 @@
-"""The world a stability preset builds when it is given no checkpoint, kept under ``<out>/world`` and reused by a
-later run: procedural scenes and their shards, one ``sray train`` job per S-Ray variant (full CRA, and
-``attention=none``) and the 2D segmenter of ``2d-transfer``, each finished pretraining recorded in ``models.json``."""
+"""The world a stability preset builds without a checkpoint, kept in ``<out>/world`` for later runs: scenes and shards,
+a ``sray train`` job per S-Ray variant (full CRA, ``attention=none``), 2d-transfer's segmenter (``models.json``)."""
 
 from __future__ import annotations
 
