@@ -93,16 +93,33 @@ def test_the_synth_demo_card_is_published_from_the_stored_demo_runs(tmp_path: Pa
             one = _row(repo)
             assert one != shipped
             assert one == ("synth-demo | 2-core CPU | 4.0 min | 5.0 min | 1.2 GiB | 25.0% (seed 0) | not measured | "
-                           "83.0% | 0.40 wall s / frame (fly-through)")
+                           "not measured | not measured | 83.0% | 0.40 wall s / frame (fly-through)")
     two = _row(repo).split(" | ")
 
     def pm(values: list[float], digits: int) -> str:
         return f"{statistics.mean(values):.{digits}f} ± {statistics.stdev(values):.{digits}f}"
 
     assert two[2] == f"{pm([4.0, 4.4], 1)} min" and two[5] == f"{pm([25.0, 27.5], 1)}% (seeds 0-1)"
-    assert two[7] == f"{pm([83.0, 91.3], 1)}%" and two[8] == f"{pm([0.4, 0.44], 2)} wall s / frame (fly-through)"
+    assert two[9] == f"{pm([83.0, 91.3], 1)}%" and two[10] == f"{pm([0.4, 0.44], 2)} wall s / frame (fly-through)"
     note = recipe_cards(repo)
     assert f"`semantic-nerf` {pm([17.0, 18.7], 1)}%" in note and "60 s per room on synth_test_000" in note
     walls = [DEMO_WALL_S / 60, 1.1 * DEMO_WALL_S / 60]
     assert f"the demo took {walls[0]:.1f} and {walls[1]:.1f} minutes in 2 runs" in demo_time(repo)
     assert sorted(p.name for p in folder.iterdir()) == ["make-demo--s0.json", "make-demo--s1.json"]
+
+
+def test_the_hour_card_shows_each_shifted_split_its_shipped_trials_store(tmp_path: Path) -> None:
+    """Stored trials that scored the appearance- and geometry-shifted rooms fill those columns (mean ± sample sd over
+    the trials holding the split); a split no trial scored says so."""
+    repo = _repo(tmp_path)
+    cards = recipe_cards(repo).splitlines()
+    assert cards[0].split(" | ")[5:8] == ["zero-shot mIoU", "appearance-shifted zero-shot mIoU",
+                                          "geometry-shifted zero-shot mIoU"]
+    shipped = sorted((repo / RESULTS / "hour-recipe").glob("hour-intra-uncapped--s*.json"))
+    for path, appearance in zip(shipped, (41.0, 44.0)):
+        trial = json.loads(path.read_text())
+        trial["metrics"]["zero_shot_appearance"] = {"miou": appearance}
+        path.write_text(json.dumps(trial))
+    row = next(line for line in recipe_cards(repo).splitlines() if line.startswith("synth-cpu-hour | 2-core CPU"))
+    sd = statistics.stdev([41.0, 44.0])
+    assert row.split(" | ")[6:8] == [f"42.5 ± {sd:.1f}%", "not stored"]
