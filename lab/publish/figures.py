@@ -116,8 +116,9 @@ def recipe_cards(repo: Path) -> str:
     return (markdown_table(header, rows) + "\n\n"
             f"`synth-cpu-hour` on the 2-core CPU: mean ± sample sd over {seeds(shipped)} of the recipe as it ships "
             f"(trained until its CPU budget is spent; {study}); its render time is its network's, measured on the same "
-            f"network at a step cap; its shifted columns are its zero-shot on the generator's held-out appearance and geometry "
-            f"regions (`sray data synth --split`). " + "".join(f"{demo_note(m, runs)} " for m, runs in demos.items()) +
+            f"network at a step cap; its shifted columns are its zero-shot on the generator's held-out appearance and "
+            f"geometry regions (`sray data synth --split`). " +
+            "".join(f"{demo_note(m, runs)} " for m, runs in demos.items()) +
             f"The other rows as `sray lab recipe-cards` stored them. Read from {sources}.")
 
 
