@@ -1,6 +1,6 @@
 """Reading one scene's views out of its shards into memory, and decoding them without loss. A loader worker keeps
 the ENCODED views of at most a few scenes (an LRU cache) and decodes only the images a sample needs, so memory
-stays near the scenes' PNG bytes (about 0.1-0.2 MB per 320x240 view) whatever the dataset."""
+stays near the scenes' PNG bytes whatever the dataset."""
 
 from __future__ import annotations
 

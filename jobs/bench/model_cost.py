@@ -57,7 +57,7 @@ def _sizes(device: torch.device, quick: bool) -> _Sizes:
     paper = {"name": "paper code config", "rays": 1024, "coarse": 64, "fine": 64, "views": 8, "hw": (240, 320),
              "steps": 3}
     small = {"name": "small CPU config", "rays": 256, "coarse": 32, "fine": 32, "views": 4, "hw": (120, 160),
-             "steps": 12}  # a 0.3 s step: more steps per process for a steadier median
+             "steps": 12}  # a short step: more steps per process for a steadier median
     if device.type == "cuda":  # each precision beside its reference path; bf16 also compiled; a GPU is not shared
         gpu = dict(paper, steps=10)
         steps = [dict(gpu, dtype=d, impl=impl) for d in ("fp32", "bf16", "fp16") for impl in ("reference", "fast")]

@@ -17,10 +17,10 @@ from .resolve import LEFT_OUT, BundleError, Pin, bundle_pins, check_pins, read_c
 from .wheel_strip import strip_wheel
 
 DROP = {"ray": ("ray/jars/", "ray/dashboard/client/build/", "ray/rllib/", "ray/serve/", "ray/llm/")}
-"""Folders left out of a wheel: Ray's Java workers (the 32 MB ``ray_dist.jar``), its dashboard's web page (sray starts
-Ray without the dashboard) and its RLlib, Serve and LLM libraries (sray imports none)."""
+"""Folders left out of a wheel: Ray's Java workers (``ray_dist.jar``), its dashboard's web page (sray starts Ray
+without the dashboard) and its RLlib, Serve and LLM libraries (sray imports none)."""
 STRIP = {"ray": ("ray/_raylet.so", "ray/core/src/ray/gcs/gcs_server", "ray/core/src/ray/raylet/raylet")}
-"""Native binaries stripped of their symbol tables: Ray's three largest (about 4.5 MB of the wheel)."""
+"""Native binaries stripped of their symbol tables: Ray's three largest."""
 LIMIT_MIB = 60.0
 """Most a bundle may weigh: a GPU call carries 64 MiB, the checkout included."""
 MANIFEST = "bundle.json"

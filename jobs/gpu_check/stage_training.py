@@ -22,7 +22,7 @@ from .synthetic import training_sample
 
 LARGE_BATCH = 4
 """The larger batch of both stages, in multiples of ``ctx.rays``: on one H100 or H200 a 1,024-ray step leaves the GPU
-partly idle (bf16 slower than fp32 there), 4,096 rays give 1.7-2.4 times the bf16 rays/s (docs/benchmarks.md)."""
+partly idle (bf16 slower than fp32 there), 4,096 rays keep it busy (the gpu-check reports in docs/benchmarks.md)."""
 
 
 def peak_mb(device: torch.device) -> float:

@@ -1,4 +1,4 @@
-"""``sray ui``: a lean ``mlflow server`` on localhost (no job runner, one worker: 2 processes, ~0.5 GiB, not 15-27)."""
+"""``sray ui``: a lean ``mlflow server`` on localhost (no job runner, one worker: 2 processes, not 15-27)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
-"""MLflow's :class:`~sray.platform.tracking.tracker.RunLogger`: batched (a SQLite write costs 20-190 ms), retrying
-with back-off after a transient failure (warned once), dropping what the store refuses. Not thread-safe."""
+"""MLflow's :class:`~sray.platform.tracking.tracker.RunLogger`: batched (a SQLite write costs more than a training
+step), retrying with back-off after a transient failure (warned once), dropping what the store refuses. Not
+thread-safe."""
 
 from __future__ import annotations
 
