@@ -3,6 +3,7 @@ and the text of a Markdown file that lies outside them."""
 
 from __future__ import annotations
 
+import ast
 import re
 
 MEASURED = [
@@ -51,4 +52,14 @@ def measured_figures(line: str) -> list[str]:
     found = [m.group(0) for pattern in MEASURED for m in pattern.finditer(line)]
     if SCORE_WORDS.search(line):
         found += [m.group(0) for m in WHOLE_PERCENT.finditer(line)]
+    return found
+
+
+def docstring_figures(source: str) -> list[tuple[int, str]]:
+    """(line of the docstring, figure) of every measured figure in the docstrings of a Python module's ``source``
+    (module, class, function and attribute docstrings: every string that stands as a statement of its own)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str):
+            found += [(node.lineno, f) for line in node.value.value.splitlines() for f in measured_figures(line)]
     return found

@@ -10,7 +10,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from number_scan import hand_written_lines, measured_figures
+from number_scan import docstring_figures, hand_written_lines, measured_figures
 
 from sray.lab.publish.__main__ import main as publish_main
 from sray.lab.publish.blocks import BlockError, blocks, fill
@@ -80,6 +80,26 @@ def test_recipe_docstrings_hold_no_measured_figure() -> None:
     text = (REPO / "platform" / "config" / "recipes.py").read_text()
     found = [f for line in text.splitlines() for f in measured_figures(line)]
     assert not found, f"platform/config/recipes.py: measured figures {found}; link the study instead"
+
+
+PRODUCT = ("model", "data_tools", "platform", "jobs", "sray")
+SPECIFIED = {
+    ("model/sliced_attention.py", "4 MiB"): "a slice's size by design (elements per slice times 4 bytes)",
+    ("model/sliced_attention.py", "32 MiB"): "the L3 cache size of the CPU it was sized for, a hardware specification",
+    ("jobs/gpu_bundle/build.py", "64 MiB"): "what one GPU call may carry, a limit of the device service",
+}
+"""(file, figure) in a product docstring -> why it is a specification, not a measurement."""
+
+
+def test_product_docstrings_hold_no_measured_figure() -> None:
+    """Docstrings say what a setting does and why in words and link the study or page holding the numbers."""
+    found = sorted((str(path.relative_to(REPO)), line, figure) for folder in PRODUCT
+                   for path in (REPO / folder).rglob("*.py") for line, figure in docstring_figures(path.read_text())
+                   if (str(path.relative_to(REPO)), figure) not in SPECIFIED)
+    assert not found, f"measured figures in docstrings (file, line, figure): {found}; link the stored result instead"
+    assert all(figure in (REPO / file).read_text() for file, figure in SPECIFIED), "a stale SPECIFIED entry"
+    assert docstring_figures('"""A step takes 0.31 s."""\nX = 1\n"""It scores 53.94% zero-shot."""') == [
+        (1, "0.31 s"), (3, "53.94%")]
 
 
 def test_the_allow_list_is_used() -> None:
