@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from sray.model.fast_render import FastRender
+from sray.platform.common.eval_protocol import EvalProtocol
 
 
 def _stored(path: Path) -> dict[str, Any] | None:
@@ -44,7 +45,8 @@ def stored_report(metrics: Path, checkpoint: Path, shards: Path, scenes: list[st
     if report is None:
         return None
     protocol = report.get("protocol") or {}
+    render = EvalProtocol(source_rule="", n_source=n_source, stride=1).rendered_by(fast).render  # as eval records it
     same = (_same_path(report.get("checkpoint"), checkpoint) and _same_path(report.get("shards"), shards)
             and sorted(report.get("scenes") or {}) == sorted(scenes) and protocol.get("n_source") == n_source
-            and protocol.get("render") == ("full" if fast is None else fast.describe()))
+            and protocol.get("render") == render)
     return report if same else None
